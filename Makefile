@@ -1,0 +1,30 @@
+# Two entry points (see README): `make run` and `make test`. Each creates .venv on first use,
+# installs the pinned CPU build of torch, then the package with its test extra.
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: run test bench install clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q torch==2.13.0
+	$(BIN)/python -m pip install -q -e ".[test]"
+	touch $(STAMP)
+
+install: $(STAMP)
+
+run: $(STAMP)
+	$(BIN)/rmm-envs demo
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q -n 2
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/perf_env.py
+	$(BIN)/python benchmarks/perf_risk.py
+
+clean:
+	rm -rf $(VENV) build *.egg-info

@@ -1,0 +1,1 @@
+"""Benchmark harness (rmm-bench) and performance measurements."""

@@ -1,0 +1,1 @@
+"""Guardians: policies that decide when to take control from the driver, and what to do."""

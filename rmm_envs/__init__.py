@@ -1,0 +1,35 @@
+"""rmm_envs: environments, risk labelling and datasets for learned risk metric maps.
+
+Importing the package registers the Gymnasium environments:
+
+* ``Dubins4DCircles-v0``: Dubins4D among circles, blocking fixed-step (guardian action).
+* ``Dubins4DParallel-v0``: the same, non-blocking (the guardian's compute time passes).
+"""
+
+from __future__ import annotations
+
+from importlib.metadata import PackageNotFoundError, version
+
+import gymnasium as gym
+
+try:
+    __version__ = version("rmm-envs")
+except PackageNotFoundError:  # pragma: no cover - running from a source tree
+    __version__ = "0.0.0+unknown"
+
+ENV_IDS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0")
+
+
+def _register() -> None:
+    specs = {
+        "Dubins4DCircles-v0": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv",
+        "Dubins4DParallel-v0": "rmm_envs.envs.dubins4d:make_parallel_env",
+    }
+    for env_id, entry in specs.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point=entry, disable_env_checker=False)
+
+
+_register()
+
+__all__ = ["ENV_IDS", "__version__"]

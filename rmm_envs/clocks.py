@@ -1,0 +1,120 @@
+"""Stopwatches that measure a guardian's thinking time for non-blocking stepping.
+
+A clock here is a stopwatch: ``start()`` marks the moment the environment hands the
+observation to the agent, ``elapsed()`` reads the seconds since, when the agent's next action
+arrives.  The environment turns that into simulated time (``elapsed * time_accel + base_step``).
+
+* :class:`WallClock` (default): real monotonic time, ``time.perf_counter`` (the paper's mode).
+  Results depend on the machine and on other processes sharing its cores.
+* :class:`CPUClock`: the process's own CPU time, ``time.process_time``; insensitive to other
+  processes competing for the cores, but blind to waiting (I/O, sleeps).
+* :class:`FixedLatencyClock`: every decision takes exactly ``latency`` seconds; reproducible
+  bit for bit, for tests and latency studies.
+* :class:`ManualClock`: a test double whose time only moves when told to.
+
+``make_clock("wall" | "cpu" | "fixed:MS")`` builds one from a string (``MS`` in milliseconds).
+"""
+
+from __future__ import annotations
+
+import time
+
+__all__ = ["CPUClock", "Clock", "FixedLatencyClock", "ManualClock", "WallClock", "make_clock"]
+
+
+class Clock:
+    """Base stopwatch. Subclasses define :meth:`now`; ``mode`` names the kind for records."""
+
+    mode = "abstract"
+
+    def __init__(self) -> None:
+        self._t0 = self.now()
+
+    def now(self) -> float:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def start(self) -> None:
+        self._t0 = self.now()
+
+    def elapsed(self) -> float:
+        return max(0.0, self.now() - self._t0)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+
+class WallClock(Clock):
+    mode = "wall"
+
+    def now(self) -> float:
+        return time.perf_counter()
+
+
+class CPUClock(Clock):
+    mode = "cpu"
+
+    def now(self) -> float:
+        return time.process_time()
+
+
+class FixedLatencyClock(Clock):
+    """Every interval lasts exactly ``latency`` seconds, whatever really happened."""
+
+    mode = "fixed"
+
+    def __init__(self, latency: float = 0.0) -> None:
+        latency = float(latency)
+        if not latency >= 0 or latency == float("inf"):
+            raise ValueError(f"latency must be a finite number of seconds >= 0, got {latency}")
+        self.latency = latency
+        super().__init__()
+
+    def now(self) -> float:
+        return 0.0
+
+    def elapsed(self) -> float:
+        return self.latency
+
+    def __repr__(self) -> str:
+        return f"FixedLatencyClock(latency={self.latency!r})"
+
+
+class ManualClock(Clock):
+    """A clock that moves only through :meth:`advance` (for tests)."""
+
+    mode = "manual"
+
+    def __init__(self, t: float = 0.0) -> None:
+        self.t = float(t)
+        super().__init__()
+
+    def now(self) -> float:
+        return self.t
+
+    def advance(self, dt: float) -> None:
+        if dt < 0:
+            raise ValueError(f"time cannot go backwards (dt={dt})")
+        self.t += float(dt)
+
+
+def make_clock(spec: str | Clock | None) -> Clock:
+    """``None`` or ``"wall"`` -> :class:`WallClock`; ``"cpu"``; ``"fixed:MS"``; or a Clock."""
+    if spec is None:
+        return WallClock()
+    if isinstance(spec, Clock):
+        return spec
+    if not isinstance(spec, str):
+        raise TypeError(f"clock must be a Clock or a string, got {type(spec).__name__}")
+    s = spec.strip().lower()
+    if s == "wall":
+        return WallClock()
+    if s == "cpu":
+        return CPUClock()
+    if s.startswith("fixed"):
+        _, _, ms = s.partition(":")
+        try:
+            latency_ms = float(ms) if ms else 0.0
+        except ValueError:
+            raise ValueError(f"clock {spec!r}: expected 'fixed:MS' with MS a number of milliseconds") from None
+        return FixedLatencyClock(latency_ms / 1000.0)
+    raise ValueError(f"unknown clock {spec!r}; expected 'wall', 'cpu' or 'fixed:MS'")

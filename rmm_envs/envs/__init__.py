@@ -1,0 +1,1 @@
+"""Gymnasium shells: a system + a world + a driver + bookkeeping."""

@@ -1,0 +1,43 @@
+"""A tiny numpy rasteriser for top-down 2D frames (no display, no extra dependency)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+WHITE = (255, 255, 255)
+RED = (214, 39, 40)
+GREEN = (44, 160, 44)
+BLUE = (31, 119, 180)
+GREY = (170, 170, 170)
+ORANGE = (255, 127, 14)
+
+
+class Canvas:
+    """An RGB image over the world window ``[x0, x1] x [y0, y1]`` (y up)."""
+
+    def __init__(self, size: int, x0: float, x1: float, y0: float, y1: float) -> None:
+        self.size = size
+        self.img = np.full((size, size, 3), 255, dtype=np.uint8)
+        self.x0, self.y0 = x0, y0
+        self.sx = size / (x1 - x0)
+        self.sy = size / (y1 - y0)
+        c = (np.arange(size) + 0.5)
+        self.wx = x0 + c / self.sx  # world x of each column
+        self.wy = y1 - c / self.sy  # world y of each row (row 0 is the top)
+
+    def disc(self, x: float, y: float, r: float, colour) -> None:
+        mask = (self.wx[None, :] - x) ** 2 + (self.wy[:, None] - y) ** 2 <= r * r
+        self.img[mask] = colour
+
+    def ring(self, x: float, y: float, r: float, colour, width: float) -> None:
+        d = np.sqrt((self.wx[None, :] - x) ** 2 + (self.wy[:, None] - y) ** 2)
+        self.img[np.abs(d - r) <= width / 2] = colour
+
+    def line(self, x0: float, y0: float, x1: float, y1: float, colour) -> None:
+        n = int(max(abs(x1 - x0) * self.sx, abs(y1 - y0) * self.sy)) + 2
+        xs = np.linspace(x0, x1, n)
+        ys = np.linspace(y0, y1, n)
+        cols = ((xs - self.x0) * self.sx).astype(int)
+        rows = ((self.wy[0] - ys) * self.sy + 0.5).astype(int)
+        ok = (cols >= 0) & (cols < self.size) & (rows >= 0) & (rows < self.size)
+        self.img[rows[ok], cols[ok]] = colour

@@ -1,0 +1,73 @@
+"""Non-blocking stepping: the agent's thinking time passes in the simulated world.
+
+The paper's ``step_to_now`` semantics (REFERENCE section 1.5), on Gymnasium's ``step``:
+
+* ``step(a)`` first advances the world by ``lap * time_accel + base_step`` simulated seconds,
+  where ``lap`` is the clock time elapsed since the previous ``step`` (or ``reset``) returned,
+  under the action set by the *previous* call; then it stores ``a`` for the next interval.
+* The first interval after ``reset`` belongs to the built-in driver (the reset action is
+  inactive), so an action takes effect one step late, exactly as in the original.
+* The clock is restarted just before ``step`` returns, so only the agent's time between
+  steps is charged; the environment's own physics and QP are not (the original started its
+  stopwatch at the end of propagation, which leaked a little post-processing into the lap).
+
+The clock is injectable (:mod:`rmm_envs.clocks`): the real monotonic clock by default, a
+fixed-latency clock for reproducible runs, the process CPU clock for runs that share cores.
+
+A bad action raises ``ValueError`` *before* the world advances, so a caller can recover.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+
+from rmm_envs.clocks import Clock, make_clock
+
+__all__ = ["NonBlockingStepping"]
+
+
+class NonBlockingStepping(gym.Wrapper):
+    """Wrap an env that offers ``simulate(duration, active, control, compute_time)``.
+
+    Args:
+        env: the blocking environment (e.g. ``Dubins4DCircles-v0``).
+        time_accel: simulated seconds per clock second, ``>= 1`` as in the paper (default 10).
+        base_step: simulated seconds added to every step, ``> 0`` (default 0.1).
+        clock: a :class:`rmm_envs.clocks.Clock`, or ``"wall"``, ``"cpu"``, ``"fixed:MS"``.
+    """
+
+    def __init__(self, env: gym.Env, time_accel: float = 10.0, base_step: float = 0.1, clock: Clock | str | None = None):
+        super().__init__(env)
+        if not hasattr(env.unwrapped, "simulate"):
+            raise TypeError(
+                f"{type(env.unwrapped).__name__} has no simulate(duration, active, control, compute_time); "
+                "NonBlockingStepping needs an env that can advance by an arbitrary duration"
+            )
+        if not (time_accel >= 1 and math.isfinite(time_accel)):
+            raise ValueError(f"time_accel must be a finite number >= 1, got {time_accel!r}")
+        if not (base_step > 0 and math.isfinite(base_step)):
+            raise ValueError(f"base_step must be a finite number > 0, got {base_step!r}")
+        self.time_accel = float(time_accel)
+        self.base_step = float(base_step)
+        self.clock = make_clock(clock)
+        self._pending = (False, np.zeros(2))
+
+    def reset(self, *, seed=None, options=None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._pending = (False, np.zeros(2))
+        self.clock.start()
+        return obs, info
+
+    def step(self, action):
+        lap = self.clock.elapsed()
+        from rmm_envs.envs.dubins4d import parse_guardian_action
+
+        parsed = parse_guardian_action(action, self.env.unwrapped.action_space)
+        active, control = self._pending
+        out = self.env.unwrapped.simulate(lap * self.time_accel + self.base_step, active, control, lap)
+        self._pending = parsed
+        self.clock.start()
+        return out
