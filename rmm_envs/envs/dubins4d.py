@@ -175,13 +175,7 @@ class Dubins4DScene:
 
     def path_failed(self, paths: np.ndarray) -> np.ndarray:
         """``(N,)`` bool: a path ``(N, S, 4)`` touches an obstacle at a point or segment."""
-        paths = np.asarray(paths)
-        if paths.shape[1] >= 2:
-            # every point of a path lies within v_max * duration of its start; the duration is
-            # not known here, so bound the reach by the path's own extent (cheap, exact).
-            ext = np.sqrt(np.max(np.sum((paths[:, :, :2] - paths[:, :1, :2]) ** 2, axis=-1)))
-            return paths_hit_circles(paths, self.world.obstacles, reach=float(ext))
-        return self.state_failed(paths[:, 0])
+        return paths_hit_circles(paths, self.world.obstacles)
 
     def observe(self, states: np.ndarray, sim_time=0.0) -> np.ndarray:
         """``(N, 17)`` float32 observations for states ``(N, 4)`` at ``sim_time`` (scalar or ``(N,)``)."""
@@ -518,6 +512,30 @@ class Dubins4DCirclesEnv(gym.Env):
         if self.scene is None:
             raise RuntimeError("call reset() first")
         return self.scene
+
+    # ------------------------------------------------------------------ dataset hooks
+    def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """``n`` states uniform over the arena x [-pi, pi) x [0, 2], outside every obstacle
+        (rejection sampling, as the original's datagen since 2022-09-13)."""
+        if self.scene is None:
+            raise RuntimeError("call reset() first")
+        out = np.empty((0, 4))
+        s = self.system
+        while out.shape[0] < n:
+            m = max(2 * (n - out.shape[0]), 16)
+            cand = np.column_stack([
+                rng.uniform(-_HALF, _HALF, m), rng.uniform(-_HALF, _HALF, m),
+                rng.uniform(-np.pi, np.pi, m), rng.uniform(s.v_min, s.v_max, m),
+            ])
+            out = np.vstack([out, cand[~self.scene.state_failed(cand)]])
+        return out[:n]
+
+    def observe_states(self, states: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Observations of arbitrary states for a dataset.  The simulated-time feature is drawn
+        uniformly over the episode range ``[0, max_episode_sim_time]``: the original left it 0
+        in every training sample and met 0-100 s at run time (REFERENCE P1)."""
+        t = rng.uniform(0.0, self.max_episode_sim_time, size=np.asarray(states).shape[0])
+        return self.scene.observe(states, t)
 
     @property
     def true_state(self) -> np.ndarray:

@@ -83,9 +83,10 @@ def segments_hit_circles(p0: np.ndarray, p1: np.ndarray, circles: np.ndarray) ->
 def paths_hit_circles(paths: np.ndarray, circles: np.ndarray, reach: float | None = None) -> np.ndarray:
     """``(N,)`` bool: any point or segment of path ``i`` (``(N, S, 2+)``) touches a circle.
 
-    ``reach`` is an optional bound on how far any path point can be from the path's first
-    point (e.g. ``v_max * duration``).  Path/circle pairs that are provably too far apart are
-    skipped, which makes sparse scenes much cheaper; the answer is the same.
+    Exact.  Path/circle pairs that cannot touch are skipped first: every point of a polyline
+    of length ``L`` lies within ``L / 2`` of the midpoint of its chord (triangle inequality),
+    so only circles within ``r + L / 2`` of that midpoint are tested segment by segment.
+    ``reach`` is accepted for compatibility and ignored (the bound is computed per path).
     """
     paths = np.asarray(paths, dtype=float)
     n = paths.shape[0]
@@ -93,28 +94,27 @@ def paths_hit_circles(paths: np.ndarray, circles: np.ndarray, reach: float | Non
     if circles.shape[0] == 0 or n == 0:
         return out
     xy = paths[:, :, :2]
-    if reach is None:
-        near = np.ones((n, circles.shape[0]), dtype=bool)
-    else:
-        d0 = xy[:, 0, None, :] - circles[None, :, :2]
-        near = np.einsum("nkj,nkj->nk", d0, d0) <= (circles[None, :, 2] + reach) ** 2
+    if xy.shape[1] == 1:
+        return points_in_circles(xy[:, 0], circles)
+    seg = np.diff(xy, axis=1)
+    half_len = 0.5 * np.sqrt(np.einsum("nsj,nsj->ns", seg, seg)).sum(axis=1)  # (N,)
+    mid = 0.5 * (xy[:, 0] + xy[:, -1])
+    dm = mid[:, None, :] - circles[None, :, :2]
+    near = np.einsum("nkj,nkj->nk", dm, dm) <= (circles[None, :, 2] + half_len[:, None]) ** 2
     idx, k = np.nonzero(near)
     if idx.size == 0:
         return out
-    seg = xy[idx]  # (P, S, 2)
+    a = xy[idx, :-1]  # (P, S-1, 2)
+    d = seg[idx]
     c = circles[k]  # (P, 3)
-    if seg.shape[1] == 1:
-        hit = np.sum((seg[:, 0] - c[:, :2]) ** 2, axis=-1) <= c[:, 2] ** 2
-    else:
-        a = seg[:, :-1]
-        d = seg[:, 1:] - a
-        f = c[:, None, :2] - a
-        dd = np.sum(d * d, axis=-1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            s = np.where(dd > 0, np.clip(np.sum(f * d, axis=-1) / dd, 0.0, 1.0), 0.0)
-        g = f - s[..., None] * d
-        hit = np.any(np.sum(g * g, axis=-1) <= c[:, None, 2] ** 2, axis=1)
-    np.logical_or.at(out, idx, hit)
+    f = c[:, None, :2] - a
+    dd = np.einsum("psj,psj->ps", d, d)
+    fd = np.einsum("psj,psj->ps", f, d)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = np.where(dd > 0, np.clip(fd / dd, 0.0, 1.0), 0.0)
+    g = f - s[..., None] * d
+    hit = np.any(np.einsum("psj,psj->ps", g, g) <= (c[:, 2] ** 2)[:, None], axis=1)
+    out[idx[hit]] = True
     return out
 
 

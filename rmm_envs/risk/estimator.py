@@ -1,0 +1,212 @@
+"""The sampling-tree risk estimator (the paper's Algorithm 1), batched over the whole tree.
+
+For a root state ``s`` the tree has branching factor ``n`` and depth ``m``: each node samples
+``n`` controls from the policy, holds each for ``t`` seconds, and records the path at
+``n_steps`` equally spaced points (point 0 is the parent).  A child whose path fails (any
+point or segment) is worth 1 and is not expanded; a child at depth ``m`` that did not fail is
+worth 0 (or the system's ``leaf_estimate`` with ``leaf="heuristic"``); every other node is
+worth the coherent risk metric of its children.  A root that already fails is worth 1.
+
+Batching: all ``B * n`` branches of level 1 are one ``propagate`` and one ``path_failed`` call,
+all ``B * n^2`` of level 2 the next, and so on; roots are processed in chunks to bound memory.
+Only the children of live nodes are propagated (a failed node is not expanded), so the
+value is exactly Algorithm 1's and cluttered states cost less.
+
+Randomness: the default policy (uniform over the control box) draws every control of the
+tree for all roots up front, level by level in root-major order, so results do not depend on
+the chunk size.  A custom ``policy(states, rng) -> controls`` is called per chunk and level.
+
+Also returned per root: the first control of the minimum-risk child (first index on ties),
+how long it is held (``t``: the control is constant over the branch; the original stored the
+duration of one path segment, ``t / (n_steps - 1)``, of the same constant control) and the
+number of terminal nodes (failed or depth-``m``) that the estimate averages over.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from rmm_envs.risk.metrics import get_metric
+from rmm_envs.risk.protocol import check_system
+
+__all__ = ["RiskEstimator", "RiskResult"]
+
+
+@dataclass
+class RiskResult:
+    risk: np.ndarray  # (B,)
+    min_risk_ctrl: np.ndarray  # (B, c)
+    min_risk_ctrl_dur: np.ndarray  # (B,)
+    n_leaves: np.ndarray  # (B,) int
+
+
+class RiskEstimator:
+    """Batched Algorithm 1.
+
+    Args:
+        system: a :class:`rmm_envs.risk.System`.
+        branches: ``n >= 1``.  depth: ``m >= 0``.  horizon: ``t > 0`` seconds per level.
+        n_steps: path points per branch, ``>= 2``.
+        metric: ``"expected"`` (default), ``"cvar"`` (with ``alpha`` in (0, 1)) or ``"worst"``.
+        policy: ``None`` for uniform controls, or ``policy(states (N, d), rng) -> (N, c)``.
+        leaf: ``"zero"`` (Algorithm 1) or ``"heuristic"`` (the system's ``leaf_estimate``).
+        chunk_size: roots per batch (memory ~ chunk * n^m * n_steps * d * 8 bytes).
+    """
+
+    def __init__(
+        self,
+        system,
+        branches: int = 32,
+        depth: int = 2,
+        horizon: float = 2.0,
+        n_steps: int = 8,
+        metric: str = "expected",
+        alpha: float | None = None,
+        policy: Callable | None = None,
+        leaf: str = "zero",
+        chunk_size: int | None = None,
+    ) -> None:
+        check_system(system)
+        if int(branches) != branches or branches < 1:
+            raise ValueError(f"branches (n) must be an integer >= 1, got {branches!r}")
+        if int(depth) != depth or depth < 0:
+            raise ValueError(f"depth (m) must be an integer >= 0, got {depth!r}")
+        if not (isinstance(horizon, (int, float)) and horizon > 0 and math.isfinite(horizon)):
+            raise ValueError(f"horizon (t) must be a finite number of seconds > 0, got {horizon!r}")
+        if int(n_steps) != n_steps or n_steps < 2:
+            raise ValueError(f"n_steps must be an integer >= 2, got {n_steps!r}")
+        if leaf not in ("zero", "heuristic"):
+            raise ValueError(f"leaf must be 'zero' or 'heuristic', got {leaf!r}")
+        if leaf == "heuristic" and not hasattr(system, "leaf_estimate"):
+            raise TypeError(f"leaf='heuristic' needs {type(system).__name__}.leaf_estimate(states)")
+        if policy is not None and not callable(policy):
+            raise TypeError(f"policy must be callable policy(states, rng) -> controls, got {policy!r}")
+        self.reduce = get_metric(metric, alpha)
+        self.system = system
+        self.n = int(branches)
+        self.m = int(depth)
+        self.t = float(horizon)
+        self.n_steps = int(n_steps)
+        self.metric = metric
+        self.alpha = alpha
+        self.policy = policy
+        self.leaf = leaf
+        nodes = self.n**self.m if self.m else 1
+        self.chunk_size = int(chunk_size) if chunk_size else max(1, 32768 // max(nodes, 1))
+
+    def params(self) -> dict:
+        return {"branches": self.n, "depth": self.m, "horizon": self.t, "n_steps": self.n_steps,
+                "metric": self.metric, "alpha": self.alpha, "leaf": self.leaf,
+                "policy": "uniform" if self.policy is None else getattr(self.policy, "__name__", repr(self.policy))}
+
+    # ------------------------------------------------------------------
+    def draw_controls(self, rng: np.random.Generator, n_roots: int) -> list[np.ndarray]:
+        """Uniform controls for every level: level ``l`` has shape ``(n_roots, n^l, c)``."""
+        lo, hi = np.asarray(self.system.control_low, float), np.asarray(self.system.control_high, float)
+        return [rng.uniform(lo, hi, size=(n_roots, self.n ** (lvl + 1), lo.shape[0])) for lvl in range(self.m)]
+
+    def estimate(self, states, rng: np.random.Generator | None = None, controls: list[np.ndarray] | None = None) -> RiskResult:
+        """Estimate the risk of each root state ``(B, d)``.
+
+        ``controls`` (optional) gives every control of the tree, as :meth:`draw_controls`
+        returns; otherwise they are drawn from ``rng`` (required then).
+        """
+        states = np.asarray(states, dtype=float)
+        if states.ndim != 2 or states.shape[1] != self.system.state_dim:
+            raise ValueError(f"states must have shape (B, {self.system.state_dim}), got {states.shape}")
+        if not np.all(np.isfinite(states)):
+            raise ValueError("states must be finite")
+        B = states.shape[0]
+        if controls is None and self.policy is None and self.m > 0:
+            if rng is None:
+                raise ValueError("estimate() needs rng (a numpy Generator) or explicit controls")
+            controls = self.draw_controls(rng, B)
+        if controls is not None:
+            if len(controls) != self.m:
+                raise ValueError(f"controls must have one array per level ({self.m}), got {len(controls)}")
+            for lvl, c in enumerate(controls):
+                if c.shape[:2] != (B, self.n ** (lvl + 1)):
+                    raise ValueError(f"controls[{lvl}] must have shape ({B}, {self.n ** (lvl + 1)}, c), got {c.shape}")
+        elif self.m > 0 and rng is None:
+            raise ValueError("estimate() needs rng (a numpy Generator) for a custom policy")
+
+        c_dim = len(np.asarray(self.system.control_low))
+        out = RiskResult(np.empty(B), np.zeros((B, c_dim)), np.zeros(B), np.zeros(B, dtype=np.int64))
+        for lo in range(0, B, self.chunk_size):
+            hi = min(B, lo + self.chunk_size)
+            ctl = None if controls is None else [c[lo:hi] for c in controls]
+            r = self._estimate_chunk(states[lo:hi], rng, ctl)
+            out.risk[lo:hi], out.min_risk_ctrl[lo:hi], out.min_risk_ctrl_dur[lo:hi], out.n_leaves[lo:hi] = r
+        return out
+
+    def _estimate_chunk(self, roots: np.ndarray, rng, controls):
+        sys_ = self.system
+        n, m = self.n, self.m
+        B = roots.shape[0]
+        root_fail = np.asarray(sys_.state_failed(roots), dtype=bool)
+        c_dim = len(np.asarray(sys_.control_low))
+        if m == 0:
+            risk = root_fail.astype(float)
+            if self.leaf == "heuristic":
+                risk = np.where(root_fail, 1.0, sys_.leaf_estimate(roots))
+            return risk, np.zeros((B, c_dim)), np.zeros(B), np.zeros(B, dtype=np.int64)
+
+        # Expand level by level; only the children of live (non-failed) nodes are propagated.
+        # live[l] flags which nodes of level l (B * n^(l+1) of them, root-major) were expanded.
+        parents, parent_idx = roots[~root_fail], np.nonzero(~root_fail)[0]
+        fails, live, finals, first_ctrls = [], [], [], None
+        for lvl in range(m):
+            n_nodes = B * n ** (lvl + 1)
+            child_idx = (parent_idx[:, None] * n + np.arange(n)[None, :]).reshape(-1)
+            rep = np.repeat(parents, n, axis=0)
+            if controls is not None:
+                u = controls[lvl].reshape(-1, controls[lvl].shape[-1])[child_idx]
+            else:
+                u = np.asarray(self.policy(rep, rng), dtype=float)
+                if u.shape != (rep.shape[0], c_dim):
+                    raise ValueError(f"policy returned shape {u.shape}, expected {(rep.shape[0], c_dim)}")
+            if lvl == 0:
+                first_ctrls = np.zeros((n_nodes, c_dim))
+                first_ctrls[child_idx] = u
+            fail = np.zeros(n_nodes, dtype=bool)
+            is_live = np.zeros(n_nodes, dtype=bool)
+            is_live[child_idx] = True
+            final = None
+            if rep.shape[0]:
+                paths = sys_.propagate(rep, u, self.t, self.n_steps)
+                f = np.asarray(sys_.path_failed(paths), dtype=bool)
+                fail[child_idx] = f
+                final = paths[~f, -1]
+                parents, parent_idx = final, child_idx[~f]
+            else:
+                parents, parent_idx = rep, child_idx
+            fails.append(fail)
+            live.append(is_live)
+            finals.append((final, parent_idx))
+
+        # values, bottom-up (nodes that were never expanded are masked by their failed ancestor)
+        value = fails[-1].astype(float)
+        if self.leaf == "heuristic":
+            final, idx = finals[-1]
+            if idx.size:
+                value[idx] = sys_.leaf_estimate(final)
+        for lvl in range(m - 2, -1, -1):
+            value = np.where(fails[lvl], 1.0, self.reduce(value.reshape(-1, n)))
+        child_values = value.reshape(B, n)
+        risk = np.where(root_fail, 1.0, self.reduce(child_values))
+
+        best = np.argmin(child_values, axis=1)
+        min_ctrl = first_ctrls.reshape(B, n, -1)[np.arange(B), best]
+        min_ctrl = np.where(root_fail[:, None], 0.0, min_ctrl)
+        dur = np.where(root_fail, 0.0, self.t)
+
+        # terminal nodes (failed, or at depth m) among the expanded ones
+        leaves = np.zeros(B, dtype=np.int64)
+        for lvl in range(m):
+            terminal = live[lvl] & (fails[lvl] | (lvl == m - 1))
+            leaves += terminal.reshape(B, -1).sum(axis=1)
+        return risk, min_ctrl, dur, leaves

@@ -1,0 +1,77 @@
+"""RiskLabel: add the sampling-tree risk of the current true state to ``info["risk"]``.
+
+Works on any environment whose unwrapped env exposes ``risk_system()`` (a
+:class:`rmm_envs.risk.System` for the current episode) and ``true_state``.  At ``reset`` and
+after every ``step`` it runs the estimator on the true state and adds:
+
+* ``info["risk"]``: the risk metric (float in [0, 1]);
+* ``info["risk_min_ctrl"]``: the first control of the minimum-risk branch;
+* ``info["risk_n_leaves"]``: the number of terminal nodes behind the estimate.
+
+The labelling time is real CPU work done between the inner ``step`` returning and this
+wrapper returning: wrap *inside* a non-blocking wrapper (or use a fixed clock) if it must not
+be charged as the agent's thinking time.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+
+from rmm_envs.risk.estimator import RiskEstimator
+
+__all__ = ["RiskLabel"]
+
+
+class RiskLabel(gym.Wrapper):
+    """Args: ``branches`` (n), ``depth`` (m), ``horizon`` (t, s), ``n_steps``, ``metric``
+    (``expected``/``cvar``/``worst``), ``alpha`` (for cvar), ``leaf`` (``zero``/``heuristic``),
+    ``seed`` (for the estimator's own generator; ``None``: fresh entropy)."""
+
+    def __init__(self, env: gym.Env, branches: int = 32, depth: int = 2, horizon: float = 2.0,
+                 n_steps: int = 8, metric: str = "expected", alpha: float | None = None,
+                 leaf: str = "zero", seed: int | None = None):
+        super().__init__(env)
+        base = env.unwrapped
+        missing = [a for a in ("risk_system", "true_state") if not hasattr(base, a)]
+        if missing:
+            raise TypeError(
+                f"RiskLabel needs an env exposing risk_system() and true_state (its dynamics and "
+                f"obstacles); {type(base).__name__} lacks {missing}"
+            )
+        self._kw = dict(branches=branches, depth=depth, horizon=horizon, n_steps=n_steps,
+                        metric=metric, alpha=alpha, leaf=leaf)
+        # validate the parameters now, not at the first reset
+        from rmm_envs.risk.metrics import get_metric
+
+        get_metric(metric, alpha)
+        if int(branches) != branches or branches < 1 or int(depth) != depth or depth < 0 \
+                or not horizon > 0 or int(n_steps) != n_steps or n_steps < 2:
+            raise ValueError(
+                f"bad tree parameters: branches={branches} (>=1), depth={depth} (>=0), "
+                f"horizon={horizon} (>0), n_steps={n_steps} (>=2)"
+            )
+        self.rng = np.random.default_rng(seed)
+        self._estimator = None
+        self._system = None
+
+    def _label(self, info: dict) -> dict:
+        base = self.env.unwrapped
+        system = base.risk_system()
+        if system is not self._system:
+            self._system = system
+            self._estimator = RiskEstimator(system, **self._kw)
+        res = self._estimator.estimate(np.asarray(base.true_state, dtype=float)[None, :], self.rng)
+        info = dict(info)
+        info["risk"] = float(res.risk[0])
+        info["risk_min_ctrl"] = res.min_risk_ctrl[0]
+        info["risk_n_leaves"] = int(res.n_leaves[0])
+        return info
+
+    def reset(self, *, seed=None, options=None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        return obs, self._label(info)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        return obs, reward, terminated, truncated, self._label(info)

@@ -1,0 +1,134 @@
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset, main
+
+SMALL = dict(configs=6, samples_per_config=10, branches=6, depth=2, configs_per_shard=2, seed=3)
+
+
+def small(**kw):
+    return DatagenConfig(**(SMALL | kw))
+
+
+def test_dataset_contents(tmp_path):
+    man = generate(small(), tmp_path / "d", workers=1, progress=False)
+    ds = load_dataset(tmp_path / "d")
+    assert len(ds) == 60 == man["n_rows"]
+    assert ds.obs.shape == (60, 17) and ds.obs.dtype == np.float32
+    assert ds.state.shape == (60, 4) and ds.min_risk_ctrl.shape == (60, 2)
+    assert np.all((ds.risk >= 0) & (ds.risk <= 1))
+    # grouped by configuration, each configuration whole
+    assert ds.config_id.tolist() == sorted(ds.config_id.tolist())
+    assert np.bincount(ds.config_id).tolist() == [10] * 6
+    # the sim-time feature is spread over the episode, not stuck at 0 as in the original
+    assert ds.obs[:, 0].min() >= 0 and ds.obs[:, 0].max() <= 100 and ds.obs[:, 0].std() > 10
+    # observations are consistent with the stored states
+    np.testing.assert_allclose(ds.obs[:, 4], ds.state[:, 3], rtol=1e-6)
+    meta = json.loads((tmp_path / "d" / "metadata.json").read_text())
+    assert meta["estimator"]["branches"] == 6 and meta["seed"] == 3 and "package_version" in meta
+
+
+def test_same_seed_same_data_whatever_the_worker_count(tmp_path):
+    a = generate(small(), tmp_path / "a", workers=1, progress=False)
+    b = generate(small(), tmp_path / "b", workers=2, progress=False)
+    assert a["dataset_sha256"] == b["dataset_sha256"]
+    da, db = load_dataset(tmp_path / "a"), load_dataset(tmp_path / "b")
+    np.testing.assert_array_equal(da.risk, db.risk)
+    c = generate(small(seed=4), tmp_path / "c", workers=1, progress=False)
+    assert c["dataset_sha256"] != a["dataset_sha256"]
+
+
+def test_rerun_is_a_no_op_and_other_parameters_are_refused(tmp_path):
+    generate(small(), tmp_path / "d", workers=1, progress=False)
+    again = generate(small(), tmp_path / "d", workers=1, progress=False)
+    assert again["last_run"]["new_rows"] == 0
+    with pytest.raises(ValueError, match="other parameters"):
+        generate(small(branches=7), tmp_path / "d", workers=1, progress=False)
+
+
+def test_resume_after_kill_minus_nine(tmp_path):
+    out = tmp_path / "k"
+    args = [sys.executable, "-m", "rmm_envs.risk.datagen", "--configs", "24", "--samples-per-config", "40",
+            "--configs-per-shard", "1", "--workers", "1", "--seed", "5", "--out", str(out), "--no-progress"]
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 60
+    while time.time() < deadline and len(list(out.glob("shard-*.parquet"))) < 3:
+        time.sleep(0.02)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    partial = len(list(out.glob("shard-*.parquet")))
+    assert 3 <= partial < 24, "the run should have been killed midway"
+    assert not (out / "manifest.json").exists()
+    with pytest.raises(ValueError, match="incomplete"):
+        load_dataset(out)
+    assert subprocess.run(args, capture_output=True).returncode == 0
+    resumed = load_dataset(out)
+    pairs = set(zip(resumed.config_id.tolist(), resumed.obs[:, 0].tolist()))
+    assert len(resumed) == 24 * 40 == len(pairs)  # nothing lost, nothing duplicated
+    generate(DatagenConfig(configs=24, samples_per_config=40, configs_per_shard=1, seed=5), tmp_path / "ref", workers=2, progress=False)
+    np.testing.assert_array_equal(load_dataset(tmp_path / "ref").risk, resumed.risk)
+
+
+def test_half_written_shard_is_redone(tmp_path):
+    out = tmp_path / "d"
+    generate(small(), out, workers=1, progress=False)
+    ref = load_dataset(out).risk
+    shard = out / "shard-00001.parquet"
+    shard.write_bytes(shard.read_bytes()[:100])  # a truncated file
+    (out / ".shard-00002.parquet.123.tmp").write_bytes(b"junk")
+    with pytest.raises(ValueError, match="checksum"):
+        load_dataset(out)
+    man = generate(small(), out, workers=1, progress=False)
+    assert man["last_run"]["new_rows"] == 20
+    assert not list(out.glob(".shard-*"))
+    np.testing.assert_array_equal(load_dataset(out).risk, ref)
+
+
+def test_ray_backend_gives_the_same_data(tmp_path):
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        a = generate(small(), tmp_path / "ray", backend="ray", progress=False)
+    finally:
+        ray.shutdown()
+    b = generate(small(), tmp_path / "local", workers=1, progress=False)
+    assert a["dataset_sha256"] == b["dataset_sha256"]
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [({"configs": 0}, "configs"), ({"depth": -1}, "depth"), ({"horizon": 0.0}, "horizon"), ({"n_steps": 1}, "n_steps"),
+     ({"metric": "cvar", "alpha": 1.5}, "alpha"), ({"env_id": "Nope-v0"}, "unknown env"), ({"branches": 0}, "branches")],
+)
+def test_bad_configuration(tmp_path, kw, match):
+    with pytest.raises(ValueError, match=match):
+        generate(small(**kw), tmp_path / "x", workers=1, progress=False)
+
+
+def test_cli_errors_and_success(tmp_path, capsys):
+    assert main(["--out", str(tmp_path / "c"), "--configs", "2", "--samples-per-config", "4", "--branches", "4",
+                 "--workers", "1", "--no-progress"]) == 0
+    assert "8 labelled samples" in capsys.readouterr().out
+    assert main(["--out", str(tmp_path / "c"), "--configs", "3", "--samples-per-config", "4", "--no-progress"]) == 2
+    assert "other parameters" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["--out", str(tmp_path / "e"), "--metric", "median"])
+
+
+def test_load_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="metadata.json"):
+        load_dataset(tmp_path)
+    (tmp_path / "metadata.json").write_text("{not json")
+    with pytest.raises(ValueError, match="JSON"):
+        load_dataset(tmp_path)
+    (tmp_path / "metadata.json").write_text(json.dumps({"format": "other"}))
+    with pytest.raises(ValueError, match="format"):
+        load_dataset(tmp_path)
