@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/rmm-envs demo
+	$(BIN)/rmm-bench --agent all --episodes 64
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2
@@ -25,6 +25,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/perf_env.py
 	$(BIN)/python benchmarks/perf_risk.py
+	$(BIN)/python benchmarks/perf_guardians.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info

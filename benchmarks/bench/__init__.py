@@ -1,0 +1,1 @@
+"""rmm-bench: run guardians over seeded episodes, store results, report Table I."""

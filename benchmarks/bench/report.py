@@ -1,0 +1,106 @@
+"""Tables (Markdown, CSV, LaTeX) and figures (PNG) from the results store."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from pathlib import Path
+
+__all__ = ["PAPER_TABLE_I", "format_tables", "plot_latency", "plot_outcomes"]
+
+# The paper's Table I (2048 episodes per agent; its HJ row used single-obstacle envs)
+PAPER_TABLE_I = {
+    "lrmm": {"obs": "local", "n_obst": 5, "compute_ms": (2.4, 5.0), "goal": (45.3, 7.3), "collision": (29.7, 5.6), "timeout": (25.0, 4.8), "intervention": (30.7, 32.5)},
+    "cbf": {"obs": "global", "n_obst": 5, "compute_ms": (52.9, 41.2), "goal": (46.2, 5.9), "collision": (35.1, 5.2), "timeout": (18.8, 3.8), "intervention": (32.8, 39.4)},
+    "random": {"obs": "none", "n_obst": 5, "compute_ms": (1.4, 2.7), "goal": (27.1, 6.9), "collision": (68.4, 5.9), "timeout": (4.5, 2.9), "intervention": (50.0, float("nan"))},
+    "inactive": {"obs": "none", "n_obst": 5, "compute_ms": (1.0, 2.3), "goal": (44.4, 7.4), "collision": (55.4, 7.3), "timeout": (0.1, 0.5), "intervention": (0.0, 0.0)},
+    "brakes": {"obs": "none", "n_obst": 5, "compute_ms": (0.3, 0.7), "goal": (0.6, 0.9), "collision": (9.0, 3.8), "timeout": (90.4, 3.7), "intervention": (100.0, 0.0)},
+    "hj": {"obs": "global", "n_obst": 1, "compute_ms": (344.0, 850.0), "goal": (54.0, 5.2), "collision": (46.0, 5.3), "timeout": (0.0, 0.3), "intervention": (1.0, float("nan"))},
+}
+
+COLUMNS = [("compute_ms", "Policy compute time [ms]"), ("goal", "Success rate [% eps]"), ("collision", "Collision rate [% eps]"),
+           ("timeout", "Timeout rate [% eps]"), ("intervention", "Intervention rate [% sim time]")]
+
+
+def _pm(v, digits=1) -> str:
+    m, s = v
+    if m is None or (isinstance(m, float) and math.isnan(m)):
+        return "n/a"
+    if s is None or (isinstance(s, float) and math.isnan(s)):
+        return f"{m:.{digits}f}"
+    return f"{m:.{digits}f} ± {s:.{digits}f}"
+
+
+def format_tables(rows: list[dict]) -> dict[str, str]:
+    """``rows``: dicts with agent, obs, n_obst, episodes, errors and the aggregate stats."""
+    header = ["Agent", "Observation", "Obstacles", "Episodes"] + [c[1] for c in COLUMNS] + ["Errors", "QP fallbacks"]
+    body = []
+    for r in rows:
+        digits = 3 if r["compute_ms"][0] < 0.1 else 2 if r["compute_ms"][0] < 10 else 1
+        body.append([r["agent"], r["obs"], str(r["n_obst"]), str(r["episodes"]), _pm(r["compute_ms"], digits)]
+                    + [_pm(r[k]) for k, _ in COLUMNS[1:]] + [str(r["errors"]), str(r["qp_fallbacks"])])
+    md = "| " + " | ".join(header) + " |\n|" + "|".join("---" for _ in header) + "|\n"
+    md += "".join("| " + " | ".join(b) + " |\n" for b in body)
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["agent", "observation", "obstacles", "episodes", "compute_ms_mean", "compute_ms_std", "success_mean", "success_std",
+                "collision_mean", "collision_std", "timeout_mean", "timeout_std", "intervention_mean", "intervention_std",
+                "errors", "qp_fallbacks", "precompute_s_mean"])
+    for r in rows:
+        w.writerow([r["agent"], r["obs"], r["n_obst"], r["episodes"], *r["compute_ms"], *r["goal"], *r["collision"], *r["timeout"],
+                    *r["intervention"], r["errors"], r["qp_fallbacks"], r["precompute_s"][0]])
+    tex = "\\begin{tabular}{llcrrrrrr}\n" + " & ".join(h.replace("%", "\\%") for h in header[:-2]) + " \\\\ \\hline\n"
+    tex += "".join(" & ".join(c.replace("±", "$\\pm$") for c in b[:-2]) + " \\\\\n" for b in body) + "\\end{tabular}\n"
+    return {"md": md, "csv": buf.getvalue(), "tex": tex}
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_outcomes(rows: list[dict], path: Path) -> Path:
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    names = [r["agent"] for r in rows]
+    x = range(len(rows))
+    width = 0.26
+    for i, (key, colour) in enumerate([("goal", "tab:green"), ("collision", "tab:red"), ("timeout", "tab:gray")]):
+        axes[0].bar([j + (i - 1) * width for j in x], [r[key][0] for r in rows], width,
+                    yerr=[0 if math.isnan(r[key][1]) else r[key][1] for r in rows], color=colour, capsize=3, label=key)
+    axes[0].set_xticks(list(x), names)
+    axes[0].set_ylabel("% of episodes (mean ± std over batches of 64)")
+    axes[0].legend()
+    axes[0].set_title("Outcomes")
+    for r in rows:
+        axes[1].errorbar(max(r["compute_ms"][0], 1e-4), r["collision"][0], yerr=r["collision"][1], fmt="o", capsize=3)
+        axes[1].annotate(r["agent"], (max(r["compute_ms"][0], 1e-4), r["collision"][0]), textcoords="offset points", xytext=(5, 5))
+    axes[1].set_xscale("log")
+    axes[1].set_xlabel("policy compute time per step [ms] (log)")
+    axes[1].set_ylabel("collision rate [% episodes]")
+    axes[1].set_title("Compute time vs collisions")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_latency(series: dict[str, list[tuple[float, float, float]]], path: Path) -> Path:
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for agent, pts in series.items():
+        pts = sorted(pts)
+        ax.errorbar([p[0] for p in pts], [p[1] for p in pts], yerr=[p[2] for p in pts], marker="o", capsize=3, label=agent)
+    ax.set_xlabel("added decision latency [ms of wall time]")
+    ax.set_ylabel("collision rate [% episodes]")
+    ax.set_title("Compute time costs safety")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

@@ -1,0 +1,89 @@
+"""Guardian decision time: observation in, action out, one state (issue figures).
+
+Run: ``python benchmarks/perf_guardians.py``.  Prints the median over repeats for every
+available guardian and, for the LRMM, its numpy inference next to the same network in torch
+(measured in the same run).
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import rmm_envs  # noqa: F401
+from guardians import available_guardians, make_guardian
+
+
+def decision_times(guardian, env_id="Dubins4DCircles-v0", steps=3000, seed=0) -> list[float]:
+    env = gym.make(env_id)
+    obs, info = env.reset(seed=seed)
+    guardian.reset(seed=seed, observation_space=env.observation_space, action_space=env.action_space,
+                   privileged=env.unwrapped.privileged)
+    times = []
+    ep = 0
+    for _ in range(steps):
+        t0 = time.perf_counter()
+        a = guardian.act(obs, info)
+        times.append(time.perf_counter() - t0)
+        obs, r, te, tr, info = env.step(a)
+        if te or tr:
+            ep += 1
+            obs, info = env.reset(seed=seed + ep)
+            guardian.reset(seed=seed + ep, observation_space=env.observation_space, action_space=env.action_space,
+                           privileged=env.unwrapped.privileged)
+    return times
+
+
+def torch_lrmm_time(model, obs, repeats=3000) -> float:
+    import torch
+
+    torch.set_num_threads(1)
+    layers = []
+    for i, (W, b) in enumerate(model.weights):
+        lin = torch.nn.Linear(W.shape[1], W.shape[0], bias=b is not None, dtype=torch.float64)
+        with torch.no_grad():
+            lin.weight.copy_(torch.as_tensor(W))
+            if b is not None:
+                lin.bias.copy_(torch.as_tensor(b))
+        layers += [lin, torch.nn.Sigmoid()]
+    net = torch.nn.Sequential(*layers).eval()
+    lo = torch.as_tensor(model.scaler_min)
+    sc = torch.as_tensor(model.scaler_scale)
+    times = []
+    with torch.inference_mode():
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            x = (torch.as_tensor(obs, dtype=torch.float64) - lo) * sc
+            float(net(x)[0])
+            times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def main() -> None:
+    print("Guardian decision time (observation in, action out), Dubins4DCircles-v0, one process")
+    for name in available_guardians():
+        g = make_guardian(name)
+        t = decision_times(g)
+        print(f"  {name:9s} median {statistics.median(t) * 1e6:9.1f} us   p90 {np.quantile(t, 0.9) * 1e6:9.1f} us")
+    lrmm = make_guardian("lrmm")
+    obs = gym.make("Dubins4DCircles-v0").reset(seed=0)[0]
+    t_np = statistics.median(timeit_np(lrmm.model, obs))
+    t_torch = torch_lrmm_time(lrmm.model, obs)
+    print(f"LRMM network only: numpy {t_np * 1e6:.1f} us, torch {t_torch * 1e6:.1f} us ({t_torch / t_np:.1f}x); "
+          "the paper reports 2.4 ms per decision; target <= 20 us")
+
+
+def timeit_np(model, obs, repeats=3000):
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        model.predict(obs)
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+if __name__ == "__main__":
+    main()

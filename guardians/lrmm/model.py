@@ -1,0 +1,199 @@
+"""The LRMM network at inference time (numpy only) and its artifact format.
+
+Network: ``x_scaled = (obs[features] - data_min) * scale`` (a MinMax scaler fitted on the
+training split only), then ``len(hidden)`` layers ``act(W x + b)``, then an output layer
+``sigmoid(W x [+ b])`` giving the inferred risk in ``(0, 1)``.  The paper's network is one
+hidden layer of 64 sigmoids and a bias-free sigmoid output.
+
+Artifact: one ``.npz`` file, loaded with ``allow_pickle=False`` (no code runs on load),
+holding the arrays ``scaler_min``, ``scaler_scale``, ``W0, b0, W1, b1, ...`` (the output
+layer's bias absent when ``output_bias`` is false) and ``meta``, a UTF-8 JSON document:
+
+* ``format`` / ``format_version``; ``env_id``; ``obs_dim``; ``features`` (indices into the
+  observation) and ``feature_names``;
+* ``hidden``, ``activation``, ``output_bias``;
+* ``labeller`` (the estimator's parameters), ``data_sha256`` (the dataset's hash);
+* ``metrics`` (train/val/test MSE and MAE), ``training`` (the command's arguments, seed,
+  wall time, library versions);
+* ``weights_sha256``: a checksum over every array, verified on load.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import zipfile
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["FORMAT", "LRMMModel", "default_model_path", "load_model"]
+
+FORMAT = "rmm-lrmm-model"
+FORMAT_VERSION = 1
+ACTIVATIONS = ("sigmoid", "tanh", "relu", "elu")
+
+
+def _sigmoid(x):
+    return 1.0 / (1.0 + np.exp(-x))
+
+
+def _act(name):
+    return {
+        "sigmoid": _sigmoid,
+        "tanh": np.tanh,
+        "relu": lambda x: np.maximum(x, 0.0),
+        "elu": lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0.0))),
+    }[name]
+
+
+def _checksum(arrays: dict[str, np.ndarray]) -> str:
+    h = hashlib.sha256()
+    for k in sorted(arrays):
+        a = np.ascontiguousarray(arrays[k])
+        h.update(k.encode())
+        h.update(str(a.dtype).encode())
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+class LRMMModel:
+    """A trained risk network ready for numpy inference.
+
+    Args:
+        weights: ``[(W, b), ...]`` for hidden layers then the output layer (``b`` may be None
+            for the output).  scaler_min, scaler_scale: per selected feature.
+        meta: the metadata dictionary (see the module docstring).
+    """
+
+    def __init__(self, weights, scaler_min, scaler_scale, meta: dict) -> None:
+        self.weights = [(np.asarray(W, float), None if b is None else np.asarray(b, float)) for W, b in weights]
+        self.scaler_min = np.asarray(scaler_min, float)
+        self.scaler_scale = np.asarray(scaler_scale, float)
+        self.meta = dict(meta)
+        self.features = np.asarray(self.meta["features"], dtype=int)
+        self.obs_dim = int(self.meta["obs_dim"])
+        self.env_id = self.meta.get("env_id")
+        act = self.meta.get("activation", "sigmoid")
+        if act not in ACTIVATIONS:
+            raise ValueError(f"unknown activation {act!r}; expected one of {ACTIVATIONS}")
+        self._act = _act(act)
+        self._check_shapes()
+        # fold the scaler into the first layer: W0 ((x - m) * s) + b0 = (W0 * s) x + (b0 - W0 (m s))
+        W0, b0 = self.weights[0]
+        self._W0 = W0 * self.scaler_scale[None, :]
+        self._b0 = (b0 if b0 is not None else 0.0) - self._W0 @ self.scaler_min
+        self._all_features = self.features.shape[0] == self.obs_dim and np.array_equal(self.features, np.arange(self.obs_dim))
+
+    def _check_shapes(self) -> None:
+        n_in = self.features.shape[0]
+        if len(self.weights) < 2:
+            raise ValueError(f"an LRMM network needs at least one hidden layer, got {len(self.weights) - 1}")
+        if self.scaler_min.shape != (n_in,) or self.scaler_scale.shape != (n_in,):
+            raise ValueError(f"scaler has shape {self.scaler_min.shape}/{self.scaler_scale.shape}, expected ({n_in},)")
+        if np.any(self.features < 0) or np.any(self.features >= self.obs_dim):
+            raise ValueError(f"feature indices {self.features.tolist()} fall outside an observation of {self.obs_dim}")
+        prev = n_in
+        for i, (W, b) in enumerate(self.weights):
+            if W.ndim != 2 or W.shape[1] != prev:
+                raise ValueError(f"layer {i}: weight shape {W.shape} does not take {prev} inputs")
+            if b is not None and b.shape != (W.shape[0],):
+                raise ValueError(f"layer {i}: bias shape {b.shape}, expected ({W.shape[0]},)")
+            prev = W.shape[0]
+        if prev != 1:
+            raise ValueError(f"the output layer must have one unit, got {prev}")
+
+    # ------------------------------------------------------------------ inference
+    def predict(self, obs) -> np.ndarray | float:
+        """Inferred risk for one observation ``(obs_dim,)`` (a float) or a batch ``(N, obs_dim)``."""
+        x = np.asarray(obs, dtype=float)
+        single = x.ndim == 1
+        if x.shape[-1] != self.obs_dim or x.ndim not in (1, 2):
+            raise ValueError(f"observation must have shape ({self.obs_dim},) or (N, {self.obs_dim}), got {x.shape}")
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"observation contains NaN or inf: {x.tolist() if single else 'batch'}")
+        if not self._all_features:
+            x = x[..., self.features]
+        h = self._act(x @ self._W0.T + self._b0)
+        layers = self.weights[1:]
+        for i, (W, b) in enumerate(layers):
+            z = h @ W.T
+            if b is not None:
+                z = z + b
+            h = _sigmoid(z) if i == len(layers) - 1 else self._act(z)
+        out = h[..., 0]
+        return float(out) if single else out
+
+    # ------------------------------------------------------------------ I/O
+    def arrays(self) -> dict[str, np.ndarray]:
+        arrs = {"scaler_min": self.scaler_min, "scaler_scale": self.scaler_scale}
+        for i, (W, b) in enumerate(self.weights):
+            arrs[f"W{i}"] = W
+            if b is not None:
+                arrs[f"b{i}"] = b
+        return arrs
+
+    def save(self, path) -> Path:
+        """Write the artifact atomically (temporary file, then rename)."""
+        path = Path(path)
+        arrs = self.arrays()
+        meta = dict(self.meta)
+        meta["format"], meta["format_version"] = FORMAT, FORMAT_VERSION
+        meta["weights_sha256"] = _checksum(arrs)
+        buf = io.BytesIO()
+        np.savez(buf, meta=np.frombuffer(json.dumps(meta, indent=1, sort_keys=True).encode(), dtype=np.uint8), **arrs)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.tmp")
+        tmp.write_bytes(buf.getvalue())
+        tmp.replace(path)
+        self.meta = meta
+        return path
+
+    @classmethod
+    def load(cls, path, env_id: str | None = None, obs_dim: int | None = None) -> "LRMMModel":
+        """Load and verify an artifact; ``env_id``/``obs_dim`` (optional) must match it."""
+        path = Path(path)
+        if not path.exists():
+            raise FileNotFoundError(f"LRMM model file {path} does not exist")
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                arrays = {k: z[k] for k in z.files}
+        except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
+            raise ValueError(f"{path} is not a readable LRMM model (truncated or not an .npz file: {e})") from None
+        if "meta" not in arrays:
+            raise ValueError(f"{path} has no 'meta' entry: not an LRMM model file")
+        try:
+            meta = json.loads(arrays.pop("meta").tobytes().decode())
+        except (UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise ValueError(f"{path}: metadata is not valid JSON ({e})") from None
+        if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
+            raise ValueError(f"{path}: expected format {FORMAT} v{FORMAT_VERSION}, got {meta.get('format')} v{meta.get('format_version')}")
+        if _checksum(arrays) != meta.get("weights_sha256"):
+            raise ValueError(f"{path}: weights checksum mismatch (the file is corrupted or was edited)")
+        if env_id is not None and meta.get("env_id") != env_id:
+            raise ValueError(f"{path} was trained for env {meta.get('env_id')!r}, not {env_id!r}")
+        if obs_dim is not None and int(meta.get("obs_dim", -1)) != int(obs_dim):
+            raise ValueError(f"{path} expects observations of {meta.get('obs_dim')} values, the env gives {obs_dim}")
+        n_layers = len(meta["hidden"]) + 1
+        weights = []
+        for i in range(n_layers):
+            if f"W{i}" not in arrays:
+                raise ValueError(f"{path}: missing weight array W{i}")
+            weights.append((arrays[f"W{i}"], arrays.get(f"b{i}")))
+        return cls(weights, arrays["scaler_min"], arrays["scaler_scale"], meta)
+
+
+def default_model_path(env_id: str = "Dubins4DCircles-v0") -> Path:
+    """Path of the model shipped with the package for ``env_id`` (the Dubins4D envs share one)."""
+    names = {"Dubins4DCircles-v0": "dubins4d.npz", "Dubins4DParallel-v0": "dubins4d.npz"}
+    if env_id not in names:
+        raise ValueError(f"no shipped LRMM model for {env_id!r}; shipped: {sorted(set(names))}")
+    return Path(str(resources.files("guardians.lrmm") / "models" / names[env_id]))
+
+
+def load_model(path=None, env_id: str = "Dubins4DCircles-v0") -> LRMMModel:
+    """Load ``path`` or the shipped model for ``env_id``."""
+    return LRMMModel.load(path or default_model_path(env_id))

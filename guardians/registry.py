@@ -1,0 +1,83 @@
+"""Guardian registry: names to guardians.
+
+Built in: ``lrmm``, ``cbf``, ``hj``, ``random``, ``inactive``, ``brakes`` (those whose module
+is not present yet are listed as unavailable).  Third-party guardians register through the
+entry-point group ``rmm_envs.guardians`` (``name = "package.module:Class"``) or are named
+directly as ``module:Class``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+from importlib.metadata import entry_points
+from typing import Any
+
+from guardians.base import Guardian
+
+__all__ = ["ENTRY_POINT_GROUP", "available_guardians", "load_guardian_class", "make_guardian"]
+
+ENTRY_POINT_GROUP = "rmm_envs.guardians"
+
+BUILTIN = {
+    "lrmm": "guardians.lrmm.guardian:LRMMGuardian",
+    "cbf": "guardians.cbf:CBFGuardian",
+    "hj": "guardians.hj.guardian:HJGuardian",
+    "random": "guardians.baselines:RandomGuardian",
+    "inactive": "guardians.baselines:InactiveGuardian",
+    "brakes": "guardians.baselines:BrakesGuardian",
+}
+
+
+def _entry_points() -> dict[str, Any]:
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def _import(spec: str):
+    module, _, attr = spec.partition(":")
+    if not module or not attr:
+        raise ValueError(f"guardian spec {spec!r} must look like 'package.module:Class'")
+    try:
+        obj = importlib.import_module(module)
+    except ImportError as e:
+        raise ValueError(f"cannot import module {module!r} for guardian {spec!r}: {e}") from None
+    for part in attr.split("."):
+        try:
+            obj = getattr(obj, part)
+        except AttributeError:
+            raise ValueError(f"module {module!r} has no attribute {attr!r} (guardian {spec!r})") from None
+    return obj
+
+
+def _builtin_available(name: str) -> bool:
+    module = BUILTIN[name].partition(":")[0]
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:  # a parent package is not there (a guardian not yet landed)
+        return False
+
+
+def available_guardians() -> list[str]:
+    """Names accepted by :func:`make_guardian` (built-in and entry points)."""
+    names = [n for n in BUILTIN if _builtin_available(n)]
+    return names + sorted(n for n in _entry_points() if n not in names)
+
+
+def load_guardian_class(name: str):
+    if ":" in name:
+        return _import(name)
+    if name in BUILTIN and _builtin_available(name):
+        return _import(BUILTIN[name])
+    eps = _entry_points()
+    if name in eps:
+        return eps[name].load()
+    raise ValueError(f"unknown guardian {name!r}; available: {available_guardians()} or 'module:Class'")
+
+
+def make_guardian(name: str, **kwargs) -> Guardian:
+    """Instantiate a guardian by registry name, entry-point name or ``module:Class``."""
+    cls = load_guardian_class(name)
+    obj = cls(**kwargs) if isinstance(cls, type) else cls(**kwargs) if callable(cls) else cls
+    if not hasattr(obj, "act") or not hasattr(obj, "reset"):
+        raise TypeError(f"{name!r} did not produce a guardian (needs reset() and act()); got {type(obj).__name__}")
+    return obj

@@ -1,0 +1,143 @@
+import sys
+import textwrap
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import rmm_envs  # noqa: F401
+from guardians import CallableGuardian, SB3Guardian, available_guardians, make_guardian
+from guardians.adapters import to_guardian_action
+from guardians.baselines import BrakesGuardian, RandomGuardian
+
+
+def run(guardian, seed=0, env_id="Dubins4DCircles-v0", max_steps=2000):
+    env = gym.make(env_id)
+    obs, info = env.reset(seed=seed)
+    guardian.reset(seed=seed, observation_space=env.observation_space, action_space=env.action_space,
+                   privileged=env.unwrapped.privileged)
+    actions, infos = [], []
+    for _ in range(max_steps):
+        a = guardian.act(obs, info)
+        assert env.action_space.contains({k: (np.asarray(v, np.float32) if k != "active_ctrl" else int(v)) for k, v in a.items()}), a
+        actions.append(a)
+        obs, r, te, tr, info = env.step(a)
+        infos.append(info)
+        if te or tr:
+            break
+    return actions, infos
+
+
+@pytest.mark.parametrize("name", [n for n in ["inactive", "random", "brakes", "lrmm"]])
+def test_every_registered_guardian_conforms_over_an_episode(name):
+    assert name in available_guardians()
+    g = make_guardian(name)
+    acts, infos = run(g, seed=3)
+    assert "outcome" in infos[-1]
+
+
+def test_inactive_never_takes_control():
+    acts, infos = run(make_guardian("inactive"))
+    assert all(a["active_ctrl"] == 0 for a in acts)
+    assert infos[-1]["episode"]["n_active_ctrl_env_steps"] == 0
+
+
+def test_random_is_seeded_and_half_active():
+    g = RandomGuardian()
+    g.reset(seed=4)
+    a = [g.act(None, {}) for _ in range(4000)]
+    g.reset(seed=4)
+    b = [g.act(None, {}) for _ in range(4000)]
+    assert [x["active_ctrl"] for x in a] == [x["active_ctrl"] for x in b]
+    frac = np.mean([x["active_ctrl"] for x in a])
+    assert 0.47 < frac < 0.53
+    u = np.array([x["turnrate_ctrl"][0] for x in a])
+    assert u.min() >= -0.25 and u.max() <= 0.25 and u.std() > 0.1
+    with pytest.raises(ValueError, match="p_active"):
+        RandomGuardian(p_active=1.5)
+
+
+def test_brakes_constant_turn_per_episode():
+    g = BrakesGuardian()
+    g.reset(seed=1)
+    acts = [g.act(None, {}) for _ in range(5)]
+    assert all(a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 for a in acts)
+    turns = {float(a["turnrate_ctrl"][0]) for a in acts}
+    assert len(turns) == 1 and turns != {0.0} and abs(turns.pop()) <= 0.25
+    g.reset(seed=2)
+    assert float(g.act(None, {})["turnrate_ctrl"][0]) != float(acts[0]["turnrate_ctrl"][0])
+    z = BrakesGuardian(turn="zero")
+    z.reset(seed=1)
+    assert z.act(None, {})["turnrate_ctrl"][0] == 0.0
+    with pytest.raises(ValueError, match="turn"):
+        BrakesGuardian(turn="left")
+
+
+def test_brakes_stops_the_car():
+    acts, infos = run(make_guardian("brakes", turn="zero"), seed=5)
+    ep = infos[-1]["episode"]
+    if infos[-1]["outcome"] == "timeout":
+        assert ep["final_speed"] == 0.0
+    assert ep["n_active_ctrl_env_steps"] == ep["n_env_steps"] - 0  # blocking env: every step is the guardian's
+
+
+def test_callable_adapter_with_dict_and_flat_actions():
+    g = CallableGuardian(lambda obs: [1.0, 0.1, -0.2], name="flat")
+    g.reset(seed=0)
+    a = g.act(np.zeros(17), {})
+    assert a["active_ctrl"] == 1 and a["turnrate_ctrl"][0] == pytest.approx(0.1)
+    acts, infos = run(CallableGuardian(lambda obs: {"active_ctrl": 0, "turnrate_ctrl": [0.0], "accel_ctrl": [0.0]}))
+    assert infos[-1]["episode"]["n_active_ctrl_env_steps"] == 0
+    with pytest.raises(TypeError, match="callable"):
+        CallableGuardian(3)
+    with pytest.raises(ValueError, match="active, turnrate, accel"):
+        to_guardian_action([1, 2])
+
+
+def test_sb3_style_adapter():
+    class Model:
+        def predict(self, obs, deterministic=True):
+            assert deterministic
+            return np.array([1.0, -0.25, -0.5]), None
+
+    g = SB3Guardian(Model())
+    g.reset(seed=0)
+    a = g.act(np.zeros(17), {})
+    assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5
+    with pytest.raises(TypeError, match="predict"):
+        SB3Guardian(object())
+
+
+def test_module_class_spec_and_entry_point(tmp_path, monkeypatch):
+    pkg = tmp_path / "myguard"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text(textwrap.dedent("""
+        from guardians.base import Guardian, active_action
+        class Swerve(Guardian):
+            name = "swerve"
+            def act(self, obs, info):
+                return active_action(0.25, 0.0)
+    """))
+    dist = tmp_path / "myguard-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: myguard\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[rmm_envs.guardians]\nswerve = myguard:Swerve\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    g = make_guardian("myguard:Swerve")
+    assert g.name == "swerve"
+    assert "swerve" in available_guardians()
+    g2 = make_guardian("swerve")
+    g2.reset(seed=0)
+    assert g2.act(None, {})["turnrate_ctrl"][0] == 0.25
+    sys.modules.pop("myguard", None)
+
+
+def test_unknown_guardian_names():
+    with pytest.raises(ValueError, match="available"):
+        make_guardian("teleport")
+    with pytest.raises(ValueError, match="cannot import"):
+        make_guardian("no_such_module_xyz:Thing")
+    with pytest.raises(ValueError, match="no attribute"):
+        make_guardian("guardians.baselines:Nope")
+    with pytest.raises(TypeError, match="guardian"):
+        make_guardian("collections:OrderedDict")
