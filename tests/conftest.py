@@ -1,6 +1,14 @@
 import pytest
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _hj_cache(tmp_path_factory):
+    """Keep HJ value functions solved by tests out of the user's cache."""
+    import os
+
+    os.environ["RMM_HJ_CACHE"] = str(tmp_path_factory.mktemp("hjcache"))
+
+
 @pytest.fixture(scope="session")
 def small_dataset(tmp_path_factory):
     """A small real dataset (8 configurations x 24 samples, a cheap tree)."""

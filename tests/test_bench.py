@@ -65,9 +65,10 @@ def _db_rows(out, agent=None):
 
 def test_every_agent_end_to_end_and_report(tmp_path, capsys):
     out = tmp_path / "r"
-    assert main(["--agent", "all", "--episodes", "6", "--workers", "2", "--out", str(out), *FAST]) == 0
+    assert main(["--agent", "all", "--episodes", "4", "--workers", "2", "--out", str(out),
+                 "--agent-opt", "hj.grid_n=[32,32,16,16]", *FAST]) == 0
     text = capsys.readouterr().out
-    for agent in ("lrmm", "cbf", "random", "inactive", "brakes"):
+    for agent in ("lrmm", "cbf", "hj", "random", "inactive", "brakes"):
         assert f"| {agent} |" in text
     for f in ("table_I.md", "table_I.csv", "table_I.tex", "outcomes.png"):
         assert (out / f).stat().st_size > 0
@@ -77,7 +78,15 @@ def test_every_agent_end_to_end_and_report(tmp_path, capsys):
     assert (out / "table_I.md").exists()
     assert rebuilt.split("Table I:")[1] == text.split("Table I:")[1]  # the same table, from the database alone
     rows = _db_rows(out)
-    assert len(rows) == 6 * 5 and not [r for r in rows if r[3] == "error"]
+    assert len(rows) == 4 * 6 and not [r for r in rows if r[3] == "error"]
+
+
+def test_agent_options_reach_the_guardian(tmp_path):
+    out = tmp_path / "o"
+    assert main(["--agent", "random", "--agent-opt", "random.p_active=1.0", "--episodes", "2", "--workers", "1",
+                 "--out", str(out), *FAST]) == 0
+    con = sqlite3.connect(out / "results.db")
+    assert all(a == s for a, s in con.execute("SELECT active_steps, steps - 1 FROM episodes"))  # all but the driver's first lap
 
 
 def test_same_results_whatever_the_worker_count(tmp_path):
@@ -136,6 +145,8 @@ def test_unknown_names_fail_before_any_work(tmp_path, capsys):
     assert main(["--agent", "lrmm,teleport", "--out", str(tmp_path / "x"), *FAST]) == 2
     err = capsys.readouterr().err
     assert "teleport" in err and "inactive" in err
+    assert main(["--agent", "lrmm", "--agent-opt", "cbf.p1=1", "--out", str(tmp_path / "x"), *FAST]) == 2
+    assert main(["--agent", "lrmm", "--agent-opt", "nonsense", "--out", str(tmp_path / "x"), *FAST]) == 2
     assert not (tmp_path / "x").exists()
     with pytest.raises(SystemExit):
         main(["--env", "Nope-v0", "--out", str(tmp_path / "x")])

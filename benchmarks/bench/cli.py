@@ -63,6 +63,24 @@ def _agents(spec: str) -> list[str]:
     return names
 
 
+def _agent_opts(items: list[str], agents: list[str]) -> dict[str, dict]:
+    """Parse ``AGENT.KEY=VALUE`` options (VALUE as JSON, else a string)."""
+    out: dict[str, dict] = {}
+    for item in items:
+        head, eq, value = item.partition("=")
+        agent, dot, key = head.rpartition(".")
+        if not eq or not dot or not agent or not key:
+            raise ValueError(f"--agent-opt {item!r}: expected AGENT.KEY=VALUE, e.g. hj.margin=0.3")
+        if agent not in agents:
+            raise ValueError(f"--agent-opt {item!r}: agent {agent!r} is not in this run ({agents})")
+        try:
+            parsed = json.loads(value)
+        except json.JSONDecodeError:
+            parsed = value
+        out.setdefault(agent, {})[key] = parsed
+    return out
+
+
 def _guardian_info(agent: str) -> tuple[str, str]:
     from guardians.registry import load_guardian_class
 
@@ -76,9 +94,10 @@ def _run_configs(args, agents) -> dict[str, dict]:
         env_kwargs = {"time_accel": args.time_accel, "base_step": args.base_step, "clock": args.clock}
     else:
         env_kwargs = {"clock": args.clock}
+    opts = _agent_opts(getattr(args, "agent_opt", None) or [], agents)
     out = {}
     for a in agents:
-        cfg = {"agent": a, "agent_kwargs": {}, "env_id": args.env, "env_kwargs": env_kwargs, "seed": args.seed,
+        cfg = {"agent": a, "agent_kwargs": opts.get(a, {}), "env_id": args.env, "env_kwargs": env_kwargs, "seed": args.seed,
                "episode_timeout": args.episode_timeout, "charge_precompute": args.charge_precompute}
         out[a] = cfg
     return out
@@ -197,9 +216,9 @@ def write_report(store: ResultsStore, out: Path, inv: dict, batch_size: int = 64
 
 def cmd_run(args, argv) -> int:
     agents = _agents(args.agent)
+    configs = _run_configs(args, agents)  # validates every option before anything is written
     out = Path(args.out)
     store = ResultsStore(out / "results.db")
-    configs = _run_configs(args, agents)
     keys = {a: run_key(c) for a, c in configs.items()}
     inv = store.add_invocation("run", vars(args), keys, args.episodes)
     t0 = time.perf_counter()
@@ -228,9 +247,13 @@ def cmd_report(args) -> int:
 
 def cmd_sweep(args, argv) -> int:
     agents = _agents(args.agent)
-    latencies = [float(x) for x in args.latency.split(",") if x.strip()]
+    try:
+        latencies = [float(x) for x in args.latency.split(",") if x.strip()]
+    except ValueError:
+        latencies = []
     if not latencies or any(x < 0 for x in latencies):
         raise ValueError(f"--latency must be a comma list of non-negative milliseconds, got {args.latency!r}")
+    _run_configs(args, agents)
     out = Path(args.out)
     store = ResultsStore(out / "results.db")
     series: dict[str, list] = {a: [] for a in agents}
@@ -267,6 +290,8 @@ def _common(p: argparse.ArgumentParser, default_agent: str) -> None:
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (default: the core count)")
     p.add_argument("--backend", default="local", choices=["local", "ray"], help="local processes or Ray tasks (default: %(default)s)")
     p.add_argument("--ray-address", default=None, help="Ray cluster address (default: start a local Ray)")
+    p.add_argument("--agent-opt", action="append", metavar="AGENT.KEY=VALUE",
+                   help="a guardian constructor argument (VALUE as JSON), e.g. hj.margin=0.3 or lrmm.threshold=0.9; repeatable")
     p.add_argument("--episode-timeout", type=float, default=600.0, help="wall seconds before an episode is recorded as an error (default: %(default)s)")
     p.add_argument("--charge-precompute", action="store_true", help="charge a guardian's reset (e.g. an HJ solve) to the first step's clock")
     p.add_argument("--batch-size", type=int, default=64, help="episodes per batch for the rate statistics (default: %(default)s)")

@@ -1,0 +1,61 @@
+"""On-disk cache of solved value functions, keyed by a hash of everything that determines them.
+
+Files are raw float32 ``.npy`` arrays (17 MB on the default grid) named by the SHA-256 of
+``{dynamics, grid, horizon, scheme, obstacles}``; written atomically; the oldest files beyond
+``max_files`` are removed.  The default directory is ``$RMM_HJ_CACHE`` or
+``~/.cache/rmm-envs/hj``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["ValueCache", "default_cache_dir"]
+
+
+def default_cache_dir() -> Path:
+    return Path(os.environ.get("RMM_HJ_CACHE") or Path.home() / ".cache" / "rmm-envs" / "hj")
+
+
+class ValueCache:
+    def __init__(self, directory: str | Path | None = None, max_files: int = 64) -> None:
+        self.dir = Path(directory) if directory is not None else default_cache_dir()
+        self.max_files = int(max_files)
+
+    @staticmethod
+    def key(spec: dict) -> str:
+        return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
+
+    def path(self, key: str) -> Path:
+        return self.dir / f"{key}.npy"
+
+    def load(self, key: str, shape) -> np.ndarray | None:
+        p = self.path(key)
+        if not p.exists():
+            return None
+        try:
+            V = np.load(p, allow_pickle=False)
+        except (ValueError, OSError, EOFError):
+            p.unlink(missing_ok=True)  # a damaged entry is recomputed
+            return None
+        if V.shape != tuple(shape) or V.dtype != np.float32:
+            p.unlink(missing_ok=True)
+            return None
+        os.utime(p)  # most recently used
+        return V
+
+    def save(self, key: str, V: np.ndarray) -> None:
+        self.dir.mkdir(parents=True, exist_ok=True)
+        p = self.path(key)
+        tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
+        with open(tmp, "wb") as fh:
+            np.save(fh, V.astype(np.float32, copy=False), allow_pickle=False)
+        os.replace(tmp, p)
+        files = sorted(self.dir.glob("*.npy"), key=lambda f: f.stat().st_mtime)
+        for f in files[: max(0, len(files) - self.max_files)]:
+            f.unlink(missing_ok=True)

@@ -1,0 +1,94 @@
+"""Dynamics for the level-set solver: the optimal Hamiltonian and its partial bounds.
+
+A dynamics object gives, on a :class:`Grid`:
+
+* ``hamiltonian(grid, p)``: ``max_u min_d  p . f(x, u, d)`` for the co-state ``p`` (a list of
+  arrays, one per axis), i.e. the control tries to *avoid* the target set (keep the value
+  high) and the disturbance tries to reach it;
+* ``alphas(grid)``: per axis, a bound on ``|dH/dp_i|`` (scalar or broadcastable array) for the
+  Lax-Friedrichs dissipation and the CFL step;
+* ``optimal_control(x, grad)``: the bang-bang maximiser at a state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["DoubleIntegrator1D", "Dubins4DHJ", "Translation"]
+
+
+@dataclass(frozen=True)
+class Dubins4DHJ:
+    """State ``(x, y, theta, v)``; ``u1`` in ``[u1_min, u1_max]``, ``u2`` in ``[u2_min, u2_max]``;
+    bounded disturbance ``|d_x|, |d_y| <= d_max`` on the position rates (0 by default, as the
+    paper ran); speed held in ``[v_min, v_max]`` as in the environment."""
+
+    u1_max: float = 0.25
+    u2_max: float = 0.5
+    v_min: float = 0.0
+    v_max: float = 2.0
+    d_max: float = 0.0
+
+    def key(self) -> dict:
+        return {"name": "dubins4d", **self.__dict__}
+
+    def hamiltonian(self, grid, p):
+        th, v = grid.coord(2), grid.coord(3)
+        vv = np.minimum(v, self.v_max).astype(np.float32)
+        c, s = (np.cos(th) * vv).astype(np.float32), (np.sin(th) * vv).astype(np.float32)
+        H = p[0] * c
+        H += p[1] * s
+        H += self.u1_max * np.abs(p[2])
+        # speed: max over u2 of p_v u2, except that u2 cannot push past a speed bound
+        can_up = (v < self.v_max).astype(np.float32)
+        can_down = (v > self.v_min).astype(np.float32)
+        H += self.u2_max * np.maximum(p[3] * can_up, -p[3] * can_down)
+        if self.d_max:
+            H -= self.d_max * (np.abs(p[0]) + np.abs(p[1]))
+        return H
+
+    def alphas(self, grid):
+        v = np.minimum(grid.axes[3], self.v_max).max()
+        return [v + self.d_max, v + self.d_max, self.u1_max, self.u2_max]
+
+    def optimal_control(self, x, grad):
+        u1 = self.u1_max if grad[2] >= 0 else -self.u1_max
+        u2 = self.u2_max if grad[3] >= 0 else -self.u2_max
+        return u1, u2
+
+
+@dataclass(frozen=True)
+class DoubleIntegrator1D:
+    """``x' = v, v' = u, |u| <= a_max`` (for accuracy tests: braking toward a wall)."""
+
+    a_max: float = 1.0
+
+    def key(self) -> dict:
+        return {"name": "double_integrator", **self.__dict__}
+
+    def hamiltonian(self, grid, p):
+        return p[0] * grid.coord(1).astype(np.float32) + self.a_max * np.abs(p[1])
+
+    def alphas(self, grid):
+        return [float(np.abs(grid.axes[1]).max()), self.a_max]
+
+
+@dataclass(frozen=True)
+class Translation:
+    """``x' = c`` (constant velocity in each axis; for tests)."""
+
+    c: tuple = (1.0,)
+
+    def key(self) -> dict:
+        return {"name": "translation", "c": list(self.c)}
+
+    def hamiltonian(self, grid, p):
+        H = np.zeros_like(p[0])
+        for pi, ci in zip(p, self.c):
+            H += ci * pi
+        return H
+
+    def alphas(self, grid):
+        return [abs(c) for c in self.c]

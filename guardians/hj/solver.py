@@ -1,0 +1,121 @@
+"""A small level-set solver for backward reachable tubes (BRTs).
+
+Solves ``V_tau = min(0, H(x, grad V))``, ``V(x, 0) = l(x)``, from ``tau = 0`` to the
+horizon, where ``l <= 0`` on the target (obstacle) set and ``H = max_u min_d grad V . f``.
+The result ``V(x, T)`` is ``<= 0`` exactly on the states from which the target cannot be
+avoided within ``T`` seconds (the value is the minimum over time of ``l`` along the best
+trajectory, so the tube only grows).
+
+Numerics (Osher-Fedkiw, Mitchell's toolbox conventions):
+
+* spatial derivatives: one-sided differences, first-order upwind (``order=1``) or ENO2
+  (``order=2``), with periodic axes wrapped and the others extrapolated linearly;
+* Lax-Friedrichs numerical Hamiltonian
+  ``H(x, (p- + p+)/2) + sum_i alpha_i (p+_i - p-_i) / 2`` (plus sign because the equation is
+  ``V_tau = +H``), with ``alpha_i >= max |dH/dp_i|`` from the dynamics;
+* time: TVD Runge-Kutta (``rk=1``: forward Euler, ``rk=2``: Heun, ``rk=3``: Shu-Osher) with
+  ``dt = cfl / sum_i (alpha_i / dx_i)`` (CFL 0.8 by default);
+* float32 arrays (the default grid has 4.2 M points, 17 MB per array).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from guardians.hj.grid import Grid
+
+__all__ = ["solve_brt", "spatial_derivatives"]
+
+
+def _pad(V: np.ndarray, axis: int, periodic: bool, g: int) -> np.ndarray:
+    if periodic:
+        return np.concatenate([V.take(range(-g, 0), axis=axis), V, V.take(range(g), axis=axis)], axis=axis)
+    n = V.shape[axis]
+    lo = [V.take([0], axis=axis) + (V.take([0], axis=axis) - V.take([1], axis=axis)) * k for k in range(g, 0, -1)]
+    hi = [V.take([n - 1], axis=axis) + (V.take([n - 1], axis=axis) - V.take([n - 2], axis=axis)) * k for k in range(1, g + 1)]
+    return np.concatenate(lo + [V] + hi, axis=axis)
+
+
+def spatial_derivatives(V: np.ndarray, grid: Grid, axis: int, order: int = 1):
+    """Left and right one-sided derivatives ``(p-, p+)`` of ``V`` along ``axis``."""
+    dx = np.float32(grid.dx[axis])
+    n = V.shape[axis]
+    if order == 1:
+        P = _pad(V, axis, grid.periodic[axis], 1)
+        D = np.diff(P, axis=axis) / dx  # n + 1 differences; D[i] = (V_i - V_{i-1}) / dx
+        sl = [slice(None)] * V.ndim
+        sl[axis] = slice(0, n)
+        left = D[tuple(sl)]
+        sl[axis] = slice(1, n + 1)
+        return left, D[tuple(sl)]
+    if order == 2:
+        P = _pad(V, axis, grid.periodic[axis], 2)
+        D1 = np.diff(P, axis=axis) / dx  # n + 3
+        D2 = np.diff(D1, axis=axis) / dx  # n + 2; D2[j] is the second difference at padded j + 1
+
+        def sl(a, b):
+            s = [slice(None)] * V.ndim
+            s[axis] = slice(a, b)
+            return tuple(s)
+
+        d2_im1, d2_i, d2_ip1 = D2[sl(0, n)], D2[sl(1, n + 1)], D2[sl(2, n + 2)]
+        c_left = np.where(np.abs(d2_im1) <= np.abs(d2_i), d2_im1, d2_i)
+        c_right = np.where(np.abs(d2_i) <= np.abs(d2_ip1), d2_i, d2_ip1)
+        left = D1[sl(1, n + 1)] + 0.5 * dx * c_left
+        right = D1[sl(2, n + 2)] - 0.5 * dx * c_right
+        return left, right
+    raise ValueError(f"order must be 1 or 2, got {order}")
+
+
+def _rate(V: np.ndarray, grid: Grid, dynamics, alphas, order: int) -> np.ndarray:
+    p_mean, diss = [], None
+    for ax in range(grid.ndim):
+        left, right = spatial_derivatives(V, grid, ax, order)
+        p_mean.append(0.5 * (left + right))
+        term = (0.5 * np.float32(alphas[ax])) * (right - left)
+        diss = term if diss is None else diss + term
+        del left, right
+    H = dynamics.hamiltonian(grid, p_mean)
+    H += diss
+    return np.minimum(H, 0.0, out=H)
+
+
+def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: int = 1, rk: int = 2,
+              cfl: float = 0.8, progress=None) -> tuple[np.ndarray, dict]:
+    """Backward reachable tube of ``target`` (``l``: <= 0 inside) over ``horizon`` seconds.
+
+    Returns ``V(x, horizon)`` (float32, the grid's shape) and a dict of solver statistics.
+    """
+    if target.shape != grid.shape:
+        raise ValueError(f"target has shape {target.shape}, the grid {grid.shape}")
+    if not horizon >= 0:
+        raise ValueError(f"horizon must be >= 0, got {horizon}")
+    if rk not in (1, 2, 3):
+        raise ValueError(f"rk must be 1, 2 or 3, got {rk}")
+    if not 0 < cfl <= 1:
+        raise ValueError(f"cfl must be in (0, 1], got {cfl}")
+    alphas = [float(np.max(a)) for a in dynamics.alphas(grid)]
+    rate_bound = sum(a / d for a, d in zip(alphas, grid.dx))
+    dt_max = cfl / rate_bound if rate_bound > 0 else horizon
+    V = target.astype(np.float32, copy=True)
+    t, steps = 0.0, 0
+    t0 = time.perf_counter()
+    while t < horizon - 1e-12:
+        dt = np.float32(min(dt_max, horizon - t))
+        if rk == 1:
+            V = V + dt * _rate(V, grid, dynamics, alphas, order)
+        elif rk == 2:
+            V1 = V + dt * _rate(V, grid, dynamics, alphas, order)
+            V = 0.5 * V + 0.5 * (V1 + dt * _rate(V1, grid, dynamics, alphas, order))
+        else:
+            V1 = V + dt * _rate(V, grid, dynamics, alphas, order)
+            V2 = 0.75 * V + 0.25 * (V1 + dt * _rate(V1, grid, dynamics, alphas, order))
+            V = V / 3.0 + (2.0 / 3.0) * (V2 + dt * _rate(V2, grid, dynamics, alphas, order))
+        V = V.astype(np.float32, copy=False)
+        t += float(dt)
+        steps += 1
+        if progress is not None:
+            progress(t, horizon)
+    return V, {"steps": steps, "dt": dt_max, "seconds": time.perf_counter() - t0, "order": order, "rk": rk, "cfl": cfl}

@@ -1,0 +1,135 @@
+import numpy as np
+import pytest
+
+from guardians.hj.dynamics import DoubleIntegrator1D, Dubins4DHJ, Translation
+from guardians.hj.grid import Grid
+from guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
+from guardians.hj.solver import solve_brt, spatial_derivatives
+
+
+def zero_crossing(xs, values):
+    """Largest x at which values go from > 0 to <= 0 (linear interpolation)."""
+    idx = np.nonzero((values[:-1] > 0) & (values[1:] <= 0))[0]
+    i = idx[-1]
+    return xs[i] + (xs[i + 1] - xs[i]) * values[i] / (values[i] - values[i + 1])
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_double_integrator_braking_toward_a_wall(order):
+    # wall at x >= 0; unsafe iff the braking distance v^2 / (2 a) exceeds the gap -x
+    a = 1.0
+    g = Grid([-10.0, -3.0], [2.0, 3.0], [241, 61])
+    target = np.broadcast_to(-g.coord(0), g.shape).astype(np.float32)
+    V, info = solve_brt(g, DoubleIntegrator1D(a), target, horizon=4.0, order=order)
+    xs = g.axes[0]
+    errs = []
+    for j, v in enumerate(g.axes[1]):
+        if 0.5 <= v <= 2.5:
+            errs.append(abs(zero_crossing(xs, V[:, j]) - (-(v * v) / (2 * a))))
+    tol = 4 * g.dx[0] if order == 1 else 3 * g.dx[0]
+    assert max(errs) < tol, (max(errs), g.dx[0])
+    # moving away from the wall is safe whatever the gap
+    assert np.all(V[xs < -0.5][:, g.axes[1] < -0.2] > 0)
+
+
+def test_refining_the_grid_converges():
+    def err(n):
+        g = Grid([-10.0, -3.0], [2.0, 3.0], [n, n // 4 + 1])
+        V, _ = solve_brt(g, DoubleIntegrator1D(1.0), np.broadcast_to(-g.coord(0), g.shape).astype(np.float32), 4.0)
+        return np.mean([abs(zero_crossing(g.axes[0], V[:, j]) + v * v / 2) for j, v in enumerate(g.axes[1]) if 0.5 <= v <= 2.5])
+
+    coarse, fine = err(61), err(241)
+    assert fine < coarse
+
+
+def test_pure_translation_extends_the_set_upstream():
+    # x' = 1: the obstacle [0, 1] is reached within 2 s from [-2, 1]
+    g = Grid([-5.0], [5.0], [401])
+    x = g.axes[0]
+    target = np.maximum(-x, x - 1.0).astype(np.float32)
+    V, _ = solve_brt(g, Translation((1.0,)), target, horizon=2.0)
+    assert abs(zero_crossing(x[x < 0], V[x < 0]) - (-2.0)) < 2 * g.dx[0]
+    assert np.all(V[x > 1.2] > 0)  # downstream of the obstacle stays safe
+    np.testing.assert_allclose(V[x < -2.5], target[x < -2.5] - 2.0, atol=0.05)  # min over the path: l(x + 2)
+
+
+def small_grid():
+    return Grid([-8.0, -8.0, -np.pi, 0.0], [8.0, 8.0, np.pi, 2.0], [33, 33, 16, 9], periodic=[2])
+
+
+def test_dubins4d_tube_is_mirror_symmetric_for_a_centred_circle():
+    g = small_grid()
+    V, _ = solve_brt(g, Dubins4DHJ(), obstacle_target(g, np.array([[0.0, 0.0, 2.0]])), horizon=2.0)
+    n = g.n[2]
+    mirror_theta = (-np.arange(n)) % n
+    W = V[:, ::-1, :, :][:, :, mirror_theta, :]  # (x, -y, -theta, v)
+    np.testing.assert_allclose(V, W, atol=1e-4)
+    assert (V <= 0).sum() > (obstacle_target(g, np.array([[0.0, 0.0, 2.0]])) <= 0).sum()  # the tube grew
+
+
+def test_periodic_axis_wraps():
+    g = Grid([0.0, -np.pi], [1.0, np.pi], [3, 16], periodic=[1])
+    assert g.dx[1] == pytest.approx(2 * np.pi / 16)
+    A = np.tile(np.cos(g.axes[1]), (3, 1))
+    assert g.interp(A, [0.5, np.pi - 1e-9]) == pytest.approx(g.interp(A, [0.5, -np.pi + 1e-9]), abs=1e-6)
+    assert g.interp(A, [0.5, 3 * np.pi]) == pytest.approx(g.interp(A, [0.5, np.pi]), abs=1e-9)
+    left, right = spatial_derivatives(A.astype(np.float32), g, 1)
+    np.testing.assert_allclose(0.5 * (left + right)[1], -np.sin(g.axes[1]), atol=0.05)  # wraps at both ends
+
+
+def test_bad_solver_arguments():
+    g = Grid([0.0], [1.0], [5])
+    with pytest.raises(ValueError, match="shape"):
+        solve_brt(g, Translation(), np.zeros(4, np.float32), 1.0)
+    with pytest.raises(ValueError, match="rk"):
+        solve_brt(g, Translation(), np.zeros(5, np.float32), 1.0, rk=4)
+    with pytest.raises(ValueError, match="order"):
+        solve_brt(g, Translation(), np.zeros(5, np.float32), 1.0, order=3)
+    with pytest.raises(ValueError, match="hi > lo"):
+        Grid([1.0], [0.0], [5])
+
+
+def hj(box, tmp_path, **kw):
+    g = HJGuardian(grid=small_grid(), horizon=2.0, cache_dir=tmp_path, **kw)
+    g.reset(seed=0, privileged=lambda: box)
+    return g
+
+
+def test_guardian_takes_control_in_the_tube_with_bang_bang(tmp_path):
+    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-3.0, 0.0, 0.0, 2.0])}
+    g = hj(box, tmp_path)
+    a = g.act(None, {})
+    assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and abs(a["turnrate_ctrl"][0]) == 0.25
+    box["state"] = np.array([-3.0, 0.0, np.pi, 2.0])  # heading away
+    assert g.act(None, {})["active_ctrl"] == 0
+
+
+def test_guardian_cache_and_edge_cases(tmp_path):
+    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([20.0, 0.0, 0.0, 1.0])}
+    g = hj(box, tmp_path)
+    assert g.stats()["solves"] == 1 and len(list(tmp_path.glob("*.npy"))) == 1
+    g.reset(seed=1, privileged=lambda: box)
+    assert g.stats()["cache_hits"] == 1 and g.stats()["solves"] == 0
+    assert g.act(None, {})["active_ctrl"] == 0 and g.stats()["outside_grid"] == 1
+    box["state"] = np.array([np.nan, 0.0, 0.0, 1.0])
+    a = g.act(None, {})
+    assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and g.stats()["nan_states"] == 1
+    # a damaged cache entry is recomputed, not trusted
+    f = next(tmp_path.glob("*.npy"))
+    f.write_bytes(b"garbage")
+    g.reset(seed=2, privileged=lambda: box)
+    assert g.stats()["solves"] == 1
+
+
+def test_obstacle_outside_the_grid_is_refused_at_reset(tmp_path):
+    box = {"obstacles": np.array([[30.0, 0.0, 2.0]]), "goal": np.array([0.0, 0.0, 0.5]), "state": np.zeros(4)}
+    with pytest.raises(ValueError, match="outside the HJ grid"):
+        hj(box, tmp_path)
+    with pytest.raises(ValueError, match="privileged"):
+        HJGuardian(grid=small_grid()).reset(seed=0)
+
+
+def test_default_grid_is_the_papers():
+    g = default_grid()
+    assert g.shape == (64, 64, 32, 32) and g.periodic == (False, False, True, False)
+    assert g.dx[0] == pytest.approx(30 / 63) and g.dx[2] == pytest.approx(2 * np.pi / 32) and g.dx[3] == pytest.approx(4 / 31)
