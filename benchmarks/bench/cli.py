@@ -253,7 +253,8 @@ def cmd_sweep(args, argv) -> int:
         latencies = []
     if not latencies or any(x < 0 for x in latencies):
         raise ValueError(f"--latency must be a comma list of non-negative milliseconds, got {args.latency!r}")
-    _run_configs(args, agents)
+    args.clock = f"fixed:{latencies[0]:g}"
+    _run_configs(args, agents)  # validates the options before anything is written
     out = Path(args.out)
     store = ResultsStore(out / "results.db")
     series: dict[str, list] = {a: [] for a in agents}
