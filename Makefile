@@ -26,6 +26,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/perf_env.py
 	$(BIN)/python benchmarks/perf_risk.py
 	$(BIN)/python benchmarks/perf_guardians.py
+	$(BIN)/python benchmarks/perf_hj.py --quick
 
 clean:
 	rm -rf $(VENV) build *.egg-info

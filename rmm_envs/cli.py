@@ -1,7 +1,8 @@
 """``rmm-envs``: small utilities around the environments.
 
 ``rmm-envs demo`` runs a short episode of ``Dubins4DParallel-v0`` with a guardian that never
-takes control (the reckless driver alone) and prints what happened.
+takes control (the reckless driver alone) and prints what happened.  ``rmm-envs riskmap``
+draws the paper's Fig. 1: sampled states in a maze coloured by their inferred risk.
 """
 
 from __future__ import annotations
@@ -41,7 +42,50 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
+def _riskmap(args: argparse.Namespace) -> int:
+    """The paper's Fig. 1: sampled states in a maze as arrows coloured by inferred risk."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rmm_envs.worlds.mazes import render_occupancy
+
+    env = gym.make("Dubins3DMaze-v0", maze_kind=args.kind).unwrapped
+    env.reset(seed=args.seed)
+    rng = np.random.default_rng(args.seed)
+    states = env.sample_states(rng, args.n)
+    obs = env.observe_states(states)
+    if args.labels:
+        from rmm_envs.risk import RiskEstimator
+
+        risk = RiskEstimator(env.risk_system()).estimate(states, rng).risk
+        what = "sampling-tree risk (n=32, m=2, t=2 s)"
+    else:
+        from guardians.lrmm.model import LRMMModel, default_model_path
+
+        model = LRMMModel.load(args.model or default_model_path("Dubins3DMaze-v0"), env_id="Dubins3DMaze-v0")
+        risk = model.predict(obs)
+        what = "inferred risk (LRMM)"
+    maze = env.scene.maze
+    occ = render_occupancy(maze, resolution=maze.thickness / 3)
+    fig, ax = plt.subplots(figsize=(9, 8))
+    ax.imshow(occ, cmap="gray_r", origin="lower", extent=(0, maze.width, 0, maze.height), alpha=0.9)
+    L = 45.0
+    q = ax.quiver(states[:, 0], states[:, 1], L * np.cos(states[:, 2]), L * np.sin(states[:, 2]), risk, cmap="RdYlGn_r",
+                  angles="xy", scale_units="xy", scale=1.0, width=0.0025, clim=(0, 1))
+    fig.colorbar(q, ax=ax, label=what)
+    ax.set_title(f"{len(states)} sampled states in a {args.kind} maze (seed {args.seed}); arrow base = position")
+    ax.set_xlim(0, maze.width)
+    ax.set_ylim(0, maze.height)
+    ax.set_aspect("equal")
+    fig.tight_layout()
+    fig.savefig(args.out, dpi=args.dpi)
+    print(f"wrote {args.out}: mean risk {risk.mean():.3f}, {np.mean(risk > 0.5) * 100:.0f}% of states above 0.5")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rmm-envs", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="run a few episodes with the driver alone and print the outcomes")
@@ -49,7 +93,20 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--episodes", type=int, default=8)
     demo.add_argument("--seed", type=int, default=0)
     demo.set_defaults(func=_demo)
-    args = parser.parse_args(argv)
+    rm = sub.add_parser("riskmap", help="the paper's Fig. 1: states in a maze coloured by inferred risk, as a PNG")
+    rm.add_argument("--model", default=None, help="LRMM model file (default: the shipped maze model)")
+    rm.add_argument("--kind", default="rectangular", choices=["rectangular", "honeycomb"], help="maze kind (default: %(default)s)")
+    rm.add_argument("--seed", type=int, default=0, help="maze and sampling seed (default: %(default)s)")
+    rm.add_argument("--n", type=int, default=1000, help="number of sampled states (default: %(default)s)")
+    rm.add_argument("--labels", action="store_true", help="colour by the sampling tree's risk instead of the model")
+    rm.add_argument("--out", default="riskmap.png", help="output PNG (default: %(default)s)")
+    rm.add_argument("--dpi", type=int, default=110)
+    rm.set_defaults(func=_riskmap)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     return args.func(args)
 
 

@@ -170,16 +170,18 @@ def _execute_ray(tasks, address, record) -> None:
         raise
 
 
-def table_rows(store: ResultsStore, run_keys: dict[str, str], episodes: int, batch_size: int = 64) -> list[dict]:
+def table_rows(store: ResultsStore, run_keys: dict[str, str], episodes, batch_size: int = 64) -> list[dict]:
+    """Aggregate rows; ``episodes`` is one count for every agent or a dict per agent."""
+    import gymnasium as gym
+
+    import rmm_envs  # noqa: F401
+
     rows = []
     for agent, key in run_keys.items():
-        eps = store.episodes(key, episodes)
+        n = episodes[agent] if isinstance(episodes, dict) else episodes
+        eps = store.episodes(key, n)
         cfg = store.run_config(key)["config"]
         obs_type, _ = _guardian_info(agent) if _safe_import(agent) else ("?", agent)
-        import gymnasium as gym
-
-        import rmm_envs  # noqa: F401
-
         n_obst = gym.make(cfg["env_id"]).unwrapped.n_obstacles
         agg = aggregate(eps, batch_size)
         rows.append({"agent": agent, "obs": obs_type, "n_obst": n_obst, **agg})
@@ -196,8 +198,14 @@ def _safe_import(agent) -> bool:
         return False
 
 
-def write_report(store: ResultsStore, out: Path, inv: dict, batch_size: int = 64, quiet: bool = False) -> str:
-    rows = table_rows(store, inv["run_keys"], inv["episodes"], batch_size)
+def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_size: int = 64, quiet: bool = False) -> str:
+    """Tables and figures for one recorded command, or several merged (later ones win per agent)."""
+    invs = [invs] if isinstance(invs, dict) else list(invs)
+    run_keys, episodes = {}, {}
+    for inv in invs:
+        for agent, key in inv["run_keys"].items():
+            run_keys[agent], episodes[agent] = key, inv["episodes"]
+    rows = table_rows(store, run_keys, episodes, batch_size)
     tables = format_tables(rows)
     (out / "table_I.md").write_text(tables["md"])
     (out / "table_I.csv").write_text(tables["csv"])
@@ -205,10 +213,11 @@ def write_report(store: ResultsStore, out: Path, inv: dict, batch_size: int = 64
     plot_outcomes(rows, out / "outcomes.png")
     paper = format_tables([{"agent": a, "episodes": 2048, "errors": 0, "qp_fallbacks": 0, "precompute_s": (0, 0),
                             "obs": p["obs"], "n_obst": p["n_obst"], **{k: p[k] for k in ("compute_ms", "goal", "collision", "timeout", "intervention")}}
-                           for a, p in PAPER_TABLE_I.items() if a in inv["run_keys"]])["md"]
-    args = inv["args"]
+                           for a, p in PAPER_TABLE_I.items() if a in run_keys])["md"]
+    args = invs[-1]["args"]
+    counts = sorted(set(episodes.values()))
     text = (f"Table I: {args.get('env')}, clock {args.get('clock')}, time accel {args.get('time_accel')}, seed {args.get('seed')}, "
-            f"{inv['episodes']} episodes per agent (results in {out})\n\n{tables['md']}\nThe paper's Table I for the same agents:\n\n{paper}")
+            f"{'/'.join(map(str, counts))} episodes per agent (results in {out})\n\n{tables['md']}\nThe paper's Table I for the same agents:\n\n{paper}")
     if not quiet:
         print(text)
     return text
@@ -240,8 +249,11 @@ def cmd_report(args) -> int:
         print(f"rmm-bench report: error: no results.db in {path}", file=sys.stderr)
         return 2
     store = ResultsStore(path / "results.db")
-    inv = store.invocation(args.invocation, kind="run" if args.invocation is None else None)
-    write_report(store, path, inv, args.batch_size)
+    if args.invocation:
+        invs = [store.invocation(i) for i in args.invocation]
+    else:
+        invs = [store.invocation(None, kind="run")]
+    write_report(store, path, invs, args.batch_size)
     return 0
 
 
@@ -310,7 +322,8 @@ def build_parser() -> argparse.ArgumentParser:
 def build_report_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="rmm-bench report", description="Rebuild Table I and the figures from a results database.")
     p.add_argument("dir", help="results directory holding results.db")
-    p.add_argument("--invocation", type=int, default=None, help="which recorded run (default: the last)")
+    p.add_argument("--invocation", type=int, action="append", default=None,
+                   help="which recorded run (default: the last); repeat to merge several into one table")
     p.add_argument("--batch-size", type=int, default=64)
     return p
 

@@ -95,7 +95,8 @@ and then stores ``a`` for the next interval (the first interval is the driver's)
 ## Rendering
 
 ``render_mode="rgb_array"``: a 512x512 top-down frame of the window ``[-15, 15]^2`` m:
-obstacles red, goal green, rays grey, the vehicle blue (driver) or orange (guardian).
+the generation arena's outline, obstacles red, goal green (with a ring), rays grey, the vehicle
+blue (driver) or orange (guardian).
 ``"human"`` shows the same frames with pygame; it is offered (listed in ``metadata``) only when the
 optional extra ``rmm-envs[human]`` is installed.
 """
@@ -550,8 +551,12 @@ class Dubins4DCirclesEnv(gym.Env):
         cv = _render.Canvas(size, -15, 15, -15, 15)
         if self.scene is None:
             return cv.img
+        for a, b in (((-_HALF, -_HALF), (_HALF, -_HALF)), ((_HALF, -_HALF), (_HALF, _HALF)),
+                     ((_HALF, _HALF), (-_HALF, _HALF)), ((-_HALF, _HALF), (-_HALF, -_HALF))):
+            cv.line(a[0], a[1], b[0], b[1], (225, 225, 225))  # the arena used for generation
         g = self.scene.goal
         cv.disc(g[0], g[1], g[2], _render.GREEN)
+        cv.ring(g[0], g[1], g[2] + 0.25, _render.GREEN, 0.12)
         for ox, oy, r in self.scene.obstacles:
             cv.disc(ox, oy, r, _render.RED)
         x, y, th, v = self._state

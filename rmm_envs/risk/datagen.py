@@ -452,6 +452,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--metric", default="expected", choices=["expected", "cvar", "worst"], help="coherent risk metric (default: %(default)s)")
     p.add_argument("--alpha", type=float, default=None, help="CVaR level in (0, 1) (with --metric cvar)")
     p.add_argument("--leaf", default="zero", choices=["zero", "heuristic"], help="leaf value: 0 (Algorithm 1) or the system's heuristic (default: %(default)s)")
+    p.add_argument("--env-kwargs", default="{}", help='environment arguments as JSON, e.g. \'{"maze_kind": "mixed"}\' (default: {})')
     p.add_argument("--configs-per-shard", type=int, default=8, help="configurations per output shard (default: %(default)s)")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: the core count)")
     p.add_argument("--backend", default="local", choices=["local", "ray"], help="where the work runs (default: %(default)s)")
@@ -462,10 +463,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    try:
+        env_kwargs = json.loads(args.env_kwargs)
+        if not isinstance(env_kwargs, dict):
+            raise ValueError
+    except ValueError:
+        print(f"rmm-datagen: error: --env-kwargs must be a JSON object, got {args.env_kwargs!r}", file=sys.stderr)
+        return 2
     cfg = DatagenConfig(
         env_id=args.env, configs=args.configs, samples_per_config=args.samples_per_config, seed=args.seed,
         branches=args.branches, depth=args.depth, horizon=args.horizon, n_steps=args.n_steps,
         metric=args.metric, alpha=args.alpha, leaf=args.leaf, configs_per_shard=args.configs_per_shard,
+        env_kwargs=env_kwargs,
     )
     try:
         manifest = generate(cfg, args.out, workers=args.workers, backend=args.backend,

@@ -1,0 +1,72 @@
+"""HJ reachability performance and convergence (issue figures).
+
+Run: ``python benchmarks/perf_hj.py [--quick]``.
+
+* solve time and peak memory on the default grid (64 x 64 x 32 x 32, 4 s, five obstacles);
+* online decision time (interpolation of V and its gradient), median over many states;
+* convergence of the unsafe set (V <= 0) as the grid is refined: the unsafe fraction of a
+  fixed set of probe states for several grids, against the finest.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import statistics
+import time
+
+import numpy as np
+
+from guardians.hj.dynamics import Dubins4DHJ
+from guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
+from guardians.hj.solver import solve_brt
+
+OBSTACLES = np.array([[0.0, 0.0, 3.0], [6.0, 5.0, 2.5], [-7.0, 3.0, 4.0], [4.0, -8.0, 2.0], [-5.0, -6.0, 3.0]])
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--quick", action="store_true", help="skip the finest grid of the convergence study")
+    args = ap.parse_args(argv)
+    grid = default_grid()
+    target = obstacle_target(grid, OBSTACLES)
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.perf_counter()
+    V, info = solve_brt(grid, Dubins4DHJ(), target, 4.0)
+    solve = time.perf_counter() - t0
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    print(f"HJ solve, default grid {grid.shape}, 5 obstacles, 4 s horizon: {solve:.1f} s "
+          f"({info['steps']} RK2 steps of {info['dt']:.3f} s), peak RSS {rss / 1024:.0f} MB (before: {rss0 / 1024:.0f} MB); "
+          "targets <= 30 s and <= 1.5 GB")
+
+    box = {"obstacles": OBSTACLES, "goal": np.array([9.0, 9.0, 0.5]), "state": np.zeros(4)}
+    g = HJGuardian(cache=False)
+    g.reset(seed=0, privileged=lambda: box)
+    rng = np.random.default_rng(0)
+    states = np.column_stack([rng.uniform(-12, 12, 2000), rng.uniform(-12, 12, 2000), rng.uniform(-np.pi, np.pi, 2000), rng.uniform(0, 2, 2000)])
+    times = []
+    for s in states:
+        box["state"] = s
+        t = time.perf_counter()
+        g.act(None, {})
+        times.append(time.perf_counter() - t)
+    print(f"online decision: median {statistics.median(times) * 1e6:.1f} us, p90 {np.quantile(times, 0.9) * 1e6:.1f} us (target <= 50 us)")
+
+    print("convergence of the unsafe set (fraction of 20,000 probe states with V <= 0):")
+    probes = np.column_stack([rng.uniform(-12, 12, 20000), rng.uniform(-12, 12, 20000), rng.uniform(-np.pi, np.pi, 20000), rng.uniform(0, 2, 20000)])
+    sizes = [(32, 32, 16, 16), (48, 48, 24, 24), (64, 64, 32, 32)] + ([] if args.quick else [(96, 96, 48, 32)])
+    verdicts = {}
+    for n in sizes:
+        gr = default_grid(n)
+        t0 = time.perf_counter()
+        Vn, _ = solve_brt(gr, Dubins4DHJ(), obstacle_target(gr, OBSTACLES), 4.0)
+        unsafe = np.array([gr.interp(Vn, p) <= 0 for p in probes])
+        verdicts[n] = unsafe
+        print(f"  grid {n}: unsafe fraction {unsafe.mean():.4f} ({time.perf_counter() - t0:.1f} s)")
+    finest = verdicts[sizes[-1]]
+    for n in sizes[:-1]:
+        print(f"  grid {n}: verdicts differ from the finest grid on {np.mean(verdicts[n] != finest) * 100:.2f}% of probes")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,233 @@
+"""Dubins3D in procedurally generated mazes: ``Dubins3DMaze-v0``.
+
+The paper's Fig. 1 / Table II system (REFERENCE section 3), as a Gymnasium environment.
+
+## Description
+
+A constant-speed car (:class:`rmm_envs.systems.Dubins3D`, 10 px/s, minimum turning radius
+50 px) drives through a perfect maze with thick walls (:mod:`rmm_envs.worlds.mazes`: 20 x 20
+cells of 125 px, walls 12.5 px thick, a 2750 x 2750 px image for the rectangular kind).  It
+has no goal: the task is to keep driving without touching a wall.  Units are the paper's
+pixels throughout.
+
+## Action space
+
+``Box(-0.2, 0.2, (1,), float32)``: the turn rate in rad/s, held for one step.  Values outside
+the bounds are clipped; NaN/inf or a wrong shape raise ``ValueError``.
+
+## Observation space
+
+``Box(0, inf, (8,), float32)``: distances in px along 8 rays at ``psi + k pi / 4``
+(``k = 0..7``, counter-clockwise from the heading), to the first wall surface (exact
+ray-capsule intersection) or the image border.  No pose, heading or speed, as in the paper.
+
+## Dynamics
+
+``x' = 10 cos(psi), y' = 10 sin(psi), psi' = u``, integrated exactly; each step lasts
+``step_dt`` (default 1 s, 10 px) and is checked as a path of ``n_path_points`` (8) points.
+
+## Rewards and episode end
+
+Reward ``-1`` on the step that touches a wall (a point inside a wall, or a segment between
+path points touching one, exactly), else 0.  ``terminated`` on that collision; ``truncated``
+after ``max_episode_steps`` (default 1000) steps.
+
+## Starting state
+
+A maze from the seed (kind ``"rectangular"`` by default, ``"honeycomb"`` with
+``maze_kind="honeycomb"``, or either at random per episode with ``"mixed"``), then a uniform state in the image, rejected until it is clear of
+the walls.  ``reset(seed, options={"state": [x, y, psi], "maze": Maze or {"kind": ...}})``
+sets either explicitly; a state inside a wall or outside the image, or a maze option of the
+wrong type, raises ``ValueError``.
+
+## Info
+
+``state`` (the true pose, privileged), ``steps``; on the last step ``outcome``
+(``"collision"`` or ``"timeout"``).
+
+## Arguments
+
+``gym.make("Dubins3DMaze-v0", maze_kind="rectangular", step_dt=1.0, n_path_points=8,
+max_episode_steps=1000, speed=10.0, r_min=50.0, render_mode=None)``
+
+## Rendering
+
+``render_mode="rgb_array"``: a 512 x 512 frame of the maze (walls black), the car (blue) and
+its rays (grey).
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from rmm_envs.envs import _render
+from rmm_envs.systems.dubins3d import Dubins3D
+from rmm_envs.worlds.mazes import MAZE_KINDS, Maze, generate_maze
+
+__all__ = ["Dubins3DMazeEnv", "MazeScene"]
+
+
+class MazeScene:
+    """A Dubins3D car in one maze: the :class:`rmm_envs.risk.System` for labelling."""
+
+    def __init__(self, maze: Maze, system: Dubins3D | None = None, n_rays: int = 8) -> None:
+        self.maze = maze
+        self.system = system or Dubins3D()
+        self.n_rays = n_rays
+        self.state_dim, self.control_dim, self.obs_dim = 3, 1, n_rays
+        self.control_low, self.control_high = self.system.control_low, self.system.control_high
+
+    def sample_controls(self, rng, n):
+        return self.system.sample_controls(rng, n)
+
+    def propagate(self, states, controls, duration, n_steps):
+        return self.system.propagate(states, controls, duration, n_steps)
+
+    def state_failed(self, states):
+        return self.maze.state_failed(np.asarray(states)[:, :2])
+
+    def path_failed(self, paths):
+        return self.maze.paths_hit(paths)
+
+    def observe(self, states, *_):
+        return self.maze.rays(np.asarray(states, dtype=float), self.n_rays).astype(np.float32)
+
+
+class Dubins3DMazeEnv(gym.Env):
+    """See the module docstring for the full specification."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(self, maze_kind: str = "rectangular", step_dt: float = 1.0, n_path_points: int = 8,
+                 max_episode_steps: int = 1000, speed: float = 10.0, r_min: float = 50.0, render_mode: str | None = None):
+        if maze_kind not in MAZE_KINDS + ("mixed",):
+            raise ValueError(f"maze_kind must be one of {MAZE_KINDS + ('mixed',)}, got {maze_kind!r}")
+        if not (step_dt > 0 and math.isfinite(step_dt)):
+            raise ValueError(f"step_dt must be a finite number > 0, got {step_dt!r}")
+        if int(n_path_points) != n_path_points or n_path_points < 2:
+            raise ValueError(f"n_path_points must be an integer >= 2, got {n_path_points!r}")
+        if int(max_episode_steps) != max_episode_steps or max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps must be an integer >= 1, got {max_episode_steps!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.maze_kind = maze_kind
+        self.step_dt = float(step_dt)
+        self.n_path_points = int(n_path_points)
+        self.max_episode_steps = int(max_episode_steps)
+        self.system = Dubins3D(speed, r_min)
+        self.render_mode = render_mode
+        u = np.float32(self.system.u_max)
+        self.action_space = spaces.Box(-u, u, shape=(1,), dtype=np.float32)
+        self.observation_space = spaces.Box(0.0, np.inf, shape=(8,), dtype=np.float32)
+        self.scene: MazeScene | None = None
+        self._state = np.zeros(3)
+        self._steps = 0
+        self._done = False
+
+    def _maze_from_option(self, value) -> Maze:
+        if isinstance(value, Maze):
+            return value
+        if isinstance(value, dict):
+            try:
+                return generate_maze(self.np_random, **value)
+            except TypeError as e:
+                raise ValueError(f"option 'maze': {e}") from None
+        raise ValueError(f"option 'maze' must be a Maze or a dict of generate_maze arguments, got {type(value).__name__}")
+
+    def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        m = self.scene.maze
+        out = np.empty((0, 3))
+        while out.shape[0] < n:
+            k = max(2 * (n - out.shape[0]), 16)
+            cand = np.column_stack([rng.uniform(0, m.width, k), rng.uniform(0, m.height, k), rng.uniform(-np.pi, np.pi, k)])
+            out = np.vstack([out, cand[~m.state_failed(cand[:, :2])]])
+        return out[:n]
+
+    def observe_states(self, states, rng=None) -> np.ndarray:
+        return self.scene.observe(states)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - {"state", "maze"}
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}; expected any of 'state', 'maze'")
+        if "maze" in options:
+            maze = self._maze_from_option(options["maze"])
+        else:
+            kind = self.maze_kind if self.maze_kind != "mixed" else MAZE_KINDS[int(self.np_random.integers(len(MAZE_KINDS)))]
+            maze = generate_maze(self.np_random, kind)
+        self.scene = MazeScene(maze, self.system)
+        if "state" in options:
+            st = np.asarray(options["state"], dtype=float).reshape(-1)
+            if st.shape != (3,) or not np.all(np.isfinite(st)):
+                raise ValueError(f"option 'state' must be 3 finite numbers [x, y, psi], got {options['state']!r}")
+            if self.scene.state_failed(st[None])[0]:
+                raise ValueError(f"option 'state': {st[:2].tolist()} is inside a wall or outside the maze image")
+        else:
+            st = self.sample_states(self.np_random, 1)[0]
+        self._state = st
+        self._steps = 0
+        self._done = False
+        return self._obs(), {"state": self._state.copy(), "steps": 0}
+
+    def _obs(self) -> np.ndarray:
+        return self.scene.observe(self._state[None])[0]
+
+    def step(self, action):
+        if self.scene is None:
+            raise RuntimeError("call reset() before step()")
+        if self._done:
+            raise RuntimeError("the episode has ended; call reset() before stepping again")
+        a = np.asarray(action, dtype=float)
+        if a.size != 1 or a.ndim > 1:
+            raise ValueError(f"action must be a turn rate of shape (1,) in {self.action_space}, got shape {a.shape}")
+        u = float(a.reshape(-1)[0])
+        if not math.isfinite(u):
+            raise ValueError(f"action must be finite (space {self.action_space}), got {u}")
+        u = min(max(u, -self.system.u_max), self.system.u_max)
+        path = self.system.propagate(self._state[None], np.array([[u]]), self.step_dt, self.n_path_points)
+        hit = bool(self.scene.path_failed(path)[0])
+        self._state = path[0, -1].copy()
+        self._state[2] = (self._state[2] + np.pi) % (2 * np.pi) - np.pi
+        self._steps += 1
+        terminated = hit
+        truncated = not hit and self._steps >= self.max_episode_steps
+        info = {"state": self._state.copy(), "steps": self._steps}
+        if terminated or truncated:
+            self._done = True
+            info["outcome"] = "collision" if hit else "timeout"
+        return self._obs(), (-1.0 if hit else 0.0), terminated, truncated, info
+
+    def risk_system(self) -> MazeScene:
+        if self.scene is None:
+            raise RuntimeError("call reset() first")
+        return self.scene
+
+    @property
+    def true_state(self) -> np.ndarray:
+        return self._state.copy()
+
+    def privileged(self) -> dict:
+        return {"state": self._state.copy(), "maze": self.scene.maze}
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
+            return None
+        m = self.scene.maze
+        size = 512
+        cv = _render.Canvas(size, 0, max(m.width, m.height), 0, max(m.width, m.height))
+        X, Y = np.meshgrid(cv.wx, cv.wy)
+        walls = m.point_clearance(np.column_stack([X.ravel(), Y.ravel()])) <= 2.0
+        cv.img[walls.reshape(size, size)] = (0, 0, 0)
+        x, y, psi = self._state
+        for d, k in zip(self._obs(), range(8)):
+            a = psi + k * np.pi / 4
+            cv.line(x, y, x + d * np.cos(a), y + d * np.sin(a), _render.GREY)
+        cv.disc(x, y, 25.0, _render.BLUE)
+        return cv.img
