@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/rmm-bench --agent all --episodes 64
+	$(BIN)/rmm-bench --agent all --episodes 32 --batch-size 16
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2

@@ -160,3 +160,29 @@ def test_rgb_render():
     env.reset(seed=0)
     frame = env.render()
     assert frame.shape == (512, 512, 3) and (frame == 0).all(axis=-1).mean() > 0.01
+
+
+def test_shipped_maze_model():
+    from guardians.lrmm.model import LRMMModel, default_model_path
+
+    m = LRMMModel.load(default_model_path("Dubins3DMaze-v0"), env_id="Dubins3DMaze-v0", obs_dim=8)
+    assert m.meta["data"]["n_rows"] >= 65536 + 4096
+    assert m.meta["metrics"]["train"]["n"] == 65536 and m.meta["metrics"]["test"]["n"] == 4096
+    assert len(m.meta["split"]["test_configs"]) == 2
+    assert m.meta["metrics"]["test"]["mae"] <= 0.045
+    # a state facing a wall 10 px away is risky; the middle of a long corridor is not
+    env = Dubins3DMazeEnv()
+    maze = Maze(np.array([[0.0, 100.0, 1000.0, 100.0], [0.0, 300.0, 1000.0, 300.0]]), width=1000.0, height=400.0, thickness=12.5)
+    env.reset(seed=0, options={"maze": maze, "state": [500.0, 200.0, 0.0]})
+    open_obs = env.observe_states(np.array([[500.0, 200.0, 0.0]]))
+    wall_obs = env.observe_states(np.array([[500.0, 280.0, np.pi / 2]]))
+    assert m.predict(wall_obs[0]) > 0.8 > 0.2 > m.predict(open_obs[0])
+
+
+def test_riskmap_command(tmp_path):
+    from rmm_envs.cli import main
+
+    out = tmp_path / "map.png"
+    assert main(["riskmap", "--n", "60", "--out", str(out), "--dpi", "40"]) == 0
+    assert out.stat().st_size > 1000
+    assert main(["riskmap", "--n", "20", "--labels", "--kind", "honeycomb", "--out", str(out), "--dpi", "40"]) == 0

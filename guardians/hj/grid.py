@@ -27,6 +27,9 @@ class Grid:
         self.dx = np.array([(h - l) / (k if p else k - 1) for l, h, k, p in zip(self.lo, self.hi, self.n, self.periodic)])
         self.axes = [l + d * np.arange(k) for l, d, k in zip(self.lo, self.dx, self.n)]
         self.shape = self.n
+        # for interpolation: the 2^d cell corners and the flat-index strides, computed once
+        self._corners = np.array(np.meshgrid(*[[0, 1]] * self.ndim, indexing="ij")).reshape(self.ndim, -1).astype(bool)
+        self._strides = np.array([int(np.prod(self.n[a + 1:])) for a in range(self.ndim)], dtype=np.int64)
 
     def coord(self, axis: int) -> np.ndarray:
         """Axis coordinates shaped to broadcast against the grid."""
@@ -65,12 +68,10 @@ class Grid:
     def interp_many(self, arrays, x) -> np.ndarray:
         """Multilinear interpolation of several same-shape arrays at one point ``x``."""
         i0, i1, frac = self._cell(x)
-        d = self.ndim
-        corners = np.array(np.meshgrid(*[[0, 1]] * d, indexing="ij")).reshape(d, -1)  # (d, 2^d)
-        idx = np.where(corners == 0, i0[:, None], i1[:, None])
-        flat = np.ravel_multi_index(tuple(idx), self.n)
-        w = np.prod(np.where(corners == 0, 1.0 - frac[:, None], frac[:, None]), axis=0)
-        return np.array([float(np.dot(a.reshape(-1)[flat], w)) for a in arrays])
+        c = self._corners
+        flat = np.where(c, i1[:, None], i0[:, None]).T @ self._strides  # (2^d,)
+        w = np.prod(np.where(c, frac[:, None], 1.0 - frac[:, None]), axis=0)
+        return np.array([a.reshape(-1)[flat] @ w for a in arrays])
 
     def interp(self, array, x) -> float:
         return float(self.interp_many([array], x)[0])
