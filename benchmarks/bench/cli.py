@@ -127,47 +127,14 @@ def execute(store: ResultsStore, configs: dict[str, dict], episodes: int, worker
         bar.set_postfix_str("; ".join(f"{a}: " + " ".join(f"{k[0]}{v}" for k, v in sorted(c.items())) for a, c in counts.items())[-120:])
         bar.update(1)
 
-    try:
-        if backend == "ray":
-            _execute_ray(tasks, ray_address, record)
-        elif workers <= 1:
-            for t in tasks:
-                record(run_episode(t))
-        else:
-            import multiprocessing as mp
+    from rmm_envs.parallel import run_local, run_ray
 
-            pool = mp.get_context("spawn").Pool(workers, maxtasksperchild=None)
-            try:
-                for row in pool.imap_unordered(run_episode, tasks, chunksize=1):
-                    record(row)
-                pool.close()
-            except BaseException:
-                pool.terminate()
-                raise
-            finally:
-                pool.join()
+    try:
+        results = run_ray(run_episode, tasks, ray_address) if backend == "ray" else run_local(run_episode, tasks, workers)
+        for row in results:
+            record(row)
     finally:
         bar.close()
-
-
-def _execute_ray(tasks, address, record) -> None:
-    try:
-        import ray
-    except ImportError as e:
-        raise RuntimeError("--backend ray needs Ray: pip install 'rmm-envs[ray]'") from e
-    if not ray.is_initialized():
-        ray.init(address=address) if address else ray.init(num_cpus=os.cpu_count() or 1, include_dashboard=False, log_to_driver=False)
-    remote = ray.remote(num_cpus=1)(run_episode)
-    pending = [remote.remote(t) for t in tasks]
-    try:
-        while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
-            for ref in ready:
-                record(ray.get(ref))
-    except BaseException:
-        for ref in pending:
-            ray.cancel(ref, force=True)
-        raise
 
 
 def table_rows(store: ResultsStore, run_keys: dict[str, str], episodes, batch_size: int = 64) -> list[dict]:

@@ -302,65 +302,30 @@ def generate(cfg: DatagenConfig, out: str | os.PathLike, workers: int | None = N
     return manifest
 
 
-def _run_local(cfg: DatagenConfig, out: Path, todo: list[int], workers: int | None, bar) -> int:
-    workers = workers or os.cpu_count() or 1
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
-    rows = 0
-    cfg_dict = asdict(cfg)
-    if workers == 1 or len(todo) == 1:
-        for s in todo:
-            _, n, _, _ = _shard_task(cfg_dict, str(out), s)
-            rows += n
-            bar.update(len(cfg.shard_configs(s)))
-        return rows
-    import multiprocessing as mp
+def _shard_job(job):
+    return _shard_task(*job)
 
-    ctx = mp.get_context("spawn")
-    pool = ctx.Pool(min(workers, len(todo)))
-    try:
-        tasks = [pool.apply_async(_shard_task, (cfg_dict, str(out), s)) for s in todo]
-        for s, task in zip(todo, tasks):
-            _, n, _, _ = task.get()
-            rows += n
-            bar.update(len(cfg.shard_configs(s)))
-        pool.close()
-    except BaseException:
-        pool.terminate()
-        raise
-    finally:
-        pool.join()
+
+def _run_local(cfg: DatagenConfig, out: Path, todo: list[int], workers: int | None, bar) -> int:
+    from rmm_envs.parallel import run_local
+
+    rows = 0
+    jobs = [(asdict(cfg), str(out), s) for s in todo]
+    for shard, n, _, _ in run_local(_shard_job, jobs, workers or os.cpu_count() or 1):
+        rows += n
+        bar.update(len(cfg.shard_configs(shard)))
     return rows
 
 
 def _run_ray(cfg: DatagenConfig, out: Path, todo: list[int], address: str | None, bar) -> int:
-    try:
-        import ray
-    except ImportError as e:
-        raise RuntimeError("--backend ray needs Ray: pip install 'rmm-envs[ray]'") from e
-    if not ray.is_initialized():
-        if address:
-            ray.init(address=address)
-        else:
-            ray.init(num_cpus=os.cpu_count() or 1, include_dashboard=False)
-    remote = ray.remote(_shard_task)
-    cfg_dict = asdict(cfg)
-    pending = {remote.remote(cfg_dict, None, s): s for s in todo}
+    from rmm_envs.parallel import run_ray
+
     rows = 0
-    try:
-        while pending:
-            ready, _ = ray.wait(list(pending), num_returns=1)
-            for ref in ready:
-                s = pending.pop(ref)
-                _, n, _, payload = ray.get(ref)
-                table = pa.ipc.open_stream(payload).read_all()
-                _write_table(_shard_path(out, s), table)
-                rows += n
-                bar.update(len(cfg.shard_configs(s)))
-    except BaseException:
-        for ref in pending:
-            ray.cancel(ref, force=True)
-        raise
+    jobs = [(asdict(cfg), None, s) for s in todo]
+    for shard, n, _, payload in run_ray(_shard_job, jobs, address):
+        _write_table(_shard_path(out, shard), pa.ipc.open_stream(payload).read_all())
+        rows += n
+        bar.update(len(cfg.shard_configs(shard)))
     return rows
 
 
