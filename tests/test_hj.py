@@ -133,3 +133,40 @@ def test_default_grid_is_the_papers():
     g = default_grid()
     assert g.shape == (64, 64, 32, 32) and g.periodic == (False, False, True, False)
     assert g.dx[0] == pytest.approx(30 / 63) and g.dx[2] == pytest.approx(2 * np.pi / 32) and g.dx[3] == pytest.approx(4 / 31)
+
+
+def test_reach_avoid_in_one_dimension():
+    from guardians.hj.dynamics import Integrator1D
+
+    g = Grid([-2.0], [8.0], [501])
+    x = g.axes[0]
+    goal = np.maximum(4 - x, x - 5).astype(np.float32)  # reach [4, 5]
+    obstacle = np.maximum(1 - x, x - 2).astype(np.float32)  # avoid [1, 2]
+    V, info = solve_brt(g, Integrator1D(1.0), goal, 10.0, constraint=obstacle)
+    assert info["mode"] == "reach_avoid"
+    assert np.all(V[x < 0.9] > 0)  # the obstacle blocks the way in 1D
+    assert np.all(V[(x > 2.1)] <= 0)  # everything beyond it can get there
+    V1, _ = solve_brt(g, Integrator1D(1.0), goal, 1.0, constraint=obstacle)
+    assert g.interp(V1, [3.2]) <= 0 < g.interp(V1, [2.5])  # within 1 s of the goal or not
+    assert g.interp(V1, [6.2]) > 0 >= g.interp(V1, [5.8])
+
+
+def test_reach_avoid_guardian_steers_to_the_goal_at_the_edge(tmp_path):
+    box = {"obstacles": np.array([[6.0, 6.0, 1.0]]), "goal": np.array([3.0, 0.0, 1.0]), "state": np.zeros(4)}
+    g = HJGuardian(grid=small_grid(), horizon=2.0, cache_dir=tmp_path, mode="reach_avoid", ra_horizon=4.0, ra_margin=0.2)
+    g.reset(seed=0, privileged=lambda: box)
+    V_ra = g._ra_arrays[0]
+    near, far, away = (np.array(s, float) for s in ([0.0, 0.0, 0.0, 1.0], [-3.0, 0.0, 0.0, 1.0], [-3.0, 0.0, np.pi, 0.0]))
+    assert g.grid.interp(V_ra, near) < g.grid.interp(V_ra, far) < g.grid.interp(V_ra, away)
+    # 2 m from the goal, driving at it: inside the reach-avoid set, at its (coarse-grid) edge:
+    # the guardian steers with the reaching control (accelerate toward the goal)
+    assert -0.2 <= g.grid.interp(V_ra, near) <= 0.0
+    box["state"] = near
+    a = g.act(None, {})
+    assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == 0.5
+    # facing away, stopped: the goal cannot be reached in 4 s; no obstacle threat: driver keeps control
+    box["state"] = away
+    assert g.act(None, {})["active_ctrl"] == 0
+    assert g.stats()["reach_avoid_steps"] == 1
+    with pytest.raises(ValueError, match="mode"):
+        HJGuardian(grid=small_grid(), mode="reach")

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["DoubleIntegrator1D", "Dubins4DHJ", "Translation"]
+__all__ = ["DoubleIntegrator1D", "Dubins4DHJ", "Integrator1D", "Translation"]
 
 
 @dataclass(frozen=True)
@@ -34,28 +34,32 @@ class Dubins4DHJ:
     def key(self) -> dict:
         return {"name": "dubins4d", **self.__dict__}
 
-    def hamiltonian(self, grid, p):
+    def hamiltonian(self, grid, p, control: str = "max"):
+        """``control="max"``: the control avoids (maximises); ``"min"``: it reaches (minimises)."""
         th, v = grid.coord(2), grid.coord(3)
         vv = np.minimum(v, self.v_max).astype(np.float32)
         c, s = (np.cos(th) * vv).astype(np.float32), (np.sin(th) * vv).astype(np.float32)
+        sign = 1.0 if control == "max" else -1.0
         H = p[0] * c
         H += p[1] * s
-        H += self.u1_max * np.abs(p[2])
-        # speed: max over u2 of p_v u2, except that u2 cannot push past a speed bound
+        H += sign * self.u1_max * np.abs(p[2])
+        # speed: the extremum over u2 of p_v u2, except that u2 cannot push past a speed bound
         can_up = (v < self.v_max).astype(np.float32)
         can_down = (v > self.v_min).astype(np.float32)
-        H += self.u2_max * np.maximum(p[3] * can_up, -p[3] * can_down)
-        if self.d_max:
-            H -= self.d_max * (np.abs(p[0]) + np.abs(p[1]))
+        H += sign * self.u2_max * np.maximum(sign * p[3] * can_up, -sign * p[3] * can_down)
+        if self.d_max:  # the disturbance opposes the control
+            H -= sign * self.d_max * (np.abs(p[0]) + np.abs(p[1]))
         return H
 
     def alphas(self, grid):
         v = np.minimum(grid.axes[3], self.v_max).max()
         return [v + self.d_max, v + self.d_max, self.u1_max, self.u2_max]
 
-    def optimal_control(self, x, grad):
-        u1 = self.u1_max if grad[2] >= 0 else -self.u1_max
-        u2 = self.u2_max if grad[3] >= 0 else -self.u2_max
+    def optimal_control(self, x, grad, control: str = "max"):
+        """Bang-bang control maximising (avoid) or minimising (reach) ``grad . f``."""
+        s = 1.0 if control == "max" else -1.0
+        u1 = self.u1_max if s * grad[2] >= 0 else -self.u1_max
+        u2 = self.u2_max if s * grad[3] >= 0 else -self.u2_max
         return u1, u2
 
 
@@ -73,6 +77,22 @@ class DoubleIntegrator1D:
 
     def alphas(self, grid):
         return [float(np.abs(grid.axes[1]).max()), self.a_max]
+
+
+@dataclass(frozen=True)
+class Integrator1D:
+    """``x' = u, |u| <= u_max`` (for reach-avoid tests)."""
+
+    u_max: float = 1.0
+
+    def key(self) -> dict:
+        return {"name": "integrator", **self.__dict__}
+
+    def hamiltonian(self, grid, p, control: str = "max"):
+        return (1.0 if control == "max" else -1.0) * self.u_max * np.abs(p[0])
+
+    def alphas(self, grid):
+        return [self.u_max]
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,18 @@ wrapped onto the periodic axis).  If ``V <= margin`` the guardian takes control 
 optimal bang-bang control (``u1 = +-0.25`` by the sign of ``dV/dtheta``, ``u2 = +-0.5`` by the
 sign of ``dV/dv``), otherwise the driver keeps control.
 
+Goal-aware variant (``mode="reach_avoid"``): it also solves the reach-avoid value of the goal
+over ``ra_horizon`` (10 s; the obstacles as a state constraint).  ``V_ra <= 0`` marks states
+that can reach the goal within that time without a collision.  The avoid rule above still
+comes first; otherwise, when the state is at the edge of the reach-avoid set
+(``-ra_margin <= V_ra <= 0``), the guardian steers with the reach-avoid optimal control
+(which minimises ``V_ra``) so as not to lose it.  It costs a second, 2.5x longer solve
+(cached likewise).  First-order Lax-Friedrichs is diffusive over a long reach horizon: on
+coarse grids the reach-avoid set is under-estimated (conservative).  For a state 3 m behind
+the goal's centre at 1 m/s, with a 4 s horizon, the value (about -1 exactly) is -0.04, -0.39
+and -0.54 on 33, 65 and 97 points per position axis.  Use finer grids or ``order=2`` where
+it matters.
+
 Explicit edge cases: a state outside the grid's position/speed box has no value: the guardian
 leaves control to the driver and counts it (``stats()["outside_grid"]``); a state with NaN
 brakes at maximum and is counted (``nan_states``); an obstacle whose centre lies outside the
@@ -73,10 +85,16 @@ class HJGuardian(Guardian):
     privileged = True
 
     def __init__(self, grid: Grid | None = None, grid_n=None, horizon: float = 4.0, order: int = 1, rk: int = 2, cfl: float = 0.8,
-                 margin: float = 0.0, disturbance: float = 0.0, cache_dir=None, cache: bool = True, cache_max_files: int = 64) -> None:
+                 margin: float = 0.0, disturbance: float = 0.0, cache_dir=None, cache: bool = True, cache_max_files: int = 64,
+                 mode: str = "avoid", ra_horizon: float = 10.0, ra_margin: float = 0.5) -> None:
         super().__init__()
         if not horizon > 0:
             raise ValueError(f"horizon must be > 0, got {horizon}")
+        if mode not in ("avoid", "reach_avoid"):
+            raise ValueError(f"mode must be 'avoid' or 'reach_avoid', got {mode!r}")
+        if not (ra_horizon > 0 and ra_margin >= 0):
+            raise ValueError(f"ra_horizon must be > 0 and ra_margin >= 0, got {ra_horizon}, {ra_margin}")
+        self.mode, self.ra_horizon, self.ra_margin = mode, float(ra_horizon), float(ra_margin)
         if grid is not None and grid_n is not None:
             raise ValueError("give grid or grid_n, not both")
         self.grid = grid or (default_grid(tuple(int(k) for k in grid_n)) if grid_n is not None else default_grid())
@@ -89,11 +107,15 @@ class HJGuardian(Guardian):
         self.solve_seconds = 0.0
         self.V = None
 
-    def spec(self, obstacles) -> dict:
-        return {"dynamics": self.dynamics.key(), "grid": self.grid.key(), "horizon": self.horizon, "order": self.order,
+    def spec(self, obstacles, goal=None) -> dict:
+        spec = {"dynamics": self.dynamics.key(), "grid": self.grid.key(), "horizon": self.horizon, "order": self.order,
                 "rk": self.rk, "cfl": self.cfl, "obstacles": np.round(np.asarray(obstacles, float), 9).tolist(), "version": 1}
+        if goal is not None:  # the reach-avoid value: goal and its own horizon
+            spec |= {"mode": "reach_avoid", "goal": np.round(np.asarray(goal, float), 9).tolist(), "horizon": self.ra_horizon}
+        return spec
 
-    def value_function(self, obstacles) -> np.ndarray:
+    def value_function(self, obstacles, goal=None) -> np.ndarray:
+        """The avoid value of the obstacles (``goal=None``) or the reach-avoid value of the goal."""
         obstacles = np.asarray(obstacles, float).reshape(-1, 3)
         for ox, oy, r in obstacles:
             if not (self.grid.lo[0] <= ox <= self.grid.hi[0] and self.grid.lo[1] <= oy <= self.grid.hi[1]):
@@ -101,14 +123,19 @@ class HJGuardian(Guardian):
                     f"obstacle centred at ({ox:.2f}, {oy:.2f}) lies outside the HJ grid "
                     f"[{self.grid.lo[0]}, {self.grid.hi[0]}] x [{self.grid.lo[1]}, {self.grid.hi[1]}]"
                 )
-        key = ValueCache.key(self.spec(obstacles)) if self.cache else None
+        key = ValueCache.key(self.spec(obstacles, goal)) if self.cache else None
         V = self.cache.load(key, self.grid.shape) if self.cache else None
         if V is not None:
             self._counts["cache_hits"] += 1
             return V
         t0 = time.perf_counter()
-        V, _ = solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, obstacles), self.horizon,
-                         order=self.order, rk=self.rk, cfl=self.cfl)
+        if goal is None:
+            V, _ = solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, obstacles), self.horizon,
+                             order=self.order, rk=self.rk, cfl=self.cfl)
+        else:
+            V, _ = solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, np.asarray(goal, float).reshape(1, 3)),
+                             self.ra_horizon, order=self.order, rk=self.rk, cfl=self.cfl,
+                             constraint=obstacle_target(self.grid, obstacles))
         self.solve_seconds = time.perf_counter() - t0
         self._counts["solves"] += 1
         if self.cache:
@@ -122,6 +149,10 @@ class HJGuardian(Guardian):
         self.V = self.value_function(priv["obstacles"])
         self.grads = _gradient(self.V, self.grid)
         self._arrays = [self.V, *self.grads]
+        self._ra_arrays = None
+        if self.mode == "reach_avoid":
+            V_ra = self.value_function(priv["obstacles"], goal=priv["goal"])
+            self._ra_arrays = [V_ra, *_gradient(V_ra, self.grid)]
 
     def evaluate(self, state) -> np.ndarray:
         """``(V, dV/dx, dV/dy, dV/dtheta, dV/dv)`` at ``state``."""
@@ -136,10 +167,16 @@ class HJGuardian(Guardian):
             self._counts["outside_grid"] += 1
             return inactive_action()
         vals = self.evaluate(s)
-        if vals[0] > self.margin:
-            return inactive_action()
-        u1, u2 = self.dynamics.optimal_control(s, vals[1:])
-        return active_action(u1, u2)
+        if vals[0] <= self.margin:  # safety first: the avoid value
+            u1, u2 = self.dynamics.optimal_control(s, vals[1:])
+            return active_action(u1, u2)
+        if self._ra_arrays is not None:
+            ra = self.grid.interp_many(self._ra_arrays, s)
+            if -self.ra_margin <= ra[0] <= 0.0:  # at the edge of the reach-avoid set: steer to the goal
+                self._counts["reach_avoid_steps"] = self._counts.get("reach_avoid_steps", 0) + 1
+                u1, u2 = self.dynamics.optimal_control(s, ra[1:], control="min")
+                return active_action(u1, u2)
+        return inactive_action()
 
     def stats(self) -> dict:
         return dict(self._counts, solve_seconds=self.solve_seconds)

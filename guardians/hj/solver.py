@@ -13,6 +13,8 @@ Numerics (Osher-Fedkiw, Mitchell's toolbox conventions):
 * Lax-Friedrichs numerical Hamiltonian
   ``H(x, (p- + p+)/2) + sum_i alpha_i (p+_i - p-_i) / 2`` (plus sign because the equation is
   ``V_tau = +H``), with ``alpha_i >= max |dH/dp_i|`` from the dynamics;
+* reach-avoid (optional): the control minimises, and the obstacle constraint is imposed as
+  ``V = max(V, -g)`` after every Runge-Kutta stage;
 * time: TVD Runge-Kutta (``rk=1``: forward Euler, ``rk=2``: Heun, ``rk=3``: Shu-Osher) with
   ``dt = cfl / sum_i (alpha_i / dx_i)`` (CFL 0.8 by default);
 * float32 arrays (the default grid has 4.2 M points, 17 MB per array).
@@ -69,7 +71,7 @@ def spatial_derivatives(V: np.ndarray, grid: Grid, axis: int, order: int = 1):
     raise ValueError(f"order must be 1 or 2, got {order}")
 
 
-def _rate(V: np.ndarray, grid: Grid, dynamics, alphas, order: int) -> np.ndarray:
+def _rate(V: np.ndarray, grid: Grid, dynamics, alphas, order: int, control: str = "max") -> np.ndarray:
     p_mean, diss = [], None
     for ax in range(grid.ndim):
         left, right = spatial_derivatives(V, grid, ax, order)
@@ -77,14 +79,20 @@ def _rate(V: np.ndarray, grid: Grid, dynamics, alphas, order: int) -> np.ndarray
         term = (0.5 * np.float32(alphas[ax])) * (right - left)
         diss = term if diss is None else diss + term
         del left, right
-    H = dynamics.hamiltonian(grid, p_mean)
+    H = dynamics.hamiltonian(grid, p_mean) if control == "max" else dynamics.hamiltonian(grid, p_mean, control="min")
     H += diss
     return np.minimum(H, 0.0, out=H)
 
 
 def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: int = 1, rk: int = 2,
-              cfl: float = 0.8, progress=None) -> tuple[np.ndarray, dict]:
+              cfl: float = 0.8, progress=None, constraint: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """Backward reachable tube of ``target`` (``l``: <= 0 inside) over ``horizon`` seconds.
+
+    Avoid mode (``constraint=None``): the control *avoids* the target (maximises); ``V <= 0``
+    marks the states that cannot avoid it.  Reach-avoid mode (``constraint`` given, ``g``:
+    <= 0 inside the obstacles): the control *reaches* the target (minimises) while
+    ``V >= -g`` is enforced after every stage, so ``V <= 0`` marks the states that can reach
+    the target within the horizon without entering an obstacle.
 
     Returns ``V(x, horizon)`` (float32, the grid's shape) and a dict of solver statistics.
     """
@@ -96,26 +104,41 @@ def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: i
         raise ValueError(f"rk must be 1, 2 or 3, got {rk}")
     if not 0 < cfl <= 1:
         raise ValueError(f"cfl must be in (0, 1], got {cfl}")
+    control = "max" if constraint is None else "min"
+    if constraint is not None:
+        if constraint.shape != grid.shape:
+            raise ValueError(f"constraint has shape {constraint.shape}, the grid {grid.shape}")
+        floor = (-constraint).astype(np.float32)
     alphas = [float(np.max(a)) for a in dynamics.alphas(grid)]
     rate_bound = sum(a / d for a, d in zip(alphas, grid.dx))
     dt_max = cfl / rate_bound if rate_bound > 0 else horizon
     V = target.astype(np.float32, copy=True)
+    if constraint is not None:
+        V = np.maximum(V, floor)
+
+    def L(W):
+        return _rate(W, grid, dynamics, alphas, order, control)
+
+    def clamp(W):
+        return W if constraint is None else np.maximum(W, floor)
+
     t, steps = 0.0, 0
     t0 = time.perf_counter()
     while t < horizon - 1e-12:
         dt = np.float32(min(dt_max, horizon - t))
         if rk == 1:
-            V = V + dt * _rate(V, grid, dynamics, alphas, order)
+            V = clamp(V + dt * L(V))
         elif rk == 2:
-            V1 = V + dt * _rate(V, grid, dynamics, alphas, order)
-            V = 0.5 * V + 0.5 * (V1 + dt * _rate(V1, grid, dynamics, alphas, order))
+            V1 = clamp(V + dt * L(V))
+            V = clamp(0.5 * V + 0.5 * (V1 + dt * L(V1)))
         else:
-            V1 = V + dt * _rate(V, grid, dynamics, alphas, order)
-            V2 = 0.75 * V + 0.25 * (V1 + dt * _rate(V1, grid, dynamics, alphas, order))
-            V = V / 3.0 + (2.0 / 3.0) * (V2 + dt * _rate(V2, grid, dynamics, alphas, order))
+            V1 = clamp(V + dt * L(V))
+            V2 = clamp(0.75 * V + 0.25 * (V1 + dt * L(V1)))
+            V = clamp(V / 3.0 + (2.0 / 3.0) * (V2 + dt * L(V2)))
         V = V.astype(np.float32, copy=False)
         t += float(dt)
         steps += 1
         if progress is not None:
             progress(t, horizon)
-    return V, {"steps": steps, "dt": dt_max, "seconds": time.perf_counter() - t0, "order": order, "rk": rk, "cfl": cfl}
+    return V, {"steps": steps, "dt": dt_max, "seconds": time.perf_counter() - t0, "order": order, "rk": rk, "cfl": cfl,
+               "mode": "avoid" if constraint is None else "reach_avoid"}
