@@ -18,6 +18,8 @@ ENV_PAGES = {
                                  "figures/dubins4d_frame.png"),
     "environments/dubins3d_maze.md": ("rmm_envs.envs.dubins3d_maze", "Dubins3D in mazes: `Dubins3DMaze-v0`",
                                       "figures/dubins3d_maze_frame.png"),
+    "environments/quadrotor_room.md": ("rmm_envs.envs.quadrotor_room", "Quadrotor in rooms: `QuadrotorRoom-v0`",
+                                       "figures/quadrotor_room_frame.png"),
 }
 
 
@@ -122,6 +124,20 @@ def render_maze_frame(path: Path) -> None:
     plt.imsave(path, env.render())
 
 
+def render_quadrotor_frame(path: Path) -> None:
+    import gymnasium as gym
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    import rmm_envs  # noqa: F401
+
+    env = gym.make("QuadrotorRoom-v0", render_mode="rgb_array")
+    env.reset(seed=2)
+    plt.imsave(path, env.render())
+
+
 def main() -> int:
     for rel, text in pages().items():
         (DOCS / rel).parent.mkdir(parents=True, exist_ok=True)
@@ -130,6 +146,7 @@ def main() -> int:
     if "--no-figures" not in sys.argv:
         render_frame(DOCS / "figures" / "dubins4d_frame.png")
         render_maze_frame(DOCS / "figures" / "dubins3d_maze_frame.png")
+        render_quadrotor_frame(DOCS / "figures" / "quadrotor_room_frame.png")
         print("wrote figures/dubins4d_frame.png, figures/dubins3d_maze_frame.png")
     return 0
 

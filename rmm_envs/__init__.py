@@ -5,6 +5,7 @@ Importing the package registers the Gymnasium environments:
 * ``Dubins4DCircles-v0``: Dubins4D among circles, blocking fixed-step (guardian action).
 * ``Dubins4DParallel-v0``: the same, non-blocking (the guardian's compute time passes).
 * ``Dubins3DMaze-v0``: a constant-speed Dubins car in procedurally generated mazes.
+* ``QuadrotorRoom-v0``: a quadrotor in procedurally generated rooms (PyBullet; extra ``quadrotor``).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
-ENV_IDS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins3DMaze-v0")
+ENV_IDS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins3DMaze-v0", "QuadrotorRoom-v0")
 
 
 def _register() -> None:
@@ -26,6 +27,7 @@ def _register() -> None:
         "Dubins4DCircles-v0": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv",
         "Dubins4DParallel-v0": "rmm_envs.envs.dubins4d:make_parallel_env",
         "Dubins3DMaze-v0": "rmm_envs.envs.dubins3d_maze:Dubins3DMazeEnv",
+        "QuadrotorRoom-v0": "rmm_envs.envs.quadrotor_room:QuadrotorRoomEnv",
     }
     for env_id, entry in specs.items():
         if env_id not in gym.registry:

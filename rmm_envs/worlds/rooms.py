@@ -1,0 +1,212 @@
+"""Procedurally generated rooms for the quadrotor (REFERENCE section 4), from primitives only.
+
+A room is:
+
+* a **footprint**: the union of ``n_rectangles`` (1-32) axis-aligned rectangles with centres
+  uniform on ``[-X/2, X/2] x [-Y/2, Y/2]`` (``X, Y ~ U(5, 50)`` m), sides ``max(2, U(0, 10))`` m,
+  each new rectangle kept only if it overlaps the union so far (as pcg_gazebo did);
+* **walls** of thickness 0.5 m and height ``U(0.1, 5)`` m around it, built on a grid of
+  wall-thickness cells: every cell outside the footprint that touches it (8-neighbourhood)
+  is wall, merged row by row into boxes;
+* a **floor** (the plane z = 0, which counts as an obstacle);
+* ``0-50`` each of **boxes** (sides ``U(0.1, 1)`` m), **cylinders** (radius and length
+  ``U(0.1, 1)`` m) and **spheres** (radius ``U(0.1, 1)`` m), with random roll, pitch and yaw,
+  resting on the floor inside the footprint and not overlapping one another (their bounding
+  spheres are kept apart).
+
+No Blender, no convex decomposition: every shape is a PyBullet primitive.  :func:`build_room`
+creates the bodies in a PyBullet client; the arrays here are the geometry for everything else.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Room", "build_room", "generate_room"]
+
+
+def _quat_from_rpy(r, p, y):
+    cr, sr, cp, sp, cy, sy = np.cos(r / 2), np.sin(r / 2), np.cos(p / 2), np.sin(p / 2), np.cos(y / 2), np.sin(y / 2)
+    return np.array([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy])
+
+
+def _rot(q):
+    x, y, z, w = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+@dataclass
+class Room:
+    """Geometry of one room (metres).
+
+    ``cell``: the footprint grid's cell size; ``origin``: its lower-left corner;
+    ``footprint``: ``(nx, ny)`` bool; ``walls``: ``(W, 6)`` boxes ``(cx, cy, cz, hx, hy, hz)``;
+    ``objects``: list of dicts ``{"shape", "pos", "quat", "size"}`` (``size``: half extents for
+    boxes, ``(radius, length)`` for cylinders, ``(radius,)`` for spheres).
+    """
+
+    footprint: np.ndarray
+    origin: np.ndarray
+    cell: float
+    wall_height: float
+    walls: np.ndarray
+    objects: list = field(default_factory=list)
+
+    def in_footprint(self, xy: np.ndarray) -> np.ndarray:
+        xy = np.atleast_2d(np.asarray(xy, float))
+        ij = np.floor((xy - self.origin) / self.cell).astype(int)
+        nx, ny = self.footprint.shape
+        ok = (ij[:, 0] >= 0) & (ij[:, 0] < nx) & (ij[:, 1] >= 0) & (ij[:, 1] < ny)
+        out = np.zeros(xy.shape[0], dtype=bool)
+        out[ok] = self.footprint[ij[ok, 0], ij[ok, 1]]
+        return out
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lo = self.walls[:, :3] - self.walls[:, 3:]
+        hi = self.walls[:, :3] + self.walls[:, 3:]
+        return lo.min(axis=0), hi.max(axis=0)
+
+
+def _footprint_rects(rng, n, X, Y):
+    rects = []
+    tries = 0
+    while len(rects) < n and tries < 10_000:
+        tries += 1
+        cx, cy = rng.uniform(-X / 2, X / 2), rng.uniform(-Y / 2, Y / 2)
+        w, h = max(2.0, rng.uniform(0, 1) * 10), max(2.0, rng.uniform(0, 1) * 10)
+        r = (cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2)
+        if rects and not any(r[0] < q[2] and q[0] < r[2] and r[1] < q[3] and q[1] < r[3] for q in rects):
+            continue
+        rects.append(r)
+    return rects
+
+
+def generate_room(rng: np.random.Generator, n_rectangles: int | None = None, x_range: float | None = None,
+                  y_range: float | None = None, wall_height: float | None = None, n_boxes: int | None = None,
+                  n_cylinders: int | None = None, n_spheres: int | None = None, wall_thickness: float = 0.5) -> Room:
+    """A seeded random room; any argument left ``None`` is drawn as described in the module."""
+    n = int(rng.integers(1, 33)) if n_rectangles is None else int(n_rectangles)
+    X = float(rng.uniform(5, 50)) if x_range is None else float(x_range)
+    Y = float(rng.uniform(5, 50)) if y_range is None else float(y_range)
+    H = float(rng.uniform(0.1, 5.0)) if wall_height is None else float(wall_height)
+    counts = [int(rng.integers(0, 51)) if c is None else int(c) for c in (n_boxes, n_cylinders, n_spheres)]
+    if n < 1 or X <= 0 or Y <= 0 or H <= 0 or min(counts) < 0 or wall_thickness <= 0:
+        raise ValueError(f"bad room parameters: n_rectangles={n} (>=1), ranges {X}, {Y} (>0), wall height {H} (>0), counts {counts} (>=0)")
+    rects = np.array(_footprint_rects(rng, n, X, Y))
+    c = wall_thickness
+    lo = rects[:, :2].min(axis=0) - 2 * c
+    hi = rects[:, 2:].max(axis=0) + 2 * c
+    nx, ny = (np.ceil((hi - lo) / c)).astype(int)
+    xs = lo[0] + (np.arange(nx) + 0.5) * c
+    ys = lo[1] + (np.arange(ny) + 0.5) * c
+    X_, Y_ = np.meshgrid(xs, ys, indexing="ij")
+    foot = np.zeros((nx, ny), dtype=bool)
+    for x0, y0, x1, y1 in rects:
+        foot |= (X_ >= x0) & (X_ <= x1) & (Y_ >= y0) & (Y_ <= y1)
+    grow = foot.copy()
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            grow |= np.roll(np.roll(foot, dx, axis=0), dy, axis=1)
+    wall = grow & ~foot
+    boxes = []
+    for i in range(nx):  # merge runs along y into boxes
+        j = 0
+        while j < ny:
+            if wall[i, j]:
+                k = j
+                while k + 1 < ny and wall[i, k + 1]:
+                    k += 1
+                y0, y1 = lo[1] + j * c, lo[1] + (k + 1) * c
+                boxes.append((lo[0] + (i + 0.5) * c, 0.5 * (y0 + y1), H / 2, c / 2, 0.5 * (y1 - y0), H / 2))
+                j = k + 1
+            else:
+                j += 1
+    room = Room(footprint=foot, origin=lo, cell=c, wall_height=H, walls=np.array(boxes))
+
+    placed: list[tuple[np.ndarray, float]] = []
+    objects = []
+    inner = foot.copy()  # keep objects a cell away from the walls
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            inner &= np.roll(np.roll(foot, dx, axis=0), dy, axis=1)
+    free_cells = np.argwhere(inner)
+    for shape, count in zip(("box", "cylinder", "sphere"), counts):
+        for _ in range(count):
+            for _try in range(50):
+                if shape == "box":
+                    size = rng.uniform(0.1, 1.0, 3) / 2
+                elif shape == "cylinder":
+                    size = np.array([rng.uniform(0.1, 1.0), rng.uniform(0.1, 1.0)])
+                else:
+                    size = np.array([rng.uniform(0.1, 1.0)])
+                q = _quat_from_rpy(*rng.uniform(-np.pi, np.pi, 3))
+                R = _rot(q)
+                if shape == "box":
+                    hz = float(np.abs(R[2]) @ size)
+                    radius = float(np.linalg.norm(size))
+                elif shape == "cylinder":
+                    r, L = size
+                    hz = float(abs(R[2, 2]) * L / 2 + r * np.sqrt(max(0.0, 1 - R[2, 2] ** 2)))
+                    radius = float(np.hypot(r, L / 2))
+                else:
+                    hz = radius = float(size[0])
+                if free_cells.size == 0:
+                    break
+                cell_ij = free_cells[rng.integers(len(free_cells))]
+                xy = lo + (cell_ij + rng.uniform(0, 1, 2)) * c
+                pos = np.array([xy[0], xy[1], hz])
+                if any(np.linalg.norm(pos[:2] - p[:2]) < radius + pr for p, pr in placed):
+                    continue
+                if not room.in_footprint(pos[None, :2] + radius * np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])).all():
+                    continue
+                placed.append((pos, radius))
+                objects.append({"shape": shape, "pos": pos, "quat": q, "size": size})
+                break
+    room.objects = objects
+    return room
+
+
+def build_room(client: int, room: Room) -> list[int]:
+    """Create the floor, the walls and the objects in the PyBullet client; returns body ids.
+
+    The walls are one static body with a compound collision shape, and so are the objects:
+    three static bodies instead of hundreds keep Bullet's broadphase cheap (a physics step
+    costs a few times less than with one body per box).
+    """
+    import pybullet as p
+
+    ids = []
+    plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client)
+    ids.append(p.createMultiBody(0, plane, -1, [0, 0, 0], physicsClientId=client))
+    if len(room.walls):
+        he = [[float(x) for x in w[3:]] for w in room.walls]
+        pos = [[float(x) for x in w[:3]] for w in room.walls]
+        n = len(he)
+        col = p.createCollisionShapeArray([p.GEOM_BOX] * n, halfExtents=he, collisionFramePositions=pos, physicsClientId=client)
+        # (createVisualShapeArray crashes PyBullet 3.2.7 when given rgbaColors: colour the body instead)
+        vis = p.createVisualShapeArray([p.GEOM_BOX] * n, halfExtents=he, visualFramePositions=pos, physicsClientId=client)
+        ids.append(p.createMultiBody(0, col, vis, [0, 0, 0], physicsClientId=client))
+        p.changeVisualShape(ids[-1], -1, rgbaColor=[0.6, 0.6, 0.6, 1], physicsClientId=client)
+    if room.objects:
+        types, he, radii, lengths, pos, orn = [], [], [], [], [], []
+        for o in room.objects:
+            s = o["size"]
+            types.append({"box": p.GEOM_BOX, "cylinder": p.GEOM_CYLINDER, "sphere": p.GEOM_SPHERE}[o["shape"]])
+            he.append(list(s) if o["shape"] == "box" else [0.0, 0.0, 0.0])
+            radii.append(float(s[0]) if o["shape"] != "box" else 0.0)
+            lengths.append(float(s[1]) if o["shape"] == "cylinder" else 0.0)
+            pos.append([float(x) for x in o["pos"]])
+            orn.append([float(x) for x in o["quat"]])
+        col = p.createCollisionShapeArray(types, radii=radii, halfExtents=he, lengths=lengths, collisionFramePositions=pos,
+                                          collisionFrameOrientations=orn, physicsClientId=client)
+        vis = p.createVisualShapeArray(types, radii=radii, halfExtents=he, lengths=lengths, visualFramePositions=pos,
+                                       visualFrameOrientations=orn, physicsClientId=client)
+        ids.append(p.createMultiBody(0, col, vis, [0, 0, 0], physicsClientId=client))
+        p.changeVisualShape(ids[-1], -1, rgbaColor=[0.8, 0.5, 0.2, 1], physicsClientId=client)
+    return ids

@@ -1,0 +1,147 @@
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("pybullet")
+
+import rmm_envs  # noqa: F401
+from gymnasium.utils.env_checker import check_env
+from rmm_envs.envs.quadrotor_room import QUAD_MASS, QuadrotorRoomEnv
+from rmm_envs.worlds.rooms import generate_room
+
+EMPTY = {"n_rectangles": 1, "x_range": 10.0, "y_range": 10.0, "wall_height": 3.0, "n_boxes": 0, "n_cylinders": 0, "n_spheres": 0}
+
+
+def open_spot(env):
+    """The footprint cell farthest from the walls (a free column to fly in)."""
+    room = env.room
+    cells = np.argwhere(room.footprint)
+    centre = cells.mean(axis=0)
+    ij = cells[np.argmin(np.linalg.norm(cells - centre, axis=1))]
+    return room.origin + (ij + 0.5) * room.cell
+
+
+def make(damping=0.04, height=1.5, v=(0, 0, 0), quat=(0, 0, 0, 1), w=(0, 0, 0)):
+    env = QuadrotorRoomEnv(linear_damping=damping, angular_damping=damping)
+    env.reset(seed=0, options={"room": dict(EMPTY)})
+    xy = open_spot(env)
+    state = [xy[0], xy[1], height, *quat, *v, *w]
+    obs, info = env.reset(seed=0, options={"room": env.room, "state": state})
+    return env, obs, info
+
+
+def run(env, action, seconds):
+    out = None
+    for _ in range(int(round(seconds / env.control_dt))):
+        out = env.step(np.asarray(action, np.float32))
+        if out[2] or out[3]:
+            break
+    return out
+
+
+def test_hover_holds_the_state():
+    env, _, info = make()
+    s0 = info["state"]
+    obs, r, te, tr, info = run(env, [QUAD_MASS * 9.81, 0, 0, 0], 1.0)
+    assert not te
+    np.testing.assert_allclose(info["state"][:3], s0[:3], atol=1e-3)
+    np.testing.assert_allclose(info["state"][7:], 0, atol=1e-3)
+
+
+def test_free_drift_and_constant_climb_match_closed_form():
+    env, _, info = make(damping=0.0, v=(0.5, -0.25, 0))
+    s0 = info["state"]
+    _, _, te, _, info = run(env, [QUAD_MASS * 9.81, 0, 0, 0], 1.0)
+    assert not te
+    np.testing.assert_allclose(info["state"][:3], s0[:3] + np.array([0.5, -0.25, 0.0]) * info["sim_time"], atol=2e-3)
+    env, _, info = make(damping=0.0, height=0.6)
+    s0 = info["state"]
+    a = 1.0
+    _, _, te, _, info = run(env, [QUAD_MASS * (9.81 + a), 0, 0, 0], 1.0)
+    t = info["sim_time"]
+    assert info["state"][2] == pytest.approx(s0[2] + 0.5 * a * t * t, abs=1e-2)  # semi-implicit Euler: O(dt)
+    assert info["state"][9] == pytest.approx(a * t, abs=1e-3)
+
+
+def test_torque_is_applied_in_the_body_frame():
+    # rolled by +90 degrees about x, the body z axis points along world -y
+    q = (math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4))
+    env, _, _ = make(damping=0.0, quat=q, height=2.0)
+    _, _, _, _, info = env.step(np.array([0.0, 0.0, 0.0, 0.1], np.float32))  # Mz = 0.1 N m for 1/24 s
+    w = info["state"][10:13]
+    expected = 0.1 / 0.004 * env.control_dt  # I_zz = 0.004
+    np.testing.assert_allclose(w, [0.0, -expected, 0.0], atol=0.02 * expected)
+
+
+def test_rays_read_the_floor_and_the_open_sky():
+    env, obs, _ = make(height=1.2)
+    assert obs[5] == pytest.approx(1.2, abs=1e-3)  # -z: the floor
+    assert obs[4] == 100.0  # +z: nothing above
+    assert np.all(obs[:4] < 10.0)  # +-x, +-y: walls of a room at most ~12 m across
+    np.testing.assert_allclose(obs[6:10], [0, 0, 0, 1], atol=1e-7)
+
+
+def test_falling_onto_the_floor_is_a_contact():
+    env, _, _ = make(height=0.5)
+    _, r, te, tr, info = run(env, [0, 0, 0, 0], 2.0)
+    assert te and not tr and r == -1.0 and info["outcome"] == "collision"
+    assert info["sim_time"] == pytest.approx(math.sqrt(2 * (0.5 - 0.05) / 9.81), abs=0.03)
+
+
+def test_generator_is_deterministic_and_rooms_are_enclosed():
+    a, b = generate_room(np.random.default_rng(4)), generate_room(np.random.default_rng(4))
+    np.testing.assert_array_equal(a.walls, b.walls)
+    np.testing.assert_array_equal(a.footprint, b.footprint)
+    assert [o["shape"] for o in a.objects] == [o["shape"] for o in b.objects]
+    for seed in range(10):
+        r = generate_room(np.random.default_rng(seed))
+        assert r.footprint.any() and len(r.walls) > 0
+        # no footprint cell touches the grid border: walls surround it
+        f = r.footprint
+        assert not (f[0].any() or f[-1].any() or f[:, 0].any() or f[:, -1].any())
+        assert all(r.in_footprint(o["pos"][None, :2])[0] for o in r.objects)
+
+
+def test_same_seed_same_episode():
+    def episode():
+        env = QuadrotorRoomEnv()
+        obs, _ = env.reset(seed=9)
+        out = [obs]
+        for _ in range(20):
+            obs, r, te, tr, _ = env.step(np.array([5.0, 0.01, 0.0, 0.0], np.float32))
+            out.append(obs)
+            if te or tr:
+                break
+        return np.array(out)
+
+    np.testing.assert_array_equal(episode(), episode())
+
+
+def test_check_env_and_render():
+    check_env(gym.make("QuadrotorRoom-v0", render_mode="rgb_array").unwrapped, skip_render_check=False)
+    env = gym.make("QuadrotorRoom-v0", render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (240, 320, 3) and frame.std() > 5
+
+
+def test_bad_input():
+    env, _, _ = make()
+    with pytest.raises(ValueError, match="finite"):
+        env.step(np.array([np.nan, 0, 0, 0]))
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.zeros(3))
+    room = env.room
+    xy = open_spot(env)
+    with pytest.raises(ValueError, match="contact"):
+        env.reset(seed=0, options={"room": room, "state": [xy[0], xy[1], 0.01, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0]})
+    with pytest.raises(ValueError, match="unit quaternion"):
+        env.reset(seed=0, options={"room": room, "state": [xy[0], xy[1], 1.0, 0, 0, 0, 2, 0, 0, 0, 0, 0, 0]})
+    with pytest.raises(ValueError, match="13 finite"):
+        env.reset(seed=0, options={"room": room, "state": [0.0] * 12})
+    with pytest.raises(ValueError, match="room"):
+        env.reset(seed=0, options={"room": "big"})
+    with pytest.raises(ValueError, match="control_dt"):
+        QuadrotorRoomEnv(control_dt=0.01)
