@@ -160,3 +160,14 @@ def test_latency_sweep(tmp_path, capsys):
     assert main(["sweep", "--agent", "inactive", "--latency", "0,50", "--episodes", "4", "--workers", "2", "--out", str(out), "--no-progress"]) == 0
     assert (out / "latency_sweep.png").stat().st_size > 0
     assert "| inactive |" in (out / "latency_sweep.md").read_text()
+
+
+def test_ray_backend_gives_the_same_results(tmp_path):
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        assert main(["--agent", "lrmm,brakes", "--episodes", "4", "--backend", "ray", "--out", str(tmp_path / "ray"), *FAST]) == 0
+    finally:
+        ray.shutdown()
+    assert main(["--agent", "lrmm,brakes", "--episodes", "4", "--workers", "1", "--out", str(tmp_path / "local"), *FAST]) == 0
+    assert _db_rows(tmp_path / "ray") == _db_rows(tmp_path / "local")
