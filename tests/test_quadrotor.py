@@ -145,3 +145,56 @@ def test_bad_input():
         env.reset(seed=0, options={"room": "big"})
     with pytest.raises(ValueError, match="control_dt"):
         QuadrotorRoomEnv(control_dt=0.01)
+
+
+def test_numpy_propagator_reproduces_pybullet():
+    """The batched propagator the fast labeller needs, against PyBullet itself on random branches."""
+    import pybullet as p
+
+    from rmm_envs.envs.quadrotor_room import _urdf_path
+    from rmm_envs.systems.quadrotor import Quadrotor
+
+    c = p.connect(p.DIRECT)
+    try:
+        p.setGravity(0, 0, -9.81, physicsClientId=c)
+        p.setTimeStep(1 / 240, physicsClientId=c)
+        b = p.loadURDF(_urdf_path(), [0, 0, 50], flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c)
+        p.changeDynamics(b, -1, linearDamping=0.04, angularDamping=0.04, physicsClientId=c)
+        quad = Quadrotor()
+        rng = np.random.default_rng(7)
+        n = 24
+        S = np.zeros((n, 13))
+        S[:, 2] = 50.0
+        q = rng.normal(size=(n, 4))
+        S[:, 3:7] = q / np.linalg.norm(q, axis=1, keepdims=True)
+        S[:, 7:10] = rng.uniform(-2, 2, (n, 3))
+        S[:, 10:13] = rng.uniform(-2, 2, (n, 3))
+        U = quad.sample_controls(rng, n)
+        paths = quad.propagate(S, U, 2.0, 8)  # 7 segments of 69 physics steps, as the original
+        assert paths.shape == (n, 8, 13)
+        for i in range(n):
+            p.resetBasePositionAndOrientation(b, S[i, :3].tolist(), S[i, 3:7].tolist(), physicsClientId=c)
+            p.resetBaseVelocity(b, S[i, 7:10].tolist(), S[i, 10:13].tolist(), physicsClientId=c)
+            for seg in range(7):
+                for _ in range(69):
+                    p.applyExternalForce(b, -1, [0, 0, U[i, 0]], [0, 0, 0], p.LINK_FRAME, physicsClientId=c)
+                    p.applyExternalTorque(b, -1, U[i, 1:].tolist(), p.LINK_FRAME, physicsClientId=c)
+                    p.stepSimulation(physicsClientId=c)
+                pos, orn = p.getBasePositionAndOrientation(b, physicsClientId=c)
+                v, w = p.getBaseVelocity(b, physicsClientId=c)
+                np.testing.assert_allclose(paths[i, seg + 1, :3], pos, atol=1e-6)
+                np.testing.assert_allclose(np.abs(paths[i, seg + 1, 3:7] @ np.array(orn)), 1.0, atol=1e-9)  # same rotation
+                np.testing.assert_allclose(paths[i, seg + 1, 7:13], [*v, *w], atol=1e-5)
+    finally:
+        p.disconnect(physicsClientId=c)
+
+
+def test_hover_in_the_numpy_propagator():
+    from rmm_envs.systems.quadrotor import Quadrotor
+
+    quad = Quadrotor()
+    s = np.array([[1.0, 2.0, 3.0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0]])
+    path = quad.propagate(s, np.array([[0.5 * 9.81, 0, 0, 0]]), 2.0, 8)
+    np.testing.assert_allclose(path[0, -1], s[0], atol=1e-12)
+    with pytest.raises(ValueError, match="shape"):
+        quad.propagate(np.zeros((1, 12)), np.zeros((1, 4)), 1.0, 4)
