@@ -198,3 +198,14 @@ def test_hover_in_the_numpy_propagator():
     np.testing.assert_allclose(path[0, -1], s[0], atol=1e-12)
     with pytest.raises(ValueError, match="shape"):
         quad.propagate(np.zeros((1, 12)), np.zeros((1, 4)), 1.0, 4)
+
+
+def test_every_generated_shape_exists_in_pybullet():
+    import pybullet as p
+
+    env = QuadrotorRoomEnv()
+    for seed in range(3):
+        env.reset(seed=seed)
+        n = sum(len(p.getCollisionShapeData(b, -1, physicsClientId=env.client))
+                for b in range(1, p.getNumBodies(physicsClientId=env.client)) if b != env.body)
+        assert n == len(env.room.walls) + len(env.room.objects)

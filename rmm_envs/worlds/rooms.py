@@ -172,41 +172,40 @@ def generate_room(rng: np.random.Generator, n_rectangles: int | None = None, x_r
     return room
 
 
+_MAX_CHILDREN = 16  # PyBullet silently truncates a shape array to 16 children
+
+
 def build_room(client: int, room: Room) -> list[int]:
     """Create the floor, the walls and the objects in the PyBullet client; returns body ids.
 
-    The walls are one static body with a compound collision shape, and so are the objects:
-    three static bodies instead of hundreds keep Bullet's broadphase cheap (a physics step
-    costs a few times less than with one body per box).
+    Static geometry is grouped into compound bodies of at most 16 shapes (PyBullet's limit
+    for ``createCollisionShapeArray``, beyond which it silently drops shapes): about ten
+    static bodies instead of hundreds keep Bullet's broadphase cheap.
     """
     import pybullet as p
 
     ids = []
     plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client)
     ids.append(p.createMultiBody(0, plane, -1, [0, 0, 0], physicsClientId=client))
-    if len(room.walls):
-        he = [[float(x) for x in w[3:]] for w in room.walls]
-        pos = [[float(x) for x in w[:3]] for w in room.walls]
-        n = len(he)
-        col = p.createCollisionShapeArray([p.GEOM_BOX] * n, halfExtents=he, collisionFramePositions=pos, physicsClientId=client)
-        # (createVisualShapeArray crashes PyBullet 3.2.7 when given rgbaColors: colour the body instead)
-        vis = p.createVisualShapeArray([p.GEOM_BOX] * n, halfExtents=he, visualFramePositions=pos, physicsClientId=client)
-        ids.append(p.createMultiBody(0, col, vis, [0, 0, 0], physicsClientId=client))
-        p.changeVisualShape(ids[-1], -1, rgbaColor=[0.6, 0.6, 0.6, 1], physicsClientId=client)
-    if room.objects:
+    kinds = {"box": p.GEOM_BOX, "cylinder": p.GEOM_CYLINDER, "sphere": p.GEOM_SPHERE}
+    shapes = [("box", w[3:], w[:3], (0.0, 0.0, 0.0, 1.0), (0.6, 0.6, 0.6, 1)) for w in room.walls]
+    shapes += [(o["shape"], o["size"], o["pos"], o["quat"], (0.8, 0.5, 0.2, 1)) for o in room.objects]
+    for lo in range(0, len(shapes), _MAX_CHILDREN):
+        group = shapes[lo:lo + _MAX_CHILDREN]
         types, he, radii, lengths, pos, orn = [], [], [], [], [], []
-        for o in room.objects:
-            s = o["size"]
-            types.append({"box": p.GEOM_BOX, "cylinder": p.GEOM_CYLINDER, "sphere": p.GEOM_SPHERE}[o["shape"]])
-            he.append(list(s) if o["shape"] == "box" else [0.0, 0.0, 0.0])
-            radii.append(float(s[0]) if o["shape"] != "box" else 0.0)
-            lengths.append(float(s[1]) if o["shape"] == "cylinder" else 0.0)
-            pos.append([float(x) for x in o["pos"]])
-            orn.append([float(x) for x in o["quat"]])
+        for kind, size, position, quat, _ in group:
+            size = np.asarray(size, float)
+            types.append(kinds[kind])
+            he.append([float(x) for x in size] if kind == "box" else [0.0, 0.0, 0.0])
+            radii.append(float(size[0]) if kind != "box" else 0.0)
+            lengths.append(float(size[1]) if kind == "cylinder" else 0.0)
+            pos.append([float(x) for x in position])
+            orn.append([float(x) for x in quat])
         col = p.createCollisionShapeArray(types, radii=radii, halfExtents=he, lengths=lengths, collisionFramePositions=pos,
                                           collisionFrameOrientations=orn, physicsClientId=client)
+        # (createVisualShapeArray crashes PyBullet 3.2.7 when given rgbaColors: colour the body instead)
         vis = p.createVisualShapeArray(types, radii=radii, halfExtents=he, lengths=lengths, visualFramePositions=pos,
                                        visualFrameOrientations=orn, physicsClientId=client)
         ids.append(p.createMultiBody(0, col, vis, [0, 0, 0], physicsClientId=client))
-        p.changeVisualShape(ids[-1], -1, rgbaColor=[0.8, 0.5, 0.2, 1], physicsClientId=client)
+        p.changeVisualShape(ids[-1], -1, rgbaColor=list(group[0][4]), physicsClientId=client)
     return ids
