@@ -71,9 +71,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from rmm_envs.systems.quadrotor import Quadrotor
+from rmm_envs.worlds.room_collision import RoomCollision
 from rmm_envs.worlds.rooms import Room, build_room, generate_room
 
-__all__ = ["QuadrotorRoomEnv", "QUAD_MASS"]
+__all__ = ["QuadrotorRoomEnv", "QuadrotorScene", "QUAD_MASS"]
 
 QUAD_MASS = 0.5
 G = 9.81
@@ -86,6 +88,40 @@ def _urdf_path() -> str:
     from importlib import resources
 
     return str(resources.files("rmm_envs") / "assets" / "quadrotor.urdf")
+
+
+class QuadrotorScene:
+    """The quadrotor in one room: the :class:`rmm_envs.risk.System` for fast labelling.
+
+    Propagation is the batched numpy integrator (:class:`rmm_envs.systems.Quadrotor`, which
+    reproduces PyBullet's), failure is the analytic room collision at the path's states (as
+    the original checked its 8 path states), and observations come from the env's PyBullet
+    rays.  PyBullet stays the environment's truth; the tests compare the two.
+    """
+
+    state_dim, control_dim, obs_dim = 13, 4, 16
+
+    def __init__(self, env: "QuadrotorRoomEnv") -> None:
+        self.env = env
+        self.system = Quadrotor(linear_damping=env.damping[0], angular_damping=env.damping[1])
+        self.collision = RoomCollision(env.room)
+        self.control_low, self.control_high = self.system.control_low, self.system.control_high
+
+    def sample_controls(self, rng, n):
+        return self.system.sample_controls(rng, n)
+
+    def propagate(self, states, controls, duration, n_steps):
+        return self.system.propagate(states, controls, duration, n_steps)
+
+    def state_failed(self, states):
+        return self.collision.states_failed(np.asarray(states, float))
+
+    def path_failed(self, paths):
+        paths = np.asarray(paths, float)
+        return self.collision.states_failed(paths.reshape(-1, 13)).reshape(paths.shape[:2]).any(axis=1)
+
+    def observe(self, states, *_):
+        return self.env.observe_states(states)
 
 
 class QuadrotorRoomEnv(gym.Env):
@@ -139,6 +175,8 @@ class QuadrotorRoomEnv(gym.Env):
         self.p.resetBaseVelocity(self.body, s[7:10].tolist(), s[10:13].tolist(), physicsClientId=self.client)
 
     def get_state(self) -> np.ndarray:
+        if self.body is None:
+            raise RuntimeError("call reset() first")
         pos, quat = self.p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
         v, w = self.p.getBaseVelocity(self.body, physicsClientId=self.client)
         return np.array([*pos, *quat, *v, *w])
@@ -236,6 +274,44 @@ class QuadrotorRoomEnv(gym.Env):
 
     def privileged(self) -> dict:
         return {"state": self.get_state(), "room": self.room}
+
+    # ------------------------------------------------------------------ dataset hooks
+    def risk_system(self) -> QuadrotorScene:
+        if self.room is None:
+            raise RuntimeError("call reset() first")
+        if getattr(self, "_scene", None) is None or self._scene.collision.room is not self.room:
+            self._scene = QuadrotorScene(self)
+        return self._scene
+
+    def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """States as the original's datagen drew them: position uniform over the walls' box
+        expanded by 15% per side (z from below the floor up), a uniformly random orientation,
+        linear velocity uniform in [-10, 10]^3 m/s and angular velocity in [-4 pi, 4 pi]^3 rad/s;
+        states in contact (analytically) are rejected."""
+        lo, hi = self.room.bounds()
+        span = hi - lo
+        lo, hi = lo - 0.15 * span, hi + 0.15 * span
+        col = self.risk_system().collision
+        out = np.empty((0, 13))
+        while out.shape[0] < n:
+            k = max(2 * (n - out.shape[0]), 16)
+            q = rng.normal(size=(k, 4))
+            q /= np.linalg.norm(q, axis=1, keepdims=True)
+            cand = np.column_stack([rng.uniform(lo, hi, (k, 3)), q, rng.uniform(-10, 10, (k, 3)),
+                                    rng.uniform(-4 * np.pi, 4 * np.pi, (k, 3))])
+            out = np.vstack([out, cand[~col.states_failed(cand)]])
+        return out[:n]
+
+    def observe_states(self, states, rng=None) -> np.ndarray:
+        """The 16-dim observation of arbitrary states (PyBullet rays; the env's state is restored)."""
+        keep = self.get_state()
+        obs = np.empty((len(states), 16), dtype=np.float32)
+        for i, st in enumerate(np.asarray(states, float)):
+            self.set_state(st)
+            obs[i, :6] = self.rays()
+            obs[i, 6:] = st[3:13]
+        self.set_state(keep)
+        return obs
 
     @property
     def true_state(self) -> np.ndarray:

@@ -33,7 +33,8 @@ class RiskLabel(gym.Wrapper):
                  leaf: str = "zero", seed: int | None = None):
         super().__init__(env)
         base = env.unwrapped
-        missing = [a for a in ("risk_system", "true_state") if not hasattr(base, a)]
+        # look on the class: evaluating a property such as true_state may need a reset first
+        missing = [a for a in ("risk_system", "true_state") if not hasattr(type(base), a)]
         if missing:
             raise TypeError(
                 f"RiskLabel needs an env exposing risk_system() and true_state (its dynamics and "
