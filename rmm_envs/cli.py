@@ -2,7 +2,8 @@
 
 ``rmm-envs demo`` runs a short episode of ``Dubins4DParallel-v0`` with a guardian that never
 takes control (the reckless driver alone) and prints what happened.  ``rmm-envs riskmap``
-draws the paper's Fig. 1: sampled states in a maze coloured by their inferred risk.
+draws the paper's Fig. 1: sampled states in a maze coloured by their inferred risk;
+``rmm-envs quadrisk`` the paper's Fig. 3: the quadrotor coloured by its inferred risk.
 """
 
 from __future__ import annotations
@@ -85,6 +86,42 @@ def _riskmap(args: argparse.Namespace) -> int:
     return 0
 
 
+def _quadrisk(args: argparse.Namespace) -> int:
+    """The paper's Fig. 3: the quadrotor in a room coloured green to red by its inferred risk."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pybullet as p
+
+    from guardians.lrmm.model import LRMMModel, default_model_path
+
+    env = gym.make("QuadrotorRoom-v0", render_mode="rgb_array").unwrapped
+    env.reset(seed=args.seed)
+    model = LRMMModel.load(args.model or default_model_path("QuadrotorRoom-v0"), env_id="QuadrotorRoom-v0")
+    rng = np.random.default_rng(args.seed)
+    states = env.sample_states(rng, args.n)
+    states = states[states[:, 2] > 0.3]  # above the floor, so that the body is visible
+    risk = model.predict(env.observe_states(states))
+    order = np.argsort(risk)
+    picks = [order[0], order[len(order) // 2], order[-1]]
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.4))
+    for ax, i in zip(axes, picks):
+        env.set_state(states[i])
+        r = float(risk[i])
+        p.changeVisualShape(env.body, -1, rgbaColor=[r, 1.0 - r, 0.0, 1.0], physicsClientId=env.client)
+        ax.imshow(env.render())
+        roll, pitch, _ = p.getEulerFromQuaternion(states[i, 3:7].tolist())
+        ax.set_title(f"inferred risk {r:.2f}\nroll {np.degrees(roll):.0f}, pitch {np.degrees(pitch):.0f} deg, "
+                     f"|v| {np.linalg.norm(states[i, 7:10]):.1f} m/s", fontsize=9)
+        ax.axis("off")
+    fig.suptitle(f"QuadrotorRoom-v0, room seed {args.seed}: lowest, median and highest inferred risk of {len(states)} sampled states")
+    fig.tight_layout()
+    fig.savefig(args.out, dpi=args.dpi)
+    print(f"wrote {args.out}: inferred risks {[round(float(risk[i]), 3) for i in picks]}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rmm-envs", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -102,6 +139,13 @@ def build_parser() -> argparse.ArgumentParser:
     rm.add_argument("--out", default="riskmap.png", help="output PNG (default: %(default)s)")
     rm.add_argument("--dpi", type=int, default=110)
     rm.set_defaults(func=_riskmap)
+    qr = sub.add_parser("quadrisk", help="the paper's Fig. 3: the quadrotor coloured by inferred risk, as a PNG")
+    qr.add_argument("--model", default=None, help="LRMM model file (default: the shipped quadrotor model)")
+    qr.add_argument("--seed", type=int, default=0, help="room and sampling seed (default: %(default)s)")
+    qr.add_argument("--n", type=int, default=200, help="states to sample before picking three (default: %(default)s)")
+    qr.add_argument("--out", default="quadrisk.png", help="output PNG (default: %(default)s)")
+    qr.add_argument("--dpi", type=int, default=110)
+    qr.set_defaults(func=_quadrisk)
     return parser
 
 

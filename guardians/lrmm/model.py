@@ -188,7 +188,8 @@ class LRMMModel:
 
 def default_model_path(env_id: str = "Dubins4DCircles-v0") -> Path:
     """Path of the model shipped with the package for ``env_id`` (the Dubins4D envs share one)."""
-    names = {"Dubins4DCircles-v0": "dubins4d.npz", "Dubins4DParallel-v0": "dubins4d.npz", "Dubins3DMaze-v0": "dubins3d_maze.npz"}
+    names = {"Dubins4DCircles-v0": "dubins4d.npz", "Dubins4DParallel-v0": "dubins4d.npz", "Dubins3DMaze-v0": "dubins3d_maze.npz",
+             "QuadrotorRoom-v0": "quadrotor.npz"}
     if env_id not in names:
         raise ValueError(f"no shipped LRMM model for {env_id!r}; shipped: {sorted(set(names))}")
     return Path(str(resources.files("guardians.lrmm") / "models" / names[env_id]))

@@ -65,13 +65,14 @@ import numpy as np
 from gymnasium import spaces
 
 from rmm_envs.envs import _render
+from rmm_envs.risk.protocol import SceneBase
 from rmm_envs.systems.dubins3d import Dubins3D
 from rmm_envs.worlds.mazes import MAZE_KINDS, Maze, generate_maze
 
 __all__ = ["Dubins3DMazeEnv", "MazeScene"]
 
 
-class MazeScene:
+class MazeScene(SceneBase):
     """A Dubins3D car in one maze: the :class:`rmm_envs.risk.System` for labelling."""
 
     def __init__(self, maze: Maze, system: Dubins3D | None = None, n_rays: int = 8) -> None:
@@ -79,13 +80,6 @@ class MazeScene:
         self.system = system or Dubins3D()
         self.n_rays = n_rays
         self.state_dim, self.control_dim, self.obs_dim = 3, 1, n_rays
-        self.control_low, self.control_high = self.system.control_low, self.system.control_high
-
-    def sample_controls(self, rng, n):
-        return self.system.sample_controls(rng, n)
-
-    def propagate(self, states, controls, duration, n_steps):
-        return self.system.propagate(states, controls, duration, n_steps)
 
     def state_failed(self, states):
         return self.maze.state_failed(np.asarray(states)[:, :2])

@@ -114,6 +114,7 @@ from gymnasium import spaces
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.driver import CLFDriver, DriverParams
 from rmm_envs.envs import _render
+from rmm_envs.risk.protocol import SceneBase
 from rmm_envs.systems.dubins4d import Dubins4D, wrap_angle
 from rmm_envs.worlds.circles import (
     CircleWorld,
@@ -130,7 +131,7 @@ OBS_DIM = 17
 _HALF = 10.0  # arena half width (generation only)
 
 
-class Dubins4DScene:
+class Dubins4DScene(SceneBase):
     """A Dubins4D vehicle among fixed circles: what the risk estimator needs of the env.
 
     Implements :class:`rmm_envs.risk.System`: control bounds and sampling, batched exact
@@ -154,8 +155,6 @@ class Dubins4DScene:
         self.state_dim = 4
         self.control_dim = 2
         self.obs_dim = 5 + self.n_rays
-        self.control_low = self.system.control_low
-        self.control_high = self.system.control_high
 
     @property
     def obstacles(self) -> np.ndarray:
@@ -164,12 +163,6 @@ class Dubins4DScene:
     @property
     def goal(self) -> np.ndarray:
         return self.world.goal
-
-    def sample_controls(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        return self.system.sample_controls(rng, n)
-
-    def propagate(self, states, controls, duration: float, n_steps: int) -> np.ndarray:
-        return self.system.propagate(states, controls, duration, n_steps)
 
     def state_failed(self, states: np.ndarray) -> np.ndarray:
         return points_in_circles(np.asarray(states)[:, :2], self.world.obstacles)

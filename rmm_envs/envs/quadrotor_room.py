@@ -71,6 +71,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from rmm_envs.risk.protocol import SceneBase
 from rmm_envs.systems.quadrotor import Quadrotor
 from rmm_envs.worlds.room_collision import RoomCollision
 from rmm_envs.worlds.rooms import Room, build_room, generate_room
@@ -90,7 +91,7 @@ def _urdf_path() -> str:
     return str(resources.files("rmm_envs") / "assets" / "quadrotor.urdf")
 
 
-class QuadrotorScene:
+class QuadrotorScene(SceneBase):
     """The quadrotor in one room: the :class:`rmm_envs.risk.System` for fast labelling.
 
     Propagation is the batched numpy integrator (:class:`rmm_envs.systems.Quadrotor`, which
@@ -105,13 +106,6 @@ class QuadrotorScene:
         self.env = env
         self.system = Quadrotor(linear_damping=env.damping[0], angular_damping=env.damping[1])
         self.collision = RoomCollision(env.room)
-        self.control_low, self.control_high = self.system.control_low, self.system.control_high
-
-    def sample_controls(self, rng, n):
-        return self.system.sample_controls(rng, n)
-
-    def propagate(self, states, controls, duration, n_steps):
-        return self.system.propagate(states, controls, duration, n_steps)
 
     def state_failed(self, states):
         return self.collision.states_failed(np.asarray(states, float))

@@ -23,7 +23,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["System", "check_system"]
+__all__ = ["SceneBase", "System", "check_system"]
 
 _REQUIRED = ("state_dim", "control_dim", "control_low", "control_high", "sample_controls",
              "propagate", "path_failed", "state_failed", "observe")
@@ -55,3 +55,27 @@ def check_system(system) -> None:
             f"{type(system).__name__} is not a risk System: it lacks {missing} "
             f"(see rmm_envs.risk.protocol for what the estimator needs)"
         )
+
+
+class SceneBase:
+    """A dynamics object placed in a world: the dynamics part of :class:`System`, delegated.
+
+    Subclasses set ``self.system`` (with ``control_low``/``control_high``, ``sample_controls``
+    and ``propagate``) and implement ``state_failed``, ``path_failed`` and ``observe``.
+    """
+
+    system = None
+
+    @property
+    def control_low(self) -> np.ndarray:
+        return self.system.control_low
+
+    @property
+    def control_high(self) -> np.ndarray:
+        return self.system.control_high
+
+    def sample_controls(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        return self.system.sample_controls(rng, n)
+
+    def propagate(self, states, controls, duration: float, n_steps: int) -> np.ndarray:
+        return self.system.propagate(states, controls, duration, n_steps)
