@@ -250,3 +250,27 @@ def test_risk_label_on_the_quadrotor():
     env = RiskLabel(QuadrotorRoomEnv(), branches=8, seed=0)
     _, info = env.reset(seed=0)
     assert 0.0 <= info["risk"] <= 1.0
+
+
+def test_shipped_quadrotor_model():
+    from guardians.lrmm.model import LRMMModel, default_model_path
+
+    m = LRMMModel.load(default_model_path("QuadrotorRoom-v0"), env_id="QuadrotorRoom-v0", obs_dim=16)
+    assert m.meta["metrics"]["train"]["n"] == 65536 and m.meta["metrics"]["test"]["n"] == 8192
+    assert len(m.meta["split"]["test_configs"]) == 4
+    assert m.meta["metrics"]["test"]["mae"] <= 0.010
+    # upside down and fast, just above the floor, is riskier than level, slow and high up
+    env, _, _ = make(height=2.5)
+    xy = open_spot(env)
+    calm = np.array([xy[0], xy[1], 2.5, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0])
+    wild = np.array([xy[0], xy[1], 0.5, 1, 0, 0, 0, 0, 0, -3.0, 5.0, 0, 0])
+    r_calm, r_wild = m.predict(env.observe_states(np.stack([calm, wild])))
+    assert r_wild > r_calm
+
+
+def test_quadrisk_command(tmp_path):
+    from rmm_envs.cli import main
+
+    out = tmp_path / "q.png"
+    assert main(["quadrisk", "--out", str(out), "--dpi", "40"]) == 0
+    assert out.stat().st_size > 1000
