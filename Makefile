@@ -27,6 +27,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/perf_risk.py
 	$(BIN)/python benchmarks/perf_guardians.py
 	$(BIN)/python benchmarks/perf_hj.py --quick
+	$(BIN)/python benchmarks/perf_quadrotor.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info

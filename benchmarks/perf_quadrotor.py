@@ -73,6 +73,21 @@ def main(argv=None):
           "moves the body after a contact, so later states differ)")
     e = np.concatenate(errs)
     print(f"  position error before the first contact: median {np.median(e):.1e} m, max {e.max():.1e} m")
+    # env steps per second: stepping alone, and with the resets that rebuild a room
+    hover = np.array([4.905, 0.0, 0.0, 0.0], np.float32)
+    n, t_all, t_step, seed = 0, time.perf_counter(), 0.0, 0
+    while n < 3000:
+        env.reset(seed=seed)
+        seed += 1
+        t0 = time.perf_counter()
+        while True:
+            _, _, te, tr, _ = env.step(hover)
+            n += 1
+            if te or tr:
+                break
+        t_step += time.perf_counter() - t0
+    print(f"QuadrotorRoom-v0 steps/s (hover thrust): {n / t_step:.0f} stepping (target >= 2,000), "
+          f"{n / (time.perf_counter() - t_all):.0f} including {seed} resets (each generates and builds a room)")
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     states = env.sample_states(rng, 64)
