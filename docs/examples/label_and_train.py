@@ -1,6 +1,6 @@
 """Tutorial: label a dataset with the sampling-tree estimator and train a risk map on it.
 
-    python docs/examples/label_and_train.py --out /tmp/lrmm-tutorial            # small and quick
+    python docs/examples/label_and_train.py --out lrmm-tutorial               # small and quick
     python docs/examples/label_and_train.py --configs 274 --samples 128 --epochs 300  # the paper's scale
 
 Steps: (1) rmm-datagen's Python API labels states of procedurally generated obstacle
