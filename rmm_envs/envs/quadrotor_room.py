@@ -125,7 +125,12 @@ class QuadrotorRoomEnv(gym.Env):
 
     def __init__(self, control_dt: float = 1.0 / 24.0, max_episode_time: float = 20.0, linear_damping: float = 0.04,
                  angular_damping: float = 0.04, render_mode: str | None = None):
-        import pybullet as p
+        try:
+            import pybullet as p
+        except ImportError as e:
+            raise gym.error.DependencyNotInstalled(
+                "QuadrotorRoom-v0 needs PyBullet: pip install 'rmm-envs[quadrotor]' (pybullet==3.2.7)"
+            ) from e
 
         n_sub = control_dt / PHYSICS_DT
         if not (control_dt > 0 and abs(n_sub - round(n_sub)) < 1e-9 and round(n_sub) >= 1):
