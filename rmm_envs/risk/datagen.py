@@ -33,7 +33,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import math
 import os
 import sys
 import time
@@ -68,23 +67,15 @@ class DatagenConfig:
 
     def validate(self) -> None:
         import rmm_envs
-        from rmm_envs.risk.metrics import get_metric
+        from rmm_envs.risk.estimator import validate_tree_params
 
         if self.env_id not in rmm_envs.ENV_IDS:
             raise ValueError(f"unknown env {self.env_id!r}; expected one of {list(rmm_envs.ENV_IDS)}")
-        for name in ("configs", "samples_per_config", "configs_per_shard", "branches", "n_steps"):
+        for name in ("configs", "samples_per_config", "configs_per_shard"):
             v = getattr(self, name)
             if not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
-        if self.n_steps < 2:
-            raise ValueError(f"n_steps must be an integer >= 2, got {self.n_steps}")
-        if not isinstance(self.depth, int) or self.depth < 0:
-            raise ValueError(f"depth must be an integer >= 0, got {self.depth!r}")
-        if not (self.horizon > 0 and math.isfinite(self.horizon)):
-            raise ValueError(f"horizon must be a finite number of seconds > 0, got {self.horizon!r}")
-        if self.leaf not in ("zero", "heuristic"):
-            raise ValueError(f"leaf must be 'zero' or 'heuristic', got {self.leaf!r}")
-        get_metric(self.metric, self.alpha)
+        validate_tree_params(**self.estimator_params())
 
     @property
     def n_shards(self) -> int:

@@ -33,7 +33,22 @@ import numpy as np
 from rmm_envs.risk.metrics import get_metric
 from rmm_envs.risk.protocol import check_system
 
-__all__ = ["RiskEstimator", "RiskResult"]
+__all__ = ["RiskEstimator", "RiskResult", "validate_tree_params"]
+
+
+def validate_tree_params(branches, depth, horizon, n_steps, metric="expected", alpha=None, leaf="zero") -> None:
+    """Raise ``ValueError`` naming the first tree parameter that is out of range."""
+    if int(branches) != branches or branches < 1:
+        raise ValueError(f"branches (n) must be an integer >= 1, got {branches!r}")
+    if int(depth) != depth or depth < 0:
+        raise ValueError(f"depth (m) must be an integer >= 0, got {depth!r}")
+    if not (isinstance(horizon, (int, float)) and horizon > 0 and math.isfinite(horizon)):
+        raise ValueError(f"horizon (t) must be a finite number of seconds > 0, got {horizon!r}")
+    if int(n_steps) != n_steps or n_steps < 2:
+        raise ValueError(f"n_steps must be an integer >= 2, got {n_steps!r}")
+    if leaf not in ("zero", "heuristic"):
+        raise ValueError(f"leaf must be 'zero' or 'heuristic', got {leaf!r}")
+    get_metric(metric, alpha)
 
 
 @dataclass
@@ -71,16 +86,7 @@ class RiskEstimator:
         chunk_size: int | None = None,
     ) -> None:
         check_system(system)
-        if int(branches) != branches or branches < 1:
-            raise ValueError(f"branches (n) must be an integer >= 1, got {branches!r}")
-        if int(depth) != depth or depth < 0:
-            raise ValueError(f"depth (m) must be an integer >= 0, got {depth!r}")
-        if not (isinstance(horizon, (int, float)) and horizon > 0 and math.isfinite(horizon)):
-            raise ValueError(f"horizon (t) must be a finite number of seconds > 0, got {horizon!r}")
-        if int(n_steps) != n_steps or n_steps < 2:
-            raise ValueError(f"n_steps must be an integer >= 2, got {n_steps!r}")
-        if leaf not in ("zero", "heuristic"):
-            raise ValueError(f"leaf must be 'zero' or 'heuristic', got {leaf!r}")
+        validate_tree_params(branches, depth, horizon, n_steps, metric, alpha, leaf)
         if leaf == "heuristic" and not hasattr(system, "leaf_estimate"):
             raise TypeError(f"leaf='heuristic' needs {type(system).__name__}.leaf_estimate(states)")
         if policy is not None and not callable(policy):

@@ -18,7 +18,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from rmm_envs.risk.estimator import RiskEstimator
+from rmm_envs.risk.estimator import RiskEstimator, validate_tree_params
 
 __all__ = ["RiskLabel"]
 
@@ -42,16 +42,7 @@ class RiskLabel(gym.Wrapper):
             )
         self._kw = dict(branches=branches, depth=depth, horizon=horizon, n_steps=n_steps,
                         metric=metric, alpha=alpha, leaf=leaf)
-        # validate the parameters now, not at the first reset
-        from rmm_envs.risk.metrics import get_metric
-
-        get_metric(metric, alpha)
-        if int(branches) != branches or branches < 1 or int(depth) != depth or depth < 0 \
-                or not horizon > 0 or int(n_steps) != n_steps or n_steps < 2:
-            raise ValueError(
-                f"bad tree parameters: branches={branches} (>=1), depth={depth} (>=0), "
-                f"horizon={horizon} (>0), n_steps={n_steps} (>=2)"
-            )
+        validate_tree_params(**self._kw)  # now, not at the first reset
         self.rng = np.random.default_rng(seed)
         self._estimator = None
         self._system = None
