@@ -2,7 +2,9 @@
 
 Run: ``python benchmarks/perf_hj.py [--quick]``.
 
-* solve time and peak memory on the default grid (64 x 64 x 32 x 32, 4 s, five obstacles);
+* solve time and peak memory on the default grid (64 x 64 x 32 x 32, 4 s, five obstacles):
+  the compiled kernel (median of 3, one thread and all threads) against the numpy
+  implementation of the same scheme in the same run;
 * online decision time (interpolation of V and its gradient), median over many states;
 * convergence of the unsafe set (V <= 0) as the grid is refined: the unsafe fraction of a
   fixed set of probe states for several grids, against the finest.
@@ -11,12 +13,14 @@ Run: ``python benchmarks/perf_hj.py [--quick]``.
 from __future__ import annotations
 
 import argparse
+import os
 import resource
 import statistics
 import time
 
 import numpy as np
 
+from guardians.hj._kernels import set_threads
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
 from guardians.hj.solver import solve_brt
@@ -30,14 +34,27 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     grid = default_grid()
     target = obstacle_target(grid, OBSTACLES)
+    solve_brt(default_grid((8, 8, 8, 8)), Dubins4DHJ(), obstacle_target(default_grid((8, 8, 8, 8)), OBSTACLES), 0.5)  # compile / load
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    t0 = time.perf_counter()
-    V, info = solve_brt(grid, Dubins4DHJ(), target, 4.0)
-    solve = time.perf_counter() - t0
+    timings = {}
+    for label, threads in (("compiled, 1 thread", 1), (f"compiled, {os.cpu_count()} threads", None)):
+        set_threads(threads)
+        runs = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            V, info = solve_brt(grid, Dubins4DHJ(), target, 4.0, backend="numba")
+            runs.append(time.perf_counter() - t0)
+        timings[label] = statistics.median(runs)
+    set_threads(None)
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    print(f"HJ solve, default grid {grid.shape}, 5 obstacles, 4 s horizon: {solve:.1f} s "
-          f"({info['steps']} RK2 steps of {info['dt']:.3f} s), peak RSS {rss / 1024:.0f} MB (before: {rss0 / 1024:.0f} MB); "
-          "targets <= 30 s and <= 1.5 GB")
+    t0 = time.perf_counter()
+    V_np, _ = solve_brt(grid, Dubins4DHJ(), target, 4.0, backend="numpy")
+    t_np = time.perf_counter() - t0
+    print(f"HJ solve, default grid {grid.shape}, 5 obstacles, 4 s horizon ({info['steps']} RK2 steps of {info['dt']:.3f} s):")
+    for label, t in timings.items():
+        print(f"  {label}: median {t:.2f} s ({t_np / t:.1f}x the numpy path)")
+    print(f"  numpy path (baseline, same run): {t_np:.1f} s; max |V_numba - V_numpy| = {np.abs(V - V_np).max():.1e}")
+    print(f"  peak RSS of the compiled solves {rss / 1024:.0f} MB (before: {rss0 / 1024:.0f} MB); targets <= 30 s and <= 1.5 GB")
 
     box = {"obstacles": OBSTACLES, "goal": np.array([9.0, 9.0, 0.5]), "state": np.zeros(4)}
     g = HJGuardian(cache=False)

@@ -170,3 +170,87 @@ def test_reach_avoid_guardian_steers_to_the_goal_at_the_edge(tmp_path):
     assert g.stats()["reach_avoid_steps"] == 1
     with pytest.raises(ValueError, match="mode"):
         HJGuardian(grid=small_grid(), mode="reach")
+
+
+# --- the compiled (numba) kernel against the numpy reference -------------------------------
+
+from guardians.hj import _kernels  # noqa: E402
+from guardians.hj.solver import _rate, select_backend  # noqa: E402
+
+needs_numba = pytest.mark.skipif(not _kernels.HAVE_NUMBA, reason="numba not installed")
+
+
+def odd_grid():
+    # every axis a different length, so a transposed index would show
+    return Grid([-4.0, -3.0, -np.pi, 0.0], [4.0, 3.0, np.pi, 3.0], [9, 7, 8, 6], periodic=[2])
+
+
+@needs_numba
+@pytest.mark.parametrize("control", ["max", "min"])
+@pytest.mark.parametrize("d_max", [0.0, 0.3])
+@pytest.mark.parametrize("with_floor", [False, True])
+def test_compiled_stage_equals_the_numpy_scheme(control, d_max, with_floor):
+    g, dyn = odd_grid(), Dubins4DHJ(d_max=d_max)
+    rng = np.random.default_rng(1)
+    W = rng.standard_normal(g.shape).astype(np.float32)
+    V0 = rng.standard_normal(g.shape).astype(np.float32)
+    floor = rng.standard_normal(g.shape).astype(np.float32) - 1.0 if with_floor else None
+    alphas = [float(np.max(a)) for a in dyn.alphas(g)]
+    st = _kernels.Dubins4DStepper(g, dyn, alphas, control=control, floor=floor)
+    PW, PV0 = st.padded(W), st.padded(V0)
+    for a, b in [(0.0, 1.0), (0.5, 0.5), (0.75, 0.25)]:
+        out = np.full_like(PW, np.nan)
+        st.stage(PV0, PW, out, a, b, 0.05)
+        expected = a * V0 + b * (W + np.float32(0.05) * _rate(W, g, dyn, alphas, 1, control))
+        if with_floor:
+            expected = np.maximum(expected, floor)
+        np.testing.assert_allclose(st.interior(out), expected, rtol=1e-5, atol=2e-5)
+        # the ghost cells are the boundary rules applied to the new interior
+        np.testing.assert_allclose(out, st.padded(np.ascontiguousarray(st.interior(out))), rtol=1e-6, atol=1e-5)
+
+
+@needs_numba
+@pytest.mark.parametrize("rk", [1, 2, 3])
+def test_backends_agree_on_whole_solves(rk):
+    g = small_grid()
+    obstacles = np.array([[0.0, 0.0, 2.0], [4.0, -3.0, 1.0]])
+    target = obstacle_target(g, obstacles)
+    Va, ia = solve_brt(g, Dubins4DHJ(), target, 2.0, rk=rk, backend="numpy")
+    Vb, ib = solve_brt(g, Dubins4DHJ(), target, 2.0, rk=rk, backend="numba")
+    assert (ia["backend"], ib["backend"], ia["steps"]) == ("numpy", "numba", ib["steps"])
+    np.testing.assert_allclose(Vb, Va, atol=1e-4)
+    goal = obstacle_target(g, np.array([[5.0, 5.0, 1.0]]))  # reach-avoid: min control and a state constraint
+    Ra, _ = solve_brt(g, Dubins4DHJ(), goal, 3.0, rk=rk, constraint=target, backend="numpy")
+    Rb, _ = solve_brt(g, Dubins4DHJ(), goal, 3.0, rk=rk, constraint=target, backend="numba")
+    np.testing.assert_allclose(Rb, Ra, atol=1e-4)
+    assert np.all(Rb >= -target - 1e-6)  # the constraint holds
+
+
+@needs_numba
+def test_compiled_solve_is_identical_whatever_the_thread_count():
+    g = small_grid()
+    target = obstacle_target(g, np.array([[1.0, -1.0, 2.5]]))
+    try:
+        _kernels.set_threads(1)
+        V1, _ = solve_brt(g, Dubins4DHJ(), target, 1.5)
+        _kernels.set_threads(2)
+        V2, _ = solve_brt(g, Dubins4DHJ(), target, 1.5)
+    finally:
+        _kernels.set_threads(None)
+    assert np.array_equal(V1, V2)
+
+
+def test_backend_selection_and_errors():
+    g = small_grid()
+    expected = "numba" if _kernels.HAVE_NUMBA else "numpy"
+    assert select_backend(g, Dubins4DHJ(), 1) == expected
+    assert select_backend(g, Dubins4DHJ(), 2) == "numpy"  # ENO2 has no compiled kernel
+    assert select_backend(g, Dubins4DHJ(), 1, "numpy") == "numpy"
+    assert select_backend(Grid([0.0], [1.0], [5]), Translation(), 1) == "numpy"
+    with pytest.raises(ValueError, match="backend must be one of"):
+        select_backend(g, Dubins4DHJ(), 1, "cuda")
+    if _kernels.HAVE_NUMBA:
+        with pytest.raises(ValueError, match="order=2"):
+            select_backend(g, Dubins4DHJ(), 2, "numba")
+        with pytest.raises(ValueError, match="axis 2 periodic"):
+            select_backend(Grid([0.0] * 4, [1.0] * 4, [5] * 4, periodic=[3]), Dubins4DHJ(), 1, "numba")

@@ -112,7 +112,10 @@ def execute(store: ResultsStore, configs: dict[str, dict], episodes: int, worker
         done = store.done_episodes(key)
         for i in range(episodes):
             if i not in done:
-                tasks.append({**cfg, "run_key": key, "episode": i, "seed": episode_seed(cfg["seed"], i)})
+                # the kernel threads are not part of the run's configuration (results do not
+                # depend on them): one per worker when several workers share the machine
+                tasks.append({**cfg, "run_key": key, "episode": i, "seed": episode_seed(cfg["seed"], i),
+                              "kernel_threads": 1 if (workers > 1 or backend == "ray") else None})
     if not tasks:
         return
     from tqdm import tqdm

@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import signal
 import statistics
 import time
@@ -67,7 +68,11 @@ def _guardian(agent: str, agent_kwargs: dict):
 
 def run_episode(task: dict) -> dict:
     """Run one episode; ``task`` holds run_key, agent, agent_kwargs, env_id, env_kwargs,
-    episode, seed, episode_timeout, charge_precompute.  Returns the store's episode row."""
+    episode, seed, episode_timeout, charge_precompute and optionally kernel_threads (threads
+    for the compiled HJ kernel; 1 when several workers already share the cores).  Returns the
+    store's episode row."""
+    if task.get("kernel_threads"):
+        os.environ["RMM_HJ_THREADS"] = str(int(task["kernel_threads"]))
     row = {"run_key": task["run_key"], "episode": task["episode"], "agent": task["agent"], "seed": task["seed"]}
     t_start = time.perf_counter()
     timeout = task.get("episode_timeout")

@@ -5,7 +5,10 @@ Uses **privileged** information: the obstacles at reset and the true state every
 Arguments: ``grid`` (a :class:`Grid`) or ``grid_n`` (points per axis of the default box),
 ``horizon`` (4 s), ``order`` (1: upwind, 2: ENO2), ``rk`` (TVD RK order), ``cfl``, ``margin``
 (take control when ``V <= margin``; 0 is the paper's rule), ``disturbance`` (bound on the
-position-rate disturbance, 0 as the paper ran), ``cache_dir``/``cache``/``cache_max_files``.
+position-rate disturbance, 0 as the paper ran), ``cache_dir``/``cache``/``cache_max_files``,
+``backend`` (``"auto"``: the compiled numba kernel where it applies, i.e. ``order=1``; or
+``"numpy"``/``"numba"``; both give the same value to float32 rounding, so they share cache
+entries).
 
 At reset it computes (or loads from the cache) the backward reachable tube of **all** the
 episode's obstacles for the Dubins4D dynamics over the horizon (4 s), on the default grid
@@ -50,7 +53,7 @@ from guardians.base import Guardian, active_action, inactive_action
 from guardians.hj.cache import ValueCache
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid
-from guardians.hj.solver import solve_brt
+from guardians.hj.solver import select_backend, solve_brt
 
 __all__ = ["HJGuardian", "default_grid", "obstacle_target"]
 
@@ -69,12 +72,28 @@ def obstacle_target(grid: Grid, obstacles: np.ndarray) -> np.ndarray:
 
 
 def _gradient(V: np.ndarray, grid: Grid) -> list[np.ndarray]:
+    """Central differences in float32 (one-sided at non-periodic edges, as ``np.gradient``)."""
     out = []
     for ax in range(grid.ndim):
+        n = V.shape[ax]
+
+        def sl(a, b):
+            s = [slice(None)] * V.ndim
+            s[ax] = slice(a, b)
+            return tuple(s)
+
+        g = np.empty_like(V, dtype=np.float32)
+        inv2 = np.float32(0.5 / grid.dx[ax])
+        np.subtract(V[sl(2, n)], V[sl(0, n - 2)], out=g[sl(1, n - 1)])
         if grid.periodic[ax]:
-            g = (np.roll(V, -1, axis=ax) - np.roll(V, 1, axis=ax)) / np.float32(2 * grid.dx[ax])
+            np.subtract(V[sl(1, 2)], V[sl(n - 1, n)], out=g[sl(0, 1)])
+            np.subtract(V[sl(0, 1)], V[sl(n - 2, n - 1)], out=g[sl(n - 1, n)])
+            g *= inv2
         else:
-            g = np.gradient(V, grid.dx[ax], axis=ax).astype(np.float32)
+            g[sl(1, n - 1)] *= inv2
+            inv = np.float32(1.0 / grid.dx[ax])
+            np.multiply(V[sl(1, 2)] - V[sl(0, 1)], inv, out=g[sl(0, 1)])
+            np.multiply(V[sl(n - 1, n)] - V[sl(n - 2, n - 1)], inv, out=g[sl(n - 1, n)])
         out.append(g)
     return out
 
@@ -86,7 +105,7 @@ class HJGuardian(Guardian):
 
     def __init__(self, grid: Grid | None = None, grid_n=None, horizon: float = 4.0, order: int = 1, rk: int = 2, cfl: float = 0.8,
                  margin: float = 0.0, disturbance: float = 0.0, cache_dir=None, cache: bool = True, cache_max_files: int = 64,
-                 mode: str = "avoid", ra_horizon: float = 10.0, ra_margin: float = 0.5) -> None:
+                 mode: str = "avoid", ra_horizon: float = 10.0, ra_margin: float = 0.5, backend: str = "auto") -> None:
         super().__init__()
         if not horizon > 0:
             raise ValueError(f"horizon must be > 0, got {horizon}")
@@ -102,6 +121,8 @@ class HJGuardian(Guardian):
         self.order, self.rk, self.cfl = int(order), int(rk), float(cfl)
         self.margin = float(margin)
         self.dynamics = Dubins4DHJ(d_max=float(disturbance))
+        self.backend = backend
+        select_backend(self.grid, self.dynamics, self.order, backend)  # a bad choice fails here, not at reset
         self.cache = ValueCache(cache_dir, cache_max_files) if cache else None
         self._counts = {"outside_grid": 0, "nan_states": 0, "cache_hits": 0, "solves": 0}
         self.solve_seconds = 0.0
@@ -131,11 +152,11 @@ class HJGuardian(Guardian):
         t0 = time.perf_counter()
         if goal is None:
             V, _ = solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, obstacles), self.horizon,
-                             order=self.order, rk=self.rk, cfl=self.cfl)
+                             order=self.order, rk=self.rk, cfl=self.cfl, backend=self.backend)
         else:
             V, _ = solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, np.asarray(goal, float).reshape(1, 3)),
                              self.ra_horizon, order=self.order, rk=self.rk, cfl=self.cfl,
-                             constraint=obstacle_target(self.grid, obstacles))
+                             constraint=obstacle_target(self.grid, obstacles), backend=self.backend)
         self.solve_seconds = time.perf_counter() - t0
         self._counts["solves"] += 1
         if self.cache:
