@@ -126,3 +126,14 @@ def test_generation_is_seeded_and_in_range():
     assert a.shape == (5, 3)
     assert np.all((a[:, 2] >= 2) & (a[:, 2] <= 5))
     assert np.all(np.abs(a[1:, :2]) <= 10)
+
+
+@settings(max_examples=60, deadline=None)
+@given(circles=st.lists(st.tuples(st.floats(-8, 8), st.floats(-8, 8), st.floats(0.2, 4)), min_size=1, max_size=6),
+       x=st.floats(-10, 10), y=st.floats(-10, 10), th=st.floats(-7, 7))
+def test_compiled_rays_equal_the_numpy_rays(circles, x, y, th):
+    # a single origin (an env step) uses the compiled loop, a batch numpy: same numbers
+    circ = np.array(circles)
+    single = ray_cast(np.array([[x, y]]), np.array([th]), circ)
+    batch = ray_cast(np.array([[x, y]] * 9), np.array([th] * 9), circ)  # 9 > the compiled cut-off
+    np.testing.assert_allclose(single[0], batch[0], rtol=0, atol=1e-12)

