@@ -121,6 +121,34 @@ def test_guardian_cache_and_edge_cases(tmp_path):
     assert g.stats()["solves"] == 1
 
 
+def test_cache_tolerates_files_removed_by_another_process(tmp_path, monkeypatch):
+    # the race seen in a 2-worker benchmark: a file listed by glob is gone before its stat
+    from pathlib import Path
+
+    from guardians.hj.cache import ValueCache
+
+    cache = ValueCache(tmp_path, max_files=2)
+    for k in range(3):
+        cache.save(f"k{k}", np.full((2, 2), k, np.float32))
+    ghost = tmp_path / "gone.npy"
+    real_glob = Path.glob
+    monkeypatch.setattr(Path, "glob", lambda self, pat: [ghost, *real_glob(self, pat)])
+    cache.save("k3", np.zeros((2, 2), np.float32))  # evicts, skipping the vanished file
+    assert sorted(f.name for f in real_glob(tmp_path, "*.npy")) == ["k2.npy", "k3.npy"]
+    monkeypatch.setattr("os.utime", lambda *a, **k: (_ for _ in ()).throw(FileNotFoundError("evicted")))
+    np.testing.assert_array_equal(cache.load("k2", (2, 2)), np.full((2, 2), 2, np.float32))  # loaded, then evicted: still a hit
+
+
+def test_an_unwritable_cache_warns_and_the_episode_goes_on(tmp_path):
+    blocker = tmp_path / "not_a_dir"
+    blocker.write_text("a file where the cache directory should be")
+    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-3.0, 0.0, 0.0, 2.0])}
+    g = HJGuardian(grid=small_grid(), horizon=2.0, cache_dir=blocker / "hj")
+    with pytest.warns(RuntimeWarning, match="cache not written"):
+        g.reset(seed=0, privileged=lambda: box)
+    assert g.stats()["solves"] == 1 and g.stats()["cache_errors"] == 1 and g.V is not None
+
+
 def test_obstacle_outside_the_grid_is_refused_at_reset(tmp_path):
     box = {"obstacles": np.array([[30.0, 0.0, 2.0]]), "goal": np.array([0.0, 0.0, 0.5]), "state": np.zeros(4)}
     with pytest.raises(ValueError, match="outside the HJ grid"):

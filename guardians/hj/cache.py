@@ -2,7 +2,8 @@
 
 Files are raw float32 ``.npy`` arrays (17 MB on the default grid) named by the SHA-256 of
 ``{dynamics, grid, horizon, scheme, obstacles}``; written atomically; the oldest files beyond
-``max_files`` are removed.  The default directory is ``$RMM_HJ_CACHE`` or
+``max_files`` are removed.  Several processes may share a directory (the benchmark's workers
+do): a file another process removes at any moment is a cache miss, never an error.  The default directory is ``$RMM_HJ_CACHE`` or
 ``~/.cache/rmm-envs/hj``.
 """
 
@@ -46,7 +47,10 @@ class ValueCache:
         if V.shape != tuple(shape) or V.dtype != np.float32:
             p.unlink(missing_ok=True)
             return None
-        os.utime(p)  # most recently used
+        try:
+            os.utime(p)  # most recently used
+        except OSError:  # evicted by another process meanwhile: the loaded array is still good
+            pass
         return V
 
     def save(self, key: str, V: np.ndarray) -> None:
@@ -56,6 +60,17 @@ class ValueCache:
         with open(tmp, "wb") as fh:
             np.save(fh, V.astype(np.float32, copy=False), allow_pickle=False)
         os.replace(tmp, p)
-        files = sorted(self.dir.glob("*.npy"), key=lambda f: f.stat().st_mtime)
-        for f in files[: max(0, len(files) - self.max_files)]:
+        self._evict()
+
+    def _evict(self) -> None:
+        """Remove the least recently used files beyond ``max_files``, tolerating files that
+        other processes remove concurrently."""
+        aged = []
+        for f in self.dir.glob("*.npy"):
+            try:
+                aged.append((f.stat().st_mtime, f))
+            except FileNotFoundError:
+                continue
+        aged.sort()
+        for _, f in aged[: max(0, len(aged) - self.max_files)]:
             f.unlink(missing_ok=True)

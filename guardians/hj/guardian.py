@@ -46,6 +46,7 @@ about +-pi (REFERENCE 2.3, P8); none of that applies here.
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
@@ -160,7 +161,11 @@ class HJGuardian(Guardian):
         self.solve_seconds = time.perf_counter() - t0
         self._counts["solves"] += 1
         if self.cache:
-            self.cache.save(key, V)
+            try:
+                self.cache.save(key, V)
+            except OSError as e:  # a cache is an optimisation: a full disk must not end the episode
+                self._counts["cache_errors"] = self._counts.get("cache_errors", 0) + 1
+                warnings.warn(f"HJ value cache not written ({e}); continuing without it", RuntimeWarning, stacklevel=2)
         return V
 
     def reset(self, **kwargs) -> None:
