@@ -185,6 +185,10 @@ def ray_cast(
         return _ray_cast_compiled(np.ascontiguousarray(origins), np.ascontiguousarray(headings.reshape(n)),
                                   np.ascontiguousarray(circles, dtype=float), int(n_rays), float(max_range),
                                   np.empty((n, int(n_rays))))
+    return _ray_cast_numpy(origins, headings, circles, n_rays, max_range)
+
+
+def _ray_cast_numpy(origins, headings, circles, n_rays, max_range):
     ang = headings[:, None] + (2.0 * np.pi / n_rays) * np.arange(n_rays)[None, :]
     dx, dy = np.cos(ang), np.sin(ang)  # (N, R)
     fx = circles[None, :, 0] - origins[:, 0:1]  # (N, K)
