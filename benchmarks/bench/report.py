@@ -81,6 +81,9 @@ def plot_outcomes(rows: list[dict], path: Path) -> Path:
         axes[1].errorbar(max(r["compute_ms"][0], 1e-4), r["collision"][0], yerr=r["collision"][1], fmt="o", capsize=3)
         axes[1].annotate(r["agent"], (max(r["compute_ms"][0], 1e-4), r["collision"][0]), textcoords="offset points", xytext=(5, 5))
     axes[1].set_xscale("log")
+    from matplotlib.ticker import NullFormatter
+
+    axes[1].xaxis.set_minor_formatter(NullFormatter())  # minor labels collide on short decades
     axes[1].set_xlabel("policy compute time per step [ms] (log)")
     axes[1].set_ylabel("collision rate [% episodes]")
     axes[1].set_title("Compute time vs collisions")
