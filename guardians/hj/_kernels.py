@@ -32,7 +32,18 @@ try:  # numba is a dependency, but the solver keeps a numpy path that works with
 except ImportError:  # pragma: no cover - exercised only where numba is missing
     HAVE_NUMBA = False
 
-__all__ = ["HAVE_NUMBA", "Dubins4DStepper", "set_threads"]
+__all__ = ["HAVE_NUMBA", "Dubins4DStepper", "kernel_mismatch", "set_threads"]
+
+
+def kernel_mismatch(grid, dynamics, order: int = 1) -> str | None:
+    """Why the compiled kernel cannot solve this problem, or ``None`` if it can."""
+    from guardians.hj.dynamics import Dubins4DHJ
+
+    if not isinstance(dynamics, Dubins4DHJ) or order != 1:
+        return f"the compiled kernel supports only Dubins4DHJ with order=1, got {type(dynamics).__name__}, order={order}"
+    if grid.ndim != 4 or grid.periodic != (False, False, True, False):
+        return f"the compiled kernel needs a 4-D grid with only axis 2 periodic, got periodic={grid.periodic}"
+    return None
 
 
 def set_threads(n: int | None) -> None:
@@ -97,14 +108,19 @@ if HAVE_NUMBA:
                         val = val if val > fl else fl
                     o[q] = val
                 # this plane's own ghosts, while it is in cache: heading periodic, speed extrapolated
-                pl = Of[i * sx + j * sy:i * sx + j * sy + plane]
-                for m in range(n3):
-                    pl[m] = pl[(n2 - 2) * n3 + m]
-                    pl[(n2 - 1) * n3 + m] = pl[n3 + m]
-                for k in range(n2):
-                    pl[k * n3] = two * pl[k * n3 + 1] - pl[k * n3 + 2]
-                    pl[k * n3 + n3 - 1] = two * pl[k * n3 + n3 - 2] - pl[k * n3 + n3 - 3]
+                _fill_plane_ghosts(Of[i * sx + j * sy:i * sx + j * sy + plane], n2, n3)
         _fill_xy_ghosts(out)
+
+    @njit(cache=True, boundscheck=False)
+    def _fill_plane_ghosts(pl, n2, n3):
+        """Ghosts of one flattened (theta, v) plane: heading periodic, then speed extrapolated."""
+        two = np.float32(2.0)
+        for m in range(n3):
+            pl[m] = pl[(n2 - 2) * n3 + m]
+            pl[(n2 - 1) * n3 + m] = pl[n3 + m]
+        for k in range(n2):
+            pl[k * n3] = two * pl[k * n3 + 1] - pl[k * n3 + 2]
+            pl[k * n3 + n3 - 1] = two * pl[k * n3 + n3 - 2] - pl[k * n3 + n3 - 3]
 
     @njit(cache=True, boundscheck=False)
     def _fill_xy_ghosts(P):
@@ -119,27 +135,14 @@ if HAVE_NUMBA:
 
     @njit(cache=True, boundscheck=False)
     def _fill_ghosts(P):
-        """Ghost cells: axes 0, 1, 3 linear extrapolation, axis 2 periodic."""
+        """All ghost cells: every (theta, v) plane's, then the position faces."""
         n0, n1, n2, n3 = P.shape
-        two = np.float32(2.0)
-        for i in range(n0):  # axis 2 (periodic) first, then axis 3, so later faces see filled edges
-            for j in range(n1):
-                for m in range(n3):
-                    P[i, j, 0, m] = P[i, j, n2 - 2, m]
-                    P[i, j, n2 - 1, m] = P[i, j, 1, m]
-                for k in range(n2):
-                    P[i, j, k, 0] = two * P[i, j, k, 1] - P[i, j, k, 2]
-                    P[i, j, k, n3 - 1] = two * P[i, j, k, n3 - 2] - P[i, j, k, n3 - 3]
-        for j in range(n1):
-            for k in range(n2):
-                for m in range(n3):
-                    P[0, j, k, m] = two * P[1, j, k, m] - P[2, j, k, m]
-                    P[n0 - 1, j, k, m] = two * P[n0 - 2, j, k, m] - P[n0 - 3, j, k, m]
+        plane = n2 * n3
+        Pf = P.reshape(-1)
         for i in range(n0):
-            for k in range(n2):
-                for m in range(n3):
-                    P[i, 0, k, m] = two * P[i, 1, k, m] - P[i, 2, k, m]
-                    P[i, n1 - 1, k, m] = two * P[i, n1 - 2, k, m] - P[i, n1 - 3, k, m]
+            for j in range(n1):
+                _fill_plane_ghosts(Pf[(i * n1 + j) * plane:(i * n1 + j + 1) * plane], n2, n3)
+        _fill_xy_ghosts(P)
 
 
 class Dubins4DStepper:
@@ -152,8 +155,9 @@ class Dubins4DStepper:
     def __init__(self, grid, dynamics, alphas, control: str = "max", floor: np.ndarray | None = None) -> None:
         if not HAVE_NUMBA:
             raise RuntimeError("the compiled HJ kernel needs numba (pip install numba)")
-        if grid.ndim != 4 or grid.periodic != (False, False, True, False):
-            raise ValueError(f"the compiled kernel needs a 4-D grid with only axis 2 periodic, got {grid.periodic}")
+        problem = kernel_mismatch(grid, dynamics)
+        if problem:
+            raise ValueError(problem)
         th, v = grid.axes[2], grid.axes[3]
         vv = np.minimum(v, dynamics.v_max)
 

@@ -36,7 +36,6 @@ import time
 import numpy as np
 
 from guardians.hj import _kernels
-from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid
 
 __all__ = ["BACKENDS", "select_backend", "solve_brt", "spatial_derivatives"]
@@ -48,18 +47,16 @@ def select_backend(grid: Grid, dynamics, order: int, backend: str = "auto") -> s
     """The implementation ``solve_brt`` will use: ``"numba"`` or ``"numpy"``."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-    fits = (isinstance(dynamics, Dubins4DHJ) and order == 1 and grid.ndim == 4
-            and grid.periodic == (False, False, True, False))
+    problem = _kernels.kernel_mismatch(grid, dynamics, order)
     if backend == "numba":
         if not _kernels.HAVE_NUMBA:
             raise RuntimeError("backend='numba' needs numba installed (pip install numba)")
-        if not fits:
-            raise ValueError("backend='numba' supports only Dubins4DHJ, order=1 and a 4-D grid with axis 2 periodic; "
-                             f"got {type(dynamics).__name__}, order={order}, periodic={grid.periodic}")
+        if problem:
+            raise ValueError(f"backend='numba': {problem}")
         return "numba"
     if backend == "numpy":
         return "numpy"
-    return "numba" if (fits and _kernels.HAVE_NUMBA) else "numpy"
+    return "numba" if (problem is None and _kernels.HAVE_NUMBA) else "numpy"
 
 
 def _pad(V: np.ndarray, axis: int, periodic: bool, g: int) -> np.ndarray:
@@ -193,6 +190,7 @@ def _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control, flo
     P = stepper.padded(V)
     # separate output buffers: an output aliasing an input defeats the kernel's vectorisation
     P1, P2 = np.empty_like(P), np.empty_like(P)
+    P3 = np.empty_like(P) if rk == 3 else None
     t, steps = 0.0, 0
     t0 = time.perf_counter()
     while t < horizon - 1e-12:
@@ -205,7 +203,6 @@ def _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control, flo
             stepper.stage(P, P1, P2, 0.5, 0.5, dt)
             P, P2 = P2, P
         else:
-            P3 = np.empty_like(P) if steps == 0 else P3
             stepper.stage(P, P, P1, 0.0, 1.0, dt)
             stepper.stage(P, P1, P2, 0.75, 0.25, dt)
             stepper.stage(P, P2, P3, 1.0 / 3.0, 2.0 / 3.0, dt)

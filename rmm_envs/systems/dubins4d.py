@@ -82,12 +82,7 @@ def _turn_integrals(phi: np.ndarray):
         p = phi * phi
         c1r, c1i, c2r, c2i = _COEF
         return _horner(p, c1r), phi * _horner(p, c1i), _horner(p, c2r), phi * _horner(p, c2i)
-    safe = np.where(small, 1.0, phi)
-    sn, cs = np.sin(safe), np.cos(safe)
-    h = np.sin(0.5 * safe)
-    one_m_cos = 2.0 * h * h
-    inv = 1.0 / safe
-    out = [sn * inv, one_m_cos * inv, (safe * sn - one_m_cos) * inv * inv, (sn - safe * cs) * inv * inv]
+    out = list(_closed_turn_integrals(np.where(small, 1.0, phi)))
     if small.any():
         ser = _turn_integrals(phi[small])
         for o, v in zip(out, ser):
@@ -95,15 +90,29 @@ def _turn_integrals(phi: np.ndarray):
     return tuple(out)
 
 
-def _segment(x0, y0, th0, v0, w, a, t):
-    """Displacement after ``t`` seconds of constant turn rate ``w`` and acceleration ``a``."""
-    e1r, e1i, e2r, e2i = _turn_integrals(w * t)
+def _closed_turn_integrals(phi):
+    """The closed forms of :func:`_turn_integrals` (``phi != 0``; arrays or floats)."""
+    sn, cs = np.sin(phi), np.cos(phi)
+    h = np.sin(0.5 * phi)
+    one_m_cos = 2.0 * h * h
+    inv = 1.0 / phi
+    return sn * inv, one_m_cos * inv, (phi * sn - one_m_cos) * inv * inv, (sn - phi * cs) * inv * inv
+
+
+def _displace(x0, y0, th0, v0, a, t, e1r, e1i, e2r, e2i):
+    """Position after ``t`` seconds from the turn integrals of ``w t`` (arrays or floats)."""
     c0, s0 = np.cos(th0), np.sin(th0)
     lin = v0 * t
     quad = a * t * t
     re = lin * e1r + quad * e2r
     im = lin * e1i + quad * e2i
     return x0 + c0 * re - s0 * im, y0 + s0 * re + c0 * im
+
+
+def _segment(x0, y0, th0, v0, w, a, t):
+    """Displacement after ``t`` seconds of constant turn rate ``w`` and acceleration ``a``."""
+    e1r, e1i, e2r, e2i = _turn_integrals(w * t)
+    return _displace(x0, y0, th0, v0, a, t, e1r, e1i, e2r, e2i)
 
 
 def _turn_integrals_1(phi, coef):
@@ -118,21 +127,12 @@ def _turn_integrals_1(phi, coef):
                 acc += coef[r, j]
             out[r] = acc
         return out[0], phi * out[1], out[2], phi * out[3]
-    sn, cs = np.sin(phi), np.cos(phi)
-    h = np.sin(0.5 * phi)
-    one_m_cos = 2.0 * h * h
-    inv = 1.0 / phi
-    return sn * inv, one_m_cos * inv, (phi * sn - one_m_cos) * inv * inv, (sn - phi * cs) * inv * inv
+    return _closed_1(phi)
 
 
 def _segment_1(x0, y0, th0, v0, w, a, t, coef):
     e1r, e1i, e2r, e2i = _turn_integrals_1(w * t, coef)
-    c0, s0 = np.cos(th0), np.sin(th0)
-    lin = v0 * t
-    quad = a * t * t
-    re = lin * e1r + quad * e2r
-    im = lin * e1i + quad * e2i
-    return x0 + c0 * re - s0 * im, y0 + s0 * re + c0 * im
+    return _displace_1(x0, y0, th0, v0, a, t, e1r, e1i, e2r, e2i)
 
 
 def _states_at_loop(states, controls, times, lo, hi, coef, out):
@@ -165,7 +165,9 @@ def _states_at_loop(states, controls, times, lo, hi, coef, out):
 
 
 _COEF_ARRAY = np.array(_COEF)
-if njit is not None:
+if njit is not None:  # the scalar path compiles the same closed forms and displacement as numpy's
+    _closed_1 = njit(cache=True)(_closed_turn_integrals)
+    _displace_1 = njit(cache=True)(_displace)
     _turn_integrals_1 = njit(cache=True)(_turn_integrals_1)
     _segment_1 = njit(cache=True)(_segment_1)
     _states_at_compiled = njit(cache=True)(_states_at_loop)
