@@ -282,3 +282,12 @@ def test_backend_selection_and_errors():
             select_backend(g, Dubins4DHJ(), 2, "numba")
         with pytest.raises(ValueError, match="axis 2 periodic"):
             select_backend(Grid([0.0] * 4, [1.0] * 4, [5] * 4, periodic=[3]), Dubins4DHJ(), 1, "numba")
+
+
+def test_guardian_backend_is_checked_at_construction():
+    with pytest.raises(ValueError, match="backend must be one of"):
+        HJGuardian(grid=small_grid(), backend="cuda")
+    if _kernels.HAVE_NUMBA:
+        with pytest.raises(ValueError, match="order=2"):
+            HJGuardian(grid=small_grid(), order=2, backend="numba")
+        assert HJGuardian(grid=small_grid(), order=2).backend == "auto"  # auto falls back to numpy for ENO2
