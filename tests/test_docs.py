@@ -64,3 +64,32 @@ def test_links_between_pages_resolve():
             if not path.exists():
                 bad.append(f"{page.relative_to(ROOT)} -> {target}")
     assert not bad, bad
+
+
+def _python_snippets():
+    """Every ```python block of the README and of docs/, as (where, code)."""
+    out = []
+    for page in [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]:
+        for i, m in enumerate(re.finditer(r"```python\n(.*?)\n```", page.read_text(), re.S)):
+            out.append((f"{page.relative_to(ROOT)}#{i}", m.group(1)))
+    return out
+
+
+SNIPPETS = _python_snippets()
+
+
+def test_the_readme_and_getting_started_have_snippets():
+    where = {w.split("#")[0] for w, _ in SNIPPETS}
+    assert {"README.md", "docs/getting-started.md"} <= where
+
+
+@pytest.mark.parametrize("where, code", SNIPPETS, ids=[w for w, _ in SNIPPETS])
+def test_python_snippets_in_the_docs_run(where, code, tmp_path):
+    """A reader pastes the snippet into a fresh interpreter: it must run, and an episode snippet
+    must end with one of the three outcomes."""
+    env = dict(os.environ, MPLBACKEND="Agg")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env)
+    assert res.returncode == 0, f"{where} failed:\n{res.stderr[-3000:]}"
+    if "env.step(" in code and "outcome" in code:
+        first = res.stdout.split()[0] if res.stdout.split() else ""
+        assert first in ("goal", "collision", "timeout"), f"{where} printed {res.stdout[:200]!r}"
