@@ -385,6 +385,7 @@ class Dubins4DCirclesEnv(gym.Env):
         self._done = False
         self._last_active = False
         self._last_control = np.zeros(2)
+        self.driver.reset()  # no warm start from an earlier episode: results depend on the seed only
         obs = self._observe()
         info = {"sim_time": 0.0, "state": self._state.copy()}
         if self.render_mode == "human":
