@@ -43,6 +43,15 @@ class DriverParams:
     p_theta: float = 1.0
     p_v: float = 1.0
 
+    def __post_init__(self) -> None:
+        # A NaN or infinite gain would silently turn a constraint off (or make the QP fail);
+        # slack weights must be > 0 for the QP to stay strictly convex.
+        for name in ("gamma_vmin", "gamma_vmax", "lambda_theta", "lambda_v", "p_theta", "p_v"):
+            v = getattr(self, name)
+            positive = name.startswith("p_")
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and (v > 0 if positive else v >= 0)):
+                raise ValueError(f"driver parameter {name} must be a finite number {'> 0' if positive else '>= 0'}, got {v!r}")
+
 
 def desired_heading(theta: float, theta_goal: float) -> float:
     """The original's literal branch-cut heuristic for the target heading (REFERENCE 1.6)."""

@@ -340,3 +340,10 @@ def test_bench_rows_bit_identical_with_1_and_2_workers(tmp_path):
     assert "final_speed" in cols and "sim_time" in cols and len(one) == 6
     for a, b in zip(one, two):
         assert a == b, {c: (x, y) for c, x, y in zip(cols, a, b) if x != y}
+
+
+@pytest.mark.parametrize("params, name", [({"lambda_v": math.inf}, "lambda_v"), ({"gamma_vmax": math.nan}, "gamma_vmax"),
+                                          ({"p_theta": 0.0}, "p_theta"), ({"speed_gain": 1.0}, "speed_gain")])
+def test_driver_parameters_that_disable_a_constraint_refused(params, name):
+    with pytest.raises(ValueError, match=name):
+        Dubins4DCirclesEnv(driver_params=params)

@@ -318,7 +318,10 @@ class Dubins4DCirclesEnv(gym.Env):
         self.render_mode = render_mode
         self.system = Dubins4D()
         if isinstance(driver_params, dict):
-            driver_params = DriverParams(**driver_params)
+            try:
+                driver_params = DriverParams(**driver_params)
+            except TypeError as e:
+                raise ValueError(f"driver_params: {e}; expected keys of DriverParams") from None
         self.driver = CLFDriver(
             (self.system.u1_min, self.system.u1_max),
             (self.system.u2_min, self.system.u2_max),

@@ -9,6 +9,9 @@ worth the coherent risk metric of its children.  A root that already fails is wo
 
 Batching: all ``B * n`` branches of level 1 are one ``propagate`` and one ``path_failed`` call,
 all ``B * n^2`` of level 2 the next, and so on; roots are processed in chunks to bound memory.
+A tree of more than ``MAX_TREE_NODES`` (2^20) nodes per root is refused before anything is
+allocated: that is a thousand times the paper's n = 32, m = 2, and beyond it one root's paths
+alone outgrow an ordinary machine's memory.
 Only the children of live nodes are propagated (a failed node is not expanded), so the
 value is exactly Algorithm 1's and cluttered states cost less.
 
