@@ -3,6 +3,7 @@ partial reset options, and results that must not depend on the order episodes ru
 
 import json
 import math
+import shlex
 import sqlite3
 import struct
 import warnings
@@ -66,7 +67,7 @@ def test_load_refuses_flipped_bytes_in_one_line_naming_the_file_and_the_fix(tmp_
     assert f"rmm-datagen --env Dubins4DCircles-v0 --configs 4 --samples-per-config 6 --seed 11 --configs-per-shard 2 --branches 4 --depth 2" in msg
     assert f"--out {out}" in msg
     # and that command does repair it
-    cmd = msg.split("`")[1].split()[1:]
+    cmd = shlex.split(msg.split("`")[1])[1:]
     assert datagen_main(cmd + ["--workers", "1", "--no-progress"]) == 0
     load_dataset(out)
 

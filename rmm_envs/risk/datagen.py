@@ -45,6 +45,7 @@ import argparse
 import hashlib
 import json
 import os
+import shlex
 import sys
 import time
 from dataclasses import asdict, dataclass, field
@@ -224,8 +225,8 @@ def rerun_command(meta: dict, out) -> str:
         if est.get(key) is not None:
             parts += [flag, str(est[key])]
     if meta.get("env_kwargs"):
-        parts += ["--env-kwargs", "'" + json.dumps(meta["env_kwargs"], sort_keys=True) + "'"]
-    return " ".join(parts + ["--out", str(out)])
+        parts += ["--env-kwargs", json.dumps(meta["env_kwargs"], sort_keys=True)]
+    return shlex.join(parts + ["--out", str(out)])
 
 
 def _shard_ok(path: Path, rows: int) -> bool:
