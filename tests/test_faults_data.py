@@ -348,3 +348,9 @@ def test_bench_rows_bit_identical_with_1_and_2_workers(tmp_path):
 def test_driver_parameters_that_disable_a_constraint_refused(params, name):
     with pytest.raises(ValueError, match=name):
         Dubins4DCirclesEnv(driver_params=params)
+
+
+def test_datagen_negative_seed_names_the_flag(tmp_path, capsys):
+    assert datagen_main(["--seed", "-1", "--configs", "1", "--samples-per-config", "2", "--branches", "2", "--workers", "1",
+                         "--out", str(tmp_path / "s"), "--no-progress"]) == 2
+    assert "--seed" in capsys.readouterr().err
