@@ -1,6 +1,7 @@
 """Fault drills for the data and environment side: damaged shards, bad sizes and parameters,
 partial reset options, and results that must not depend on the order episodes run in."""
 
+import hashlib
 import json
 import math
 import shlex
@@ -64,7 +65,7 @@ def test_load_refuses_flipped_bytes_in_one_line_naming_the_file_and_the_fix(tmp_
     msg = str(e.value)
     assert "\n" not in msg and str(out / "shard-00000.parquet") in msg
     # the exact command that repairs it
-    assert f"rmm-datagen --env Dubins4DCircles-v0 --configs 4 --samples-per-config 6 --seed 11 --configs-per-shard 2 --branches 4 --depth 2" in msg
+    assert "rmm-datagen --env Dubins4DCircles-v0 --configs 4 --samples-per-config 6 --seed 11 --configs-per-shard 2 --branches 4 --depth 2" in msg
     assert f"--out {out}" in msg
     # and that command does repair it
     cmd = shlex.split(msg.split("`")[1])[1:]
@@ -80,7 +81,7 @@ def test_damaged_shard_of_an_interrupted_run_is_regenerated(tmp_path):
     (out / "manifest.json").unlink()
     for s in (0, 1):  # what an interrupted run leaves: shards and their checksum files
         shard = out / f"shard-0000{s}.parquet"
-        (out / f"shard-0000{s}.sha256").write_text(f"{__import__('hashlib').sha256(shard.read_bytes()).hexdigest()}  {shard.name}\n")
+        (out / f"shard-0000{s}.sha256").write_text(f"{hashlib.sha256(shard.read_bytes()).hexdigest()}  {shard.name}\n")
     _flip_middle(out / "shard-00000.parquet")
     man = generate(tiny(), out, workers=1, progress=False)
     assert man["last_run"]["regenerated"] == ["shard-00000.parquet"]
@@ -157,7 +158,7 @@ def test_datagen_workers_zero_or_negative_refused(tmp_path, capsys, workers):
     assert datagen_main(["--workers", str(workers), "--configs", "1", "--samples-per-config", "2", "--branches", "2",
                          "--out", str(tmp_path / "w"), "--no-progress"]) == 2
     err = capsys.readouterr().err
-    assert f"--workers" in err and f"got {workers}" in err
+    assert "--workers" in err and f"got {workers}" in err
     assert not list((tmp_path / "w").glob("shard-*"))
 
 
