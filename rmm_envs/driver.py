@@ -16,7 +16,9 @@ literal +-1.5 pi heuristic near the branch cut), ``LfV_theta = 2 v (theta - thet
 
 Solved with OSQP: the problem is set up once with a fixed sparsity pattern and each call only
 updates the constraint matrix values and bounds (``update(Ax=..., l=..., u=...)``) and re-solves,
-warm-started from the previous solution.  Rows 1-2 and the ``u2`` box are merged into one row
+warm-started from the previous solution.  :meth:`CLFDriver.reset` (called by the environment at
+every episode start) sets the problem up afresh, so warm starts never cross episodes and an
+episode's floats depend only on its own seed, whatever ran before it in the same process.  Rows 1-2 and the ``u2`` box are merged into one row
 with the tighter bounds (an equivalent feasible set, one row fewer).
 """
 
@@ -40,6 +42,15 @@ class DriverParams:
     lambda_v: float = 1.0
     p_theta: float = 1.0
     p_v: float = 1.0
+
+    def __post_init__(self) -> None:
+        # A NaN or infinite gain would silently turn a constraint off (or make the QP fail);
+        # slack weights must be > 0 for the QP to stay strictly convex.
+        for name in ("gamma_vmin", "gamma_vmax", "lambda_theta", "lambda_v", "p_theta", "p_v"):
+            v = getattr(self, name)
+            positive = name.startswith("p_")
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and (v > 0 if positive else v >= 0)):
+                raise ValueError(f"driver parameter {name} must be a finite number {'> 0' if positive else '>= 0'}, got {v!r}")
 
 
 def desired_heading(theta: float, theta_goal: float) -> float:
@@ -75,20 +86,31 @@ class CLFDriver:
         if self.u1_min > self.u1_max or self.u2_min > self.u2_max:
             raise ValueError(f"control bounds must satisfy min <= max, got {u1_bounds}, {u2_bounds}")
         self.params = params
-        P = sp.diags([2.0, 2.0, 2.0 * params.p_theta, 2.0 * params.p_v], format="csc")
+        self._eps = float(eps)
+        self._P = sp.diags([2.0, 2.0, 2.0 * params.p_theta, 2.0 * params.p_v], format="csc")
         # Rows: 0 u1 box; 1 u2 box merged with the speed barriers; 2 heading CLF; 3 speed CLF.
         # Fixed pattern (column-major): col0 rows (0, 2); col1 rows (1, 3); col2 row 2; col3 row 3.
         self._A_indices = np.array([0, 2, 1, 3, 2, 3], dtype=np.int32)
         self._A_indptr = np.array([0, 2, 4, 5, 6], dtype=np.int32)
-        data = np.array([1.0, 1.0, 1.0, 1.0, -1.0, -1.0])
-        A = sp.csc_matrix((data, self._A_indices, self._A_indptr), shape=(4, 4))
-        self._Ax = data.copy()
+        self._A0 = np.array([1.0, 1.0, 1.0, 1.0, -1.0, -1.0])
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything earlier solves left behind: a fresh OSQP problem.
+
+        OSQP keeps the last primal and dual iterates (the warm start) and its adapted step
+        size ``rho`` between solves, so without this an episode's controls would depend, in
+        the last bits, on the episodes the same driver solved before.  The environment calls
+        it at every ``reset()``: an episode's result then depends only on its own seed.
+        """
+        A = sp.csc_matrix((self._A0.copy(), self._A_indices, self._A_indptr), shape=(4, 4))
+        self._Ax = self._A0.copy()
         self._l = np.array([self.u1_min, self.u2_min, -np.inf, -np.inf])
         self._u = np.array([self.u1_max, self.u2_max, 0.0, 0.0])
         self._solver = osqp.OSQP()
         self._solver.setup(
-            P, np.zeros(4), A, self._l, self._u,
-            verbose=False, eps_abs=eps, eps_rel=eps, polishing=True, warm_starting=True,
+            self._P, np.zeros(4), A, self._l, self._u,
+            verbose=False, eps_abs=self._eps, eps_rel=self._eps, polishing=True, warm_starting=True,
             max_iter=4000,
         )
 

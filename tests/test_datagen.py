@@ -93,7 +93,10 @@ def test_half_written_shard_is_redone(tmp_path):
 
 
 def test_ray_backend_gives_the_same_data(tmp_path):
-    ray = pytest.importorskip("ray")
+    try:  # ray is in the test extra: a missing install must fail, not skip
+        import ray
+    except ImportError as e:
+        raise ImportError("this test needs ray, part of the test extra: pip install -e '.[test]'") from e
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         a = generate(small(), tmp_path / "ray", backend="ray", progress=False)

@@ -179,10 +179,10 @@ def test_bad_actions(action, match):
         ({"state": [0, 0, 0]}, "state"),
         ({"state": [0, 0, 0, 3.0]}, "speed"),
         ({"state": [0, 0, 0, np.nan]}, "state"),
-        ({"state": [0, 0, 0, 1.0], "obstacles": [[0, 0, 1]]}, "inside an obstacle"),
+        ({"state": [0, 0, 0, 1.0], "obstacles": [[0, 0, 1]]}, "inside obstacle 0 .* of option .obstacles."),
         ({"obstacles": [[0, 0, -1]]}, "radii"),
         ({"goal": [1, 1, 0]}, "radius"),
-        ({"state": [0, 0, 0, 1], "goal": [0, 0, 1], "obstacles": [[5, 5, 1]]}, "inside the goal"),
+        ({"state": [0, 0, 0, 1], "goal": [0, 0, 1], "obstacles": [[5, 5, 1]]}, "inside option .goal."),
         ({"start": [0, 0, 0, 1]}, "unknown"),
     ],
 )

@@ -106,3 +106,54 @@ def test_clock_factory():
         FixedLatencyClock(-1)
     with pytest.raises(ValueError, match="backwards"):
         ManualClock().advance(-1)
+
+
+class RecordingClock(ManualClock):
+    """A manual clock that records every start() and elapsed() with the time it happened."""
+
+    def __init__(self):
+        self.events = []
+        super().__init__()
+
+    def start(self):
+        super().start()
+        self.events.append(("start", self.t))
+
+    def elapsed(self):
+        lap = super().elapsed()
+        self.events.append(("elapsed", self.t, lap))
+        return lap
+
+
+class SlowPhysicsEnv(Dubins4DCirclesEnv):
+    """The env's own work takes (clock) time: 0.3 s before the physics and 0.7 s after it."""
+
+    def simulate(self, duration, active, control, compute_time=0.0):
+        self.clock_under_test.advance(0.3)
+        out = super().simulate(duration, active, control, compute_time)
+        self.clock_under_test.advance(0.7)
+        return out
+
+
+@pytest.mark.parametrize("wrapped", [True, False])
+def test_only_the_agents_time_between_steps_is_charged_never_the_envs_own_work(wrapped):
+    clock = RecordingClock()
+    inner = SlowPhysicsEnv(max_episode_sim_time=50.0, clock=clock)
+    inner.clock_under_test = clock
+    env = NonBlockingStepping(inner, time_accel=10.0, base_step=0.1, clock=clock) if wrapped else inner
+    env.reset(options=OPTS)
+    thinking = [0.01, 0.02, 0.0, 0.04, 0.03]
+    sim_before = 0.0
+    for dt in thinking:
+        clock.advance(dt)  # the agent thinks
+        _, _, te, tr, info = env.step(act(0, 0, active=0))
+        assert not (te or tr)
+        if wrapped:  # the world advanced by the agent's time only
+            assert info["sim_time"] - sim_before == pytest.approx(dt * 10.0 + 0.1, abs=1e-12)
+        sim_before = info["sim_time"]
+    laps = [e[2] for e in clock.events if e[0] == "elapsed"]
+    assert laps == pytest.approx(thinking, abs=1e-12)  # each lap is exactly the agent's thinking
+    assert inner.episode_statistics()["cum_compute_time"] == pytest.approx(sum(thinking), abs=1e-12)
+    # every lap starts when step returns: the last start() of a step comes after the env's work
+    starts = [e[1] for e in clock.events if e[0] == "start"]
+    assert starts[-1] == pytest.approx(clock.t)

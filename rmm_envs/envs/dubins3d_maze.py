@@ -37,8 +37,11 @@ after ``max_episode_steps`` (default 1000) steps.
 A maze from the seed (kind ``"rectangular"`` by default, ``"honeycomb"`` with
 ``maze_kind="honeycomb"``, or either at random per episode with ``"mixed"``), then a uniform state in the image, rejected until it is clear of
 the walls.  ``reset(seed, options={"state": [x, y, psi], "maze": Maze or {"kind": ...}})``
-sets either explicitly; a state inside a wall or outside the image, or a maze option of the
-wrong type, raises ``ValueError``.
+sets either explicitly.  With a given state and a generated maze (from the seed, or from the
+given ``generate_maze`` arguments) the maze is redrawn until the state is clear of its walls,
+as generation keeps states clear; a state inside a wall of a given ``Maze`` or outside its
+image, a state that no drawn maze leaves clear, or a maze option of the wrong type raises
+``ValueError``.  Without options the draws are exactly those of generation.
 
 ## Info
 
@@ -104,6 +107,9 @@ class Dubins3DMazeEnv(gym.Env):
             raise ValueError(f"step_dt must be a finite number > 0, got {step_dt!r}")
         if int(n_path_points) != n_path_points or n_path_points < 2:
             raise ValueError(f"n_path_points must be an integer >= 2, got {n_path_points!r}")
+        for name, v in (("speed", speed), ("r_min", r_min)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
         if int(max_episode_steps) != max_episode_steps or max_episode_steps < 1:
             raise ValueError(f"max_episode_steps must be an integer >= 1, got {max_episode_steps!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -144,25 +150,48 @@ class Dubins3DMazeEnv(gym.Env):
     def observe_states(self, states, rng=None) -> np.ndarray:
         return self.scene.observe(states)
 
+    _MAX_MAZE_DRAWS = 100
+
+    def _draw_maze(self, spec) -> Maze:
+        if spec is None:
+            kind = self.maze_kind if self.maze_kind != "mixed" else MAZE_KINDS[int(self.np_random.integers(len(MAZE_KINDS)))]
+            return generate_maze(self.np_random, kind)
+        return self._maze_from_option(spec)
+
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         options = dict(options or {})
         unknown = set(options) - {"state", "maze"}
         if unknown:
             raise ValueError(f"unknown reset options {sorted(unknown)}; expected any of 'state', 'maze'")
-        if "maze" in options:
-            maze = self._maze_from_option(options["maze"])
-        else:
-            kind = self.maze_kind if self.maze_kind != "mixed" else MAZE_KINDS[int(self.np_random.integers(len(MAZE_KINDS)))]
-            maze = generate_maze(self.np_random, kind)
-        self.scene = MazeScene(maze, self.system)
+        st = None
         if "state" in options:
             st = np.asarray(options["state"], dtype=float).reshape(-1)
             if st.shape != (3,) or not np.all(np.isfinite(st)):
                 raise ValueError(f"option 'state' must be 3 finite numbers [x, y, psi], got {options['state']!r}")
-            if self.scene.state_failed(st[None])[0]:
-                raise ValueError(f"option 'state': {st[:2].tolist()} is inside a wall or outside the maze image")
+        spec = options.get("maze")
+        if spec is not None and not isinstance(spec, (Maze, dict)):
+            self._maze_from_option(spec)  # raises, naming the option
+        if st is not None and isinstance(spec, Maze):
+            if spec.state_failed(st[None, :2])[0]:
+                raise ValueError(f"option 'state': {st[:2].tolist()} is inside a wall of option 'maze' or outside its "
+                                 f"{spec.width:g} x {spec.height:g} px image")
+            maze = spec
+        elif st is not None:
+            # a generated maze (from the seed, or from the given generate_maze arguments) is
+            # redrawn until the given state is clear of its walls, as generation keeps states clear
+            for _ in range(self._MAX_MAZE_DRAWS):
+                maze = self._draw_maze(spec)
+                if not maze.state_failed(st[None, :2])[0]:
+                    break
+            else:
+                raise ValueError(f"option 'state': {st[:2].tolist()} is inside a wall or outside the image of each of "
+                                 f"{self._MAX_MAZE_DRAWS} mazes drawn from the seed; choose a point inside a cell, "
+                                 "away from its sides")
         else:
+            maze = self._draw_maze(spec)
+        self.scene = MazeScene(maze, self.system)
+        if st is None:
             st = self.sample_states(self.np_random, 1)[0]
         self._state = st
         self._steps = 0

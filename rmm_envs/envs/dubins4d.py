@@ -64,9 +64,15 @@ obstacles, heading ``U(-pi, pi)``, speed ``U(0, 2)``.  Goal: centre uniform on t
 radius ``U(0.1, 1)``, redrawn while it contains the vehicle or lies entirely inside an obstacle.
 
 ``reset(seed=..., options={"state": [x, y, theta, v], "goal": [x, y, r], "obstacles": [[x, y,
-r], ...]})`` sets any subset explicitly; the rest is generated from the seed.  Invalid options
-(wrong length, non-finite, radius <= 0, speed outside [0, 2], a state inside an obstacle or the
-goal, an unknown key) raise ``ValueError``.
+r], ...]})`` sets any subset explicitly; the rest is generated from the seed around what was
+given, in the same order (obstacles, vehicle, goal) and by the same rules: a generated part is
+redrawn until the vehicle is outside every obstacle and outside the goal and the goal is not
+entirely inside an obstacle, against the given parts too (so ``{"state": ...}`` alone gets
+obstacles that leave that state free, and ``{"goal": ...}`` alone a start outside that goal).
+Given parts must obey the same rules among themselves: a state inside a given obstacle or
+goal, or a goal entirely inside a given obstacle, raises ``ValueError`` naming the options
+involved, as do wrong lengths, non-finite numbers, radii <= 0, a speed outside [0, 2] and
+unknown keys.  Without options the draws are exactly those of generation.
 
 ## Info
 
@@ -240,6 +246,16 @@ def parse_guardian_action(action, space: spaces.Dict) -> tuple[bool, np.ndarray]
     return av == 1.0, np.array([u1, u2])
 
 
+def _finite(x) -> bool:
+    """A real, finite number (not a bool, string or array)."""
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _whole(x) -> bool:
+    """An integer value (``3`` or ``3.0``), finite."""
+    return _finite(x) and float(x) == int(x)
+
+
 def _vector(value, n: int, name: str) -> np.ndarray:
     arr = np.asarray(value, dtype=float).reshape(-1)
     if arr.shape != (n,) or not np.all(np.isfinite(arr)):
@@ -272,15 +288,20 @@ class Dubins4DCirclesEnv(gym.Env):
         clock: Clock | str | None = None,
         render_mode: str | None = None,
     ) -> None:
+        # Every bound is finite: an infinite episode length, ray length or radius would silently
+        # disable what it configures (no timeout, rays that never end, a goal covering everything).
         checks = [
-            (step_dt > 0 and math.isfinite(step_dt), "step_dt", step_dt, "a finite number > 0"),
-            (int(n_rays) == n_rays and n_rays >= 1, "n_rays", n_rays, "an integer >= 1"),
-            (ray_length > 0 and math.isfinite(ray_length), "ray_length", ray_length, "> 0"),
-            (max_episode_sim_time > 0, "max_episode_sim_time", max_episode_sim_time, "> 0"),
-            (int(n_obstacles) == n_obstacles and n_obstacles >= 0, "n_obstacles", n_obstacles, "an integer >= 0"),
-            (0 < obstacle_min_rad <= obstacle_max_rad, "obstacle radii", (obstacle_min_rad, obstacle_max_rad), "0 < min <= max"),
-            (0 < goal_min_rad <= goal_max_rad, "goal radii", (goal_min_rad, goal_max_rad), "0 < min <= max"),
-            (int(n_path_points) == n_path_points and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
+            (_finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number > 0"),
+            (_whole(n_rays) and n_rays >= 1, "n_rays", n_rays, "an integer >= 1"),
+            (_finite(ray_length) and ray_length > 0, "ray_length", ray_length, "a finite number > 0"),
+            (_finite(max_episode_sim_time) and max_episode_sim_time > 0, "max_episode_sim_time", max_episode_sim_time,
+             "a finite number of seconds > 0 (episodes need a time limit)"),
+            (_whole(n_obstacles) and n_obstacles >= 0, "n_obstacles", n_obstacles, "an integer >= 0"),
+            (_finite(obstacle_min_rad) and _finite(obstacle_max_rad) and 0 < obstacle_min_rad <= obstacle_max_rad,
+             "obstacle radii", (obstacle_min_rad, obstacle_max_rad), "finite with 0 < min <= max"),
+            (_finite(goal_min_rad) and _finite(goal_max_rad) and 0 < goal_min_rad <= goal_max_rad,
+             "goal radii", (goal_min_rad, goal_max_rad), "finite with 0 < min <= max"),
+            (_whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
             (render_mode is None or render_mode in self.metadata["render_modes"], "render_mode", render_mode, f"one of {self.metadata['render_modes']}"),
         ]
         for ok, name, value, expected in checks:
@@ -297,7 +318,10 @@ class Dubins4DCirclesEnv(gym.Env):
         self.render_mode = render_mode
         self.system = Dubins4D()
         if isinstance(driver_params, dict):
-            driver_params = DriverParams(**driver_params)
+            try:
+                driver_params = DriverParams(**driver_params)
+            except TypeError as e:
+                raise ValueError(f"driver_params: {e}; expected keys of DriverParams") from None
         self.driver = CLFDriver(
             (self.system.u1_min, self.system.u1_max),
             (self.system.u2_min, self.system.u2_max),
@@ -324,25 +348,106 @@ class Dubins4DCirclesEnv(gym.Env):
         self._last_active = False
 
     # ------------------------------------------------------------------ generation
-    def _generate_state(self, rng: np.random.Generator, obstacles: np.ndarray) -> np.ndarray:
-        for _ in range(100_000):
+    # The rules a start (state, goal, obstacles) obeys, whether generated or given:
+    #   R1 the vehicle's position is outside every obstacle (boundary counts as inside);
+    #   R2 the vehicle's position is outside the goal (boundary counts as inside);
+    #   R3 the goal is not entirely inside one obstacle.
+    # Generated parts are rejection-sampled until they obey them against every given part.
+    _MAX_DRAWS = 100_000
+    _MAX_OBSTACLE_DRAWS = 1_000  # a state at the arena's centre is left free by ~1 draw in 8
+
+    @staticmethod
+    def _goal_inside_obstacle(goal: np.ndarray, obstacles: np.ndarray) -> int | None:
+        """Index of an obstacle that contains the whole goal disc (R3), or ``None``."""
+        if not obstacles.shape[0]:
+            return None
+        inside = np.hypot(*(goal[None, :2] - obstacles[:, :2]).T) + goal[2] < obstacles[:, 2]
+        return int(np.argmax(inside)) if inside.any() else None
+
+    @staticmethod
+    def _in_goal(state: np.ndarray, goal: np.ndarray) -> bool:
+        return bool(np.hypot(*(state[:2] - goal[:2])) <= goal[2])
+
+    def _generate_obstacles(self, rng: np.random.Generator, state: np.ndarray | None, goal: np.ndarray | None) -> np.ndarray:
+        for _ in range(self._MAX_OBSTACLE_DRAWS):
+            obstacles = CircleWorld.generate(rng, self.n_obstacles, *self.obstacle_rad, half_width=_HALF)
+            if state is not None and points_in_circles(state[None, :2], obstacles)[0]:
+                continue
+            if goal is not None and self._goal_inside_obstacle(goal, obstacles) is not None:
+                continue
+            return obstacles
+        given = " and ".join(f"option {k!r} {v[:2 if k == 'state' else 3].tolist()}" for k, v in (("state", state), ("goal", goal)) if v is not None)
+        raise ValueError(f"could not generate {self.n_obstacles} obstacles clear of {given} in {self._MAX_OBSTACLE_DRAWS} draws; "
+                         "give 'obstacles' explicitly too")
+
+    def _generate_state(self, rng: np.random.Generator, obstacles: np.ndarray, goal: np.ndarray | None = None,
+                        given: tuple[str, ...] = ()) -> np.ndarray:
+        if goal is not None:
+            corners = np.array([[-_HALF, -_HALF], [-_HALF, _HALF], [_HALF, -_HALF], [_HALF, _HALF]])
+            if np.all(np.hypot(*(corners - goal[:2]).T) <= goal[2]):  # a disc is convex: it holds the square
+                raise ValueError(f"option 'goal' {goal.tolist()} covers the whole arena [-{_HALF}, {_HALF}]^2 where "
+                                 "initial states are drawn, so no start outside it exists; give a smaller goal")
+        for _ in range(self._MAX_DRAWS):
             st = np.array(
                 [rng.uniform(-_HALF, _HALF), rng.uniform(-_HALF, _HALF),
                  rng.uniform(-np.pi, np.pi), rng.uniform(self.system.v_min, self.system.v_max)]
             )
-            if not points_in_circles(st[None, :2], obstacles)[0]:
-                return st
-        raise RuntimeError("could not find a collision-free initial state in 100000 draws")
-
-    def _generate_goal(self, rng: np.random.Generator, state: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
-        for _ in range(100_000):
-            g = np.array([rng.uniform(-_HALF, _HALF), rng.uniform(-_HALF, _HALF), rng.uniform(*self.goal_rad)])
-            if np.hypot(*(state[:2] - g[:2])) <= g[2]:
+            if points_in_circles(st[None, :2], obstacles)[0]:
                 continue
-            if obstacles.shape[0] and np.any(np.hypot(*(g[None, :2] - obstacles[:, :2]).T) + g[2] < obstacles[:, 2]):
+            if goal is not None and self._in_goal(st, goal):
+                continue
+            return st
+        if given:
+            raise ValueError(f"could not draw an initial state on the arena [-{_HALF}, {_HALF}]^2 outside "
+                             f"{' and '.join(f'option {k!r}' for k in given)} in {self._MAX_DRAWS} draws: they leave "
+                             "too little free space; give 'state' explicitly too")
+        raise RuntimeError(f"could not find a collision-free initial state in {self._MAX_DRAWS} draws")
+
+    def _generate_goal(self, rng: np.random.Generator, state: np.ndarray, obstacles: np.ndarray,
+                       given: tuple[str, ...] = ()) -> np.ndarray:
+        for _ in range(self._MAX_DRAWS):
+            g = np.array([rng.uniform(-_HALF, _HALF), rng.uniform(-_HALF, _HALF), rng.uniform(*self.goal_rad)])
+            if self._in_goal(state, g):
+                continue
+            if self._goal_inside_obstacle(g, obstacles) is not None:
                 continue
             return g
-        raise RuntimeError("could not place a goal in 100000 draws")
+        if given:
+            raise ValueError(f"could not place a goal around {' and '.join(f'option {k!r}' for k in given)} "
+                             f"in {self._MAX_DRAWS} draws; give 'goal' explicitly too")
+        raise RuntimeError(f"could not place a goal in {self._MAX_DRAWS} draws")
+
+    def _given_options(self, options: dict) -> dict:
+        """Validate the given parts of a start on their own and against each other (R1-R3)."""
+        given = {}
+        if "obstacles" in options:
+            given["obstacles"] = as_circles(options["obstacles"], "option 'obstacles'")
+        if "state" in options:
+            state = _vector(options["state"], 4, "state")
+            if not (self.system.v_min <= state[3] <= self.system.v_max):
+                raise ValueError(f"option 'state': speed must be in [{self.system.v_min}, {self.system.v_max}], got {state[3]}")
+            state[2] = wrap_angle(state[2])
+            given["state"] = state
+        if "goal" in options:
+            goal = _vector(options["goal"], 3, "goal")
+            if goal[2] <= 0:
+                raise ValueError(f"option 'goal': radius must be > 0, got {goal[2]}")
+            given["goal"] = goal
+        obstacles, state, goal = given.get("obstacles"), given.get("state"), given.get("goal")
+        if state is not None and obstacles is not None:
+            hits = [points_in_circles(state[None, :2], o[None, :])[0] for o in obstacles]
+            if any(hits):
+                k = hits.index(True)
+                raise ValueError(f"option 'state': position {state[:2].tolist()} is inside obstacle {k} "
+                                 f"{obstacles[k].tolist()} of option 'obstacles'")
+        if goal is not None and obstacles is not None:
+            k = self._goal_inside_obstacle(goal, obstacles)
+            if k is not None:
+                raise ValueError(f"option 'goal' {goal.tolist()} lies entirely inside obstacle {k} {obstacles[k].tolist()} "
+                                 "of option 'obstacles', so it can never be reached (generation never places a goal there)")
+        if state is not None and goal is not None and self._in_goal(state, goal):
+            raise ValueError(f"option 'state': position {state[:2].tolist()} is already inside option 'goal' {goal.tolist()}")
+        return given
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
@@ -350,28 +455,19 @@ class Dubins4DCirclesEnv(gym.Env):
         unknown = set(options) - {"state", "goal", "obstacles"}
         if unknown:
             raise ValueError(f"unknown reset options {sorted(unknown)}; expected any of 'state', 'goal', 'obstacles'")
+        given = self._given_options(options)
         rng = self.np_random
-        if "obstacles" in options:
-            obstacles = as_circles(options["obstacles"], "option 'obstacles'")
-        else:
-            obstacles = CircleWorld.generate(rng, self.n_obstacles, *self.obstacle_rad, half_width=_HALF)
-        if "state" in options:
-            state = _vector(options["state"], 4, "state")
-            if not (self.system.v_min <= state[3] <= self.system.v_max):
-                raise ValueError(f"option 'state': speed must be in [{self.system.v_min}, {self.system.v_max}], got {state[3]}")
-            if points_in_circles(state[None, :2], obstacles)[0]:
-                raise ValueError(f"option 'state': position {state[:2].tolist()} is inside an obstacle")
-            state[2] = wrap_angle(state[2])
-        else:
-            state = self._generate_state(rng, obstacles)
-        if "goal" in options:
-            goal = _vector(options["goal"], 3, "goal")
-            if goal[2] <= 0:
-                raise ValueError(f"option 'goal': radius must be > 0, got {goal[2]}")
-            if np.hypot(*(state[:2] - goal[:2])) <= goal[2]:
-                raise ValueError(f"option 'goal': the initial position {state[:2].tolist()} is already inside the goal")
-        else:
-            goal = self._generate_goal(rng, state, obstacles)
+        # Generation order (obstacles, state, goal) and its draws are those of a reset without
+        # options; each generated part is redrawn until it obeys R1-R3 against the given parts.
+        obstacles = given.get("obstacles")
+        if obstacles is None:
+            obstacles = self._generate_obstacles(rng, given.get("state"), given.get("goal"))
+        state = given.get("state")
+        if state is None:
+            state = self._generate_state(rng, obstacles, given.get("goal"), tuple(k for k in ("obstacles", "goal") if k in given))
+        goal = given.get("goal")
+        if goal is None:
+            goal = self._generate_goal(rng, state, obstacles, tuple(k for k in ("state", "obstacles") if k in given))
 
         self.scene = Dubins4DScene(obstacles, goal, self.system, self.n_rays, self.ray_length)
         self._circles = np.vstack([self.scene.obstacles, self.scene.goal[None, :]])
@@ -385,6 +481,7 @@ class Dubins4DCirclesEnv(gym.Env):
         self._done = False
         self._last_active = False
         self._last_control = np.zeros(2)
+        self.driver.reset()  # no warm start from an earlier episode: results depend on the seed only
         obs = self._observe()
         info = {"sim_time": 0.0, "state": self._state.copy()}
         if self.render_mode == "human":

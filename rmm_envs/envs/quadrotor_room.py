@@ -49,8 +49,11 @@ A room from the seed; a position above a random footprint cell at height ``U(0.3
 a random yaw with roll and pitch ``U(-0.3, 0.3)`` rad, linear velocity ``U(-1, 1)`` m/s and
 angular velocity ``U(-0.5, 0.5)`` rad/s per axis, redrawn while in contact.
 ``reset(seed, options={"state": [13 numbers], "room": Room or dict of generate_room
-arguments})`` sets either; a state in contact or with a non-unit quaternion, or a bad room
-option, raises ``ValueError``.
+arguments})`` sets either.  With a given state and a generated room (from the seed, or from
+the given ``generate_room`` arguments) the room is redrawn until the state is clear of it, as
+generation keeps states clear; a state in contact with a given ``Room`` (or with every one of
+100 drawn rooms), a non-unit quaternion, or a bad room option raises ``ValueError``.  Without
+options the draws are exactly those of generation.
 
 ## Arguments
 
@@ -135,10 +138,10 @@ class QuadrotorRoomEnv(gym.Env):
         n_sub = control_dt / PHYSICS_DT
         if not (control_dt > 0 and abs(n_sub - round(n_sub)) < 1e-9 and round(n_sub) >= 1):
             raise ValueError(f"control_dt must be a positive multiple of 1/240 s, got {control_dt!r}")
-        if not max_episode_time > 0:
-            raise ValueError(f"max_episode_time must be > 0, got {max_episode_time!r}")
-        if not (linear_damping >= 0 and angular_damping >= 0):
-            raise ValueError(f"damping must be >= 0, got {linear_damping}, {angular_damping}")
+        if not (max_episode_time > 0 and math.isfinite(max_episode_time)):
+            raise ValueError(f"max_episode_time must be a finite number of seconds > 0 (episodes need a time limit), got {max_episode_time!r}")
+        if not (linear_damping >= 0 and angular_damping >= 0 and math.isfinite(linear_damping) and math.isfinite(angular_damping)):
+            raise ValueError(f"damping must be finite and >= 0, got {linear_damping}, {angular_damping}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.p = p
@@ -198,6 +201,18 @@ class QuadrotorRoomEnv(gym.Env):
                 return s
         raise RuntimeError("could not place the quadrotor clear of obstacles in 1000 draws")
 
+    _MAX_ROOM_DRAWS = 100
+
+    def _draw_room(self, spec) -> Room:
+        if spec is None:
+            return generate_room(self.np_random)
+        if isinstance(spec, Room):
+            return spec
+        try:
+            return generate_room(self.np_random, **spec)
+        except TypeError as e:
+            raise ValueError(f"option 'room': {e}") from None
+
     # ------------------------------------------------------------------ API
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
@@ -205,29 +220,35 @@ class QuadrotorRoomEnv(gym.Env):
         unknown = set(options) - {"state", "room"}
         if unknown:
             raise ValueError(f"unknown reset options {sorted(unknown)}; expected any of 'state', 'room'")
-        if "room" in options:
-            room = options["room"]
-            if isinstance(room, dict):
-                try:
-                    room = generate_room(self.np_random, **room)
-                except TypeError as e:
-                    raise ValueError(f"option 'room': {e}") from None
-            elif not isinstance(room, Room):
-                raise ValueError(f"option 'room' must be a Room or a dict of generate_room arguments, got {type(room).__name__}")
-        else:
-            room = generate_room(self.np_random)
-        self._build(room)
+        s = None
         if "state" in options:
             s = np.asarray(options["state"], float).reshape(-1)
             if s.shape != (13,) or not np.all(np.isfinite(s)):
                 raise ValueError(f"option 'state' must be 13 finite numbers (position, quaternion xyzw, velocity, angular velocity), got shape {s.shape}")
             if abs(np.linalg.norm(s[3:7]) - 1) > 1e-6:
                 raise ValueError(f"option 'state': the quaternion {s[3:7].tolist()} is not a unit quaternion")
+        spec = options.get("room")
+        if spec is not None and not isinstance(spec, (Room, dict)):
+            raise ValueError(f"option 'room' must be a Room or a dict of generate_room arguments, got {type(spec).__name__}")
+        if s is None:
+            self._build(self._draw_room(spec))
+            self._random_state(self.np_random)
+        elif isinstance(spec, Room):
+            self._build(spec)
             self.set_state(s)
             if self.in_contact():
-                raise ValueError(f"option 'state': the body at {s[:3].tolist()} is in contact with the room")
+                raise ValueError(f"option 'state': the body at {s[:3].tolist()} is in contact with option 'room'")
         else:
-            self._random_state(self.np_random)
+            # a generated room (from the seed, or from the given generate_room arguments) is
+            # redrawn until the given state is clear of it, as generation keeps states clear
+            for _ in range(self._MAX_ROOM_DRAWS):
+                self._build(self._draw_room(spec))
+                self.set_state(s)
+                if not self.in_contact():
+                    break
+            else:
+                raise ValueError(f"option 'state': the body at {s[:3].tolist()} is in contact with each of "
+                                 f"{self._MAX_ROOM_DRAWS} rooms drawn from the seed; give 'room' too or move the state")
         self._t = 0.0
         self._done = False
         return self._obs(), {"state": self.get_state(), "sim_time": 0.0}

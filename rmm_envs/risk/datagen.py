@@ -13,6 +13,8 @@ Output directory:
   ``config_id``, ``sample``, ``obs`` (float32 list), ``state`` (float64 list), ``risk``,
   ``min_risk_ctrl`` (list), ``min_risk_ctrl_dur``, ``n_leaves``.
 * ``manifest.json`` (written last): row count, per-shard SHA-256 and the dataset hash.
+* ``shard-NNNNN.sha256`` (only while a run is unfinished): the SHA-256 of a shard, written
+  right after the shard itself (``sha256sum -c`` format); folded into the manifest at the end.
 
 Determinism: configuration ``c`` draws everything from ``SeedSequence(seed, spawn_key=(c, ...))``
 so the same seed gives identical data whatever the worker count or backend.
@@ -21,6 +23,15 @@ Crash safety: each shard is written to a temporary file and renamed into place, 
 either complete or absent.  Rerunning the same command (after Ctrl-C, ``kill -9`` or a crash)
 checks the existing shards and computes only the missing ones; a directory made with other
 parameters is refused rather than mixed.
+
+Integrity: every shard's SHA-256 is recorded when it is written (its ``.sha256`` file, then
+the manifest), and nothing else is ever trusted.  A rerun verifies every existing shard
+against its recorded checksum and regenerates, with a line naming the file, any that does not
+match or has no recorded checksum: generation is deterministic, so the result is exactly what
+the damaged file held before.  The manifest is then built from the recorded checksums, never
+from whatever the files hold now, so a damaged shard cannot be laundered into a valid-looking
+dataset.  :func:`load_dataset` verifies every shard too and refuses a damaged dataset with
+one line naming the file and the command that repairs it.
 
 Backends: ``--backend local`` (processes, ``--workers`` default the core count) or
 ``--backend ray`` (``--ray-address`` of a cluster, else a local Ray; the optional extra
@@ -34,6 +45,7 @@ import argparse
 import hashlib
 import json
 import os
+import shlex
 import sys
 import time
 from dataclasses import asdict, dataclass, field
@@ -75,6 +87,8 @@ class DatagenConfig:
             v = getattr(self, name)
             if not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise ValueError(f"seed (--seed) must be an integer >= 0, got {self.seed!r}")
         validate_tree_params(**self.estimator_params())
 
     @property
@@ -158,10 +172,63 @@ def _atomic_write_bytes(path: Path, data: bytes) -> None:
     os.replace(tmp, path)
 
 
+def _checksum_path(shard_path: Path) -> Path:
+    return shard_path.with_suffix(".sha256")
+
+
 def _write_table(path: Path, table: pa.Table) -> None:
+    """Write a shard atomically, then its checksum file (so a checksum file implies a whole shard)."""
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink, compression="zstd")
-    _atomic_write_bytes(path, sink.getvalue().to_pybytes())
+    data = sink.getvalue().to_pybytes()
+    _atomic_write_bytes(path, data)
+    _atomic_write_bytes(_checksum_path(path), f"{hashlib.sha256(data).hexdigest()}  {path.name}\n".encode())
+
+
+def _recorded_checksum(shard_path: Path) -> str | None:
+    """The checksum written next to a shard when it was written, if any."""
+    try:
+        digest = _checksum_path(shard_path).read_text().split()[0]
+    except (OSError, IndexError, UnicodeDecodeError):
+        return None
+    return digest if len(digest) == 64 and all(c in "0123456789abcdef" for c in digest) else None
+
+
+def _sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _read_manifest_shards(out: Path) -> tuple[dict, str | None]:
+    """``({shard name: sha256}, problem)`` from an existing manifest; empty if absent or unreadable."""
+    path = out / "manifest.json"
+    if not path.exists():
+        return {}, None
+    try:
+        shards = json.loads(path.read_text())["shards"]
+        if not isinstance(shards, dict):
+            raise TypeError("'shards' is not a mapping")
+        return {str(k): str(v) for k, v in shards.items()}, None
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        return {}, f"{path} is unreadable ({type(e).__name__}: {e}); its checksums cannot be used"
+
+
+def rerun_command(meta: dict, out) -> str:
+    """The ``rmm-datagen`` command that (re)generates the dataset described by ``meta`` in ``out``."""
+    est = meta.get("estimator") or {}
+    parts = ["rmm-datagen", "--env", str(meta.get("env_id")), "--configs", str(meta.get("configs")),
+             "--samples-per-config", str(meta.get("samples_per_config")), "--seed", str(meta.get("seed")),
+             "--configs-per-shard", str(meta.get("configs_per_shard"))]
+    for key, flag in (("branches", "--branches"), ("depth", "--depth"), ("horizon", "--horizon"),
+                      ("n_steps", "--n-steps"), ("metric", "--metric"), ("alpha", "--alpha"), ("leaf", "--leaf")):
+        if est.get(key) is not None:
+            parts += [flag, str(est[key])]
+    if meta.get("env_kwargs"):
+        parts += ["--env-kwargs", json.dumps(meta["env_kwargs"], sort_keys=True)]
+    return shlex.join(parts + ["--out", str(out)])
 
 
 def _shard_ok(path: Path, rows: int) -> bool:
@@ -220,8 +287,14 @@ def _shard_task(cfg_dict: dict, out: str | None, shard: int):
 
 def generate(cfg: DatagenConfig, out: str | os.PathLike, workers: int | None = None,
              backend: str = "local", ray_address: str | None = None, progress: bool = True) -> dict:
-    """Generate (or finish) the dataset in ``out``; returns the manifest."""
+    """Generate (or finish) the dataset in ``out``; returns the manifest.
+
+    Existing shards are kept only if they match the checksum recorded when they were written;
+    the others are regenerated and listed in ``manifest["last_run"]["regenerated"]``.
+    """
     cfg.validate()
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise ValueError(f"workers (--workers) must be an integer >= 1 (leave it out for one per core), got {workers!r}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     meta = _metadata(cfg)
@@ -243,12 +316,28 @@ def generate(cfg: DatagenConfig, out: str | os.PathLike, workers: int | None = N
         tmp.unlink(missing_ok=True)
 
     rows_of = {s: len(cfg.shard_configs(s)) * cfg.samples_per_config for s in range(cfg.n_shards)}
-    todo = []
+    in_manifest, manifest_problem = _read_manifest_shards(out)
+    if manifest_problem:
+        print(f"rmm-datagen: {manifest_problem}", file=sys.stderr)
+    todo, regenerated, verified = [], [], {}
     for s in range(cfg.n_shards):
         p = _shard_path(out, s)
-        if p.exists() and _shard_ok(p, rows_of[s]):
-            continue
+        if p.exists():
+            expected = _recorded_checksum(p) or in_manifest.get(p.name)  # a checksum file is newer
+            problem = None
+            if expected is None:
+                problem = "has no recorded checksum (written by an interrupted run or an older version)"
+            elif _sha256_file(p) != expected:
+                problem = "does not match the checksum recorded when it was written (damaged or changed since)"
+            elif not _shard_ok(p, rows_of[s]):
+                problem = f"does not hold the expected {rows_of[s]} rows"
+            if problem is None:
+                verified[p.name] = expected
+                continue
+            print(f"rmm-datagen: {p} {problem}; regenerating it", file=sys.stderr)
+            regenerated.append(p.name)
         p.unlink(missing_ok=True)
+        _checksum_path(p).unlink(missing_ok=True)
         todo.append(s)
     done_configs = cfg.configs - sum(len(cfg.shard_configs(s)) for s in todo)
 
@@ -278,18 +367,24 @@ def generate(cfg: DatagenConfig, out: str | os.PathLike, workers: int | None = N
     hashes = {}
     for s in range(cfg.n_shards):
         p = _shard_path(out, s)
-        if not _shard_ok(p, rows_of[s]):
-            raise RuntimeError(f"shard {p} is missing or incomplete after generation")
-        hashes[p.name] = hashlib.sha256(p.read_bytes()).hexdigest()
+        expected = verified.get(p.name) or _recorded_checksum(p)
+        if not p.exists() or expected is None:
+            raise RuntimeError(f"shard {p} is missing or has no checksum after generation; rerun the same command")
+        if _sha256_file(p) != expected or not _shard_ok(p, rows_of[s]):
+            raise RuntimeError(f"shard {p} changed while this run was writing the dataset; rerun the same command")
+        hashes[p.name] = expected
     manifest = {
         "n_rows": sum(rows_of.values()),
         "n_shards": cfg.n_shards,
         "shards": hashes,
         "dataset_sha256": hashlib.sha256("".join(hashes[k] for k in sorted(hashes)).encode()).hexdigest(),
         "last_run": {"new_rows": new_rows, "seconds": elapsed, "backend": backend,
-                     "labels_per_second": new_rows / elapsed if elapsed > 0 and new_rows else None},
+                     "labels_per_second": new_rows / elapsed if elapsed > 0 and new_rows else None,
+                     "regenerated": regenerated},
     }
     _atomic_write_bytes(out / "manifest.json", json.dumps(manifest, indent=2).encode())
+    for s in range(cfg.n_shards):  # the manifest holds the checksums now
+        _checksum_path(_shard_path(out, s)).unlink(missing_ok=True)
     return manifest
 
 
@@ -345,30 +440,58 @@ def _fixed_list(col: pa.ChunkedArray, name: str, path: Path) -> np.ndarray:
 
 
 def load_dataset(path: str | os.PathLike) -> Dataset:
-    """Load a dataset directory written by ``rmm-datagen``, checking its files on the way."""
+    """Load a dataset directory written by ``rmm-datagen``, checking its files on the way.
+
+    Every shard must match the SHA-256 the manifest recorded when it was written, and the
+    manifest must list exactly the shards the metadata implies.  Any problem raises
+    ``ValueError`` with one line naming the file and the command that repairs it.
+    """
     path = Path(path)
     meta_path = path / "metadata.json"
     if not meta_path.exists():
         raise FileNotFoundError(f"{path} is not an rmm-datagen dataset: {meta_path} is missing")
     try:
         meta = json.loads(meta_path.read_text())
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{meta_path} is not valid JSON ({e})") from None
+        if not isinstance(meta, dict):
+            raise ValueError("not a JSON object")
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise ValueError(f"{meta_path} is unreadable or not valid JSON ({e}): the dataset cannot be identified; "
+                         f"move {path} aside and generate it again with rmm-datagen") from None
     if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
         raise ValueError(f"{meta_path}: expected format {FORMAT} v{FORMAT_VERSION}, got {meta.get('format')} v{meta.get('format_version')}")
+    repair = f"rerun `{rerun_command(meta, path)}` to regenerate what is damaged or missing"
     manifest_path = path / "manifest.json"
     if not manifest_path.exists():
-        raise ValueError(f"{path} is incomplete (no manifest.json): rerun rmm-datagen with the same arguments to finish it")
-    manifest = json.loads(manifest_path.read_text())
+        raise ValueError(f"{path} is incomplete (no manifest.json): {repair}")
+    try:
+        manifest = json.loads(manifest_path.read_text())
+        shards = manifest["shards"]
+        if not isinstance(shards, dict):
+            raise TypeError("'shards' is not a mapping")
+        dataset_sha = str(manifest["dataset_sha256"])
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"{manifest_path} is unreadable ({type(e).__name__}: {e}): {repair}") from None
+    try:
+        expected_names = {_shard_path(path, s).name for s in range(-(-int(meta["configs"]) // int(meta["configs_per_shard"])))}
+    except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        expected_names = None
+    if expected_names is not None and set(shards) != expected_names:
+        missing = sorted(expected_names - set(shards))
+        raise ValueError(f"{manifest_path} does not list the shards {meta_path.name} implies "
+                         f"(missing {missing[:3]}{'...' if len(missing) > 3 else ''}, "
+                         f"unexpected {sorted(set(shards) - expected_names)[:3]}): {repair}")
     parts = []
-    for name in sorted(manifest["shards"]):
+    for name in sorted(shards):
         p = path / name
         if not p.exists():
-            raise ValueError(f"{p} is listed in the manifest but missing")
+            raise ValueError(f"{p} is listed in the manifest but missing: {repair}")
         data = p.read_bytes()
-        if hashlib.sha256(data).hexdigest() != manifest["shards"][name]:
-            raise ValueError(f"{p}: checksum mismatch (the file changed after generation)")
-        parts.append(pq.read_table(pa.BufferReader(data)))
+        if hashlib.sha256(data).hexdigest() != shards[name]:
+            raise ValueError(f"{p} does not match its checksum in the manifest (damaged or changed after generation): {repair}")
+        try:
+            parts.append(pq.read_table(pa.BufferReader(data)))
+        except (pa.ArrowException, OSError, ValueError) as e:
+            raise ValueError(f"{p} cannot be read ({e}): {repair}") from None
     if not parts:
         raise ValueError(f"{path} holds no shards")
     t = pa.concat_tables(parts)
@@ -384,7 +507,7 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
         n_leaves=t["n_leaves"].to_numpy(),
         config_id=t["config_id"].to_numpy(),
         meta=meta,
-        sha256=manifest["dataset_sha256"],
+        sha256=dataset_sha,
     )
 
 
@@ -410,7 +533,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--leaf", default="zero", choices=["zero", "heuristic"], help="leaf value: 0 (Algorithm 1) or the system's heuristic (default: %(default)s)")
     p.add_argument("--env-kwargs", default="{}", help='environment arguments as JSON, e.g. \'{"maze_kind": "mixed"}\' (default: {})')
     p.add_argument("--configs-per-shard", type=int, default=8, help="configurations per output shard (default: %(default)s)")
-    p.add_argument("--workers", type=int, default=None, help="worker processes (default: the core count)")
+    p.add_argument("--workers", type=int, default=None, help="worker processes, >= 1 (default: the core count)")
     p.add_argument("--backend", default="local", choices=["local", "ray"], help="where the work runs (default: %(default)s)")
     p.add_argument("--ray-address", default=None, help="Ray cluster address (with --backend ray; default: a local Ray)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

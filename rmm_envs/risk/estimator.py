@@ -9,6 +9,9 @@ worth the coherent risk metric of its children.  A root that already fails is wo
 
 Batching: all ``B * n`` branches of level 1 are one ``propagate`` and one ``path_failed`` call,
 all ``B * n^2`` of level 2 the next, and so on; roots are processed in chunks to bound memory.
+A tree of more than ``MAX_TREE_NODES`` (2^20) nodes per root is refused before anything is
+allocated: that is a thousand times the paper's n = 32, m = 2, and beyond it one root's paths
+alone outgrow an ordinary machine's memory.
 Only the children of live nodes are propagated (a failed node is not expanded), so the
 value is exactly Algorithm 1's and cluttered states cost less.
 
@@ -33,15 +36,42 @@ import numpy as np
 from rmm_envs.risk.metrics import get_metric
 from rmm_envs.risk.protocol import check_system
 
-__all__ = ["RiskEstimator", "RiskResult", "validate_tree_params"]
+__all__ = ["MAX_TREE_NODES", "RiskEstimator", "RiskResult", "tree_nodes", "validate_tree_params"]
+
+# The largest tree accepted per root state: 2^20 nodes, a thousand times the paper's
+# n = 32, m = 2 (1056 nodes).  One root's deepest level alone then needs up to
+# 2^20 * n_steps * state_dim * 8 bytes of paths (256 MiB for Dubins4D with 8 points), so
+# anything larger cannot run on an ordinary machine; refusing it up front replaces a numpy
+# MemoryError or an out-of-memory kill after the fact.
+MAX_TREE_NODES = 2**20
+
+
+def tree_nodes(branches: int, depth: int) -> int | float:
+    """Nodes below one root, ``n + n^2 + ... + n^m``: exact, or ``inf`` beyond ``2^64``."""
+    n, m = int(branches), int(depth)
+    if n == 1:
+        return m
+    if m * math.log2(n) > 64:
+        return math.inf
+    return (n ** (m + 1) - n) // (n - 1)
 
 
 def validate_tree_params(branches, depth, horizon, n_steps, metric="expected", alpha=None, leaf="zero") -> None:
-    """Raise ``ValueError`` naming the first tree parameter that is out of range."""
+    """Raise ``ValueError`` naming the first tree parameter that is out of range.
+
+    Checked before anything is allocated, including the tree's size (:data:`MAX_TREE_NODES`).
+    """
     if int(branches) != branches or branches < 1:
         raise ValueError(f"branches (n) must be an integer >= 1, got {branches!r}")
     if int(depth) != depth or depth < 0:
         raise ValueError(f"depth (m) must be an integer >= 0, got {depth!r}")
+    nodes = tree_nodes(branches, depth)
+    if nodes > MAX_TREE_NODES:
+        raise ValueError(
+            f"branches (n, --branches) = {int(branches)} and depth (m, --depth) = {int(depth)} make a tree of "
+            f"{'more than 2^64' if nodes == math.inf else f'{nodes:,}'} nodes per state (n + n^2 + ... + n^m); at most {MAX_TREE_NODES:,} are supported "
+            f"(the paper uses n = 32, m = 2: 1,056): lower --branches or --depth"
+        )
     if not (isinstance(horizon, (int, float)) and horizon > 0 and math.isfinite(horizon)):
         raise ValueError(f"horizon (t) must be a finite number of seconds > 0, got {horizon!r}")
     if int(n_steps) != n_steps or n_steps < 2:

@@ -227,10 +227,10 @@ def _ray_capsule(ox, oy, dx, dy, ax, ay, bx, by, r):
     dn = dx * nx + dy * ny
     for sgn in (1.0, -1.0):
         cx, cy = ax + sgn * r * nx, ay + sgn * r * ny
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):  # a ray parallel to the side: t is inf or nan
             t = ((cx - ox) * nx + (cy - oy) * ny) / dn
-        hx, hy = ox + t * dx - cx, oy + t * dy - cy
-        along = hx * ux + hy * uy
+            hx, hy = ox + t * dx - cx, oy + t * dy - cy
+            along = hx * ux + hy * uy
         ok = (t >= 0) & (along >= 0) & (along <= L) & np.isfinite(t)
         best = np.where(ok, np.minimum(best, t), best)
     # the two round caps
