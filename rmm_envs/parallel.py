@@ -27,6 +27,8 @@ its process kills the caller too; the callers' resume logic then finishes the ru
 Ray: a task whose worker or node dies is retried by Ray once (``max_retries=1``: one retry
 rides out a transient node loss without doubling the cost of a task that always crashes),
 then yielded as a :class:`TaskLost` with Ray's reason; application errors are re-raised.
+There is no parent-side time limit on Ray tasks: a time limit inside the task (rmm-bench's
+episode timer) is the only one.
 """
 
 from __future__ import annotations

@@ -103,20 +103,6 @@ def test_pool_reraises_a_task_exception_with_the_worker_traceback():
     assert "faulty_task" in str(info.value.__cause__)
 
 
-def test_ray_reports_a_lost_task():
-    ray = pytest.importorskip("ray")
-    from rmm_envs.parallel import run_ray
-
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    try:
-        out = within(120, lambda: list(run_ray(faulty_task, [("sq", 2), ("exit", 3), ("sq", 5)])))
-    finally:
-        ray.shutdown()
-    assert sorted(r for r in out if not isinstance(r, TaskLost)) == [4, 25]
-    (lost,) = [r for r in out if isinstance(r, TaskLost)]
-    assert lost.task == ("exit", 3) and "Ray lost it" in lost.cause
-
-
 # ------------------------------------------------------------------ rmm-bench: a dead worker
 def test_bench_records_a_dead_worker_and_resume_retries_it(tmp_path, monkeypatch):
     out = tmp_path / "dead"
@@ -278,3 +264,21 @@ def test_datagen_rejects_zero_workers(tmp_path):
     with pytest.raises(ValueError, match="--workers must be an integer >= 1, got 0"):
         datagen.generate(datagen.DatagenConfig(configs=2, samples_per_config=2, branches=2, depth=1, configs_per_shard=1),
                          tmp_path / "z", workers=0, progress=False)
+
+
+def test_ray_backend_same_results_and_a_lost_task_is_reported(tmp_path):
+    ray = pytest.importorskip("ray")
+    from rmm_envs.parallel import run_ray
+
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        assert main(["--agent", "lrmm,brakes", "--episodes", "4", "--backend", "ray", "--out", str(tmp_path / "ray"), *FAST]) == 0
+        out = within(120, lambda: list(run_ray(faulty_task, [("sq", 2), ("exit", 3), ("sq", 5)])))
+    finally:
+        ray.shutdown()
+    assert sorted(r for r in out if not isinstance(r, TaskLost)) == [4, 25]
+    (lost,) = [r for r in out if isinstance(r, TaskLost)]
+    assert lost.task == ("exit", 3) and "Ray lost it" in lost.cause
+    assert main(["--agent", "lrmm,brakes", "--episodes", "4", "--workers", "1", "--out", str(tmp_path / "local"), *FAST]) == 0
+    cols = "agent, episode, seed, outcome, steps, sim_time, active_sim_time"
+    assert rows(tmp_path / "ray", cols) == rows(tmp_path / "local", cols)

@@ -252,17 +252,19 @@ def _completeness(rows: list[dict], invs: list[dict]) -> str:
         return ""
     have = ", ".join(f"{r['agent']} {r['with_result']} of {r['requested']}" for r in short)
     why = []
+    lost = sum(r["episodes"] - r["with_result"] for r in short)
+    if lost:
+        why.append(f"{lost} stored over the time limit or lost with their worker")
     for inv in invs:
         state = inv.get("state", inv["status"])
         if state == "stale":
-            why.append(f"invocation {inv['id']} was killed (it is marked running but its process {inv['pid']} is gone)")
+            why.append(f"invocation {inv['id']} was killed: it is marked running but its process {inv['pid']} is gone")
         elif state == "running":
             why.append(f"invocation {inv['id']} is still running (process {inv['pid']} on {inv['host']})")
         elif state in ("interrupted", "failed"):
-            why.append(f"invocation {inv['id']} {state}" + (f": {inv['message']}" if inv.get("message") else ""))
-    lost = sum(r["episodes"] - r["with_result"] for r in short)
-    if lost:
-        why.append(f"{lost} stored episodes are over the time limit or lost their worker")
+            msg = inv.get("message") or ""
+            detail = f": {msg}" if msg and "ended without a result" not in msg else ""
+            why.append(f"invocation {inv['id']} {state}{detail}")
     return (f"INCOMPLETE: episodes with a result: {have}" + (f" ({'; '.join(why)})" if why else "")
             + ". Rerun the same command to finish; the table covers the stored episodes only.\n")
 

@@ -120,6 +120,9 @@ class ResultsStore:
 
     def _error(self, e: sqlite3.DatabaseError) -> ResultsDatabaseError:
         text = str(e).replace("\n", " ")
+        if "full" in text:
+            return ResultsDatabaseError(f"cannot write {self.path} ({text}); free disk space and rerun the same command: "
+                                        "stored episodes are kept")
         if "locked" in text or "busy" in text:
             return ResultsDatabaseError(f"{self.path} is locked by another process ({text}); wait for the other "
                                         "rmm-bench command to finish, or use another --out")
