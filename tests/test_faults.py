@@ -3,13 +3,12 @@
 
 Each drill is a tiny run (a few episodes of cheap guardians, a few tiny shards) so the file
 takes seconds.  Drills that would hang on a pool that misses a dead worker run under a
-watchdog (a thread or a subprocess time limit), so a regression fails instead of hanging.
+watchdog thread, so a regression fails instead of hanging.
 """
 
 import json
 import os
 import sqlite3
-import subprocess
 import sys
 import threading
 from pathlib import Path
@@ -21,7 +20,6 @@ from rmm_envs.parallel import TaskLost, WorkersLost, run_local
 from tests.bench_helpers import faulty_task
 
 FAST = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DParallel-v0"]
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def within(seconds, fn):
@@ -42,12 +40,6 @@ def within(seconds, fn):
     if "error" in box:
         raise box["error"]
     return box["value"]
-
-
-def bench(*args, timeout=120, env=None):
-    """rmm-bench in a subprocess (a hang fails the test at ``timeout``)."""
-    return subprocess.run([sys.executable, "-m", "benchmarks.bench.cli", *map(str, args)], capture_output=True, text=True,
-                          timeout=timeout, cwd=ROOT, env=env)
 
 
 def rows(out, cols="agent, episode, outcome, error_kind, error"):
@@ -104,26 +96,25 @@ def test_pool_reraises_a_task_exception_with_the_worker_traceback():
 
 
 # ------------------------------------------------------------------ rmm-bench: a dead worker
-def test_bench_records_a_dead_worker_and_resume_retries_it(tmp_path, monkeypatch):
+def test_bench_records_a_dead_worker_and_resume_retries_it(tmp_path, monkeypatch, capsys):
     out = tmp_path / "dead"
-    env = dict(os.environ, RMM_TEST_EXIT_MARKER=str(tmp_path / "exited"))
-    cmd = ["--agent", "tests.bench_helpers:ExitOnce", "--episodes", 3, "--workers", 2, "--out", out, *FAST]
-    first = bench(*cmd, env=env)
-    assert first.returncode == 1, first.stderr
-    last = first.stderr.strip().splitlines()[-1]
+    monkeypatch.setenv("RMM_TEST_EXIT_MARKER", str(tmp_path / "exited"))  # read by the spawned workers
+    cmd = ["--agent", "tests.bench_helpers:ExitOnce", "--episodes", 2, "--workers", 2, "--out", out, *FAST]
+    assert within(120, lambda: main([str(c) for c in cmd])) == 1
+    first = capsys.readouterr()
+    last = first.err.strip().splitlines()[-1]
     assert "1 episodes ended without a result" in last and "rerun the same command" in last
-    assert "INCOMPLETE: episodes with a result: tests.bench_helpers:ExitOnce 2 of 3" in first.stdout
+    assert "INCOMPLETE: episodes with a result: tests.bench_helpers:ExitOnce 1 of 2" in first.out
     (lost,) = [r for r in rows(out) if r[2] == "error"]
     assert lost[3] == "lost_worker" and "exited with code 3" in lost[4]
     assert invocations(out)[-1][1] == "failed"
 
     # the marker exists now: the guardian behaves; one episode to run, so in this process
-    monkeypatch.setenv("RMM_TEST_EXIT_MARKER", str(tmp_path / "exited"))
     assert main([str(c) for c in cmd] + ["--resume"]) == 0
     assert "error" not in [r[2] for r in rows(out)]
     assert [r[1] for r in invocations(out)] == ["failed", "finished"]
     ref = tmp_path / "ref"
-    assert main(["--agent", "inactive", "--episodes", "3", "--workers", "1", "--out", str(ref), *FAST]) == 0
+    assert main(["--agent", "inactive", "--episodes", "2", "--workers", "1", "--out", str(ref), *FAST]) == 0
     assert rows(out, "episode, seed, outcome, steps, sim_time") == rows(ref, "episode, seed, outcome, steps, sim_time")
 
 

@@ -5,6 +5,7 @@
     rmm-bench --agent lrmm,cbf --clock fixed:2             # reproducible: every decision takes 2 ms
     rmm-bench --agent mypkg.guard:MyGuardian               # a third-party guardian
     rmm-bench report results/                              # rebuild the last run's table from the database
+    rmm-bench --agent lrmm --episodes 2048 --retry-errors  # after fixing a guardian: rerun its error episodes
     rmm-bench sweep --agent lrmm,cbf --latency 0,1,5,20,50 # collision rate against decision latency
 
 Results go to ``--out`` (default ``results/``): ``results.db`` (SQLite: every episode and run),
