@@ -22,8 +22,9 @@ Failures.  Every option is checked before any episode runs, including building t
 each guardian with its ``--agent-opt`` values: a bad one exits with status 2 and one line
 naming the flag.  While running, an episode whose guardian raises is stored as that
 guardian's error (a result: the Errors column; ``--retry-errors`` runs them again).  An
-episode over ``--episode-timeout`` (default 600 s, generous: the slowest built-in guardian's
-episodes take seconds) or whose worker process died (out of memory, a crash, a guardian
+episode over ``--episode-timeout`` (default 600 s: generous, as a worker's first episode also
+pays for imports and, for ``hj``, a value-function solve of tens of seconds before it is
+cached) or whose worker process died (out of memory, a crash, a guardian
 calling ``os._exit``) is a failure of the run, not a result: it is stored with its cause, a
 fresh worker takes over, and any rerun retries it.  After ``max(4, 2 x workers)`` episodes in
 a row lost their worker the run stops (a cause that kills every worker, such as too little
