@@ -273,3 +273,23 @@ def test_ray_backend_same_results_and_a_lost_task_is_reported(tmp_path):
     assert main(["--agent", "lrmm,brakes", "--episodes", "4", "--workers", "1", "--out", str(tmp_path / "local"), *FAST]) == 0
     cols = "agent, episode, seed, outcome, steps, sim_time, active_sim_time"
     assert rows(tmp_path / "ray", cols) == rows(tmp_path / "local", cols)
+
+
+# ------------------------------------------------------------------ rmm-bench: how an invocation ends
+@pytest.mark.parametrize("exc, code, status", [(KeyboardInterrupt(), 130, "interrupted"), (ZeroDivisionError("bug"), None, "failed")])
+def test_an_invocation_never_stays_running(tmp_path, monkeypatch, exc, code, status):
+    import benchmarks.bench.cli as cli
+
+    def broken(*a, **k):
+        raise exc
+
+    monkeypatch.setattr(cli, "execute", broken)
+    out = tmp_path / "i"
+    argv = ["--agent", "inactive", "--episodes", "1", "--workers", "1", "--out", str(out), *FAST]
+    if code is None:
+        with pytest.raises(type(exc)):
+            main(argv)
+    else:
+        assert main(argv) == code
+    ((_, got, message),) = invocations(out)
+    assert got == status and message
