@@ -25,3 +25,67 @@ class Sleepy(Guardian):
     def act(self, obs, info):
         time.sleep(0.05)
         return inactive_action()
+
+
+# ---------------------------------------------------------------- fault drills (tests/test_faults.py)
+import os  # noqa: E402
+import signal  # noqa: E402
+
+
+def faulty_task(task):
+    """A task for the worker pools: ``("exit", n)`` calls ``os._exit(n)``, ``("kill",)`` SIGKILLs its
+    own process, ``("hang", s)`` sleeps with SIGALRM blocked, ``("raise",)`` raises; else squares."""
+    kind = task[0]
+    if kind == "exit":
+        os._exit(task[1])
+    if kind == "kill":
+        os.kill(os.getpid(), signal.SIGKILL)
+    if kind == "hang":
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGALRM})
+        time.sleep(task[1])
+    if kind == "raise":
+        raise KeyError("task raised on purpose")
+    return task[1] ** 2
+
+
+class ExitOnce(Guardian):
+    """Kills its worker process with ``os._exit(3)`` in the first ``act`` of the run: the first
+    episode to get here creates the marker file named by ``RMM_TEST_EXIT_MARKER``."""
+
+    name = "exit-once"
+
+    def act(self, obs, info):
+        import multiprocessing
+
+        marker = os.environ["RMM_TEST_EXIT_MARKER"]
+        if multiprocessing.parent_process() is None:  # never kill the test process itself
+            return inactive_action()
+        try:
+            fd = os.open(marker, os.O_CREAT | os.O_EXCL)
+        except FileExistsError:
+            return inactive_action()
+        os.close(fd)
+        os._exit(3)
+
+
+class StatsBoom(Guardian):
+    """Acts like ``inactive``; its ``stats()`` raises."""
+
+    name = "stats-boom"
+
+    def act(self, obs, info):
+        return inactive_action()
+
+    def stats(self):
+        raise ZeroDivisionError("stats exploded")
+
+
+def dying_shard_job(job):
+    """``rmm_envs.risk.datagen._shard_job`` whose worker dies (``os._exit(3)``) on shard 1."""
+    import multiprocessing
+
+    from rmm_envs.risk import datagen
+
+    if job[2] == 1 and multiprocessing.parent_process() is not None:
+        os._exit(3)
+    return datagen._shard_task(*job)

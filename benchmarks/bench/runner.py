@@ -5,8 +5,12 @@ the same configurations; the original drew seeds unseeded, with repeats).  The g
 ``reset`` (e.g. an HJ solve) is timed as ``precompute_time`` and, as in the paper's reported
 HJ row, not charged to the episode's clock unless ``charge_precompute`` is set.
 
-A guardian that raises, or an episode exceeding ``episode_timeout`` seconds of wall time,
-ends that episode with outcome ``error`` and the message; the run goes on.
+A guardian that raises (in ``reset``, ``act`` or ``stats``, or with ``sys.exit``), or an
+episode exceeding ``episode_timeout`` seconds of wall time, ends that episode with outcome
+``error``, the message and its kind (``guardian`` or ``timeout``, see the store); the run goes
+on.  The time limit is a ``SIGALRM`` timer in the worker, so it interrupts Python code; a
+call stuck in compiled code is ended by the parent, which kills the worker after
+:func:`hard_timeout` seconds and records the episode as ``lost_worker``.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ import traceback
 
 import numpy as np
 
-__all__ = ["EpisodeTimeout", "episode_seed", "run_episode", "run_key"]
+__all__ = ["EpisodeTimeout", "episode_seed", "hard_timeout", "lost_episode", "run_episode", "run_key"]
 
 _SEED_DOMAIN = 0xBE7C  # keeps episode seeds apart from rmm-datagen's configuration seeds
 
@@ -37,6 +41,19 @@ def run_key(config: dict) -> str:
 
 class EpisodeTimeout(Exception):
     pass
+
+
+def hard_timeout(episode_timeout: float) -> float:
+    """Seconds after which the parent kills a worker that has not returned its episode: the
+    episode's own limit, plus a quarter and 30 s, so the in-worker timer always fires first
+    when it can."""
+    return 1.25 * float(episode_timeout) + 30.0
+
+
+def lost_episode(task: dict, cause: str) -> dict:
+    """The store's row for an episode whose worker died: an ``error`` of kind ``lost_worker``."""
+    return {"run_key": task["run_key"], "episode": task["episode"], "agent": task["agent"], "seed": task["seed"],
+            "outcome": "error", "error_kind": "lost_worker", "error": f"lost: {cause}"[:2000], "finished": time.time()}
 
 
 def _alarm(signum, frame):
@@ -115,8 +132,9 @@ def run_episode(task: dict) -> dict:
             compute_time=ep["cum_compute_time"], avg_compute_time=ep["avg_compute_time"],
             final_speed=ep["final_speed"], cum_reward=ep["cum_reward"],
         )
-    except Exception as e:  # recorded, the run goes on
+    except (Exception, SystemExit) as e:  # recorded, the run goes on
         row["outcome"] = "error"
+        row["error_kind"] = "timeout" if isinstance(e, EpisodeTimeout) else "guardian"
         row["error"] = f"{type(e).__name__}: {e}"[:500] + ("" if isinstance(e, EpisodeTimeout) else "\n" + traceback.format_exc(limit=3)[-1500:])
         _CACHE.pop(("guardian", task["agent"], json.dumps(task["agent_kwargs"], sort_keys=True)), None)
     finally:
@@ -128,10 +146,17 @@ def run_episode(task: dict) -> dict:
         row["decision_mean"] = statistics.fmean(decisions)
         row["decision_std"] = statistics.pstdev(decisions) if len(decisions) > 1 else 0.0
         row["decision_max"] = max(decisions)
-    stats = guardian.stats() if guardian is not None and hasattr(guardian, "stats") else {}
-    row["qp_fallbacks"] = int(stats.get("qp_fallbacks", 0))
-    row["nan_states"] = int(stats.get("nan_states", 0))
-    row["guardian_stats"] = json.dumps({k: v for k, v in stats.items() if isinstance(v, (int, float)) and math.isfinite(v)})
+    try:  # a guardian's stats() failing is its error, like act() failing
+        stats = guardian.stats() if guardian is not None and hasattr(guardian, "stats") else {}
+        row["qp_fallbacks"] = int(stats.get("qp_fallbacks", 0))
+        row["nan_states"] = int(stats.get("nan_states", 0))
+        row["guardian_stats"] = json.dumps({k: v for k, v in stats.items() if isinstance(v, (int, float)) and math.isfinite(v)})
+    except (Exception, SystemExit) as e:
+        if row["outcome"] != "error":
+            row["outcome"], row["error_kind"], row["error"] = "error", "guardian", ""
+        row["error"] = (f"{task['agent']}.stats() raised {type(e).__name__}: {e}"[:500] + "\n" + traceback.format_exc(limit=3)[-1500:]
+                        + ("\n" + row["error"] if row["error"] else ""))
+        _CACHE.pop(("guardian", task["agent"], json.dumps(task["agent_kwargs"], sort_keys=True)), None)
     row["wall_time"] = time.perf_counter() - t_start
     row["finished"] = time.time()
     return row

@@ -4,22 +4,43 @@ Tables:
 
 * ``runs``: one row per (agent, configuration): ``run_key`` (a hash of everything that
   determines an episode's result except the episode index), the agent, the full
-  configuration and provenance (package version, git revision, command line, Python).
-* ``episodes``: one row per finished episode, keyed by ``(run_key, episode)``, committed as
-  soon as it ends (WAL journal), so killing a run loses at most the episodes in flight and a
-  rerun skips what is stored.
-* ``invocations``: each ``rmm-bench`` command: its arguments, run keys and episode count, so
-  ``rmm-bench report DIR`` can rebuild exactly that command's table.
+  configuration and provenance (package version, git revision, command line, Python, and the
+  guardian's observation type and the env's obstacle count, which ``report`` prints without
+  importing anything named in the database).
+* ``episodes``: one row per episode, keyed by ``(run_key, episode)``, committed as soon as it
+  ends (WAL journal), so killing a run loses at most the episodes in flight and a rerun skips
+  what is stored.  An episode that failed has outcome ``error``, the message in ``error`` and
+  its kind in ``error_kind``:
+
+  - ``guardian``: the guardian raised (in ``reset``, ``act`` or ``stats``) or returned an
+    action the env refused.  A result about the guardian: kept by a rerun, retried only with
+    ``--retry-errors``.
+  - ``timeout`` (over ``--episode-timeout``) and ``lost_worker`` (the worker process died or
+    was killed): failures of the run, not results.  Every rerun retries them, replacing the row.
+
+* ``invocations``: each ``rmm-bench`` command: its arguments, run keys, episode count, the
+  process id and host that ran it, and its status: ``running`` while it runs, then
+  ``finished`` (every requested episode has a result), ``interrupted`` (Ctrl-C, or found
+  dead: a ``running`` invocation whose process no longer exists on this host was killed) or
+  ``failed`` (stopped on an error, or episodes left without a result; ``message`` says why).
+  ``rmm-bench report DIR`` rebuilds exactly one command's table from it.
+
+A damaged file is reported as :class:`ResultsDatabaseError` naming the file and what to do
+(move it aside and rerun), never as a raw SQLite traceback; the whole file is checked
+(``PRAGMA quick_check``, milliseconds for a full Table I run) when it is opened.
 """
 
 from __future__ import annotations
 
+import functools
 import json
+import os
+import socket
 import sqlite3
 import time
 from pathlib import Path
 
-__all__ = ["EPISODE_FIELDS", "ResultsStore"]
+__all__ = ["EPISODE_FIELDS", "RETRIED_ERRORS", "ResultsDatabaseError", "ResultsStore"]
 
 EPISODE_FIELDS = {
     "run_key": "TEXT NOT NULL",
@@ -45,16 +66,70 @@ EPISODE_FIELDS = {
     "error": "TEXT",
     "wall_time": "REAL",
     "finished": "REAL",
+    "error_kind": "TEXT",  # guardian / timeout / lost_worker (NULL unless outcome is error)
 }
+
+# error kinds that are failures of the run rather than results: every rerun retries them
+RETRIED_ERRORS = ("timeout", "lost_worker")
+
+_INVOCATION_COLUMNS = {"pid": "INTEGER", "host": "TEXT", "updated": "REAL", "message": "TEXT"}
+
+
+class ResultsDatabaseError(RuntimeError):
+    """``results.db`` cannot be read (damaged, not a database, locked)."""
+
+
+def _guarded(method):
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except sqlite3.DatabaseError as e:
+            raise self._error(e) from None
+
+    return wrapper
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, another user's
+        return True
+    return True
 
 
 class ResultsStore:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.db = sqlite3.connect(str(self.path), timeout=30)
-        self.db.execute("PRAGMA journal_mode=WAL")
-        self.db.execute("PRAGMA synchronous=NORMAL")
+        self.db = None
+        try:
+            self.db = sqlite3.connect(str(self.path), timeout=30)
+            self.db.execute("PRAGMA journal_mode=WAL")
+            self.db.execute("PRAGMA synchronous=NORMAL")
+            problems = [r[0] for r in self.db.execute("PRAGMA quick_check(5)")]
+            if problems != ["ok"]:
+                raise sqlite3.DatabaseError("; ".join(problems)[:300])
+            self._create()
+        except sqlite3.DatabaseError as e:
+            if self.db is not None:
+                self.db.close()
+            raise self._error(e) from None
+
+    def _error(self, e: sqlite3.DatabaseError) -> ResultsDatabaseError:
+        text = str(e).replace("\n", " ")
+        if "full" in text:
+            return ResultsDatabaseError(f"cannot write {self.path} ({text}); free disk space and rerun the same command: "
+                                        "stored episodes are kept")
+        if "locked" in text or "busy" in text:
+            return ResultsDatabaseError(f"{self.path} is locked by another process ({text}); wait for the other "
+                                        "rmm-bench command to finish, or use another --out")
+        return ResultsDatabaseError(f"{self.path} is damaged or not a results database ({text}); move it aside "
+                                    f"(mv {self.path} {self.path}.damaged) and rerun: the run starts afresh")
+
+    def _create(self) -> None:
         cols = ", ".join(f"{k} {v}" for k, v in EPISODE_FIELDS.items())
         self.db.executescript(f"""
             CREATE TABLE IF NOT EXISTS runs (run_key TEXT PRIMARY KEY, agent TEXT NOT NULL, created REAL,
@@ -63,33 +138,60 @@ class ResultsStore:
             CREATE TABLE IF NOT EXISTS invocations (id INTEGER PRIMARY KEY AUTOINCREMENT, created REAL,
                 kind TEXT, args TEXT, run_keys TEXT, episodes INTEGER, status TEXT);
         """)
+        # databases written before error kinds and invocation bookkeeping existed
+        have = {r[1] for r in self.db.execute("PRAGMA table_info(episodes)")}
+        if "error_kind" not in have:
+            self.db.execute("ALTER TABLE episodes ADD COLUMN error_kind TEXT")
+            self.db.execute("UPDATE episodes SET error_kind = CASE WHEN error LIKE 'EpisodeTimeout%' THEN 'timeout' "
+                            "ELSE 'guardian' END WHERE outcome = 'error'")
+        have = {r[1] for r in self.db.execute("PRAGMA table_info(invocations)")}
+        for name, kind in _INVOCATION_COLUMNS.items():
+            if name not in have:
+                self.db.execute(f"ALTER TABLE invocations ADD COLUMN {name} {kind}")
+        self.db.execute("UPDATE invocations SET status = 'finished' WHERE status = 'done'")
         self.db.commit()
 
     def close(self) -> None:
         self.db.close()
 
     # runs
+    @_guarded
     def ensure_run(self, run_key: str, agent: str, config: dict, provenance: dict) -> None:
         self.db.execute("INSERT OR IGNORE INTO runs VALUES (?, ?, ?, ?, ?)",
                         (run_key, agent, time.time(), json.dumps(config, sort_keys=True), json.dumps(provenance, sort_keys=True)))
         self.db.commit()
 
+    @_guarded
     def run_config(self, run_key: str) -> dict:
         row = self.db.execute("SELECT config, provenance, agent FROM runs WHERE run_key = ?", (run_key,)).fetchone()
         if row is None:
-            raise KeyError(run_key)
+            raise LookupError(f"run {run_key} is not recorded in {self.path}")
         return {"config": json.loads(row[0]), "provenance": json.loads(row[1]), "agent": row[2]}
 
     # episodes
-    def done_episodes(self, run_key: str) -> set[int]:
-        return {r[0] for r in self.db.execute("SELECT episode FROM episodes WHERE run_key = ?", (run_key,))}
+    @_guarded
+    def done_episodes(self, run_key: str, retry_errors: bool = False) -> set[int]:
+        """Episodes a rerun skips: all stored ones but the retried failures (and guardian errors if ``retry_errors``)."""
+        q = "SELECT episode FROM episodes WHERE run_key = ? AND "
+        if retry_errors:
+            q += "outcome != 'error'"
+        else:
+            q += f"NOT (outcome = 'error' AND COALESCE(error_kind, 'guardian') IN ({', '.join('?' * len(RETRIED_ERRORS))}))"
+        return {r[0] for r in self.db.execute(q, (run_key,) + (() if retry_errors else RETRIED_ERRORS))}
 
-    def add_episode(self, row: dict) -> None:
+    @_guarded
+    def add_episode(self, row: dict, invocation: int | None = None) -> None:
+        """Store an episode; it replaces a stored row only if that row is an error (a retry)."""
         keys = list(EPISODE_FIELDS)
         vals = [row.get(k) for k in keys]
-        self.db.execute(f"INSERT OR IGNORE INTO episodes ({', '.join(keys)}) VALUES ({', '.join('?' * len(keys))})", vals)
+        update = ", ".join(f"{k} = excluded.{k}" for k in keys if k not in ("run_key", "episode"))
+        self.db.execute(f"INSERT INTO episodes ({', '.join(keys)}) VALUES ({', '.join('?' * len(keys))}) "
+                        f"ON CONFLICT (run_key, episode) DO UPDATE SET {update} WHERE episodes.outcome = 'error'", vals)
+        if invocation is not None:
+            self.db.execute("UPDATE invocations SET updated = ? WHERE id = ?", (time.time(), invocation))
         self.db.commit()
 
+    @_guarded
     def episodes(self, run_key: str, n: int | None = None) -> list[dict]:
         q = "SELECT * FROM episodes WHERE run_key = ?" + (" AND episode < ?" if n is not None else "") + " ORDER BY episode"
         cur = self.db.execute(q, (run_key, n) if n is not None else (run_key,))
@@ -97,18 +199,42 @@ class ResultsStore:
         return [dict(zip(names, r)) for r in cur.fetchall()]
 
     # invocations
+    @_guarded
     def add_invocation(self, kind: str, args: dict, run_keys: dict, episodes: int) -> int:
-        cur = self.db.execute("INSERT INTO invocations (created, kind, args, run_keys, episodes, status) VALUES (?, ?, ?, ?, ?, ?)",
-                              (time.time(), kind, json.dumps(args, sort_keys=True), json.dumps(run_keys), episodes, "running"))
+        now = time.time()
+        cur = self.db.execute("INSERT INTO invocations (created, kind, args, run_keys, episodes, status, pid, host, updated) "
+                              "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                              (now, kind, json.dumps(args, sort_keys=True), json.dumps(run_keys), episodes, "running",
+                               os.getpid(), socket.gethostname(), now))
         self.db.commit()
         return int(cur.lastrowid)
 
-    def finish_invocation(self, inv_id: int, status: str = "done") -> None:
-        self.db.execute("UPDATE invocations SET status = ? WHERE id = ?", (status, inv_id))
+    @_guarded
+    def finish_invocation(self, inv_id: int, status: str = "finished", message: str | None = None) -> None:
+        if status not in ("finished", "interrupted", "failed"):
+            raise ValueError(f"invocation status must be finished, interrupted or failed, got {status!r}")
+        self.db.execute("UPDATE invocations SET status = ?, message = ?, updated = ? WHERE id = ?",
+                        (status, message, time.time(), inv_id))
         self.db.commit()
 
+    def _stale(self, status: str, pid, host) -> bool:
+        return status == "running" and pid is not None and host == socket.gethostname() and not _pid_alive(int(pid))
+
+    @_guarded
+    def mark_stale_invocations(self) -> int:
+        """Mark ``running`` invocations whose process is gone from this host as ``interrupted``; returns how many."""
+        rows = self.db.execute("SELECT id, pid, host, status FROM invocations WHERE status = 'running'").fetchall()
+        stale = [r for r in rows if self._stale(r[3], r[1], r[2])]
+        for inv_id, pid, _, _ in stale:
+            self.db.execute("UPDATE invocations SET status = 'interrupted', message = ? WHERE id = ?",
+                            (f"its process {pid} ended without recording an end (killed)", inv_id))
+        self.db.commit()
+        return len(stale)
+
+    @_guarded
     def invocation(self, inv_id: int | None = None, kind: str | None = None) -> dict:
-        q = "SELECT id, created, kind, args, run_keys, episodes, status FROM invocations"
+        """One invocation; ``state`` is its status, or ``stale`` for a ``running`` one whose process is gone."""
+        q = "SELECT id, created, kind, args, run_keys, episodes, status, pid, host, updated, message FROM invocations"
         params: tuple = ()
         if inv_id is not None:
             q += " WHERE id = ?"
@@ -120,5 +246,8 @@ class ResultsStore:
         row = self.db.execute(q, params).fetchone()
         if row is None:
             raise LookupError(f"no {'invocation ' + str(inv_id) if inv_id else (kind or 'benchmark') + ' run'} recorded in {self.path}")
-        return {"id": row[0], "created": row[1], "kind": row[2], "args": json.loads(row[3]),
-                "run_keys": json.loads(row[4]), "episodes": row[5], "status": row[6]}
+        inv = {"id": row[0], "created": row[1], "kind": row[2], "args": json.loads(row[3]),
+               "run_keys": json.loads(row[4]), "episodes": row[5], "status": row[6], "pid": row[7], "host": row[8],
+               "updated": row[9], "message": row[10]}
+        inv["state"] = "stale" if self._stale(inv["status"], inv["pid"], inv["host"]) else inv["status"]
+        return inv

@@ -389,29 +389,69 @@ def generate(cfg: DatagenConfig, out: str | os.PathLike, workers: int | None = N
 
 
 def _shard_job(job):
+    """Worker entry for :func:`rmm_envs.parallel.run_local` / ``run_ray``: ``job`` is ``(config dict, out or None, shard)``."""
     return _shard_task(*job)
 
 
-def _run_local(cfg: DatagenConfig, out: Path, todo: list[int], workers: int | None, bar) -> int:
-    from rmm_envs.parallel import run_local
+# Stop after this many shards in a row lost their worker with none finishing: a cause that
+# kills every worker (too little memory for one shard) then ends the run instead of starting
+# a fresh worker for every remaining shard.
+_MAX_LOST_IN_A_ROW = 3
 
+
+def _lost_shards_error(lost: list, todo: list[int], out: Path, stopped: str | None = None) -> RuntimeError:
+    what = "; ".join(f"shard {shard} ({cause})" for shard, cause in lost[:5]) + (f"; and {len(lost) - 5} more" if len(lost) > 5 else "")
+    head = f"{stopped}; " if stopped else ""
+    return RuntimeError(f"{head}{len(lost)} of {len(todo)} shards to compute were lost: {what}. The finished shards are saved "
+                        f"in {out}; rerun the same command to compute the missing ones (fewer --workers if memory ran out)")
+
+
+def _run_local(cfg: DatagenConfig, out: Path, todo: list[int], workers: int | None, bar) -> int:
+    """Label the ``todo`` shards on local processes; a shard whose worker dies is reported, the rest finish."""
+    from rmm_envs.parallel import TaskLost, WorkersLost, run_local
+
+    if workers is None:
+        workers = os.cpu_count() or 1
+    if int(workers) != workers or workers < 1:
+        raise ValueError(f"--workers must be an integer >= 1, got {workers}")
     rows = 0
+    lost: list = []
     jobs = [(asdict(cfg), str(out), s) for s in todo]
-    for shard, n, _, _ in run_local(_shard_job, jobs, workers or os.cpu_count() or 1):
-        rows += n
-        bar.update(len(cfg.shard_configs(shard)))
+    try:
+        for res in run_local(_shard_job, jobs, workers, max_lost_in_a_row=_MAX_LOST_IN_A_ROW):
+            if isinstance(res, TaskLost):
+                lost.append((res.task[2], res.cause))
+                continue
+            shard, n, _, _ = res
+            rows += n
+            bar.update(len(cfg.shard_configs(shard)))
+    except WorkersLost as e:
+        raise _lost_shards_error(lost, todo, out, str(e)) from None
+    if lost:
+        raise _lost_shards_error(lost, todo, out)
     return rows
 
 
 def _run_ray(cfg: DatagenConfig, out: Path, todo: list[int], address: str | None, bar) -> int:
-    from rmm_envs.parallel import run_ray
+    """Label the ``todo`` shards as Ray tasks and write them here; a shard Ray loses is reported."""
+    from rmm_envs.parallel import TaskLost, WorkersLost, run_ray
 
     rows = 0
+    lost: list = []
     jobs = [(asdict(cfg), None, s) for s in todo]
-    for shard, n, _, payload in run_ray(_shard_job, jobs, address):
-        _write_table(_shard_path(out, shard), pa.ipc.open_stream(payload).read_all())
-        rows += n
-        bar.update(len(cfg.shard_configs(shard)))
+    try:
+        for res in run_ray(_shard_job, jobs, address, max_lost_in_a_row=_MAX_LOST_IN_A_ROW):
+            if isinstance(res, TaskLost):
+                lost.append((res.task[2], res.cause))
+                continue
+            shard, n, _, payload = res
+            _write_table(_shard_path(out, shard), pa.ipc.open_stream(payload).read_all())
+            rows += n
+            bar.update(len(cfg.shard_configs(shard)))
+    except WorkersLost as e:
+        raise _lost_shards_error(lost, todo, out, str(e)) from None
+    if lost:
+        raise _lost_shards_error(lost, todo, out)
     return rows
 
 
