@@ -151,13 +151,6 @@ def test_agent_options_reach_the_guardian(tmp_path):
     assert all(a == s for a, s in con.execute("SELECT active_steps, steps - 1 FROM episodes"))  # all but the driver's first lap
 
 
-def test_same_results_whatever_the_worker_count(tmp_path):
-    a, b = tmp_path / "a", tmp_path / "b"
-    assert main(["--agent", "lrmm,random", "--episodes", "8", "--workers", "1", "--out", str(a), *FAST]) == 0
-    assert main(["--agent", "lrmm,random", "--episodes", "8", "--workers", "2", "--out", str(b), *FAST]) == 0
-    assert _db_rows(a) == _db_rows(b)
-
-
 def test_resume_after_kill_minus_nine(tmp_path, capsys):
     out = tmp_path / "k"
     cmd = [sys.executable, "-m", "benchmarks.bench.cli", "--agent", "inactive", "--episodes", "40", "--workers", "1", "--out", str(out), *FAST]
