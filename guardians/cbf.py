@@ -312,8 +312,9 @@ class CBFGuardian(Guardian):
         return s
 
     # ------------------------------------------------------------------ recovery
-    def recovery_control(self, state, i: int, lap: float | None = None) -> np.ndarray:
-        """The backup manoeuvre about obstacle ``i`` at ``state`` (module docstring): ``(u1, u2)``."""
+    def recovery_control(self, state, i: int, lap: float | None = None, side: float | None = None) -> np.ndarray:
+        """The backup manoeuvre about obstacle ``i`` at ``state`` (module docstring): ``(u1, u2)``.
+        ``side`` (+1: counter-clockwise tangent, -1: clockwise) overrides the choice of tangent."""
         x, y, th, v = (float(s) for s in state[:4])
         ox, oy = self.obstacles[i, :2]
         R = float(self.radii[i])
@@ -326,16 +327,23 @@ class CBFGuardian(Guardian):
         c, s = math.cos(th), math.sin(th)
         hn = c * nx + s * ny  # outward component of the heading
         tx, ty = -ny, nx  # the counter-clockwise tangent
-        if v > self.v_stuck:
+        if side is not None:
+            pass
+        elif v > self.v_stuck:
             side = 1.0 if c * tx + s * ty >= 0 else -1.0
         else:
             gx, gy = self.goal[0] - x, self.goal[1] - y
             side = 1.0 if gx * tx + gy * ty >= 0 else -1.0
         tx, ty = side * tx, side * ty
+        self._last_side = side
         b = dx * dx + dy * dy - R * R
         if b < 0:
             tx, ty = tx + nx, ty + ny
         err = (math.atan2(ty, tx) - th + math.pi) % (2.0 * math.pi) - math.pi
+        if hn < 0:  # turn the way that rotates the heading away from the centre, never through it
+            away = ny * c - nx * s  # sin(normal angle - heading angle): > 0 turn left
+            if away * err < 0:
+                err += math.copysign(2.0 * math.pi, away)
         lap = self._lap if lap is None else lap
         u1 = min(max(err / lap, self.u1_min), self.u1_max)
         if hn < 0 and abs(err) > self.u1_max * lap:
@@ -386,15 +394,26 @@ class CBFGuardian(Guardian):
         if self._recovering is None:
             self._counts["recovery_entries"] += 1
             self._recovering = self.critical_obstacle(state)
+            self._side = None
+            self._flips = 0
         self._counts["recoveries"] += 1
-        u = self.recovery_control(state, self._recovering)
+        u = self.recovery_control(state, self._recovering, side=self._side)
+        self._side = self._last_side  # keep going round the same way
         if abs(u[0]) * self._lap < 1e-3 and state[3] + u[1] * self._lap <= self.v_stuck:
-            # stalled (stopped, facing the target, blocked by another obstacle's row):
-            # recover from the obstacle that now blocks instead
-            j = self.critical_obstacle(state)
-            if j != self._recovering:
-                self._recovering = j
-                u = self.recovery_control(state, j)
+            # stalled: stopped, facing the target and blocked by another obstacle's row (two
+            # overlapping obstacles form a notch).  Go round the other way; if that is blocked
+            # too, recover from the obstacle that now blocks.
+            if self._flips == 0:
+                self._flips = 1
+                self._side = -self._side
+            else:
+                self._recovering = self.critical_obstacle(state)
+                self._side = None
+                self._flips = 0
+            u = self.recovery_control(state, self._recovering, side=self._side)
+            self._side = self._last_side
+        elif state[3] > self.v_stuck:
+            self._flips = 0
         return u
 
     # ------------------------------------------------------------------ decision
@@ -420,6 +439,10 @@ class CBFGuardian(Guardian):
                 self._lap = t - self._last_time
             self._last_time = t
             state = self.predict(state, self._pending, self._lap)
+        return self._decide(state)
+
+    def _decide(self, state):
+        """The decision for the state the action will act from (already predicted)."""
         if self.low_speed_stop and state[3] < 0.05:
             return self._emit(0.0, self.u2_min)
         if self.K == 0:
