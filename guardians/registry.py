@@ -22,6 +22,7 @@ ENTRY_POINT_GROUP = "rmm_envs.guardians"
 BUILTIN = {
     "lrmm": "guardians.lrmm.guardian:LRMMGuardian",
     "cbf": "guardians.cbf:CBFGuardian",
+    "cbf-paper": "guardians.cbf:CBFPaperGuardian",
     "hj": "guardians.hj.guardian:HJGuardian",
     "random": "guardians.baselines:RandomGuardian",
     "inactive": "guardians.baselines:InactiveGuardian",
