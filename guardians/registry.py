@@ -1,9 +1,12 @@
 """Guardian registry: names to guardians.
 
-Built in: ``lrmm``, ``cbf``, ``hj``, ``random``, ``inactive``, ``brakes`` (those whose module
-is not present yet are listed as unavailable).  Third-party guardians register through the
-entry-point group ``rmm_envs.guardians`` (``name = "package.module:Class"``) or are named
-directly as ``module:Class``.
+Built in: ``lrmm``, ``cbf``, ``hj`` (the best defaults this project can justify, each
+explained in its module docstring), ``lrmm-paper``, ``cbf-paper``, ``hj-paper`` (the paper's
+rules, exactly, for reproduction), and the baselines ``random``, ``inactive``, ``brakes``.
+Two named sets: ``all`` (:data:`DEFAULT_SET`, what ``rmm-bench --agent all`` runs) and
+``paper`` (:data:`PAPER_SET`, the paper's Table I agents with the paper's rules).
+Third-party guardians register through the entry-point group ``rmm_envs.guardians``
+(``name = "package.module:Class"``) or are named directly as ``module:Class``.
 """
 
 from __future__ import annotations
@@ -15,7 +18,8 @@ from typing import Any
 
 from guardians.base import Guardian
 
-__all__ = ["ENTRY_POINT_GROUP", "available_guardians", "load_guardian_class", "make_guardian"]
+__all__ = ["DEFAULT_SET", "ENTRY_POINT_GROUP", "PAPER_SET", "available_guardians", "guardian_set", "load_guardian_class",
+           "make_guardian"]
 
 ENTRY_POINT_GROUP = "rmm_envs.guardians"
 
@@ -28,6 +32,21 @@ BUILTIN = {
     "inactive": "guardians.baselines:InactiveGuardian",
     "brakes": "guardians.baselines:BrakesGuardian",
 }
+
+#: The suite's guardians at their defaults: ``rmm-bench --agent all``.
+DEFAULT_SET = ("lrmm", "cbf", "hj", "random", "inactive", "brakes")
+#: The paper's Table I agents with the paper's rules: ``rmm-bench --agent paper``.
+PAPER_SET = ("lrmm-paper", "cbf-paper", "hj-paper", "random", "inactive", "brakes")
+SETS = {"all": DEFAULT_SET, "paper": PAPER_SET}
+
+
+def guardian_set(name: str) -> list[str] | None:
+    """The available members of a named set (``"all"`` or ``"paper"``); None for other names."""
+    members = SETS.get(name.strip())
+    if members is None:
+        return None
+    available = set(available_guardians())
+    return [n for n in members if n in available]
 
 
 def _entry_points() -> dict[str, Any]:

@@ -1,7 +1,8 @@
 """``rmm-bench``: run guardians over seeded episodes and reproduce the paper's Table I.
 
     rmm-bench --agent lrmm --episodes 2048                 # run (the default command)
-    rmm-bench --agent all --episodes 64                    # every available guardian
+    rmm-bench --agent all --episodes 64                    # every guardian at its defaults
+    rmm-bench --agent paper --episodes 64                  # the paper's agents with the paper's rules
     rmm-bench --agent lrmm,cbf --clock fixed:2             # reproducible: every decision takes 2 ms
     rmm-bench --agent mypkg.guard:MyGuardian               # a third-party guardian
     rmm-bench report results/                              # rebuild the last run's table from the database
@@ -69,12 +70,14 @@ def _provenance(argv) -> dict:
 
 def _agents(spec: str) -> list[str]:
     from guardians import available_guardians
-    from guardians.registry import load_guardian_class
+    from guardians.registry import guardian_set, load_guardian_class
 
     available = available_guardians()
-    names = available if spec.strip() == "all" else [s.strip() for s in spec.split(",") if s.strip()]
+    names = guardian_set(spec)
+    if names is None:
+        names = [s.strip() for s in spec.split(",") if s.strip()]
     if not names:
-        raise ValueError(f"--agent is empty; choose from {available}, 'all' or 'module:Class'")
+        raise ValueError(f"--agent is empty; choose from {available}, 'all', 'paper' or 'module:Class'")
     for n in names:
         load_guardian_class(n)  # raises ValueError listing the valid names
     return names
@@ -286,7 +289,7 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
     plot_outcomes(rows, out / "outcomes.png")
     paper = format_tables([{"agent": a, "episodes": 2048, "errors": 0, "qp_fallbacks": 0, "precompute_s": (0, 0),
                             "obs": p["obs"], "n_obst": p["n_obst"], **{k: p[k] for k in ("compute_ms", "goal", "collision", "timeout", "intervention")}}
-                           for a, p in PAPER_TABLE_I.items() if a in run_keys])["md"]
+                           for a, p in PAPER_TABLE_I.items() if a in run_keys or f"{a}-paper" in run_keys])["md"]
     args = invs[-1]["args"]
     counts = sorted(set(episodes.values()))
     text = (f"Table I: {args.get('env')}, clock {args.get('clock')}, time accel {args.get('time_accel')}, seed {args.get('seed')}, "
@@ -415,7 +418,7 @@ def cmd_sweep(args, argv) -> int:
 
 
 def _common(p: argparse.ArgumentParser, default_agent: str) -> None:
-    p.add_argument("--agent", default=default_agent, help="guardian name, comma list, 'all', or module:Class (default: %(default)s)")
+    p.add_argument("--agent", default=default_agent, help="guardian name, comma list, 'all' (defaults), 'paper' (the paper's rules), or module:Class (default: %(default)s)")
     p.add_argument("--episodes", type=int, default=2048, help="episodes per agent (default: %(default)s)")
     p.add_argument("--env", default="Dubins4DParallel-v0", choices=ENVS, help="environment (default: %(default)s)")
     p.add_argument("--time-accel", type=float, default=10.0, help="sim seconds per clock second (default: %(default)s)")
