@@ -21,6 +21,7 @@ ENTRY_POINT_GROUP = "rmm_envs.guardians"
 
 BUILTIN = {
     "lrmm": "guardians.lrmm.guardian:LRMMGuardian",
+    "lrmm-paper": "guardians.lrmm.guardian:LRMMPaperGuardian",
     "cbf": "guardians.cbf:CBFGuardian",
     "hj": "guardians.hj.guardian:HJGuardian",
     "random": "guardians.baselines:RandomGuardian",
