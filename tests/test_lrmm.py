@@ -10,6 +10,14 @@ from guardians.lrmm.model import LRMMModel, default_model_path, load_model
 from guardians.lrmm.train import TrainConfig, main as train_main, split_by_config, train
 
 
+# The shipped lrmm model's stored defaults (threshold, commit, action): changing them must fail a test.
+SHIPPED_DECISION = (0.2, 18, "head")
+# The shipped act model on tests/fixtures/lrmm_heldout_d4.npz measured risk MAE 0.035, candidate
+# MAE 0.040, regret 0.005 (the picked candidate's labelled risk 0.133, the best 0.128, the best
+# fixed manoeuvre 0.174); bounds leave room for a retrained model of the same quality, not more.
+HELDOUT_BOUNDS = {"risk_mae": 0.045, "cand_mae": 0.05, "regret": 0.015}
+
+
 def quiet(*a):
     pass
 
@@ -314,7 +322,7 @@ def test_set_decision_round_trip_and_bad_values(tmp_path, head_model, trained):
     p = head_model.save(tmp_path / "h.npz")
     assert model_main(["set-decision", str(p), "--threshold", "0.4", "--commit", "7", "--chosen-by", "a test"]) == 0
     m = LRMMModel.load(p)
-    assert m.meta["decision"] == {"threshold": 0.4, "commit": 7, "chosen_by": "a test"}
+    assert m.meta["decision"] == {"threshold": 0.4, "commit": 7, "action": "head", "chosen_by": "a test"}
     np.testing.assert_array_equal(m.weights[0][0], head_model.weights[0][0])
     g = LRMMGuardian(p)
     assert (g.threshold, g.commit, g.action) == (0.4, 7, "head")
@@ -324,6 +332,10 @@ def test_set_decision_round_trip_and_bad_values(tmp_path, head_model, trained):
         set_decision(p, 0.5, -1, "x")
     with pytest.raises(ValueError, match="chosen_by"):
         set_decision(p, 0.5, 1, " ")
+    with pytest.raises(ValueError, match="action"):
+        set_decision(p, 0.5, 1, "x", action="steer")
+    set_decision(p, 0.6, 3, "another test", action="heuristic")
+    assert LRMMGuardian(p).action == "heuristic" and LRMMGuardian(p, action="head").action == "head"
     with pytest.raises(ValueError, match="candidates"):
         set_decision(trained.save(tmp_path / "old.npz"), 0.5, 1, "x")
 
@@ -450,3 +462,135 @@ def test_selected_epoch_is_the_best_on_validation(small_dataset):
     assert last.meta["training"]["val_mse_history"] == hist and last.meta["training"]["selected_epoch"] == 6
     assert last.meta["metrics"]["val"]["mse"] == pytest.approx(hist[-1], rel=1e-9)
     assert int(np.argmin(hist)) != 5, "pick a seed/lr whose last epoch is not the best, so the two differ"
+
+
+# ============================================================================ the decision rule, pinned
+def head_model_by_hand(risks_bias=(0.0, 1.0, -1.0, 2.0), decision=None):
+    """Outputs sigmoid(b_k + 0 * obs) with ray 0 driving unit 0: risk = sigmoid(b0 + 2 - ray0)."""
+    W0 = np.zeros((1, 17))
+    W0[0, 5] = -1.0
+    W1 = np.array([[1.0], [0.0], [0.0], [0.0]])
+    meta = {"env_id": "Dubins4DCircles-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1], "activation": "relu",
+            "output_bias": True, "candidates": [[-0.25, -0.5], [0.25, -0.5], [0.0, 0.5]], "candidate_hold": 1.0}
+    if decision:
+        meta["decision"] = decision
+    # hidden = relu(10 - ray0) >= 0 for rays <= 10; risk = sigmoid(h + b0 - 8)
+    return LRMMModel([(W0, np.array([10.0])), (W1, np.array(risks_bias) + np.array([-8.0, 0, 0, 0]))],
+                     np.zeros(17), np.ones(17), meta)
+
+
+def test_rule_is_strictly_above_the_threshold():
+    m = head_model_by_hand(decision={"threshold": 0.5, "commit": 0})
+    o = obs_with(2.0, 5.0, 5.0)  # hidden 8, risk = sigmoid(0) = 0.5 exactly
+    assert m.predict(o) == 0.5
+    g = LRMMGuardian(m)
+    g.reset(seed=0)
+    assert g.act(o, {})["active_ctrl"] == 0  # risk == threshold: the driver keeps control
+    just_below = np.nextafter(0.5, 0.0)
+    g2 = LRMMGuardian(m, threshold=just_below)
+    g2.reset(seed=0)
+    assert g2.act(o, {})["active_ctrl"] == 1  # the smallest step above the threshold: the guardian acts
+    paper = __import__("guardians.lrmm.guardian", fromlist=["x"]).LRMMPaperGuardian
+    for thr, expected in ((0.5, 0), (just_below, 1)):
+        p = paper(m, threshold=thr)
+        p.reset(seed=0)
+        assert p.act(o, {})["active_ctrl"] == expected
+
+
+def test_head_applies_the_lowest_risk_candidate_and_commits():
+    m = head_model_by_hand(risks_bias=(0.0, 1.0, -1.0, 2.0), decision={"threshold": 0.5, "commit": 2})
+    g = LRMMGuardian(m)
+    g.reset(seed=0)
+    a = g.act(obs_with(1.0, 5.0, 5.0), {})  # risk sigmoid(1) > 0.5; candidate risks sigmoid(1, -1, 2): the second
+    assert (a["active_ctrl"], a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (1, 0.25, -0.5)
+    low = obs_with(9.0, 5.0, 5.0)  # risk sigmoid(-7): released only after `commit` more steps
+    assert [g.act(low, {})["active_ctrl"] for _ in range(4)] == [1, 1, 0, 0]
+    g.reset(seed=0)  # reset clears the commitment
+    assert g.act(low, {})["active_ctrl"] == 0
+    tie = LRMMGuardian(head_model_by_hand(risks_bias=(5.0, 0.0, 0.0, 0.0), decision={"threshold": 0.5}))
+    tie.reset(seed=0)
+    assert tie.act(obs_with(1.0, 5.0, 5.0), {})["turnrate_ctrl"][0] == -0.25  # ties: the first candidate
+
+
+def test_defaults_are_pinned():
+    import inspect
+
+    from guardians.lrmm.guardian import PAPER_THRESHOLD, LRMMPaperGuardian
+
+    assert PAPER_THRESHOLD == 0.85
+    sig = inspect.signature(LRMMGuardian.__init__).parameters
+    assert {k: sig[k].default for k in ("model", "threshold", "action", "hysteresis", "window", "commit", "u1_max", "u2_min")} == \
+        {"model": None, "threshold": None, "action": None, "hysteresis": False, "window": 20, "commit": None, "u1_max": 0.25, "u2_min": -0.5}
+    paper = LRMMPaperGuardian()
+    assert (paper.name, paper.threshold, paper.action, paper.commit, paper.hysteresis, paper.window) == ("lrmm-paper", 0.85, "heuristic", 0, False, 20)
+    assert paper.model.path == default_model_path("Dubins4DCircles-v0", variant="paper")
+    g = LRMMGuardian()
+    assert g.name == "lrmm" and g.model.path == default_model_path("Dubins4DCircles-v0", variant="act")
+    d = g.model.meta["decision"]
+    assert (g.threshold, g.commit, g.action) == (d["threshold"], d["commit"], d.get("action", "head"))
+    assert (g.threshold, g.commit, g.action) == SHIPPED_DECISION
+    assert "seed" in d["chosen_by"]
+
+
+def test_registry_names():
+    from guardians.lrmm.guardian import LRMMPaperGuardian
+    from guardians.registry import available_guardians, make_guardian
+
+    assert {"lrmm", "lrmm-paper"} <= set(available_guardians())
+    p = make_guardian("lrmm-paper")
+    assert type(p) is LRMMPaperGuardian and p.name == "lrmm-paper" and p.threshold == 0.85
+    g = make_guardian("lrmm")
+    assert type(g) is LRMMGuardian and g.name == "lrmm"
+    assert make_guardian("lrmm-paper", threshold=0.3).threshold == 0.3
+
+
+def test_bad_guardian_arguments():
+    m = head_model_by_hand(decision={"threshold": 0.5})
+    for kw, match in [({"commit": -1}, "commit"), ({"commit": 1.5}, "commit"), ({"action": "steer"}, "action"),
+                      ({"threshold": -0.1}, "threshold"), ({"window": 0}, "window")]:
+        with pytest.raises(ValueError, match=match):
+            LRMMGuardian(m, **kw)
+    bad = head_model_by_hand(decision={"threshold": 1.5})
+    with pytest.raises(ValueError, match="stored decision threshold"):
+        LRMMGuardian(bad)
+
+
+# ============================================================================ shipped models on a held-out sample
+@pytest.fixture(scope="module")
+def heldout():
+    from pathlib import Path
+
+    with np.load(Path(__file__).parent / "fixtures" / "lrmm_heldout_d4.npz", allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
+def test_heldout_sample_is_held_out(heldout):
+    import json
+
+    params = json.loads(heldout["params"].tobytes().decode())
+    for variant in ("paper", "act"):
+        m = load_model(default_model_path(variant=variant))
+        assert m.meta["data"]["seed"] != params["seed"]  # other configurations than training/validation
+        assert m.meta["labeller"]["branches"] == params["estimator"]["branches"] and m.meta["labeller"]["depth"] == params["estimator"]["depth"]
+    act = load_model(default_model_path(variant="act"))
+    np.testing.assert_array_equal(act.candidates, heldout["candidates"])
+    assert act.candidate_hold == params["candidate_hold"]
+
+
+def test_shipped_paper_model_on_the_heldout_sample(heldout):
+    p = load_model(default_model_path(variant="paper")).predict(heldout["obs"])
+    mae = np.mean(np.abs(p - heldout["risk"]))
+    assert mae <= 0.035, mae  # measured 0.026 (its own test split: 0.028); predicting the mean gives 0.27
+    assert np.corrcoef(p, heldout["risk"])[0, 1] >= 0.95
+
+
+def test_shipped_act_model_on_the_heldout_sample(heldout):
+    out = load_model(default_model_path(variant="act")).predict_all(heldout["obs"])
+    risk, cand = heldout["risk"], heldout["candidate_risk"]
+    assert np.mean(np.abs(out[:, 0] - risk)) <= HELDOUT_BOUNDS["risk_mae"]
+    assert np.mean(np.abs(out[:, 1:] - cand)) <= HELDOUT_BOUNDS["cand_mae"]
+    picked = cand[np.arange(len(cand)), np.argmin(out[:, 1:], axis=1)]
+    regret = np.mean(picked - cand.min(axis=1))
+    assert regret <= HELDOUT_BOUNDS["regret"]
+    # the head's choice beats every fixed manoeuvre on these states
+    assert np.mean(picked) < cand.mean(axis=0).min()

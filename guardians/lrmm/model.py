@@ -23,11 +23,12 @@ layer's bias absent when ``output_bias`` is false) and ``meta``, a UTF-8 JSON do
   wall time, library versions);
 * ``weights_sha256``: a checksum over every array, verified on load;
 * version 2 only, both optional: ``candidates`` and ``candidate_hold`` (the head above), and
-  ``decision``: ``{"threshold": ..., "commit": ..., "chosen_by": ...}``, the risk threshold
-  and commitment (steps in control after the risk falls back) a guardian uses by default,
-  and how they were chosen.  Written after training by::
+  ``decision``: ``{"threshold": ..., "commit": ..., "action": ..., "chosen_by": ...}``, the
+  risk threshold, the commitment (steps kept in control after the risk falls back), the
+  avoidance action (``"head"`` or ``"heuristic"``) a guardian uses by default, and how they
+  were chosen.  Written after training by::
 
-      python -m guardians.lrmm.model set-decision MODEL --threshold T --commit N --chosen-by "..."
+      python -m guardians.lrmm.model set-decision MODEL --threshold T --commit N --action A --chosen-by "..."
 
 Every array must be finite: constructing, saving or loading a model with NaN or inf weights
 raises ``ValueError`` naming the array (a NaN risk would compare as "safe" and silently
@@ -257,18 +258,20 @@ def load_model(path=None, env_id: str = "Dubins4DCircles-v0") -> LRMMModel:
     return LRMMModel.load(path or default_model_path(env_id))
 
 
-def set_decision(path, threshold: float, commit: int, chosen_by: str) -> LRMMModel:
+def set_decision(path, threshold: float, commit: int, chosen_by: str, action: str = "head") -> LRMMModel:
     """Store the guardian's decision defaults in the model file ``path`` (weights unchanged)."""
     if not (isinstance(threshold, (int, float)) and 0.0 <= threshold <= 1.0):
         raise ValueError(f"threshold must be in [0, 1], got {threshold!r}")
     if int(commit) != commit or commit < 0:
         raise ValueError(f"commit must be an integer >= 0, got {commit!r}")
+    if action not in ("head", "heuristic"):
+        raise ValueError(f"action must be 'head' or 'heuristic', got {action!r}")
     if not chosen_by or not chosen_by.strip():
         raise ValueError("chosen_by must say how the threshold was chosen")
     model = LRMMModel.load(path)
     if model.candidates is None:
         raise ValueError(f"{path} has no 'candidates' head; its guardian uses the paper's rule")
-    model.meta["decision"] = {"threshold": float(threshold), "commit": int(commit), "chosen_by": chosen_by.strip()}
+    model.meta["decision"] = {"threshold": float(threshold), "commit": int(commit), "action": action, "chosen_by": chosen_by.strip()}
     return model.save(path) and model
 
 
@@ -280,10 +283,11 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("model")
     s.add_argument("--threshold", type=float, required=True)
     s.add_argument("--commit", type=int, required=True)
+    s.add_argument("--action", default="head", choices=["head", "heuristic"])
     s.add_argument("--chosen-by", required=True)
     args = p.parse_args(argv)
     try:
-        set_decision(args.model, args.threshold, args.commit, args.chosen_by)
+        set_decision(args.model, args.threshold, args.commit, args.chosen_by, args.action)
     except (ValueError, FileNotFoundError) as e:
         print(f"set-decision: error: {e}", file=sys.stderr)
         return 2
