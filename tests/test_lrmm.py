@@ -317,10 +317,11 @@ def test_head_model_shape_round_trip_and_numpy_equals_torch(tmp_path, cand_datas
 
 
 def test_set_decision_round_trip_and_bad_values(tmp_path, head_model, trained):
-    from guardians.lrmm.model import main as model_main, set_decision
+    from guardians.lrmm.decision import main as decision_main
+    from guardians.lrmm.model import set_decision
 
     p = head_model.save(tmp_path / "h.npz")
-    assert model_main(["set-decision", str(p), "--threshold", "0.4", "--commit", "7", "--chosen-by", "a test"]) == 0
+    assert decision_main([str(p), "--threshold", "0.4", "--commit", "7", "--chosen-by", "a test"]) == 0
     m = LRMMModel.load(p)
     assert m.meta["decision"] == {"threshold": 0.4, "commit": 7, "action": "head", "chosen_by": "a test"}
     np.testing.assert_array_equal(m.weights[0][0], head_model.weights[0][0])
@@ -338,6 +339,7 @@ def test_set_decision_round_trip_and_bad_values(tmp_path, head_model, trained):
     assert LRMMGuardian(p).action == "heuristic" and LRMMGuardian(p, action="head").action == "head"
     with pytest.raises(ValueError, match="candidates"):
         set_decision(trained.save(tmp_path / "old.npz"), 0.5, 1, "x")
+    assert decision_main([str(tmp_path / "missing.npz"), "--threshold", "0.4", "--commit", "1", "--chosen-by", "x"]) == 2
 
 
 def _rewrite(src, dst, edit_meta=None, edit_arrays=None):

@@ -28,7 +28,7 @@ layer's bias absent when ``output_bias`` is false) and ``meta``, a UTF-8 JSON do
   avoidance action (``"head"`` or ``"heuristic"``) a guardian uses by default, and how they
   were chosen.  Written after training by::
 
-      python -m guardians.lrmm.model set-decision MODEL --threshold T --commit N --action A --chosen-by "..."
+      python -m guardians.lrmm.decision MODEL --threshold T --commit N --action A --chosen-by "..."
 
 Every array must be finite: constructing, saving or loading a model with NaN or inf weights
 raises ``ValueError`` naming the array (a NaN risk would compare as "safe" and silently
@@ -37,9 +37,7 @@ disable a guardian).
 
 from __future__ import annotations
 
-import argparse
 import hashlib
-import sys
 import io
 import json
 import zipfile
@@ -272,28 +270,6 @@ def set_decision(path, threshold: float, commit: int, chosen_by: str, action: st
     if model.candidates is None:
         raise ValueError(f"{path} has no 'candidates' head; its guardian uses the paper's rule")
     model.meta["decision"] = {"threshold": float(threshold), "commit": int(commit), "action": action, "chosen_by": chosen_by.strip()}
-    return model.save(path) and model
+    model.save(path)
+    return model
 
-
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m guardians.lrmm.model",
-                                description="Store the lrmm guardian's decision defaults in a trained model file.")
-    sub = p.add_subparsers(dest="cmd", required=True)
-    s = sub.add_parser("set-decision", help="store threshold, commit and how they were chosen")
-    s.add_argument("model")
-    s.add_argument("--threshold", type=float, required=True)
-    s.add_argument("--commit", type=int, required=True)
-    s.add_argument("--action", default="head", choices=["head", "heuristic"])
-    s.add_argument("--chosen-by", required=True)
-    args = p.parse_args(argv)
-    try:
-        set_decision(args.model, args.threshold, args.commit, args.chosen_by, args.action)
-    except (ValueError, FileNotFoundError) as e:
-        print(f"set-decision: error: {e}", file=sys.stderr)
-        return 2
-    print(f"{args.model}: decision threshold {args.threshold}, commit {args.commit}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

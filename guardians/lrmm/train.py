@@ -28,7 +28,7 @@ batch 64, float64, on the dataset written by ``rmm-datagen``.
 * **Divergence is an error**: a NaN or inf loss (for instance from a huge ``--lr``) stops
   training with a message naming the epoch; no model is written.
 * The guardian's decision defaults are not set here: they are chosen in closed loop after
-  training and stored with ``python -m guardians.lrmm.model set-decision`` (see there).
+  training and stored with ``python -m guardians.lrmm.decision`` (see there).
 """
 
 from __future__ import annotations
