@@ -179,11 +179,10 @@ class LRMMGuardian(Guardian):
         if not intervene:
             return inactive_action()
         if self.action == "head":
-            cand = out[1:]
-            k = int(np.argmin(cand))
-            if not math.isfinite(float(cand[k])):
-                raise ValueError(f"the LRMM model returned non-finite candidate risks {cand.tolist()}")
-            u1, u2 = self._cands[k]
+            cand = out[1:].tolist()
+            if not all(map(math.isfinite, cand)):
+                raise ValueError(f"the LRMM model returned non-finite candidate risks {cand}")
+            u1, u2 = self._cands[cand.index(min(cand))]  # the first of the lowest
             return active_action(u1, u2)
         left, right = observation[self._left], observation[self._right]
         if np.isclose(left, right):
