@@ -25,6 +25,7 @@ ENTRY_POINT_GROUP = "rmm_envs.guardians"
 
 BUILTIN = {
     "lrmm": "guardians.lrmm.guardian:LRMMGuardian",
+    "lrmm-paper": "guardians.lrmm.guardian:LRMMPaperGuardian",
     "cbf": "guardians.cbf:CBFGuardian",
     "cbf-paper": "guardians.cbf:CBFPaperGuardian",
     "hj": "guardians.hj.guardian:HJGuardian",

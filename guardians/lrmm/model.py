@@ -5,6 +5,12 @@ training split only), then ``len(hidden)`` layers ``act(W x + b)``, then an outp
 ``sigmoid(W x [+ b])`` giving the inferred risk in ``(0, 1)``.  The paper's network is one
 hidden layer of 64 sigmoids and a bias-free sigmoid output.
 
+Action-conditioned head (format version 2, optional): the output layer has ``1 + K`` sigmoid
+units.  Unit 0 is the risk of the state (uniformly random futures); unit ``k`` is the risk of
+holding candidate control ``k`` (``meta["candidates"][k - 1]``) for ``meta["candidate_hold"]``
+seconds, then random futures (the labels of ``rmm-datagen --candidates``).  A guardian uses
+unit 0 to decide *when* to act and the other units to decide *what* to do.
+
 Artifact: one ``.npz`` file, loaded with ``allow_pickle=False`` (no code runs on load),
 holding the arrays ``scaler_min``, ``scaler_scale``, ``W0, b0, W1, b1, ...`` (the output
 layer's bias absent when ``output_bias`` is false) and ``meta``, a UTF-8 JSON document:
@@ -15,7 +21,18 @@ layer's bias absent when ``output_bias`` is false) and ``meta``, a UTF-8 JSON do
 * ``labeller`` (the estimator's parameters), ``data_sha256`` (the dataset's hash);
 * ``metrics`` (train/val/test MSE and MAE), ``training`` (the command's arguments, seed,
   wall time, library versions);
-* ``weights_sha256``: a checksum over every array, verified on load.
+* ``weights_sha256``: a checksum over every array, verified on load;
+* version 2 only, both optional: ``candidates`` and ``candidate_hold`` (the head above), and
+  ``decision``: ``{"threshold": ..., "commit": ..., "action": ..., "chosen_by": ...}``, the
+  risk threshold, the commitment (steps kept in control after the risk falls back), the
+  avoidance action (``"head"`` or ``"heuristic"``) a guardian uses by default, and how they
+  were chosen.  Written after training by::
+
+      python -m guardians.lrmm.decision MODEL --threshold T --commit N --action A --chosen-by "..."
+
+Every array must be finite: constructing, saving or loading a model with NaN or inf weights
+raises ``ValueError`` naming the array (a NaN risk would compare as "safe" and silently
+disable a guardian).
 """
 
 from __future__ import annotations
@@ -32,7 +49,8 @@ import numpy as np
 __all__ = ["FORMAT", "LRMMModel", "default_model_path", "load_model"]
 
 FORMAT = "rmm-lrmm-model"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READABLE_VERSIONS = (1, 2)  # version 1: one output unit, no candidates or decision fields
 ACTIVATIONS = ("sigmoid", "tanh", "relu", "elu")
 
 
@@ -81,7 +99,11 @@ class LRMMModel:
         if act not in ACTIVATIONS:
             raise ValueError(f"unknown activation {act!r}; expected one of {ACTIVATIONS}")
         self._act = _act(act)
+        cands = self.meta.get("candidates")
+        self.candidates = None if cands is None else np.asarray(cands, dtype=float)
+        self.candidate_hold = self.meta.get("candidate_hold")
         self._check_shapes()
+        self._check_finite()
         # fold the scaler into the first layer: W0 ((x - m) * s) + b0 = (W0 * s) x + (b0 - W0 (m s))
         W0, b0 = self.weights[0]
         self._W0 = W0 * self.scaler_scale[None, :]
@@ -103,12 +125,31 @@ class LRMMModel:
             if b is not None and b.shape != (W.shape[0],):
                 raise ValueError(f"layer {i}: bias shape {b.shape}, expected ({W.shape[0]},)")
             prev = W.shape[0]
-        if prev != 1:
-            raise ValueError(f"the output layer must have one unit, got {prev}")
+        n_out = 1 if self.candidates is None else 1 + self.candidates.shape[0]
+        if self.candidates is not None and (self.candidates.ndim != 2 or self.candidates.shape[0] < 1):
+            raise ValueError(f"meta 'candidates' must be a non-empty list of controls, got {self.meta['candidates']!r}")
+        if prev != n_out:
+            what = "one unit (risk)" if self.candidates is None else f"{n_out} units (risk + {n_out - 1} candidates)"
+            raise ValueError(f"the output layer must have {what}, got {prev}")
+        self.n_outputs = n_out
+
+    def _check_finite(self) -> None:
+        for name, a in self.arrays().items():
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"LRMM model array {name!r} holds {int(np.sum(~np.isfinite(a)))} non-finite value(s) (NaN or inf); "
+                                 "the training diverged or the file is damaged")
+        if self.candidates is not None and not np.all(np.isfinite(self.candidates)):
+            raise ValueError(f"meta 'candidates' holds non-finite controls: {self.candidates.tolist()}")
 
     # ------------------------------------------------------------------ inference
     def predict(self, obs) -> np.ndarray | float:
         """Inferred risk for one observation ``(obs_dim,)`` (a float) or a batch ``(N, obs_dim)``."""
+        out = self.predict_all(obs)[..., 0]
+        return float(out) if out.ndim == 0 else out
+
+    def predict_all(self, obs) -> np.ndarray:
+        """All output units, ``(n_outputs,)`` or ``(N, n_outputs)``: the risk, then one risk per
+        candidate control (version-2 models with a head)."""
         x = np.asarray(obs, dtype=float)
         single = x.ndim == 1
         if x.shape[-1] != self.obs_dim or x.ndim not in (1, 2):
@@ -124,8 +165,7 @@ class LRMMModel:
             if b is not None:
                 z = z + b
             h = _sigmoid(z) if i == len(layers) - 1 else self._act(z)
-        out = h[..., 0]
-        return float(out) if single else out
+        return h
 
     # ------------------------------------------------------------------ I/O
     def arrays(self) -> dict[str, np.ndarray]:
@@ -139,6 +179,7 @@ class LRMMModel:
     def save(self, path) -> Path:
         """Write the artifact atomically (temporary file, then rename)."""
         path = Path(path)
+        self._check_finite()
         arrs = self.arrays()
         meta = dict(self.meta)
         meta["format"], meta["format_version"] = FORMAT, FORMAT_VERSION
@@ -169,8 +210,13 @@ class LRMMModel:
             meta = json.loads(arrays.pop("meta").tobytes().decode())
         except (UnicodeDecodeError, json.JSONDecodeError) as e:
             raise ValueError(f"{path}: metadata is not valid JSON ({e})") from None
-        if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
-            raise ValueError(f"{path}: expected format {FORMAT} v{FORMAT_VERSION}, got {meta.get('format')} v{meta.get('format_version')}")
+        if meta.get("format") != FORMAT or meta.get("format_version") not in READABLE_VERSIONS:
+            raise ValueError(f"{path}: expected format {FORMAT} v{'/'.join(map(str, READABLE_VERSIONS))}, "
+                             f"got {meta.get('format')} v{meta.get('format_version')}")
+        if meta["format_version"] == 1:
+            for key in ("candidates", "decision"):
+                if key in meta:
+                    raise ValueError(f"{path}: field {key!r} needs format version 2, the file says version 1")
         if _checksum(arrays) != meta.get("weights_sha256"):
             raise ValueError(f"{path}: weights checksum mismatch (the file is corrupted or was edited)")
         if env_id is not None and meta.get("env_id") != env_id:
@@ -183,18 +229,47 @@ class LRMMModel:
             if f"W{i}" not in arrays:
                 raise ValueError(f"{path}: missing weight array W{i}")
             weights.append((arrays[f"W{i}"], arrays.get(f"b{i}")))
-        return cls(weights, arrays["scaler_min"], arrays["scaler_scale"], meta)
+        try:
+            model = cls(weights, arrays["scaler_min"], arrays["scaler_scale"], meta)
+        except ValueError as e:
+            raise ValueError(f"{path}: {e}") from None
+        model.path = path
+        return model
 
 
-def default_model_path(env_id: str = "Dubins4DCircles-v0") -> Path:
-    """Path of the model shipped with the package for ``env_id`` (the Dubins4D envs share one)."""
-    names = {"Dubins4DCircles-v0": "dubins4d.npz", "Dubins4DParallel-v0": "dubins4d.npz", "Dubins3DMaze-v0": "dubins3d_maze.npz",
-             "QuadrotorRoom-v0": "quadrotor.npz"}
-    if env_id not in names:
-        raise ValueError(f"no shipped LRMM model for {env_id!r}; shipped: {sorted(set(names))}")
-    return Path(str(resources.files("guardians.lrmm") / "models" / names[env_id]))
+def default_model_path(env_id: str = "Dubins4DCircles-v0", variant: str = "paper") -> Path:
+    """Path of the model shipped with the package for ``env_id`` (the Dubins4D envs share one).
+
+    ``variant="paper"`` (default): the paper's risk-only network (Table II).  ``"act"``: the
+    network with the action-conditioned head used by the ``lrmm`` guardian (Dubins4D only).
+    """
+    names = {("Dubins4DCircles-v0", "paper"): "dubins4d.npz", ("Dubins4DParallel-v0", "paper"): "dubins4d.npz",
+             ("Dubins3DMaze-v0", "paper"): "dubins3d_maze.npz", ("QuadrotorRoom-v0", "paper"): "quadrotor.npz",
+             ("Dubins4DCircles-v0", "act"): "dubins4d_act.npz", ("Dubins4DParallel-v0", "act"): "dubins4d_act.npz"}
+    if (env_id, variant) not in names:
+        raise ValueError(f"no shipped LRMM model for {env_id!r} (variant {variant!r}); shipped: {sorted(names)}")
+    return Path(str(resources.files("guardians.lrmm") / "models" / names[(env_id, variant)]))
 
 
 def load_model(path=None, env_id: str = "Dubins4DCircles-v0") -> LRMMModel:
     """Load ``path`` or the shipped model for ``env_id``."""
     return LRMMModel.load(path or default_model_path(env_id))
+
+
+def set_decision(path, threshold: float, commit: int, chosen_by: str, action: str = "head") -> LRMMModel:
+    """Store the guardian's decision defaults in the model file ``path`` (weights unchanged)."""
+    if not (isinstance(threshold, (int, float)) and 0.0 <= threshold <= 1.0):
+        raise ValueError(f"threshold must be in [0, 1], got {threshold!r}")
+    if int(commit) != commit or commit < 0:
+        raise ValueError(f"commit must be an integer >= 0, got {commit!r}")
+    if action not in ("head", "heuristic"):
+        raise ValueError(f"action must be 'head' or 'heuristic', got {action!r}")
+    if not chosen_by or not chosen_by.strip():
+        raise ValueError("chosen_by must say how the threshold was chosen")
+    model = LRMMModel.load(path)
+    if model.candidates is None:
+        raise ValueError(f"{path} has no 'candidates' head; its guardian uses the paper's rule")
+    model.meta["decision"] = {"threshold": float(threshold), "commit": int(commit), "action": action, "chosen_by": chosen_by.strip()}
+    model.save(path)
+    return model
+

@@ -16,6 +16,19 @@ batch 64, float64, on the dataset written by ``rmm-datagen``.
   (single-threaded torch, seeded initialisation and shuffling).
 * Prints and saves train / validation / test MSE and MAE (computed with the saved numpy model,
   i.e. exactly what the guardian will run).
+* **Action-conditioned head** (``--head auto``, default): when the dataset has
+  ``candidate_risk`` labels (``rmm-datagen --candidates``), the output layer gets one more
+  sigmoid unit per candidate and the loss is the MSE over all units (risk and candidates
+  weigh the same); the candidates and their hold time are copied into the model.  ``--head
+  none`` trains the risk alone (the paper's network).  Metrics then add the candidates' MAE
+  and the *regret* of picking the predicted safest candidate: its labelled risk minus the
+  lowest labelled risk, averaged over rows.
+* **Only training rows reach the loss**; validation rows only choose the epoch; test rows
+  only score the result.  The validation MSE of every epoch is saved (``val_mse_history``).
+* **Divergence is an error**: a NaN or inf loss (for instance from a huge ``--lr``) stops
+  training with a message naming the epoch; no model is written.
+* The guardian's decision defaults are not set here: they are chosen in closed loop after
+  training and stored with ``python -m guardians.lrmm.decision`` (see there).
 """
 
 from __future__ import annotations
@@ -37,7 +50,7 @@ __all__ = ["TrainConfig", "main", "split_by_config", "train"]
 class TrainConfig:
     def __init__(self, hidden=(64,), activation="sigmoid", output_bias=False, epochs=300, batch_size=64,
                  lr=1e-3, seed=0, val_frac=0.15, test_frac=0.15, features=None, select="best",
-                 dtype="float64", patience=None):
+                 dtype="float64", patience=None, head="auto"):
         if not hidden or any(int(h) != h or h < 1 for h in hidden):
             raise ValueError(f"hidden must be one or more positive layer sizes, got {hidden!r}")
         if activation not in ACTIVATIONS:
@@ -46,8 +59,10 @@ class TrainConfig:
             raise ValueError(f"epochs must be an integer >= 1, got {epochs!r}")
         if int(batch_size) != batch_size or batch_size < 1:
             raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
-        if not lr > 0:
-            raise ValueError(f"lr must be > 0, got {lr!r}")
+        if not (lr > 0 and np.isfinite(lr)):
+            raise ValueError(f"lr must be a finite number > 0, got {lr!r}")
+        if head not in ("auto", "none"):
+            raise ValueError(f"head must be 'auto' or 'none', got {head!r}")
         if not (0 < val_frac < 1 and 0 < test_frac < 1 and val_frac + test_frac < 1):
             raise ValueError(f"val_frac and test_frac must be in (0, 1) with a sum below 1, got {val_frac}, {test_frac}")
         if select not in ("best", "last"):
@@ -67,6 +82,7 @@ class TrainConfig:
         self.select = select
         self.dtype = dtype
         self.patience = patience
+        self.head = head
 
     def as_dict(self) -> dict:
         return dict(vars(self))
@@ -96,12 +112,23 @@ def fit_minmax(x: np.ndarray):
     return lo.astype(float), scale.astype(float)
 
 
-def _metrics(model: LRMMModel, obs, y) -> dict:
+def _metrics(model: LRMMModel, obs, y, cand=None) -> dict:
     if len(y) == 0:
         return {"mse": None, "mae": None, "max_abs_err": None, "n": 0}
-    p = model.predict(obs)
-    e = p - y
-    return {"mse": float(np.mean(e * e)), "mae": float(np.mean(np.abs(e))), "max_abs_err": float(np.max(np.abs(e))), "n": int(len(y))}
+    out = model.predict_all(obs)
+    e = out[:, 0] - y
+    m = {"mse": float(np.mean(e * e)), "mae": float(np.mean(np.abs(e))), "max_abs_err": float(np.max(np.abs(e))), "n": int(len(y))}
+    if cand is not None and model.candidates is not None:
+        pc = out[:, 1:]
+        picked = cand[np.arange(len(y)), np.argmin(pc, axis=1)]
+        m["candidates"] = {"mse": float(np.mean((pc - cand) ** 2)), "mae": float(np.mean(np.abs(pc - cand))),
+                           "regret": float(np.mean(picked - cand.min(axis=1))),
+                           "picked_risk": float(np.mean(picked)), "best_risk": float(np.mean(cand.min(axis=1)))}
+    return m
+
+
+class TrainingDiverged(ValueError):
+    """The loss became NaN or inf."""
 
 
 def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
@@ -112,6 +139,16 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
         raise ValueError("the dataset is empty")
     obs_all = dataset.obs.astype(np.float64)
     y_all = dataset.risk.astype(np.float64)
+    cand_all = None
+    if cfg.head == "auto" and getattr(dataset, "candidate_risk", None) is not None:
+        cand_all = np.asarray(dataset.candidate_risk, dtype=np.float64)
+        cands = dataset.meta.get("estimator", {}).get("candidates")
+        if cands is None or len(cands) != cand_all.shape[1]:
+            raise ValueError(f"the dataset has {cand_all.shape[1]} candidate_risk columns but its metadata lists "
+                             f"candidates {cands!r}")
+    targets = y_all[:, None] if cand_all is None else np.column_stack([y_all, cand_all])
+    if not np.all(np.isfinite(obs_all)) or not np.all(np.isfinite(targets)):
+        raise ValueError("the dataset holds non-finite observations or labels")
     obs_dim = obs_all.shape[1]
     feats = list(range(obs_dim)) if cfg.features is None else cfg.features
     if any(f < 0 or f >= obs_dim for f in feats):
@@ -129,20 +166,21 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
         layers.append(torch.nn.Linear(n_in, h, dtype=dt))
         layers.append({"sigmoid": torch.nn.Sigmoid(), "tanh": torch.nn.Tanh(), "relu": torch.nn.ReLU(), "elu": torch.nn.ELU()}[cfg.activation])
         n_in = h
-    layers.append(torch.nn.Linear(n_in, 1, bias=cfg.output_bias, dtype=dt))
+    layers.append(torch.nn.Linear(n_in, targets.shape[1], bias=cfg.output_bias, dtype=dt))
     layers.append(torch.nn.Sigmoid())
     net = torch.nn.Sequential(*layers)
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
 
     xt = torch.as_tensor((x[tr] - lo) * scale, dtype=dt)
-    yt = torch.as_tensor(y_all[tr], dtype=dt)[:, None]
+    yt = torch.as_tensor(targets[tr], dtype=dt)
     xv = torch.as_tensor((x[va] - lo) * scale, dtype=dt)
-    yv = torch.as_tensor(y_all[va], dtype=dt)[:, None]
+    yv = torch.as_tensor(targets[va], dtype=dt)
     gen = torch.Generator().manual_seed(cfg.seed)
     best = (float("inf"), None, -1)
     t0 = time.perf_counter()
     n = xt.shape[0]
     stale = 0
+    history = []
     for epoch in range(cfg.epochs):
         net.train()
         perm = torch.randperm(n, generator=gen)
@@ -150,11 +188,18 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
             idx = perm[i:i + cfg.batch_size]
             opt.zero_grad(set_to_none=True)
             loss = torch.nn.functional.mse_loss(net(xt[idx]), yt[idx])
+            if not torch.isfinite(loss):
+                raise TrainingDiverged(f"training diverged: the loss became {loss.item()} at epoch {epoch + 1}, batch "
+                                       f"{i // cfg.batch_size + 1} (lr {cfg.lr}); lower --lr.  No model was written")
             loss.backward()
             opt.step()
         net.eval()
         with torch.no_grad():
             val_mse = float(torch.nn.functional.mse_loss(net(xv), yv))
+        if not np.isfinite(val_mse):
+            raise TrainingDiverged(f"training diverged: the validation loss became {val_mse} after epoch {epoch + 1} "
+                                   f"(lr {cfg.lr}); lower --lr.  No model was written")
+        history.append(val_mse)
         if val_mse < best[0]:
             best = (val_mse, {k: v.detach().clone() for k, v in net.state_dict().items()}, epoch)
             stale = 0
@@ -185,16 +230,22 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
         "data": {"n_rows": len(dataset), "configs": int(np.unique(dataset.config_id).shape[0]),
                  "seed": dataset.meta.get("seed"), "samples_per_config": dataset.meta.get("samples_per_config")},
         "training": cfg.as_dict() | {"wall_seconds": wall, "best_epoch": best[2] + 1, "epochs_run": epoch + 1,
+                                     "selected_epoch": best[2] + 1 if cfg.select == "best" else epoch + 1,
+                                     "val_mse_history": history,
                                      "torch": torch.__version__, "numpy": np.__version__, "python": platform.python_version()},
         "split": {"by": "configuration", "train_configs": sorted(np.unique(dataset.config_id[tr]).tolist()),
                   "val_configs": sorted(np.unique(dataset.config_id[va]).tolist()),
                   "test_configs": sorted(np.unique(dataset.config_id[te]).tolist())},
     }
+    if cand_all is not None:
+        meta["candidates"] = [[float(v) for v in c] for c in dataset.meta["estimator"]["candidates"]]
+        meta["candidate_hold"] = float(dataset.meta["estimator"]["candidate_hold"])
     model = LRMMModel(weights, lo, scale, meta)
+    c = (lambda m: None) if cand_all is None else (lambda m: cand_all[m])
     model.meta["metrics"] = {
-        "train": _metrics(model, obs_all[tr], y_all[tr]),
-        "val": _metrics(model, obs_all[va], y_all[va]),
-        "test": _metrics(model, obs_all[te], y_all[te]),
+        "train": _metrics(model, obs_all[tr], y_all[tr], c(tr)),
+        "val": _metrics(model, obs_all[va], y_all[va], c(va)),
+        "test": _metrics(model, obs_all[te], y_all[te], c(te)),
     }
     model.torch_net = net  # for tests comparing numpy and torch inference
     return model
@@ -218,6 +269,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--features", type=int, nargs="+", default=None, help="observation indices to use (default: all)")
     p.add_argument("--select", default="best", choices=["best", "last"], help="keep the best-validation or the last epoch (default: %(default)s)")
     p.add_argument("--dtype", default="float64", choices=["float64", "float32"], help="training precision (default: %(default)s)")
+    p.add_argument("--head", default="auto", choices=["auto", "none"],
+                   help="auto: add one output per candidate control when the dataset has candidate labels; none: risk only (default: %(default)s)")
     p.add_argument("--quiet", action="store_true", help="no per-epoch log")
     return p
 
@@ -230,7 +283,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg = TrainConfig(hidden=args.hidden, activation=args.activation, output_bias=args.output_bias,
                           epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
                           val_frac=args.val_frac, test_frac=args.test_frac, features=args.features,
-                          select=args.select, dtype=args.dtype, patience=args.patience)
+                          select=args.select, dtype=args.dtype, patience=args.patience, head=args.head)
         ds = load_dataset(args.data)
         model = train(ds, cfg, log=(lambda *a: None) if args.quiet else print)
     except (ValueError, FileNotFoundError) as e:
@@ -243,6 +296,10 @@ def main(argv: list[str] | None = None) -> int:
     for split in ("train", "val", "test"):
         s = m[split]
         print(f"  {split:5s}: n={s['n']:6d}  MSE {s['mse']:.3e}  MAE {s['mae']:.3e}  max |err| {s['max_abs_err']:.3f}")
+        if "candidates" in s:
+            cs = s["candidates"]
+            print(f"         candidates: MSE {cs['mse']:.3e}  MAE {cs['mae']:.3e}  regret {cs['regret']:.4f} "
+                  f"(picked {cs['picked_risk']:.4f}, best {cs['best_risk']:.4f})")
     print(json.dumps({k: {"mse": v["mse"], "mae": v["mae"]} for k, v in m.items()}))
     return 0
 

@@ -11,7 +11,10 @@ Output directory:
 * ``shard-NNNNN.parquet``: rows for a fixed block of configurations (``--configs-per-shard``),
   grouped by configuration so train/test can be split by configuration.  Columns:
   ``config_id``, ``sample``, ``obs`` (float32 list), ``state`` (float64 list), ``risk``,
-  ``min_risk_ctrl`` (list), ``min_risk_ctrl_dur``, ``n_leaves``.
+  ``min_risk_ctrl`` (list), ``min_risk_ctrl_dur``, ``n_leaves``; with ``--candidates`` also
+  ``candidate_risk`` (list, one action-conditioned label per candidate control, see
+  :meth:`rmm_envs.risk.RiskEstimator.estimate_candidates`; drawn after the plain labels, so
+  ``risk`` is the same with or without candidates).
 * ``manifest.json`` (written last): row count, per-shard SHA-256 and the dataset hash.
 * ``shard-NNNNN.sha256`` (only while a run is unfinished): the SHA-256 of a shard, written
   right after the shard itself (``sha256sum -c`` format); folded into the manifest at the end.
@@ -76,6 +79,8 @@ class DatagenConfig:
     leaf: str = "zero"
     configs_per_shard: int = 8
     env_kwargs: dict = field(default_factory=dict)
+    candidates: list | None = None  # action-conditioned labels: controls held for candidate_hold s
+    candidate_hold: float = 1.0
 
     def validate(self) -> None:
         import rmm_envs
@@ -90,6 +95,12 @@ class DatagenConfig:
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise ValueError(f"seed (--seed) must be an integer >= 0, got {self.seed!r}")
         validate_tree_params(**self.estimator_params())
+        if self.candidates is not None:
+            c = np.asarray(self.candidates, dtype=float)
+            if c.ndim != 2 or c.shape[0] < 1 or not np.all(np.isfinite(c)):
+                raise ValueError(f"candidates must be a non-empty list of finite controls, got {self.candidates!r}")
+            if not (np.isfinite(self.candidate_hold) and self.candidate_hold > 0):
+                raise ValueError(f"candidate_hold must be a finite number of seconds > 0, got {self.candidate_hold!r}")
 
     @property
     def n_shards(self) -> int:
@@ -148,6 +159,8 @@ def label_configs(cfg: DatagenConfig, config_ids) -> pa.Table:
         cols["min_risk_ctrl"].append(res.min_risk_ctrl)
         cols["min_risk_ctrl_dur"].append(res.min_risk_ctrl_dur)
         cols["n_leaves"].append(res.n_leaves.astype(np.int32))
+        if cfg.candidates is not None:
+            cols.setdefault("candidate_risk", []).append(est.estimate_candidates(states, cfg.candidates, cfg.candidate_hold, rng))
     arrays = {}
     for k, parts in cols.items():
         a = np.concatenate(parts)
@@ -261,7 +274,8 @@ def _metadata(cfg: DatagenConfig) -> dict:
         "samples_per_config": cfg.samples_per_config,
         "seed": cfg.seed,
         "configs_per_shard": cfg.configs_per_shard,
-        "estimator": cfg.estimator_params() | {"policy": "uniform"},
+        "estimator": cfg.estimator_params() | {"policy": "uniform"}
+        | ({} if cfg.candidates is None else {"candidates": cfg.candidates, "candidate_hold": cfg.candidate_hold}),
         "obs_dim": int(env.observation_space.shape[0]),
         "state_dim": int(sys_.state_dim),
         "control_dim": int(sys_.control_dim),
@@ -467,6 +481,7 @@ class Dataset:
     config_id: np.ndarray
     meta: dict
     sha256: str
+    candidate_risk: np.ndarray | None = None  # (N, K) with --candidates, else None
 
     def __len__(self) -> int:
         return self.risk.shape[0]
@@ -548,6 +563,7 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
         config_id=t["config_id"].to_numpy(),
         meta=meta,
         sha256=dataset_sha,
+        candidate_risk=_fixed_list(t["candidate_risk"], "candidate_risk", path) if "candidate_risk" in t.column_names else None,
     )
 
 
@@ -572,6 +588,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--alpha", type=float, default=None, help="CVaR level in (0, 1) (with --metric cvar)")
     p.add_argument("--leaf", default="zero", choices=["zero", "heuristic"], help="leaf value: 0 (Algorithm 1) or the system's heuristic (default: %(default)s)")
     p.add_argument("--env-kwargs", default="{}", help='environment arguments as JSON, e.g. \'{"maze_kind": "mixed"}\' (default: {})')
+    p.add_argument("--candidates", default=None,
+                   help="also label the risk of holding each of these controls for --candidate-hold s, then the tree, "
+                   "as JSON, e.g. '[[-0.25, -0.5], [0.25, -0.5]]' (default: none)")
+    p.add_argument("--candidate-hold", type=float, default=1.0, help="seconds each candidate is held (default: %(default)s)")
     p.add_argument("--configs-per-shard", type=int, default=8, help="configurations per output shard (default: %(default)s)")
     p.add_argument("--workers", type=int, default=None, help="worker processes, >= 1 (default: the core count)")
     p.add_argument("--backend", default="local", choices=["local", "ray"], help="where the work runs (default: %(default)s)")
@@ -589,11 +609,18 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         print(f"rmm-datagen: error: --env-kwargs must be a JSON object, got {args.env_kwargs!r}", file=sys.stderr)
         return 2
+    try:
+        candidates = None if args.candidates is None else json.loads(args.candidates)
+        if candidates is not None and not (isinstance(candidates, list) and all(isinstance(c, list) for c in candidates)):
+            raise ValueError
+    except ValueError:
+        print(f"rmm-datagen: error: --candidates must be a JSON list of controls, got {args.candidates!r}", file=sys.stderr)
+        return 2
     cfg = DatagenConfig(
         env_id=args.env, configs=args.configs, samples_per_config=args.samples_per_config, seed=args.seed,
         branches=args.branches, depth=args.depth, horizon=args.horizon, n_steps=args.n_steps,
         metric=args.metric, alpha=args.alpha, leaf=args.leaf, configs_per_shard=args.configs_per_shard,
-        env_kwargs=env_kwargs,
+        env_kwargs=env_kwargs, candidates=candidates, candidate_hold=args.candidate_hold,
     )
     try:
         manifest = generate(cfg, args.out, workers=args.workers, backend=args.backend,

@@ -23,6 +23,11 @@ Also returned per root: the first control of the minimum-risk child (first index
 how long it is held (``t``: the control is constant over the branch; the original stored the
 duration of one path segment, ``t / (n_steps - 1)``, of the same constant control) and the
 number of terminal nodes (failed or depth-``m``) that the estimate averages over.
+
+Action-conditioned labels (:meth:`RiskEstimator.estimate_candidates`): the risk of holding
+each of ``K`` given controls for ``hold`` seconds (one branch of ``n_steps`` points, worth 1
+if it fails), then the same random tree from where it ends.  They tell a guardian which of a
+few manoeuvres is safest, which the plain label (uniform controls from the root) cannot.
 """
 
 from __future__ import annotations
@@ -178,6 +183,43 @@ class RiskEstimator:
             r = self._estimate_chunk(states[lo:hi], rng, ctl)
             out.risk[lo:hi], out.min_risk_ctrl[lo:hi], out.min_risk_ctrl_dur[lo:hi], out.n_leaves[lo:hi] = r
         return out
+
+    def estimate_candidates(self, states, candidates, hold: float, rng: np.random.Generator) -> np.ndarray:
+        """Risk ``(B, K)`` of holding each candidate control ``(K, c)`` for ``hold`` seconds
+        from each root state ``(B, d)``, then running the tree from the end of that branch.
+
+        A root that already fails, or a candidate branch that fails, is worth 1.  The tree's
+        controls are drawn from ``rng`` for the live end states in root-major, candidate-minor
+        order, so the result does not depend on the chunk size.
+        """
+        states = np.asarray(states, dtype=float)
+        cands = np.asarray(candidates, dtype=float)
+        c_dim = len(np.asarray(self.system.control_low))
+        if states.ndim != 2 or states.shape[1] != self.system.state_dim:
+            raise ValueError(f"states must have shape (B, {self.system.state_dim}), got {states.shape}")
+        if cands.ndim != 2 or cands.shape[1] != c_dim or cands.shape[0] < 1:
+            raise ValueError(f"candidates must have shape (K >= 1, {c_dim}), got {cands.shape}")
+        if not np.all(np.isfinite(cands)):
+            raise ValueError(f"candidates must be finite, got {cands.tolist()}")
+        lo, hi = np.asarray(self.system.control_low, float), np.asarray(self.system.control_high, float)
+        if np.any(cands < lo) or np.any(cands > hi):
+            raise ValueError(f"candidates {cands.tolist()} fall outside the control box [{lo.tolist()}, {hi.tolist()}]")
+        if not (isinstance(hold, (int, float)) and math.isfinite(hold) and hold > 0):
+            raise ValueError(f"hold must be a finite number of seconds > 0, got {hold!r}")
+        B, K = states.shape[0], cands.shape[0]
+        rep = np.repeat(states, K, axis=0)
+        u = np.tile(cands, (B, 1))
+        risk = np.ones(B * K)
+        root_ok = ~np.asarray(self.system.state_failed(rep), dtype=bool)
+        if root_ok.any():
+            paths = self.system.propagate(rep[root_ok], u[root_ok], float(hold), self.n_steps)
+            branch_ok = ~np.asarray(self.system.path_failed(paths), dtype=bool)
+            ok = np.zeros(B * K, dtype=bool)
+            ok[root_ok] = branch_ok
+            ends = paths[branch_ok, -1]
+            if ends.shape[0]:
+                risk[ok] = self.estimate(ends, rng).risk
+        return risk.reshape(B, K)
 
     def _estimate_chunk(self, roots: np.ndarray, rng, controls):
         sys_ = self.system

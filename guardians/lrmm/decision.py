@@ -1,0 +1,37 @@
+"""``python -m guardians.lrmm.decision MODEL --threshold T --commit N --action A --chosen-by TEXT``
+
+Stores the ``lrmm`` guardian's decision defaults in a trained model file (``meta["decision"]``,
+see :mod:`guardians.lrmm.model`); the weights are unchanged.  ``--chosen-by`` is required: a
+stored threshold always says how it was chosen.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from guardians.lrmm.model import set_decision
+
+__all__ = ["main"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m guardians.lrmm.decision",
+                                description="Store the lrmm guardian's decision defaults in a trained model file.")
+    p.add_argument("model")
+    p.add_argument("--threshold", type=float, required=True, help="take control while the risk is above this")
+    p.add_argument("--commit", type=int, required=True, help="steps to stay in control after the risk falls back")
+    p.add_argument("--action", default="head", choices=["head", "heuristic"], help="avoidance action (default: %(default)s)")
+    p.add_argument("--chosen-by", required=True, help="how these values were chosen (stored with them)")
+    args = p.parse_args(argv)
+    try:
+        set_decision(args.model, args.threshold, args.commit, args.chosen_by, args.action)
+    except (ValueError, FileNotFoundError) as e:
+        print(f"{p.prog}: error: {e}", file=sys.stderr)
+        return 2
+    print(f"{args.model}: decision threshold {args.threshold}, commit {args.commit}, action {args.action}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
