@@ -23,6 +23,7 @@ BUILTIN = {
     "lrmm": "guardians.lrmm.guardian:LRMMGuardian",
     "cbf": "guardians.cbf:CBFGuardian",
     "hj": "guardians.hj.guardian:HJGuardian",
+    "hj-paper": "guardians.hj.guardian:HJPaperGuardian",
     "random": "guardians.baselines:RandomGuardian",
     "inactive": "guardians.baselines:InactiveGuardian",
     "brakes": "guardians.baselines:BrakesGuardian",
