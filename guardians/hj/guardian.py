@@ -153,6 +153,9 @@ def _gradient(V: np.ndarray, grid: Grid) -> list[np.ndarray]:
     return out
 
 
+RULES = ("distance", "gradient", "value")
+
+
 def _finite(name: str, value, lo: float | None = None, lo_open: bool = False) -> float:
     """``value`` as a float, refused (naming it) unless finite and above ``lo`` if given."""
     try:
@@ -171,15 +174,15 @@ class HJGuardian(Guardian):
     privileged = True
 
     def __init__(self, grid: Grid | None = None, grid_n=None, horizon: float = 4.0, order: int = 2, rk: int = 3, cfl: float = 0.8,
-                 rule: str = "lookahead", margin: float = 0.0, delay: int = 1, lap: float | None = None,
+                 rule: str = "distance", margin: float | None = None, delay: int = 1, lap: float | None = None,
                  disturbance: float = 0.0, cache_dir=None, cache: bool = True, cache_max_files: int = 64,
                  mode: str = "avoid", ra_horizon: float = 10.0, ra_margin: float = 0.5, backend: str = "auto") -> None:
         super().__init__()
         self.horizon = _finite("horizon", horizon, 0.0, lo_open=True)
         if mode not in ("avoid", "reach_avoid"):
             raise ValueError(f"mode must be 'avoid' or 'reach_avoid', got {mode!r}")
-        if rule not in ("lookahead", "value"):
-            raise ValueError(f"rule must be 'lookahead' or 'value', got {rule!r}")
+        if rule not in RULES:
+            raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
         if order not in (1, 2):
             raise ValueError(f"order must be 1 or 2, got {order!r}")
         if rk not in (1, 2, 3):
@@ -194,12 +197,14 @@ class HJGuardian(Guardian):
         self.mode, self.rule = mode, rule
         self.ra_horizon = _finite("ra_horizon", ra_horizon, 0.0, lo_open=True)
         self.ra_margin = _finite("ra_margin", ra_margin, 0.0)
-        self.margin = _finite("margin", margin)
         self.delay = int(delay)
         self.lap = None if lap is None else _finite("lap", lap, 0.0, lo_open=True)
         if grid is not None and grid_n is not None:
             raise ValueError("give grid or grid_n, not both")
         self.grid = grid or (default_grid(tuple(int(k) for k in grid_n)) if grid_n is not None else default_grid())
+        # default: half a position cell, the most multilinear interpolation can over-state V
+        # at a kink of a function that is 1-Lipschitz in position
+        self.margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if margin is None else _finite("margin", margin)
         self.order, self.rk = int(order), int(rk)
         self.dynamics = Dubins4DHJ(d_max=_finite("disturbance", disturbance, 0.0))
         self.backend = backend
@@ -208,6 +213,8 @@ class HJGuardian(Guardian):
         self._counts = {"outside_grid": 0, "nan_states": 0, "cache_hits": 0, "solves": 0}
         self.solve_seconds = 0.0
         self.V = None
+        self._last_time = None  # sim time of the previous decision (for the lap)
+        self._measured_lap = None
 
     def spec(self, obstacles, goal=None) -> dict:
         spec = {"dynamics": self.dynamics.key(), "grid": self.grid.key(), "horizon": self.horizon, "order": self.order,
@@ -258,7 +265,6 @@ class HJGuardian(Guardian):
         self._ra_arrays = None
         self._last_time = None  # sim time of the previous decision (for the lap)
         self._measured_lap = None
-        self._pending = None  # the guardian's own control now pending, or None: the driver's
         if self.mode == "reach_avoid":
             V_ra = self.value_function(priv["obstacles"], goal=priv["goal"])
             self._ra_arrays = [V_ra, *_gradient(V_ra, self.grid)]
@@ -274,17 +280,12 @@ class HJGuardian(Guardian):
             return self.lap
         return self._measured_lap if self._measured_lap is not None else 0.1
 
-    def decrease_rate(self, state, grad, control=None) -> float:
-        """How fast ``V`` can fall at ``state`` (first order, ``>= 0``): under the worst held
-        control if ``control`` is None, else under ``control``."""
+    def decrease_rate(self, state, grad) -> float:
+        """How fast ``V`` can fall at ``state`` under the worst held control (first order, ``>= 0``)."""
         d = self.dynamics
         _, _, th, v = state
         vx, vy, vth, vv = grad
         drift = v * (vx * math.cos(th) + vy * math.sin(th))
-        if control is not None:
-            u1, u2 = control
-            blocked = (v >= d.v_max and u2 > 0) or (v <= d.v_min and u2 < 0)  # the speed clamp holds v
-            return max(0.0, -(drift + vth * u1 + (0.0 if blocked else vv * u2)))
         # the worst u2 pushes v against the sign of dV/dv, unless the clamp stops it there
         speed = abs(vv) if d.v_min < v < d.v_max else (max(0.0, -vv) if v >= d.v_max else max(0.0, vv))
         return max(0.0, -drift + d.u1_max * abs(vth) + d.u2_max * speed)
@@ -293,10 +294,13 @@ class HJGuardian(Guardian):
         """The value at or below which the guardian takes control at ``state``."""
         if self.rule == "value":
             return self.margin
-        tau = self.current_lap()
-        worst = self.decrease_rate(state, grad)
-        pending = worst if self._pending is None else self.decrease_rate(state, grad, self._pending)
-        return self.margin + tau * (pending + self.delay * worst)
+        T = (1 + self.delay) * self.current_lap()  # the time one decision commits
+        v, a = float(state[3]), self.dynamics.u2_max
+        if self.rule == "distance":  # V is 1-Lipschitz in position: at most the path length
+            return self.margin + v * T + 0.5 * a * T * T
+        # "gradient": first order along the worst held control, plus the path's bending
+        bend = math.hypot(grad[0], grad[1]) * math.hypot(v * self.dynamics.u1_max, a)
+        return self.margin + T * self.decrease_rate(state, grad) + 0.5 * T * T * bend
 
     def act(self, observation, info=None):
         priv = self._privileged()
@@ -306,9 +310,7 @@ class HJGuardian(Guardian):
             if self._last_time is not None and t > self._last_time:
                 self._measured_lap = float(t - self._last_time)
             self._last_time = float(t)
-        action = self._decide(s)
-        self._pending = (float(action["turnrate_ctrl"][0]), float(action["accel_ctrl"][0])) if action["active_ctrl"] else None
-        return action
+        return self._decide(s)
 
     def _decide(self, s):
         if not np.all(np.isfinite(s)):
