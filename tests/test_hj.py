@@ -449,3 +449,81 @@ def test_hj_acts_in_time_for_the_latency_and_hj_paper_does_not(circle_guardians,
     assert closed_loop(guards["hj-paper"], box, s0, latency=1) < -0.2
     # hj's own turn flipped: collides too
     assert closed_loop(guards["hj"], box, s0, latency=1, flip_turn=True) < -0.2
+
+
+def test_thresholds_of_the_rules_by_hand():
+    g = HJGuardian(grid=small_grid(), lap=0.11)
+    assert (g.rule, g.order, g.rk, g.delay) == ("distance", 2, 3, 1)
+    assert g.margin == pytest.approx(0.25)  # half of the 16 m / 32 cells position step
+    s, grad = np.array([0.0, 0.0, 0.3, 1.5]), np.array([-0.6, -0.8, 1.0, -2.0])
+    T = 0.22
+    assert g.threshold(s, grad) == pytest.approx(0.25 + 1.5 * T + 0.5 * 0.5 * T * T)
+    # gradient rule: rho = -v (Vx cos + Vy sin) + 0.25 |Vth| + 0.5 |Vv|; kappa = |grad_xy| hypot(v 0.25, 0.5)
+    gg = HJGuardian(grid=small_grid(), lap=0.11, rule="gradient", margin=0.1)
+    rho = -1.5 * (-0.6 * np.cos(0.3) - 0.8 * np.sin(0.3)) + 0.25 * 1.0 + 0.5 * 2.0
+    assert gg.decrease_rate(s, grad) == pytest.approx(rho)
+    assert gg.threshold(s, grad) == pytest.approx(0.1 + T * rho + 0.5 * T * T * 1.0 * np.hypot(1.5 * 0.25, 0.5))
+    # at the speed bounds the clamp stops u2: at v = 2 (the top) only braking lowers V if dV/dv > 0
+    assert gg.decrease_rate(np.array([0, 0, 0, 2.0]), np.array([0, 0, 0, 1.0])) == pytest.approx(0.5)
+    assert gg.decrease_rate(np.array([0, 0, 0, 2.0]), np.array([0, 0, 0, -1.0])) == pytest.approx(0.0)
+    assert gg.decrease_rate(np.array([0, 0, 0, 0.0]), np.array([0, 0, 0, -1.0])) == pytest.approx(0.5)
+    assert gg.decrease_rate(np.array([0, 0, 0, 0.0]), np.array([0, 0, 0, 1.0])) == pytest.approx(0.0)
+    # delay=0 (the blocking env) commits one lap; the value rule ignores the lap
+    assert HJGuardian(grid=small_grid(), lap=0.1, delay=0, margin=0.0).threshold(s, grad) == pytest.approx(0.15 + 0.25 * 0.01)
+    assert HJGuardian(grid=small_grid(), rule="value", margin=0.3).threshold(s, grad) == 0.3
+    assert HJGuardian(grid=default_grid()).margin == pytest.approx(30 / 63 / 2)
+
+
+def test_the_lap_is_measured_from_the_sim_time(tmp_path):
+    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-6.0, 5.0, 0.0, 1.0]), "sim_time": 0.0}
+    g = hj(box, tmp_path)
+    assert g.current_lap() == 0.1  # assumed before any lap
+    g.act(None, {})
+    box["sim_time"] = 0.13
+    g.act(None, {})
+    assert g.current_lap() == pytest.approx(0.13)
+    box["sim_time"] = 0.13 + 0.11
+    g.act(None, {})
+    assert g.current_lap() == pytest.approx(0.11)
+    g.reset(seed=1, privileged=lambda: box)  # a new episode forgets it
+    assert g.current_lap() == 0.1
+    assert HJGuardian(grid=small_grid(), lap=0.5).current_lap() == 0.5
+
+
+def test_hj_paper_is_the_papers_rule_and_both_are_registered():
+    from guardians.registry import available_guardians, load_guardian_class, make_guardian
+
+    assert {"hj", "hj-paper"} <= set(available_guardians())
+    assert load_guardian_class("hj") is HJGuardian and load_guardian_class("hj-paper") is HJPaperGuardian
+    p = make_guardian("hj-paper", grid=small_grid())
+    assert (p.name, p.order, p.rk, p.rule, p.margin) == ("hj-paper", 1, 2, "value", 0.0)
+    assert p.threshold(np.array([0.0, 0.0, 0.0, 2.0]), np.ones(4)) == 0.0
+    # the scheme is part of the cache key: the two never share a value
+    obstacles = np.array([[0.0, 0.0, 2.0]])
+    assert HJGuardian(grid=small_grid()).spec(obstacles) != p.spec(obstacles)
+    assert make_guardian("hj-paper", grid=small_grid(), order=2).spec(obstacles) != HJGuardian(grid=small_grid()).spec(obstacles)  # rk differs
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"margin": float("nan")}, "margin must be a finite number, got nan"),
+    ({"margin": "big"}, "margin must be a number, got 'big'"),
+    ({"horizon": -1.0}, "horizon must be a finite number > 0.0, got -1.0"),
+    ({"horizon": float("inf")}, "horizon must be a finite number > 0.0, got inf"),
+    ({"lap": 0.0}, "lap must be a finite number > 0.0, got 0.0"),
+    ({"disturbance": -0.1}, "disturbance must be a finite number >= 0.0, got -0.1"),
+    ({"cfl": 1.5}, "cfl must be in"),
+    ({"cfl": float("nan")}, "cfl must be a finite number"),
+    ({"ra_horizon": 0}, "ra_horizon must be a finite number > 0.0, got 0"),
+    ({"ra_margin": -1}, "ra_margin must be a finite number >= 0.0, got -1"),
+    ({"delay": -1}, "delay must be an integer >= 0"),
+    ({"delay": 0.5}, "delay must be an integer >= 0"),
+    ({"order": 3}, "order must be 1 or 2, got 3"),
+    ({"rk": 4}, "rk must be 1, 2 or 3, got 4"),
+    ({"rule": "eager"}, "rule must be one of"),
+    ({"cache_max_files": 0}, "cache_max_files must be an integer >= 1, got 0"),
+])
+def test_bad_arguments_are_refused_naming_the_value(kwargs, match):
+    import re
+
+    with pytest.raises(ValueError, match=re.escape(match)):
+        HJGuardian(grid=small_grid(), **kwargs)

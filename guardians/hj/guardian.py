@@ -28,34 +28,37 @@ values of different schemes never mix.
 In the parallel-autonomy loop an action takes effect one lap late.  The action computed from
 the state ``s_k`` (returned by step ``k``) is applied from ``s_{k+1}`` on, and the lap from
 ``s_k`` to ``s_{k+1}`` runs under the *previous* action.  A lap lasts
-``base_step + time_accel * thinking time`` (0.11 s under ``--clock fixed:1``); the guardian
+``base_step + time_accel * thinking time`` (0.11 s under ``--clock fixed:1``).  The guardian
 measures it as the difference of successive sim times (``lap=None``).  Before it has seen one
 lap it assumes 0.1 s, the environment's default base step.
 
-So a decision at ``s_k`` commits two laps.  Staying passive is safe only if, whatever the driver
-does, the guardian can still take over in time, i.e. the value two laps ahead is still
-positive.  The optimal control keeps ``V`` from decreasing (that is what ``V`` means).  The
-worst a held control can do is decrease it at the rate
+So a decision at ``s_k`` commits ``T = (1 + delay) * lap`` seconds (``delay=1``: the pending
+lap and the lap the decision governs; use ``delay=0`` in the blocking ``Dubins4DCircles-v0``,
+where an action acts at once).  Staying passive is safe only if, whatever the driver does in
+that time, the guardian can still take over: the value at the end of ``T`` must still be
+positive.  The dynamics are invariant under translation and the target is a distance, so
+``V`` is 1-Lipschitz in position: moving the car by ``d`` metres lowers ``V`` by at most ``d``.
+In ``T`` seconds, starting at speed ``v``, the car covers at most ``v T + u2_max T^2 / 2``
+metres.  ``hj`` (``rule="distance"``) therefore takes control when
 
-    rho(s) = max(0, -min_u grad V(s) . f(s, u))
-           = max(0, -v (V_x cos theta + V_y sin theta) + u1_max |V_theta| + u2_max |V_v|)
+    V(s) <= margin + v T + u2_max T^2 / 2
 
-(the speed term only where the speed is not at a bound).  Over one lap of length ``tau`` the
-decrease is ``tau * rho(s)`` to first order in ``tau``.  Over the pending lap it is known
-exactly when the pending control is the guardian's own, ``tau * max(0, -grad V . f(s,
-u_pending))``, and bounded by ``tau * rho(s)`` when it is the driver's.  Over the lap that
-the decision governs it is ``tau * rho(s)`` again.  ``hj`` takes control when
+which is 0.24 + 0.44 + 0.01 = 0.69 m at 2 m/s with 0.11 s laps.  ``margin`` is the
+numerical error of the value as the guardian sees it.  ``V`` is interpolated multilinearly
+between grid nodes, and at a kink of a function with slopes of at most 1 that over-states
+the value by up to half a cell.  So the default is half a position cell, ``dx / 2`` (0.238 m
+on the default grid), and it shrinks with a finer grid.  ``margin`` is also the knob of the
+sensitivity study.
 
-    V(s) <= margin + (pending-lap decrease) + delay * tau * rho(s)
-
-with ``delay=1`` (the laps between a decision and its effect: 1 in the parallel-autonomy loop;
-use 0 in the blocking ``Dubins4DCircles-v0``, where an action acts at once).  At speed 2 m/s,
-heading straight at a wall, this is ``V <= 2 * 0.11 * 2 = 0.44`` m: the distance the car
-covers in the two laps.  Driving away from an obstacle, ``rho`` is small and the guardian
-leaves the driver alone.  ``margin`` (default 0) is an extra constant, the knob of the
-sensitivity study.  The rule has no other tuned number: the first-order term is the whole
-derivation.  The value's error on the default grid is about one position cell where it
-matters; the constant margin is where a user would add such a cushion.
+What the distance bound leaves out: the heading and speed the driver changes in ``T``
+(at most 0.055 rad and 0.11 m/s) also move ``V``.  ``rule="gradient"`` bounds them to first
+order with the value's gradient.  It acts when ``V <= margin + T rho(s) + T^2 kappa(s) / 2``,
+where ``rho = max(0, -min_u grad V . f)`` is the worst rate of decrease and
+``kappa = |grad_xy V| sqrt((v u1_max)^2 + u2_max^2)`` bounds how much the path bends.  It
+counts the driver's worst acceleration even from standstill, so it keeps a stopped car facing
+an obstacle stopped.  We compared the two on the first 52 episodes of seed 0 (fixed 1 ms
+clock): both collided in 7.7% of them, "gradient" with 28.8% timeouts against 15.4%.  So
+"distance" is the default, chosen on that comparison.
 
 When acting, the guardian applies the value function's optimal control, the bang-bang
 maximiser of ``grad V . f``: ``u1 = +-0.25`` by the sign of ``dV/dtheta``, ``u2 = +-0.5`` by
@@ -63,15 +66,17 @@ the sign of ``dV/dv``.
 
 ## ``hj-paper``: the paper's rule
 
-``order=1, rk=2``, ``rule="value"``: take control when ``V <= margin`` (``margin=0``) with the
-same bang-bang control, no latency term.  This is what ``hj`` was before the rule above.
+``order=1, rk=2``, ``rule="value"``, ``margin=0``: take control when ``V <= 0`` with the same
+bang-bang control and no allowance for the latency.  This is what ``hj`` did before the rule
+above.
 
 ## Arguments
 
 ``grid`` (a :class:`Grid`) or ``grid_n`` (points per axis of the default box), ``horizon`` (4
 s), ``order`` (1: upwind, 2: ENO2), ``rk`` (TVD RK order), ``cfl`` (0.8), ``rule``
-(``"lookahead"`` or ``"value"``), ``margin`` (m), ``delay`` (laps), ``lap`` (s, ``None``:
-measured), ``disturbance`` (bound on the position-rate disturbance, 0 as the paper ran),
+(``"distance"``, ``"gradient"`` or ``"value"``: act when ``V <= margin``), ``margin`` (m;
+``None``: half a position cell), ``delay`` (laps), ``lap`` (s, ``None``: measured),
+``disturbance`` (bound on the position-rate disturbance, 0 as the paper ran),
 ``cache_dir``/``cache``/``cache_max_files``, ``backend`` (``"auto"``: the compiled numba
 kernel, which covers both orders; or ``"numpy"``/``"numba"``; both give the same value to
 float32 rounding, so they share cache entries).  A non-finite or out-of-range value is refused
@@ -287,7 +292,7 @@ class HJGuardian(Guardian):
         vx, vy, vth, vv = grad
         drift = v * (vx * math.cos(th) + vy * math.sin(th))
         # the worst u2 pushes v against the sign of dV/dv, unless the clamp stops it there
-        speed = abs(vv) if d.v_min < v < d.v_max else (max(0.0, -vv) if v >= d.v_max else max(0.0, vv))
+        speed = abs(vv) if d.v_min < v < d.v_max else (max(0.0, vv) if v >= d.v_max else max(0.0, -vv))
         return max(0.0, -drift + d.u1_max * abs(vth) + d.u2_max * speed)
 
     def threshold(self, state, grad) -> float:
