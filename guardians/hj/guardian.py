@@ -181,8 +181,10 @@ class HJGuardian(Guardian):
     def __init__(self, grid: Grid | None = None, grid_n=None, horizon: float = 4.0, order: int = 2, rk: int = 3, cfl: float = 0.8,
                  rule: str = "distance", margin: float | None = None, delay: int = 1, lap: float | None = None,
                  disturbance: float = 0.0, cache_dir=None, cache: bool = True, cache_max_files: int = 64,
-                 mode: str = "avoid", ra_horizon: float = 10.0, ra_margin: float = 0.5, backend: str = "auto") -> None:
+                 mode: str = "avoid", ra_horizon: float = 10.0, ra_margin: float = 0.5, backend: str = "auto",
+                 standstill_lookup: bool = True) -> None:
         super().__init__()
+        self.standstill_lookup = bool(standstill_lookup)
         self.horizon = _finite("horizon", horizon, 0.0, lo_open=True)
         if mode not in ("avoid", "reach_avoid"):
             raise ValueError(f"mode must be 'avoid' or 'reach_avoid', got {mode!r}")
@@ -326,7 +328,15 @@ class HJGuardian(Guardian):
             return inactive_action()
         vals = self.evaluate(s)
         if vals[0] <= self.threshold(s, vals[1:]):  # safety first: the avoid value
-            u1, u2 = self.dynamics.optimal_control(s, vals[1:])
+            grad = vals[1:]
+            cell = self.grid.dx[3]
+            if self.standstill_lookup and s[3] < cell:
+                # at standstill the heading does not change V (dV/dtheta = 0): the control is
+                # read one speed cell up, where the value says which way to turn and whether
+                # to move off (otherwise a car stopped within the margin is held there forever)
+                grad = self.evaluate(np.array([s[0], s[1], s[2], cell]))[1:]
+                self._counts["standstill_lookups"] = self._counts.get("standstill_lookups", 0) + 1
+            u1, u2 = self.dynamics.optimal_control(s, grad)
             return active_action(u1, u2)
         if self._ra_arrays is not None:
             ra = self.grid.interp_many(self._ra_arrays, s)
@@ -346,5 +356,6 @@ class HJPaperGuardian(HJGuardian):
 
     name = "hj-paper"
 
-    def __init__(self, order: int = 1, rk: int = 2, rule: str = "value", margin: float = 0.0, **kwargs) -> None:
-        super().__init__(order=order, rk=rk, rule=rule, margin=margin, **kwargs)
+    def __init__(self, order: int = 1, rk: int = 2, rule: str = "value", margin: float = 0.0, standstill_lookup: bool = False,
+                 **kwargs) -> None:
+        super().__init__(order=order, rk=rk, rule=rule, margin=margin, standstill_lookup=standstill_lookup, **kwargs)
