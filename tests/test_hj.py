@@ -290,7 +290,7 @@ def test_compiled_stage_equals_the_numpy_scheme(order, control, d_max, with_floo
 
 
 @needs_numba
-@pytest.mark.parametrize("order, rk", [(1, 1), (1, 2), (1, 3), (2, 1), (2, 2), (2, 3)])
+@pytest.mark.parametrize("order, rk", [(1, 1), (1, 2), (1, 3), (2, 3)])  # the RK driver is shared by both orders
 def test_backends_agree_on_whole_solves(order, rk):
     # each stage agrees to float32 rounding (above); over a whole ENO2 solve a rounding-level
     # difference can flip ENO's choice between two nearly equal second differences, which moves
