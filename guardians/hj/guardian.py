@@ -57,12 +57,17 @@ where ``rho = max(0, -min_u grad V . f)`` is the worst rate of decrease and
 ``kappa = |grad_xy V| sqrt((v u1_max)^2 + u2_max^2)`` bounds how much the path bends.  It
 counts the driver's worst acceleration even from standstill, so it keeps a stopped car facing
 an obstacle stopped.  We compared the two on the first 52 episodes of seed 0 (fixed 1 ms
-clock): both collided in 7.7% of them, "gradient" with 28.8% timeouts against 15.4%.  So
-"distance" is the default, chosen on that comparison.
+clock, before the standstill rule below): both collided in 7.7% of them, "gradient" with
+28.8% timeouts against 15.4%.  So "distance" is the default, chosen on that comparison.
 
 When acting, the guardian applies the value function's optimal control, the bang-bang
 maximiser of ``grad V . f``: ``u1 = +-0.25`` by the sign of ``dV/dtheta``, ``u2 = +-0.5`` by
-the sign of ``dV/dv``.
+the sign of ``dV/dv``.  One degenerate case: at standstill the heading does not change ``V``
+(``dV/dtheta = 0``).  The bang-bang control then only brakes, and a car stopped within the
+margin of an obstacle would be held there until the episode times out.  Below one speed cell
+(0.13 m/s) the guardian therefore reads the gradient one speed cell up, where the value says
+which way to turn and whether to move off (``standstill_lookup=True``; counted in
+``stats()["standstill_lookups"]``; ``hj-paper`` does not do this).
 
 ## ``hj-paper``: the paper's rule
 
