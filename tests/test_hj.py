@@ -527,3 +527,18 @@ def test_bad_arguments_are_refused_naming_the_value(kwargs, match):
 
     with pytest.raises(ValueError, match=re.escape(match)):
         HJGuardian(grid=small_grid(), **kwargs)
+
+
+def test_a_stopped_car_within_the_margin_is_turned_away_not_held(tmp_path):
+    # stopped 0.2 m from a circle, facing it, a little left of its centre line: V <= margin, so
+    # the guardian acts.  At v = 0, dV/dtheta vanishes and the plain bang-bang control only
+    # brakes (held forever); read one speed cell up, the value turns the car left, away
+    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-2.2, 0.4, 0.0, 0.0]), "sim_time": 0.0}
+    g = hj(box, tmp_path)
+    vals = g.evaluate(box["state"])
+    assert 0 < vals[0] <= g.margin and abs(vals[3]) < 0.05  # acts; the heading hardly matters at v = 0
+    a = g.act(None, {})
+    assert a["active_ctrl"] == 1 and a["turnrate_ctrl"][0] == 0.25 and g.stats()["standstill_lookups"] == 1
+    plain = hj(box, tmp_path, standstill_lookup=False)
+    a = plain.act(None, {})
+    assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and "standstill_lookups" not in plain.stats()
