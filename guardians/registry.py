@@ -29,6 +29,7 @@ BUILTIN = {
     "cbf": "guardians.cbf:CBFGuardian",
     "cbf-paper": "guardians.cbf:CBFPaperGuardian",
     "hj": "guardians.hj.guardian:HJGuardian",
+    "hj-paper": "guardians.hj.guardian:HJPaperGuardian",
     "random": "guardians.baselines:RandomGuardian",
     "inactive": "guardians.baselines:InactiveGuardian",
     "brakes": "guardians.baselines:BrakesGuardian",

@@ -1,6 +1,13 @@
-"""Compiled (numba) kernel for the Dubins4D Lax-Friedrichs update on a 4-D grid.
+"""Compiled (numba) kernels for the Dubins4D Lax-Friedrichs update on a 4-D grid.
 
-The arrays are kept **padded** with one ghost cell on each side of every axis (heading:
+Two kernels: ``_stage`` (first-order upwind differences, one ghost cell per side) and
+``_stage2`` (ENO2 differences, two ghost cells per side; the default scheme).  Both are
+described here for the first-order one; ``_stage2`` differs only in the one-sided
+differences (see its comments) and in its ghost width.  ENO2 reads two neighbours per side and
+chooses the smaller second difference, about 2.2x the work of the first-order stage; with
+RK3 (3 stages instead of 2) a default-grid solve costs about 3.3x the first-order RK2 one.
+
+The arrays are kept **padded** with ghost cells on each side of every axis (heading:
 periodic copies; the other axes: linear extrapolation, so that the outer one-sided difference
 equals the inner one, as in the numpy path).  One call of :func:`lf_stage` then computes a
 whole Runge-Kutta stage in a single branch-free, vectorisable pass over the interior:
@@ -39,8 +46,8 @@ def kernel_mismatch(grid, dynamics, order: int = 1) -> str | None:
     """Why the compiled kernel cannot solve this problem, or ``None`` if it can."""
     from guardians.hj.dynamics import Dubins4DHJ
 
-    if not isinstance(dynamics, Dubins4DHJ) or order != 1:
-        return f"the compiled kernel supports only Dubins4DHJ with order=1, got {type(dynamics).__name__}, order={order}"
+    if not isinstance(dynamics, Dubins4DHJ) or order not in (1, 2):
+        return f"the compiled kernel supports only Dubins4DHJ with order 1 or 2, got {type(dynamics).__name__}, order={order}"
     if grid.ndim != 4 or grid.periodic != (False, False, True, False):
         return f"the compiled kernel needs a 4-D grid with only axis 2 periodic, got periodic={grid.periodic}"
     return None
@@ -111,6 +118,138 @@ if HAVE_NUMBA:
                 _fill_plane_ghosts(Of[i * sx + j * sy:i * sx + j * sy + plane], n2, n3)
         _fill_xy_ghosts(out)
 
+    @njit(cache=True, parallel=True, boundscheck=False)
+    def _stage2(V0, W, out, floor, has_floor, a, b, dt, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max):
+        # The ENO2 version of _stage on arrays padded with two ghosts per side.  Along an axis
+        # with neighbours w-2, w-1, w, w+1, w+2 and undivided second differences
+        # c_m = w-2 - 2 w-1 + w, c_0 = w-1 - 2 w + w+1, c_p = w - 2 w+1 + w+2:
+        #   p- = (w - w-1 + minabs(c_m, c_0) / 2) / dx,  p+ = (w+1 - w - minabs(c_0, c_p) / 2) / dx
+        # (minabs: the argument of smaller magnitude, the left one on a tie, as the numpy path).
+        # Then, with e = (minabs(c_m, c_0) + minabs(c_0, c_p)) / 2 and the central difference d:
+        # with lm = minabs(c_m, c_0) and rm = minabs(c_0, c_p):
+        #   (p- + p+) / 2 = (w+1 - w-1 + (lm - rm) / 2) / (2 dx)   (``d*_`` below, times 2 dx)
+        #   (p+ - p-) / 2 = (c_0 - (lm + rm) / 2) / (2 dx)          (``j*`` below, times 2 dx)
+        # so the LF dissipation alpha (p+ - p-) / 2 is alpha / (2 dx) * j, as in _stage.
+        n0, n1, n2, n3 = W.shape
+        plane = n2 * n3
+        Wf, Of, Vf, Ff = W.reshape(-1), out.reshape(-1), V0.reshape(-1), floor.reshape(-1)
+        sx, sy, st = n1 * plane, plane, n3
+        half = np.float32(0.5)
+        zero = np.float32(0.0)
+        two = np.float32(2.0)
+        k0, k1, k2, k3 = half * inv_dx[0], half * inv_dx[1], half * inv_dx[2], half * inv_dx[3]
+        g0, g1, g2, g3 = alpha[0] * k0, alpha[1] * k1, alpha[2] * k2, alpha[3] * k3
+        K1 = sign * u1max * k2
+        K3 = sign * u2max * k3
+        KD0, KD1 = sign * d_max * k0, sign * d_max * k1
+        bdt = b * dt
+        q_lo = 2 * n3 + 2  # the first interior entry of a (theta, v) plane
+        count = plane - 4 * n3 - 4  # up to the last interior entry
+        Cq, Sq = C[q_lo:q_lo + count] * k0, S[q_lo:q_lo + count] * k1
+        Aq, Bq = sign * up[q_lo:q_lo + count], -sign * down[q_lo:q_lo + count]
+        for i in prange(2, n0 - 2):
+            for j in range(2, n1 - 2):
+                base = i * sx + j * sy + q_lo
+                wc = Wf[base:base + count]
+                xm2, xm, xp, xp2 = (Wf[base - 2 * sx:base - 2 * sx + count], Wf[base - sx:base - sx + count],
+                                    Wf[base + sx:base + sx + count], Wf[base + 2 * sx:base + 2 * sx + count])
+                ym2, ym, yp, yp2 = (Wf[base - 2 * sy:base - 2 * sy + count], Wf[base - sy:base - sy + count],
+                                    Wf[base + sy:base + sy + count], Wf[base + 2 * sy:base + 2 * sy + count])
+                tm2, tm, tp, tp2 = (Wf[base - 2 * st:base - 2 * st + count], Wf[base - st:base - st + count],
+                                    Wf[base + st:base + st + count], Wf[base + 2 * st:base + 2 * st + count])
+                vm2, vm, vp, vp2 = (Wf[base - 2:base - 2 + count], Wf[base - 1:base - 1 + count],
+                                    Wf[base + 1:base + 1 + count], Wf[base + 2:base + 2 + count])
+                o = Of[base:base + count]
+                v0 = Vf[base:base + count] if a != zero else wc
+                fr = Ff[base:base + count] if has_floor else Ff[0:count]
+                for q in range(count):
+                    w = wc[q]
+                    w2 = two * w
+                    # x
+                    cm, c0, cp = xm2[q] - two * xm[q] + w, xm[q] - w2 + xp[q], w - two * xp[q] + xp2[q]
+                    lm = cm if abs(cm) <= abs(c0) else c0
+                    rm = c0 if abs(c0) <= abs(cp) else cp
+                    dx_ = xp[q] - xm[q] + half * (lm - rm)  # 2 dx (p- + p+) / 2
+                    jx = c0 - half * (lm + rm)  # dx (p+ - p-)
+                    # y
+                    cm, c0, cp = ym2[q] - two * ym[q] + w, ym[q] - w2 + yp[q], w - two * yp[q] + yp2[q]
+                    lm = cm if abs(cm) <= abs(c0) else c0
+                    rm = c0 if abs(c0) <= abs(cp) else cp
+                    dy_ = yp[q] - ym[q] + half * (lm - rm)
+                    jy = c0 - half * (lm + rm)
+                    # theta
+                    cm, c0, cp = tm2[q] - two * tm[q] + w, tm[q] - w2 + tp[q], w - two * tp[q] + tp2[q]
+                    lm = cm if abs(cm) <= abs(c0) else c0
+                    rm = c0 if abs(c0) <= abs(cp) else cp
+                    dt_ = tp[q] - tm[q] + half * (lm - rm)
+                    jt = c0 - half * (lm + rm)
+                    # v
+                    cm, c0, cp = vm2[q] - two * vm[q] + w, vm[q] - w2 + vp[q], w - two * vp[q] + vp2[q]
+                    lm = cm if abs(cm) <= abs(c0) else c0
+                    rm = c0 if abs(c0) <= abs(cp) else cp
+                    dv_ = vp[q] - vm[q] + half * (lm - rm)
+                    jv = c0 - half * (lm + rm)
+                    hv, hd = dv_ * Aq[q], dv_ * Bq[q]
+                    H = Cq[q] * dx_ + Sq[q] * dy_ + K1 * abs(dt_) + K3 * (hv if hv > hd else hd)
+                    H -= KD0 * abs(dx_) + KD1 * abs(dy_)
+                    H += g0 * jx + g1 * jy + g2 * jt + g3 * jv
+                    H = H if H < zero else zero
+                    val = a * v0[q] + b * w + bdt * H
+                    if has_floor:
+                        fl = fr[q]
+                        val = val if val > fl else fl
+                    o[q] = val
+                _fill_plane_ghosts2(Of[i * sx + j * sy:i * sx + j * sy + plane], n2, n3)
+        _fill_xy_ghosts2(out)
+
+    @njit(cache=True, boundscheck=False)
+    def _fill_plane_ghosts2(pl, n2, n3):
+        """Two ghosts per side of one flattened (theta, v) plane: heading periodic, speed
+        extrapolated linearly (``w[-k] = w[0] + k (w[0] - w[1])``)."""
+        for m in range(n3):
+            pl[m] = pl[(n2 - 4) * n3 + m]
+            pl[n3 + m] = pl[(n2 - 3) * n3 + m]
+            pl[(n2 - 2) * n3 + m] = pl[2 * n3 + m]
+            pl[(n2 - 1) * n3 + m] = pl[3 * n3 + m]
+        two = np.float32(2.0)
+        for k in range(n2):
+            r = k * n3
+            d = pl[r + 2] - pl[r + 3]
+            pl[r + 1] = pl[r + 2] + d
+            pl[r] = pl[r + 2] + two * d
+            e = pl[r + n3 - 3] - pl[r + n3 - 4]
+            pl[r + n3 - 2] = pl[r + n3 - 3] + e
+            pl[r + n3 - 1] = pl[r + n3 - 3] + two * e
+
+    @njit(cache=True, boundscheck=False)
+    def _fill_xy_ghosts2(P):
+        """Two ghost faces per side of the position axes (linear extrapolation)."""
+        n0, n1 = P.shape[0], P.shape[1]
+        two = np.float32(2.0)
+        d = P[2] - P[3]
+        P[1] = P[2] + d
+        P[0] = P[2] + two * d
+        e = P[n0 - 3] - P[n0 - 4]
+        P[n0 - 2] = P[n0 - 3] + e
+        P[n0 - 1] = P[n0 - 3] + two * e
+        for i in range(n0):
+            d = P[i, 2] - P[i, 3]
+            P[i, 1] = P[i, 2] + d
+            P[i, 0] = P[i, 2] + two * d
+            e = P[i, n1 - 3] - P[i, n1 - 4]
+            P[i, n1 - 2] = P[i, n1 - 3] + e
+            P[i, n1 - 1] = P[i, n1 - 3] + two * e
+
+    @njit(cache=True, boundscheck=False)
+    def _fill_ghosts2(P):
+        n0, n1, n2, n3 = P.shape
+        plane = n2 * n3
+        Pf = P.reshape(-1)
+        for i in range(n0):
+            for j in range(n1):
+                _fill_plane_ghosts2(Pf[(i * n1 + j) * plane:(i * n1 + j + 1) * plane], n2, n3)
+        _fill_xy_ghosts2(P)
+
     @njit(cache=True, boundscheck=False)
     def _fill_plane_ghosts(pl, n2, n3):
         """Ghosts of one flattened (theta, v) plane: heading periodic, then speed extrapolated."""
@@ -148,22 +287,27 @@ if HAVE_NUMBA:
 class Dubins4DStepper:
     """Runge-Kutta stages of the Dubins4D LF scheme on padded float32 arrays.
 
-    ``padded(V)`` returns a padded copy; ``stage(V0, W, out, a, b, dt)`` writes one stage into
-    ``out`` (interior and ghosts); ``interior(P)`` is a view of the unpadded values.
+    ``order`` 1 (upwind, one ghost cell per side) or 2 (ENO2, two).  ``padded(V)`` returns a
+    padded copy; ``stage(V0, W, out, a, b, dt)`` writes one stage into ``out`` (interior and
+    ghosts); ``interior(P)`` is a view of the unpadded values.
     """
 
-    def __init__(self, grid, dynamics, alphas, control: str = "max", floor: np.ndarray | None = None) -> None:
+    def __init__(self, grid, dynamics, alphas, control: str = "max", floor: np.ndarray | None = None, order: int = 1) -> None:
         if not HAVE_NUMBA:
             raise RuntimeError("the compiled HJ kernel needs numba (pip install numba)")
-        problem = kernel_mismatch(grid, dynamics)
+        problem = kernel_mismatch(grid, dynamics, order)
         if problem:
             raise ValueError(problem)
+        self.order = g = int(order)
+        self._kernel = _stage if g == 1 else _stage2
+        self._fill = _fill_ghosts if g == 1 else _fill_ghosts2
+        self._inner = (slice(g, -g),) * 4
         th, v = grid.axes[2], grid.axes[3]
         vv = np.minimum(v, dynamics.v_max)
 
         def plane(a):  # a (theta, v) table on the padded plane, flattened; ghosts get 0
-            P = np.zeros((len(th) + 2, len(v) + 2), np.float32)
-            P[1:-1, 1:-1] = a
+            P = np.zeros((len(th) + 2 * g, len(v) + 2 * g), np.float32)
+            P[g:-g, g:-g] = a
             return P.reshape(-1)
 
         self.C = plane(np.cos(th)[:, None] * vv[None, :])
@@ -177,19 +321,18 @@ class Dubins4DStepper:
         self.floor = None if floor is None else self.padded(np.asarray(floor, dtype=np.float32))
         self._dummy_floor = np.zeros((1, 1, 1, 1), np.float32)
 
-    @staticmethod
-    def padded(V: np.ndarray) -> np.ndarray:
-        P = np.empty(tuple(n + 2 for n in V.shape), np.float32)
-        P[1:-1, 1:-1, 1:-1, 1:-1] = V
-        _fill_ghosts(P)
+    def padded(self, V: np.ndarray) -> np.ndarray:
+        g = self.order
+        P = np.empty(tuple(n + 2 * g for n in V.shape), np.float32)
+        P[self._inner] = V
+        self._fill(P)
         return P
 
-    @staticmethod
-    def interior(P: np.ndarray) -> np.ndarray:
-        return P[1:-1, 1:-1, 1:-1, 1:-1]
+    def interior(self, P: np.ndarray) -> np.ndarray:
+        return P[self._inner]
 
     def stage(self, V0, W, out, a: float, b: float, dt: float) -> None:
         f32 = np.float32
         has_floor = self.floor is not None
-        _stage(V0, W, out, self.floor if has_floor else self._dummy_floor, has_floor, f32(a), f32(b), f32(dt),
-               self.inv_dx, self.alpha, self.C, self.S, self.up, self.down, *self.consts)
+        self._kernel(V0, W, out, self.floor if has_floor else self._dummy_floor, has_floor, f32(a), f32(b), f32(dt),
+                     self.inv_dx, self.alpha, self.C, self.S, self.up, self.down, *self.consts)

@@ -3,7 +3,7 @@
 A non-periodic axis has ``n`` points from ``lo`` to ``hi`` inclusive.  A periodic axis has
 ``n`` points ``lo + i (hi - lo) / n``: the period is exactly ``hi - lo`` and ``hi`` itself is
 the same point as ``lo`` (the original padded its heading axis by 0.1 rad on each side, giving
-a period of 2 pi + 0.2; REFERENCE P8).
+a period of 2 pi + 0.2).
 """
 
 from __future__ import annotations

@@ -17,12 +17,15 @@ Numerics (Osher-Fedkiw, Mitchell's toolbox conventions):
   ``V = max(V, -g)`` after every Runge-Kutta stage;
 * time: TVD Runge-Kutta (``rk=1``: forward Euler, ``rk=2``: Heun, ``rk=3``: Shu-Osher) with
   ``dt = cfl / sum_i (alpha_i / dx_i)`` (CFL 0.8 by default);
+* defaults ``order=2, rk=3``: second-order accurate in space (away from kinks) and third in
+  time.  First order is kept (``order=1, rk=2``, the paper's scheme); it is diffusive and
+  under-estimates the unsafe set (the circle convergence test in ``tests/test_hj.py``);
 * float32 arrays (the default grid has 4.2 M points, 17 MB per array).
 
 Two implementations of the same scheme: a generic numpy one (any dimension, any dynamics
-object, ``order`` 1 or 2) and, for the Dubins4D dynamics with first-order differences, a
-compiled numba kernel that fuses a whole Runge-Kutta stage into one pass over the grid
-(``guardians/hj/_kernels.py``; 10-20x faster on the default grid).  ``backend="auto"`` (the
+object, ``order`` 1 or 2), the reference, and, for the Dubins4D dynamics, compiled numba
+kernels (first order and ENO2) that fuse a whole Runge-Kutta stage into one pass over the
+grid (``guardians/hj/_kernels.py``; 10-20x faster on the default grid).  ``backend="auto"`` (the
 default) takes the compiled one where it applies; both agree to float32 rounding (tested).
 The kernel's threads follow ``RMM_HJ_THREADS`` if set (the benchmark's worker processes use
 one each), else numba's default.
@@ -112,7 +115,7 @@ def _rate(V: np.ndarray, grid: Grid, dynamics, alphas, order: int, control: str 
     return np.minimum(H, 0.0, out=H)
 
 
-def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: int = 1, rk: int = 2,
+def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: int = 2, rk: int = 3,
               cfl: float = 0.8, progress=None, constraint: np.ndarray | None = None,
               backend: str = "auto") -> tuple[np.ndarray, dict]:
     """Backward reachable tube of ``target`` (``l``: <= 0 inside) over ``horizon`` seconds.
@@ -152,7 +155,7 @@ def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: i
 
     if impl == "numba":
         return _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control,
-                               None if constraint is None else floor, progress, cfl)
+                               None if constraint is None else floor, progress, cfl, order)
 
     def L(W):
         return _rate(W, grid, dynamics, alphas, order, control)
@@ -182,11 +185,11 @@ def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: i
                "mode": "avoid" if constraint is None else "reach_avoid", "backend": "numpy"}
 
 
-def _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control, floor, progress, cfl):
+def _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control, floor, progress, cfl, order):
     threads = os.environ.get("RMM_HJ_THREADS")
     if threads:
         _kernels.set_threads(int(threads))
-    stepper = _kernels.Dubins4DStepper(grid, dynamics, alphas, control=control, floor=floor)
+    stepper = _kernels.Dubins4DStepper(grid, dynamics, alphas, control=control, floor=floor, order=order)
     P = stepper.padded(V)
     # separate output buffers: an output aliasing an input defeats the kernel's vectorisation
     P1, P2 = np.empty_like(P), np.empty_like(P)
@@ -212,5 +215,5 @@ def _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control, flo
         if progress is not None:
             progress(t, horizon)
     V = np.ascontiguousarray(stepper.interior(P))
-    return V, {"steps": steps, "dt": dt_max, "seconds": time.perf_counter() - t0, "order": 1, "rk": rk, "cfl": cfl,
+    return V, {"steps": steps, "dt": dt_max, "seconds": time.perf_counter() - t0, "order": order, "rk": rk, "cfl": cfl,
                "mode": "avoid" if floor is None else "reach_avoid", "backend": "numba"}
