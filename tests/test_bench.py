@@ -127,7 +127,7 @@ def test_every_agent_end_to_end_and_report(tmp_path, capsys):
     assert main(["--agent", "all", "--episodes", "1", "--workers", "1", "--out", str(out),
                  "--agent-opt", "hj.grid_n=[32,32,16,16]", *FAST]) == 0
     text = capsys.readouterr().out
-    agents = ("lrmm", "cbf", "hj", "random", "inactive", "brakes")
+    agents = ("lrmm", "cbf", "hj", "random", "inactive", "brakes")  # 'all' = the defaults, not the -paper presets
     rows = _db_rows(out)
     assert sorted(r[0] for r in rows) == sorted(agents) and not [r for r in rows if r[3] == "error"]
     store = ResultsStore(out / "results.db")
@@ -141,6 +141,14 @@ def test_every_agent_end_to_end_and_report(tmp_path, capsys):
     rebuilt = capsys.readouterr().out
     assert rebuilt.split("Table I:")[1] == text.split("Table I:")[1]  # the same table, from the database alone
     _check_rendered_numbers(out, aggs)
+
+
+def test_named_agent_sets():
+    from benchmarks.bench.cli import _agents
+
+    assert _agents("all") == ["lrmm", "cbf", "hj", "random", "inactive", "brakes"]
+    assert _agents(" paper ") == ["lrmm-paper", "cbf-paper", "hj-paper", "random", "inactive", "brakes"]
+    assert _agents("cbf-paper,inactive") == ["cbf-paper", "inactive"]
 
 
 def test_agent_options_reach_the_guardian(tmp_path):

@@ -141,3 +141,15 @@ def test_unknown_guardian_names():
         make_guardian("guardians.baselines:Nope")
     with pytest.raises(TypeError, match="guardian"):
         make_guardian("collections:OrderedDict")
+
+
+def test_every_registered_name_makes_a_guardian_of_that_name():
+    """Each name of both sets builds a guardian whose table name is the registered name, and a
+    -paper preset is its default's class with other defaults (so options carry over)."""
+    from guardians.registry import DEFAULT_SET, PAPER_SET, load_guardian_class
+
+    for name in set(DEFAULT_SET) | set(PAPER_SET):
+        assert name in available_guardians()
+        assert load_guardian_class(name).name == name
+    for name in ("lrmm", "cbf", "hj"):
+        assert issubclass(load_guardian_class(f"{name}-paper"), load_guardian_class(name))
