@@ -249,9 +249,14 @@ class Dubins4D:
         times = np.linspace(0.0, float(duration), int(n_steps))
         return self.states_at(states, controls, times)
 
-    def states_at(self, states: np.ndarray, controls: np.ndarray, times: np.ndarray) -> np.ndarray:
-        """States at each of ``times`` (shape ``(T,)``, all ``>= 0``): ``(N, T, 4)``."""
-        if states.shape[0] <= _COMPILED_MAX_N and _states_at_compiled is not None:
+    def states_at(self, states: np.ndarray, controls: np.ndarray, times: np.ndarray, compiled: bool | None = None) -> np.ndarray:
+        """States at each of ``times`` (shape ``(T,)``, all ``>= 0``): ``(N, T, 4)``.
+
+        ``compiled``: ``None`` picks the faster path for ``N``; ``True`` always runs the compiled
+        loop, whose result for one state does not depend on ``N`` (the vector environment relies
+        on that to match the single one bit for bit).
+        """
+        if (compiled or (compiled is None and states.shape[0] <= _COMPILED_MAX_N)) and _states_at_compiled is not None:
             out = np.empty((states.shape[0], len(times), 4))
             return _states_at_compiled(np.ascontiguousarray(states, dtype=float), np.ascontiguousarray(controls, dtype=float),
                                        np.asarray(times, dtype=float), self._lo, self._hi, _COEF_ARRAY, out)
