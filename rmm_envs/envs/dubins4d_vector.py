@@ -189,11 +189,11 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | list | None = None, options: dict[str, Any] | None = None):
         """Reset every sub-env (or those of ``options["reset_mask"]``); see the module docstring."""
-        super().reset(seed=seed)
         n = self.num_envs
         if seed is None:
             seeds = [None] * n
         elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            super().reset(seed=int(seed))  # the vector env's own np_random (unused by the worlds)
             seeds = [int(seed) + i for i in range(n)]
         elif isinstance(seed, (list, tuple)) and len(seed) == n:
             seeds = list(seed)
@@ -324,8 +324,9 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
                 self._add_info(infos, {"final_obs": obs[i].copy(), "final_info": step_info}, int(i))
                 self._reset_one(int(i), None)
             if ended_idx.size:
-                infos["_active"] &= ~ended
-                infos["_control"] &= ~ended
+                for key in ("active", "control"):  # now in final_info; absent (zero, unmasked) at the top
+                    infos[f"_{key}"] &= ~ended
+                    infos[key][ended_idx] = 0
                 infos["sim_time"][ended_idx] = 0.0
                 infos["state"][ended_idx] = self._states[ended_idx]
                 obs[ended_idx] = self._observe(ended_idx)
