@@ -293,22 +293,19 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         truncated[sl] = ~terminated[sl] & (self._sim_time[sl] >= e.max_episode_sim_time - 1e-9)
         ended = terminated | truncated
 
-        control = np.zeros((n, 2))
-        control[sl] = u
-        act_all = np.zeros(n, dtype=bool)
-        act_all[sl] = act
-        coll_all = np.zeros(n, dtype=bool)
-        coll_all[sl] = collision
-        goal_all = np.zeros(n, dtype=bool)
-        goal_all[sl] = goal
+        if all_step:
+            control, act_all, coll_all, goal_all = u, act, collision, goal
+        else:
+            control = np.zeros((n, 2))
+            control[sl] = u
+            act_all, coll_all, goal_all = (np.zeros(n, dtype=bool) for _ in range(3))
+            act_all[sl], coll_all[sl], goal_all[sl] = act, collision, goal
         infos = {"sim_time": self._sim_time.copy(), "_sim_time": np.ones(n, dtype=bool),
                  "state": self._states.copy(), "_state": np.ones(n, dtype=bool),
                  "active": act_all, "_active": stepping.copy(), "control": control, "_control": stepping.copy()}
-        ended_idx = np.nonzero(ended)[0]
-        ended_info = {}
-        for i in ended_idx:  # few per step: the single env's outcome and statistics
-            outcome = "collision" if coll_all[i] else "goal" if goal_all[i] else "timeout"
-            ended_info[i] = {"outcome": outcome, "episode": self._statistics(int(i), outcome)}
+        any_ended = bool(ended.any())
+        if any_ended:
+            ended_info = self._ended_info(ended, coll_all, goal_all)
 
         if resetting.any():  # NEXT_STEP: sub-envs whose episode ended at the last step
             ridx = np.nonzero(resetting)[0]
@@ -318,22 +315,27 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
             infos["state"][ridx] = self._states[ridx]
         obs = self._observe()
         if mode == AutoresetMode.SAME_STEP:
-            for i in ended_idx:
-                step_info = {"sim_time": float(infos["sim_time"][i]), "state": infos["state"][i].copy(),
-                             "active": bool(act_all[i]), "control": control[i].copy(), **ended_info[i]}
-                self._add_info(infos, {"final_obs": obs[i].copy(), "final_info": step_info}, int(i))
-                self._reset_one(int(i), None)
-            if ended_idx.size:
-                for key in ("active", "control"):  # now in final_info; absent (zero, unmasked) at the top
-                    infos[f"_{key}"] &= ~ended
-                    infos[key][ended_idx] = 0
+            if any_ended:
+                ended_idx = np.nonzero(ended)[0]
+                final_obs = np.full(n, None, dtype=object)
+                for i in ended_idx:
+                    final_obs[i] = obs[i].copy()
+                final_info = {k: (_masked(v, ended) if not k.startswith("_") else v & ended)
+                              for k, v in infos.items()} | ended_info
+                for key in ("active", "control"):  # now in final_info: absent (zero, unmasked) at the top
+                    infos[f"_{key}"] = infos[f"_{key}"] & ~ended
+                    infos[key] = _masked(infos[key], ~ended)
+                for i in ended_idx:
+                    self._reset_one(int(i), None)
                 infos["sim_time"][ended_idx] = 0.0
                 infos["state"][ended_idx] = self._states[ended_idx]
                 obs[ended_idx] = self._observe(ended_idx)
+                infos.update({"final_obs": final_obs, "_final_obs": ended.copy(),
+                              "final_info": final_info, "_final_info": ended.copy()})
             self._ended[:] = False
         else:
-            for i in ended_idx:
-                self._add_info(infos, ended_info[i], int(i))
+            if any_ended:
+                infos.update(ended_info)
             self._ended = ended
         for key in ("active", "control"):  # a key no sub-env has is absent, as in Gymnasium's own vector envs
             if not infos[f"_{key}"].any():
@@ -342,20 +344,32 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         self.clock.start()
         return obs.copy(), rewards, terminated, truncated, infos
 
-    def _statistics(self, i: int, outcome: str) -> dict:
-        """The single env's ``episode_statistics`` of sub-env ``i`` (same keys, same types)."""
-        n = int(self._n_steps[i])
-        return {
-            "outcome": outcome,
-            "n_env_steps": n,
-            "n_active_ctrl_env_steps": int(self._n_active[i]),
-            "active_ctrl_sim_time": float(self._active_time[i]),
-            "cum_sim_time": float(self._sim_time[i]),
-            "cum_compute_time": float(self._cum_compute[i]),
-            "avg_compute_time": float(self._cum_compute[i]) / n if n else 0.0,
-            "cum_reward": float(self._cum_reward[i]),
-            "final_speed": float(self._states[i, 3]),
-        }
+    def _ended_info(self, ended: np.ndarray, collision: np.ndarray, goal: np.ndarray) -> dict:
+        """``outcome`` and ``episode`` (the single env's ``episode_statistics``) of the sub-envs
+        where ``ended``, as arrays with masks (zero or ``None`` elsewhere, as Gymnasium fills)."""
+        n_steps = self._n_steps
+        with np.errstate(divide="ignore", invalid="ignore"):
+            avg = np.where(n_steps > 0, self._cum_compute / n_steps, 0.0)
+        outcome = np.full(self.num_envs, None, dtype=object)
+        for i in np.nonzero(ended)[0]:
+            outcome[i] = "collision" if collision[i] else "goal" if goal[i] else "timeout"
+        masks = np.repeat(ended[None], 11, axis=0)  # one independent mask row per key
+        episode = {"outcome": outcome.copy(), "_outcome": masks[0]}
+        for j, (key, value) in enumerate((
+                ("n_env_steps", n_steps), ("n_active_ctrl_env_steps", self._n_active),
+                ("active_ctrl_sim_time", self._active_time), ("cum_sim_time", self._sim_time),
+                ("cum_compute_time", self._cum_compute), ("avg_compute_time", avg),
+                ("cum_reward", self._cum_reward), ("final_speed", self._states[:, 3])), start=1):
+            episode[key] = np.where(ended, value, value.dtype.type(0))
+            episode[f"_{key}"] = masks[j]
+        return {"outcome": outcome, "_outcome": masks[9], "episode": episode, "_episode": masks[10]}
 
     def close_extras(self, **kwargs: Any) -> None:
         self._single.close()
+
+
+def _masked(value: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """A copy of ``value`` (``(N, ...)``) with the rows outside ``mask`` zero (``None`` for objects)."""
+    out = np.zeros_like(value) if value.dtype != object else np.full(value.shape, None, dtype=object)
+    out[mask] = value[mask]
+    return out
