@@ -216,9 +216,10 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
                 self._rngs[i], _ = seeding.np_random(seeds[i])
             self._reset_one(int(i), options or None)
         self._started = True
+        self._obs = self._obs.copy()  # the array returned earlier stays as it was
         self._obs[idx] = self._observe(idx)
         self.clock.start()
-        return self._obs.copy(), self._reset_info(idx)
+        return self._obs, self._reset_info(idx)
 
     # ------------------------------------------------------------------ actions
     def _parse_actions(self, actions) -> tuple[np.ndarray, np.ndarray]:
@@ -236,22 +237,27 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         extra = sorted(set(actions) - set(_FIELDS))
         if extra:
             raise ValueError(f"actions have unknown fields {extra}; expected the keys of {self.action_space}")
-        cols = []
+        arrs = {}
         for key in _FIELDS:
             arr = np.asarray(actions[key])
             if arr.dtype.kind not in "biuf" or arr.shape not in ((n,), (n, 1)):
                 raise ValueError(f"action field {key!r} must be {n} numbers, shape ({n},) or ({n}, 1), "
                                  f"got {arr.dtype} array of shape {arr.shape}")
-            arr = arr.reshape(n).astype(float)
-            bad = ~np.isfinite(arr) if key != "active_ctrl" else ~((arr == 0.0) | (arr == 1.0))
-            if bad.any():
-                i = int(np.argmax(bad))
-                expected = "0 or 1 (Discrete(2))" if key == "active_ctrl" else "finite"
-                raise ValueError(f"action field {key!r} of sub-env {i} must be {expected}, got {arr[i]!r}")
-            cols.append(arr)
-        ctrl = np.column_stack(cols[1:])
+            arrs[key] = arr.reshape(n)
+        flag = arrs["active_ctrl"]
+        active = flag == 1
+        bad = ~(active | (flag == 0))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ValueError(f"action field 'active_ctrl' of sub-env {i} must be 0 or 1 (Discrete(2)), got {flag[i]!r}")
+        ctrl = np.empty((n, 2))
+        ctrl[:, 0] = arrs["turnrate_ctrl"]
+        ctrl[:, 1] = arrs["accel_ctrl"]
+        if not np.isfinite(ctrl).all():
+            i, j = np.argwhere(~np.isfinite(ctrl))[0]
+            raise ValueError(f"action field {_FIELDS[1 + j]!r} of sub-env {i} must be finite, got {ctrl[i, j]!r}")
         np.minimum(np.maximum(ctrl, self._ctrl_low, out=ctrl), self._ctrl_high, out=ctrl)
-        return cols[0] == 1.0, ctrl
+        return active, ctrl
 
     # ------------------------------------------------------------------ step
     def step(self, actions):
@@ -266,40 +272,39 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
             i = int(np.argmax(self._ended))
             raise RuntimeError(f"sub-env {i}'s episode has ended and autoreset_mode is DISABLED: reset it first "
                                "with reset(options={'reset_mask': mask})")
-        resetting = self._ended.copy() if mode == AutoresetMode.NEXT_STEP else np.zeros(n, dtype=bool)
-        stepping = ~resetting
-        all_step = bool(stepping.all())
-        sl = slice(None) if all_step else np.nonzero(stepping)[0]
-
-        nxt, u, hit_obst, hit_goal = advance(e.system, e.driver, self._states[sl], self._circles[sl],
-                                             active[sl], ctrl[sl], e._step_times)
+        # Every world is advanced, those about to be reset too (NEXT_STEP: their episode ended at
+        # the last step): one pass over whole arrays, no gathers; what the resetting ones
+        # computed is discarded and their bookkeeping restarts in _reset_one.
+        resetting = self._ended if mode == AutoresetMode.NEXT_STEP else np.zeros(n, dtype=bool)
+        any_resetting = bool(resetting.any())
+        nxt, u, hit_obst, hit_goal = advance(e.system, e.driver, self._states, self._circles, active, ctrl,
+                                             e._step_times)
         dt = e.step_dt
-        act = active[sl]
-        self._n_steps[sl] += 1
-        self._n_active[sl] += act
-        self._active_time[sl] += np.where(act, dt, 0.0)
-        self._cum_compute[sl] += compute
-        self._sim_time[sl] += dt
-        self._states[sl] = nxt
+        self._n_steps += 1
+        self._n_active += active
+        self._active_time += np.where(active, dt, 0.0)
+        self._cum_compute += compute
+        self._sim_time += dt
+        self._states = nxt
         collision = np.isfinite(hit_obst) & (hit_obst <= hit_goal)
         goal = ~collision & np.isfinite(hit_goal)
-        rew = np.where(collision, -1.0, np.where(goal, 1.0, 0.0))
-        self._cum_reward[sl] += rew
-        rewards = np.zeros(n)
-        terminated = np.zeros(n, dtype=bool)
-        truncated = np.zeros(n, dtype=bool)
-        rewards[sl] = rew
-        terminated[sl] = collision | goal
-        truncated[sl] = ~terminated[sl] & (self._sim_time[sl] >= e.max_episode_sim_time - 1e-9)
-        ended = terminated | truncated
-
-        if all_step:
-            control, act_all, coll_all, goal_all = u, act, collision, goal
+        rewards = np.where(collision, -1.0, np.where(goal, 1.0, 0.0))
+        self._cum_reward += rewards
+        truncated = self._sim_time >= e.max_episode_sim_time - 1e-9
+        if any_resetting:
+            stepping = ~resetting
+            collision &= stepping
+            goal &= stepping
+            rewards[resetting] = 0.0
+            truncated &= stepping
+            active = active & stepping
+            u[resetting] = 0.0
         else:
-            control = np.zeros((n, 2))
-            control[sl] = u
-            act_all, coll_all, goal_all = (np.zeros(n, dtype=bool) for _ in range(3))
-            act_all[sl], coll_all[sl], goal_all[sl] = act, collision, goal
+            stepping = np.ones(n, dtype=bool)
+        terminated = collision | goal
+        truncated &= ~terminated
+        ended = terminated | truncated
+        control, act_all, coll_all, goal_all = u, active, collision, goal
         infos = {"sim_time": self._sim_time.copy(), "_sim_time": np.ones(n, dtype=bool),
                  "state": self._states.copy(), "_state": np.ones(n, dtype=bool),
                  "active": act_all, "_active": stepping.copy(), "control": control, "_control": stepping.copy()}
@@ -340,9 +345,9 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         for key in ("active", "control"):  # a key no sub-env has is absent, as in Gymnasium's own vector envs
             if not infos[f"_{key}"].any():
                 del infos[key], infos[f"_{key}"]
-        self._obs = obs
+        self._obs = obs  # a fresh array every step, never written to afterwards: no copy needed
         self.clock.start()
-        return obs.copy(), rewards, terminated, truncated, infos
+        return obs, rewards, terminated, truncated, infos
 
     def _ended_info(self, ended: np.ndarray, collision: np.ndarray, goal: np.ndarray) -> dict:
         """``outcome`` and ``episode`` (the single env's ``episode_statistics``) of the sub-envs
