@@ -156,8 +156,15 @@ def test_bad_action_containers_and_arguments():
         vec.reset(options={"reset_mask": np.array([1, 0])})
     with pytest.raises(ValueError, match="at least one"):
         vec.reset(options={"reset_mask": np.zeros(2, bool)})
+    before = vec.reset(seed=0)[0]
     with pytest.raises(ValueError, match="must hold n_obstacles = 5"):
-        vec.reset(seed=0, options={"obstacles": [[0.0, 0.0, 1.0]], "state": [5.0, 5.0, 0.0, 1.0]})
+        vec.reset(seed=1, options={"obstacles": [[0.0, 0.0, 1.0]], "state": [5.0, 5.0, 0.0, 1.0]})
+    with pytest.raises(ValueError, match="unknown reset options"):
+        vec.reset(seed=1, options={"speed": 1.0})
+    # a refused reset changed nothing: the generators continue as after reset(seed=0)
+    single = gym.make(ID)
+    single.reset(seed=1)
+    assert np.array_equal(vec.reset()[0][1], single.reset()[0]) and before.shape == (2, 17)
     with pytest.raises(ValueError, match="num_envs must be an integer >= 1"):
         Dubins4DCirclesVectorEnv(0)
     with pytest.raises(ValueError, match="autoreset_mode must be one of"):

@@ -165,9 +165,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
     def _reset_one(self, i: int, options: dict | None) -> None:
         e = self._single
         obstacles, state, goal = e.generate_start(self._rngs[i], options)
-        if obstacles.shape[0] != e.n_obstacles:
-            raise ValueError(f"option 'obstacles' must hold n_obstacles = {e.n_obstacles} circles in the vector env "
-                             f"(every world of a batch has as many), got {obstacles.shape[0]}")
+        self._check_start(obstacles, state, goal)
         self._states[i] = state
         self._circles[i, :-1] = obstacles
         self._circles[i, -1] = goal
@@ -178,6 +176,12 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         self._cum_compute[i] = 0.0
         self._cum_reward[i] = 0.0
         self._ended[i] = False
+
+    def _check_start(self, obstacles, state, goal) -> None:
+        k = self._single.n_obstacles
+        if obstacles.shape[0] != k:
+            raise ValueError(f"option 'obstacles' must hold n_obstacles = {k} circles in the vector env "
+                             f"(every world of a batch has as many), got {obstacles.shape[0]}")
 
     def _reset_info(self, idx: np.ndarray) -> dict:
         mask = np.zeros(self.num_envs, dtype=bool)
@@ -211,6 +215,8 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
             if not self._started and not mask.all():
                 raise ValueError("the first reset must reset every sub-env; options['reset_mask'] selects only some")
             idx = np.nonzero(mask)[0]
+        if options:  # bad options fail before any sub-env changes (a dry run on a throwaway generator)
+            self._check_start(*self._single.generate_start(np.random.default_rng(0), options))
         for i in idx:
             if seeds[i] is not None or self._rngs[i] is None:
                 self._rngs[i], _ = seeding.np_random(seeds[i])
