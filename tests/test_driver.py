@@ -138,3 +138,25 @@ def test_bad_solver_and_shapes():
         CLFDriver(solver="cvxpy")
     with pytest.raises(ValueError, match=r"states must be \(N, 4\)"):
         clf_qp(np.zeros((3, 4)), np.zeros((2, 2)), CLFDriver().lim, CLFDriver().gain)
+
+
+def test_env_driver_solver_option():
+    """``driver_solver="osqp"`` (the earlier solver, kept for checking) drives the same
+    episode as the closed form, to OSQP's tolerance; an unknown solver is refused."""
+    import gymnasium as gym
+
+    import rmm_envs  # noqa: F401
+
+    inactive = {"active_ctrl": 0, "turnrate_ctrl": np.zeros(1, np.float32), "accel_ctrl": np.zeros(1, np.float32)}
+    a, b = gym.make("Dubins4DCircles-v0"), gym.make("Dubins4DCircles-v0", driver_solver="osqp")
+    a.reset(seed=4)
+    b.reset(seed=4)
+    for _ in range(60):
+        ra, rb = a.step(inactive), b.step(inactive)
+        np.testing.assert_allclose(ra[4]["control"], rb[4]["control"], atol=1e-6)
+        np.testing.assert_allclose(ra[4]["state"], rb[4]["state"], atol=1e-6)
+        assert ra[1:4] == rb[1:4]
+        if ra[2] or ra[3]:
+            break
+    with pytest.raises(ValueError, match="driver solver must be one of"):
+        gym.make("Dubins4DCircles-v0", driver_solver="qpoases")

@@ -182,3 +182,26 @@ def test_reset_options_apply_to_every_sub_env():
     obs, info = vec.reset(seed=0, options={"state": [1.0, 2.0, 0.5, 1.0], "goal": [-5.0, -5.0, 1.0]})
     assert np.all(info["state"] == [1.0, 2.0, 0.5, 1.0])
     assert np.all(obs[:, 1] == np.float32(-6.0)) and np.all(obs[:, 2] == np.float32(-7.0))
+
+
+def test_gymnasium_vector_wrappers_work():
+    from gymnasium.wrappers.vector import NormalizeObservation, RecordEpisodeStatistics
+
+    n = 4
+    vec = gym.make_vec(ID, num_envs=n, vectorization_mode="vector_entry_point")
+    env = NormalizeObservation(RecordEpisodeStatistics(vec, stats_key="rl_episode"))
+    env.reset(seed=0)
+    a = {"active_ctrl": np.zeros(n, np.int64), "turnrate_ctrl": np.zeros((n, 1)), "accel_ctrl": np.zeros((n, 1))}
+    lengths, steps_done = [], []
+    for _ in range(300):
+        _, _, te, tr, info = env.step(a)
+        if "rl_episode" in info:
+            m = info["_rl_episode"]
+            lengths += info["rl_episode"]["l"][m].tolist()
+            steps_done += info["episode"]["n_env_steps"][m].tolist()
+    assert lengths and lengths == steps_done  # the wrapper counts the steps the env reports
+    w = RecordEpisodeStatistics(gym.make_vec(ID, num_envs=2))
+    w.reset(seed=0)
+    with pytest.raises(ValueError, match="already exists"):  # the default key is the env's own
+        for _ in range(1000):
+            w.step({"active_ctrl": np.zeros(2, np.int64), "turnrate_ctrl": np.zeros(2), "accel_ctrl": np.zeros(2)})

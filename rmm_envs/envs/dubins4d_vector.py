@@ -58,6 +58,9 @@ mask ``_k`` telling which sub-envs have it.  Every step: ``sim_time`` ``(N,)`` a
 sub-envs that stepped (not those being reset in ``NEXT_STEP`` mode); for the sub-envs whose
 episode ended, ``outcome`` (object array of ``"goal"``/``"collision"``/``"timeout"``) and
 ``episode`` (a dict of arrays of the single env's episode statistics, with its own masks).
+The key ``episode`` is the env's own (the paper's Table I statistics), so Gymnasium's
+``RecordEpisodeStatistics`` wrapper needs another key: ``RecordEpisodeStatistics(env,
+stats_key="rl_episode")`` (tested, with ``NormalizeObservation`` on top).
 
 ## Compute time and clock
 
