@@ -86,23 +86,6 @@ def test_states_at_compiled_does_not_depend_on_the_batch():
     np.testing.assert_allclose(batch, sys_._states_at_numpy(s, u, t), rtol=0, atol=1e-12)
 
 
-def _generate_one_number_at_a_time(rng, n, r_min=2.0, r_max=5.0, half_width=10.0, centre_std=2.0):
-    """The obstacle draws as first written: one generator call per number or pair."""
-    obs = np.empty((n, 3))
-    for i in range(n):
-        obs[i, :2] = rng.normal(0.0, centre_std, size=2) if i == 0 else rng.uniform(-half_width, half_width, size=2)
-        obs[i, 2] = rng.uniform(r_min, r_max)
-    return obs
-
-
-@settings(max_examples=60, deadline=None)
-@given(seed=st.integers(0, 2**63), n=st.integers(0, 9))
-def test_obstacle_draws_are_the_one_at_a_time_draws(seed, n):
-    a, b = np.random.default_rng(seed), np.random.default_rng(seed)
-    assert np.array_equal(CircleWorld.generate(a, n), _generate_one_number_at_a_time(b, n))
-    assert a.random() == b.random()  # and the generator is left in the same state
-
-
 def test_one_point_in_circles_equals_the_batch():
     rng = np.random.default_rng(3)
     circles = CircleWorld.generate(rng)

@@ -352,8 +352,13 @@ class CircleWorld:
     ) -> np.ndarray:
         """Random obstacles as in the paper: the first near the centre, the rest uniform."""
         obs = np.empty((n_obstacles, 3))
-        if n_obstacles == 0:
-            return obs
+        for i in range(n_obstacles):
+            if i == 0:
+                obs[i, :2] = rng.normal(0.0, centre_std, size=2)
+            else:
+                obs[i, :2] = rng.uniform(-half_width, half_width, size=2)
+            obs[i, 2] = rng.uniform(r_min, r_max)
+        return obs
         # Draw order: centre 0 (normal), radius 0, then (x, y, r) of each other obstacle.  The
         # uniform draws after the first come from one call with per-element bounds, which
         # consumes the generator exactly as one call per number would (same numbers, faster).
