@@ -144,6 +144,19 @@ OBS_DIM = 17
 _HALF = 10.0  # arena half width (generation only)
 
 
+def observation(states: np.ndarray, sim_time, goals: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """The observation table above for ``N`` states ``(N, 4)``: ``sim_time`` scalar or ``(N,)``,
+    goal centres ``(N, 2)`` (or ``(1, 2)`` for all), ray lengths ``(N, n_rays)``; float32."""
+    obs = np.empty((states.shape[0], 5 + rays.shape[1]), dtype=np.float32)
+    obs[:, 0] = sim_time
+    obs[:, 1] = goals[:, 0] - states[:, 0]
+    obs[:, 2] = goals[:, 1] - states[:, 1]
+    obs[:, 3] = wrap_angle(states[:, 2])
+    obs[:, 4] = states[:, 3]
+    obs[:, 5:] = rays
+    return obs
+
+
 class Dubins4DScene(SceneBase):
     """A Dubins4D vehicle among fixed circles: what the risk estimator needs of the env.
 
@@ -187,15 +200,8 @@ class Dubins4DScene(SceneBase):
     def observe(self, states: np.ndarray, sim_time=0.0) -> np.ndarray:
         """``(N, 17)`` float32 observations for states ``(N, 4)`` at ``sim_time`` (scalar or ``(N,)``)."""
         states = np.asarray(states, dtype=float)
-        n = states.shape[0]
-        obs = np.empty((n, self.obs_dim), dtype=np.float32)
-        obs[:, 0] = sim_time
-        obs[:, 1] = self.world.goal[0] - states[:, 0]
-        obs[:, 2] = self.world.goal[1] - states[:, 1]
-        obs[:, 3] = wrap_angle(states[:, 2])
-        obs[:, 4] = states[:, 3]
-        obs[:, 5:] = ray_cast(states[:, :2], states[:, 2], self.world.obstacles, self.n_rays, self.ray_length)
-        return obs
+        rays = ray_cast(states[:, :2], states[:, 2], self.world.obstacles, self.n_rays, self.ray_length)
+        return observation(states, sim_time, self.world.goal[None, :2], rays)
 
     def leaf_estimate(self, states: np.ndarray) -> np.ndarray:
         """pyrmm's Dubins4D stopping-distance leaf heuristic (REFERENCE section 5), ``(N,)``.

@@ -89,9 +89,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from rmm_envs.clocks import make_clock
-from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
+from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv, observation
 from rmm_envs.envs.dubins4d_step import advance
-from rmm_envs.systems.dubins4d import wrap_angle
 from rmm_envs.worlds.circles import ray_cast_each
 
 __all__ = ["Dubins4DCirclesVectorEnv"]
@@ -150,18 +149,12 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
 
     # ------------------------------------------------------------------ observations
     def _observe(self, idx=slice(None)) -> np.ndarray:
-        """Observations of sub-envs ``idx``: the single env's ``Dubins4DScene.observe``, per world."""
+        """Observations of sub-envs ``idx``: the single env's, each world with its own circles."""
         st = self._states[idx]
         circles = self._circles[idx]
         e = self._single
-        obs = np.empty((st.shape[0], e.observation_space.shape[0]), dtype=np.float32)
-        obs[:, 0] = self._sim_time[idx]
-        obs[:, 1] = circles[:, -1, 0] - st[:, 0]
-        obs[:, 2] = circles[:, -1, 1] - st[:, 1]
-        obs[:, 3] = wrap_angle(st[:, 2])
-        obs[:, 4] = st[:, 3]
-        obs[:, 5:] = ray_cast_each(st[:, :2], st[:, 2], circles[:, :-1], e.n_rays, e.ray_length)
-        return obs
+        rays = ray_cast_each(st[:, :2], st[:, 2], circles[:, :-1], e.n_rays, e.ray_length)
+        return observation(st, self._sim_time[idx], circles[:, -1, :2], rays)
 
     # ------------------------------------------------------------------ reset
     def _reset_one(self, i: int, options: dict | None) -> None:
