@@ -2,7 +2,8 @@
 
 Run: ``python benchmarks/perf_env.py``.  Prints medians over repeats and ratios against
 baselines measured in the same run (an ``odeint`` propagation per step, as the original did,
-the numpy array code of the same formulas, and a Python loop over rays and circles).
+the numpy array code of the same formulas, and a Python loop over rays and circles).  The vector
+env, and the single env against its earlier OSQP driver: ``benchmarks/perf_vector.py``.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from scipy.integrate import odeint
 
 import rmm_envs  # noqa: F401
 from benchmarks._timing import fmt_us, median_time
+from rmm_envs.driver import CLFDriver
 from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_envs.worlds.circles import CircleWorld, _ray_cast_numpy, points_in_circles, ray_cast
 
@@ -49,8 +51,10 @@ def profile_step() -> dict[str, float]:
     goal = env.scene.goal
     sys_ = env.system
     u = env.driver.control(st, goal)
+    osqp_driver = CLFDriver(env.driver.lim[:2], env.driver.lim[2:4], env.driver.lim[4:], env.driver.params, solver="osqp")
     parts = {
-        "driver QP (OSQP)": median_time(lambda: env.driver.control(st, goal), number=500),
+        "driver QP (closed form)": median_time(lambda: env.driver.control(st, goal), number=500),
+        "driver QP (OSQP)": median_time(lambda: osqp_driver.control(st, goal), number=500),
         "propagate 16 pts": median_time(lambda: sys_.propagate(st[None], u[None], 0.1, 16), number=500),
         "observe (rays)": median_time(lambda: env.scene.observe(st[None], 0.0), number=500),
     }
@@ -97,7 +101,7 @@ def main() -> None:
           f"(min {min(rates):.0f}, max {max(rates):.0f}); target >= 5,000")
     parts = profile_step()
     for k, v in parts.items():
-        print(f"  {k:18s} {fmt_us(v)} per step")
+        print(f"  {k:24s} {fmt_us(v)} per step")
     st = np.array([0.5, -1.0, 0.3, 1.2])
     sysm, u, times = Dubins4D(), np.array([[0.1, 0.2]]), np.linspace(0.0, 0.1, 16)
     t_ours = median_time(lambda: sysm.propagate(st[None], u, 0.1, 16), number=300)

@@ -2,7 +2,9 @@
 
 Importing the package registers the Gymnasium environments:
 
-* ``Dubins4DCircles-v0``: Dubins4D among circles, blocking fixed-step (guardian action).
+* ``Dubins4DCircles-v0``: Dubins4D among circles, blocking fixed-step (guardian action); also
+  a native vector env, ``gym.make_vec("Dubins4DCircles-v0", num_envs=N)`` (numpy arrays,
+  :mod:`rmm_envs.envs.dubins4d_vector`).
 * ``Dubins4DParallel-v0``: the same, non-blocking (the guardian's compute time passes).
 * ``Dubins3DMaze-v0``: a constant-speed Dubins car in procedurally generated mazes.
 * ``QuadrotorRoom-v0``: a quadrotor in procedurally generated rooms (PyBullet; extra ``quadrotor``).
@@ -29,9 +31,11 @@ def _register() -> None:
         "Dubins3DMaze-v0": "rmm_envs.envs.dubins3d_maze:Dubins3DMazeEnv",
         "QuadrotorRoom-v0": "rmm_envs.envs.quadrotor_room:QuadrotorRoomEnv",
     }
+    vector_specs = {"Dubins4DCircles-v0": "rmm_envs.envs.dubins4d_vector:Dubins4DCirclesVectorEnv"}
     for env_id, entry in specs.items():
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point=entry, disable_env_checker=False)
+            gym.register(id=env_id, entry_point=entry, vector_entry_point=vector_specs.get(env_id),
+                         disable_env_checker=False)
 
 
 _register()

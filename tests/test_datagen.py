@@ -36,6 +36,31 @@ def test_dataset_contents(tmp_path):
     assert meta["estimator"]["branches"] == 6 and meta["seed"] == 3 and "package_version" in meta
 
 
+def test_to_pandas_round_trips_every_field(tmp_path):
+    generate(small(configs=2, samples_per_config=5), tmp_path / "d", workers=1, progress=False)
+    ds = load_dataset(tmp_path / "d")
+    df = ds.to_pandas()
+    assert len(df) == 10
+    assert list(df.columns[:4]) == ["config_id", "risk", "min_risk_ctrl_dur", "n_leaves"]
+    assert [c for c in df.columns if c.startswith("obs_")] == [f"obs_{j}" for j in range(17)]
+    np.testing.assert_array_equal(df[[f"obs_{j}" for j in range(17)]].to_numpy(), ds.obs)
+    assert df["obs_3"].dtype == np.float32 and df["state_0"].dtype == np.float64
+    np.testing.assert_array_equal(df[["state_0", "state_1", "state_2", "state_3"]].to_numpy(), ds.state)
+    np.testing.assert_array_equal(df[["min_risk_ctrl_0", "min_risk_ctrl_1"]].to_numpy(), ds.min_risk_ctrl)
+    for name in ("config_id", "risk", "min_risk_ctrl_dur", "n_leaves"):
+        np.testing.assert_array_equal(df[name].to_numpy(), getattr(ds, name))
+    assert df.attrs["sha256"] == ds.sha256 and df.attrs["meta"]["seed"] == 3
+    # a groupby works as a user would write it: the mean risk per configuration
+    np.testing.assert_allclose(df.groupby("config_id")["risk"].mean().to_numpy(),
+                               [ds.risk[ds.config_id == c].mean() for c in (0, 1)])
+    lists = ds.to_pandas(vectors="lists")
+    assert list(lists.columns) == ["config_id", "risk", "min_risk_ctrl_dur", "n_leaves", "obs", "state", "min_risk_ctrl"]
+    np.testing.assert_array_equal(np.stack(lists["obs"].to_list()), ds.obs)
+    np.testing.assert_array_equal(np.stack(lists["state"].to_list()), ds.state)
+    with pytest.raises(ValueError, match="vectors must be 'columns' or 'lists', got 'wide'"):
+        ds.to_pandas(vectors="wide")
+
+
 def test_same_seed_same_data_whatever_the_worker_count(tmp_path):
     a = generate(small(), tmp_path / "a", workers=1, progress=False)
     b = generate(small(), tmp_path / "b", workers=2, progress=False)

@@ -90,8 +90,15 @@ Privileged information is also available through :meth:`Dubins4DCirclesEnv.privi
 ``gym.make("Dubins4DCircles-v0", step_dt=0.1, n_rays=12, ray_length=10.0,
 max_episode_sim_time=100.0, n_obstacles=5, obstacle_min_rad=2.0, obstacle_max_rad=5.0,
 goal_min_rad=0.1, goal_max_rad=1.0, n_path_points=16, driver_params=None, clock=None,
-render_mode=None)``.  ``clock`` ("wall", "cpu", "fixed:MS" or a :class:`rmm_envs.clocks.Clock`)
-only measures the agent's compute time for the statistics in the blocking env.
+render_mode=None, driver_solver="closed_form")``.  ``clock`` ("wall", "cpu", "fixed:MS" or a
+:class:`rmm_envs.clocks.Clock`) only measures the agent's compute time for the statistics in the
+blocking env.  ``driver_solver``: how the driver's QP is solved, ``"closed_form"`` (exact, the
+default) or ``"osqp"`` (the earlier solver, kept for checking; equal to about 1e-7).
+
+``gym.make_vec("Dubins4DCircles-v0", num_envs=N, vectorization_mode="vector_entry_point")``:
+:class:`rmm_envs.envs.dubins4d_vector.Dubins4DCirclesVectorEnv`, ``N`` copies of this env
+computed as arrays (sub-env ``i`` after ``reset(seed=s)`` is this env after ``reset(seed=s +
+i)``, bit for bit).
 
 ``gym.make("Dubins4DParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same)``:
 the same world stepped by :class:`rmm_envs.wrappers.NonBlockingStepping`: each ``step(a)``
@@ -120,12 +127,12 @@ from gymnasium import spaces
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.driver import CLFDriver, DriverParams
 from rmm_envs.envs import _render
+from rmm_envs.envs.dubins4d_step import advance
 from rmm_envs.risk.protocol import SceneBase
 from rmm_envs.systems.dubins4d import Dubins4D, wrap_angle
 from rmm_envs.worlds.circles import (
     CircleWorld,
     as_circles,
-    contact_params,
     paths_hit_circles,
     points_in_circles,
     ray_cast,
@@ -135,6 +142,19 @@ __all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "parse_guardian_action"]
 
 OBS_DIM = 17
 _HALF = 10.0  # arena half width (generation only)
+
+
+def observation(states: np.ndarray, sim_time, goals: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """The observation table above for ``N`` states ``(N, 4)``: ``sim_time`` scalar or ``(N,)``,
+    goal centres ``(N, 2)`` (or ``(1, 2)`` for all), ray lengths ``(N, n_rays)``; float32."""
+    obs = np.empty((states.shape[0], 5 + rays.shape[1]), dtype=np.float32)
+    obs[:, 0] = sim_time
+    obs[:, 1] = goals[:, 0] - states[:, 0]
+    obs[:, 2] = goals[:, 1] - states[:, 1]
+    obs[:, 3] = wrap_angle(states[:, 2])
+    obs[:, 4] = states[:, 3]
+    obs[:, 5:] = rays
+    return obs
 
 
 class Dubins4DScene(SceneBase):
@@ -180,15 +200,8 @@ class Dubins4DScene(SceneBase):
     def observe(self, states: np.ndarray, sim_time=0.0) -> np.ndarray:
         """``(N, 17)`` float32 observations for states ``(N, 4)`` at ``sim_time`` (scalar or ``(N,)``)."""
         states = np.asarray(states, dtype=float)
-        n = states.shape[0]
-        obs = np.empty((n, self.obs_dim), dtype=np.float32)
-        obs[:, 0] = sim_time
-        obs[:, 1] = self.world.goal[0] - states[:, 0]
-        obs[:, 2] = self.world.goal[1] - states[:, 1]
-        obs[:, 3] = wrap_angle(states[:, 2])
-        obs[:, 4] = states[:, 3]
-        obs[:, 5:] = ray_cast(states[:, :2], states[:, 2], self.world.obstacles, self.n_rays, self.ray_length)
-        return obs
+        rays = ray_cast(states[:, :2], states[:, 2], self.world.obstacles, self.n_rays, self.ray_length)
+        return observation(states, sim_time, self.world.goal[None, :2], rays)
 
     def leaf_estimate(self, states: np.ndarray) -> np.ndarray:
         """pyrmm's Dubins4D stopping-distance leaf heuristic (REFERENCE section 5), ``(N,)``.
@@ -287,6 +300,7 @@ class Dubins4DCirclesEnv(gym.Env):
         driver_params: DriverParams | dict | None = None,
         clock: Clock | str | None = None,
         render_mode: str | None = None,
+        driver_solver: str = "closed_form",
     ) -> None:
         # Every bound is finite: an infinite episode length, ray length or radius would silently
         # disable what it configures (no timeout, rays that never end, a goal covering everything).
@@ -315,6 +329,7 @@ class Dubins4DCirclesEnv(gym.Env):
         self.obstacle_rad = (float(obstacle_min_rad), float(obstacle_max_rad))
         self.goal_rad = (float(goal_min_rad), float(goal_max_rad))
         self.n_path_points = int(n_path_points)
+        self._step_times = np.linspace(0.0, self.step_dt, self.n_path_points)
         self.render_mode = render_mode
         self.system = Dubins4D()
         if isinstance(driver_params, dict):
@@ -327,6 +342,7 @@ class Dubins4DCirclesEnv(gym.Env):
             (self.system.u2_min, self.system.u2_max),
             (self.system.v_min, self.system.v_max),
             driver_params or DriverParams(),
+            solver=driver_solver,
         )
         self.clock = make_clock(clock)
 
@@ -451,12 +467,23 @@ class Dubins4DCirclesEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
+        obstacles, state, goal = self.generate_start(self.np_random, options)
+        self._start_episode(obstacles, state, goal)
+        obs = self._observe()
+        info = {"sim_time": 0.0, "state": self._state.copy()}
+        if self.render_mode == "human":
+            self.render()
+        self.clock.start()
+        return obs, info
+
+    def generate_start(self, rng: np.random.Generator, options: dict[str, Any] | None = None):
+        """``(obstacles, state, goal)`` of a new episode drawn from ``rng`` around the reset
+        ``options`` (validated); what :meth:`reset` does (the vector env calls it per sub-env)."""
         options = dict(options or {})
         unknown = set(options) - {"state", "goal", "obstacles"}
         if unknown:
             raise ValueError(f"unknown reset options {sorted(unknown)}; expected any of 'state', 'goal', 'obstacles'")
         given = self._given_options(options)
-        rng = self.np_random
         # Generation order (obstacles, state, goal) and its draws are those of a reset without
         # options; each generated part is redrawn until it obeys R1-R3 against the given parts.
         obstacles = given.get("obstacles")
@@ -468,7 +495,9 @@ class Dubins4DCirclesEnv(gym.Env):
         goal = given.get("goal")
         if goal is None:
             goal = self._generate_goal(rng, state, obstacles, tuple(k for k in ("state", "obstacles") if k in given))
+        return obstacles, state, goal
 
+    def _start_episode(self, obstacles: np.ndarray, state: np.ndarray, goal: np.ndarray) -> None:
         self.scene = Dubins4DScene(obstacles, goal, self.system, self.n_rays, self.ray_length)
         self._circles = np.vstack([self.scene.obstacles, self.scene.goal[None, :]])
         self._state = state
@@ -482,12 +511,6 @@ class Dubins4DCirclesEnv(gym.Env):
         self._last_active = False
         self._last_control = np.zeros(2)
         self.driver.reset()  # no warm start from an earlier episode: results depend on the seed only
-        obs = self._observe()
-        info = {"sim_time": 0.0, "state": self._state.copy()}
-        if self.render_mode == "human":
-            self.render()
-        self.clock.start()
-        return obs, info
 
     # ------------------------------------------------------------------ stepping
     def _observe(self) -> np.ndarray:
@@ -514,24 +537,15 @@ class Dubins4DCirclesEnv(gym.Env):
             raise RuntimeError("the episode has ended; call reset() before stepping again")
         if not (duration >= 0 and math.isfinite(duration)):
             raise ValueError(f"duration must be a finite number >= 0, got {duration}")
-        if active:
-            u = np.asarray(control, dtype=float)
+        if duration == self.step_dt:
+            times = self._step_times
         else:
-            u = self.driver.control(self._state, self.scene.goal)
-        path = self.system.propagate(self._state[None, :], u[None, :], duration, self.n_path_points)[0]
-        # only circles the path can reach need the exact contact test
-        circles = self._circles
-        reach = math.sqrt(float(np.max((path[:, 0] - path[0, 0]) ** 2 + (path[:, 1] - path[0, 1]) ** 2)))
-        d0 = (circles[:, 0] - path[0, 0]) ** 2 + (circles[:, 1] - path[0, 1]) ** 2
-        near = np.nonzero(d0 <= (circles[:, 2] + reach) ** 2)[0]
-        hit_obst = hit_goal = math.inf
-        if near.size:
-            cp = contact_params(path, circles[near])
-            is_goal = near == circles.shape[0] - 1
-            if is_goal.any():
-                hit_goal = float(cp[is_goal][0])
-            if (~is_goal).any():
-                hit_obst = float(cp[~is_goal].min())
+            times = np.linspace(0.0, float(duration), self.n_path_points)
+        nxt, u, hit_obst, hit_goal = advance(self.system, self.driver, self._state[None, :], self._circles[None],
+                                             np.array([bool(active)]), np.zeros((1, 2)) if control is None else np.asarray(control, dtype=float).reshape(1, 2),
+                                             times)
+        hit_obst, hit_goal = float(hit_obst[0]), float(hit_goal[0])
+        u = u[0]
 
         self._n_steps += 1
         if active:
@@ -539,8 +553,7 @@ class Dubins4DCirclesEnv(gym.Env):
             self._active_sim_time += duration
         self._cum_compute += compute_time
         self._sim_time += duration
-        self._state = path[-1].copy()
-        self._state[2] = wrap_angle(self._state[2])
+        self._state = nxt[0]
         self._last_active = bool(active)
         self._last_control = u
 

@@ -486,6 +486,36 @@ class Dataset:
     def __len__(self) -> int:
         return self.risk.shape[0]
 
+    def to_pandas(self, vectors: str = "columns"):
+        """The dataset as a ``pandas.DataFrame``, one row per labelled state, in file order.
+
+        Columns: ``config_id``, ``risk``, ``min_risk_ctrl_dur``, ``n_leaves``, then the vector
+        fields ``obs`` (17 float32 values for Dubins4D), ``state`` and ``min_risk_ctrl``:
+
+        * ``vectors="columns"`` (the default: what filtering and plotting want): one column per
+          element, ``obs_0 ... obs_16``, ``state_0 ...``, ``min_risk_ctrl_0, min_risk_ctrl_1``,
+          keeping the arrays' dtypes;
+        * ``vectors="lists"``: one column per field whose cells are 1-D numpy arrays (as the
+          Parquet shards store them).
+
+        ``df.attrs`` holds ``meta`` (the dataset's metadata) and ``sha256`` (its hash).
+        """
+        import pandas as pd
+
+        if vectors not in ("columns", "lists"):
+            raise ValueError(f"vectors must be 'columns' or 'lists', got {vectors!r}")
+        data: dict = {"config_id": self.config_id, "risk": self.risk, "min_risk_ctrl_dur": self.min_risk_ctrl_dur,
+                      "n_leaves": self.n_leaves}
+        for name in ("obs", "state", "min_risk_ctrl"):
+            arr = getattr(self, name)
+            if vectors == "columns":
+                data.update({f"{name}_{j}": arr[:, j] for j in range(arr.shape[1])})
+            else:
+                data[name] = list(arr)
+        df = pd.DataFrame(data)
+        df.attrs.update(meta=self.meta, sha256=self.sha256)
+        return df
+
 
 def _fixed_list(col: pa.ChunkedArray, name: str, path: Path) -> np.ndarray:
     arr = col.combine_chunks()

@@ -115,18 +115,20 @@ def _segment(x0, y0, th0, v0, w, a, t):
     return _displace(x0, y0, th0, v0, a, t, e1r, e1i, e2r, e2i)
 
 
+def _horner_1(p, coef, r):
+    """Scalar :func:`_horner` of coefficient row ``r``."""
+    acc = coef[r, coef.shape[1] - 1]
+    for j in range(coef.shape[1] - 2, -1, -1):
+        acc *= p
+        acc += coef[r, j]
+    return acc
+
+
 def _turn_integrals_1(phi, coef):
-    """Scalar :func:`_turn_integrals` (same operations, same order)."""
+    """Scalar :func:`_turn_integrals` (same operations, same order; no array allocated)."""
     if abs(phi) <= _SERIES_MAX:
         p = phi * phi
-        out = np.empty(4)
-        for r in range(4):
-            acc = coef[r, coef.shape[1] - 1]
-            for j in range(coef.shape[1] - 2, -1, -1):
-                acc *= p
-                acc += coef[r, j]
-            out[r] = acc
-        return out[0], phi * out[1], out[2], phi * out[3]
+        return _horner_1(p, coef, 0), phi * _horner_1(p, coef, 1), _horner_1(p, coef, 2), phi * _horner_1(p, coef, 3)
     return _closed_1(phi)
 
 
@@ -168,6 +170,7 @@ _COEF_ARRAY = np.array(_COEF)
 if njit is not None:  # the scalar path compiles the same closed forms and displacement as numpy's
     _closed_1 = njit(cache=True)(_closed_turn_integrals)
     _displace_1 = njit(cache=True)(_displace)
+    _horner_1 = njit(cache=True)(_horner_1)
     _turn_integrals_1 = njit(cache=True)(_turn_integrals_1)
     _segment_1 = njit(cache=True)(_segment_1)
     _states_at_compiled = njit(cache=True)(_states_at_loop)
@@ -249,9 +252,14 @@ class Dubins4D:
         times = np.linspace(0.0, float(duration), int(n_steps))
         return self.states_at(states, controls, times)
 
-    def states_at(self, states: np.ndarray, controls: np.ndarray, times: np.ndarray) -> np.ndarray:
-        """States at each of ``times`` (shape ``(T,)``, all ``>= 0``): ``(N, T, 4)``."""
-        if states.shape[0] <= _COMPILED_MAX_N and _states_at_compiled is not None:
+    def states_at(self, states: np.ndarray, controls: np.ndarray, times: np.ndarray, compiled: bool | None = None) -> np.ndarray:
+        """States at each of ``times`` (shape ``(T,)``, all ``>= 0``): ``(N, T, 4)``.
+
+        ``compiled``: ``None`` picks the faster path for ``N``; ``True`` always runs the compiled
+        loop, whose result for one state does not depend on ``N`` (the vector environment relies
+        on that to match the single one bit for bit).
+        """
+        if (compiled or (compiled is None and states.shape[0] <= _COMPILED_MAX_N)) and _states_at_compiled is not None:
             out = np.empty((states.shape[0], len(times), 4))
             return _states_at_compiled(np.ascontiguousarray(states, dtype=float), np.ascontiguousarray(controls, dtype=float),
                                        np.asarray(times, dtype=float), self._lo, self._hi, _COEF_ARRAY, out)

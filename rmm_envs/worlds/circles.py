@@ -35,9 +35,11 @@ __all__ = [
     "CircleWorld",
     "as_circles",
     "contact_params",
+    "contact_params_each",
     "first_contact",
     "points_in_circles",
     "ray_cast",
+    "ray_cast_each",
     "segments_hit_circles",
 ]
 
@@ -63,6 +65,13 @@ def points_in_circles(points: np.ndarray, circles: np.ndarray) -> np.ndarray:
     points = np.asarray(points, dtype=float)
     if circles.shape[0] == 0:
         return np.zeros(points.shape[0], dtype=bool)
+    if points.shape[0] == 1:  # one point (a start being drawn): the same arithmetic without numpy's overhead
+        x, y = float(points[0, 0]), float(points[0, 1])
+        for cx, cy, r in circles.tolist():
+            dx, dy = x - cx, y - cy
+            if dx * dx + dy * dy <= r * r:
+                return np.ones(1, dtype=bool)
+        return np.zeros(1, dtype=bool)
     d = points[:, None, :2] - circles[None, :, :2]
     return np.any(np.einsum("nkj,nkj->nk", d, d) <= circles[None, :, 2] ** 2, axis=1)
 
@@ -131,30 +140,71 @@ def contact_params(path_xy: np.ndarray, circles: np.ndarray) -> np.ndarray:
 
     Segment ``j`` runs from point ``j`` to point ``j + 1``; ``s`` is the exact fraction along it
     where the path first enters the circle (``0`` when point ``j`` is already inside).
-    ``inf`` for a circle the path never touches.
+    ``inf`` for a circle the path never touches.  :func:`contact_params_each` with ``N = 1``.
     """
-    xy = np.asarray(path_xy, dtype=float)[:, :2]
-    k = circles.shape[0]
-    if k == 0:
+    xy = np.asarray(path_xy, dtype=float)
+    circles = np.asarray(circles, dtype=float)
+    if circles.shape[0] == 0:
         return np.zeros(0)
-    if xy.shape[0] == 1:
-        inside = np.sum((xy[0] - circles[:, :2]) ** 2, axis=-1) <= circles[:, 2] ** 2
-        return np.where(inside, 0.0, np.inf)
-    p0 = xy[:-1]
-    d = xy[1:] - p0  # (S-1, 2)
-    f = p0[:, None, :] - circles[None, :, :2]  # (S-1, K, 2)
-    c = np.sum(f * f, axis=-1) - circles[None, :, 2] ** 2  # <= 0: segment starts inside
-    a = np.sum(d * d, axis=-1)[:, None]
-    b = np.sum(f * d[:, None, :], axis=-1)  # half the linear coefficient
-    disc = b * b - a * c
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s_in = (-b - np.sqrt(np.maximum(disc, 0.0))) / a
-    entering = (a > 0) & (disc >= 0) & (s_in >= 0) & (s_in <= 1)
-    s = np.where(c <= 0, 0.0, np.where(entering, s_in, np.inf))  # (S-1, K)
-    touched = np.isfinite(s)
-    j = np.argmax(touched, axis=0)  # first touching segment per circle
-    cols = np.arange(k)
-    return np.where(touched.any(axis=0), j + s[j, cols], np.inf)
+    return contact_params_each(xy[None], circles[None])[0]
+
+
+def contact_params_each(paths: np.ndarray, circles: np.ndarray) -> np.ndarray:
+    """Contact parameters of ``N`` paths ``(N, S, 2+)``, each with its own circles ``(N, K, 3)``:
+    ``(N, K)``, as :func:`contact_params` per path.
+
+    One compiled loop (the same Python function without numba) whatever ``N``: a path's result
+    does not depend on the batch it is computed in, bit for bit.  A single-point path
+    (``S = 1``) has contact ``0`` with the circles holding its point.
+    """
+    paths = np.ascontiguousarray(paths, dtype=float)
+    circles = np.ascontiguousarray(circles, dtype=float)
+    if paths.ndim != 3 or paths.shape[2] < 2 or circles.ndim != 3 or circles.shape[::2] != (paths.shape[0], 3):
+        raise ValueError(f"paths must be (N, S, 2+) and circles (N, K, 3), got {paths.shape} and {circles.shape}")
+    return _contact_loop(paths, circles, np.empty(circles.shape[:2]))
+
+
+def _contact_loop(paths, circles, out):
+    for n in range(paths.shape[0]):
+        # every point, hence every segment, of the path lies within `reach` of its first point:
+        # a circle farther than r + reach from it cannot be touched (skip the exact test)
+        reach2 = 0.0
+        for j in range(1, paths.shape[1]):
+            qx, qy = paths[n, j, 0] - paths[n, 0, 0], paths[n, j, 1] - paths[n, 0, 1]
+            reach2 = max(reach2, qx * qx + qy * qy)
+        reach = math.sqrt(reach2)
+        for k in range(circles.shape[1]):
+            cx, cy, r = circles[n, k, 0], circles[n, k, 1], circles[n, k, 2]
+            best = math.inf
+            gx, gy = paths[n, 0, 0] - cx, paths[n, 0, 1] - cy
+            if gx * gx + gy * gy > (r + reach) * (r + reach):
+                out[n, k] = best
+                continue
+            if paths.shape[1] == 1:
+                fx, fy = paths[n, 0, 0] - cx, paths[n, 0, 1] - cy
+                if fx * fx + fy * fy <= r * r:
+                    best = 0.0
+            for j in range(paths.shape[1] - 1):
+                px, py = paths[n, j, 0], paths[n, j, 1]
+                dx, dy = paths[n, j + 1, 0] - px, paths[n, j + 1, 1] - py
+                fx, fy = px - cx, py - cy
+                c = (fx * fx + fy * fy) - r * r  # <= 0: the segment starts inside
+                if c <= 0:
+                    best = float(j)
+                    break
+                a = dx * dx + dy * dy
+                b = fx * dx + fy * dy  # half the linear coefficient
+                disc = b * b - a * c
+                if a > 0 and disc >= 0:
+                    s_in = (-b - math.sqrt(disc)) / a
+                    if 0 <= s_in <= 1:
+                        best = j + s_in
+                        break
+            out[n, k] = best
+    return out
+
+
+_contact_loop = njit(cache=True)(_contact_loop) if njit is not None else _contact_loop
 
 
 def first_contact(path_xy: np.ndarray, circles: np.ndarray) -> float:
@@ -202,31 +252,74 @@ def _ray_cast_numpy(origins, headings, circles, n_rays, max_range):
     return np.minimum(t.min(axis=2), max_range)
 
 
-def _ray_cast_loop(origins, headings, circles, n_rays, max_range, out):
+def _rays_1(ox, oy, heading, circles, max_range, out, dirs):
+    """The ray lengths from one origin into ``out`` (the formulas of the numpy path); ``dirs``:
+    ``(n_rays, 2)`` scratch for the rays' directions.  A circle farther than ``max_range``
+    from the origin cannot shorten a ray and is skipped (a relative margin of 1e-9 keeps
+    rounding from ever mattering); the minimum over the others is order-free."""
+    n_rays = out.shape[0]
     step = 2.0 * math.pi / n_rays
-    for n in range(origins.shape[0]):
-        ox, oy = origins[n, 0], origins[n, 1]
+    for r in range(n_rays):
+        ang = heading + step * r
+        dirs[r, 0], dirs[r, 1] = math.cos(ang), math.sin(ang)
+        out[r] = max_range
+    for k in range(circles.shape[0]):
+        fx, fy = circles[k, 0] - ox, circles[k, 1] - oy
+        cc = fx * fx + fy * fy - circles[k, 2] ** 2
+        if cc <= 0:  # inside: every ray reads 0
+            for r in range(n_rays):
+                out[r] = 0.0
+            return
+        reach = max_range + circles[k, 2]
+        if fx * fx + fy * fy > reach * reach * (1.0 + 1e-9):
+            continue
         for r in range(n_rays):
-            ang = headings[n] + step * r
-            dx, dy = math.cos(ang), math.sin(ang)
-            best = math.inf
-            for k in range(circles.shape[0]):
-                fx, fy = circles[k, 0] - ox, circles[k, 1] - oy
-                cc = fx * fx + fy * fy - circles[k, 2] ** 2
-                if cc <= 0:
-                    t = 0.0
-                else:
-                    b = dx * fx + dy * fy
-                    disc = b * b - cc
-                    t = b - math.sqrt(max(disc, 0.0))
-                    if not (disc >= 0 and t >= 0):
-                        t = math.inf
-                best = min(best, t)
-            out[n, r] = min(best, max_range)
+            b = dirs[r, 0] * fx + dirs[r, 1] * fy
+            disc = b * b - cc
+            t = b - math.sqrt(max(disc, 0.0))
+            if disc >= 0 and t >= 0 and t < out[r]:
+                out[r] = t
+
+
+def _ray_cast_loop(origins, headings, circles, n_rays, max_range, out):
+    dirs = np.empty((n_rays, 2))
+    for n in range(origins.shape[0]):
+        _rays_1(origins[n, 0], origins[n, 1], headings[n], circles, max_range, out[n], dirs)
     return out
 
 
-_ray_cast_compiled = njit(cache=True)(_ray_cast_loop) if njit is not None else None
+def _ray_cast_each_loop(origins, headings, circles, n_rays, max_range, out):
+    dirs = np.empty((n_rays, 2))
+    for n in range(origins.shape[0]):
+        _rays_1(origins[n, 0], origins[n, 1], headings[n], circles[n], max_range, out[n], dirs)
+    return out
+
+
+if njit is not None:  # one source: the compiled loops run the same per-origin function
+    _rays_1 = njit(cache=True)(_rays_1)
+    _ray_cast_compiled = njit(cache=True)(_ray_cast_loop)
+    _ray_cast_each_loop = njit(cache=True)(_ray_cast_each_loop)
+else:  # pragma: no cover
+    _ray_cast_compiled = None
+
+
+def ray_cast_each(origins: np.ndarray, headings: np.ndarray, circles: np.ndarray, n_rays: int = 12,
+                  max_range: float = 10.0) -> np.ndarray:
+    """:func:`ray_cast` for ``N`` origins each among its own circles ``(N, K, 3)``: ``(N, n_rays)``.
+
+    Always the compiled loop (the same per-origin function as :func:`ray_cast`'s for a few
+    origins), so an origin's rays do not depend on the batch, bit for bit.
+    """
+    origins = np.ascontiguousarray(np.asarray(origins, dtype=float)[:, :2])
+    headings = np.ascontiguousarray(headings, dtype=float).reshape(origins.shape[0])
+    circles = np.ascontiguousarray(circles, dtype=float)
+    if circles.ndim != 3 or circles.shape[::2] != (origins.shape[0], 3):
+        raise ValueError(f"circles must be (N, K, 3) for {origins.shape[0]} origins, got {circles.shape}")
+    out = np.empty((origins.shape[0], int(n_rays)))
+    if circles.shape[1] == 0:
+        out[:] = float(max_range)
+        return out
+    return _ray_cast_each_loop(origins, headings, circles, int(n_rays), float(max_range), out)
 
 
 @dataclass
@@ -265,6 +358,16 @@ class CircleWorld:
             else:
                 obs[i, :2] = rng.uniform(-half_width, half_width, size=2)
             obs[i, 2] = rng.uniform(r_min, r_max)
+        return obs
+        # Draw order: centre 0 (normal), radius 0, then (x, y, r) of each other obstacle.  The
+        # uniform draws after the first come from one call with per-element bounds, which
+        # consumes the generator exactly as one call per number would (same numbers, faster).
+        obs[0, :2] = rng.normal(0.0, centre_std, size=2)
+        obs[0, 2] = rng.uniform(r_min, r_max)
+        if n_obstacles > 1:
+            k = n_obstacles - 1
+            obs[1:] = rng.uniform(np.array([-half_width, -half_width, r_min] * k),
+                                  np.array([half_width, half_width, r_max] * k)).reshape(k, 3)
         return obs
 
     def in_collision(self, points: np.ndarray) -> np.ndarray:

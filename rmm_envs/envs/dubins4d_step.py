@@ -1,0 +1,49 @@
+"""One Dubins4D environment step for ``N`` worlds at once: driver, exact path, contacts.
+
+Shared by :class:`rmm_envs.envs.dubins4d.Dubins4DCirclesEnv` (``N = 1``) and
+:class:`rmm_envs.envs.dubins4d_vector.Dubins4DCirclesVectorEnv` (``N`` sub-environments), so
+both run the very same floating-point operations: every stage is a compiled loop over the
+worlds (the driver's closed-form QP, the exact zero-order-hold path, the contact parameters),
+whose result for one world does not depend on the others in the batch.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rmm_envs.driver import CLFDriver
+from rmm_envs.systems.dubins4d import Dubins4D, wrap_angle
+from rmm_envs.worlds.circles import contact_params_each
+
+__all__ = ["advance"]
+
+
+def advance(system: Dubins4D, driver: CLFDriver, states: np.ndarray, circles: np.ndarray, active: np.ndarray,
+            controls: np.ndarray, times: np.ndarray):
+    """Advance ``N`` worlds by one held control each.
+
+    Args:
+        states: ``(N, 4)`` states.
+        circles: ``(N, K + 1, 3)``: each world's obstacles, then its goal (last).
+        active: ``(N,)`` bool: the guardian's control applies; otherwise the driver's.
+        controls: ``(N, 2)`` the guardian's controls (already validated and clipped); rows
+            where ``active`` is false are ignored.
+        times: ``(S,)`` path times, ``0 ... duration``.
+
+    Returns ``(next_states, applied_controls, hit_obstacle, hit_goal)``: the path's end with the
+    heading wrapped to ``[-pi, pi)``, ``(N, 2)``, and the first contact parameters ``(N,)``
+    with any obstacle and with the goal (``inf`` where none).
+    """
+    u = np.array(controls, dtype=float)
+    inactive = ~active
+    if inactive.all():
+        u = driver.controls(states, circles[:, -1, :2])
+    elif inactive.any():
+        u[inactive] = driver.controls(states[inactive], circles[inactive, -1, :2])
+    paths = system.states_at(states, u, times, compiled=True)
+    cp = contact_params_each(paths, circles)
+    hit_goal = cp[:, -1]
+    hit_obst = cp[:, :-1].min(axis=1) if cp.shape[1] > 1 else np.full(cp.shape[0], np.inf)
+    nxt = paths[:, -1].copy()
+    nxt[:, 2] = wrap_angle(nxt[:, 2])
+    return nxt, u, hit_obst, hit_goal
