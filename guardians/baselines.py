@@ -1,4 +1,4 @@
-"""Baseline guardians: inactive, random, brakes-only (REFERENCE section 2.4)."""
+"""Baseline guardians: inactive, random, brakes-only (docs/original-code.md, items 17 and 23)."""
 
 from __future__ import annotations
 

@@ -13,7 +13,7 @@ def test_acceptance_value():
 
 
 def _reference(state, goal, u1b=(-0.25, 0.25), u2b=(-0.5, 0.5)):
-    """An exact dense solve of the same QP, built from the REFERENCE rows (unmerged)."""
+    """An exact dense solve of the same QP, built from the original's rows (unmerged; docs/original-code.md item 20)."""
     x, y, th, v = state
     xh, yh = goal[0] - x, goal[1] - y
     d2 = xh * xh + yh * yh

@@ -1,4 +1,4 @@
-"""Table I aggregation (REFERENCE section 1.11), over the non-errored episodes in order.
+"""Table I aggregation (docs/original-code.md, item 22), over the non-errored episodes in order.
 
 * policy compute time, ms: per episode ``compute_time / steps``; mean and population std
   across episodes;

@@ -9,7 +9,7 @@ batch 64, float64, on the dataset written by ``rmm-datagen``.
   metrics are on layouts the model never saw.  (The paper's Dubins4D "test" set was a random
   15 % of the samples, i.e. its validation split.)
 * **Input scaling**: a MinMax scaler fitted on the training split only (the original refitted
-  it on the test data, REFERENCE P12), saved in the model and folded into the first layer.
+  it on the test data, docs/original-code.md item 9), saved in the model and folded into the first layer.
 * **Model selection**: the epoch with the lowest validation MSE (``--select best``, default)
   or the last one (``--select last``, the original's behaviour).
 * **Determinism**: the same data, arguments and ``--seed`` give the same model bit for bit

@@ -1,6 +1,6 @@
 """Dubins3D in procedurally generated mazes: ``Dubins3DMaze-v0``.
 
-The paper's Fig. 1 / Table II system (REFERENCE section 3), as a Gymnasium environment.
+The paper's Fig. 1 / Table II system (docs/original-code.md, item 25), as a Gymnasium environment.
 
 ## Description
 

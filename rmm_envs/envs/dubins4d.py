@@ -204,7 +204,7 @@ class Dubins4DScene(SceneBase):
         return observation(states, sim_time, self.world.goal[None, :2], rays)
 
     def leaf_estimate(self, states: np.ndarray) -> np.ndarray:
-        """pyrmm's Dubins4D stopping-distance leaf heuristic (REFERENCE section 5), ``(N,)``.
+        """pyrmm's Dubins4D stopping-distance leaf heuristic (docs/original-code.md, item 24), ``(N,)``.
 
         Braking at 0.5 m/s^2 from speed ``v`` covers ``v^2`` m; the risk is that distance over
         the forward ray, capped at 1 (1 when the ray reads 0).  Speeds are never negative here,
@@ -637,7 +637,7 @@ class Dubins4DCirclesEnv(gym.Env):
     def observe_states(self, states: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Observations of arbitrary states for a dataset.  The simulated-time feature is drawn
         uniformly over the episode range ``[0, max_episode_sim_time]``: the original left it 0
-        in every training sample and met 0-100 s at run time (REFERENCE P1)."""
+        in every training sample and met 0-100 s at run time (docs/original-code.md, item 8)."""
         t = rng.uniform(0.0, self.max_episode_sim_time, size=np.asarray(states).shape[0])
         return self.scene.observe(states, t)
 

@@ -1,6 +1,6 @@
 """A quadrotor in procedurally generated rooms: ``QuadrotorRoom-v0`` (PyBullet).
 
-The paper's high-dimensional system (Fig. 3, Table II; REFERENCE section 4).
+The paper's high-dimensional system (Fig. 3, Table II; docs/original-code.md, item 26).
 
 ## Description
 

@@ -4,7 +4,7 @@ State ``(x, y, psi)`` (pixels, radians), control ``u`` (rad/s)::
 
     x' = s cos(psi),   y' = s sin(psi),   psi' = u,   |u| <= s / R_min
 
-Defaults follow the paper's data generation (REFERENCE section 3): speed ``s = 10`` px/s and
+Defaults follow the paper's data generation (docs/original-code.md, item 25): speed ``s = 10`` px/s and
 minimum turning radius ``R_min = 50`` px, so ``|u| <= 0.2`` rad/s.  Propagation is exact for a
 held control (an arc of a circle, or a straight line), batched over ``N`` states.
 """

@@ -7,7 +7,7 @@ State ``s = (x, y, theta, v)`` in metres, radians and m/s; control ``u = (u1, u2
 with the speed held in ``[v_min, v_max]`` (default ``[0, 2]`` m/s): when the speed reaches a
 bound, ``v'`` is zero for as long as ``u2`` pushes past it.  This is the same clamp the paper's
 environment applies inside its ODE right-hand side; the original's *risk sampler* had the clamp
-removed (REFERENCE section 8 item 15), we keep it everywhere so sampled branches obey the same
+removed (docs/original-code.md, item 5), we keep it everywhere so sampled branches obey the same
 limits as the environment.
 
 Control bounds: ``u1`` in ``[-0.25, 0.25]`` rad/s and ``u2`` in ``[-0.5, 0.5]`` m/s^2.

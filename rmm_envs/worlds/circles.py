@@ -12,7 +12,7 @@ Conventions (shared by the environment and the risk estimator):
   fraction ``s`` in ``[0, 1]`` along it, ``inf`` when it never touches.  It orders goal and
   obstacle contacts within one step exactly (the original compared segment indices only).
 
-Generation follows the paper's environment (REFERENCE section 1.3): the first obstacle's centre
+Generation follows the paper's environment (docs/original-code.md, item 21): the first obstacle's centre
 is drawn from ``N(0, 2^2)`` per axis (biased to the centre), the others uniformly on the arena
 square; radii uniform in ``[r_min, r_max]``; obstacles may overlap and may extend past the arena.
 """

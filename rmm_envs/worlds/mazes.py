@@ -1,6 +1,6 @@
 """Procedurally generated mazes with exact thick-wall geometry (the paper's Dubins-3D world).
 
-Units are the paper's pixels (REFERENCE section 3): the defaults give a 2750 x 2750 px image
+Units are the paper's pixels (docs/original-code.md, item 25): the defaults give a 2750 x 2750 px image
 holding a maze of 20 x 20 cells of 125 px, with a one-cell margin, and walls 12.5 px thick
 (mazegen's 3-unit round-capped stroke at 300 dpi).  A wall is a segment with round caps: the
 set of points within ``thickness / 2`` of the segment (a capsule).

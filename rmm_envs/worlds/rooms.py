@@ -1,4 +1,4 @@
-"""Procedurally generated rooms for the quadrotor (REFERENCE section 4), from primitives only.
+"""Procedurally generated rooms for the quadrotor (docs/original-code.md, item 26), from primitives only.
 
 A room is:
 

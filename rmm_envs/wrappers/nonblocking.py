@@ -1,6 +1,6 @@
 """Non-blocking stepping: the agent's thinking time passes in the simulated world.
 
-The paper's ``step_to_now`` semantics (REFERENCE section 1.5), on Gymnasium's ``step``:
+The paper's ``step_to_now`` semantics (docs/original-code.md, item 19), on Gymnasium's ``step``:
 
 * ``step(a)`` first advances the world by ``lap * time_accel + base_step`` simulated seconds,
   where ``lap`` is the clock time elapsed since the previous ``step`` (or ``reset``) returned,
