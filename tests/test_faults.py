@@ -252,7 +252,7 @@ def test_datagen_reports_a_dead_worker_and_a_rerun_finishes(tmp_path, monkeypatc
 def test_datagen_rejects_zero_workers(tmp_path):
     from rmm_envs.risk import datagen
 
-    with pytest.raises(ValueError, match="--workers must be an integer >= 1, got 0"):
+    with pytest.raises(ValueError, match=r"workers \(--workers\) must be an integer >= 1 .*got 0"):
         datagen.generate(datagen.DatagenConfig(configs=2, samples_per_config=2, branches=2, depth=1, configs_per_shard=1),
                          tmp_path / "z", workers=0, progress=False)
 
