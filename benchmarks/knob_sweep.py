@@ -74,7 +74,7 @@ def plot(points: list[tuple[str, dict]], default: str | None, reference: dict | 
             ax.plot([p["intervention_mean"]], [p["collision_mean"]], "*", color="tab:red", ms=14, label=f"default ({v})")
     if reference is not None:
         ax.plot([reference["intervention_mean"]], [reference["collision_mean"]], "s", color="grey", ms=6, label="driver alone")
-    ax.set_xlim(left=0)
+    ax.set_xlim(left=-1)  # the driver alone sits at 0
     ax.set_ylim(bottom=0)
     ax.set_xlabel("intervention [% sim time]")
     ax.set_ylabel("collision rate [% episodes]")
