@@ -36,16 +36,22 @@ def main(argv=None):
     manifest = generate(cfg, work / "data", workers=2, progress=False)
     data = load_dataset(work / "data")
     print(f"labelled {len(data)} states from {args.configs} configurations; mean risk {data.risk.mean():.3f}")
+    assert len(data) == args.configs * args.samples and 0.0 <= data.risk.min() <= data.risk.max() <= 1.0
 
     # 2. train the paper's network (17 -> 64 sigmoid -> 1 sigmoid), split by configuration
     model = train(data, TrainConfig(epochs=args.epochs, seed=0), log=lambda *a: None)
     model.save(work / "model.npz")
     for split, m in model.meta["metrics"].items():
         print(f"{split:5s} MSE {m['mse']:.4f} MAE {m['mae']:.4f} ({m['n']} samples)")
+    # every split was scored, on disjoint configurations that together cover the dataset
+    assert set(model.meta["metrics"]) == {"train", "val", "test"}
+    assert sum(m["n"] for m in model.meta["metrics"].values()) == len(data)
 
-    # 3. use it as a guardian
+    # 3. use it as a guardian.  This model predicts the risk only (no action-conditioned head,
+    #    no stored decision defaults), so say how to act: take control above 0.3 and brake
+    #    toward the more open side (the paper's manoeuvre)
     env = gym.make("Dubins4DParallel-v0", clock="fixed:1")
-    guardian = LRMMGuardian(work / "model.npz")
+    guardian = LRMMGuardian(work / "model.npz", threshold=0.3, action="heuristic")
     obs, info = env.reset(seed=123)
     guardian.reset(seed=123, observation_space=env.observation_space, action_space=env.action_space)
     done = False
@@ -53,6 +59,7 @@ def main(argv=None):
         obs, reward, terminated, truncated, info = env.step(guardian.act(obs, info))
         done = terminated or truncated
     ep = info["episode"]
+    assert info["outcome"] in ("goal", "collision", "timeout")
     print(f"episode: {info['outcome']} after {ep['n_env_steps']} steps, guardian in control "
           f"{100 * ep['active_ctrl_sim_time'] / ep['cum_sim_time']:.0f}% of the time; dataset {manifest['dataset_sha256'][:12]}")
     return 0

@@ -64,12 +64,16 @@ def main():
             done = te or tr
         outcomes[info["outcome"]] = outcomes.get(info["outcome"], 0) + 1
     print("keep-distance over 5 episodes:", outcomes)
+    assert sum(outcomes.values()) == 5 and set(outcomes) <= {"goal", "collision", "timeout"}
 
     # 2. the benchmark with a module:Class guardian next to a built-in one
     out = tempfile.mkdtemp(prefix="rmm-bench-tutorial-")
     # (this file's folder is on sys.path when it runs as a script, so it imports as a module)
-    rmm_bench(["--agent", "third_party_guardian:Cautious,inactive", "--episodes", "6", "--workers", "1",
-               "--clock", "fixed:1", "--out", out, "--no-progress"])
+    rc = rmm_bench(["--agent", "third_party_guardian:Cautious,inactive", "--episodes", "6", "--workers", "1",
+                    "--clock", "fixed:1", "--out", out, "--no-progress"])
+    assert rc == 0, f"rmm-bench exited with {rc}"
+    table = open(f"{out}/table_I.csv").read()
+    assert "third_party_guardian:Cautious," in table and "\ninactive," in table  # one row per agent
     return 0
 
 
