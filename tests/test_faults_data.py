@@ -273,6 +273,10 @@ def test_maze_and_quadrotor_non_finite_parameters_refused():
 
     with pytest.raises(ValueError, match="speed must be a finite number"):
         Dubins3DMazeEnv(speed=math.inf)
+    for steps in (math.inf, math.nan, "100", 2.5, 0):  # inf used to raise a raw OverflowError
+        with pytest.raises(ValueError, match="max_episode_steps must be an integer >= 1"):
+            Dubins3DMazeEnv(max_episode_steps=steps)
+    assert Dubins3DMazeEnv(max_episode_steps=np.int64(5)).max_episode_steps == 5
     with pytest.raises(ValueError, match="max_episode_time must be a finite"):
         QuadrotorRoomEnv(max_episode_time=math.inf)
     with pytest.raises(ValueError, match="damping must be finite"):

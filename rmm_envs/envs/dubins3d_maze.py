@@ -110,7 +110,8 @@ class Dubins3DMazeEnv(gym.Env):
         for name, v in (("speed", speed), ("r_min", r_min)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
-        if int(max_episode_steps) != max_episode_steps or max_episode_steps < 1:
+        if (isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, float, np.integer, np.floating))
+                or not np.isfinite(max_episode_steps) or int(max_episode_steps) != max_episode_steps or max_episode_steps < 1):
             raise ValueError(f"max_episode_steps must be an integer >= 1, got {max_episode_steps!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
