@@ -420,44 +420,21 @@ def _lost_shards_error(lost: list, todo: list[int], out: Path, stopped: str | No
                         f"in {out}; rerun the same command to compute the missing ones (fewer --workers if memory ran out)")
 
 
-def _run_local(cfg: DatagenConfig, out: Path, todo: list[int], workers: int | None, bar) -> int:
-    """Label the ``todo`` shards on local processes; a shard whose worker dies is reported, the rest finish."""
-    from rmm_envs.parallel import TaskLost, WorkersLost, run_local
-
-    if workers is None:
-        workers = os.cpu_count() or 1  # generate() has refused anything but an integer >= 1
-    rows = 0
-    lost: list = []
-    jobs = [(asdict(cfg), str(out), s) for s in todo]
-    try:
-        for res in run_local(_shard_job, jobs, workers, max_lost_in_a_row=_MAX_LOST_IN_A_ROW):
-            if isinstance(res, TaskLost):
-                lost.append((res.task[2], res.cause))
-                continue
-            shard, n, _, _ = res
-            rows += n
-            bar.update(len(cfg.shard_configs(shard)))
-    except WorkersLost as e:
-        raise _lost_shards_error(lost, todo, out, str(e)) from None
-    if lost:
-        raise _lost_shards_error(lost, todo, out)
-    return rows
-
-
-def _run_ray(cfg: DatagenConfig, out: Path, todo: list[int], address: str | None, bar) -> int:
-    """Label the ``todo`` shards as Ray tasks and write them here; a shard Ray loses is reported."""
-    from rmm_envs.parallel import TaskLost, WorkersLost, run_ray
+def _collect(cfg: DatagenConfig, out: Path, todo: list[int], results, bar) -> int:
+    """Count the rows of finished shards (writing those that came back as bytes, from Ray);
+    a shard whose worker was lost is reported after the others finish."""
+    from rmm_envs.parallel import TaskLost, WorkersLost
 
     rows = 0
     lost: list = []
-    jobs = [(asdict(cfg), None, s) for s in todo]
     try:
-        for res in run_ray(_shard_job, jobs, address, max_lost_in_a_row=_MAX_LOST_IN_A_ROW):
+        for res in results:
             if isinstance(res, TaskLost):
                 lost.append((res.task[2], res.cause))
                 continue
             shard, n, _, payload = res
-            _write_table(_shard_path(out, shard), pa.ipc.open_stream(payload).read_all())
+            if payload is not None:
+                _write_table(_shard_path(out, shard), pa.ipc.open_stream(payload).read_all())
             rows += n
             bar.update(len(cfg.shard_configs(shard)))
     except WorkersLost as e:
@@ -465,6 +442,24 @@ def _run_ray(cfg: DatagenConfig, out: Path, todo: list[int], address: str | None
     if lost:
         raise _lost_shards_error(lost, todo, out)
     return rows
+
+
+def _run_local(cfg: DatagenConfig, out: Path, todo: list[int], workers: int | None, bar) -> int:
+    """Label the ``todo`` shards on local processes; a shard whose worker dies is reported, the rest finish."""
+    from rmm_envs.parallel import run_local
+
+    if workers is None:
+        workers = os.cpu_count() or 1  # generate() has refused anything but an integer >= 1
+    jobs = [(asdict(cfg), str(out), s) for s in todo]
+    return _collect(cfg, out, todo, run_local(_shard_job, jobs, workers, max_lost_in_a_row=_MAX_LOST_IN_A_ROW), bar)
+
+
+def _run_ray(cfg: DatagenConfig, out: Path, todo: list[int], address: str | None, bar) -> int:
+    """Label the ``todo`` shards as Ray tasks and write them here; a shard Ray loses is reported."""
+    from rmm_envs.parallel import run_ray
+
+    jobs = [(asdict(cfg), None, s) for s in todo]
+    return _collect(cfg, out, todo, run_ray(_shard_job, jobs, address, max_lost_in_a_row=_MAX_LOST_IN_A_ROW), bar)
 
 
 # ---------------------------------------------------------------------- loading
