@@ -61,6 +61,24 @@ def set_threads(n: int | None) -> None:
 
 if HAVE_NUMBA:
 
+    @njit(cache=True)
+    def _setup(W, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, ghosts):
+        # What both stages derive from their arguments: strides, the LF weights, the Hamiltonian's
+        # coefficients and the per-plane coefficient rows over the interior entries of a plane.
+        n0, n1, n2, n3 = W.shape
+        plane = n2 * n3
+        half = np.float32(0.5)
+        k0, k1, k2, k3 = half * inv_dx[0], half * inv_dx[1], half * inv_dx[2], half * inv_dx[3]
+        g = (alpha[0] * k0, alpha[1] * k1, alpha[2] * k2, alpha[3] * k3)  # dissipation weights
+        K1 = sign * u1max * k2  # heading-rate term: K1 |d_theta|
+        K3 = sign * u2max * k3  # acceleration term: K3 max(sign d_v up, -sign d_v down)
+        KD0, KD1 = sign * d_max * k0, sign * d_max * k1  # disturbance
+        q_lo = ghosts * n3 + ghosts  # the first interior entry of a (theta, v) plane
+        count = plane - 2 * ghosts * n3 - 2 * ghosts  # up to the last interior entry
+        Cq, Sq = C[q_lo:q_lo + count] * k0, S[q_lo:q_lo + count] * k1
+        Aq, Bq = sign * up[q_lo:q_lo + count], -sign * down[q_lo:q_lo + count]
+        return plane, n1 * plane, plane, n3, g, K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq
+
     @njit(cache=True, parallel=True, boundscheck=False)
     def _stage(V0, W, out, floor, has_floor, a, b, dt, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max):
         # For fixed (i, j) the padded (theta, v) plane is contiguous: one long, branch-free,
@@ -70,23 +88,15 @@ if HAVE_NUMBA:
         # terms simplify: p_a = d_a / (2 dx_a) and alpha_a (p+_a - p-_a) / 2 =
         # alpha_a (s_a - 2 w) / (2 dx_a), so the kernel needs no one-sided differences.
         n0, n1, n2, n3 = W.shape
-        plane = n2 * n3
         Wf, Of, Vf, Ff = W.reshape(-1), out.reshape(-1), V0.reshape(-1), floor.reshape(-1)
-        sx, sy, st = n1 * plane, plane, n3
         half = np.float32(0.5)
         zero = np.float32(0.0)
         two = np.float32(2.0)
-        k0, k1, k2, k3 = half * inv_dx[0], half * inv_dx[1], half * inv_dx[2], half * inv_dx[3]
-        g0, g1, g2, g3 = alpha[0] * k0, alpha[1] * k1, alpha[2] * k2, alpha[3] * k3  # dissipation weights
-        gw = two * (g0 + g1 + g2 + g3)
-        K1 = sign * u1max * k2  # heading-rate term: K1 |d_theta|
-        K3 = sign * u2max * k3  # acceleration term: K3 max(sign d_v up, -sign d_v down)
-        KD0, KD1 = sign * d_max * k0, sign * d_max * k1  # disturbance
+        plane, sx, sy, st, g, K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq = _setup(
+            W, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, 1)
+        g0, g1, g2, g3 = g
         bdt = b * dt
-        q_lo = n3 + 1  # the first interior entry of a (theta, v) plane
-        count = plane - 2 * n3 - 2  # up to the last interior entry
-        Cq, Sq = C[q_lo:q_lo + count] * k0, S[q_lo:q_lo + count] * k1
-        Aq, Bq = sign * up[q_lo:q_lo + count], -sign * down[q_lo:q_lo + count]
+        gw = two * (g0 + g1 + g2 + g3)
         for i in prange(1, n0 - 1):
             for j in range(1, n1 - 1):
                 base = i * sx + j * sy + q_lo
@@ -131,22 +141,14 @@ if HAVE_NUMBA:
         #   (p+ - p-) / 2 = (c_0 - (lm + rm) / 2) / (2 dx)          (``j*`` below, times 2 dx)
         # so the LF dissipation alpha (p+ - p-) / 2 is alpha / (2 dx) * j, as in _stage.
         n0, n1, n2, n3 = W.shape
-        plane = n2 * n3
         Wf, Of, Vf, Ff = W.reshape(-1), out.reshape(-1), V0.reshape(-1), floor.reshape(-1)
-        sx, sy, st = n1 * plane, plane, n3
         half = np.float32(0.5)
         zero = np.float32(0.0)
         two = np.float32(2.0)
-        k0, k1, k2, k3 = half * inv_dx[0], half * inv_dx[1], half * inv_dx[2], half * inv_dx[3]
-        g0, g1, g2, g3 = alpha[0] * k0, alpha[1] * k1, alpha[2] * k2, alpha[3] * k3
-        K1 = sign * u1max * k2
-        K3 = sign * u2max * k3
-        KD0, KD1 = sign * d_max * k0, sign * d_max * k1
+        plane, sx, sy, st, g, K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq = _setup(
+            W, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, 2)
+        g0, g1, g2, g3 = g
         bdt = b * dt
-        q_lo = 2 * n3 + 2  # the first interior entry of a (theta, v) plane
-        count = plane - 4 * n3 - 4  # up to the last interior entry
-        Cq, Sq = C[q_lo:q_lo + count] * k0, S[q_lo:q_lo + count] * k1
-        Aq, Bq = sign * up[q_lo:q_lo + count], -sign * down[q_lo:q_lo + count]
         for i in prange(2, n0 - 2):
             for j in range(2, n1 - 2):
                 base = i * sx + j * sy + q_lo
