@@ -122,8 +122,8 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout, parse
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.driver import CLFDriver, DriverParams
 from rmm_envs.envs import _render
@@ -141,6 +141,13 @@ from rmm_envs.worlds.circles import (
 __all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "parse_guardian_action"]
 
 OBS_DIM = 17
+CONTROLS = ("turnrate_ctrl", "accel_ctrl")  # the action fields of u = (u1, u2)
+
+
+def observation_layout(n_rays: int = 12) -> ObservationLayout:
+    """The named slices of the observation table above; ray ``i`` points ``2 pi i / n_rays`` left of the heading."""
+    return ObservationLayout.of(("time", 1), ("goal_offset", 2), ("heading", 1), ("speed", 1), ("rays", n_rays),
+                                ray_angles=[2.0 * math.pi * i / n_rays for i in range(n_rays)])
 _HALF = 10.0  # arena half width (generation only)
 
 
@@ -220,43 +227,9 @@ class Dubins4DScene(SceneBase):
         return np.where(v <= 0, np.where(fwd <= 0, 1.0, 0.0), risk)
 
 
-def _as_scalar(value, field: str, space: spaces.Box) -> float:
-    arr = np.asarray(value)
-    if arr.dtype.kind not in "fiu" or arr.size != 1 or arr.ndim > 1:
-        raise ValueError(
-            f"action field {field!r} must be a number or a shape-(1,) array in {space}, got {value!r}"
-        )
-    x = float(arr.reshape(-1)[0])
-    if not math.isfinite(x):
-        raise ValueError(f"action field {field!r} must be finite (space {space}), got {x}")
-    return min(max(x, float(space.low[0])), float(space.high[0]))
-
-
-def parse_guardian_action(action, space: spaces.Dict) -> tuple[bool, np.ndarray]:
-    """Validate a guardian action; return ``(active, (u1, u2) clipped)``."""
-    if not isinstance(action, dict):
-        try:
-            action = dict(action)
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"action must be a dict with keys active_ctrl, turnrate_ctrl, accel_ctrl ({space}), "
-                f"got {type(action).__name__}"
-            ) from None
-    for key in ("active_ctrl", "turnrate_ctrl", "accel_ctrl"):
-        if key not in action:
-            raise ValueError(f"action is missing field {key!r}; expected the keys of {space}")
-    extra = set(action) - {"active_ctrl", "turnrate_ctrl", "accel_ctrl"}
-    if extra:
-        raise ValueError(f"action has unknown fields {sorted(extra)}; expected the keys of {space}")
-    a = np.asarray(action["active_ctrl"])
-    if a.size != 1 or a.dtype.kind not in "biuf" or a.ndim > 1:
-        raise ValueError(f"action field 'active_ctrl' must be 0 or 1 (Discrete(2)), got {action['active_ctrl']!r}")
-    av = float(a.reshape(-1)[0])
-    if av not in (0.0, 1.0):
-        raise ValueError(f"action field 'active_ctrl' must be 0 or 1 (Discrete(2)), got {action['active_ctrl']!r}")
-    u1 = _as_scalar(action["turnrate_ctrl"], "turnrate_ctrl", space["turnrate_ctrl"])
-    u2 = _as_scalar(action["accel_ctrl"], "accel_ctrl", space["accel_ctrl"])
-    return av == 1.0, np.array([u1, u2])
+def parse_guardian_action(action, space: GuardianActionSpace) -> tuple[bool, np.ndarray]:
+    """Validate a guardian action; return ``(active, (u1, u2) clipped)`` (:func:`rmm_envs.autonomy.parse`)."""
+    return parse(action, space)
 
 
 def _finite(x) -> bool:
@@ -347,16 +320,10 @@ class Dubins4DCirclesEnv(gym.Env):
         self.clock = make_clock(clock)
 
         s = self.system
-        self.action_space = spaces.Dict(
-            {
-                "active_ctrl": spaces.Discrete(2),
-                "turnrate_ctrl": spaces.Box(s.u1_min, s.u1_max, shape=(1,), dtype=np.float32),
-                "accel_ctrl": spaces.Box(s.u2_min, s.u2_max, shape=(1,), dtype=np.float32),
-            }
-        )
+        self.action_space = GuardianActionSpace.for_system(s, CONTROLS)
         low = np.array([0.0, -np.inf, -np.inf, -np.pi, s.v_min] + [0.0] * self.n_rays, dtype=np.float32)
         high = np.array([np.inf, np.inf, np.inf, np.pi, s.v_max] + [self.ray_length] * self.n_rays, dtype=np.float32)
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.observation_space = ObservationBox(low, high, observation_layout(self.n_rays))
 
         self.scene: Dubins4DScene | None = None
         self._state = np.zeros(4)

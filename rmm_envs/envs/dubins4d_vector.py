@@ -95,9 +95,6 @@ from rmm_envs.worlds.circles import ray_cast_each
 
 __all__ = ["Dubins4DCirclesVectorEnv"]
 
-_FIELDS = ("active_ctrl", "turnrate_ctrl", "accel_ctrl")
-
-
 class Dubins4DCirclesVectorEnv(VectorEnv):
     """``num_envs`` Dubins4D parallel-autonomy worlds as arrays; see the module docstring."""
 
@@ -142,10 +139,6 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         self._ended = np.zeros(n, dtype=bool)  # the episode ended at the last step
         self._obs = np.zeros((n, self._single.observation_space.shape[0]), dtype=np.float32)
         self._started = False
-        self._ctrl_low = np.array([float(self.single_action_space["turnrate_ctrl"].low[0]),
-                                   float(self.single_action_space["accel_ctrl"].low[0])])
-        self._ctrl_high = np.array([float(self.single_action_space["turnrate_ctrl"].high[0]),
-                                    float(self.single_action_space["accel_ctrl"].high[0])])
 
     # ------------------------------------------------------------------ observations
     def _observe(self, idx=slice(None)) -> np.ndarray:
@@ -225,40 +218,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
     # ------------------------------------------------------------------ actions
     def _parse_actions(self, actions) -> tuple[np.ndarray, np.ndarray]:
         """Validate a batched guardian action; ``(active (N,) bool, controls (N, 2) clipped)``."""
-        n = self.num_envs
-        if not isinstance(actions, dict):
-            try:
-                actions = dict(actions)
-            except (TypeError, ValueError):
-                raise ValueError(f"actions must be a dict of arrays with keys {list(_FIELDS)} ({self.action_space}), "
-                                 f"got {type(actions).__name__}") from None
-        missing = [k for k in _FIELDS if k not in actions]
-        if missing:
-            raise ValueError(f"actions are missing field {missing[0]!r}; expected the keys of {self.action_space}")
-        extra = sorted(set(actions) - set(_FIELDS))
-        if extra:
-            raise ValueError(f"actions have unknown fields {extra}; expected the keys of {self.action_space}")
-        arrs = {}
-        for key in _FIELDS:
-            arr = np.asarray(actions[key])
-            if arr.dtype.kind not in "biuf" or arr.shape not in ((n,), (n, 1)):
-                raise ValueError(f"action field {key!r} must be {n} numbers, shape ({n},) or ({n}, 1), "
-                                 f"got {arr.dtype} array of shape {arr.shape}")
-            arrs[key] = arr.reshape(n)
-        flag = arrs["active_ctrl"]
-        active = flag == 1
-        bad = ~(active | (flag == 0))
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise ValueError(f"action field 'active_ctrl' of sub-env {i} must be 0 or 1 (Discrete(2)), got {flag[i]!r}")
-        ctrl = np.empty((n, 2))
-        ctrl[:, 0] = arrs["turnrate_ctrl"]
-        ctrl[:, 1] = arrs["accel_ctrl"]
-        if not np.isfinite(ctrl).all():
-            i, j = np.argwhere(~np.isfinite(ctrl))[0]
-            raise ValueError(f"action field {_FIELDS[1 + j]!r} of sub-env {i} must be finite, got {ctrl[i, j]!r}")
-        np.minimum(np.maximum(ctrl, self._ctrl_low, out=ctrl), self._ctrl_high, out=ctrl)
-        return active, ctrl
+        return self.single_action_space.parse_batch(actions, self.num_envs, self.action_space)
 
     # ------------------------------------------------------------------ step
     def step(self, actions):

@@ -22,15 +22,18 @@ from __future__ import annotations
 import math
 
 import gymnasium as gym
-import numpy as np
 
+from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.clocks import Clock, make_clock
 
 __all__ = ["NonBlockingStepping"]
 
 
 class NonBlockingStepping(gym.Wrapper):
-    """Wrap an env that offers ``simulate(duration, active, control, compute_time)``.
+    """Wrap a parallel-autonomy env that offers ``simulate(duration, active, control, compute_time)``.
+
+    The env's action space is a :class:`rmm_envs.autonomy.GuardianActionSpace`; actions are
+    parsed by it.
 
     Args:
         env: the blocking environment (e.g. ``Dubins4DCircles-v0``).
@@ -53,19 +56,21 @@ class NonBlockingStepping(gym.Wrapper):
         self.time_accel = float(time_accel)
         self.base_step = float(base_step)
         self.clock = make_clock(clock)
-        self._pending = (False, np.zeros(2))
+        self._space = env.unwrapped.action_space
+        if not isinstance(self._space, GuardianActionSpace):
+            raise TypeError(f"{type(env.unwrapped).__name__}.action_space must be a GuardianActionSpace (the "
+                            f"parallel-autonomy contract, rmm_envs.autonomy), got {self._space!r}")
+        self._pending = self._space.parse(self._space.inactive())
 
     def reset(self, *, seed=None, options=None):
         obs, info = self.env.reset(seed=seed, options=options)
-        self._pending = (False, np.zeros(2))
+        self._pending = self._space.parse(self._space.inactive())
         self.clock.start()
         return obs, info
 
     def step(self, action):
         lap = self.clock.elapsed()
-        from rmm_envs.envs.dubins4d import parse_guardian_action
-
-        parsed = parse_guardian_action(action, self.env.unwrapped.action_space)
+        parsed = self._space.parse(action)
         active, control = self._pending
         out = self.env.unwrapped.simulate(lap * self.time_accel + self.base_step, active, control, lap)
         self._pending = parsed

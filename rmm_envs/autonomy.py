@@ -1,0 +1,297 @@
+"""The parallel-autonomy contract: how a guardian and an environment talk.
+
+A *parallel-autonomy* environment has a built-in driver that controls the system by default.
+At every step a guardian returns an action that says whether it takes control this step and,
+if so, with which control.  This module owns that contract, for every system:
+
+**The action.**  A dict ``{"active_ctrl": 0 or 1, <control field>: shape-(1,) array, ...}``
+with one field per component of the system's control vector (for Dubins4D ``turnrate_ctrl``
+and ``accel_ctrl``, in that order: ``u = (turn rate, acceleration)``).  Its space is a
+:class:`GuardianActionSpace`, a Gymnasium ``Dict`` (so ``check_env``, ``sample()``, vector
+batching and every Gymnasium utility work as for any ``Dict``) that also knows the order of
+the control vector and its bounds:
+
+* ``space.inactive()``: the action that leaves control with the driver;
+* ``space.active(u)``: take control and apply the control vector ``u``;
+* ``space.parse(action) -> (active, u)``: validate an action and return the flag and the
+  control vector, clipped to the bounds (as the paper's environment clipped).  A missing or
+  unknown field, a wrong type or shape, a non-finite number or an ``active_ctrl`` other than
+  0/1 raises ``ValueError`` naming the field and the space.
+
+The module-level :func:`inactive`, :func:`active` and :func:`parse` do the same given the
+space, and refuse a space that is not a :class:`GuardianActionSpace` with a message saying so.
+The bounds are those of the system's dynamics object (:meth:`GuardianActionSpace.for_system`
+reads ``system.control_low`` / ``control_high``), so they are written once.
+
+**The observation layout.**  An environment's observation space is an :class:`ObservationBox`:
+a Gymnasium ``Box`` that also carries an :class:`ObservationLayout`, the named slices of the
+flat observation vector (``"goal_offset"``, ``"rays"``, ...) and the directions of its range
+rays relative to the heading.  A guardian reads positions in the vector by name
+(``layout(space)["rays"]``) rather than assuming indices, so the same guardian code serves any
+system whose observation offers the fields it needs, and refuses one that does not with a
+message naming the missing field.
+
+Guardians receive both spaces at ``reset`` (see :mod:`guardians.base`) and read bounds and
+layout from them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+from gymnasium import spaces
+
+__all__ = ["ACTIVE", "GuardianActionSpace", "ObservationBox", "ObservationLayout", "active", "inactive",
+           "layout", "parse"]
+
+ACTIVE = "active_ctrl"  # the action field that says whether the guardian takes control
+
+
+class GuardianActionSpace(spaces.Dict):
+    """``Dict(active_ctrl=Discrete(2), <name>=Box(low_i, high_i, (1,)) for each control)``.
+
+    Args:
+        controls: the action field of each component of the control vector, in the order of
+            the system's control vector (e.g. ``("turnrate_ctrl", "accel_ctrl")``).
+        low, high: the control bounds, one number per control (``low <= high``, finite).
+        seed: as for ``gymnasium.spaces.Dict``.
+
+    The fields are stored in Gymnasium's default (sorted) key order, so sampling, seeding and
+    flattening behave exactly as for the plain ``Dict`` with the same fields; the control
+    order lives in :attr:`controls`.  The continuous fields are float32 boxes.
+    """
+
+    def __init__(self, controls: Sequence[str], low: Iterable[float], high: Iterable[float], seed=None) -> None:
+        controls = tuple(controls)
+        lo = np.asarray(list(low), dtype=float).reshape(-1)
+        hi = np.asarray(list(high), dtype=float).reshape(-1)
+        if not controls or len(set(controls)) != len(controls) or not all(isinstance(c, str) and c for c in controls):
+            raise ValueError(f"controls must be distinct non-empty field names, got {controls!r}")
+        if ACTIVE in controls:
+            raise ValueError(f"{ACTIVE!r} is the activation flag and cannot name a control")
+        if lo.shape != (len(controls),) or hi.shape != (len(controls),):
+            raise ValueError(f"low and high need one bound per control {controls}, got {lo.tolist()} and {hi.tolist()}")
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)):
+            raise ValueError(f"control bounds must be finite with low <= high, got low={lo.tolist()} high={hi.tolist()}")
+        fields: dict[str, spaces.Space] = {ACTIVE: spaces.Discrete(2)}
+        for name, a, b in zip(controls, lo, hi):
+            fields[name] = spaces.Box(a, b, shape=(1,), dtype=np.float32)
+        super().__init__(fields, seed=seed)
+        self.controls = controls
+        # the bounds actions are clipped to: those of the float32 boxes, as float64
+        self.control_low = np.array([float(self.spaces[c].low[0]) for c in controls])
+        self.control_high = np.array([float(self.spaces[c].high[0]) for c in controls])
+
+    @classmethod
+    def for_system(cls, system: Any, controls: Sequence[str], seed=None) -> "GuardianActionSpace":
+        """The action space of a system whose dynamics object has ``control_low``/``control_high``."""
+        return cls(controls, np.asarray(system.control_low, float), np.asarray(system.control_high, float), seed=seed)
+
+    @property
+    def control_dim(self) -> int:
+        return len(self.controls)
+
+    def inactive(self) -> dict:
+        """The driver controls this step (the control fields are zeros and ignored)."""
+        action: dict[str, Any] = {ACTIVE: 0}
+        for c in self.controls:
+            action[c] = np.zeros(1, np.float32)
+        return action
+
+    def active(self, control) -> dict:
+        """Take control and apply the control vector ``control`` (one number per control)."""
+        u = np.asarray(control, dtype=float).reshape(-1)
+        if u.shape != (len(self.controls),):
+            raise ValueError(f"control must have one value per control {self.controls}, got {control!r}")
+        action: dict[str, Any] = {ACTIVE: 1}
+        for c, x in zip(self.controls, u):
+            action[c] = np.array([x], np.float32)
+        return action
+
+    def parse(self, action) -> tuple[bool, np.ndarray]:
+        """Validate ``action``; return ``(active, control vector clipped to the bounds)``."""
+        keys = [ACTIVE, *self.controls]
+        if not isinstance(action, dict):
+            try:
+                action = dict(action)
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"action must be a dict with keys {', '.join(keys)} ({self}), got {type(action).__name__}"
+                ) from None
+        for key in keys:
+            if key not in action:
+                raise ValueError(f"action is missing field {key!r}; expected the keys of {self}")
+        extra = set(action) - set(keys)
+        if extra:
+            raise ValueError(f"action has unknown fields {sorted(extra, key=str)}; expected the keys of {self}")
+        flag = np.asarray(action[ACTIVE])
+        if flag.size != 1 or flag.dtype.kind not in "biuf" or flag.ndim > 1 or float(flag.reshape(-1)[0]) not in (0.0, 1.0):
+            raise ValueError(f"action field {ACTIVE!r} must be 0 or 1 (Discrete(2)), got {action[ACTIVE]!r}")
+        u = np.empty(len(self.controls))
+        for i, c in enumerate(self.controls):
+            u[i] = _bounded_scalar(action[c], c, self.spaces[c], self.control_low[i], self.control_high[i])
+        return float(flag.reshape(-1)[0]) == 1.0, u
+
+    def parse_batch(self, actions, n: int, batch_space=None) -> tuple[np.ndarray, np.ndarray]:
+        """Validate the actions of ``n`` sub-envs (a dict of arrays, one entry per sub-env, shape
+        ``(n,)`` or ``(n, 1)`` per field); return ``(active (n,) bool, controls (n, c) clipped)``.
+        Errors name the field and the first bad sub-env; ``batch_space`` is named in them."""
+        keys = [ACTIVE, *self.controls]
+        where = batch_space if batch_space is not None else f"{n} x {self}"
+        if not isinstance(actions, dict):
+            try:
+                actions = dict(actions)
+            except (TypeError, ValueError):
+                raise ValueError(f"actions must be a dict of arrays with keys {keys} ({where}), "
+                                 f"got {type(actions).__name__}") from None
+        missing = [k for k in keys if k not in actions]
+        if missing:
+            raise ValueError(f"actions are missing field {missing[0]!r}; expected the keys of {where}")
+        extra = sorted(set(actions) - set(keys), key=str)
+        if extra:
+            raise ValueError(f"actions have unknown fields {extra}; expected the keys of {where}")
+        arrs = {}
+        for key in keys:
+            arr = np.asarray(actions[key])
+            if arr.dtype.kind not in "biuf" or arr.shape not in ((n,), (n, 1)):
+                raise ValueError(f"action field {key!r} must be {n} numbers, shape ({n},) or ({n}, 1), "
+                                 f"got {arr.dtype} array of shape {arr.shape}")
+            arrs[key] = arr.reshape(n)
+        flag = arrs[ACTIVE]
+        act = flag == 1
+        bad = ~(act | (flag == 0))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ValueError(f"action field {ACTIVE!r} of sub-env {i} must be 0 or 1 (Discrete(2)), got {flag[i]!r}")
+        ctrl = np.empty((n, len(self.controls)))
+        for j, c in enumerate(self.controls):
+            ctrl[:, j] = arrs[c]
+        if not np.isfinite(ctrl).all():
+            i, j = np.argwhere(~np.isfinite(ctrl))[0]
+            raise ValueError(f"action field {self.controls[j]!r} of sub-env {i} must be finite, got {ctrl[i, j]!r}")
+        np.minimum(np.maximum(ctrl, self.control_low, out=ctrl), self.control_high, out=ctrl)
+        return act, ctrl
+
+
+def _bounded_scalar(value, field: str, space: spaces.Box, low: float, high: float) -> float:
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "fiu" or arr.size != 1 or arr.ndim > 1:
+        raise ValueError(f"action field {field!r} must be a number or a shape-(1,) array in {space}, got {value!r}")
+    x = float(arr.reshape(-1)[0])
+    if not math.isfinite(x):
+        raise ValueError(f"action field {field!r} must be finite (space {space}), got {x}")
+    return min(max(x, low), high)
+
+
+def _action_space(space) -> GuardianActionSpace:
+    if not isinstance(space, GuardianActionSpace):
+        raise TypeError(
+            f"expected the action space of a parallel-autonomy env (rmm_envs.autonomy.GuardianActionSpace), got {space!r}"
+        )
+    return space
+
+
+def inactive(space: GuardianActionSpace) -> dict:
+    """The action of ``space`` that leaves control with the driver."""
+    return _action_space(space).inactive()
+
+
+def active(space: GuardianActionSpace, control) -> dict:
+    """The action of ``space`` that takes control and applies ``control``."""
+    return _action_space(space).active(control)
+
+
+def parse(action, space: GuardianActionSpace) -> tuple[bool, np.ndarray]:
+    """Validate ``action`` against ``space``; ``(active, control clipped to the bounds)``."""
+    return _action_space(space).parse(action)
+
+
+@dataclass(frozen=True)
+class ObservationLayout:
+    """Named slices of a flat observation vector.
+
+    Args:
+        fields: ``(name, start, stop)`` triples: ``obs[start:stop]`` is the field ``name``.
+            Fields do not overlap and cover ``range(size)`` without gaps.
+        ray_angles: direction of each ray of the ``"rays"`` field relative to the heading, in
+            radians counter-clockwise (empty when there are no rays).
+    """
+
+    fields: tuple[tuple[str, int, int], ...]
+    ray_angles: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        pos = 0
+        names = set()
+        for name, start, stop in self.fields:
+            if start != pos or stop <= start or name in names:
+                raise ValueError(f"layout fields must be distinct, contiguous and non-empty from 0, got {self.fields}")
+            names.add(name)
+            pos = stop
+        if "rays" in names and len(self.ray_angles) != self.size_of("rays"):
+            raise ValueError(f"ray_angles needs one angle per ray ({self.size_of('rays')}), got {len(self.ray_angles)}")
+
+    @classmethod
+    def of(cls, *sizes: tuple[str, int], ray_angles: Sequence[float] = ()) -> "ObservationLayout":
+        """A layout from ``(name, length)`` pairs in order, e.g. ``of(("time", 1), ("rays", 12))``."""
+        fields, pos = [], 0
+        for name, n in sizes:
+            fields.append((name, pos, pos + int(n)))
+            pos += int(n)
+        return cls(tuple(fields), tuple(float(a) for a in ray_angles))
+
+    @property
+    def size(self) -> int:
+        return self.fields[-1][2] if self.fields else 0
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(f[0] for f in self.fields)
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.names
+
+    def __getitem__(self, name: str) -> slice:
+        for f, start, stop in self.fields:
+            if f == name:
+                return slice(start, stop)
+        raise KeyError(f"the observation has no field {name!r}; it has {list(self.names)}")
+
+    def size_of(self, name: str) -> int:
+        s = self[name]
+        return s.stop - s.start
+
+    def index(self, name: str) -> int:
+        """The position of a one-number field."""
+        s = self[name]
+        if s.stop - s.start != 1:
+            raise ValueError(f"field {name!r} has {s.stop - s.start} numbers, not one; use layout[{name!r}]")
+        return s.start
+
+    def ray_index(self, angle: float) -> int:
+        """Position in the observation of the ray nearest to ``angle`` (radians from the heading)."""
+        if not self.ray_angles:
+            raise KeyError(f"the observation has no rays; it has {list(self.names)}")
+        d = np.angle(np.exp(1j * (np.asarray(self.ray_angles) - float(angle))))
+        return self["rays"].start + int(np.argmin(np.abs(d)))
+
+
+class ObservationBox(spaces.Box):
+    """A Gymnasium ``Box`` observation space with an :class:`ObservationLayout` (``.layout``)."""
+
+    def __init__(self, low, high, layout: ObservationLayout, dtype=np.float32, seed=None) -> None:
+        super().__init__(low, high, dtype=dtype, seed=seed)
+        if self.shape != (layout.size,):
+            raise ValueError(f"layout describes {layout.size} numbers but the box has shape {self.shape}")
+        self.layout = layout
+
+
+def layout(space) -> ObservationLayout:
+    """The layout of an observation space, or a ``TypeError`` saying the space has none."""
+    lay = getattr(space, "layout", None)
+    if not isinstance(lay, ObservationLayout):
+        raise TypeError(f"observation space {space!r} carries no layout (expected rmm_envs.autonomy.ObservationBox)")
+    return lay
