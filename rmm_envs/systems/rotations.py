@@ -3,9 +3,11 @@
 Quaternions are ``(x, y, z, w)``, scalar last, as PyBullet stores them; a rotation matrix
 ``R`` maps body-frame vectors to the world frame (its columns are the body axes in world
 coordinates).  Every function takes one quaternion ``(4,)`` or a batch ``(..., 4)`` and keeps
-the leading shape; a batch is the same arithmetic as its rows one at a time, to the last bit.
-Inputs are assumed to be unit quaternions (nothing is normalised here: the callers hold unit
-quaternions and normalising would change their bits).
+the leading shape.  A batch of products or matrices is the same arithmetic as its rows one at
+a time, to the last bit (one batched call can replace a loop of single ones); roll-pitch-yaw
+uses numpy's ``sin``/``cos``, whose vectorised loops may differ from one element at a time in
+the last bit.  Inputs are assumed to be unit quaternions (nothing is normalised here: the
+callers hold unit quaternions and normalising would change their bits).
 """
 
 from __future__ import annotations
