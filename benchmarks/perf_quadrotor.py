@@ -19,6 +19,7 @@ import numpy as np
 
 import rmm_envs  # noqa: F401
 from rmm_envs.risk import RiskEstimator
+from rmm_envs.systems.quadrotor import QUADROTOR
 
 
 def compare(env, states, controls):
@@ -74,7 +75,7 @@ def main(argv=None):
     e = np.concatenate(errs)
     print(f"  position error before the first contact: median {np.median(e):.1e} m, max {e.max():.1e} m")
     # env steps per second: stepping alone, and with the resets that rebuild a room
-    hover = np.array([4.905, 0.0, 0.0, 0.0], np.float32)
+    hover = np.array([QUADROTOR.hover_thrust, 0.0, 0.0, 0.0], np.float32)
     n, t_all, t_step, seed = 0, time.perf_counter(), 0.0, 0
     while n < 3000:
         env.reset(seed=seed)

@@ -11,7 +11,8 @@ except ImportError as e:
 
 import rmm_envs  # noqa: F401
 from gymnasium.utils.env_checker import check_env
-from rmm_envs.envs.quadrotor_room import QUAD_MASS, QuadrotorRoomEnv
+from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
+from rmm_envs.systems.quadrotor import QUADROTOR
 from rmm_envs.worlds.rooms import generate_room
 
 EMPTY = {"n_rectangles": 1, "x_range": 10.0, "y_range": 10.0, "wall_height": 3.0, "n_boxes": 0, "n_cylinders": 0, "n_spheres": 0}
@@ -47,7 +48,7 @@ def run(env, action, seconds):
 def test_hover_holds_the_state():
     env, _, info = make()
     s0 = info["state"]
-    obs, r, te, tr, info = run(env, [QUAD_MASS * 9.81, 0, 0, 0], 1.0)
+    obs, r, te, tr, info = run(env, [QUADROTOR.hover_thrust, 0, 0, 0], 1.0)
     assert not te
     np.testing.assert_allclose(info["state"][:3], s0[:3], atol=1e-3)
     np.testing.assert_allclose(info["state"][7:], 0, atol=1e-3)
@@ -56,13 +57,13 @@ def test_hover_holds_the_state():
 def test_free_drift_and_constant_climb_match_closed_form():
     env, _, info = make(damping=0.0, v=(0.5, -0.25, 0))
     s0 = info["state"]
-    _, _, te, _, info = run(env, [QUAD_MASS * 9.81, 0, 0, 0], 1.0)
+    _, _, te, _, info = run(env, [QUADROTOR.hover_thrust, 0, 0, 0], 1.0)
     assert not te
     np.testing.assert_allclose(info["state"][:3], s0[:3] + np.array([0.5, -0.25, 0.0]) * info["sim_time"], atol=2e-3)
     env, _, info = make(damping=0.0, height=0.6)
     s0 = info["state"]
     a = 1.0
-    _, _, te, _, info = run(env, [QUAD_MASS * (9.81 + a), 0, 0, 0], 1.0)
+    _, _, te, _, info = run(env, [QUADROTOR.mass * (QUADROTOR.gravity + a), 0, 0, 0], 1.0)
     t = info["sim_time"]
     assert info["state"][2] == pytest.approx(s0[2] + 0.5 * a * t * t, abs=1e-2)  # semi-implicit Euler: O(dt)
     assert info["state"][9] == pytest.approx(a * t, abs=1e-3)
@@ -159,10 +160,11 @@ def test_numpy_propagator_reproduces_pybullet():
 
     c = p.connect(p.DIRECT)
     try:
-        p.setGravity(0, 0, -9.81, physicsClientId=c)
-        p.setTimeStep(1 / 240, physicsClientId=c)
+        p.setGravity(0, 0, -QUADROTOR.gravity, physicsClientId=c)
+        p.setTimeStep(QUADROTOR.dt, physicsClientId=c)
         b = p.loadURDF(_urdf_path(), [0, 0, 50], flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c)
-        p.changeDynamics(b, -1, linearDamping=0.04, angularDamping=0.04, physicsClientId=c)
+        p.changeDynamics(b, -1, linearDamping=QUADROTOR.linear_damping, angularDamping=QUADROTOR.angular_damping,
+                         physicsClientId=c)
         quad = Quadrotor()
         rng = np.random.default_rng(7)
         n = 24

@@ -69,21 +69,19 @@ no display needed), from behind and above the body.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from rmm_envs.risk.protocol import SceneBase
-from rmm_envs.systems.quadrotor import Quadrotor
+from rmm_envs.systems.quadrotor import QUADROTOR, Quadrotor
 from rmm_envs.worlds.room_collision import RoomCollision
 from rmm_envs.worlds.rooms import Room, build_room, generate_room
 
-__all__ = ["QuadrotorRoomEnv", "QuadrotorScene", "QUAD_MASS"]
+__all__ = ["QuadrotorRoomEnv", "QuadrotorScene"]
 
-QUAD_MASS = 0.5
-G = 9.81
-PHYSICS_DT = 1.0 / 240.0
 RAY_RANGE = 100.0
 _RAY_DIRS = np.array([[1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float)
 
@@ -107,7 +105,7 @@ class QuadrotorScene(SceneBase):
 
     def __init__(self, env: "QuadrotorRoomEnv") -> None:
         self.env = env
-        self.system = Quadrotor(linear_damping=env.damping[0], angular_damping=env.damping[1])
+        self.system = Quadrotor(env.params)
         self.collision = RoomCollision(env.room)
 
     def state_failed(self, states):
@@ -126,8 +124,9 @@ class QuadrotorRoomEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 24}
 
-    def __init__(self, control_dt: float = 1.0 / 24.0, max_episode_time: float = 20.0, linear_damping: float = 0.04,
-                 angular_damping: float = 0.04, render_mode: str | None = None):
+    def __init__(self, control_dt: float = 1.0 / 24.0, max_episode_time: float = 20.0,
+                 linear_damping: float = QUADROTOR.linear_damping, angular_damping: float = QUADROTOR.angular_damping,
+                 render_mode: str | None = None):
         try:
             import pybullet as p
         except ImportError as e:
@@ -135,7 +134,7 @@ class QuadrotorRoomEnv(gym.Env):
                 "QuadrotorRoom-v0 needs PyBullet: pip install 'rmm-envs[quadrotor]' (pybullet==3.2.7)"
             ) from e
 
-        n_sub = control_dt / PHYSICS_DT
+        n_sub = control_dt / QUADROTOR.dt
         if not (control_dt > 0 and abs(n_sub - round(n_sub)) < 1e-9 and round(n_sub) >= 1):
             raise ValueError(f"control_dt must be a positive multiple of 1/240 s, got {control_dt!r}")
         if not (max_episode_time > 0 and math.isfinite(max_episode_time)):
@@ -149,8 +148,9 @@ class QuadrotorRoomEnv(gym.Env):
         self.control_dt = float(control_dt)
         self.max_episode_time = float(max_episode_time)
         self.damping = (float(linear_damping), float(angular_damping))
+        self.params = replace(QUADROTOR, linear_damping=self.damping[0], angular_damping=self.damping[1])
         self.render_mode = render_mode
-        self.action_space = spaces.Box(np.array([0, -2, -2, -1], np.float32), np.array([8, 2, 2, 1], np.float32), dtype=np.float32)
+        self.action_space = spaces.Box(np.array(self.params.control_low, np.float32), np.array(self.params.control_high, np.float32), dtype=np.float32)
         low = np.array([0] * 6 + [-1] * 4 + [-np.inf] * 6, np.float32)
         high = np.array([RAY_RANGE] * 6 + [1] * 4 + [np.inf] * 6, np.float32)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
@@ -164,8 +164,8 @@ class QuadrotorRoomEnv(gym.Env):
     def _build(self, room: Room) -> None:
         p, c = self.p, self.client
         p.resetSimulation(physicsClientId=c)
-        p.setGravity(0, 0, -G, physicsClientId=c)
-        p.setTimeStep(PHYSICS_DT, physicsClientId=c)
+        p.setGravity(0, 0, -self.params.gravity, physicsClientId=c)
+        p.setTimeStep(self.params.dt, physicsClientId=c)
         build_room(c, room)
         self.body = p.loadURDF(_urdf_path(), [0, 0, 1], physicsClientId=c, flags=p.URDF_USE_INERTIA_FROM_FILE)
         p.changeDynamics(self.body, -1, linearDamping=self.damping[0], angularDamping=self.damping[1], physicsClientId=c)
@@ -281,7 +281,7 @@ class QuadrotorRoomEnv(gym.Env):
             p.applyExternalForce(b, -1, force, [0, 0, 0], p.LINK_FRAME, physicsClientId=c)
             p.applyExternalTorque(b, -1, torque, p.LINK_FRAME, physicsClientId=c)
             p.stepSimulation(physicsClientId=c)
-            self._t += PHYSICS_DT
+            self._t += self.params.dt
             if p.getContactPoints(bodyA=b, physicsClientId=c):
                 hit = True
                 break

@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from rmm_envs.systems.quadrotor import quat_to_rot
-from rmm_envs.worlds.rooms import Room, _rot
+from rmm_envs.systems.quadrotor import QUADROTOR
+from rmm_envs.systems.rotations import quat_to_rot
+from rmm_envs.worlds.rooms import Room
 
 __all__ = ["RoomCollision", "body_points"]
 
-RADIUS, HALF = 0.3, 0.05
+RADIUS, HALF = QUADROTOR.collision_radius, QUADROTOR.collision_length / 2
 BOUND = float(np.hypot(RADIUS, HALF))
 
 
@@ -53,7 +54,7 @@ class RoomCollision:
         objs = room.objects
         self.obj_shape = np.array([{"box": 0, "cylinder": 1, "sphere": 2}[o["shape"]] for o in objs], dtype=int)
         self.obj_pos = np.array([o["pos"] for o in objs]).reshape(-1, 3)
-        self.obj_R = np.array([_rot(o["quat"]) for o in objs]).reshape(-1, 3, 3)
+        self.obj_R = quat_to_rot(np.array([o["quat"] for o in objs]).reshape(-1, 4))
         sizes = np.zeros((len(objs), 3))
         radii = np.zeros(len(objs))
         for i, o in enumerate(objs):

@@ -24,21 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
+
 __all__ = ["Room", "build_room", "generate_room"]
-
-
-def _quat_from_rpy(r, p, y):
-    cr, sr, cp, sp, cy, sy = np.cos(r / 2), np.sin(r / 2), np.cos(p / 2), np.sin(p / 2), np.cos(y / 2), np.sin(y / 2)
-    return np.array([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy])
-
-
-def _rot(q):
-    x, y, z, w = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 @dataclass
@@ -145,8 +133,8 @@ def generate_room(rng: np.random.Generator, n_rectangles: int | None = None, x_r
                     size = np.array([rng.uniform(0.1, 1.0), rng.uniform(0.1, 1.0)])
                 else:
                     size = np.array([rng.uniform(0.1, 1.0)])
-                q = _quat_from_rpy(*rng.uniform(-np.pi, np.pi, 3))
-                R = _rot(q)
+                q = quat_from_euler(*rng.uniform(-np.pi, np.pi, 3))
+                R = quat_to_rot(q)
                 if shape == "box":
                     hz = float(np.abs(R[2]) @ size)
                     radius = float(np.linalg.norm(size))
