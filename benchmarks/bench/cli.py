@@ -8,6 +8,8 @@
     rmm-bench report results/                              # rebuild the last run's table from the database
     rmm-bench --agent lrmm --episodes 2048 --retry-errors  # after fixing a guardian: rerun its error episodes
     rmm-bench sweep --agent lrmm,cbf --latency 0,1,5,20,50 # collision rate against decision latency
+    rmm-bench riskmap --seed 3                             # the paper's Fig. 1 (a maze, by inferred risk)
+    rmm-bench quadrisk --seed 1                            # the paper's Fig. 3 (the quadrotor, by inferred risk)
 
 Results go to ``--out`` (default ``results/``): ``results.db`` (SQLite: every episode and run),
 ``table_I.md``/``.csv``/``.tex`` and ``outcomes.png`` (rates and compute time against collisions);
@@ -72,6 +74,10 @@ def main(argv: list[str] | None = None) -> int:
             from benchmarks.bench.report import cmd_report
 
             return cmd_report(_args.parse_report(argv[1:]))
+        if argv and argv[0] in ("riskmap", "quadrisk"):
+            from benchmarks.figures import main as figure
+
+            return figure(argv)
         if argv and argv[0] == "sweep":
             return cmd_sweep(_args.parse_sweep(argv[1:]), argv)
         if argv and argv[0] == "run":
