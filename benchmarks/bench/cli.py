@@ -19,7 +19,7 @@ or adding ``--resume``, finishes an interrupted run without repeating stored epi
 Environments (``--env``): any registered env offering the parallel-autonomy contract (an
 action ``active_ctrl`` choosing between the built-in driver and the guardian's control, a
 ``clock`` argument timing the guardian, and the episode statistics in the last step's info;
-see :mod:`benchmarks.bench.checks`): ``Dubins4DParallel-v0`` (default, non-blocking: the
+described in ``benchmarks.bench.checks``): ``Dubins4DParallel-v0`` (default, non-blocking: the
 guardian's compute time passes in the world) and ``Dubins4DCircles-v0`` (blocking) in this
 package.  Another env is refused with one line naming it and what it lacks.
 
