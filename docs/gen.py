@@ -50,6 +50,7 @@ def _help(parser) -> str:
 
 
 def cli_parsers():
+    from benchmarks import figures
     from benchmarks.bench import cli as bench
     from guardians.lrmm import train
     from rmm_envs import cli as envs_cli
@@ -65,6 +66,8 @@ def cli_parsers():
         ("rmm-bench", bench.build_parser()),
         ("rmm-bench report", bench.build_report_parser()),
         ("rmm-bench sweep", bench.build_sweep_parser()),
+        ("rmm-bench riskmap", figures.riskmap_parser()),
+        ("rmm-bench quadrisk", figures.quadrisk_parser()),
         ("rmm-datagen", datagen.build_parser()),
         ("rmm-train", train.build_parser()),
         ("rmm-envs", envs_cli.build_parser()),

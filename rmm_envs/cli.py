@@ -1,9 +1,14 @@
 """``rmm-envs``: small utilities around the environments.
 
-``rmm-envs demo`` runs a short episode of ``Dubins4DParallel-v0`` with a guardian that never
-takes control (the reckless driver alone) and prints what happened.  ``rmm-envs riskmap``
-draws the paper's Fig. 1: sampled states in a maze coloured by their inferred risk;
-``rmm-envs quadrisk`` the paper's Fig. 3: the quadrotor coloured by its inferred risk.
+``rmm-envs demo`` runs a few episodes of a parallel-autonomy env (default
+``Dubins4DParallel-v0``; 8 episodes from seed 0, enough to see both goals and collisions) with a guardian
+that never takes control, so the reckless driver alone decides, and prints each outcome.
+The "no guardian" action is read off the env's action space: ``active_ctrl`` 0 and every
+control field zero.  An env whose action space has no ``active_ctrl`` is refused by name.
+
+The figure commands that need a learned model moved above the guardians, to ``rmm-bench
+riskmap`` (the paper's Fig. 1) and ``rmm-bench quadrisk`` (Fig. 3): ``rmm-envs riskmap`` and
+``rmm-envs quadrisk`` print that pointer and exit with status 2.
 """
 
 from __future__ import annotations
@@ -14,13 +19,32 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from gymnasium import spaces
 
 import rmm_envs  # noqa: F401  (registers the environments)
 
+MOVED = {"riskmap": "rmm-bench riskmap", "quadrisk": "rmm-bench quadrisk"}
+
+
+def driver_only_action(space: spaces.Space, env_id: str) -> dict:
+    """The action that leaves the step to the built-in driver: ``active_ctrl`` 0, every control zero."""
+    if not isinstance(space, spaces.Dict) or "active_ctrl" not in space.spaces:
+        raise ValueError(f"env {env_id} has no guardian action to leave to its driver: its action space is {space}, "
+                         "not a Dict with 'active_ctrl' (the parallel-autonomy contract)")
+    return {k: 0 if k == "active_ctrl" else np.zeros(s.shape, s.dtype) for k, s in space.spaces.items()}
+
 
 def _demo(args: argparse.Namespace) -> int:
+    if args.episodes < 1:
+        print(f"rmm-envs demo: error: --episodes must be >= 1, got {args.episodes}", file=sys.stderr)
+        return 2
     env = gym.make(args.env)
-    inactive = {"active_ctrl": 0, "turnrate_ctrl": np.zeros(1, np.float32), "accel_ctrl": np.zeros(1, np.float32)}
+    try:
+        inactive = driver_only_action(env.action_space, args.env)
+    except ValueError as e:
+        env.close()
+        print(f"rmm-envs demo: error: {e}", file=sys.stderr)
+        return 2
     outcomes: dict[str, int] = {}
     t0 = time.perf_counter()
     steps = 0
@@ -33,99 +57,12 @@ def _demo(args: argparse.Namespace) -> int:
             done = terminated or truncated
         st = info["episode"]
         outcomes[info["outcome"]] = outcomes.get(info["outcome"], 0) + 1
-        print(
-            f"episode {ep:3d} seed {args.seed + ep:5d}: {info['outcome']:9s} after {st['n_env_steps']:4d} steps, "
-            f"{st['cum_sim_time']:6.1f} s simulated, final speed {st['final_speed']:.2f} m/s"
-        )
+        speed = f", final speed {st['final_speed']:.2f} m/s" if "final_speed" in st else ""
+        print(f"episode {ep:3d} seed {args.seed + ep:5d}: {info['outcome']:9s} after {st['n_env_steps']:4d} steps, "
+              f"{st['cum_sim_time']:6.1f} s simulated{speed}")
     dt = time.perf_counter() - t0
     print(f"\n{args.env}, driver alone, {args.episodes} episodes: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
     print(f"{steps} steps in {dt:.2f} s ({steps / dt:.0f} steps/s)")
-    return 0
-
-
-def _riskmap(args: argparse.Namespace) -> int:
-    """The paper's Fig. 1: sampled states in a maze as arrows coloured by inferred risk."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from rmm_envs.worlds.mazes import render_occupancy
-
-    env = gym.make("Dubins3DMaze-v0", maze_kind=args.kind).unwrapped
-    env.reset(seed=args.seed)
-    rng = np.random.default_rng(args.seed)
-    states = env.sample_states(rng, args.n)
-    obs = env.observe_states(states)
-    if args.labels:
-        from rmm_envs.risk import RiskEstimator
-
-        risk = RiskEstimator(env.risk_system()).estimate(states, rng).risk
-        what = "sampling-tree risk (n=32, m=2, t=2 s)"
-    else:
-        from guardians.lrmm.model import LRMMModel, default_model_path
-
-        model = LRMMModel.load(args.model or default_model_path("Dubins3DMaze-v0"), env_id="Dubins3DMaze-v0")
-        risk = model.predict(obs)
-        what = "inferred risk (LRMM)"
-    maze = env.scene.maze
-    occ = render_occupancy(maze, resolution=maze.thickness / 3)
-    fig, ax = plt.subplots(figsize=(9, 8))
-    ax.imshow(occ, cmap="gray_r", origin="lower", extent=(0, maze.width, 0, maze.height), alpha=0.9)
-    L = 45.0
-    q = ax.quiver(states[:, 0], states[:, 1], L * np.cos(states[:, 2]), L * np.sin(states[:, 2]), risk, cmap="RdYlGn_r",
-                  angles="xy", scale_units="xy", scale=1.0, width=0.0025, clim=(0, 1))
-    fig.colorbar(q, ax=ax, label=what)
-    ax.set_title(f"{len(states)} sampled states in a {args.kind} maze (seed {args.seed}); arrow base = position")
-    ax.set_xlim(0, maze.width)
-    ax.set_ylim(0, maze.height)
-    ax.set_aspect("equal")
-    fig.tight_layout()
-    fig.savefig(args.out, dpi=args.dpi)
-    print(f"wrote {args.out}: mean risk {risk.mean():.3f}, {np.mean(risk > 0.5) * 100:.0f}% of states above 0.5")
-    return 0
-
-
-def _quadrisk(args: argparse.Namespace) -> int:
-    """The paper's Fig. 3: the quadrotor in a room coloured green to red by its inferred risk."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import pybullet as p
-
-    from guardians.lrmm.model import LRMMModel, default_model_path
-
-    env = gym.make("QuadrotorRoom-v0", render_mode="rgb_array").unwrapped
-    env.reset(seed=args.seed, options={"room": {"wall_height": 3.0}})
-    model = LRMMModel.load(args.model or default_model_path("QuadrotorRoom-v0"), env_id="QuadrotorRoom-v0")
-    room = env.room
-    cells = np.argwhere(room.footprint)
-    centre = room.origin + (cells[np.argmin(np.linalg.norm(cells - cells.mean(axis=0), axis=1))] + 0.5) * room.cell
-    edge = room.origin + (cells[np.argmin(cells[:, 0])] + 0.5) * room.cell  # a cell at the footprint's -x edge
-    tilt = p.getQuaternionFromEuler([0.0, -0.5, np.pi])
-    flip = p.getQuaternionFromEuler([np.pi, 0.0, 0.0])
-    cases = [
-        ("level and still, mid-room, 2 m up", [centre[0], centre[1], 2.0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0]),
-        ("tilted, flying at a wall at 3 m/s", [edge[0] + 1.0, edge[1], 1.5, *tilt, -3.0, 0, 0, 0, 0, 0]),
-        ("upside down, falling near the floor", [centre[0], centre[1], 0.6, *flip, 0, 0, -2.0, 1.0, 0, 0]),
-    ]
-    states = np.array([c[1] for c in cases], dtype=float)
-    risk = model.predict(env.observe_states(states))
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
-    for ax, (name, _), st, r in zip(axes, cases, states, risk):
-        env.set_state(st)
-        p.changeVisualShape(env.body, -1, rgbaColor=[float(r), 1.0 - float(r), 0.0, 1.0], physicsClientId=env.client)
-        view = p.computeViewMatrixFromYawPitchRoll(st[:3].tolist(), 3.0, 45.0, -60.0, 0.0, 2, physicsClientId=env.client)
-        proj = p.computeProjectionMatrixFOV(60.0, 4 / 3, 0.05, 100.0, physicsClientId=env.client)
-        _, _, rgba, _, _ = p.getCameraImage(320, 240, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=env.client)
-        ax.imshow(np.asarray(rgba, dtype=np.uint8).reshape(240, 320, 4)[..., :3])
-        ax.set_title(f"{name}\ninferred risk {float(r):.3f}", fontsize=9)
-        ax.axis("off")
-    fig.suptitle(f"QuadrotorRoom-v0 (room seed {args.seed}): the body coloured green to red by inferred risk")
-    fig.tight_layout()
-    fig.savefig(args.out, dpi=args.dpi)
-    print(f"wrote {args.out}: inferred risks {[round(float(r), 3) for r in risk]}")
     return 0
 
 
@@ -137,25 +74,16 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--episodes", type=int, default=8)
     demo.add_argument("--seed", type=int, default=0)
     demo.set_defaults(func=_demo)
-    rm = sub.add_parser("riskmap", help="the paper's Fig. 1: states in a maze coloured by inferred risk, as a PNG")
-    rm.add_argument("--model", default=None, help="LRMM model file (default: the shipped maze model)")
-    rm.add_argument("--kind", default="rectangular", choices=["rectangular", "honeycomb"], help="maze kind (default: %(default)s)")
-    rm.add_argument("--seed", type=int, default=0, help="maze and sampling seed (default: %(default)s)")
-    rm.add_argument("--n", type=int, default=1000, help="number of sampled states (default: %(default)s)")
-    rm.add_argument("--labels", action="store_true", help="colour by the sampling tree's risk instead of the model")
-    rm.add_argument("--out", default="riskmap.png", help="output PNG (default: %(default)s)")
-    rm.add_argument("--dpi", type=int, default=110)
-    rm.set_defaults(func=_riskmap)
-    qr = sub.add_parser("quadrisk", help="the paper's Fig. 3: the quadrotor coloured by inferred risk, as a PNG")
-    qr.add_argument("--model", default=None, help="LRMM model file (default: the shipped quadrotor model)")
-    qr.add_argument("--seed", type=int, default=0, help="room and sampling seed (default: %(default)s)")
-    qr.add_argument("--out", default="quadrisk.png", help="output PNG (default: %(default)s)")
-    qr.add_argument("--dpi", type=int, default=110)
-    qr.set_defaults(func=_quadrisk)
+    for old, new in MOVED.items():  # listed for --help; main() answers them before parsing
+        sub.add_parser(old, help=f"moved: run `{new}` (it loads a guardian's model)")
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in MOVED:
+        print(f"rmm-envs {argv[0]} moved: run `{' '.join([MOVED[argv[0]], *argv[1:]])}`", file=sys.stderr)
+        return 2
     args = build_parser().parse_args(argv)
     return args.func(args)
 

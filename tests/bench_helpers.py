@@ -89,3 +89,20 @@ def dying_shard_job(job):
     if job[2] == 1 and multiprocessing.parent_process() is not None:
         os._exit(3)
     return datagen._shard_task(*job)
+
+
+class Threaded(Guardian):
+    """Acts like ``inactive``; takes ``threads`` like the HJ guardian and reports what it got
+    (0 for None) and ``RMM_HJ_THREADS`` as its process sees it (-1 when unset)."""
+
+    name = "threaded"
+
+    def __init__(self, margin: float = 0.0, threads: int | None = None):
+        super().__init__()
+        self.threads = threads
+
+    def act(self, obs, info):
+        return inactive_action()
+
+    def stats(self):
+        return {"threads": self.threads or 0, "env_threads": int(os.environ.get("RMM_HJ_THREADS", -1))}

@@ -281,12 +281,12 @@ def test_ray_backend_same_results_and_a_lost_task_is_reported(tmp_path):
 # ------------------------------------------------------------------ rmm-bench: how an invocation ends
 @pytest.mark.parametrize("exc, code, status", [(KeyboardInterrupt(), 130, "interrupted"), (ZeroDivisionError("bug"), None, "failed")])
 def test_an_invocation_never_stays_running(tmp_path, monkeypatch, exc, code, status):
-    import benchmarks.bench.cli as cli
+    import benchmarks.bench.run as run
 
     def broken(*a, **k):
         raise exc
 
-    monkeypatch.setattr(cli, "execute", broken)
+    monkeypatch.setattr(run, "execute", broken)
     out = tmp_path / "i"
     argv = ["--agent", "inactive", "--episodes", "1", "--workers", "1", "--out", str(out), *FAST]
     if code is None:

@@ -177,12 +177,3 @@ def test_shipped_maze_model():
     open_obs = env.observe_states(np.array([[500.0, 200.0, 0.0]]))
     wall_obs = env.observe_states(np.array([[500.0, 280.0, np.pi / 2]]))
     assert m.predict(wall_obs[0]) > 0.8 > 0.2 > m.predict(open_obs[0])
-
-
-def test_riskmap_command(tmp_path):
-    from rmm_envs.cli import main
-
-    out = tmp_path / "map.png"
-    assert main(["riskmap", "--n", "60", "--out", str(out), "--dpi", "40"]) == 0
-    assert out.stat().st_size > 1000
-    assert main(["riskmap", "--n", "20", "--labels", "--kind", "honeycomb", "--out", str(out), "--dpi", "40"]) == 0

@@ -271,11 +271,3 @@ def test_shipped_quadrotor_model():
     wild = np.array([xy[0], xy[1], 0.5, 1, 0, 0, 0, 0, 0, -3.0, 5.0, 0, 0])
     r_calm, r_wild = m.predict(env.observe_states(np.stack([calm, wild])))
     assert r_wild > r_calm
-
-
-def test_quadrisk_command(tmp_path):
-    from rmm_envs.cli import main
-
-    out = tmp_path / "q.png"
-    assert main(["quadrisk", "--out", str(out), "--dpi", "40"]) == 0
-    assert out.stat().st_size > 1000

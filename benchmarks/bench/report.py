@@ -1,4 +1,10 @@
-"""Tables (Markdown, CSV, LaTeX) and figures (PNG) from the results store."""
+"""``rmm-bench report`` and the tables of every run: Table I (Markdown, CSV, LaTeX) and figures (PNG).
+
+Tables are built from the stored rows alone: a name read from the database (a guardian
+``module:Class``, an env id) is never imported.  For runs stored before the guardian's
+observation type and the env's obstacle count were recorded, only built-in guardian names and
+this package's env ids are looked up.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +13,10 @@ import io
 import math
 from pathlib import Path
 
-__all__ = ["PAPER_TABLE_I", "format_tables", "plot_latency", "plot_outcomes"]
+from benchmarks.bench.metrics import aggregate
+from benchmarks.bench.store import RETRIED_ERRORS, ResultsStore
+
+__all__ = ["PAPER_TABLE_I", "cmd_report", "format_tables", "plot_latency", "plot_outcomes", "table_rows", "write_report"]
 
 # The paper's Table I (2048 episodes per agent; its HJ row used single-obstacle envs)
 PAPER_TABLE_I = {
@@ -107,3 +116,112 @@ def plot_latency(series: dict[str, list[tuple[float, float, float]]], path: Path
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+# ------------------------------------------------------------------ the report command
+def _legacy_meta(agent: str, config: dict) -> dict:
+    """Observation type and obstacle count for runs stored before they were recorded: only
+    built-in guardian names and this package's envs are looked up (our own modules); a name
+    from the database is never imported."""
+    from guardians.registry import BUILTIN, load_guardian_class
+    from rmm_envs import ENV_IDS
+
+    meta = {"observation": "?", "n_obstacles": "?"}
+    if agent in BUILTIN:
+        try:
+            meta["observation"] = getattr(load_guardian_class(agent), "observation_type", "?")
+        except Exception:
+            pass
+    if config.get("env_id") in ENV_IDS:
+        import gymnasium as gym
+
+        env = gym.make(config["env_id"])
+        meta["n_obstacles"] = getattr(env.unwrapped, "n_obstacles", "?")
+        env.close()
+    return meta
+
+
+def table_rows(store: ResultsStore, run_keys: dict[str, str], episodes, batch_size: int = 64) -> list[dict]:
+    """Aggregate rows from the stored rows alone; ``episodes`` is one count for every agent or a
+    dict per agent.  Each row also says how many episodes have a result (``with_result``: all
+    stored but those over the time limit or lost with their worker)."""
+    rows = []
+    for agent, key in run_keys.items():
+        n = episodes[agent] if isinstance(episodes, dict) else episodes
+        eps = store.episodes(key, n)
+        run = store.run_config(key)
+        meta = run["provenance"].get("guardian") or _legacy_meta(agent, run["config"])
+        agg = aggregate(eps, batch_size)
+        with_result = sum(1 for e in eps if not (e["outcome"] == "error" and e.get("error_kind") in RETRIED_ERRORS))
+        rows.append({"agent": agent, "obs": meta.get("observation", "?"), "n_obst": meta.get("n_obstacles", "?"),
+                     "requested": n, "with_result": with_result, **agg})
+    return rows
+
+
+def _completeness(rows: list[dict], invs: list[dict]) -> str:
+    """'' when every agent has a result for every requested episode, else what is missing and why."""
+    short = [r for r in rows if r["with_result"] < r["requested"]]
+    if not short:
+        return ""
+    have = ", ".join(f"{r['agent']} {r['with_result']} of {r['requested']}" for r in short)
+    why = []
+    lost = sum(r["episodes"] - r["with_result"] for r in short)
+    if lost:
+        why.append(f"{lost} stored over the time limit or lost with their worker")
+    for inv in invs:
+        state = inv.get("state", inv["status"])
+        if state == "stale":
+            why.append(f"invocation {inv['id']} was killed: it is marked running but its process {inv['pid']} is gone")
+        elif state == "running":
+            why.append(f"invocation {inv['id']} is still running (process {inv['pid']} on {inv['host']})")
+        elif state in ("interrupted", "failed"):
+            msg = inv.get("message") or ""
+            detail = f": {msg}" if msg and "ended without a result" not in msg else ""
+            why.append(f"invocation {inv['id']} {state}{detail}")
+    return (f"INCOMPLETE: episodes with a result: {have}" + (f" ({'; '.join(why)})" if why else "")
+            + ". Rerun the same command to finish; the table covers the stored episodes only.\n")
+
+
+def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_size: int = 64, quiet: bool = False) -> str:
+    """Tables and figures for one recorded command, or several merged (later ones win per agent)."""
+    invs = [invs] if isinstance(invs, dict) else list(invs)
+    run_keys, episodes = {}, {}
+    for inv in invs:
+        for agent, key in inv["run_keys"].items():
+            run_keys[agent], episodes[agent] = key, inv["episodes"]
+    rows = table_rows(store, run_keys, episodes, batch_size)
+    tables = format_tables(rows)
+    (out / "table_I.md").write_text(tables["md"])
+    (out / "table_I.csv").write_text(tables["csv"])
+    (out / "table_I.tex").write_text(tables["tex"])
+    plot_outcomes(rows, out / "outcomes.png")
+    paper = format_tables([{"agent": a, "episodes": 2048, "errors": 0, "qp_fallbacks": 0, "precompute_s": (0, 0),
+                            "obs": p["obs"], "n_obst": p["n_obst"], **{k: p[k] for k in ("compute_ms", "goal", "collision", "timeout", "intervention")}}
+                           for a, p in PAPER_TABLE_I.items() if a in run_keys or f"{a}-paper" in run_keys])["md"]
+    args = invs[-1]["args"]
+    counts = sorted(set(episodes.values()))
+    text = (f"Table I: {args.get('env')}, clock {args.get('clock')}, time accel {args.get('time_accel')}, seed {args.get('seed')}, "
+            f"{'/'.join(map(str, counts))} episodes requested per agent (results in {out})\n{_completeness(rows, invs)}\n"
+            f"{tables['md']}\nThe paper's Table I for the same agents:\n\n{paper}")
+    if not quiet:
+        print(text)
+    return text
+
+
+def cmd_report(request) -> int:
+    """``rmm-bench report``; ``request`` is an :class:`benchmarks.bench.args.ReportRequest`."""
+    import sys
+
+    if not (request.dir / "results.db").is_file():
+        print(f"rmm-bench report: error: no results.db in {request.dir}", file=sys.stderr)
+        return 2
+    store = ResultsStore(request.dir / "results.db")
+    try:
+        if request.invocations:
+            invs = [store.invocation(i) for i in request.invocations]
+        else:
+            invs = [store.invocation(None, kind="run")]
+        write_report(store, request.dir, invs, request.batch_size)
+    finally:
+        store.close()
+    return 0

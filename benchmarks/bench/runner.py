@@ -11,14 +11,17 @@ episode exceeding ``episode_timeout`` seconds of wall time, ends that episode wi
 on.  The time limit is a ``SIGALRM`` timer in the worker, so it interrupts Python code; a
 call stuck in compiled code is ended by the parent, which kills the worker after
 :func:`hard_timeout` seconds and records the episode as ``lost_worker``.
+
+The env is driven only through the parallel-autonomy contract (:mod:`benchmarks.bench.checks`):
+the result's columns come from the last step's ``info["outcome"]`` and ``info["episode"]``
+(:data:`EPISODE_STATISTICS`; ``final_speed`` is optional).  The guardian is built with the
+run's options, plus ``threads`` when the task carries it (see :func:`benchmarks.bench.run.plan_tasks`).
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
-import os
 import signal
 import statistics
 import time
@@ -26,21 +29,33 @@ import traceback
 
 import numpy as np
 
-__all__ = ["EpisodeTimeout", "episode_seed", "hard_timeout", "lost_episode", "run_episode", "run_key"]
+from benchmarks.bench.config import EpisodeResult, EpisodeTask, run_key
+
+__all__ = ["EPISODE_STATISTICS", "EpisodeTimeout", "episode_seed", "hard_timeout", "lost_episode", "run_episode", "run_key"]
 
 _SEED_DOMAIN = 0xBE7C  # keeps episode seeds apart from rmm-datagen's configuration seeds
+
+#: The store's columns read from ``info["episode"]`` on the step that ends an episode (the
+#: parallel-autonomy contract), column -> statistic.  Every env offering the contract reports these.
+EPISODE_STATISTICS = {
+    "steps": "n_env_steps", "active_steps": "n_active_ctrl_env_steps", "sim_time": "cum_sim_time",
+    "active_sim_time": "active_ctrl_sim_time", "compute_time": "cum_compute_time", "avg_compute_time": "avg_compute_time",
+    "cum_reward": "cum_reward",
+}
+#: Statistics an env may report (NULL in the store when it does not): ``final_speed`` (a vehicle's speed).
+OPTIONAL_STATISTICS = {"final_speed": "final_speed"}
 
 
 def episode_seed(seed: int, episode: int) -> int:
     return int(np.random.SeedSequence([int(seed), _SEED_DOMAIN], spawn_key=(int(episode),)).generate_state(1)[0])
 
 
-def run_key(config: dict) -> str:
-    return hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()[:16]
-
-
 class EpisodeTimeout(Exception):
     pass
+
+
+class EnvContractError(RuntimeError):
+    """The env ended an episode without the statistics of the parallel-autonomy contract."""
 
 
 def hard_timeout(episode_timeout: float) -> float:
@@ -50,10 +65,10 @@ def hard_timeout(episode_timeout: float) -> float:
     return 1.25 * float(episode_timeout) + 30.0
 
 
-def lost_episode(task: dict, cause: str) -> dict:
+def lost_episode(task: EpisodeTask, cause: str) -> EpisodeResult:
     """The store's row for an episode whose worker died: an ``error`` of kind ``lost_worker``."""
-    return {"run_key": task["run_key"], "episode": task["episode"], "agent": task["agent"], "seed": task["seed"],
-            "outcome": "error", "error_kind": "lost_worker", "error": f"lost: {cause}"[:2000], "finished": time.time()}
+    return EpisodeResult(run_key=task.run_key, episode=task.episode, agent=task.agent, seed=task.seed, outcome="error",
+                         error_kind="lost_worker", error=f"lost: {cause}"[:2000], finished=time.time())
 
 
 def _alarm(signum, frame):
@@ -74,29 +89,46 @@ def _env(env_id: str, env_kwargs: dict):
     return _CACHE[key]
 
 
-def _guardian(agent: str, agent_kwargs: dict):
-    key = ("guardian", agent, json.dumps(agent_kwargs, sort_keys=True))
+def _guardian_key(task: EpisodeTask) -> tuple:
+    return ("guardian", task.agent, json.dumps(task.guardian_kwargs(), sort_keys=True))
+
+
+def _guardian(task: EpisodeTask):
+    key = _guardian_key(task)
     if key not in _CACHE:
         from guardians import make_guardian
 
-        _CACHE[key] = make_guardian(agent, **agent_kwargs)
+        _CACHE[key] = make_guardian(task.agent, **task.guardian_kwargs())
     return _CACHE[key]
 
 
-def run_episode(task: dict) -> dict:
-    """Run one episode; ``task`` holds run_key, agent, agent_kwargs, env_id, env_kwargs,
-    episode, seed, episode_timeout, charge_precompute and optionally kernel_threads (threads
-    for the compiled HJ kernel; 1 when several workers already share the cores).  Returns the
-    store's episode row."""
-    if task.get("kernel_threads"):
-        os.environ["RMM_HJ_THREADS"] = str(int(task["kernel_threads"]))
-    row = {"run_key": task["run_key"], "episode": task["episode"], "agent": task["agent"], "seed": task["seed"]}
+def _statistics(env_id: str, info: dict) -> dict:
+    """The store's columns from the last step's ``info`` (the contract's ``outcome`` and ``episode``)."""
+    ep = info.get("episode")
+    missing = [k for k in ("outcome", "episode") if k not in info] or [k for k in EPISODE_STATISTICS.values() if k not in ep]
+    if missing:
+        where = "info" if "episode" not in info or "outcome" not in info else 'info["episode"]'
+        raise EnvContractError(f"env {env_id} ended an episode without {where} keys {missing} (the parallel-autonomy "
+                               f"contract: info['outcome'] and info['episode'] with {sorted(EPISODE_STATISTICS.values())})")
+    out = {col: ep[k] for col, k in EPISODE_STATISTICS.items()}
+    out.update({col: ep.get(k) for col, k in OPTIONAL_STATISTICS.items()})
+    return {"outcome": info["outcome"], **out}
+
+
+def _error_text(e: BaseException) -> str:
+    return f"{type(e).__name__}: {e}"[:500] + ("" if isinstance(e, EpisodeTimeout) else "\n" + traceback.format_exc(limit=3)[-1500:])
+
+
+def run_episode(task: EpisodeTask) -> EpisodeResult:
+    """Run one episode of ``task`` in this process; returns the store's episode row."""
     t_start = time.perf_counter()
-    timeout = task.get("episode_timeout")
+    run = task.run
+    timeout = run.episode_timeout
     use_alarm = bool(timeout) and hasattr(signal, "setitimer")
     old = None
     decisions: list[float] = []
     guardian = None
+    fields: dict = {}
     try:
         if use_alarm:
             try:
@@ -104,18 +136,15 @@ def run_episode(task: dict) -> dict:
                 signal.setitimer(signal.ITIMER_REAL, float(timeout))
             except ValueError:  # not the main thread (e.g. some Ray setups): check in the loop only
                 use_alarm = False
-        env = _env(task["env_id"], task["env_kwargs"])
-        guardian = _guardian(task["agent"], task["agent_kwargs"])
-        obs, info = env.reset(seed=task["seed"])
+        env = _env(run.env_id, run.env_kwargs)
+        guardian = _guardian(task)
+        obs, info = env.reset(seed=task.seed)
         t0 = time.perf_counter()
-        guardian.reset(seed=task["seed"], observation_space=env.observation_space, action_space=env.action_space,
+        guardian.reset(seed=task.seed, observation_space=env.observation_space, action_space=env.action_space,
                        privileged=env.unwrapped.privileged if getattr(guardian, "privileged", False) else None)
-        row["precompute_time"] = time.perf_counter() - t0
-        clock = env.get_wrapper_attr("clock")
-        if task.get("charge_precompute"):
-            pass  # the clock keeps running: the solve counts as thinking time on the first step
-        else:
-            clock.start()
+        fields["precompute_time"] = time.perf_counter() - t0
+        if not run.charge_precompute:  # else the clock keeps running: the solve counts as thinking time on the first step
+            env.get_wrapper_attr("clock").start()
         while True:
             t0 = time.perf_counter()
             action = guardian.act(obs, info)
@@ -125,38 +154,27 @@ def run_episode(task: dict) -> dict:
                 break
             if timeout and time.perf_counter() - t_start > timeout:
                 raise EpisodeTimeout("episode time limit exceeded")
-        ep = info["episode"]
-        row.update(
-            outcome=info["outcome"], steps=ep["n_env_steps"], active_steps=ep["n_active_ctrl_env_steps"],
-            sim_time=ep["cum_sim_time"], active_sim_time=ep["active_ctrl_sim_time"],
-            compute_time=ep["cum_compute_time"], avg_compute_time=ep["avg_compute_time"],
-            final_speed=ep["final_speed"], cum_reward=ep["cum_reward"],
-        )
+        fields.update(_statistics(run.env_id, info))
     except (Exception, SystemExit) as e:  # recorded, the run goes on
-        row["outcome"] = "error"
-        row["error_kind"] = "timeout" if isinstance(e, EpisodeTimeout) else "guardian"
-        row["error"] = f"{type(e).__name__}: {e}"[:500] + ("" if isinstance(e, EpisodeTimeout) else "\n" + traceback.format_exc(limit=3)[-1500:])
-        _CACHE.pop(("guardian", task["agent"], json.dumps(task["agent_kwargs"], sort_keys=True)), None)
+        fields.update(outcome="error", error_kind="timeout" if isinstance(e, EpisodeTimeout) else "guardian", error=_error_text(e))
+        _CACHE.pop(_guardian_key(task), None)
     finally:
         if use_alarm:
             signal.setitimer(signal.ITIMER_REAL, 0)
             if old is not None:
                 signal.signal(signal.SIGALRM, old)
     if decisions:
-        row["decision_mean"] = statistics.fmean(decisions)
-        row["decision_std"] = statistics.pstdev(decisions) if len(decisions) > 1 else 0.0
-        row["decision_max"] = max(decisions)
+        fields.update(decision_mean=statistics.fmean(decisions), decision_std=statistics.pstdev(decisions) if len(decisions) > 1 else 0.0,
+                      decision_max=max(decisions))
     try:  # a guardian's stats() failing is its error, like act() failing
         stats = guardian.stats() if guardian is not None and hasattr(guardian, "stats") else {}
-        row["qp_fallbacks"] = int(stats.get("qp_fallbacks", 0))
-        row["nan_states"] = int(stats.get("nan_states", 0))
-        row["guardian_stats"] = json.dumps({k: v for k, v in stats.items() if isinstance(v, (int, float)) and math.isfinite(v)})
+        fields.update(qp_fallbacks=int(stats.get("qp_fallbacks", 0)), nan_states=int(stats.get("nan_states", 0)),
+                      guardian_stats=json.dumps({k: v for k, v in stats.items() if isinstance(v, (int, float)) and math.isfinite(v)}))
     except (Exception, SystemExit) as e:
-        if row["outcome"] != "error":
-            row["outcome"], row["error_kind"], row["error"] = "error", "guardian", ""
-        row["error"] = (f"{task['agent']}.stats() raised {type(e).__name__}: {e}"[:500] + "\n" + traceback.format_exc(limit=3)[-1500:]
-                        + ("\n" + row["error"] if row["error"] else ""))
-        _CACHE.pop(("guardian", task["agent"], json.dumps(task["agent_kwargs"], sort_keys=True)), None)
-    row["wall_time"] = time.perf_counter() - t_start
-    row["finished"] = time.time()
-    return row
+        earlier = fields.get("error") if fields.get("outcome") == "error" else None
+        fields.update(outcome="error", error_kind=fields.get("error_kind") or "guardian",
+                      error=(f"{task.agent}.stats() raised {type(e).__name__}: {e}"[:500] + "\n" + traceback.format_exc(limit=3)[-1500:]
+                             + ("\n" + earlier if earlier else "")))
+        _CACHE.pop(_guardian_key(task), None)
+    return EpisodeResult(run_key=task.run_key, episode=task.episode, agent=task.agent, seed=task.seed,
+                         wall_time=time.perf_counter() - t_start, finished=time.time(), **fields)

@@ -40,6 +40,8 @@ import sqlite3
 import time
 from pathlib import Path
 
+from benchmarks.bench.config import EpisodeResult
+
 __all__ = ["EPISODE_FIELDS", "RETRIED_ERRORS", "ResultsDatabaseError", "ResultsStore"]
 
 EPISODE_FIELDS = {
@@ -180,10 +182,11 @@ class ResultsStore:
         return {r[0] for r in self.db.execute(q, (run_key,) + (() if retry_errors else RETRIED_ERRORS))}
 
     @_guarded
-    def add_episode(self, row: dict, invocation: int | None = None) -> None:
+    def add_episode(self, result: EpisodeResult, invocation: int | None = None) -> None:
         """Store an episode; it replaces a stored row only if that row is an error (a retry)."""
+        row = result.as_row()
         keys = list(EPISODE_FIELDS)
-        vals = [row.get(k) for k in keys]
+        vals = [row[k] for k in keys]
         update = ", ".join(f"{k} = excluded.{k}" for k in keys if k not in ("run_key", "episode"))
         self.db.execute(f"INSERT INTO episodes ({', '.join(keys)}) VALUES ({', '.join('?' * len(keys))}) "
                         f"ON CONFLICT (run_key, episode) DO UPDATE SET {update} WHERE episodes.outcome = 'error'", vals)

@@ -1,0 +1,145 @@
+"""``rmm-bench`` command lines: the parsers, and their validation into a :class:`BenchConfig`.
+
+Every option that needs no env or guardian built is checked here, once, and the result is a
+frozen :class:`~benchmarks.bench.config.BenchConfig`; :func:`benchmarks.bench.checks.check_runs`
+then builds the env and each guardian before any episode runs.  A bad value raises
+ValueError naming the flag and the value (``main`` turns it into one line and exit status 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from benchmarks.bench.config import BenchConfig
+
+__all__ = ["DEFAULT_ENV", "ReportRequest", "parse_report", "parse_run", "parse_sweep", "report_parser", "run_parser",
+           "sweep_parser"]
+
+DEFAULT_ENV = "Dubins4DParallel-v0"
+
+
+def _common(p: argparse.ArgumentParser, default_agent: str) -> None:
+    p.add_argument("--agent", default=default_agent, help="guardian name, comma list, 'all' (defaults), 'paper' (the paper's rules), or module:Class (default: %(default)s)")
+    p.add_argument("--episodes", type=int, default=2048, help="episodes per agent (default: %(default)s)")
+    p.add_argument("--env", default=DEFAULT_ENV,
+                   help="a registered env id offering the parallel-autonomy contract: Dubins4DParallel-v0 (non-blocking) or "
+                        "Dubins4DCircles-v0 (blocking) in this package (default: %(default)s)")
+    p.add_argument("--time-accel", type=float, default=10.0, help="sim seconds per clock second, for a non-blocking env (default: %(default)s)")
+    p.add_argument("--base-step", type=float, default=0.1, help="sim seconds added every step, for a non-blocking env (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="master seed; episode i's seed derives from it (default: %(default)s)")
+    p.add_argument("--out", default="results", help="output directory (default: %(default)s)")
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (default: the core count)")
+    p.add_argument("--backend", default="local", choices=["local", "ray"], help="local processes or Ray tasks (default: %(default)s)")
+    p.add_argument("--ray-address", default=None, help="Ray cluster address (default: start a local Ray)")
+    p.add_argument("--agent-opt", action="append", metavar="AGENT.KEY=VALUE",
+                   help="a guardian constructor argument (VALUE as JSON), e.g. hj.margin=0.3 or lrmm.threshold=0.9; repeatable")
+    p.add_argument("--episode-timeout", type=float, default=600.0,
+                   help="wall seconds before an episode is stopped; it is stored as a failure that a rerun retries (default: %(default)s)")
+    p.add_argument("--charge-precompute", action="store_true", help="charge a guardian's reset (e.g. an HJ solve) to the first step's clock")
+    p.add_argument("--batch-size", type=int, default=64, help="episodes per batch for the rate statistics (default: %(default)s)")
+    p.add_argument("--resume", action="store_true",
+                   help="finish an interrupted run: runs missing episodes and retries those over the time limit or lost with their worker "
+                        "(rerunning the same command does the same)")
+    p.add_argument("--retry-errors", action="store_true",
+                   help="also run again the episodes stored as guardian errors (after fixing the guardian or its options)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run_parser(description: str) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="rmm-bench", description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
+    _common(p, "lrmm")
+    p.add_argument("--clock", default="wall", help="wall (default), cpu, or fixed:MS")
+    return p
+
+
+def report_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="rmm-bench report", description="Rebuild Table I and the figures from a results database.")
+    p.add_argument("dir", help="results directory holding results.db")
+    p.add_argument("--invocation", type=int, action="append", default=None,
+                   help="which recorded run (default: the last); repeat to merge several into one table")
+    p.add_argument("--batch-size", type=int, default=64)
+    return p
+
+
+def sweep_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="rmm-bench sweep", description="Collision rate against added decision latency (fixed-latency clock).")
+    _common(p, "lrmm,cbf")
+    p.add_argument("--latency", default="0,1,5,20,50", help="comma list of decision latencies in ms (default: %(default)s)")
+    p.set_defaults(episodes=256)
+    return p
+
+
+def _check_counts(args) -> None:
+    """Options that need nothing imported."""
+    if args.episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    if args.batch_size < 1:
+        raise ValueError(f"--batch-size must be >= 1, got {args.batch_size}")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be a non-negative integer, got {args.seed}")
+    if not (math.isfinite(args.episode_timeout) and args.episode_timeout > 0):
+        raise ValueError(f"--episode-timeout must be a positive, finite number of seconds, got {args.episode_timeout:g}")
+
+
+def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
+    from benchmarks.bench.checks import env_arguments, parse_agent_opts, resolve_agents
+
+    agents = resolve_agents(args.agent)
+    agent_kwargs = parse_agent_opts(args.agent_opt or [], agents)
+    options = {"time_accel": args.time_accel, "base_step": args.base_step, "clock": clock}
+    takes = env_arguments(args.env)  # ValueError if not registered; the contract is checked when the env is built
+    return BenchConfig(
+        agents=tuple(agents), agent_kwargs=agent_kwargs, env_id=args.env,
+        env_kwargs={k: v for k, v in options.items() if k in takes}, clock=clock, seed=args.seed, episodes=args.episodes,
+        out=args.out, workers=args.workers, backend=args.backend, ray_address=args.ray_address,
+        episode_timeout=args.episode_timeout, charge_precompute=args.charge_precompute, batch_size=args.batch_size,
+        retry_errors=args.retry_errors, progress=not args.no_progress, parsed=vars(args), latencies=latencies)
+
+
+def parse_run(argv: list[str], description: str) -> BenchConfig:
+    args = run_parser(description).parse_args(argv)
+    _check_counts(args)
+    from rmm_envs.clocks import make_clock
+
+    try:
+        make_clock(args.clock)
+    except ValueError as e:
+        raise ValueError(f"--clock {args.clock}: {e}") from None
+    return _config(args, args.clock)
+
+
+def parse_sweep(argv: list[str]) -> BenchConfig:
+    """A sweep's config carries its latencies and the first one's clock; the command derives
+    one config per latency with :meth:`BenchConfig.with_clock`."""
+    args = sweep_parser().parse_args(argv)
+    _check_counts(args)
+    try:
+        latencies = tuple(float(x) for x in args.latency.split(",") if x.strip())
+    except ValueError:
+        latencies = ()
+    if not latencies or any(not 0 <= x < float("inf") for x in latencies):
+        raise ValueError(f"--latency must be a comma list of non-negative milliseconds, got {args.latency!r}")
+    return _config(args, f"fixed:{latencies[0]:g}", latencies)
+
+
+@dataclass(frozen=True)
+class ReportRequest:
+    """``rmm-bench report``: which directory, which recorded invocations (None: the last run)."""
+
+    dir: Path
+    invocations: tuple[int, ...] | None
+    batch_size: int
+
+
+def parse_report(argv: list[str]) -> ReportRequest:
+    args = report_parser().parse_args(argv)
+    if args.batch_size < 1:
+        raise ValueError(f"--batch-size must be >= 1, got {args.batch_size}")
+    return ReportRequest(dir=Path(args.dir), invocations=tuple(args.invocation) if args.invocation else None,
+                         batch_size=args.batch_size)

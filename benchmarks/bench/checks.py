@@ -1,0 +1,172 @@
+"""What ``rmm-bench`` checks before any episode runs: agent names and options, the env, each guardian.
+
+The env must offer the **parallel-autonomy contract** that the runner drives guardians
+through (the Dubins4D envs' module docstring describes it in full):
+
+* a constructor argument ``clock`` (a stopwatch measuring the guardian's compute time per
+  step, read back as the env's ``clock`` attribute);
+* an action space that is a ``Dict`` holding ``active_ctrl`` (``Discrete(2)``: 0 lets the
+  built-in driver control the step, 1 applies the guardian's control) and the control fields;
+* on the step that ends an episode, ``info["outcome"]`` (``goal``, ``collision``,
+  ``timeout``) and ``info["episode"]``, the statistics the store keeps (see
+  :data:`benchmarks.bench.runner.EPISODE_STATISTICS`).
+
+Of this command's env options, the env is given those its constructor takes: ``clock``
+always, ``time_accel`` and ``base_step`` only if it takes them (a non-blocking env such as
+``Dubins4DParallel-v0``).  The last part of the contract can only be seen when an episode
+ends: an env that breaks it gets an error naming the missing key in every episode.
+"""
+
+from __future__ import annotations
+
+import json
+
+from benchmarks.bench.config import AgentRun, accepts_argument
+
+__all__ = ["CONTRACT_ACTION_KEY", "check_env_contract", "check_runs", "env_arguments", "parse_agent_opts", "resolve_agents"]
+
+#: The action key that marks a parallel-autonomy env: whether the guardian takes control.
+CONTRACT_ACTION_KEY = "active_ctrl"
+#: Options of this command that an env may take, in the order the run's env_kwargs list them.
+ENV_OPTIONS = ("time_accel", "base_step", "clock")
+
+
+def resolve_agents(spec: str) -> list[str]:
+    """``--agent``: a name, a comma list, ``all``, ``paper`` or ``module:Class``; each one loadable."""
+    from guardians import available_guardians
+    from guardians.registry import guardian_set, load_guardian_class
+
+    available = available_guardians()
+    names = guardian_set(spec)
+    if names is None:
+        names = [s.strip() for s in spec.split(",") if s.strip()]
+    if not names:
+        raise ValueError(f"--agent is empty; choose from {available}, 'all', 'paper' or 'module:Class'")
+    for n in names:
+        load_guardian_class(n)  # raises ValueError listing the valid names
+    return names
+
+
+def parse_agent_opts(items: list[str], agents: list[str]) -> dict[str, dict]:
+    """Parse ``AGENT.KEY=VALUE`` options (VALUE as JSON, else a string)."""
+    out: dict[str, dict] = {}
+    for item in items:
+        head, eq, value = item.partition("=")
+        agent, dot, key = head.rpartition(".")
+        if not eq or not dot or not agent or not key:
+            raise ValueError(f"--agent-opt {item!r}: expected AGENT.KEY=VALUE, e.g. hj.margin=0.3")
+        if agent not in agents:
+            raise ValueError(f"--agent-opt {item!r}: agent {agent!r} is not in this run ({agents})")
+        try:
+            parsed = json.loads(value)
+        except json.JSONDecodeError:
+            parsed = value
+        out.setdefault(agent, {})[key] = parsed
+    return out
+
+
+def _env_creator(env_id: str):
+    import gymnasium as gym
+    from gymnasium.envs.registration import load_env_creator
+
+    import rmm_envs
+
+    if env_id not in gym.registry:
+        raise ValueError(f"--env {env_id!r} is not a registered Gymnasium env (this package registers {', '.join(rmm_envs.ENV_IDS)}; "
+                         "another package's env is registered by importing it, e.g. from a guardian module)")
+    entry = gym.spec(env_id).entry_point
+    try:
+        return load_env_creator(entry) if isinstance(entry, str) else entry
+    except Exception as e:
+        raise ValueError(f"--env {env_id}: its entry point {entry!r} cannot be loaded: {type(e).__name__}: {e}") from None
+
+
+def env_arguments(env_id: str) -> set[str]:
+    """Which of :data:`ENV_OPTIONS` the registered env ``env_id`` takes (ValueError if it is not registered)."""
+    creator = _env_creator(env_id)
+    return {name for name in ENV_OPTIONS if accepts_argument(creator, name)}
+
+
+def _action_space_lacks(space) -> str | None:
+    from gymnasium import spaces
+
+    if not isinstance(space, spaces.Dict) or CONTRACT_ACTION_KEY not in space.spaces:
+        return f"its action space is {space}, not a Dict holding {CONTRACT_ACTION_KEY!r} (take control or not) and the control"
+    flag = space.spaces[CONTRACT_ACTION_KEY]
+    if not (isinstance(flag, spaces.Discrete) and flag.n == 2 and flag.start == 0):
+        return f"its action {CONTRACT_ACTION_KEY!r} is {flag}, not Discrete(2)"
+    if len(space.spaces) < 2:
+        return f"its action space {space} holds no control besides {CONTRACT_ACTION_KEY!r}"
+    return None
+
+
+def check_env_contract(env_id: str, env=None) -> None:
+    """Raise ValueError naming ``env_id`` and what it lacks of the parallel-autonomy contract.
+
+    ``env``: the env already built with this run's options (its action space is checked);
+    without it, one is built with its defaults, and only if it takes no ``clock``."""
+    lacks = []
+    if "clock" not in env_arguments(env_id):
+        lacks.append("its constructor takes no `clock` (the stopwatch of the guardian's compute time)")
+    if env is None and lacks:
+        import gymnasium as gym
+
+        try:
+            probe = gym.make(env_id)
+        except Exception:  # noqa: BLE001 - what it lacks is said already
+            probe = None
+        if probe is not None:
+            problem = _action_space_lacks(probe.action_space)
+            probe.close()
+            if problem:
+                lacks.append(problem)
+    elif env is not None:
+        problem = _action_space_lacks(env.action_space)
+        if problem:
+            lacks.append(problem)
+    if lacks:
+        raise ValueError(f"--env {env_id}: rmm-bench runs guardians only on envs offering the parallel-autonomy contract, "
+                         f"and {env_id} does not: {'; '.join(lacks)}")
+
+
+def _flag_for(message: str, env_kwargs: dict) -> str:
+    for k in env_kwargs:
+        if k in message:
+            return f"--{k.replace('_', '-')} {env_kwargs[k]}"
+    return f"--env {env_kwargs}"
+
+
+def check_runs(runs: dict[str, AgentRun]) -> dict[str, dict]:
+    """Build the env and every guardian as the workers will, before any episode runs.
+
+    Raises ValueError naming the flag and value at fault; returns, per agent, what ``report``
+    prints later without importing anything (observation type, obstacle count)."""
+    import gymnasium as gym
+
+    import rmm_envs  # noqa: F401
+    from guardians import make_guardian
+
+    meta: dict[str, dict] = {}
+    envs: dict[str, int] = {}
+    for agent, run in runs.items():
+        ekey = json.dumps([run.env_id, run.env_kwargs], sort_keys=True)
+        if ekey not in envs:
+            if "clock" not in env_arguments(run.env_id):
+                check_env_contract(run.env_id)
+            try:
+                env = gym.make(run.env_id, **run.env_kwargs)
+            except Exception as e:
+                raise ValueError(f"{_flag_for(str(e), run.env_kwargs)}: {e}") from None
+            try:
+                check_env_contract(run.env_id, env)
+                envs[ekey] = int(getattr(env.unwrapped, "n_obstacles", -1))  # optional: the table's Obstacles column
+            finally:
+                env.close()
+        try:
+            guardian = make_guardian(agent, **run.agent_kwargs)
+        except Exception as e:
+            opts = " ".join(f"{agent}.{k}={v if isinstance(v, str) else json.dumps(v)}" for k, v in run.agent_kwargs.items())
+            where = f"--agent-opt {opts}" if opts else f"--agent {agent}"
+            raise ValueError(f"{where}: the guardian cannot be built: {type(e).__name__}: {e}") from None
+        meta[agent] = {"observation": str(getattr(guardian, "observation_type", "?")), "n_obstacles": envs[ekey]}
+    return meta

@@ -1,0 +1,192 @@
+"""Typed configuration of ``rmm-bench``: what the command line asked for, what a worker runs, what it returns.
+
+* :class:`BenchConfig`: one ``rmm-bench`` command, parsed and validated once (``args.py``);
+  never changed afterwards (a latency sweep derives one config per latency with
+  :meth:`BenchConfig.with_clock`).
+* :class:`AgentRun`: one agent under one configuration: exactly what determines an
+  episode's result apart from its index.  Its :meth:`~AgentRun.as_dict` is what the store
+  keeps in ``runs.config`` and what :attr:`~AgentRun.key` (the ``run_key``) hashes, with the
+  same keys and values as databases written before these classes existed, so ``report`` and
+  ``--resume`` read them unchanged.
+* :class:`EpisodeTask`: what a worker receives: the run, the episode index, its derived seed,
+  and the guardian's compute threads (not part of the run: results do not depend on them).
+* :class:`EpisodeResult`: what a worker returns and the store writes: one row of the
+  ``episodes`` table, one field per column (``None`` is SQL ``NULL``).
+
+All are frozen dataclasses of plain values (dicts of JSON values for options), so they pickle
+to worker processes and Ray tasks and compare by value.  Their dict fields are copies taken at
+construction: treat them as read-only.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import inspect
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["AgentRun", "BenchConfig", "EpisodeResult", "EpisodeTask", "accepts_argument", "run_key"]
+
+
+def run_key(config: dict) -> str:
+    """The run's identity in the store: the first 16 hex digits of the SHA-256 of its sorted JSON."""
+    return hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def _json_copy(name: str, value: dict) -> dict:
+    """A deep copy of ``value`` through JSON: what the store will hold, refused if it cannot."""
+    try:
+        return json.loads(json.dumps(dict(value), sort_keys=True))
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{name} must hold JSON values (it is stored and hashed), got {value!r}: {e}") from None
+
+
+@dataclass(frozen=True)
+class AgentRun:
+    """One agent on one env configuration; ``agent_kwargs`` are its constructor arguments."""
+
+    agent: str
+    agent_kwargs: dict
+    env_id: str
+    env_kwargs: dict
+    seed: int
+    episode_timeout: float
+    charge_precompute: bool
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "agent_kwargs", _json_copy("agent_kwargs", self.agent_kwargs))
+        object.__setattr__(self, "env_kwargs", _json_copy("env_kwargs", self.env_kwargs))
+
+    def as_dict(self) -> dict:
+        """The stored configuration (``runs.config``), as every version of the store wrote it."""
+        return {"agent": self.agent, "agent_kwargs": self.agent_kwargs, "env_id": self.env_id, "env_kwargs": self.env_kwargs,
+                "seed": self.seed, "episode_timeout": self.episode_timeout, "charge_precompute": self.charge_precompute}
+
+    @property
+    def key(self) -> str:
+        return run_key(self.as_dict())
+
+
+@dataclass(frozen=True)
+class EpisodeTask:
+    """Episode ``episode`` of ``run``, with env seed ``seed`` (derived from the run's seed).
+
+    ``threads``: passed as the guardian's ``threads`` argument when not None (the runner sets
+    it only for guardians whose constructor takes one and whose options do not already)."""
+
+    run: AgentRun
+    run_key: str
+    episode: int
+    seed: int
+    threads: int | None = None
+
+    @property
+    def agent(self) -> str:
+        return self.run.agent
+
+    def guardian_kwargs(self) -> dict:
+        return self.run.agent_kwargs | ({} if self.threads is None else {"threads": int(self.threads)})
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """One row of the store's ``episodes`` table; see :mod:`benchmarks.bench.store` for the columns."""
+
+    run_key: str
+    episode: int
+    agent: str
+    seed: int
+    outcome: str  # goal / collision / timeout / error
+    steps: int | None = None
+    active_steps: int | None = None
+    sim_time: float | None = None
+    active_sim_time: float | None = None
+    compute_time: float | None = None
+    avg_compute_time: float | None = None
+    decision_mean: float | None = None
+    decision_std: float | None = None
+    decision_max: float | None = None
+    precompute_time: float | None = None
+    final_speed: float | None = None
+    cum_reward: float | None = None
+    qp_fallbacks: int | None = None
+    nan_states: int | None = None
+    guardian_stats: str | None = None
+    error: str | None = None
+    wall_time: float | None = None
+    finished: float | None = None
+    error_kind: str | None = None  # guardian / timeout / lost_worker (None unless outcome is error)
+
+    def as_row(self) -> dict:
+        return dataclasses.asdict(self)
+
+    def replace(self, **changes) -> EpisodeResult:
+        return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """One ``rmm-bench`` run or sweep, validated (see ``args.py``).
+
+    ``parsed`` is the command line's arguments as argparse named them (stored with the
+    invocation, where ``report`` reads the env, clock, time acceleration and seed it prints)."""
+
+    agents: tuple[str, ...]
+    agent_kwargs: dict  # agent -> its --agent-opt values
+    env_id: str
+    env_kwargs: dict  # what the env is built with: the options of this command it accepts
+    clock: str
+    seed: int
+    episodes: int
+    out: str
+    workers: int
+    backend: str
+    ray_address: str | None
+    episode_timeout: float
+    charge_precompute: bool
+    batch_size: int
+    retry_errors: bool
+    progress: bool
+    parsed: dict = field(default_factory=dict)
+    latencies: tuple[float, ...] = ()  # a sweep's decision latencies, ms
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "agent_kwargs", {a: _json_copy(f"--agent-opt {a}", kw) for a, kw in self.agent_kwargs.items()})
+        object.__setattr__(self, "env_kwargs", _json_copy("env_kwargs", self.env_kwargs))
+        object.__setattr__(self, "parsed", _json_copy("arguments", self.parsed))
+
+    def with_clock(self, clock: str) -> BenchConfig:
+        """The same command under another clock (a sweep's latency); the env gets it only if it
+        took this run's clock."""
+        env_kwargs = self.env_kwargs | {"clock": clock} if "clock" in self.env_kwargs else self.env_kwargs
+        return dataclasses.replace(self, clock=clock, env_kwargs=env_kwargs)
+
+    def agent_runs(self) -> dict[str, AgentRun]:
+        return {a: AgentRun(agent=a, agent_kwargs=self.agent_kwargs.get(a, {}), env_id=self.env_id, env_kwargs=self.env_kwargs,
+                            seed=self.seed, episode_timeout=self.episode_timeout, charge_precompute=self.charge_precompute)
+                for a in self.agents}
+
+
+def accepts_argument(factory, name: str) -> bool:
+    """Whether ``factory`` (a guardian class or callable, as the registry resolves it) takes a
+    keyword argument ``name`` by that name.  A class's ``__init__`` that forwards ``**kwargs``
+    is followed up its bases, so a subclass of a guardian that takes ``threads`` takes it too;
+    a bare ``**kwargs`` that reaches no named parameter does not count."""
+    if isinstance(factory, type):
+        targets = [c.__dict__["__init__"] for c in factory.__mro__ if "__init__" in c.__dict__ and c is not object]
+    else:
+        targets = [factory]
+    for fn in targets:
+        try:
+            params = inspect.signature(fn).parameters
+        except (TypeError, ValueError):  # a builtin without a signature
+            return False
+        p = params.get(name)
+        if p is not None and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY):
+            return True
+        if not any(q.kind is q.VAR_KEYWORD for q in params.values()):
+            return False
+    return False
+

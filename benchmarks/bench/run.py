@@ -1,0 +1,209 @@
+"""The run and sweep commands: plan the episodes a command still owes, run them, record the invocation.
+
+Each agent of a :class:`~benchmarks.bench.config.BenchConfig` is one
+:class:`~benchmarks.bench.config.AgentRun` in the store; :func:`plan_tasks` lists its episodes
+not stored yet as :class:`~benchmarks.bench.config.EpisodeTask` values, :func:`execute` runs
+them on local worker processes or Ray and stores each :class:`~benchmarks.bench.config.EpisodeResult`
+as it arrives.
+
+Compute threads: when several workers share the machine (``--workers`` > 1, or Ray), a
+guardian whose constructor takes ``threads`` (the HJ guardian's compiled solver) is built with
+``threads=1`` unless ``--agent-opt AGENT.threads=N`` sets it; one worker leaves it at the
+guardian's own default.  Threads are not part of the run's configuration: results do not
+depend on them, and a rerun with another worker count resumes the same run.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from benchmarks.bench.config import AgentRun, BenchConfig, EpisodeResult, EpisodeTask, accepts_argument
+from benchmarks.bench.metrics import aggregate
+from benchmarks.bench.report import plot_latency, write_report
+from benchmarks.bench.runner import episode_seed, hard_timeout, lost_episode, run_episode
+from benchmarks.bench.store import RETRIED_ERRORS, ResultsStore
+
+__all__ = ["RunFailed", "cmd_run", "cmd_sweep", "execute", "plan_tasks"]
+
+
+class RunFailed(RuntimeError):
+    """The run stopped on an error, or left episodes without a result (exit status 1)."""
+
+
+def _provenance(argv) -> dict:
+    import rmm_envs
+
+    rev = None
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=5,
+                             cwd=Path(__file__).resolve().parent).stdout.strip() or None
+    except Exception:
+        pass
+    return {"package_version": rmm_envs.__version__, "git_revision": rev, "argv": list(argv),
+            "python": platform.python_version(), "platform": platform.platform(), "cpus": os.cpu_count()}
+
+
+def guardian_threads(agent: str, agent_kwargs: dict, workers: int, backend: str) -> int | None:
+    """The ``threads`` a worker builds ``agent`` with (None: not passed); see the module docstring."""
+    from guardians.registry import load_guardian_class
+
+    if not (workers > 1 or backend == "ray") or "threads" in agent_kwargs:
+        return None
+    return 1 if accepts_argument(load_guardian_class(agent), "threads") else None
+
+
+def plan_tasks(store: ResultsStore, runs: dict[str, AgentRun], episodes: int, workers: int, backend: str,
+               retry_errors: bool = False) -> list[EpisodeTask]:
+    """The episodes ``0 .. episodes-1`` of each run that the store lacks (or holds as a retried failure)."""
+    tasks = []
+    for agent, run in runs.items():
+        key = run.key
+        threads = guardian_threads(agent, run.agent_kwargs, workers, backend)
+        done = store.done_episodes(key, retry_errors)
+        tasks += [EpisodeTask(run=run, run_key=key, episode=i, seed=episode_seed(run.seed, i), threads=threads)
+                  for i in range(episodes) if i not in done]
+    return tasks
+
+
+def execute(store: ResultsStore, config: BenchConfig, provenance: dict, meta: dict[str, dict] | None = None,
+            invocation: int | None = None) -> dict[str, int]:
+    """Run every episode of ``config`` not stored yet; returns, per agent, how many of this
+    call's episodes ended without a result (time limit, lost worker).  Raises
+    :class:`RunFailed` if too many episodes in a row lost their worker."""
+    from rmm_envs.parallel import TaskLost, WorkersLost, run_local, run_ray
+
+    runs = config.agent_runs()
+    for agent, run in runs.items():
+        store.ensure_run(run.key, agent, run.as_dict(), provenance | {"guardian": (meta or {}).get(agent, {})})
+    tasks = plan_tasks(store, runs, config.episodes, config.workers, config.backend, config.retry_errors)
+    unfinished = {a: 0 for a in runs}
+    if not tasks:
+        return unfinished
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(tasks), unit="ep", disable=not config.progress, dynamic_ncols=True, desc="episodes")
+    counts: dict[str, dict[str, int]] = {}
+
+    def record(result: EpisodeResult):
+        store.add_episode(result, invocation)
+        if result.error_kind in RETRIED_ERRORS:
+            unfinished[result.agent] += 1
+        c = counts.setdefault(result.agent, {})
+        label = "lost" if result.error_kind == "lost_worker" else result.outcome
+        c[label] = c.get(label, 0) + 1
+        bar.set_postfix_str("; ".join(f"{a}: " + " ".join(f"{k[0]}{v}" for k, v in sorted(c.items())) for a, c in counts.items())[-120:])
+        bar.update(1)
+
+    max_lost = max(4, 2 * config.workers)
+    try:
+        if config.backend == "ray":
+            results = run_ray(run_episode, tasks, config.ray_address, max_lost_in_a_row=max_lost)
+        else:
+            results = run_local(run_episode, tasks, config.workers, task_timeout=hard_timeout(config.episode_timeout),
+                                max_lost_in_a_row=max_lost)
+        for res in results:
+            record(lost_episode(res.task, res.cause) if isinstance(res, TaskLost) else res)
+    except WorkersLost as e:
+        raise RunFailed(f"{e}: {sum(unfinished.values())} episodes lost their worker (see the error column of "
+                        f"{store.path}); fix the cause (fewer --workers if memory ran out) and rerun the same command") from None
+    finally:
+        bar.close()
+    return unfinished
+
+
+def _unfinished_message(unfinished: dict[str, int], store: ResultsStore) -> str:
+    lacking = {a: n for a, n in unfinished.items() if n}
+    if not lacking:
+        return ""
+    return (f"{sum(lacking.values())} episodes ended without a result ({', '.join(f'{a}: {n}' for a, n in lacking.items())}): "
+            f"over --episode-timeout or their worker died (causes in the error column of {store.path}); "
+            "the table counts them as errors; rerun the same command to retry them")
+
+
+def _invoke(store: ResultsStore, kind: str, config: BenchConfig, argv, meta: dict, record_args: dict) -> tuple[int, str]:
+    """Record an invocation, run it, and end it as finished, interrupted or failed."""
+    keys = {a: r.key for a, r in config.agent_runs().items()}
+    inv = store.add_invocation(kind, record_args, keys, config.episodes)
+    try:
+        unfinished = execute(store, config, _provenance(argv), meta, inv)
+    except KeyboardInterrupt:
+        store.finish_invocation(inv, "interrupted", "Ctrl-C")
+        raise
+    except BaseException as e:
+        store.finish_invocation(inv, "failed", f"{type(e).__name__}: {e}"[:1000])
+        raise
+    msg = _unfinished_message(unfinished, store)
+    store.finish_invocation(inv, "failed" if msg else "finished", msg or None)
+    return inv, msg
+
+
+def _interrupted(out: Path) -> int:
+    print(f"\ninterrupted: finished episodes are saved in {out / 'results.db'}; rerun the same command to finish", file=sys.stderr)
+    return 130
+
+
+def cmd_run(config: BenchConfig, argv) -> int:
+    from benchmarks.bench.checks import check_runs
+
+    meta = check_runs(config.agent_runs())  # every option, env and guardian checked before anything is written
+    out = Path(config.out)
+    store = ResultsStore(out / "results.db")
+    try:
+        store.mark_stale_invocations()
+        t0 = time.perf_counter()
+        try:
+            inv, msg = _invoke(store, "run", config, argv, meta, config.parsed)
+        except KeyboardInterrupt:
+            return _interrupted(out)
+        print(f"finished in {time.perf_counter() - t0:.1f} s")
+        write_report(store, out, store.invocation(inv), config.batch_size)
+        if msg:
+            print(f"rmm-bench: {msg}", file=sys.stderr)
+            return 1
+        return 0
+    finally:
+        store.close()
+
+
+def cmd_sweep(config: BenchConfig, argv) -> int:
+    from benchmarks.bench.checks import check_runs
+
+    meta = check_runs(config.agent_runs())  # validates the options before anything is written
+    out = Path(config.out)
+    store = ResultsStore(out / "results.db")
+    agents, latencies = config.agents, config.latencies
+    series: dict[str, list] = {a: [] for a in agents}
+    lines = ["| agent | " + " | ".join(f"{x:g} ms" for x in latencies) + " |", "|---|" + "---|" * len(latencies)]
+    table: dict[str, list[str]] = {a: [] for a in agents}
+    failed = []
+    try:
+        store.mark_stale_invocations()
+        for lat in latencies:
+            at = config.with_clock(f"fixed:{lat:g}")
+            try:
+                _, msg = _invoke(store, "sweep", at, argv, meta, at.parsed | {"clock": at.clock, "latency_ms": lat})
+            except KeyboardInterrupt:
+                return _interrupted(out)
+            if msg:
+                failed.append(f"{lat:g} ms: {msg}")
+            for agent, run in at.agent_runs().items():
+                agg = aggregate(store.episodes(run.key, at.episodes), at.batch_size)
+                series[agent].append((lat, agg["collision"][0], agg["collision"][1]))
+                table[agent].append(f"{agg['collision'][0]:.1f} ± {agg['collision'][1]:.1f}")
+    finally:
+        store.close()
+    lines += [f"| {a} | " + " | ".join(table[a]) + " |" for a in agents]
+    md = (f"Collision rate [% episodes] against added decision latency (fixed clock, time accel {config.parsed['time_accel']}, "
+          f"{config.episodes} episodes, seed {config.seed})\n\n" + "\n".join(lines) + "\n")
+    (out / "latency_sweep.md").write_text(md)
+    plot_latency(series, out / "latency_sweep.png")
+    print(md)
+    if failed:
+        print("rmm-bench sweep: " + " | ".join(failed), file=sys.stderr)
+        return 1
+    return 0

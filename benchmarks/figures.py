@@ -1,0 +1,159 @@
+"""``rmm-bench riskmap`` and ``rmm-bench quadrisk``: the paper's figures of a learned risk model at work.
+
+    rmm-bench riskmap --seed 3 --out riskmap.png     # Fig. 1: maze states coloured by inferred risk
+    rmm-bench riskmap --labels                       # ... by the sampling tree's risk instead
+    rmm-bench quadrisk --seed 1 --out quadrisk.png   # Fig. 3: the quadrotor coloured by inferred risk
+
+``riskmap`` samples ``--n`` states (default 1,000, the figure's density) in a freshly
+generated maze (``--kind``, ``--seed``) and draws each as an arrow coloured green to red by
+the risk the LRMM model infers from its local observation (default: the model shipped for
+``Dubins3DMaze-v0``; ``--model`` another file), or with ``--labels`` by the sampling-tree
+risk that labels the training data (the estimator's defaults, n=32, m=2, t=2 s).
+``quadrisk`` renders the quadrotor in three hand-picked situations (level and still; tilted
+and flying at a wall; upside down and falling) in a room 3 m high, its body coloured by the
+risk the shipped ``QuadrotorRoom-v0`` model infers.  Both write a PNG (``--out``, ``--dpi``,
+default 110: legible on screen at a small file size).
+
+These commands live in ``benchmarks`` because they load a guardian's model: the packages stack
+``benchmarks`` -> ``guardians`` -> ``rmm_envs``, and ``rmm-envs`` (the environments' own
+command) imports no guardian.  They are subcommands of ``rmm-bench``, the command of this
+package, rather than a console script of their own, so an existing install gains them
+without reinstalling.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import gymnasium as gym
+import numpy as np
+
+import rmm_envs  # noqa: F401  (registers the environments)
+
+__all__ = ["COMMANDS", "main", "quadrisk", "quadrisk_parser", "riskmap", "riskmap_parser"]
+
+
+def riskmap(args: argparse.Namespace) -> int:
+    """The paper's Fig. 1: sampled states in a maze as arrows coloured by inferred risk."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rmm_envs.worlds.mazes import render_occupancy
+
+    env = gym.make("Dubins3DMaze-v0", maze_kind=args.kind).unwrapped
+    env.reset(seed=args.seed)
+    rng = np.random.default_rng(args.seed)
+    states = env.sample_states(rng, args.n)
+    obs = env.observe_states(states)
+    if args.labels:
+        from rmm_envs.risk import RiskEstimator
+
+        risk = RiskEstimator(env.risk_system()).estimate(states, rng).risk
+        what = "sampling-tree risk (n=32, m=2, t=2 s)"
+    else:
+        from guardians.lrmm.model import LRMMModel, default_model_path
+
+        model = LRMMModel.load(args.model or default_model_path("Dubins3DMaze-v0"), env_id="Dubins3DMaze-v0")
+        risk = model.predict(obs)
+        what = "inferred risk (LRMM)"
+    maze = env.scene.maze
+    occ = render_occupancy(maze, resolution=maze.thickness / 3)
+    fig, ax = plt.subplots(figsize=(9, 8))
+    ax.imshow(occ, cmap="gray_r", origin="lower", extent=(0, maze.width, 0, maze.height), alpha=0.9)
+    L = 45.0
+    q = ax.quiver(states[:, 0], states[:, 1], L * np.cos(states[:, 2]), L * np.sin(states[:, 2]), risk, cmap="RdYlGn_r",
+                  angles="xy", scale_units="xy", scale=1.0, width=0.0025, clim=(0, 1))
+    fig.colorbar(q, ax=ax, label=what)
+    ax.set_title(f"{len(states)} sampled states in a {args.kind} maze (seed {args.seed}); arrow base = position")
+    ax.set_xlim(0, maze.width)
+    ax.set_ylim(0, maze.height)
+    ax.set_aspect("equal")
+    fig.tight_layout()
+    fig.savefig(args.out, dpi=args.dpi)
+    print(f"wrote {args.out}: mean risk {risk.mean():.3f}, {np.mean(risk > 0.5) * 100:.0f}% of states above 0.5")
+    return 0
+
+
+def quadrisk(args: argparse.Namespace) -> int:
+    """The paper's Fig. 3: the quadrotor in a room coloured green to red by its inferred risk."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pybullet as p
+
+    from guardians.lrmm.model import LRMMModel, default_model_path
+
+    env = gym.make("QuadrotorRoom-v0", render_mode="rgb_array").unwrapped
+    env.reset(seed=args.seed, options={"room": {"wall_height": 3.0}})
+    model = LRMMModel.load(args.model or default_model_path("QuadrotorRoom-v0"), env_id="QuadrotorRoom-v0")
+    room = env.room
+    cells = np.argwhere(room.footprint)
+    centre = room.origin + (cells[np.argmin(np.linalg.norm(cells - cells.mean(axis=0), axis=1))] + 0.5) * room.cell
+    edge = room.origin + (cells[np.argmin(cells[:, 0])] + 0.5) * room.cell  # a cell at the footprint's -x edge
+    tilt = p.getQuaternionFromEuler([0.0, -0.5, np.pi])
+    flip = p.getQuaternionFromEuler([np.pi, 0.0, 0.0])
+    cases = [
+        ("level and still, mid-room, 2 m up", [centre[0], centre[1], 2.0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0]),
+        ("tilted, flying at a wall at 3 m/s", [edge[0] + 1.0, edge[1], 1.5, *tilt, -3.0, 0, 0, 0, 0, 0]),
+        ("upside down, falling near the floor", [centre[0], centre[1], 0.6, *flip, 0, 0, -2.0, 1.0, 0, 0]),
+    ]
+    states = np.array([c[1] for c in cases], dtype=float)
+    risk = model.predict(env.observe_states(states))
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
+    for ax, (name, _), st, r in zip(axes, cases, states, risk):
+        env.set_state(st)
+        p.changeVisualShape(env.body, -1, rgbaColor=[float(r), 1.0 - float(r), 0.0, 1.0], physicsClientId=env.client)
+        view = p.computeViewMatrixFromYawPitchRoll(st[:3].tolist(), 3.0, 45.0, -60.0, 0.0, 2, physicsClientId=env.client)
+        proj = p.computeProjectionMatrixFOV(60.0, 4 / 3, 0.05, 100.0, physicsClientId=env.client)
+        _, _, rgba, _, _ = p.getCameraImage(320, 240, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=env.client)
+        ax.imshow(np.asarray(rgba, dtype=np.uint8).reshape(240, 320, 4)[..., :3])
+        ax.set_title(f"{name}\ninferred risk {float(r):.3f}", fontsize=9)
+        ax.axis("off")
+    fig.suptitle(f"QuadrotorRoom-v0 (room seed {args.seed}): the body coloured green to red by inferred risk")
+    fig.tight_layout()
+    fig.savefig(args.out, dpi=args.dpi)
+    print(f"wrote {args.out}: inferred risks {[round(float(r), 3) for r in risk]}")
+    return 0
+
+
+def riskmap_parser() -> argparse.ArgumentParser:
+    rm = argparse.ArgumentParser(prog="rmm-bench riskmap", description="The paper's Fig. 1: states in a maze coloured by inferred risk, as a PNG.")
+    rm.add_argument("--model", default=None, help="LRMM model file (default: the shipped maze model)")
+    rm.add_argument("--kind", default="rectangular", choices=["rectangular", "honeycomb"], help="maze kind (default: %(default)s)")
+    rm.add_argument("--seed", type=int, default=0, help="maze and sampling seed (default: %(default)s)")
+    rm.add_argument("--n", type=int, default=1000, help="number of sampled states (default: %(default)s)")
+    rm.add_argument("--labels", action="store_true", help="colour by the sampling tree's risk instead of the model")
+    rm.add_argument("--out", default="riskmap.png", help="output PNG (default: %(default)s)")
+    rm.add_argument("--dpi", type=int, default=110, help="resolution of the PNG (default: %(default)s)")
+    return rm
+
+
+def quadrisk_parser() -> argparse.ArgumentParser:
+    qr = argparse.ArgumentParser(prog="rmm-bench quadrisk", description="The paper's Fig. 3: the quadrotor coloured by inferred risk, as a PNG.")
+    qr.add_argument("--model", default=None, help="LRMM model file (default: the shipped quadrotor model)")
+    qr.add_argument("--seed", type=int, default=0, help="room and sampling seed (default: %(default)s)")
+    qr.add_argument("--out", default="quadrisk.png", help="output PNG (default: %(default)s)")
+    qr.add_argument("--dpi", type=int, default=110, help="resolution of the PNG (default: %(default)s)")
+    return qr
+
+
+#: subcommand -> (its parser, what it runs)
+COMMANDS = {"riskmap": (riskmap_parser, riskmap), "quadrisk": (quadrisk_parser, quadrisk)}
+
+
+def main(argv: list[str]) -> int:
+    """``argv``: the subcommand's name, then its arguments."""
+    name = argv[0] if argv else None
+    if name not in COMMANDS:
+        raise ValueError(f"figure command must be one of {sorted(COMMANDS)}, got {name!r}")
+    parser, run = COMMANDS[name]
+    args = parser().parse_args(argv[1:])
+    if getattr(args, "n", 1) < 1:
+        raise ValueError(f"--n must be >= 1, got {args.n}")
+    if args.dpi < 1:
+        raise ValueError(f"--dpi must be >= 1, got {args.dpi}")
+    return run(args)
