@@ -22,7 +22,7 @@ from rmm_envs.driver import CLFDriver
 from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_envs.worlds.circles import CircleWorld, _ray_cast_numpy, points_in_circles, ray_cast
 
-INACTIVE = {"active_ctrl": 0, "turnrate_ctrl": np.zeros(1, np.float32), "accel_ctrl": np.zeros(1, np.float32)}
+INACTIVE = gym.make("Dubins4DCircles-v0").action_space.inactive()
 
 
 def steps_per_second(env_id: str = "Dubins4DCircles-v0", episodes: int = 10, repeats: int = 5) -> list[float]:

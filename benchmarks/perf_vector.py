@@ -36,10 +36,10 @@ ID = "Dubins4DCircles-v0"
 
 
 def _inactive(n: int | None = None) -> dict:
+    one = gym.make("Dubins4DCircles-v0").action_space.inactive()
     if n is None:
-        return {"active_ctrl": 0, "turnrate_ctrl": np.zeros(1, np.float32), "accel_ctrl": np.zeros(1, np.float32)}
-    return {"active_ctrl": np.zeros(n, np.int64), "turnrate_ctrl": np.zeros((n, 1), np.float32),
-            "accel_ctrl": np.zeros((n, 1), np.float32)}
+        return one
+    return {k: np.zeros((n, 1), np.float32) if np.ndim(v) else np.zeros(n, np.int64) for k, v in one.items()}
 
 
 class SingleRunner:

@@ -22,16 +22,17 @@ import numpy as np
 from gymnasium import spaces
 
 import rmm_envs  # noqa: F401  (registers the environments)
+from rmm_envs.autonomy import GuardianActionSpace
 
 MOVED = {"riskmap": "rmm-bench riskmap", "quadrisk": "rmm-bench quadrisk"}
 
 
 def driver_only_action(space: spaces.Space, env_id: str) -> dict:
-    """The action that leaves the step to the built-in driver: ``active_ctrl`` 0, every control zero."""
-    if not isinstance(space, spaces.Dict) or "active_ctrl" not in space.spaces:
+    """The action that leaves the step to the built-in driver (:func:`rmm_envs.autonomy.inactive`)."""
+    if not isinstance(space, GuardianActionSpace):
         raise ValueError(f"env {env_id} has no guardian action to leave to its driver: its action space is {space}, "
-                         "not a Dict with 'active_ctrl' (the parallel-autonomy contract)")
-    return {k: 0 if k == "active_ctrl" else np.zeros(s.shape, s.dtype) for k, s in space.spaces.items()}
+                         "not a GuardianActionSpace (the parallel-autonomy contract, rmm_envs.autonomy)")
+    return space.inactive()
 
 
 def _demo(args: argparse.Namespace) -> int:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
+from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.cli import driver_only_action, main
 
 
@@ -17,9 +18,12 @@ def test_driver_only_action_is_read_off_the_action_space():
     assert set(a) == {"active_ctrl", "turnrate_ctrl", "accel_ctrl"} and a["active_ctrl"] == 0
     for k in ("turnrate_ctrl", "accel_ctrl"):
         assert a[k].dtype == np.float32 and a[k].shape == (1,) and not a[k].any()
-    other = spaces.Dict({"active_ctrl": spaces.Discrete(2), "thrust": spaces.Box(-1.0, 1.0, (3,), dtype=np.float64)})
+    other = GuardianActionSpace(("thrust", "roll"), [0.0, -1.0], [2.0, 1.0])
     b = driver_only_action(other, "Other-v0")
-    assert b["active_ctrl"] == 0 and b["thrust"].shape == (3,) and b["thrust"].dtype == np.float64 and not b["thrust"].any()
+    assert b["active_ctrl"] == 0 and set(b) == {"active_ctrl", "thrust", "roll"} and not b["thrust"].any()
+    plain = spaces.Dict({"active_ctrl": spaces.Discrete(2), "thrust": spaces.Box(-1.0, 1.0, (3,), dtype=np.float64)})
+    with pytest.raises(ValueError, match="env Plain-v0 has no guardian action .* not a GuardianActionSpace"):
+        driver_only_action(plain, "Plain-v0")
     with pytest.raises(ValueError, match=r"env Box-v0 has no guardian action .* its action space is Box\(-1\.0, 1\.0, \(2,\), float32\)"):
         driver_only_action(spaces.Box(-1.0, 1.0, (2,), dtype=np.float32), "Box-v0")
 

@@ -5,8 +5,9 @@ through (the Dubins4D envs' module docstring describes it in full):
 
 * a constructor argument ``clock`` (a stopwatch measuring the guardian's compute time per
   step, read back as the env's ``clock`` attribute);
-* an action space that is a ``Dict`` holding ``active_ctrl`` (``Discrete(2)``: 0 lets the
-  built-in driver control the step, 1 applies the guardian's control) and the control fields;
+* an action space that is a :class:`rmm_envs.autonomy.GuardianActionSpace` (a ``Dict`` holding
+  ``active_ctrl``, ``Discrete(2)``: 0 lets the built-in driver control the step, 1 applies the
+  guardian's control, and the control fields);
 * on the step that ends an episode, ``info["outcome"]`` (``goal``, ``collision``,
   ``timeout``) and ``info["episode"]``, the statistics the store keeps (see
   :data:`benchmarks.bench.runner.EPISODE_STATISTICS`).
@@ -19,14 +20,14 @@ ends: an env that breaks it gets an error naming the missing key in every episod
 
 from __future__ import annotations
 
+from rmm_envs.autonomy import ACTIVE
+
 import json
 
 from benchmarks.bench.config import AgentRun, accepts_argument
 
-__all__ = ["CONTRACT_ACTION_KEY", "check_env_contract", "check_runs", "env_arguments", "parse_agent_opts", "resolve_agents"]
+__all__ = ["check_env_contract", "check_runs", "env_arguments", "parse_agent_opts", "resolve_agents"]
 
-#: The action key that marks a parallel-autonomy env: whether the guardian takes control.
-CONTRACT_ACTION_KEY = "active_ctrl"
 #: Options of this command that an env may take, in the order the run's env_kwargs list them.
 ENV_OPTIONS = ("time_accel", "base_step", "clock")
 
@@ -88,15 +89,11 @@ def env_arguments(env_id: str) -> set[str]:
 
 
 def _action_space_lacks(space) -> str | None:
-    from gymnasium import spaces
+    from rmm_envs.autonomy import GuardianActionSpace
 
-    if not isinstance(space, spaces.Dict) or CONTRACT_ACTION_KEY not in space.spaces:
-        return f"its action space is {space}, not a Dict holding {CONTRACT_ACTION_KEY!r} (take control or not) and the control"
-    flag = space.spaces[CONTRACT_ACTION_KEY]
-    if not (isinstance(flag, spaces.Discrete) and flag.n == 2 and flag.start == 0):
-        return f"its action {CONTRACT_ACTION_KEY!r} is {flag}, not Discrete(2)"
-    if len(space.spaces) < 2:
-        return f"its action space {space} holds no control besides {CONTRACT_ACTION_KEY!r}"
+    if not isinstance(space, GuardianActionSpace):
+        return (f"its action space is {space}, not a GuardianActionSpace (rmm_envs.autonomy: {ACTIVE!r} to take "
+                "control or not, and the control)")
     return None
 
 
