@@ -1,0 +1,119 @@
+"""Wrappers for training guardians with reinforcement-learning libraries.
+
+Most RL libraries (Stable-Baselines3, CleanRL, ...) train on ``Box`` or ``Discrete`` actions,
+not on the ``Dict`` guardian action of a parallel-autonomy env, and the env's own reward
+(+1 goal, -1 collision) says nothing about the cost of taking control.  Two wrappers close
+the gap; they work on every env whose action space is an
+:class:`rmm_envs.autonomy.GuardianActionSpace` (``Dubins4DCircles-v0``, ``Dubins4DParallel-v0``).
+
+:class:`FlattenGuardianAction`
+    Action space ``Box(-1, 1, (1 + c,), float32)`` for ``c`` controls: ``a[0] > 0.5`` takes
+    control (so a policy that outputs zeros, as a fresh Gaussian policy does on average, leaves
+    the driver in charge), and ``a[1:]`` are the controls scaled to the env's bounds, ``-1`` the
+    lower and ``+1`` the upper bound of each (values outside ``[-1, 1]`` are clipped first).  A
+    symmetric unit box is what SB3's PPO/SAC expect.  :meth:`FlattenGuardianAction.to_guardian`
+    converts such a vector for a given space, so a policy trained through the wrapper can act
+    as a guardian (see the tutorial ``docs/tutorials/rl-guardian.md``).  Non-finite values raise
+    ``ValueError`` naming the index.
+
+:class:`GuardianReward`
+    Replaces the reward by the usual shaping for a guardian:
+
+    ``r = goal_bonus * [reached the goal] - collision_penalty * [collided]
+    - intervention_cost * (simulated seconds under guardian control this step)``
+
+    Defaults ``goal_bonus=1``, ``collision_penalty=10``, ``intervention_cost=0.05`` per second.
+    The penalty is ten times the bonus because a guardian's purpose is to prevent crashes;
+    a guardian that takes control for a whole 100 s episode pays 5, half a crash, so holding
+    the brakes for ever is worse than intervening briefly but still better than crashing.  The
+    intervention cost is charged per simulated second, not per step, because non-blocking
+    steps have different lengths.  The env's own reward is kept in ``info["env_reward"]``; the
+    episode statistics in ``info["episode"]`` are unchanged.  The three weights must be
+    finite and ``>= 0``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from rmm_envs.autonomy import GuardianActionSpace
+
+__all__ = ["FlattenGuardianAction", "GuardianReward"]
+
+
+def _guardian_space(env: gym.Env, wrapper: str) -> GuardianActionSpace:
+    space = env.action_space
+    if not isinstance(space, GuardianActionSpace):
+        raise TypeError(f"{wrapper} needs a parallel-autonomy env (action space rmm_envs.autonomy.GuardianActionSpace); "
+                        f"{env.unwrapped.spec.id if env.unwrapped.spec else type(env.unwrapped).__name__} has {space}")
+    return space
+
+
+class FlattenGuardianAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
+    """The guardian action as ``Box(-1, 1, (1 + c,))``; see the module docstring."""
+
+    def __init__(self, env: gym.Env) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.ActionWrapper.__init__(self, env)
+        self.guardian_space = _guardian_space(env, "FlattenGuardianAction")
+        n = 1 + self.guardian_space.control_dim
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
+
+    @staticmethod
+    def to_guardian(space: GuardianActionSpace, action) -> dict:
+        """The guardian action of ``space`` for a flat vector ``[active, scaled controls...]``."""
+        a = np.asarray(action, dtype=float).reshape(-1)
+        if a.shape != (1 + space.control_dim,):
+            raise ValueError(f"a flat guardian action has {1 + space.control_dim} numbers [active, "
+                             f"{', '.join(space.controls)}], got shape {np.shape(action)}")
+        bad = np.flatnonzero(~np.isfinite(a))
+        if bad.size:
+            raise ValueError(f"flat guardian action index {int(bad[0])} must be finite, got {a[bad[0]]}")
+        if a[0] <= 0.5:
+            return space.inactive()
+        z = np.clip(a[1:], -1.0, 1.0)
+        return space.active(space.control_low + (z + 1.0) * 0.5 * (space.control_high - space.control_low))
+
+    def action(self, action) -> dict:
+        return self.to_guardian(self.guardian_space, action)
+
+
+class GuardianReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Shaped reward for training guardians; see the module docstring."""
+
+    def __init__(self, env: gym.Env, goal_bonus: float = 1.0, collision_penalty: float = 10.0,
+                 intervention_cost: float = 0.05) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, goal_bonus=goal_bonus, collision_penalty=collision_penalty,
+                                                 intervention_cost=intervention_cost)
+        gym.Wrapper.__init__(self, env)
+        _guardian_space(env.unwrapped, "GuardianReward")
+        for name, v in (("goal_bonus", goal_bonus), ("collision_penalty", collision_penalty),
+                        ("intervention_cost", intervention_cost)):
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+        self.goal_bonus = float(goal_bonus)
+        self.collision_penalty = float(collision_penalty)
+        self.intervention_cost = float(intervention_cost)
+        self._sim_time = 0.0
+
+    def reset(self, *, seed=None, options=None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._sim_time = float(info.get("sim_time", 0.0))
+        return obs, info
+
+    def step(self, action):
+        obs, env_reward, terminated, truncated, info = self.env.step(action)
+        now = float(info["sim_time"])
+        dt, self._sim_time = now - self._sim_time, now
+        outcome = info.get("outcome")
+        reward = -self.intervention_cost * dt if info.get("active") else 0.0
+        if outcome == "goal":
+            reward += self.goal_bonus
+        elif outcome == "collision":
+            reward -= self.collision_penalty
+        info = {**info, "env_reward": env_reward}
+        return obs, float(reward), terminated, truncated, info
