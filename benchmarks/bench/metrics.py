@@ -7,61 +7,108 @@
   batch size (the paper's +-);
 * intervention rate, %: per episode ``active_sim_time / sim_time``; mean and population std
   across episodes.
+
+Written once, with pandas: :func:`table_i` aggregates a DataFrame of episodes (as
+:func:`benchmarks.load_results` returns) into one row per agent; :func:`aggregate` gives the
+same statistics for one agent's episodes as stored rows (dicts), which is what ``rmm-bench``'s
+report and sweep use.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["aggregate", "batch_rate", "weighted_mean_std"]
+__all__ = ["aggregate", "batch_rate", "table_i", "weighted_mean_std"]
+
+_NAN2 = (float("nan"), float("nan"))
+_OUTCOMES = ("goal", "collision", "timeout")
+_COLUMNS = ("steps", "compute_time", "decision_mean", "sim_time", "active_sim_time", "precompute_time", "final_speed",
+            "qp_fallbacks", "nan_states")
 
 
 def weighted_mean_std(values, weights) -> tuple[float, float]:
     v = np.asarray(values, float)
     w = np.asarray(weights, float)
     if v.size == 0 or w.sum() == 0:
-        return float("nan"), float("nan")
+        return _NAN2
     m = float(np.sum(w * v) / np.sum(w))
     return m, float(np.sqrt(np.sum(w * (v - m) ** 2) / np.sum(w)))
 
 
 def batch_rate(flags, batch_size: int = 64) -> tuple[float, float]:
     """Mean and std (weighted by batch size) of the per-batch rate of ``flags`` (in order)."""
-    f = np.asarray(flags, float)
-    if f.size == 0:
-        return float("nan"), float("nan")
-    chunks = [f[i:i + batch_size] for i in range(0, f.size, batch_size)]
-    return weighted_mean_std([c.mean() for c in chunks], [c.size for c in chunks])
+    import pandas as pd
+
+    f = pd.Series(np.asarray(flags, float))
+    if f.empty:
+        return _NAN2
+    per_batch = f.groupby(np.arange(f.size) // batch_size).agg(["mean", "size"])
+    return weighted_mean_std(per_batch["mean"], per_batch["size"])
 
 
 def _mean_std(x) -> tuple[float, float]:
     x = np.asarray(x, float)
     if x.size == 0:
-        return float("nan"), float("nan")
+        return _NAN2
     return float(x.mean()), float(x.std())
+
+
+def _aggregate_frame(df, batch_size: int) -> dict:
+    """Table I statistics of one agent's episodes, a DataFrame with the store's episode columns."""
+    missing = [c for c in _COLUMNS if c not in df.columns]  # e.g. an errored episode stores no timings
+    if missing:
+        df = df.assign(**{c: np.nan for c in missing})
+    n = len(df)
+    ok = df[df["outcome"] != "error"].sort_values("episode", kind="stable")
+    out = {"episodes": n, "errors": n - len(ok), "error_rate": (n - len(ok)) / n if n else float("nan")}
+    stepped = ok[ok["steps"] != 0]
+    out["compute_ms"] = _mean_std(stepped["compute_time"] / stepped["steps"] * 1e3)
+    out["decision_ms"] = _mean_std(ok["decision_mean"].dropna().astype(float) * 1e3)
+    for name in _OUTCOMES:
+        flags = (ok["outcome"] == name).to_numpy(float)
+        m, s = batch_rate(flags, batch_size)
+        out[name] = (100 * m, 100 * s)
+        out[f"total_{name}"] = 100 * float(flags.mean()) if flags.size else float("nan")
+    timed = ok[ok["sim_time"] != 0]
+    m, s = _mean_std(timed["active_sim_time"] / timed["sim_time"])
+    out["intervention"] = (100 * m, 100 * s)
+    out["steps"] = _mean_std(ok["steps"])
+    out["precompute_s"] = _mean_std(ok["precompute_time"].astype(float).fillna(0.0))
+    for col in ("qp_fallbacks", "nan_states"):
+        out[col] = int(df[col].astype(float).fillna(0).sum())
+    out["collision_speed"] = _mean_std(ok.loc[ok["outcome"] == "collision", "final_speed"].astype(float))
+    return out
 
 
 def aggregate(episodes: list[dict], batch_size: int = 64) -> dict:
     """Table I statistics of one agent's episodes (dicts with the store's episode fields)."""
-    ok = [e for e in sorted(episodes, key=lambda e: e["episode"]) if e["outcome"] != "error"]
-    n_err = len(episodes) - len(ok)
-    out = {"episodes": len(episodes), "errors": n_err, "error_rate": n_err / len(episodes) if episodes else float("nan")}
-    comp = [e["compute_time"] / e["steps"] * 1e3 for e in ok if e["steps"]]
-    out["compute_ms"] = _mean_std(comp)
-    dec = [e["decision_mean"] * 1e3 for e in ok if e.get("decision_mean") is not None]
-    out["decision_ms"] = _mean_std(dec)
-    for name in ("goal", "collision", "timeout"):
-        flags = [e["outcome"] == name for e in ok]
-        m, s = batch_rate(flags, batch_size)
-        out[name] = (100 * m, 100 * s)
-        out[f"total_{name}"] = 100 * float(np.mean(flags)) if flags else float("nan")
-    ratio = [e["active_sim_time"] / e["sim_time"] for e in ok if e["sim_time"]]
-    m, s = _mean_std(ratio)
-    out["intervention"] = (100 * m, 100 * s)
-    out["steps"] = _mean_std([e["steps"] for e in ok])
-    out["precompute_s"] = _mean_std([e["precompute_time"] or 0.0 for e in ok])
-    out["qp_fallbacks"] = int(sum(e.get("qp_fallbacks") or 0 for e in episodes))
-    out["nan_states"] = int(sum(e.get("nan_states") or 0 for e in episodes))
-    coll = [e["final_speed"] for e in ok if e["outcome"] == "collision"]
-    out["collision_speed"] = _mean_std(coll)
-    return out
+    import pandas as pd
+
+    episodes = list(episodes)
+    if not episodes:
+        return {"episodes": 0, "errors": 0, "error_rate": float("nan"), "compute_ms": _NAN2, "decision_ms": _NAN2,
+                **{k: _NAN2 for k in _OUTCOMES}, **{f"total_{k}": float("nan") for k in _OUTCOMES},
+                "intervention": _NAN2, "steps": _NAN2, "precompute_s": _NAN2, "qp_fallbacks": 0, "nan_states": 0,
+                "collision_speed": _NAN2}
+    return _aggregate_frame(pd.DataFrame.from_records(episodes), batch_size)
+
+
+def table_i(df, batch_size: int = 64):
+    """Table I of a DataFrame of episodes (one row per stored episode, e.g. from
+    :func:`benchmarks.load_results`): one row per agent, in order of first appearance, with
+    columns ``episodes``, ``errors``, ``<stat>`` and ``<stat>_std`` for each statistic of
+    :func:`aggregate` that has a spread (``compute_ms``, ``goal``, ``collision``, ``timeout``,
+    ``intervention``, ...), and the totals and counters as they are."""
+    import pandas as pd
+
+    rows = {}
+    for agent, group in df.groupby("agent", sort=False):
+        agg = _aggregate_frame(group, batch_size)
+        row = {}
+        for k, v in agg.items():
+            if isinstance(v, tuple):
+                row[k], row[f"{k}_std"] = v
+            else:
+                row[k] = v
+        rows[agent] = row
+    return pd.DataFrame.from_dict(rows, orient="index").rename_axis("agent")
