@@ -155,7 +155,7 @@ def test_numpy_propagator_reproduces_pybullet():
     """The batched propagator the fast labeller needs, against PyBullet itself on random branches."""
     import pybullet as p
 
-    from rmm_envs.envs.quadrotor_room import _urdf_path
+    from rmm_envs.envs.quadrotor_room import _urdf_path, push_body
     from rmm_envs.systems.quadrotor import Quadrotor
 
     c = p.connect(p.DIRECT)
@@ -181,10 +181,7 @@ def test_numpy_propagator_reproduces_pybullet():
             p.resetBasePositionAndOrientation(b, S[i, :3].tolist(), S[i, 3:7].tolist(), physicsClientId=c)
             p.resetBaseVelocity(b, S[i, 7:10].tolist(), S[i, 10:13].tolist(), physicsClientId=c)
             for seg in range(7):
-                for _ in range(69):
-                    p.applyExternalForce(b, -1, [0, 0, U[i, 0]], [0, 0, 0], p.LINK_FRAME, physicsClientId=c)
-                    p.applyExternalTorque(b, -1, U[i, 1:].tolist(), p.LINK_FRAME, physicsClientId=c)
-                    p.stepSimulation(physicsClientId=c)
+                push_body(p, c, b, U[i], 69)
                 pos, orn = p.getBasePositionAndOrientation(b, physicsClientId=c)
                 v, w = p.getBaseVelocity(b, physicsClientId=c)
                 np.testing.assert_allclose(paths[i, seg + 1, :3], pos, atol=1e-6)
