@@ -6,9 +6,8 @@ follows the :class:`LabelledEnv` protocol (:func:`check_labelled_env`).
 """
 
 from rmm_envs.risk.estimator import RiskEstimator, RiskResult
-from rmm_envs.risk.labelled import LabelledEnv, check_labelled_env
 from rmm_envs.risk.metrics import METRICS, cvar, expected, get_metric, worst_case
-from rmm_envs.risk.protocol import RiskScene, System, check_scene, check_system
+from rmm_envs.risk.protocol import LabelledEnv, RiskScene, System, check_labelled_env, check_scene, check_system
 
 __all__ = [
     "METRICS",

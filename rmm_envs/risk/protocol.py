@@ -1,4 +1,7 @@
-"""What the risk estimator needs of a system placed in a world: the :class:`RiskScene` protocol.
+"""The two protocols of risk labelling: :class:`RiskScene` (what the estimator needs of a system
+placed in a world) and :class:`LabelledEnv` (what ``RiskLabel`` and ``rmm-datagen`` need of an env).
+
+## RiskScene
 
 "System" in this project means *dynamics* (:mod:`rmm_envs.systems`); a *scene* is a dynamics
 object placed in one obstacle configuration, and that is what the estimator labels.  The
@@ -18,17 +21,46 @@ Optional:
     leaf_estimate(states (N, d)) -> (N,) in [0, 1]: a value for non-failed leaves instead of 0.
 
 Observing states for datasets is not the scene's concern but the env's
-(:class:`rmm_envs.risk.labelled.LabelledEnv`).  ``System`` and ``check_system`` are the
+(:class:`LabelledEnv`, below).  ``System`` and ``check_system`` are the
 deprecated former names of :class:`RiskScene` and :func:`check_scene`.
+
+## LabelledEnv
+
+An environment whose states can be risk-labelled offers, on its unwrapped env (every env of
+this package does, through :class:`rmm_envs.envs.base.LabelledEnvBase`):
+
+``risk_scene() -> RiskScene``
+    The :class:`rmm_envs.risk.RiskScene` of the current episode (its dynamics in its obstacle
+    configuration); ``RuntimeError`` before the first ``reset``.  ``risk_system()`` is its
+    deprecated former name.
+``true_state``
+    Property: the current true state, a ``(state_dim,)`` float array (a copy).
+``sample_states(rng, n) -> (n, state_dim)``
+    ``n`` states of the current episode's scene for a dataset, drawn from the
+    ``numpy.random.Generator`` ``rng`` only (so a seed fixes them).
+``observe_states(states, rng=None) -> (n, obs_dim) float32``
+    The observations the env would return in those states.  ``rng`` draws any feature that a
+    state does not determine (the Dubins4D simulated time); envs without such a feature ignore
+    it, envs with one require it.
+``privileged() -> dict``
+    The true state and the obstacle geometry (copies): **privileged** information, for
+    guardians that declare they use it and for analysis.
+``dataset_notes() -> dict``
+    Facts about ``observe_states`` that a dataset records in its metadata
+    (``{"obs_time_feature": description or None}``).
+
+:func:`check_labelled_env` checks an env against this list (on its class, so before any
+``reset``) and names the env and each missing or ill-formed hook.
 """
 
 from __future__ import annotations
 
+import inspect
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["RiskScene", "System", "check_scene", "check_system"]
+__all__ = ["HOOKS", "LabelledEnv", "RiskScene", "System", "check_labelled_env", "check_scene", "check_system"]
 
 _REQUIRED = ("state_dim", "control_low", "control_high", "propagate", "path_failed", "state_failed")
 
@@ -60,3 +92,65 @@ def check_scene(scene) -> None:
 System = RiskScene
 #: Deprecated: the former name of :func:`check_scene`.
 check_system = check_scene
+
+
+@runtime_checkable
+class LabelledEnv(Protocol):
+    def risk_scene(self) -> RiskScene: ...
+
+    @property
+    def true_state(self) -> np.ndarray: ...
+
+    def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray: ...
+
+    def observe_states(self, states: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray: ...
+
+    def privileged(self) -> dict: ...
+
+    def dataset_notes(self) -> dict: ...
+
+
+#: hook -> the positional arguments a call passes (``None``: a property, not called)
+HOOKS: dict[str, tuple[str, ...] | None] = {
+    "risk_scene": (),
+    "true_state": None,
+    "sample_states": ("rng", "n"),
+    "observe_states": ("states", "rng"),
+    "privileged": (),
+    "dataset_notes": (),
+}
+
+
+def _env_name(env) -> str:
+    spec = getattr(env, "spec", None)
+    name = type(env).__name__
+    return f"{spec.id} ({name})" if getattr(spec, "id", None) else name
+
+
+def check_labelled_env(env, needs: tuple[str, ...] = tuple(HOOKS)) -> None:
+    """Raise ``TypeError`` naming ``env`` and each hook of ``needs`` (default: all of
+    :data:`HOOKS`) that its unwrapped env lacks or cannot be called as the protocol calls it.
+    Hooks are looked up on the class, so the check needs no ``reset``."""
+    base = getattr(env, "unwrapped", env)
+    cls = type(base)
+    problems = []
+    for hook in needs:
+        args = HOOKS[hook]
+        member = inspect.getattr_static(cls, hook, None)
+        if member is None:
+            problems.append(f"{hook} is missing")
+        elif args is None:
+            if callable(member) and not isinstance(member, property):
+                problems.append(f"{hook} must be a property or attribute, not a method")
+        elif not callable(member):
+            problems.append(f"{hook} must be a method taking ({', '.join(args)})")
+        else:
+            try:
+                inspect.signature(member).bind(None, *args)
+            except TypeError:
+                problems.append(f"{hook}{inspect.signature(member)} cannot be called as {hook}({', '.join(args)})")
+            except ValueError:  # no signature (a builtin): assume it fits
+                pass
+    if problems:
+        raise TypeError(f"{_env_name(base)} is not a LabelledEnv (see rmm_envs.risk.protocol): "
+                        + "; ".join(problems))
