@@ -60,7 +60,7 @@ def test_the_checker_names_the_env_and_each_ill_formed_hook():
     with pytest.raises(TypeError) as e:
         check_labelled_env(_Bad())
     assert str(e.value) == (
-        "_Bad is not a LabelledEnv (see rmm_envs.risk.labelled): risk_scene(self, episode) cannot be called as "
+        "_Bad is not a LabelledEnv (see rmm_envs.risk.protocol): risk_scene(self, episode) cannot be called as "
         "risk_scene(); true_state must be a property or attribute, not a method; "
         "sample_states must be a method taking (rng, n)")
     check_labelled_env(_Bad(), needs=("observe_states", "privileged"))  # only what is asked for

@@ -20,7 +20,7 @@ import gymnasium as gym
 import numpy as np
 
 from rmm_envs.risk.estimator import RiskEstimator, validate_tree_params
-from rmm_envs.risk.labelled import check_labelled_env
+from rmm_envs.risk.protocol import check_labelled_env
 
 __all__ = ["RiskLabel"]
 
