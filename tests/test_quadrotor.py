@@ -213,7 +213,7 @@ def test_every_generated_shape_exists_in_pybullet():
         assert n == len(env.room.walls) + len(env.room.objects)
 
 
-def test_risk_system_hooks_and_agreement_with_pybullet():
+def test_risk_scene_hooks_and_agreement_with_pybullet():
     import sys
     from pathlib import Path
 
@@ -231,7 +231,7 @@ def test_risk_system_hooks_and_agreement_with_pybullet():
             env.set_state(s)
             in_contact.append(env.in_contact())
         assert np.mean(in_contact) <= 0.05
-        controls = env.risk_system().sample_controls(rng, 40)
+        controls = env.risk_scene().sample_controls(rng, 40)
         ours, _, pb_any, err = compare(env, states, controls)
         agree.append(np.mean(ours.any(1) == pb_any))
         assert err.max() < 1e-6  # identical trajectories until the first contact

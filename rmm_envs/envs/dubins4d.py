@@ -83,7 +83,9 @@ observations use it too); ``sample_states(rng, n)`` draws states uniform over th
 draws the simulated-time feature uniformly over ``[0, max_episode_sim_time]`` (the original
 left it 0 in every training sample and met 0-100 s at run time).
 
-## Info: ``sim_time``; ``state`` (the true state: **privileged**, for analysis and for
+## Info
+
+Every step: ``sim_time``; ``state`` (the true state: **privileged**, for analysis and for
 guardians that declare they use it); ``active`` and ``control`` (what was applied during the
 step and whether the guardian applied it).  On the last step also ``outcome`` (``"goal"``, ``"collision"``
 or ``"timeout"``) and ``episode`` (the statistics of the paper's Table I: ``n_env_steps``,
