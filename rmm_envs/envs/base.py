@@ -42,10 +42,12 @@ __all__ = ["MAX_ROUNDS", "LabelledEnvBase", "check_arguments", "draw_until", "fi
 T = TypeVar("T")
 
 #: Rounds of :func:`rejection_sample` before it gives up.  Each round draws twice the missing
-#: count, so with an acceptance rate ``p`` the missing count shrinks by about ``1 - 2p`` a round:
-#: 10,000 rounds serve acceptance rates down to ~0.05% for a thousand samples.  The envs accept
-#: far more (Dubins4D ~70%, mazes ~80%, rooms ~50%), so reaching the limit means the scene leaves
-#: (almost) no free space, and an error says so instead of looping for ever.
+#: count, so with an acceptance rate ``p`` the missing count shrinks by about ``1 - 2p`` a round
+#: and ``n`` samples take about ``ln(n) / (2p)`` rounds: 10,000 rounds serve acceptance rates
+#: down to ~0.04% for a thousand samples.  Measured over 20 seeded episodes each, the envs'
+#: ``sample_states`` accept 45% (worst) / 62% (mean) of draws for Dubins4D, 90% / 91% in mazes and
+#: 2% / 51% in rooms (a small room in its expanded box), so reaching the limit means the scene
+#: leaves (almost) no free space, and an error says so instead of looping for ever.
 MAX_ROUNDS = 10_000
 
 

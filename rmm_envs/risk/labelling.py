@@ -73,7 +73,7 @@ class DatagenConfig:
                 "n_steps": self.n_steps, "metric": self.metric, "alpha": self.alpha, "leaf": self.leaf}
 
 
-_ENV_CACHE: dict = {}  # one env per (id, arguments) and process: building one costs more than a configuration
+_ENV_CACHE: dict = {}  # one env per (id, arguments) and process, reused by every configuration (reset re-seeds it)
 
 
 def labelled_env(cfg: DatagenConfig):
