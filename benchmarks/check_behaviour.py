@@ -125,7 +125,7 @@ def label_fingerprint(n_states: int = 16) -> dict:
         rng = np.random.default_rng(3)
         states = env.sample_states(rng, n_states)
         obs = env.observe_states(states, rng)
-        est = RiskEstimator(env.risk_system(), branches=4, depth=2, horizon=0.5, n_steps=4)
+        est = RiskEstimator(env.risk_scene(), branches=4, depth=2, horizon=0.5, n_steps=4)
         res = est.estimate(states, np.random.default_rng(5))
         env.close()
         out[env_id] = _digest(states, obs, res.risk, res.min_risk_ctrl, res.min_risk_ctrl_dur, res.n_leaves)

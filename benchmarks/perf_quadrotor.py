@@ -18,14 +18,13 @@ import gymnasium as gym
 import numpy as np
 
 import rmm_envs  # noqa: F401
+from rmm_envs.envs.quadrotor_room import push_body
 from rmm_envs.risk import RiskEstimator
 from rmm_envs.systems.quadrotor import QUADROTOR
 
 
 def compare(env, states, controls):
-    import pybullet as p
-
-    scene = env.risk_system()
+    scene = env.risk_scene()
     paths = scene.propagate(states, controls, 2.0, 8)
     ours = scene.collision.states_failed(paths.reshape(-1, 13)).reshape(-1, 8)
     pb8 = np.zeros_like(ours)
@@ -35,12 +34,7 @@ def compare(env, states, controls):
         env.set_state(s)
         touched = False
         for seg in range(7):
-            for _ in range(69):
-                p.applyExternalForce(env.body, -1, [0, 0, u[0]], [0, 0, 0], p.LINK_FRAME, physicsClientId=env.client)
-                p.applyExternalTorque(env.body, -1, u[1:].tolist(), p.LINK_FRAME, physicsClientId=env.client)
-                p.stepSimulation(physicsClientId=env.client)
-                if p.getContactPoints(bodyA=env.body, physicsClientId=env.client):
-                    touched = True
+            touched |= push_body(env.p, env.client, env.body, u, 69)[1]
             pb8[i, seg + 1] = env.in_contact()
             if not touched:
                 max_err[i] = max(max_err[i], np.linalg.norm(env.get_state()[:3] - paths[i, seg + 1, :3]))
@@ -61,7 +55,7 @@ def main(argv=None):
         env.reset(seed=seed)
         rng = np.random.default_rng(seed)
         states = env.sample_states(rng, args.branches)
-        controls = env.risk_system().sample_controls(rng, args.branches)
+        controls = env.risk_scene().sample_controls(rng, args.branches)
         ours, pb8, pb_any, err = compare(env, states, controls)
         agree8.append(np.mean(ours.any(1) == pb8.any(1)))
         agree_any.append(np.mean(ours.any(1) == pb_any))
@@ -92,7 +86,7 @@ def main(argv=None):
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     states = env.sample_states(rng, 64)
-    est = RiskEstimator(env.risk_system())
+    est = RiskEstimator(env.risk_scene())
     t0 = time.perf_counter()
     est.estimate(states, rng)
     print(f"labels/s, n=32, m=2, t=2 s, one process: {64 / (time.perf_counter() - t0):.1f} (target >= 20)")

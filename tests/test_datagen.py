@@ -160,3 +160,25 @@ def test_load_errors(tmp_path):
     (tmp_path / "metadata.json").write_text(json.dumps({"format": "other"}))
     with pytest.raises(ValueError, match="format"):
         load_dataset(tmp_path)
+
+
+def test_datagen_reaches_any_env_through_the_labelled_env_protocol_only(tmp_path, capsys):
+    """An env registered under another id (so no id prefix can say what it is) gives the very
+    same dataset as the package's own id; an env without the protocol is refused by name."""
+    import gymnasium as gym
+
+    if "ThirdPartyMaze-v0" not in gym.registry:
+        gym.register(id="ThirdPartyMaze-v0", entry_point="rmm_envs.envs.dubins3d_maze:Dubins3DMazeEnv")
+    tiny = dict(configs=1, samples_per_config=4, branches=2, depth=1, configs_per_shard=1, seed=5)
+    ours = generate(DatagenConfig(env_id="Dubins3DMaze-v0", **tiny), tmp_path / "ours", workers=1, progress=False)
+    theirs = generate(DatagenConfig(env_id="ThirdPartyMaze-v0", **tiny), tmp_path / "theirs", workers=1, progress=False)
+    assert ours["dataset_sha256"] == theirs["dataset_sha256"]
+    meta = json.loads((tmp_path / "theirs" / "metadata.json").read_text())
+    assert (meta["obs_dim"], meta["state_dim"], meta["control_dim"], meta["obs_time_feature"]) == (8, 3, 1, None)
+    generate(DatagenConfig(**tiny), tmp_path / "d4", workers=1, progress=False)
+    d4 = json.loads((tmp_path / "d4" / "metadata.json").read_text())
+    assert d4["obs_time_feature"] == "uniform over [0, max_episode_sim_time]" and d4["control_dim"] == 2
+    with pytest.raises(TypeError, match=r"CartPole-v1 \(CartPoleEnv\) is not a LabelledEnv.*risk_scene is missing"):
+        generate(DatagenConfig(env_id="CartPole-v1", **tiny), tmp_path / "cp", workers=1, progress=False)
+    assert main(["--env", "CartPole-v1", "--out", str(tmp_path / "cp2"), "--no-progress"]) == 2
+    assert "is not a LabelledEnv" in capsys.readouterr().err and not (tmp_path / "cp2").exists()

@@ -148,8 +148,8 @@ def test_tree_size_refused_before_allocation_naming_the_flags(tmp_path, capsys):
     env = Dubins4DCirclesEnv()
     env.reset(seed=0)
     with pytest.raises(ValueError, match="--depth"):
-        RiskEstimator(env.risk_system(), branches=2, depth=21)  # 2^22 - 2 nodes
-    RiskEstimator(env.risk_system(), branches=2, depth=19)  # 2^20 - 2 nodes: the largest accepted
+        RiskEstimator(env.risk_scene(), branches=2, depth=21)  # 2^22 - 2 nodes
+    RiskEstimator(env.risk_scene(), branches=2, depth=19)  # 2^20 - 2 nodes: the largest accepted
     assert tree_nodes(2, 19) <= MAX_TREE_NODES < tree_nodes(2, 20)
 
 

@@ -155,7 +155,7 @@ def test_numpy_propagator_reproduces_pybullet():
     """The batched propagator the fast labeller needs, against PyBullet itself on random branches."""
     import pybullet as p
 
-    from rmm_envs.envs.quadrotor_room import _urdf_path
+    from rmm_envs.envs.quadrotor_room import _urdf_path, push_body
     from rmm_envs.systems.quadrotor import Quadrotor
 
     c = p.connect(p.DIRECT)
@@ -181,10 +181,7 @@ def test_numpy_propagator_reproduces_pybullet():
             p.resetBasePositionAndOrientation(b, S[i, :3].tolist(), S[i, 3:7].tolist(), physicsClientId=c)
             p.resetBaseVelocity(b, S[i, 7:10].tolist(), S[i, 10:13].tolist(), physicsClientId=c)
             for seg in range(7):
-                for _ in range(69):
-                    p.applyExternalForce(b, -1, [0, 0, U[i, 0]], [0, 0, 0], p.LINK_FRAME, physicsClientId=c)
-                    p.applyExternalTorque(b, -1, U[i, 1:].tolist(), p.LINK_FRAME, physicsClientId=c)
-                    p.stepSimulation(physicsClientId=c)
+                push_body(p, c, b, U[i], 69)
                 pos, orn = p.getBasePositionAndOrientation(b, physicsClientId=c)
                 v, w = p.getBaseVelocity(b, physicsClientId=c)
                 np.testing.assert_allclose(paths[i, seg + 1, :3], pos, atol=1e-6)
@@ -216,7 +213,7 @@ def test_every_generated_shape_exists_in_pybullet():
         assert n == len(env.room.walls) + len(env.room.objects)
 
 
-def test_risk_system_hooks_and_agreement_with_pybullet():
+def test_risk_scene_hooks_and_agreement_with_pybullet():
     import sys
     from pathlib import Path
 
@@ -234,7 +231,7 @@ def test_risk_system_hooks_and_agreement_with_pybullet():
             env.set_state(s)
             in_contact.append(env.in_contact())
         assert np.mean(in_contact) <= 0.05
-        controls = env.risk_system().sample_controls(rng, 40)
+        controls = env.risk_scene().sample_controls(rng, 40)
         ours, _, pb_any, err = compare(env, states, controls)
         agree.append(np.mean(ours.any(1) == pb_any))
         assert err.max() < 1e-6  # identical trajectories until the first contact

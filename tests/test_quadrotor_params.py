@@ -40,7 +40,7 @@ def test_the_env_configures_pybullet_from_the_parameter_object():
         # the env's damping arguments replace the defaults in its parameters, and the
         # labeller's propagator uses exactly those parameters
         assert env.params == dataclasses.replace(QUADROTOR, linear_damping=0.1, angular_damping=0.2)
-        assert env.risk_system().system.params is env.params
+        assert env.risk_scene().system.params is env.params
     finally:
         env.close()
     assert QuadrotorRoomEnv().params == QUADROTOR

@@ -3,8 +3,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv, Dubins4DScene
-from rmm_envs.risk import RiskEstimator, check_system, cvar, get_metric, worst_case
+from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
+from rmm_envs.scenes import Dubins4DScene
+from rmm_envs.risk import RiskEstimator, check_scene, cvar, get_metric, worst_case
 from tests.toy_systems import Line1D
 
 
@@ -142,7 +143,7 @@ def _tree_from_levels(levels, root, n, m):
 def test_batched_agrees_with_recursive_reference(metric, alpha):
     env = Dubins4DCirclesEnv()
     env.reset(seed=4)
-    sc = env.risk_system()
+    sc = env.risk_scene()
     rng = np.random.default_rng(1)
     states = env.sample_states(rng, 12)
     n, m = 5, 3
@@ -158,11 +159,11 @@ def test_deterministic_and_independent_of_chunking():
     env = Dubins4DCirclesEnv()
     env.reset(seed=2)
     states = env.sample_states(np.random.default_rng(0), 40)
-    a = RiskEstimator(env.risk_system(), chunk_size=7).estimate(states, np.random.default_rng(9))
-    b = RiskEstimator(env.risk_system(), chunk_size=40).estimate(states, np.random.default_rng(9))
+    a = RiskEstimator(env.risk_scene(), chunk_size=7).estimate(states, np.random.default_rng(9))
+    b = RiskEstimator(env.risk_scene(), chunk_size=40).estimate(states, np.random.default_rng(9))
     np.testing.assert_array_equal(a.risk, b.risk)
     np.testing.assert_array_equal(a.min_risk_ctrl, b.min_risk_ctrl)
-    c = RiskEstimator(env.risk_system()).estimate(states, np.random.default_rng(10))
+    c = RiskEstimator(env.risk_scene()).estimate(states, np.random.default_rng(10))
     assert not np.array_equal(a.risk, c.risk)
 
 
@@ -202,7 +203,7 @@ def test_bad_systems_and_states():
     with pytest.raises(TypeError, match="lacks"):
         RiskEstimator(object())
     with pytest.raises(TypeError, match="lacks"):
-        check_system(np.zeros(3))
+        check_scene(np.zeros(3))
     est = RiskEstimator(Line1D(), branches=2, depth=1)
     with pytest.raises(ValueError, match="shape"):
         est.estimate(np.zeros((2, 3)), np.random.default_rng(0))

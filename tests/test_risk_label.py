@@ -39,8 +39,9 @@ def test_works_on_the_parallel_env_and_is_seeded():
     assert risks() == risks()
 
 
-def test_needs_an_env_with_a_system():
-    with pytest.raises(TypeError, match="risk_system"):
+def test_needs_a_labelled_env_and_names_it_and_the_missing_hooks():
+    with pytest.raises(TypeError, match=r"CartPole-v1 \(CartPoleEnv\) is not a LabelledEnv.*risk_scene is missing; "
+                                        r"true_state is missing$"):
         RiskLabel(gym.make("CartPole-v1"))
 
 

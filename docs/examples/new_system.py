@@ -4,26 +4,22 @@
 
 A planar double integrator (a point mass with bounded acceleration) in a corridor of width 2 m:
 state ``(x, y, vx, vy)``, control ``(ax, ay)`` in ``[-1, 1]^2``, failure when ``|y| >= 1``.
-All the estimator needs is the :class:`rmm_envs.risk.System` protocol: control bounds and
-sampling, batched propagation, path failure, and an observation.
+All the estimator needs is the :class:`rmm_envs.risk.RiskScene` protocol: the state size, the
+control bounds, batched propagation, and which states and paths fail.
 """
 
 import numpy as np
 
-from rmm_envs.risk import RiskEstimator, check_system
+from rmm_envs.risk import RiskEstimator, check_scene
 
 
 class CorridorDoubleIntegrator:
     state_dim = 4
-    control_dim = 2
 
     def __init__(self, half_width=1.0, a_max=1.0):
         self.half_width = half_width
         self.control_low = np.array([-a_max, -a_max])
         self.control_high = np.array([a_max, a_max])
-
-    def sample_controls(self, rng, n):
-        return rng.uniform(self.control_low, self.control_high, size=(n, 2))
 
     def propagate(self, states, controls, duration, n_steps):
         # exact for a constant acceleration: p(t) = p0 + v0 t + a t^2 / 2
@@ -39,15 +35,10 @@ class CorridorDoubleIntegrator:
         # of each segment would be exact; with short segments the points suffice here)
         return np.any(np.abs(paths[..., 1]) >= self.half_width, axis=1)
 
-    def observe(self, states):
-        # a local observation: distances to both walls and the velocity
-        y = states[:, 1]
-        return np.column_stack([self.half_width - y, self.half_width + y, states[:, 2], states[:, 3]])
-
 
 def main():
     system = CorridorDoubleIntegrator()
-    check_system(system)  # raises TypeError naming anything missing
+    check_scene(system)  # raises TypeError naming anything missing
     est = RiskEstimator(system, branches=32, depth=2, horizon=1.0, n_steps=8)
     states = np.array([
         [0.0, 0.0, 1.0, 0.0],    # centred, moving along the corridor

@@ -41,3 +41,29 @@ class Canvas:
         rows = ((self.wy[0] - ys) * self.sy + 0.5).astype(int)
         ok = (cols >= 0) & (cols < self.size) & (rows >= 0) & (rows < self.size)
         self.img[rows[ok], cols[ok]] = colour
+
+
+def dubins4d_frame(scene, state, guardian_active: bool, half: float, size: int = 512) -> np.ndarray:
+    """Dubins4D's top-down frame of the window ``[-15, 15]^2`` m: the generation arena
+    ``[-half, half]^2`` outlined, obstacles red, the goal green with a ring, the rays grey and the
+    vehicle blue (driver) or orange (``guardian_active``)."""
+    from rmm_envs.worlds.circles import ray_cast
+
+    cv = Canvas(size, -15, 15, -15, 15)
+    for a, b in (((-half, -half), (half, -half)), ((half, -half), (half, half)),
+                 ((half, half), (-half, half)), ((-half, half), (-half, -half))):
+        cv.line(a[0], a[1], b[0], b[1], (225, 225, 225))  # the arena used for generation
+    g = scene.goal
+    cv.disc(g[0], g[1], g[2], GREEN)
+    cv.ring(g[0], g[1], g[2] + 0.25, GREEN, 0.12)
+    for ox, oy, r in scene.obstacles:
+        cv.disc(ox, oy, r, RED)
+    x, y, th, v = state
+    rays = ray_cast(state[None, :2], np.array([th]), scene.obstacles, scene.n_rays, scene.ray_length)[0]
+    for i, d in enumerate(rays):
+        a = th + 2 * np.pi * i / scene.n_rays
+        cv.line(x, y, x + d * np.cos(a), y + d * np.sin(a), GREY)
+    colour = ORANGE if guardian_active else BLUE
+    cv.disc(x, y, 0.4, colour)
+    cv.line(x, y, x + (0.5 + v) * np.cos(th), y + (0.5 + v) * np.sin(th), colour)
+    return cv.img

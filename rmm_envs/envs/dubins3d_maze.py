@@ -20,6 +20,8 @@ the bounds are clipped; NaN/inf or a wrong shape raise ``ValueError``.
 ``Box(0, inf, (8,), float32)``: distances in px along 8 rays at ``psi + k pi / 4``
 (``k = 0..7``, counter-clockwise from the heading), to the first wall surface (exact
 ray-capsule intersection) or the image border.  No pose, heading or speed, as in the paper.
+The space is an :class:`rmm_envs.autonomy.ObservationBox` whose layout has one field,
+``"rays"`` (indices 0-7), with ray angles ``k pi / 4``.
 
 ## Dynamics
 
@@ -43,6 +45,13 @@ as generation keeps states clear; a state inside a wall of a given ``Maze`` or o
 image, a state that no drawn maze leaves clear, or a maze option of the wrong type raises
 ``ValueError``.  Without options the draws are exactly those of generation.
 
+## Risk labelling
+
+The env follows the :class:`rmm_envs.risk.LabelledEnv` protocol: ``risk_scene()`` is the
+episode's :class:`rmm_envs.scenes.MazeScene`; ``sample_states(rng, n)`` draws poses uniform over
+the image and heading, rejecting those inside a wall; ``observe_states(states)`` is the ray
+observation (no random feature: ``rng`` is ignored).
+
 ## Info
 
 ``state`` (the true pose, privileged), ``steps``; on the last step ``outcome``
@@ -63,58 +72,43 @@ from __future__ import annotations
 
 import math
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from rmm_envs.autonomy import ObservationBox, ObservationLayout
 from rmm_envs.envs import _render
-from rmm_envs.risk.protocol import SceneBase
+from rmm_envs.envs.base import LabelledEnvBase, check_arguments, draw_until, finite, option_vector, rejection_sample, whole
+from rmm_envs.scenes.maze import MazeScene
 from rmm_envs.systems.dubins3d import Dubins3D
 from rmm_envs.worlds.mazes import MAZE_KINDS, Maze, generate_maze
 
-__all__ = ["Dubins3DMazeEnv", "MazeScene"]
+__all__ = ["Dubins3DMazeEnv", "MazeScene", "observation_layout"]
+
+N_RAYS = 8
 
 
-class MazeScene(SceneBase):
-    """A Dubins3D car in one maze: the :class:`rmm_envs.risk.System` for labelling."""
-
-    def __init__(self, maze: Maze, system: Dubins3D | None = None, n_rays: int = 8) -> None:
-        self.maze = maze
-        self.system = system or Dubins3D()
-        self.n_rays = n_rays
-        self.state_dim, self.control_dim, self.obs_dim = 3, 1, n_rays
-
-    def state_failed(self, states):
-        return self.maze.state_failed(np.asarray(states)[:, :2])
-
-    def path_failed(self, paths):
-        return self.maze.paths_hit(paths)
-
-    def observe(self, states, *_):
-        return self.maze.rays(np.asarray(states, dtype=float), self.n_rays).astype(np.float32)
+def observation_layout() -> ObservationLayout:
+    """The observation's named slices: ``"rays"``, ray ``k`` at ``k pi / 4`` left of the heading."""
+    return ObservationLayout.of(("rays", N_RAYS), ray_angles=[k * math.pi / 4 for k in range(N_RAYS)])
 
 
-class Dubins3DMazeEnv(gym.Env):
+class Dubins3DMazeEnv(LabelledEnvBase):
     """See the module docstring for the full specification."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    reset_options = ("state", "maze")
 
     def __init__(self, maze_kind: str = "rectangular", step_dt: float = 1.0, n_path_points: int = 8,
                  max_episode_steps: int = 1000, speed: float = 10.0, r_min: float = 50.0, render_mode: str | None = None):
-        if maze_kind not in MAZE_KINDS + ("mixed",):
-            raise ValueError(f"maze_kind must be one of {MAZE_KINDS + ('mixed',)}, got {maze_kind!r}")
-        if not (step_dt > 0 and math.isfinite(step_dt)):
-            raise ValueError(f"step_dt must be a finite number > 0, got {step_dt!r}")
-        if int(n_path_points) != n_path_points or n_path_points < 2:
-            raise ValueError(f"n_path_points must be an integer >= 2, got {n_path_points!r}")
-        for name, v in (("speed", speed), ("r_min", r_min)):
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
-        if (isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, float, np.integer, np.floating))
-                or not np.isfinite(max_episode_steps) or int(max_episode_steps) != max_episode_steps or max_episode_steps < 1):
-            raise ValueError(f"max_episode_steps must be an integer >= 1, got {max_episode_steps!r}")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        check_arguments([
+            (maze_kind in MAZE_KINDS + ("mixed",), "maze_kind", maze_kind, f"one of {MAZE_KINDS + ('mixed',)}"),
+            (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number > 0"),
+            (whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
+            (whole(max_episode_steps) and max_episode_steps >= 1, "max_episode_steps", max_episode_steps, "an integer >= 1"),
+            (finite(speed) and speed > 0, "speed", speed, "a finite number > 0"),
+            (finite(r_min) and r_min > 0, "r_min", r_min, "a finite number > 0"),
+            self.check_render_mode(render_mode),
+        ])
         self.maze_kind = maze_kind
         self.step_dt = float(step_dt)
         self.n_path_points = int(n_path_points)
@@ -123,11 +117,10 @@ class Dubins3DMazeEnv(gym.Env):
         self.render_mode = render_mode
         u = np.float32(self.system.u_max)
         self.action_space = spaces.Box(-u, u, shape=(1,), dtype=np.float32)
-        self.observation_space = spaces.Box(0.0, np.inf, shape=(8,), dtype=np.float32)
+        self.observation_space = ObservationBox(np.zeros(N_RAYS, np.float32), np.full(N_RAYS, np.inf, np.float32), observation_layout())
         self.scene: MazeScene | None = None
         self._state = np.zeros(3)
         self._steps = 0
-        self._done = False
 
     def _maze_from_option(self, value) -> Maze:
         if isinstance(value, Maze):
@@ -139,18 +132,30 @@ class Dubins3DMazeEnv(gym.Env):
                 raise ValueError(f"option 'maze': {e}") from None
         raise ValueError(f"option 'maze' must be a Maze or a dict of generate_maze arguments, got {type(value).__name__}")
 
+    # ------------------------------------------------------------------ dataset hooks
     def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """``n`` poses uniform over the image x [-pi, pi), clear of the walls (rejection sampling)."""
+        self.require_episode()
         m = self.scene.maze
-        out = np.empty((0, 3))
-        while out.shape[0] < n:
-            k = max(2 * (n - out.shape[0]), 16)
-            cand = np.column_stack([rng.uniform(0, m.width, k), rng.uniform(0, m.height, k), rng.uniform(-np.pi, np.pi, k)])
-            out = np.vstack([out, cand[~m.state_failed(cand[:, :2])]])
-        return out[:n]
+        return rejection_sample(
+            rng, n, 3,
+            lambda r, k: np.column_stack([r.uniform(0, m.width, k), r.uniform(0, m.height, k), r.uniform(-np.pi, np.pi, k)]),
+            lambda cand: m.state_failed(cand[:, :2]), "maze poses clear of the walls")
 
     def observe_states(self, states, rng=None) -> np.ndarray:
+        """The ray observation of arbitrary poses ``(N, 3)``; ``rng`` is unused (no random feature)."""
+        self.require_episode()
         return self.scene.observe(states)
 
+    @property
+    def true_state(self) -> np.ndarray:
+        return self._state.copy()
+
+    def privileged(self) -> dict:
+        self.require_episode()
+        return {"state": self._state.copy(), "maze": self.scene.maze}
+
+    # ------------------------------------------------------------------ episodes
     _MAX_MAZE_DRAWS = 100
 
     def _draw_maze(self, spec) -> Maze:
@@ -161,15 +166,8 @@ class Dubins3DMazeEnv(gym.Env):
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = set(options) - {"state", "maze"}
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; expected any of 'state', 'maze'")
-        st = None
-        if "state" in options:
-            st = np.asarray(options["state"], dtype=float).reshape(-1)
-            if st.shape != (3,) or not np.all(np.isfinite(st)):
-                raise ValueError(f"option 'state' must be 3 finite numbers [x, y, psi], got {options['state']!r}")
+        options = self.check_options(options)
+        st = option_vector(options["state"], 3, "state", " [x, y, psi]") if "state" in options else None
         spec = options.get("maze")
         if spec is not None and not isinstance(spec, (Maze, dict)):
             self._maze_from_option(spec)  # raises, naming the option
@@ -181,11 +179,9 @@ class Dubins3DMazeEnv(gym.Env):
         elif st is not None:
             # a generated maze (from the seed, or from the given generate_maze arguments) is
             # redrawn until the given state is clear of its walls, as generation keeps states clear
-            for _ in range(self._MAX_MAZE_DRAWS):
-                maze = self._draw_maze(spec)
-                if not maze.state_failed(st[None, :2])[0]:
-                    break
-            else:
+            maze = draw_until(lambda: self._draw_maze(spec), lambda mz: not mz.state_failed(st[None, :2])[0],
+                              self._MAX_MAZE_DRAWS)
+            if maze is None:
                 raise ValueError(f"option 'state': {st[:2].tolist()} is inside a wall or outside the image of each of "
                                  f"{self._MAX_MAZE_DRAWS} mazes drawn from the seed; choose a point inside a cell, "
                                  "away from its sides")
@@ -196,17 +192,14 @@ class Dubins3DMazeEnv(gym.Env):
             st = self.sample_states(self.np_random, 1)[0]
         self._state = st
         self._steps = 0
-        self._done = False
+        self.begin_episode()
         return self._obs(), {"state": self._state.copy(), "steps": 0}
 
     def _obs(self) -> np.ndarray:
         return self.scene.observe(self._state[None])[0]
 
     def step(self, action):
-        if self.scene is None:
-            raise RuntimeError("call reset() before step()")
-        if self._done:
-            raise RuntimeError("the episode has ended; call reset() before stepping again")
+        self.check_can_step()
         a = np.asarray(action, dtype=float)
         if a.size != 1 or a.ndim > 1:
             raise ValueError(f"action must be a turn rate of shape (1,) in {self.action_space}, got shape {a.shape}")
@@ -223,34 +216,19 @@ class Dubins3DMazeEnv(gym.Env):
         truncated = not hit and self._steps >= self.max_episode_steps
         info = {"state": self._state.copy(), "steps": self._steps}
         if terminated or truncated:
-            self._done = True
+            self.end_episode()
             info["outcome"] = "collision" if hit else "timeout"
         return self._obs(), (-1.0 if hit else 0.0), terminated, truncated, info
 
-    def risk_system(self) -> MazeScene:
-        if self.scene is None:
-            raise RuntimeError("call reset() first")
-        return self.scene
-
-    @property
-    def true_state(self) -> np.ndarray:
-        return self._state.copy()
-
-    def privileged(self) -> dict:
-        return {"state": self._state.copy(), "maze": self.scene.maze}
-
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
-            return None
-        m = self.scene.maze
+    def render_frame(self) -> np.ndarray:
         size = 512
+        m = self.scene.maze
         cv = _render.Canvas(size, 0, max(m.width, m.height), 0, max(m.width, m.height))
         X, Y = np.meshgrid(cv.wx, cv.wy)
         walls = m.point_clearance(np.column_stack([X.ravel(), Y.ravel()])) <= 2.0
         cv.img[walls.reshape(size, size)] = (0, 0, 0)
         x, y, psi = self._state
-        for d, k in zip(self._obs(), range(8)):
+        for d, k in zip(self._obs(), range(N_RAYS)):
             a = psi + k * np.pi / 4
             cv.line(x, y, x + d * np.cos(a), y + d * np.sin(a), _render.GREY)
         cv.disc(x, y, 25.0, _render.BLUE)

@@ -74,6 +74,15 @@ goal, or a goal entirely inside a given obstacle, raises ``ValueError`` naming t
 involved, as do wrong lengths, non-finite numbers, radii <= 0, a speed outside [0, 2] and
 unknown keys.  Without options the draws are exactly those of generation.
 
+## Risk labelling
+
+The env follows the :class:`rmm_envs.risk.LabelledEnv` protocol: ``risk_scene()`` is the
+episode's :class:`rmm_envs.scenes.Dubins4DScene` (the env's own collision checks and
+observations use it too); ``sample_states(rng, n)`` draws states uniform over the arena x
+``[-pi, pi)`` x ``[0, 2]``, rejecting those inside an obstacle; ``observe_states(states, rng)``
+draws the simulated-time feature uniformly over ``[0, max_episode_sim_time]`` (the original
+left it 0 in every training sample and met 0-100 s at run time).
+
 ## Info
 
 Every step: ``sim_time``; ``state`` (the true state: **privileged**, for analysis and for
@@ -118,29 +127,21 @@ from __future__ import annotations
 
 import importlib.util
 import math
-from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout, parse
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.driver import CLFDriver, DriverParams
 from rmm_envs.envs import _render
+from rmm_envs.envs.base import LabelledEnvBase, check_arguments, finite, rejection_sample, whole
+from rmm_envs.envs.dubins4d_start import HALF as _HALF, Dubins4DStarts
 from rmm_envs.envs.dubins4d_step import advance
-from rmm_envs.risk.protocol import SceneBase
-from rmm_envs.systems.dubins4d import Dubins4D, wrap_angle
-from rmm_envs.worlds.circles import (
-    CircleWorld,
-    as_circles,
-    paths_hit_circles,
-    points_in_circles,
-    ray_cast,
-)
+from rmm_envs.scenes.dubins4d import Dubins4DScene, observation
+from rmm_envs.systems.dubins4d import Dubins4D
 
-__all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "parse_guardian_action"]
+__all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "observation", "observation_layout", "parse_guardian_action"]
 
-OBS_DIM = 17
 CONTROLS = ("turnrate_ctrl", "accel_ctrl")  # the action fields of u = (u1, u2)
 
 
@@ -148,108 +149,12 @@ def observation_layout(n_rays: int = 12) -> ObservationLayout:
     """The named slices of the observation table above; ray ``i`` points ``2 pi i / n_rays`` left of the heading."""
     return ObservationLayout.of(("time", 1), ("goal_offset", 2), ("heading", 1), ("speed", 1), ("rays", n_rays),
                                 ray_angles=[2.0 * math.pi * i / n_rays for i in range(n_rays)])
-_HALF = 10.0  # arena half width (generation only)
 
 
-def observation(states: np.ndarray, sim_time, goals: np.ndarray, rays: np.ndarray) -> np.ndarray:
-    """The observation table above for ``N`` states ``(N, 4)``: ``sim_time`` scalar or ``(N,)``,
-    goal centres ``(N, 2)`` (or ``(1, 2)`` for all), ray lengths ``(N, n_rays)``; float32."""
-    obs = np.empty((states.shape[0], 5 + rays.shape[1]), dtype=np.float32)
-    obs[:, 0] = sim_time
-    obs[:, 1] = goals[:, 0] - states[:, 0]
-    obs[:, 2] = goals[:, 1] - states[:, 1]
-    obs[:, 3] = wrap_angle(states[:, 2])
-    obs[:, 4] = states[:, 3]
-    obs[:, 5:] = rays
-    return obs
+#: Validate a guardian action, return ``(active, (u1, u2) clipped)``: :func:`rmm_envs.autonomy.parse`.
+parse_guardian_action = parse
 
-
-class Dubins4DScene(SceneBase):
-    """A Dubins4D vehicle among fixed circles: what the risk estimator needs of the env.
-
-    Implements :class:`rmm_envs.risk.System`: control bounds and sampling, batched exact
-    propagation, path failure (any point or segment touching an obstacle) and the 17-dim
-    observation.  The environment uses the very same object, so labels and the env agree by
-    construction.
-    """
-
-    def __init__(
-        self,
-        obstacles: np.ndarray,
-        goal: np.ndarray,
-        system: Dubins4D | None = None,
-        n_rays: int = 12,
-        ray_length: float = 10.0,
-    ) -> None:
-        self.system = system or Dubins4D()
-        self.world = CircleWorld(obstacles, goal)
-        self.n_rays = int(n_rays)
-        self.ray_length = float(ray_length)
-        self.state_dim = 4
-        self.control_dim = 2
-        self.obs_dim = 5 + self.n_rays
-
-    @property
-    def obstacles(self) -> np.ndarray:
-        return self.world.obstacles
-
-    @property
-    def goal(self) -> np.ndarray:
-        return self.world.goal
-
-    def state_failed(self, states: np.ndarray) -> np.ndarray:
-        return points_in_circles(np.asarray(states)[:, :2], self.world.obstacles)
-
-    def path_failed(self, paths: np.ndarray) -> np.ndarray:
-        """``(N,)`` bool: a path ``(N, S, 4)`` touches an obstacle at a point or segment."""
-        return paths_hit_circles(paths, self.world.obstacles)
-
-    def observe(self, states: np.ndarray, sim_time=0.0) -> np.ndarray:
-        """``(N, 17)`` float32 observations for states ``(N, 4)`` at ``sim_time`` (scalar or ``(N,)``)."""
-        states = np.asarray(states, dtype=float)
-        rays = ray_cast(states[:, :2], states[:, 2], self.world.obstacles, self.n_rays, self.ray_length)
-        return observation(states, sim_time, self.world.goal[None, :2], rays)
-
-    def leaf_estimate(self, states: np.ndarray) -> np.ndarray:
-        """pyrmm's Dubins4D stopping-distance leaf heuristic (docs/original-code.md, item 24), ``(N,)``.
-
-        Braking at 0.5 m/s^2 from speed ``v`` covers ``v^2`` m; the risk is that distance over
-        the forward ray, capped at 1 (1 when the ray reads 0).  Speeds are never negative here,
-        and ``v = 0`` gives 0 (the original asserted on it).
-        """
-        states = np.asarray(states, dtype=float)
-        v = np.clip(states[:, 3], self.system.v_min, self.system.v_max)
-        a = abs(self.system.u2_min)
-        d_stop = v * v / (2.0 * a)
-        fwd = ray_cast(states[:, :2], states[:, 2], self.world.obstacles, 1, self.ray_length)[:, 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            risk = np.where(fwd <= 0, 1.0, np.minimum(d_stop / fwd, 1.0))
-        return np.where(v <= 0, np.where(fwd <= 0, 1.0, 0.0), risk)
-
-
-def parse_guardian_action(action, space: GuardianActionSpace) -> tuple[bool, np.ndarray]:
-    """Validate a guardian action; return ``(active, (u1, u2) clipped)`` (:func:`rmm_envs.autonomy.parse`)."""
-    return parse(action, space)
-
-
-def _finite(x) -> bool:
-    """A real, finite number (not a bool, string or array)."""
-    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool) and math.isfinite(x)
-
-
-def _whole(x) -> bool:
-    """An integer value (``3`` or ``3.0``), finite."""
-    return _finite(x) and float(x) == int(x)
-
-
-def _vector(value, n: int, name: str) -> np.ndarray:
-    arr = np.asarray(value, dtype=float).reshape(-1)
-    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"option {name!r} must be {n} finite numbers, got {value!r}")
-    return arr
-
-
-class Dubins4DCirclesEnv(gym.Env):
+class Dubins4DCirclesEnv(Dubins4DStarts, LabelledEnvBase):
     """Blocking Dubins4D parallel-autonomy env; see the module docstring for the full spec."""
 
     # "human" is offered only where its optional dependency (pygame) is installed
@@ -257,6 +162,7 @@ class Dubins4DCirclesEnv(gym.Env):
         "render_modes": ["rgb_array"] + (["human"] if importlib.util.find_spec("pygame") else []),
         "render_fps": 15,
     }
+    reset_options = ("state", "goal", "obstacles")
 
     def __init__(
         self,
@@ -277,23 +183,20 @@ class Dubins4DCirclesEnv(gym.Env):
     ) -> None:
         # Every bound is finite: an infinite episode length, ray length or radius would silently
         # disable what it configures (no timeout, rays that never end, a goal covering everything).
-        checks = [
-            (_finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number > 0"),
-            (_whole(n_rays) and n_rays >= 1, "n_rays", n_rays, "an integer >= 1"),
-            (_finite(ray_length) and ray_length > 0, "ray_length", ray_length, "a finite number > 0"),
-            (_finite(max_episode_sim_time) and max_episode_sim_time > 0, "max_episode_sim_time", max_episode_sim_time,
+        check_arguments([
+            (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number > 0"),
+            (whole(n_rays) and n_rays >= 1, "n_rays", n_rays, "an integer >= 1"),
+            (finite(ray_length) and ray_length > 0, "ray_length", ray_length, "a finite number > 0"),
+            (finite(max_episode_sim_time) and max_episode_sim_time > 0, "max_episode_sim_time", max_episode_sim_time,
              "a finite number of seconds > 0 (episodes need a time limit)"),
-            (_whole(n_obstacles) and n_obstacles >= 0, "n_obstacles", n_obstacles, "an integer >= 0"),
-            (_finite(obstacle_min_rad) and _finite(obstacle_max_rad) and 0 < obstacle_min_rad <= obstacle_max_rad,
+            (whole(n_obstacles) and n_obstacles >= 0, "n_obstacles", n_obstacles, "an integer >= 0"),
+            (finite(obstacle_min_rad) and finite(obstacle_max_rad) and 0 < obstacle_min_rad <= obstacle_max_rad,
              "obstacle radii", (obstacle_min_rad, obstacle_max_rad), "finite with 0 < min <= max"),
-            (_finite(goal_min_rad) and _finite(goal_max_rad) and 0 < goal_min_rad <= goal_max_rad,
+            (finite(goal_min_rad) and finite(goal_max_rad) and 0 < goal_min_rad <= goal_max_rad,
              "goal radii", (goal_min_rad, goal_max_rad), "finite with 0 < min <= max"),
-            (_whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
-            (render_mode is None or render_mode in self.metadata["render_modes"], "render_mode", render_mode, f"one of {self.metadata['render_modes']}"),
-        ]
-        for ok, name, value, expected in checks:
-            if not ok:
-                raise ValueError(f"{name} must be {expected}, got {value!r}")
+            (whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
+            self.check_render_mode(render_mode),
+        ])
         self.step_dt = float(step_dt)
         self.n_rays = int(n_rays)
         self.ray_length = float(ray_length)
@@ -310,16 +213,10 @@ class Dubins4DCirclesEnv(gym.Env):
                 driver_params = DriverParams(**driver_params)
             except TypeError as e:
                 raise ValueError(f"driver_params: {e}; expected keys of DriverParams") from None
-        self.driver = CLFDriver(
-            (self.system.u1_min, self.system.u1_max),
-            (self.system.u2_min, self.system.u2_max),
-            (self.system.v_min, self.system.v_max),
-            driver_params or DriverParams(),
-            solver=driver_solver,
-        )
-        self.clock = make_clock(clock)
-
         s = self.system
+        self.driver = CLFDriver((s.u1_min, s.u1_max), (s.u2_min, s.u2_max), (s.v_min, s.v_max),
+                                driver_params or DriverParams(), solver=driver_solver)
+        self.clock = make_clock(clock)
         self.action_space = GuardianActionSpace.for_system(s, CONTROLS)
         low = np.array([0.0, -np.inf, -np.inf, -np.pi, s.v_min] + [0.0] * self.n_rays, dtype=np.float32)
         high = np.array([np.inf, np.inf, np.inf, np.pi, s.v_max] + [self.ray_length] * self.n_rays, dtype=np.float32)
@@ -327,112 +224,9 @@ class Dubins4DCirclesEnv(gym.Env):
 
         self.scene: Dubins4DScene | None = None
         self._state = np.zeros(4)
-        self._window = None
         self._last_active = False
 
-    # ------------------------------------------------------------------ generation
-    # The rules a start (state, goal, obstacles) obeys, whether generated or given:
-    #   R1 the vehicle's position is outside every obstacle (boundary counts as inside);
-    #   R2 the vehicle's position is outside the goal (boundary counts as inside);
-    #   R3 the goal is not entirely inside one obstacle.
-    # Generated parts are rejection-sampled until they obey them against every given part.
-    _MAX_DRAWS = 100_000
-    _MAX_OBSTACLE_DRAWS = 1_000  # a state at the arena's centre is left free by ~1 draw in 8
-
-    @staticmethod
-    def _goal_inside_obstacle(goal: np.ndarray, obstacles: np.ndarray) -> int | None:
-        """Index of an obstacle that contains the whole goal disc (R3), or ``None``."""
-        if not obstacles.shape[0]:
-            return None
-        inside = np.hypot(*(goal[None, :2] - obstacles[:, :2]).T) + goal[2] < obstacles[:, 2]
-        return int(np.argmax(inside)) if inside.any() else None
-
-    @staticmethod
-    def _in_goal(state: np.ndarray, goal: np.ndarray) -> bool:
-        return bool(np.hypot(*(state[:2] - goal[:2])) <= goal[2])
-
-    def _generate_obstacles(self, rng: np.random.Generator, state: np.ndarray | None, goal: np.ndarray | None) -> np.ndarray:
-        for _ in range(self._MAX_OBSTACLE_DRAWS):
-            obstacles = CircleWorld.generate(rng, self.n_obstacles, *self.obstacle_rad, half_width=_HALF)
-            if state is not None and points_in_circles(state[None, :2], obstacles)[0]:
-                continue
-            if goal is not None and self._goal_inside_obstacle(goal, obstacles) is not None:
-                continue
-            return obstacles
-        given = " and ".join(f"option {k!r} {v[:2 if k == 'state' else 3].tolist()}" for k, v in (("state", state), ("goal", goal)) if v is not None)
-        raise ValueError(f"could not generate {self.n_obstacles} obstacles clear of {given} in {self._MAX_OBSTACLE_DRAWS} draws; "
-                         "give 'obstacles' explicitly too")
-
-    def _generate_state(self, rng: np.random.Generator, obstacles: np.ndarray, goal: np.ndarray | None = None,
-                        given: tuple[str, ...] = ()) -> np.ndarray:
-        if goal is not None:
-            corners = np.array([[-_HALF, -_HALF], [-_HALF, _HALF], [_HALF, -_HALF], [_HALF, _HALF]])
-            if np.all(np.hypot(*(corners - goal[:2]).T) <= goal[2]):  # a disc is convex: it holds the square
-                raise ValueError(f"option 'goal' {goal.tolist()} covers the whole arena [-{_HALF}, {_HALF}]^2 where "
-                                 "initial states are drawn, so no start outside it exists; give a smaller goal")
-        for _ in range(self._MAX_DRAWS):
-            st = np.array(
-                [rng.uniform(-_HALF, _HALF), rng.uniform(-_HALF, _HALF),
-                 rng.uniform(-np.pi, np.pi), rng.uniform(self.system.v_min, self.system.v_max)]
-            )
-            if points_in_circles(st[None, :2], obstacles)[0]:
-                continue
-            if goal is not None and self._in_goal(st, goal):
-                continue
-            return st
-        if given:
-            raise ValueError(f"could not draw an initial state on the arena [-{_HALF}, {_HALF}]^2 outside "
-                             f"{' and '.join(f'option {k!r}' for k in given)} in {self._MAX_DRAWS} draws: they leave "
-                             "too little free space; give 'state' explicitly too")
-        raise RuntimeError(f"could not find a collision-free initial state in {self._MAX_DRAWS} draws")
-
-    def _generate_goal(self, rng: np.random.Generator, state: np.ndarray, obstacles: np.ndarray,
-                       given: tuple[str, ...] = ()) -> np.ndarray:
-        for _ in range(self._MAX_DRAWS):
-            g = np.array([rng.uniform(-_HALF, _HALF), rng.uniform(-_HALF, _HALF), rng.uniform(*self.goal_rad)])
-            if self._in_goal(state, g):
-                continue
-            if self._goal_inside_obstacle(g, obstacles) is not None:
-                continue
-            return g
-        if given:
-            raise ValueError(f"could not place a goal around {' and '.join(f'option {k!r}' for k in given)} "
-                             f"in {self._MAX_DRAWS} draws; give 'goal' explicitly too")
-        raise RuntimeError(f"could not place a goal in {self._MAX_DRAWS} draws")
-
-    def _given_options(self, options: dict) -> dict:
-        """Validate the given parts of a start on their own and against each other (R1-R3)."""
-        given = {}
-        if "obstacles" in options:
-            given["obstacles"] = as_circles(options["obstacles"], "option 'obstacles'")
-        if "state" in options:
-            state = _vector(options["state"], 4, "state")
-            if not (self.system.v_min <= state[3] <= self.system.v_max):
-                raise ValueError(f"option 'state': speed must be in [{self.system.v_min}, {self.system.v_max}], got {state[3]}")
-            state[2] = wrap_angle(state[2])
-            given["state"] = state
-        if "goal" in options:
-            goal = _vector(options["goal"], 3, "goal")
-            if goal[2] <= 0:
-                raise ValueError(f"option 'goal': radius must be > 0, got {goal[2]}")
-            given["goal"] = goal
-        obstacles, state, goal = given.get("obstacles"), given.get("state"), given.get("goal")
-        if state is not None and obstacles is not None:
-            hits = [points_in_circles(state[None, :2], o[None, :])[0] for o in obstacles]
-            if any(hits):
-                k = hits.index(True)
-                raise ValueError(f"option 'state': position {state[:2].tolist()} is inside obstacle {k} "
-                                 f"{obstacles[k].tolist()} of option 'obstacles'")
-        if goal is not None and obstacles is not None:
-            k = self._goal_inside_obstacle(goal, obstacles)
-            if k is not None:
-                raise ValueError(f"option 'goal' {goal.tolist()} lies entirely inside obstacle {k} {obstacles[k].tolist()} "
-                                 "of option 'obstacles', so it can never be reached (generation never places a goal there)")
-        if state is not None and goal is not None and self._in_goal(state, goal):
-            raise ValueError(f"option 'state': position {state[:2].tolist()} is already inside option 'goal' {goal.tolist()}")
-        return given
-
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         obstacles, state, goal = self.generate_start(self.np_random, options)
         self._start_episode(obstacles, state, goal)
@@ -442,27 +236,6 @@ class Dubins4DCirclesEnv(gym.Env):
             self.render()
         self.clock.start()
         return obs, info
-
-    def generate_start(self, rng: np.random.Generator, options: dict[str, Any] | None = None):
-        """``(obstacles, state, goal)`` of a new episode drawn from ``rng`` around the reset
-        ``options`` (validated); what :meth:`reset` does (the vector env calls it per sub-env)."""
-        options = dict(options or {})
-        unknown = set(options) - {"state", "goal", "obstacles"}
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; expected any of 'state', 'goal', 'obstacles'")
-        given = self._given_options(options)
-        # Generation order (obstacles, state, goal) and its draws are those of a reset without
-        # options; each generated part is redrawn until it obeys R1-R3 against the given parts.
-        obstacles = given.get("obstacles")
-        if obstacles is None:
-            obstacles = self._generate_obstacles(rng, given.get("state"), given.get("goal"))
-        state = given.get("state")
-        if state is None:
-            state = self._generate_state(rng, obstacles, given.get("goal"), tuple(k for k in ("obstacles", "goal") if k in given))
-        goal = given.get("goal")
-        if goal is None:
-            goal = self._generate_goal(rng, state, obstacles, tuple(k for k in ("state", "obstacles") if k in given))
-        return obstacles, state, goal
 
     def _start_episode(self, obstacles: np.ndarray, state: np.ndarray, goal: np.ndarray) -> None:
         self.scene = Dubins4DScene(obstacles, goal, self.system, self.n_rays, self.ray_length)
@@ -474,7 +247,7 @@ class Dubins4DCirclesEnv(gym.Env):
         self._active_sim_time = 0.0
         self._cum_compute = 0.0
         self._cum_reward = 0.0
-        self._done = False
+        self.begin_episode()
         self._last_active = False
         self._last_control = np.zeros(2)
         self.driver.reset()  # no warm start from an earlier episode: results depend on the seed only
@@ -498,10 +271,7 @@ class Dubins4DCirclesEnv(gym.Env):
         agent's thinking time attributed to this step (statistics only).  Used by :meth:`step`
         and by the non-blocking wrapper; returns the usual 5-tuple.
         """
-        if self.scene is None:
-            raise RuntimeError("call reset() before step()")
-        if self._done:
-            raise RuntimeError("the episode has ended; call reset() before stepping again")
+        self.check_can_step()
         if not (duration >= 0 and math.isfinite(duration)):
             raise ValueError(f"duration must be a finite number >= 0, got {duration}")
         if duration == self.step_dt:
@@ -543,7 +313,7 @@ class Dubins4DCirclesEnv(gym.Env):
             "control": u.copy(),
         }
         if terminated or truncated:
-            self._done = True
+            self.end_episode()
             info["outcome"] = outcome
             info["episode"] = self.episode_statistics(outcome)
         obs = self._observe()
@@ -569,8 +339,7 @@ class Dubins4DCirclesEnv(gym.Env):
     def privileged(self) -> dict:
         """The true state and the world's geometry (copies).  **Privileged**: for guardians
         that declare they need it (CBF, HJ) and for analysis, never for local-observation ones."""
-        if self.scene is None:
-            raise RuntimeError("call reset() first")
+        self.require_episode()
         return {
             "state": self._state.copy(),
             "obstacles": self.scene.obstacles.copy(),
@@ -578,35 +347,31 @@ class Dubins4DCirclesEnv(gym.Env):
             "sim_time": self._sim_time,
         }
 
-    def risk_system(self) -> Dubins4DScene:
-        """The :class:`rmm_envs.risk.System` of the current episode (for risk labelling)."""
-        if self.scene is None:
-            raise RuntimeError("call reset() first")
-        return self.scene
-
     # ------------------------------------------------------------------ dataset hooks
     def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """``n`` states uniform over the arena x [-pi, pi) x [0, 2], outside every obstacle
         (rejection sampling, as the original's datagen since 2022-09-13)."""
-        if self.scene is None:
-            raise RuntimeError("call reset() first")
-        out = np.empty((0, 4))
+        self.require_episode()
         s = self.system
-        while out.shape[0] < n:
-            m = max(2 * (n - out.shape[0]), 16)
-            cand = np.column_stack([
-                rng.uniform(-_HALF, _HALF, m), rng.uniform(-_HALF, _HALF, m),
-                rng.uniform(-np.pi, np.pi, m), rng.uniform(s.v_min, s.v_max, m),
-            ])
-            out = np.vstack([out, cand[~self.scene.state_failed(cand)]])
-        return out[:n]
+        return rejection_sample(
+            rng, n, 4,
+            lambda r, m: np.column_stack([r.uniform(-_HALF, _HALF, m), r.uniform(-_HALF, _HALF, m),
+                                          r.uniform(-np.pi, np.pi, m), r.uniform(s.v_min, s.v_max, m)]),
+            self.scene.state_failed, "states outside the obstacles")
 
-    def observe_states(self, states: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    def observe_states(self, states: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
         """Observations of arbitrary states for a dataset.  The simulated-time feature is drawn
-        uniformly over the episode range ``[0, max_episode_sim_time]``: the original left it 0
-        in every training sample and met 0-100 s at run time (docs/original-code.md, item 8)."""
+        from ``rng`` (required) uniformly over the episode range ``[0, max_episode_sim_time]``: the
+        original left it 0 in every training sample and met 0-100 s at run time
+        (docs/original-code.md, item 8)."""
+        self.require_episode()
+        if not isinstance(rng, np.random.Generator):
+            raise ValueError(f"observe_states needs rng, a numpy.random.Generator to draw the simulated-time feature, got {rng!r}")
         t = rng.uniform(0.0, self.max_episode_sim_time, size=np.asarray(states).shape[0])
         return self.scene.observe(states, t)
+
+    def dataset_notes(self) -> dict:
+        return {"obs_time_feature": "uniform over [0, max_episode_sim_time]"}
 
     @property
     def true_state(self) -> np.ndarray:
@@ -617,55 +382,11 @@ class Dubins4DCirclesEnv(gym.Env):
         return self._sim_time
 
     # ------------------------------------------------------------------ rendering
-    def _frame(self, size: int = 512) -> np.ndarray:
-        cv = _render.Canvas(size, -15, 15, -15, 15)
+    def render_frame(self, size: int = 512) -> np.ndarray:
+        """The ``rgb_array`` frame described under "Rendering" above."""
         if self.scene is None:
-            return cv.img
-        for a, b in (((-_HALF, -_HALF), (_HALF, -_HALF)), ((_HALF, -_HALF), (_HALF, _HALF)),
-                     ((_HALF, _HALF), (-_HALF, _HALF)), ((-_HALF, _HALF), (-_HALF, -_HALF))):
-            cv.line(a[0], a[1], b[0], b[1], (225, 225, 225))  # the arena used for generation
-        g = self.scene.goal
-        cv.disc(g[0], g[1], g[2], _render.GREEN)
-        cv.ring(g[0], g[1], g[2] + 0.25, _render.GREEN, 0.12)
-        for ox, oy, r in self.scene.obstacles:
-            cv.disc(ox, oy, r, _render.RED)
-        x, y, th, v = self._state
-        rays = ray_cast(self._state[None, :2], np.array([th]), self.scene.obstacles, self.n_rays, self.ray_length)[0]
-        for i, d in enumerate(rays):
-            a = th + 2 * np.pi * i / self.n_rays
-            cv.line(x, y, x + d * np.cos(a), y + d * np.sin(a), _render.GREY)
-        colour = _render.ORANGE if self._last_active else _render.BLUE
-        cv.disc(x, y, 0.4, colour)
-        cv.line(x, y, x + (0.5 + v) * np.cos(th), y + (0.5 + v) * np.sin(th), colour)
-        return cv.img
-
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
-            return None
-        frame = self._frame()
-        if self.render_mode == "rgb_array":
-            return frame
-        try:
-            import pygame
-        except ImportError as e:  # pragma: no cover - optional extra
-            raise gym.error.DependencyNotInstalled("render_mode='human' needs pygame: pip install rmm-envs[human]") from e
-        if self._window is None:  # pragma: no cover - needs a display
-            pygame.init()
-            self._window = pygame.display.set_mode(frame.shape[:2])
-        surf = pygame.surfarray.make_surface(frame.swapaxes(0, 1))  # pragma: no cover
-        self._window.blit(surf, (0, 0))  # pragma: no cover
-        pygame.event.pump()  # pragma: no cover
-        pygame.display.flip()  # pragma: no cover
-        return None
-
-    def close(self):
-        if self._window is not None:  # pragma: no cover
-            import pygame
-
-            pygame.display.quit()
-            pygame.quit()
-            self._window = None
+            return _render.Canvas(size, -15, 15, -15, 15).img
+        return _render.dubins4d_frame(self.scene, self._state, self._last_active, _HALF, size)
 
 
 def make_parallel_env(time_accel: float = 10.0, base_step: float = 0.1, clock=None, **kwargs):

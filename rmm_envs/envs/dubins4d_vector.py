@@ -89,7 +89,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from rmm_envs.clocks import make_clock
-from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv, observation
+from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
+from rmm_envs.scenes.dubins4d import observation
 from rmm_envs.envs.dubins4d_step import advance
 from rmm_envs.worlds.circles import ray_cast_each
 

@@ -30,6 +30,10 @@ clipped; NaN/inf or a wrong shape raise ``ValueError``.
 | 13-15 | angular velocity, world frame (rad/s) | R |
 
 Rays start at the body's origin and use ``rayTestBatch`` (they do not hit the body itself).
+The space is an :class:`rmm_envs.autonomy.ObservationBox` whose layout names the fields
+``"rays"`` (0-3, the horizontal body-frame rays, at angles ``0, pi/2, pi, 3 pi/2`` from the body
+x axis), ``"rays_vertical"`` (4-5, up and down), ``"orientation"`` (6-9), ``"velocity"``
+(10-12) and ``"angular_velocity"`` (13-15).
 
 ## State
 
@@ -60,6 +64,16 @@ options the draws are exactly those of generation.
 ``gym.make("QuadrotorRoom-v0", control_dt=1/24, max_episode_time=20.0, linear_damping=0.04,
 angular_damping=0.04, render_mode=None)``
 
+## Risk labelling
+
+The env follows the :class:`rmm_envs.risk.LabelledEnv` protocol: ``risk_scene()`` is the room's
+:class:`rmm_envs.scenes.QuadrotorScene` (the numpy propagator built from this env's parameters,
+analytic collision); ``sample_states(rng, n)`` draws states as the original's dataset generator
+did (position uniform over the walls' box expanded by 15% per side, z from below the floor up,
+a uniformly random orientation, linear velocity in ``[-10, 10]^3`` m/s, angular velocity in
+``[-4 pi, 4 pi]^3`` rad/s, rejecting states in contact); ``observe_states(states)`` computes the
+observation of each state with PyBullet's rays (``rng`` is unused; the env's state is restored).
+
 ## Rendering
 
 ``render_mode="rgb_array"``: a 320 x 240 frame from PyBullet's software renderer (TinyRenderer,
@@ -75,15 +89,22 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from rmm_envs.risk.protocol import SceneBase
-from rmm_envs.systems.quadrotor import QUADROTOR, Quadrotor
-from rmm_envs.worlds.room_collision import RoomCollision
+from rmm_envs.autonomy import ObservationBox, ObservationLayout
+from rmm_envs.envs.base import LabelledEnvBase, check_arguments, draw_until, finite, option_vector, rejection_sample
+from rmm_envs.scenes.quadrotor import QuadrotorScene
+from rmm_envs.systems.quadrotor import QUADROTOR
 from rmm_envs.worlds.rooms import Room, build_room, generate_room
 
-__all__ = ["QuadrotorRoomEnv", "QuadrotorScene"]
+__all__ = ["QuadrotorRoomEnv", "QuadrotorScene", "observation_layout", "push_body"]
 
 RAY_RANGE = 100.0
 _RAY_DIRS = np.array([[1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float)
+
+
+def observation_layout() -> ObservationLayout:
+    """The observation table's named slices (see the module docstring)."""
+    return ObservationLayout.of(("rays", 4), ("rays_vertical", 2), ("orientation", 4), ("velocity", 3),
+                                ("angular_velocity", 3), ray_angles=[0.0, math.pi / 2, math.pi, 3 * math.pi / 2])
 
 
 def _urdf_path() -> str:
@@ -92,37 +113,31 @@ def _urdf_path() -> str:
     return str(resources.files("rmm_envs") / "assets" / "quadrotor.urdf")
 
 
-class QuadrotorScene(SceneBase):
-    """The quadrotor in one room: the :class:`rmm_envs.risk.System` for fast labelling.
-
-    Propagation is the batched numpy integrator (:class:`rmm_envs.systems.Quadrotor`, which
-    reproduces PyBullet's), failure is the analytic room collision at the path's states (as
-    the original checked its 8 path states), and observations come from the env's PyBullet
-    rays.  PyBullet stays the environment's truth; the tests compare the two.
-    """
-
-    state_dim, control_dim, obs_dim = 13, 4, 16
-
-    def __init__(self, env: "QuadrotorRoomEnv") -> None:
-        self.env = env
-        self.system = Quadrotor(env.params)
-        self.collision = RoomCollision(env.room)
-
-    def state_failed(self, states):
-        return self.collision.states_failed(np.asarray(states, float))
-
-    def path_failed(self, paths):
-        paths = np.asarray(paths, float)
-        return self.collision.states_failed(paths.reshape(-1, 13)).reshape(paths.shape[:2]).any(axis=1)
-
-    def observe(self, states, *_):
-        return self.env.observe_states(states)
+def push_body(p, client: int, body: int, control, n_steps: int, stop_on_contact: bool = False) -> tuple[int, bool]:
+    """Hold ``control = (F, Mx, My, Mz)`` for ``n_steps`` PyBullet steps of ``body``: before each
+    step, the thrust ``F`` along the body z axis and the moments in the body frame
+    (``applyExternalForce`` / ``applyExternalTorque`` in ``LINK_FRAME``; PyBullet clears them after
+    every step).  Returns ``(steps taken, whether the body touched anything after a step)``;
+    with ``stop_on_contact`` it stops after the first step that ends in contact."""
+    force = [0.0, 0.0, float(control[0])]
+    torque = [float(control[1]), float(control[2]), float(control[3])]
+    touched = False
+    for k in range(n_steps):
+        p.applyExternalForce(body, -1, force, [0, 0, 0], p.LINK_FRAME, physicsClientId=client)
+        p.applyExternalTorque(body, -1, torque, p.LINK_FRAME, physicsClientId=client)
+        p.stepSimulation(physicsClientId=client)
+        if p.getContactPoints(bodyA=body, physicsClientId=client):
+            touched = True
+            if stop_on_contact:
+                return k + 1, True
+    return n_steps, touched
 
 
-class QuadrotorRoomEnv(gym.Env):
+class QuadrotorRoomEnv(LabelledEnvBase):
     """See the module docstring for the full specification."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 24}
+    reset_options = ("state", "room")
 
     def __init__(self, control_dt: float = 1.0 / 24.0, max_episode_time: float = 20.0,
                  linear_damping: float = QUADROTOR.linear_damping, angular_damping: float = QUADROTOR.angular_damping,
@@ -134,15 +149,16 @@ class QuadrotorRoomEnv(gym.Env):
                 "QuadrotorRoom-v0 needs PyBullet: pip install 'rmm-envs[quadrotor]' (pybullet==3.2.7)"
             ) from e
 
-        n_sub = control_dt / QUADROTOR.dt
-        if not (control_dt > 0 and abs(n_sub - round(n_sub)) < 1e-9 and round(n_sub) >= 1):
-            raise ValueError(f"control_dt must be a positive multiple of 1/240 s, got {control_dt!r}")
-        if not (max_episode_time > 0 and math.isfinite(max_episode_time)):
-            raise ValueError(f"max_episode_time must be a finite number of seconds > 0 (episodes need a time limit), got {max_episode_time!r}")
-        if not (linear_damping >= 0 and angular_damping >= 0 and math.isfinite(linear_damping) and math.isfinite(angular_damping)):
-            raise ValueError(f"damping must be finite and >= 0, got {linear_damping}, {angular_damping}")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        n_sub = control_dt / QUADROTOR.dt if finite(control_dt) else math.nan
+        check_arguments([
+            (control_dt > 0 and abs(n_sub - round(n_sub)) < 1e-9 and round(n_sub) >= 1, "control_dt", control_dt,
+             "a positive multiple of 1/240 s"),
+            (finite(max_episode_time) and max_episode_time > 0, "max_episode_time", max_episode_time,
+             "a finite number of seconds > 0 (episodes need a time limit)"),
+            (finite(linear_damping) and linear_damping >= 0, "linear_damping", linear_damping, "finite and >= 0"),
+            (finite(angular_damping) and angular_damping >= 0, "angular_damping", angular_damping, "finite and >= 0"),
+            self.check_render_mode(render_mode),
+        ])
         self.p = p
         self.n_sub = int(round(n_sub))
         self.control_dt = float(control_dt)
@@ -153,12 +169,12 @@ class QuadrotorRoomEnv(gym.Env):
         self.action_space = spaces.Box(np.array(self.params.control_low, np.float32), np.array(self.params.control_high, np.float32), dtype=np.float32)
         low = np.array([0] * 6 + [-1] * 4 + [-np.inf] * 6, np.float32)
         high = np.array([RAY_RANGE] * 6 + [1] * 4 + [np.inf] * 6, np.float32)
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.observation_space = ObservationBox(low, high, observation_layout())
         self.client = p.connect(p.DIRECT)
         self.room: Room | None = None
+        self.scene: QuadrotorScene | None = None
         self.body = None
         self._t = 0.0
-        self._done = False
 
     # ------------------------------------------------------------------ world
     def _build(self, room: Room) -> None:
@@ -187,19 +203,28 @@ class QuadrotorRoomEnv(gym.Env):
         self.p.performCollisionDetection(physicsClientId=self.client)
         return len(self.p.getContactPoints(bodyA=self.body, physicsClientId=self.client)) > 0
 
+    _MAX_STATE_DRAWS = 1000
+
     def _random_state(self, rng) -> np.ndarray:
         cells = np.argwhere(self.room.footprint)
-        for _ in range(1000):
+
+        def draw():
             ij = cells[rng.integers(len(cells))]
             xy = self.room.origin + (ij + rng.uniform(0, 1, 2)) * self.room.cell
             z = rng.uniform(0.3, 3.0)
             r, pt = rng.uniform(-0.3, 0.3, 2)
             q = self.p.getQuaternionFromEuler([r, pt, rng.uniform(-np.pi, np.pi)])
-            s = np.array([xy[0], xy[1], z, *q, *rng.uniform(-1, 1, 3), *rng.uniform(-0.5, 0.5, 3)])
-            self.set_state(s)
-            if not self.in_contact():
-                return s
-        raise RuntimeError("could not place the quadrotor clear of obstacles in 1000 draws")
+            return np.array([xy[0], xy[1], z, *q, *rng.uniform(-1, 1, 3), *rng.uniform(-0.5, 0.5, 3)])
+
+        s = draw_until(draw, self._placed_clear, self._MAX_STATE_DRAWS)
+        if s is None:
+            raise RuntimeError(f"could not place the quadrotor clear of obstacles in {self._MAX_STATE_DRAWS} draws")
+        return s
+
+    def _placed_clear(self, state) -> bool:
+        """Put the body in ``state``; whether it is clear of everything there."""
+        self.set_state(state)
+        return not self.in_contact()
 
     _MAX_ROOM_DRAWS = 100
 
@@ -213,18 +238,17 @@ class QuadrotorRoomEnv(gym.Env):
         except TypeError as e:
             raise ValueError(f"option 'room': {e}") from None
 
+    def _built(self, room: Room) -> Room:
+        self._build(room)
+        return room
+
     # ------------------------------------------------------------------ API
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = set(options) - {"state", "room"}
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; expected any of 'state', 'room'")
+        options = self.check_options(options)
         s = None
         if "state" in options:
-            s = np.asarray(options["state"], float).reshape(-1)
-            if s.shape != (13,) or not np.all(np.isfinite(s)):
-                raise ValueError(f"option 'state' must be 13 finite numbers (position, quaternion xyzw, velocity, angular velocity), got shape {s.shape}")
+            s = option_vector(options["state"], 13, "state", " (position, quaternion xyzw, velocity, angular velocity)")
             if abs(np.linalg.norm(s[3:7]) - 1) > 1e-6:
                 raise ValueError(f"option 'state': the quaternion {s[3:7].tolist()} is not a unit quaternion")
         spec = options.get("room")
@@ -235,22 +259,17 @@ class QuadrotorRoomEnv(gym.Env):
             self._random_state(self.np_random)
         elif isinstance(spec, Room):
             self._build(spec)
-            self.set_state(s)
-            if self.in_contact():
+            if not self._placed_clear(s):
                 raise ValueError(f"option 'state': the body at {s[:3].tolist()} is in contact with option 'room'")
-        else:
+        elif draw_until(lambda: self._built(self._draw_room(spec)), lambda _: self._placed_clear(s),
+                        self._MAX_ROOM_DRAWS) is None:
             # a generated room (from the seed, or from the given generate_room arguments) is
             # redrawn until the given state is clear of it, as generation keeps states clear
-            for _ in range(self._MAX_ROOM_DRAWS):
-                self._build(self._draw_room(spec))
-                self.set_state(s)
-                if not self.in_contact():
-                    break
-            else:
-                raise ValueError(f"option 'state': the body at {s[:3].tolist()} is in contact with each of "
-                                 f"{self._MAX_ROOM_DRAWS} rooms drawn from the seed; give 'room' too or move the state")
+            raise ValueError(f"option 'state': the body at {s[:3].tolist()} is in contact with each of "
+                             f"{self._MAX_ROOM_DRAWS} rooms drawn from the seed; give 'room' too or move the state")
+        self.scene = QuadrotorScene(self.room, self.params)
         self._t = 0.0
-        self._done = False
+        self.begin_episode()
         return self._obs(), {"state": self.get_state(), "sim_time": 0.0}
 
     def rays(self) -> np.ndarray:
@@ -264,66 +283,47 @@ class QuadrotorRoomEnv(gym.Env):
         return np.concatenate([self.rays(), s[3:13]]).astype(np.float32)
 
     def step(self, action):
-        if self.body is None:
-            raise RuntimeError("call reset() before step()")
-        if self._done:
-            raise RuntimeError("the episode has ended; call reset() before stepping again")
+        self.check_can_step()
         a = np.asarray(action, dtype=float)
         if a.shape != (4,):
             raise ValueError(f"action must have shape (4,) in {self.action_space}, got shape {a.shape}")
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action must be finite (space {self.action_space}), got {a.tolist()}")
         a = np.clip(a, self.action_space.low, self.action_space.high)
-        p, c, b = self.p, self.client, self.body
-        force, torque = [0.0, 0.0, float(a[0])], [float(a[1]), float(a[2]), float(a[3])]
-        hit = False
-        for _ in range(self.n_sub):
-            p.applyExternalForce(b, -1, force, [0, 0, 0], p.LINK_FRAME, physicsClientId=c)
-            p.applyExternalTorque(b, -1, torque, p.LINK_FRAME, physicsClientId=c)
-            p.stepSimulation(physicsClientId=c)
+        n, hit = push_body(self.p, self.client, self.body, a, self.n_sub, stop_on_contact=True)
+        for _ in range(n):  # summed step by step, as simulated
             self._t += self.params.dt
-            if p.getContactPoints(bodyA=b, physicsClientId=c):
-                hit = True
-                break
         truncated = not hit and self._t >= self.max_episode_time - 1e-9
         info = {"state": self.get_state(), "sim_time": self._t}
         if hit or truncated:
-            self._done = True
+            self.end_episode()
             info["outcome"] = "collision" if hit else "timeout"
         return self._obs(), (-1.0 if hit else 0.0), hit, truncated, info
 
+    # ------------------------------------------------------------------ labelling hooks
     def privileged(self) -> dict:
+        self.require_episode()
         return {"state": self.get_state(), "room": self.room}
 
-    # ------------------------------------------------------------------ dataset hooks
-    def risk_system(self) -> QuadrotorScene:
-        if self.room is None:
-            raise RuntimeError("call reset() first")
-        if getattr(self, "_scene", None) is None or self._scene.collision.room is not self.room:
-            self._scene = QuadrotorScene(self)
-        return self._scene
-
     def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        """States as the original's datagen drew them: position uniform over the walls' box
-        expanded by 15% per side (z from below the floor up), a uniformly random orientation,
-        linear velocity uniform in [-10, 10]^3 m/s and angular velocity in [-4 pi, 4 pi]^3 rad/s;
-        states in contact (analytically) are rejected."""
+        """States as the original's datagen drew them (see "Risk labelling" above)."""
+        self.require_episode()
         lo, hi = self.room.bounds()
         span = hi - lo
         lo, hi = lo - 0.15 * span, hi + 0.15 * span
-        col = self.risk_system().collision
-        out = np.empty((0, 13))
-        while out.shape[0] < n:
-            k = max(2 * (n - out.shape[0]), 16)
-            q = rng.normal(size=(k, 4))
+
+        def draw(r, k):
+            q = r.normal(size=(k, 4))
             q /= np.linalg.norm(q, axis=1, keepdims=True)
-            cand = np.column_stack([rng.uniform(lo, hi, (k, 3)), q, rng.uniform(-10, 10, (k, 3)),
-                                    rng.uniform(-4 * np.pi, 4 * np.pi, (k, 3))])
-            out = np.vstack([out, cand[~col.states_failed(cand)]])
-        return out[:n]
+            return np.column_stack([r.uniform(lo, hi, (k, 3)), q, r.uniform(-10, 10, (k, 3)),
+                                    r.uniform(-4 * np.pi, 4 * np.pi, (k, 3))])
+
+        return rejection_sample(rng, n, 13, draw, self.risk_scene().collision.states_failed,
+                                "quadrotor states clear of the room")
 
     def observe_states(self, states, rng=None) -> np.ndarray:
-        """The 16-dim observation of arbitrary states (PyBullet rays; the env's state is restored)."""
+        """The 16-dim observation of arbitrary states (PyBullet rays; the env's state is restored);
+        ``rng`` is unused (no random feature)."""
         keep = self.get_state()
         obs = np.empty((len(states), 16), dtype=np.float32)
         for i, st in enumerate(np.asarray(states, float)):
@@ -337,10 +337,7 @@ class QuadrotorRoomEnv(gym.Env):
     def true_state(self) -> np.ndarray:
         return self.get_state()
 
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
-            return None
+    def render_frame(self) -> np.ndarray:
         p = self.p
         s = self.get_state()
         view = p.computeViewMatrixFromYawPitchRoll(s[:3].tolist(), 4.0, 30.0, -35.0, 0.0, 2, physicsClientId=self.client)
@@ -349,6 +346,7 @@ class QuadrotorRoomEnv(gym.Env):
         return np.asarray(rgba, dtype=np.uint8).reshape(240, 320, 4)[..., :3]
 
     def close(self):
+        super().close()
         if getattr(self, "client", None) is not None:
             try:
                 self.p.disconnect(physicsClientId=self.client)

@@ -39,7 +39,7 @@ from typing import Callable
 import numpy as np
 
 from rmm_envs.risk.metrics import get_metric
-from rmm_envs.risk.protocol import check_system
+from rmm_envs.risk.protocol import check_scene
 
 __all__ = ["MAX_TREE_NODES", "RiskEstimator", "RiskResult", "tree_nodes", "validate_tree_params"]
 
@@ -98,7 +98,7 @@ class RiskEstimator:
     """Batched Algorithm 1.
 
     Args:
-        system: a :class:`rmm_envs.risk.System`.
+        system: a :class:`rmm_envs.risk.RiskScene` (the dynamics in one obstacle configuration).
         branches: ``n >= 1``.  depth: ``m >= 0``.  horizon: ``t > 0`` seconds per level.
         n_steps: path points per branch, ``>= 2``.
         metric: ``"expected"`` (default), ``"cvar"`` (with ``alpha`` in (0, 1)) or ``"worst"``.
@@ -120,7 +120,7 @@ class RiskEstimator:
         leaf: str = "zero",
         chunk_size: int | None = None,
     ) -> None:
-        check_system(system)
+        check_scene(system)
         validate_tree_params(branches, depth, horizon, n_steps, metric, alpha, leaf)
         if leaf == "heuristic" and not hasattr(system, "leaf_estimate"):
             raise TypeError(f"leaf='heuristic' needs {type(system).__name__}.leaf_estimate(states)")

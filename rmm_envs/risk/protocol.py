@@ -1,42 +1,75 @@
-"""The small protocol a system must offer to be risk-labelled.
+"""The two protocols of risk labelling: :class:`RiskScene` (what the estimator needs of a system
+placed in a world) and :class:`LabelledEnv` (what ``RiskLabel`` and ``rmm-datagen`` need of an env).
 
-The estimator knows nothing else about a system: a new system is a class with these members
-(usually a dynamics file in ``systems/`` plus a world in ``worlds/``, combined by its env).
+## RiskScene
 
-Members:
-    state_dim, control_dim: ints.
-    control_low, control_high: ``(control_dim,)`` arrays, the control box.
-    sample_controls(rng, n) -> (n, control_dim): the default (uniform) sampling policy.
+"System" in this project means *dynamics* (:mod:`rmm_envs.systems`); a *scene* is a dynamics
+object placed in one obstacle configuration, and that is what the estimator labels.  The
+estimator knows nothing else about it: a new scene is a class with these members (usually a
+dynamics file in ``systems/`` plus a world in ``worlds/``, combined in :mod:`rmm_envs.scenes`).
+
+Members (exactly what :class:`rmm_envs.risk.RiskEstimator` reads):
+    state_dim: int, the length of a state vector.
+    control_low, control_high: ``(control_dim,)`` arrays, the control box the estimator samples
+        uniformly.
     propagate(states (N, d), controls (N, c), duration, n_steps) -> (N, n_steps, d): the path
         under a zero-order-hold control; point 0 is the start.
     path_failed(paths (N, S, d)) -> (N,) bool: any point or segment of the path fails.
     state_failed(states (N, d)) -> (N,) bool: the state itself fails.
-    observe(states (N, d), ...) -> (N, obs_dim): the local observation (for datasets).
 
 Optional:
     leaf_estimate(states (N, d)) -> (N,) in [0, 1]: a value for non-failed leaves instead of 0.
+
+Observing states for datasets is not the scene's concern but the env's
+(:class:`LabelledEnv`, below).  ``System`` and ``check_system`` are the
+deprecated former names of :class:`RiskScene` and :func:`check_scene`.
+
+## LabelledEnv
+
+An environment whose states can be risk-labelled offers, on its unwrapped env (every env of
+this package does, through :class:`rmm_envs.envs.base.LabelledEnvBase`):
+
+``risk_scene() -> RiskScene``
+    The :class:`rmm_envs.risk.RiskScene` of the current episode (its dynamics in its obstacle
+    configuration); ``RuntimeError`` before the first ``reset``.  ``risk_system()`` is its
+    deprecated former name.
+``true_state``
+    Property: the current true state, a ``(state_dim,)`` float array (a copy).
+``sample_states(rng, n) -> (n, state_dim)``
+    ``n`` states of the current episode's scene for a dataset, drawn from the
+    ``numpy.random.Generator`` ``rng`` only (so a seed fixes them).
+``observe_states(states, rng=None) -> (n, obs_dim) float32``
+    The observations the env would return in those states.  ``rng`` draws any feature that a
+    state does not determine (the Dubins4D simulated time); envs without such a feature ignore
+    it, envs with one require it.
+``privileged() -> dict``
+    The true state and the obstacle geometry (copies): **privileged** information, for
+    guardians that declare they use it and for analysis.
+``dataset_notes() -> dict``
+    Facts about ``observe_states`` that a dataset records in its metadata
+    (``{"obs_time_feature": description or None}``).
+
+:func:`check_labelled_env` checks an env against this list (on its class, so before any
+``reset``) and names the env and each missing or ill-formed hook.
 """
 
 from __future__ import annotations
 
+import inspect
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["SceneBase", "System", "check_system"]
+__all__ = ["HOOKS", "LabelledEnv", "RiskScene", "System", "check_labelled_env", "check_scene", "check_system"]
 
-_REQUIRED = ("state_dim", "control_dim", "control_low", "control_high", "sample_controls",
-             "propagate", "path_failed", "state_failed", "observe")
+_REQUIRED = ("state_dim", "control_low", "control_high", "propagate", "path_failed", "state_failed")
 
 
 @runtime_checkable
-class System(Protocol):
+class RiskScene(Protocol):
     state_dim: int
-    control_dim: int
     control_low: np.ndarray
     control_high: np.ndarray
-
-    def sample_controls(self, rng: np.random.Generator, n: int) -> np.ndarray: ...
 
     def propagate(self, states: np.ndarray, controls: np.ndarray, duration: float, n_steps: int) -> np.ndarray: ...
 
@@ -44,38 +77,80 @@ class System(Protocol):
 
     def state_failed(self, states: np.ndarray) -> np.ndarray: ...
 
-    def observe(self, states: np.ndarray, *args, **kwargs) -> np.ndarray: ...
 
-
-def check_system(system) -> None:
-    """Raise ``TypeError`` naming what ``system`` lacks of the :class:`System` protocol."""
-    missing = [m for m in _REQUIRED if not hasattr(system, m)]
+def check_scene(scene) -> None:
+    """Raise ``TypeError`` naming what ``scene`` lacks of the :class:`RiskScene` protocol."""
+    missing = [m for m in _REQUIRED if not hasattr(scene, m)]
     if missing:
         raise TypeError(
-            f"{type(system).__name__} is not a risk System: it lacks {missing} "
+            f"{type(scene).__name__} is not a RiskScene: it lacks {missing} "
             f"(see rmm_envs.risk.protocol for what the estimator needs)"
         )
 
 
-class SceneBase:
-    """A dynamics object placed in a world: the dynamics part of :class:`System`, delegated.
+#: Deprecated: the former name of :class:`RiskScene` (kept so existing imports work).
+System = RiskScene
+#: Deprecated: the former name of :func:`check_scene`.
+check_system = check_scene
 
-    Subclasses set ``self.system`` (with ``control_low``/``control_high``, ``sample_controls``
-    and ``propagate``) and implement ``state_failed``, ``path_failed`` and ``observe``.
-    """
 
-    system = None
-
-    @property
-    def control_low(self) -> np.ndarray:
-        return self.system.control_low
+@runtime_checkable
+class LabelledEnv(Protocol):
+    def risk_scene(self) -> RiskScene: ...
 
     @property
-    def control_high(self) -> np.ndarray:
-        return self.system.control_high
+    def true_state(self) -> np.ndarray: ...
 
-    def sample_controls(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        return self.system.sample_controls(rng, n)
+    def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray: ...
 
-    def propagate(self, states, controls, duration: float, n_steps: int) -> np.ndarray:
-        return self.system.propagate(states, controls, duration, n_steps)
+    def observe_states(self, states: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray: ...
+
+    def privileged(self) -> dict: ...
+
+    def dataset_notes(self) -> dict: ...
+
+
+#: hook -> the positional arguments a call passes (``None``: a property, not called)
+HOOKS: dict[str, tuple[str, ...] | None] = {
+    "risk_scene": (),
+    "true_state": None,
+    "sample_states": ("rng", "n"),
+    "observe_states": ("states", "rng"),
+    "privileged": (),
+    "dataset_notes": (),
+}
+
+
+def _env_name(env) -> str:
+    spec = getattr(env, "spec", None)
+    name = type(env).__name__
+    return f"{spec.id} ({name})" if getattr(spec, "id", None) else name
+
+
+def check_labelled_env(env, needs: tuple[str, ...] = tuple(HOOKS)) -> None:
+    """Raise ``TypeError`` naming ``env`` and each hook of ``needs`` (default: all of
+    :data:`HOOKS`) that its unwrapped env lacks or cannot be called as the protocol calls it.
+    Hooks are looked up on the class, so the check needs no ``reset``."""
+    base = getattr(env, "unwrapped", env)
+    cls = type(base)
+    problems = []
+    for hook in needs:
+        args = HOOKS[hook]
+        member = inspect.getattr_static(cls, hook, None)
+        if member is None:
+            problems.append(f"{hook} is missing")
+        elif args is None:
+            if callable(member) and not isinstance(member, property):
+                problems.append(f"{hook} must be a property or attribute, not a method")
+        elif not callable(member):
+            problems.append(f"{hook} must be a method taking ({', '.join(args)})")
+        else:
+            try:
+                inspect.signature(member).bind(None, *args)
+            except TypeError:
+                problems.append(f"{hook}{inspect.signature(member)} cannot be called as {hook}({', '.join(args)})")
+            except ValueError:  # no signature (a builtin): assume it fits
+                pass
+    if problems:
+        raise TypeError(f"{_env_name(base)} is not a LabelledEnv (see rmm_envs.risk.protocol): "
+                        + "; ".join(problems))

@@ -1,7 +1,8 @@
 """RiskLabel: add the sampling-tree risk of the current true state to ``info["risk"]``.
 
-Works on any environment whose unwrapped env exposes ``risk_system()`` (a
-:class:`rmm_envs.risk.System` for the current episode) and ``true_state``.  At ``reset`` and
+Works on any environment whose unwrapped env offers the ``risk_scene()`` and ``true_state``
+hooks of the :class:`rmm_envs.risk.LabelledEnv` protocol (checked at construction by
+:func:`rmm_envs.risk.check_labelled_env`, which names what is missing).  At ``reset`` and
 after every ``step`` it runs the estimator on the true state and adds:
 
 * ``info["risk"]``: the risk metric (float in [0, 1]);
@@ -19,6 +20,7 @@ import gymnasium as gym
 import numpy as np
 
 from rmm_envs.risk.estimator import RiskEstimator, validate_tree_params
+from rmm_envs.risk.protocol import check_labelled_env
 
 __all__ = ["RiskLabel"]
 
@@ -32,27 +34,20 @@ class RiskLabel(gym.Wrapper):
                  n_steps: int = 8, metric: str = "expected", alpha: float | None = None,
                  leaf: str = "zero", seed: int | None = None):
         super().__init__(env)
-        base = env.unwrapped
-        # look on the class: evaluating a property such as true_state may need a reset first
-        missing = [a for a in ("risk_system", "true_state") if not hasattr(type(base), a)]
-        if missing:
-            raise TypeError(
-                f"RiskLabel needs an env exposing risk_system() and true_state (its dynamics and "
-                f"obstacles); {type(base).__name__} lacks {missing}"
-            )
+        check_labelled_env(env, needs=("risk_scene", "true_state"))
         self._kw = dict(branches=branches, depth=depth, horizon=horizon, n_steps=n_steps,
                         metric=metric, alpha=alpha, leaf=leaf)
         validate_tree_params(**self._kw)  # now, not at the first reset
         self.rng = np.random.default_rng(seed)
         self._estimator = None
-        self._system = None
+        self._scene = None
 
     def _label(self, info: dict) -> dict:
         base = self.env.unwrapped
-        system = base.risk_system()
-        if system is not self._system:
-            self._system = system
-            self._estimator = RiskEstimator(system, **self._kw)
+        scene = base.risk_scene()
+        if scene is not self._scene:
+            self._scene = scene
+            self._estimator = RiskEstimator(scene, **self._kw)
         res = self._estimator.estimate(np.asarray(base.true_state, dtype=float)[None, :], self.rng)
         info = dict(info)
         info["risk"] = float(res.risk[0])

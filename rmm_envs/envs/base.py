@@ -1,0 +1,208 @@
+"""The skeleton every environment of this package shares: :class:`LabelledEnvBase`.
+
+An env module is then its system, its world, its driver (if any) and its docstring; this class
+provides, once:
+
+* **argument and option checks**: :func:`check_arguments` (constructor arguments, each error
+  naming the argument, the expected kind of value and the value given),
+  :meth:`LabelledEnvBase.check_options` (unknown reset options) and :func:`option_vector`
+  (a reset option that must be ``n`` finite numbers);
+* **running-state guards**: :meth:`LabelledEnvBase.check_can_step` (``step`` before ``reset`` or
+  after the episode ended raises ``RuntimeError``) and :meth:`LabelledEnvBase.require_episode`
+  (accessors that need a ``reset`` first);
+* **seeded rejection sampling**: :func:`draw_until` (one object: draw until accepted, or give up
+  after ``max_draws``) and :func:`rejection_sample` (a batch of ``n`` accepted rows, drawn in
+  rounds of ``max(2 * missing, 16)`` candidates, at most :data:`MAX_ROUNDS` rounds, then a
+  ``RuntimeError`` naming what could not be drawn).  Every draw takes the caller's
+  ``numpy.random.Generator``, so the same seed gives the same samples;
+* **rendering**: :meth:`LabelledEnvBase.render` warns and returns ``None`` without a
+  ``render_mode``, returns :meth:`~LabelledEnvBase.render_frame` for ``"rgb_array"`` and shows it
+  with pygame for ``"human"`` (offered by an env only where pygame is installed);
+* **the labelling hooks** of :class:`rmm_envs.risk.LabelledEnv`: :meth:`~LabelledEnvBase.risk_scene`
+  (the current episode's ``self.scene``), the deprecated alias ``risk_system()``,
+  :meth:`~LabelledEnvBase.dataset_notes` (none by default); each env adds ``true_state``,
+  ``sample_states``, ``observe_states`` and ``privileged``.
+
+Subclasses set ``self.scene`` at every ``reset`` (to the :class:`rmm_envs.risk.RiskScene` of the
+new episode) and call :meth:`~LabelledEnvBase.begin_episode` there, and
+:meth:`~LabelledEnvBase.end_episode` on the step that ends it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Callable, Iterable, TypeVar
+
+import gymnasium as gym
+import numpy as np
+
+__all__ = ["MAX_ROUNDS", "LabelledEnvBase", "check_arguments", "draw_until", "finite", "option_vector",
+           "rejection_sample", "whole"]
+
+T = TypeVar("T")
+
+#: Rounds of :func:`rejection_sample` before it gives up.  Each round draws twice the missing
+#: count, so with an acceptance rate ``p`` the missing count shrinks by about ``1 - 2p`` a round
+#: and ``n`` samples take about ``ln(n) / (2p)`` rounds: 10,000 rounds serve acceptance rates
+#: down to ~0.04% for a thousand samples.  Measured over 20 seeded episodes each, the envs'
+#: ``sample_states`` accept 45% (worst) / 62% (mean) of draws for Dubins4D, 90% / 91% in mazes and
+#: 2% / 51% in rooms (a small room in its expanded box), so reaching the limit means the scene
+#: leaves (almost) no free space, and an error says so instead of looping for ever.
+MAX_ROUNDS = 10_000
+
+
+def finite(x) -> bool:
+    """A real, finite number (not a bool, string or array)."""
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def whole(x) -> bool:
+    """An integer value (``3`` or ``3.0``), finite."""
+    return finite(x) and float(x) == int(x)
+
+
+def check_arguments(checks: Iterable[tuple[bool, str, Any, str]]) -> None:
+    """Raise ``ValueError("<name> must be <expected>, got <value>")`` for the first failed
+    ``(ok, name, value, expected)`` check."""
+    for ok, name, value, expected in checks:
+        if not ok:
+            raise ValueError(f"{name} must be {expected}, got {value!r}")
+
+
+def option_vector(value, n: int, name: str, what: str = "") -> np.ndarray:
+    """The reset option ``name`` as ``n`` finite floats (a fresh array); ``ValueError`` naming
+    the option otherwise.  ``what`` describes the numbers (e.g. ``" [x, y, psi]"``)."""
+    try:
+        arr = np.array(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is None or arr.shape != (n,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"option {name!r} must be {n} finite numbers{what}, got {value!r}")
+    return arr
+
+
+def draw_until(draw: Callable[[], T], accept: Callable[[T], bool], max_draws: int) -> T | None:
+    """The first of at most ``max_draws`` calls of ``draw()`` that ``accept`` accepts, else
+    ``None`` (the caller raises, naming what it could not draw and why)."""
+    for _ in range(max_draws):
+        x = draw()
+        if accept(x):
+            return x
+    return None
+
+
+def rejection_sample(rng: np.random.Generator, n: int, dim: int,
+                     draw: Callable[[np.random.Generator, int], np.ndarray],
+                     rejected: Callable[[np.ndarray], np.ndarray], what: str,
+                     max_rounds: int = MAX_ROUNDS) -> np.ndarray:
+    """``(n, dim)`` rows of ``draw(rng, k) -> (k, dim)`` that ``rejected(rows) -> (k,) bool``
+    does not reject, in the order drawn; rounds of ``max(2 * missing, 16)`` candidates, at most
+    ``max_rounds`` of them, then ``RuntimeError`` naming ``what`` and the acceptance seen."""
+    out = np.empty((0, dim))
+    drawn = 0
+    for _ in range(max_rounds):
+        if out.shape[0] >= n:
+            return out[:n]
+        k = max(2 * (n - out.shape[0]), 16)
+        cand = draw(rng, k)
+        drawn += k
+        out = np.vstack([out, cand[~np.asarray(rejected(cand), dtype=bool)]])
+    if out.shape[0] >= n:
+        return out[:n]
+    raise RuntimeError(f"could not draw {n} {what}: only {out.shape[0]} of {drawn} candidates were accepted in "
+                       f"{max_rounds} rounds of rejection sampling; the scene leaves (almost) no free space")
+
+
+class LabelledEnvBase(gym.Env):
+    """A Gymnasium env with the shared skeleton above; see the module docstring."""
+
+    #: the keys ``reset(options=...)`` accepts, in the order error messages list them
+    reset_options: tuple[str, ...] = ()
+    #: the :class:`rmm_envs.risk.RiskScene` of the current episode (``None`` before ``reset``)
+    scene = None
+    _done = False
+    _window = None
+
+    # ------------------------------------------------------------------ checks
+    def check_render_mode(self, render_mode: str | None) -> tuple[bool, str, Any, str]:
+        """The constructor check of ``render_mode`` (for :func:`check_arguments`)."""
+        modes = self.metadata["render_modes"]
+        return render_mode is None or render_mode in modes, "render_mode", render_mode, f"one of {modes}"
+
+    def check_options(self, options: dict | None) -> dict:
+        """A copy of the reset ``options``; ``ValueError`` listing any unknown key."""
+        options = dict(options or {})
+        unknown = set(options) - set(self.reset_options)
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}; expected any of "
+                             f"{', '.join(repr(k) for k in self.reset_options)}")
+        return options
+
+    # ------------------------------------------------------------------ running state
+    def begin_episode(self) -> None:
+        """Mark a new episode running (call in ``reset``, after setting ``self.scene``)."""
+        self._done = False
+
+    def end_episode(self) -> None:
+        """Mark the episode ended: further steps raise until the next ``reset``."""
+        self._done = True
+
+    def require_episode(self) -> None:
+        """``RuntimeError`` before the first ``reset``."""
+        if self.scene is None:
+            raise RuntimeError("call reset() first")
+
+    def check_can_step(self) -> None:
+        """``RuntimeError`` when stepping before ``reset`` or after the episode ended."""
+        if self.scene is None:
+            raise RuntimeError("call reset() before step()")
+        if self._done:
+            raise RuntimeError("the episode has ended; call reset() before stepping again")
+
+    # ------------------------------------------------------------------ labelling hooks
+    def risk_scene(self):
+        """The :class:`rmm_envs.risk.RiskScene` of the current episode (for risk labelling)."""
+        self.require_episode()
+        return self.scene
+
+    def risk_system(self):
+        """Deprecated: the former name of :meth:`risk_scene`."""
+        return self.risk_scene()
+
+    def dataset_notes(self) -> dict:
+        """Facts about :meth:`observe_states` a dataset records in its metadata; here
+        ``obs_time_feature``: how a simulated-time feature is drawn (``None``: the
+        observation has none)."""
+        return {"obs_time_feature": None}
+
+    # ------------------------------------------------------------------ rendering
+    def render_frame(self) -> np.ndarray:  # pragma: no cover - each env implements it
+        raise NotImplementedError
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
+            return None
+        frame = self.render_frame()
+        if self.render_mode == "rgb_array":
+            return frame
+        try:
+            import pygame
+        except ImportError as e:  # pragma: no cover - optional extra
+            raise gym.error.DependencyNotInstalled("render_mode='human' needs pygame: pip install rmm-envs[human]") from e
+        if self._window is None:  # pragma: no cover - needs a display
+            pygame.init()
+            self._window = pygame.display.set_mode(frame.shape[:2])
+        surf = pygame.surfarray.make_surface(frame.swapaxes(0, 1))  # pragma: no cover
+        self._window.blit(surf, (0, 0))  # pragma: no cover
+        pygame.event.pump()  # pragma: no cover
+        pygame.display.flip()  # pragma: no cover
+        return None
+
+    def close(self):
+        if self._window is not None:  # pragma: no cover
+            import pygame
+
+            pygame.display.quit()
+            pygame.quit()
+            self._window = None

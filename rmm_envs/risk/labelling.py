@@ -1,0 +1,163 @@
+"""Algorithm 2 for a block of obstacle configurations: :class:`DatagenConfig`, the env (any
+registered env that follows :class:`rmm_envs.risk.LabelledEnv`), :func:`label_configs` and the
+metadata of a dataset.  The env is reached through the protocol only, so a new labelled env
+needs no change here.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyarrow as pa
+
+from rmm_envs.risk.dataset import FORMAT, FORMAT_VERSION
+from rmm_envs.risk.protocol import check_labelled_env
+
+__all__ = ["DatagenConfig", "config_seeds", "dataset_metadata", "label_configs", "labelled_env"]
+
+
+@dataclass
+class DatagenConfig:
+    env_id: str = "Dubins4DCircles-v0"
+    configs: int = 274
+    samples_per_config: int = 128
+    seed: int = 0
+    branches: int = 32
+    depth: int = 2
+    horizon: float = 2.0
+    n_steps: int = 8
+    metric: str = "expected"
+    alpha: float | None = None
+    leaf: str = "zero"
+    configs_per_shard: int = 8
+    env_kwargs: dict = field(default_factory=dict)
+    candidates: list | None = None  # action-conditioned labels: controls held for candidate_hold s
+    candidate_hold: float = 1.0
+
+    def validate(self) -> None:
+        import gymnasium as gym
+
+        import rmm_envs
+        from rmm_envs.risk.estimator import validate_tree_params
+
+        if not isinstance(self.env_id, str) or self.env_id not in gym.registry:
+            raise ValueError(f"unknown env {self.env_id!r}: not a registered Gymnasium id; this package registers "
+                             f"{list(rmm_envs.ENV_IDS)} (any registered env that follows rmm_envs.risk.LabelledEnv works)")
+        for name in ("configs", "samples_per_config", "configs_per_shard"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise ValueError(f"seed (--seed) must be an integer >= 0, got {self.seed!r}")
+        validate_tree_params(**self.estimator_params())
+        if self.candidates is not None:
+            c = np.asarray(self.candidates, dtype=float)
+            if c.ndim != 2 or c.shape[0] < 1 or not np.all(np.isfinite(c)):
+                raise ValueError(f"candidates must be a non-empty list of finite controls, got {self.candidates!r}")
+            if not (np.isfinite(self.candidate_hold) and self.candidate_hold > 0):
+                raise ValueError(f"candidate_hold must be a finite number of seconds > 0, got {self.candidate_hold!r}")
+
+    @property
+    def n_shards(self) -> int:
+        return -(-self.configs // self.configs_per_shard)
+
+    def shard_configs(self, shard: int) -> range:
+        lo = shard * self.configs_per_shard
+        return range(lo, min(self.configs, lo + self.configs_per_shard))
+
+    def estimator_params(self) -> dict:
+        return {"branches": self.branches, "depth": self.depth, "horizon": self.horizon,
+                "n_steps": self.n_steps, "metric": self.metric, "alpha": self.alpha, "leaf": self.leaf}
+
+
+_ENV_CACHE: dict = {}  # one env per (id, arguments) and process, reused by every configuration (reset re-seeds it)
+
+
+def labelled_env(cfg: DatagenConfig):
+    """The unwrapped env of ``cfg`` (cached per process), checked against
+    :class:`rmm_envs.risk.LabelledEnv` (``TypeError`` naming the env and the missing hooks)."""
+    key = (cfg.env_id, json.dumps(cfg.env_kwargs, sort_keys=True))
+    if key not in _ENV_CACHE:
+        import gymnasium as gym
+
+        import rmm_envs  # noqa: F401  (registers the package's envs)
+
+        env = gym.make(cfg.env_id, **cfg.env_kwargs).unwrapped
+        check_labelled_env(env)
+        _ENV_CACHE[key] = env
+    return _ENV_CACHE[key]
+
+
+def config_seeds(seed: int, config_id: int) -> tuple[int, np.random.Generator]:
+    """The env's reset seed and the sampling/labelling generator of one configuration."""
+    env_seed = int(np.random.SeedSequence(seed, spawn_key=(config_id, 0)).generate_state(1)[0])
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(config_id, 1)))
+    return env_seed, rng
+
+
+def label_configs(cfg: DatagenConfig, config_ids) -> pa.Table:
+    """Generate, observe and label the samples of the given configurations (Algorithm 2)."""
+    from rmm_envs.risk.estimator import RiskEstimator
+
+    env = labelled_env(cfg)
+    cols: dict[str, list] = {k: [] for k in ("config_id", "sample", "obs", "state", "risk", "min_risk_ctrl", "min_risk_ctrl_dur", "n_leaves")}
+    for c in config_ids:
+        env_seed, rng = config_seeds(cfg.seed, c)
+        env.reset(seed=env_seed)
+        states = env.sample_states(rng, cfg.samples_per_config)
+        obs = env.observe_states(states, rng)
+        est = RiskEstimator(env.risk_scene(), **cfg.estimator_params())
+        res = est.estimate(states, rng)
+        n = states.shape[0]
+        cols["config_id"].append(np.full(n, c, dtype=np.int32))
+        cols["sample"].append(np.arange(n, dtype=np.int32))
+        cols["obs"].append(obs.astype(np.float32))
+        cols["state"].append(states.astype(np.float64))
+        cols["risk"].append(res.risk)
+        cols["min_risk_ctrl"].append(res.min_risk_ctrl)
+        cols["min_risk_ctrl_dur"].append(res.min_risk_ctrl_dur)
+        cols["n_leaves"].append(res.n_leaves.astype(np.int32))
+        if cfg.candidates is not None:
+            cols.setdefault("candidate_risk", []).append(est.estimate_candidates(states, cfg.candidates, cfg.candidate_hold, rng))
+    arrays = {}
+    for k, parts in cols.items():
+        a = np.concatenate(parts)
+        if a.ndim == 2:
+            arrays[k] = pa.FixedSizeListArray.from_arrays(pa.array(a.reshape(-1)), a.shape[1])
+        else:
+            arrays[k] = pa.array(a)
+    return pa.table(arrays)
+
+
+def dataset_metadata(cfg: DatagenConfig) -> dict:
+    """``metadata.json`` of the dataset ``cfg`` describes (the env is reset once if it has no
+    episode yet, to read its scene's sizes)."""
+    import rmm_envs
+
+    env = labelled_env(cfg)
+    try:
+        scene = env.risk_scene()
+    except RuntimeError:  # the protocol's answer before the first reset
+        env.reset(seed=0)
+        scene = env.risk_scene()
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "env_id": cfg.env_id,
+        "env_kwargs": cfg.env_kwargs,
+        "configs": cfg.configs,
+        "samples_per_config": cfg.samples_per_config,
+        "seed": cfg.seed,
+        "configs_per_shard": cfg.configs_per_shard,
+        "estimator": cfg.estimator_params() | {"policy": "uniform"}
+        | ({} if cfg.candidates is None else {"candidates": cfg.candidates, "candidate_hold": cfg.candidate_hold}),
+        "obs_dim": int(env.observation_space.shape[0]),
+        "state_dim": int(scene.state_dim),
+        "control_dim": len(scene.control_low),
+        "obs_time_feature": env.dataset_notes()["obs_time_feature"],
+        "package_version": rmm_envs.__version__,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }

@@ -1,0 +1,37 @@
+"""The part every scene shares: its dynamics object's control box and propagation, delegated."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["SceneBase"]
+
+
+class SceneBase:
+    """A dynamics object placed in a world: the dynamics part of :class:`rmm_envs.risk.RiskScene`.
+
+    Subclasses set ``self.system`` (a dynamics object of :mod:`rmm_envs.systems`, with
+    ``control_low``/``control_high``, ``sample_controls`` and ``propagate``) and ``state_dim``,
+    and implement ``state_failed`` and ``path_failed``.
+    """
+
+    system = None
+
+    @property
+    def control_low(self) -> np.ndarray:
+        return self.system.control_low
+
+    @property
+    def control_high(self) -> np.ndarray:
+        return self.system.control_high
+
+    @property
+    def control_dim(self) -> int:
+        return len(self.system.control_low)
+
+    def sample_controls(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """``(n, control_dim)`` controls uniform on the box (the dynamics object's sampler)."""
+        return self.system.sample_controls(rng, n)
+
+    def propagate(self, states, controls, duration: float, n_steps: int) -> np.ndarray:
+        return self.system.propagate(states, controls, duration, n_steps)
