@@ -51,7 +51,7 @@ def riskmap(args: argparse.Namespace) -> int:
     if args.labels:
         from rmm_envs.risk import RiskEstimator
 
-        risk = RiskEstimator(env.risk_system()).estimate(states, rng).risk
+        risk = RiskEstimator(env.risk_scene()).estimate(states, rng).risk
         what = "sampling-tree risk (n=32, m=2, t=2 s)"
     else:
         from guardians.lrmm.model import LRMMModel, default_model_path

@@ -74,7 +74,7 @@ def main(argv=None) -> None:
 
     env = Dubins4DCirclesEnv()
     env.reset(seed=0)
-    sc = env.risk_system()
+    sc = env.risk_scene()
     rng = np.random.default_rng(0)
     states = env.sample_states(rng, args.labels)
     est = RiskEstimator(sc)  # n=32, m=2, t=2 s, 8 points, expected value
@@ -105,7 +105,7 @@ def main(argv=None) -> None:
     maze_env = gym.make("Dubins3DMaze-v0").unwrapped
     maze_env.reset(seed=0)
     maze_states = maze_env.sample_states(rng, args.labels)
-    maze_est = RiskEstimator(maze_env.risk_system())
+    maze_est = RiskEstimator(maze_env.risk_scene())
     maze_est.estimate(maze_states[:4], rng)
     rates = []
     for _ in range(args.repeats):
