@@ -14,21 +14,26 @@ from guardians.base import Guardian
 __all__ = ["BrakesGuardian", "InactiveGuardian", "RandomGuardian"]
 
 
-class InactiveGuardian(Guardian):
-    """Never takes control: the reckless driver alone."""
+class _ContractOnly(Guardian):
+    """A guardian that needs only the action space (checked at reset)."""
 
-    name = "inactive"
     observation_type = "none"
 
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)
         self.require_action_space()
 
+
+class InactiveGuardian(_ContractOnly):
+    """Never takes control: the reckless driver alone."""
+
+    name = "inactive"
+
     def act(self, observation, info):
         return self.action_space.inactive()
 
 
-class RandomGuardian(Guardian):
+class RandomGuardian(_ContractOnly):
     """Takes control with probability ``p_active`` (0.5) and applies a control drawn uniformly
     over the action space's control box (drawn every step, also when it does not take control).
 
@@ -36,17 +41,12 @@ class RandomGuardian(Guardian):
     """
 
     name = "random"
-    observation_type = "none"
 
     def __init__(self, p_active: float = 0.5) -> None:
         super().__init__()
         if not 0.0 <= p_active <= 1.0:
             raise ValueError(f"p_active must be a probability in [0, 1], got {p_active}")
         self.p_active = p_active
-
-    def reset(self, **kwargs) -> None:
-        super().reset(**kwargs)
-        self.require_action_space()
 
     def act(self, observation, info):
         space = self.action_space

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from guardians._checks import finite, integer, number_pair
 from guardians.base import Guardian
 from guardians.cbf.barrier import HOCBFParams, barrier_rows, barrier_values, critical_obstacle, inflated_radii
 from guardians.cbf.qp import BarrierQP
@@ -16,30 +17,6 @@ from guardians.cbf.recovery import recovery_control, recovery_done
 from rmm_envs.systems.dubins4d import Dubins4D
 
 __all__ = ["CBFGuardian", "CBFPaperGuardian"]
-
-
-def _finite(name, value, positive=False, nonneg=False):
-    try:
-        f = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a finite number, got {value!r}") from None
-    if not math.isfinite(f):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    if positive and not f > 0:
-        raise ValueError(f"{name} must be > 0, got {value!r}")
-    if nonneg and not f >= 0:
-        raise ValueError(f"{name} must be >= 0, got {value!r}")
-    return f
-
-
-def _range(name, pair, allow_equal=False):
-    try:
-        lo, hi = (float(v) for v in pair)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a (min, max) pair of numbers, got {pair!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi)) or not (lo < hi or (allow_equal and lo == hi)):
-        raise ValueError(f"{name} must be a finite (min, max) with min < max, got {pair!r}")
-    return lo, hi
 
 
 def _box_problem(u1, u2) -> str | None:
@@ -68,36 +45,34 @@ class CBFGuardian(Guardian):
                  recovery: bool = True, v_stuck: float = 0.05, lap_guess: float = 0.1,
                  goal_aware_margin: bool = True) -> None:
         super().__init__()
-        self.p1 = _finite("p1 (class-K gain)", p1, positive=True)
-        self.p2 = _finite("p2 (class-K gain)", p2, positive=True)
-        k = _finite("inflation", inflation)
+        self.p1 = finite("p1 (class-K gain)", p1, 0.0, lo_open=True)
+        self.p2 = finite("p2 (class-K gain)", p2, 0.0, lo_open=True)
+        k = finite("inflation", inflation)
         if not k >= 1:
             raise ValueError(f"inflation must be >= 1 (1 = the obstacle itself), got {inflation!r}")
         self.k = k
-        self.gamma_vmin = _finite("gamma_vmin", gamma_vmin, positive=True)
-        self.gamma_vmax = _finite("gamma_vmax", gamma_vmax, positive=True)
-        self.lambda_theta = _finite("lambda_theta", lambda_theta, positive=True)
-        self.lambda_v = _finite("lambda_v", lambda_v, positive=True)
-        self.p_theta = _finite("p_theta", p_theta, positive=True)
-        self.p_v = _finite("p_v", p_v, positive=True)
-        self._u1_arg = None if u1_bounds is None else _range("u1_bounds", u1_bounds)
-        self._u2_arg = None if u2_bounds is None else _range("u2_bounds", u2_bounds)
-        self.v_min, self.v_max = (Dubins4D.v_min, Dubins4D.v_max) if v_bounds is None else _range("v_bounds", v_bounds)
+        self.gamma_vmin = finite("gamma_vmin", gamma_vmin, 0.0, lo_open=True)
+        self.gamma_vmax = finite("gamma_vmax", gamma_vmax, 0.0, lo_open=True)
+        self.lambda_theta = finite("lambda_theta", lambda_theta, 0.0, lo_open=True)
+        self.lambda_v = finite("lambda_v", lambda_v, 0.0, lo_open=True)
+        self.p_theta = finite("p_theta", p_theta, 0.0, lo_open=True)
+        self.p_v = finite("p_v", p_v, 0.0, lo_open=True)
+        self._u1_arg = None if u1_bounds is None else number_pair("u1_bounds", u1_bounds)
+        self._u2_arg = None if u2_bounds is None else number_pair("u2_bounds", u2_bounds)
+        self.v_min, self.v_max = (Dubins4D.v_min, Dubins4D.v_max) if v_bounds is None else number_pair("v_bounds", v_bounds)
         if self._u1_arg is not None and _box_problem(self._u1_arg, (-1.0, 1.0)):
             raise ValueError(f"u1_bounds must contain 0, got {u1_bounds!r}")
         if self._u2_arg is not None and _box_problem((0.0, 0.0), self._u2_arg):
             raise ValueError(f"u2_bounds must allow braking and accelerating (min < 0 < max), got {u2_bounds!r}")
-        self.active_atol = _finite("active_atol", active_atol, nonneg=True)
-        self.active_rtol = _finite("active_rtol", active_rtol, nonneg=True)
+        self.active_atol = finite("active_atol", active_atol, 0.0)
+        self.active_rtol = finite("active_rtol", active_rtol, 0.0)
         self.low_speed_stop = bool(low_speed_stop)
-        if int(max_obstacles) != max_obstacles or max_obstacles < 0:
-            raise ValueError(f"max_obstacles must be an integer >= 0, got {max_obstacles!r}")
-        self.max_obstacles = int(max_obstacles)
-        self.eps = _finite("eps", eps, positive=True)
+        self.max_obstacles = integer("max_obstacles", max_obstacles, 0)
+        self.eps = finite("eps", eps, 0.0, lo_open=True)
         self.predict_latency = bool(predict_latency)
         self.recovery = bool(recovery)
-        self.v_stuck = _finite("v_stuck", v_stuck, nonneg=True)
-        self.lap_guess = _finite("lap_guess", lap_guess, positive=True)
+        self.v_stuck = finite("v_stuck", v_stuck, 0.0)
+        self.lap_guess = finite("lap_guess", lap_guess, 0.0, lo_open=True)
         self.goal_aware_margin = bool(goal_aware_margin)
         self._qp = None
         self._counts = self._zero_counts()

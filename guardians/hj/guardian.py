@@ -126,6 +126,7 @@ import warnings
 
 import numpy as np
 
+from guardians._checks import finite, integer
 from guardians.base import Guardian
 from guardians.hj.cache import ValueCache
 from guardians.hj.dynamics import Dubins4DHJ
@@ -195,18 +196,6 @@ def _gradient(V: np.ndarray, grid: Grid) -> list[np.ndarray]:
 RULES = ("distance", "gradient", "value")
 
 
-def _finite(name: str, value, lo: float | None = None, lo_open: bool = False) -> float:
-    """``value`` as a float, refused (naming it) unless finite and above ``lo`` if given."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(x) or (lo is not None and (x <= lo if lo_open else x < lo)):
-        bound = "" if lo is None else f" {'>' if lo_open else '>='} {lo}"
-        raise ValueError(f"{name} must be a finite number{bound}, got {value!r}")
-    return x
-
-
 class HJGuardian(Guardian):
     name = "hj"
     observation_type = "global"
@@ -219,7 +208,7 @@ class HJGuardian(Guardian):
                  standstill_lookup: bool = True, threads: int | None = None) -> None:
         super().__init__()
         self.standstill_lookup = bool(standstill_lookup)
-        self.horizon = _finite("horizon", horizon, 0.0, lo_open=True)
+        self.horizon = finite("horizon", horizon, 0.0, lo_open=True)
         if mode not in ("avoid", "reach_avoid"):
             raise ValueError(f"mode must be 'avoid' or 'reach_avoid', got {mode!r}")
         if rule not in RULES:
@@ -228,30 +217,25 @@ class HJGuardian(Guardian):
             raise ValueError(f"order must be 1 or 2, got {order!r}")
         if rk not in (1, 2, 3):
             raise ValueError(f"rk must be 1, 2 or 3, got {rk!r}")
-        self.cfl = _finite("cfl", cfl, 0.0, lo_open=True)
+        self.cfl = finite("cfl", cfl, 0.0, lo_open=True)
         if self.cfl > 1:
             raise ValueError(f"cfl must be in (0, 1], got {cfl!r}")
-        if isinstance(delay, bool) or not isinstance(delay, (int, np.integer)) or delay < 0:
-            raise ValueError(f"delay must be an integer >= 0 (laps between a decision and its effect), got {delay!r}")
-        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1):
-            raise ValueError(f"threads must be an integer >= 1 or None, got {threads!r}")
-        self.threads = default_threads() if threads is None else int(threads)
-        if isinstance(cache_max_files, bool) or not isinstance(cache_max_files, (int, np.integer)) or cache_max_files < 1:
-            raise ValueError(f"cache_max_files must be an integer >= 1, got {cache_max_files!r}")
+        self.threads = default_threads() if threads is None else integer("threads", threads, 1, "or None")
+        cache_max_files = integer("cache_max_files", cache_max_files, 1)
         self.mode, self.rule = mode, rule
-        self.ra_horizon = _finite("ra_horizon", ra_horizon, 0.0, lo_open=True)
-        self.ra_margin = _finite("ra_margin", ra_margin, 0.0)
-        self.delay = int(delay)
-        self.lap = None if lap is None else _finite("lap", lap, 0.0, lo_open=True)
+        self.ra_horizon = finite("ra_horizon", ra_horizon, 0.0, lo_open=True)
+        self.ra_margin = finite("ra_margin", ra_margin, 0.0)
+        self.delay = integer("delay", delay, 0, "laps between a decision and its effect")
+        self.lap = None if lap is None else finite("lap", lap, 0.0, lo_open=True)
         if grid is not None and grid_n is not None:
             raise ValueError("give grid or grid_n, not both")
         self.grid = grid or (default_grid(tuple(int(k) for k in grid_n)) if grid_n is not None else default_grid())
         # default: half a position cell, the most multilinear interpolation can over-state V
         # at a kink of a function that is 1-Lipschitz in position
-        self.margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if margin is None else _finite("margin", margin)
+        self.margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if margin is None else finite("margin", margin)
         self.order, self.rk = int(order), int(rk)
         # the Dubins4D system's bounds; reset replaces the control bounds by the action space's
-        self.dynamics = Dubins4DHJ(d_max=_finite("disturbance", disturbance, 0.0))
+        self.dynamics = Dubins4DHJ(d_max=finite("disturbance", disturbance, 0.0))
         self.backend = backend
         select_backend(self.grid, self.dynamics, self.order, backend)  # a bad choice fails here, not at reset
         self.cache = ValueCache(cache_dir, cache_max_files) if cache else None

@@ -41,6 +41,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from guardians._checks import integer
 from guardians.hj import _kernels
 from guardians.hj.grid import Grid
 
@@ -165,8 +166,8 @@ def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: i
         raise ValueError(f"horizon must be >= 0, got {horizon}")
     if rk not in TVD_RK:
         raise ValueError(f"rk must be one of {sorted(TVD_RK)}, got {rk}")
-    if threads is not None and (isinstance(threads, bool) or int(threads) != threads or threads < 1):
-        raise ValueError(f"threads must be an integer >= 1 or None, got {threads!r}")
+    if threads is not None:
+        integer("threads", threads, 1, "or None")
     if not 0 < cfl <= 1:
         raise ValueError(f"cfl must be in (0, 1], got {cfl}")
     if order not in (1, 2):
