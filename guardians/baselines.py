@@ -7,8 +7,6 @@ system whose env offers a :class:`rmm_envs.autonomy.GuardianActionSpace`.
 
 from __future__ import annotations
 
-import numpy as np
-
 from guardians.base import Guardian
 
 __all__ = ["BrakesGuardian", "InactiveGuardian", "RandomGuardian"]
