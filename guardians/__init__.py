@@ -5,8 +5,7 @@
 """
 
 from guardians.adapters import CallableGuardian, SB3Guardian
-from guardians.base import Guardian, active_action, inactive_action
+from guardians.base import Guardian
 from guardians.registry import available_guardians, make_guardian
 
-__all__ = ["CallableGuardian", "Guardian", "SB3Guardian", "active_action", "available_guardians",
-           "inactive_action", "make_guardian"]
+__all__ = ["CallableGuardian", "Guardian", "SB3Guardian", "available_guardians", "make_guardian"]

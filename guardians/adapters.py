@@ -4,8 +4,10 @@
 * :class:`SB3Guardian` wraps an object with Stable-Baselines3's
   ``predict(observation, deterministic=True) -> (action, state)``.
 
-Actions may be the env's dict, or a flat array ``[active, turnrate, accel]`` (active > 0.5
-means take control), which is converted to the dict.
+Actions may be the env's dict, or a flat array ``[active, u...]`` (``active > 0.5`` means take
+control; ``u`` the control vector in the order of the action space's ``controls``, for
+Dubins4D ``[active, turnrate, accel]``), which is converted through the action space given at
+``reset`` (:func:`to_guardian_action`).
 """
 
 from __future__ import annotations
@@ -15,20 +17,25 @@ from typing import Any, Callable
 import numpy as np
 
 from guardians.base import Guardian
+from rmm_envs.autonomy import GuardianActionSpace
 
 __all__ = ["CallableGuardian", "SB3Guardian", "to_guardian_action"]
 
 
-def to_guardian_action(action: Any) -> dict:
+def to_guardian_action(action: Any, space: GuardianActionSpace | None) -> dict:
+    """``action`` as the env's action dict: a dict passes through; a flat ``[active, u...]``
+    becomes ``space.inactive()`` or ``space.active(u)``."""
     if isinstance(action, dict):
         return action
+    if not isinstance(space, GuardianActionSpace):
+        raise ValueError(f"a flat action {action!r} needs the env's action space (a GuardianActionSpace) to become "
+                         f"an action dict: pass reset(action_space=env.action_space), got {space!r}")
     arr = np.asarray(action, dtype=float).reshape(-1)
-    if arr.shape != (3,):
-        raise ValueError(
-            f"a policy must return the env's action dict or [active, turnrate, accel]; got shape {np.shape(action)}"
-        )
-    return {"active_ctrl": int(arr[0] > 0.5), "turnrate_ctrl": np.array([arr[1]], np.float32),
-            "accel_ctrl": np.array([arr[2]], np.float32)}
+    n = space.control_dim + 1
+    if arr.shape != (n,):
+        raise ValueError(f"a policy must return the env's action dict or [active, {', '.join(space.controls)}] "
+                         f"({n} numbers); got shape {np.shape(action)}")
+    return space.active(arr[1:]) if arr[0] > 0.5 else space.inactive()
 
 
 class CallableGuardian(Guardian):
@@ -43,7 +50,7 @@ class CallableGuardian(Guardian):
         self.observation_type = observation_type
 
     def act(self, observation, info):
-        return to_guardian_action(self.fn(observation))
+        return to_guardian_action(self.fn(observation), self.action_space)
 
 
 class SB3Guardian(Guardian):
@@ -60,4 +67,4 @@ class SB3Guardian(Guardian):
     def act(self, observation, info):
         out = self.model.predict(observation, deterministic=self.deterministic)
         action = out[0] if isinstance(out, tuple) else out
-        return to_guardian_action(action)
+        return to_guardian_action(action, self.action_space)

@@ -11,9 +11,17 @@ control.  It has:
   for privileged guardians, ``privileged``: a zero-argument callable returning the env's
   documented privileged data (``Dubins4DCirclesEnv.privileged()``: true ``state``,
   ``obstacles``, ``goal``, ``sim_time``).  Guardians never read private attributes of an env;
-* :meth:`act` ``(observation, info) -> action`` in the env's action space, a dict
-  ``{"active_ctrl": 0/1, "turnrate_ctrl": (1,), "accel_ctrl": (1,)}`` for the Dubins4D envs;
+* :meth:`act` ``(observation, info) -> action`` in the env's action space.  The action space
+  is a :class:`rmm_envs.autonomy.GuardianActionSpace`: a guardian builds every action through
+  it (``self.action_space.inactive()``, ``self.action_space.active(u)``) and reads the
+  control bounds from it (``control_low`` / ``control_high``), so the same guardian serves any
+  system that offers what it needs;
 * ``stats()``: counters the guardian wants recorded with the episode (e.g. QP fallbacks).
+
+A guardian checks at :meth:`reset` that the spaces it was given offer what it needs, with
+:meth:`Guardian.require_action_space` and :meth:`Guardian.require_layout`; a missing piece
+raises there (``ValueError`` naming the guardian and the piece), not in the middle of an
+episode.
 """
 
 from __future__ import annotations
@@ -22,17 +30,9 @@ from typing import Any, Callable
 
 import numpy as np
 
-__all__ = ["Guardian", "active_action", "inactive_action"]
+from rmm_envs.autonomy import GuardianActionSpace, ObservationLayout
 
-
-def inactive_action() -> dict:
-    """Let the driver control this step."""
-    return {"active_ctrl": 0, "turnrate_ctrl": np.zeros(1, np.float32), "accel_ctrl": np.zeros(1, np.float32)}
-
-
-def active_action(turnrate: float, accel: float) -> dict:
-    """Take control and apply ``(turnrate, accel)``."""
-    return {"active_ctrl": 1, "turnrate_ctrl": np.array([turnrate], np.float32), "accel_ctrl": np.array([accel], np.float32)}
+__all__ = ["Guardian"]
 
 
 class Guardian:
@@ -56,6 +56,33 @@ class Guardian:
         if self.privileged and privileged is None:
             raise ValueError(f"guardian {self.name!r} needs privileged information: pass reset(privileged=env.unwrapped.privileged)")
         self._privileged = privileged
+
+    def require_action_space(self, controls: int | None = None) -> GuardianActionSpace:
+        """The action space given at :meth:`reset`, checked to be a ``GuardianActionSpace``
+        (with ``controls`` components when given); a ``ValueError`` naming this guardian otherwise."""
+        space = self.action_space
+        if not isinstance(space, GuardianActionSpace):
+            raise ValueError(f"guardian {self.name!r} builds its actions through the env's action space: pass "
+                             f"reset(action_space=env.action_space) with a rmm_envs.autonomy.GuardianActionSpace, "
+                             f"got {space!r}")
+        if controls is not None and space.control_dim != controls:
+            raise ValueError(f"guardian {self.name!r} needs an action space with {controls} controls, "
+                             f"got {space.control_dim} ({space.controls})")
+        return space
+
+    def require_layout(self, *fields: str) -> ObservationLayout:
+        """The layout of the observation space given at :meth:`reset`, checked to have ``fields``
+        (``"rays"`` also needs the rays' directions); a ``ValueError`` naming this guardian otherwise."""
+        lay = getattr(self.observation_space, "layout", None)
+        if not isinstance(lay, ObservationLayout):
+            raise ValueError(f"guardian {self.name!r} reads the observation by name: pass reset(observation_space="
+                             f"env.observation_space) with a layout (rmm_envs.autonomy.ObservationBox), "
+                             f"got {self.observation_space!r}")
+        missing = [f for f in fields if f not in lay]
+        if missing:
+            raise ValueError(f"guardian {self.name!r} needs the observation field(s) {missing}; "
+                             f"the observation has {list(lay.names)}")
+        return lay
 
     def act(self, observation: np.ndarray, info: dict[str, Any]) -> dict:  # pragma: no cover - abstract
         raise NotImplementedError

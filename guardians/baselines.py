@@ -1,35 +1,44 @@
-"""Baseline guardians: inactive, random, brakes-only (docs/original-code.md, items 17 and 23)."""
+"""Baseline guardians: inactive, random, brakes-only (docs/original-code.md, items 17 and 23).
+
+They need nothing but the parallel-autonomy contract: each builds its actions through the
+action space given at ``reset`` and reads the control bounds from it, so they run on any
+system whose env offers a :class:`rmm_envs.autonomy.GuardianActionSpace`.
+"""
 
 from __future__ import annotations
 
-import numpy as np
-
-from guardians.base import Guardian, active_action, inactive_action
+from guardians.base import Guardian
 
 __all__ = ["BrakesGuardian", "InactiveGuardian", "RandomGuardian"]
 
-U1 = (-0.25, 0.25)
-U2 = (-0.5, 0.5)
+
+class _ContractOnly(Guardian):
+    """A guardian that needs only the action space (checked at reset)."""
+
+    observation_type = "none"
+
+    def reset(self, **kwargs) -> None:
+        super().reset(**kwargs)
+        self.require_action_space()
 
 
-class InactiveGuardian(Guardian):
+class InactiveGuardian(_ContractOnly):
     """Never takes control: the reckless driver alone."""
 
     name = "inactive"
-    observation_type = "none"
 
     def act(self, observation, info):
-        return inactive_action()
+        return self.action_space.inactive()
 
 
-class RandomGuardian(Guardian):
-    """Takes control with probability ``p_active`` (0.5) and applies a uniform control.
+class RandomGuardian(_ContractOnly):
+    """Takes control with probability ``p_active`` (0.5) and applies a control drawn uniformly
+    over the action space's control box (drawn every step, also when it does not take control).
 
     Seeded through :meth:`reset` (the original sampled the action space unseeded).
     """
 
     name = "random"
-    observation_type = "none"
 
     def __init__(self, p_active: float = 0.5) -> None:
         super().__init__()
@@ -38,17 +47,26 @@ class RandomGuardian(Guardian):
         self.p_active = p_active
 
     def act(self, observation, info):
+        space = self.action_space
         active = self.rng.random() < self.p_active
-        u1 = self.rng.uniform(*U1)
-        u2 = self.rng.uniform(*U2)
-        return active_action(u1, u2) if active else inactive_action()
+        u = self.rng.uniform(space.control_low, space.control_high)
+        return space.active(u) if active else space.inactive()
 
 
 class BrakesGuardian(Guardian):
     """Always in control, maximum braking.
 
-    ``turn="random"`` (default, as the paper's code): a constant turn rate drawn uniformly on
-    ``[-0.25, 0.25]`` once per episode; ``turn="zero"``: no turn (the paper's text).
+    The first control (Dubins4D: the turn rate) is held constant for the episode and every
+    other control (Dubins4D: the acceleration) at its lower bound, read from the action
+    space: for Dubins4D that is full braking, ``u2 = -0.5``.  ``turn="random"`` (default, as
+    the paper's code): the constant turn rate is drawn uniformly over its bounds
+    (``[-0.25, 0.25]``) once per episode; ``turn="zero"``: no turn (the paper's text; zero
+    clipped into the bounds).
+
+    "Lowest value of every other control" is the safe default of Dubins4D only (for a
+    quadrotor the lowest thrust is a fall): which control is safe is a property of the
+    system, and other systems need their own definition before this baseline means
+    "brake" for them.
     """
 
     name = "brakes"
@@ -63,7 +81,11 @@ class BrakesGuardian(Guardian):
 
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)
-        self.turnrate = float(self.rng.uniform(*U1)) if self.turn == "random" else 0.0
+        space = self.require_action_space()
+        lo, hi = float(space.control_low[0]), float(space.control_high[0])
+        self.turnrate = float(self.rng.uniform(lo, hi)) if self.turn == "random" else min(max(0.0, lo), hi)
+        self._control = space.control_low.copy()
+        self._control[0] = self.turnrate
 
     def act(self, observation, info):
-        return active_action(self.turnrate, U2[0])
+        return self.action_space.active(self._control)

@@ -2,7 +2,7 @@
 
 import time
 
-from guardians.base import Guardian, inactive_action
+from guardians.base import Guardian
 
 
 class Boom(Guardian):
@@ -16,7 +16,7 @@ class Boom(Guardian):
         self.n += 1
         if self.n == 3:
             raise RuntimeError("guardian exploded")
-        return inactive_action()
+        return self.action_space.inactive()
 
 
 class Sleepy(Guardian):
@@ -24,7 +24,7 @@ class Sleepy(Guardian):
 
     def act(self, obs, info):
         time.sleep(0.05)
-        return inactive_action()
+        return self.action_space.inactive()
 
 
 # ---------------------------------------------------------------- fault drills (tests/test_faults.py)
@@ -59,11 +59,11 @@ class ExitOnce(Guardian):
 
         marker = os.environ["RMM_TEST_EXIT_MARKER"]
         if multiprocessing.parent_process() is None:  # never kill the test process itself
-            return inactive_action()
+            return self.action_space.inactive()
         try:
             fd = os.open(marker, os.O_CREAT | os.O_EXCL)
         except FileExistsError:
-            return inactive_action()
+            return self.action_space.inactive()
         os.close(fd)
         os._exit(3)
 
@@ -74,7 +74,7 @@ class StatsBoom(Guardian):
     name = "stats-boom"
 
     def act(self, obs, info):
-        return inactive_action()
+        return self.action_space.inactive()
 
     def stats(self):
         raise ZeroDivisionError("stats exploded")
@@ -102,7 +102,7 @@ class Threaded(Guardian):
         self.threads = threads
 
     def act(self, obs, info):
-        return inactive_action()
+        return self.action_space.inactive()
 
     def stats(self):
         return {"threads": self.threads or 0, "env_threads": int(os.environ.get("RMM_HJ_THREADS", -1))}

@@ -9,15 +9,19 @@ from hypothesis import strategies as st
 import rmm_envs  # noqa: F401
 from guardians import make_guardian
 from guardians.cbf import CBFGuardian, CBFPaperGuardian
+from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D
 from tests.qp_reference import solve_qp_dense
+
+SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS)  # the Dubins4D envs' action space
 
 
 def make(state, obstacles, goal=(20.0, 0.0, 0.5), cls=CBFGuardian, **kw):
     g = cls(**kw)
     box = {"state": np.asarray(state, float), "obstacles": np.asarray(obstacles, float),
            "goal": np.asarray(goal, float), "sim_time": 0.0}
-    g.reset(seed=0, privileged=lambda: box)
+    g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
     return g, box
 
 
@@ -169,7 +173,7 @@ def _run_env(guardian, state, obstacles, goal, seconds):
     latency, exact dynamics and contact checks).  Returns the outcome (or None) and the states."""
     env = gym.make("Dubins4DParallel-v0", clock="fixed:1")
     obs, info = env.reset(seed=0, options={"state": state, "obstacles": obstacles, "goal": goal})
-    guardian.reset(seed=0, privileged=env.unwrapped.privileged)
+    guardian.reset(seed=0, privileged=env.unwrapped.privileged, action_space=env.action_space)
     states = [np.asarray(info["state"])]
     while info["sim_time"] < seconds:
         obs, r, te, tr, info = env.step(guardian.act(obs, info))
@@ -295,3 +299,26 @@ def test_recovery_strictly_improves_the_barrier(dist, bearing, heading, v, lap):
     elif v == 0 and hn < 0:
         hn1 = math.cos(nxt[2]) * n[0] + math.sin(nxt[2]) * n[1]
         assert hn1 > hn or u[1] > 0
+
+
+# ---------------------------------------------------------------- bounds from the action space
+def test_control_box_comes_from_the_action_space_unless_given():
+    box = {"state": np.array([0, 0, 0, 1.0]), "obstacles": np.array([[3.0, 0.0, 1.0]]), "goal": np.array([20.0, 0, 0.5]),
+           "sim_time": 0.0}
+    g = CBFPaperGuardian()
+    g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
+    assert (g.u1_min, g.u1_max, g.u2_min, g.u2_max, g.v_min, g.v_max) == (-0.25, 0.25, -0.5, 0.5, 0.0, 2.0)
+    narrow = GuardianActionSpace(CONTROLS, [-0.125, -0.25], [0.125, 0.375])
+    g.reset(seed=0, privileged=lambda: box, action_space=narrow)
+    assert (g.u1_min, g.u1_max, g.u2_min, g.u2_max) == (-0.125, 0.125, -0.25, 0.375)
+    G, h = g.rows(box["state"])
+    assert (h[1], h[2], h[3], h[4]) == (0.125, 0.125, 0.375, 0.25)  # the box rows carry the space's bounds
+    a = g.act(None, {})  # the paper's example needs u2 = -0.426: clipped to this space's braking
+    assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == np.float32(-0.25)
+    given = CBFPaperGuardian(u2_bounds=(-0.5, 0.5))
+    given.reset(seed=0, privileged=lambda: box, action_space=narrow)
+    assert (given.u1_min, given.u2_min) == (-0.125, -0.5)
+    with pytest.raises(ValueError, match="guardian 'cbf'.*control box"):
+        CBFGuardian().reset(seed=0, privileged=lambda: box, action_space=GuardianActionSpace(CONTROLS, [0.1, -1], [0.2, 1]))
+    with pytest.raises(ValueError, match="guardian 'cbf'.*action space"):
+        CBFGuardian().reset(seed=0, privileged=lambda: box)

@@ -5,6 +5,11 @@ from guardians.hj.dynamics import DoubleIntegrator1D, Dubins4DHJ, Translation
 from guardians.hj.grid import Grid
 from guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
 from guardians.hj.solver import solve_brt, spatial_derivatives
+from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.envs.dubins4d import CONTROLS
+from rmm_envs.systems.dubins4d import Dubins4D
+
+SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS)  # the Dubins4D envs' action space
 
 
 def zero_crossing(xs, values):
@@ -137,7 +142,7 @@ def test_bad_solver_arguments():
 
 def hj(box, tmp_path, **kw):
     g = HJGuardian(grid=small_grid(), horizon=2.0, cache_dir=tmp_path, **kw)
-    g.reset(seed=0, privileged=lambda: box)
+    g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
     return g
 
 
@@ -154,7 +159,7 @@ def test_guardian_cache_and_edge_cases(tmp_path):
     box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([20.0, 0.0, 0.0, 1.0])}
     g = hj(box, tmp_path)
     assert g.stats()["solves"] == 1 and len(list(tmp_path.glob("*.npy"))) == 1
-    g.reset(seed=1, privileged=lambda: box)
+    g.reset(seed=1, privileged=lambda: box, action_space=SPACE)
     assert g.stats()["cache_hits"] == 1 and g.stats()["solves"] == 0
     assert g.act(None, {})["active_ctrl"] == 0 and g.stats()["outside_grid"] == 1
     box["state"] = np.array([np.nan, 0.0, 0.0, 1.0])
@@ -163,7 +168,7 @@ def test_guardian_cache_and_edge_cases(tmp_path):
     # a damaged cache entry is recomputed, not trusted
     f = next(tmp_path.glob("*.npy"))
     f.write_bytes(b"garbage")
-    g.reset(seed=2, privileged=lambda: box)
+    g.reset(seed=2, privileged=lambda: box, action_space=SPACE)
     assert g.stats()["solves"] == 1
 
 
@@ -191,7 +196,7 @@ def test_an_unwritable_cache_warns_and_the_episode_goes_on(tmp_path):
     box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-3.0, 0.0, 0.0, 2.0])}
     g = HJGuardian(grid=small_grid(), horizon=2.0, cache_dir=blocker / "hj")
     with pytest.warns(RuntimeWarning, match="cache not written"):
-        g.reset(seed=0, privileged=lambda: box)
+        g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
     assert g.stats()["solves"] == 1 and g.stats()["cache_errors"] == 1 and g.V is not None
 
 
@@ -231,7 +236,7 @@ def test_reach_avoid_guardian_steers_to_the_goal_at_the_edge(tmp_path):
     # (the exact reach-avoid value is -1 at both "near" and "far": both reach the goal's centre)
     g = HJGuardian(grid=small_grid(), horizon=2.0, cache_dir=tmp_path, mode="reach_avoid", ra_horizon=4.0, ra_margin=0.2,
                    order=1, rk=2, rule="value")
-    g.reset(seed=0, privileged=lambda: box)
+    g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
     V_ra = g._ra_arrays[0]
     near, far, away = (np.array(s, float) for s in ([0.0, 0.0, 0.0, 1.0], [-3.0, 0.0, 0.0, 1.0], [-3.0, 0.0, np.pi, 0.0]))
     assert g.grid.interp(V_ra, near) < g.grid.interp(V_ra, far) < g.grid.interp(V_ra, away)
@@ -364,7 +369,7 @@ def circle_guardians(tmp_path_factory):
     guards = {}
     for cls in (HJGuardian, HJPaperGuardian):
         g = cls(cache_dir=cache)
-        g.reset(seed=0, privileged=lambda: box)
+        g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
         guards[cls.name] = g
     return guards, box
 
@@ -401,7 +406,7 @@ def closed_loop(guard, box, s0, *, latency: int, flip_turn: bool = False, lap: f
     from rmm_envs.systems.dubins4d import Dubins4D, wrap_angle
 
     dyn = Dubins4D()
-    guard.reset(seed=0, privileged=lambda: box)
+    guard.reset(seed=0, privileged=lambda: box, action_space=SPACE)
     s, t, clearance, queue = np.asarray(s0, float), 0.0, np.inf, [None] * latency
     while t < horizon - 1e-9:
         box["state"], box["sim_time"] = s.copy(), t
@@ -485,7 +490,7 @@ def test_the_lap_is_measured_from_the_sim_time(tmp_path):
     box["sim_time"] = 0.13 + 0.11
     g.act(None, {})
     assert g.current_lap() == pytest.approx(0.11)
-    g.reset(seed=1, privileged=lambda: box)  # a new episode forgets it
+    g.reset(seed=1, privileged=lambda: box, action_space=SPACE)  # a new episode forgets it
     assert g.current_lap() == 0.1
     assert HJGuardian(grid=small_grid(), lap=0.5).current_lap() == 0.5
 
@@ -542,3 +547,79 @@ def test_a_stopped_car_within_the_margin_is_turned_away_not_held(tmp_path):
     plain = hj(box, tmp_path, standstill_lookup=False)
     a = plain.act(None, {})
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and "standstill_lookups" not in plain.stats()
+
+
+# ---------------------------------------------------------------- one source per fact, configuration
+def test_tvd_rk_tableau_is_consistent_and_of_its_order():
+    """Each Shu-Osher stage is a convex combination (a + b = 1, both >= 0: the TVD property), and
+    on the linear test equation V' = z V the scheme reproduces exp(z dt) to its order (exact
+    rational arithmetic, so a mistyped coefficient cannot hide in rounding)."""
+    from fractions import Fraction
+    from math import factorial
+
+    from guardians.hj.solver import TVD_RK
+
+    assert sorted(TVD_RK) == [1, 2, 3]
+    for order, stages in TVD_RK.items():
+        assert all(a + b == 1 and a >= 0 and b >= 0 for a, b in stages)
+        # the amplification polynomial R(z) as coefficients of z^0..z^order
+        V0 = [Fraction(1)] + [Fraction(0)] * order
+        W = V0
+        for a, b in stages:
+            euler = [W[k] + (W[k - 1] if k else 0) for k in range(order + 1)]  # (1 + z) W, truncated
+            W = [a * V0[k] + b * euler[k] for k in range(order + 1)]
+        assert W == [Fraction(1, factorial(k)) for k in range(order + 1)], (order, W)
+
+
+def test_hj_dynamics_take_their_bounds_from_the_system():
+    assert Dubins4DHJ() == Dubins4DHJ.from_system(Dubins4D())
+    assert (Dubins4DHJ().u1_max, Dubins4DHJ().u2_max, Dubins4DHJ().v_min, Dubins4DHJ().v_max) == (0.25, 0.5, 0.0, 2.0)
+    # the cache key is what it was when the numbers were written in this module
+    assert Dubins4DHJ().key() == {"name": "dubins4d", "u1_max": 0.25, "u2_max": 0.5, "v_min": 0.0, "v_max": 2.0, "d_max": 0.0}
+    fast = Dubins4DHJ.from_system(Dubins4D(u1_min=-0.5, u1_max=0.5, v_max=3.0), d_max=0.1)
+    assert (fast.u1_max, fast.u2_max, fast.v_max, fast.d_max) == (0.5, 0.5, 3.0, 0.1)
+    with pytest.raises(ValueError, match="symmetric"):
+        Dubins4DHJ.from_bounds([-0.25, -0.4], [0.25, 0.5])
+    with pytest.raises(ValueError, match="symmetric"):
+        Dubins4DHJ.from_bounds([-0.25], [0.25])
+
+
+def test_guardian_reads_the_control_bounds_from_the_action_space(tmp_path):
+    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-3.0, 0.0, 0.0, 2.0])}
+    g = HJGuardian(grid=small_grid(), horizon=2.0, cache_dir=tmp_path)
+    narrow = GuardianActionSpace(CONTROLS, [-0.125, -0.25], [0.125, 0.25])
+    g.reset(seed=0, privileged=lambda: box, action_space=narrow)
+    assert (g.dynamics.u1_max, g.dynamics.u2_max) == (0.125, 0.25)
+    a = g.act(None, {})
+    assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.25 and abs(a["turnrate_ctrl"][0]) == 0.125
+    g.reset(seed=0, privileged=lambda: box, action_space=SPACE)  # another value: a second cache entry
+    assert g.dynamics == Dubins4DHJ() and g.stats()["solves"] == 1 and len(list(tmp_path.glob("*.npy"))) == 2
+    with pytest.raises(ValueError, match="guardian 'hj'.*symmetric"):
+        g.reset(seed=0, privileged=lambda: box, action_space=GuardianActionSpace(CONTROLS, [-0.25, -0.4], [0.25, 0.5]))
+    with pytest.raises(ValueError, match="guardian 'hj'.*action space"):
+        g.reset(seed=0, privileged=lambda: box)
+
+
+def test_threads_are_an_argument_with_a_documented_default(tmp_path, monkeypatch):
+    from guardians.hj import guardian as hjg
+
+    monkeypatch.delenv("RMM_HJ_THREADS", raising=False)
+    assert hjg.default_threads() is None and HJGuardian(grid=small_grid()).threads is None
+    monkeypatch.setenv("RMM_HJ_THREADS", "3")
+    assert HJGuardian(grid=small_grid()).threads == 3 and HJGuardian(grid=small_grid(), threads=1).threads == 1
+    for bad in ("0", "two", "-1"):
+        monkeypatch.setenv("RMM_HJ_THREADS", bad)
+        with pytest.raises(ValueError, match=f"RMM_HJ_THREADS.*{bad}"):
+            HJGuardian(grid=small_grid())
+    monkeypatch.delenv("RMM_HJ_THREADS")
+    for bad in (0, 1.5, True, "2"):
+        with pytest.raises(ValueError, match="threads"):
+            HJGuardian(grid=small_grid(), threads=bad)
+    seen = []
+    monkeypatch.setattr(hjg, "solve_brt", lambda *a, **k: (seen.append(k["threads"]), (_ for _ in ()).throw(KeyError("stop")))[1])
+    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.zeros(4)}
+    with pytest.raises(KeyError, match="stop"):
+        HJGuardian(grid=small_grid(), cache=False, threads=2).reset(seed=0, privileged=lambda: box, action_space=SPACE)
+    assert seen == [2]
+    with pytest.raises(ValueError, match="threads"):
+        solve_brt(small_grid(), Dubins4DHJ(), np.zeros(small_grid().shape, np.float32), 1.0, threads=0)

@@ -8,6 +8,19 @@ import rmm_envs  # noqa: F401
 from guardians.lrmm.guardian import LRMMGuardian
 from guardians.lrmm.model import LRMMModel, default_model_path, load_model
 from guardians.lrmm.train import TrainConfig, main as train_main, split_by_config, train
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
+from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
+from rmm_envs.systems.dubins4d import Dubins4D
+
+
+def env_spaces(n_rays=12, layout=None):
+    """The spaces a Dubins4D env with ``n_rays`` rays gives its guardian at reset."""
+    lay = layout or observation_layout(n_rays)
+    return {"observation_space": ObservationBox(np.full(lay.size, -np.inf), np.full(lay.size, np.inf), lay),
+            "action_space": GuardianActionSpace.for_system(Dubins4D(), CONTROLS)}
+
+
+SPACES = env_spaces()
 
 
 # The shipped lrmm model's stored defaults (threshold, commit, action): changing them must fail a test.
@@ -176,7 +189,7 @@ def obs_with(ray0, left, right):
 
 def test_lrmm_takes_control_above_threshold_and_turns_to_the_open_side():
     g = LRMMGuardian(forward_ray_model())
-    g.reset(seed=0, observation_space=gym.spaces.Box(-np.inf, np.inf, (17,)))
+    g.reset(seed=0, **SPACES)
     a = g.act(obs_with(1.0, left=8.0, right=2.0), {})
     assert g.last_risk > 0.85
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and a["turnrate_ctrl"][0] == 0.25
@@ -188,16 +201,60 @@ def test_lrmm_takes_control_above_threshold_and_turns_to_the_open_side():
     assert a["active_ctrl"] == 0
 
 
+def test_heuristic_finds_the_side_rays_by_direction_for_any_ray_count():
+    """24 rays 15 degrees apart: the +-30 degree rays are rays 2 and 22 (observation 7 and 27),
+    found through the layout; the 12-ray indices (6 and 16) are ignored."""
+    g = LRMMGuardian(forward_ray_model(29), action="heuristic", threshold=0.85)
+    g.reset(seed=0, **env_spaces(24))
+    o = np.full(29, 10.0)
+    o[:5] = 0.0
+    o[5] = 1.0  # forward ray short: risk high
+    o[6], o[16] = 2.0, 9.0  # the 12-ray positions would say "turn left"
+    o[7], o[27] = 2.0, 8.0  # the true +30 / -30 degree rays say "turn right"
+    a = g.act(o, {})
+    assert a["active_ctrl"] == 1 and a["turnrate_ctrl"][0] == -0.25 and a["accel_ctrl"][0] == -0.5
+
+
+def test_heuristic_bounds_come_from_the_action_space():
+    g = LRMMGuardian(forward_ray_model(), action="heuristic", threshold=0.85)
+    narrow = GuardianActionSpace(CONTROLS, [-0.1, -0.3], [0.125, 0.5])
+    g.reset(seed=0, observation_space=SPACES["observation_space"], action_space=narrow)
+    a = g.act(obs_with(1.0, left=8.0, right=2.0), {})
+    assert (a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (np.float32(0.125), np.float32(-0.3))
+    override = LRMMGuardian(forward_ray_model(), action="heuristic", threshold=0.85, u1_max=0.2, u2_min=-0.4)
+    override.reset(seed=0, **SPACES)
+    a = override.act(obs_with(1.0, left=8.0, right=2.0), {})
+    assert (a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (np.float32(0.2), np.float32(-0.4))
+
+
+def test_lrmm_refuses_at_reset_spaces_that_lack_what_it_needs():
+    heur = LRMMGuardian(forward_ray_model(), action="heuristic", threshold=0.85)
+    no_rays = ObservationLayout.of(("time", 1), ("goal_offset", 2), ("heading", 1), ("speed", 1), ("ranges", 12))
+    with pytest.raises(ValueError, match=r"guardian 'lrmm'.*\['rays'\]"):
+        heur.reset(seed=0, **env_spaces(layout=no_rays))
+    with pytest.raises(ValueError, match="guardian 'lrmm'.*layout"):
+        heur.reset(seed=0, observation_space=gym.spaces.Box(-1, 1, (17,)), action_space=SPACES["action_space"])
+    with pytest.raises(ValueError, match="guardian 'lrmm'.*action space"):
+        heur.reset(seed=0, observation_space=SPACES["observation_space"])
+    with pytest.raises(ValueError, match=r"guardian 'lrmm'.*shape \(17,\).*None"):
+        heur.reset(seed=0, action_space=SPACES["action_space"])
+    head = LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5}))
+    head.reset(seed=0, observation_space=gym.spaces.Box(-1, 1, (17,)), action_space=SPACES["action_space"])  # no rays needed
+    three = GuardianActionSpace(("a", "b", "c"), [-1, -1, -1], [1, 1, 1])
+    with pytest.raises(ValueError, match="guardian 'lrmm'.*2 controls"):
+        head.reset(seed=0, observation_space=SPACES["observation_space"], action_space=three)
+
+
 def test_lrmm_hysteresis_holds_control_while_the_average_is_high():
     g = LRMMGuardian(forward_ray_model(), hysteresis=True, window=8)
-    g.reset(seed=0)
+    g.reset(seed=0, **SPACES)
     for _ in range(8):
         g.act(obs_with(1.0, 8, 2), {})
     # risk drops to ~0.007 but the 8-sample mean stays above 0.85 for one more step
     acts = [g.act(obs_with(9.0, 8, 2), {})["active_ctrl"] for _ in range(4)]
     assert acts[0] == 1 and acts[-1] == 0
     plain = LRMMGuardian(forward_ray_model())
-    plain.reset(seed=0)
+    plain.reset(seed=0, **SPACES)
     plain.act(obs_with(1.0, 8, 2), {})
     assert plain.act(obs_with(9.0, 8, 2), {})["active_ctrl"] == 0
 
@@ -205,8 +262,8 @@ def test_lrmm_hysteresis_holds_control_while_the_average_is_high():
 def test_lrmm_guardian_bad_input():
     g = LRMMGuardian(forward_ray_model())
     with pytest.raises(ValueError, match="shape"):
-        g.reset(seed=0, observation_space=gym.spaces.Box(-1, 1, (16,)))
-    g.reset(seed=0)
+        g.reset(seed=0, **env_spaces(11))
+    g.reset(seed=0, **SPACES)
     with pytest.raises(ValueError, match="NaN"):
         g.act(np.full(17, np.nan), {})
     with pytest.raises(ValueError, match="threshold"):
@@ -418,7 +475,7 @@ def test_non_finite_risk_is_an_error_not_safe():
             "activation": "relu", "output_bias": False, "decision": {"threshold": 0.5}}
     m = LRMMModel([(W0, np.zeros(1)), (np.ones((1, 1)), None)], np.zeros(17), np.ones(17), meta)
     for g in (LRMMGuardian(m, action="heuristic"), __import__("guardians.lrmm.guardian", fromlist=["x"]).LRMMPaperGuardian(m)):
-        g.reset(seed=0)
+        g.reset(seed=0, **SPACES)
         with np.errstate(all="ignore"), pytest.raises(ValueError, match="non-finite risk"):
             g.act(obs_with(10.0, 10.0, 10.0), {})
 
@@ -486,31 +543,31 @@ def test_rule_is_strictly_above_the_threshold():
     o = obs_with(2.0, 5.0, 5.0)  # hidden 8, risk = sigmoid(0) = 0.5 exactly
     assert m.predict(o) == 0.5
     g = LRMMGuardian(m)
-    g.reset(seed=0)
+    g.reset(seed=0, **SPACES)
     assert g.act(o, {})["active_ctrl"] == 0  # risk == threshold: the driver keeps control
     just_below = np.nextafter(0.5, 0.0)
     g2 = LRMMGuardian(m, threshold=just_below)
-    g2.reset(seed=0)
+    g2.reset(seed=0, **SPACES)
     assert g2.act(o, {})["active_ctrl"] == 1  # the smallest step above the threshold: the guardian acts
     paper = __import__("guardians.lrmm.guardian", fromlist=["x"]).LRMMPaperGuardian
     for thr, expected in ((0.5, 0), (just_below, 1)):
         p = paper(m, threshold=thr)
-        p.reset(seed=0)
+        p.reset(seed=0, **SPACES)
         assert p.act(o, {})["active_ctrl"] == expected
 
 
 def test_head_applies_the_lowest_risk_candidate_and_commits():
     m = head_model_by_hand(risks_bias=(0.0, 1.0, -1.0, 2.0), decision={"threshold": 0.5, "commit": 2})
     g = LRMMGuardian(m)
-    g.reset(seed=0)
+    g.reset(seed=0, **SPACES)
     a = g.act(obs_with(1.0, 5.0, 5.0), {})  # risk sigmoid(1) > 0.5; candidate risks sigmoid(1, -1, 2): the second
     assert (a["active_ctrl"], a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (1, 0.25, -0.5)
     low = obs_with(9.0, 5.0, 5.0)  # risk sigmoid(-7): released only after `commit` more steps
     assert [g.act(low, {})["active_ctrl"] for _ in range(4)] == [1, 1, 0, 0]
-    g.reset(seed=0)  # reset clears the commitment
+    g.reset(seed=0, **SPACES)  # reset clears the commitment
     assert g.act(low, {})["active_ctrl"] == 0
     tie = LRMMGuardian(head_model_by_hand(risks_bias=(5.0, 0.0, 0.0, 0.0), decision={"threshold": 0.5}))
-    tie.reset(seed=0)
+    tie.reset(seed=0, **SPACES)
     assert tie.act(obs_with(1.0, 5.0, 5.0), {})["turnrate_ctrl"][0] == -0.25  # ties: the first candidate
 
 
@@ -522,8 +579,10 @@ def test_defaults_are_pinned():
     assert PAPER_THRESHOLD == 0.85
     sig = inspect.signature(LRMMGuardian.__init__).parameters
     assert {k: sig[k].default for k in ("model", "threshold", "action", "hysteresis", "window", "commit", "u1_max", "u2_min")} == \
-        {"model": None, "threshold": None, "action": None, "hysteresis": False, "window": 20, "commit": None, "u1_max": 0.25, "u2_min": -0.5}
+        {"model": None, "threshold": None, "action": None, "hysteresis": False, "window": 20, "commit": None, "u1_max": None, "u2_min": None}
     paper = LRMMPaperGuardian()
+    paper.reset(seed=0, **SPACES)
+    assert (paper.u1_max, paper.u2_min) == (0.25, -0.5)  # the Dubins4D control box, read from the action space
     assert (paper.name, paper.threshold, paper.action, paper.commit, paper.hysteresis, paper.window) == ("lrmm-paper", 0.85, "heuristic", 0, False, 20)
     assert paper.model.path == default_model_path("Dubins4DCircles-v0", variant="paper")
     g = LRMMGuardian()

@@ -21,7 +21,7 @@ import tempfile
 import numpy as np
 
 from benchmarks.bench.cli import main as rmm_bench
-from guardians import CallableGuardian, Guardian, active_action, inactive_action
+from guardians import CallableGuardian, Guardian
 
 
 def keep_distance(obs):
@@ -34,16 +34,27 @@ def keep_distance(obs):
 
 
 class Cautious(Guardian):
-    """A Guardian subclass: brake whenever the speed exceeds what the forward ray allows."""
+    """A Guardian subclass: brake whenever the speed exceeds what the forward ray allows.
+
+    It reads the observation by name (the layout of the env's observation space) and builds
+    its actions through the env's action space, whose bounds give the strongest braking.
+    """
 
     name = "cautious"
     observation_type = "local"
 
+    def reset(self, **kwargs):
+        super().reset(**kwargs)
+        layout = self.require_layout("speed", "rays")  # refuses an env without these fields
+        space = self.require_action_space(controls=2)  # (turn rate, acceleration)
+        self.speed, self.forward = layout.index("speed"), layout.ray_index(0.0)
+        self.brake = space.control_low[1]
+
     def act(self, obs, info):
-        v, forward = obs[4], obs[5]
-        if v * v / (2 * 0.5) > 0.8 * forward:  # braking distance vs. free space ahead
-            return active_action(0.0, -0.5)
-        return inactive_action()
+        v, forward = obs[self.speed], obs[self.forward]
+        if v * v / (2 * -self.brake) > 0.8 * forward:  # braking distance vs. free space ahead
+            return self.action_space.active([0.0, self.brake])
+        return self.action_space.inactive()
 
 
 def main():

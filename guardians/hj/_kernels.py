@@ -62,9 +62,10 @@ def set_threads(n: int | None) -> None:
 if HAVE_NUMBA:
 
     @njit(cache=True)
-    def _setup(W, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, ghosts):
-        # What both stages derive from their arguments: strides, the LF weights, the Hamiltonian's
-        # coefficients and the per-plane coefficient rows over the interior entries of a plane.
+    def _setup(V0, W, out, floor, b, dt, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, ghosts):
+        # What both stages derive from their arguments: flat views, strides, the LF weights, the
+        # Hamiltonian's coefficients, the per-plane coefficient rows over the interior entries of
+        # a plane and the weight of the rate in the stage combination.
         n0, n1, n2, n3 = W.shape
         plane = n2 * n3
         half = np.float32(0.5)
@@ -77,7 +78,24 @@ if HAVE_NUMBA:
         count = plane - 2 * ghosts * n3 - 2 * ghosts  # up to the last interior entry
         Cq, Sq = C[q_lo:q_lo + count] * k0, S[q_lo:q_lo + count] * k1
         Aq, Bq = sign * up[q_lo:q_lo + count], -sign * down[q_lo:q_lo + count]
-        return plane, n1 * plane, plane, n3, g, K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq
+        flat = (W.reshape(-1), out.reshape(-1), V0.reshape(-1), floor.reshape(-1))
+        return flat, plane, n1 * plane, plane, n3, g, K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq, b * dt
+
+    @njit(inline="always", boundscheck=False)
+    def _point(q, dx_, dy_, dth, dv_, diss, w, v0, fr, has_floor, a, b, bdt, Cq, Sq, Aq, Bq, K1, K3, KD0, KD1):
+        # One grid point of a stage, shared by both kernels (inlined into their loops): the
+        # Hamiltonian from the (scaled) central differences, plus the dissipation ``diss``,
+        # capped at 0, then the stage combination and the floor.
+        hv, hd = dv_ * Aq[q], dv_ * Bq[q]
+        H = Cq[q] * dx_ + Sq[q] * dy_ + K1 * abs(dth) + K3 * (hv if hv > hd else hd)
+        H -= KD0 * abs(dx_) + KD1 * abs(dy_)
+        H += diss
+        H = H if H < np.float32(0.0) else np.float32(0.0)
+        val = a * v0[q] + b * w + bdt * H
+        if has_floor:
+            fl = fr[q]
+            val = val if val > fl else fl
+        return val
 
     @njit(cache=True, parallel=True, boundscheck=False)
     def _stage(V0, W, out, floor, has_floor, a, b, dt, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max):
@@ -88,14 +106,10 @@ if HAVE_NUMBA:
         # terms simplify: p_a = d_a / (2 dx_a) and alpha_a (p+_a - p-_a) / 2 =
         # alpha_a (s_a - 2 w) / (2 dx_a), so the kernel needs no one-sided differences.
         n0, n1, n2, n3 = W.shape
-        Wf, Of, Vf, Ff = W.reshape(-1), out.reshape(-1), V0.reshape(-1), floor.reshape(-1)
-        half = np.float32(0.5)
         zero = np.float32(0.0)
         two = np.float32(2.0)
-        plane, sx, sy, st, g, K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq = _setup(
-            W, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, 1)
-        g0, g1, g2, g3 = g
-        bdt = b * dt
+        (Wf, Of, Vf, Ff), plane, sx, sy, st, (g0, g1, g2, g3), K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq, bdt = _setup(
+            V0, W, out, floor, b, dt, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, 1)
         gw = two * (g0 + g1 + g2 + g3)
         for i in prange(1, n0 - 1):
             for j in range(1, n1 - 1):
@@ -114,16 +128,9 @@ if HAVE_NUMBA:
                 for q in range(count):
                     w = wc[q]
                     dx_, dy_, dv_ = wxp[q] - wxm[q], wyp[q] - wym[q], wvp[q] - wvm[q]
-                    hv, hd = dv_ * Aq[q], dv_ * Bq[q]
-                    H = Cq[q] * dx_ + Sq[q] * dy_ + K1 * abs(wtp[q] - wtm[q]) + K3 * (hv if hv > hd else hd)
-                    H -= KD0 * abs(dx_) + KD1 * abs(dy_)
-                    H += g0 * (wxp[q] + wxm[q]) + g1 * (wyp[q] + wym[q]) + g2 * (wtp[q] + wtm[q]) + g3 * (wvp[q] + wvm[q]) - gw * w
-                    H = H if H < zero else zero
-                    val = a * v0[q] + b * w + bdt * H
-                    if has_floor:
-                        fl = fr[q]
-                        val = val if val > fl else fl
-                    o[q] = val
+                    diss = g0 * (wxp[q] + wxm[q]) + g1 * (wyp[q] + wym[q]) + g2 * (wtp[q] + wtm[q]) + g3 * (wvp[q] + wvm[q]) - gw * w
+                    o[q] = _point(q, dx_, dy_, wtp[q] - wtm[q], dv_, diss, w, v0, fr, has_floor, a, b, bdt,
+                                  Cq, Sq, Aq, Bq, K1, K3, KD0, KD1)
                 # this plane's own ghosts, while it is in cache: heading periodic, speed extrapolated
                 _fill_plane_ghosts(Of[i * sx + j * sy:i * sx + j * sy + plane], n2, n3)
         _fill_xy_ghosts(out)
@@ -141,14 +148,11 @@ if HAVE_NUMBA:
         #   (p+ - p-) / 2 = (c_0 - (lm + rm) / 2) / (2 dx)          (``j*`` below, times 2 dx)
         # so the LF dissipation alpha (p+ - p-) / 2 is alpha / (2 dx) * j, as in _stage.
         n0, n1, n2, n3 = W.shape
-        Wf, Of, Vf, Ff = W.reshape(-1), out.reshape(-1), V0.reshape(-1), floor.reshape(-1)
         half = np.float32(0.5)
         zero = np.float32(0.0)
         two = np.float32(2.0)
-        plane, sx, sy, st, g, K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq = _setup(
-            W, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, 2)
-        g0, g1, g2, g3 = g
-        bdt = b * dt
+        (Wf, Of, Vf, Ff), plane, sx, sy, st, (g0, g1, g2, g3), K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq, bdt = _setup(
+            V0, W, out, floor, b, dt, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, 2)
         for i in prange(2, n0 - 2):
             for j in range(2, n1 - 2):
                 base = i * sx + j * sy + q_lo
@@ -191,16 +195,8 @@ if HAVE_NUMBA:
                     rm = c0 if abs(c0) <= abs(cp) else cp
                     dv_ = vp[q] - vm[q] + half * (lm - rm)
                     jv = c0 - half * (lm + rm)
-                    hv, hd = dv_ * Aq[q], dv_ * Bq[q]
-                    H = Cq[q] * dx_ + Sq[q] * dy_ + K1 * abs(dt_) + K3 * (hv if hv > hd else hd)
-                    H -= KD0 * abs(dx_) + KD1 * abs(dy_)
-                    H += g0 * jx + g1 * jy + g2 * jt + g3 * jv
-                    H = H if H < zero else zero
-                    val = a * v0[q] + b * w + bdt * H
-                    if has_floor:
-                        fl = fr[q]
-                        val = val if val > fl else fl
-                    o[q] = val
+                    o[q] = _point(q, dx_, dy_, dt_, dv_, g0 * jx + g1 * jy + g2 * jt + g3 * jv, w, v0, fr, has_floor, a, b,
+                                  bdt, Cq, Sq, Aq, Bq, K1, K3, KD0, KD1)
                 _fill_plane_ghosts2(Of[i * sx + j * sy:i * sx + j * sy + plane], n2, n3)
         _fill_xy_ghosts2(out)
 
@@ -243,16 +239,6 @@ if HAVE_NUMBA:
             P[i, n1 - 1] = P[i, n1 - 3] + two * e
 
     @njit(cache=True, boundscheck=False)
-    def _fill_ghosts2(P):
-        n0, n1, n2, n3 = P.shape
-        plane = n2 * n3
-        Pf = P.reshape(-1)
-        for i in range(n0):
-            for j in range(n1):
-                _fill_plane_ghosts2(Pf[(i * n1 + j) * plane:(i * n1 + j + 1) * plane], n2, n3)
-        _fill_xy_ghosts2(P)
-
-    @njit(cache=True, boundscheck=False)
     def _fill_plane_ghosts(pl, n2, n3):
         """Ghosts of one flattened (theta, v) plane: heading periodic, then speed extrapolated."""
         two = np.float32(2.0)
@@ -275,15 +261,22 @@ if HAVE_NUMBA:
             P[i, n1 - 1] = two * P[i, n1 - 2] - P[i, n1 - 3]
 
     @njit(cache=True, boundscheck=False)
-    def _fill_ghosts(P):
-        """All ghost cells: every (theta, v) plane's, then the position faces."""
+    def _fill_ghosts(P, ghosts):
+        """All ``ghosts`` (1 or 2) ghost cells per side: every (theta, v) plane's, then the position faces."""
         n0, n1, n2, n3 = P.shape
         plane = n2 * n3
         Pf = P.reshape(-1)
         for i in range(n0):
             for j in range(n1):
-                _fill_plane_ghosts(Pf[(i * n1 + j) * plane:(i * n1 + j + 1) * plane], n2, n3)
-        _fill_xy_ghosts(P)
+                pl = Pf[(i * n1 + j) * plane:(i * n1 + j + 1) * plane]
+                if ghosts == 1:
+                    _fill_plane_ghosts(pl, n2, n3)
+                else:
+                    _fill_plane_ghosts2(pl, n2, n3)
+        if ghosts == 1:
+            _fill_xy_ghosts(P)
+        else:
+            _fill_xy_ghosts2(P)
 
 
 class Dubins4DStepper:
@@ -302,7 +295,6 @@ class Dubins4DStepper:
             raise ValueError(problem)
         self.order = g = int(order)
         self._kernel = _stage if g == 1 else _stage2
-        self._fill = _fill_ghosts if g == 1 else _fill_ghosts2
         self._inner = (slice(g, -g),) * 4
         th, v = grid.axes[2], grid.axes[3]
         vv = np.minimum(v, dynamics.v_max)
@@ -327,7 +319,7 @@ class Dubins4DStepper:
         g = self.order
         P = np.empty(tuple(n + 2 * g for n in V.shape), np.float32)
         P[self._inner] = V
-        self._fill(P)
+        _fill_ghosts(P, g)
         return P
 
     def interior(self, P: np.ndarray) -> np.ndarray:

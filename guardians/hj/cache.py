@@ -3,8 +3,11 @@
 Files are raw float32 ``.npy`` arrays (17 MB on the default grid) named by the SHA-256 of
 ``{dynamics, grid, horizon, scheme, obstacles}``; written atomically; the oldest files beyond
 ``max_files`` are removed.  Several processes may share a directory (the benchmark's workers
-do): a file another process removes at any moment is a cache miss, never an error.  The default directory is ``$RMM_HJ_CACHE`` or
-``~/.cache/rmm-envs/hj``.
+do): a file another process removes at any moment is a cache miss, never an error.
+
+The directory is the HJ guardian's ``cache_dir`` argument; without one,
+:func:`default_cache_dir`: ``$RMM_HJ_CACHE`` if set (the one place it is read), else
+``~/.cache/rmm-envs/hj`` (a per-user cache outside any checkout).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ __all__ = ["ValueCache", "default_cache_dir"]
 
 
 def default_cache_dir() -> Path:
+    """``$RMM_HJ_CACHE`` if set, else ``~/.cache/rmm-envs/hj``."""
     return Path(os.environ.get("RMM_HJ_CACHE") or Path.home() / ".cache" / "rmm-envs" / "hj")
 
 

@@ -16,20 +16,46 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rmm_envs.systems.dubins4d import Dubins4D
+
 __all__ = ["DoubleIntegrator1D", "Dubins4DHJ", "Integrator1D", "Translation"]
 
 
 @dataclass(frozen=True)
 class Dubins4DHJ:
-    """State ``(x, y, theta, v)``; ``u1`` in ``[u1_min, u1_max]``, ``u2`` in ``[u2_min, u2_max]``;
+    """The Dubins4D system (:class:`rmm_envs.systems.dubins4d.Dubins4D`) as the solver sees it:
+    state ``(x, y, theta, v)``; ``u1`` in ``[-u1_max, u1_max]``, ``u2`` in ``[-u2_max, u2_max]``;
     bounded disturbance ``|d_x|, |d_y| <= d_max`` on the position rates (0 by default, as the
-    paper ran); speed held in ``[v_min, v_max]`` as in the environment."""
+    paper ran); speed held in ``[v_min, v_max]`` as in the environment.
 
-    u1_max: float = 0.25
-    u2_max: float = 0.5
-    v_min: float = 0.0
-    v_max: float = 2.0
+    The bounds are the dynamics object's, not written again here: the defaults are
+    ``Dubins4D``'s, :meth:`from_system` reads a ``Dubins4D`` instance and :meth:`from_bounds`
+    the control bounds an action space carries.  The Hamiltonian below takes the control box
+    symmetric about 0 (as Dubins4D's is); other boxes are refused.  The fields (and so the
+    value cache's key) are unchanged from when the numbers were written here."""
+
+    u1_max: float = Dubins4D.u1_max
+    u2_max: float = Dubins4D.u2_max
+    v_min: float = Dubins4D.v_min
+    v_max: float = Dubins4D.v_max
     d_max: float = 0.0
+
+    @classmethod
+    def from_bounds(cls, control_low, control_high, v_min: float = Dubins4D.v_min, v_max: float = Dubins4D.v_max,
+                    d_max: float = 0.0) -> "Dubins4DHJ":
+        """From control bounds ``(u1, u2)`` (an action space's ``control_low``/``control_high``),
+        which must be symmetric about 0, and the speed bounds (default: Dubins4D's)."""
+        lo = np.asarray(control_low, float).reshape(-1)
+        hi = np.asarray(control_high, float).reshape(-1)
+        if lo.shape != (2,) or hi.shape != (2,) or not np.all(hi > 0) or not np.array_equal(lo, -hi):
+            raise ValueError(f"the HJ Dubins4D dynamics need two control bounds (u1, u2) symmetric about 0, "
+                             f"got low={lo.tolist()} high={hi.tolist()}")
+        return cls(u1_max=float(hi[0]), u2_max=float(hi[1]), v_min=float(v_min), v_max=float(v_max), d_max=float(d_max))
+
+    @classmethod
+    def from_system(cls, system: Dubins4D, d_max: float = 0.0) -> "Dubins4DHJ":
+        """From a :class:`Dubins4D` dynamics object: its control and speed bounds."""
+        return cls.from_bounds(system.control_low, system.control_high, system.v_min, system.v_max, d_max)
 
     def key(self) -> dict:
         return {"name": "dubins4d", **self.__dict__}

@@ -82,10 +82,21 @@ s), ``order`` (1: upwind, 2: ENO2), ``rk`` (TVD RK order), ``cfl`` (0.8), ``rule
 (``"distance"``, ``"gradient"`` or ``"value"``: act when ``V <= margin``), ``margin`` (m;
 ``None``: half a position cell), ``delay`` (laps), ``lap`` (s, ``None``: measured),
 ``disturbance`` (bound on the position-rate disturbance, 0 as the paper ran),
-``cache_dir``/``cache``/``cache_max_files``, ``backend`` (``"auto"``: the compiled numba
-kernel, which covers both orders; or ``"numpy"``/``"numba"``; both give the same value to
-float32 rounding, so they share cache entries).  A non-finite or out-of-range value is refused
-at construction with a message naming it.
+``cache_dir`` (``None``: ``$RMM_HJ_CACHE`` if set, else ``~/.cache/rmm-envs/hj``; read in
+:func:`guardians.hj.cache.default_cache_dir`), ``cache`` (False: always solve),
+``cache_max_files`` (64 files of 17 MB on the default grid), ``backend`` (``"auto"``: the
+compiled numba kernel, which covers both orders; or ``"numpy"``/``"numba"``; both give the
+same value to float32 rounding, so they share cache entries), ``threads`` (threads of the
+compiled solve; ``None``: ``$RMM_HJ_THREADS`` if set, read in :func:`default_threads`, else
+numba's default, the core count; ``rmm-bench`` passes 1 when several workers share the
+machine; the value does not depend on it).  A non-finite or out-of-range value is refused at
+construction with a message naming it.
+
+What it needs from the env, checked at ``reset``: privileged data (obstacles, state, sim
+time) and an action space (:class:`rmm_envs.autonomy.GuardianActionSpace`) with the two
+Dubins4D controls, symmetric about 0.  Every action is built through that space, and the
+control bounds of the HJ dynamics are read from it (speed bounds: the Dubins4D system's);
+they enter the value cache's key, so values for other bounds never mix.
 
 Goal-aware variant (``mode="reach_avoid"``): it also solves the reach-avoid value of the goal
 over ``ra_horizon`` (10 s; the obstacles as a state constraint).  ``V_ra <= 0`` marks states
@@ -109,18 +120,37 @@ about +-pi; none of that applies here.
 from __future__ import annotations
 
 import math
+import os
 import time
 import warnings
 
 import numpy as np
 
-from guardians.base import Guardian, active_action, inactive_action
+from guardians._checks import finite, integer
+from guardians.base import Guardian
 from guardians.hj.cache import ValueCache
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid
 from guardians.hj.solver import select_backend, solve_brt
 
-__all__ = ["HJGuardian", "HJPaperGuardian", "default_grid", "obstacle_target"]
+__all__ = ["HJGuardian", "HJPaperGuardian", "default_grid", "default_threads", "obstacle_target"]
+
+THREADS_VARIABLE = "RMM_HJ_THREADS"
+
+
+def default_threads() -> int | None:
+    """The HJ guardians' ``threads`` when none is given: ``$RMM_HJ_THREADS`` (an integer >= 1)
+    if set, else ``None`` (numba's default, the core count).  The one place it is read."""
+    raw = os.environ.get(THREADS_VARIABLE)
+    if not raw:
+        return None
+    try:
+        n = int(raw)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ValueError(f"{THREADS_VARIABLE} must be an integer >= 1, got {raw!r}")
+    return n
 
 
 def default_grid(n=(64, 64, 32, 32), half_width: float = 15.0, v_max: float = 4.0) -> Grid:
@@ -166,18 +196,6 @@ def _gradient(V: np.ndarray, grid: Grid) -> list[np.ndarray]:
 RULES = ("distance", "gradient", "value")
 
 
-def _finite(name: str, value, lo: float | None = None, lo_open: bool = False) -> float:
-    """``value`` as a float, refused (naming it) unless finite and above ``lo`` if given."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(x) or (lo is not None and (x <= lo if lo_open else x < lo)):
-        bound = "" if lo is None else f" {'>' if lo_open else '>='} {lo}"
-        raise ValueError(f"{name} must be a finite number{bound}, got {value!r}")
-    return x
-
-
 class HJGuardian(Guardian):
     name = "hj"
     observation_type = "global"
@@ -187,10 +205,10 @@ class HJGuardian(Guardian):
                  rule: str = "distance", margin: float | None = None, delay: int = 1, lap: float | None = None,
                  disturbance: float = 0.0, cache_dir=None, cache: bool = True, cache_max_files: int = 64,
                  mode: str = "avoid", ra_horizon: float = 10.0, ra_margin: float = 0.5, backend: str = "auto",
-                 standstill_lookup: bool = True) -> None:
+                 standstill_lookup: bool = True, threads: int | None = None) -> None:
         super().__init__()
         self.standstill_lookup = bool(standstill_lookup)
-        self.horizon = _finite("horizon", horizon, 0.0, lo_open=True)
+        self.horizon = finite("horizon", horizon, 0.0, lo_open=True)
         if mode not in ("avoid", "reach_avoid"):
             raise ValueError(f"mode must be 'avoid' or 'reach_avoid', got {mode!r}")
         if rule not in RULES:
@@ -199,26 +217,25 @@ class HJGuardian(Guardian):
             raise ValueError(f"order must be 1 or 2, got {order!r}")
         if rk not in (1, 2, 3):
             raise ValueError(f"rk must be 1, 2 or 3, got {rk!r}")
-        self.cfl = _finite("cfl", cfl, 0.0, lo_open=True)
+        self.cfl = finite("cfl", cfl, 0.0, lo_open=True)
         if self.cfl > 1:
             raise ValueError(f"cfl must be in (0, 1], got {cfl!r}")
-        if isinstance(delay, bool) or not isinstance(delay, (int, np.integer)) or delay < 0:
-            raise ValueError(f"delay must be an integer >= 0 (laps between a decision and its effect), got {delay!r}")
-        if isinstance(cache_max_files, bool) or not isinstance(cache_max_files, (int, np.integer)) or cache_max_files < 1:
-            raise ValueError(f"cache_max_files must be an integer >= 1, got {cache_max_files!r}")
+        self.threads = default_threads() if threads is None else integer("threads", threads, 1, "or None")
+        cache_max_files = integer("cache_max_files", cache_max_files, 1)
         self.mode, self.rule = mode, rule
-        self.ra_horizon = _finite("ra_horizon", ra_horizon, 0.0, lo_open=True)
-        self.ra_margin = _finite("ra_margin", ra_margin, 0.0)
-        self.delay = int(delay)
-        self.lap = None if lap is None else _finite("lap", lap, 0.0, lo_open=True)
+        self.ra_horizon = finite("ra_horizon", ra_horizon, 0.0, lo_open=True)
+        self.ra_margin = finite("ra_margin", ra_margin, 0.0)
+        self.delay = integer("delay", delay, 0, "laps between a decision and its effect")
+        self.lap = None if lap is None else finite("lap", lap, 0.0, lo_open=True)
         if grid is not None and grid_n is not None:
             raise ValueError("give grid or grid_n, not both")
         self.grid = grid or (default_grid(tuple(int(k) for k in grid_n)) if grid_n is not None else default_grid())
         # default: half a position cell, the most multilinear interpolation can over-state V
         # at a kink of a function that is 1-Lipschitz in position
-        self.margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if margin is None else _finite("margin", margin)
+        self.margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if margin is None else finite("margin", margin)
         self.order, self.rk = int(order), int(rk)
-        self.dynamics = Dubins4DHJ(d_max=_finite("disturbance", disturbance, 0.0))
+        # the Dubins4D system's bounds; reset replaces the control bounds by the action space's
+        self.dynamics = Dubins4DHJ(d_max=finite("disturbance", disturbance, 0.0))
         self.backend = backend
         select_backend(self.grid, self.dynamics, self.order, backend)  # a bad choice fails here, not at reset
         self.cache = ValueCache(cache_dir, cache_max_files) if cache else None
@@ -252,11 +269,12 @@ class HJGuardian(Guardian):
         t0 = time.perf_counter()
         if goal is None:
             V, _ = solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, obstacles), self.horizon,
-                             order=self.order, rk=self.rk, cfl=self.cfl, backend=self.backend)
+                             order=self.order, rk=self.rk, cfl=self.cfl, backend=self.backend, threads=self.threads)
         else:
             V, _ = solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, np.asarray(goal, float).reshape(1, 3)),
                              self.ra_horizon, order=self.order, rk=self.rk, cfl=self.cfl,
-                             constraint=obstacle_target(self.grid, obstacles), backend=self.backend)
+                             constraint=obstacle_target(self.grid, obstacles), backend=self.backend,
+                             threads=self.threads)
         self.solve_seconds = time.perf_counter() - t0
         self._counts["solves"] += 1
         if self.cache:
@@ -269,6 +287,14 @@ class HJGuardian(Guardian):
 
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)
+        space = self.require_action_space(controls=2)
+        d = self.dynamics
+        try:
+            dyn = Dubins4DHJ.from_bounds(space.control_low, space.control_high, d.v_min, d.v_max, d.d_max)
+        except ValueError as e:
+            raise ValueError(f"guardian {self.name!r}: {e}") from None
+        if dyn != d:
+            self.dynamics = dyn
         self._counts = {"outside_grid": 0, "nan_states": 0, "cache_hits": 0, "solves": 0}
         priv = self._privileged()
         self.V = self.value_function(priv["obstacles"])
@@ -327,10 +353,10 @@ class HJGuardian(Guardian):
     def _decide(self, s):
         if not np.all(np.isfinite(s)):
             self._counts["nan_states"] += 1
-            return active_action(0.0, -self.dynamics.u2_max)
+            return self.action_space.active((0.0, -self.dynamics.u2_max))
         if not self.grid.contains(s):
             self._counts["outside_grid"] += 1
-            return inactive_action()
+            return self.action_space.inactive()
         vals = self.evaluate(s)
         if vals[0] <= self.threshold(s, vals[1:]):  # safety first: the avoid value
             grad = vals[1:]
@@ -341,15 +367,13 @@ class HJGuardian(Guardian):
                 # to move off (otherwise a car stopped within the margin is held there forever)
                 grad = self.evaluate(np.array([s[0], s[1], s[2], cell]))[1:]
                 self._counts["standstill_lookups"] = self._counts.get("standstill_lookups", 0) + 1
-            u1, u2 = self.dynamics.optimal_control(s, grad)
-            return active_action(u1, u2)
+            return self.action_space.active(self.dynamics.optimal_control(s, grad))
         if self._ra_arrays is not None:
             ra = self.grid.interp_many(self._ra_arrays, s)
             if -self.ra_margin <= ra[0] <= 0.0:  # at the edge of the reach-avoid set: steer to the goal
                 self._counts["reach_avoid_steps"] = self._counts.get("reach_avoid_steps", 0) + 1
-                u1, u2 = self.dynamics.optimal_control(s, ra[1:], control="min")
-                return active_action(u1, u2)
-        return inactive_action()
+                return self.action_space.active(self.dynamics.optimal_control(s, ra[1:], control="min"))
+        return self.action_space.inactive()
 
     def stats(self) -> dict:
         return dict(self._counts, solve_seconds=self.solve_seconds)

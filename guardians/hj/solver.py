@@ -15,7 +15,8 @@ Numerics (Osher-Fedkiw, Mitchell's toolbox conventions):
   ``V_tau = +H``), with ``alpha_i >= max |dH/dp_i|`` from the dynamics;
 * reach-avoid (optional): the control minimises, and the obstacle constraint is imposed as
   ``V = max(V, -g)`` after every Runge-Kutta stage;
-* time: TVD Runge-Kutta (``rk=1``: forward Euler, ``rk=2``: Heun, ``rk=3``: Shu-Osher) with
+* time: TVD Runge-Kutta (``rk=1``: forward Euler, ``rk=2``: Heun, ``rk=3``: Shu-Osher), one
+  tableau (:data:`TVD_RK`) that both implementations step through, with
   ``dt = cfl / sum_i (alpha_i / dx_i)`` (CFL 0.8 by default);
 * defaults ``order=2, rk=3``: second-order accurate in space (away from kinks) and third in
   time.  First order is kept (``order=1, rk=2``, the paper's scheme); it is diffusive and
@@ -27,23 +28,51 @@ object, ``order`` 1 or 2), the reference, and, for the Dubins4D dynamics, compil
 kernels (first order and ENO2) that fuse a whole Runge-Kutta stage into one pass over the
 grid (``guardians/hj/_kernels.py``; 10-20x faster on the default grid).  ``backend="auto"`` (the
 default) takes the compiled one where it applies; both agree to float32 rounding (tested).
-The kernel's threads follow ``RMM_HJ_THREADS`` if set (the benchmark's worker processes use
-one each), else numba's default.
+The compiled kernel runs on ``threads`` threads when given (the HJ guardian passes its own
+``threads`` argument, see :mod:`guardians.hj.guardian`); ``None`` leaves numba's setting as it
+is (numba's default, the core count, unless the process changed it).  Threads do not change
+the result: every grid point is computed by exactly one thread.
 """
 
 from __future__ import annotations
 
-import os
 import time
+from fractions import Fraction
 
 import numpy as np
 
+from guardians._checks import integer
 from guardians.hj import _kernels
 from guardians.hj.grid import Grid
 
-__all__ = ["BACKENDS", "select_backend", "solve_brt", "spatial_derivatives"]
+__all__ = ["BACKENDS", "TVD_RK", "select_backend", "solve_brt", "spatial_derivatives"]
 
 BACKENDS = ("auto", "numpy", "numba")
+
+_F = Fraction
+#: TVD Runge-Kutta schemes in Shu-Osher form, by order: ``(a_k, b_k)`` per stage, and stage
+#: ``k`` computes ``V_{k+1} = a_k V_0 + b_k (V_k + dt L(V_k))`` from ``V_0 = V(t)``; the last
+#: stage is ``V(t + dt)``.  Exact fractions: each backend rounds a coefficient once, its own way.
+TVD_RK = {
+    1: ((_F(0), _F(1)),),  # forward Euler
+    2: ((_F(0), _F(1)), (_F(1, 2), _F(1, 2))),  # Heun
+    3: ((_F(0), _F(1)), (_F(3, 4), _F(1, 4)), (_F(1, 3), _F(2, 3))),  # Shu-Osher
+}
+
+
+def _scaled(X: np.ndarray, c: Fraction) -> np.ndarray:
+    """``c X`` in float32, correctly rounded: ``X / n`` for ``c = 1/n`` (``1/3`` has no exact
+    binary form, so multiplying by it would round twice)."""
+    if c == 1:
+        return X
+    if c.numerator == 1:
+        return X / float(c.denominator)
+    return float(c) * X
+
+
+def _combine(V0: np.ndarray, E: np.ndarray, a: Fraction, b: Fraction) -> np.ndarray:
+    """``a V0 + b E`` (one Runge-Kutta stage of :data:`TVD_RK`, ``E`` its Euler step)."""
+    return _scaled(E, b) if a == 0 else _scaled(V0, a) + _scaled(E, b)
 
 
 def select_backend(grid: Grid, dynamics, order: int, backend: str = "auto") -> str:
@@ -117,7 +146,7 @@ def _rate(V: np.ndarray, grid: Grid, dynamics, alphas, order: int, control: str 
 
 def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: int = 2, rk: int = 3,
               cfl: float = 0.8, progress=None, constraint: np.ndarray | None = None,
-              backend: str = "auto") -> tuple[np.ndarray, dict]:
+              backend: str = "auto", threads: int | None = None) -> tuple[np.ndarray, dict]:
     """Backward reachable tube of ``target`` (``l``: <= 0 inside) over ``horizon`` seconds.
 
     Avoid mode (``constraint=None``): the control *avoids* the target (maximises); ``V <= 0``
@@ -127,6 +156,7 @@ def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: i
     the target within the horizon without entering an obstacle.
 
     ``backend``: ``"auto"`` (compiled kernel where it applies), ``"numpy"`` or ``"numba"``.
+    ``threads``: threads of the compiled kernel (``None``: leave numba's setting as it is).
 
     Returns ``V(x, horizon)`` (float32, the grid's shape) and a dict of solver statistics.
     """
@@ -134,8 +164,10 @@ def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: i
         raise ValueError(f"target has shape {target.shape}, the grid {grid.shape}")
     if not horizon >= 0:
         raise ValueError(f"horizon must be >= 0, got {horizon}")
-    if rk not in (1, 2, 3):
-        raise ValueError(f"rk must be 1, 2 or 3, got {rk}")
+    if rk not in TVD_RK:
+        raise ValueError(f"rk must be one of {sorted(TVD_RK)}, got {rk}")
+    if threads is not None:
+        integer("threads", threads, 1, "or None")
     if not 0 < cfl <= 1:
         raise ValueError(f"cfl must be in (0, 1], got {cfl}")
     if order not in (1, 2):
@@ -155,7 +187,7 @@ def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: i
 
     if impl == "numba":
         return _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control,
-                               None if constraint is None else floor, progress, cfl, order)
+                               None if constraint is None else floor, progress, cfl, order, threads)
 
     def L(W):
         return _rate(W, grid, dynamics, alphas, order, control)
@@ -167,16 +199,10 @@ def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: i
     t0 = time.perf_counter()
     while t < horizon - 1e-12:
         dt = np.float32(min(dt_max, horizon - t))
-        if rk == 1:
-            V = clamp(V + dt * L(V))
-        elif rk == 2:
-            V1 = clamp(V + dt * L(V))
-            V = clamp(0.5 * V + 0.5 * (V1 + dt * L(V1)))
-        else:
-            V1 = clamp(V + dt * L(V))
-            V2 = clamp(0.75 * V + 0.25 * (V1 + dt * L(V1)))
-            V = clamp(V / 3.0 + (2.0 / 3.0) * (V2 + dt * L(V2)))
-        V = V.astype(np.float32, copy=False)
+        W = V
+        for a, b in TVD_RK[rk]:
+            W = clamp(_combine(V, W + dt * L(W), a, b))
+        V = W.astype(np.float32, copy=False)
         t += float(dt)
         steps += 1
         if progress is not None:
@@ -185,31 +211,23 @@ def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: i
                "mode": "avoid" if constraint is None else "reach_avoid", "backend": "numpy"}
 
 
-def _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control, floor, progress, cfl, order):
-    threads = os.environ.get("RMM_HJ_THREADS")
-    if threads:
-        _kernels.set_threads(int(threads))
+def _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control, floor, progress, cfl, order, threads):
+    if threads is not None:
+        _kernels.set_threads(threads)
     stepper = _kernels.Dubins4DStepper(grid, dynamics, alphas, control=control, floor=floor, order=order)
     P = stepper.padded(V)
-    # separate output buffers: an output aliasing an input defeats the kernel's vectorisation
-    P1, P2 = np.empty_like(P), np.empty_like(P)
-    P3 = np.empty_like(P) if rk == 3 else None
+    tableau = [(float(a), float(b)) for a, b in TVD_RK[rk]]
+    # one output buffer per stage: an output aliasing an input defeats the kernel's vectorisation
+    bufs = [np.empty_like(P) for _ in tableau]
     t, steps = 0.0, 0
     t0 = time.perf_counter()
     while t < horizon - 1e-12:
         dt = float(np.float32(min(dt_max, horizon - t)))
-        if rk == 1:
-            stepper.stage(P, P, P1, 0.0, 1.0, dt)
-            P, P1 = P1, P
-        elif rk == 2:
-            stepper.stage(P, P, P1, 0.0, 1.0, dt)
-            stepper.stage(P, P1, P2, 0.5, 0.5, dt)
-            P, P2 = P2, P
-        else:
-            stepper.stage(P, P, P1, 0.0, 1.0, dt)
-            stepper.stage(P, P1, P2, 0.75, 0.25, dt)
-            stepper.stage(P, P2, P3, 1.0 / 3.0, 2.0 / 3.0, dt)
-            P, P3 = P3, P
+        W = P
+        for (a, b), out in zip(tableau, bufs):
+            stepper.stage(P, W, out, a, b, dt)
+            W = out
+        P, bufs[-1] = bufs[-1], P
         t += dt
         steps += 1
         if progress is not None:

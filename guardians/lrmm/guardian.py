@@ -36,11 +36,20 @@ model's action-conditioned head, and a commitment that outlasts the risk:
 reproduced the paper's Table II (``dubins4d.npz``): take control while ``risk > 0.85`` with
 maximum braking (-0.5) and a maximum turn (0.25) toward the more open side, comparing the +30
 and -30 degree rays (no turn when they are equal within ``numpy.isclose``); no commitment.
+The bounds are read from the env's action space and the two rays are found by direction in
+the observation's layout (``layout.ray_index(+-30 degrees)``), so the rule holds for any ray
+count that has rays in (or nearest to) those directions.
 At 0.85 the car is usually too close to brake in time (85% of *random* futures crash there).
 
 ``hysteresis=True`` (either guardian) reproduces the original code's release rule: a deque of
 the last ``window`` (20) risks, initialised at the threshold, and the guardian intervenes while
 either the current risk or the deque's mean exceeds the threshold.
+
+**What it needs from the env** (checked at ``reset``, a ``ValueError`` naming the guardian and
+the missing piece otherwise): an observation space of the model's input size; an action space
+(:class:`rmm_envs.autonomy.GuardianActionSpace`) with two controls (turn rate, acceleration)
+through which every action is built; for the heuristic, an observation layout with a
+``"rays"`` field.
 
 **Bad input.**  A model file without the head (``candidates``) or without stored defaults
 (``decision``), such as a file written before these fields existed, makes ``lrmm`` fall back
@@ -58,12 +67,13 @@ from pathlib import Path
 
 import numpy as np
 
-from guardians.base import Guardian, active_action, inactive_action
+from guardians.base import Guardian
 from guardians.lrmm.model import LRMMModel, default_model_path, load_model
 
 __all__ = ["PAPER_THRESHOLD", "LRMMGuardian", "LRMMPaperGuardian"]
 
 PAPER_THRESHOLD = 0.85  # the paper's Table I setting
+_SIDE_RAY = math.pi / 6  # the heuristic compares the rays 30 degrees left and right of the heading
 
 
 class LRMMGuardian(Guardian):
@@ -79,7 +89,8 @@ class LRMMGuardian(Guardian):
         window: moving-average length with ``hysteresis`` (default 20).
         commit: steps to stay in control after the risk is back at or below the threshold;
             ``None`` (default) uses the model's stored value (0 if it has none).
-        u1_max, u2_min: turn rate and braking of the heuristic (0.25, -0.5: the control box).
+        u1_max, u2_min: turn rate and braking of the heuristic; ``None`` (default): the action
+            space's largest turn rate and strongest braking (0.25, -0.5 for Dubins4D).
     """
 
     name = "lrmm"
@@ -89,7 +100,7 @@ class LRMMGuardian(Guardian):
 
     def __init__(self, model: LRMMModel | str | Path | None = None, threshold: float | None = None,
                  action: str | None = None, hysteresis: bool = False, window: int = 20, commit: int | None = None,
-                 u1_max: float = 0.25, u2_min: float = -0.5) -> None:
+                 u1_max: float | None = None, u2_min: float | None = None) -> None:
         super().__init__()
         if threshold is not None and not 0.0 <= threshold <= 1.0:
             raise ValueError(f"threshold must be in [0, 1], got {threshold}")
@@ -133,12 +144,11 @@ class LRMMGuardian(Guardian):
         self.window = int(window)
         self.commit = int(commit)
         self._committed = 0
-        self.u1_max = float(u1_max)
-        self.u2_min = float(u2_min)
+        self._u1_max_arg = None if u1_max is None else float(u1_max)
+        self._u2_min_arg = None if u2_min is None else float(u2_min)
+        self.u1_max, self.u2_min = self._u1_max_arg, self._u2_min_arg
         self._history: deque = deque(maxlen=self.window)
         self.last_risk = float("nan")
-        n_rays = self.model.obs_dim - 5
-        self._left, self._right = 5 + 1, 5 + n_rays - 1  # +30 and -30 degree rays (12 rays)
         if action == "head":
             self._cands = [(float(c[0]), float(c[1])) for c in self.model.candidates]
 
@@ -148,12 +158,21 @@ class LRMMGuardian(Guardian):
 
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)
-        space = kwargs.get("observation_space")
-        if space is not None and space.shape != (self.model.obs_dim,):
+        space = self.observation_space
+        if getattr(space, "shape", None) != (self.model.obs_dim,):
             raise ValueError(
-                f"the LRMM model expects observations of shape ({self.model.obs_dim},), "
-                f"the env's observation space is {space.shape}"
+                f"guardian {self.name!r}: the LRMM model expects observations of shape ({self.model.obs_dim},), "
+                f"the env's observation space is {getattr(space, 'shape', space)}"
             )
+        actions = self.require_action_space(controls=2)  # (turn rate, acceleration)
+        if self.action == "head" and self.model.candidates.shape[1] != actions.control_dim:
+            raise ValueError(f"guardian {self.name!r}: the model's candidate controls have {self.model.candidates.shape[1]} "
+                             f"components, the env's action space {actions.control_dim} ({actions.controls})")
+        if self.action == "heuristic":
+            lay = self.require_layout("rays")
+            self._left, self._right = lay.ray_index(_SIDE_RAY), lay.ray_index(-_SIDE_RAY)
+        self.u1_max = float(actions.control_high[0]) if self._u1_max_arg is None else self._u1_max_arg
+        self.u2_min = float(actions.control_low[1]) if self._u2_min_arg is None else self._u2_min_arg
         self._history = deque([self.threshold] * self.window, maxlen=self.window)
         self.last_risk = float("nan")
         self._committed = 0
@@ -177,13 +196,12 @@ class LRMMGuardian(Guardian):
             self._committed -= 1
             intervene = True
         if not intervene:
-            return inactive_action()
+            return self.action_space.inactive()
         if self.action == "head":
             cand = out[1:].tolist()
             if not all(map(math.isfinite, cand)):
                 raise ValueError(f"the LRMM model returned non-finite candidate risks {cand}")
-            u1, u2 = self._cands[cand.index(min(cand))]  # the first of the lowest
-            return active_action(u1, u2)
+            return self.action_space.active(self._cands[cand.index(min(cand))])  # the first of the lowest
         left, right = observation[self._left], observation[self._right]
         if np.isclose(left, right):
             turn = 0.0
@@ -191,7 +209,7 @@ class LRMMGuardian(Guardian):
             turn = self.u1_max
         else:
             turn = -self.u1_max
-        return active_action(turn, self.u2_min)
+        return self.action_space.active((turn, self.u2_min))
 
 
 class LRMMPaperGuardian(LRMMGuardian):

@@ -1,0 +1,247 @@
+"""The HOCBF guardians ``cbf`` and ``cbf-paper``: configuration, latency prediction and the decision.
+
+Their defaults, the rule and the reasons are in the package docstring (:mod:`guardians.cbf`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from guardians._checks import finite, integer, number_pair
+from guardians.base import Guardian
+from guardians.cbf.barrier import HOCBFParams, barrier_rows, barrier_values, critical_obstacle, inflated_radii
+from guardians.cbf.qp import BarrierQP
+from guardians.cbf.recovery import recovery_control, recovery_done
+from rmm_envs.systems.dubins4d import Dubins4D
+
+__all__ = ["CBFGuardian", "CBFPaperGuardian"]
+
+
+def _box_problem(u1, u2) -> str | None:
+    """Why the control box ``u1 x u2`` cannot serve the guardian, or ``None``."""
+    if u1[0] <= 0 <= u1[1] and u2[0] < 0 < u2[1]:
+        return None
+    return "the control box must contain 0 in u1 and allow braking and accelerating in u2"
+
+
+class CBFGuardian(Guardian):
+    """HOCBF safety filter with one-step latency prediction and recovery (see :mod:`guardians.cbf`).
+
+    ``u1_bounds``/``u2_bounds`` (default ``None``: the action space's, read at ``reset``) and
+    ``v_bounds`` (default ``None``: the Dubins4D system's speed range) override the bounds."""
+
+    name = "cbf"
+    observation_type = "global"
+    privileged = True
+
+    def __init__(self, p1: float = 0.7535, p2: float = 0.6664, inflation: float = 1.05,
+                 gamma_vmin: float = 1.0, gamma_vmax: float = 1.0, lambda_theta: float = 1.0,
+                 lambda_v: float = 1.0, p_theta: float = 1.0, p_v: float = 1.0,
+                 u1_bounds=None, u2_bounds=None, v_bounds=None,
+                 active_atol: float = 1e-3, active_rtol: float = 0.0, low_speed_stop: bool = False,
+                 max_obstacles: int = 64, eps: float = 1e-6, predict_latency: bool = True,
+                 recovery: bool = True, v_stuck: float = 0.05, lap_guess: float = 0.1,
+                 goal_aware_margin: bool = True) -> None:
+        super().__init__()
+        self.p1 = finite("p1 (class-K gain)", p1, 0.0, lo_open=True)
+        self.p2 = finite("p2 (class-K gain)", p2, 0.0, lo_open=True)
+        k = finite("inflation", inflation)
+        if not k >= 1:
+            raise ValueError(f"inflation must be >= 1 (1 = the obstacle itself), got {inflation!r}")
+        self.k = k
+        self.gamma_vmin = finite("gamma_vmin", gamma_vmin, 0.0, lo_open=True)
+        self.gamma_vmax = finite("gamma_vmax", gamma_vmax, 0.0, lo_open=True)
+        self.lambda_theta = finite("lambda_theta", lambda_theta, 0.0, lo_open=True)
+        self.lambda_v = finite("lambda_v", lambda_v, 0.0, lo_open=True)
+        self.p_theta = finite("p_theta", p_theta, 0.0, lo_open=True)
+        self.p_v = finite("p_v", p_v, 0.0, lo_open=True)
+        self._u1_arg = None if u1_bounds is None else number_pair("u1_bounds", u1_bounds)
+        self._u2_arg = None if u2_bounds is None else number_pair("u2_bounds", u2_bounds)
+        self.v_min, self.v_max = (Dubins4D.v_min, Dubins4D.v_max) if v_bounds is None else number_pair("v_bounds", v_bounds)
+        if self._u1_arg is not None and _box_problem(self._u1_arg, (-1.0, 1.0)):
+            raise ValueError(f"u1_bounds must contain 0, got {u1_bounds!r}")
+        if self._u2_arg is not None and _box_problem((0.0, 0.0), self._u2_arg):
+            raise ValueError(f"u2_bounds must allow braking and accelerating (min < 0 < max), got {u2_bounds!r}")
+        self.active_atol = finite("active_atol", active_atol, 0.0)
+        self.active_rtol = finite("active_rtol", active_rtol, 0.0)
+        self.low_speed_stop = bool(low_speed_stop)
+        self.max_obstacles = integer("max_obstacles", max_obstacles, 0)
+        self.eps = finite("eps", eps, 0.0, lo_open=True)
+        self.predict_latency = bool(predict_latency)
+        self.recovery = bool(recovery)
+        self.v_stuck = finite("v_stuck", v_stuck, 0.0)
+        self.lap_guess = finite("lap_guess", lap_guess, 0.0, lo_open=True)
+        self.goal_aware_margin = bool(goal_aware_margin)
+        self._qp = None
+        self._counts = self._zero_counts()
+
+    @staticmethod
+    def _zero_counts():
+        return {"qp_fallbacks": 0, "nan_states": 0, "qp_solves": 0, "recoveries": 0, "recovery_entries": 0}
+
+    # ------------------------------------------------------------------ setup
+    def _bounds(self) -> None:
+        """The control box (the action space's unless overridden), the rows' parameters and the
+        dynamics used for the latency prediction."""
+        space = self.require_action_space(controls=2)  # (turn rate, acceleration)
+        lo, hi = space.control_low, space.control_high
+        u1 = self._u1_arg or (float(lo[0]), float(hi[0]))
+        u2 = self._u2_arg or (float(lo[1]), float(hi[1]))
+        problem = _box_problem(u1, u2)
+        if problem:
+            raise ValueError(f"guardian {self.name!r}: {problem}, got u1 in {list(u1)} and u2 in {list(u2)} "
+                             f"(from the action space {space} unless given)")
+        (self.u1_min, self.u1_max), (self.u2_min, self.u2_max) = u1, u2
+        self.params = HOCBFParams(self.p1, self.p2, self.gamma_vmin, self.gamma_vmax, self.lambda_theta, self.lambda_v,
+                                  self.u1_min, self.u1_max, self.u2_min, self.u2_max, self.v_min, self.v_max)
+        self._system = Dubins4D(v_min=self.v_min, v_max=self.v_max, u1_min=self.u1_min, u1_max=self.u1_max,
+                                u2_min=self.u2_min, u2_max=self.u2_max)
+
+    def reset(self, **kwargs) -> None:
+        super().reset(**kwargs)
+        self._bounds()
+        priv = self._privileged()
+        obstacles = np.asarray(priv["obstacles"], float).reshape(-1, 3)
+        if obstacles.shape[0] > self.max_obstacles:
+            raise ValueError(f"{obstacles.shape[0]} obstacles exceed this CBF guardian's QP limit of {self.max_obstacles}")
+        self.obstacles = obstacles
+        self.goal = np.asarray(priv["goal"], float)
+        self.radii = inflated_radii(obstacles, self.goal, self.k, self.goal_aware_margin)
+        self._counts = self._zero_counts()
+        self._pending = np.zeros(2)  # the control acting during the coming lap (the driver's: unknown, 0)
+        self._last_time = float(priv.get("sim_time", 0.0))
+        self._lap = self.lap_guess
+        self._recovering = None  # index of the obstacle being recovered from
+        self.K = obstacles.shape[0]
+        self._qp = BarrierQP(self.K, self.params, self.p_theta, self.p_v, self.eps)
+
+    # ------------------------------------------------------------------ the barrier maths and the QP
+    def barriers(self, state) -> np.ndarray:
+        """``b_i`` at ``state`` for every obstacle (``>= 0``: outside the inflated circle)."""
+        return barrier_values(state, self.obstacles, self.radii)
+
+    def rows(self, state):
+        """Dense ``(G, h)`` of ``G z <= h`` at ``state`` (the same rows the OSQP problem holds);
+        for tests against independent solvers."""
+        return barrier_rows(state, self.obstacles, self.radii, self.goal, self.params)
+
+    def solve(self, state):
+        """OSQP solution ``z*`` at ``state`` and the dense rows ``(G, h)``; ``z* = None`` if it failed."""
+        G, h = self.rows(state)
+        z = self._qp.solve(G, h)
+        self._counts["qp_solves"] += 1
+        return z, G, h
+
+    def critical_obstacle(self, state) -> int:
+        """The obstacle whose barrier row is hardest to satisfy at ``state`` (see
+        :func:`guardians.cbf.barrier.critical_obstacle`)."""
+        G, h = self.rows(state)
+        return critical_obstacle(G, h, self.params)
+
+    # ------------------------------------------------------------------ latency
+    def predict(self, state, control, lap: float) -> np.ndarray:
+        """The exact state after ``lap`` seconds of ``control`` from ``state`` (heading wrapped)."""
+        s = self._system.states_at(np.asarray(state, float)[None, :4], np.asarray(control, float)[None, :],
+                                   np.array([float(lap)]))[0, 0].copy()
+        s[2] = (s[2] + math.pi) % (2.0 * math.pi) - math.pi
+        return s
+
+    # ------------------------------------------------------------------ recovery
+    def recovery_control(self, state, i: int, lap: float | None = None, side: float | None = None) -> np.ndarray:
+        """The backup manoeuvre about obstacle ``i`` at ``state`` (:mod:`guardians.cbf`): ``(u1, u2)``.
+        ``side`` (+1: counter-clockwise tangent, -1: clockwise) overrides the choice of tangent."""
+        u, self._last_side = recovery_control(state, i, self.obstacles, self.radii, self.goal, self.params,
+                                              self._lap if lap is None else lap, self.v_stuck, side)
+        return u
+
+    def _recover(self, state):
+        if self._recovering is None:
+            self._counts["recovery_entries"] += 1
+            self._recovering = self.critical_obstacle(state)
+            self._side = None
+            self._flips = 0
+        self._counts["recoveries"] += 1
+        u = self.recovery_control(state, self._recovering, side=self._side)
+        self._side = self._last_side  # keep going round the same way
+        if abs(u[0]) * self._lap < 1e-3 and state[3] + u[1] * self._lap <= self.v_stuck:
+            # stalled: stopped, facing the target and blocked by another obstacle's row (two
+            # overlapping obstacles form a notch).  Go round the other way; if that is blocked
+            # too, recover from the obstacle that now blocks.
+            if self._flips == 0:
+                self._flips = 1
+                self._side = -self._side
+            else:
+                self._recovering = self.critical_obstacle(state)
+                self._side = None
+                self._flips = 0
+            u = self.recovery_control(state, self._recovering, side=self._side)
+            self._side = self._last_side
+        elif state[3] > self.v_stuck:
+            self._flips = 0
+        return u
+
+    # ------------------------------------------------------------------ decision
+    def _emit(self, u1, u2):
+        u1 = float(np.clip(u1, self.u1_min, self.u1_max))
+        u2 = float(np.clip(u2, self.u2_min, self.u2_max))
+        self._pending = np.array([u1, u2])
+        return self.action_space.active(self._pending)
+
+    def _inactive(self):
+        self._pending = np.zeros(2)
+        return self.action_space.inactive()
+
+    def act(self, observation, info=None):
+        priv = self._privileged()
+        state = np.asarray(priv["state"], float)
+        if not np.all(np.isfinite(state)):
+            self._counts["nan_states"] += 1
+            return self._emit(0.0, self.u2_min)
+        if self.predict_latency:
+            t = float(priv.get("sim_time", self._last_time))
+            if t > self._last_time:
+                self._lap = t - self._last_time
+            self._last_time = t
+            state = self.predict(state, self._pending, self._lap)
+        return self._decide(state)
+
+    def _decide(self, state):
+        """The decision for the state the action will act from (already predicted)."""
+        if self.low_speed_stop and state[3] < 0.05:
+            return self._emit(0.0, self.u2_min)
+        if self.K == 0:
+            return self._inactive()
+        if self.recovery and self._recovering is not None:
+            b = self.barriers(state)
+            if not recovery_done(state, b, self._recovering, self.obstacles, self.radii, self.goal):
+                return self._emit(*self._recover(state))
+            self._recovering = None
+        z, G, h = self.solve(state)
+        if z is None:
+            self._counts["qp_fallbacks"] += 1
+            if self.recovery:
+                return self._emit(*self._recover(state))
+            return self._emit(0.0, self.u2_min)
+        gap = h[: self.K] - G[: self.K] @ z
+        if np.any(np.abs(gap) <= self.active_atol + self.active_rtol * np.abs(h[: self.K])):
+            if self.recovery and state[3] + z[1] * self._lap <= self.v_stuck:
+                return self._emit(*self._recover(state))
+            return self._emit(z[0], z[1])
+        return self._inactive()
+
+    def stats(self) -> dict:
+        return dict(self._counts)
+
+
+class CBFPaperGuardian(CBFGuardian):
+    """The paper's CBF rule (the previous ``cbf`` exactly): the QP at the observed state, maximum
+    braking when it is infeasible, no recovery."""
+
+    name = "cbf-paper"
+
+    def __init__(self, *args, predict_latency: bool = False, recovery: bool = False,
+                 goal_aware_margin: bool = False, **kwargs) -> None:
+        super().__init__(*args, predict_latency=predict_latency, recovery=recovery,
+                         goal_aware_margin=goal_aware_margin, **kwargs)

@@ -1,0 +1,72 @@
+"""The HOCBF-CLF quadratic programme, solved with OSQP: set up once per episode, updated per step.
+
+Over ``z = (u1, u2, d_th, d_v)``: minimise ``u1^2 + u2^2 + p_th d_th^2 + p_v d_v^2`` subject to
+the rows of :func:`guardians.cbf.barrier.barrier_rows`.  The sparse constraint matrix has one
+row per obstacle and four more (``u1`` box; ``u2`` box merged with the speed barriers, as one
+two-sided row; heading CLF; speed CLF), so its sparsity is fixed for the episode's obstacles:
+each step only updates values and bounds, then re-solves warm-started.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import osqp
+import scipy.sparse as sp
+
+from guardians.cbf.barrier import HOCBFParams
+
+__all__ = ["BarrierQP"]
+
+
+class BarrierQP:
+    """The OSQP problem for ``K`` obstacles.
+
+    Args:
+        K: number of obstacles (barrier rows).
+        prm: the rows' gains and bounds (the control box enters the bounds of the box rows).
+        p_theta, p_v: weights of the heading and speed CLF slacks.
+        eps: OSQP's absolute and relative tolerance (solutions polished).
+    """
+
+    def __init__(self, K: int, prm: HOCBFParams, p_theta: float, p_v: float, eps: float) -> None:
+        self.K = K
+        # rows: 0..K-1 barriers (u1, u2); K u1 box; K+1 u2 box+speed; K+2 heading CLF (u1, d_th); K+3 speed CLF (u2, d_v)
+        m = K + 4
+        rows = [np.r_[np.arange(K), K, K + 2], np.r_[np.arange(K), K + 1, K + 3], [K + 2], [K + 3]]
+        self._indices = np.concatenate(rows).astype(np.int32)
+        self._indptr = np.cumsum([0] + [len(r) for r in rows]).astype(np.int32)
+        self._Ax = np.ones(self._indices.shape[0])
+        self._Ax[self._indptr[2]] = -1.0  # d_th in the heading CLF
+        self._Ax[self._indptr[3]] = -1.0  # d_v in the speed CLF
+        A = sp.csc_matrix((self._Ax.copy(), self._indices, self._indptr), shape=(m, 4))
+        P = sp.diags([2.0, 2.0, 2.0 * p_theta, 2.0 * p_v], format="csc")
+        self._l = np.full(m, -np.inf)
+        self._u = np.full(m, np.inf)
+        self._l[K], self._u[K] = prm.u1_min, prm.u1_max
+        self._l[K + 1], self._u[K + 1] = prm.u2_min, prm.u2_max
+        self._u[K + 2] = self._u[K + 3] = 0.0
+        self._solver = osqp.OSQP()
+        self._solver.setup(P, np.zeros(4), A, self._l, self._u, verbose=False, eps_abs=eps, eps_rel=eps,
+                           polishing=True, warm_starting=True, max_iter=4000)
+
+    def solve(self, G: np.ndarray, h: np.ndarray) -> np.ndarray | None:
+        """The solution ``z*`` for the dense rows ``(G, h)`` of the current state; ``None`` if the
+        problem is infeasible or the solver failed."""
+        K = self.K
+        Ax = self._Ax
+        p = self._indptr
+        Ax[p[0]:p[0] + K] = G[:K, 0]
+        Ax[p[0] + K + 1] = G[K + 4, 0]  # heading CLF coefficient of u1
+        Ax[p[1]:p[1] + K] = G[:K, 1]
+        Ax[p[1] + K + 1] = G[K + 5, 1]  # speed CLF coefficient of u2
+        u = self._u
+        u[:K] = h[:K]
+        self._l[K + 1], u[K + 1] = -h[K + 3], h[K + 2]
+        if self._l[K + 1] > u[K + 1]:
+            self._l[K + 1] = u[K + 1]
+        u[K + 2], u[K + 3] = h[K + 4], h[K + 5]
+        self._solver.update(Ax=Ax, l=self._l, u=u)
+        res = self._solver.solve(raise_error=False)
+        if res.info.status_val not in (1, 2) or res.x is None or not np.all(np.isfinite(res.x)):
+            return None
+        return np.asarray(res.x)
