@@ -138,7 +138,7 @@ from rmm_envs.envs.base import LabelledEnvBase, check_arguments, finite, rejecti
 from rmm_envs.envs.dubins4d_start import HALF as _HALF, Dubins4DStarts
 from rmm_envs.envs.dubins4d_step import advance
 from rmm_envs.scenes.dubins4d import Dubins4DScene, observation
-from rmm_envs.systems.dubins4d import Dubins4D
+from rmm_envs.systems.dubins4d import Dubins4D, FullBraking
 
 __all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "observation", "observation_layout", "parse_guardian_action"]
 
@@ -217,7 +217,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, LabelledEnvBase):
         self.driver = CLFDriver((s.u1_min, s.u1_max), (s.u2_min, s.u2_max), (s.v_min, s.v_max),
                                 driver_params or DriverParams(), solver=driver_solver)
         self.clock = make_clock(clock)
-        self.action_space = GuardianActionSpace.for_system(s, CONTROLS)
+        self.action_space = GuardianActionSpace.for_system(s, CONTROLS, safe_default=FullBraking())
         low = np.array([0.0, -np.inf, -np.inf, -np.pi, s.v_min] + [0.0] * self.n_rays, dtype=np.float32)
         high = np.array([np.inf, np.inf, np.inf, np.pi, s.v_max] + [self.ray_length] * self.n_rays, dtype=np.float32)
         self.observation_space = ObservationBox(low, high, observation_layout(self.n_rays))
