@@ -2,7 +2,9 @@
 
 They need nothing but the parallel-autonomy contract: each builds its actions through the
 action space given at ``reset`` and reads the control bounds from it, so they run on any
-system whose env offers a :class:`rmm_envs.autonomy.GuardianActionSpace`.
+system whose env offers a :class:`rmm_envs.autonomy.GuardianActionSpace`; ``brakes`` also
+needs the space's ``safe_default`` (the system's own safe behaviour), and is refused before any
+episode on an env that states none.
 """
 
 from __future__ import annotations

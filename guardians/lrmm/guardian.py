@@ -41,6 +41,18 @@ the observation's layout (``layout.ray_index(+-30 degrees)``), so the rule holds
 count that has rays in (or nearest to) those directions.
 At 0.85 the car is usually too close to brake in time (85% of *random* futures crash there).
 
+**Other systems** (``env_id``: the env served, which ``rmm-bench`` passes from ``--env``): one
+table, :data:`guardians.lrmm.model.SHIPPED`, gives per env id the shipped model, the
+observation field it reads and, where the model file stores none, the decision defaults.  On
+``Dubins3DMazeGuarded-v0`` / ``Dubins3DMazeParallel-v0`` the guardian reads the maze model
+(trained on ``Dubins3DMaze-v0``'s 8 rays: the risk of random 2 s futures) on the ``"rays"``
+field and acts with ``action="turn"``: the maximum turn rate toward the side the model rates
+safer, comparing its risk of the rays as they would read with the heading one ray (45 degrees)
+further left or right (a cyclic shift of the rays: the pose turned in place, a stand-in for the
+turn the car will make); threshold 0.7, commit 5 steps (how they were chosen is stored in the
+table).  The car cannot brake, so turning is the whole action.  Without ``env_id`` (or a
+model) the guardian serves Dubins4D, as before.
+
 ``hysteresis=True`` (either guardian) reproduces the original code's release rule: a deque of
 the last ``window`` (20) risks, initialised at the threshold, and the guardian intervenes while
 either the current risk or the deque's mean exceeds the threshold.
@@ -85,14 +97,20 @@ class LRMMGuardian(Guardian):
         threshold: take control while the risk is strictly above it; ``None`` (default) uses
             the model's stored threshold (the paper's 0.85 if it has none, with a warning).
         action: ``"head"`` (the safest candidate of the model's head), ``"heuristic"`` (brake
-            and turn to the more open +-30 degree ray) or ``None`` (default: ``"head"`` when
+            and turn to the more open +-30 degree ray), ``"turn"`` (turn toward the lower-risk
+            side; one-control systems whose model reads the rays) or ``None`` (default: ``"head"`` when
             the model has one, else ``"heuristic"`` with a warning).
         hysteresis: use the original's moving-average release rule (default False).
         window: moving-average length with ``hysteresis`` (default 20).
         commit: steps to stay in control after the risk is back at or below the threshold;
             ``None`` (default) uses the model's stored value (0 if it has none).
-        u1_max, u2_min: turn rate and braking of the heuristic; ``None`` (default): the action
-            space's largest turn rate and strongest braking (0.25, -0.5 for Dubins4D).
+        u1_max, u2_min: turn rate and braking of the heuristic (``u1_max`` also of ``"turn"``);
+            ``None`` (default): the action space's largest turn rate and strongest braking
+            (0.25, -0.5 for Dubins4D).
+        env_id: the env served (default ``None``: Dubins4D): picks the shipped model, its
+            input field and decision defaults from :data:`guardians.lrmm.model.SHIPPED`.
+        inputs: the observation field the model reads (default ``None``: the table's for
+            ``env_id``, else the whole observation).
     """
 
     name = "lrmm"

@@ -8,12 +8,13 @@ the guardian's thinking time passes in the world), the maze counterparts of
 ## Description
 
 The constant-speed car of ``Dubins3DMaze-v0`` (:class:`rmm_envs.systems.Dubins3D`: 10 px/s,
-minimum turning radius 50 px, so ``|u| <= 0.2`` rad/s) in a seeded perfect maze (20 x 20 cells
+minimum turning radius 50 px, so ``|u| <= 0.2`` rad/s) in a seeded perfect maze (10 x 10 cells
 of 125 px, walls 12.5 px thick; :mod:`rmm_envs.worlds.mazes`) must reach a goal disc in the
 centre of a goal cell.  A built-in reckless driver (:class:`rmm_envs.maze_driver.PursuitDriver`)
 follows the maze's cell path to the goal by pure pursuit with a long look-ahead, cutting
-corners and ignoring the walls.  The agent is a *guardian*: at every step it decides whether to
-take over the turn rate.  Units are the maze's pixels.
+corners and ignoring the walls: alone it collides in 46% of the episodes (256 episodes of
+``rmm-bench`` seed 0, fixed 1 ms clock) and reaches the goal in the rest.  The agent is a
+*guardian*: at every step it decides whether to take over the turn rate.  Units are pixels.
 
 ## Dynamics
 
@@ -86,11 +87,15 @@ the goal ``[x, y, r]`` and the simulated time.
 ## Arguments
 
 ``gym.make("Dubins3DMazeGuarded-v0", step_dt=0.1, n_path_points=8, max_episode_sim_time=300.0,
-goal_cells=(4, 8), goal_radius=30.0, start_jitter=15.0, heading_noise=pi/4, lookahead=150.0,
-driver_gain=1.0, maze_rows=20, maze_cols=20, speed=10.0, r_min=50.0, clock=None,
+goal_cells=(4, 8), goal_radius=30.0, start_jitter=15.0, heading_noise=pi/4, lookahead=190.0,
+driver_gain=1.0, maze_rows=10, maze_cols=10, speed=10.0, r_min=50.0, clock=None,
 render_mode=None)``.  ``step_dt`` 0.1 s as Dubins4D: the blocking env re-decides every 1 px of
 travel.  ``goal_radius`` 30 px: half a corridor, so the driver cannot miss it when it arrives.
-``clock`` only measures the agent's compute time in the blocking env.
+``lookahead`` (px) and ``driver_gain`` (1/s): the driver's (:mod:`rmm_envs.maze_driver`, where
+the collision rate against the look-ahead is measured).  A 10 x 10 maze holds every drive (the
+goal is at most 8 cells away) and resets ~8x faster than the paper's 20 x 20 (the ``Maze``
+spatial index); the rays are local either way.  ``clock`` only measures the agent's compute
+time in the blocking env.
 
 ``gym.make("Dubins3DMazeParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same)``:
 the same world under :class:`rmm_envs.wrappers.NonBlockingStepping` (each ``step(a)`` advances
@@ -348,13 +353,8 @@ class Dubins3DMazeGuardedEnv(LabelledEnvBase):
         self.require_episode()
         return {"state": self._state.copy(), "maze": self.scene.maze, "goal": self.goal.copy(), "sim_time": self._sim_time}
 
-    @property
-    def true_state(self) -> np.ndarray:
-        return self._state.copy()
-
-    @property
-    def sim_time(self) -> float:
-        return self._sim_time
+    true_state = property(lambda self: self._state.copy(), doc="The true pose (a copy). **Privileged**.")
+    sim_time = property(lambda self: self._sim_time, doc="Simulated seconds since reset.")
 
     def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """``n`` poses uniform over the image x [-pi, pi), clear of the walls (rejection sampling)."""
