@@ -114,10 +114,12 @@ import math
 
 import numpy as np
 
-from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout, SafeDefault, parse
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout, SafeDefault
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.envs import _render
-from rmm_envs.envs.base import LabelledEnvBase, check_arguments, finite, option_vector, rejection_sample, whole
+from rmm_envs.envs.base import check_arguments, finite, option_vector, whole
+from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
+from rmm_envs.envs.guarded import GuardedEnv
 from rmm_envs.maze_driver import PursuitDriver, cell_distances, cell_of, cell_path
 from rmm_envs.scenes.maze import MazeScene
 from rmm_envs.systems.dubins3d import Dubins3D
@@ -164,7 +166,7 @@ class TurnFromNearerWall(SafeDefault):
         return control
 
 
-class Dubins3DMazeGuardedEnv(LabelledEnvBase):
+class Dubins3DMazeGuardedEnv(GuardedEnv):
     """Blocking maze parallel-autonomy env; see the module docstring for the full spec."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -277,9 +279,7 @@ class Dubins3DMazeGuardedEnv(LabelledEnvBase):
         self.driver.reset(waypoints)
         self._state = state.copy()
         self._state[2] = (self._state[2] + math.pi) % (2 * math.pi) - math.pi
-        self._sim_time = 0.0
-        self._n_steps = self._n_active_steps = 0
-        self._active_sim_time = self._cum_compute = self._cum_reward = 0.0
+        self.begin_statistics()
         self._last_active = False
         self._last_control = np.zeros(1)
         self.begin_episode()
@@ -295,57 +295,31 @@ class Dubins3DMazeGuardedEnv(LabelledEnvBase):
         obs[N_RAYS], obs[N_RAYS + 1], obs[N_RAYS + 2] = self.goal[0] - x, self.goal[1] - y, psi
         return obs
 
-    def step(self, action):
-        compute = self.clock.elapsed()
-        active, ctrl = parse(action, self.action_space)
-        out = self.simulate(self.step_dt, active, ctrl, compute)
-        self.clock.start()
-        return out
-
     def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
         """Advance the world by ``duration`` seconds under one held turn rate: the driver's
         (chosen at the start of the interval) when ``active`` is false, else ``control[0]``
         (already validated).  ``compute_time`` is the agent's time charged to this step
         (statistics only).  Used by :meth:`step` and the non-blocking wrapper."""
-        self.check_can_step()
-        if not (duration >= 0 and math.isfinite(duration)):
-            raise ValueError(f"duration must be a finite number >= 0, got {duration}")
+        self.check_interval(duration)
         u = float(np.asarray(control, dtype=float).reshape(-1)[0]) if active else self.driver.control(self._state)
         u = min(max(u, -self.system.u_max), self.system.u_max)
         path = dubins_path(self._state[0], self._state[1], self._state[2], self.system.speed, u, float(duration),
                            np.empty((self.n_path_points, 3)), _COEF_ARRAY)
         hit = maze_path_hit(*self._geom, path)
         reached = not hit and path_reaches_disc(path, self.goal[0], self.goal[1], self.goal[2])
-        self._n_steps += 1
-        if active:
-            self._n_active_steps += 1
-            self._active_sim_time += duration
-        self._cum_compute += compute_time
-        self._sim_time += duration
+        self.count_interval(duration, active, compute_time)
         self._state = path[-1].copy()
         self._state[2] = (self._state[2] + math.pi) % (2 * math.pi) - math.pi
         self._last_active = bool(active)
         self._last_control = np.array([u])
         outcome, reward = ("collision", -1.0) if hit else ("goal", 1.0) if reached else (None, 0.0)
-        terminated = outcome is not None
-        truncated = not terminated and self._sim_time >= self.max_episode_sim_time - 1e-9
-        if truncated:
-            outcome = "timeout"
-        self._cum_reward += reward
         info = {"sim_time": self._sim_time, "state": self._state.copy(), "active": bool(active),
                 "control": self._last_control.copy()}
-        if terminated or truncated:
-            self.end_episode()
-            info["outcome"] = outcome
-            info["episode"] = self.episode_statistics(outcome)
+        terminated, truncated = self.end_interval(outcome, reward, info)
         return self._observe(), reward, terminated, truncated, info
 
-    def episode_statistics(self, outcome: str | None = None) -> dict:
-        n = self._n_steps
-        return {"outcome": outcome, "n_env_steps": n, "n_active_ctrl_env_steps": self._n_active_steps,
-                "active_ctrl_sim_time": self._active_sim_time, "cum_sim_time": self._sim_time,
-                "cum_compute_time": self._cum_compute, "avg_compute_time": self._cum_compute / n if n else 0.0,
-                "cum_reward": self._cum_reward, "final_speed": self.system.speed}
+    def final_speed(self) -> float:
+        return self.system.speed
 
     # ------------------------------------------------------------------ accessors and labelling hooks
     def privileged(self) -> dict:
@@ -356,14 +330,8 @@ class Dubins3DMazeGuardedEnv(LabelledEnvBase):
     true_state = property(lambda self: self._state.copy(), doc="The true pose (a copy). **Privileged**.")
     sim_time = property(lambda self: self._sim_time, doc="Simulated seconds since reset.")
 
-    def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        """``n`` poses uniform over the image x [-pi, pi), clear of the walls (rejection sampling)."""
-        self.require_episode()
-        m = self.scene.maze
-        return rejection_sample(
-            rng, n, 3,
-            lambda r, k: np.column_stack([r.uniform(0, m.width, k), r.uniform(0, m.height, k), r.uniform(-np.pi, np.pi, k)]),
-            lambda cand: m.state_failed(cand[:, :2]), "maze poses clear of the walls")
+    #: poses uniform over the image x [-pi, pi), clear of the walls: the maze env's hook, shared
+    sample_states = Dubins3DMazeEnv.sample_states
 
     def observe_states(self, states, rng=None) -> np.ndarray:
         """This env's observation of poses ``(N, 3)`` in the current episode; ``rng`` is unused."""
