@@ -18,6 +18,9 @@ ENV_PAGES = {
                                  "figures/dubins4d_frame.png"),
     "environments/dubins3d_maze.md": ("rmm_envs.envs.dubins3d_maze", "Dubins3D in mazes: `Dubins3DMaze-v0`",
                                       "figures/dubins3d_maze_frame.png"),
+    "environments/dubins3d_maze_parallel.md": ("rmm_envs.envs.dubins3d_maze_parallel",
+                                               "The maze car under parallel autonomy: `Dubins3DMazeGuarded-v0`, "
+                                               "`Dubins3DMazeParallel-v0`", None),
     "environments/quadrotor_room.md": ("rmm_envs.envs.quadrotor_room", "Quadrotor in rooms: `QuadrotorRoom-v0`",
                                        "figures/quadrotor_room_frame.png"),
 }

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-__all__ = ["finite", "integer", "number_pair"]
+__all__ = ["dubins4d_only", "finite", "integer", "number_pair"]
 
 
 def finite(name: str, value, lo: float | None = None, lo_open: bool = False) -> float:
@@ -40,3 +40,16 @@ def number_pair(name: str, pair) -> tuple[float, float]:
     if not (math.isfinite(lo) and math.isfinite(hi)) or not lo < hi:
         raise ValueError(f"{name} must be a finite (min, max) with min < max, got {pair!r}")
     return lo, hi
+
+
+def dubins4d_only(guardian, action_space) -> None:
+    """Refuse an env that is not a Dubins4D one (``ValueError`` naming the guardian and why): the
+    privileged guardians (``cbf``, ``hj``) model the Dubins4D car among circles, so they need its
+    two controls (turn rate, acceleration) and circular obstacles in its privileged data."""
+    from rmm_envs.envs.dubins4d import CONTROLS
+
+    name = guardian.name
+    controls = guardian.require_action_space(space=action_space).controls
+    if tuple(controls) != CONTROLS:
+        raise ValueError(f"guardian {name!r} applies to Dubins4D envs only for now: it models the Dubins4D car (controls "
+                         f"{CONTROLS}) among circular obstacles, and this env's controls are {controls}")

@@ -57,10 +57,16 @@ class Guardian:
             raise ValueError(f"guardian {self.name!r} needs privileged information: pass reset(privileged=env.unwrapped.privileged)")
         self._privileged = privileged
 
-    def require_action_space(self, controls: int | None = None) -> GuardianActionSpace:
-        """The action space given at :meth:`reset`, checked to be a ``GuardianActionSpace``
+    def check_spaces(self, observation_space, action_space) -> None:
+        """Raise ``ValueError`` (naming this guardian and what is missing) if it cannot serve an
+        env with these spaces.  Cheap, so ``rmm-bench`` calls it before any episode; guardians
+        that need more than a ``GuardianActionSpace`` override it (and call it from ``reset``)."""
+        self.require_action_space(space=action_space)
+
+    def require_action_space(self, controls: int | None = None, space=None) -> GuardianActionSpace:
+        """The action space given at :meth:`reset` (or ``space``), checked to be a ``GuardianActionSpace``
         (with ``controls`` components when given); a ``ValueError`` naming this guardian otherwise."""
-        space = self.action_space
+        space = self.action_space if space is None else space
         if not isinstance(space, GuardianActionSpace):
             raise ValueError(f"guardian {self.name!r} builds its actions through the env's action space: pass "
                              f"reset(action_space=env.action_space) with a rmm_envs.autonomy.GuardianActionSpace, "
@@ -70,14 +76,16 @@ class Guardian:
                              f"got {space.control_dim} ({space.controls})")
         return space
 
-    def require_layout(self, *fields: str) -> ObservationLayout:
-        """The layout of the observation space given at :meth:`reset`, checked to have ``fields``
-        (``"rays"`` also needs the rays' directions); a ``ValueError`` naming this guardian otherwise."""
-        lay = getattr(self.observation_space, "layout", None)
+    def require_layout(self, *fields: str, observation_space=None) -> ObservationLayout:
+        """The layout of the observation space given at :meth:`reset` (or ``observation_space``),
+        checked to have ``fields`` (``"rays"`` also needs the rays' directions); a ``ValueError``
+        naming this guardian otherwise."""
+        space = self.observation_space if observation_space is None else observation_space
+        lay = getattr(space, "layout", None)
         if not isinstance(lay, ObservationLayout):
             raise ValueError(f"guardian {self.name!r} reads the observation by name: pass reset(observation_space="
                              f"env.observation_space) with a layout (rmm_envs.autonomy.ObservationBox), "
-                             f"got {self.observation_space!r}")
+                             f"got {space!r}")
         missing = [f for f in fields if f not in lay]
         if missing:
             raise ValueError(f"guardian {self.name!r} needs the observation field(s) {missing}; "

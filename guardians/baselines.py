@@ -2,7 +2,9 @@
 
 They need nothing but the parallel-autonomy contract: each builds its actions through the
 action space given at ``reset`` and reads the control bounds from it, so they run on any
-system whose env offers a :class:`rmm_envs.autonomy.GuardianActionSpace`.
+system whose env offers a :class:`rmm_envs.autonomy.GuardianActionSpace`; ``brakes`` also
+needs the space's ``safe_default`` (the system's own safe behaviour), and is refused before any
+episode on an env that states none.
 """
 
 from __future__ import annotations
@@ -54,38 +56,49 @@ class RandomGuardian(_ContractOnly):
 
 
 class BrakesGuardian(Guardian):
-    """Always in control, maximum braking.
+    """Always in control, applying the system's safe default.
 
-    The first control (Dubins4D: the turn rate) is held constant for the episode and every
-    other control (Dubins4D: the acceleration) at its lower bound, read from the action
-    space: for Dubins4D that is full braking, ``u2 = -0.5``.  ``turn="random"`` (default, as
-    the paper's code): the constant turn rate is drawn uniformly over its bounds
-    (``[-0.25, 0.25]``) once per episode; ``turn="zero"``: no turn (the paper's text; zero
-    clipped into the bounds).
+    The safe default is the env's: its action space's ``safe_default``
+    (:class:`rmm_envs.autonomy.SafeDefault`), full braking for Dubins4D, the maximum turn away
+    from the nearer wall for the maze car.  An env whose action space states none is refused at
+    :meth:`reset`, naming what is missing.
 
-    "Lowest value of every other control" is the safe default of Dubins4D only (for a
-    quadrotor the lowest thrust is a fall): which control is safe is a property of the
-    system, and other systems need their own definition before this baseline means
-    "brake" for them.
+    ``turn`` (Dubins4D's braking only): ``"random"`` (default, as the paper's code) holds a turn
+    rate drawn uniformly over its bounds (``[-0.25, 0.25]``) once per episode; ``"zero"`` no
+    turn (the paper's text).  ``None`` leaves the safe default's own choice (``"random"`` for
+    Dubins4D); a safe default without a turn choice refuses a given ``turn``.
     """
 
     name = "brakes"
     observation_type = "none"
 
-    def __init__(self, turn: str = "random") -> None:
+    def __init__(self, turn: str | None = None) -> None:
         super().__init__()
-        if turn not in ("random", "zero"):
+        if turn not in (None, "random", "zero"):
             raise ValueError(f"turn must be 'random' or 'zero', got {turn!r}")
         self.turn = turn
-        self.turnrate = 0.0
+        self._policy = None
+
+    def check_spaces(self, observation_space, action_space) -> None:
+        space = self.require_action_space(space=action_space)
+        if space.safe_default is None:
+            raise ValueError(f"guardian {self.name!r} applies the env's safe default, and this env's action space "
+                             "states none (GuardianActionSpace(safe_default=...), rmm_envs.autonomy.SafeDefault)")
+        if self.turn is not None:
+            try:
+                space.safe_default.check_options({"turn": self.turn})
+            except ValueError as e:
+                raise ValueError(f"guardian {self.name!r}: {e}") from None
 
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)
-        space = self.require_action_space()
-        lo, hi = float(space.control_low[0]), float(space.control_high[0])
-        self.turnrate = float(self.rng.uniform(lo, hi)) if self.turn == "random" else min(max(0.0, lo), hi)
-        self._control = space.control_low.copy()
-        self._control[0] = self.turnrate
+        self.check_spaces(self.observation_space, self.action_space)
+        space = self.action_space
+        options = {} if self.turn is None else {"turn": self.turn}
+        try:
+            self._policy = space.safe_default.policy(space, self.rng, **options)
+        except ValueError as e:
+            raise ValueError(f"guardian {self.name!r}: {e}") from None
 
     def act(self, observation, info):
-        return self.action_space.active(self._control)
+        return self.action_space.active(self._policy(observation))

@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import inspect
 from importlib.metadata import entry_points
 from typing import Any
 
 from guardians.base import Guardian
 
-__all__ = ["DEFAULT_SET", "ENTRY_POINT_GROUP", "PAPER_SET", "available_guardians", "guardian_set", "load_guardian_class",
-           "make_guardian"]
+__all__ = ["DEFAULT_SET", "ENTRY_POINT_GROUP", "PAPER_SET", "accepts_argument", "available_guardians", "guardian_set",
+           "load_guardian_class", "make_guardian"]
 
 ENTRY_POINT_GROUP = "rmm_envs.guardians"
 
@@ -96,9 +97,35 @@ def load_guardian_class(name: str):
     raise ValueError(f"unknown guardian {name!r}; available: {available_guardians()} or 'module:Class'")
 
 
-def make_guardian(name: str, **kwargs) -> Guardian:
-    """Instantiate a guardian by registry name, entry-point name or ``module:Class``."""
+def accepts_argument(factory, name: str) -> bool:
+    """Whether ``factory`` (a guardian class or callable, as the registry resolves it) takes a
+    keyword argument ``name`` by that name.  A class's ``__init__`` that forwards ``**kwargs``
+    is followed up its bases, so a subclass of a guardian that takes ``threads`` or ``env_id``
+    takes it too; a bare ``**kwargs`` that reaches no named parameter does not count."""
+    targets = [c.__dict__["__init__"] for c in factory.__mro__ if "__init__" in c.__dict__ and c is not object] \
+        if isinstance(factory, type) else [factory]
+    for fn in targets:
+        try:
+            params = inspect.signature(fn).parameters
+        except (TypeError, ValueError):  # a builtin without a signature
+            return False
+        p = params.get(name)
+        if p is not None and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY):
+            return True
+        if not any(q.kind is q.VAR_KEYWORD for q in params.values()):
+            return False
+    return False
+
+
+def make_guardian(name: str, env_id: str | None = None, **kwargs) -> Guardian:
+    """Instantiate a guardian by registry name, entry-point name or ``module:Class``.
+
+    ``env_id``: the env the guardian will serve, passed on as the guardian's ``env_id``
+    argument when its constructor takes one by that name (the ``lrmm`` guardians pick their
+    shipped model by it) and ignored otherwise."""
     cls = load_guardian_class(name)
+    if env_id is not None and "env_id" not in kwargs and accepts_argument(cls, "env_id"):
+        kwargs["env_id"] = env_id
     obj = cls(**kwargs) if isinstance(cls, type) else cls(**kwargs) if callable(cls) else cls
     if not hasattr(obj, "act") or not hasattr(obj, "reset"):
         raise TypeError(f"{name!r} did not produce a guardian (needs reset() and act()); got {type(obj).__name__}")

@@ -7,6 +7,9 @@ Importing the package registers the Gymnasium environments:
   :mod:`rmm_envs.envs.dubins4d_vector`).
 * ``Dubins4DParallel-v0``: the same, non-blocking (the guardian's compute time passes).
 * ``Dubins3DMaze-v0``: a constant-speed Dubins car in procedurally generated mazes.
+* ``Dubins3DMazeGuarded-v0``: that car driven to a goal cell by a reckless driver, a guardian
+  may take over the turn rate (blocking, fixed step).
+* ``Dubins3DMazeParallel-v0``: the same, non-blocking (the guardian's compute time passes).
 * ``QuadrotorRoom-v0``: a quadrotor in procedurally generated rooms (PyBullet; extra ``quadrotor``).
 """
 
@@ -21,7 +24,8 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
-ENV_IDS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins3DMaze-v0", "QuadrotorRoom-v0")
+ENV_IDS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins3DMaze-v0", "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0",
+           "QuadrotorRoom-v0")
 
 
 def _register() -> None:
@@ -29,6 +33,8 @@ def _register() -> None:
         "Dubins4DCircles-v0": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv",
         "Dubins4DParallel-v0": "rmm_envs.envs.dubins4d:make_parallel_env",
         "Dubins3DMaze-v0": "rmm_envs.envs.dubins3d_maze:Dubins3DMazeEnv",
+        "Dubins3DMazeGuarded-v0": "rmm_envs.envs.dubins3d_maze_parallel:Dubins3DMazeGuardedEnv",
+        "Dubins3DMazeParallel-v0": "rmm_envs.envs.dubins3d_maze_parallel:make_parallel_env",
         "QuadrotorRoom-v0": "rmm_envs.envs.quadrotor_room:QuadrotorRoomEnv",
     }
     vector_specs = {"Dubins4DCircles-v0": "rmm_envs.envs.dubins4d_vector:Dubins4DCirclesVectorEnv"}

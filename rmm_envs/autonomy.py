@@ -31,6 +31,13 @@ rays relative to the heading.  A guardian reads positions in the vector by name
 system whose observation offers the fields it needs, and refuses one that does not with a
 message naming the missing field.
 
+**The safe default.**  What "do the safe thing" means is a property of the system: full
+braking for Dubins4D, the maximum turn away from the nearer wall for the constant-speed maze
+car.  An env states it by giving its action space a :class:`SafeDefault`
+(``GuardianActionSpace(..., safe_default=...)``, read back as ``space.safe_default``); the
+``brakes`` guardian applies it on any env that offers one.  A new system adds its own in its
+env (or system) module: one subclass with a ``policy`` method, no change elsewhere.
+
 Guardians receive both spaces at ``reset`` (see :mod:`guardians.base`) and read bounds and
 layout from them.
 """
@@ -44,10 +51,36 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 from gymnasium import spaces
 
-__all__ = ["ACTIVE", "GuardianActionSpace", "ObservationBox", "ObservationLayout", "active", "inactive",
+__all__ = ["ACTIVE", "GuardianActionSpace", "ObservationBox", "ObservationLayout", "SafeDefault", "active", "inactive",
            "layout", "parse"]
 
 ACTIVE = "active_ctrl"  # the action field that says whether the guardian takes control
+
+
+class SafeDefault:
+    """A system's safe default control (what the ``brakes`` guardian applies); subclass per system.
+
+    :meth:`policy` is called once per episode and returns the episode's policy, a function
+    from the observation to the control vector (within the space's bounds).  ``options`` are
+    the keyword options a subclass's :meth:`policy` accepts (e.g. Dubins4D's ``turn``); others
+    are refused with a ``ValueError`` naming them.
+    """
+
+    #: what the safe default does, in words (error messages and reports show it)
+    description: str = "a safe default control"
+    #: keyword options :meth:`policy` accepts
+    options: tuple[str, ...] = ()
+
+    def check_options(self, options: dict) -> None:
+        unknown = sorted(set(options) - set(self.options))
+        if unknown:
+            accepted = ", ".join(repr(o) for o in self.options) or "none"
+            raise ValueError(f"the safe default of this env ({self.description}) takes no option(s) {unknown}; "
+                             f"it accepts: {accepted}")
+
+    def policy(self, space: "GuardianActionSpace", rng: np.random.Generator, **options):  # pragma: no cover - abstract
+        """``observation -> control vector`` for one episode; ``rng`` for any per-episode draw."""
+        raise NotImplementedError
 
 
 class GuardianActionSpace(spaces.Dict):
@@ -58,13 +91,15 @@ class GuardianActionSpace(spaces.Dict):
             the system's control vector (e.g. ``("turnrate_ctrl", "accel_ctrl")``).
         low, high: the control bounds, one number per control (``low <= high``, finite).
         seed: as for ``gymnasium.spaces.Dict``.
+        safe_default: the system's :class:`SafeDefault` (``None``: the env states none).
 
     The fields are stored in Gymnasium's default (sorted) key order, so sampling, seeding and
     flattening behave exactly as for the plain ``Dict`` with the same fields; the control
     order lives in :attr:`controls`.  The continuous fields are float32 boxes.
     """
 
-    def __init__(self, controls: Sequence[str], low: Iterable[float], high: Iterable[float], seed=None) -> None:
+    def __init__(self, controls: Sequence[str], low: Iterable[float], high: Iterable[float], seed=None,
+                 safe_default: SafeDefault | None = None) -> None:
         controls = tuple(controls)
         lo = np.asarray(list(low), dtype=float).reshape(-1)
         hi = np.asarray(list(high), dtype=float).reshape(-1)
@@ -80,15 +115,20 @@ class GuardianActionSpace(spaces.Dict):
         for name, a, b in zip(controls, lo, hi):
             fields[name] = spaces.Box(a, b, shape=(1,), dtype=np.float32)
         super().__init__(fields, seed=seed)
+        if safe_default is not None and not isinstance(safe_default, SafeDefault):
+            raise TypeError(f"safe_default must be a rmm_envs.autonomy.SafeDefault, got {safe_default!r}")
         self.controls = controls
+        self.safe_default = safe_default
         # the bounds actions are clipped to: those of the float32 boxes, as float64
         self.control_low = np.array([float(self.spaces[c].low[0]) for c in controls])
         self.control_high = np.array([float(self.spaces[c].high[0]) for c in controls])
 
     @classmethod
-    def for_system(cls, system: Any, controls: Sequence[str], seed=None) -> "GuardianActionSpace":
+    def for_system(cls, system: Any, controls: Sequence[str], seed=None,
+                   safe_default: SafeDefault | None = None) -> "GuardianActionSpace":
         """The action space of a system whose dynamics object has ``control_low``/``control_high``."""
-        return cls(controls, np.asarray(system.control_low, float), np.asarray(system.control_high, float), seed=seed)
+        return cls(controls, np.asarray(system.control_low, float), np.asarray(system.control_high, float), seed=seed,
+                   safe_default=safe_default)
 
     @property
     def control_dim(self) -> int:

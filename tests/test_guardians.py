@@ -11,9 +11,9 @@ from guardians.adapters import to_guardian_action
 from guardians.baselines import BrakesGuardian, InactiveGuardian, RandomGuardian
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
-from rmm_envs.systems.dubins4d import Dubins4D
+from rmm_envs.systems.dubins4d import Dubins4D, FullBraking
 
-SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS)
+SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, safe_default=FullBraking())
 
 
 def spaces(action_space=SPACE, n_rays=12):
@@ -177,7 +177,7 @@ def test_every_registered_name_makes_a_guardian_of_that_name():
 def test_baselines_build_actions_through_any_action_space():
     """The same baseline code on a three-control space with other bounds: actions have that
     space's fields, respect its bounds, and brakes holds every control but the first at its low."""
-    space = GuardianActionSpace(("a", "b", "c"), [-1.0, -2.0, 0.5], [1.0, -1.0, 4.0])
+    space = GuardianActionSpace(("a", "b", "c"), [-1.0, -2.0, 0.5], [1.0, -1.0, 4.0], safe_default=FullBraking())
     r = RandomGuardian(p_active=1.0)
     r.reset(seed=0, action_space=space)
     for _ in range(200):
@@ -188,7 +188,7 @@ def test_baselines_build_actions_through_any_action_space():
     active, u = space.parse(b.act(None, {}))
     assert active and -1.0 <= u[0] <= 1.0 and u[1:].tolist() == [-2.0, 0.5]
     z = BrakesGuardian(turn="zero")
-    z.reset(seed=3, action_space=GuardianActionSpace(("t", "s"), [0.1, -1.0], [0.2, 1.0]))
+    z.reset(seed=3, action_space=GuardianActionSpace(("t", "s"), [0.1, -1.0], [0.2, 1.0], safe_default=FullBraking()))
     assert z.act(None, {})["t"][0] == np.float32(0.1)  # zero clipped into the bounds
     i = InactiveGuardian()
     i.reset(seed=0, action_space=space)

@@ -145,6 +145,7 @@ def check_runs(runs: dict[str, AgentRun]) -> dict[str, dict]:
 
     meta: dict[str, dict] = {}
     envs: dict[str, int] = {}
+    env_spaces: dict[str, tuple] = {}
     for agent, run in runs.items():
         ekey = json.dumps([run.env_id, run.env_kwargs], sort_keys=True)
         if ekey not in envs:
@@ -157,13 +158,20 @@ def check_runs(runs: dict[str, AgentRun]) -> dict[str, dict]:
             try:
                 check_env_contract(run.env_id, env)
                 envs[ekey] = int(getattr(env.unwrapped, "n_obstacles", -1))  # optional: the table's Obstacles column
+                env_spaces[ekey] = (env.observation_space, env.action_space)
             finally:
                 env.close()
         try:
-            guardian = make_guardian(agent, **run.agent_kwargs)
+            guardian = make_guardian(agent, env_id=run.env_id, **run.agent_kwargs)
         except Exception as e:
             opts = " ".join(f"{agent}.{k}={v if isinstance(v, str) else json.dumps(v)}" for k, v in run.agent_kwargs.items())
             where = f"--agent-opt {opts}" if opts else f"--agent {agent}"
-            raise ValueError(f"{where}: the guardian cannot be built: {type(e).__name__}: {e}") from None
+            raise ValueError(f"{where}: the guardian cannot be built for --env {run.env_id}: {type(e).__name__}: {e}") from None
+        check = getattr(guardian, "check_spaces", None)
+        if check is not None:  # what the guardian needs of the env's spaces, before any episode
+            try:
+                check(*env_spaces[ekey])
+            except ValueError as e:
+                raise ValueError(f"--agent {agent} does not apply to --env {run.env_id}: {e}") from None
         meta[agent] = {"observation": str(getattr(guardian, "observation_type", "?")), "n_obstacles": envs[ekey]}
     return meta

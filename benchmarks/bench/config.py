@@ -22,10 +22,11 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import inspect
 import json
 from dataclasses import dataclass, field
 from typing import Any
+
+from guardians.registry import accepts_argument  # noqa: F401  (re-exported: the runner and the checks use it from here)
 
 __all__ = ["AgentRun", "BenchConfig", "EpisodeResult", "EpisodeTask", "accepts_argument", "run_key"]
 
@@ -167,26 +168,3 @@ class BenchConfig:
         return {a: AgentRun(agent=a, agent_kwargs=self.agent_kwargs.get(a, {}), env_id=self.env_id, env_kwargs=self.env_kwargs,
                             seed=self.seed, episode_timeout=self.episode_timeout, charge_precompute=self.charge_precompute)
                 for a in self.agents}
-
-
-def accepts_argument(factory, name: str) -> bool:
-    """Whether ``factory`` (a guardian class or callable, as the registry resolves it) takes a
-    keyword argument ``name`` by that name.  A class's ``__init__`` that forwards ``**kwargs``
-    is followed up its bases, so a subclass of a guardian that takes ``threads`` takes it too;
-    a bare ``**kwargs`` that reaches no named parameter does not count."""
-    if isinstance(factory, type):
-        targets = [c.__dict__["__init__"] for c in factory.__mro__ if "__init__" in c.__dict__ and c is not object]
-    else:
-        targets = [factory]
-    for fn in targets:
-        try:
-            params = inspect.signature(fn).parameters
-        except (TypeError, ValueError):  # a builtin without a signature
-            return False
-        p = params.get(name)
-        if p is not None and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY):
-            return True
-        if not any(q.kind is q.VAR_KEYWORD for q in params.values()):
-            return False
-    return False
-

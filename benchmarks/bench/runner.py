@@ -98,7 +98,7 @@ def _guardian(task: EpisodeTask):
     if key not in _CACHE:
         from guardians import make_guardian
 
-        _CACHE[key] = make_guardian(task.agent, **task.guardian_kwargs())
+        _CACHE[key] = make_guardian(task.agent, env_id=task.run.env_id, **task.guardian_kwargs())
     return _CACHE[key]
 
 

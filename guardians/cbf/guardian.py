@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from guardians._checks import finite, integer, number_pair
+from guardians._checks import dubins4d_only, finite, integer, number_pair
 from guardians.base import Guardian
 from guardians.cbf.barrier import HOCBFParams, barrier_rows, barrier_values, critical_obstacle, inflated_radii
 from guardians.cbf.qp import BarrierQP
@@ -99,8 +99,12 @@ class CBFGuardian(Guardian):
         self._system = Dubins4D(v_min=self.v_min, v_max=self.v_max, u1_min=self.u1_min, u1_max=self.u1_max,
                                 u2_min=self.u2_min, u2_max=self.u2_max)
 
+    def check_spaces(self, observation_space, action_space) -> None:
+        dubins4d_only(self, action_space)
+
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)
+        self.check_spaces(self.observation_space, self.action_space)
         self._bounds()
         priv = self._privileged()
         obstacles = np.asarray(priv["obstacles"], float).reshape(-1, 3)

@@ -126,7 +126,7 @@ import warnings
 
 import numpy as np
 
-from guardians._checks import finite, integer
+from guardians._checks import dubins4d_only, finite, integer
 from guardians.base import Guardian
 from guardians.hj.cache import ValueCache
 from guardians.hj.dynamics import Dubins4DHJ
@@ -285,8 +285,12 @@ class HJGuardian(Guardian):
                 warnings.warn(f"HJ value cache not written ({e}); continuing without it", RuntimeWarning, stacklevel=2)
         return V
 
+    def check_spaces(self, observation_space, action_space) -> None:
+        dubins4d_only(self, action_space)
+
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)
+        self.check_spaces(self.observation_space, self.action_space)
         space = self.require_action_space(controls=2)
         d = self.dynamics
         try:

@@ -41,6 +41,18 @@ the observation's layout (``layout.ray_index(+-30 degrees)``), so the rule holds
 count that has rays in (or nearest to) those directions.
 At 0.85 the car is usually too close to brake in time (85% of *random* futures crash there).
 
+**Other systems** (``env_id``: the env served, which ``rmm-bench`` passes from ``--env``): one
+table, :data:`guardians.lrmm.model.SHIPPED`, gives per env id the shipped model, the
+observation field it reads and, where the model file stores none, the decision defaults.  On
+``Dubins3DMazeGuarded-v0`` / ``Dubins3DMazeParallel-v0`` the guardian reads the maze model
+(trained on ``Dubins3DMaze-v0``'s 8 rays: the risk of random 2 s futures) on the ``"rays"``
+field and acts with ``action="turn"``: the maximum turn rate toward the side the model rates
+safer, comparing its risk of the rays as they would read with the heading one ray (45 degrees)
+further left or right (a cyclic shift of the rays: the pose turned in place, a stand-in for the
+turn the car will make); threshold 0.7, commit 5 steps (how they were chosen is stored in the
+table).  The car cannot brake, so turning is the whole action.  Without ``env_id`` (or a
+model) the guardian serves Dubins4D, as before.
+
 ``hysteresis=True`` (either guardian) reproduces the original code's release rule: a deque of
 the last ``window`` (20) risks, initialised at the threshold, and the guardian intervenes while
 either the current risk or the deque's mean exceeds the threshold.
@@ -68,11 +80,13 @@ from pathlib import Path
 import numpy as np
 
 from guardians.base import Guardian
-from guardians.lrmm.model import LRMMModel, default_model_path, load_model
+from guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, load_model
 
 __all__ = ["PAPER_THRESHOLD", "LRMMGuardian", "LRMMPaperGuardian"]
 
 PAPER_THRESHOLD = 0.85  # the paper's Table I setting
+ACTIONS = ("head", "heuristic", "turn")
+DEFAULT_ENV = "Dubins4DCircles-v0"  # whose shipped model a guardian built without env_id or model reads
 _SIDE_RAY = math.pi / 6  # the heuristic compares the rays 30 degrees left and right of the heading
 
 
@@ -83,14 +97,20 @@ class LRMMGuardian(Guardian):
         threshold: take control while the risk is strictly above it; ``None`` (default) uses
             the model's stored threshold (the paper's 0.85 if it has none, with a warning).
         action: ``"head"`` (the safest candidate of the model's head), ``"heuristic"`` (brake
-            and turn to the more open +-30 degree ray) or ``None`` (default: ``"head"`` when
+            and turn to the more open +-30 degree ray), ``"turn"`` (turn toward the lower-risk
+            side; one-control systems whose model reads the rays) or ``None`` (default: ``"head"`` when
             the model has one, else ``"heuristic"`` with a warning).
         hysteresis: use the original's moving-average release rule (default False).
         window: moving-average length with ``hysteresis`` (default 20).
         commit: steps to stay in control after the risk is back at or below the threshold;
             ``None`` (default) uses the model's stored value (0 if it has none).
-        u1_max, u2_min: turn rate and braking of the heuristic; ``None`` (default): the action
-            space's largest turn rate and strongest braking (0.25, -0.5 for Dubins4D).
+        u1_max, u2_min: turn rate and braking of the heuristic (``u1_max`` also of ``"turn"``);
+            ``None`` (default): the action space's largest turn rate and strongest braking
+            (0.25, -0.5 for Dubins4D).
+        env_id: the env served (default ``None``: Dubins4D): picks the shipped model, its
+            input field and decision defaults from :data:`guardians.lrmm.model.SHIPPED`.
+        inputs: the observation field the model reads (default ``None``: the table's for
+            ``env_id``, else the whole observation).
     """
 
     name = "lrmm"
@@ -100,7 +120,8 @@ class LRMMGuardian(Guardian):
 
     def __init__(self, model: LRMMModel | str | Path | None = None, threshold: float | None = None,
                  action: str | None = None, hysteresis: bool = False, window: int = 20, commit: int | None = None,
-                 u1_max: float | None = None, u2_min: float | None = None) -> None:
+                 u1_max: float | None = None, u2_min: float | None = None, env_id: str | None = None,
+                 inputs: str | None = None) -> None:
         super().__init__()
         if threshold is not None and not 0.0 <= threshold <= 1.0:
             raise ValueError(f"threshold must be in [0, 1], got {threshold}")
@@ -108,18 +129,24 @@ class LRMMGuardian(Guardian):
             raise ValueError(f"window must be an integer >= 1, got {window}")
         if commit is not None and (int(commit) != commit or commit < 0):
             raise ValueError(f"commit must be an integer >= 0, got {commit}")
-        if action not in (None, "head", "heuristic"):
-            raise ValueError(f"action must be 'head', 'heuristic' or None, got {action!r}")
+        if action not in (None, *ACTIONS):
+            raise ValueError(f"action must be one of {ACTIONS} or None, got {action!r}")
+        if env_id is not None and not isinstance(env_id, str):
+            raise ValueError(f"env_id must be a registered env id (str) or None, got {env_id!r}")
+        self.env_id = env_id or DEFAULT_ENV
+        ship = SHIPPED.get(self.env_id)
         if isinstance(model, LRMMModel):
             self.model = model
         else:
-            self.model = load_model(model if model is not None else default_model_path("Dubins4DCircles-v0", variant=self.default_model))
+            self.model = load_model(model if model is not None else default_model_path(self.env_id, variant=self.default_model))
         where = str(getattr(self.model, "path", "the model"))
-        decision = self.model.meta.get("decision")
+        # the observation field the model reads: given, else the env's entry in the table, else all of it
+        self.inputs = inputs if inputs is not None else (ship.inputs if ship is not None else None)
+        decision = self.model.meta.get("decision") or (ship.decision if ship is not None and model is None else None)
         if action is None and decision and decision.get("action") is not None:
             action = decision["action"]
-            if action not in ("head", "heuristic"):
-                raise ValueError(f"{where}: stored decision action must be 'head' or 'heuristic', got {action!r}")
+            if action not in ACTIONS:
+                raise ValueError(f"{where}: stored decision action must be one of {ACTIONS}, got {action!r}")
         if action is None:
             if self.model.candidates is None:
                 action = "heuristic"
@@ -156,23 +183,56 @@ class LRMMGuardian(Guardian):
         if type(self) is LRMMGuardian:  # the paper preset expects the paper's rule: nothing to warn about
             warnings.warn(f"lrmm: {text}", UserWarning, stacklevel=3)
 
+    def check_spaces(self, observation_space, action_space) -> None:
+        """Refuse (``ValueError`` naming what is missing) an env this guardian cannot serve: the
+        model's input (the whole observation, or the field ``inputs``) must have the model's
+        size; ``head`` needs the head's control count, ``heuristic`` two controls (turn rate,
+        acceleration) and rays, ``turn`` one control (the turn rate) and the model reading rays
+        evenly spaced over the full circle."""
+        actions = self.require_action_space(space=action_space)
+        size = None
+        if self.inputs is not None:
+            lay = self.require_layout(self.inputs, observation_space=observation_space)
+            size = lay.size_of(self.inputs)
+        else:
+            size = (getattr(observation_space, "shape", None) or (None,))[0]
+        if size != self.model.obs_dim:
+            what = f"observation field {self.inputs!r} has {size} numbers" if self.inputs else \
+                f"observation space is {getattr(observation_space, 'shape', observation_space)}"
+            raise ValueError(f"guardian {self.name!r}: the LRMM model (trained on {self.model.env_id}) expects observations "
+                             f"of shape ({self.model.obs_dim},), the env's {what}")
+        if self.action == "head" and self.model.candidates.shape[1] != actions.control_dim:
+            k = self.model.candidates.shape[1]
+            raise ValueError(f"guardian {self.name!r} needs an action space with {k} controls (the model's candidate "
+                             f"controls have {k} components), got {actions.control_dim} ({actions.controls})")
+        if self.action == "heuristic":
+            self.require_action_space(controls=2, space=action_space)  # (turn rate, acceleration)
+            self.require_layout("rays", observation_space=observation_space)
+        if self.action == "turn":
+            self.require_action_space(controls=1, space=action_space)  # the turn rate
+            lay = self.require_layout("rays", observation_space=observation_space)
+            n = lay.size_of("rays")
+            even = np.allclose(np.angle(np.exp(1j * (np.asarray(lay.ray_angles) - 2 * np.pi * np.arange(n) / n))), 0, atol=1e-9)
+            if self.inputs != "rays" or not even:
+                raise ValueError(f"guardian {self.name!r}: action 'turn' judges a turn by the model's risk of the rays "
+                                 "rotated by one ray, so the model must read the 'rays' field, rays evenly spaced over the "
+                                 f"full circle from the heading; got inputs={self.inputs!r}, ray angles {lay.ray_angles}")
+
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)
-        space = self.observation_space
-        if getattr(space, "shape", None) != (self.model.obs_dim,):
-            raise ValueError(
-                f"guardian {self.name!r}: the LRMM model expects observations of shape ({self.model.obs_dim},), "
-                f"the env's observation space is {getattr(space, 'shape', space)}"
-            )
-        actions = self.require_action_space(controls=2)  # (turn rate, acceleration)
-        if self.action == "head" and self.model.candidates.shape[1] != actions.control_dim:
-            raise ValueError(f"guardian {self.name!r}: the model's candidate controls have {self.model.candidates.shape[1]} "
-                             f"components, the env's action space {actions.control_dim} ({actions.controls})")
+        self.check_spaces(self.observation_space, self.action_space)
+        actions = self.action_space
+        lay = getattr(self.observation_space, "layout", None)
+        self._in = lay[self.inputs] if self.inputs is not None else slice(None)
         if self.action == "heuristic":
-            lay = self.require_layout("rays")
             self._left, self._right = lay.ray_index(_SIDE_RAY), lay.ray_index(-_SIDE_RAY)
         self.u1_max = float(actions.control_high[0]) if self._u1_max_arg is None else self._u1_max_arg
-        self.u2_min = float(actions.control_low[1]) if self._u2_min_arg is None else self._u2_min_arg
+        if self.action == "heuristic":
+            self.u2_min = float(actions.control_low[1]) if self._u2_min_arg is None else self._u2_min_arg
+        if self.action == "turn":
+            rays = lay["rays"]
+            self._lside = [rays.start + i for i, a in enumerate(lay.ray_angles) if 0 < math.remainder(a, 2 * math.pi) < math.pi]
+            self._rside = [rays.start + i for i, a in enumerate(lay.ray_angles) if -math.pi < math.remainder(a, 2 * math.pi) < 0]
         self._history = deque([self.threshold] * self.window, maxlen=self.window)
         self.last_risk = float("nan")
         self._committed = 0
@@ -181,7 +241,8 @@ class LRMMGuardian(Guardian):
         return self.model.predict(observation)
 
     def act(self, observation, info=None):
-        out = self.model.predict_all(observation)
+        x = observation[self._in]
+        out = self.model.predict_all(x)
         risk = float(out[0])
         if not math.isfinite(risk):
             raise ValueError(f"the LRMM model returned a non-finite risk ({risk}) for observation {list(observation)}")
@@ -202,6 +263,8 @@ class LRMMGuardian(Guardian):
             if not all(map(math.isfinite, cand)):
                 raise ValueError(f"the LRMM model returned non-finite candidate risks {cand}")
             return self.action_space.active(self._cands[cand.index(min(cand))])  # the first of the lowest
+        if self.action == "turn":
+            return self.action_space.active((self._turn(observation, x),))
         left, right = observation[self._left], observation[self._right]
         if np.isclose(left, right):
             turn = 0.0
@@ -210,6 +273,21 @@ class LRMMGuardian(Guardian):
         else:
             turn = -self.u1_max
         return self.action_space.active((turn, self.u2_min))
+
+
+    def _turn(self, observation, rays) -> float:
+        """The maximum turn rate toward the lower-risk side: the model's risk of the rays as
+        they would read with the heading one ray further left (``roll(rays, -1)``) or right
+        (``roll(rays, 1)``); on a tie (``numpy.isclose``), toward the side whose nearest wall is
+        farther, left on a second tie."""
+        r_left, r_right = self.model.predict_all(np.stack([np.roll(rays, -1), np.roll(rays, 1)]))[:, 0]
+        if not (math.isfinite(r_left) and math.isfinite(r_right)):
+            raise ValueError(f"the LRMM model returned non-finite risks {[r_left, r_right]} for the turned rays")
+        if np.isclose(r_left, r_right):
+            left = min(observation[i] for i in self._lside) >= min(observation[i] for i in self._rside)
+        else:
+            left = r_left < r_right
+        return self.u1_max if left else -self.u1_max
 
 
 class LRMMPaperGuardian(LRMMGuardian):

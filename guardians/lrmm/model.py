@@ -41,12 +41,13 @@ import hashlib
 import io
 import json
 import zipfile
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["FORMAT", "LRMMModel", "default_model_path", "load_model"]
+__all__ = ["FORMAT", "SHIPPED", "LRMMModel", "Shipped", "default_model_path", "load_model"]
 
 FORMAT = "rmm-lrmm-model"
 FORMAT_VERSION = 2
@@ -237,18 +238,52 @@ class LRMMModel:
         return model
 
 
+@dataclass(frozen=True)
+class Shipped:
+    """What this package ships for one env id: its model file per variant, the observation field
+    the model reads (``None``: the whole observation) and, where the model file stores none, the
+    ``lrmm`` guardian's decision defaults for that env (``threshold``, ``commit``, ``action``,
+    ``chosen_by``, as ``meta["decision"]``)."""
+
+    files: dict
+    inputs: str | None = None
+    decision: dict | None = None
+
+
+_DUBINS4D = Shipped({"paper": "dubins4d.npz", "act": "dubins4d_act.npz"})
+#: The maze car under parallel autonomy reads the maze model (trained on ``Dubins3DMaze-v0``'s 8
+#: rays) on its observation's ``"rays"`` field.  Its decision defaults were chosen on development
+#: seeds (env seeds 5000-5063 of ``Dubins3DMazeParallel-v0``, 1 ms fixed clock), never on the
+#: seeds that reported results use; see :mod:`guardians.lrmm.guardian`.
+_MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays", decision={
+    "threshold": 0.7, "commit": 5, "action": "turn",
+    "chosen_by": "fewest collisions, then most goals, then least time in control, over thresholds 0.3/0.5/0.7/0.85 x "
+                 "commit 5/10/20 steps on 64 development episodes (env seeds 5000-5063 of Dubins3DMazeParallel-v0, "
+                 "fixed 1 ms clock): 0 collisions and 64 goals with 1.3% of the steps in control"})
+
+#: The one table of shipped models, by env id.
+SHIPPED: dict[str, Shipped] = {
+    "Dubins4DCircles-v0": _DUBINS4D,
+    "Dubins4DParallel-v0": _DUBINS4D,
+    "Dubins3DMaze-v0": Shipped({"paper": "dubins3d_maze.npz"}),
+    "Dubins3DMazeGuarded-v0": _MAZE_PARALLEL,
+    "Dubins3DMazeParallel-v0": _MAZE_PARALLEL,
+    "QuadrotorRoom-v0": Shipped({"paper": "quadrotor.npz"}),
+}
+
+
 def default_model_path(env_id: str = "Dubins4DCircles-v0", variant: str = "paper") -> Path:
-    """Path of the model shipped with the package for ``env_id`` (the Dubins4D envs share one).
+    """Path of the model shipped with the package for ``env_id`` (:data:`SHIPPED`).
 
     ``variant="paper"`` (default): the paper's risk-only network (Table II).  ``"act"``: the
-    network with the action-conditioned head used by the ``lrmm`` guardian (Dubins4D only).
+    network the ``lrmm`` guardian uses (Dubins4D: with the action-conditioned head; the maze's
+    parallel envs: the maze network).
     """
-    names = {("Dubins4DCircles-v0", "paper"): "dubins4d.npz", ("Dubins4DParallel-v0", "paper"): "dubins4d.npz",
-             ("Dubins3DMaze-v0", "paper"): "dubins3d_maze.npz", ("QuadrotorRoom-v0", "paper"): "quadrotor.npz",
-             ("Dubins4DCircles-v0", "act"): "dubins4d_act.npz", ("Dubins4DParallel-v0", "act"): "dubins4d_act.npz"}
-    if (env_id, variant) not in names:
-        raise ValueError(f"no shipped LRMM model for {env_id!r} (variant {variant!r}); shipped: {sorted(names)}")
-    return Path(str(resources.files("guardians.lrmm") / "models" / names[(env_id, variant)]))
+    ship = SHIPPED.get(env_id)
+    if ship is None or variant not in ship.files:
+        shipped = sorted((e, v) for e, sh in SHIPPED.items() for v in sh.files)
+        raise ValueError(f"no shipped LRMM model for {env_id!r} (variant {variant!r}); shipped: {shipped}")
+    return Path(str(resources.files("guardians.lrmm") / "models" / ship.files[variant]))
 
 
 def load_model(path=None, env_id: str = "Dubins4DCircles-v0") -> LRMMModel:

@@ -134,11 +134,12 @@ from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLa
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.driver import CLFDriver, DriverParams
 from rmm_envs.envs import _render
-from rmm_envs.envs.base import LabelledEnvBase, check_arguments, finite, rejection_sample, whole
+from rmm_envs.envs.base import check_arguments, finite, rejection_sample, whole
 from rmm_envs.envs.dubins4d_start import HALF as _HALF, Dubins4DStarts
 from rmm_envs.envs.dubins4d_step import advance
+from rmm_envs.envs.guarded import GuardedEnv
 from rmm_envs.scenes.dubins4d import Dubins4DScene, observation
-from rmm_envs.systems.dubins4d import Dubins4D
+from rmm_envs.systems.dubins4d import Dubins4D, FullBraking
 
 __all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "observation", "observation_layout", "parse_guardian_action"]
 
@@ -154,7 +155,7 @@ def observation_layout(n_rays: int = 12) -> ObservationLayout:
 #: Validate a guardian action, return ``(active, (u1, u2) clipped)``: :func:`rmm_envs.autonomy.parse`.
 parse_guardian_action = parse
 
-class Dubins4DCirclesEnv(Dubins4DStarts, LabelledEnvBase):
+class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
     """Blocking Dubins4D parallel-autonomy env; see the module docstring for the full spec."""
 
     # "human" is offered only where its optional dependency (pygame) is installed
@@ -217,7 +218,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, LabelledEnvBase):
         self.driver = CLFDriver((s.u1_min, s.u1_max), (s.u2_min, s.u2_max), (s.v_min, s.v_max),
                                 driver_params or DriverParams(), solver=driver_solver)
         self.clock = make_clock(clock)
-        self.action_space = GuardianActionSpace.for_system(s, CONTROLS)
+        self.action_space = GuardianActionSpace.for_system(s, CONTROLS, safe_default=FullBraking())
         low = np.array([0.0, -np.inf, -np.inf, -np.pi, s.v_min] + [0.0] * self.n_rays, dtype=np.float32)
         high = np.array([np.inf, np.inf, np.inf, np.pi, s.v_max] + [self.ray_length] * self.n_rays, dtype=np.float32)
         self.observation_space = ObservationBox(low, high, observation_layout(self.n_rays))
@@ -241,12 +242,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, LabelledEnvBase):
         self.scene = Dubins4DScene(obstacles, goal, self.system, self.n_rays, self.ray_length)
         self._circles = np.vstack([self.scene.obstacles, self.scene.goal[None, :]])
         self._state = state
-        self._sim_time = 0.0
-        self._n_steps = 0
-        self._n_active_steps = 0
-        self._active_sim_time = 0.0
-        self._cum_compute = 0.0
-        self._cum_reward = 0.0
+        self.begin_statistics()
         self.begin_episode()
         self._last_active = False
         self._last_control = np.zeros(2)
@@ -256,13 +252,6 @@ class Dubins4DCirclesEnv(Dubins4DStarts, LabelledEnvBase):
     def _observe(self) -> np.ndarray:
         return self.scene.observe(self._state[None, :], self._sim_time)[0]
 
-    def step(self, action):
-        compute = self.clock.elapsed()
-        active, ctrl = parse_guardian_action(action, self.action_space)
-        out = self.simulate(self.step_dt, active, ctrl, compute)
-        self.clock.start()
-        return out
-
     def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
         """Advance the world by ``duration`` seconds under one held control.
 
@@ -271,9 +260,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, LabelledEnvBase):
         agent's thinking time attributed to this step (statistics only).  Used by :meth:`step`
         and by the non-blocking wrapper; returns the usual 5-tuple.
         """
-        self.check_can_step()
-        if not (duration >= 0 and math.isfinite(duration)):
-            raise ValueError(f"duration must be a finite number >= 0, got {duration}")
+        self.check_interval(duration)
         if duration == self.step_dt:
             times = self._step_times
         else:
@@ -284,12 +271,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, LabelledEnvBase):
         hit_obst, hit_goal = float(hit_obst[0]), float(hit_goal[0])
         u = u[0]
 
-        self._n_steps += 1
-        if active:
-            self._n_active_steps += 1
-            self._active_sim_time += duration
-        self._cum_compute += compute_time
-        self._sim_time += duration
+        self.count_interval(duration, active, compute_time)
         self._state = nxt[0]
         self._last_active = bool(active)
         self._last_control = u
@@ -300,40 +282,20 @@ class Dubins4DCirclesEnv(Dubins4DStarts, LabelledEnvBase):
             outcome, reward = "collision", -1.0
         elif math.isfinite(hit_goal):
             outcome, reward = "goal", 1.0
-        terminated = outcome is not None
-        truncated = not terminated and self._sim_time >= self.max_episode_sim_time - 1e-9
-        if truncated:
-            outcome = "timeout"
-        self._cum_reward += reward
-
         info = {
             "sim_time": self._sim_time,
             "state": self._state.copy(),
             "active": bool(active),
             "control": u.copy(),
         }
-        if terminated or truncated:
-            self.end_episode()
-            info["outcome"] = outcome
-            info["episode"] = self.episode_statistics(outcome)
+        terminated, truncated = self.end_interval(outcome, reward, info)
         obs = self._observe()
         if self.render_mode == "human":
             self.render()
         return obs, reward, terminated, truncated, info
 
-    def episode_statistics(self, outcome: str | None = None) -> dict:
-        n = self._n_steps
-        return {
-            "outcome": outcome,
-            "n_env_steps": n,
-            "n_active_ctrl_env_steps": self._n_active_steps,
-            "active_ctrl_sim_time": self._active_sim_time,
-            "cum_sim_time": self._sim_time,
-            "cum_compute_time": self._cum_compute,
-            "avg_compute_time": self._cum_compute / n if n else 0.0,
-            "cum_reward": self._cum_reward,
-            "final_speed": float(self._state[3]),
-        }
+    def final_speed(self) -> float:
+        return float(self._state[3])
 
     # ------------------------------------------------------------------ accessors
     def privileged(self) -> dict:

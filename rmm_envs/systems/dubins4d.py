@@ -30,12 +30,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rmm_envs.autonomy import SafeDefault
+
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; numpy alone still works
     njit = None
 
-__all__ = ["Dubins4D", "wrap_angle"]
+__all__ = ["Dubins4D", "FullBraking", "wrap_angle"]
 
 _COMPILED_MAX_N = 8  # up to this many states per call, the compiled scalar path is faster
 
@@ -176,6 +178,24 @@ if njit is not None:  # the scalar path compiles the same closed forms and displ
     _states_at_compiled = njit(cache=True)(_states_at_loop)
 else:  # pragma: no cover
     _states_at_compiled = None
+
+
+class FullBraking(SafeDefault):
+    """Dubins4D's safe default: full braking (the acceleration at its lower bound) with a turn
+    rate held for the episode, ``turn="random"`` (default, as the paper's code: drawn uniformly
+    over the turn-rate bounds once per episode) or ``"zero"`` (the paper's text)."""
+
+    description = "full braking with a constant turn rate"
+    options = ("turn",)
+
+    def policy(self, space, rng: np.random.Generator, turn: str = "random", **options):
+        self.check_options(options)
+        if turn not in ("random", "zero"):
+            raise ValueError(f"turn must be 'random' or 'zero', got {turn!r}")
+        lo, hi = float(space.control_low[0]), float(space.control_high[0])
+        control = space.control_low.copy()
+        control[0] = float(rng.uniform(lo, hi)) if turn == "random" else min(max(0.0, lo), hi)
+        return lambda observation: control
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,101 @@
+"""The blocking parallel-autonomy env skeleton: :class:`GuardedEnv`.
+
+What every env with a built-in driver and a guardian action shares (``Dubins4DCircles-v0``,
+``Dubins3DMazeGuarded-v0``), written once on top of :class:`rmm_envs.envs.base.LabelledEnvBase`:
+
+* :meth:`GuardedEnv.step`: read the agent's compute time off ``self.clock``, parse the action
+  with the action space (:class:`rmm_envs.autonomy.GuardianActionSpace`), advance by
+  ``step_dt`` with the env's ``simulate(duration, active, control, compute_time)`` (which the
+  non-blocking wrapper calls directly with its own durations), restart the clock;
+* the statistics of the paper's Table I (:meth:`GuardedEnv.episode_statistics`, the
+  ``info["episode"]`` of the contract) and the end of a step: :meth:`GuardedEnv.end_interval`
+  ends the episode on an outcome (``"goal"``, ``"collision"``) or at ``max_episode_sim_time``
+  (``"timeout"``, truncated) and adds ``outcome`` and ``episode`` to the last step's ``info``.
+
+A subclass sets ``step_dt``, ``max_episode_sim_time``, ``clock`` and ``action_space``, calls
+:meth:`~GuardedEnv.begin_statistics` at ``reset`` and, in ``simulate``,
+:meth:`~GuardedEnv.check_interval`, :meth:`~GuardedEnv.count_interval` and
+:meth:`~GuardedEnv.end_interval`; it reports its speed through :meth:`~GuardedEnv.final_speed`.
+"""
+
+from __future__ import annotations
+
+import math
+
+from rmm_envs.autonomy import parse
+from rmm_envs.envs.base import LabelledEnvBase
+
+__all__ = ["GuardedEnv"]
+
+
+class GuardedEnv(LabelledEnvBase):
+    """See the module docstring."""
+
+    step_dt: float
+    max_episode_sim_time: float
+
+    def step(self, action):
+        compute = self.clock.elapsed()
+        active, ctrl = parse(action, self.action_space)
+        out = self.simulate(self.step_dt, active, ctrl, compute)
+        self.clock.start()
+        return out
+
+    def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):  # pragma: no cover
+        raise NotImplementedError
+
+    def begin_statistics(self) -> None:
+        """Zero the simulated time and the episode's counters (call at ``reset``)."""
+        self._sim_time = 0.0
+        self._n_steps = 0
+        self._n_active_steps = 0
+        self._active_sim_time = 0.0
+        self._cum_compute = 0.0
+        self._cum_reward = 0.0
+
+    def check_interval(self, duration: float) -> None:
+        """``RuntimeError`` before ``reset`` or after the end; ``ValueError`` for a bad duration."""
+        self.check_can_step()
+        if not (duration >= 0 and math.isfinite(duration)):
+            raise ValueError(f"duration must be a finite number >= 0, got {duration}")
+
+    def count_interval(self, duration: float, active: bool, compute_time: float) -> None:
+        """Count one interval of ``duration`` simulated seconds (the guardian's if ``active``)."""
+        self._n_steps += 1
+        if active:
+            self._n_active_steps += 1
+            self._active_sim_time += duration
+        self._cum_compute += compute_time
+        self._sim_time += duration
+
+    def end_interval(self, outcome: str | None, reward: float, info: dict) -> tuple[bool, bool]:
+        """``(terminated, truncated)`` after an interval with ``outcome`` (``None``: the episode
+        goes on unless its time is up) and ``reward``; on the last step, ends the episode and
+        adds ``outcome`` and ``episode`` to ``info``."""
+        terminated = outcome is not None
+        truncated = not terminated and self._sim_time >= self.max_episode_sim_time - 1e-9
+        if truncated:
+            outcome = "timeout"
+        self._cum_reward += reward
+        if terminated or truncated:
+            self.end_episode()
+            info["outcome"] = outcome
+            info["episode"] = self.episode_statistics(outcome)
+        return terminated, truncated
+
+    def final_speed(self) -> float:  # pragma: no cover - each env implements it
+        raise NotImplementedError
+
+    def episode_statistics(self, outcome: str | None = None) -> dict:
+        n = self._n_steps
+        return {
+            "outcome": outcome,
+            "n_env_steps": n,
+            "n_active_ctrl_env_steps": self._n_active_steps,
+            "active_ctrl_sim_time": self._active_sim_time,
+            "cum_sim_time": self._sim_time,
+            "cum_compute_time": self._cum_compute,
+            "avg_compute_time": self._cum_compute / n if n else 0.0,
+            "cum_reward": self._cum_reward,
+            "final_speed": self.final_speed(),
+        }
