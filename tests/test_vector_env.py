@@ -20,11 +20,12 @@ def _pair(n, mode=AutoresetMode.NEXT_STEP, **kw):
 
 
 def _actions(vec, rng, p_active):
-    a = vec.action_space.sample()
-    a["active_ctrl"] = (rng.random(vec.num_envs) < p_active).astype(np.int64)
-    # out-of-bounds values are clipped by both envs
-    a["turnrate_ctrl"] = rng.uniform(-0.4, 0.4, (vec.num_envs, 1)).astype(np.float32)
-    return a
+    """Seeded actions (all drawn from ``rng``, so a test is the same on every run); out-of-bounds
+    values are clipped by both envs."""
+    n = vec.num_envs
+    return {"active_ctrl": (rng.random(n) < p_active).astype(np.int64),
+            "turnrate_ctrl": rng.uniform(-0.4, 0.4, (n, 1)).astype(np.float32),
+            "accel_ctrl": rng.uniform(-0.5, 0.5, (n, 1)).astype(np.float32)}
 
 
 def _assert_same(out_vec, out_ref, t):
@@ -117,6 +118,7 @@ def test_spaces_and_metadata():
     assert vec.action_space["active_ctrl"].nvec.tolist() == [2] * 5
     assert vec.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
     obs, _ = vec.reset(seed=0)
+    vec.action_space.seed(0)
     assert obs in vec.observation_space
     for _ in range(20):
         obs, r, te, tr, info = vec.step(vec.action_space.sample())
