@@ -22,13 +22,15 @@ from rmm_envs.driver import CLFDriver
 from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_envs.worlds.circles import CircleWorld, _ray_cast_numpy, points_in_circles, ray_cast
 
-INACTIVE = gym.make("Dubins4DCircles-v0").action_space.inactive()
 
 
-def steps_per_second(env_id: str = "Dubins4DCircles-v0", episodes: int = 10, repeats: int = 5) -> list[float]:
-    env = gym.make(env_id)
+def steps_per_second(env_id: str = "Dubins4DCircles-v0", episodes: int = 10, repeats: int = 5, **env_kwargs) -> list[float]:
+    """Steps per second of ``env_id`` driven by the inactive guardian, one value per repeat
+    (the same ``episodes`` seeded episodes each time)."""
+    env = gym.make(env_id, **env_kwargs)
+    inactive = env.action_space.inactive()
     env.reset(seed=0)
-    env.step(INACTIVE)  # load the compiled paths before timing
+    env.step(inactive)  # load the compiled paths before timing
     rates = []
     for _ in range(repeats):
         n = 0
@@ -37,10 +39,11 @@ def steps_per_second(env_id: str = "Dubins4DCircles-v0", episodes: int = 10, rep
             env.reset(seed=ep)
             done = False
             while not done:
-                _, _, te, tr, _ = env.step(INACTIVE)
+                _, _, te, tr, _ = env.step(inactive)
                 n += 1
                 done = te or tr
         rates.append(n / (time.perf_counter() - t0))
+    env.close()
     return rates
 
 

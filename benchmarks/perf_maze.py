@@ -12,36 +12,20 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import time
 
 import gymnasium as gym
 import numpy as np
 
 import rmm_envs  # noqa: F401
 from benchmarks._timing import fmt_us, median_time
+from benchmarks.perf_env import steps_per_second as _steps_per_second
 from rmm_envs.systems.dubins4d import _COEF_ARRAY
 from rmm_envs.worlds.maze_kernels import dubins_path, maze_path_hit, maze_rays
 
 
 def steps_per_second(env_id: str, episodes: int, repeats: int) -> list[float]:
-    env = gym.make(env_id, clock="fixed:1")
-    inactive = env.action_space.inactive()
-    env.reset(seed=0)
-    env.step(inactive)  # load the compiled kernels before timing
-    rates = []
-    for r in range(repeats):
-        n = 0
-        t0 = time.perf_counter()
-        for ep in range(episodes):
-            env.reset(seed=1000 * r + ep)
-            while True:
-                _, _, te, tr, _ = env.step(inactive)
-                n += 1
-                if te or tr:
-                    break
-        rates.append(n / (time.perf_counter() - t0))
-    env.close()
-    return rates
+    """Steps per second with the inactive guardian under a fixed 1 ms clock (perf_env's loop)."""
+    return _steps_per_second(env_id, episodes, repeats, clock="fixed:1")
 
 
 def parts() -> dict[str, float]:
