@@ -92,6 +92,19 @@ def observation_layout() -> ObservationLayout:
     return ObservationLayout.of(("rays", N_RAYS), ray_angles=[k * math.pi / 4 for k in range(N_RAYS)])
 
 
+def maze_from_option(value, rng: np.random.Generator) -> Maze:
+    """The reset option ``maze``: a :class:`Maze` as given, or a dict of :func:`generate_maze`
+    arguments drawn from ``rng``; anything else raises ``ValueError`` naming the option."""
+    if isinstance(value, Maze):
+        return value
+    if isinstance(value, dict):
+        try:
+            return generate_maze(rng, **value)
+        except TypeError as e:
+            raise ValueError(f"option 'maze': {e}") from None
+    raise ValueError(f"option 'maze' must be a Maze or a dict of generate_maze arguments, got {type(value).__name__}")
+
+
 class Dubins3DMazeEnv(LabelledEnvBase):
     """See the module docstring for the full specification."""
 
@@ -123,14 +136,7 @@ class Dubins3DMazeEnv(LabelledEnvBase):
         self._steps = 0
 
     def _maze_from_option(self, value) -> Maze:
-        if isinstance(value, Maze):
-            return value
-        if isinstance(value, dict):
-            try:
-                return generate_maze(self.np_random, **value)
-            except TypeError as e:
-                raise ValueError(f"option 'maze': {e}") from None
-        raise ValueError(f"option 'maze' must be a Maze or a dict of generate_maze arguments, got {type(value).__name__}")
+        return maze_from_option(value, self.np_random)
 
     # ------------------------------------------------------------------ dataset hooks
     def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:

@@ -118,7 +118,7 @@ from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLa
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, option_vector, whole
-from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
+from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv, maze_from_option
 from rmm_envs.envs.guarded import GuardedEnv
 from rmm_envs.maze_driver import PursuitDriver, cell_distances, cell_of, cell_path
 from rmm_envs.scenes.maze import MazeScene
@@ -221,16 +221,9 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
     def _maze(self, spec) -> Maze:
         if spec is None:
             return generate_maze(self.np_random, "rectangular", *self.maze_shape)
-        if isinstance(spec, Maze):
-            if spec.cells.shape[0] < 2 or spec.passages.shape[0] < 1:
-                raise ValueError("option 'maze' must have cells joined by passages (a generated Maze); this one has none")
-            return spec
-        if isinstance(spec, dict):
-            try:
-                return generate_maze(self.np_random, **spec)
-            except TypeError as e:
-                raise ValueError(f"option 'maze': {e}") from None
-        raise ValueError(f"option 'maze' must be a Maze or a dict of generate_maze arguments, got {type(spec).__name__}")
+        if isinstance(spec, Maze) and (spec.cells.shape[0] < 2 or spec.passages.shape[0] < 1):
+            raise ValueError("option 'maze' must have cells joined by passages (a generated Maze); this one has none")
+        return maze_from_option(spec, self.np_random)
 
     def _start(self, options: dict):
         rng = self.np_random
