@@ -143,12 +143,13 @@ class GuardianActionSpace(spaces.Dict):
 
     def active(self, control) -> dict:
         """Take control and apply the control vector ``control`` (one number per control)."""
-        u = np.asarray(control, dtype=float).reshape(-1)
+        # one float32 buffer (float64 -> float32, as the boxes hold them), one field per element
+        u = np.array(np.asarray(control, dtype=float), dtype=np.float32).reshape(-1)
         if u.shape != (len(self.controls),):
             raise ValueError(f"control must have one value per control {self.controls}, got {control!r}")
         action: dict[str, Any] = {ACTIVE: 1}
-        for c, x in zip(self.controls, u):
-            action[c] = np.array([x], np.float32)
+        for i, c in enumerate(self.controls):
+            action[c] = u[i:i + 1]
         return action
 
     def parse(self, action) -> tuple[bool, np.ndarray]:

@@ -11,7 +11,7 @@ import numpy as np
 
 from guardians._checks import dubins4d_only, finite, integer, number_pair
 from guardians.base import Guardian
-from guardians.cbf.barrier import HOCBFParams, barrier_rows, barrier_values, critical_obstacle, inflated_radii
+from guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_values, critical_obstacle, inflated_radii
 from guardians.cbf.qp import BarrierQP
 from guardians.cbf.recovery import recovery_control, recovery_done
 from rmm_envs.systems.dubins4d import Dubins4D
@@ -113,6 +113,7 @@ class CBFGuardian(Guardian):
         self.obstacles = obstacles
         self.goal = np.asarray(priv["goal"], float)
         self.radii = inflated_radii(obstacles, self.goal, self.k, self.goal_aware_margin)
+        self._rows = BarrierRows(obstacles, self.radii, self.goal, self.params)
         self._counts = self._zero_counts()
         self._pending = np.zeros(2)  # the control acting during the coming lap (the driver's: unknown, 0)
         self._last_time = float(priv.get("sim_time", 0.0))
@@ -129,7 +130,7 @@ class CBFGuardian(Guardian):
     def rows(self, state):
         """Dense ``(G, h)`` of ``G z <= h`` at ``state`` (the same rows the OSQP problem holds);
         for tests against independent solvers."""
-        return barrier_rows(state, self.obstacles, self.radii, self.goal, self.params)
+        return self._rows(state)
 
     def solve(self, state):
         """OSQP solution ``z*`` at ``state`` and the dense rows ``(G, h)``; ``z* = None`` if it failed."""
@@ -147,8 +148,8 @@ class CBFGuardian(Guardian):
     # ------------------------------------------------------------------ latency
     def predict(self, state, control, lap: float) -> np.ndarray:
         """The exact state after ``lap`` seconds of ``control`` from ``state`` (heading wrapped)."""
-        s = self._system.states_at(np.asarray(state, float)[None, :4], np.asarray(control, float)[None, :],
-                                   np.array([float(lap)]))[0, 0].copy()
+        s = self._system.states_at(np.asarray(state, float).reshape(1, -1)[:, :4], np.asarray(control, float).reshape(1, 2),
+                                   np.full(1, float(lap)), compiled=True).reshape(4)
         s[2] = (s[2] + math.pi) % (2.0 * math.pi) - math.pi
         return s
 
@@ -188,8 +189,8 @@ class CBFGuardian(Guardian):
 
     # ------------------------------------------------------------------ decision
     def _emit(self, u1, u2):
-        u1 = float(np.clip(u1, self.u1_min, self.u1_max))
-        u2 = float(np.clip(u2, self.u2_min, self.u2_max))
+        u1 = min(max(float(u1), self.u1_min), self.u1_max)
+        u2 = min(max(float(u2), self.u2_min), self.u2_max)
         self._pending = np.array([u1, u2])
         return self.action_space.active(self._pending)
 
@@ -200,7 +201,7 @@ class CBFGuardian(Guardian):
     def act(self, observation, info=None):
         priv = self._privileged()
         state = np.asarray(priv["state"], float)
-        if not np.all(np.isfinite(state)):
+        if not all(map(math.isfinite, state.tolist())):
             self._counts["nan_states"] += 1
             return self._emit(0.0, self.u2_min)
         if self.predict_latency:
@@ -228,8 +229,7 @@ class CBFGuardian(Guardian):
             if self.recovery:
                 return self._emit(*self._recover(state))
             return self._emit(0.0, self.u2_min)
-        gap = h[: self.K] - G[: self.K] @ z
-        if np.any(np.abs(gap) <= self.active_atol + self.active_rtol * np.abs(h[: self.K])):
+        if any_row_active(G, h, z, self.K, self.active_atol, self.active_rtol):
             if self.recovery and state[3] + z[1] * self._lap <= self.v_stuck:
                 return self._emit(*self._recover(state))
             return self._emit(z[0], z[1])

@@ -9,6 +9,8 @@ each step only updates values and bounds, then re-solves warm-started.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import osqp
 import scipy.sparse as sp
@@ -16,6 +18,11 @@ import scipy.sparse as sp
 from guardians.cbf.barrier import HOCBFParams
 
 __all__ = ["BarrierQP"]
+
+#: OSQP's status values for "solved" and "solved inaccurate".
+_SOLVED = (1, 2)
+#: What the compiled solver object must offer for the direct path (osqp >= 1.0).
+_NATIVE_API = ("update_data_vec", "update_data_mat", "solve", "info", "solution")
 
 
 class BarrierQP:
@@ -48,6 +55,16 @@ class BarrierQP:
         self._solver = osqp.OSQP()
         self._solver.setup(P, np.zeros(4), A, self._l, self._u, verbose=False, eps_abs=eps, eps_rel=eps,
                            polishing=True, warm_starting=True, max_iter=4000)
+        # Per step, talk to the compiled solver object directly when the wrapper exposes it:
+        # the Python wrapper's ``update``/``solve`` spend longer on bookkeeping (bound
+        # clipping, derivative caches, a namespace of every info field) than OSQP spends
+        # solving this 4-variable problem.  The same calls with the same data: the bounds are
+        # clipped to OSQP's infinity here once, as the wrapper clips them on every update.
+        inf = float(self._solver.constant("OSQP_INFTY"))
+        np.clip(self._l, -inf, inf, out=self._l)
+        np.clip(self._u, -inf, inf, out=self._u)
+        native = getattr(self._solver, "_solver", None)
+        self._native = native if all(hasattr(native, a) for a in _NATIVE_API) else None
 
     def solve(self, G: np.ndarray, h: np.ndarray) -> np.ndarray | None:
         """The solution ``z*`` for the dense rows ``(G, h)`` of the current state; ``None`` if the
@@ -65,8 +82,19 @@ class BarrierQP:
         if self._l[K + 1] > u[K + 1]:
             self._l[K + 1] = u[K + 1]
         u[K + 2], u[K + 3] = h[K + 4], h[K + 5]
-        self._solver.update(Ax=Ax, l=self._l, u=u)
-        res = self._solver.solve(raise_error=False)
-        if res.info.status_val not in (1, 2) or res.x is None or not np.all(np.isfinite(res.x)):
+        native = self._native
+        if native is not None:
+            native.update_data_vec(q=None, l=self._l, u=u)
+            native.update_data_mat(P_x=None, P_i=None, A_x=Ax, A_i=None)
+            native.solve()
+            status, x = native.info.status_val, native.solution.x
+        else:
+            self._solver.update(Ax=Ax, l=self._l, u=u)
+            res = self._solver.solve(raise_error=False)
+            status, x = res.info.status_val, res.x
+        if status not in _SOLVED or x is None:
             return None
-        return np.asarray(res.x)
+        x = np.asarray(x, dtype=float)
+        if not all(map(math.isfinite, x.tolist())):
+            return None
+        return x

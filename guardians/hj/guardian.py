@@ -304,16 +304,19 @@ class HJGuardian(Guardian):
         self.V = self.value_function(priv["obstacles"])
         self.grads = _gradient(self.V, self.grid)
         self._arrays = [self.V, *self.grads]
+        self._interp = self.grid.interpolator(self._arrays)
         self._ra_arrays = None
+        self._ra_interp = None
         self._last_time = None  # sim time of the previous decision (for the lap)
         self._measured_lap = None
         if self.mode == "reach_avoid":
             V_ra = self.value_function(priv["obstacles"], goal=priv["goal"])
             self._ra_arrays = [V_ra, *_gradient(V_ra, self.grid)]
+            self._ra_interp = self.grid.interpolator(self._ra_arrays)
 
     def evaluate(self, state) -> np.ndarray:
         """``(V, dV/dx, dV/dy, dV/dtheta, dV/dv)`` at ``state``."""
-        return self.grid.interp_many(self._arrays, np.asarray(state, float))
+        return self._interp(np.asarray(state, float))
 
     def current_lap(self) -> float:
         """The lap length the rule assumes: ``lap`` if given, else the last one measured
@@ -355,25 +358,25 @@ class HJGuardian(Guardian):
         return self._decide(s)
 
     def _decide(self, s):
-        if not np.all(np.isfinite(s)):
+        if not all(map(math.isfinite, s.tolist())):
             self._counts["nan_states"] += 1
             return self.action_space.active((0.0, -self.dynamics.u2_max))
         if not self.grid.contains(s):
             self._counts["outside_grid"] += 1
             return self.action_space.inactive()
-        vals = self.evaluate(s)
-        if vals[0] <= self.threshold(s, vals[1:]):  # safety first: the avoid value
+        vals = self.evaluate(s).tolist()  # Python floats: the rule below is scalar arithmetic
+        if vals[0] <= self.threshold(s.tolist(), vals[1:]):  # safety first: the avoid value
             grad = vals[1:]
             cell = self.grid.dx[3]
             if self.standstill_lookup and s[3] < cell:
                 # at standstill the heading does not change V (dV/dtheta = 0): the control is
                 # read one speed cell up, where the value says which way to turn and whether
                 # to move off (otherwise a car stopped within the margin is held there forever)
-                grad = self.evaluate(np.array([s[0], s[1], s[2], cell]))[1:]
+                grad = self.evaluate(np.array([s[0], s[1], s[2], cell]))[1:].tolist()
                 self._counts["standstill_lookups"] = self._counts.get("standstill_lookups", 0) + 1
             return self.action_space.active(self.dynamics.optimal_control(s, grad))
-        if self._ra_arrays is not None:
-            ra = self.grid.interp_many(self._ra_arrays, s)
+        if self._ra_interp is not None:
+            ra = self._ra_interp(s)
             if -self.ra_margin <= ra[0] <= 0.0:  # at the edge of the reach-avoid set: steer to the goal
                 self._counts["reach_avoid_steps"] = self._counts.get("reach_avoid_steps", 0) + 1
                 return self.action_space.active(self.dynamics.optimal_control(s, ra[1:], control="min"))

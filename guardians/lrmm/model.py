@@ -38,6 +38,7 @@ disable a guardian).
 from __future__ import annotations
 
 import hashlib
+import math
 import io
 import json
 import zipfile
@@ -46,6 +47,11 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
+
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover - numba is a dependency; inference falls back to numpy
+    njit = None
 
 __all__ = ["FORMAT", "SHIPPED", "LRMMModel", "Shipped", "default_model_path", "load_model"]
 
@@ -66,6 +72,42 @@ def _act(name):
         "relu": lambda x: np.maximum(x, 0.0),
         "elu": lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0.0))),
     }[name]
+
+
+def _forward_one(x, Ws, bs, act_code):
+    """The network at one observation ``x`` (``Ws``: transposed weights, the scaler folded into
+    the first; ``bs``: biases): hidden layers with
+    activation ``ACTIVATIONS[act_code]``, a sigmoid output; ``None`` if ``x`` is not finite."""
+    for i in range(x.shape[0]):
+        if not math.isfinite(x[i]):
+            return None
+    h = x
+    last = len(Ws) - 1
+    for layer in range(len(Ws)):
+        WT = Ws[layer]  # (inputs, outputs): the inner loop runs along contiguous outputs
+        b = bs[layer]
+        n_out = WT.shape[1]
+        z = np.zeros(n_out)
+        for k in range(WT.shape[0]):
+            hk = h[k]
+            for j in range(n_out):
+                z[j] += WT[k, j] * hk
+        for j in range(n_out):
+            acc = z[j] + b[j]  # after the products, as numpy's ``x @ W.T + b``
+            if layer == last or act_code == 0:
+                acc = 1.0 / (1.0 + math.exp(-acc))
+            elif act_code == 1:
+                acc = math.tanh(acc)
+            elif act_code == 2:
+                acc = max(acc, 0.0)
+            elif acc <= 0.0:
+                acc = math.expm1(acc)
+            z[j] = acc
+        h = z
+    return h
+
+
+_forward_one = njit(cache=True)(_forward_one) if njit is not None else None
 
 
 def _checksum(arrays: dict[str, np.ndarray]) -> str:
@@ -110,6 +152,12 @@ class LRMMModel:
         self._W0 = W0 * self.scaler_scale[None, :]
         self._b0 = (b0 if b0 is not None else 0.0) - self._W0 @ self.scaler_min
         self._all_features = self.features.shape[0] == self.obs_dim and np.array_equal(self.features, np.arange(self.obs_dim))
+        # the compiled one-observation path: the layers as tuples (a missing bias as zeros)
+        layers = [(self._W0, np.broadcast_to(self._b0, (self._W0.shape[0],)))] + [
+            (W, b if b is not None else np.zeros(W.shape[0])) for W, b in self.weights[1:]]
+        self._Ws = tuple(np.array(W.T, dtype=float, order="C") for W, _ in layers)  # transposed
+        self._bs = tuple(np.array(b, dtype=float, order="C") for _, b in layers)
+        self._act_code = ACTIVATIONS.index(act)
 
     def _check_shapes(self) -> None:
         n_in = self.features.shape[0]
@@ -155,6 +203,16 @@ class LRMMModel:
         single = x.ndim == 1
         if x.shape[-1] != self.obs_dim or x.ndim not in (1, 2):
             raise ValueError(f"observation must have shape ({self.obs_dim},) or (N, {self.obs_dim}), got {x.shape}")
+        if single and _forward_one is not None:
+            # one compiled call (a guardian's per-decision inference): numpy's per-call overhead
+            # on 64-unit layers was most of the decision time.  Same network; the sums run in
+            # sequential order, so results may differ from the batch path in the last bits.
+            if not self._all_features:
+                x = x[self.features]
+            out = _forward_one(np.ascontiguousarray(x), self._Ws, self._bs, self._act_code)
+            if out is None:
+                raise ValueError(f"observation contains NaN or inf: {np.asarray(obs, dtype=float).tolist()}")
+            return out
         if not np.all(np.isfinite(x)):
             raise ValueError(f"observation contains NaN or inf: {x.tolist() if single else 'batch'}")
         if not self._all_features:

@@ -226,6 +226,11 @@ class Dubins4D:
                 f"control bounds must satisfy min <= max, got u1 in [{self.u1_min}, {self.u1_max}]"
                 f" and u2 in [{self.u2_min}, {self.u2_max}]"
             )
+        # the compiled loop's (v, u1, u2) bounds, built once: it runs at every guardian decision
+        for name, arr in (("_lo", [self.v_min, self.u1_min, self.u2_min]), ("_hi", [self.v_max, self.u1_max, self.u2_max])):
+            arr = np.array(arr, dtype=float)
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
 
     @property
     def control_low(self) -> np.ndarray:
@@ -284,14 +289,6 @@ class Dubins4D:
             return _states_at_compiled(np.ascontiguousarray(states, dtype=float), np.ascontiguousarray(controls, dtype=float),
                                        np.asarray(times, dtype=float), self._lo, self._hi, _COEF_ARRAY, out)
         return self._states_at_numpy(states, controls, times)
-
-    @property
-    def _lo(self) -> np.ndarray:
-        return np.array([self.v_min, self.u1_min, self.u2_min])
-
-    @property
-    def _hi(self) -> np.ndarray:
-        return np.array([self.v_max, self.u1_max, self.u2_max])
 
     def _states_at_numpy(self, states: np.ndarray, controls: np.ndarray, times: np.ndarray) -> np.ndarray:
         x0, y0, th0 = states[:, 0:1], states[:, 1:2], states[:, 2:3]
