@@ -53,3 +53,9 @@ def dubins4d_only(guardian, action_space) -> None:
     if tuple(controls) != CONTROLS:
         raise ValueError(f"guardian {name!r} applies to Dubins4D envs only for now: it models the Dubins4D car (controls "
                          f"{CONTROLS}) among circular obstacles, and this env's controls are {controls}")
+    shapes = getattr(action_space, "obstacle_shapes", None)
+    other = [s for s in (shapes or ()) if s != "circle"]
+    if other:
+        raise ValueError(f"guardian {name!r} models circular obstacles only, and this env's world also has "
+                         f"{', '.join(other)} obstacles (a map with shapes {list(shapes)}); use a map of circles only, "
+                         "or a guardian that needs no obstacle geometry (lrmm, brakes)")
