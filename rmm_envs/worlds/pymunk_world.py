@@ -85,6 +85,8 @@ class PymunkWorld:
     def points_inside(self, points: np.ndarray) -> np.ndarray:
         """``(N,)`` bool: point ``i`` (``(N, 2+)``) lies in (or on) an obstacle."""
         pts = np.asarray(points, dtype=float)[:, :2]
+        if pts.shape[0] == 1:  # one point (a start being drawn): pymunk's own tree, no numpy set-up
+            return np.array([self._inside(float(pts[0, 0]), float(pts[0, 1]))])
         out = np.zeros(pts.shape[0], dtype=bool)
         for i in np.flatnonzero(self._near(pts - _REACH, pts + _REACH)):
             out[i] = self._inside(pts[i, 0], pts[i, 1])

@@ -119,7 +119,7 @@ def _polygon(value) -> np.ndarray:
                 raise ValueError(f"edges {i} ({a.tolist()} to {b.tolist()}) and {j} ({c.tolist()} to {d.tolist()}) "
                                  "cross or touch; a polygon must be simple (non-self-intersecting)")
     area = 0.5 * float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
-    if area == 0:
+    if area == 0:  # pragma: no cover - a simple polygon has an area (collinear ones fold back, above)
         raise ValueError("the polygon has zero area (all vertices on one line)")
     return v if area > 0 else v[::-1].copy()  # counter-clockwise
 
