@@ -45,7 +45,9 @@ def number_pair(name: str, pair) -> tuple[float, float]:
 def dubins4d_only(guardian, action_space) -> None:
     """Refuse an env that is not a Dubins4D one (``ValueError`` naming the guardian and why): the
     privileged guardians (``cbf``, ``hj``) model the Dubins4D car among circles, so they need its
-    two controls (turn rate, acceleration) and circular obstacles in its privileged data."""
+    two controls (turn rate, acceleration) and circular obstacles in its privileged data: an env
+    whose action space states other obstacle shapes (``obstacle_shapes``, a map with polygons or
+    walls) is refused too."""
     from rmm_envs.envs.dubins4d import CONTROLS
 
     name = guardian.name

@@ -122,8 +122,9 @@ kwargs={"map": "my_map.json"})``.
 
 A step costs a few pymunk queries (one bounding-box query skips a path far from every
 obstacle; rays need up to ``n_rays`` segment queries), so it is slower than the compiled
-circle kernels: about 3x ``Dubins4DCircles-v0``'s step time on the example map (measured in
-one run by ``benchmarks/perf_map.py``; a ratio, not a timing).
+circle kernels of ``Dubins4DCircles-v0``: about 2.8x its step time on the example map and 2.4x
+on a map of its five circles, and about 2x its time per risk label (``benchmarks/perf_map.py``,
+CPU time, both envs in one run: ratios, not timings).
 
 ## Rendering
 
