@@ -122,7 +122,7 @@ kwargs={"map": "my_map.json"})``.
 
 A step costs a few pymunk queries (one bounding-box query skips a path far from every
 obstacle; rays need up to ``n_rays`` segment queries), so it is slower than the compiled
-circle kernels of ``Dubins4DCircles-v0``: about 2.8x its step time on the example map and 2.4x
+circle kernels of ``Dubins4DCircles-v0``: about 2.8-2.9x its step time on the example map and 2.4-2.6x
 on a map of its five circles, and about 2x its time per risk label (``benchmarks/perf_map.py``,
 CPU time, both envs in one run: ratios, not timings).
 
