@@ -16,6 +16,9 @@ DOCS = Path(__file__).resolve().parent
 ENV_PAGES = {
     "environments/dubins4d.md": ("rmm_envs.envs.dubins4d", "Dubins4D among circles: `Dubins4DCircles-v0`, `Dubins4DParallel-v0`",
                                  "figures/dubins4d_frame.png"),
+    "environments/dubins4d_map.md": ("rmm_envs.envs.dubins4d_map",
+                                     "Dubins4D on a map of your own: `Dubins4DMap-v0`, `Dubins4DMapParallel-v0`",
+                                     "figures/dubins4d_map_frame.png"),
     "environments/dubins3d_maze.md": ("rmm_envs.envs.dubins3d_maze", "Dubins3D in mazes: `Dubins3DMaze-v0`",
                                       "figures/dubins3d_maze_frame.png"),
     "environments/dubins3d_maze_parallel.md": ("rmm_envs.envs.dubins3d_maze_parallel",
@@ -130,6 +133,20 @@ def render_maze_frame(path: Path) -> None:
     plt.imsave(path, env.render())
 
 
+def render_map_frame(path: Path) -> None:
+    import gymnasium as gym
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    import rmm_envs  # noqa: F401
+
+    env = gym.make("Dubins4DMap-v0", render_mode="rgb_array")  # the shipped example map
+    env.reset(seed=3)
+    plt.imsave(path, env.render())
+
+
 def render_quadrotor_frame(path: Path) -> None:
     import gymnasium as gym
     import matplotlib
@@ -152,8 +169,10 @@ def main() -> int:
     if "--no-figures" not in sys.argv:
         render_frame(DOCS / "figures" / "dubins4d_frame.png")
         render_maze_frame(DOCS / "figures" / "dubins3d_maze_frame.png")
+        render_map_frame(DOCS / "figures" / "dubins4d_map_frame.png")
         render_quadrotor_frame(DOCS / "figures" / "quadrotor_room_frame.png")
-        print("wrote figures/dubins4d_frame.png, figures/dubins3d_maze_frame.png")
+        print("wrote figures/dubins4d_frame.png, figures/dubins3d_maze_frame.png, figures/dubins4d_map_frame.png, "
+              "figures/quadrotor_room_frame.png")
     return 0
 
 

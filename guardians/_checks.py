@@ -45,7 +45,9 @@ def number_pair(name: str, pair) -> tuple[float, float]:
 def dubins4d_only(guardian, action_space) -> None:
     """Refuse an env that is not a Dubins4D one (``ValueError`` naming the guardian and why): the
     privileged guardians (``cbf``, ``hj``) model the Dubins4D car among circles, so they need its
-    two controls (turn rate, acceleration) and circular obstacles in its privileged data."""
+    two controls (turn rate, acceleration) and circular obstacles in its privileged data: an env
+    whose action space states other obstacle shapes (``obstacle_shapes``, a map with polygons or
+    walls) is refused too."""
     from rmm_envs.envs.dubins4d import CONTROLS
 
     name = guardian.name
@@ -53,3 +55,9 @@ def dubins4d_only(guardian, action_space) -> None:
     if tuple(controls) != CONTROLS:
         raise ValueError(f"guardian {name!r} applies to Dubins4D envs only for now: it models the Dubins4D car (controls "
                          f"{CONTROLS}) among circular obstacles, and this env's controls are {controls}")
+    shapes = getattr(action_space, "obstacle_shapes", None)
+    other = [s for s in (shapes or ()) if s != "circle"]
+    if other:
+        raise ValueError(f"guardian {name!r} models circular obstacles only, and this env's world also has "
+                         f"{', '.join(other)} obstacles (a map with shapes {list(shapes)}); use a map of circles only, "
+                         "or a guardian that needs no obstacle geometry (lrmm, brakes)")

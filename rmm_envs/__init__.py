@@ -6,6 +6,8 @@ Importing the package registers the Gymnasium environments:
   a native vector env, ``gym.make_vec("Dubins4DCircles-v0", num_envs=N)`` (numpy arrays,
   :mod:`rmm_envs.envs.dubins4d_vector`).
 * ``Dubins4DParallel-v0``: the same, non-blocking (the guardian's compute time passes).
+* ``Dubins4DMap-v0``, ``Dubins4DMapParallel-v0``: the same world on a map of your own (circles,
+  polygons, walls from JSON; rays and collisions by pymunk, extra ``map``).
 * ``Dubins3DMaze-v0``: a constant-speed Dubins car in procedurally generated mazes.
 * ``Dubins3DMazeGuarded-v0``: that car driven to a goal cell by a reckless driver, a guardian
   may take over the turn rate (blocking, fixed step).
@@ -24,7 +26,7 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
-ENV_IDS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins3DMaze-v0", "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0",
+ENV_IDS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins4DMap-v0", "Dubins4DMapParallel-v0", "Dubins3DMaze-v0", "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0",
            "QuadrotorRoom-v0")
 
 
@@ -32,6 +34,8 @@ def _register() -> None:
     specs = {
         "Dubins4DCircles-v0": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv",
         "Dubins4DParallel-v0": "rmm_envs.envs.dubins4d:make_parallel_env",
+        "Dubins4DMap-v0": "rmm_envs.envs.dubins4d_map:Dubins4DMapEnv",
+        "Dubins4DMapParallel-v0": "rmm_envs.envs.dubins4d_map:make_parallel_env",
         "Dubins3DMaze-v0": "rmm_envs.envs.dubins3d_maze:Dubins3DMazeEnv",
         "Dubins3DMazeGuarded-v0": "rmm_envs.envs.dubins3d_maze_parallel:Dubins3DMazeGuardedEnv",
         "Dubins3DMazeParallel-v0": "rmm_envs.envs.dubins3d_maze_parallel:make_parallel_env",

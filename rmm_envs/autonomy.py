@@ -92,6 +92,9 @@ class GuardianActionSpace(spaces.Dict):
         low, high: the control bounds, one number per control (``low <= high``, finite).
         seed: as for ``gymnasium.spaces.Dict``.
         safe_default: the system's :class:`SafeDefault` (``None``: the env states none).
+        obstacle_shapes: the kinds of obstacle in the env's world (e.g. ``("circle",
+            "polygon")``), for guardians whose model of the privileged obstacles assumes a kind
+            (``cbf`` and ``hj`` need circles); ``None``: not stated (the circle envs).
 
     The fields are stored in Gymnasium's default (sorted) key order, so sampling, seeding and
     flattening behave exactly as for the plain ``Dict`` with the same fields; the control
@@ -99,7 +102,7 @@ class GuardianActionSpace(spaces.Dict):
     """
 
     def __init__(self, controls: Sequence[str], low: Iterable[float], high: Iterable[float], seed=None,
-                 safe_default: SafeDefault | None = None) -> None:
+                 safe_default: SafeDefault | None = None, obstacle_shapes: Sequence[str] | None = None) -> None:
         controls = tuple(controls)
         lo = np.asarray(list(low), dtype=float).reshape(-1)
         hi = np.asarray(list(high), dtype=float).reshape(-1)
@@ -119,16 +122,18 @@ class GuardianActionSpace(spaces.Dict):
             raise TypeError(f"safe_default must be a rmm_envs.autonomy.SafeDefault, got {safe_default!r}")
         self.controls = controls
         self.safe_default = safe_default
+        self.obstacle_shapes = None if obstacle_shapes is None else tuple(obstacle_shapes)
         # the bounds actions are clipped to: those of the float32 boxes, as float64
         self.control_low = np.array([float(self.spaces[c].low[0]) for c in controls])
         self.control_high = np.array([float(self.spaces[c].high[0]) for c in controls])
 
     @classmethod
     def for_system(cls, system: Any, controls: Sequence[str], seed=None,
-                   safe_default: SafeDefault | None = None) -> "GuardianActionSpace":
+                   safe_default: SafeDefault | None = None,
+                   obstacle_shapes: Sequence[str] | None = None) -> "GuardianActionSpace":
         """The action space of a system whose dynamics object has ``control_low``/``control_high``."""
         return cls(controls, np.asarray(system.control_low, float), np.asarray(system.control_high, float), seed=seed,
-                   safe_default=safe_default)
+                   safe_default=safe_default, obstacle_shapes=obstacle_shapes)
 
     @property
     def control_dim(self) -> int:

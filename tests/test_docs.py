@@ -94,3 +94,16 @@ def test_python_snippets_in_the_docs_run(where, code, tmp_path):
     if "env.step(" in code and "outcome" in code:
         first = res.stdout.split()[0] if res.stdout.split() else ""
         assert first in ("goal", "collision", "timeout"), f"{where} printed {res.stdout[:200]!r}"
+
+
+def test_readme_dependencies_name_every_dependency_and_extra():
+    """README "Dependencies": one line per runtime dependency and per extra of pyproject.toml."""
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    text = (ROOT / "README.md").read_text()
+    section = text[text.index("## Dependencies"):text.index("\n## ", text.index("## Dependencies") + 3)]
+    lines = [ln for ln in section.splitlines() if ln.startswith("- ")]
+    for dep in project["dependencies"]:
+        name = re.split(r"[<>=!~\[ ;]", dep, maxsplit=1)[0]
+        assert any(ln.startswith(f"- `{name}`") or f", `{name}`" in ln.split(":")[0] for ln in lines), name
+    for extra in project["optional-dependencies"]:
+        assert any(ln.startswith(f"- `{extra}`:") for ln in lines), extra

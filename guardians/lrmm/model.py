@@ -323,6 +323,11 @@ _MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays", decision={
 SHIPPED: dict[str, Shipped] = {
     "Dubins4DCircles-v0": _DUBINS4D,
     "Dubins4DParallel-v0": _DUBINS4D,
+    # the same car and observation on a map of your own: the circle-trained models, unchanged
+    # (rays are distances whatever the obstacle's shape; how well that transfers is measured
+    # in the map env's tests and docs, not assumed)
+    "Dubins4DMap-v0": _DUBINS4D,
+    "Dubins4DMapParallel-v0": _DUBINS4D,
     "Dubins3DMaze-v0": Shipped({"paper": "dubins3d_maze.npz"}),
     "Dubins3DMazeGuarded-v0": _MAZE_PARALLEL,
     "Dubins3DMazeParallel-v0": _MAZE_PARALLEL,

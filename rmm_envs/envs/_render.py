@@ -33,6 +33,26 @@ class Canvas:
         d = np.sqrt((self.wx[None, :] - x) ** 2 + (self.wy[:, None] - y) ** 2)
         self.img[np.abs(d - r) <= width / 2] = colour
 
+    def polygon(self, vertices, colour) -> None:
+        """Fill a simple polygon ``(V, 2)`` (even-odd rule over the pixel centres)."""
+        v = np.asarray(vertices, dtype=float)
+        X, Y = self.wx[None, :], self.wy[:, None]
+        inside = np.zeros((self.size, self.size), dtype=bool)
+        for (xa, ya), (xb, yb) in zip(v, np.roll(v, -1, axis=0)):
+            if ya == yb:
+                continue
+            crosses = (ya > Y) != (yb > Y)
+            x_at = xa + (Y - ya) * (xb - xa) / (yb - ya)
+            inside ^= crosses & (X < x_at)
+        self.img[inside] = colour
+
+    def capsule(self, x0: float, y0: float, x1: float, y1: float, r: float, colour) -> None:
+        """Fill every pixel within ``r`` of the segment ``(x0, y0)-(x1, y1)``."""
+        dx, dy = x1 - x0, y1 - y0
+        fx, fy = self.wx[None, :] - x0, self.wy[:, None] - y0
+        s = np.clip((fx * dx + fy * dy) / max(dx * dx + dy * dy, 1e-300), 0.0, 1.0)
+        self.img[(fx - s * dx) ** 2 + (fy - s * dy) ** 2 <= r * r] = colour
+
     def line(self, x0: float, y0: float, x1: float, y1: float, colour) -> None:
         n = int(max(abs(x1 - x0) * self.sx, abs(y1 - y0) * self.sy)) + 2
         xs = np.linspace(x0, x1, n)
@@ -60,6 +80,38 @@ def dubins4d_frame(scene, state, guardian_active: bool, half: float, size: int =
         cv.disc(ox, oy, r, RED)
     x, y, th, v = state
     rays = ray_cast(state[None, :2], np.array([th]), scene.obstacles, scene.n_rays, scene.ray_length)[0]
+    for i, d in enumerate(rays):
+        a = th + 2 * np.pi * i / scene.n_rays
+        cv.line(x, y, x + d * np.cos(a), y + d * np.sin(a), GREY)
+    colour = ORANGE if guardian_active else BLUE
+    cv.disc(x, y, 0.4, colour)
+    cv.line(x, y, x + (0.5 + v) * np.cos(th), y + (0.5 + v) * np.sin(th), colour)
+    return cv.img
+
+
+def map_frame(scene, state, guardian_active: bool, start_box, size: int = 512) -> np.ndarray:
+    """A map's top-down frame: the square window around the map and its start box (5% margin),
+    the start box outlined, obstacles red, the goal green with a ring, the rays grey and the
+    vehicle blue (driver) or orange (``guardian_active``)."""
+    m = scene.map
+    box = np.vstack([m.bounding_box(), np.asarray(start_box, float)])
+    lo, hi = box.min(axis=0), box.max(axis=0)
+    c, half = (lo + hi) / 2, 0.525 * float(np.max(hi - lo))
+    cv = Canvas(size, c[0] - half, c[0] + half, c[1] - half, c[1] + half)
+    (bx0, by0), (bx1, by1) = start_box
+    for a, b in (((bx0, by0), (bx1, by0)), ((bx1, by0), (bx1, by1)), ((bx1, by1), (bx0, by1)), ((bx0, by1), (bx0, by0))):
+        cv.line(a[0], a[1], b[0], b[1], (225, 225, 225))
+    g = scene.goal
+    cv.disc(g[0], g[1], g[2], GREEN)
+    cv.ring(g[0], g[1], g[2] + 0.25, GREEN, 0.12)
+    for ox, oy, r in m.circles:
+        cv.disc(ox, oy, r, RED)
+    for poly in m.polygons:
+        cv.polygon(poly, RED)
+    for a, b, t in m.segments:
+        cv.capsule(a[0], a[1], b[0], b[1], t / 2, RED)
+    x, y, th, v = state
+    rays = scene.rays(np.asarray(state, float)[None, :], scene.n_rays)[0]
     for i, d in enumerate(rays):
         a = th + 2 * np.pi * i / scene.n_rays
         cv.line(x, y, x + d * np.cos(a), y + d * np.sin(a), GREY)

@@ -164,6 +164,9 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         "render_fps": 15,
     }
     reset_options = ("state", "goal", "obstacles")
+    #: ``None``: contacts with the circles of ``_circles``; a subclass on another world sets a
+    #: function ``paths -> first obstacle contacts`` (see :func:`~rmm_envs.envs.dubins4d_step.advance`)
+    _obstacle_contact = None
 
     def __init__(
         self,
@@ -267,7 +270,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
             times = np.linspace(0.0, float(duration), self.n_path_points)
         nxt, u, hit_obst, hit_goal = advance(self.system, self.driver, self._state[None, :], self._circles[None],
                                              np.array([bool(active)]), np.zeros((1, 2)) if control is None else np.asarray(control, dtype=float).reshape(1, 2),
-                                             times)
+                                             times, self._obstacle_contact)
         hit_obst, hit_goal = float(hit_obst[0]), float(hit_goal[0])
         u = u[0]
 

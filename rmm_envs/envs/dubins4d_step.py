@@ -19,7 +19,7 @@ __all__ = ["advance"]
 
 
 def advance(system: Dubins4D, driver: CLFDriver, states: np.ndarray, circles: np.ndarray, active: np.ndarray,
-            controls: np.ndarray, times: np.ndarray):
+            controls: np.ndarray, times: np.ndarray, obstacle_contact=None):
     """Advance ``N`` worlds by one held control each.
 
     Args:
@@ -29,6 +29,9 @@ def advance(system: Dubins4D, driver: CLFDriver, states: np.ndarray, circles: np
         controls: ``(N, 2)`` the guardian's controls (already validated and clipped); rows
             where ``active`` is false are ignored.
         times: ``(S,)`` path times, ``0 ... duration``.
+        obstacle_contact: ``None`` (the circles before the goal are the obstacles), or a
+            function ``paths (N, S, 4) -> (N,)`` giving the first obstacle contact parameters
+            of another world (then ``circles`` holds the goal only): the map env's hook.
 
     Returns ``(next_states, applied_controls, hit_obstacle, hit_goal)``: the path's end with the
     heading wrapped to ``[-pi, pi)``, ``(N, 2)``, and the first contact parameters ``(N,)``
@@ -43,7 +46,10 @@ def advance(system: Dubins4D, driver: CLFDriver, states: np.ndarray, circles: np
     paths = system.states_at(states, u, times, compiled=True)
     cp = contact_params_each(paths, circles)
     hit_goal = cp[:, -1]
-    hit_obst = cp[:, :-1].min(axis=1) if cp.shape[1] > 1 else np.full(cp.shape[0], np.inf)
+    if obstacle_contact is not None:
+        hit_obst = obstacle_contact(paths)
+    else:
+        hit_obst = cp[:, :-1].min(axis=1) if cp.shape[1] > 1 else np.full(cp.shape[0], np.inf)
     nxt = paths[:, -1].copy()
     nxt[:, 2] = wrap_angle(nxt[:, 2])
     return nxt, u, hit_obst, hit_goal

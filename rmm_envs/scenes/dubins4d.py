@@ -68,8 +68,12 @@ class Dubins4DScene(SceneBase):
     def observe(self, states: np.ndarray, sim_time=0.0) -> np.ndarray:
         """``(N, 17)`` float32 observations for states ``(N, 4)`` at ``sim_time`` (scalar or ``(N,)``)."""
         states = np.asarray(states, dtype=float)
-        rays = ray_cast(states[:, :2], states[:, 2], self.world.obstacles, self.n_rays, self.ray_length)
-        return observation(states, sim_time, self.world.goal[None, :2], rays)
+        return observation(states, sim_time, self.goal[None, :2], self.rays(states, self.n_rays))
+
+    def rays(self, states: np.ndarray, n_rays: int) -> np.ndarray:
+        """``(N, n_rays)`` ray lengths from states ``(N, 4)``, ray ``i`` at ``theta + 2 pi i / n_rays``,
+        capped at ``ray_length`` (the world's question; a scene on another world overrides it)."""
+        return ray_cast(states[:, :2], states[:, 2], self.world.obstacles, n_rays, self.ray_length)
 
     def leaf_estimate(self, states: np.ndarray) -> np.ndarray:
         """pyrmm's Dubins4D stopping-distance leaf heuristic (docs/original-code.md, item 24), ``(N,)``.
@@ -82,7 +86,7 @@ class Dubins4DScene(SceneBase):
         v = np.clip(states[:, 3], self.system.v_min, self.system.v_max)
         a = abs(self.system.u2_min)
         d_stop = v * v / (2.0 * a)
-        fwd = ray_cast(states[:, :2], states[:, 2], self.world.obstacles, 1, self.ray_length)[:, 0]
+        fwd = self.rays(states, 1)[:, 0]
         with np.errstate(divide="ignore", invalid="ignore"):
             risk = np.where(fwd <= 0, 1.0, np.minimum(d_stop / fwd, 1.0))
         return np.where(v <= 0, np.where(fwd <= 0, 1.0, 0.0), risk)
