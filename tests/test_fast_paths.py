@@ -200,3 +200,18 @@ def test_direct_osqp_calls_give_what_the_wrapper_gives():
             assert np.array_equal(a, b)
             assert np.all(G @ a <= h + 1e-4)
     assert solved > 30
+
+
+# ---------------------------------------------------------------------- one-state prediction
+@settings(max_examples=150, deadline=None)
+@given(finite, finite, st.floats(-7, 7), st.floats(-1, 3), st.floats(-1, 1), st.floats(-1, 1),
+       st.one_of(st.just(0.0), st.floats(0, 6)))
+def test_state_after_is_states_at_for_one_state_bit_for_bit(x, y, th, v, w, a, t):
+    from rmm_envs.systems.dubins4d import Dubins4D
+
+    d = Dubins4D()
+    s, u = np.array([x, y, th, v]), np.array([w, a])
+    out = d.state_after(s, u, t)
+    assert out.shape == (4,)
+    assert np.array_equal(out, d.states_at(s[None], u[None], np.array([t]), compiled=True)[0, 0])
+    np.testing.assert_allclose(out, d.states_at(s[None], u[None], np.array([t]), compiled=False)[0, 0], atol=1e-9)

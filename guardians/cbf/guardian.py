@@ -148,8 +148,7 @@ class CBFGuardian(Guardian):
     # ------------------------------------------------------------------ latency
     def predict(self, state, control, lap: float) -> np.ndarray:
         """The exact state after ``lap`` seconds of ``control`` from ``state`` (heading wrapped)."""
-        s = self._system.states_at(np.asarray(state, float).reshape(1, -1)[:, :4], np.asarray(control, float).reshape(1, 2),
-                                   np.full(1, float(lap)), compiled=True).reshape(4)
+        s = self._system.state_after(np.asarray(state, float)[:4], control, lap)
         s[2] = (s[2] + math.pi) % (2.0 * math.pi) - math.pi
         return s
 
@@ -158,7 +157,7 @@ class CBFGuardian(Guardian):
         """The backup manoeuvre about obstacle ``i`` at ``state`` (:mod:`guardians.cbf`): ``(u1, u2)``.
         ``side`` (+1: counter-clockwise tangent, -1: clockwise) overrides the choice of tangent."""
         u, self._last_side = recovery_control(state, i, self.obstacles, self.radii, self.goal, self.params,
-                                              self._lap if lap is None else lap, self.v_stuck, side)
+                                              self._lap if lap is None else lap, self.v_stuck, side, rows=self._rows)
         return u
 
     def _recover(self, state):

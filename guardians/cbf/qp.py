@@ -42,6 +42,7 @@ class BarrierQP:
         rows = [np.r_[np.arange(K), K, K + 2], np.r_[np.arange(K), K + 1, K + 3], [K + 2], [K + 3]]
         self._indices = np.concatenate(rows).astype(np.int32)
         self._indptr = np.cumsum([0] + [len(r) for r in rows]).astype(np.int32)
+        self._p0, self._p1 = int(self._indptr[0]), int(self._indptr[1])
         self._Ax = np.ones(self._indices.shape[0])
         self._Ax[self._indptr[2]] = -1.0  # d_th in the heading CLF
         self._Ax[self._indptr[3]] = -1.0  # d_v in the speed CLF
@@ -69,27 +70,16 @@ class BarrierQP:
     def solve(self, G: np.ndarray, h: np.ndarray) -> np.ndarray | None:
         """The solution ``z*`` for the dense rows ``(G, h)`` of the current state; ``None`` if the
         problem is infeasible or the solver failed."""
-        K = self.K
-        Ax = self._Ax
-        p = self._indptr
-        Ax[p[0]:p[0] + K] = G[:K, 0]
-        Ax[p[0] + K + 1] = G[K + 4, 0]  # heading CLF coefficient of u1
-        Ax[p[1]:p[1] + K] = G[:K, 1]
-        Ax[p[1] + K + 1] = G[K + 5, 1]  # speed CLF coefficient of u2
-        u = self._u
-        u[:K] = h[:K]
-        self._l[K + 1], u[K + 1] = -h[K + 3], h[K + 2]
-        if self._l[K + 1] > u[K + 1]:
-            self._l[K + 1] = u[K + 1]
-        u[K + 2], u[K + 3] = h[K + 4], h[K + 5]
+        Ax, l, u = self._Ax, self._l, self._u
+        _fill(Ax, l, u, G, h, self.K, self._p0, self._p1)
         native = self._native
         if native is not None:
-            native.update_data_vec(q=None, l=self._l, u=u)
+            native.update_data_vec(q=None, l=l, u=u)
             native.update_data_mat(P_x=None, P_i=None, A_x=Ax, A_i=None)
             native.solve()
             status, x = native.info.status_val, native.solution.x
         else:
-            self._solver.update(Ax=Ax, l=self._l, u=u)
+            self._solver.update(Ax=Ax, l=l, u=u)
             res = self._solver.solve(raise_error=False)
             status, x = res.info.status_val, res.x
         if status not in _SOLVED or x is None:
@@ -98,3 +88,26 @@ class BarrierQP:
         if not all(map(math.isfinite, x.tolist())):
             return None
         return x
+
+
+def _fill(Ax, l, u, G, h, K, p0, p1):
+    """Copy the dense rows ``(G, h)`` into the sparse problem's values ``Ax`` (columns ``u1``
+    from ``p0``, ``u2`` from ``p1``) and bounds ``l, u`` (rows as in :class:`BarrierQP`)."""
+    for i in range(K):
+        Ax[p0 + i] = G[i, 0]
+        Ax[p1 + i] = G[i, 1]
+        u[i] = h[i]
+    Ax[p0 + K + 1] = G[K + 4, 0]  # heading CLF coefficient of u1
+    Ax[p1 + K + 1] = G[K + 5, 1]  # speed CLF coefficient of u2
+    l[K + 1], u[K + 1] = -h[K + 3], h[K + 2]  # u2 box merged with the speed barriers
+    if l[K + 1] > u[K + 1]:
+        l[K + 1] = u[K + 1]
+    u[K + 2], u[K + 3] = h[K + 4], h[K + 5]
+
+
+try:
+    from numba import njit
+
+    _fill = njit(cache=True)(_fill)
+except ImportError:  # pragma: no cover - numba is a dependency; the Python loop still works
+    pass

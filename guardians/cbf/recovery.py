@@ -10,16 +10,18 @@ import math
 
 import numpy as np
 
-from guardians.cbf.barrier import HOCBFParams, barrier_rows
+from guardians.cbf.barrier import BarrierRows, HOCBFParams
 
 __all__ = ["recovery_control", "recovery_done"]
 
 
 def recovery_control(state, i: int, obstacles: np.ndarray, radii: np.ndarray, goal: np.ndarray, prm: HOCBFParams,
-                     lap: float, v_stuck: float, side: float | None = None) -> tuple[np.ndarray, float]:
+                     lap: float, v_stuck: float, side: float | None = None,
+                     rows: BarrierRows | None = None) -> tuple[np.ndarray, float]:
     """The backup manoeuvre about obstacle ``i`` at ``state``: ``((u1, u2), side)``.  ``side``
     (+1: counter-clockwise tangent, -1: clockwise) overrides the choice of tangent; the side
-    used is returned so that a recovery keeps going round the same way."""
+    used is returned so that a recovery keeps going round the same way.  ``rows``: the
+    scene's :class:`BarrierRows` when the caller has one (else built here)."""
     x, y, th, v = (float(s) for s in state[:4])
     ox, oy = obstacles[i, :2]
     R = float(radii[i])
@@ -55,20 +57,21 @@ def recovery_control(state, i: int, obstacles: np.ndarray, radii: np.ndarray, go
         u2 = max(0.0, min(prm.u2_max, prm.gamma_vmax * (prm.v_max - v)))
         # accelerate only as far as every barrier row allows with this u1 (another
         # obstacle may lie ahead): row j reads G[j,0] u1 + G[j,1] u2 <= h_j
-        G, h = barrier_rows(state, obstacles, radii, goal, prm)
+        G, h = (rows if rows is not None else BarrierRows(obstacles, radii, goal, prm))(state)
         K = obstacles.shape[0]
-        lim = G[:K, 1] > 0
-        if np.any(lim):
-            cap = float(np.min((h[:K][lim] - G[:K, 0][lim] * u1) / G[:K, 1][lim]))
-            if cap < u2:
-                u2 = max(cap, prm.u2_min)
+        cap = math.inf
+        for g1, g2, hj in zip(G[:K, 0].tolist(), G[:K, 1].tolist(), h[:K].tolist()):
+            if g2 > 0:
+                cap = min(cap, (hj - g1 * u1) / g2)
+        if cap < u2:
+            u2 = max(cap, prm.u2_min)
     return np.array([u1, u2]), side
 
 
 def recovery_done(state, b: np.ndarray, i: int, obstacles: np.ndarray, radii: np.ndarray, goal: np.ndarray) -> bool:
     """Whether a recovery from obstacle ``i`` is over at ``state`` (barrier values ``b``): outside
     every margin, not heading into ``i``, and the straight line to the goal clears inflated ``i``."""
-    if np.any(b < 0):
+    if any(x < 0 for x in b.tolist()):
         return False
     x, y, th = float(state[0]), float(state[1]), float(state[2])
     ox, oy = obstacles[i, :2]

@@ -139,33 +139,49 @@ def _segment_1(x0, y0, th0, v0, w, a, t, coef):
     return _displace_1(x0, y0, th0, v0, a, t, e1r, e1i, e2r, e2i)
 
 
+def _clamped_start(v0, w, a, t_end, lo, hi):
+    """The start of a held control: speed and controls clamped to their bounds (``lo``/``hi``:
+    (v, u1, u2) bounds), and whether/when the speed saturates within ``t_end``."""
+    v0 = min(max(v0, lo[0]), hi[0])
+    w = min(max(w, lo[1]), hi[1])
+    a = min(max(a, lo[2]), hi[2])
+    v_end = v0 + a * t_end
+    sat = v_end > hi[0] or v_end < lo[0]
+    t_sat = ((hi[0] - v0) / a if a > 0 else (lo[0] - v0) / a) if sat else 0.0
+    return v0, w, a, sat, t_sat
+
+
+def _state_at_1(x0, y0, th0, v0, w, a, t, sat, t_sat, lo, hi, coef):
+    """The state at time ``t`` of a held control from a clamped start (:func:`_clamped_start`)."""
+    th = th0 + w * t
+    if not sat:
+        x, y = _segment_1(x0, y0, th0, v0, w, a, t, coef)
+        return x, y, th, v0 + a * t
+    t1 = min(t, max(t_sat, 0.0))
+    x1, y1 = _segment_1(x0, y0, th0, v0, w, a, t1, coef)
+    v1 = min(max(v0 + a * t1, lo[0]), hi[0])
+    th1 = th0 + w * t1
+    x, y = _segment_1(x1, y1, th1, v1, w, 0.0, t - t1, coef)
+    return x, y, th, v1
+
+
 def _states_at_loop(states, controls, times, lo, hi, coef, out):
     """:meth:`Dubins4D.states_at` one state at a time; ``lo``/``hi``: (v, u1, u2) bounds."""
     t_end = 0.0
     for k in range(times.shape[0]):
         t_end = max(t_end, times[k])
     for n in range(states.shape[0]):
-        x0, y0, th0 = states[n, 0], states[n, 1], states[n, 2]
-        v0 = min(max(states[n, 3], lo[0]), hi[0])
-        w = min(max(controls[n, 0], lo[1]), hi[1])
-        a = min(max(controls[n, 1], lo[2]), hi[2])
-        v_end = v0 + a * t_end
-        sat = v_end > hi[0] or v_end < lo[0]
-        t_sat = ((hi[0] - v0) / a if a > 0 else (lo[0] - v0) / a) if sat else 0.0
+        v0, w, a, sat, t_sat = _clamped_start(states[n, 3], controls[n, 0], controls[n, 1], t_end, lo, hi)
         for k in range(times.shape[0]):
-            t = times[k]
-            out[n, k, 2] = th0 + w * t
-            if not sat:
-                out[n, k, 0], out[n, k, 1] = _segment_1(x0, y0, th0, v0, w, a, t, coef)
-                out[n, k, 3] = v0 + a * t
-            else:
-                t1 = min(t, max(t_sat, 0.0))
-                x1, y1 = _segment_1(x0, y0, th0, v0, w, a, t1, coef)
-                v1 = min(max(v0 + a * t1, lo[0]), hi[0])
-                th1 = th0 + w * t1
-                out[n, k, 0], out[n, k, 1] = _segment_1(x1, y1, th1, v1, w, 0.0, t - t1, coef)
-                out[n, k, 3] = v1
+            out[n, k, 0], out[n, k, 1], out[n, k, 2], out[n, k, 3] = _state_at_1(
+                states[n, 0], states[n, 1], states[n, 2], v0, w, a, times[k], sat, t_sat, lo, hi, coef)
     return out
+
+
+def _state_after_1(x0, y0, th0, v0, w, a, t, lo, hi, coef):
+    """:func:`_states_at_loop` for one state and the one time ``t`` (scalars in and out)."""
+    v0, w, a, sat, t_sat = _clamped_start(v0, w, a, t, lo, hi)
+    return _state_at_1(x0, y0, th0, v0, w, a, t, sat, t_sat, lo, hi, coef)
 
 
 _COEF_ARRAY = np.array(_COEF)
@@ -175,9 +191,13 @@ if njit is not None:  # the scalar path compiles the same closed forms and displ
     _horner_1 = njit(cache=True)(_horner_1)
     _turn_integrals_1 = njit(cache=True)(_turn_integrals_1)
     _segment_1 = njit(cache=True)(_segment_1)
+    _clamped_start = njit(cache=True)(_clamped_start)
+    _state_at_1 = njit(cache=True)(_state_at_1)
     _states_at_compiled = njit(cache=True)(_states_at_loop)
+    _state_after_compiled = njit(cache=True)(_state_after_1)
 else:  # pragma: no cover
     _states_at_compiled = None
+    _state_after_compiled = None
 
 
 class FullBraking(SafeDefault):
@@ -228,9 +248,7 @@ class Dubins4D:
             )
         # the compiled loop's (v, u1, u2) bounds, built once: it runs at every guardian decision
         for name, arr in (("_lo", [self.v_min, self.u1_min, self.u2_min]), ("_hi", [self.v_max, self.u1_max, self.u2_max])):
-            arr = np.array(arr, dtype=float)
-            arr.flags.writeable = False
-            object.__setattr__(self, name, arr)
+            object.__setattr__(self, name, np.array(arr, dtype=float))
 
     @property
     def control_low(self) -> np.ndarray:
@@ -289,6 +307,18 @@ class Dubins4D:
             return _states_at_compiled(np.ascontiguousarray(states, dtype=float), np.ascontiguousarray(controls, dtype=float),
                                        np.asarray(times, dtype=float), self._lo, self._hi, _COEF_ARRAY, out)
         return self._states_at_numpy(states, controls, times)
+
+    def state_after(self, state, control, t: float) -> np.ndarray:
+        """The state ``(4,)`` after holding ``control`` for ``t >= 0`` seconds from ``state``:
+        :meth:`states_at` for one state and one time, through the compiled loop (the same
+        floats as ``states_at(state[None], control[None], [t], compiled=True)[0, 0]``), with
+        the least per-call work: a guardian predicts one state per decision."""
+        if _state_after_compiled is None:  # pragma: no cover - numba is a dependency
+            return self._states_at_numpy(np.asarray(state, float).reshape(1, 4), np.asarray(control, float).reshape(1, 2),
+                                         np.array([float(t)]))[0, 0]
+        x, y, th, v = np.asarray(state, dtype=float).tolist()
+        w, a = np.asarray(control, dtype=float).tolist()
+        return np.array(_state_after_compiled(x, y, th, v, w, a, float(t), self._lo, self._hi, _COEF_ARRAY))
 
     def _states_at_numpy(self, states: np.ndarray, controls: np.ndarray, times: np.ndarray) -> np.ndarray:
         x0, y0, th0 = states[:, 0:1], states[:, 1:2], states[:, 2:3]
