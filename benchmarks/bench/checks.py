@@ -139,8 +139,9 @@ def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False) -> di
     Raises ValueError naming the flag and value at fault; returns, per agent, what ``report``
     prints later without importing anything (observation type, obstacle count).  With
     ``skip_inapplicable`` (the agents came from a named set, ``--agent all`` or ``paper``), a
-    guardian that does not apply to the env (its ``check_spaces`` refuses it) is not an error:
-    its entry is ``{"skipped": reason}`` instead."""
+    guardian that does not apply to the env (its ``check_spaces`` refuses it, or, given no
+    ``--agent-opt``, it cannot be built for the env, e.g. no shipped model) is not an error: its
+    entry is ``{"skipped": reason}`` instead."""
     import gymnasium as gym
 
     import rmm_envs  # noqa: F401
@@ -167,6 +168,9 @@ def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False) -> di
         try:
             guardian = make_guardian(agent, env_id=run.env_id, **run.agent_kwargs)
         except Exception as e:
+            if skip_inapplicable and not run.agent_kwargs:  # a set's member that cannot serve this env (no model)
+                meta[agent] = {"skipped": f"cannot be built for it: {type(e).__name__}: {e}"}
+                continue
             opts = " ".join(f"{agent}.{k}={v if isinstance(v, str) else json.dumps(v)}" for k, v in run.agent_kwargs.items())
             where = f"--agent-opt {opts}" if opts else f"--agent {agent}"
             raise ValueError(f"{where}: the guardian cannot be built for --env {run.env_id}: {type(e).__name__}: {e}") from None

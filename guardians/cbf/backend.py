@@ -11,10 +11,9 @@ end rebuilds the problem on every call.
 (``qpsolvers.available_solvers``; qpsolvers itself is the optional extra ``rmm-envs[qp]``).
 It is for choice and cross-checking: the decisions agree with the default to the solvers'
 tolerance (``tests/test_cbf_solvers.py``).  The guardian's ``eps`` (``1e-6``) is passed on as
-the tolerance of the solvers whose options this module knows (``osqp``: absolute and relative
-tolerance, solutions polished as on the direct path; ``clarabel``: gap and feasibility
-tolerances); the others run at their own defaults, which for the dense active-set ``daqp``
-are tighter than ``1e-6`` anyway.
+OSQP's absolute and relative tolerance (solutions polished, as on the direct path); the
+others run at their own defaults, which are tighter than ``1e-6`` (``clarabel``'s interior
+point 1e-8; ``daqp`` is a dense active-set method, exact up to rounding).
 
 A name that is not ``"osqp"`` and not ``"qpsolvers:<installed solver>"`` is refused at the
 guardian's construction, with the installed solvers listed.
@@ -59,8 +58,6 @@ def parse_solver(solver) -> str | None:
 def _options(name: str, eps: float, polish: bool = True) -> dict:
     if name == "osqp":
         return {"eps_abs": eps, "eps_rel": eps, "polishing": polish, "max_iter": 4000}
-    if name == "clarabel":
-        return {"tol_gap_abs": eps, "tol_gap_rel": eps, "tol_feas": eps}
     return {}
 
 
@@ -86,13 +83,21 @@ class QpsolversQP:
         self.name = name
         self.lb = None if lb is None else np.asarray(lb, float)
         self.ub = None if ub is None else np.asarray(ub, float)
+        self.eps = eps
         self.options = _options(name, eps, polish)
 
     def solve(self, G, h) -> np.ndarray | None:
         """The solution for the rows ``(G, h)``; ``None`` if infeasible or the solver failed."""
-        keep = np.isfinite(h)  # a row bounded by +inf constrains nothing (some solvers refuse inf)
+        G, h = np.asarray(G, float), np.asarray(h, float)
+        # a row with no variable in it (coefficients under 1e-12) is a fact about the state: infeasible below -eps (OSQP's
+        # tolerance on the direct path), else it constrains nothing; some solvers call an empty
+        # row with h = -1e-12 infeasible.  A row bounded by +inf constrains nothing either.
+        empty = ~np.any(np.abs(G) > 1e-12, axis=1)
+        if np.any(h[empty] < -self.eps):
+            return None
+        keep = np.isfinite(h) & ~empty
         try:
-            z = self._solve_qp(self.P, self.q, np.asarray(G, float)[keep], np.asarray(h, float)[keep], lb=self.lb,
+            z = self._solve_qp(self.P, self.q, G[keep], h[keep], lb=self.lb,
                                ub=self.ub, solver=self.name, **self.options)
         except self._errors:  # a solver that raises on an infeasible problem: no solution, as OSQP's status says
             return None
