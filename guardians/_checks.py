@@ -42,18 +42,20 @@ def number_pair(name: str, pair) -> tuple[float, float]:
     return lo, hi
 
 
-def dubins4d_only(guardian, action_space) -> None:
+def dubins4d_only(guardian, action_space, maze: bool = False) -> None:
     """Refuse an env that is not a Dubins4D one (``ValueError`` naming the guardian and why): the
     privileged guardians (``cbf``, ``hj``) model the Dubins4D car among circles, so they need its
     two controls (turn rate, acceleration) and circular obstacles in its privileged data: an env
     whose action space states other obstacle shapes (``obstacle_shapes``, a map with polygons or
-    walls) is refused too."""
+    walls) is refused too.  ``maze``: the guardian also serves the maze car (its own check ran
+    first), said in the message."""
     from rmm_envs.envs.dubins4d import CONTROLS
 
     name = guardian.name
     controls = guardian.require_action_space(space=action_space).controls
     if tuple(controls) != CONTROLS:
-        raise ValueError(f"guardian {name!r} applies to Dubins4D envs only for now: it models the Dubins4D car (controls "
+        systems = ("Dubins4D envs and the maze car (controls ('turnrate_ctrl',))" if maze else "Dubins4D envs only")
+        raise ValueError(f"guardian {name!r} applies to {systems}: it models the Dubins4D car (controls "
                          f"{CONTROLS}) among circular obstacles, and this env's controls are {controls}")
     shapes = getattr(action_space, "obstacle_shapes", None)
     other = [s for s in (shapes or ()) if s != "circle"]

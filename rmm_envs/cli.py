@@ -3,6 +3,8 @@
 ``rmm-envs demo`` runs a few episodes of a parallel-autonomy env (default
 ``Dubins4DParallel-v0``; 8 episodes from seed 0, enough to see both goals and collisions) with a guardian
 that never takes control, so the reckless driver alone decides, and prints each outcome.
+Speeds are in m/s; an env measured in other units (the maze, in pixels) also gets its own
+unit in brackets, converted at the scale the env states (``0.10 m/s (10.00 px/s)``).
 The "no guardian" action is read off the env's action space: ``active_ctrl`` 0 and every
 control field zero.  An env whose action space has no ``active_ctrl`` is refused by name.
 
@@ -35,6 +37,16 @@ def driver_only_action(space: spaces.Space, env_id: str) -> dict:
     return space.inactive()
 
 
+def speed_text(speed: float, env) -> str:
+    """A speed in m/s; for an env whose lengths are in another unit (its ``length_unit``, e.g. the
+    maze's ``"px"``), converted with its ``metres_per_unit`` and followed by the native value in
+    brackets: ``0.10 m/s (10.00 px/s)``."""
+    unit = getattr(env, "length_unit", "m")
+    if unit == "m":
+        return f"{speed:.2f} m/s"
+    return f"{speed * float(env.metres_per_unit):.2f} m/s ({speed:.2f} {unit}/s)"
+
+
 def _demo(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         print(f"rmm-envs demo: error: --episodes must be >= 1, got {args.episodes}", file=sys.stderr)
@@ -58,7 +70,7 @@ def _demo(args: argparse.Namespace) -> int:
             done = terminated or truncated
         st = info["episode"]
         outcomes[info["outcome"]] = outcomes.get(info["outcome"], 0) + 1
-        speed = f", final speed {st['final_speed']:.2f} m/s" if "final_speed" in st else ""
+        speed = f", final speed {speed_text(st['final_speed'], env.unwrapped)}" if "final_speed" in st else ""
         print(f"episode {ep:3d} seed {args.seed + ep:5d}: {info['outcome']:9s} after {st['n_env_steps']:4d} steps, "
               f"{st['cum_sim_time']:6.1f} s simulated{speed}")
     dt = time.perf_counter() - t0

@@ -248,12 +248,28 @@ def test_lrmm_reads_the_maze_model_on_the_rays_and_turns_to_the_lower_risk_side(
     assert g.act(moved, {}) == action
 
 
-def test_rmm_bench_refuses_guardians_that_do_not_apply(tmp_path, capsys):
-    for agent in ("cbf", "hj"):
+def test_rmm_bench_refuses_a_named_guardian_that_does_not_apply(tmp_path, capsys):
+    for agent in ("cbf-paper", "hj-paper"):  # the paper's rules are Dubins4D's only
         assert bench_main(["--env", "Dubins3DMazeParallel-v0", "--agent", agent, "--episodes", "1", "--workers", "1",
                            "--out", str(tmp_path), "--no-progress"]) == 2
         err = capsys.readouterr().err
         assert f"--agent {agent} does not apply to --env Dubins3DMazeParallel-v0" in err and "Dubins4D envs only" in err
+
+
+def test_rmm_bench_set_runs_what_applies_and_lists_the_rest(tmp_path, capsys):
+    import sqlite3
+
+    assert bench_main(["--env", "Dubins3DMazeParallel-v0", "--agent", "paper", "--episodes", "1", "--workers", "1",
+                       "--out", str(tmp_path), "--no-progress", "--clock", "fixed:1"]) == 0
+    err = capsys.readouterr().err
+    for agent in ("cbf-paper", "hj-paper"):
+        assert (f"--agent paper: {agent} does not apply to --env Dubins3DMazeParallel-v0, skipped: guardian {agent!r} "
+                "applies to Dubins4D envs only") in err
+    con = sqlite3.connect(tmp_path / "results.db")
+    ran = {r[0] for r in con.execute("select agent from runs")}
+    con.close()
+    assert "lrmm-paper does not apply to --env Dubins3DMazeParallel-v0, skipped: cannot be built for it" in err
+    assert ran == {"random", "inactive", "brakes"}
 
 
 def test_safe_default_contract_and_dubins4d_braking():

@@ -89,6 +89,7 @@ def _check_counts(args) -> None:
 
 def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
     from benchmarks.bench.checks import env_arguments, parse_agent_opts, resolve_agents
+    from guardians.registry import guardian_set
 
     agents = resolve_agents(args.agent)
     agent_kwargs = parse_agent_opts(args.agent_opt or [], agents)
@@ -99,7 +100,8 @@ def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
         env_kwargs={k: v for k, v in options.items() if k in takes}, clock=clock, seed=args.seed, episodes=args.episodes,
         out=args.out, workers=args.workers, backend=args.backend, ray_address=args.ray_address,
         episode_timeout=args.episode_timeout, charge_precompute=args.charge_precompute, batch_size=args.batch_size,
-        retry_errors=args.retry_errors, progress=not args.no_progress, parsed=vars(args), latencies=latencies)
+        retry_errors=args.retry_errors, progress=not args.no_progress, parsed=vars(args), latencies=latencies,
+        agent_set=args.agent.strip() if guardian_set(args.agent) is not None else None)
 
 
 def parse_run(argv: list[str], description: str) -> BenchConfig:

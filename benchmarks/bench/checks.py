@@ -133,11 +133,15 @@ def _flag_for(message: str, env_kwargs: dict) -> str:
     return f"--env {env_kwargs}"
 
 
-def check_runs(runs: dict[str, AgentRun]) -> dict[str, dict]:
+def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False) -> dict[str, dict]:
     """Build the env and every guardian as the workers will, before any episode runs.
 
     Raises ValueError naming the flag and value at fault; returns, per agent, what ``report``
-    prints later without importing anything (observation type, obstacle count)."""
+    prints later without importing anything (observation type, obstacle count).  With
+    ``skip_inapplicable`` (the agents came from a named set, ``--agent all`` or ``paper``), a
+    guardian that does not apply to the env (its ``check_spaces`` refuses it, or, given no
+    ``--agent-opt``, it cannot be built for the env, e.g. no shipped model) is not an error: its
+    entry is ``{"skipped": reason}`` instead."""
     import gymnasium as gym
 
     import rmm_envs  # noqa: F401
@@ -164,6 +168,9 @@ def check_runs(runs: dict[str, AgentRun]) -> dict[str, dict]:
         try:
             guardian = make_guardian(agent, env_id=run.env_id, **run.agent_kwargs)
         except Exception as e:
+            if skip_inapplicable and not run.agent_kwargs:  # a set's member that cannot serve this env (no model)
+                meta[agent] = {"skipped": f"cannot be built for it: {type(e).__name__}: {e}"}
+                continue
             opts = " ".join(f"{agent}.{k}={v if isinstance(v, str) else json.dumps(v)}" for k, v in run.agent_kwargs.items())
             where = f"--agent-opt {opts}" if opts else f"--agent {agent}"
             raise ValueError(f"{where}: the guardian cannot be built for --env {run.env_id}: {type(e).__name__}: {e}") from None
@@ -172,6 +179,9 @@ def check_runs(runs: dict[str, AgentRun]) -> dict[str, dict]:
             try:
                 check(*env_spaces[ekey])
             except ValueError as e:
+                if skip_inapplicable:
+                    meta[agent] = {"skipped": str(e)}
+                    continue
                 raise ValueError(f"--agent {agent} does not apply to --env {run.env_id}: {e}") from None
         meta[agent] = {"observation": str(getattr(guardian, "observation_type", "?")), "n_obstacles": envs[ekey]}
     return meta

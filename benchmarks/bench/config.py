@@ -152,6 +152,7 @@ class BenchConfig:
     progress: bool
     parsed: dict = field(default_factory=dict)
     latencies: tuple[float, ...] = ()  # a sweep's decision latencies, ms
+    agent_set: str | None = None  # the named set --agent gave ("all", "paper"), or None for named agents
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "agent_kwargs", {a: _json_copy(f"--agent-opt {a}", kw) for a, kw in self.agent_kwargs.items()})
@@ -163,6 +164,12 @@ class BenchConfig:
         took this run's clock."""
         env_kwargs = self.env_kwargs | {"clock": clock} if "clock" in self.env_kwargs else self.env_kwargs
         return dataclasses.replace(self, clock=clock, env_kwargs=env_kwargs)
+
+    def without(self, agents) -> BenchConfig:
+        """The same command without ``agents`` (those of a named set that do not apply to the env)."""
+        drop = set(agents)
+        return dataclasses.replace(self, agents=tuple(a for a in self.agents if a not in drop),
+                                   agent_kwargs={a: kw for a, kw in self.agent_kwargs.items() if a not in drop})
 
     def agent_runs(self) -> dict[str, AgentRun]:
         return {a: AgentRun(agent=a, agent_kwargs=self.agent_kwargs.get(a, {}), env_id=self.env_id, env_kwargs=self.env_kwargs,

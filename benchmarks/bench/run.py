@@ -147,10 +147,29 @@ def _interrupted(out: Path) -> int:
     return 130
 
 
-def cmd_run(config: BenchConfig, argv) -> int:
+def applicable(config: BenchConfig) -> tuple[BenchConfig, dict]:
+    """Check every option, env and guardian before anything is written (:func:`check_runs`).
+    Agents of a named set (``--agent all``, ``paper``) that do not apply to the env are dropped
+    from the run and listed, with the reason, on stderr; an agent named explicitly that does
+    not apply is an error, as is a set of which none applies."""
     from benchmarks.bench.checks import check_runs
 
-    meta = check_runs(config.agent_runs())  # every option, env and guardian checked before anything is written
+    meta = check_runs(config.agent_runs(), skip_inapplicable=config.agent_set is not None)
+    skipped = {a: m["skipped"] for a, m in meta.items() if "skipped" in m}
+    if skipped:
+        if len(skipped) == len(config.agents):
+            raise ValueError(f"--agent {config.agent_set}: no guardian of the set applies to --env {config.env_id}: "
+                             + "; ".join(f"{a}: {r}" for a, r in skipped.items()))
+        for agent, reason in skipped.items():
+            print(f"rmm-bench: --agent {config.agent_set}: {agent} does not apply to --env {config.env_id}, "
+                  f"skipped: {reason}", file=sys.stderr)
+        config = config.without(skipped)
+        meta = {a: m for a, m in meta.items() if a not in skipped}
+    return config, meta
+
+
+def cmd_run(config: BenchConfig, argv) -> int:
+    config, meta = applicable(config)  # every option, env and guardian checked before anything is written
     out = Path(config.out)
     store = ResultsStore(out / "results.db")
     try:
@@ -171,9 +190,7 @@ def cmd_run(config: BenchConfig, argv) -> int:
 
 
 def cmd_sweep(config: BenchConfig, argv) -> int:
-    from benchmarks.bench.checks import check_runs
-
-    meta = check_runs(config.agent_runs())  # validates the options before anything is written
+    config, meta = applicable(config)  # validates the options before anything is written
     out = Path(config.out)
     store = ResultsStore(out / "results.db")
     agents, latencies = config.agents, config.latencies

@@ -134,10 +134,22 @@ ranges, negative tolerances) are refused at construction with a message naming t
 action space without two controls, or whose box does not contain ``u1 = 0`` and both signs of
 ``u2``, is refused at ``reset``, naming the guardian.
 
+The maze car and the solver
+---------------------------
+``cbf`` also serves the maze car (``Dubins3DMazeParallel-v0``): given an action space with the
+maze car's one control (``turnrate_ctrl``) it hands the episode to
+:class:`guardians.cbf.maze.MazeCBFGuardian` (walls as barriers that include the turn the car
+needs; its module docstring has the rows and defaults).  ``maze`` (a dict) sets that
+guardian's own arguments; ``solver``, ``eps``, ``predict_latency`` and ``lap_guess`` are
+shared; ``maze=False`` refuses maze envs (``cbf-paper`` does: the paper's rule is Dubins4D's).
+``solver``: ``"osqp"`` (default, the direct path below) or ``"qpsolvers:<name>"`` for any
+solver qpsolvers has installed (:mod:`guardians.cbf.backend`).
+
 The package, by responsibility: :mod:`guardians.cbf.barrier` (the barrier rows and the
 obstacle choices, pure functions of the state), :mod:`guardians.cbf.qp` (the OSQP problem, set
 up once per episode), :mod:`guardians.cbf.recovery` (the backup manoeuvre) and
-:mod:`guardians.cbf.guardian` (the two guardians: configuration, latency and the decision).
+:mod:`guardians.cbf.guardian` (the two guardians: configuration, latency and the decision),
+:mod:`guardians.cbf.backend` (the solver choice) and :mod:`guardians.cbf.maze` (the maze car).
 """
 
 from guardians.cbf.guardian import CBFGuardian, CBFPaperGuardian

@@ -11,8 +11,9 @@ import numpy as np
 
 from guardians._checks import dubins4d_only, finite, integer, number_pair
 from guardians.base import Guardian
+from guardians.cbf.backend import dubins4d_qp, parse_solver
 from guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_values, critical_obstacle, inflated_radii
-from guardians.cbf.qp import BarrierQP
+from guardians.cbf.maze import MazeCBFGuardian, is_maze_space
 from guardians.cbf.recovery import recovery_control, recovery_done
 from rmm_envs.systems.dubins4d import Dubins4D
 
@@ -43,8 +44,13 @@ class CBFGuardian(Guardian):
                  active_atol: float = 1e-3, active_rtol: float = 0.0, low_speed_stop: bool = False,
                  max_obstacles: int = 64, eps: float = 1e-6, predict_latency: bool = True,
                  recovery: bool = True, v_stuck: float = 0.05, lap_guess: float = 0.1,
-                 goal_aware_margin: bool = True) -> None:
+                 goal_aware_margin: bool = True, solver: str = "osqp", maze: dict | None = None) -> None:
         super().__init__()
+        parse_solver(solver)  # a bad name fails here, listing the installed solvers
+        self.solver = solver
+        self._maze_args = _maze_arguments(maze, solver, eps, predict_latency, lap_guess)
+        self._delegate = None  # the maze car's guardian, built on the first maze env
+        self._maze = None  # the delegate while an episode on a maze env runs
         self.p1 = finite("p1 (class-K gain)", p1, 0.0, lo_open=True)
         self.p2 = finite("p2 (class-K gain)", p2, 0.0, lo_open=True)
         k = finite("inflation", inflation)
@@ -99,10 +105,27 @@ class CBFGuardian(Guardian):
         self._system = Dubins4D(v_min=self.v_min, v_max=self.v_max, u1_min=self.u1_min, u1_max=self.u1_max,
                                 u2_min=self.u2_min, u2_max=self.u2_max)
 
+    def _maze_guardian(self, action_space):
+        """The maze car's guardian when ``action_space`` is the maze car's (and this class
+        serves the maze), else None: the dispatch of :mod:`guardians.cbf.maze`."""
+        if self._maze_args is None or not is_maze_space(action_space):
+            return None
+        if self._delegate is None:
+            self._delegate = MazeCBFGuardian(**self._maze_args)
+            self._delegate.name = self.name
+        return self._delegate
+
     def check_spaces(self, observation_space, action_space) -> None:
-        dubins4d_only(self, action_space)
+        maze = self._maze_guardian(action_space)
+        if maze is not None:
+            return maze.check_spaces(observation_space, action_space)
+        dubins4d_only(self, action_space, maze=self._maze_args is not None)
 
     def reset(self, **kwargs) -> None:
+        self._maze = self._maze_guardian(kwargs.get("action_space"))
+        if self._maze is not None:
+            self._maze.reset(**kwargs)
+            return
         super().reset(**kwargs)
         self.check_spaces(self.observation_space, self.action_space)
         self._bounds()
@@ -120,7 +143,7 @@ class CBFGuardian(Guardian):
         self._lap = self.lap_guess
         self._recovering = None  # index of the obstacle being recovered from
         self.K = obstacles.shape[0]
-        self._qp = BarrierQP(self.K, self.params, self.p_theta, self.p_v, self.eps)
+        self._qp = dubins4d_qp(self.solver, self.K, self.params, self.p_theta, self.p_v, self.eps)
 
     # ------------------------------------------------------------------ the barrier maths and the QP
     def barriers(self, state) -> np.ndarray:
@@ -198,6 +221,8 @@ class CBFGuardian(Guardian):
         return self.action_space.inactive()
 
     def act(self, observation, info=None):
+        if self._maze is not None:
+            return self._maze.act(observation, info)
         priv = self._privileged()
         state = np.asarray(priv["state"], float)
         if not all(map(math.isfinite, state.tolist())):
@@ -235,7 +260,21 @@ class CBFGuardian(Guardian):
         return self._inactive()
 
     def stats(self) -> dict:
+        if self._maze is not None:
+            return self._maze.stats()
         return dict(self._counts)
+
+
+def _maze_arguments(maze, solver, eps, predict_latency, lap_guess) -> dict | None:
+    """The maze guardian's arguments: ``maze`` (a dict of :class:`MazeCBFGuardian` arguments;
+    ``False`` refuses maze envs) over the arguments both systems share."""
+    if maze is False:
+        return None
+    if maze is not None and not isinstance(maze, dict):
+        raise ValueError(f"maze must be a dict of guardians.cbf.maze.MazeCBFGuardian arguments (or False), got {maze!r}")
+    args = {"solver": solver, "eps": eps, "predict_latency": predict_latency, "lap_guess": lap_guess} | dict(maze or {})
+    MazeCBFGuardian(**args)  # a bad argument fails at construction, naming it
+    return args
 
 
 class CBFPaperGuardian(CBFGuardian):
@@ -245,6 +284,6 @@ class CBFPaperGuardian(CBFGuardian):
     name = "cbf-paper"
 
     def __init__(self, *args, predict_latency: bool = False, recovery: bool = False,
-                 goal_aware_margin: bool = False, **kwargs) -> None:
+                 goal_aware_margin: bool = False, maze=False, **kwargs) -> None:
         super().__init__(*args, predict_latency=predict_latency, recovery=recovery,
-                         goal_aware_margin=goal_aware_margin, **kwargs)
+                         goal_aware_margin=goal_aware_margin, maze=maze, **kwargs)

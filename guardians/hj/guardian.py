@@ -109,6 +109,16 @@ coarse grids the reach-avoid set is under-estimated (conservative).  For a state
 the goal's centre at 1 m/s, with a 4 s horizon, the first-order value (about -1 exactly) is
 -0.04, -0.39 and -0.54 on 33, 65 and 97 points per position axis.
 
+## The maze car
+
+``hj`` also serves the maze car (``Dubins3DMazeParallel-v0``): given an action space with the
+maze car's one control (``turnrate_ctrl``), it hands the episode to
+:class:`guardians.hj.maze.MazeHJGuardian` (a 3-D value over the maze's walls, same rule; its
+module docstring has its defaults).  ``maze`` (a dict) sets that guardian's own arguments;
+``cache_dir``, ``cache``, ``cache_max_files``, ``backend``, ``threads``, ``delay`` and ``lap``
+are shared.  ``maze=False`` refuses maze envs (``hj-paper`` does: the paper's rule is for
+Dubins4D only).
+
 Explicit edge cases: a state outside the grid's position/speed box has no value: the guardian
 leaves control to the driver and counts it (``stats()["outside_grid"]``); a state with NaN
 brakes at maximum and is counted (``nan_states``); an obstacle whose centre lies outside the
@@ -131,6 +141,7 @@ from guardians.base import Guardian
 from guardians.hj.cache import ValueCache
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid
+from guardians.hj.maze import MazeHJGuardian, is_maze_space
 from guardians.hj.solver import select_backend, solve_brt
 
 __all__ = ["HJGuardian", "HJPaperGuardian", "default_grid", "default_threads", "obstacle_target"]
@@ -205,8 +216,11 @@ class HJGuardian(Guardian):
                  rule: str = "distance", margin: float | None = None, delay: int = 1, lap: float | None = None,
                  disturbance: float = 0.0, cache_dir=None, cache: bool = True, cache_max_files: int = 64,
                  mode: str = "avoid", ra_horizon: float = 10.0, ra_margin: float = 0.5, backend: str = "auto",
-                 standstill_lookup: bool = True, threads: int | None = None) -> None:
+                 standstill_lookup: bool = True, threads: int | None = None, maze: dict | None = None) -> None:
         super().__init__()
+        self._maze_args = _maze_arguments(maze, cache_dir, cache, cache_max_files, backend, threads, delay, lap)
+        self._delegate = None  # the maze car's guardian, built on the first maze env
+        self._maze = None  # the delegate while an episode on a maze env runs
         self.standstill_lookup = bool(standstill_lookup)
         self.horizon = finite("horizon", horizon, 0.0, lo_open=True)
         if mode not in ("avoid", "reach_avoid"):
@@ -285,10 +299,28 @@ class HJGuardian(Guardian):
                 warnings.warn(f"HJ value cache not written ({e}); continuing without it", RuntimeWarning, stacklevel=2)
         return V
 
+    def _maze_guardian(self, action_space):
+        """The maze car's guardian when ``action_space`` is the maze car's (and this class
+        serves the maze), else None: the dispatch of :mod:`guardians.hj.maze`."""
+        if self._maze_args is None or not is_maze_space(action_space):
+            return None
+        if self._delegate is None:
+            self._delegate = MazeHJGuardian(**self._maze_args)
+            self._delegate.name = self.name
+        return self._delegate
+
     def check_spaces(self, observation_space, action_space) -> None:
-        dubins4d_only(self, action_space)
+        maze = self._maze_guardian(action_space)
+        if maze is not None:
+            return maze.check_spaces(observation_space, action_space)
+        dubins4d_only(self, action_space, maze=self._maze_args is not None)
 
     def reset(self, **kwargs) -> None:
+        maze = self._maze_guardian(kwargs.get("action_space"))
+        self._maze = maze
+        if maze is not None:
+            maze.reset(**kwargs)
+            return
         super().reset(**kwargs)
         self.check_spaces(self.observation_space, self.action_space)
         space = self.require_action_space(controls=2)
@@ -348,6 +380,8 @@ class HJGuardian(Guardian):
         return self.margin + T * self.decrease_rate(state, grad) + 0.5 * T * T * bend
 
     def act(self, observation, info=None):
+        if self._maze is not None:
+            return self._maze.act(observation, info)
         priv = self._privileged()
         s = np.asarray(priv["state"], float)
         t = priv.get("sim_time")
@@ -383,7 +417,23 @@ class HJGuardian(Guardian):
         return self.action_space.inactive()
 
     def stats(self) -> dict:
+        if self._maze is not None:
+            return self._maze.stats()
         return dict(self._counts, solve_seconds=self.solve_seconds)
+
+
+def _maze_arguments(maze, cache_dir, cache, cache_max_files, backend, threads, delay, lap) -> dict | None:
+    """The maze guardian's arguments: ``maze`` (a dict of :class:`MazeHJGuardian` arguments;
+    ``False`` refuses maze envs) over the arguments both systems share."""
+    if maze is False:
+        return None
+    if maze is not None and not isinstance(maze, dict):
+        raise ValueError(f"maze must be a dict of guardians.hj.maze.MazeHJGuardian arguments (or False), got {maze!r}")
+    shared = {"cache_dir": cache_dir, "cache": cache, "cache_max_files": cache_max_files, "backend": backend,
+              "threads": threads, "delay": delay, "lap": lap}
+    args = shared | dict(maze or {})
+    MazeHJGuardian(**args)  # a bad argument fails at construction, naming it
+    return args
 
 
 class HJPaperGuardian(HJGuardian):
@@ -393,5 +443,6 @@ class HJPaperGuardian(HJGuardian):
     name = "hj-paper"
 
     def __init__(self, order: int = 1, rk: int = 2, rule: str = "value", margin: float = 0.0, standstill_lookup: bool = False,
-                 **kwargs) -> None:
-        super().__init__(order=order, rk=rk, rule=rule, margin=margin, standstill_lookup=standstill_lookup, **kwargs)
+                 maze=False, **kwargs) -> None:
+        super().__init__(order=order, rk=rk, rule=rule, margin=margin, standstill_lookup=standstill_lookup, maze=maze,
+                         **kwargs)

@@ -14,7 +14,12 @@ centre of a goal cell.  A built-in reckless driver (:class:`rmm_envs.maze_driver
 follows the maze's cell path to the goal by pure pursuit with a long look-ahead, cutting
 corners and ignoring the walls: alone it collides in 46% of the episodes (256 episodes of
 ``rmm-bench`` seed 0, fixed 1 ms clock) and reaches the goal in the rest.  The agent is a
-*guardian*: at every step it decides whether to take over the turn rate.  Units are pixels.
+*guardian*: at every step it decides whether to take over the turn rate.
+
+**Units** are the paper's pixels (``length_unit = "px"``).  For reading them physically the env
+states a nominal scale, ``metres_per_unit = 0.01`` (1 px = 1 cm: a small indoor robot at
+0.1 m/s with a 0.5 m turning radius in 1.25 m cells); nothing in the env depends on it, and
+``rmm-envs demo`` prints speeds in m/s at this scale with px/s in brackets.
 
 ## Dynamics
 
@@ -82,7 +87,7 @@ Every step: ``sim_time``, ``state`` (the true pose, **privileged**), ``active`` 
 (``n_env_steps``, ``n_active_ctrl_env_steps``, ``active_ctrl_sim_time``, ``cum_sim_time``,
 ``cum_compute_time``, ``avg_compute_time``, ``cum_reward``, ``final_speed`` (the constant
 speed), ``outcome``).  :meth:`Dubins3DMazeGuardedEnv.privileged` returns the pose, the maze,
-the goal ``[x, y, r]`` and the simulated time.
+the goal ``[x, y, r]``, the car's speed (px/s) and the simulated time.
 
 ## Arguments
 
@@ -171,6 +176,10 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
     reset_options = ("maze", "state", "goal_cell")
+    #: lengths are in pixels; for reading them in metres, a nominal scale of 1 cm per px (the
+    #: "Units" paragraph of the module docstring)
+    length_unit = "px"
+    metres_per_unit = 0.01
 
     def __init__(self, step_dt: float = 0.1, n_path_points: int = 8, max_episode_sim_time: float = 300.0,
                  goal_cells=(4, 8), goal_radius: float = 30.0, start_jitter: float = 15.0,
@@ -316,9 +325,11 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
 
     # ------------------------------------------------------------------ accessors and labelling hooks
     def privileged(self) -> dict:
-        """The true pose, the maze, the goal ``[x, y, r]`` and the simulated time. **Privileged**."""
+        """The true pose, the maze, the goal ``[x, y, r]``, the car's (constant) speed and the
+        simulated time. **Privileged**."""
         self.require_episode()
-        return {"state": self._state.copy(), "maze": self.scene.maze, "goal": self.goal.copy(), "sim_time": self._sim_time}
+        return {"state": self._state.copy(), "maze": self.scene.maze, "goal": self.goal.copy(),
+                "speed": self.system.speed, "sim_time": self._sim_time}
 
     true_state = property(lambda self: self._state.copy(), doc="The true pose (a copy). **Privileged**.")
     sim_time = property(lambda self: self._sim_time, doc="Simulated seconds since reset.")

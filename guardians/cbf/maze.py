@@ -1,0 +1,295 @@
+"""The ``cbf`` guardian on the maze car (``Dubins3DMazeParallel-v0``): walls as control barriers.
+
+``cbf`` serves both systems: :class:`guardians.cbf.guardian.CBFGuardian` hands an env whose
+action space has the maze car's single control (``turnrate_ctrl``) to :class:`MazeCBFGuardian`,
+which can also be used (and named, ``guardians.cbf.maze:MazeCBFGuardian``) on its own.  It
+uses **privileged** information: the maze, the true pose, the car's speed and the simulated
+time (the env's ``privileged()``).
+
+## The barriers
+
+The car ``x' = s cos psi, y' = s sin psi, psi' = u`` has a constant speed ``s`` (10 px/s) and
+a bounded turn rate ``|u| <= u_max`` (0.2 rad/s, from the action space).  A wall is a capsule:
+the points within ``r`` (half the thickness, 6.25 px) of a segment.  For each wall, with ``c``
+the segment's point nearest the car, ``d = |p - c|``, ``n = (p - c) / d`` and the heading
+``e = (cos psi, sin psi)``, ``e_perp = (-sin psi, cos psi)``::
+
+    b      = d - r - margin                          (px; >= 0: clear of the wall and the margin)
+    b'     = s n . e
+    b''    = s^2 kappa + s (n . e_perp) u            kappa = (1 - (n . e)^2) / d at a wall's end
+                                                      (c an endpoint), 0 along its side
+
+The turn rate enters only ``b''``: the distance has relative degree 2, and the high-order
+condition (Xiao & Belta, linear class-K gains ``p1, p2``) reads
+``-s (n . e_perp) u <= s^2 kappa + (p1 + p2) b' + p1 p2 b``.  It fails on this car: its first
+set ``b' + p1 b >= 0`` asks for ``b >= s sin(phi) / p1`` when heading into a wall at ``phi``,
+more than a corridor allows at any gain that the car's ``u_max`` can also hold (heading
+straight at a wall ``n . e_perp = 0``: no turn helps to first order).  Measured
+(``barrier="distance"``, ``p1 = p2 = 0.1``, 64 episodes, fixed 1 ms clock, seed 0): 96.9%
+collisions, QP infeasible at most steps.  So the default barrier builds the turn in.
+
+**The turning barrier** (``barrier="turning"``, the default).  A car approaching a flat wall at
+angle ``phi`` (``sin phi = -n . e``) that turns away at full rate (radius ``R = s / u_max``,
+50 px) comes closest at ``b - R (1 - cos phi)``, with ``cos phi = |n . e_perp|``.  So::
+
+    B = b - R (1 - |n . e_perp|)   while approaching (n . e < 0),   B = b otherwise
+
+is ``C^1`` (the two forms meet with equal slope at ``n . e = 0``) except head-on
+(``n . e_perp = 0``, where either turn raises it), and has relative degree 1:
+with ``sigma = sign(n . e_perp)`` (the turn away from the wall; left on a tie),
+``B' = s n . e + R sigma ((dn/dt) . e_perp - u n . e)`` while approaching, ``(dn/dt) . e_perp
+= -s (n . e_perp)(n . e) / d`` at a wall's end, 0 along its side.  Along a flat wall the full
+turn away, ``u = sigma u_max``, gives exactly ``B' = 0``: the condition ``B' + p1 B >= 0`` is
+always feasible where ``B >= 0`` (the input bound is built into the barrier, tested).  Each
+wall gives the row ``-(coefficient of u in B') u <= (the rest of B') + p1 B``.
+
+The QP over the turn rate alone: minimise ``u^2`` subject to the rows for the ``n_walls``
+nearest walls and ``|u| <= u_max``.  There is no goal term: the driver's route through the
+maze is the nominal behaviour, and ``u = 0`` (hold the heading) is what the filter keeps
+when it is safe.  The guardian takes control, applying the QP's ``u``, when a barrier row is
+active at the solution (``|G_i u* - h_i| <= active_atol``, as Dubins4D's ``cbf``): holding the
+heading would break a barrier condition.  Otherwise the driver keeps control.  An infeasible
+or failed QP turns at full rate the way that best satisfies the hardest row (the largest
+``h_i - G_i u`` over ``|u| <= u_max``), counted in ``stats()["qp_fallbacks"]``.
+
+Defaults, and why:
+
+* ``p1 = 1`` /s for the turning barrier (``0.1`` for the distance barrier; ``p2 = 0.1`` is
+  used by that one only): ``B`` may fall at most at ``p1 B`` px/s, so the filter lets the car
+  drive at a wall until ``B`` is a lap or two of travel; with the margin below this keeps the
+  sampled loop clear.  Measured with the defaults (256 episodes, ``rmm-bench --clock
+  fixed:1``, seed 0): 99.6% success, 0.4% collisions (the driver alone: 53.9% / 46.1%), in
+  control 6.2% of the simulated time, 16 QP fallbacks in all.
+* ``margin = 2`` px: about two laps of travel (1.1 px each at 0.11 s), the loop's sampling.
+* ``n_walls = 8``: the nearest eight walls; farther ones are more than a corridor away and
+  their rows are slack.
+* ``predict_latency = True``: as Dubins4D's ``cbf``, the QP is solved at the pose predicted one
+  lap ahead under the control acting during the lap (the guardian's own last turn rate, or 0
+  for the driver's, unknown; at most ``u_max lap`` = 0.022 rad of heading error at 0.11 s),
+  the lap measured from the simulated times (``lap_guess = 0.1`` s before the first).
+* ``eps = 1e-6``, ``solver = "osqp"``: the QP's tolerance and solver
+  (:mod:`guardians.cbf.backend`); ``active_atol = 1e-3`` as Dubins4D's.
+
+A pose with NaN applies the env's safe default (the maximum turn away from the nearer wall) and
+is counted (``nan_states``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import osqp
+import scipy.sparse as sp
+
+from guardians._checks import finite, integer
+from guardians.base import Guardian
+from guardians.cbf.backend import QpsolversQP, parse_solver
+
+__all__ = ["MAZE_CONTROLS", "MazeCBFGuardian", "WallQP", "is_maze_space", "wall_rows"]
+
+MAZE_CONTROLS = ("turnrate_ctrl",)
+BARRIERS = ("turning", "distance")
+
+
+def is_maze_space(action_space) -> bool:
+    """Whether ``action_space`` is the maze car's (a guardian action space with its one control)."""
+    return tuple(getattr(action_space, "controls", ())) == MAZE_CONTROLS
+
+
+def wall_rows(state, speed: float, walls: np.ndarray, half: float, margin: float, p1: float, p2: float,
+              barrier: str = "turning", u_max: float = 0.2):
+    """The barrier values and the rows ``G u <= h`` (``G`` of shape ``(W, 1)``) of every wall
+    ``(W, 4)`` at pose ``state``: ``barrier="turning"`` (the default, first order, gain ``p1``)
+    or ``"distance"`` (the high-order distance barrier, gains ``p1, p2``).  The module docstring
+    derives both."""
+    x, y, psi = float(state[0]), float(state[1]), float(state[2])
+    ax, ay = walls[:, 0], walls[:, 1]
+    abx, aby = walls[:, 2] - ax, walls[:, 3] - ay
+    L2 = abx * abx + aby * aby
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(L2 > 0, ((x - ax) * abx + (y - ay) * aby) / L2, 0.0)
+    t = np.clip(t, 0.0, 1.0)
+    dx, dy = x - (ax + t * abx), y - (ay + t * aby)
+    d = np.maximum(np.hypot(dx, dy), 1e-9)
+    nx, ny = dx / d, dy / d
+    c, s = math.cos(psi), math.sin(psi)
+    ne = nx * c + ny * s  # n . e: < 0 while approaching the wall
+    nperp = -nx * s + ny * c  # n . e_perp
+    cap = (t <= 0.0) | (t >= 1.0)  # nearest point at a wall's end: n turns as the car moves
+    b = d - half - margin
+    if barrier == "distance":
+        kappa = np.where(cap, (1.0 - ne * ne) / d, 0.0)
+        h = speed * speed * kappa + (p1 + p2) * speed * ne + p1 * p2 * b
+        return b, (-speed * nperp)[:, None], h
+    R = speed / u_max
+    approach = ne < 0.0
+    sigma = np.where(nperp >= 0.0, 1.0, -1.0)  # the turn that takes the heading away from the wall
+    B = np.where(approach, b - R * (1.0 - np.abs(nperp)), b)
+    ndot_eperp = np.where(cap, -speed * nperp * ne / d, 0.0)  # (dn/dt) . e_perp
+    coef_u = np.where(approach, -R * sigma * ne, 0.0)
+    h = speed * ne + np.where(approach, R * sigma * ndot_eperp, 0.0) + p1 * B
+    return B, (-coef_u)[:, None], h
+
+
+class WallQP:
+    """``min u^2  s.t.  G u <= h, |u| <= u_max`` for ``K`` wall rows, on the direct OSQP path
+    (set up once, values and bounds updated per step, warm-started) or through qpsolvers
+    (``name``: an installed qpsolvers solver, :mod:`guardians.cbf.backend`)."""
+
+    def __init__(self, K: int, u_max: float, eps: float, name: str | None = None) -> None:
+        self.K = K
+        self.u_max = u_max
+        self.name = name
+        if name is not None:
+            self._qp = QpsolversQP(np.array([[2.0]]), name, eps, lb=[-u_max], ub=[u_max], polish=False)
+            return
+        A = sp.csc_matrix(np.ones((K + 1, 1)))  # K wall rows, then the turn-rate box
+        self._Ax = np.ones(K + 1)
+        self._l = np.r_[np.full(K, -np.inf), -u_max]
+        self._u = np.r_[np.zeros(K), u_max]
+        self._solver = osqp.OSQP()
+        # no polishing: a one-variable problem reaches eps without it, and OSQP writes a line to
+        # stderr for every solution with no active row when polishing is on
+        self._solver.setup(sp.csc_matrix([[2.0]]), np.zeros(1), A, self._l, self._u, verbose=False, eps_abs=eps,
+                           eps_rel=eps, polishing=False, warm_starting=True, max_iter=4000)
+
+    def solve(self, G, h) -> np.ndarray | None:
+        """The solution ``u*`` (shape ``(1,)``); ``None`` if infeasible or the solver failed."""
+        if self.name is not None:
+            return self._qp.solve(G, h)
+        self._Ax[: self.K] = G[:, 0]
+        self._u[: self.K] = h
+        self._solver.update(Ax=self._Ax, u=self._u)
+        res = self._solver.solve(raise_error=False)
+        if res.info.status_val not in (1, 2) or res.x is None or not np.all(np.isfinite(res.x)):
+            return None
+        return np.asarray(res.x)
+
+
+class MazeCBFGuardian(Guardian):
+    """HOCBF safety filter for the maze car; see the module docstring."""
+
+    name = "cbf"
+    observation_type = "global"
+    privileged = True
+
+    def __init__(self, barrier: str = "turning", p1: float | None = None, p2: float = 0.1, margin: float = 2.0, n_walls: int = 8,
+                 active_atol: float = 1e-3, predict_latency: bool = True, lap_guess: float = 0.1,
+                 eps: float = 1e-6, solver: str = "osqp") -> None:
+        super().__init__()
+        if barrier not in BARRIERS:
+            raise ValueError(f"barrier must be one of {BARRIERS}, got {barrier!r}")
+        self.barrier = barrier
+        p1 = (1.0 if barrier == "turning" else 0.1) if p1 is None else p1
+        self.p1 = finite("p1 (class-K gain)", p1, 0.0, lo_open=True)
+        self.p2 = finite("p2 (class-K gain)", p2, 0.0, lo_open=True)
+        self.margin = finite("margin", margin, 0.0)
+        self.n_walls = integer("n_walls", n_walls, 1)
+        self.active_atol = finite("active_atol", active_atol, 0.0)
+        self.predict_latency = bool(predict_latency)
+        self.lap_guess = finite("lap_guess", lap_guess, 0.0, lo_open=True)
+        self.eps = finite("eps", eps, 0.0, lo_open=True)
+        self._solver_name = parse_solver(solver)
+        self.solver = solver
+        self._counts = self._zero()
+
+    @staticmethod
+    def _zero() -> dict:
+        return {"qp_fallbacks": 0, "nan_states": 0, "qp_solves": 0}
+
+    def check_spaces(self, observation_space, action_space) -> None:
+        space = self.require_action_space(space=action_space)
+        if not is_maze_space(space):
+            raise ValueError(f"guardian {self.name!r} (maze) models the constant-speed maze car (controls "
+                             f"{MAZE_CONTROLS}) among walls; this env's controls are {space.controls}")
+        lo, hi = float(space.control_low[0]), float(space.control_high[0])
+        if not (hi > 0 and lo == -hi):
+            raise ValueError(f"guardian {self.name!r} (maze) needs a turn-rate bound symmetric about 0, got [{lo}, {hi}]")
+
+    def reset(self, **kwargs) -> None:
+        super().reset(**kwargs)
+        self.check_spaces(self.observation_space, self.action_space)
+        space = self.action_space
+        priv = self._privileged()
+        if "speed" not in priv:
+            raise ValueError(f"guardian {self.name!r} (maze) needs the car's speed in the env's privileged data "
+                             f"(keys: {sorted(priv)})")
+        self.speed = finite("privileged speed", priv["speed"], 0.0, lo_open=True)
+        maze = priv["maze"]
+        self.walls = np.asarray(maze.walls, float)
+        if self.walls.shape[0] == 0:
+            raise ValueError(f"guardian {self.name!r} (maze) needs a maze with walls, got none")
+        self.half = float(maze.half)
+        self.u_max = float(space.control_high[0])
+        self.K = min(self.n_walls, self.walls.shape[0])
+        self._qp = WallQP(self.K, self.u_max, self.eps, self._solver_name)
+        self._safe = space.safe_default.policy(space, self.rng) if space.safe_default is not None else None
+        self._counts = self._zero()
+        self._pending = 0.0  # the turn rate acting during the coming lap (the driver's: unknown, 0)
+        self._last_time = float(priv.get("sim_time", 0.0))
+        self._lap = self.lap_guess
+
+    # ------------------------------------------------------------------ the maths
+    def rows(self, state):
+        """``(b, G, h)`` of the ``n_walls`` walls nearest ``state`` (smallest ``b`` first)."""
+        b, G, h = wall_rows(state, self.speed, self.walls, self.half, self.margin, self.p1, self.p2, self.barrier,
+                            self.u_max)
+        idx = np.argpartition(b, self.K - 1)[: self.K] if self.K < b.shape[0] else np.arange(b.shape[0])
+        idx = idx[np.argsort(b[idx], kind="stable")]
+        return b[idx], G[idx], h[idx]
+
+    def solve(self, state):
+        """The QP's ``u*`` at ``state`` (``None`` if it failed) and its rows ``(G, h)``."""
+        _, G, h = self.rows(state)
+        self._counts["qp_solves"] += 1
+        return self._qp.solve(G, h), G, h
+
+    def predict(self, state, u: float, lap: float) -> np.ndarray:
+        """The exact pose after ``lap`` seconds of turn rate ``u`` (heading wrapped)."""
+        x, y, psi = (float(v) for v in state[:3])
+        s = self.speed
+        if abs(u) < 1e-12:
+            x, y = x + s * lap * math.cos(psi), y + s * lap * math.sin(psi)
+        else:
+            p2 = psi + u * lap
+            x, y = x + s / u * (math.sin(p2) - math.sin(psi)), y - s / u * (math.cos(p2) - math.cos(psi))
+            psi = p2
+        return np.array([x, y, (psi + math.pi) % (2 * math.pi) - math.pi])
+
+    # ------------------------------------------------------------------ the decision
+    def _emit(self, u: float):
+        u = min(max(float(u), -self.u_max), self.u_max)
+        self._pending = u
+        return self.action_space.active(np.array([u]))
+
+    def act(self, observation, info=None):
+        priv = self._privileged()
+        state = np.asarray(priv["state"], float)
+        if not np.all(np.isfinite(state)):
+            self._counts["nan_states"] += 1
+            u = self._safe(observation)[0] if self._safe is not None else self.u_max
+            return self._emit(u)
+        if self.predict_latency:
+            t = float(priv.get("sim_time", self._last_time))
+            if t > self._last_time:
+                self._lap = t - self._last_time
+            self._last_time = t
+            state = self.predict(state, self._pending, self._lap)
+        return self.decide(state)
+
+    def decide(self, state):
+        """The decision for the pose the action will act from (already predicted)."""
+        z, G, h = self.solve(state)
+        if z is None:
+            self._counts["qp_fallbacks"] += 1
+            slack = h + np.abs(G[:, 0]) * self.u_max  # each row's best slack over the box
+            g = G[int(np.argmin(slack)), 0]
+            return self._emit(-self.u_max if g > 0 else self.u_max)
+        if np.any(np.abs(h - G[:, 0] * z[0]) <= self.active_atol):
+            return self._emit(z[0])
+        self._pending = 0.0
+        return self.action_space.inactive()
+
+    def stats(self) -> dict:
+        return dict(self._counts)

@@ -1,0 +1,91 @@
+"""The CBF guardians' solver choice: direct OSQP (default) against qpsolvers' solvers."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from guardians.cbf import CBFGuardian
+from guardians.cbf.backend import installed_solvers, parse_solver
+from guardians.cbf.maze import MazeCBFGuardian
+from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
+from rmm_envs.envs.dubins4d import CONTROLS
+from rmm_envs.systems.dubins4d import Dubins4D
+
+pytest.importorskip("qpsolvers")
+OTHERS = [f"qpsolvers:{n}" for n in ("osqp", "clarabel", "daqp") if n in installed_solvers()]
+SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS)
+OBSTACLES = np.array([[3.0, 0.0, 2.0], [-4.0, 5.0, 3.0], [0.0, -6.0, 2.5]])
+GOAL = np.array([8.0, 8.0, 1.0])
+
+
+def dubins4d(solver):
+    g = CBFGuardian(solver=solver)
+    priv = {"state": np.zeros(4), "obstacles": OBSTACLES, "goal": GOAL, "sim_time": 0.0}
+    g.reset(seed=0, action_space=SPACE, privileged=lambda: priv)
+    return g
+
+
+def test_bad_solver_names_list_the_installed_ones():
+    listed = "installed: " + str(["osqp"] + [f"qpsolvers:{n}" for n in installed_solvers()]).replace("[", r"\[").replace("]", r"\]")
+    for bad, why in (("gurobi", "must be 'osqp'"), ("qpsolvers:nope", "no installed solver 'nope'"), (3, "must be 'osqp'")):
+        with pytest.raises(ValueError, match=why + ".*" + listed):
+            CBFGuardian(solver=bad)
+        with pytest.raises(ValueError, match=why):
+            MazeCBFGuardian(solver=bad)
+    assert parse_solver("osqp") is None and parse_solver("qpsolvers:clarabel") == "clarabel"
+
+
+@pytest.mark.parametrize("solver", OTHERS)
+@settings(max_examples=40, deadline=None)
+@given(x=st.floats(-9.0, 9.0), y=st.floats(-9.0, 9.0), th=st.floats(-math.pi, math.pi), v=st.floats(0.0, 2.0))
+def test_dubins4d_decisions_agree_with_direct_osqp(solver, x, y, th, v):
+    ref, other = dubins4d("osqp"), dubins4d(solver)
+    state = np.array([x, y, th, v])
+    z0, G, h = ref.solve(state)
+    z1, _, _ = other.solve(state)
+    assert (z0 is None) == (z1 is None)
+    if z0 is None:
+        return
+    # solver tolerance: an interior-point solver (clarabel) stops up to ~3e-4 short of a bound here
+    assert np.allclose(z0[:2], z1[:2], atol=1e-3)
+    gap = np.abs(h[: ref.K] - G[: ref.K] @ z0)
+    if np.all(np.abs(gap - ref.active_atol) > 5e-4):  # not on the fence of the activity test
+        a0, a1 = ref._decide(state), other._decide(state)
+        assert a0["active_ctrl"] == a1["active_ctrl"]
+        for k in ("turnrate_ctrl", "accel_ctrl"):
+            assert np.allclose(a0[k], a1[k], atol=1e-3)
+
+
+@pytest.mark.parametrize("solver", OTHERS)
+@settings(max_examples=40, deadline=None)
+@given(f=st.floats(0.0, 1.0), g=st.floats(0.0, 1.0), psi=st.floats(-math.pi, math.pi))
+def test_maze_decisions_agree_with_direct_osqp(solver, f, g, psi):
+    env = Dubins3DMazeGuardedEnv()
+    env.reset(seed=3)
+    priv = env.privileged()
+    maze = priv["maze"]
+    pose = np.array([125.0 + 1250.0 * f, 125.0 + 1250.0 * g, psi])
+    if maze.point_clearance(pose[None, :2])[0] <= 3.0:
+        return
+    out = []
+    for s in ("osqp", solver):
+        guard = MazeCBFGuardian(solver=s)
+        guard.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space,
+                    privileged=lambda: priv)
+        z, G, h = guard.solve(pose)
+        out.append((z, G, h, guard.decide(pose)))
+    (z0, G, h, a0), (z1, _, _, a1) = out
+    assert (z0 is None) == (z1 is None)
+    if z0 is None:
+        assert a0 == a1 or (a0["active_ctrl"] == a1["active_ctrl"] == 1)
+        return
+    assert abs(z0[0] - z1[0]) <= 1e-4
+    gap = np.abs(h - G[:, 0] * z0[0])
+    if np.all(np.abs(gap - 1e-3) > 5e-4):
+        assert a0["active_ctrl"] == a1["active_ctrl"]
+        if a0["active_ctrl"]:
+            assert abs(float(a0["turnrate_ctrl"][0]) - float(a1["turnrate_ctrl"][0])) <= 1e-4
