@@ -363,8 +363,14 @@ from guardians.hj.guardian import HJPaperGuardian  # noqa: E402
 
 @pytest.fixture(scope="module")
 def circle_guardians(tmp_path_factory):
-    """``hj`` and ``hj-paper`` on the default grid around one circle of radius 3 at the origin."""
-    cache = tmp_path_factory.mktemp("hj_circle")
+    """``hj`` and ``hj-paper`` on the default grid around one circle of radius 3 at the origin.
+
+    Their values are solved into a fresh cache, or into ``$RMM_TEST_HJ_CACHE`` when set: a
+    cache kept between test sessions, so that the mutation runs (``make mutate``), which run
+    these tests once per mutant, solve the two default-grid values once and not every time."""
+    import os
+
+    cache = os.environ.get("RMM_TEST_HJ_CACHE") or tmp_path_factory.mktemp("hj_circle")
     box = {"obstacles": np.array([[0.0, 0.0, 3.0]]), "goal": np.array([12.0, 12.0, 0.5]), "state": np.zeros(4), "sim_time": 0.0}
     guards = {}
     for cls in (HJGuardian, HJPaperGuardian):
