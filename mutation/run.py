@@ -5,8 +5,8 @@ makes a scratch copy of the repository under ``build/mutate/<target>/``, writes 
 configuration there (the target's files to mutate and the tests that judge them), runs
 ``mutmut run`` and reads back the verdict of every mutant.  Then it prints, and writes to
 ``build/mutate/report.md``, the score of each target and overall, and every surviving mutant
-with its diff and, where ``mutation/equivalent.toml`` classifies it, the reason it is
-equivalent.
+with its diff and its one-line classification from ``mutation/survivors.toml`` (equivalent,
+or the test that would kill it).
 
 Score: killed (a test failed, or the mutant ran past mutmut's timeout, which is how an
 infinite loop shows) over all mutants that are not classified equivalent.  A mutant that no
@@ -27,6 +27,7 @@ import argparse
 import fnmatch
 import json
 import os
+import random
 import shutil
 import subprocess
 import sys
@@ -59,12 +60,15 @@ def load_targets(path: Path = ROOT / "mutation" / "targets.toml") -> dict:
     return targets
 
 
-def load_equivalent(path: Path = ROOT / "mutation" / "equivalent.toml") -> dict[str, str]:
-    """Mutant name -> one-line reason it is equivalent (it cannot change behaviour)."""
+SURVIVORS = ROOT / "mutation" / "survivors.toml"
+
+
+def load_survivors(path: Path = SURVIVORS) -> tuple[dict[str, str], dict[str, str]]:
+    """``(equivalent, to_test)``: mutant name -> one-line reason, from ``mutation/survivors.toml``."""
     if not path.exists():
-        return {}
+        return {}, {}
     data = tomllib.loads(path.read_text())
-    return {k: v for k, v in data.get("equivalent", {}).items()}
+    return dict(data.get("equivalent", {})), dict(data.get("to_test", {}))
 
 
 def prepare(work: Path, target: dict, keep: bool) -> None:
@@ -87,6 +91,19 @@ def prepare(work: Path, target: dict, keep: bool) -> None:
         "use_git_change_detection = false\n"
     )
     (work / "pyproject.toml").write_text(text)
+
+
+def mutant_names(work: Path, target: dict, python: str) -> list[str]:
+    """The names of the target's mutants (those of its files that ``only`` admits), as mutmut names them."""
+    code = ("import json, sys\nfrom mutmut.mutation.file_mutation import mutate_file_contents\nout = []\n"
+            "for f in sys.argv[1:]:\n    mod = f[:-3].replace('/', '.')\n"
+            "    out += [mod + '.' + n for n in mutate_file_contents(f, open(f).read()).mutant_names]\n"
+            "print(json.dumps(out))")
+    r = subprocess.run([python, "-c", code, *target["mutate"]], cwd=work, capture_output=True, text=True, env=_env(),
+                       check=True)
+    names = json.loads(r.stdout.strip().splitlines()[-1])
+    only = target.get("only")  # mutants of the other functions of these files are not part of the target
+    return sorted(n for n in names if not only or any(fnmatch.fnmatchcase(n, pat) for pat in only))
 
 
 def verdicts(work: Path) -> dict[str, str]:
@@ -116,13 +133,14 @@ def run_target(name: str, target: dict, args, equivalent: dict) -> dict:
     t0 = time.monotonic()
     log = work / "mutmut.log"
     env = _env() | {k: v.replace("{work}", str(work.resolve())) for k, v in target.get("env", {}).items()}
+    names = mutant_names(work, target, args.python)
+    chosen = names if not args.sample or args.sample >= len(names) else sorted(random.Random(0).sample(names, args.sample))
     with open(log, "w") as f:
         r = subprocess.run(["nice", "-n", str(args.nice), args.python, "-m", "mutmut", "run", "--max-children",
-                            str(args.jobs), *target.get("only", [])], cwd=work, stdout=f, stderr=subprocess.STDOUT, env=env)
+                            str(args.jobs), *chosen], cwd=work, stdout=f, stderr=subprocess.STDOUT, env=env)
     seconds = time.monotonic() - t0
     v = verdicts(work)
-    if target.get("only"):  # mutants of the other functions of these files are not part of the target
-        v = {m: s for m, s in v.items() if any(fnmatch.fnmatchcase(m, pat) for pat in target["only"])}
+    v = {m: v.get(m, "not checked") for m in chosen}
     if r.returncode != 0 or not v:
         print(f"[{name}] mutmut failed (exit {r.returncode}); see {log}", file=sys.stderr)
     equiv = {m for m in v if m in equivalent}
@@ -132,7 +150,7 @@ def run_target(name: str, target: dict, args, equivalent: dict) -> dict:
     equiv_survived = sorted(m for m in equiv if v[m] not in ("killed", "timeout"))
     killed_equiv = sorted(m for m in equiv if v[m] in ("killed", "timeout"))  # stale classification
     res = {"target": name, "files": target["mutate"], "tests": target["tests"], "seconds": round(seconds),
-           "mutants": len(v), "killed": len([m for m in detected if m not in equiv]), "equivalent": len(equiv),
+           "mutants": len(v), "of": len(names), "killed": len([m for m in detected if m not in equiv]), "equivalent": len(equiv),
            "survived": survivors, "equivalent_mutants": equiv_survived, "equivalent_but_killed": killed_equiv,
            "status": {m: v[m] for m in survivors}, "exit": r.returncode}
     res["score"] = res["killed"] / len(counted) if counted else float("nan")
@@ -155,13 +173,14 @@ def _reclassify(r: dict, equivalent: dict) -> None:
     r["score"] = r["killed"] / counted if counted else float("nan")
 
 
-def report(results: list[dict], equivalent: dict) -> str:
+def report(results: list[dict], equivalent: dict, to_test: dict) -> str:
     killed = sum(r["killed"] for r in results)
     counted = sum(r["mutants"] - r["equivalent"] for r in results)
     lines = ["| target | files | mutants | equivalent | killed | surviving | score | time (s) |",
              "|---|---|---:|---:|---:|---:|---:|---:|"]
     for r in results:
-        lines.append(f"| {r['target']} | {', '.join(r['files'])} | {r['mutants']} | {r['equivalent']} | {r['killed']} | "
+        sampled = f" of {r['of']}" if r.get("of", r["mutants"]) != r["mutants"] else ""
+        lines.append(f"| {r['target']} | {', '.join(r['files'])} | {r['mutants']}{sampled} | {r['equivalent']} | {r['killed']} | "
                      f"{len(r['survived'])} | {100 * r['score']:.1f}% | {r['seconds']} |")
     lines.append(f"| **all** | | {sum(r['mutants'] for r in results)} | {sum(r['equivalent'] for r in results)} | "
                  f"{killed} | {counted - killed} | **{100 * killed / max(counted, 1):.1f}%** | "
@@ -170,11 +189,12 @@ def report(results: list[dict], equivalent: dict) -> str:
         if r["survived"] or r["equivalent_mutants"] or r["equivalent_but_killed"]:
             lines.append(f"\n### {r['target']}\n")
         for m in r["survived"]:
-            lines.append(f"- `{m}` ({r['status'][m]}):\n\n```diff\n{r['diffs'][m]}\n```")
+            why = f"to test: {to_test[m]}" if m in to_test else "UNCLASSIFIED (add it to mutation/survivors.toml)"
+            lines.append(f"- `{m}` ({r['status'][m]}) {why}\n\n```diff\n{r['diffs'][m]}\n```")
         for m in r["equivalent_mutants"]:
             lines.append(f"- `{m}` equivalent: {equivalent[m]}\n\n```diff\n{r['diffs'][m]}\n```")
         for m in r["equivalent_but_killed"]:
-            lines.append(f"- `{m}` is listed as equivalent but a test kills it: remove it from mutation/equivalent.toml")
+            lines.append(f"- `{m}` is listed as equivalent but a test kills it: remove it from mutation/survivors.toml")
     return "\n".join(lines) + "\n"
 
 
@@ -184,6 +204,8 @@ def main(argv=None) -> int:
     p.add_argument("--jobs", type=int, default=2, help="mutants tested at once (default 2)")
     p.add_argument("--nice", type=int, default=19, help="niceness of the runs (default 19: a shared machine)")
     p.add_argument("--out", default=str(ROOT / "build" / "mutate"), help="scratch folder (default build/mutate)")
+    p.add_argument("--sample", type=int, default=0,
+                   help="test only this many of each target's mutants, drawn at random with a fixed seed (default 0: all)")
     p.add_argument("--keep", action="store_true", help="reuse the previous scratch copy and mutmut's cached verdicts")
     p.add_argument("--python", default=sys.executable, help="python with mutmut and the test extra (default: this one)")
     p.add_argument("--report-only", action="store_true",
@@ -193,7 +215,7 @@ def main(argv=None) -> int:
     unknown = [t for t in args.targets if t not in targets]
     if unknown:
         p.error(f"unknown targets {unknown}; known: {sorted(targets)}")
-    equivalent = load_equivalent()
+    equivalent, to_test = load_survivors()
     names = args.targets or list(targets)
     if args.report_only:
         results = [json.loads((Path(args.out) / n / "result.json").read_text()) for n in names
@@ -202,7 +224,7 @@ def main(argv=None) -> int:
             _reclassify(r, equivalent)
     else:
         results = [run_target(n, targets[n], args, equivalent) for n in names]
-    text = report(results, equivalent)
+    text = report(results, equivalent, to_test)
     Path(args.out).mkdir(parents=True, exist_ok=True)
     (Path(args.out) / "report.md").write_text(text)
     (Path(args.out) / "report.json").write_text(json.dumps(results, indent=1))

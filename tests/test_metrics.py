@@ -47,8 +47,10 @@ def test_every_statistic_by_hand():
 
 def test_empty_inputs_give_nan_not_zero():
     a = aggregate([])
-    assert a["episodes"] == 0 and a["qp_fallbacks"] == 0
-    assert all(math.isnan(x) for x in (*a["goal"], *a["compute_ms"], a["error_rate"], a["total_goal"]))
+    assert a.keys() == aggregate(RUN).keys()  # the same statistics as any run
+    assert (a["episodes"], a["errors"], a["qp_fallbacks"], a["nan_states"]) == (0, 0, 0, 0)
+    rest = [v for k, v in a.items() if k not in ("episodes", "errors", "qp_fallbacks", "nan_states")]
+    assert all(math.isnan(x) for v in rest for x in (v if isinstance(v, tuple) else (v,)))
     assert all(map(math.isnan, weighted_mean_std([], [])))
     assert all(map(math.isnan, weighted_mean_std([1.0, 2.0], [0, 0])))
     assert all(map(math.isnan, batch_rate([])))
@@ -73,3 +75,14 @@ def test_table_i_rows_per_agent_in_order_of_appearance():
     assert (z["goal"], z["goal_std"], z["errors"], z["qp_fallbacks"]) == (50.0, 50.0, 1, 10)
     assert z["compute_ms"] == pytest.approx(7 / 3) and z["compute_ms_std"] == pytest.approx(math.sqrt(14 / 9))
     assert (t.loc["a", "goal"], t.loc["a", "episodes"], t.loc["a", "intervention"]) == (100.0, 1, 25.0)
+
+
+def test_table_i_batches_64_episodes_by_default():
+    # 64 goals then one collision: batches of 64 and 1 (one batch of 65 would have no spread)
+    df = pd.DataFrame.from_records([dict(RUN[1], episode=i, agent="x", outcome="goal" if i < 64 else "collision")
+                                    for i in range(65)])
+    m = 64 / 65
+    row = table_i(df).loc["x"]
+    assert row["goal"] == pytest.approx(100 * m)
+    assert row["goal_std"] == pytest.approx(100 * math.sqrt((64 * (1 - m) ** 2 + m ** 2) / 65))
+    assert aggregate(df.to_dict("records"))["goal"] == pytest.approx((row["goal"], row["goal_std"]))
