@@ -89,6 +89,10 @@ def prepare(work: Path, target: dict, keep: bool) -> None:
         f"pytest_add_cli_args_test_selection = {json.dumps(target['tests'])}\n"
         'pytest_add_cli_args = ["-p", "no:cacheprovider", "-p", "no:xdist"]\n'
         "use_git_change_detection = false\n"
+        # a mutant's tests may take far longer than they took unmutated on a loaded shared machine
+        # (or when the mutant sends a solver the long way): a generous limit, so that only a real
+        # hang is a timeout, and a timeout is never the load
+        "timeout_multiplier = 20.0\ntimeout_constant = 60.0\n"
     )
     (work / "pyproject.toml").write_text(text)
 
@@ -129,18 +133,36 @@ def _env() -> dict:
 
 def run_target(name: str, target: dict, args, equivalent: dict) -> dict:
     work = Path(args.out) / name
-    prepare(work, target, args.keep)
+    prev = None
+    if args.rerun_survivors:
+        prev = json.loads((work / "result.json").read_text())
+    prepare(work, target, args.keep or prev is not None)
     t0 = time.monotonic()
     log = work / "mutmut.log"
     env = _env() | {k: v.replace("{work}", str(work.resolve())) for k, v in target.get("env", {}).items()}
     names = mutant_names(work, target, args.python)
-    chosen = names if not args.sample or args.sample >= len(names) else sorted(random.Random(0).sample(names, args.sample))
+    if prev is not None:
+        # only the survivors again, judged by the tests as they are now: mutmut must re-learn which
+        # test calls which function (new tests), so its stats go; the killed stay killed
+        chosen = sorted(set(prev["survived"]) | set(prev["equivalent_mutants"]))
+        (work / "mutants" / "mutmut-stats.json").unlink(missing_ok=True)
+    else:
+        chosen = names if not args.sample or args.sample >= len(names) else sorted(random.Random(0).sample(names, args.sample))
     with open(log, "w") as f:
         r = subprocess.run(["nice", "-n", str(args.nice), args.python, "-m", "mutmut", "run", "--max-children",
                             str(args.jobs), *chosen], cwd=work, stdout=f, stderr=subprocess.STDOUT, env=env)
     seconds = time.monotonic() - t0
     v = verdicts(work)
-    v = {m: v.get(m, "not checked") for m in chosen}
+    if prev is not None:
+        if "killed_mutants" in prev:
+            tested = set(prev["status"]) | set(prev["equivalent_mutants"]) | set(prev["killed_mutants"])
+        else:  # the same fixed-seed sample as the previous run drew
+            k = prev["mutants"]
+            tested = set(names if k >= len(names) else random.Random(0).sample(names, k))
+        v = {m: ("killed" if m not in chosen else v.get(m, "not checked")) for m in tested}
+        chosen = sorted(tested)
+    else:
+        v = {m: v.get(m, "not checked") for m in chosen}
     if r.returncode != 0 or not v:
         print(f"[{name}] mutmut failed (exit {r.returncode}); see {log}", file=sys.stderr)
     equiv = {m for m in v if m in equivalent}
@@ -150,7 +172,8 @@ def run_target(name: str, target: dict, args, equivalent: dict) -> dict:
     equiv_survived = sorted(m for m in equiv if v[m] not in ("killed", "timeout"))
     killed_equiv = sorted(m for m in equiv if v[m] in ("killed", "timeout"))  # stale classification
     res = {"target": name, "files": target["mutate"], "tests": target["tests"], "seconds": round(seconds),
-           "mutants": len(v), "of": len(names), "killed": len([m for m in detected if m not in equiv]), "equivalent": len(equiv),
+           "mutants": len(v), "of": len(names), "killed_mutants": sorted(m for m in detected),
+           "rerun": prev is not None, "killed": len([m for m in detected if m not in equiv]), "equivalent": len(equiv),
            "survived": survivors, "equivalent_mutants": equiv_survived, "equivalent_but_killed": killed_equiv,
            "status": {m: v[m] for m in survivors}, "exit": r.returncode}
     res["score"] = res["killed"] / len(counted) if counted else float("nan")
@@ -206,6 +229,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=str(ROOT / "build" / "mutate"), help="scratch folder (default build/mutate)")
     p.add_argument("--sample", type=int, default=0,
                    help="test only this many of each target's mutants, drawn at random with a fixed seed (default 0: all)")
+    p.add_argument("--rerun-survivors", action="store_true",
+                   help="re-test only the previous run's survivors with the current tests (after adding tests)")
     p.add_argument("--keep", action="store_true", help="reuse the previous scratch copy and mutmut's cached verdicts")
     p.add_argument("--python", default=sys.executable, help="python with mutmut and the test extra (default: this one)")
     p.add_argument("--report-only", action="store_true",

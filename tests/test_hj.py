@@ -553,6 +553,10 @@ def test_a_stopped_car_within_the_margin_is_turned_away_not_held(tmp_path):
     plain = hj(box, tmp_path, standstill_lookup=False)
     a = plain.act(None, {})
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and "standstill_lookups" not in plain.stats()
+    paper = HJPaperGuardian(grid=small_grid(), horizon=2.0, cache_dir=tmp_path, margin=10.0)  # the paper's rule: no lookup
+    paper.reset(seed=0, privileged=lambda: box, action_space=SPACE)
+    a = paper.act(None, {})
+    assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and "standstill_lookups" not in paper.stats()
 
 
 # ---------------------------------------------------------------- one source per fact, configuration
