@@ -118,6 +118,23 @@ def verdicts(work: Path) -> dict[str, str]:
     return out
 
 
+def rejudge(work: Path, name: str, python: str, env: dict) -> str:
+    """The verdict of one mutant from its tests run directly, without mutmut's forked worker.
+
+    Used for the mutants whose worker ended on a signal (mutmut's "suspicious"): the HJ solver's
+    compiled threads do not always survive the fork, which is the harness's failure, not a
+    verdict.  The tests are the ones mutmut recorded as calling the mutant's function."""
+    r = subprocess.run([python, "-m", "mutmut", "tests-for-mutant", name], cwd=work, capture_output=True, text=True,
+                       env=env)
+    tests = [ln.strip() for ln in r.stdout.splitlines() if ln.strip().startswith("tests/")]
+    if not tests:
+        return "no tests"
+    r = subprocess.run(["nice", "-n", "19", python, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", "-p", "no:xdist",
+                        *tests], cwd=work / "mutants", capture_output=True, text=True,
+                       env=env | {"MUTANT_UNDER_TEST": name, "PYTHONPATH": "."})
+    return {0: "survived", 1: "killed"}.get(r.returncode, f"suspicious (pytest exit {r.returncode})")
+
+
 def mutant_diff(work: Path, name: str, python: str) -> str:
     r = subprocess.run([python, "-m", "mutmut", "show", name], cwd=work, capture_output=True, text=True, env=_env())
     lines = [ln for ln in r.stdout.splitlines() if ln.startswith(("+", "-")) and not ln.startswith(("+++", "---"))]
@@ -151,8 +168,11 @@ def run_target(name: str, target: dict, args, equivalent: dict) -> dict:
     with open(log, "w") as f:
         r = subprocess.run(["nice", "-n", str(args.nice), args.python, "-m", "mutmut", "run", "--max-children",
                             str(args.jobs), *chosen], cwd=work, stdout=f, stderr=subprocess.STDOUT, env=env)
-    seconds = time.monotonic() - t0
     v = verdicts(work)
+    for m in chosen:
+        if v.get(m, "").startswith("suspicious"):
+            v[m] = rejudge(work, m, args.python, env)
+    seconds = time.monotonic() - t0
     if prev is not None:
         if "killed_mutants" in prev:
             tested = set(prev["status"]) | set(prev["equivalent_mutants"]) | set(prev["killed_mutants"])
