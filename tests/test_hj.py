@@ -633,3 +633,14 @@ def test_threads_are_an_argument_with_a_documented_default(tmp_path, monkeypatch
     assert seen == [2]
     with pytest.raises(ValueError, match="threads"):
         solve_brt(small_grid(), Dubins4DHJ(), np.zeros(small_grid().shape, np.float32), 1.0, threads=0)
+
+
+def test_obstacle_target_is_the_signed_distance_to_the_union_on_a_non_square_grid():
+    grid = Grid([-2.0, -3.0, -np.pi, 0.0], [2.0, 3.0, np.pi, 1.0], [5, 7, 4, 3], periodic=[2])
+    target = obstacle_target(grid, np.array([[0.0, 0.0, 1.0], [2.0, 3.0, 0.5]]))
+    x, y = grid.axes[0][:, None], grid.axes[1][None, :]
+    expected = np.minimum(np.hypot(x, y) - 1.0, np.hypot(x - 2.0, y - 3.0) - 0.5)
+    assert target.shape == (5, 7, 4, 3) and target.dtype == np.float32
+    for k in range(4):
+        for m in range(3):
+            np.testing.assert_allclose(target[:, :, k, m], expected, rtol=1e-6, atol=1e-6)
