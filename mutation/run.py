@@ -211,6 +211,9 @@ def _reclassify(r: dict, equivalent: dict) -> None:
     r["survived"] = sorted(m for m in undetected if m not in equivalent)
     r["equivalent_mutants"] = sorted(m for m in undetected if m in equivalent)
     r["status"] = {m: status[m] for m in r["survived"]}
+    unlisted = [m for m in r["equivalent_but_killed"] if m not in equivalent]  # killed, no longer listed
+    r["killed"] += len(unlisted)
+    r["equivalent_but_killed"] = [m for m in r["equivalent_but_killed"] if m in equivalent]
     r["equivalent"] = len(r["equivalent_mutants"]) + len(r["equivalent_but_killed"])
     counted = r["mutants"] - r["equivalent"]
     r["score"] = r["killed"] / counted if counted else float("nan")

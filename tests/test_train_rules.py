@@ -1,5 +1,7 @@
 """Training's split, scaler and early stopping, pinned where test_lrmm.py leaves room."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -47,3 +49,10 @@ def test_float32_training_runs_in_float32(small_dataset):
     m = train(ds, TrainConfig(hidden=(4,), epochs=1, dtype="float32", seed=0), log=quiet)
     assert next(m.torch_net.parameters()).dtype.is_floating_point and str(next(m.torch_net.parameters()).dtype) == "torch.float32"
     assert np.isfinite(m.meta["metrics"]["val"]["mae"])
+
+
+def test_non_finite_labels_are_refused_naming_them(small_dataset):
+    ds, _ = small_dataset
+    bad = dataclasses.replace(ds, risk=np.where(np.arange(len(ds)) == 3, np.nan, ds.risk))
+    with pytest.raises(ValueError, match="the dataset holds non-finite observations or labels"):
+        train(bad, TrainConfig(epochs=1), log=quiet)
