@@ -5,7 +5,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test bench install clean
+.PHONY: run test bench install clean mutate
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,6 +21,18 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2
+
+# Mutation score of the decision-making modules (docs/mutation.md): targets and the tests that judge
+# each are in mutation/targets.toml; `make mutate TARGETS="cbf hj"` runs only those.
+MUTATE_STAMP := $(VENV)/.installed-mutate
+TARGETS ?=
+
+$(MUTATE_STAMP): $(STAMP)
+	$(BIN)/python -m pip install -q -e ".[test,mutate]"
+	touch $(MUTATE_STAMP)
+
+mutate: $(MUTATE_STAMP)
+	$(BIN)/python mutation/run.py $(TARGETS)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/perf_env.py

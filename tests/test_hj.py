@@ -363,8 +363,14 @@ from guardians.hj.guardian import HJPaperGuardian  # noqa: E402
 
 @pytest.fixture(scope="module")
 def circle_guardians(tmp_path_factory):
-    """``hj`` and ``hj-paper`` on the default grid around one circle of radius 3 at the origin."""
-    cache = tmp_path_factory.mktemp("hj_circle")
+    """``hj`` and ``hj-paper`` on the default grid around one circle of radius 3 at the origin.
+
+    Their values are solved into a fresh cache, or into ``$RMM_TEST_HJ_CACHE`` when set: a
+    cache kept between test sessions, so that the mutation runs (``make mutate``), which run
+    these tests once per mutant, solve the two default-grid values once and not every time."""
+    import os
+
+    cache = os.environ.get("RMM_TEST_HJ_CACHE") or tmp_path_factory.mktemp("hj_circle")
     box = {"obstacles": np.array([[0.0, 0.0, 3.0]]), "goal": np.array([12.0, 12.0, 0.5]), "state": np.zeros(4), "sim_time": 0.0}
     guards = {}
     for cls in (HJGuardian, HJPaperGuardian):
@@ -547,6 +553,10 @@ def test_a_stopped_car_within_the_margin_is_turned_away_not_held(tmp_path):
     plain = hj(box, tmp_path, standstill_lookup=False)
     a = plain.act(None, {})
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and "standstill_lookups" not in plain.stats()
+    paper = HJPaperGuardian(grid=small_grid(), horizon=2.0, cache_dir=tmp_path, margin=10.0)  # the paper's rule: no lookup
+    paper.reset(seed=0, privileged=lambda: box, action_space=SPACE)
+    a = paper.act(None, {})
+    assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and "standstill_lookups" not in paper.stats()
 
 
 # ---------------------------------------------------------------- one source per fact, configuration
@@ -623,3 +633,14 @@ def test_threads_are_an_argument_with_a_documented_default(tmp_path, monkeypatch
     assert seen == [2]
     with pytest.raises(ValueError, match="threads"):
         solve_brt(small_grid(), Dubins4DHJ(), np.zeros(small_grid().shape, np.float32), 1.0, threads=0)
+
+
+def test_obstacle_target_is_the_signed_distance_to_the_union_on_a_non_square_grid():
+    grid = Grid([-2.0, -3.0, -np.pi, 0.0], [2.0, 3.0, np.pi, 1.0], [5, 7, 4, 3], periodic=[2])
+    target = obstacle_target(grid, np.array([[0.0, 0.0, 1.0], [2.0, 3.0, 0.5]]))
+    x, y = grid.axes[0][:, None], grid.axes[1][None, :]
+    expected = np.minimum(np.hypot(x, y) - 1.0, np.hypot(x - 2.0, y - 3.0) - 0.5)
+    assert target.shape == (5, 7, 4, 3) and target.dtype == np.float32
+    for k in range(4):
+        for m in range(3):
+            np.testing.assert_allclose(target[:, :, k, m], expected, rtol=1e-6, atol=1e-6)

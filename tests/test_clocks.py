@@ -1,0 +1,61 @@
+"""The clocks' documented defaults and refusals, and the non-blocking wrapper's argument checks."""
+
+import gymnasium as gym
+import pytest
+
+import rmm_envs  # noqa: F401
+from rmm_envs.clocks import FixedLatencyClock, ManualClock, WallClock, make_clock
+from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
+from rmm_envs.wrappers import NonBlockingStepping
+
+
+def test_clock_specs_by_name():
+    assert type(make_clock("wall")) is WallClock and type(make_clock(" Wall ")) is WallClock
+    bare = make_clock("fixed")  # no milliseconds: a zero-latency clock
+    assert isinstance(bare, FixedLatencyClock) and bare.elapsed() == 0.0
+    assert make_clock("fixed:2.5").elapsed() == 0.0025
+    with pytest.raises(ValueError, match=r"clock 'fixed:2:3': expected 'fixed:MS'"):
+        make_clock("fixed:2:3")
+    with pytest.raises(TypeError, match="clock must be a Clock or a string, got int"):
+        make_clock(5)
+
+
+def test_a_clock_measures_from_its_creation_until_started():
+    c = ManualClock(t=5.0)
+    assert c.now() == 5.0
+    c.advance(2.0)
+    assert c.elapsed() == 2.0  # never started: from construction
+    c.start()
+    assert c.elapsed() == 0.0
+    assert ManualClock().now() == 0.0  # the documented default reading
+    w = WallClock()
+    assert 0.0 <= w.elapsed() < 60.0
+    assert repr(w) == "WallClock()" and repr(ManualClock()) == "ManualClock()"
+
+
+def test_fixed_latency_bounds():
+    assert FixedLatencyClock().elapsed() == 0.0  # default: no latency
+    assert FixedLatencyClock(0.0).elapsed() == 0.0
+    for bad in (-1e-9, float("inf"), float("nan")):
+        with pytest.raises(ValueError, match="latency must be a finite number of seconds >= 0"):
+            FixedLatencyClock(bad)
+
+
+class NoGuardianSpace(Dubins4DCirclesEnv):
+    def __init__(self):
+        super().__init__()
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,))
+
+
+def test_wrapper_accepts_the_papers_range_and_names_what_it_refuses():
+    env = Dubins4DCirclesEnv()
+    for accel in (1.0, 1.5):  # >= 1 as in the paper
+        w = NonBlockingStepping(env, time_accel=accel, clock="fixed:0")
+        w.reset(options={"state": [0, 0, 0, 1.0], "goal": [9, 9, 0.5], "obstacles": [[-9, -9, 1.0]]})
+        _, _, _, _, info = w.step(w.unwrapped.action_space.inactive())
+        assert info["sim_time"] == pytest.approx(0.1)
+    with pytest.raises(TypeError, match="CartPoleEnv has no simulate.*NonBlockingStepping needs an env that can "
+                                        "advance by an arbitrary duration"):
+        NonBlockingStepping(gym.make("CartPole-v1"))
+    with pytest.raises(TypeError, match=r"NoGuardianSpace\.action_space must be a GuardianActionSpace.*got Box"):
+        NonBlockingStepping(NoGuardianSpace())

@@ -1,0 +1,88 @@
+"""Table I aggregation (benchmarks.bench.metrics): every statistic on a small hand-made run."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from benchmarks.bench.metrics import aggregate, batch_rate, table_i, weighted_mean_std
+
+NAN = float("nan")
+
+
+def E(i, outcome, steps, compute, sim, active, speed, decision, pre, **extra):
+    return {"episode": i, "outcome": outcome, "steps": steps, "compute_time": compute, "sim_time": sim,
+            "active_sim_time": active, "final_speed": speed, "decision_mean": decision, "precompute_time": pre, **extra}
+
+
+# stored out of order; one errored episode; one that never stepped and had no sim time
+RUN = [
+    E(2, "collision", 5, 0.02, 4.0, 4.0, 1.4, 0.003, None, qp_fallbacks=3),
+    E(0, "goal", 10, 0.02, 2.0, 0.5, 1.0, 0.001, 1.5, qp_fallbacks=2, nan_states=1),
+    {"episode": 3, "outcome": "error", "qp_fallbacks": 5, "nan_states": 2},
+    E(4, "collision", 4, 0.004, 1.0, 0.0, 0.6, NAN, 0.5),
+    E(1, "goal", 0, 0.0, 0.0, 0.0, 2.0, 0.002, 0.0),
+]
+
+
+def test_every_statistic_by_hand():
+    a = aggregate(RUN, batch_size=2)
+    assert (a["episodes"], a["errors"], a["error_rate"]) == (5, 1, 0.2)
+    # in episode order 0 1 | 2 4: goals 1 1 | 0 0 (stored order would give 0 1 | 0 1)
+    assert a["goal"] == pytest.approx((50.0, 50.0)) and a["collision"] == pytest.approx((50.0, 50.0))
+    assert a["timeout"] == (0.0, 0.0)
+    assert (a["total_goal"], a["total_collision"], a["total_timeout"]) == (50.0, 50.0, 0.0)
+    # ms per step of the episodes that stepped: 2, 4, 1
+    assert a["compute_ms"] == pytest.approx((7 / 3, math.sqrt(14 / 9)))
+    # decision means 1, 3, 2 ms (the NaN one left out)
+    assert a["decision_ms"] == pytest.approx((2.0, math.sqrt(2 / 3)))
+    # active share of the episodes with sim time: 0.25, 1, 0
+    assert a["intervention"] == pytest.approx((100 * 1.25 / 3, 100 * np.std([0.25, 1.0, 0.0])))
+    assert a["steps"] == pytest.approx((4.75, np.std([10, 0, 5, 4])))
+    assert a["precompute_s"] == pytest.approx((0.5, np.std([1.5, 0.0, 0.0, 0.5])))  # missing -> 0
+    assert (a["qp_fallbacks"], a["nan_states"]) == (10, 3)  # counted over every episode, errored too
+    assert a["collision_speed"] == pytest.approx((1.0, 0.4))
+
+
+def test_empty_inputs_give_nan_not_zero():
+    a = aggregate([])
+    assert a.keys() == aggregate(RUN).keys()  # the same statistics as any run
+    assert (a["episodes"], a["errors"], a["qp_fallbacks"], a["nan_states"]) == (0, 0, 0, 0)
+    rest = [v for k, v in a.items() if k not in ("episodes", "errors", "qp_fallbacks", "nan_states")]
+    assert all(math.isnan(x) for v in rest for x in (v if isinstance(v, tuple) else (v,)))
+    assert all(map(math.isnan, weighted_mean_std([], [])))
+    assert all(map(math.isnan, weighted_mean_std([1.0, 2.0], [0, 0])))
+    assert all(map(math.isnan, batch_rate([])))
+    only_errors = aggregate([{"episode": 0, "outcome": "error"}])
+    assert only_errors["errors"] == 1 and only_errors["error_rate"] == 1.0
+    assert math.isnan(only_errors["total_goal"]) and all(map(math.isnan, only_errors["goal"]))
+
+
+def test_batch_rate_batches_in_order_and_weights_by_size():
+    # batches of 3: [1 1 0] [0 0]: rates 2/3 (3 episodes) and 0 (2)
+    m, s = batch_rate([1, 1, 0, 0, 0], batch_size=3)
+    assert m == pytest.approx(0.4)
+    assert s == pytest.approx(math.sqrt((3 * (2 / 3 - 0.4) ** 2 + 2 * 0.4 ** 2) / 5))
+    assert weighted_mean_std([2.0, 4.0], [1, 3]) == pytest.approx((3.5, math.sqrt(0.75)))
+
+
+def test_table_i_rows_per_agent_in_order_of_appearance():
+    df = pd.DataFrame.from_records([dict(r, agent="z") for r in RUN] + [dict(RUN[1], agent="a")])
+    t = table_i(df, batch_size=2)
+    assert list(t.index) == ["z", "a"] and t.index.name == "agent"
+    z = t.loc["z"]
+    assert (z["goal"], z["goal_std"], z["errors"], z["qp_fallbacks"]) == (50.0, 50.0, 1, 10)
+    assert z["compute_ms"] == pytest.approx(7 / 3) and z["compute_ms_std"] == pytest.approx(math.sqrt(14 / 9))
+    assert (t.loc["a", "goal"], t.loc["a", "episodes"], t.loc["a", "intervention"]) == (100.0, 1, 25.0)
+
+
+def test_table_i_batches_64_episodes_by_default():
+    # 64 goals then one collision: batches of 64 and 1 (one batch of 65 would have no spread)
+    df = pd.DataFrame.from_records([dict(RUN[1], episode=i, agent="x", outcome="goal" if i < 64 else "collision")
+                                    for i in range(65)])
+    m = 64 / 65
+    row = table_i(df).loc["x"]
+    assert row["goal"] == pytest.approx(100 * m)
+    assert row["goal_std"] == pytest.approx(100 * math.sqrt((64 * (1 - m) ** 2 + m ** 2) / 65))
+    assert aggregate(df.to_dict("records"))["goal"] == pytest.approx((row["goal"], row["goal_std"]))
