@@ -17,7 +17,7 @@ import gen  # noqa: E402
     ("label_and_train.py", ["--configs", "6", "--samples", "16", "--branches", "8", "--epochs", "3"]),
     ("third_party_guardian.py", []),
     ("new_system.py", []),
-    ("rl_guardian.py", ["--timesteps", "2048", "--episodes", "4"]),
+    ("rl_guardian.py", ["--timesteps", "2048", "--episodes", "4"]),  # asserts its table's rows and counts
 ])
 def test_example_scripts_run(script, args, tmp_path):
     env = dict(os.environ, MPLBACKEND="Agg")

@@ -107,6 +107,17 @@ def main(argv=None) -> int:
                     "--episodes", str(args.episodes), "--workers", str(args.workers), "--clock", args.clock,
                     "--out", str(out), "--no-progress"])
     print((out / "table_I.md").read_text())
+    assert rc == 0, f"rmm-bench exited with {rc}"
+    # every agent ran every episode (the trained guardian included), without an error
+    from benchmarks import load_results
+
+    df = load_results(out)
+    counts = df.groupby("agent").size().to_dict()
+    assert counts == {a: args.episodes for a in (agent, "lrmm", "cbf", "inactive")}, counts
+    assert set(df.outcome) <= {"goal", "collision", "timeout"} and df.error.isna().all()
+    ppo = df[df.agent == agent]
+    print(f"PPO guardian: {ppo.outcome.eq('collision').mean():.1%} collisions, "
+          f"in control {ppo.active_sim_time.sum() / ppo.sim_time.sum():.1%} of the simulated time")
     return rc
 
 
