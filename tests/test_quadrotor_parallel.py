@@ -328,3 +328,60 @@ def test_sampled_states_are_clear_and_labels_are_seeded(env):
     r1 = est.estimate(states, np.random.default_rng(1)).risk
     np.testing.assert_array_equal(r1, est.estimate(states, np.random.default_rng(1)).risk)
     assert ((r1 >= 0) & (r1 <= 1)).all()
+
+
+# ---------------------------------------------------------------- guardians on the quadrotor
+def floor_model():
+    """A real LRMM network on the down ray alone (feature 9): risk = sigmoid(3 sigmoid(10 - 10 x)),
+    about 0.5 high above the floor and 0.95 below 0.5 m."""
+    from guardians.lrmm.model import LRMMModel
+
+    meta = {"features": [9], "obs_dim": 23, "env_id": "QuadrotorRoomGuarded-v0", "activation": "sigmoid"}
+    return LRMMModel([(np.array([[-10.0]]), np.array([10.0])), (np.array([[3.0]]), None)], [0.0], [1.0], meta)
+
+
+def test_lrmm_applies_hover_and_level_while_the_risk_is_high_then_commits(env):
+    from guardians.lrmm.guardian import LRMMGuardian
+
+    g = LRMMGuardian(model=floor_model(), threshold=0.7, commit=2, action="safe", env_id="QuadrotorRoomParallel-v0")
+    g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
+    obs = np.zeros(23, np.float32)
+    obs[9] = 2.0
+    sig = lambda x: 1 / (1 + math.exp(-x))  # noqa: E731
+    assert g.act(obs, {})["active_ctrl"] == 0
+    assert g.last_risk == pytest.approx(sig(3 * sig(10 - 20)))
+    obs[9] = 0.3
+    a = g.act(obs, {})
+    assert a["active_ctrl"] == 1 and all(float(a[c][0]) == 0.0 for c in CONTROLS)
+    assert g.last_risk == pytest.approx(sig(3 * sig(10 - 3)))
+    obs[9] = 2.0
+    assert [g.act(obs, {})["active_ctrl"] for _ in range(3)] == [1, 1, 0]  # two committed steps, then released
+
+
+def test_lrmm_safe_action_needs_a_safe_default():
+    from guardians.lrmm.guardian import LRMMGuardian
+    from rmm_envs.autonomy import GuardianActionSpace
+
+    g = LRMMGuardian(model=floor_model(), threshold=0.7, action="safe")
+    from rmm_envs.autonomy import ObservationBox
+
+    bare = GuardianActionSpace(CONTROLS, CTRL.command_low, CTRL.command_high)  # no safe default
+    box = ObservationBox(np.zeros(23, np.float32), np.ones(23, np.float32), observation_layout())
+    with pytest.raises(ValueError, match="action 'safe' applies the env's safe default"):
+        g.check_spaces(box, bare)
+
+
+def test_brakes_is_hover_and_level_and_random_draws_commands_in_the_box(env):
+    from guardians import make_guardian
+
+    env.reset(seed=6)
+    for name in ("brakes", "random"):
+        g = make_guardian(name, env_id="QuadrotorRoomParallel-v0")
+        g.reset(seed=1, observation_space=env.observation_space, action_space=env.action_space)
+        acts = [g.act(np.zeros(23, np.float32), {}) for _ in range(50)]
+        u = np.array([[float(a[c][0]) for c in CONTROLS] for a in acts])
+        assert (u >= CTRL.command_low).all() and (u <= CTRL.command_high).all()
+        if name == "brakes":
+            assert all(a["active_ctrl"] == 1 for a in acts) and not u.any()
+        else:
+            assert 0 < sum(a["active_ctrl"] for a in acts) < 50 and u.std(axis=0).min() > 0.1

@@ -306,8 +306,21 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         out[:, 20:23] = _heading_frame(st[:, 3:7], self.goal[None, :] - st[:, :3])
         return out
 
-    def _observe(self, state) -> np.ndarray:
-        return self._features(state, self.rays()[None])[0]
+    def _observe(self, s) -> np.ndarray:
+        """:meth:`_features` of one state, in scalar arithmetic (a step's observation; the tests
+        hold the two equal)."""
+        out = np.empty(23, dtype=np.float32)
+        out[:N_RAYS + 2] = self.rays()
+        qx, qy, qz, qw = s[3], s[4], s[5], s[6]
+        out[10:14] = s[3:7]
+        psi = math.atan2(2 * (qx * qy + qz * qw), 1 - 2 * (qy * qy + qz * qz))
+        c, sn = math.cos(psi), math.sin(psi)
+        out[14], out[15], out[16] = c * s[7] + sn * s[8], -sn * s[7] + c * s[8], s[9]
+        r = quat_to_rot(s[3:7])
+        out[17:20] = r.T @ s[10:13]
+        dx, dy = self.goal[0] - s[0], self.goal[1] - s[1]
+        out[20], out[21], out[22] = c * dx + sn * dy, -sn * dx + c * dy, self.goal[2] - s[2]
+        return out
 
     def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
         """Advance the world by ``duration`` seconds under one held command: the pilot's (chosen
