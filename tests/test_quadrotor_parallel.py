@@ -385,3 +385,39 @@ def test_brakes_is_hover_and_level_and_random_draws_commands_in_the_box(env):
             assert all(a["active_ctrl"] == 1 for a in acts) and not u.any()
         else:
             assert 0 < sum(a["active_ctrl"] for a in acts) < 50 and u.std(axis=0).min() > 0.1
+
+
+def test_lrmm_reads_the_shipped_command_model_by_env_id(env):
+    from guardians import make_guardian
+    from guardians.lrmm.model import SHIPPED
+
+    g = make_guardian("lrmm", env_id="QuadrotorRoomParallel-v0")
+    ship = SHIPPED["QuadrotorRoomParallel-v0"]
+    assert g.model.path.name == ship.files["act"] == "quadrotor_cmd.npz"
+    assert (g.action, g.threshold, g.commit) == ("safe", ship.decision["threshold"], ship.decision["commit"])
+    assert g.model.meta["env_id"] == "QuadrotorRoomGuarded-v0" and g.model.obs_dim == 23
+    lay = env.observation_space.layout
+    # it reads the rays, the heading-frame velocity and the body rates: not the yaw-dependent
+    # quaternion nor the goal
+    used = {f for f, a, b in lay.fields if any(a <= i < b for i in g.model.features)}
+    assert used == {"rays", "rays_vertical", "velocity", "angular_velocity"}
+    obs, _ = env.reset(seed=0)
+    g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
+    a = g.act(obs, {})
+    assert a["active_ctrl"] in (0, 1) and 0.0 < g.last_risk < 1.0
+
+
+def test_rmm_bench_set_runs_what_applies_and_lists_the_rest(tmp_path, capsys):
+    import sqlite3
+
+    from benchmarks.bench.cli import main as bench_main
+
+    assert bench_main(["--env", "QuadrotorRoomParallel-v0", "--agent", "all", "--episodes", "1", "--workers", "1",
+                       "--out", str(tmp_path), "--no-progress", "--clock", "fixed:1"]) == 0
+    err = capsys.readouterr().err
+    for agent in ("cbf", "hj"):
+        assert f"--agent all: {agent} does not apply to --env QuadrotorRoomParallel-v0, skipped: guardian {agent!r}" in err
+    con = sqlite3.connect(tmp_path / "results.db")
+    ran = {r[0] for r in con.execute("select agent from runs")}
+    con.close()
+    assert ran == {"lrmm", "random", "inactive", "brakes"}
