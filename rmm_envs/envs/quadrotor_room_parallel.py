@@ -14,8 +14,10 @@ yaw_rate)`` in the body's heading frame.  At every physics step the cascaded con
 :mod:`rmm_envs.systems.quadrotor_control` turns the command into thrust and body moments (the
 velocity loop, then a geometric attitude loop), which PyBullet applies.  A built-in reckless
 pilot (:class:`rmm_envs.quadrotor_pilot.WaypointPilot`) flies straight through
-``n_waypoints`` random points of the room, the last one the goal, ignoring walls and objects.
-The agent is a *guardian*: at every step it decides whether to take over the command.
+``n_waypoints`` random points of the room, the last one the goal, ignoring walls and objects:
+alone it collides in 57.7% of the episodes and reaches the goal in 42.2% (2,048 episodes of
+``rmm-bench`` seed 0, fixed 1 ms clock).  The agent is a *guardian*: at every step it decides
+whether to take over the command.
 
 ## Action space
 
