@@ -421,3 +421,36 @@ def test_rmm_bench_set_runs_what_applies_and_lists_the_rest(tmp_path, capsys):
     ran = {r[0] for r in con.execute("select agent from runs")}
     con.close()
     assert ran == {"lrmm", "random", "inactive", "brakes"}
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(-3, 3), min_size=3, max_size=3), st.lists(st.floats(-0.5, 0.5), min_size=3, max_size=3))
+def test_clearance_is_one_lipschitz(p, dp):
+    """What lets the env skip contact queries: the gap cannot shrink faster than the body moves."""
+    room = Room(footprint=np.ones((2, 2), bool), origin=np.zeros(2), cell=1.0, wall_height=2.0,
+                walls=np.array([[1.0, 0.0, 1.0, 0.25, 3.0, 1.0], [-2.0, 1.0, 0.5, 1.0, 0.25, 0.5]]),
+                objects=[{"shape": "box", "pos": np.array([0.0, -2.0, 0.3]), "quat": np.array([0, 0, 0, 1.0]),
+                          "size": np.array([0.3, 0.3, 0.3])}])
+    col = RoomCollision(room)
+    p0 = np.array(p) + [0, 0, 3.5]
+    assert col.clearance(p0) - col.clearance(p0 + dp) <= np.linalg.norm(dp) + 1e-12
+
+
+def test_skipping_contact_queries_changes_nothing():
+    """The same episodes with a contact query after every physics step (no skipping)."""
+    runs = []
+    for skip in (True, False):
+        e = QuadrotorRoomGuardedEnv(clock="fixed:1")
+        if not skip:
+            e._a_bound = math.inf  # the travel bound is infinite: every step is queried
+        out = []
+        for seed in (0, 1, 2, 3):
+            e.reset(seed=seed)
+            while True:
+                _, r, te, tr, info = e.step(e.action_space.inactive())
+                if te or tr:
+                    break
+            out.append((info["outcome"], e._physics_steps, info["state"].tolist()))
+        e.close()
+        runs.append(out)
+    assert runs[0] == runs[1] and {o for o, _, _ in runs[0]} >= {"collision"}
