@@ -28,8 +28,9 @@ vup_ctrl=Box(-1, 1, (1,)), yawrate_ctrl=Box(-1, 1, (1,)))``, a
 guardian's command is applied, clipped to the box.  NaN/inf, a wrong shape or type, a missing
 or unknown field, or an ``active_ctrl`` other than 0/1 raise ``ValueError`` naming the field.
 The space's safe default (``space.safe_default``, what ``brakes`` applies) is
-:class:`HoverAndLevel`: the zero command.  The guardian commands the same controller as the
-pilot, so the risk labels' random commands, the safe default and the pilot live in one space.
+:class:`~rmm_envs.systems.quadrotor_control.HoverAndLevel`: the zero command.  The guardian
+commands the same controller as the pilot, so the risk labels' random commands, the safe
+default and the pilot live in one space.
 
 ## Observation space
 
@@ -114,14 +115,15 @@ import math
 import gymnasium as gym
 import numpy as np
 
-from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout, SafeDefault
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.clocks import make_clock
 from rmm_envs.envs.base import check_arguments, draw_until, finite, option_vector, rejection_sample, whole
 from rmm_envs.envs.guarded import GuardedEnv
 from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
 from rmm_envs.quadrotor_pilot import WaypointPilot
 from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
-from rmm_envs.systems.quadrotor_control import ClosedLoopQuadrotor, CommandController, command_wrench, heading_of
+from rmm_envs.systems.quadrotor_control import (ClosedLoopQuadrotor, CommandController, HoverAndLevel, command_wrench,
+                                                heading_of)
 from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
 from rmm_envs.worlds.room_collision import RoomCollision
 from rmm_envs.worlds.rooms import Room
@@ -138,18 +140,6 @@ def observation_layout() -> ObservationLayout:
     return ObservationLayout.of(("rays", N_RAYS), ("rays_vertical", 2), ("orientation", 4), ("velocity", 3),
                                 ("angular_velocity", 3), ("goal_offset", 3),
                                 ray_angles=[k * math.pi / 4 for k in range(N_RAYS)])
-
-
-class HoverAndLevel(SafeDefault):
-    """The quadrotor's safe default: hover and level, the zero command (no velocity, no yaw
-    rate), which the controller turns into braking to a stop with the body levelled."""
-
-    description = "hover and level (the zero command)"
-
-    def policy(self, space: GuardianActionSpace, rng: np.random.Generator, **options):
-        self.check_options(options)
-        zero = np.minimum(np.maximum(np.zeros(space.control_dim), space.control_low), space.control_high)
-        return lambda observation: zero
 
 
 _DIRS = np.array([[math.cos(k * math.pi / 4), math.sin(k * math.pi / 4), 0.0] for k in range(N_RAYS)]

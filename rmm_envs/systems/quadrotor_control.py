@@ -43,6 +43,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from rmm_envs.autonomy import SafeDefault
 from rmm_envs.systems.quadrotor import QUADROTOR, Quadrotor, QuadrotorParams
 
 try:
@@ -50,7 +51,7 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency
     njit = None
 
-__all__ = ["ClosedLoopQuadrotor", "CommandController", "body_packed", "body_step", "command_wrench", "command_wrenches",
+__all__ = ["ClosedLoopQuadrotor", "CommandController", "HoverAndLevel", "body_packed", "body_step", "command_wrench", "command_wrenches",
            "heading_of"]
 
 # the layout of the packed gain vector the compiled kernel reads
@@ -340,3 +341,15 @@ class ClosedLoopQuadrotor:
                 s = body.step(s, command_wrenches(s, cmds, self.controller.packed))
             out[:, j] = s
         return out
+
+
+class HoverAndLevel(SafeDefault):
+    """The quadrotor's safe default: hover and level, the zero command (no velocity, no yaw
+    rate), which the controller turns into braking to a stop with the body levelled."""
+
+    description = "hover and level (the zero command)"
+
+    def policy(self, space, rng: np.random.Generator, **options):
+        self.check_options(options)
+        zero = np.minimum(np.maximum(np.zeros(space.control_dim), space.control_low), space.control_high)
+        return lambda observation: zero
