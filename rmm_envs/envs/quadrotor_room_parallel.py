@@ -57,7 +57,8 @@ over).  ``+1`` when the body comes within ``goal_radius`` of the goal (checked a
 physics step), ``-1`` on any contact with the room (walls, objects, floor; PyBullet's contact
 points, queried at every physics step of an interval unless the body's clearance at the
 interval's start, :meth:`RoomCollision.clearance <rmm_envs.worlds.room_collision.RoomCollision.clearance>`,
-exceeds what it can travel in the interval, ``|v| d + (F_max / m + g) d^2 / 2`` plus 5 cm);
+exceeds what it can travel in the interval, ``|v| d + (F_max / m + g) d^2 / 2`` plus 5 cm; the
+clearance is recomputed only when the last one, less the distance moved since, falls short);
 the episode ends on either (``terminated``), else ``truncated`` at
 ``max_episode_sim_time`` (60 s).  The state after a collision is the one PyBullet reached.
 
@@ -274,6 +275,7 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         self.pilot.reset(waypoints)
         self.goal = waypoints[-1].copy()
         self._physics_steps = 0
+        self._gap, self._gap_at = -math.inf, state[:3].copy()  # no clearance known yet
         self._last_control = np.zeros(4)
         self.begin_statistics()
         self.begin_episode()
@@ -327,7 +329,13 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         n = max(0, target - self._physics_steps)
         t = n * par.dt
         speed = math.sqrt(s[7] ** 2 + s[8] ** 2 + s[9] ** 2)
-        query = self.scene.collision.clearance(s[:3]) <= speed * t + 0.5 * self._a_bound * t * t + _CONTACT_MARGIN
+        reach = speed * t + 0.5 * self._a_bound * t * t + _CONTACT_MARGIN
+        # the clearance is 1-Lipschitz in the position: the last one computed, less the distance
+        # moved since, is a lower bound; compute it afresh only when that bound is not enough
+        query = self._gap - math.dist(s[:3], self._gap_at) <= reach
+        if query:
+            self._gap, self._gap_at = self.scene.collision.clearance(s[:3]), s[:3].copy()
+            query = self._gap <= reach
         k, w, gx, gy, gz = self.controller.packed, self._wrench, *self.goal
         r2 = self.goal_radius ** 2
         hit = reached = False

@@ -134,29 +134,35 @@ def generate_room(rng: np.random.Generator, n_rectangles: int | None = None, x_r
                     size = np.array([rng.uniform(0.1, 1.0), rng.uniform(0.1, 1.0)])
                 else:
                     size = np.array([rng.uniform(0.1, 1.0)])
-                q = quat_from_euler(*rng.uniform(-np.pi, np.pi, 3))
-                R = quat_to_rot(q)
+                angles = rng.uniform(-np.pi, np.pi, 3)
+                # the footprint radius does not depend on the orientation: rotate only a kept object
                 if shape == "box":
-                    hz = float(np.abs(R[2]) @ size)
                     radius = float(np.linalg.norm(size))
                 elif shape == "cylinder":
-                    r, L = size
-                    hz = float(abs(R[2, 2]) * L / 2 + r * np.sqrt(max(0.0, 1 - R[2, 2] ** 2)))
-                    radius = float(np.hypot(r, L / 2))
+                    radius = float(np.hypot(size[0], size[1] / 2))
                 else:
-                    hz = radius = float(size[0])
+                    radius = float(size[0])
                 if free_cells.size == 0:
                     break
                 cell_ij = free_cells[rng.integers(len(free_cells))]
                 xy = lo + (cell_ij + rng.uniform(0, 1, 2)) * c
-                pos = np.array([xy[0], xy[1], hz])
                 if placed:  # exact norms only where the per-axis gaps allow an overlap
-                    near = np.flatnonzero((np.abs(placed_xy[:len(placed)] - pos[:2]) < (radius + placed_r[:len(placed), None])).all(axis=1))
-                    if any(np.linalg.norm(pos[:2] - placed[i][0][:2]) < radius + placed[i][1] for i in near):
+                    near = np.flatnonzero((np.abs(placed_xy[:len(placed)] - xy) < (radius + placed_r[:len(placed), None])).all(axis=1))
+                    if any(np.linalg.norm(xy - placed[i][0][:2]) < radius + placed[i][1] for i in near):
                         continue
-                if not room.in_footprint(pos[None, :2] + radius * np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])).all():
+                if not room.in_footprint(xy[None, :] + radius * np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])).all():
                     continue
-                placed_xy[len(placed)], placed_r[len(placed)] = pos[:2], radius
+                q = quat_from_euler(*angles)
+                R = quat_to_rot(q)
+                if shape == "box":
+                    hz = float(np.abs(R[2]) @ size)
+                elif shape == "cylinder":
+                    r, L = size
+                    hz = float(abs(R[2, 2]) * L / 2 + r * np.sqrt(max(0.0, 1 - R[2, 2] ** 2)))
+                else:
+                    hz = radius
+                pos = np.array([xy[0], xy[1], hz])
+                placed_xy[len(placed)], placed_r[len(placed)] = xy, radius
                 placed.append((pos, radius))
                 objects.append({"shape": shape, "pos": pos, "quat": q, "size": size})
                 break
