@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-__all__ = ["dubins4d_only", "finite", "integer", "number_pair"]
+__all__ = ["MazeDelegation", "dubins4d_only", "finite", "integer", "is_maze_space", "maze_car_only", "number_pair"]
 
 
 def finite(name: str, value, lo: float | None = None, lo_open: bool = False) -> float:
@@ -63,3 +63,57 @@ def dubins4d_only(guardian, action_space, maze: bool = False) -> None:
         raise ValueError(f"guardian {name!r} models circular obstacles only, and this env's world also has "
                          f"{', '.join(other)} obstacles (a map with shapes {list(shapes)}); use a map of circles only, "
                          "or a guardian that needs no obstacle geometry (lrmm, brakes)")
+
+
+def _maze_controls() -> tuple[str, ...]:
+    from rmm_envs.envs.dubins3d_maze_parallel import CONTROLS
+
+    return tuple(CONTROLS)
+
+
+def is_maze_space(action_space) -> bool:
+    """Whether ``action_space`` is the maze car's: a guardian action space with its one control
+    (the turn rate, :data:`rmm_envs.envs.dubins3d_maze_parallel.CONTROLS`)."""
+    return tuple(getattr(action_space, "controls", ())) == _maze_controls()
+
+
+def maze_car_only(guardian, action_space):
+    """Refuse an env that is not the maze car's, or whose turn-rate bound is not symmetric about 0
+    (``ValueError`` naming the guardian and why); the checked action space otherwise.  The
+    privileged maze guardians (``cbf``, ``hj`` on ``Dubins3DMazeParallel-v0``) need both."""
+    space = guardian.require_action_space(space=action_space)
+    if not is_maze_space(space):
+        raise ValueError(f"guardian {guardian.name!r} (maze) models the constant-speed maze car (controls "
+                         f"{_maze_controls()}) among walls; this env's controls are {space.controls}")
+    lo, hi = float(space.control_low[0]), float(space.control_high[0])
+    if not (hi > 0 and lo == -hi):
+        raise ValueError(f"guardian {guardian.name!r} (maze) needs a turn-rate bound symmetric about 0, got [{lo}, {hi}]")
+    return space
+
+
+class MazeDelegation:
+    """One guardian name for the Dubins4D car and the maze car: a mixin for a Dubins4D guardian
+    class whose maze counterpart is ``maze_class``.  On an env whose action space is the maze
+    car's (and when the guardian was built to serve the maze, ``self._maze_args`` not ``None``),
+    the checks and the episode go to one delegate of ``maze_class``, built on the first maze env
+    with ``self._maze_args`` and the guardian's name; elsewhere the Dubins4D checks apply."""
+
+    maze_class: type
+    _maze_args: dict | None = None
+    _delegate = None  # the maze car's guardian, built on the first maze env
+
+    def _maze_guardian(self, action_space):
+        """The delegate when ``action_space`` is the maze car's (and this guardian serves the
+        maze), else ``None``."""
+        if self._maze_args is None or not is_maze_space(action_space):
+            return None
+        if self._delegate is None:
+            self._delegate = self.maze_class(**self._maze_args)
+            self._delegate.name = self.name
+        return self._delegate
+
+    def check_spaces(self, observation_space, action_space) -> None:
+        maze = self._maze_guardian(action_space)
+        if maze is not None:
+            return maze.check_spaces(observation_space, action_space)
+        dubins4d_only(self, action_space, maze=self._maze_args is not None)

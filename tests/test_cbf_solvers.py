@@ -4,19 +4,21 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from guardians.cbf import CBFGuardian
 from guardians.cbf.backend import installed_solvers, parse_solver
 from guardians.cbf.maze import MazeCBFGuardian
+from guardians.cbf.qp import MAX_ITER
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D
 
-pytest.importorskip("qpsolvers")
-OTHERS = [f"qpsolvers:{n}" for n in ("osqp", "clarabel", "daqp") if n in installed_solvers()]
+import qpsolvers  # noqa: E402,F401  (pinned in the test extra: a missing install fails here, it is not skipped)
+# every solver the test extra pins (qpsolvers[clarabel,daqp]): one that is missing fails its tests, it is not left out
+OTHERS = [f"qpsolvers:{n}" for n in ("osqp", "clarabel", "daqp")]
 SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS)
 OBSTACLES = np.array([[3.0, 0.0, 2.0], [-4.0, 5.0, 3.0], [0.0, -6.0, 2.5]])
 GOAL = np.array([8.0, 8.0, 1.0])
@@ -42,11 +44,17 @@ def test_bad_solver_names_list_the_installed_ones():
 @pytest.mark.parametrize("solver", OTHERS)
 @settings(max_examples=40, deadline=None)
 @given(x=st.floats(-9.0, 9.0), y=st.floats(-9.0, 9.0), th=st.floats(-math.pi, math.pi), v=st.floats(0.0, 2.0))
+@example(x=0.0, y=1.625, th=1.578125, v=1.5625)  # direct OSQP stops at its iteration limit here (found by hypothesis)
 def test_dubins4d_decisions_agree_with_direct_osqp(solver, x, y, th, v):
     ref, other = dubins4d("osqp"), dubins4d(solver)
     state = np.array([x, y, th, v])
     z0, G, h = ref.solve(state)
     z1, _, _ = other.solve(state)
+    if z0 is None and z1 is not None and ref._qp.last_status == MAX_ITER:
+        # OSQP's documented rare non-convergence on a feasible QP (guardians/cbf/qp.py): the
+        # other solver's answer must then satisfy every row
+        assert np.all(G @ z1 <= h + 1e-4)
+        return
     assert (z0 is None) == (z1 is None)
     if z0 is None:
         return

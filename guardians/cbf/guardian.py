@@ -9,11 +9,11 @@ import math
 
 import numpy as np
 
-from guardians._checks import dubins4d_only, finite, integer, number_pair
+from guardians._checks import MazeDelegation, finite, integer, number_pair
 from guardians.base import Guardian
 from guardians.cbf.backend import dubins4d_qp, parse_solver
 from guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_values, critical_obstacle, inflated_radii
-from guardians.cbf.maze import MazeCBFGuardian, is_maze_space
+from guardians.cbf.maze import MazeCBFGuardian
 from guardians.cbf.recovery import recovery_control, recovery_done
 from rmm_envs.systems.dubins4d import Dubins4D
 
@@ -27,7 +27,7 @@ def _box_problem(u1, u2) -> str | None:
     return "the control box must contain 0 in u1 and allow braking and accelerating in u2"
 
 
-class CBFGuardian(Guardian):
+class CBFGuardian(MazeDelegation, Guardian):
     """HOCBF safety filter with one-step latency prediction and recovery (see :mod:`guardians.cbf`).
 
     ``u1_bounds``/``u2_bounds`` (default ``None``: the action space's, read at ``reset``) and
@@ -36,6 +36,7 @@ class CBFGuardian(Guardian):
     name = "cbf"
     observation_type = "global"
     privileged = True
+    maze_class = MazeCBFGuardian
 
     def __init__(self, p1: float = 0.7535, p2: float = 0.6664, inflation: float = 1.05,
                  gamma_vmin: float = 1.0, gamma_vmax: float = 1.0, lambda_theta: float = 1.0,
@@ -104,22 +105,6 @@ class CBFGuardian(Guardian):
                                   self.u1_min, self.u1_max, self.u2_min, self.u2_max, self.v_min, self.v_max)
         self._system = Dubins4D(v_min=self.v_min, v_max=self.v_max, u1_min=self.u1_min, u1_max=self.u1_max,
                                 u2_min=self.u2_min, u2_max=self.u2_max)
-
-    def _maze_guardian(self, action_space):
-        """The maze car's guardian when ``action_space`` is the maze car's (and this class
-        serves the maze), else None: the dispatch of :mod:`guardians.cbf.maze`."""
-        if self._maze_args is None or not is_maze_space(action_space):
-            return None
-        if self._delegate is None:
-            self._delegate = MazeCBFGuardian(**self._maze_args)
-            self._delegate.name = self.name
-        return self._delegate
-
-    def check_spaces(self, observation_space, action_space) -> None:
-        maze = self._maze_guardian(action_space)
-        if maze is not None:
-            return maze.check_spaces(observation_space, action_space)
-        dubins4d_only(self, action_space, maze=self._maze_args is not None)
 
     def reset(self, **kwargs) -> None:
         self._maze = self._maze_guardian(kwargs.get("action_space"))

@@ -82,19 +82,13 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from guardians._checks import finite, integer
+from guardians._checks import finite, integer, maze_car_only
 from guardians.base import Guardian
 from guardians.cbf.backend import QpsolversQP, parse_solver
 
-__all__ = ["MAZE_CONTROLS", "MazeCBFGuardian", "WallQP", "is_maze_space", "wall_rows"]
+__all__ = ["MazeCBFGuardian", "WallQP", "wall_rows"]
 
-MAZE_CONTROLS = ("turnrate_ctrl",)
 BARRIERS = ("turning", "distance")
-
-
-def is_maze_space(action_space) -> bool:
-    """Whether ``action_space`` is the maze car's (a guardian action space with its one control)."""
-    return tuple(getattr(action_space, "controls", ())) == MAZE_CONTROLS
 
 
 def wall_rows(state, speed: float, walls: np.ndarray, half: float, margin: float, p1: float, p2: float,
@@ -199,13 +193,7 @@ class MazeCBFGuardian(Guardian):
         return {"qp_fallbacks": 0, "nan_states": 0, "qp_solves": 0}
 
     def check_spaces(self, observation_space, action_space) -> None:
-        space = self.require_action_space(space=action_space)
-        if not is_maze_space(space):
-            raise ValueError(f"guardian {self.name!r} (maze) models the constant-speed maze car (controls "
-                             f"{MAZE_CONTROLS}) among walls; this env's controls are {space.controls}")
-        lo, hi = float(space.control_low[0]), float(space.control_high[0])
-        if not (hi > 0 and lo == -hi):
-            raise ValueError(f"guardian {self.name!r} (maze) needs a turn-rate bound symmetric about 0, got [{lo}, {hi}]")
+        maze_car_only(self, action_space)
 
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)

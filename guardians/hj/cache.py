@@ -15,11 +15,39 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import time
+import warnings
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
-__all__ = ["ValueCache", "default_cache_dir"]
+__all__ = ["ValueCache", "default_cache_dir", "load_or_solve"]
+
+
+def load_or_solve(cache: "ValueCache | None", spec: dict, shape, solve: Callable[[], np.ndarray],
+                  counts: dict) -> tuple[np.ndarray, float | None]:
+    """The value function that ``spec`` determines: read from ``cache`` when it holds it
+    (``counts["cache_hits"]`` += 1), else ``solve()`` (``counts["solves"]`` += 1) and saved there.
+    A cache that cannot be written is an optimisation lost, not an error: it is counted
+    (``counts["cache_errors"]``) and warned about.  ``cache=None``: always solve.  Returns
+    ``(V, seconds the solve took)``, the seconds ``None`` on a cache hit."""
+    key = ValueCache.key(spec) if cache is not None else None
+    V = cache.load(key, shape) if cache is not None else None
+    if V is not None:
+        counts["cache_hits"] += 1
+        return V, None
+    t0 = time.perf_counter()
+    V = solve()
+    seconds = time.perf_counter() - t0
+    counts["solves"] += 1
+    if cache is not None:
+        try:
+            cache.save(key, V)
+        except OSError as e:  # a full disk must not end the episode
+            counts["cache_errors"] = counts.get("cache_errors", 0) + 1
+            warnings.warn(f"HJ value cache not written ({e}); continuing without it", RuntimeWarning, stacklevel=3)
+    return V, seconds
 
 
 def default_cache_dir() -> Path:

@@ -131,17 +131,15 @@ from __future__ import annotations
 
 import math
 import os
-import time
-import warnings
 
 import numpy as np
 
-from guardians._checks import dubins4d_only, finite, integer
+from guardians._checks import MazeDelegation, finite, integer
 from guardians.base import Guardian
-from guardians.hj.cache import ValueCache
+from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid
-from guardians.hj.maze import MazeHJGuardian, is_maze_space
+from guardians.hj.maze import MazeHJGuardian
 from guardians.hj.solver import select_backend, solve_brt
 
 __all__ = ["HJGuardian", "HJPaperGuardian", "default_grid", "default_threads", "obstacle_target"]
@@ -207,8 +205,9 @@ def _gradient(V: np.ndarray, grid: Grid) -> list[np.ndarray]:
 RULES = ("distance", "gradient", "value")
 
 
-class HJGuardian(Guardian):
+class HJGuardian(MazeDelegation, Guardian):
     name = "hj"
+    maze_class = MazeHJGuardian
     observation_type = "global"
     privileged = True
 
@@ -275,45 +274,20 @@ class HJGuardian(Guardian):
                     f"obstacle centred at ({ox:.2f}, {oy:.2f}) lies outside the HJ grid "
                     f"[{self.grid.lo[0]}, {self.grid.hi[0]}] x [{self.grid.lo[1]}, {self.grid.hi[1]}]"
                 )
-        key = ValueCache.key(self.spec(obstacles, goal)) if self.cache else None
-        V = self.cache.load(key, self.grid.shape) if self.cache else None
-        if V is not None:
-            self._counts["cache_hits"] += 1
-            return V
-        t0 = time.perf_counter()
-        if goal is None:
-            V, _ = solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, obstacles), self.horizon,
-                             order=self.order, rk=self.rk, cfl=self.cfl, backend=self.backend, threads=self.threads)
-        else:
-            V, _ = solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, np.asarray(goal, float).reshape(1, 3)),
+
+        def solve():
+            if goal is None:
+                return solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, obstacles), self.horizon,
+                                 order=self.order, rk=self.rk, cfl=self.cfl, backend=self.backend, threads=self.threads)[0]
+            return solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, np.asarray(goal, float).reshape(1, 3)),
                              self.ra_horizon, order=self.order, rk=self.rk, cfl=self.cfl,
                              constraint=obstacle_target(self.grid, obstacles), backend=self.backend,
-                             threads=self.threads)
-        self.solve_seconds = time.perf_counter() - t0
-        self._counts["solves"] += 1
-        if self.cache:
-            try:
-                self.cache.save(key, V)
-            except OSError as e:  # a cache is an optimisation: a full disk must not end the episode
-                self._counts["cache_errors"] = self._counts.get("cache_errors", 0) + 1
-                warnings.warn(f"HJ value cache not written ({e}); continuing without it", RuntimeWarning, stacklevel=2)
+                             threads=self.threads)[0]
+
+        V, seconds = load_or_solve(self.cache or None, self.spec(obstacles, goal), self.grid.shape, solve, self._counts)
+        if seconds is not None:
+            self.solve_seconds = seconds
         return V
-
-    def _maze_guardian(self, action_space):
-        """The maze car's guardian when ``action_space`` is the maze car's (and this class
-        serves the maze), else None: the dispatch of :mod:`guardians.hj.maze`."""
-        if self._maze_args is None or not is_maze_space(action_space):
-            return None
-        if self._delegate is None:
-            self._delegate = MazeHJGuardian(**self._maze_args)
-            self._delegate.name = self.name
-        return self._delegate
-
-    def check_spaces(self, observation_space, action_space) -> None:
-        maze = self._maze_guardian(action_space)
-        if maze is not None:
-            return maze.check_spaces(observation_space, action_space)
-        dubins4d_only(self, action_space, maze=self._maze_args is not None)
 
     def reset(self, **kwargs) -> None:
         maze = self._maze_guardian(kwargs.get("action_space"))

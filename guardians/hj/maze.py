@@ -77,28 +77,20 @@ is refused at reset.
 from __future__ import annotations
 
 import math
-import time
-import warnings
 
 import numpy as np
 
-from guardians._checks import finite, integer
+from guardians._checks import finite, integer, maze_car_only
 from guardians.base import Guardian
-from guardians.hj.cache import ValueCache
+from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid
 from guardians.hj.solver import select_backend, solve_brt
 
-__all__ = ["MAZE_CONTROLS", "MazeHJGuardian", "is_maze_space", "maze_grid", "wall_target"]
+__all__ = ["MazeHJGuardian", "maze_grid", "wall_target"]
 
 #: The maze car's controls (:data:`rmm_envs.envs.dubins3d_maze_parallel.CONTROLS`).
-MAZE_CONTROLS = ("turnrate_ctrl",)
 REGIONS = ("route", "maze")
-
-
-def is_maze_space(action_space) -> bool:
-    """Whether ``action_space`` is the maze car's (a guardian action space with its one control)."""
-    return tuple(getattr(action_space, "controls", ())) == MAZE_CONTROLS
 
 
 def maze_grid(lo, hi, spacing: float, n_heading: int, speed: float) -> Grid:
@@ -164,13 +156,7 @@ class MazeHJGuardian(Guardian):
 
     # ------------------------------------------------------------------ applicability
     def check_spaces(self, observation_space, action_space) -> None:
-        space = self.require_action_space(space=action_space)
-        if not is_maze_space(space):
-            raise ValueError(f"guardian {self.name!r} (maze) models the constant-speed maze car (controls "
-                             f"{MAZE_CONTROLS}) among walls; this env's controls are {space.controls}")
-        lo, hi = float(space.control_low[0]), float(space.control_high[0])
-        if not (hi > 0 and lo == -hi):
-            raise ValueError(f"guardian {self.name!r} (maze) needs a turn-rate bound symmetric about 0, got [{lo}, {hi}]")
+        maze_car_only(self, action_space)
 
     # ------------------------------------------------------------------ the value
     def region_box(self, maze, state, goal) -> tuple[np.ndarray, np.ndarray]:
@@ -197,22 +183,13 @@ class MazeHJGuardian(Guardian):
 
     def value_function(self, maze, grid: Grid) -> np.ndarray:
         """The avoid value of the maze's walls on ``grid`` (from the cache when there)."""
-        key = ValueCache.key(self.spec(maze, grid)) if self.cache else None
-        V = self.cache.load(key, grid.shape) if self.cache else None
-        if V is not None:
-            self._counts["cache_hits"] += 1
-            return V
-        t0 = time.perf_counter()
-        V, _ = solve_brt(grid, self.dynamics, wall_target(grid, maze), self.horizon, order=self.order, rk=self.rk,
-                         cfl=self.cfl, backend=self.backend, threads=self.threads)
-        self.solve_seconds = time.perf_counter() - t0
-        self._counts["solves"] += 1
-        if self.cache:
-            try:
-                self.cache.save(key, V)
-            except OSError as e:  # a cache is an optimisation: a full disk must not end the episode
-                self._counts["cache_errors"] = self._counts.get("cache_errors", 0) + 1
-                warnings.warn(f"HJ value cache not written ({e}); continuing without it", RuntimeWarning, stacklevel=2)
+        def solve():
+            return solve_brt(grid, self.dynamics, wall_target(grid, maze), self.horizon, order=self.order, rk=self.rk,
+                             cfl=self.cfl, backend=self.backend, threads=self.threads)[0]
+
+        V, seconds = load_or_solve(self.cache or None, self.spec(maze, grid), grid.shape, solve, self._counts)
+        if seconds is not None:
+            self.solve_seconds = seconds
         return V
 
     def reset(self, **kwargs) -> None:
