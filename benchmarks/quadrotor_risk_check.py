@@ -1,6 +1,7 @@
 """Does the quadrotor's command-policy risk carry information, and does the shipped model hold?
 
-Run: ``python benchmarks/quadrotor_risk_check.py [--resets 200] [--episodes 16] [--seed 0]``.
+Run: ``python benchmarks/quadrotor_risk_check.py [--resets 200] [--episodes 16] [--seed 0] [--variant risk]``
+(``--variant act``: the model ``lrmm`` reads, with the action-conditioned head).
 
 1. **Labels at reset states** (issue target: mean in [0.1, 0.9], standard deviation >= 0.15):
    the start state of ``--resets`` episodes of ``QuadrotorRoomGuarded-v0`` (env seeds
@@ -78,8 +79,9 @@ def main(argv=None) -> None:
     p.add_argument("--resets", type=int, default=200)
     p.add_argument("--episodes", type=int, default=16)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--variant", default="risk", choices=["risk", "act"], help="which shipped model (default: %(default)s)")
     args = p.parse_args(argv)
-    model = load_model(default_model_path(ENV, variant="act"))
+    model = load_model(default_model_path(ENV, variant=args.variant))
     lab = model.meta["labeller"]
     ours, paper = reset_labels(args.resets, args.seed, lab)
     print(f"labels at {args.resets} reset states (env seeds {args.seed}-{args.seed + args.resets - 1}):")

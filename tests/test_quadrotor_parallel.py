@@ -393,9 +393,13 @@ def test_lrmm_reads_the_shipped_command_model_by_env_id(env):
 
     g = make_guardian("lrmm", env_id="QuadrotorRoomParallel-v0")
     ship = SHIPPED["QuadrotorRoomParallel-v0"]
-    assert g.model.path.name == ship.files["act"] == "quadrotor_cmd.npz"
-    assert (g.action, g.threshold, g.commit) == ("safe", ship.decision["threshold"], ship.decision["commit"])
+    assert g.model.path.name == ship.files["act"] == "quadrotor_cmd_act.npz"
+    decision = g.model.meta["decision"]  # stored in the file, with how it was chosen
+    assert (g.action, g.threshold, g.commit) == ("head", decision["threshold"], decision["commit"]) == ("head", 0.2, 20)
+    np.testing.assert_array_equal(g.model.candidates, [[0, 0, 0, 0], [0, 0, 1, 0], [-1.5, 0, 0, 0], [-1, 0, 1, 0]])
     assert g.model.meta["env_id"] == "QuadrotorRoomGuarded-v0" and g.model.obs_dim == 23
+    risk_only = make_guardian("lrmm", model=str(g.model.path.with_name(ship.files["risk"])), action="safe", threshold=0.5)
+    assert risk_only.model.candidates is None and risk_only.model.meta["env_id"] == "QuadrotorRoomGuarded-v0"
     lay = env.observation_space.layout
     # it reads the rays, the heading-frame velocity and the body rates: not the yaw-dependent
     # quaternion nor the goal
@@ -473,3 +477,20 @@ def test_generated_rooms_are_those_the_shipped_datasets_were_made_from():
             for k in ("pos", "quat", "size"):
                 h.update(np.ascontiguousarray(o[k], dtype=float).tobytes())
     assert h.hexdigest() == "eb5280bcd4f648face1e5a8b4af3715159889846c9ae3258d941f28203c16cc2"
+
+
+def test_lrmm_head_picks_the_lowest_risk_command_of_four_controls(env):
+    """A real network with a two-candidate head on the down ray: risk sigmoid(3 h), hover
+    sigmoid(2 h), climb sigmoid(-2 h) with h = sigmoid(10 - 10 x): climbing is rated safer."""
+    from guardians.lrmm.guardian import LRMMGuardian
+    from guardians.lrmm.model import LRMMModel
+
+    meta = {"features": [9], "obs_dim": 23, "env_id": "QuadrotorRoomGuarded-v0", "activation": "sigmoid",
+            "candidates": [[0, 0, 0, 0], [0, 0, 1, 0]], "candidate_hold": 1.0}
+    model = LRMMModel([(np.array([[-10.0]]), np.array([10.0])), (np.array([[3.0], [2.0], [-2.0]]), None)], [0.0], [1.0], meta)
+    g = LRMMGuardian(model=model, threshold=0.4, commit=0)
+    g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
+    obs = np.zeros(23, np.float32)
+    obs[9] = 0.5
+    a = g.act(obs, {})
+    assert a["active_ctrl"] == 1 and [float(a[c][0]) for c in CONTROLS] == [0.0, 0.0, 1.0, 0.0]

@@ -51,11 +51,13 @@ safer, comparing its risk of the rays as they would read with the heading one ra
 further left or right (a cyclic shift of the rays: the pose turned in place, a stand-in for the
 turn the car will make); threshold 0.7, commit 5 steps (how they were chosen is stored in the
 table).  The car cannot brake, so turning is the whole action.  On ``QuadrotorRoomGuarded-v0``
-/ ``QuadrotorRoomParallel-v0`` it reads the quadrotor command model (``quadrotor_cmd.npz``:
-the risk of random velocity commands to the stabilising controller, from the rays, the
-heading-frame velocity and the body angular velocity) and acts with ``action="safe"``: the
-env's safe default, hover and level, while the risk is above the threshold and for ``commit``
-steps after.  Without ``env_id`` (or a model) the guardian serves Dubins4D, as before.
+/ ``QuadrotorRoomParallel-v0`` it reads the quadrotor command model with a head
+(``quadrotor_cmd_act.npz``: the risk of random velocity commands to the stabilising controller,
+and of holding hover, climb, back off, or back off and climb for 1 s first, from the rays, the
+heading-frame velocity and the body rates) and applies the safest of those four commands while
+the risk is above 0.2 and for 20 steps after (stored in the file with how they were chosen).
+``action="safe"`` applies the env's safe default instead (hover and level).  Without
+``env_id`` (or a model) the guardian serves Dubins4D, as before.
 
 ``hysteresis=True`` (either guardian) reproduces the original code's release rule: a deque of
 the last ``window`` (20) risks, initialised at the threshold, and the guardian intervenes while
@@ -182,7 +184,7 @@ class LRMMGuardian(Guardian):
         self._history: deque = deque(maxlen=self.window)
         self.last_risk = float("nan")
         if action == "head":
-            self._cands = [(float(c[0]), float(c[1])) for c in self.model.candidates]
+            self._cands = [tuple(float(x) for x in c) for c in self.model.candidates]  # any control count
 
     def _fallback_warning(self, text: str) -> None:
         if type(self) is LRMMGuardian:  # the paper preset expects the paper's rule: nothing to warn about

@@ -319,16 +319,14 @@ _MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays", decision={
                  "commit 5/10/20 steps on 64 development episodes (env seeds 5000-5063 of Dubins3DMazeParallel-v0, "
                  "fixed 1 ms clock): 0 collisions and 64 goals with 1.3% of the steps in control"})
 
-#: The quadrotor under parallel autonomy reads the command model (``QuadrotorRoomGuarded-v0``'s
-#: labels: random velocity commands to the stabilising controller, each held for one tree level)
-#: on the whole observation (the model's ``features`` leave out the orientation and the goal) and
-#: applies the env's safe default, hover and level.  Its decision defaults were chosen on
-#: development seeds (``rmm-bench --seed 5``), never on the seeds that reported results use.
-_QUAD_PARALLEL = Shipped({"act": "quadrotor_cmd.npz"}, decision={
-    "threshold": 0.5, "commit": 10, "action": "safe",
-    "chosen_by": "fewest collisions among the settings losing at most 5 points of success against the pilot alone, over "
-                 "thresholds 0.3/0.4/0.5/0.6/0.7 x commit 3/10/20 steps on 128 development episodes (rmm-bench --seed 5, "
-                 "fixed 1 ms clock; pilot alone: 37.5% goals, 62.5% collisions): 33.6% goals, 35.9% collisions"})
+#: The quadrotor under parallel autonomy: ``lrmm`` reads the command model with the
+#: action-conditioned head (``quadrotor_cmd_act.npz``: ``QuadrotorRoomGuarded-v0``'s labels under
+#: random velocity commands to the stabilising controller, plus the risk of holding each of four
+#: commands for 1 s: hover, climb, back off, back off and climb) on the whole observation (its
+#: ``features`` leave out the orientation and the goal); its decision defaults are stored in the
+#: file.  ``"risk"``: the risk-only command model of Table II (``quadrotor_cmd.npz``, more labels,
+#: no head), for ``action="safe"`` (hover and level) with an explicit threshold.
+_QUAD_PARALLEL = Shipped({"act": "quadrotor_cmd_act.npz", "risk": "quadrotor_cmd.npz"})
 
 #: The one table of shipped models, by env id.
 SHIPPED: dict[str, Shipped] = {
