@@ -351,7 +351,8 @@ def default_model_path(env_id: str = "Dubins4DCircles-v0", variant: str = "paper
 
     ``variant="paper"`` (default): the paper's risk-only network (Table II).  ``"act"``: the
     network the ``lrmm`` guardian uses (Dubins4D: with the action-conditioned head; the maze's
-    parallel envs: the maze network; the quadrotor's parallel envs: the command-policy network).
+    parallel envs: the maze network; the quadrotor's parallel envs: the command model with its
+    head).  ``"risk"`` (the quadrotor's parallel envs): the risk-only command model.
     """
     ship = SHIPPED.get(env_id)
     if ship is None or variant not in ship.files:
