@@ -40,6 +40,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/perf_guardians.py
 	$(BIN)/python benchmarks/perf_hj.py --quick
 	$(BIN)/python benchmarks/perf_quadrotor.py
+	$(BIN)/python benchmarks/perf_quadrotor_parallel.py
 	$(BIN)/python benchmarks/perf_vector.py
 
 clean:

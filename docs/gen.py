@@ -26,6 +26,9 @@ ENV_PAGES = {
                                                "`Dubins3DMazeParallel-v0`", None),
     "environments/quadrotor_room.md": ("rmm_envs.envs.quadrotor_room", "Quadrotor in rooms: `QuadrotorRoom-v0`",
                                        "figures/quadrotor_room_frame.png"),
+    "environments/quadrotor_room_parallel.md": ("rmm_envs.envs.quadrotor_room_parallel",
+                                                "The quadrotor under parallel autonomy: `QuadrotorRoomGuarded-v0`, "
+                                                "`QuadrotorRoomParallel-v0`", None),
 }
 
 

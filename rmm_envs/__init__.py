@@ -13,6 +13,9 @@ Importing the package registers the Gymnasium environments:
   may take over the turn rate (blocking, fixed step).
 * ``Dubins3DMazeParallel-v0``: the same, non-blocking (the guardian's compute time passes).
 * ``QuadrotorRoom-v0``: a quadrotor in procedurally generated rooms (PyBullet; extra ``quadrotor``).
+* ``QuadrotorRoomGuarded-v0``: that quadrotor flown through waypoints by a reckless pilot on a
+  cascaded controller, a guardian may take over the velocity command (blocking, fixed step).
+* ``QuadrotorRoomParallel-v0``: the same, non-blocking (the guardian's compute time passes).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
 ENV_IDS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins4DMap-v0", "Dubins4DMapParallel-v0", "Dubins3DMaze-v0", "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0",
-           "QuadrotorRoom-v0")
+           "QuadrotorRoom-v0", "QuadrotorRoomGuarded-v0", "QuadrotorRoomParallel-v0")
 
 
 def _register() -> None:
@@ -40,6 +43,8 @@ def _register() -> None:
         "Dubins3DMazeGuarded-v0": "rmm_envs.envs.dubins3d_maze_parallel:Dubins3DMazeGuardedEnv",
         "Dubins3DMazeParallel-v0": "rmm_envs.envs.dubins3d_maze_parallel:make_parallel_env",
         "QuadrotorRoom-v0": "rmm_envs.envs.quadrotor_room:QuadrotorRoomEnv",
+        "QuadrotorRoomGuarded-v0": "rmm_envs.envs.quadrotor_room_parallel:QuadrotorRoomGuardedEnv",
+        "QuadrotorRoomParallel-v0": "rmm_envs.envs.quadrotor_room_parallel:make_parallel_env",
     }
     vector_specs = {"Dubins4DCircles-v0": "rmm_envs.envs.dubins4d_vector:Dubins4DCirclesVectorEnv"}
     for env_id, entry in specs.items():

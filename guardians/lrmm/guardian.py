@@ -50,8 +50,14 @@ field and acts with ``action="turn"``: the maximum turn rate toward the side the
 safer, comparing its risk of the rays as they would read with the heading one ray (45 degrees)
 further left or right (a cyclic shift of the rays: the pose turned in place, a stand-in for the
 turn the car will make); threshold 0.7, commit 5 steps (how they were chosen is stored in the
-table).  The car cannot brake, so turning is the whole action.  Without ``env_id`` (or a
-model) the guardian serves Dubins4D, as before.
+table).  The car cannot brake, so turning is the whole action.  On ``QuadrotorRoomGuarded-v0``
+/ ``QuadrotorRoomParallel-v0`` it reads the quadrotor command model with a head
+(``quadrotor_cmd_act.npz``: the risk of random velocity commands to the stabilising controller,
+and of holding hover, climb, back off, or back off and climb for 1 s first, from the rays, the
+heading-frame velocity and the body rates) and applies the safest of those four commands while
+the risk is above 0.2 and for 20 steps after (stored in the file with how they were chosen).
+``action="safe"`` applies the env's safe default instead (hover and level).  Without
+``env_id`` (or a model) the guardian serves Dubins4D, as before.
 
 ``hysteresis=True`` (either guardian) reproduces the original code's release rule: a deque of
 the last ``window`` (20) risks, initialised at the threshold, and the guardian intervenes while
@@ -85,7 +91,7 @@ from guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, load_mo
 __all__ = ["PAPER_THRESHOLD", "LRMMGuardian", "LRMMPaperGuardian"]
 
 PAPER_THRESHOLD = 0.85  # the paper's Table I setting
-ACTIONS = ("head", "heuristic", "turn")
+ACTIONS = ("head", "heuristic", "turn", "safe")
 DEFAULT_ENV = "Dubins4DCircles-v0"  # whose shipped model a guardian built without env_id or model reads
 _SIDE_RAY = math.pi / 6  # the heuristic compares the rays 30 degrees left and right of the heading
 
@@ -98,7 +104,8 @@ class LRMMGuardian(Guardian):
             the model's stored threshold (the paper's 0.85 if it has none, with a warning).
         action: ``"head"`` (the safest candidate of the model's head), ``"heuristic"`` (brake
             and turn to the more open +-30 degree ray), ``"turn"`` (turn toward the lower-risk
-            side; one-control systems whose model reads the rays) or ``None`` (default: ``"head"`` when
+            side; one-control systems whose model reads the rays), ``"safe"`` (the env's safe default,
+            ``action_space.safe_default``: hover and level for the quadrotor) or ``None`` (default: ``"head"`` when
             the model has one, else ``"heuristic"`` with a warning).
         hysteresis: use the original's moving-average release rule (default False).
         window: moving-average length with ``hysteresis`` (default 20).
@@ -177,7 +184,7 @@ class LRMMGuardian(Guardian):
         self._history: deque = deque(maxlen=self.window)
         self.last_risk = float("nan")
         if action == "head":
-            self._cands = [(float(c[0]), float(c[1])) for c in self.model.candidates]
+            self._cands = [tuple(float(x) for x in c) for c in self.model.candidates]  # any control count
 
     def _fallback_warning(self, text: str) -> None:
         if type(self) is LRMMGuardian:  # the paper preset expects the paper's rule: nothing to warn about
@@ -208,6 +215,9 @@ class LRMMGuardian(Guardian):
         if self.action == "heuristic":
             self.require_action_space(controls=2, space=action_space)  # (turn rate, acceleration)
             self.require_layout("rays", observation_space=observation_space)
+        if self.action == "safe" and actions.safe_default is None:
+            raise ValueError(f"guardian {self.name!r}: action 'safe' applies the env's safe default, and this env's "
+                             "action space states none (GuardianActionSpace(safe_default=...))")
         if self.action == "turn":
             self.require_action_space(controls=1, space=action_space)  # the turn rate
             lay = self.require_layout("rays", observation_space=observation_space)
@@ -229,6 +239,8 @@ class LRMMGuardian(Guardian):
         self.u1_max = float(actions.control_high[0]) if self._u1_max_arg is None else self._u1_max_arg
         if self.action == "heuristic":
             self.u2_min = float(actions.control_low[1]) if self._u2_min_arg is None else self._u2_min_arg
+        if self.action == "safe":
+            self._safe = actions.safe_default.policy(actions, self.rng)
         if self.action == "turn":
             rays = lay["rays"]
             self._lside = [rays.start + i for i, a in enumerate(lay.ray_angles) if 0 < math.remainder(a, 2 * math.pi) < math.pi]
@@ -265,6 +277,8 @@ class LRMMGuardian(Guardian):
             return self.action_space.active(self._cands[cand.index(min(cand))])  # the first of the lowest
         if self.action == "turn":
             return self.action_space.active((self._turn(observation, x),))
+        if self.action == "safe":
+            return self.action_space.active(self._safe(observation))
         left, right = observation[self._left], observation[self._right]
         if np.isclose(left, right):
             turn = 0.0

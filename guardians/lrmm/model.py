@@ -319,6 +319,15 @@ _MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays", decision={
                  "commit 5/10/20 steps on 64 development episodes (env seeds 5000-5063 of Dubins3DMazeParallel-v0, "
                  "fixed 1 ms clock): 0 collisions and 64 goals with 1.3% of the steps in control"})
 
+#: The quadrotor under parallel autonomy: ``lrmm`` reads the command model with the
+#: action-conditioned head (``quadrotor_cmd_act.npz``: ``QuadrotorRoomGuarded-v0``'s labels under
+#: random velocity commands to the stabilising controller, plus the risk of holding each of four
+#: commands for 1 s: hover, climb, back off, back off and climb) on the whole observation (its
+#: ``features`` leave out the orientation and the goal); its decision defaults are stored in the
+#: file.  ``"risk"``: the risk-only command model of Table II (``quadrotor_cmd.npz``, more labels,
+#: no head), for ``action="safe"`` (hover and level) with an explicit threshold.
+_QUAD_PARALLEL = Shipped({"act": "quadrotor_cmd_act.npz", "risk": "quadrotor_cmd.npz"})
+
 #: The one table of shipped models, by env id.
 SHIPPED: dict[str, Shipped] = {
     "Dubins4DCircles-v0": _DUBINS4D,
@@ -332,6 +341,8 @@ SHIPPED: dict[str, Shipped] = {
     "Dubins3DMazeGuarded-v0": _MAZE_PARALLEL,
     "Dubins3DMazeParallel-v0": _MAZE_PARALLEL,
     "QuadrotorRoom-v0": Shipped({"paper": "quadrotor.npz"}),
+    "QuadrotorRoomGuarded-v0": _QUAD_PARALLEL,
+    "QuadrotorRoomParallel-v0": _QUAD_PARALLEL,
 }
 
 
@@ -340,7 +351,8 @@ def default_model_path(env_id: str = "Dubins4DCircles-v0", variant: str = "paper
 
     ``variant="paper"`` (default): the paper's risk-only network (Table II).  ``"act"``: the
     network the ``lrmm`` guardian uses (Dubins4D: with the action-conditioned head; the maze's
-    parallel envs: the maze network).
+    parallel envs: the maze network; the quadrotor's parallel envs: the command model with its
+    head).  ``"risk"`` (the quadrotor's parallel envs): the risk-only command model.
     """
     ship = SHIPPED.get(env_id)
     if ship is None or variant not in ship.files:

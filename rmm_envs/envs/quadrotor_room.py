@@ -182,7 +182,7 @@ class QuadrotorRoomEnv(LabelledEnvBase):
         p.resetSimulation(physicsClientId=c)
         p.setGravity(0, 0, -self.params.gravity, physicsClientId=c)
         p.setTimeStep(self.params.dt, physicsClientId=c)
-        build_room(c, room)
+        build_room(c, room, visual=self.render_mode is not None)  # visual shapes only for rendering
         self.body = p.loadURDF(_urdf_path(), [0, 0, 1], physicsClientId=c, flags=p.URDF_USE_INERTIA_FROM_FILE)
         p.changeDynamics(self.body, -1, linearDamping=self.damping[0], angularDamping=self.damping[1], physicsClientId=c)
         self.room = room

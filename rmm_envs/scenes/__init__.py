@@ -6,12 +6,14 @@ collision checks and observations, so labels and the env agree by construction:
 
 * :class:`Dubins4DScene`: :class:`rmm_envs.systems.Dubins4D` among circles (with a goal);
 * :class:`MazeScene`: :class:`rmm_envs.systems.Dubins3D` in a maze;
-* :class:`QuadrotorScene`: the numpy :class:`rmm_envs.systems.Quadrotor` in a room.
+* :class:`QuadrotorScene`: the numpy :class:`rmm_envs.systems.Quadrotor` in a room;
+* :class:`QuadrotorCommandScene`: the same body flown through its cascaded controller (the
+  control is a velocity command).
 """
 
 from rmm_envs.scenes.base import SceneBase
 from rmm_envs.scenes.dubins4d import Dubins4DScene
 from rmm_envs.scenes.maze import MazeScene
-from rmm_envs.scenes.quadrotor import QuadrotorScene
+from rmm_envs.scenes.quadrotor import QuadrotorCommandScene, QuadrotorScene
 
-__all__ = ["Dubins4DScene", "MazeScene", "QuadrotorScene", "SceneBase"]
+__all__ = ["Dubins4DScene", "MazeScene", "QuadrotorCommandScene", "QuadrotorScene", "SceneBase"]

@@ -6,10 +6,11 @@ import numpy as np
 
 from rmm_envs.scenes.base import SceneBase
 from rmm_envs.systems.quadrotor import Quadrotor, QuadrotorParams
+from rmm_envs.systems.quadrotor_control import ClosedLoopQuadrotor, CommandController
 from rmm_envs.worlds.room_collision import RoomCollision
 from rmm_envs.worlds.rooms import Room
 
-__all__ = ["QuadrotorScene"]
+__all__ = ["QuadrotorCommandScene", "QuadrotorScene"]
 
 
 class QuadrotorScene(SceneBase):
@@ -37,3 +38,20 @@ class QuadrotorScene(SceneBase):
     def path_failed(self, paths):
         paths = np.asarray(paths, float)
         return self.collision.states_failed(paths.reshape(-1, 13)).reshape(paths.shape[:2]).any(axis=1)
+
+
+class QuadrotorCommandScene(QuadrotorScene):
+    """The quadrotor flown through its cascaded controller in one room: the
+    :class:`rmm_envs.risk.RiskScene` of ``QuadrotorRoomGuarded-v0`` / ``QuadrotorRoomParallel-v0``.
+
+    The control is the *command* ``(v_forward, v_left, v_up, yaw_rate)``
+    (:mod:`rmm_envs.systems.quadrotor_control`), so the estimator's uniform controls are random
+    bounded commands, each held for one tree level, to a controller that keeps the body
+    flying: the label is the risk of flying on at random, not of tumbling under random thrust
+    and moments (:class:`QuadrotorScene`, the paper's labelling of ``QuadrotorRoom-v0``).
+    Failure is the same analytic room collision at the path's states.
+    """
+
+    def __init__(self, room: Room, controller: CommandController) -> None:
+        super().__init__(room, controller.params)
+        self.system = ClosedLoopQuadrotor(controller)

@@ -163,16 +163,28 @@ class Quadrotor:
         q_new /= np.linalg.norm(q_new, axis=1, keepdims=True)
         return np.concatenate([pos_new, q_new, v_new, w_new], axis=1)
 
-    def propagate(self, states, controls, duration: float, n_steps: int) -> np.ndarray:
+    def check_propagate(self, states, controls, duration: float, n_steps: int, low=None, high=None):
+        """``(states (N, 13), controls (N, 4) clipped to [low, high])`` as floats (default bounds:
+        the body's thrust and moments), or ``ValueError`` naming the bad argument."""
         states = np.asarray(states, dtype=float)
-        u = np.clip(np.asarray(controls, dtype=float), self.control_low, self.control_high)
+        low = self.control_low if low is None else low
+        high = self.control_high if high is None else high
+        u = np.clip(np.asarray(controls, dtype=float), low, high)
         if states.ndim != 2 or states.shape[1] != 13:
             raise ValueError(f"states must have shape (N, 13), got {states.shape}")
         if u.shape != (states.shape[0], 4):
             raise ValueError(f"controls must have shape ({states.shape[0]}, 4), got {u.shape}")
         if not (math.isfinite(duration) and duration >= 0) or int(n_steps) != n_steps or n_steps < 2:
             raise ValueError(f"need duration >= 0 and n_steps >= 2, got {duration}, {n_steps}")
-        per_segment = math.ceil(duration / (n_steps - 1) / self.params.dt - 1e-9)
+        return states, u
+
+    def segment_steps(self, duration: float, n_steps: int) -> int:
+        """Physics steps per path segment: ``ceil(duration / (n_steps - 1) / dt)`` (whole steps)."""
+        return math.ceil(duration / (n_steps - 1) / self.params.dt - 1e-9)
+
+    def propagate(self, states, controls, duration: float, n_steps: int) -> np.ndarray:
+        states, u = self.check_propagate(states, controls, duration, n_steps)
+        per_segment = self.segment_steps(duration, n_steps)
         out = np.empty((states.shape[0], int(n_steps), 13))
         out[:, 0] = s = states
         for k in range(1, int(n_steps)):
@@ -180,4 +192,3 @@ class Quadrotor:
                 s = self.step(s, u)
             out[:, k] = s
         return out
-

@@ -63,6 +63,18 @@ class RoomCollision:
             radii[i] = np.linalg.norm(s) if o["shape"] == "box" else (np.hypot(s[0], s[1] / 2) if o["shape"] == "cylinder" else s[0])
         self.obj_size, self.obj_radius = sizes, radii
 
+    def clearance(self, point) -> float:
+        """A lower bound (m) on the gap between the room and the body centred at ``point`` in
+        any orientation: the distance from the body's bounding sphere to the floor, to every
+        wall box and to every object's bounding sphere (negative when they overlap)."""
+        c = np.asarray(point, dtype=float).reshape(3)
+        gap = c[2]
+        if self.walls.size:
+            gap = min(gap, float(_box_sd(c[None, :] - self.walls[:, :3], self.walls[:, 3:]).min()))
+        if self.obj_pos.size:
+            gap = min(gap, float((np.linalg.norm(self.obj_pos - c, axis=1) - self.obj_radius).min()))
+        return gap - BOUND
+
     def states_failed(self, states: np.ndarray) -> np.ndarray:
         """``(N,)`` bool for body states ``(N, 13)`` (position and quaternion are used)."""
         s = np.asarray(states, float)

@@ -1,0 +1,415 @@
+"""The quadrotor under parallel autonomy: a reckless pilot, a guardian that may take over.
+
+``QuadrotorRoomGuarded-v0`` (blocking, fixed step) and ``QuadrotorRoomParallel-v0``
+(non-blocking: the guardian's thinking time passes in the world), the quadrotor counterparts
+of ``Dubins3DMazeGuarded-v0`` / ``Dubins3DMazeParallel-v0`` with the same contract
+(:mod:`rmm_envs.autonomy`), so the same guardians and ``rmm-bench --env`` run on them.
+
+## Description
+
+The PyBullet quadrotor of ``QuadrotorRoom-v0`` (0.5 kg, a collision cylinder of radius 0.3 m,
+240 Hz physics, the same :class:`~rmm_envs.systems.quadrotor.QuadrotorParams`) in a room from
+:func:`rmm_envs.worlds.rooms.generate_room`, flown by a *command* ``(v_forward, v_left, v_up,
+yaw_rate)`` in the body's heading frame.  At every physics step the cascaded controller of
+:mod:`rmm_envs.systems.quadrotor_control` turns the command into thrust and body moments (the
+velocity loop, then a geometric attitude loop), which PyBullet applies.  A built-in reckless
+pilot (:class:`rmm_envs.quadrotor_pilot.WaypointPilot`) flies straight through
+``n_waypoints`` random points of the room, the last one the goal, ignoring walls and objects:
+alone it collides in 57.7% of the episodes and reaches the goal in 42.2% (2,048 episodes of
+``rmm-bench`` seed 0, fixed 1 ms clock).  The agent is a *guardian*: at every step it decides
+whether to take over the command.
+
+## Action space
+
+``Dict(active_ctrl=Discrete(2), vforward_ctrl=Box(-2, 2, (1,)), vleft_ctrl=Box(-2, 2, (1,)),
+vup_ctrl=Box(-1, 1, (1,)), yawrate_ctrl=Box(-1, 1, (1,)))``, a
+:class:`rmm_envs.autonomy.GuardianActionSpace` built from the controller's command box
+(m/s, m/s, m/s, rad/s).  ``active_ctrl = 0``: the pilot commands this step; ``1``: the
+guardian's command is applied, clipped to the box.  NaN/inf, a wrong shape or type, a missing
+or unknown field, or an ``active_ctrl`` other than 0/1 raise ``ValueError`` naming the field.
+The space's safe default (``space.safe_default``, what ``brakes`` applies) is
+:class:`~rmm_envs.systems.quadrotor_control.HoverAndLevel`: the zero command.  The guardian
+commands the same controller as the pilot, so the risk labels' random commands, the safe
+default and the pilot live in one space.
+
+## Observation space
+
+``Box(23,)`` float32, an :class:`rmm_envs.autonomy.ObservationBox` with a named layout:
+
+| index | field | observation | range |
+|---|---|---|---|
+| 0-7 | ``rays`` | ray ranges in the body's x-y plane at ``k pi / 4`` from the body x axis, m | [0, ray_range] |
+| 8-9 | ``rays_vertical`` | ray ranges along body +z and -z, m | [0, ray_range] |
+| 10-13 | ``orientation`` | quaternion (x, y, z, w), world frame | [-1, 1] |
+| 14-16 | ``velocity`` | linear velocity in the heading frame (forward, left, up), m/s | R |
+| 17-19 | ``angular_velocity`` | angular velocity in the body frame, rad/s | R |
+| 20-22 | ``goal_offset`` | goal minus position in the heading frame, m | R |
+
+Rays start at the body's origin (PyBullet ``rayTestBatch``, not hitting the body itself) and
+read ``ray_range`` (10 m) when nothing is nearer.
+
+## Dynamics and episode end
+
+Each interval holds one command: the pilot's (chosen from the state at the interval's start)
+or the guardian's.  An interval of ``d`` seconds runs the PyBullet steps that bring the
+physics clock to ``floor(t / dt)`` steps at simulated time ``t`` (so fractional steps carry
+over).  ``+1`` when the body comes within ``goal_radius`` of the goal (checked after every
+physics step), ``-1`` on any contact with the room (walls, objects, floor; PyBullet's contact
+points, queried at every physics step of an interval unless the body's clearance at the
+interval's start, :meth:`RoomCollision.clearance <rmm_envs.worlds.room_collision.RoomCollision.clearance>`,
+exceeds what it can travel in the interval, ``|v| d + (F_max / m + g) d^2 / 2`` plus 5 cm; the
+clearance is recomputed only when the last one, less the distance moved since, falls short);
+the episode ends on either (``terminated``), else ``truncated`` at
+``max_episode_sim_time`` (60 s).  The state after a collision is the one PyBullet reached.
+
+## Starting state
+
+A room from the seed; the body level and still at a point uniform over the room's footprint at
+a height ``U(altitude)`` (0.5-2 m), clear of everything by 0.2 m (bounding sphere), with a
+uniform yaw; ``n_waypoints`` (3) points drawn the same way with 0.5 m of clearance, each at
+least ``min_leg`` (3 m) horizontally from the one before; a room where they cannot be placed
+in 200 draws each is redrawn (up to 100 rooms).  ``reset(seed=..., options={"room": Room or
+dict of generate_room arguments, "state": [13 numbers], "waypoints": [[x, y, z], ...]})`` sets
+any of them; a given state must be clear of the room (``ValueError`` otherwise, as for a
+non-unit quaternion, an unknown key or malformed values).
+
+## Risk labelling
+
+The :class:`rmm_envs.risk.LabelledEnv` hooks: ``risk_scene()`` is the episode's
+:class:`rmm_envs.scenes.QuadrotorCommandScene`: the estimator's controls are random commands
+uniform over the command box, each held for one tree level, flown through the same controller
+(compiled, pinned to the numpy propagator that reproduces PyBullet), failing on the analytic
+room collision.  ``sample_states(rng, n)`` draws flight states: a point uniform over the
+footprint at height ``U(0.2, 3)`` m, a uniform yaw, roll and pitch ``U(-0.3, 0.3)`` rad,
+heading-frame velocity ``U(-2, 2)`` m/s horizontally and ``U(-1, 1)`` vertically, angular
+velocity ``U(-1, 1)`` rad/s per axis, rejecting states in contact.  ``observe_states`` is this
+env's observation of them (PyBullet rays; the goal offset from the episode's goal).
+
+## Info
+
+Every step: ``sim_time``, ``state`` (13 numbers, **privileged**), ``active`` and ``control``
+(the command applied).  On the last step also ``outcome`` (``"goal"``, ``"collision"`` or
+``"timeout"``) and ``episode`` (the statistics of :class:`rmm_envs.envs.guarded.GuardedEnv`,
+``final_speed`` the body's speed).  :meth:`QuadrotorRoomGuardedEnv.privileged` returns the
+state, the room, the goal, the waypoints and the simulated time.
+
+## Arguments
+
+``gym.make("QuadrotorRoomGuarded-v0", step_dt=0.1, max_episode_sim_time=60.0, n_waypoints=3,
+altitude=(0.5, 2.0), min_leg=3.0, goal_radius=0.5, cruise_speed=1.5, climb_speed=0.5,
+ray_range=10.0, clock=None, render_mode=None)``; ``cruise_speed`` and ``climb_speed`` (m/s)
+are the pilot's.  ``gym.make("QuadrotorRoomParallel-v0", time_accel=10.0, base_step=0.1,
+clock=None, **same)``: the same world under :class:`rmm_envs.wrappers.NonBlockingStepping`
+(each ``step(a)`` advances the world by ``elapsed * time_accel + base_step`` seconds under the
+previous action, then stores ``a``; the first interval is the pilot's).
+
+## Rendering
+
+``render_mode="rgb_array"``: a 320 x 240 frame from PyBullet's software renderer, as
+``QuadrotorRoom-v0``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
+from rmm_envs.clocks import make_clock
+from rmm_envs.envs.base import check_arguments, draw_until, finite, option_vector, rejection_sample, whole
+from rmm_envs.envs.guarded import GuardedEnv
+from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
+from rmm_envs.quadrotor_pilot import WaypointPilot
+from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
+from rmm_envs.systems.quadrotor_control import (ClosedLoopQuadrotor, CommandController, HoverAndLevel, command_wrench,
+                                                heading_of)
+from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
+from rmm_envs.worlds.room_collision import RoomCollision
+from rmm_envs.worlds.rooms import Room
+
+__all__ = ["CONTROLS", "HoverAndLevel", "QuadrotorRoomGuardedEnv", "make_parallel_env", "observation_layout"]
+
+CONTROLS = ("vforward_ctrl", "vleft_ctrl", "vup_ctrl", "yawrate_ctrl")
+N_RAYS = 8
+_CONTACT_MARGIN = 0.05  # m added to the travel bound before contact queries are skipped
+
+
+def observation_layout() -> ObservationLayout:
+    """The named slices of the observation table above."""
+    return ObservationLayout.of(("rays", N_RAYS), ("rays_vertical", 2), ("orientation", 4), ("velocity", 3),
+                                ("angular_velocity", 3), ("goal_offset", 3),
+                                ray_angles=[k * math.pi / 4 for k in range(N_RAYS)])
+
+
+_DIRS = np.array([[math.cos(k * math.pi / 4), math.sin(k * math.pi / 4), 0.0] for k in range(N_RAYS)]
+                 + [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+
+
+def _heading_frame(q, vectors) -> np.ndarray:
+    """World vectors ``(N, 3)`` in the heading frames of quaternions ``(N, 4)``."""
+    psi = heading_of(q)
+    c, s = np.cos(psi), np.sin(psi)
+    v = np.asarray(vectors, float)
+    return np.column_stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]])
+
+
+class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
+    """Blocking quadrotor parallel-autonomy env; see the module docstring for the full spec."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    reset_options = ("room", "state", "waypoints")
+
+    def __init__(self, step_dt: float = 0.1, max_episode_sim_time: float = 60.0, n_waypoints: int = 3,
+                 altitude=(0.5, 2.0), min_leg: float = 3.0, goal_radius: float = 0.5, cruise_speed: float = 1.5,
+                 climb_speed: float = 0.5, ray_range: float = 10.0, clock=None, render_mode: str | None = None) -> None:
+        alt = tuple(altitude) if isinstance(altitude, (tuple, list)) else ()
+        check_arguments([
+            (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number of seconds > 0"),
+            (finite(max_episode_sim_time) and max_episode_sim_time > 0, "max_episode_sim_time", max_episode_sim_time,
+             "a finite number of seconds > 0 (episodes need a time limit)"),
+            (whole(n_waypoints) and n_waypoints >= 1, "n_waypoints", n_waypoints, "an integer >= 1 (the last is the goal)"),
+            (len(alt) == 2 and all(finite(a) for a in alt) and 0.35 <= alt[0] <= alt[1], "altitude", altitude,
+             "a pair (min, max) of heights in m with 0.35 <= min <= max (the body must clear the floor)"),
+            (finite(min_leg) and min_leg >= 0, "min_leg", min_leg, "a finite number of metres >= 0"),
+            (finite(goal_radius) and goal_radius > 0, "goal_radius", goal_radius, "a finite number of metres > 0"),
+            (finite(cruise_speed) and cruise_speed > 0, "cruise_speed", cruise_speed, "a finite speed > 0 (m/s)"),
+            (finite(climb_speed) and climb_speed > 0, "climb_speed", climb_speed, "a finite speed > 0 (m/s)"),
+            (finite(ray_range) and ray_range > 0, "ray_range", ray_range, "a finite number of metres > 0"),
+        ])
+        QuadrotorRoomEnv.__init__(self, render_mode=render_mode)
+        self.step_dt = float(step_dt)
+        self.max_episode_sim_time = float(max_episode_sim_time)
+        self.n_waypoints = int(n_waypoints)
+        self.altitude = (float(alt[0]), float(alt[1]))
+        self.min_leg, self.goal_radius, self.ray_range = float(min_leg), float(goal_radius), float(ray_range)
+        self.controller = CommandController(self.params)
+        self.system = ClosedLoopQuadrotor(self.controller)
+        self.pilot = WaypointPilot(self.system.control_low, self.system.control_high, cruise_speed, climb_speed)
+        self.clock = make_clock(clock)
+        self.action_space = GuardianActionSpace.for_system(self.system, CONTROLS, safe_default=HoverAndLevel())
+        lay = observation_layout()
+        low = np.array([0.0] * (N_RAYS + 2) + [-1.0] * 4 + [-np.inf] * 9, np.float32)
+        high = np.array([self.ray_range] * (N_RAYS + 2) + [1.0] * 4 + [np.inf] * 9, np.float32)
+        self.observation_space = ObservationBox(low, high, lay)
+        # F_max / m + g: no body acceleration exceeds it (damping only slows the body)
+        self._a_bound = self.params.control_high[0] / self.params.mass + self.params.gravity
+        self._ray_to = (self.ray_range * _DIRS).tolist()
+        self._wrench = np.empty(4)
+        self.goal = np.zeros(3)
+
+    # ------------------------------------------------------------------ starts
+    def _point(self, rng, collision: RoomCollision, room: Room, clearance: float, after=None):
+        cells = np.argwhere(room.footprint)
+
+        def draw():
+            ij = cells[rng.integers(len(cells))]
+            xy = room.origin + (ij + rng.uniform(0, 1, 2)) * room.cell
+            return np.array([xy[0], xy[1], rng.uniform(*self.altitude)])
+
+        def ok(p):
+            far = after is None or math.hypot(p[0] - after[0], p[1] - after[1]) >= self.min_leg
+            return far and collision.clearance(p) >= clearance
+
+        return draw_until(draw, ok, 200)
+
+    def _plan(self, room: Room, state, waypoints):
+        """``(state, waypoints)`` for ``room``, drawing what was not given; ``None`` if they
+        cannot be placed."""
+        rng, col = self.np_random, RoomCollision(room)
+        if state is None:
+            p = self._point(rng, col, room, 0.2)
+            if p is None:
+                return None
+            state = np.concatenate([p, quat_from_euler(0.0, 0.0, rng.uniform(-np.pi, np.pi)), np.zeros(6)])
+        if waypoints is None:
+            pts, last = [], state[:3]
+            for _ in range(self.n_waypoints):
+                last = self._point(rng, col, room, 0.5, after=last)
+                if last is None:
+                    return None
+                pts.append(last)
+            waypoints = np.array(pts)
+        return state, waypoints
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        gym.Env.reset(self, seed=seed)
+        options = self.check_options(options)
+        state = waypoints = None
+        if "state" in options:
+            state = option_vector(options["state"], 13, "state", " (position, quaternion xyzw, velocity, angular velocity)")
+            if abs(np.linalg.norm(state[3:7]) - 1) > 1e-6:
+                raise ValueError(f"option 'state': the quaternion {state[3:7].tolist()} is not a unit quaternion")
+        if "waypoints" in options:
+            w = np.asarray(options["waypoints"], dtype=float) if isinstance(options["waypoints"], (list, tuple, np.ndarray)) else None
+            if w is None or w.ndim != 2 or w.shape[0] < 1 or w.shape[1] != 3 or not np.isfinite(w).all():
+                raise ValueError(f"option 'waypoints' must be a list of K >= 1 finite [x, y, z] points, got {options['waypoints']!r}")
+            waypoints = w.copy()
+        spec = options.get("room")
+        if spec is not None and not isinstance(spec, (Room, dict)):
+            raise ValueError(f"option 'room' must be a Room or a dict of generate_room arguments, got {type(spec).__name__}")
+        if isinstance(spec, Room) or state is not None:
+            room = self._draw_room(spec)
+            if state is not None and RoomCollision(room).states_failed(state[None])[0]:
+                raise ValueError(f"option 'state': the body at {state[:3].tolist()} is in contact with the room "
+                                 "(give 'room' too, or move the state)")
+            plan = self._plan(room, state, waypoints)
+            if plan is None:
+                raise ValueError("could not place the start and waypoints in the given room (200 draws each); "
+                                 "give 'state' and 'waypoints' too")
+        else:
+            plan = None
+            for _ in range(self._MAX_ROOM_DRAWS):
+                room = self._draw_room(spec)
+                plan = self._plan(room, None, waypoints)
+                if plan is not None:
+                    break
+            if plan is None:
+                raise RuntimeError(f"could not place a start and {self.n_waypoints} waypoints in "
+                                   f"{self._MAX_ROOM_DRAWS} rooms drawn from the seed")
+        state, waypoints = plan
+        self._build(room)
+        self.set_state(state)
+        self.scene = QuadrotorCommandScene(room, self.controller)
+        self.pilot.reset(waypoints)
+        self.goal = waypoints[-1].copy()
+        self._physics_steps = 0
+        self._gap, self._gap_at = -math.inf, state[:3].copy()  # no clearance known yet
+        self._last_control = np.zeros(4)
+        self.begin_statistics()
+        self.begin_episode()
+        self.clock.start()
+        return self._observe(state), {"sim_time": 0.0, "state": state.copy()}
+
+    # ------------------------------------------------------------------ stepping
+    def rays(self) -> np.ndarray:
+        res = self.p.rayTestBatch([[0.0, 0.0, 0.0]] * len(_DIRS), self._ray_to, parentObjectUniqueId=self.body,
+                                  parentLinkIndex=-1, physicsClientId=self.client)
+        return np.array([self.ray_range * r[2] if r[0] >= 0 else self.ray_range for r in res])
+
+    def _features(self, states, rays) -> np.ndarray:
+        st = np.atleast_2d(states)
+        n = st.shape[0]
+        R = quat_to_rot(st[:, 3:7])
+        out = np.empty((n, 23), dtype=np.float32)
+        out[:, :N_RAYS + 2] = rays
+        out[:, 10:14] = st[:, 3:7]
+        out[:, 14:17] = _heading_frame(st[:, 3:7], st[:, 7:10])
+        out[:, 17:20] = np.einsum("nji,nj->ni", R, st[:, 10:13])
+        out[:, 20:23] = _heading_frame(st[:, 3:7], self.goal[None, :] - st[:, :3])
+        return out
+
+    def _observe(self, s) -> np.ndarray:
+        """:meth:`_features` of one state, in scalar arithmetic (a step's observation; the tests
+        hold the two equal)."""
+        out = np.empty(23, dtype=np.float32)
+        out[:N_RAYS + 2] = self.rays()
+        qx, qy, qz, qw = s[3], s[4], s[5], s[6]
+        out[10:14] = s[3:7]
+        psi = math.atan2(2 * (qx * qy + qz * qw), 1 - 2 * (qy * qy + qz * qz))
+        c, sn = math.cos(psi), math.sin(psi)
+        out[14], out[15], out[16] = c * s[7] + sn * s[8], -sn * s[7] + c * s[8], s[9]
+        r = quat_to_rot(s[3:7])
+        out[17:20] = r.T @ s[10:13]
+        dx, dy = self.goal[0] - s[0], self.goal[1] - s[1]
+        out[20], out[21], out[22] = c * dx + sn * dy, -sn * dx + c * dy, self.goal[2] - s[2]
+        return out
+
+    def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
+        """Advance the world by ``duration`` seconds under one held command: the pilot's (chosen
+        at the start of the interval) when ``active`` is false, else ``control`` (already
+        validated).  ``compute_time``: the agent's time charged to this step (statistics)."""
+        self.check_interval(duration)
+        p, c, body, par = self.p, self.client, self.body, self.params
+        s = self.get_state()
+        cmd = np.asarray(control, dtype=float).reshape(4) if active else self.pilot.command(s)
+        cmd = np.minimum(np.maximum(cmd, self.system.control_low), self.system.control_high)
+        target = math.floor((self._sim_time + duration) / par.dt + 1e-9)
+        n = max(0, target - self._physics_steps)
+        t = n * par.dt
+        speed = math.sqrt(s[7] ** 2 + s[8] ** 2 + s[9] ** 2)
+        reach = speed * t + 0.5 * self._a_bound * t * t + _CONTACT_MARGIN
+        # the clearance is 1-Lipschitz in the position: the last one computed, less the distance
+        # moved since, is a lower bound; compute it afresh only when that bound is not enough
+        query = self._gap - math.dist(s[:3], self._gap_at) <= reach
+        if query:
+            self._gap, self._gap_at = self.scene.collision.clearance(s[:3]), s[:3].copy()
+            query = self._gap <= reach
+        k, w, gx, gy, gz = self.controller.packed, self._wrench, *self.goal
+        r2 = self.goal_radius ** 2
+        hit = reached = False
+        frame, force, torque, step = p.LINK_FRAME, p.applyExternalForce, p.applyExternalTorque, p.stepSimulation
+        pose, vel, contacts, origin = p.getBasePositionAndOrientation, p.getBaseVelocity, p.getContactPoints, (0.0, 0.0, 0.0)
+        for _ in range(n):
+            command_wrench(s, cmd, k, w)
+            force(body, -1, (0.0, 0.0, w[0]), origin, frame, physicsClientId=c)
+            torque(body, -1, (w[1], w[2], w[3]), frame, physicsClientId=c)
+            step(physicsClientId=c)
+            self._physics_steps += 1
+            hit = query and len(contacts(bodyA=body, physicsClientId=c)) > 0
+            pos, quat = pose(body, physicsClientId=c)
+            s = np.array(pos + quat + sum(vel(body, physicsClientId=c), ()))
+            if hit:
+                break
+            if (pos[0] - gx) ** 2 + (pos[1] - gy) ** 2 + (pos[2] - gz) ** 2 < r2:
+                reached = True
+                break
+        self.count_interval(duration, active, compute_time)
+        self._last_control = cmd
+        outcome, reward = ("collision", -1.0) if hit else ("goal", 1.0) if reached else (None, 0.0)
+        info = {"sim_time": self._sim_time, "state": s.copy(), "active": bool(active), "control": cmd.copy()}
+        terminated, truncated = self.end_interval(outcome, reward, info)
+        return self._observe(s), reward, terminated, truncated, info
+
+    def final_speed(self) -> float:
+        v = self.get_state()[7:10]
+        return float(np.linalg.norm(v))
+
+    # ------------------------------------------------------------------ accessors and labelling hooks
+    def privileged(self) -> dict:
+        """The true state, the room, the goal, the waypoints and the simulated time. **Privileged**."""
+        self.require_episode()
+        return {"state": self.get_state(), "room": self.room, "goal": self.goal.copy(),
+                "waypoints": self.pilot.waypoints.copy(), "sim_time": self._sim_time}
+
+    true_state = property(lambda self: self.get_state(), doc="The true state (a copy). **Privileged**.")
+    sim_time = property(lambda self: self._sim_time, doc="Simulated seconds since reset.")
+
+    def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """Flight states of the current room (see "Risk labelling" above)."""
+        self.require_episode()
+        room = self.room
+        cells = np.argwhere(room.footprint)
+
+        def draw(r, k):
+            ij = cells[r.integers(len(cells), size=k)]
+            xy = room.origin + (ij + r.uniform(0, 1, (k, 2))) * room.cell
+            q = quat_from_euler(r.uniform(-0.3, 0.3, k), r.uniform(-0.3, 0.3, k), r.uniform(-np.pi, np.pi, k))
+            psi = heading_of(q)
+            vf, vl = r.uniform(-2, 2, k), r.uniform(-2, 2, k)
+            v = np.column_stack([np.cos(psi) * vf - np.sin(psi) * vl, np.sin(psi) * vf + np.cos(psi) * vl,
+                                 r.uniform(-1, 1, k)])
+            return np.column_stack([xy, r.uniform(0.2, 3.0, k), q, v, r.uniform(-1, 1, (k, 3))])
+
+        return rejection_sample(rng, n, 13, draw, self.scene.collision.states_failed, "quadrotor flight states clear of the room")
+
+    def observe_states(self, states, rng=None) -> np.ndarray:
+        """This env's observation of states ``(N, 13)`` in the current episode (PyBullet rays; the
+        env's state is restored); ``rng`` is unused."""
+        self.require_episode()
+        keep = self.get_state()
+        st = np.asarray(states, dtype=float)
+        rays = np.empty((st.shape[0], N_RAYS + 2))
+        for i, row in enumerate(st):
+            self.set_state(row)
+            rays[i] = self.rays()
+        self.set_state(keep)
+        return self._features(st, rays)
+
+
+def make_parallel_env(time_accel: float = 10.0, base_step: float = 0.1, clock=None, **kwargs):
+    """Entry point of ``QuadrotorRoomParallel-v0``: the blocking env under non-blocking stepping."""
+    from rmm_envs.wrappers.nonblocking import NonBlockingStepping
+
+    return NonBlockingStepping(QuadrotorRoomGuardedEnv(**kwargs), time_accel=time_accel, base_step=base_step, clock=clock)
