@@ -257,6 +257,25 @@ def test_flying_into_a_wall_is_a_collision(env):
     assert 2.0 < info["state"][0] < 2.75  # the body (radius 0.3) at the wall's face x = 2.75
 
 
+def test_given_waypoints_and_states_must_lie_over_the_room_and_clear_of_it(env):
+    room = Room(footprint=np.ones((20, 20), bool), origin=np.array([-5.0, -5.0]), cell=0.5, wall_height=3.0,
+                walls=np.array([[3.0, 0.0, 1.5, 0.25, 1.0, 1.5]]))
+    for w, bad in (([[2.0, 2.0, 1.0], [20.0, 0.0, 1.0]], 1),  # beyond the footprint
+                   ([[2.0, 2.0, 0.2]], 0),                    # the bounding sphere (0.304 m) in the floor
+                   ([[3.0, 0.0, 1.0]], 0)):                   # inside the wall
+        with pytest.raises(ValueError, match=rf"option 'waypoints': point {bad} .* must lie over the footprint of option 'room'"):
+            env.reset(seed=0, options={"room": room, "waypoints": w})
+    with pytest.raises(ValueError, match=r"option 'state': the body at \[9.0, 0.0, 1.5\] is not over the footprint of option 'room'$"):
+        env.reset(seed=0, options={"room": room, "state": list(level(x=9.0))})
+    # a point just clear of the floor is accepted, and it becomes the goal
+    env.reset(seed=0, options={"room": room, "state": list(level()), "waypoints": [[-3.0, 0.0, BOUND + 0.01]]})
+    np.testing.assert_array_equal(env.privileged()["goal"], [-3.0, 0.0, BOUND + 0.01])
+    # generated rooms are redrawn until given waypoints fit: the episode's room holds them
+    w = [[0.5, 0.5, 1.2]]
+    env.reset(seed=3, options={"waypoints": w})
+    assert env.room.in_footprint(np.array([[0.5, 0.5]]))[0] and RoomCollision(env.room).clearance(w[0]) > 0
+
+
 def test_same_seed_same_episode():
     a, b = gym.make("QuadrotorRoomParallel-v0", clock="fixed:1"), gym.make("QuadrotorRoomParallel-v0", clock="fixed:1")
     for e in (a, b):
@@ -277,7 +296,10 @@ def test_same_seed_same_episode():
 @pytest.mark.parametrize("options, match", [
     ({"state": [0.0] * 12}, "option 'state' must be 13 finite numbers"),
     ({"state": [0, 0, 1, 0, 0, 0, 2.0, 0, 0, 0, 0, 0, 0]}, "is not a unit quaternion"),
-    ({"state": list(level(z=0.01))}, "in contact with the room"),
+    ({"state": list(level(z=0.01))}, "in contact with the room drawn from the seed"),
+    ({"state": list(level(x=1000.0, y=1000.0))}, r"the body at \[1000.0, 1000.0, 1.5\] is not over the footprint of the room"),
+    ({"waypoints": [[1000.0, 1000.0, 1.0]]}, r"option 'waypoints' \[\[1000.0, 1000.0, 1.0\]\]: in none of 100 rooms"),
+    ({"waypoints": [[0.0, 0.0, -5.0]]}, "in none of 100 rooms drawn from the seed does every point lie over the footprint"),
     ({"waypoints": [[1.0, 2.0]]}, "option 'waypoints' must be a list of K >= 1 finite"),
     ({"waypoints": [[1.0, 2.0, np.nan]]}, "option 'waypoints' must be a list"),
     ({"room": 3}, "option 'room' must be a Room or a dict"),
@@ -293,6 +315,7 @@ def test_bad_reset_options(env, options, match):
     ({"max_episode_sim_time": math.inf}, "max_episode_sim_time must be"),
     ({"n_waypoints": 0}, "n_waypoints must be an integer >= 1"),
     ({"altitude": (0.1, 2.0)}, r"altitude must be a pair \(min, max\)"),
+    ({"altitude": (0.4, 0.7)}, r"max > 0.804 \(a drawn waypoint keeps its bounding sphere 0.5 m above the floor\), got \(0.4, 0.7\)"),
     ({"goal_radius": -1}, "goal_radius must be"),
     ({"cruise_speed": math.nan}, "cruise_speed must be"),
     ({"ray_range": 0}, "ray_range must be"),

@@ -65,13 +65,18 @@ the episode ends on either (``terminated``), else ``truncated`` at
 ## Starting state
 
 A room from the seed; the body level and still at a point uniform over the room's footprint at
-a height ``U(altitude)`` (0.5-2 m), clear of everything by 0.2 m (bounding sphere), with a
-uniform yaw; ``n_waypoints`` (3) points drawn the same way with 0.5 m of clearance, each at
-least ``min_leg`` (3 m) horizontally from the one before; a room where they cannot be placed
-in 200 draws each is redrawn (up to 100 rooms).  ``reset(seed=..., options={"room": Room or
-dict of generate_room arguments, "state": [13 numbers], "waypoints": [[x, y, z], ...]})`` sets
-any of them; a given state must be clear of the room (``ValueError`` otherwise, as for a
-non-unit quaternion, an unknown key or malformed values).
+a height ``U(altitude)`` (0.5-2 m), its bounding sphere (radius 0.304 m) clear of everything by
+0.2 m, with a uniform yaw; ``n_waypoints`` (3) points drawn the same way with 0.5 m of
+clearance, each at least ``min_leg`` (3 m) horizontally from the one before.  Draws that miss
+the clearance are redrawn, so starts lie at least 0.504 m and waypoints at least 0.804 m above
+the floor (``altitude``'s maximum must exceed 0.804).  A room where they cannot be placed in
+200 draws each is redrawn (up to 100 rooms; then ``RuntimeError`` naming ``min_leg`` and
+``altitude``).  ``reset(seed=..., options={"room": Room or dict of generate_room arguments,
+"state": [13 numbers], "waypoints": [[x, y, z], ...]})`` sets any of them.  A given state must
+lie over the room's footprint and clear of it; given waypoints must lie over the footprint with
+the bounding sphere clear of the floor, walls and objects (generated rooms are redrawn until
+they are; a given room, or a room with a given state, raises).  Those, a non-unit quaternion,
+an unknown key or malformed values raise ``ValueError`` naming the option.
 
 ## Risk labelling
 
@@ -126,13 +131,15 @@ from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
 from rmm_envs.systems.quadrotor_control import (ClosedLoopQuadrotor, CommandController, HoverAndLevel, command_wrench,
                                                 heading_of)
 from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
-from rmm_envs.worlds.room_collision import RoomCollision
+from rmm_envs.worlds.room_collision import BOUND, RoomCollision
 from rmm_envs.worlds.rooms import Room
 
 __all__ = ["CONTROLS", "HoverAndLevel", "QuadrotorRoomGuardedEnv", "make_parallel_env", "observation_layout"]
 
 CONTROLS = ("vforward_ctrl", "vleft_ctrl", "vup_ctrl", "yawrate_ctrl")
 N_RAYS = 8
+START_CLEARANCE = 0.2  # m between the bounding sphere and the room at a drawn start
+WAYPOINT_CLEARANCE = 0.5  # m between the bounding sphere and the room at a drawn waypoint
 _CONTACT_MARGIN = 0.05  # m added to the travel bound before contact queries are skipped
 
 
@@ -164,14 +171,16 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
     def __init__(self, step_dt: float = 0.1, max_episode_sim_time: float = 60.0, n_waypoints: int = 3,
                  altitude=(0.5, 2.0), min_leg: float = 3.0, goal_radius: float = 0.5, cruise_speed: float = 1.5,
                  climb_speed: float = 0.5, ray_range: float = 10.0, clock=None, render_mode: str | None = None) -> None:
-        alt = tuple(altitude) if isinstance(altitude, (tuple, list)) else ()
+        alt = tuple(altitude) if isinstance(altitude, (tuple, list, np.ndarray)) else ()
         check_arguments([
             (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number of seconds > 0"),
             (finite(max_episode_sim_time) and max_episode_sim_time > 0, "max_episode_sim_time", max_episode_sim_time,
              "a finite number of seconds > 0 (episodes need a time limit)"),
             (whole(n_waypoints) and n_waypoints >= 1, "n_waypoints", n_waypoints, "an integer >= 1 (the last is the goal)"),
-            (len(alt) == 2 and all(finite(a) for a in alt) and 0.35 <= alt[0] <= alt[1], "altitude", altitude,
-             "a pair (min, max) of heights in m with 0.35 <= min <= max (the body must clear the floor)"),
+            (len(alt) == 2 and all(finite(a) for a in alt) and 0.35 <= alt[0] <= alt[1]
+             and alt[1] > WAYPOINT_CLEARANCE + BOUND, "altitude", altitude,
+             f"a pair (min, max) of heights in m with 0.35 <= min <= max and max > {WAYPOINT_CLEARANCE + BOUND:.3f} "
+             f"(a drawn waypoint keeps its bounding sphere {WAYPOINT_CLEARANCE} m above the floor)"),
             (finite(min_leg) and min_leg >= 0, "min_leg", min_leg, "a finite number of metres >= 0"),
             (finite(goal_radius) and goal_radius > 0, "goal_radius", goal_radius, "a finite number of metres > 0"),
             (finite(cruise_speed) and cruise_speed > 0, "cruise_speed", cruise_speed, "a finite speed > 0 (m/s)"),
@@ -218,20 +227,33 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         """``(state, waypoints)`` for ``room``, drawing what was not given; ``None`` if they
         cannot be placed."""
         rng, col = self.np_random, RoomCollision(room)
+        if waypoints is not None and self._bad_waypoint(room, col, waypoints) is not None:
+            return None
         if state is None:
-            p = self._point(rng, col, room, 0.2)
+            p = self._point(rng, col, room, START_CLEARANCE)
             if p is None:
                 return None
             state = np.concatenate([p, quat_from_euler(0.0, 0.0, rng.uniform(-np.pi, np.pi)), np.zeros(6)])
         if waypoints is None:
             pts, last = [], state[:3]
             for _ in range(self.n_waypoints):
-                last = self._point(rng, col, room, 0.5, after=last)
+                last = self._point(rng, col, room, WAYPOINT_CLEARANCE, after=last)
                 if last is None:
                     return None
                 pts.append(last)
             waypoints = np.array(pts)
         return state, waypoints
+
+    @staticmethod
+    def _bad_waypoint(room: Room, collision: RoomCollision, waypoints):
+        """The index of the first given waypoint the body cannot reach a goal at in ``room`` (not
+        over its footprint, or its bounding sphere touching the floor, a wall or an object), or
+        ``None``."""
+        over = room.in_footprint(waypoints[:, :2])
+        for i, w in enumerate(waypoints):
+            if not over[i] or collision.clearance(w) <= 0:
+                return i
+        return None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         gym.Env.reset(self, seed=seed)
@@ -251,13 +273,21 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
             raise ValueError(f"option 'room' must be a Room or a dict of generate_room arguments, got {type(spec).__name__}")
         if isinstance(spec, Room) or state is not None:
             room = self._draw_room(spec)
+            which = "option 'room'" if isinstance(spec, Room) else "the room drawn from the seed (give 'room' too, or move it)"
+            if state is not None and not room.in_footprint(state[None, :2])[0]:
+                raise ValueError(f"option 'state': the body at {state[:3].tolist()} is not over the footprint of {which}")
             if state is not None and RoomCollision(room).states_failed(state[None])[0]:
-                raise ValueError(f"option 'state': the body at {state[:3].tolist()} is in contact with the room "
-                                 "(give 'room' too, or move the state)")
+                raise ValueError(f"option 'state': the body at {state[:3].tolist()} is in contact with {which}")
+            bad = None if waypoints is None else self._bad_waypoint(room, RoomCollision(room), waypoints)
+            if bad is not None:
+                raise ValueError(f"option 'waypoints': point {bad} {waypoints[bad].tolist()} must lie over the "
+                                 f"footprint of {which} with the body's bounding sphere clear of it")
             plan = self._plan(room, state, waypoints)
             if plan is None:
-                raise ValueError("could not place the start and waypoints in the given room (200 draws each); "
-                                 "give 'state' and 'waypoints' too")
+                given = " and ".join(f"'{k}'" for k in ("room", "state", "waypoints") if k in options)
+                missing = [f"'{k}'" for k in ("state", "waypoints") if k not in options]
+                raise ValueError(f"could not place the {' and '.join(missing)} around option(s) {given} "
+                                 f"(200 draws each, min_leg={self.min_leg} m, altitude={self.altitude})")
         else:
             plan = None
             for _ in range(self._MAX_ROOM_DRAWS):
@@ -265,9 +295,14 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
                 plan = self._plan(room, None, waypoints)
                 if plan is not None:
                     break
+            if plan is None and waypoints is not None:
+                raise ValueError(f"option 'waypoints' {waypoints.tolist()}: in none of {self._MAX_ROOM_DRAWS} rooms drawn "
+                                 "from the seed does every point lie over the footprint, clear of the room, with a start "
+                                 "placeable; give 'room' too or move them")
             if plan is None:
                 raise RuntimeError(f"could not place a start and {self.n_waypoints} waypoints in "
-                                   f"{self._MAX_ROOM_DRAWS} rooms drawn from the seed")
+                                   f"{self._MAX_ROOM_DRAWS} rooms drawn (min_leg={self.min_leg} m, "
+                                   f"altitude={self.altitude}); lower min_leg or widen altitude")
         state, waypoints = plan
         self._build(room)
         self.set_state(state)
@@ -276,7 +311,6 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         self.goal = waypoints[-1].copy()
         self._physics_steps = 0
         self._gap, self._gap_at = -math.inf, state[:3].copy()  # no clearance known yet
-        self._last_control = np.zeros(4)
         self.begin_statistics()
         self.begin_episode()
         self.clock.start()
@@ -356,7 +390,6 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
                 reached = True
                 break
         self.count_interval(duration, active, compute_time)
-        self._last_control = cmd
         outcome, reward = ("collision", -1.0) if hit else ("goal", 1.0) if reached else (None, 0.0)
         info = {"sim_time": self._sim_time, "state": s.copy(), "active": bool(active), "control": cmd.copy()}
         terminated, truncated = self.end_interval(outcome, reward, info)
