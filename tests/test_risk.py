@@ -1,3 +1,5 @@
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -211,3 +213,142 @@ def test_bad_systems_and_states():
         est.estimate(np.array([[np.nan]]), np.random.default_rng(0))
     with pytest.raises(ValueError, match="rng"):
         est.estimate(np.zeros((1, 1)))
+
+
+# ------------------------------------------------------------------ pinned where the tests above leave room
+class IntFlagsLine1D(Line1D):
+    """Line1D reporting failures as 0/1 integers and its control box as integer lists."""
+
+    def __init__(self):
+        super().__init__()
+        self.control_low, self.control_high = [0], [3]
+
+    def path_failed(self, paths):
+        return super().path_failed(paths).astype(int)
+
+    def state_failed(self, states):
+        return super().state_failed(states).astype(int)
+
+
+def test_failure_flags_given_as_integers_give_the_same_labels():
+    states = np.array([[0.0], [0.5], [1.5], [0.9]])
+    for kw in (dict(branches=3, depth=2), dict(branches=2, depth=1, leaf="heuristic"), dict(depth=0)):
+        a = RiskEstimator(Line1D(), horizon=0.5, n_steps=3, **kw).estimate(states, np.random.default_rng(4))
+        b = RiskEstimator(IntFlagsLine1D(), horizon=0.5, n_steps=3, **kw).estimate(states, np.random.default_rng(4))
+        for f in ("risk", "min_risk_ctrl", "min_risk_ctrl_dur", "n_leaves"):
+            np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+    c = [[0.0], [0.6], [2.0]]
+    est = RiskEstimator(IntFlagsLine1D(), branches=2, depth=0, horizon=1.0, n_steps=5)
+    np.testing.assert_array_equal(est.estimate_candidates(states[:3], c, hold=1.0, rng=np.random.default_rng(0)),
+                                  [[0, 0, 1], [0, 1, 1], [1, 1, 1]])
+
+
+def test_candidates_by_hand_b_differs_from_k_and_the_tree_runs_from_the_branch_end():
+    """Line1D (x' = u, wall at 1): holding u for ``hold`` ends at x + u * hold; from there one level
+    of 2 branches of t = 1 s with controls drawn from the rng fails where x_end + u' >= 1."""
+    est = RiskEstimator(Line1D(), branches=2, depth=1, horizon=1.0, n_steps=3)
+    states = np.array([[0.0], [0.25]])
+    cands = [[0.0], [0.5], [2.0]]  # held 0.5 s: ends at x, x + 0.25, x + 1 (fails on the way for both roots)
+    r = est.estimate_candidates(states, cands, hold=0.5, rng=np.random.default_rng(3))
+    assert r.shape == (2, 3)
+    # the tree's controls, drawn for the live ends in root-major, candidate-minor order (4 ends)
+    u = np.random.default_rng(3).uniform(0.0, 3.0, size=(4, 2, 1))[..., 0]
+    ends = np.array([0.0, 0.25, 0.25, 0.5])
+    expected = (ends[:, None] + u >= 1.0).mean(axis=1)
+    np.testing.assert_array_equal(r, [[expected[0], expected[1], 1.0], [expected[2], expected[3], 1.0]])
+
+
+def test_candidates_refused_with_their_messages():
+    est = RiskEstimator(IntFlagsLine1D(), branches=2, depth=1)
+    rng = np.random.default_rng(0)
+    cases = [
+        (dict(states=np.zeros((1, 2)), candidates=[[0.0]], hold=1.0), "states must have shape (B, 1), got (1, 2)"),
+        (dict(states=np.zeros(1), candidates=[[0.0]], hold=1.0), "states must have shape (B, 1), got (1,)"),
+        (dict(states=np.zeros((1, 1)), candidates=[0.0], hold=1.0), "candidates must have shape (K >= 1, 1), got (1,)"),
+        (dict(states=np.zeros((1, 1)), candidates=[[[0.0]]], hold=1.0), "candidates must have shape (K >= 1, 1), got (1, 1, 1)"),
+        (dict(states=np.zeros((1, 1)), candidates=np.zeros((0, 1)), hold=1.0), "candidates must have shape (K >= 1, 1), got (0, 1)"),
+        (dict(states=np.zeros((1, 1)), candidates=[[0.0, 1.0]], hold=1.0), "candidates must have shape (K >= 1, 1), got (1, 2)"),
+        (dict(states=np.zeros((1, 1)), candidates=[[np.inf]], hold=1.0), "candidates must be finite, got [[inf]]"),
+        (dict(states=np.zeros((1, 1)), candidates=[[3.5]], hold=1.0),
+         "candidates [[3.5]] fall outside the control box [[0.0], [3.0]]"),
+        (dict(states=np.zeros((1, 1)), candidates=[[-0.5]], hold=1.0),
+         "candidates [[-0.5]] fall outside the control box [[0.0], [3.0]]"),
+        (dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold=-1.0), "hold must be a finite number of seconds > 0, got -1.0"),
+        (dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold="1"), "hold must be a finite number of seconds > 0, got '1'"),
+        (dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold=np.nan), "hold must be a finite number of seconds > 0, got nan"),
+    ]
+    for kw, text in cases:
+        with pytest.raises(ValueError) as e:
+            est.estimate_candidates(rng=rng, **kw)
+        assert str(e.value) == text
+    # the box's edges are inside it
+    assert est.estimate_candidates(np.zeros((1, 1)), [[0.0], [3.0]], hold=0.1, rng=rng).shape == (1, 2)
+
+
+def test_a_custom_policy_is_called_per_chunk_with_the_generator():
+    """Four roots at x = 0 in chunks of two, one level of 4 branches, t = 1: the policy draws from
+    the generator it is given, once per chunk; a root's risk is the share of its draws >= 1."""
+    calls = []
+
+    def draw(states, rng):
+        calls.append(states.shape[0])
+        return rng.uniform(0.0, 3.0, size=(states.shape[0], 1))
+
+    est = RiskEstimator(Line1D(), branches=4, depth=1, horizon=1.0, n_steps=2, policy=draw, chunk_size=2)
+    r = est.estimate(np.zeros((4, 1)), np.random.default_rng(5))
+    ref = np.random.default_rng(5)
+    u = np.concatenate([ref.uniform(0.0, 3.0, size=(8, 1)), ref.uniform(0.0, 3.0, size=(8, 1))])[:, 0].reshape(4, 4)
+    assert calls == [8, 8]
+    np.testing.assert_array_equal(r.risk, (u >= 1.0).mean(axis=1))
+    np.testing.assert_array_equal(r.min_risk_ctrl[:, 0], u[np.arange(4), np.argmin(u >= 1.0, axis=1)])
+    with pytest.raises(ValueError) as e:
+        RiskEstimator(Line1D(), branches=2, depth=1, policy=draw).estimate(np.zeros((1, 1)))
+    assert str(e.value) == "estimate() needs rng (a numpy Generator) for a custom policy"
+    bad = RiskEstimator(Line1D(), branches=2, depth=1, policy=lambda s, rng: np.zeros((s.shape[0], 2)))
+    with pytest.raises(ValueError) as e:
+        bad.estimate(np.zeros((3, 1)), np.random.default_rng(0))
+    assert str(e.value) == "policy returned shape (6, 2), expected (6, 1)"
+    with pytest.raises(TypeError) as e:
+        RiskEstimator(Line1D(), policy="uniform")
+    assert str(e.value) == "policy must be callable policy(states, rng) -> controls, got 'uniform'"
+
+
+def test_default_chunk_keeps_a_chunk_at_about_32768_leaves():
+    for n, m, chunk in ((32, 2, 32), (4, 3, 512), (5, 1, 6553), (2, 0, 32768), (200, 2, 1)):
+        est = RiskEstimator(Line1D(), branches=n, depth=m)
+        assert est.chunk_size == chunk
+        assert est.chunk_size * n**m <= max(32768, n**m)  # the bound on one chunk's leaves (one root at least)
+    assert RiskEstimator(Line1D(), chunk_size=3).chunk_size == 3
+
+
+def test_tree_size_refusals_say_how_large():
+    with pytest.raises(ValueError) as e:
+        RiskEstimator(Line1D(), branches=1025, depth=2)
+    assert str(e.value) == ("branches (n, --branches) = 1025 and depth (m, --depth) = 2 make a tree of 1,051,650 nodes per "
+                            "state (n + n^2 + ... + n^m); at most 1,048,576 are supported (the paper uses n = 32, m = 2: "
+                            "1,056): lower --branches or --depth")
+    with pytest.raises(ValueError) as e:
+        RiskEstimator(Line1D(), branches=2**40, depth=2)
+    assert "make a tree of more than 2^64 nodes per state" in str(e.value)
+    RiskEstimator(Line1D(), branches=1, depth=2**20)  # exactly 2^20 nodes: the largest accepted
+    with pytest.raises(ValueError, match="make a tree of 1,048,577 nodes"):
+        RiskEstimator(Line1D(), branches=1, depth=2**20 + 1)
+
+
+def test_tree_nodes_by_hand():
+    from rmm_envs.risk.estimator import tree_nodes
+
+    assert [tree_nodes(1, 5), tree_nodes(3, 2), tree_nodes(32, 2), tree_nodes(2, 0)] == [5, 12, 1056, 0]
+    assert tree_nodes(2, 64) == 2**65 - 2 and tree_nodes(2, 65) == math.inf  # exact up to 2^64 levels' worth
+
+
+def test_metric_names_and_refusals():
+    assert get_metric("worst") is worst_case and get_metric("worst_case") is worst_case
+    assert get_metric("cvar", 0.25)(np.array([0.0, 0.0, 0.0, 1.0])) == 1.0
+    with pytest.raises(ValueError) as e:
+        get_metric("median")
+    assert str(e.value) == "unknown risk metric 'median'; expected one of ['expected', 'cvar', 'worst']"
+    for alpha in (None, 1, 0.0, float("nan"), "0.5"):
+        with pytest.raises(ValueError) as e:
+            get_metric("cvar", alpha)
+        assert str(e.value) == f"cvar needs alpha in the open interval (0, 1), got {alpha!r}"

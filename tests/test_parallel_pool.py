@@ -1,0 +1,149 @@
+"""The local worker pool's parts (rmm_envs.parallel), pinned in this process where test_faults.py's
+drills only see them from outside: the worker loop's protocol over its pipe, exit causes in words,
+the start-up allowance of the time limit, graceful and forced stops, and the argument checks."""
+
+import multiprocessing as mp
+import os
+import signal
+
+import pytest
+
+from rmm_envs.parallel import _STARTUP_S, TaskLost, _Worker, _worker_main, describe_exit, run_local
+from tests.bench_helpers import faulty_task
+
+
+@pytest.mark.parametrize("code, text", [
+    (None, "still running"),
+    (0, "exited with code 0 (os._exit or sys.exit inside the task?)"),
+    (3, "exited with code 3 (os._exit or sys.exit inside the task?)"),
+    (-signal.SIGKILL, "killed by SIGKILL (often the out-of-memory killer)"),
+    (-signal.SIGSEGV, "killed by SIGSEGV (a crash in compiled code)"),
+    (-signal.SIGBUS, "killed by SIGBUS (a crash in compiled code)"),
+    (-signal.SIGABRT, "killed by SIGABRT (an abort in compiled code)"),
+    (-signal.SIGTERM, "killed by SIGTERM"),
+    (-200, "killed by signal 200"),
+])
+def test_exit_causes_in_words(code, text):
+    assert describe_exit(code) == text
+
+
+def _loop(fn, messages, close_parent=False):
+    """Run the worker loop here on a pipe preloaded with ``messages``; return what it sent back."""
+    parent, child = mp.Pipe(duplex=True)
+    for m in messages:
+        parent.send(m)
+    if close_parent:
+        parent.close()
+    old = signal.getsignal(signal.SIGINT)
+    try:
+        _worker_main(fn, child)
+        assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN  # the parent decides what Ctrl-C stops
+    finally:
+        signal.signal(signal.SIGINT, old)
+    if close_parent:
+        return None
+    out = []
+    while parent.poll():
+        out.append(parent.recv())
+    return out
+
+
+def test_worker_loop_says_start_then_sends_each_result_until_told_to_stop():
+    out = _loop(faulty_task, [(0, ("sq", 3)), (5, ("sq", 4)), None, (6, ("sq", 5))])
+    assert out == [("start", 0, None), ("ok", 0, 9), ("start", 5, None), ("ok", 5, 16)]  # nothing after None
+
+
+def test_worker_loop_sends_a_task_exception_with_its_traceback_and_goes_on():
+    out = _loop(faulty_task, [(1, ("raise",)), (2, ("sq", 2)), None])
+    assert [m[:2] for m in out] == [("start", 1), ("err", 1), ("start", 2), ("ok", 2)]
+    exc, tb = out[1][2]
+    assert isinstance(exc, KeyError) and exc.args == ("task raised on purpose",)
+    assert "in faulty_task" in tb and tb.strip().endswith("KeyError: 'task raised on purpose'")
+    assert out[3][2] == 4
+
+
+def _generator(task):
+    return (x for x in range(task))
+
+
+def _raise_unpicklable(task):
+    raise ValueError((x for x in range(task)))
+
+
+def test_a_result_or_exception_that_cannot_be_pickled_is_sent_as_an_error_saying_so():
+    out = _loop(_generator, [(7, 3), None])
+    assert [m[:2] for m in out] == [("start", 7), ("err", 7)]
+    exc, tb = out[1][2]
+    assert isinstance(exc, RuntimeError) and tb == ""
+    assert str(exc) == "task 7: its result cannot be sent to the parent process (TypeError: cannot pickle 'generator' object)"
+    out = _loop(_raise_unpicklable, [(8, 3), None])
+    exc, tb = out[1][2]
+    assert str(exc) == "task 8: its exception cannot be sent to the parent process (TypeError: cannot pickle 'generator' object)"
+    assert "in _raise_unpicklable" in tb and "ValueError" in tb  # the original traceback, as text
+
+
+def test_worker_loop_ends_quietly_when_the_parent_is_gone():
+    ran = []
+    # the task was sent before the parent went: the loop reads it, cannot say "start", and never runs it
+    assert _loop(ran.append, [(0, "task")], close_parent=True) is None
+    assert ran == []
+    assert _loop(ran.append, [], close_parent=True) is None  # nothing sent: EOF at once
+
+
+def test_a_worker_still_starting_gets_the_startup_allowance_on_top_of_the_time_limit():
+    assert _STARTUP_S == 120.0
+    w = object.__new__(_Worker)  # the deadline arithmetic only, no process
+    w.started, w.running = 1000.0, False
+    assert w.deadline(2.5) == 1000.0 + 2.5 + 120.0
+    w.running = True
+    assert w.deadline(2.5) == 1002.5
+
+
+def test_graceful_stop_ends_a_worker_by_message_and_a_forced_one_by_signal():
+    ctx = mp.get_context("spawn")
+    a, b = _Worker(ctx, faulty_task), _Worker(ctx, faulty_task)
+    try:
+        a.give(0, ("sq", 6))
+        assert a.job == (0, ("sq", 6)) and a.running is False
+        assert a.conn.recv() == ("start", 0, None)
+        assert a.conn.recv() == ("ok", 0, 36)
+        b.give(1, ("sq", 2))
+        assert b.conn.recv() == ("start", 1, None)
+        assert b.conn.recv() == ("ok", 1, 4)
+    finally:
+        a.stop(graceful=True)
+        b.stop(graceful=False)
+    assert a.proc.exitcode == 0  # it read None and returned
+    assert b.proc.exitcode == -signal.SIGTERM  # terminated
+    assert a.conn.closed and b.conn.closed
+
+
+def _pid(task):
+    return os.getpid(), task
+
+
+def test_one_worker_or_one_task_runs_here_in_order():
+    me = os.getpid()
+    assert list(run_local(_pid, ["a", "b", "c"], 1)) == [(me, "a"), (me, "b"), (me, "c")]
+    assert list(run_local(_pid, ["a"], 4)) == [(me, "a")]
+    assert list(run_local(_pid, [], 4)) == []
+
+
+@pytest.mark.parametrize("kw, text", [
+    ({"workers": 0}, "workers must be an integer >= 1, got 0"),
+    ({"workers": 1.5}, "workers must be an integer >= 1, got 1.5"),
+    ({"workers": 2, "task_timeout": 0}, "task_timeout must be > 0 seconds or None, got 0"),
+    ({"workers": 2, "task_timeout": -1.0}, "task_timeout must be > 0 seconds or None, got -1.0"),
+])
+def test_bad_pool_arguments_are_refused_before_anything_runs(kw, text):
+    ran = []
+    with pytest.raises(ValueError) as e:
+        list(run_local(ran.append, [1, 2], **kw))
+    assert str(e.value) == text and ran == []
+
+
+def test_task_lost_carries_the_task_and_its_cause():
+    lost = TaskLost(("sq", 1), "its worker process (pid 1) killed by SIGKILL")
+    assert (lost.task, lost.cause) == (("sq", 1), "its worker process (pid 1) killed by SIGKILL")
+    with pytest.raises(AttributeError):
+        lost.cause = "changed"  # frozen: the record of a loss is not edited
