@@ -196,3 +196,17 @@ def test_a_wrong_observation_size_is_refused_showing_the_space_or_the_field():
         t.reset(seed=0, **maze_spaces())
     assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins3DMaze-v0) expects observations of "
                             "shape (12,), the env's observation field 'rays' has 8 numbers")
+
+
+def test_the_sides_are_read_from_the_directions_however_the_angles_are_written():
+    """The same eight directions with those past the left written negative (ray 4 at -pi, not +pi):
+    ray 4, straight behind, still belongs to neither side."""
+    angles = [0.0, math.pi / 4, math.pi / 2, 3 * math.pi / 4, -math.pi, -3 * math.pi / 4, -math.pi / 2, -math.pi / 4]
+    lay = ObservationLayout.of(("rays", 8), ("goal_offset", 2), ("heading", 1), ray_angles=angles)
+    g = LRMMGuardian(RaysModel(nearest_wall_risk), threshold=0.3, commit=0, action="turn", inputs="rays")
+    g.reset(seed=0, **maze_spaces(lay))
+    # left's nearest wall 2, right's 4: right, whatever the wall behind (0.5) is
+    a = g.act(maze_obs([1.0, 2.0, 2.0, 2.0, 0.5, 4.0, 4.0, 4.0]), {})
+    assert a["active_ctrl"] == 1 and a["turnrate_ctrl"].tolist() == [-U1]
+    a = g.act(maze_obs([1.0, 4.0, 4.0, 4.0, 0.5, 2.0, 2.0, 2.0]), {})
+    assert a["turnrate_ctrl"].tolist() == [U1]
