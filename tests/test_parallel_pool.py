@@ -2,9 +2,12 @@
 drills only see them from outside: the worker loop's protocol over its pipe, exit causes in words,
 the start-up allowance of the time limit, graceful and forced stops, and the argument checks."""
 
+import functools
 import multiprocessing as mp
+import multiprocessing.util  # noqa: F401 - mp.util
 import os
 import signal
+from pathlib import Path
 
 import pytest
 
@@ -103,6 +106,7 @@ def test_graceful_stop_ends_a_worker_by_message_and_a_forced_one_by_signal():
     ctx = mp.get_context("spawn")
     a, b = _Worker(ctx, faulty_task), _Worker(ctx, faulty_task)
     try:
+        assert a.proc.daemon and b.proc.daemon  # workers never outlive the parent
         a.give(0, ("sq", 6))
         assert a.job == (0, ("sq", 6)) and a.running is False
         assert a.conn.recv() == ("start", 0, None)
@@ -116,6 +120,20 @@ def test_graceful_stop_ends_a_worker_by_message_and_a_forced_one_by_signal():
     assert a.proc.exitcode == 0  # it read None and returned
     assert b.proc.exitcode == -signal.SIGTERM  # terminated
     assert a.conn.closed and b.conn.closed
+
+
+def _finalized(task):
+    """Leaves a file behind when its worker process exits normally (multiprocessing's exit
+    finalizers run then; a worker ended by a signal leaves none)."""
+    folder, i = task
+    mp.util.Finalize(None, functools.partial(Path(folder, f"{i}.exited").touch), exitpriority=1)
+    return i
+
+
+def test_a_finished_run_stops_its_workers_gracefully(tmp_path):
+    tasks = [(str(tmp_path), i) for i in range(2)]
+    assert sorted(run_local(_finalized, tasks, 2)) == [0, 1]  # one task per worker
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["0.exited", "1.exited"]
 
 
 def _pid(task):
