@@ -277,6 +277,8 @@ def test_candidates_refused_with_their_messages():
         (dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold="1"), "hold must be a finite number of seconds > 0, got '1'"),
         (dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold=np.nan), "hold must be a finite number of seconds > 0, got nan"),
     ]
+    cases.append((dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold=0.0),
+                  "hold must be a finite number of seconds > 0, got 0.0"))
     for kw, text in cases:
         with pytest.raises(ValueError) as e:
             est.estimate_candidates(rng=rng, **kw)
@@ -352,3 +354,83 @@ def test_metric_names_and_refusals():
         with pytest.raises(ValueError) as e:
             get_metric("cvar", alpha)
         assert str(e.value) == f"cvar needs alpha in the open interval (0, 1), got {alpha!r}"
+
+
+class NoLeafLine1D:
+    """Line1D without the optional leaf_estimate."""
+
+    state_dim, control_dim = 1, 1
+    control_low, control_high = np.array([0.0]), np.array([3.0])
+    propagate, path_failed, state_failed = Line1D.propagate, Line1D.path_failed, Line1D.state_failed
+    wall = 1.0
+
+
+def test_defaults_and_params_are_pinned():
+    from rmm_envs.risk.estimator import validate_tree_params
+
+    assert RiskEstimator(Line1D()).params() == {"branches": 32, "depth": 2, "horizon": 2.0, "n_steps": 8,
+                                                "metric": "expected", "alpha": None, "leaf": "zero", "policy": "uniform"}
+
+    def my_policy(states, rng):
+        return np.zeros((states.shape[0], 1))
+
+    p = RiskEstimator(Line1D(), branches=3, depth=1, horizon=0.5, n_steps=4, metric="cvar", alpha=0.3, leaf="heuristic",
+                      policy=my_policy).params()
+    assert p == {"branches": 3, "depth": 1, "horizon": 0.5, "n_steps": 4, "metric": "cvar", "alpha": 0.3,
+                 "leaf": "heuristic", "policy": "my_policy"}
+    assert validate_tree_params(32, 2, 2.0, 8) is None  # the defaults of the check are valid ones
+
+
+def test_leaf_estimate_is_needed_only_for_the_heuristic_leaf():
+    r = RiskEstimator(NoLeafLine1D(), branches=2, depth=1, horizon=1.0, n_steps=2).estimate(np.zeros((1, 1)), controls=ctl([0.5, 2.0]))
+    assert r.risk[0] == 0.5
+    with pytest.raises(TypeError) as e:
+        RiskEstimator(NoLeafLine1D(), leaf="heuristic")
+    assert str(e.value) == "leaf='heuristic' needs NoLeafLine1D.leaf_estimate(states)"
+
+
+def test_estimate_refusals_and_result_types_are_pinned():
+    est = RiskEstimator(Line1D(), branches=2, depth=2, horizon=1.0, n_steps=2)
+    cases = [
+        (dict(states=np.array([[np.inf]]), rng=np.random.default_rng(0)), "states must be finite"),
+        (dict(states=np.zeros((1, 1))), "estimate() needs rng (a numpy Generator) or explicit controls"),
+        (dict(states=np.zeros((1, 1)), controls=ctl([0.1, 0.2])), "controls must have one array per level (2), got 1"),
+        (dict(states=np.zeros((1, 1)), controls=ctl([0.1, 0.2], [0.1] * 3)),
+         "controls[1] must have shape (1, 4, c), got (1, 3, 1)"),
+        (dict(states=np.zeros((1, 1)), controls=ctl([0.1] * 3, [0.1] * 4)),
+         "controls[0] must have shape (1, 2, c), got (1, 3, 1)"),
+    ]
+    for kw, text in cases:
+        with pytest.raises(ValueError) as e:
+            est.estimate(**kw)
+        assert str(e.value) == text
+    r = est.estimate(np.zeros((2, 1)), np.random.default_rng(0))
+    assert r.n_leaves.dtype == np.int64 and r.risk.dtype == np.float64
+
+
+def test_object_arrays_of_numbers_are_read_as_floats():
+    """States and candidates are converted to float: an object array of numbers (as a pandas column
+    of Python floats gives) labels exactly as the float array does, on the compiled Dubins4D scene."""
+    sc = scene([[3.0, 0.0, 1.0]])
+    est = RiskEstimator(sc, branches=4, depth=1)
+    states = np.array([[0.0, 0.0, 0.0, 1.0], [1.0, 0.5, 0.2, 2.0]])
+    obj = states.astype(object)
+    np.testing.assert_array_equal(est.estimate(obj, np.random.default_rng(0)).risk,
+                                  est.estimate(states, np.random.default_rng(0)).risk)
+    cands = np.array([[0.0, -0.5], [0.25, 0.5]])
+    ref = est.estimate_candidates(states, cands, hold=1.0, rng=np.random.default_rng(1))
+    np.testing.assert_array_equal(est.estimate_candidates(obj, cands.astype(object), hold=1.0, rng=np.random.default_rng(1)), ref)
+
+
+def test_the_tree_after_a_candidate_starts_where_the_held_branch_ends():
+    """The tree's policy sees the live ends, root-major and candidate-minor: x + u * hold."""
+    seen = []
+
+    def record(states, rng):
+        seen.append(states[::2, 0].tolist())  # two branches per end
+        return np.zeros((states.shape[0], 1))
+
+    est = RiskEstimator(Line1D(), branches=2, depth=1, horizon=1.0, n_steps=5, policy=record)
+    r = est.estimate_candidates(np.array([[0.0], [0.25]]), [[0.2], [0.5], [2.0]], hold=1.5, rng=np.random.default_rng(0))
+    assert seen == [[0.2 * 1.5, 0.5 * 1.5, 0.25 + 0.2 * 1.5]]  # 2.0 * 1.5 and 0.25 + 0.5 * 1.5 = 1 reach the wall
+    np.testing.assert_array_equal(r, [[0.0, 0.0, 1.0], [0.0, 1.0, 1.0]])  # u = 0 afterwards: only the held branches fail
