@@ -390,15 +390,15 @@ def test_leaf_estimate_is_needed_only_for_the_heuristic_leaf():
 
 
 def test_estimate_refusals_and_result_types_are_pinned():
-    est = RiskEstimator(Line1D(), branches=2, depth=2, horizon=1.0, n_steps=2)
+    est = RiskEstimator(Line1D(), branches=3, depth=2, horizon=1.0, n_steps=2)
     cases = [
         (dict(states=np.array([[np.inf]]), rng=np.random.default_rng(0)), "states must be finite"),
         (dict(states=np.zeros((1, 1))), "estimate() needs rng (a numpy Generator) or explicit controls"),
-        (dict(states=np.zeros((1, 1)), controls=ctl([0.1, 0.2])), "controls must have one array per level (2), got 1"),
-        (dict(states=np.zeros((1, 1)), controls=ctl([0.1, 0.2], [0.1] * 3)),
-         "controls[1] must have shape (1, 4, c), got (1, 3, 1)"),
-        (dict(states=np.zeros((1, 1)), controls=ctl([0.1] * 3, [0.1] * 4)),
-         "controls[0] must have shape (1, 2, c), got (1, 3, 1)"),
+        (dict(states=np.zeros((1, 1)), controls=ctl([0.1] * 3)), "controls must have one array per level (2), got 1"),
+        (dict(states=np.zeros((1, 1)), controls=ctl([0.1] * 3, [0.1] * 6)),
+         "controls[1] must have shape (1, 9, c), got (1, 6, 1)"),
+        (dict(states=np.zeros((1, 1)), controls=ctl([0.1] * 2, [0.1] * 9)),
+         "controls[0] must have shape (1, 3, c), got (1, 2, 1)"),
     ]
     for kw, text in cases:
         with pytest.raises(ValueError) as e:
@@ -434,3 +434,26 @@ def test_the_tree_after_a_candidate_starts_where_the_held_branch_ends():
     r = est.estimate_candidates(np.array([[0.0], [0.25]]), [[0.2], [0.5], [2.0]], hold=1.5, rng=np.random.default_rng(0))
     assert seen == [[0.2 * 1.5, 0.5 * 1.5, 0.25 + 0.2 * 1.5]]  # 2.0 * 1.5 and 0.25 + 0.5 * 1.5 = 1 reach the wall
     np.testing.assert_array_equal(r, [[0.0, 0.0, 1.0], [0.0, 1.0, 1.0]])  # u = 0 afterwards: only the held branches fail
+
+
+class Float64OnlyLine1D(Line1D):
+    """Line1D that refuses anything but float64 states (as a kernel compiled for float64 would)."""
+
+    def _check(self, a):
+        assert a.dtype == np.float64, a.dtype
+        return a
+
+    def propagate(self, states, controls, duration, n_steps):
+        return super().propagate(self._check(states), controls, duration, n_steps)
+
+    def state_failed(self, states):
+        return super().state_failed(self._check(states))
+
+
+def test_the_system_is_given_float64_states_whatever_the_caller_passes():
+    est = RiskEstimator(Float64OnlyLine1D(), branches=2, depth=1, horizon=1.0, n_steps=2)
+    for roots in (np.array([[0], [2]]), np.array([[0.0], [2.0]], np.float32), [[0], [2]]):
+        assert est.estimate(roots, controls=[np.array([[[0.5], [0.9]]] * 2)]).risk.tolist() == [0.0, 1.0]
+        held = RiskEstimator(Float64OnlyLine1D(), depth=0, n_steps=2)  # the held branch's failure only
+        np.testing.assert_array_equal(held.estimate_candidates(roots, [[0.0], [1.0]], hold=1.0, rng=np.random.default_rng(0)),
+                                      [[0.0, 1.0], [1.0, 1.0]])
