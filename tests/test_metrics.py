@@ -86,3 +86,18 @@ def test_table_i_batches_64_episodes_by_default():
     assert row["goal"] == pytest.approx(100 * m)
     assert row["goal_std"] == pytest.approx(100 * math.sqrt((64 * (1 - m) ** 2 + m ** 2) / 65))
     assert aggregate(df.to_dict("records"))["goal"] == pytest.approx((row["goal"], row["goal_std"]))
+
+
+def test_degenerate_inputs_give_nan_without_a_numpy_warning():
+    """All weights zero, or every episode errored: NaN by the explicit branches, never by a 0/0 or
+    the mean of an empty slice (which would print a RuntimeWarning in every report)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert all(map(math.isnan, weighted_mean_std([1.0, 2.0], [0, 0])))
+        a = aggregate([{"episode": 0, "outcome": "error"}, {"episode": 1, "outcome": "error"}])
+        t = table_i(pd.DataFrame.from_records([{"agent": "e", "episode": 0, "outcome": "error"}]))
+    assert [math.isnan(a[f"total_{k}"]) for k in ("goal", "collision", "timeout")] == [True] * 3
+    assert (a["episodes"], a["errors"], a["error_rate"]) == (2, 2, 1.0)
+    assert math.isnan(t.loc["e", "total_goal"]) and t.loc["e", "errors"] == 1
