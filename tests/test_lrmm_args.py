@@ -2,7 +2,9 @@
 (where a full mutation run of guardians/lrmm/guardian.py found them loose)."""
 
 import math
+import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -55,8 +57,10 @@ def test_the_tables_decision_defaults_are_for_the_shipped_model_only():
 def test_fallback_warnings_point_at_the_callers_line():
     with pytest.warns(UserWarning) as w:
         LRMMGuardian(forward_ray_model())
-    assert [x.filename for x in w] == [__file__, __file__]
-    assert all(x.category is UserWarning for x in w)
+    assert all(x.category is UserWarning for x in w) and len(w) == 2
+    assert not any(Path(x.filename).parts[-3:] == ("guardians", "lrmm", "guardian.py") for x in w)
+    if "mutmut" not in sys.modules:  # under mutation testing, mutmut's trampoline adds frames in between
+        assert [x.filename for x in w] == [__file__, __file__]
 
 
 def test_last_risk_is_nan_until_the_first_decision_and_after_each_reset():
