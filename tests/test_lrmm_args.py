@@ -137,6 +137,10 @@ def test_check_spaces_judges_the_spaces_it_is_given_before_any_reset():
         turn.check_spaces(bare_space, TURN)
     assert str(e.value) == "guardian 'lrmm' needs the observation field(s) ['rays']; the observation has ['goal_offset', 'heading', 'ranges']"
     turn.check_spaces(maze_spaces()["observation_space"], TURN)
+    whole = LRMMGuardian(RaysModel(forward_risk, obs_dim=11), threshold=0.3, action="turn")  # reads all 11 numbers
+    with pytest.raises(ValueError) as e:
+        whole.check_spaces(bare_space, TURN)
+    assert str(e.value) == "guardian 'lrmm' needs the observation field(s) ['rays']; the observation has ['goal_offset', 'heading', 'ranges']"
 
 
 @pytest.mark.parametrize("angles", [
