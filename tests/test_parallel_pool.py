@@ -13,6 +13,7 @@ import pytest
 
 from rmm_envs.parallel import _STARTUP_S, TaskLost, _Worker, _worker_main, describe_exit, run_local
 from tests.bench_helpers import faulty_task
+from tests.test_faults import within  # fails a test that would hang (a pool that misses its end)
 
 
 @pytest.mark.parametrize("code, text", [
@@ -38,10 +39,18 @@ def _loop(fn, messages, close_parent=False):
     if close_parent:
         parent.close()
     old = signal.getsignal(signal.SIGINT)
+
+    def hung(*_):
+        raise TimeoutError("the worker loop did not return within 30 s")
+
+    old_alarm = signal.signal(signal.SIGALRM, hung)  # a loop that misses its end fails instead of hanging
+    signal.setitimer(signal.ITIMER_REAL, 30.0)
     try:
         _worker_main(fn, child)
         assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN  # the parent decides what Ctrl-C stops
     finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        signal.signal(signal.SIGALRM, old_alarm)
         signal.signal(signal.SIGINT, old)
     if close_parent:
         return None
@@ -102,6 +111,11 @@ def test_a_worker_still_starting_gets_the_startup_allowance_on_top_of_the_time_l
     assert w.deadline(2.5) == 1002.5
 
 
+def _recv(conn):
+    assert conn.poll(60), "no reply from the worker in 60 s"
+    return conn.recv()
+
+
 def test_graceful_stop_ends_a_worker_by_message_and_a_forced_one_by_signal():
     ctx = mp.get_context("spawn")
     a, b = _Worker(ctx, faulty_task), _Worker(ctx, faulty_task)
@@ -109,11 +123,11 @@ def test_graceful_stop_ends_a_worker_by_message_and_a_forced_one_by_signal():
         assert a.proc.daemon and b.proc.daemon  # workers never outlive the parent
         a.give(0, ("sq", 6))
         assert a.job == (0, ("sq", 6)) and a.running is False
-        assert a.conn.recv() == ("start", 0, None)
-        assert a.conn.recv() == ("ok", 0, 36)
+        assert _recv(a.conn) == ("start", 0, None)
+        assert _recv(a.conn) == ("ok", 0, 36)
         b.give(1, ("sq", 2))
-        assert b.conn.recv() == ("start", 1, None)
-        assert b.conn.recv() == ("ok", 1, 4)
+        assert _recv(b.conn) == ("start", 1, None)
+        assert _recv(b.conn) == ("ok", 1, 4)
     finally:
         a.stop(graceful=True)
         b.stop(graceful=False)
@@ -132,7 +146,7 @@ def _finalized(task):
 
 def test_a_finished_run_stops_its_workers_gracefully(tmp_path):
     tasks = [(str(tmp_path), i) for i in range(2)]
-    assert sorted(run_local(_finalized, tasks, 2)) == [0, 1]  # one task per worker
+    assert sorted(within(60, lambda: list(run_local(_finalized, tasks, 2)))) == [0, 1]  # one task per worker
     assert sorted(p.name for p in tmp_path.iterdir()) == ["0.exited", "1.exited"]
 
 
