@@ -179,3 +179,63 @@ def test_task_lost_carries_the_task_and_its_cause():
     assert (lost.task, lost.cause) == (("sq", 1), "its worker process (pid 1) killed by SIGKILL")
     with pytest.raises(AttributeError):
         lost.cause = "changed"  # frozen: the record of a loss is not edited
+
+
+def test_remote_traceback_text_is_its_argument_or_empty():
+    from rmm_envs.parallel import _RemoteTraceback
+
+    assert str(_RemoteTraceback("in worker process 7:\nTraceback ...")) == "in worker process 7:\nTraceback ..."
+    assert str(_RemoteTraceback()) == ""
+
+
+_MARK = "as imported"
+
+
+def _mark(task):
+    return _MARK
+
+
+def test_workers_are_fresh_spawned_processes_not_forks_of_the_caller():
+    global _MARK
+    _MARK = "changed in the caller"  # a forked worker would see this; a spawned one imports the module afresh
+    try:
+        assert within(60, lambda: list(run_local(_mark, [0, 1], 2))) == ["as imported", "as imported"]
+    finally:
+        _MARK = "as imported"
+
+
+def test_results_come_in_completion_order_past_a_busy_worker():
+    # the first worker sleeps 3 s, the second answers at once: its result must not wait behind the first
+    out = within(60, lambda: list(run_local(faulty_task, [("hang", 3), ("sq", 2)], 2)))
+    assert out == [4, 9]  # ("hang", 3) returns 3 ** 2 when it wakes
+
+
+def test_a_run_stopped_by_a_task_error_terminates_its_workers(tmp_path):
+    """On an error the workers are terminated (no graceful exit: an idle worker's exit finalizers do not run)."""
+    with pytest.raises(KeyError):
+        within(60, lambda: list(run_local(_finalized_or_raise, [(str(tmp_path), 0), (str(tmp_path), "raise")], 2)))
+    assert list(tmp_path.iterdir()) == []
+
+
+def _finalized_or_raise(task):
+    if task[1] == "raise":
+        import time
+
+        time.sleep(1.0)  # let the other worker finish its task first and wait, idle, for the next
+        raise KeyError("raised on purpose")
+    return _finalized(task)
+
+
+def test_stopping_after_lost_tasks_names_the_last_cause():
+    from rmm_envs.parallel import WorkersLost
+
+    seen = []
+
+    def consume():
+        for r in run_local(faulty_task, [("exit", 9)] * 6, 2, max_lost_in_a_row=3):
+            seen.append(r)
+
+    with pytest.raises(WorkersLost) as e:
+        within(60, consume)
+    assert len(seen) == 3 and len({r.cause for r in seen}) == 3  # three workers, three pids
+    assert str(e.value) == f"3 tasks in a row lost their worker with none finishing (last: {seen[-1].cause}); stopped"
