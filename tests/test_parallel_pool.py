@@ -204,10 +204,26 @@ def test_workers_are_fresh_spawned_processes_not_forks_of_the_caller():
         _MARK = "as imported"
 
 
-def test_results_come_in_completion_order_past_a_busy_worker():
-    # the first worker sleeps 3 s, the second answers at once: its result must not wait behind the first
-    out = within(60, lambda: list(run_local(faulty_task, [("hang", 3), ("sq", 2)], 2)))
-    assert out == [4, 9]  # ("hang", 3) returns 3 ** 2 when it wakes
+def _after(task):
+    """("first", folder) waits until ("second", folder) has finished, then 0.5 s more."""
+    import time
+
+    which, folder = task
+    mark = Path(folder, "second.done")
+    if which == "second":
+        mark.touch()
+        return "second"
+    t0 = time.monotonic()
+    while not mark.exists() and time.monotonic() - t0 < 30:
+        time.sleep(0.01)
+    time.sleep(0.5)
+    return "first"
+
+
+def test_results_come_in_completion_order_past_a_busy_worker(tmp_path):
+    # the first worker is busy until after the second has answered: that answer must not wait behind it
+    out = within(60, lambda: list(run_local(_after, [("first", str(tmp_path)), ("second", str(tmp_path))], 2)))
+    assert out == ["second", "first"]
 
 
 def test_a_run_stopped_by_a_task_error_terminates_its_workers(tmp_path):
@@ -221,7 +237,7 @@ def _finalized_or_raise(task):
     if task[1] == "raise":
         import time
 
-        time.sleep(1.0)  # let the other worker finish its task first and wait, idle, for the next
+        time.sleep(0.2)  # let the other worker finish its task first and wait, idle, for the next
         raise KeyError("raised on purpose")
     return _finalized(task)
 
