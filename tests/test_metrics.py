@@ -86,3 +86,32 @@ def test_table_i_batches_64_episodes_by_default():
     assert row["goal"] == pytest.approx(100 * m)
     assert row["goal_std"] == pytest.approx(100 * math.sqrt((64 * (1 - m) ** 2 + m ** 2) / 65))
     assert aggregate(df.to_dict("records"))["goal"] == pytest.approx((row["goal"], row["goal_std"]))
+
+
+def test_degenerate_inputs_give_nan_without_a_numpy_warning():
+    """All weights zero, or every episode errored: NaN by the explicit branches, never by a 0/0 or
+    the mean of an empty slice (which would print a RuntimeWarning in every report)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert all(map(math.isnan, weighted_mean_std([1.0, 2.0], [0, 0])))
+        a = aggregate([{"episode": 0, "outcome": "error"}, {"episode": 1, "outcome": "error"}])
+        t = table_i(pd.DataFrame.from_records([{"agent": "e", "episode": 0, "outcome": "error"}]))
+    assert [math.isnan(a[f"total_{k}"]) for k in ("goal", "collision", "timeout")] == [True] * 3
+    assert (a["episodes"], a["errors"], a["error_rate"]) == (2, 2, 1.0)
+    assert math.isnan(t.loc["e", "total_goal"]) and t.loc["e", "errors"] == 1
+
+
+def test_episodes_with_equal_numbers_keep_their_stored_order():
+    """A frame of two runs numbered alike (16 goals numbered 0-15, then 8 collisions numbered 0-7):
+    sorted by episode with a stable sort, the order is g c g c ... (8 pairs) then 8 g; batches of 3
+    have goal rates 2/3 1/3 2/3 1/3 2/3 2/3 1 1, so mean 2/3 and population std sqrt(1/18).
+    An unstable sort may swap the pairs and change the spread."""
+    rows = [dict(RUN[1], episode=i, outcome="goal") for i in range(16)] + \
+        [dict(RUN[1], episode=i, outcome="collision") for i in range(8)]
+    a = aggregate(rows, batch_size=3)
+    assert a["goal"] == pytest.approx((100 * 2 / 3, 100 * math.sqrt(1 / 18)), rel=1e-12)
+    assert a["collision"] == pytest.approx((100 / 3, 100 * math.sqrt(1 / 18)), rel=1e-12)
+    row = table_i(pd.DataFrame.from_records([dict(r, agent="x") for r in rows]), batch_size=3).loc["x"]
+    assert (row["goal"], row["goal_std"]) == pytest.approx(a["goal"], rel=1e-12)
