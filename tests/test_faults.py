@@ -129,6 +129,10 @@ BAD_OPTIONS = [
     (["--agent-opt", "lrmm.model=MISSING"], "--agent-opt lrmm.model="),
     (["--agent-opt", "lrmm.model=CORRUPT"], "--agent-opt lrmm.model="),
     (["--agent-opt", "lrmm.windw=3"], "--agent-opt lrmm.windw=3"),
+    (["--agent-opt", "lrmm.threshold=true"], "threshold must be a number in [0, 1], got True"),
+    (["--agent-opt", "lrmm.threshold=nan"], "threshold must be a number in [0, 1], got 'nan'"),
+    (["--agent-opt", "lrmm.commit=abc"], "commit must be an integer >= 0"),
+    (["--agent-opt", "lrmm.env_id=Dubins3DMazeParallel-v0"], "every guardian is built for the run's env (--env)"),
 ]
 
 

@@ -37,7 +37,7 @@ def test_stored_decision_without_commit_commits_zero_steps_and_a_bad_stored_acti
     assert LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5})).commit == 0
     with pytest.raises(ValueError) as e:
         LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5, "action": "fly"}))
-    assert str(e.value) == "the model: stored decision action must be one of ('head', 'heuristic', 'turn'), got 'fly'"
+    assert str(e.value) == "the model: stored decision action must be one of ('head', 'heuristic', 'turn', 'safe'), got 'fly'"
     with pytest.raises(ValueError) as e:
         LRMMGuardian(forward_ray_model(), env_id=5)
     assert str(e.value) == "env_id must be a registered env id (str) or None, got 5"

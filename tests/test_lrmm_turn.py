@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from guardians.lrmm.guardian import LRMMGuardian
+from guardians.lrmm.guardian import REMEDY, LRMMGuardian
 from guardians.lrmm.model import LRMMModel
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.envs.dubins3d_maze_parallel import observation_layout
@@ -186,16 +186,16 @@ def test_a_wrong_observation_size_is_refused_showing_the_space_or_the_field():
     with pytest.raises(ValueError) as e:
         g.check_spaces("a space without a shape", SPACES["action_space"])
     assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins4DCircles-v0) expects observations of "
-                            "shape (17,), the env's observation space is a space without a shape")
+                            "shape (17,), the env's observation space is a space without a shape" + REMEDY)
     with pytest.raises(ValueError) as e:
         g.check_spaces(ObservationBox(np.zeros(11, np.float32), np.ones(11, np.float32), observation_layout()), SPACES["action_space"])
     assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins4DCircles-v0) expects observations of "
-                            "shape (17,), the env's observation space is (11,)")
+                            "shape (17,), the env's observation space is (11,)" + REMEDY)
     t = LRMMGuardian(RaysModel(forward_risk, obs_dim=12), threshold=0.3, action="turn", inputs="rays")
     with pytest.raises(ValueError) as e:
         t.reset(seed=0, **maze_spaces())
     assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins3DMaze-v0) expects observations of "
-                            "shape (12,), the env's observation field 'rays' has 8 numbers")
+                            "shape (12,), the env's observation field 'rays' has 8 numbers" + REMEDY)
 
 
 def test_the_sides_are_read_from_the_directions_however_the_angles_are_written():

@@ -517,3 +517,28 @@ def test_lrmm_head_picks_the_lowest_risk_command_of_four_controls(env):
     obs[9] = 0.5
     a = g.act(obs, {})
     assert a["active_ctrl"] == 1 and [float(a[c][0]) for c in CONTROLS] == [0.0, 0.0, 1.0, 0.0]
+
+
+def test_lrmm_built_for_another_env_or_without_a_head_says_how_to_serve_the_quadrotor(env):
+    import warnings
+
+    from guardians import make_guardian
+    from guardians.lrmm.guardian import REMEDY, LRMMGuardian
+    from guardians.lrmm.model import default_model_path
+
+    spaces = {"observation_space": env.observation_space, "action_space": env.action_space}
+    with pytest.raises(ValueError) as e:
+        make_guardian("lrmm").reset(seed=0, **spaces)  # built for Dubins4D (no env_id)
+    assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins4DCircles-v0) expects observations "
+                            "of shape (17,), the env's observation space is (23,)" + REMEDY)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the risk-only model stores no decision: the paper's fallback warns
+        risk_only = LRMMGuardian(env_id="QuadrotorRoomParallel-v0",
+                                 model=default_model_path("QuadrotorRoomParallel-v0", variant="risk"))
+    with pytest.raises(ValueError, match=r"needs the Dubins car's two controls, got 4 .*this env states a safe default "
+                                         r"\(hover and level.*\): action='safe' applies it"):
+        risk_only.reset(seed=0, **spaces)
+    for bad, shown in ((True, "True"), ("nan", "'nan'"), ("0.2", "'0.2'")):
+        with pytest.raises(ValueError) as e:
+            LRMMGuardian(env_id="QuadrotorRoomParallel-v0", threshold=bad)
+        assert str(e.value) == f"threshold must be a number in [0, 1], got {shown}"

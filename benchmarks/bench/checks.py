@@ -58,6 +58,9 @@ def parse_agent_opts(items: list[str], agents: list[str]) -> dict[str, dict]:
             raise ValueError(f"--agent-opt {item!r}: expected AGENT.KEY=VALUE, e.g. hj.margin=0.3")
         if agent not in agents:
             raise ValueError(f"--agent-opt {item!r}: agent {agent!r} is not in this run ({agents})")
+        if key == "env_id":
+            raise ValueError(f"--agent-opt {item!r}: every guardian is built for the run's env (--env); "
+                             "run another --env instead of setting env_id")
         try:
             parsed = json.loads(value)
         except json.JSONDecodeError:

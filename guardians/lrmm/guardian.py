@@ -85,6 +85,7 @@ from pathlib import Path
 
 import numpy as np
 
+from guardians._checks import integer
 from guardians.base import Guardian
 from guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, load_model
 
@@ -93,6 +94,9 @@ __all__ = ["PAPER_THRESHOLD", "LRMMGuardian", "LRMMPaperGuardian"]
 PAPER_THRESHOLD = 0.85  # the paper's Table I setting
 ACTIONS = ("head", "heuristic", "turn", "safe")
 DEFAULT_ENV = "Dubins4DCircles-v0"  # whose shipped model a guardian built without env_id or model reads
+#: how to get the model of another env: the guardian picks its model when it is built, not at reset
+REMEDY = ("; the shipped model is chosen when the guardian is built: make_guardian('lrmm', env_id=<this env's id>) "
+          "(as rmm-bench does), or model=<a model trained on this env>")
 _SIDE_RAY = math.pi / 6  # the heuristic compares the rays 30 degrees left and right of the heading
 
 
@@ -130,12 +134,13 @@ class LRMMGuardian(Guardian):
                  u1_max: float | None = None, u2_min: float | None = None, env_id: str | None = None,
                  inputs: str | None = None) -> None:
         super().__init__()
+        if threshold is not None and (isinstance(threshold, bool) or not isinstance(threshold, (int, float, np.number))):
+            raise ValueError(f"threshold must be a number in [0, 1], got {threshold!r}")
         if threshold is not None and not 0.0 <= threshold <= 1.0:
             raise ValueError(f"threshold must be in [0, 1], got {threshold}")
-        if int(window) != window or window < 1:
-            raise ValueError(f"window must be an integer >= 1, got {window}")
-        if commit is not None and (int(commit) != commit or commit < 0):
-            raise ValueError(f"commit must be an integer >= 0, got {commit}")
+        integer("window", window, 1)
+        if commit is not None:
+            integer("commit", commit, 0, "steps to stay in control after the risk falls back")
         if action not in (None, *ACTIONS):
             raise ValueError(f"action must be one of {ACTIONS} or None, got {action!r}")
         if env_id is not None and not isinstance(env_id, str):
@@ -207,12 +212,17 @@ class LRMMGuardian(Guardian):
             what = f"observation field {self.inputs!r} has {size} numbers" if self.inputs else \
                 f"observation space is {getattr(observation_space, 'shape', observation_space)}"
             raise ValueError(f"guardian {self.name!r}: the LRMM model (trained on {self.model.env_id}) expects observations "
-                             f"of shape ({self.model.obs_dim},), the env's {what}")
+                             f"of shape ({self.model.obs_dim},), the env's {what}{REMEDY}")
         if self.action == "head" and self.model.candidates.shape[1] != actions.control_dim:
             k = self.model.candidates.shape[1]
             raise ValueError(f"guardian {self.name!r} needs an action space with {k} controls (the model's candidate "
                              f"controls have {k} components), got {actions.control_dim} ({actions.controls})")
         if self.action == "heuristic":
+            if actions.control_dim != 2 and actions.safe_default is not None:
+                raise ValueError(f"guardian {self.name!r}: the brake-and-turn heuristic (the action of a model without "
+                                 f"a head) needs the Dubins car's two controls, got {actions.control_dim} "
+                                 f"({actions.controls}); this env states a safe default ({actions.safe_default.description}): "
+                                 "action='safe' applies it")
             self.require_action_space(controls=2, space=action_space)  # (turn rate, acceleration)
             self.require_layout("rays", observation_space=observation_space)
         if self.action == "safe" and actions.safe_default is None:
