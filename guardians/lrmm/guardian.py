@@ -64,10 +64,11 @@ the last ``window`` (20) risks, initialised at the threshold, and the guardian i
 either the current risk or the deque's mean exceeds the threshold.
 
 **What it needs from the env** (checked at ``reset``, a ``ValueError`` naming the guardian and
-the missing piece otherwise): an observation space of the model's input size; an action space
-(:class:`rmm_envs.autonomy.GuardianActionSpace`) with two controls (turn rate, acceleration)
-through which every action is built; for the heuristic, an observation layout with a
-``"rays"`` field.
+the missing piece otherwise): an observation space (or the field ``inputs``) of the model's
+input size; an action space (:class:`rmm_envs.autonomy.GuardianActionSpace`) through which
+every action is built, with the head's control count (``head``), the two Dubins4D controls and
+a ``"rays"`` field (``heuristic``), one control and evenly spaced rays (``turn``) or a safe
+default (``safe``).
 
 **Bad input.**  A model file without the head (``candidates``) or without stored defaults
 (``decision``), such as a file written before these fields existed, makes ``lrmm`` fall back

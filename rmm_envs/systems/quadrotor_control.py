@@ -22,8 +22,10 @@ numbers, world frame, :mod:`rmm_envs.systems.quadrotor`) into the body's thrust 
    and ``M = I (-k_R e_R - k_w e_w) + w_b x I w_b`` (body frame), ``k_w`` replaced by
    ``k_wz`` about z; each moment clipped to the body's bounds.
 
-Horizontal accelerations up to 5 m/s^2 tilt the body at most ``atan(5 / 9.81) = 27`` degrees,
-so the thrust needed stays within 8 N.  The gains (``k_R = 400`` s^-2, ``k_w = 36`` s^-1:
+Horizontal accelerations up to 5 m/s^2 tilt the body at most ``atan(5 / 9.81) = 27`` degrees
+in level flight, and ``atan(5 / (9.81 - 4)) = 41`` degrees while descending at the vertical
+limit of 4 m/s^2; the thrust needed stays within 8 N (at most ``0.5 sqrt(5^2 + 13.81^2) = 7.3``
+N, climbing).  The gains (``k_R = 400`` s^-2, ``k_w = 36`` s^-1:
 natural frequency 20 rad/s, damping 0.9) make the attitude loop about six times faster than
 the velocity loop (``k_v = 2.5`` s^-1), and ``k_w dt = 0.15`` is well inside the stability of
 the 240 Hz integrator.
