@@ -1,6 +1,7 @@
 """QuadrotorRoomGuarded-v0 / QuadrotorRoomParallel-v0: controller, pilot, closed-loop labels, contract."""
 
 import math
+import re
 
 import gymnasium as gym
 import numpy as np
@@ -542,3 +543,34 @@ def test_lrmm_built_for_another_env_or_without_a_head_says_how_to_serve_the_quad
         with pytest.raises(ValueError) as e:
             LRMMGuardian(env_id="QuadrotorRoomParallel-v0", threshold=bad)
         assert str(e.value) == f"threshold must be a number in [0, 1], got {shown}"
+
+
+@pytest.mark.parametrize("env_id", ["QuadrotorRoomGuarded-v0", "QuadrotorRoom-v0"])
+def test_labelling_hooks_refuse_bad_states_and_counts_by_name(env_id):
+    e = gym.make(env_id).unwrapped
+    e.reset(seed=0)
+    good = e.sample_states(np.random.default_rng(0), 2)
+    for states, text in ((np.zeros((3, 5)), r"states must have shape \(N, 13\), got shape \(3, 5\)"),
+                         (good[0], r"states must have shape \(N, 13\), got shape \(13,\)"),
+                         (np.vstack([good[0], np.full(13, np.nan)]), r"states must be finite: row 1 is \[nan"),
+                         (np.vstack([good[0], np.r_[good[0, :3], np.zeros(4), good[0, 7:]]]),
+                          r"states: row 1 has the quaternion \[0.0, 0.0, 0.0, 0.0\], not a unit quaternion")):
+        with pytest.raises(ValueError, match=text):
+            e.observe_states(states)
+    for n in (1.5, -1, True):
+        with pytest.raises(ValueError, match=rf"to draw must be an integer >= 0, got {n!r}"):
+            e.sample_states(np.random.default_rng(0), n)
+    assert e.sample_states(np.random.default_rng(0), 0).shape == (0, 13)
+    e.close()
+
+
+@pytest.mark.parametrize("room, text", [
+    ({"x_range": math.nan}, "x_range must be a finite number of metres > 0, got nan"),
+    ({"wall_height": math.inf}, "wall_height must be a finite number of metres > 0, got inf"),
+    ({"n_rectangles": "a"}, "n_rectangles must be an integer >= 1, got 'a'"),
+    ({"n_boxes": 1.7}, "n_boxes must be an integer >= 0, got 1.7"),
+    ({"n_spheres": True}, "n_spheres must be an integer >= 0, got True"),
+])
+def test_bad_generate_room_arguments_in_reset_options_are_named(env, room, text):
+    with pytest.raises(ValueError, match=re.escape(f"generate_room: {text}")):
+        env.reset(seed=0, options={"room": room})

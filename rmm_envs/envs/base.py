@@ -37,7 +37,7 @@ import gymnasium as gym
 import numpy as np
 
 __all__ = ["MAX_ROUNDS", "LabelledEnvBase", "check_arguments", "draw_until", "finite", "option_vector",
-           "rejection_sample", "whole"]
+           "rejection_sample", "state_rows", "whole"]
 
 T = TypeVar("T")
 
@@ -81,6 +81,21 @@ def option_vector(value, n: int, name: str, what: str = "") -> np.ndarray:
     return arr
 
 
+def state_rows(states, dim: int, what: str = "states") -> np.ndarray:
+    """``states`` as a float array ``(N, dim)`` of finite numbers, else ``ValueError`` naming the
+    shape or the first row that is not finite (the labelling hooks' input check)."""
+    try:
+        s = np.asarray(states, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be an array of shape (N, {dim}) of numbers, got {type(states).__name__}") from None
+    if s.ndim != 2 or s.shape[1] != dim:
+        raise ValueError(f"{what} must have shape (N, {dim}), got shape {s.shape}")
+    bad = np.flatnonzero(~np.isfinite(s).all(axis=1))
+    if bad.size:
+        raise ValueError(f"{what} must be finite: row {bad[0]} is {s[bad[0]].tolist()}")
+    return s
+
+
 def draw_until(draw: Callable[[], T], accept: Callable[[T], bool], max_draws: int) -> T | None:
     """The first of at most ``max_draws`` calls of ``draw()`` that ``accept`` accepts, else
     ``None`` (the caller raises, naming what it could not draw and why)."""
@@ -98,6 +113,8 @@ def rejection_sample(rng: np.random.Generator, n: int, dim: int,
     """``(n, dim)`` rows of ``draw(rng, k) -> (k, dim)`` that ``rejected(rows) -> (k,) bool``
     does not reject, in the order drawn; rounds of ``max(2 * missing, 16)`` candidates, at most
     ``max_rounds`` of them, then ``RuntimeError`` naming ``what`` and the acceptance seen."""
+    if not (whole(n) and n >= 0):
+        raise ValueError(f"the number of {what} to draw must be an integer >= 0, got {n!r}")
     out = np.empty((0, dim))
     drawn = 0
     for _ in range(max_rounds):

@@ -90,12 +90,13 @@ import numpy as np
 from gymnasium import spaces
 
 from rmm_envs.autonomy import ObservationBox, ObservationLayout
-from rmm_envs.envs.base import LabelledEnvBase, check_arguments, draw_until, finite, option_vector, rejection_sample
+from rmm_envs.envs.base import (LabelledEnvBase, check_arguments, draw_until, finite, option_vector, rejection_sample,
+                                state_rows)
 from rmm_envs.scenes.quadrotor import QuadrotorScene
 from rmm_envs.systems.quadrotor import QUADROTOR
 from rmm_envs.worlds.rooms import Room, build_room, generate_room
 
-__all__ = ["QuadrotorRoomEnv", "QuadrotorScene", "observation_layout", "push_body"]
+__all__ = ["QuadrotorRoomEnv", "QuadrotorScene", "observation_layout", "push_body", "unit_quaternion_rows"]
 
 RAY_RANGE = 100.0
 _RAY_DIRS = np.array([[1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float)
@@ -131,6 +132,15 @@ def push_body(p, client: int, body: int, control, n_steps: int, stop_on_contact:
             if stop_on_contact:
                 return k + 1, True
     return n_steps, touched
+
+
+def unit_quaternion_rows(states: np.ndarray) -> np.ndarray:
+    """``states`` ``(N, 13)``, refused (``ValueError`` naming the first bad row) unless every
+    quaternion (columns 3-6) is a unit quaternion to 1e-6."""
+    bad = np.flatnonzero(np.abs(np.linalg.norm(states[:, 3:7], axis=1) - 1.0) > 1e-6)
+    if bad.size:
+        raise ValueError(f"states: row {bad[0]} has the quaternion {states[bad[0], 3:7].tolist()}, not a unit quaternion")
+    return states
 
 
 class QuadrotorRoomEnv(LabelledEnvBase):
@@ -235,7 +245,7 @@ class QuadrotorRoomEnv(LabelledEnvBase):
             return spec
         try:
             return generate_room(self.np_random, **spec)
-        except TypeError as e:
+        except (TypeError, ValueError) as e:
             raise ValueError(f"option 'room': {e}") from None
 
     def _built(self, room: Room) -> Room:
@@ -324,9 +334,10 @@ class QuadrotorRoomEnv(LabelledEnvBase):
     def observe_states(self, states, rng=None) -> np.ndarray:
         """The 16-dim observation of arbitrary states (PyBullet rays; the env's state is restored);
         ``rng`` is unused (no random feature)."""
+        states = unit_quaternion_rows(state_rows(states, 13))
         keep = self.get_state()
         obs = np.empty((len(states), 16), dtype=np.float32)
-        for i, st in enumerate(np.asarray(states, float)):
+        for i, st in enumerate(states):
             self.set_state(st)
             obs[i, :6] = self.rays()
             obs[i, 6:] = st[3:13]

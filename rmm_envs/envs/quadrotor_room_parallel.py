@@ -123,9 +123,9 @@ import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.clocks import make_clock
-from rmm_envs.envs.base import check_arguments, draw_until, finite, option_vector, rejection_sample, whole
+from rmm_envs.envs.base import check_arguments, draw_until, finite, option_vector, rejection_sample, state_rows, whole
 from rmm_envs.envs.guarded import GuardedEnv
-from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
+from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv, unit_quaternion_rows
 from rmm_envs.quadrotor_pilot import WaypointPilot
 from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
 from rmm_envs.systems.quadrotor_control import (ClosedLoopQuadrotor, CommandController, HoverAndLevel, command_wrench,
@@ -431,8 +431,8 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         """This env's observation of states ``(N, 13)`` in the current episode (PyBullet rays; the
         env's state is restored); ``rng`` is unused."""
         self.require_episode()
+        st = unit_quaternion_rows(state_rows(states, 13))
         keep = self.get_state()
-        st = np.asarray(states, dtype=float)
         rays = np.empty((st.shape[0], N_RAYS + 2))
         for i, row in enumerate(st):
             self.set_state(row)

@@ -20,6 +20,7 @@ creates the bodies in a PyBullet client; the arrays here are the geometry for ev
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -78,14 +79,24 @@ def _footprint_rects(rng, n, X, Y):
 def generate_room(rng: np.random.Generator, n_rectangles: int | None = None, x_range: float | None = None,
                   y_range: float | None = None, wall_height: float | None = None, n_boxes: int | None = None,
                   n_cylinders: int | None = None, n_spheres: int | None = None, wall_thickness: float = 0.5) -> Room:
-    """A seeded random room; any argument left ``None`` is drawn as described in the module."""
+    """A seeded random room; any argument left ``None`` is drawn as described in the module.  A
+    given argument must be an integer (the counts: ``n_rectangles >= 1``, the object counts
+    ``>= 0``) or a finite length in metres ``> 0``; anything else is refused (``ValueError``
+    naming it) before anything is drawn."""
+    for name, v, lo in (("n_rectangles", n_rectangles, 1), ("n_boxes", n_boxes, 0), ("n_cylinders", n_cylinders, 0),
+                        ("n_spheres", n_spheres, 0)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo):
+            raise ValueError(f"generate_room: {name} must be an integer >= {lo}, got {v!r}")
+    for name, v in (("x_range", x_range), ("y_range", y_range), ("wall_height", wall_height),
+                    ("wall_thickness", wall_thickness)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not math.isfinite(v)
+                              or v <= 0):
+            raise ValueError(f"generate_room: {name} must be a finite number of metres > 0, got {v!r}")
     n = int(rng.integers(1, 33)) if n_rectangles is None else int(n_rectangles)
     X = float(rng.uniform(5, 50)) if x_range is None else float(x_range)
     Y = float(rng.uniform(5, 50)) if y_range is None else float(y_range)
     H = float(rng.uniform(0.1, 5.0)) if wall_height is None else float(wall_height)
     counts = [int(rng.integers(0, 51)) if c is None else int(c) for c in (n_boxes, n_cylinders, n_spheres)]
-    if n < 1 or X <= 0 or Y <= 0 or H <= 0 or min(counts) < 0 or wall_thickness <= 0:
-        raise ValueError(f"bad room parameters: n_rectangles={n} (>=1), ranges {X}, {Y} (>0), wall height {H} (>0), counts {counts} (>=0)")
     rects = np.array(_footprint_rects(rng, n, X, Y))
     c = wall_thickness
     lo = rects[:, :2].min(axis=0) - 2 * c
