@@ -27,6 +27,8 @@ import math
 
 import numpy as np
 
+from rmm_envs.systems.quadrotor_control import yaw_of
+
 __all__ = ["WaypointPilot"]
 
 
@@ -74,8 +76,7 @@ class WaypointPilot:
             self.index += 1
         wx, wy, wz = self.waypoints[self.index]
         dx, dy, dz = wx - x, wy - y, wz - z
-        qx, qy, qz, qw = s[3], s[4], s[5], s[6]
-        psi = math.atan2(2 * (qx * qy + qz * qw), 1 - 2 * (qy * qy + qz * qz))
+        psi = yaw_of(s[3], s[4], s[5], s[6])
         vx, vy = self.gain * dx, self.gain * dy
         speed = math.hypot(vx, vy)
         if speed > self.cruise_speed:

@@ -16,7 +16,7 @@ from rmm_envs.quadrotor_pilot import WaypointPilot
 from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
 from rmm_envs.systems.quadrotor import QUADROTOR, Quadrotor
 from rmm_envs.systems.quadrotor_control import (ClosedLoopQuadrotor, CommandController, body_packed, body_step,
-                                                heading_of)
+                                                heading_of, yaw_of)
 from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
 from rmm_envs.worlds.room_collision import BOUND, RoomCollision
 from rmm_envs.worlds.rooms import Room
@@ -574,3 +574,11 @@ def test_labelling_hooks_refuse_bad_states_and_counts_by_name(env_id):
 def test_bad_generate_room_arguments_in_reset_options_are_named(env, room, text):
     with pytest.raises(ValueError, match=re.escape(f"generate_room: {text}")):
         env.reset(seed=0, options={"room": room})
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(-math.pi, math.pi), st.floats(-1.2, 1.2), st.floats(-1.2, 1.2))
+def test_scalar_yaw_equals_the_batched_heading(yaw, roll, pitch):
+    q = quat_from_euler(roll, pitch, yaw)
+    assert abs(yaw_of(*q) - float(heading_of(q))) < 1e-12
+    assert abs(math.remainder(yaw_of(*quat_from_euler(0.0, 0.0, yaw)) - yaw, 2 * math.pi)) < 1e-12

@@ -129,7 +129,7 @@ from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv, unit_quaternion_rows
 from rmm_envs.quadrotor_pilot import WaypointPilot
 from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
 from rmm_envs.systems.quadrotor_control import (ClosedLoopQuadrotor, CommandController, HoverAndLevel, command_wrench,
-                                                heading_of)
+                                                heading_of, yaw_of)
 from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
 from rmm_envs.worlds.room_collision import BOUND, RoomCollision
 from rmm_envs.worlds.rooms import Room
@@ -339,9 +339,8 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         hold the two equal)."""
         out = np.empty(23, dtype=np.float32)
         out[:N_RAYS + 2] = self.rays()
-        qx, qy, qz, qw = s[3], s[4], s[5], s[6]
         out[10:14] = s[3:7]
-        psi = math.atan2(2 * (qx * qy + qz * qw), 1 - 2 * (qy * qy + qz * qz))
+        psi = yaw_of(s[3], s[4], s[5], s[6])
         c, sn = math.cos(psi), math.sin(psi)
         out[14], out[15], out[16] = c * s[7] + sn * s[8], -sn * s[7] + c * s[8], s[9]
         r = quat_to_rot(s[3:7])

@@ -53,7 +53,7 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency
     njit = None
 
-__all__ = ["ClosedLoopQuadrotor", "CommandController", "HoverAndLevel", "body_packed", "body_step", "command_wrench", "command_wrenches",
+__all__ = ["yaw_of", "ClosedLoopQuadrotor", "CommandController", "HoverAndLevel", "body_packed", "body_step", "command_wrench", "command_wrenches",
            "heading_of"]
 
 # the layout of the packed gain vector the compiled kernel reads
@@ -230,6 +230,12 @@ def command_wrenches(states, commands, packed) -> np.ndarray:
     states = np.ascontiguousarray(states, dtype=float)
     commands = np.ascontiguousarray(commands, dtype=float)
     return _wrench_loop(states, commands, packed, np.empty((states.shape[0], 4)))
+
+
+def yaw_of(qx: float, qy: float, qz: float, qw: float) -> float:
+    """:func:`heading_of` of one quaternion, in scalar arithmetic (the env's and the pilot's
+    per-step path; a test holds the two equal)."""
+    return math.atan2(2 * (qx * qy + qz * qw), 1 - 2 * (qy * qy + qz * qz))
 
 
 def heading_of(q) -> np.ndarray:
