@@ -158,3 +158,22 @@ def test_maze_scene_is_the_env_scene_and_observations_are_named():
     assert [lay[n] for n in lay.names] == [slice(0, 4), slice(4, 6), slice(6, 10), slice(10, 13), slice(13, 16)]
     assert lay.ray_index(np.pi / 2) == 1 and lay.names[1] == "rays_vertical"
     q.close()
+
+
+@pytest.mark.parametrize("env_id", ["Dubins4DParallel-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoomParallel-v0",
+                                    "Dubins4DMapParallel-v0"])
+def test_parallel_envs_refuse_step_dt_which_non_blocking_stepping_would_ignore(env_id):
+    import gymnasium as gym
+
+    import rmm_envs  # noqa: F401
+
+    with pytest.raises(ValueError) as e:
+        gym.make(env_id, step_dt=5.0)
+    assert str(e.value) == (f"{env_id} steps by elapsed * time_accel + base_step, so step_dt (the fixed step of the "
+                            "blocking env) does not apply; set base_step and time_accel instead, got step_dt=5.0")
+    env = gym.make(env_id, base_step=0.2, clock="fixed:0")
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(env.action_space.inactive() if hasattr(env.action_space, "inactive")
+                                else env.unwrapped.action_space.inactive())
+    assert abs(info["sim_time"] - 0.2) < 1e-9  # the first interval: base_step, the driver's
+    env.close()

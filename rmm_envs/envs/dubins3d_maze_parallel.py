@@ -102,7 +102,7 @@ goal is at most 8 cells away) and resets ~8x faster than the paper's 20 x 20 (th
 spatial index); the rays are local either way.  ``clock`` only measures the agent's compute
 time in the blocking env.
 
-``gym.make("Dubins3DMazeParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same)``:
+``gym.make("Dubins3DMazeParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same but step_dt)``:
 the same world under :class:`rmm_envs.wrappers.NonBlockingStepping` (each ``step(a)`` advances
 the world by ``elapsed * time_accel + base_step`` seconds under the previous action, then
 stores ``a``; the first interval is the driver's), with Dubins4DParallel's defaults.
@@ -124,7 +124,7 @@ from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, option_vector, whole
 from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv, maze_from_option
-from rmm_envs.envs.guarded import GuardedEnv
+from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.maze_driver import PursuitDriver, cell_distances, cell_of, cell_path
 from rmm_envs.scenes.maze import MazeScene
 from rmm_envs.systems.dubins3d import Dubins3D
@@ -364,8 +364,4 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         return cv.img
 
 
-def make_parallel_env(time_accel: float = 10.0, base_step: float = 0.1, clock=None, **kwargs):
-    """Entry point of ``Dubins3DMazeParallel-v0``: the blocking env under non-blocking stepping."""
-    from rmm_envs.wrappers.nonblocking import NonBlockingStepping
-
-    return NonBlockingStepping(Dubins3DMazeGuardedEnv(**kwargs), time_accel=time_accel, base_step=base_step, clock=clock)
+make_parallel_env = parallel_entry_point(Dubins3DMazeGuardedEnv, "Dubins3DMazeParallel-v0")

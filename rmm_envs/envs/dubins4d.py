@@ -109,7 +109,7 @@ default) or ``"osqp"`` (the earlier solver, kept for checking; equal to about 1e
 computed as arrays (sub-env ``i`` after ``reset(seed=s)`` is this env after ``reset(seed=s +
 i)``, bit for bit).
 
-``gym.make("Dubins4DParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same)``:
+``gym.make("Dubins4DParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same but step_dt)``:
 the same world stepped by :class:`rmm_envs.wrappers.NonBlockingStepping`: each ``step(a)``
 advances the world by ``elapsed * time_accel + base_step`` seconds under the *previous* action
 and then stores ``a`` for the next interval (the first interval is the driver's).
@@ -137,7 +137,7 @@ from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, rejection_sample, whole
 from rmm_envs.envs.dubins4d_start import HALF as _HALF, Dubins4DStarts
 from rmm_envs.envs.dubins4d_step import advance
-from rmm_envs.envs.guarded import GuardedEnv
+from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.scenes.dubins4d import Dubins4DScene, observation
 from rmm_envs.systems.dubins4d import Dubins4D, FullBraking
 
@@ -354,8 +354,4 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         return _render.dubins4d_frame(self.scene, self._state, self._last_active, _HALF, size)
 
 
-def make_parallel_env(time_accel: float = 10.0, base_step: float = 0.1, clock=None, **kwargs):
-    """Entry point of ``Dubins4DParallel-v0``: the blocking env under non-blocking stepping."""
-    from rmm_envs.wrappers.nonblocking import NonBlockingStepping
-
-    return NonBlockingStepping(Dubins4DCirclesEnv(**kwargs), time_accel=time_accel, base_step=base_step, clock=clock)
+make_parallel_env = parallel_entry_point(Dubins4DCirclesEnv, "Dubins4DParallel-v0")

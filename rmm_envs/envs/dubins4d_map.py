@@ -110,7 +110,7 @@ path to a JSON file, the list (or object) already loaded, or ``None`` for the ex
 other arguments and their defaults are ``Dubins4DCircles-v0``'s (the paper's).  The map is
 parsed and its pymunk space built once, at construction.
 
-``gym.make("Dubins4DMapParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same)``:
+``gym.make("Dubins4DMapParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same but step_dt)``:
 the same world under :class:`rmm_envs.wrappers.NonBlockingStepping` (each ``step(a)``
 advances ``elapsed * time_accel + base_step`` simulated seconds under the previous action), so
 ``rmm-bench --env Dubins4DMapParallel-v0`` runs guardians on the example map.  For your own
@@ -144,6 +144,7 @@ from rmm_envs.envs import _render
 from rmm_envs.envs.base import draw_until, option_vector, rejection_sample
 from rmm_envs.envs.dubins4d import CONTROLS, Dubins4DCirclesEnv
 from rmm_envs.envs.dubins4d_start import in_goal
+from rmm_envs.envs.guarded import parallel_entry_point
 from rmm_envs.scenes.dubins4d_map import Dubins4DMapScene
 from rmm_envs.systems.dubins4d import FullBraking, wrap_angle
 from rmm_envs.worlds.pymunk_world import PymunkWorld
@@ -267,8 +268,4 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
         return _render.map_frame(self.scene, self._state, self._last_active, self.map.start_box, size)
 
 
-def make_parallel_env(time_accel: float = 10.0, base_step: float = 0.1, clock=None, **kwargs):
-    """Entry point of ``Dubins4DMapParallel-v0``: the blocking map env under non-blocking stepping."""
-    from rmm_envs.wrappers.nonblocking import NonBlockingStepping
-
-    return NonBlockingStepping(Dubins4DMapEnv(**kwargs), time_accel=time_accel, base_step=base_step, clock=clock)
+make_parallel_env = parallel_entry_point(Dubins4DMapEnv, "Dubins4DMapParallel-v0")

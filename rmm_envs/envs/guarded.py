@@ -25,7 +25,7 @@ import math
 from rmm_envs.autonomy import parse
 from rmm_envs.envs.base import LabelledEnvBase
 
-__all__ = ["GuardedEnv"]
+__all__ = ["GuardedEnv", "parallel_entry_point"]
 
 
 class GuardedEnv(LabelledEnvBase):
@@ -99,3 +99,24 @@ class GuardedEnv(LabelledEnvBase):
             "cum_reward": self._cum_reward,
             "final_speed": self.final_speed(),
         }
+
+
+def parallel_entry_point(env_cls: type, env_id: str):
+    """The Gymnasium entry point of ``env_id``: the blocking ``env_cls`` under
+    :class:`rmm_envs.wrappers.NonBlockingStepping` (``time_accel``, ``base_step``, ``clock``; every
+    other keyword goes to ``env_cls``).  ``step_dt``, the blocking env's fixed step, is refused
+    by name: under non-blocking stepping each interval is ``elapsed * time_accel + base_step``,
+    so a given ``step_dt`` would be silently ignored."""
+
+    def make_parallel_env(time_accel: float = 10.0, base_step: float = 0.1, clock=None, **kwargs):
+        if "step_dt" in kwargs:
+            raise ValueError(f"{env_id} steps by elapsed * time_accel + base_step, so step_dt (the fixed step of the "
+                             f"blocking env) does not apply; set base_step and time_accel instead, got "
+                             f"step_dt={kwargs['step_dt']!r}")
+        from rmm_envs.wrappers.nonblocking import NonBlockingStepping
+
+        return NonBlockingStepping(env_cls(**kwargs), time_accel=time_accel, base_step=base_step, clock=clock)
+
+    make_parallel_env.__doc__ = (f"Entry point of ``{env_id}``: :class:`{env_cls.__name__}` under non-blocking "
+                                 "stepping (see :func:`rmm_envs.envs.guarded.parallel_entry_point`).")
+    return make_parallel_env

@@ -104,7 +104,7 @@ state, the room, the goal, the waypoints and the simulated time.
 altitude=(0.5, 2.0), min_leg=3.0, goal_radius=0.5, cruise_speed=1.5, climb_speed=0.5,
 ray_range=10.0, clock=None, render_mode=None)``; ``cruise_speed`` and ``climb_speed`` (m/s)
 are the pilot's.  ``gym.make("QuadrotorRoomParallel-v0", time_accel=10.0, base_step=0.1,
-clock=None, **same)``: the same world under :class:`rmm_envs.wrappers.NonBlockingStepping`
+clock=None, **same but step_dt)``: the same world under :class:`rmm_envs.wrappers.NonBlockingStepping`
 (each ``step(a)`` advances the world by ``elapsed * time_accel + base_step`` seconds under the
 previous action, then stores ``a``; the first interval is the pilot's).
 
@@ -124,7 +124,7 @@ import numpy as np
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.clocks import make_clock
 from rmm_envs.envs.base import check_arguments, draw_until, finite, option_vector, rejection_sample, state_rows, whole
-from rmm_envs.envs.guarded import GuardedEnv
+from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv, unit_quaternion_rows
 from rmm_envs.quadrotor_pilot import WaypointPilot
 from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
@@ -440,8 +440,4 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         return self._features(st, rays)
 
 
-def make_parallel_env(time_accel: float = 10.0, base_step: float = 0.1, clock=None, **kwargs):
-    """Entry point of ``QuadrotorRoomParallel-v0``: the blocking env under non-blocking stepping."""
-    from rmm_envs.wrappers.nonblocking import NonBlockingStepping
-
-    return NonBlockingStepping(QuadrotorRoomGuardedEnv(**kwargs), time_accel=time_accel, base_step=base_step, clock=clock)
+make_parallel_env = parallel_entry_point(QuadrotorRoomGuardedEnv, "QuadrotorRoomParallel-v0")
