@@ -149,6 +149,19 @@ def test_bad_options_exit_2_naming_the_flag_before_any_episode(tmp_path, capsys,
     assert not out.exists()  # nothing ran, nothing was written
 
 
+@pytest.mark.parametrize("flag, value", [("--time-accel", "5"), ("--base-step", "0.3")])
+def test_non_blocking_options_on_a_blocking_env_exit_2_instead_of_being_ignored(tmp_path, capsys, flag, value):
+    out = tmp_path / "r"
+    argv = ["--agent", "inactive", "--episodes", "1", "--workers", "1", "--out", str(out), "--clock", "fixed:1",
+            "--no-progress", "--env", "Dubins4DCircles-v0", flag, value]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(f"{flag} {value}: Dubins4DCircles-v0 steps by a fixed step per decision and takes no "
+                        f"{flag[2:].replace('-', '_')}; leave {flag} out, or run its non-blocking (Parallel) twin"), err
+    assert not out.exists()
+    assert main(argv[:-2]) == 0  # the defaults are what a blocking env runs with
+
+
 # ------------------------------------------------------------------ rmm-bench: stats() and --retry-errors
 def test_stats_failure_is_the_guardians_error_and_retry_errors_reruns_it(tmp_path, capsys):
     out = tmp_path / "s"

@@ -20,6 +20,8 @@ __all__ = ["DEFAULT_ENV", "ReportRequest", "parse_report", "parse_run", "parse_s
            "sweep_parser"]
 
 DEFAULT_ENV = "Dubins4DParallel-v0"
+#: the non-blocking stepping options and their defaults (what a blocking env must be left with)
+NON_BLOCKING_DEFAULTS = {"time_accel": 10.0, "base_step": 0.1}
 
 
 def _common(p: argparse.ArgumentParser, default_agent: str) -> None:
@@ -29,8 +31,10 @@ def _common(p: argparse.ArgumentParser, default_agent: str) -> None:
                    help="a registered env id offering the parallel-autonomy contract: Dubins4DParallel-v0, Dubins3DMazeParallel-v0 or "
                         "QuadrotorRoomParallel-v0 (non-blocking), Dubins4DCircles-v0, Dubins3DMazeGuarded-v0 or QuadrotorRoomGuarded-v0 "
                         "(blocking) in this package (default: %(default)s)")
-    p.add_argument("--time-accel", type=float, default=10.0, help="sim seconds per clock second, for a non-blocking env (default: %(default)s)")
-    p.add_argument("--base-step", type=float, default=0.1, help="sim seconds added every step, for a non-blocking env (default: %(default)s)")
+    p.add_argument("--time-accel", type=float, default=NON_BLOCKING_DEFAULTS["time_accel"],
+                   help="sim seconds per clock second, for a non-blocking env (default: %(default)s)")
+    p.add_argument("--base-step", type=float, default=NON_BLOCKING_DEFAULTS["base_step"],
+                   help="sim seconds added every step, for a non-blocking env (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="master seed; episode i's seed derives from it (default: %(default)s)")
     p.add_argument("--out", default="results", help="output directory (default: %(default)s)")
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (default: the core count)")
@@ -96,6 +100,11 @@ def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
     agent_kwargs = parse_agent_opts(args.agent_opt or [], agents)
     options = {"time_accel": args.time_accel, "base_step": args.base_step, "clock": clock}
     takes = env_arguments(args.env)  # ValueError if not registered; the contract is checked when the env is built
+    for name, default in NON_BLOCKING_DEFAULTS.items():
+        if name not in takes and options[name] != default:  # a blocking env would silently ignore it
+            flag = "--" + name.replace("_", "-")
+            raise ValueError(f"{flag} {options[name]:g}: {args.env} steps by a fixed step per decision and takes no "
+                             f"{name}; leave {flag} out, or run its non-blocking (Parallel) twin")
     return BenchConfig(
         agents=tuple(agents), agent_kwargs=agent_kwargs, env_id=args.env,
         env_kwargs={k: v for k, v in options.items() if k in takes}, clock=clock, seed=args.seed, episodes=args.episodes,
