@@ -150,6 +150,11 @@ def observation_layout() -> ObservationLayout:
                                 ray_angles=[k * math.pi / 4 for k in range(N_RAYS)])
 
 
+_LAYOUT = observation_layout()
+_RANGES = slice(_LAYOUT["rays"].start, _LAYOUT["rays_vertical"].stop)  # every ray, horizontal then vertical
+_QUAT, _VEL, _RATES, _GOAL = (_LAYOUT[f] for f in ("orientation", "velocity", "angular_velocity", "goal_offset"))
+
+
 _DIRS = np.array([[math.cos(k * math.pi / 4), math.sin(k * math.pi / 4), 0.0] for k in range(N_RAYS)]
                  + [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
 
@@ -198,10 +203,10 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         self.pilot = WaypointPilot(self.system.control_low, self.system.control_high, cruise_speed, climb_speed)
         self.clock = make_clock(clock)
         self.action_space = GuardianActionSpace.for_system(self.system, CONTROLS, safe_default=HoverAndLevel())
-        lay = observation_layout()
-        low = np.array([0.0] * (N_RAYS + 2) + [-1.0] * 4 + [-np.inf] * 9, np.float32)
-        high = np.array([self.ray_range] * (N_RAYS + 2) + [1.0] * 4 + [np.inf] * 9, np.float32)
-        self.observation_space = ObservationBox(low, high, lay)
+        low, high = np.full(_LAYOUT.size, -np.inf, np.float32), np.full(_LAYOUT.size, np.inf, np.float32)
+        low[_RANGES], high[_RANGES] = 0.0, self.ray_range
+        low[_QUAT], high[_QUAT] = -1.0, 1.0
+        self.observation_space = ObservationBox(low, high, _LAYOUT)
         # F_max / m + g: no body acceleration exceeds it (damping only slows the body)
         self._a_bound = self.params.control_high[0] / self.params.mass + self.params.gravity
         self._ray_to = (self.ray_range * _DIRS).tolist()
@@ -326,27 +331,26 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         st = np.atleast_2d(states)
         n = st.shape[0]
         R = quat_to_rot(st[:, 3:7])
-        out = np.empty((n, 23), dtype=np.float32)
-        out[:, :N_RAYS + 2] = rays
-        out[:, 10:14] = st[:, 3:7]
-        out[:, 14:17] = _heading_frame(st[:, 3:7], st[:, 7:10])
-        out[:, 17:20] = np.einsum("nji,nj->ni", R, st[:, 10:13])
-        out[:, 20:23] = _heading_frame(st[:, 3:7], self.goal[None, :] - st[:, :3])
+        out = np.empty((n, _LAYOUT.size), dtype=np.float32)
+        out[:, _RANGES] = rays
+        out[:, _QUAT] = st[:, 3:7]
+        out[:, _VEL] = _heading_frame(st[:, 3:7], st[:, 7:10])
+        out[:, _RATES] = np.einsum("nji,nj->ni", R, st[:, 10:13])
+        out[:, _GOAL] = _heading_frame(st[:, 3:7], self.goal[None, :] - st[:, :3])
         return out
 
     def _observe(self, s) -> np.ndarray:
         """:meth:`_features` of one state, in scalar arithmetic (a step's observation; the tests
         hold the two equal)."""
-        out = np.empty(23, dtype=np.float32)
-        out[:N_RAYS + 2] = self.rays()
-        out[10:14] = s[3:7]
+        out = np.empty(_LAYOUT.size, dtype=np.float32)
+        out[_RANGES] = self.rays()
+        out[_QUAT] = s[3:7]
         psi = yaw_of(s[3], s[4], s[5], s[6])
         c, sn = math.cos(psi), math.sin(psi)
-        out[14], out[15], out[16] = c * s[7] + sn * s[8], -sn * s[7] + c * s[8], s[9]
-        r = quat_to_rot(s[3:7])
-        out[17:20] = r.T @ s[10:13]
+        out[_VEL] = (c * s[7] + sn * s[8], -sn * s[7] + c * s[8], s[9])
+        out[_RATES] = quat_to_rot(s[3:7]).T @ s[10:13]
         dx, dy = self.goal[0] - s[0], self.goal[1] - s[1]
-        out[20], out[21], out[22] = c * dx + sn * dy, -sn * dx + c * dy, self.goal[2] - s[2]
+        out[_GOAL] = (c * dx + sn * dy, -sn * dx + c * dy, self.goal[2] - s[2])
         return out
 
     def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
@@ -432,7 +436,7 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         self.require_episode()
         st = unit_quaternion_rows(state_rows(states, 13))
         keep = self.get_state()
-        rays = np.empty((st.shape[0], N_RAYS + 2))
+        rays = np.empty((st.shape[0], _RANGES.stop - _RANGES.start))
         for i, row in enumerate(st):
             self.set_state(row)
             rays[i] = self.rays()
