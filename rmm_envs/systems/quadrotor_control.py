@@ -62,20 +62,19 @@ _MASS, _G, _IX, _IY, _IZ, _KV, _KVZ, _AH, _AZ, _KR, _KW, _KWZ, _FLO, _FHI, _MLO,
 _N_GAINS = 20
 
 
+def _rotation(qx, qy, qz, qw):
+    """The rotation matrix of the unit quaternion ``(x, y, z, w)``, row by row (9 numbers): the
+    scalar form of :func:`rmm_envs.systems.rotations.quat_to_rot`, for the compiled kernels."""
+    return (1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw),
+            2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw),
+            2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy))
+
+
 def command_wrench(s, cmd, k, out):
     """Thrust and body moments ``out = (F, Mx, My, Mz)`` for state ``s`` (13) and command
     ``cmd`` (4), with the packed gains ``k`` (:attr:`CommandController.packed`); see the
     module docstring.  Returns ``out``."""
-    qx, qy, qz, qw = s[3], s[4], s[5], s[6]
-    r00 = 1 - 2 * (qy * qy + qz * qz)
-    r01 = 2 * (qx * qy - qz * qw)
-    r02 = 2 * (qx * qz + qy * qw)
-    r10 = 2 * (qx * qy + qz * qw)
-    r11 = 1 - 2 * (qx * qx + qz * qz)
-    r12 = 2 * (qy * qz - qx * qw)
-    r20 = 2 * (qx * qz - qy * qw)
-    r21 = 2 * (qy * qz + qx * qw)
-    r22 = 1 - 2 * (qx * qx + qy * qy)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rotation(s[3], s[4], s[5], s[6])
     h = math.sqrt(r00 * r00 + r10 * r10)  # (cos psi, sin psi) without the trigonometry
     c, sn = (r00 / h, r10 / h) if h > 1e-12 else (1.0, 0.0)
     # velocity loop
@@ -133,15 +132,7 @@ def body_step(s, u, b, out):
     damping, max angular speed)``.  ``out`` (13) may not be ``s``."""
     m, g, ix, iy, iz, dt, dl, da, wmax = b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7], b[8]
     qx, qy, qz, qw = s[3], s[4], s[5], s[6]
-    r00 = 1 - 2 * (qy * qy + qz * qz)
-    r01 = 2 * (qx * qy - qz * qw)
-    r02 = 2 * (qx * qz + qy * qw)
-    r10 = 2 * (qx * qy + qz * qw)
-    r11 = 1 - 2 * (qx * qx + qz * qz)
-    r12 = 2 * (qy * qz - qx * qw)
-    r20 = 2 * (qx * qz - qy * qw)
-    r21 = 2 * (qy * qz + qx * qw)
-    r22 = 1 - 2 * (qx * qx + qy * qy)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rotation(qx, qy, qz, qw)
     vx, vy, vz, wx, wy, wz = s[7], s[8], s[9], s[10], s[11], s[12]
     f = u[0] / m
     vn = math.sqrt(vx * vx + vy * vy + vz * vz)
@@ -214,6 +205,7 @@ def _closed_loop_paths(states, cmds, k, b, per_segment, out):
 
 
 if njit is not None:  # one source: the compiled loops run these very functions
+    _rotation = njit(cache=True, inline="always")(_rotation)
     command_wrench = njit(cache=True)(command_wrench)
     _wrench_loop = njit(cache=True)(_wrench_loop)
     body_step = njit(cache=True)(body_step)
