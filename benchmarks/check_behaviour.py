@@ -25,6 +25,7 @@ import argparse
 import hashlib
 import json
 import math
+import os
 import subprocess
 import sys
 import tempfile
@@ -36,10 +37,26 @@ import numpy as np
 _TIMING = {"decision_mean", "decision_std", "decision_max", "precompute_time", "wall_time", "finished", "run_key",
            "invocation", "config"}
 
+# Sizes: "full" is the refactor check (about two minutes on one core), "quick" the cheap one the
+# default test suite runs under several machines' arithmetic (tests/test_reproducibility.py).
+SIZES = {
+    "full": {"episodes": 32, "hj_episodes": 4, "other_episodes": 8, "steps": 200, "states": 16, "seeds": 20,
+             "configs": 2, "samples": 8},
+    "quick": {"episodes": 3, "hj_episodes": 0, "other_episodes": 1, "steps": 40, "states": 4, "seeds": 4,
+              "configs": 1, "samples": 4},
+}
 AGENTS = ("inactive", "random", "brakes", "lrmm", "lrmm-paper", "cbf", "cbf-paper")
 HJ_AGENTS = ("hj", "hj-paper")
-ENVS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins3DMaze-v0", "QuadrotorRoom-v0")
-LABELLED = {"Dubins4DCircles-v0": {}, "Dubins3DMaze-v0": {}, "QuadrotorRoom-v0": {}}
+# the other systems' parallel-autonomy envs and the guardians that apply to each
+OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "brakes", "lrmm", "cbf", "hj"),
+               "QuadrotorRoomParallel-v0": ("inactive", "brakes", "lrmm")}
+QUICK_OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "lrmm", "cbf"), "QuadrotorRoomParallel-v0": ("inactive", "lrmm")}
+ENVS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins4DMap-v0", "Dubins4DMapParallel-v0", "Dubins3DMaze-v0",
+        "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoom-v0", "QuadrotorRoomGuarded-v0",
+        "QuadrotorRoomParallel-v0")
+LABELLED = {"Dubins4DCircles-v0": {}, "Dubins4DMap-v0": {}, "Dubins3DMaze-v0": {}, "Dubins3DMazeGuarded-v0": {},
+            "QuadrotorRoom-v0": {}, "QuadrotorRoomGuarded-v0": {}}
+DATASETS = ("Dubins4DCircles-v0", "Dubins3DMazeGuarded-v0", "QuadrotorRoomGuarded-v0")
 
 
 def _is_timing(key: str) -> bool:
@@ -55,6 +72,32 @@ def _digest(*arrays) -> str:
     return h.hexdigest()[:32]
 
 
+def _measured(key) -> bool:
+    """An info key that holds a measured (wall or CPU) time, not behaviour."""
+    return isinstance(key, str) and any(w in key for w in ("compute", "wall", "seconds", "elapsed"))
+
+
+def _flatten(value, out: list) -> None:
+    """Every number, string and array of a nested structure, in a fixed order (measured times left out)."""
+    if isinstance(value, dict):
+        for k in sorted(value, key=str):
+            if _measured(k):
+                continue
+            out.append(np.frombuffer(str(k).encode(), np.uint8))
+            _flatten(value[k], out)
+    elif isinstance(value, (list, tuple)):
+        for v in value:
+            _flatten(v, out)
+    elif isinstance(value, str):
+        out.append(np.frombuffer(value.encode(), np.uint8))
+    elif value is None or callable(value):
+        out.append(np.zeros(0))
+    elif hasattr(value, "__dict__") and not isinstance(value, np.ndarray):
+        _flatten({k: v for k, v in vars(value).items() if not k.startswith("_")}, out)
+    else:
+        out.append(np.asarray(value))
+
+
 def _plain(v):
     if isinstance(v, float) and math.isnan(v):
         return "nan"
@@ -65,48 +108,101 @@ def _plain(v):
     return v
 
 
-def bench_fingerprint(episodes: int, hj_episodes: int) -> dict:
+def _bench(tmp: str, env_id: str, agents, n: int, extra=()) -> None:
+    """One fixed-clock ``rmm-bench`` run, in this process (its table is not printed)."""
+    import contextlib
+    import io
+
+    from benchmarks.bench.cli import main as bench_main
+
+    argv = ["--env", env_id, "--agent", ",".join(agents), "--episodes", str(n), "--seed", "0", "--clock", "fixed:1",
+            "--out", tmp, "--workers", "1", "--no-progress", *extra]
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            rc = bench_main(argv)
+        except SystemExit as e:
+            rc = e.code
+    if rc not in (0, None):
+        raise SystemExit(f"rmm-bench {' '.join(argv)} failed ({rc}):\n{out.getvalue()[-2000:]}\n{err.getvalue()[-2000:]}")
+
+
+def bench_fingerprint(episodes: int, hj_episodes: int, other_episodes: int = 0, other=OTHER_BENCH) -> dict:
+    """Every stored non-timing column of fixed-clock benchmark episodes, keyed agent/episode
+    (Dubins4D, whose keys are kept as before) or env/agent/episode (the other systems)."""
     from benchmarks import load_results
 
     out: dict = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        runs = [(AGENTS, episodes)] + ([(HJ_AGENTS, hj_episodes)] if hj_episodes else [])
-        for agents, n in runs:
-            cmd = [sys.executable, "-m", "benchmarks.bench.cli", "--agent", ",".join(agents), "--episodes", str(n),
-                   "--seed", "0", "--clock", "fixed:1", "--out", tmp, "--workers", "1", "--no-progress"]
-            if agents == HJ_AGENTS:  # solve afresh: a cached value function would hide a change of the solver
-                cmd += ["--agent-opt", "hj.cache=false", "--agent-opt", "hj-paper.cache=false"]
-            proc = subprocess.run(cmd, capture_output=True, text=True)
-            if proc.returncode != 0:
-                raise SystemExit(f"rmm-bench failed ({proc.returncode}):\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}")
-        df = load_results(tmp)
+    runs = [("Dubins4DParallel-v0", AGENTS, episodes, ())]
+    if hj_episodes:  # solve afresh: a cached value function would hide a change of the solver
+        runs.append(("Dubins4DParallel-v0", HJ_AGENTS, hj_episodes,
+                     ("--agent-opt", "hj.cache=false", "--agent-opt", "hj-paper.cache=false")))
+    if other_episodes:
+        runs += [(env_id, agents, other_episodes, ()) for env_id, agents in other.items()]
+    for env_id, agents, n, extra in runs:
+        with tempfile.TemporaryDirectory() as tmp:
+            _bench(tmp, env_id, agents, n, extra)
+            df = load_results(tmp)
         cols = [c for c in df.columns if c not in _TIMING]
+        prefix = "" if env_id == "Dubins4DParallel-v0" else f"{env_id}/"
         for row in df[cols].to_dict("records"):
             if row.get("guardian_stats"):  # guardians' own timings (e.g. HJ's solve_seconds) are not behaviour
                 stats = json.loads(row["guardian_stats"])
                 row["guardian_stats"] = json.dumps({k: v for k, v in sorted(stats.items()) if not _is_timing(k)})
-            out[f"{row['agent']}/{row['episode']}"] = {k: _plain(v) for k, v in sorted(row.items())}
+            out[f"{prefix}{row['agent']}/{row['episode']}"] = {k: _plain(v) for k, v in sorted(row.items())}
     return out
 
 
-def env_fingerprint(steps: int = 200) -> dict:
+def _make(env_id: str):
     import gymnasium as gym
 
     import rmm_envs  # noqa: F401
 
+    kwargs = {"clock": "fixed:1"} if "Parallel" in env_id else {}
+    return gym.make(env_id, **kwargs)
+
+
+def env_fingerprint(steps: int = 200, envs=ENVS) -> dict:
+    """Observations, rewards, flags and every numeric info value of a seeded rollout of each env."""
     out = {}
-    for env_id in ENVS:
-        kwargs = {"clock": "fixed:1"} if env_id == "Dubins4DParallel-v0" else {}
-        env = gym.make(env_id, **kwargs)
+    for env_id in envs:
+        env = _make(env_id)
         env.action_space.seed(7)
-        obs, _ = env.reset(seed=7)
+        obs, info = env.reset(seed=7)
         record = [obs]
+        _flatten(info, record)
         for _ in range(steps):
-            obs, r, term, trunc, _ = env.step(env.action_space.sample())
+            obs, r, term, trunc, info = env.step(env.action_space.sample())
             record += [obs, np.array([r, term, trunc], dtype=float)]
+            _flatten(info, record)
             if term or trunc:
                 obs, _ = env.reset()
                 record.append(obs)
+        env.close()
+        out[env_id] = _digest(*record)
+    return out
+
+
+def world_fingerprint(seeds: int) -> dict:
+    """The generated worlds: rooms, mazes, and every env's world and start state at reset
+    (circle sets, map starts, goals and waypoints), through the privileged accessor."""
+    from rmm_envs.worlds.mazes import generate_maze
+    from rmm_envs.worlds.rooms import generate_room
+
+    out = {}
+    rooms, mazes = [], []
+    for seed in range(seeds):
+        _flatten(generate_room(np.random.default_rng(seed)), rooms)
+        for kind in ("rectangular", "honeycomb"):
+            _flatten(generate_maze(np.random.default_rng(seed), kind=kind, rows=6, cols=6), mazes)
+    out["generate_room"], out["generate_maze"] = _digest(*rooms), _digest(*mazes)
+    for env_id in ENVS:
+        env = _make(env_id)
+        record = []
+        for seed in range(seeds):
+            obs, _ = env.reset(seed=seed)
+            record.append(obs)
+            _flatten(env.unwrapped.privileged(), record)
         env.close()
         out[env_id] = _digest(*record)
     return out
@@ -132,15 +228,68 @@ def label_fingerprint(n_states: int = 16) -> dict:
     return out
 
 
-def fingerprint(episodes: int, hj_episodes: int) -> dict:
-    return {"bench": bench_fingerprint(episodes, hj_episodes), "envs": env_fingerprint(),
-            "labels": label_fingerprint(), "sizes": {"episodes": episodes, "hj_episodes": hj_episodes}}
+def dataset_fingerprint(configs: int, samples: int) -> dict:
+    """The dataset hash ``rmm-datagen`` writes in its manifest (every shard's bytes), per system."""
+    from rmm_envs.risk.datagen import DatagenConfig, generate
+
+    out = {}
+    for env_id in DATASETS:
+        cfg = DatagenConfig(env_id=env_id, configs=configs, samples_per_config=samples, seed=11, branches=4, depth=2,
+                            horizon=0.5, n_steps=4, configs_per_shard=1)
+        with tempfile.TemporaryDirectory() as tmp:
+            manifest = generate(cfg, tmp, workers=1, progress=False)
+            shards = sorted(Path(tmp).glob("shard-*.parquet"))
+            import pyarrow.parquet as pq
+
+            cols = [pq.read_table(p).to_pydict() for p in shards]
+        out[env_id] = {"content": _digest(*[np.asarray(v, dtype=object).astype(str) for c in cols for v in c.values()]),
+                       "rows": manifest.get("rows")}
+    return out
+
+
+def hj_fingerprint() -> dict:
+    """HJ value functions solved afresh on small grids: Dubins4D (second and first order) and the maze."""
+    from guardians.hj.guardian import HJGuardian
+
+    obstacles = np.array([[3.0, 1.0, 1.5], [-4.0, -2.0, 2.0]])
+    out = {}
+    for order, rk in ((2, 3), (1, 2)):
+        g = HJGuardian(grid_n=(21, 21, 9, 9), horizon=1.0, order=order, rk=rk, cache=False, threads=1)
+        out[f"dubins4d/order{order}"] = _digest(g.value_function(obstacles))
+    return out
+
+
+def fingerprint(episodes: int, hj_episodes: int, size: str | None = None) -> dict:
+    sz = dict(SIZES[size or "full"], episodes=episodes, hj_episodes=hj_episodes)
+    other = QUICK_OTHER_BENCH if size == "quick" else OTHER_BENCH
+    return {"bench": bench_fingerprint(sz["episodes"], sz["hj_episodes"], sz["other_episodes"], other),
+            "envs": env_fingerprint(sz["steps"]), "worlds": world_fingerprint(sz["seeds"]),
+            "labels": label_fingerprint(sz["states"]), "datasets": dataset_fingerprint(sz["configs"], sz["samples"]),
+            "hj": hj_fingerprint(), "sizes": {**sz, "size": size or "full"}, "versions": versions()}
+
+
+def versions() -> dict:
+    """What the bits are promised for: the versions of the packages that compute them."""
+    from importlib.metadata import version
+
+    out = {"python": ".".join(map(str, sys.version_info[:3]))}
+    for pkg in ("numpy", "numba", "scipy", "osqp", "pybullet", "pymunk", "pyarrow"):
+        try:
+            out[pkg] = version(pkg)
+        except Exception:  # noqa: BLE001 - an optional extra that is not installed
+            out[pkg] = None
+    return out
+
+
+SECTIONS = ("worlds", "envs", "labels", "datasets", "hj", "bench")
 
 
 def compare(old: dict, new: dict) -> list[str]:
     diffs = []
-    for section in ("envs", "labels", "bench"):
-        a, b = old.get(section, {}), new.get(section, {})
+    for section in SECTIONS:
+        if section not in old or section not in new:
+            continue  # a record made before the section existed
+        a, b = old[section], new[section]
         for key in sorted(set(a) | set(b)):
             if key not in b:
                 diffs.append(f"{section}: {key} missing now")
@@ -155,21 +304,97 @@ def compare(old: dict, new: dict) -> list[str]:
     return diffs
 
 
+# Machines' arithmetic, simulated on one machine: the BLAS kernel numpy's OpenBLAS picks
+# (OPENBLAS_CORETYPE), the CPU numba compiles for (NUMBA_CPU_NAME; unset = this host) and the
+# SIMD loops numpy dispatches to (NPY_DISABLE_CPU_FEATURES: X86_V4 is AVX-512, X86_V3 AVX2/FMA).
+_NPY_NO_AVX512 = "X86_V4 AVX512_ICL AVX512_SPR"
+_NPY_NO_AVX2 = "X86_V3 " + _NPY_NO_AVX512
+
+
+def arith_settings(host_flags: set[str] | None = None) -> list[dict]:
+    """The settings to compare, the portable one (oldest kernel, generic CPU, no SIMD dispatch) first."""
+    if host_flags is None:
+        try:
+            host_flags = set(Path("/proc/cpuinfo").read_text().split())
+        except OSError:
+            host_flags = set()
+    out = [{"OPENBLAS_CORETYPE": "Prescott", "NUMBA_CPU_NAME": "generic", "NPY_DISABLE_CPU_FEATURES": _NPY_NO_AVX2},
+           {"OPENBLAS_CORETYPE": "Haswell", "NUMBA_CPU_NAME": "generic", "NPY_DISABLE_CPU_FEATURES": _NPY_NO_AVX512},
+           {"OPENBLAS_CORETYPE": "Haswell", "NUMBA_CPU_NAME": None, "NPY_DISABLE_CPU_FEATURES": _NPY_NO_AVX512},
+           {"OPENBLAS_CORETYPE": None, "NUMBA_CPU_NAME": None, "NPY_DISABLE_CPU_FEATURES": None}]  # the host's own
+    if "avx512f" in host_flags:
+        out.insert(3, {"OPENBLAS_CORETYPE": "SkylakeX", "NUMBA_CPU_NAME": None, "NPY_DISABLE_CPU_FEATURES": None})
+    return out
+
+
+def describe(setting: dict) -> str:
+    return ", ".join(f"{k}={'(host)' if v is None else v}" for k, v in setting.items())
+
+
+def run_under(setting: dict, size: str, timeout: float | None = None) -> dict:
+    """The fingerprint computed in a fresh interpreter under one setting (None: unset)."""
+    env = dict(os.environ)
+    for k, v in setting.items():
+        env.pop(k, None)
+        if v is not None:
+            env[k] = v
+    env.pop("OPENBLAS_L2_SIZE", None) if setting.get("OPENBLAS_CORETYPE") is None else None
+    root = Path(__file__).resolve().parent.parent
+    env["PYTHONPATH"] = os.pathsep.join([str(root), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "fingerprint.json"
+        proc = subprocess.run([sys.executable, str(Path(__file__).resolve()), "record", str(out), "--size", size],
+                              env=env, capture_output=True, text=True, timeout=timeout, cwd=root)
+        if proc.returncode != 0:
+            raise RuntimeError(f"fingerprint under {describe(setting)} failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
+        return json.loads(out.read_text())
+
+
+def first_difference(ref: dict, other: dict) -> str | None:
+    diffs = compare(ref, other)
+    return diffs[0] if diffs else None
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("mode", choices=["record", "compare"])
-    p.add_argument("file", type=Path)
-    p.add_argument("--episodes", type=int, default=32, help="benchmark episodes per agent (default: %(default)s)")
-    p.add_argument("--hj-episodes", type=int, default=4, help="episodes per HJ agent, 0 to skip (default: %(default)s)")
+    p.add_argument("mode", choices=["record", "compare", "print", "arith"],
+                   help="record FILE, compare FILE, print (JSON to stdout), or arith: the same fingerprint under "
+                        "several machines' arithmetic (BLAS kernel, numba CPU, numpy SIMD dispatch), compared")
+    p.add_argument("file", type=Path, nargs="?")
+    p.add_argument("--size", choices=sorted(SIZES), default="full", help="what to compute (default: %(default)s)")
+    p.add_argument("--episodes", type=int, default=None, help="Dubins4D benchmark episodes per agent")
+    p.add_argument("--hj-episodes", type=int, default=None, help="episodes per HJ agent, 0 to skip")
+    p.add_argument("--show", type=int, default=1, help="arith: differences listed per setting (default: %(default)s)")
     args = p.parse_args(argv)
+    sz = SIZES[args.size]
+    episodes = sz["episodes"] if args.episodes is None else args.episodes
+    hj_episodes = sz["hj_episodes"] if args.hj_episodes is None else args.hj_episodes
+    if args.mode in ("record", "compare") and args.file is None:
+        p.error(f"{args.mode} needs a FILE")
+    if args.mode == "print":
+        print(json.dumps(fingerprint(episodes, hj_episodes, args.size), sort_keys=True))
+        return 0
+    if args.mode == "arith":
+        settings = arith_settings()
+        ref = run_under(settings[0], args.size)
+        print(f"reference: {describe(settings[0])}")
+        bad = 0
+        for s in settings[1:]:
+            diffs = compare(ref, run_under(s, args.size))
+            print(f"{describe(s)}: " + ("same bits" if not diffs else f"{len(diffs)} DIFFER, first: {diffs[0]}"))
+            for d in diffs[1:args.show]:
+                print(f"    {d}")
+            bad += bool(diffs)
+        return 1 if bad else 0
     if args.mode == "record":
-        fp = fingerprint(args.episodes, args.hj_episodes)
+        fp = fingerprint(episodes, hj_episodes, args.size)
         args.file.write_text(json.dumps(fp, indent=1, sort_keys=True))
-        print(f"recorded {len(fp['bench'])} episodes, {len(fp['envs'])} env rollouts, {len(fp['labels'])} label sets -> {args.file}")
+        print(f"recorded {len(fp['bench'])} episodes, {len(fp['envs'])} env rollouts, {len(fp['labels'])} label sets, "
+              f"{len(fp['worlds'])} world sets, {len(fp['datasets'])} datasets -> {args.file}")
         return 0
     old = json.loads(args.file.read_text())
     sizes = old.get("sizes", {})
-    new = fingerprint(sizes.get("episodes", args.episodes), sizes.get("hj_episodes", args.hj_episodes))
+    new = fingerprint(sizes.get("episodes", episodes), sizes.get("hj_episodes", hj_episodes), sizes.get("size", "full"))
     diffs = compare(old, new)
     for d in diffs:
         print(d)

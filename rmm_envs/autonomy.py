@@ -51,6 +51,8 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 from gymnasium import spaces
 
+from rmm_envs.portable import wrap_angle
+
 __all__ = ["ACTIVE", "GuardianActionSpace", "ObservationBox", "ObservationLayout", "SafeDefault", "active", "inactive",
            "layout", "parse"]
 
@@ -321,7 +323,7 @@ class ObservationLayout:
         """Position in the observation of the ray nearest to ``angle`` (radians from the heading)."""
         if not self.ray_angles:
             raise KeyError(f"the observation has no rays; it has {list(self.names)}")
-        d = np.angle(np.exp(1j * (np.asarray(self.ray_angles) - float(angle))))
+        d = wrap_angle(np.asarray(self.ray_angles, dtype=float) - float(angle))
         return self["rays"].start + int(np.argmin(np.abs(d)))
 
 

@@ -76,9 +76,9 @@ class Grid:
         """Multilinear interpolation of several same-shape arrays at one point ``x``."""
         i0, i1, frac = self._cell(x)
         c = self._corners
-        flat = np.where(c, i1[:, None], i0[:, None]).T @ self._strides  # (2^d,)
+        flat = (np.where(c, i1[:, None], i0[:, None]).T * self._strides).sum(axis=1)  # (2^d,) flat indices
         w = np.prod(np.where(c, frac[:, None], 1.0 - frac[:, None]), axis=0)
-        return np.array([a.reshape(-1)[flat] @ w for a in arrays])
+        return np.array([np.add.reduce(a.reshape(-1)[flat] * w) for a in arrays])  # ordered sums, not BLAS
 
     def interpolator(self, arrays):
         """A function ``f(x) -> (len(arrays),)`` interpolating ``arrays`` at one point, as

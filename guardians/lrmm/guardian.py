@@ -89,6 +89,7 @@ import numpy as np
 from guardians._checks import integer
 from guardians.base import Guardian
 from guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, load_model
+from rmm_envs.portable import wrap_angle
 
 __all__ = ["PAPER_THRESHOLD", "LRMMGuardian", "LRMMPaperGuardian"]
 
@@ -233,7 +234,7 @@ class LRMMGuardian(Guardian):
             self.require_action_space(controls=1, space=action_space)  # the turn rate
             lay = self.require_layout("rays", observation_space=observation_space)
             n = lay.size_of("rays")
-            even = np.allclose(np.angle(np.exp(1j * (np.asarray(lay.ray_angles) - 2 * np.pi * np.arange(n) / n))), 0, atol=1e-9)
+            even = np.allclose(wrap_angle(np.asarray(lay.ray_angles) - 2 * np.pi * np.arange(n) / n), 0, atol=1e-9)
             if self.inputs != "rays" or not even:
                 raise ValueError(f"guardian {self.name!r}: action 'turn' judges a turn by the model's risk of the rays "
                                  "rotated by one ray, so the model must read the 'rays' field, rays evenly spaced over the "

@@ -48,10 +48,9 @@ from pathlib import Path
 
 import numpy as np
 
-try:
-    from numba import njit
-except ImportError:  # pragma: no cover - numba is a dependency; inference falls back to numpy
-    njit = None
+from numba import njit
+
+from rmm_envs.portable import matvec
 
 __all__ = ["FORMAT", "SHIPPED", "LRMMModel", "Shipped", "default_model_path", "load_model"]
 
@@ -59,19 +58,6 @@ FORMAT = "rmm-lrmm-model"
 FORMAT_VERSION = 2
 READABLE_VERSIONS = (1, 2)  # version 1: one output unit, no candidates or decision fields
 ACTIVATIONS = ("sigmoid", "tanh", "relu", "elu")
-
-
-def _sigmoid(x):
-    return 1.0 / (1.0 + np.exp(-x))
-
-
-def _act(name):
-    return {
-        "sigmoid": _sigmoid,
-        "tanh": np.tanh,
-        "relu": lambda x: np.maximum(x, 0.0),
-        "elu": lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0.0))),
-    }[name]
 
 
 def _forward_one(x, Ws, bs, act_code):
@@ -107,7 +93,20 @@ def _forward_one(x, Ws, bs, act_code):
     return h
 
 
-_forward_one = njit(cache=True)(_forward_one) if njit is not None else None
+_forward_one = njit(cache=True)(_forward_one)
+
+
+def _forward_rows(X, Ws, bs, act_code):
+    """:func:`_forward_one` of every (finite) row of ``X``: the batch path computes the same
+    bits as the one-observation path, in sums of a fixed order (no BLAS, whose kernel and so
+    whose rounding depends on the CPU)."""
+    out = np.empty((X.shape[0], bs[len(bs) - 1].shape[0]))
+    for i in range(X.shape[0]):
+        out[i] = _forward_one(X[i], Ws, bs, act_code)
+    return out
+
+
+_forward_rows = njit(cache=True)(_forward_rows)
 
 
 def _checksum(arrays: dict[str, np.ndarray]) -> str:
@@ -141,7 +140,6 @@ class LRMMModel:
         act = self.meta.get("activation", "sigmoid")
         if act not in ACTIVATIONS:
             raise ValueError(f"unknown activation {act!r}; expected one of {ACTIVATIONS}")
-        self._act = _act(act)
         cands = self.meta.get("candidates")
         self.candidates = None if cands is None else np.asarray(cands, dtype=float)
         self.candidate_hold = self.meta.get("candidate_hold")
@@ -150,7 +148,7 @@ class LRMMModel:
         # fold the scaler into the first layer: W0 ((x - m) * s) + b0 = (W0 * s) x + (b0 - W0 (m s))
         W0, b0 = self.weights[0]
         self._W0 = W0 * self.scaler_scale[None, :]
-        self._b0 = (b0 if b0 is not None else 0.0) - self._W0 @ self.scaler_min
+        self._b0 = (b0 if b0 is not None else 0.0) - matvec(self._W0, self.scaler_min)
         self._all_features = self.features.shape[0] == self.obs_dim and np.array_equal(self.features, np.arange(self.obs_dim))
         # the compiled one-observation path: the layers as tuples (a missing bias as zeros)
         layers = [(self._W0, np.broadcast_to(self._b0, (self._W0.shape[0],)))] + [
@@ -203,10 +201,9 @@ class LRMMModel:
         single = x.ndim == 1
         if x.shape[-1] != self.obs_dim or x.ndim not in (1, 2):
             raise ValueError(f"observation must have shape ({self.obs_dim},) or (N, {self.obs_dim}), got {x.shape}")
-        if single and _forward_one is not None:
+        if single:
             # one compiled call (a guardian's per-decision inference): numpy's per-call overhead
-            # on 64-unit layers was most of the decision time.  Same network; the sums run in
-            # sequential order, so results may differ from the batch path in the last bits.
+            # on 64-unit layers was most of the decision time.
             if not self._all_features:
                 x = x[self.features]
             out = _forward_one(np.ascontiguousarray(x), self._Ws, self._bs, self._act_code)
@@ -214,17 +211,12 @@ class LRMMModel:
                 raise ValueError(f"observation contains NaN or inf: {np.asarray(obs, dtype=float).tolist()}")
             return out
         if not np.all(np.isfinite(x)):
-            raise ValueError(f"observation contains NaN or inf: {x.tolist() if single else 'batch'}")
+            raise ValueError("observation contains NaN or inf: batch")
         if not self._all_features:
             x = x[..., self.features]
-        h = self._act(x @ self._W0.T + self._b0)
-        layers = self.weights[1:]
-        for i, (W, b) in enumerate(layers):
-            z = h @ W.T
-            if b is not None:
-                z = z + b
-            h = _sigmoid(z) if i == len(layers) - 1 else self._act(z)
-        return h
+        # the same compiled sums row by row: the bits of a batch equal those of its rows, and
+        # neither depends on the CPU (numpy's ``@`` goes to BLAS, ``np.exp`` to SIMD code)
+        return _forward_rows(np.ascontiguousarray(x), self._Ws, self._bs, self._act_code)
 
     # ------------------------------------------------------------------ I/O
     def arrays(self) -> dict[str, np.ndarray]:

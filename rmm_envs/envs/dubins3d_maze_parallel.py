@@ -125,6 +125,7 @@ from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, option_vector, whole
 from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv, maze_from_option
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
+from rmm_envs.portable import wrap_angle
 from rmm_envs.maze_driver import PursuitDriver, cell_distances, cell_of, cell_path
 from rmm_envs.scenes.maze import MazeScene
 from rmm_envs.systems.dubins3d import Dubins3D
@@ -155,7 +156,7 @@ class TurnFromNearerWall(SafeDefault):
 
     def __init__(self, layout: ObservationLayout) -> None:
         rays = layout["rays"]
-        ang = np.angle(np.exp(1j * np.asarray(layout.ray_angles)))
+        ang = wrap_angle(layout.ray_angles)
         self._left = [rays.start + i for i, a in enumerate(ang) if 1e-9 < a < math.pi - 1e-9]
         self._right = [rays.start + i for i, a in enumerate(ang) if -math.pi + 1e-9 < a < -1e-9]
 

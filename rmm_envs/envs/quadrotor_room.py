@@ -92,6 +92,7 @@ from gymnasium import spaces
 from rmm_envs.autonomy import ObservationBox, ObservationLayout
 from rmm_envs.envs.base import (LabelledEnvBase, check_arguments, draw_until, finite, option_vector, rejection_sample,
                                 state_rows)
+from rmm_envs.portable import norm, norms
 from rmm_envs.scenes.quadrotor import QuadrotorScene
 from rmm_envs.systems.quadrotor import QUADROTOR
 from rmm_envs.worlds.rooms import Room, build_room, generate_room
@@ -137,7 +138,7 @@ def push_body(p, client: int, body: int, control, n_steps: int, stop_on_contact:
 def unit_quaternion_rows(states: np.ndarray) -> np.ndarray:
     """``states`` ``(N, 13)``, refused (``ValueError`` naming the first bad row) unless every
     quaternion (columns 3-6) is a unit quaternion to 1e-6."""
-    bad = np.flatnonzero(np.abs(np.linalg.norm(states[:, 3:7], axis=1) - 1.0) > 1e-6)
+    bad = np.flatnonzero(np.abs(norms(states[:, 3:7]) - 1.0) > 1e-6)
     if bad.size:
         raise ValueError(f"states: row {bad[0]} has the quaternion {states[bad[0], 3:7].tolist()}, not a unit quaternion")
     return states
@@ -259,7 +260,7 @@ class QuadrotorRoomEnv(LabelledEnvBase):
         s = None
         if "state" in options:
             s = option_vector(options["state"], 13, "state", " (position, quaternion xyzw, velocity, angular velocity)")
-            if abs(np.linalg.norm(s[3:7]) - 1) > 1e-6:
+            if abs(norm(s[3:7]) - 1) > 1e-6:
                 raise ValueError(f"option 'state': the quaternion {s[3:7].tolist()} is not a unit quaternion")
         spec = options.get("room")
         if spec is not None and not isinstance(spec, (Room, dict)):
@@ -324,7 +325,7 @@ class QuadrotorRoomEnv(LabelledEnvBase):
 
         def draw(r, k):
             q = r.normal(size=(k, 4))
-            q /= np.linalg.norm(q, axis=1, keepdims=True)
+            q /= norms(q, keepdims=True)
             return np.column_stack([r.uniform(lo, hi, (k, 3)), q, r.uniform(-10, 10, (k, 3)),
                                     r.uniform(-4 * np.pi, 4 * np.pi, (k, 3))])
 

@@ -126,6 +126,7 @@ from rmm_envs.clocks import make_clock
 from rmm_envs.envs.base import check_arguments, draw_until, finite, option_vector, rejection_sample, state_rows, whole
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv, unit_quaternion_rows
+from rmm_envs.portable import matvec, norm
 from rmm_envs.quadrotor_pilot import WaypointPilot
 from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
 from rmm_envs.systems.quadrotor_control import (ClosedLoopQuadrotor, CommandController, HoverAndLevel, command_wrench,
@@ -266,7 +267,7 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         state = waypoints = None
         if "state" in options:
             state = option_vector(options["state"], 13, "state", " (position, quaternion xyzw, velocity, angular velocity)")
-            if abs(np.linalg.norm(state[3:7]) - 1) > 1e-6:
+            if abs(norm(state[3:7]) - 1) > 1e-6:
                 raise ValueError(f"option 'state': the quaternion {state[3:7].tolist()} is not a unit quaternion")
         if "waypoints" in options:
             w = np.asarray(options["waypoints"], dtype=float) if isinstance(options["waypoints"], (list, tuple, np.ndarray)) else None
@@ -348,7 +349,7 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         psi = yaw_of(s[3], s[4], s[5], s[6])
         c, sn = math.cos(psi), math.sin(psi)
         out[_VEL] = (c * s[7] + sn * s[8], -sn * s[7] + c * s[8], s[9])
-        out[_RATES] = quat_to_rot(s[3:7]).T @ s[10:13]
+        out[_RATES] = matvec(quat_to_rot(s[3:7]).T, s[10:13])
         dx, dy = self.goal[0] - s[0], self.goal[1] - s[1]
         out[_GOAL] = (c * dx + sn * dy, -sn * dx + c * dy, self.goal[2] - s[2])
         return out
@@ -400,7 +401,7 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
 
     def final_speed(self) -> float:
         v = self.get_state()[7:10]
-        return float(np.linalg.norm(v))
+        return norm(v)
 
     # ------------------------------------------------------------------ accessors and labelling hooks
     def privileged(self) -> dict:

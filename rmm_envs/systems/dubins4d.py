@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rmm_envs.autonomy import SafeDefault
+from rmm_envs.portable import wrap_angle
 
 try:
     from numba import njit
@@ -40,11 +41,6 @@ except ImportError:  # pragma: no cover - numba is a dependency; numpy alone sti
 __all__ = ["Dubins4D", "FullBraking", "wrap_angle"]
 
 _COMPILED_MAX_N = 8  # up to this many states per call, the compiled scalar path is faster
-
-
-def wrap_angle(theta: np.ndarray | float) -> np.ndarray | float:
-    """Wrap angles to ``[-pi, pi)``."""
-    return (np.asarray(theta) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def _series_coefficients(j_max: int = 7):

@@ -46,6 +46,7 @@ from typing import ClassVar
 import numpy as np
 
 from rmm_envs.autonomy import SafeDefault
+from rmm_envs.portable import arctan2
 from rmm_envs.systems.quadrotor import QUADROTOR, Quadrotor, QuadrotorParams
 
 try:
@@ -234,7 +235,7 @@ def heading_of(q) -> np.ndarray:
     """The yaw ``psi`` (rad) of the body x axis of quaternions ``(..., 4)`` (x, y, z, w)."""
     q = np.asarray(q, dtype=float)
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.arctan2(2 * (x * y + z * w), 1 - 2 * (y * y + z * z))
+    return arctan2(2 * (x * y + z * w), 1 - 2 * (y * y + z * z))
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rmm_envs.portable import norm
 from rmm_envs.systems.quadrotor import QUADROTOR
 from rmm_envs.systems.rotations import quat_to_rot
 from rmm_envs.worlds.rooms import Room
@@ -60,7 +61,7 @@ class RoomCollision:
         for i, o in enumerate(objs):
             s = np.asarray(o["size"], float)
             sizes[i, : s.size] = s
-            radii[i] = np.linalg.norm(s) if o["shape"] == "box" else (np.hypot(s[0], s[1] / 2) if o["shape"] == "cylinder" else s[0])
+            radii[i] = norm(s) if o["shape"] == "box" else (np.hypot(s[0], s[1] / 2) if o["shape"] == "cylinder" else s[0])
         self.obj_size, self.obj_radius = sizes, radii
 
     def clearance(self, point) -> float:

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rmm_envs.portable import dot, norm
 from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
 
 __all__ = ["Room", "build_room", "generate_room"]
@@ -148,7 +149,7 @@ def generate_room(rng: np.random.Generator, n_rectangles: int | None = None, x_r
                 angles = rng.uniform(-np.pi, np.pi, 3)
                 # the footprint radius does not depend on the orientation: rotate only a kept object
                 if shape == "box":
-                    radius = float(np.linalg.norm(size))
+                    radius = norm(size)
                 elif shape == "cylinder":
                     radius = float(np.hypot(size[0], size[1] / 2))
                 else:
@@ -159,14 +160,14 @@ def generate_room(rng: np.random.Generator, n_rectangles: int | None = None, x_r
                 xy = lo + (cell_ij + rng.uniform(0, 1, 2)) * c
                 if placed:  # exact norms only where the per-axis gaps allow an overlap
                     near = np.flatnonzero((np.abs(placed_xy[:len(placed)] - xy) < (radius + placed_r[:len(placed), None])).all(axis=1))
-                    if any(np.linalg.norm(xy - placed[i][0][:2]) < radius + placed[i][1] for i in near):
+                    if any(norm(xy - placed[i][0][:2]) < radius + placed[i][1] for i in near):
                         continue
                 if not room.in_footprint(xy[None, :] + radius * np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])).all():
                     continue
                 q = quat_from_euler(*angles)
                 R = quat_to_rot(q)
                 if shape == "box":
-                    hz = float(np.abs(R[2]) @ size)
+                    hz = dot(np.abs(R[2]), size)
                 elif shape == "cylinder":
                     r, L = size
                     hz = float(abs(R[2, 2]) * L / 2 + r * np.sqrt(max(0.0, 1 - R[2, 2] ** 2)))

@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from rmm_envs.portable import dot
+
 __all__ = ["OBSTACLE_KINDS", "MapError", "ShapeMap", "load_map", "triangulate"]
 
 OBSTACLE_KINDS = ("circle", "polygon", "segment")
@@ -111,7 +113,7 @@ def _polygon(value) -> np.ndarray:
             c, d = v[j], v[(j + 1) % n]
             if j == i + 1 or (i == 0 and j == n - 1):  # neighbours share a vertex: they must not fold back
                 shared, p, q = (b, a, d) if j == i + 1 else (a, b, c)
-                if _cross(shared, p, q) == 0 and np.dot(p - shared, q - shared) > 0:
+                if _cross(shared, p, q) == 0 and dot(p - shared, q - shared) > 0:
                     raise ValueError(f"edges {i} and {j} overlap (the outline folds back at vertex "
                                      f"{(i + 1) % n if j == i + 1 else 0}); a polygon must be simple")
                 continue
