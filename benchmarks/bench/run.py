@@ -70,6 +70,25 @@ def plan_tasks(store: ResultsStore, runs: dict[str, AgentRun], episodes: int, wo
     return tasks
 
 
+def _announce_new_runs(store: ResultsStore, runs: dict[str, AgentRun]) -> None:
+    """One line per agent whose files (a model) differ from those of episodes stored for the same
+    command: the run key covers the files' bytes, so this command starts a new run instead of
+    appending to the old one."""
+    for agent, run in runs.items():
+        for old in store.superseded_runs(run.key, run.as_dict()):
+            if not old["episodes"]:
+                continue
+            if old["inputs"]:
+                paths = sorted(set(old["inputs"]) | set(run.inputs))
+                what = ", ".join(f"{p} (sha256 {old['inputs'].get(p, 'none')[:12]} then, {run.inputs.get(p, 'none')[:12]} now)"
+                                 for p in paths if old["inputs"].get(p) != run.inputs.get(p))
+            else:
+                what = f"{', '.join(run.inputs)} (not recorded by the version that stored them)"
+            print(f"rmm-bench: {agent}: {old['episodes']} episodes in {store.path} were run with other files: {what}; "
+                  f"this command starts a new run (run {run.key}) instead of mixing them; the old episodes stay under "
+                  f"run {old['run_key']}", file=sys.stderr)
+
+
 def execute(store: ResultsStore, config: BenchConfig, provenance: dict, meta: dict[str, dict] | None = None,
             invocation: int | None = None) -> dict[str, int]:
     """Run every episode of ``config`` not stored yet; returns, per agent, how many of this
@@ -78,6 +97,7 @@ def execute(store: ResultsStore, config: BenchConfig, provenance: dict, meta: di
     from rmm_envs.parallel import TaskLost, WorkersLost, run_local, run_ray
 
     runs = config.agent_runs()
+    _announce_new_runs(store, runs)
     for agent, run in runs.items():
         store.ensure_run(run.key, agent, run.as_dict(), provenance | {"guardian": (meta or {}).get(agent, {})})
     tasks = plan_tasks(store, runs, config.episodes, config.workers, config.backend, config.retry_errors)
@@ -121,7 +141,7 @@ def _unfinished_message(unfinished: dict[str, int], store: ResultsStore) -> str:
     if not lacking:
         return ""
     return (f"{sum(lacking.values())} episodes ended without a result ({', '.join(f'{a}: {n}' for a, n in lacking.items())}): "
-            f"over --episode-timeout or their worker died (causes in the error column of {store.path}); "
+            f"over --episode-timeout, their worker died or a file they read changed (causes in the error column of {store.path}); "
             "the table counts them as errors; rerun the same command to retry them")
 
 
@@ -165,6 +185,7 @@ def applicable(config: BenchConfig) -> tuple[BenchConfig, dict]:
                   f"skipped: {reason}", file=sys.stderr)
         config = config.without(skipped)
         meta = {a: m for a, m in meta.items() if a not in skipped}
+    config = config.with_inputs({a: m.pop("inputs", {}) for a, m in meta.items()})
     return config, meta
 
 

@@ -15,8 +15,9 @@ Tables:
   - ``guardian``: the guardian raised (in ``reset``, ``act`` or ``stats``) or returned an
     action the env refused.  A result about the guardian: kept by a rerun, retried only with
     ``--retry-errors``.
-  - ``timeout`` (over ``--episode-timeout``) and ``lost_worker`` (the worker process died or
-    was killed): failures of the run, not results.  Every rerun retries them, replacing the row.
+  - ``timeout`` (over ``--episode-timeout``), ``lost_worker`` (the worker process died or
+    was killed) and ``input_changed`` (a file the run reads, such as a model, changed while it
+    ran): failures of the run, not results.  Every rerun retries them, replacing the row.
 
 * ``invocations``: each ``rmm-bench`` command: its arguments, run keys, episode count, the
   process id and host that ran it, and its status: ``running`` while it runs, then
@@ -68,11 +69,11 @@ EPISODE_FIELDS = {
     "error": "TEXT",
     "wall_time": "REAL",
     "finished": "REAL",
-    "error_kind": "TEXT",  # guardian / timeout / lost_worker (NULL unless outcome is error)
+    "error_kind": "TEXT",  # guardian / timeout / lost_worker / input_changed (NULL unless outcome is error)
 }
 
 # error kinds that are failures of the run rather than results: every rerun retries them
-RETRIED_ERRORS = ("timeout", "lost_worker")
+RETRIED_ERRORS = ("timeout", "lost_worker", "input_changed")
 
 _INVOCATION_COLUMNS = {"pid": "INTEGER", "host": "TEXT", "updated": "REAL", "message": "TEXT"}
 
@@ -169,6 +170,21 @@ class ResultsStore:
         if row is None:
             raise LookupError(f"run {run_key} is not recorded in {self.path}")
         return {"config": json.loads(row[0]), "provenance": json.loads(row[1]), "agent": row[2]}
+
+    @_guarded
+    def superseded_runs(self, run_key: str, config: dict) -> list[dict]:
+        """Other stored runs of ``config`` but for the files read (``inputs``): ``run_key``,
+        their ``inputs`` and how many ``episodes`` they hold; none if ``run_key`` itself is stored."""
+        if self.db.execute("SELECT 1 FROM runs WHERE run_key = ?", (run_key,)).fetchone():
+            return []
+        base = {k: v for k, v in config.items() if k != "inputs"}
+        out = []
+        for key, stored in self.db.execute("SELECT run_key, config FROM runs WHERE agent = ?", (config["agent"],)).fetchall():
+            stored = json.loads(stored)
+            if {k: v for k, v in stored.items() if k != "inputs"} == base:
+                n = self.db.execute("SELECT COUNT(*) FROM episodes WHERE run_key = ?", (key,)).fetchone()[0]
+                out.append({"run_key": key, "inputs": stored.get("inputs", {}), "episodes": int(n)})
+        return out
 
     # episodes
     @_guarded

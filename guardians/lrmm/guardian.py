@@ -192,6 +192,12 @@ class LRMMGuardian(Guardian):
         if action == "head":
             self._cands = [tuple(float(x) for x in c) for c in self.model.candidates]  # any control count
 
+    def input_files(self) -> dict[str, str]:
+        """The model file this guardian was built from (given or shipped) and the SHA-256 of the
+        bytes it was loaded from; none for a model given as an object."""
+        path, digest = getattr(self.model, "path", None), getattr(self.model, "file_sha256", None)
+        return {str(path): digest} if path is not None and digest is not None else {}
+
     def _fallback_warning(self, text: str) -> None:
         if type(self) is LRMMGuardian:  # the paper preset expects the paper's rule: nothing to warn about
             warnings.warn(f"lrmm: {text}", UserWarning, stacklevel=3)

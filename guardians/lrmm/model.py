@@ -259,7 +259,8 @@ class LRMMModel:
         if not path.exists():
             raise FileNotFoundError(f"LRMM model file {path} does not exist")
         try:
-            with np.load(path, allow_pickle=False) as z:
+            data = path.read_bytes()  # read once: the digest is of exactly the bytes the model is built from
+            with np.load(io.BytesIO(data), allow_pickle=False) as z:
                 arrays = {k: z[k] for k in z.files}
         except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
             raise ValueError(f"{path} is not a readable LRMM model (truncated or not an .npz file: {e})") from None
@@ -293,6 +294,7 @@ class LRMMModel:
         except ValueError as e:
             raise ValueError(f"{path}: {e}") from None
         model.path = path
+        model.file_sha256 = hashlib.sha256(data).hexdigest()
         return model
 
 

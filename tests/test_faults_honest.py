@@ -1,0 +1,105 @@
+"""Fault drills of issue 25 ("nothing silently wrong"): a run is keyed on the bytes of the files
+it reads, storage errors are told apart and never advise throwing data away, the HJ cache is
+verified, guardian errors count in the rates and fail the command, a merged report keeps its
+configurations apart, and huge or deep input is refused before it is used.
+
+Each drill repeats a finding of the issue as a user would meet it, with a tiny run (a few
+episodes of cheap guardians)."""
+
+import json
+import os
+import shutil
+import sqlite3
+
+import pytest
+
+from benchmarks.bench.cli import main
+
+FAST = ["--clock", "fixed:1", "--no-progress", "--workers", "1"]
+
+
+def stored(out, cols="run_key, agent, episode, outcome, error_kind"):
+    con = sqlite3.connect(out / "results.db")
+    try:
+        return con.execute(f"SELECT {cols} FROM episodes ORDER BY run_key, episode").fetchall()
+    finally:
+        con.close()
+
+
+# ------------------------------------------------------------------ 1. a run is what ran
+def _two_models(tmp_path):
+    """The shipped Dubins4D head model, and the same weights with another stored threshold."""
+    from guardians.lrmm.model import default_model_path, set_decision
+
+    first = tmp_path / "first.npz"
+    second = tmp_path / "second.npz"
+    shutil.copy(default_model_path("Dubins4DParallel-v0", variant="act"), first)
+    shutil.copy(first, second)
+    set_decision(second, threshold=0.05, commit=0, chosen_by="a drill: a different model file", action="head")
+    assert first.read_bytes() != second.read_bytes()
+    return first, second
+
+
+def test_resume_after_the_model_file_changed_starts_a_new_run_naming_the_file(tmp_path, capsys):
+    first, second = _two_models(tmp_path)
+    model = tmp_path / "model.npz"
+    shutil.copy(first, model)
+    out = tmp_path / "r"
+    cmd = ["--agent", "lrmm", "--agent-opt", f"lrmm.model={model}", "--out", str(out), "--env", "Dubins4DParallel-v0", *FAST]
+    assert main(cmd + ["--episodes", "2"]) == 0
+    (old_key,) = {r[0] for r in stored(out)}
+    capsys.readouterr()
+
+    shutil.copy(second, model)  # the same path, other bytes
+    assert main(cmd + ["--episodes", "4", "--resume"]) == 0
+    err = capsys.readouterr().err
+    assert f"lrmm: 2 episodes in {out / 'results.db'} were run with other files: {model}" in err
+    assert "this command starts a new run" in err and f"the old episodes stay under run {old_key}" in err
+    runs = {}
+    for key, _, episode, _, _ in stored(out):
+        runs.setdefault(key, []).append(episode)
+    assert runs.pop(old_key) == [0, 1]  # untouched
+    ((new_key, episodes),) = runs.items()
+    assert episodes == [0, 1, 2, 3]  # every episode of the new run ran with the new file
+    con = sqlite3.connect(out / "results.db")
+    inputs = {k: json.loads(c)["inputs"] for k, c in con.execute("SELECT run_key, config FROM runs")}
+    con.close()
+    from benchmarks.bench.config import file_sha256
+
+    assert inputs == {old_key: {str(model): file_sha256(first)}, new_key: {str(model): file_sha256(second)}}
+
+    # the same bytes again: the same run, nothing to do and nothing announced
+    assert main(cmd + ["--episodes", "4", "--resume"]) == 0
+    assert "other files" not in capsys.readouterr().err
+    assert len(stored(out)) == 6
+
+
+def test_shipped_model_is_part_of_the_run_key(tmp_path):
+    from benchmarks.bench.config import file_sha256
+    from benchmarks.bench.checks import check_runs
+    from benchmarks.bench.config import AgentRun
+    from guardians.lrmm.model import default_model_path
+
+    run = AgentRun("lrmm", {}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
+    meta = check_runs({"lrmm": run})
+    shipped = default_model_path("Dubins4DParallel-v0", variant="act")
+    assert meta["lrmm"]["inputs"] == {str(shipped): file_sha256(shipped)}
+    keyed = AgentRun(**{**run.__dict__, "inputs": meta["lrmm"]["inputs"]})
+    other = AgentRun(**{**run.__dict__, "inputs": {str(shipped): "0" * 64}})
+    assert len({run.key, keyed.key, other.key}) == 3
+    inactive = AgentRun("inactive", {}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
+    assert check_runs({"inactive": inactive})["inactive"]["inputs"] == {}
+    assert "inputs" not in inactive.as_dict()  # runs that read no file keep the keys they always had
+
+
+def test_a_file_changed_while_the_run_runs_is_not_used(tmp_path):
+    from benchmarks.bench.config import AgentRun, EpisodeTask, file_sha256
+    from benchmarks.bench.runner import run_episode
+    from benchmarks.bench.store import RETRIED_ERRORS
+
+    first, second = _two_models(tmp_path)
+    run = AgentRun("lrmm", {"model": str(second)}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False,
+                   inputs={str(second): file_sha256(first)})  # keyed before the file was replaced
+    res = run_episode(EpisodeTask(run=run, run_key=run.key, episode=0, seed=1))
+    assert res.outcome == "error" and res.error_kind == "input_changed" and "input_changed" in RETRIED_ERRORS
+    assert f"{second} (sha256 {file_sha256(first)[:12]}... when the run was keyed, {file_sha256(second)[:12]}... now)" in res.error
