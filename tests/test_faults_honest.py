@@ -103,3 +103,47 @@ def test_a_file_changed_while_the_run_runs_is_not_used(tmp_path):
     res = run_episode(EpisodeTask(run=run, run_key=run.key, episode=0, seed=1))
     assert res.outcome == "error" and res.error_kind == "input_changed" and "input_changed" in RETRIED_ERRORS
     assert f"{second} (sha256 {file_sha256(first)[:12]}... when the run was keyed, {file_sha256(second)[:12]}... now)" in res.error
+
+
+# ------------------------------------------------------------------ 4. honest rates
+from guardians.base import Guardian  # noqa: E402
+
+
+class ErrsOnEvenSeeds(Guardian):
+    """Lets the driver drive, but raises in its first decision of every episode with an even seed
+    (a guardian that fails exactly when it would matter)."""
+
+    name = "errs-on-even-seeds"
+    observation_type = "none"
+
+    def reset(self, **kw):
+        super().reset(**kw)
+        self.seed = kw.get("seed")
+
+    def act(self, obs, info):
+        if self.seed % 2 == 0:
+            raise ValueError("turnrate_ctrl must be finite, got inf")
+        return self.action_space.inactive()
+
+
+def test_guardian_errors_count_as_failures_and_the_command_fails_naming_them(tmp_path, capsys):
+    from benchmarks.bench.runner import episode_seed
+
+    n, agent = 8, "tests.test_faults_honest:ErrsOnEvenSeeds"
+    out = tmp_path / "r"
+    assert main(["--agent", f"{agent},inactive", "--episodes", str(n), "--out", str(out), "--batch-size", str(n),
+                 "--env", "Dubins4DParallel-v0", *FAST]) == 1
+    captured = capsys.readouterr()
+    got = {(a, e): o for _, a, e, o, _ in stored(out)}
+    even = [i for i in range(n) if episode_seed(0, i) % 2 == 0]
+    assert 0 < len(even) < n and [e for e in range(n) if got[(agent, e)] == "error"] == even
+    # where it did not err, it never acted: the same outcome as the inactive agent's
+    goals = sum(got[("inactive", e)] == "goal" for e in range(n) if e not in even)
+    collisions = sum(got[("inactive", e)] == "collision" for e in range(n) if e not in even)
+    cells = [c.strip() for c in captured.out.split(f"| {agent} |")[1].split("\n")[0].split("|")]
+    assert cells[4] == f"{100 * goals / n:.1f} ± 0.0" and cells[5] == f"{100 * collisions / n:.1f} ± 0.0"  # over all n
+    assert cells[-3] == str(len(even))
+    (line,) = [ln for ln in captured.err.splitlines() if agent in ln]
+    assert line.startswith(f"rmm-bench: {agent}: {len(even)} of {n} episodes ended in a guardian error, counted as failures "
+                           f"in the rates (first, episode {even[0]}: ValueError: turnrate_ctrl must be finite, got inf)")
+    assert "--retry-errors" in line and not [ln for ln in captured.err.splitlines() if ln.startswith("rmm-bench: inactive")]

@@ -28,7 +28,7 @@ from benchmarks.bench.report import plot_latency, write_report
 from benchmarks.bench.runner import episode_seed, hard_timeout, lost_episode, run_episode
 from benchmarks.bench.store import RETRIED_ERRORS, ResultsStore
 
-__all__ = ["RunFailed", "cmd_run", "cmd_sweep", "execute", "plan_tasks"]
+__all__ = ["RunFailed", "cmd_run", "cmd_sweep", "execute", "guardian_error_lines", "plan_tasks"]
 
 
 class RunFailed(RuntimeError):
@@ -145,6 +145,21 @@ def _unfinished_message(unfinished: dict[str, int], store: ResultsStore) -> str:
             "the table counts them as errors; rerun the same command to retry them")
 
 
+def guardian_error_lines(store: ResultsStore, run_keys: dict[str, str], episodes: int) -> list[str]:
+    """One line per agent whose first ``episodes`` stored episodes hold guardian errors: the
+    count and the first error.  Those episodes count as failures in the rates (see
+    :mod:`benchmarks.bench.metrics`); the command exits with status 1 so they are never missed."""
+    lines = []
+    for agent, key in run_keys.items():
+        errs = [e for e in store.episodes(key, episodes) if e["outcome"] == "error" and (e["error_kind"] or "guardian") == "guardian"]
+        if errs:
+            first = (errs[0]["error"] or "").splitlines()[0][:300] if errs[0]["error"] else "no message"
+            lines.append(f"{agent}: {len(errs)} of {episodes} episodes ended in a guardian error, counted as failures in the "
+                         f"rates (first, episode {errs[0]['episode']}: {first}); fix the guardian or its --agent-opt values "
+                         "and rerun with --retry-errors")
+    return lines
+
+
 def _invoke(store: ResultsStore, kind: str, config: BenchConfig, argv, meta: dict, record_args: dict) -> tuple[int, str]:
     """Record an invocation, run it, and end it as finished, interrupted or failed."""
     keys = {a: r.key for a, r in config.agent_runs().items()}
@@ -201,11 +216,12 @@ def cmd_run(config: BenchConfig, argv) -> int:
         except KeyboardInterrupt:
             return _interrupted(out)
         print(f"finished in {time.perf_counter() - t0:.1f} s")
-        write_report(store, out, store.invocation(inv), config.batch_size)
-        if msg:
-            print(f"rmm-bench: {msg}", file=sys.stderr)
-            return 1
-        return 0
+        record = store.invocation(inv)
+        write_report(store, out, record, config.batch_size)
+        errors = guardian_error_lines(store, record["run_keys"], config.episodes)
+        for line in ([msg] if msg else []) + errors:
+            print(f"rmm-bench: {line}", file=sys.stderr)
+        return 1 if msg or errors else 0
     finally:
         store.close()
 
@@ -227,8 +243,8 @@ def cmd_sweep(config: BenchConfig, argv) -> int:
                 _, msg = _invoke(store, "sweep", at, argv, meta, at.parsed | {"clock": at.clock, "latency_ms": lat})
             except KeyboardInterrupt:
                 return _interrupted(out)
-            if msg:
-                failed.append(f"{lat:g} ms: {msg}")
+            failed += [f"{lat:g} ms: {line}" for line in ([msg] if msg else [])
+                       + guardian_error_lines(store, {a: r.key for a, r in at.agent_runs().items()}, at.episodes)]
             for agent, run in at.agent_runs().items():
                 agg = aggregate(store.episodes(run.key, at.episodes), at.batch_size)
                 series[agent].append((lat, agg["collision"][0], agg["collision"][1]))
@@ -242,6 +258,7 @@ def cmd_sweep(config: BenchConfig, argv) -> int:
     plot_latency(series, out / "latency_sweep.png")
     print(md)
     if failed:
-        print("rmm-bench sweep: " + " | ".join(failed), file=sys.stderr)
+        for line in failed:
+            print(f"rmm-bench sweep: {line}", file=sys.stderr)
         return 1
     return 0
