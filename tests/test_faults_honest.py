@@ -147,3 +147,109 @@ def test_guardian_errors_count_as_failures_and_the_command_fails_naming_them(tmp
     assert line.startswith(f"rmm-bench: {agent}: {len(even)} of {n} episodes ended in a guardian error, counted as failures "
                            f"in the rates (first, episode {even[0]}: ValueError: turnrate_ctrl must be finite, got inf)")
     assert "--retry-errors" in line and not [ln for ln in captured.err.splitlines() if ln.startswith("rmm-bench: inactive")]
+
+
+# ------------------------------------------------------------------ 2 and 8. storage errors told apart, one line each
+import resource  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _one_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_out_naming_a_file_is_bad_input_in_one_line(tmp_path, capsys):
+    from rmm_envs.risk.datagen import main as datagen
+
+    afile = tmp_path / "afile"
+    afile.write_text("mine")
+    assert main(["--agent", "inactive", "--episodes", "1", "--out", str(afile), *FAST]) == 2
+    assert _one_line(capsys.readouterr().err) == (f"rmm-bench: error: {afile} is a file, not a directory (File exists); "
+                                                  "choose another --out")
+    assert main(["--agent", "inactive", "--episodes", "1", "--out", str(afile / "sub"), *FAST]) == 2
+    assert "a part of this path is a file, not a directory" in _one_line(capsys.readouterr().err)
+    assert datagen(["--configs", "2", "--samples-per-config", "2", "--branches", "2", "--depth", "1", "--out", str(afile),
+                    "--no-progress", "--workers", "1"]) == 2
+    assert _one_line(capsys.readouterr().err) == (f"rmm-datagen: error: {afile} is a file, not a directory (File exists); "
+                                                  "choose another --out")
+    assert afile.read_text() == "mine"
+
+
+def _bench(args, limit_bytes=None):
+    """rmm-bench in a child process, under a file-size limit (``ulimit -f``) when given."""
+    def limit():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+    return subprocess.run([sys.executable, "-m", "benchmarks.bench.cli", *map(str, args)], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300, preexec_fn=limit if limit_bytes else None)
+
+
+def test_file_size_limit_mid_run_is_a_run_failure_that_keeps_every_episode(tmp_path):
+    out = tmp_path / "r"
+    cmd = ["--agent", "inactive", "--out", out, *FAST]
+    assert _bench(cmd + ["--episodes", "2"]).returncode == 0
+    before = stored(out, "episode, outcome, steps")
+    db = out / "results.db"
+    res = _bench(cmd + ["--episodes", "400"], limit_bytes=db.stat().st_size + 16384)
+    assert res.returncode == 1, res.stderr
+    line = _one_line(res.stderr)
+    assert line.startswith(f"rmm-bench: error: cannot write {db} (disk I/O error): it reached the file-size limit (ulimit -f: ")
+    assert line.endswith("raise the limit (ulimit -f unlimited), then the stored episodes are kept: rerun the same command")
+    assert "move it aside" not in line and "damaged" not in line
+    con = sqlite3.connect(db)
+    assert con.execute("PRAGMA integrity_check").fetchall() == [("ok",)]
+    con.close()
+    assert stored(out, "episode, outcome, steps")[:2] == before
+    assert _bench(cmd + ["--episodes", "400"]).returncode == 0  # the same command, the limit lifted
+    assert [r[0] for r in stored(out, "episode")] == list(range(400))
+
+
+def test_disk_full_while_writing_the_tables_is_one_line_naming_the_directory(tmp_path, capsys):
+    out = tmp_path / "r"
+    assert main(["--agent", "inactive", "--episodes", "2", "--out", str(out), *FAST]) == 0
+    (out / "table_I.md").unlink()
+    (out / "table_I.md").symlink_to("/dev/full")  # every write there fails with ENOSPC
+    capsys.readouterr()
+    assert main(["report", str(out)]) == 1
+    assert _one_line(capsys.readouterr().err) == (f"rmm-bench: error: no space left to write {out} (No space left on device); "
+                                                  "free disk space (or quota), then what is stored is kept: rerun the same command")
+
+
+def test_a_read_only_database_is_not_called_damaged(tmp_path, capsys):
+    """Permissions cannot make a file read-only for root (tests may run as root); SQLite's own read-only mode
+    gives the error it raises for a read-only file, directory or file system."""
+    from benchmarks.bench.store import ResultsStore
+
+    out = tmp_path / "r"
+    assert main(["--agent", "inactive", "--episodes", "2", "--out", str(out), *FAST]) == 0
+    db = out / "results.db"
+    ro = sqlite3.connect(db.resolve().as_uri() + "?mode=ro", uri=True)
+    with pytest.raises(sqlite3.OperationalError) as info:
+        ro.execute("DELETE FROM episodes")
+    ro.close()
+    store = ResultsStore(db)
+    try:
+        err = store._error(info.value)
+    finally:
+        store.close()
+    assert err.status == 2 and str(err).startswith(f"cannot write {db} (attempt to write a readonly database): the file, its "
+                                                   "directory")
+    assert "damaged" not in str(err) and "move it aside" not in str(err) and "the database is intact" in str(err)
+
+
+def test_a_damaged_database_says_what_moving_it_aside_loses_and_how_to_export(tmp_path, capsys):
+    out = tmp_path / "r"
+    out.mkdir()
+    db = out / "results.db"
+    db.write_bytes(b"this is not a database " * 200)
+    assert main(["report", str(out)]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert f"sqlite3 {db} .recover > {db}.sql" in line and f"mv {db} {db}.damaged" in line
+    assert line.index(".recover") < line.index("mv ")  # export first
+    assert "the episodes of the old one are lost to rmm-bench" in line

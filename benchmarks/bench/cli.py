@@ -53,6 +53,8 @@ import sys
 
 from benchmarks.bench import args as _args
 from benchmarks.bench.run import RunFailed, cmd_run, cmd_sweep
+from benchmarks.bench.store import ResultsDatabaseError
+from rmm_envs.failures import describe_os_error
 
 __all__ = ["build_parser", "build_report_parser", "build_sweep_parser", "main"]
 
@@ -88,6 +90,13 @@ def main(argv: list[str] | None = None) -> int:
     except RunFailed as e:
         print(f"rmm-bench: error: {e}", file=sys.stderr)
         return 1
+    except ResultsDatabaseError as e:  # one line, the cause told apart; 2 or 1 as the cause says
+        print(f"rmm-bench: error: {e}", file=sys.stderr)
+        return e.status
+    except OSError as e:  # a full disk, a file-size limit, an unwritable --out, an unreachable Ray cluster
+        message, status = describe_os_error(e)
+        print(f"rmm-bench: error: {message}", file=sys.stderr)
+        return status
     except (ValueError, RuntimeError, LookupError) as e:
         print(f"rmm-bench: error: {e}", file=sys.stderr)
         return 2

@@ -195,10 +195,14 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
             run_keys[agent], episodes[agent] = key, inv["episodes"]
     rows = table_rows(store, run_keys, episodes, batch_size)
     tables = format_tables(rows)
-    (out / "table_I.md").write_text(tables["md"])
-    (out / "table_I.csv").write_text(tables["csv"])
-    (out / "table_I.tex").write_text(tables["tex"])
-    plot_outcomes(rows, out / "outcomes.png")
+    try:
+        for ext in ("md", "csv", "tex"):
+            (out / f"table_I.{ext}").write_text(tables[ext])
+        plot_outcomes(rows, out / "outcomes.png")
+    except OSError as e:  # a full disk names no file: name the directory (the CLI prints one line)
+        if e.filename is None:
+            raise OSError(e.errno, e.strerror or str(e), str(out)) from None
+        raise
     paper = format_tables([{"agent": a, "episodes": 2048, "errors": 0, "qp_fallbacks": 0, "precompute_s": (0, 0),
                             "obs": p["obs"], "n_obst": p["n_obst"], **{k: p[k] for k in ("compute_ms", "goal", "collision", "timeout", "intervention")}}
                            for a, p in PAPER_TABLE_I.items() if a in run_keys or f"{a}-paper" in run_keys])["md"]
