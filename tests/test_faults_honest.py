@@ -253,3 +253,75 @@ def test_a_damaged_database_says_what_moving_it_aside_loses_and_how_to_export(tm
     assert f"sqlite3 {db} .recover > {db}.sql" in line and f"mv {db} {db}.damaged" in line
     assert line.index(".recover") < line.index("mv ")  # export first
     assert "the episodes of the old one are lost to rmm-bench" in line
+
+
+# ------------------------------------------------------------------ 3. a verified HJ value cache
+def _hj_guardian(cache_dir):
+    import numpy as np
+
+    from guardians.hj.grid import Grid
+    from guardians.hj.guardian import HJGuardian
+    from rmm_envs.autonomy import GuardianActionSpace
+    from rmm_envs.envs.dubins4d import CONTROLS
+    from rmm_envs.systems.dubins4d import Dubins4D
+
+    grid = Grid([-8.0, -8.0, -np.pi, 0.0], [8.0, 8.0, np.pi, 2.0], [33, 33, 16, 9], periodic=[2])
+    g = HJGuardian(grid=grid, horizon=2.0, cache_dir=cache_dir)
+    space = GuardianActionSpace.for_system(Dubins4D(), CONTROLS)
+    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-3.0, 0.0, 0.0, 2.0])}
+    return g, (lambda seed: g.reset(seed=seed, privileged=lambda: box, action_space=space))
+
+
+def _safe_everywhere(entry, V):
+    """The edit of the finding: the entry's array replaced by one of the same shape saying 'safe'."""
+    import numpy as np
+
+    with np.load(entry) as z:
+        meta = z["meta"]
+    np.savez(entry, V=np.full_like(V, 50.0), meta=meta)
+
+
+def _raw_npy(entry, V):
+    import numpy as np
+
+    with open(entry, "wb") as fh:
+        np.save(fh, np.full_like(V, 50.0))
+
+
+def _other_solve(entry, V):
+    """A genuine entry of another solve (another horizon) renamed to this one's name."""
+    import numpy as np
+
+    from guardians.hj.cache import ValueCache
+
+    other = ValueCache(entry.parent / "other")
+    other.save("x", V + 1.0, {"horizon": 9.0})
+    os.replace(other.path("x"), entry)
+
+
+@pytest.mark.parametrize("edit, problem", [(_safe_everywhere, "does not match its recorded checksum"),
+                                           (_raw_npy, "is not a verified entry"),
+                                           (_other_solve, "was solved for other parameters")])
+def test_an_edited_hj_cache_entry_is_recomputed_and_said_once(tmp_path, edit, problem):
+    import warnings
+
+    import numpy as np
+
+    g, reset = _hj_guardian(tmp_path)
+    reset(0)
+    solved = g.V.copy()
+    assert g.act(None, {})["active_ctrl"] == 1  # heading into the obstacle: it takes control
+    (entry,) = tmp_path.glob("*.npz")
+    edit(entry, solved)
+    with pytest.warns(RuntimeWarning) as said:
+        reset(1)
+    assert [str(w.message) for w in said] == [f"HJ value cache entry {entry} {problem}" + str(said[0].message).split(problem)[1]]
+    assert str(said[0].message).endswith("; recomputing it")
+    assert g.stats()["cache_rejected"] == 1 and g.stats()["solves"] == 1 and g.stats()["cache_hits"] == 0
+    np.testing.assert_array_equal(g.V, solved)
+    assert g.act(None, {})["active_ctrl"] == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the recomputed entry replaced the bad one: nothing more to say
+        reset(2)
+    assert g.stats()["cache_hits"] == 1 and g.stats()["solves"] == 0
+    np.testing.assert_array_equal(g.V, solved)
