@@ -325,3 +325,33 @@ def test_an_edited_hj_cache_entry_is_recomputed_and_said_once(tmp_path, edit, pr
         reset(2)
     assert g.stats()["cache_hits"] == 1 and g.stats()["solves"] == 0
     np.testing.assert_array_equal(g.V, solved)
+
+
+# ------------------------------------------------------------------ 5. a merged report keeps its configurations apart
+def test_a_report_over_two_configurations_prints_one_header_each(tmp_path, capsys):
+    import csv
+
+    out = tmp_path / "r"
+    assert main(["--agent", "inactive", "--episodes", "1", "--seed", "1", "--out", str(out), "--env", "Dubins4DParallel-v0",
+                 *FAST]) == 0
+    assert main(["--agent", "brakes", "--episodes", "1", "--seed", "2", "--out", str(out), "--env", "Dubins3DMazeParallel-v0",
+                 "--clock", "fixed:20", "--no-progress", "--workers", "1"]) == 0
+    capsys.readouterr()
+    assert main(["report", str(out), "--invocation", "1", "--invocation", "2"]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("2 configurations, one table each (they differ in env, clock, seed):")
+    first = "Table I [1]: Dubins4DParallel-v0, clock fixed:1, time accel 10.0, seed 1, 1 episodes requested per agent"
+    second = "Table I [2]: Dubins3DMazeParallel-v0, clock fixed:20, time accel 10.0, seed 2, 1 episodes requested per agent"
+    assert first in text and second in text
+    a, b = text.index(first), text.index(second)
+    assert a < text.index("| inactive |") < b < text.index("| brakes |")  # each row under its own header
+    md = (out / "table_I.md").read_text()
+    assert md.index("[1] Dubins4DParallel-v0, clock fixed:1") < md.index("| inactive |") \
+        < md.index("[2] Dubins3DMazeParallel-v0, clock fixed:20") < md.index("| brakes |")
+    with open(out / "table_I.csv") as fh:
+        got = [(r["agent"], r["env"], r["clock"], r["seed"]) for r in csv.DictReader(fh)]
+    assert got == [("inactive", "Dubins4DParallel-v0", "fixed:1", "1"), ("brakes", "Dubins3DMazeParallel-v0", "fixed:20", "2")]
+    # one configuration: the table as it always was, no numbering
+    assert main(["report", str(out), "--invocation", "2"]) == 0
+    assert capsys.readouterr().out.startswith("Table I: Dubins3DMazeParallel-v0, clock fixed:20, time accel 10.0, seed 2")
+    assert (out / "table_I.md").read_text().startswith("| Agent |")
