@@ -355,3 +355,51 @@ def test_a_report_over_two_configurations_prints_one_header_each(tmp_path, capsy
     assert main(["report", str(out), "--invocation", "2"]) == 0
     assert capsys.readouterr().out.startswith("Table I: Dubins3DMazeParallel-v0, clock fixed:20, time accel 10.0, seed 2")
     assert (out / "table_I.md").read_text().startswith("| Agent |")
+
+
+# ------------------------------------------------------------------ 9. model files checked before they are used
+def _edited_model(tmp_path, arrays=None, meta=None, drop=()):
+    """The shipped Dubins4D head model with some arrays or metadata replaced, its checksum made
+    consistent again (the edits a tool, not a damaged disk, would make)."""
+    import numpy as np
+
+    from guardians.lrmm.model import _checksum, default_model_path
+
+    with np.load(default_model_path("Dubins4DParallel-v0", variant="act")) as z:
+        arrs = {k: z[k] for k in z.files}
+    m = json.loads(arrs.pop("meta").tobytes().decode())
+    arrs.update(arrays or {})
+    m.update(meta or {})
+    for k in drop:
+        m.pop(k)
+    m["weights_sha256"] = _checksum(arrs)
+    path = tmp_path / "edited.npz"
+    np.savez(path, meta=np.frombuffer(json.dumps(m).encode(), dtype=np.uint8), **arrs)
+    return path
+
+
+def _W0():
+    import numpy as np
+
+    from guardians.lrmm.model import default_model_path
+
+    with np.load(default_model_path("Dubins4DParallel-v0", variant="act")) as z:
+        return z["W0"]
+
+
+@pytest.mark.parametrize("edit, message", [
+    (dict(arrays={"W0": _W0() * (1 + 1j)}), "LRMM model array 'W0' has dtype complex128; expected real numbers (float)"),
+    (dict(meta={"candidate_hold": -5}), "meta 'candidate_hold' must be a finite number of seconds > 0, got -5"),
+    (dict(meta={"candidate_hold": 1e999}), "meta 'candidate_hold' must be a finite number of seconds > 0, got inf"),
+    (dict(drop=("hidden",)), "metadata lacks ['hidden']: not a complete LRMM model file"),
+    (dict(meta={"candidates": [[1e308, 0.5]] * 6}),
+     "candidate controls [[1e+308, 0.5], [1e+308, 0.5], [1e+308, 0.5], [1e+308, 0.5], [1e+308, 0.5], [1e+308, 0.5]] of "),
+], ids=["complex", "negative-hold", "infinite-hold", "no-hidden", "huge-candidates"])
+def test_a_bad_model_file_is_refused_before_any_episode_naming_the_value(tmp_path, capsys, edit, message):
+    path = _edited_model(tmp_path, **edit)
+    out = tmp_path / "r"
+    assert main(["--agent", "lrmm", "--agent-opt", f"lrmm.model={path}", "--episodes", "1", "--out", str(out),
+                 "--env", "Dubins4DParallel-v0", *FAST]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert str(path) in line and message in line and "KeyError" not in line
+    assert not out.exists()

@@ -224,6 +224,13 @@ class LRMMGuardian(Guardian):
             k = self.model.candidates.shape[1]
             raise ValueError(f"guardian {self.name!r} needs an action space with {k} controls (the model's candidate "
                              f"controls have {k} components), got {actions.control_dim} ({actions.controls})")
+        if self.action == "head":
+            low, high = np.asarray(actions.control_low, float), np.asarray(actions.control_high, float)
+            outside = [c.tolist() for c in self.model.candidates if np.any(c < low) or np.any(c > high)]
+            if outside:
+                raise ValueError(f"guardian {self.name!r}: candidate controls {outside} of "
+                                 f"{getattr(self.model, 'path', 'the model')} lie outside the env's control bounds "
+                                 f"[{low.tolist()}, {high.tolist()}] ({actions.controls})")
         if self.action == "heuristic":
             if actions.control_dim != 2 and actions.safe_default is not None:
                 raise ValueError(f"guardian {self.name!r}: the brake-and-turn heuristic (the action of a model without "
