@@ -403,3 +403,135 @@ def test_a_bad_model_file_is_refused_before_any_episode_naming_the_value(tmp_pat
     line = _one_line(capsys.readouterr().err)
     assert str(path) in line and message in line and "KeyError" not in line
     assert not out.exists()
+
+
+# ------------------------------------------------------------------ 6 and 7. bounded, finite input
+def _make_map_env(spec):
+    import gymnasium as gym
+
+    import rmm_envs  # noqa: F401
+
+    return gym.make("Dubins4DMap-v0", map=spec)
+
+
+@pytest.mark.parametrize("radius", [1e150, 1e300, 10**400])
+def test_a_map_number_too_large_for_the_geometry_is_refused(tmp_path, radius):
+    from rmm_envs.worlds.shape_map import MapError
+
+    path = tmp_path / "big.json"
+    path.write_text(f'[{{"circle": [0, 0, {radius}]}}]')
+    with pytest.raises(MapError, match=r"entry 0 .*with numbers of magnitude at most 1e\+09 \(larger ones overflow the geometry\)"):
+        _make_map_env(str(path))
+
+
+def test_map_files_bounded_in_bytes_and_depth_before_they_are_parsed(tmp_path):
+    from rmm_envs.worlds.bounds import MAX_MAP_BYTES
+    from rmm_envs.worlds.shape_map import MapError
+
+    big = tmp_path / "big.json"
+    big.write_text('[{"circle": [0, 0, 1]}' + " " * MAX_MAP_BYTES + "]")
+    with pytest.raises(MapError, match=f"map file '{big}' holds more than 16 MiB"):
+        _make_map_env(str(big))
+    deep = tmp_path / "deep.json"
+    deep.write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(MapError, match=f"map file '{deep}' nests its JSON too deeply"):
+        _make_map_env(str(deep))
+    digits = tmp_path / "digits.json"
+    digits.write_text('[{"circle": [0, 0, 1' + "0" * 5000 + "]}]")
+    with pytest.raises(MapError, match=f"map file '{digits}' holds a number that cannot be read"):
+        _make_map_env(str(digits))
+
+
+def _star(n, scale=3.0):
+    import numpy as np
+
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    r = scale * (1 + 0.3 * np.sin(7 * a))
+    return np.column_stack([r * np.cos(a), r * np.sin(a)]).tolist()
+
+
+def test_a_polygon_of_thousands_of_vertices_builds_in_seconds_and_larger_ones_are_refused():
+    import time
+
+    from rmm_envs.worlds.bounds import MAX_POLYGON_VERTICES
+    from rmm_envs.worlds.shape_map import MapError
+
+    t0 = time.perf_counter()
+    env = _make_map_env([{"polygon": _star(2000)}])  # the finding: 29 s, the simplicity check and ear clipping quadratic in Python
+    took = time.perf_counter() - t0
+    obs, _ = env.reset(seed=0)
+    assert took < 10.0, f"gym.make took {took:.1f} s"
+    env.close()
+    with pytest.raises(MapError, match=f"expected at most {MAX_POLYGON_VERTICES:,} vertices, got {MAX_POLYGON_VERTICES + 2:,}"):
+        _make_map_env([{"polygon": _star(MAX_POLYGON_VERTICES + 2)}])
+
+
+def test_the_vectorised_polygon_checks_agree_with_the_scalar_tests():
+    """Every pair of edges of small polygons (convex, star-shaped, self-crossing, with collinear
+    and repeated points) judged by the vectorised test equals the scalar one."""
+    import numpy as np
+
+    from rmm_envs.worlds.shape_map import _segments_meet, _segments_meet_many
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        pts = rng.integers(-3, 4, (8, 2)).astype(float)
+        ends = np.roll(pts, -1, axis=0)
+        for i in range(8):
+            got = _segments_meet_many(pts[i], ends[i], pts, ends)
+            want = [_segments_meet(pts[i], ends[i], pts[j], ends[j]) for j in range(8)]
+            assert got.tolist() == want
+
+
+@pytest.mark.parametrize("env_id, option, value", [
+    ("Dubins4DCircles-v0", "state", [1e300, 1e300, 0, 1]),
+    ("Dubins4DCircles-v0", "state", [2e9, 0, 0, 1]),
+    ("Dubins4DCircles-v0", "goal", [0, 0, 1e200]),
+    ("Dubins4DCircles-v0", "obstacles", [[0, 0, 1e150]]),
+])
+def test_reset_options_too_large_for_the_geometry_are_refused(env_id, option, value):
+    import gymnasium as gym
+
+    import rmm_envs  # noqa: F401
+
+    env = gym.make(env_id)
+    with pytest.raises(ValueError, match=f"option '{option}' must be .*magnitude at most 1e\\+09"):
+        env.reset(seed=0, options={option: value})
+    obs, _ = env.reset(seed=0, options={"state": [1e9, 0, 0, 1]})  # the bound itself: finite observations
+    import numpy as np
+
+    assert np.all(np.isfinite(obs))
+    env.close()
+
+
+def test_quadrotor_velocity_too_large_is_refused():
+    import gymnasium as gym
+    import numpy as np
+
+    import rmm_envs  # noqa: F401
+
+    env = gym.make("QuadrotorRoom-v0")
+    env.reset(seed=0)
+    state = np.array(env.unwrapped.privileged()["state"], dtype=float)  # position, quaternion xyzw, velocity, angular velocity
+    state[7] = 1e200  # the x velocity
+    with pytest.raises(ValueError, match=r"option 'state' must be 13 numbers of magnitude at most 1e\+09"):
+        env.reset(seed=0, options={"state": state.tolist()})
+    env.close()
+
+
+@pytest.mark.parametrize("rows", [10**6, 10**400, 33])
+def test_maze_sizes_refused_before_anything_is_allocated(rows):
+    import time
+
+    import gymnasium as gym
+    import numpy as np
+
+    import rmm_envs  # noqa: F401
+    from rmm_envs.worlds.mazes import generate_maze
+
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=r"maze_rows must be an integer in \[2, 32\]"):
+        gym.make("Dubins3DMazeParallel-v0", maze_rows=rows)
+    with pytest.raises(ValueError, match=r"rows and cols must be integers in \[2, 32\]"):
+        generate_maze(np.random.default_rng(0), rows=rows, cols=3)
+    assert time.perf_counter() - t0 < 5.0
