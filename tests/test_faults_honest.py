@@ -535,3 +535,22 @@ def test_maze_sizes_refused_before_anything_is_allocated(rows):
     with pytest.raises(ValueError, match=r"rows and cols must be integers in \[2, 32\]"):
         generate_maze(np.random.default_rng(0), rows=rows, cols=3)
     assert time.perf_counter() - t0 < 5.0
+
+
+def test_datagen_under_a_file_size_limit_is_one_line_exit_1_and_a_rerun_finishes(tmp_path):
+    """The worker writing a shard hits the limit (EFBIG, as ENOSPC would): one line naming the
+    directory and the fix, exit 1, and the same command afterwards finishes the dataset."""
+    out = tmp_path / "d"
+    cmd = [sys.executable, "-m", "rmm_envs.risk.datagen", "--configs", "4", "--samples-per-config", "50", "--branches", "3",
+           "--depth", "1", "--configs-per-shard", "2", "--out", str(out), "--no-progress", "--workers", "2"]
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (4096, 4096))
+
+    res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300, preexec_fn=limit)
+    assert res.returncode == 1, res.stderr
+    assert _one_line(res.stderr) == (f"rmm-datagen: error: {out} reached the file-size limit (ulimit -f: 4096 bytes); raise "
+                                     "it (ulimit -f unlimited), then what is stored is kept: rerun the same command")
+    done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "200 labelled samples" in done.stdout
