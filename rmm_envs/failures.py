@@ -41,8 +41,8 @@ def describe_os_error(e: OSError, path: str | os.PathLike | None = None) -> tupl
     name = f"{where}" if where is not None else "a file"
     reason = e.strerror or str(e) or type(e).__name__
     if isinstance(e, ConnectionError) and not e.filename:
-        return (f"cannot reach {name if path is not None else 'the cluster'} ({type(e).__name__}: {reason}); check the "
-                f"address (--ray-address) or leave it out to start a local Ray, then rerun: {_KEPT}", RUN_FAILED)
+        return (f"{reason}; check the address (--ray-address) or leave it out to start a local Ray, then {_KEPT}",
+                RUN_FAILED)
     if e.errno in (errno.ENOSPC, errno.EDQUOT):
         return f"no space left to write {name} ({reason}); free disk space (or quota), then {_KEPT}", RUN_FAILED
     if e.errno == errno.EFBIG:

@@ -554,3 +554,22 @@ def test_datagen_under_a_file_size_limit_is_one_line_exit_1_and_a_rerun_finishes
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert "200 labelled samples" in done.stdout
+
+
+def test_an_unreachable_ray_cluster_is_one_line_exit_1_within_seconds(tmp_path, capsys):
+    """Port 1 of this host refuses connections: ray.init alone would retry for minutes."""
+    import time
+
+    from rmm_envs.risk.datagen import main as datagen
+
+    t0 = time.perf_counter()
+    assert main(["--agent", "inactive", "--episodes", "1", "--backend", "ray", "--ray-address", "127.0.0.1:1",
+                 "--out", str(tmp_path / "r"), "--clock", "fixed:1", "--no-progress"]) == 1
+    line = _one_line(capsys.readouterr().err)
+    assert line.startswith("rmm-bench: error: cannot reach the Ray cluster at 127.0.0.1:1 (ConnectionRefusedError")
+    assert line.endswith("check the address (--ray-address) or leave it out to start a local Ray, then what is stored is "
+                         "kept: rerun the same command")
+    assert datagen(["--configs", "2", "--samples-per-config", "2", "--branches", "2", "--depth", "1", "--out",
+                    str(tmp_path / "d"), "--no-progress", "--backend", "ray", "--ray-address", "ray://127.0.0.1:1"]) == 1
+    assert _one_line(capsys.readouterr().err).startswith("rmm-datagen: error: cannot reach the Ray cluster at ray://127.0.0.1:1")
+    assert time.perf_counter() - t0 < 60
