@@ -573,3 +573,20 @@ def test_an_unreachable_ray_cluster_is_one_line_exit_1_within_seconds(tmp_path, 
                     str(tmp_path / "d"), "--no-progress", "--backend", "ray", "--ray-address", "ray://127.0.0.1:1"]) == 1
     assert _one_line(capsys.readouterr().err).startswith("rmm-datagen: error: cannot reach the Ray cluster at ray://127.0.0.1:1")
     assert time.perf_counter() - t0 < 60
+
+
+@pytest.mark.parametrize("env_id, kwargs, name", [
+    ("Dubins4DCircles-v0", {"ray_length": 1e300}, "ray_length"),  # the finding: infinite observations
+    ("Dubins4DCircles-v0", {"step_dt": 1e300}, "step_dt"),
+    ("Dubins4DCircles-v0", {"n_rays": 10**400}, "n_rays"),  # an OverflowError traceback before
+    ("Dubins3DMazeParallel-v0", {"speed": 1e200}, "speed"),
+    ("QuadrotorRoomParallel-v0", {"cruise_speed": 1e200}, "cruise_speed"),
+])
+def test_constructor_arguments_too_large_for_the_arithmetic_are_refused_by_name(env_id, kwargs, name):
+    import gymnasium as gym
+
+    import rmm_envs  # noqa: F401
+
+    with pytest.raises(ValueError, match=rf"^{name} must be .* \(at most 1e\+09 in magnitude: larger values overflow "
+                                         r"the arithmetic\), got "):
+        gym.make(env_id, **kwargs)

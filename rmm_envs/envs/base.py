@@ -55,13 +55,12 @@ MAX_ROUNDS = 10_000
 
 
 def finite(x) -> bool:
-    """A real, finite number (not a bool, string or array) that a float holds (not ``10**400``)."""
+    """A real number (not a bool, string or array), finite and of magnitude at most
+    :data:`rmm_envs.worlds.bounds.MAX_MAGNITUDE` (1e9): larger ones (``1e300``, ``10**400``)
+    overflow the arithmetic they configure (``ray_length=1e300`` gave infinite observations)."""
     if not isinstance(x, (int, float, np.integer, np.floating)) or isinstance(x, bool):
         return False
-    try:
-        return math.isfinite(x)
-    except OverflowError:  # an integer beyond any float
-        return False
+    return within_bounds(x)
 
 
 def whole(x) -> bool:
@@ -74,7 +73,11 @@ def check_arguments(checks: Iterable[tuple[bool, str, Any, str]]) -> None:
     ``(ok, name, value, expected)`` check."""
     for ok, name, value, expected in checks:
         if not ok:
-            raise ValueError(f"{name} must be {expected}, got {value!r}")
+            numbers = list(value) if isinstance(value, (list, tuple)) else [value]
+            huge = [v for v in numbers if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+                    and not within_bounds(v) and not (isinstance(v, (float, np.floating)) and not math.isfinite(v))]
+            why = f" (at most {MAX_MAGNITUDE:g} in magnitude: larger values overflow the arithmetic)" if huge else ""
+            raise ValueError(f"{name} must be {expected}{why}, got {str(value)[:200] if huge else repr(value)}")
 
 
 def option_vector(value, n: int, name: str, what: str = "") -> np.ndarray:
