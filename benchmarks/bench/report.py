@@ -171,7 +171,7 @@ def _completeness(rows: list[dict], invs: list[dict]) -> str:
     why = []
     lost = sum(r["episodes"] - r["with_result"] for r in short)
     if lost:
-        why.append(f"{lost} stored over the time limit or lost with their worker")
+        why.append(f"{lost} stored over the time limit, lost with their worker or not run as a file changed")
     for inv in invs:
         state = inv.get("state", inv["status"])
         if state == "stale":
