@@ -16,7 +16,10 @@ control.  It has:
   it (``self.action_space.inactive()``, ``self.action_space.active(u)``) and reads the
   control bounds from it (``control_low`` / ``control_high``), so the same guardian serves any
   system that offers what it needs;
-* ``stats()``: counters the guardian wants recorded with the episode (e.g. QP fallbacks).
+* ``stats()``: counters the guardian wants recorded with the episode (e.g. QP fallbacks);
+* :meth:`input_files`: the files it read when it was built (path -> SHA-256 of the bytes it
+  read), which ``rmm-bench`` makes part of the run's identity, so a run resumed after a model
+  file changed is a new run, never a mix of two models.
 
 A guardian checks at :meth:`reset` that the spaces it was given offer what it needs, with
 :meth:`Guardian.require_action_space` and :meth:`Guardian.require_layout`; a missing piece
@@ -56,6 +59,13 @@ class Guardian:
         if self.privileged and privileged is None:
             raise ValueError(f"guardian {self.name!r} needs privileged information: pass reset(privileged=env.unwrapped.privileged)")
         self._privileged = privileged
+
+    def input_files(self) -> dict[str, str]:
+        """The files this guardian read when it was built: path -> SHA-256 (hex) of the bytes it
+        read.  A guardian that reads a file its arguments do not name (a shipped model, a
+        default data file) must list it here; files named by a string argument are hashed by
+        ``rmm-bench`` anyway.  Default: none."""
+        return {}
 
     def check_spaces(self, observation_space, action_space) -> None:
         """Raise ``ValueError`` (naming this guardian and what is missing) if it cannot serve an

@@ -41,7 +41,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Iterator
 
-__all__ = ["TaskLost", "WorkersLost", "describe_exit", "run_local", "run_ray"]
+__all__ = ["TaskLost", "WorkersLost", "check_reachable", "describe_exit", "run_local", "run_ray"]
 
 
 @dataclass(frozen=True)
@@ -230,6 +230,24 @@ def run_local(fn: Callable, tasks: list, workers: int, *, task_timeout: float | 
             w.stop(graceful)
 
 
+def check_reachable(address: str, timeout: float = 10.0) -> None:
+    """Raise :class:`ConnectionError` naming ``address`` when nothing accepts a connection there
+    within ``timeout`` seconds (``ray.init`` would otherwise retry for minutes).  ``host:port``
+    or ``ray://host:port``; ``auto`` and ``local`` are Ray's own and not checked."""
+    import socket
+
+    if address in ("auto", "local"):
+        return
+    target = address.split("://", 1)[-1]
+    host, sep, port = target.rpartition(":")
+    if not sep or not port.isdigit():
+        return  # a form Ray understands and this check does not: left to Ray
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as e:
+        raise ConnectionError(f"cannot reach the Ray cluster at {address} ({type(e).__name__}: {e})") from None
+
+
 def run_ray(fn: Callable, tasks: Iterable, address: str | None = None, *, max_lost_in_a_row: int | None = None) -> Iterator:
     """``fn(task)`` for each task as Ray tasks (``address`` of a cluster, else a local Ray).
 
@@ -242,6 +260,7 @@ def run_ray(fn: Callable, tasks: Iterable, address: str | None = None, *, max_lo
         raise RuntimeError("the Ray backend needs Ray: pip install 'rmm-envs[ray]'") from e
     if not ray.is_initialized():
         if address:
+            check_reachable(address)
             ray.init(address=address)
         else:
             ray.init(num_cpus=os.cpu_count() or 1, include_dashboard=False, log_to_driver=False)

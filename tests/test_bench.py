@@ -36,11 +36,13 @@ def test_batch_statistics_by_hand():
     assert agg["intervention"] == pytest.approx((25.0, 0.0))
 
 
-def test_errors_are_excluded_and_counted():
+def test_guardian_errors_are_failures_in_the_rates_and_counted():
     eps = [ep(0, "goal"), {"episode": 1, "outcome": "error", "qp_fallbacks": 0}, ep(2, "collision", active=2.0)]
     agg = aggregate(eps)
     assert agg["errors"] == 1 and agg["error_rate"] == pytest.approx(1 / 3)
-    assert agg["goal"][0] == pytest.approx(50.0)
+    assert agg["goal"][0] == pytest.approx(100 / 3) and agg["collision"][0] == pytest.approx(100 / 3)
+    lost = aggregate([eps[0], {"episode": 1, "outcome": "error", "error_kind": "lost_worker"}, eps[2]])
+    assert lost["errors"] == 1 and lost["goal"][0] == pytest.approx(50.0)  # no result: out of the rates
     assert agg["intervention"] == pytest.approx((62.5, 37.5))
 
 
@@ -103,11 +105,11 @@ def test_rendered_tables_hold_the_aggregated_numbers(tmp_path):
     eps = [ep(i, o, compute=0.01 * (1 + i % 3), active=0.1 * (i % 5)) for i, o in enumerate(outcomes)]
     eps[7] = {"episode": 7, "outcome": "error", "qp_fallbacks": 3}
     aggs = {"a": aggregate(eps), "b": aggregate(eps[:10], batch_size=4), "c": aggregate([eps[7]])}
-    # by hand for "a": 129 non-error episodes in batches of 64, 64 and 1 holding 32, 16 and 1 goals
-    # (episode 7, a goal, is the error; episodes 64 and 128 move into the first and second batch)
-    rates, w = np.array([32 / 64, 16 / 64, 1.0]), np.array([64, 64, 1])
+    # by hand for "a": 130 episodes in batches of 64, 64 and 2 holding 31, 16 and 2 goals
+    # (episode 7, a goal, is a guardian error: a failure in the rates)
+    rates, w = np.array([31 / 64, 16 / 64, 1.0]), np.array([64, 64, 2])
     assert aggs["a"]["goal"][0] == pytest.approx(100 * (rates * w).sum() / w.sum())
-    assert _pm_text(aggs["c"]["goal"]) == "n/a"
+    assert _pm_text(aggs["c"]["goal"]) == "0.0 ± 0.0" and _pm_text(aggs["c"]["intervention"]) == "n/a"
     rows = [{"agent": k, "obs": "none", "n_obst": 5, **v} for k, v in aggs.items()]
     tables = format_tables(rows)
     for ext in ("md", "csv", "tex"):
@@ -195,7 +197,7 @@ def test_resume_after_kill_minus_nine(tmp_path, capsys):
 
 def test_a_raising_guardian_is_an_error_not_a_crash(tmp_path, capsys):
     out = tmp_path / "e"
-    assert main(["--agent", "tests.bench_helpers:Boom,inactive", "--episodes", "3", "--workers", "1", "--out", str(out), *FAST]) == 0
+    assert main(["--agent", "tests.bench_helpers:Boom,inactive", "--episodes", "3", "--workers", "1", "--out", str(out), *FAST]) == 1
     con = sqlite3.connect(out / "results.db")
     errs = con.execute("SELECT outcome, error FROM episodes WHERE agent LIKE '%Boom'").fetchall()
     assert len(errs) == 3 and all(o == "error" and "guardian exploded" in e for o, e in errs)

@@ -166,7 +166,7 @@ def test_non_blocking_options_on_a_blocking_env_exit_2_instead_of_being_ignored(
 def test_stats_failure_is_the_guardians_error_and_retry_errors_reruns_it(tmp_path, capsys):
     out = tmp_path / "s"
     cmd = ["--agent", "tests.bench_helpers:StatsBoom,inactive", "--episodes", "2", "--workers", "1", "--out", str(out), *FAST]
-    assert main(cmd) == 0
+    assert main(cmd) == 1  # guardian errors: counted as failures, and the command says so
     text = capsys.readouterr().out
     got = rows(out)
     boom = [r for r in got if r[0].endswith("StatsBoom")]
@@ -178,9 +178,9 @@ def test_stats_failure_is_the_guardians_error_and_retry_errors_reruns_it(tmp_pat
     assert invocations(out)[-1][1] == "finished"
 
     stamps = rows(out, "agent, episode, finished")
-    assert main(cmd + ["--resume"]) == 0  # guardian errors are results: nothing to run
+    assert main(cmd + ["--resume"]) == 1  # guardian errors are results: nothing to run
     assert rows(out, "agent, episode, finished") == stamps
-    assert main(cmd + ["--retry-errors"]) == 0  # ... unless asked
+    assert main(cmd + ["--retry-errors"]) == 1  # ... unless asked
     after = dict(((a, e), f) for a, e, f in rows(out, "agent, episode, finished"))
     for a, e, f in stamps:
         assert (after[(a, e)] != f) == a.endswith("StatsBoom")

@@ -158,7 +158,7 @@ def test_guardian_takes_control_in_the_tube_with_bang_bang(tmp_path):
 def test_guardian_cache_and_edge_cases(tmp_path):
     box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([20.0, 0.0, 0.0, 1.0])}
     g = hj(box, tmp_path)
-    assert g.stats()["solves"] == 1 and len(list(tmp_path.glob("*.npy"))) == 1
+    assert g.stats()["solves"] == 1 and len(list(tmp_path.glob("*.npz"))) == 1
     g.reset(seed=1, privileged=lambda: box, action_space=SPACE)
     assert g.stats()["cache_hits"] == 1 and g.stats()["solves"] == 0
     assert g.act(None, {})["active_ctrl"] == 0 and g.stats()["outside_grid"] == 1
@@ -166,10 +166,11 @@ def test_guardian_cache_and_edge_cases(tmp_path):
     a = g.act(None, {})
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and g.stats()["nan_states"] == 1
     # a damaged cache entry is recomputed, not trusted
-    f = next(tmp_path.glob("*.npy"))
+    f = next(tmp_path.glob("*.npz"))
     f.write_bytes(b"garbage")
-    g.reset(seed=2, privileged=lambda: box, action_space=SPACE)
-    assert g.stats()["solves"] == 1
+    with pytest.warns(RuntimeWarning, match=f"HJ value cache entry {f} cannot be read .*; recomputing it"):
+        g.reset(seed=2, privileged=lambda: box, action_space=SPACE)
+    assert g.stats()["solves"] == 1 and g.stats()["cache_rejected"] == 1
 
 
 def test_cache_tolerates_files_removed_by_another_process(tmp_path, monkeypatch):
@@ -181,11 +182,11 @@ def test_cache_tolerates_files_removed_by_another_process(tmp_path, monkeypatch)
     cache = ValueCache(tmp_path, max_files=2)
     for k in range(3):
         cache.save(f"k{k}", np.full((2, 2), k, np.float32))
-    ghost = tmp_path / "gone.npy"
+    ghost = tmp_path / "gone.npz"
     real_glob = Path.glob
     monkeypatch.setattr(Path, "glob", lambda self, pat: [ghost, *real_glob(self, pat)])
     cache.save("k3", np.zeros((2, 2), np.float32))  # evicts, skipping the vanished file
-    assert sorted(f.name for f in real_glob(tmp_path, "*.npy")) == ["k2.npy", "k3.npy"]
+    assert sorted(f.name for f in real_glob(tmp_path, "*.npz")) == ["k2.npz", "k3.npz"]
     monkeypatch.setattr("os.utime", lambda *a, **k: (_ for _ in ()).throw(FileNotFoundError("evicted")))
     np.testing.assert_array_equal(cache.load("k2", (2, 2)), np.full((2, 2), 2, np.float32))  # loaded, then evicted: still a hit
 
@@ -603,7 +604,7 @@ def test_guardian_reads_the_control_bounds_from_the_action_space(tmp_path):
     a = g.act(None, {})
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.25 and abs(a["turnrate_ctrl"][0]) == 0.125
     g.reset(seed=0, privileged=lambda: box, action_space=SPACE)  # another value: a second cache entry
-    assert g.dynamics == Dubins4DHJ() and g.stats()["solves"] == 1 and len(list(tmp_path.glob("*.npy"))) == 2
+    assert g.dynamics == Dubins4DHJ() and g.stats()["solves"] == 1 and len(list(tmp_path.glob("*.npz"))) == 2
     with pytest.raises(ValueError, match="guardian 'hj'.*symmetric"):
         g.reset(seed=0, privileged=lambda: box, action_space=GuardianActionSpace(CONTROLS, [-0.25, -0.4], [0.25, 0.5]))
     with pytest.raises(ValueError, match="guardian 'hj'.*action space"):

@@ -29,10 +29,13 @@ RUN = [
 def test_every_statistic_by_hand():
     a = aggregate(RUN, batch_size=2)
     assert (a["episodes"], a["errors"], a["error_rate"]) == (5, 1, 0.2)
-    # in episode order 0 1 | 2 4: goals 1 1 | 0 0 (stored order would give 0 1 | 0 1)
-    assert a["goal"] == pytest.approx((50.0, 50.0)) and a["collision"] == pytest.approx((50.0, 50.0))
+    # in episode order 0 1 | 2 3 | 4, the guardian error (3) a failure: goals 1 1 | 0 0 | 0, rates 1 0 0
+    # weighted 2 2 1: mean 2/5, std sqrt((2 * 0.6^2 + 2 * 0.4^2 + 0.4^2) / 5); collisions 0 0 | 1 0 | 1
+    # (stored order would give 0 1 | 0 1 for the goals)
+    assert a["goal"] == pytest.approx((40.0, 100 * math.sqrt(0.24)))
+    assert a["collision"] == pytest.approx((40.0, 100 * math.sqrt((2 * 0.4 ** 2 + 2 * 0.1 ** 2 + 0.6 ** 2) / 5)))
     assert a["timeout"] == (0.0, 0.0)
-    assert (a["total_goal"], a["total_collision"], a["total_timeout"]) == (50.0, 50.0, 0.0)
+    assert (a["total_goal"], a["total_collision"], a["total_timeout"]) == pytest.approx((40.0, 40.0, 0.0))
     # ms per step of the episodes that stepped: 2, 4, 1
     assert a["compute_ms"] == pytest.approx((7 / 3, math.sqrt(14 / 9)))
     # decision means 1, 3, 2 ms (the NaN one left out)
@@ -54,9 +57,11 @@ def test_empty_inputs_give_nan_not_zero():
     assert all(map(math.isnan, weighted_mean_std([], [])))
     assert all(map(math.isnan, weighted_mean_std([1.0, 2.0], [0, 0])))
     assert all(map(math.isnan, batch_rate([])))
-    only_errors = aggregate([{"episode": 0, "outcome": "error"}])
+    only_errors = aggregate([{"episode": 0, "outcome": "error"}])  # a guardian error: a failure, not a missing result
     assert only_errors["errors"] == 1 and only_errors["error_rate"] == 1.0
-    assert math.isnan(only_errors["total_goal"]) and all(map(math.isnan, only_errors["goal"]))
+    assert only_errors["total_goal"] == 0.0 and only_errors["goal"] == (0.0, 0.0)
+    no_result = aggregate([{"episode": 0, "outcome": "error", "error_kind": "timeout"}])
+    assert math.isnan(no_result["total_goal"]) and all(map(math.isnan, no_result["goal"]))
 
 
 def test_batch_rate_batches_in_order_and_weights_by_size():
@@ -72,7 +77,8 @@ def test_table_i_rows_per_agent_in_order_of_appearance():
     t = table_i(df, batch_size=2)
     assert list(t.index) == ["z", "a"] and t.index.name == "agent"
     z = t.loc["z"]
-    assert (z["goal"], z["goal_std"], z["errors"], z["qp_fallbacks"]) == (50.0, 50.0, 1, 10)
+    assert (z["goal"], z["goal_std"]) == pytest.approx((40.0, 100 * math.sqrt(0.24)))
+    assert (z["errors"], z["qp_fallbacks"]) == (1, 10)
     assert z["compute_ms"] == pytest.approx(7 / 3) and z["compute_ms_std"] == pytest.approx(math.sqrt(14 / 9))
     assert (t.loc["a", "goal"], t.loc["a", "episodes"], t.loc["a", "intervention"]) == (100.0, 1, 25.0)
 
@@ -96,8 +102,9 @@ def test_degenerate_inputs_give_nan_without_a_numpy_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert all(map(math.isnan, weighted_mean_std([1.0, 2.0], [0, 0])))
-        a = aggregate([{"episode": 0, "outcome": "error"}, {"episode": 1, "outcome": "error"}])
-        t = table_i(pd.DataFrame.from_records([{"agent": "e", "episode": 0, "outcome": "error"}]))
+        a = aggregate([{"episode": 0, "outcome": "error", "error_kind": "timeout"},
+                       {"episode": 1, "outcome": "error", "error_kind": "lost_worker"}])
+        t = table_i(pd.DataFrame.from_records([{"agent": "e", "episode": 0, "outcome": "error", "error_kind": "timeout"}]))
     assert [math.isnan(a[f"total_{k}"]) for k in ("goal", "collision", "timeout")] == [True] * 3
     assert (a["episodes"], a["errors"], a["error_rate"]) == (2, 2, 1.0)
     assert math.isnan(t.loc["e", "total_goal"]) and t.loc["e", "errors"] == 1

@@ -65,7 +65,7 @@ def report_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="rmm-bench report", description="Rebuild Table I and the figures from a results database.")
     p.add_argument("dir", help="results directory holding results.db")
     p.add_argument("--invocation", type=int, action="append", default=None,
-                   help="which recorded run (default: the last); repeat to merge several into one table")
+                   help="which recorded run (default: the last); repeat to merge several (one table per configuration)")
     p.add_argument("--batch-size", type=int, default=64)
     return p
 

@@ -24,7 +24,7 @@ from rmm_envs.autonomy import ACTIVE
 
 import json
 
-from benchmarks.bench.config import AgentRun, accepts_argument
+from benchmarks.bench.config import AgentRun, accepts_argument, input_digests
 
 __all__ = ["check_env_contract", "check_runs", "env_arguments", "parse_agent_opts", "resolve_agents"]
 
@@ -140,7 +140,8 @@ def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False) -> di
     """Build the env and every guardian as the workers will, before any episode runs.
 
     Raises ValueError naming the flag and value at fault; returns, per agent, what ``report``
-    prints later without importing anything (observation type, obstacle count).  With
+    prints later without importing anything (observation type, obstacle count) and the files
+    its run reads (``inputs``: path -> SHA-256, part of the run's key).  With
     ``skip_inapplicable`` (the agents came from a named set, ``--agent all`` or ``paper``), a
     guardian that does not apply to the env (its ``check_spaces`` refuses it, or, given no
     ``--agent-opt``, it cannot be built for the env, e.g. no shipped model) is not an error: its
@@ -186,5 +187,6 @@ def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False) -> di
                     meta[agent] = {"skipped": str(e)}
                     continue
                 raise ValueError(f"--agent {agent} does not apply to --env {run.env_id}: {e}") from None
-        meta[agent] = {"observation": str(getattr(guardian, "observation_type", "?")), "n_obstacles": envs[ekey]}
+        meta[agent] = {"observation": str(getattr(guardian, "observation_type", "?")), "n_obstacles": envs[ekey],
+                       "inputs": input_digests(guardian, run.agent_kwargs, run.env_kwargs)}
     return meta

@@ -33,7 +33,13 @@ share its cores), ``cpu`` (the worker's own CPU time: insensitive to other proce
 Failures.  Every option is checked before any episode runs, including building the env and
 each guardian with its ``--agent-opt`` values: a bad one exits with status 2 and one line
 naming the flag.  While running, an episode whose guardian raises is stored as that
-guardian's error (a result: the Errors column; ``--retry-errors`` runs them again).  An
+guardian's error, a result: it counts in the success, collision and timeout rates as a failure
+(none of the three, so they add up to 100% less the errors' share: a guardian failing exactly
+when it would intervene must not look perfect), the Errors column counts it, and the command
+exits with status 1 with one line per agent naming the count and the first error;
+``--retry-errors`` runs them again after a fix.  A run is keyed on its options and on the
+SHA-256 of every file it reads (a model file, given or shipped): the same command after a
+model file changed starts a new run, said in one line, instead of appending to the old one.  An
 episode over ``--episode-timeout`` (default 600 s: generous, as a worker's first episode also
 pays for imports and, for ``hj``, a value-function solve of tens of seconds before it is
 cached) or whose worker process died (out of memory, a crash, a guardian
@@ -42,7 +48,12 @@ fresh worker takes over, and any rerun retries it.  After ``max(4, 2 x workers)`
 a row lost their worker the run stops (a cause that kills every worker, such as too little
 memory, would otherwise restart workers for every remaining episode).  A run that leaves
 episodes without a result exits with status 1 and says how to finish; Ctrl-C exits 130; both
-keep every finished episode.  ``rmm-bench report`` prints how many episodes each agent
+keep every finished episode.  Storage failures are told apart, one line each: an ``--out``
+that is a file or cannot be written, or a read-only ``results.db``, exit 2 (change the path);
+a full disk, a file-size limit (``ulimit -f``) or a database locked by another command exit 1
+and keep every stored episode (rerun the same command once fixed); only a truly damaged
+``results.db`` (its integrity check fails) is to be moved aside, after exporting what is
+readable, as its message says.  In short: 2 is bad input, 1 a run that could not finish.  ``rmm-bench report`` prints how many episodes each agent
 actually has and flags a run that was killed (its invocation still says ``running`` but its
 process is gone).
 """
@@ -53,6 +64,8 @@ import sys
 
 from benchmarks.bench import args as _args
 from benchmarks.bench.run import RunFailed, cmd_run, cmd_sweep
+from benchmarks.bench.store import ResultsDatabaseError
+from rmm_envs.failures import describe_os_error
 
 __all__ = ["build_parser", "build_report_parser", "build_sweep_parser", "main"]
 
@@ -88,6 +101,13 @@ def main(argv: list[str] | None = None) -> int:
     except RunFailed as e:
         print(f"rmm-bench: error: {e}", file=sys.stderr)
         return 1
+    except ResultsDatabaseError as e:  # one line, the cause told apart; 2 or 1 as the cause says
+        print(f"rmm-bench: error: {e}", file=sys.stderr)
+        return e.status
+    except OSError as e:  # a full disk, a file-size limit, an unwritable --out, an unreachable Ray cluster
+        message, status = describe_os_error(e)
+        print(f"rmm-bench: error: {message}", file=sys.stderr)
+        return status
     except (ValueError, RuntimeError, LookupError) as e:
         print(f"rmm-bench: error: {e}", file=sys.stderr)
         return 2

@@ -7,7 +7,9 @@
   episode's result apart from its index.  Its :meth:`~AgentRun.as_dict` is what the store
   keeps in ``runs.config`` and what :attr:`~AgentRun.key` (the ``run_key``) hashes, with the
   same keys and values as databases written before these classes existed, so ``report`` and
-  ``--resume`` read them unchanged.
+  ``--resume`` read them unchanged, plus ``inputs`` when the run reads files: the SHA-256 of
+  the bytes of every file the guardian or the env reads (:func:`input_digests`), so a model
+  file replaced between two commands makes a new run instead of one row mixing two models.
 * :class:`EpisodeTask`: what a worker receives: the run, the episode index, its derived seed,
   and the guardian's compute threads (not part of the run: results do not depend on them).
 * :class:`EpisodeResult`: what a worker returns and the store writes: one row of the
@@ -24,16 +26,68 @@ import dataclasses
 import hashlib
 import json
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from guardians.registry import accepts_argument  # noqa: F401  (re-exported: the runner and the checks use it from here)
 
-__all__ = ["AgentRun", "BenchConfig", "EpisodeResult", "EpisodeTask", "accepts_argument", "run_key"]
+__all__ = ["AgentRun", "BenchConfig", "EpisodeResult", "EpisodeTask", "InputChanged", "accepts_argument", "changed_inputs",
+           "file_sha256",
+           "input_digests", "run_key"]
 
 
 def run_key(config: dict) -> str:
     """The run's identity in the store: the first 16 hex digits of the SHA-256 of its sorted JSON."""
     return hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of the bytes of the file ``path``, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _strings(value):
+    if isinstance(value, str):
+        yield value
+    elif isinstance(value, dict):
+        for v in value.values():
+            yield from _strings(v)
+    elif isinstance(value, (list, tuple)):
+        for v in value:
+            yield from _strings(v)
+
+
+def input_digests(guardian, *options: dict) -> dict[str, str]:
+    """Every file a run reads, path -> SHA-256 of its bytes: each string option (of the guardian
+    or the env) naming a regular file, and the files the guardian reports it read
+    (:meth:`guardians.base.Guardian.input_files`, e.g. a shipped model)."""
+    out: dict[str, str] = {}
+    for opts in options:
+        for text in _strings(opts):
+            try:
+                if len(text) < 4096 and Path(text).is_file():
+                    out[text] = file_sha256(text)
+            except (OSError, ValueError):  # unreadable or not a path: the guardian or env reports it when it reads it
+                continue
+    reported = getattr(guardian, "input_files", None)
+    if callable(reported):
+        out.update({str(k): str(v) for k, v in reported().items()})
+    return dict(sorted(out.items()))
+
+
+class InputChanged(RuntimeError):
+    """A file the run reads no longer has the bytes the run was started with."""
+
+
+def changed_inputs(recorded: dict[str, str], now: dict[str, str]) -> str:
+    """'' if every file of ``recorded`` still has its digest in ``now``, else one clause per changed file."""
+    return "; ".join(f"{path} (sha256 {digest[:12]}... when the run was keyed, "
+                     f"{now[path][:12] + '...' if now.get(path) else 'unreadable'} now)"
+                     for path, digest in recorded.items() if now.get(path) != digest)
 
 
 def _json_copy(name: str, value: dict) -> dict:
@@ -55,15 +109,19 @@ class AgentRun:
     seed: int
     episode_timeout: float
     charge_precompute: bool
+    inputs: dict = field(default_factory=dict)  # path -> SHA-256 of every file read (input_digests)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "agent_kwargs", _json_copy("agent_kwargs", self.agent_kwargs))
         object.__setattr__(self, "env_kwargs", _json_copy("env_kwargs", self.env_kwargs))
+        object.__setattr__(self, "inputs", _json_copy("inputs", self.inputs))
 
     def as_dict(self) -> dict:
-        """The stored configuration (``runs.config``), as every version of the store wrote it."""
-        return {"agent": self.agent, "agent_kwargs": self.agent_kwargs, "env_id": self.env_id, "env_kwargs": self.env_kwargs,
-                "seed": self.seed, "episode_timeout": self.episode_timeout, "charge_precompute": self.charge_precompute}
+        """The stored configuration (``runs.config``), as every version of the store wrote it, plus
+        ``inputs`` for a run that reads files."""
+        out = {"agent": self.agent, "agent_kwargs": self.agent_kwargs, "env_id": self.env_id, "env_kwargs": self.env_kwargs,
+               "seed": self.seed, "episode_timeout": self.episode_timeout, "charge_precompute": self.charge_precompute}
+        return out | ({"inputs": self.inputs} if self.inputs else {})
 
     @property
     def key(self) -> str:
@@ -153,9 +211,11 @@ class BenchConfig:
     parsed: dict = field(default_factory=dict)
     latencies: tuple[float, ...] = ()  # a sweep's decision latencies, ms
     agent_set: str | None = None  # the named set --agent gave ("all", "paper"), or None for named agents
+    agent_inputs: dict = field(default_factory=dict)  # agent -> the files its run reads (input_digests), set once checked
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "agent_kwargs", {a: _json_copy(f"--agent-opt {a}", kw) for a, kw in self.agent_kwargs.items()})
+        object.__setattr__(self, "agent_inputs", {a: _json_copy(f"{a} inputs", kw) for a, kw in self.agent_inputs.items()})
         object.__setattr__(self, "env_kwargs", _json_copy("env_kwargs", self.env_kwargs))
         object.__setattr__(self, "parsed", _json_copy("arguments", self.parsed))
 
@@ -169,9 +229,15 @@ class BenchConfig:
         """The same command without ``agents`` (those of a named set that do not apply to the env)."""
         drop = set(agents)
         return dataclasses.replace(self, agents=tuple(a for a in self.agents if a not in drop),
-                                   agent_kwargs={a: kw for a, kw in self.agent_kwargs.items() if a not in drop})
+                                   agent_kwargs={a: kw for a, kw in self.agent_kwargs.items() if a not in drop},
+                                   agent_inputs={a: d for a, d in self.agent_inputs.items() if a not in drop})
+
+    def with_inputs(self, inputs: dict[str, dict]) -> BenchConfig:
+        """The same command with the files each agent's run reads (agent -> path -> SHA-256)."""
+        return dataclasses.replace(self, agent_inputs=dict(inputs))
 
     def agent_runs(self) -> dict[str, AgentRun]:
         return {a: AgentRun(agent=a, agent_kwargs=self.agent_kwargs.get(a, {}), env_id=self.env_id, env_kwargs=self.env_kwargs,
-                            seed=self.seed, episode_timeout=self.episode_timeout, charge_precompute=self.charge_precompute)
+                            seed=self.seed, episode_timeout=self.episode_timeout, charge_precompute=self.charge_precompute,
+                            inputs=self.agent_inputs.get(a, {}))
                 for a in self.agents}

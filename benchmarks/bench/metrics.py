@@ -1,12 +1,18 @@
-"""Table I aggregation (docs/original-code.md, item 22), over the non-errored episodes in order.
+"""Table I aggregation (docs/original-code.md, item 22), over the episodes in order.
 
 * policy compute time, ms: per episode ``compute_time / steps``; mean and population std
-  across episodes;
-* success / collision / timeout rate, %: episodes split in order into consecutive batches of
-  ``batch_size`` (64); the rate per batch; mean and population std across batches weighted by
-  batch size (the paper's +-);
+  across the episodes without an error;
+* success / collision / timeout rate, %: over every episode with a result, **an episode that
+  ended in a guardian error included, as a failure** (neither a goal, a collision nor a
+  timeout: a guardian that fails exactly when it would intervene must not look perfect, so the
+  three rates add up to 100% minus the share of guardian errors, which the Errors column
+  counts); episodes without a result (over the time limit, lost with their worker: kinds in
+  :data:`benchmarks.bench.store.RETRIED_ERRORS`) are left out, and the report marks the run
+  incomplete.  Episodes are split in order into consecutive batches of ``batch_size`` (64);
+  the rate per batch; mean and population std across batches weighted by batch size (the
+  paper's +-);
 * intervention rate, %: per episode ``active_sim_time / sim_time``; mean and population std
-  across episodes.
+  across the episodes without an error.
 
 Written once, with pandas: :func:`table_i` aggregates a DataFrame of episodes (as
 :func:`benchmarks.load_results` returns) into one row per agent; :func:`aggregate` gives the
@@ -17,6 +23,8 @@ report and sweep use.
 from __future__ import annotations
 
 import numpy as np
+
+from benchmarks.bench.store import RETRIED_ERRORS
 
 __all__ = ["aggregate", "batch_rate", "table_i", "weighted_mean_std"]
 
@@ -61,11 +69,14 @@ def _aggregate_frame(df, batch_size: int) -> dict:
     n = len(df)
     ok = df[df["outcome"] != "error"].sort_values("episode", kind="stable")
     out = {"episodes": n, "errors": n - len(ok), "error_rate": (n - len(ok)) / n if n else float("nan")}
+    kind = df["error_kind"] if "error_kind" in df.columns else None  # NULL: a guardian error (rows stored before kinds)
+    no_result = (df["outcome"] == "error") & (kind.isin(RETRIED_ERRORS) if kind is not None else False)
+    resulted = df[~no_result].sort_values("episode", kind="stable")  # guardian errors included: failures
     stepped = ok[ok["steps"] != 0]
     out["compute_ms"] = _mean_std(stepped["compute_time"] / stepped["steps"] * 1e3)
     out["decision_ms"] = _mean_std(ok["decision_mean"].dropna().astype(float) * 1e3)
     for name in _OUTCOMES:
-        flags = (ok["outcome"] == name).to_numpy(float)
+        flags = (resulted["outcome"] == name).to_numpy(float)
         m, s = batch_rate(flags, batch_size)
         out[name] = (100 * m, 100 * s)
         out[f"total_{name}"] = 100 * float(flags.mean()) if flags.size else float("nan")

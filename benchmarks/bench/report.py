@@ -171,7 +171,7 @@ def _completeness(rows: list[dict], invs: list[dict]) -> str:
     why = []
     lost = sum(r["episodes"] - r["with_result"] for r in short)
     if lost:
-        why.append(f"{lost} stored over the time limit or lost with their worker")
+        why.append(f"{lost} stored over the time limit, lost with their worker or not run as a file changed")
     for inv in invs:
         state = inv.get("state", inv["status"])
         if state == "stale":
@@ -186,29 +186,79 @@ def _completeness(rows: list[dict], invs: list[dict]) -> str:
             + ". Rerun the same command to finish; the table covers the stored episodes only.\n")
 
 
+#: What a table's header names: runs that differ in any of these are never merged under one header.
+CONFIGURATION = ("env", "clock", "time_accel", "base_step", "seed")
+
+
+def _configuration(inv: dict) -> tuple:
+    return tuple(inv["args"].get(k) for k in CONFIGURATION)
+
+
+def _header(args: dict) -> str:
+    return f"{args.get('env')}, clock {args.get('clock')}, time accel {args.get('time_accel')}, seed {args.get('seed')}"
+
+
+def _merge_csv(parts: list[tuple[dict, str]]) -> str:
+    """The CSV tables of several configurations in one, each row led by its configuration's columns."""
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    for k, (args, text) in enumerate(parts):
+        lines = list(csv.reader(io.StringIO(text)))
+        if k == 0:
+            w.writerow(list(CONFIGURATION) + lines[0])
+        for line in lines[1:]:
+            w.writerow([args.get(c) for c in CONFIGURATION] + line)
+    return buf.getvalue()
+
+
 def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_size: int = 64, quiet: bool = False) -> str:
-    """Tables and figures for one recorded command, or several merged (later ones win per agent)."""
+    """Tables and figures for one recorded command, or several merged (later ones win per agent).
+
+    Commands run under different configurations (env, clock, time acceleration, base step,
+    seed) are never put under one header: each configuration gets its own header and table,
+    in the printed report and in ``table_I.md``/``.tex``, the CSV gets the configuration's
+    columns, and the figure labels each agent with its table's number."""
     invs = [invs] if isinstance(invs, dict) else list(invs)
-    run_keys, episodes = {}, {}
+    groups: dict[tuple, list[dict]] = {}
     for inv in invs:
-        for agent, key in inv["run_keys"].items():
-            run_keys[agent], episodes[agent] = key, inv["episodes"]
-    rows = table_rows(store, run_keys, episodes, batch_size)
-    tables = format_tables(rows)
-    (out / "table_I.md").write_text(tables["md"])
-    (out / "table_I.csv").write_text(tables["csv"])
-    (out / "table_I.tex").write_text(tables["tex"])
-    plot_outcomes(rows, out / "outcomes.png")
-    paper = format_tables([{"agent": a, "episodes": 2048, "errors": 0, "qp_fallbacks": 0, "precompute_s": (0, 0),
-                            "obs": p["obs"], "n_obst": p["n_obst"], **{k: p[k] for k in ("compute_ms", "goal", "collision", "timeout", "intervention")}}
-                           for a, p in PAPER_TABLE_I.items() if a in run_keys or f"{a}-paper" in run_keys])["md"]
-    args = invs[-1]["args"]
-    counts = sorted(set(episodes.values()))
-    text = (f"Table I: {args.get('env')}, clock {args.get('clock')}, time accel {args.get('time_accel')}, seed {args.get('seed')}, "
-            f"{'/'.join(map(str, counts))} episodes requested per agent (results in {out})\n{_completeness(rows, invs)}\n"
-            f"{tables['md']}")
-    if str(args.get("env", "")) in PAPER_ENVS:  # the paper evaluated guardians on Dubins4D only
-        text += f"\nThe paper's Table I for the same agents:\n\n{paper}"
+        groups.setdefault(_configuration(inv), []).append(inv)
+    mixed = len(groups) > 1
+    texts, md, tex, csv_parts, figure_rows = [], [], [], [], []
+    for number, group in enumerate(groups.values(), 1):
+        run_keys, episodes = {}, {}
+        for inv in group:
+            for agent, key in inv["run_keys"].items():
+                run_keys[agent], episodes[agent] = key, inv["episodes"]
+        rows = table_rows(store, run_keys, episodes, batch_size)
+        tables = format_tables(rows)
+        args = group[-1]["args"]
+        label = f"[{number}] " if mixed else ""
+        md.append(f"{label}{_header(args)}\n\n{tables['md']}" if mixed else tables["md"])
+        tex.append(f"% {label}{_header(args)}\n{tables['tex']}" if mixed else tables["tex"])
+        csv_parts.append((args, tables["csv"]))
+        figure_rows += [r | {"agent": f"{r['agent']} [{number}]"} for r in rows] if mixed else rows
+        paper = format_tables([{"agent": a, "episodes": 2048, "errors": 0, "qp_fallbacks": 0, "precompute_s": (0, 0),
+                                "obs": p["obs"], "n_obst": p["n_obst"], **{k: p[k] for k in ("compute_ms", "goal", "collision", "timeout", "intervention")}}
+                               for a, p in PAPER_TABLE_I.items() if a in run_keys or f"{a}-paper" in run_keys])["md"]
+        counts = sorted(set(episodes.values()))
+        text = (f"Table I{' ' + label.strip() if mixed else ''}: {_header(args)}, {'/'.join(map(str, counts))} episodes "
+                f"requested per agent (results in {out})\n{_completeness(rows, group)}\n{tables['md']}")
+        if str(args.get("env", "")) in PAPER_ENVS:  # the paper evaluated guardians on Dubins4D only
+            text += f"\nThe paper's Table I for the same agents:\n\n{paper}"
+        texts.append(text)
+    try:
+        (out / "table_I.md").write_text("\n".join(md))
+        (out / "table_I.csv").write_text(_merge_csv(csv_parts) if mixed else csv_parts[0][1])
+        (out / "table_I.tex").write_text("\n".join(tex))
+        plot_outcomes(figure_rows, out / "outcomes.png")
+    except OSError as e:  # a full disk names no file: name the directory (the CLI prints one line)
+        if e.filename is None:
+            raise OSError(e.errno, e.strerror or str(e), str(out)) from None
+        raise
+    text = "\n".join(texts)
+    if mixed:
+        text = (f"{len(groups)} configurations, one table each (they differ in "
+                f"{', '.join(c for i, c in enumerate(CONFIGURATION) if len({g[i] for g in groups}) > 1)}):\n\n{text}")
     if not quiet:
         print(text)
     return text

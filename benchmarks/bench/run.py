@@ -28,7 +28,7 @@ from benchmarks.bench.report import plot_latency, write_report
 from benchmarks.bench.runner import episode_seed, hard_timeout, lost_episode, run_episode
 from benchmarks.bench.store import RETRIED_ERRORS, ResultsStore
 
-__all__ = ["RunFailed", "cmd_run", "cmd_sweep", "execute", "plan_tasks"]
+__all__ = ["RunFailed", "cmd_run", "cmd_sweep", "execute", "guardian_error_lines", "plan_tasks"]
 
 
 class RunFailed(RuntimeError):
@@ -70,6 +70,25 @@ def plan_tasks(store: ResultsStore, runs: dict[str, AgentRun], episodes: int, wo
     return tasks
 
 
+def _announce_new_runs(store: ResultsStore, runs: dict[str, AgentRun]) -> None:
+    """One line per agent whose files (a model) differ from those of episodes stored for the same
+    command: the run key covers the files' bytes, so this command starts a new run instead of
+    appending to the old one."""
+    for agent, run in runs.items():
+        for old in store.superseded_runs(run.key, run.as_dict()):
+            if not old["episodes"]:
+                continue
+            if old["inputs"]:
+                paths = sorted(set(old["inputs"]) | set(run.inputs))
+                what = ", ".join(f"{p} (sha256 {old['inputs'].get(p, 'none')[:12]} then, {run.inputs.get(p, 'none')[:12]} now)"
+                                 for p in paths if old["inputs"].get(p) != run.inputs.get(p))
+            else:
+                what = f"{', '.join(run.inputs)} (not recorded by the version that stored them)"
+            print(f"rmm-bench: {agent}: {old['episodes']} episodes in {store.path} were run with other files: {what}; "
+                  f"this command starts a new run (run {run.key}) instead of mixing them; the old episodes stay under "
+                  f"run {old['run_key']}", file=sys.stderr)
+
+
 def execute(store: ResultsStore, config: BenchConfig, provenance: dict, meta: dict[str, dict] | None = None,
             invocation: int | None = None) -> dict[str, int]:
     """Run every episode of ``config`` not stored yet; returns, per agent, how many of this
@@ -78,6 +97,7 @@ def execute(store: ResultsStore, config: BenchConfig, provenance: dict, meta: di
     from rmm_envs.parallel import TaskLost, WorkersLost, run_local, run_ray
 
     runs = config.agent_runs()
+    _announce_new_runs(store, runs)
     for agent, run in runs.items():
         store.ensure_run(run.key, agent, run.as_dict(), provenance | {"guardian": (meta or {}).get(agent, {})})
     tasks = plan_tasks(store, runs, config.episodes, config.workers, config.backend, config.retry_errors)
@@ -121,8 +141,23 @@ def _unfinished_message(unfinished: dict[str, int], store: ResultsStore) -> str:
     if not lacking:
         return ""
     return (f"{sum(lacking.values())} episodes ended without a result ({', '.join(f'{a}: {n}' for a, n in lacking.items())}): "
-            f"over --episode-timeout or their worker died (causes in the error column of {store.path}); "
+            f"over --episode-timeout, their worker died or a file they read changed (causes in the error column of {store.path}); "
             "the table counts them as errors; rerun the same command to retry them")
+
+
+def guardian_error_lines(store: ResultsStore, run_keys: dict[str, str], episodes: int) -> list[str]:
+    """One line per agent whose first ``episodes`` stored episodes hold guardian errors: the
+    count and the first error.  Those episodes count as failures in the rates (see
+    :mod:`benchmarks.bench.metrics`); the command exits with status 1 so they are never missed."""
+    lines = []
+    for agent, key in run_keys.items():
+        errs = [e for e in store.episodes(key, episodes) if e["outcome"] == "error" and (e["error_kind"] or "guardian") == "guardian"]
+        if errs:
+            first = (errs[0]["error"] or "").splitlines()[0][:300] if errs[0]["error"] else "no message"
+            lines.append(f"{agent}: {len(errs)} of {episodes} episodes ended in a guardian error, counted as failures in the "
+                         f"rates (first, episode {errs[0]['episode']}: {first}); fix the guardian or its --agent-opt values "
+                         "and rerun with --retry-errors")
+    return lines
 
 
 def _invoke(store: ResultsStore, kind: str, config: BenchConfig, argv, meta: dict, record_args: dict) -> tuple[int, str]:
@@ -165,6 +200,7 @@ def applicable(config: BenchConfig) -> tuple[BenchConfig, dict]:
                   f"skipped: {reason}", file=sys.stderr)
         config = config.without(skipped)
         meta = {a: m for a, m in meta.items() if a not in skipped}
+    config = config.with_inputs({a: m.pop("inputs", {}) for a, m in meta.items()})
     return config, meta
 
 
@@ -180,11 +216,12 @@ def cmd_run(config: BenchConfig, argv) -> int:
         except KeyboardInterrupt:
             return _interrupted(out)
         print(f"finished in {time.perf_counter() - t0:.1f} s")
-        write_report(store, out, store.invocation(inv), config.batch_size)
-        if msg:
-            print(f"rmm-bench: {msg}", file=sys.stderr)
-            return 1
-        return 0
+        record = store.invocation(inv)
+        write_report(store, out, record, config.batch_size)
+        errors = guardian_error_lines(store, record["run_keys"], config.episodes)
+        for line in ([msg] if msg else []) + errors:
+            print(f"rmm-bench: {line}", file=sys.stderr)
+        return 1 if msg or errors else 0
     finally:
         store.close()
 
@@ -206,8 +243,8 @@ def cmd_sweep(config: BenchConfig, argv) -> int:
                 _, msg = _invoke(store, "sweep", at, argv, meta, at.parsed | {"clock": at.clock, "latency_ms": lat})
             except KeyboardInterrupt:
                 return _interrupted(out)
-            if msg:
-                failed.append(f"{lat:g} ms: {msg}")
+            failed += [f"{lat:g} ms: {line}" for line in ([msg] if msg else [])
+                       + guardian_error_lines(store, {a: r.key for a, r in at.agent_runs().items()}, at.episodes)]
             for agent, run in at.agent_runs().items():
                 agg = aggregate(store.episodes(run.key, at.episodes), at.batch_size)
                 series[agent].append((lat, agg["collision"][0], agg["collision"][1]))
@@ -221,6 +258,7 @@ def cmd_sweep(config: BenchConfig, argv) -> int:
     plot_latency(series, out / "latency_sweep.png")
     print(md)
     if failed:
-        print("rmm-bench sweep: " + " | ".join(failed), file=sys.stderr)
+        for line in failed:
+            print(f"rmm-bench sweep: {line}", file=sys.stderr)
         return 1
     return 0

@@ -8,7 +8,8 @@ HJ row, not charged to the episode's clock unless ``charge_precompute`` is set.
 A guardian that raises (in ``reset``, ``act`` or ``stats``, or with ``sys.exit``), or an
 episode exceeding ``episode_timeout`` seconds of wall time, ends that episode with outcome
 ``error``, the message and its kind (``guardian`` or ``timeout``, see the store); the run goes
-on.  The time limit is a ``SIGALRM`` timer in the worker, so it interrupts Python code; a
+on.  A worker whose guardian's files (a model) no longer hash to the run's ``inputs`` runs no
+episode: each is stored as ``input_changed``, a failure of the run that any rerun retries.  The time limit is a ``SIGALRM`` timer in the worker, so it interrupts Python code; a
 call stuck in compiled code is ended by the parent, which kills the worker after
 :func:`hard_timeout` seconds and records the episode as ``lost_worker``.
 
@@ -29,7 +30,7 @@ import traceback
 
 import numpy as np
 
-from benchmarks.bench.config import EpisodeResult, EpisodeTask, run_key
+from benchmarks.bench.config import EpisodeResult, EpisodeTask, InputChanged, changed_inputs, input_digests, run_key
 
 __all__ = ["EPISODE_STATISTICS", "EpisodeTimeout", "episode_seed", "hard_timeout", "lost_episode", "run_episode", "run_key"]
 
@@ -90,15 +91,23 @@ def _env(env_id: str, env_kwargs: dict):
 
 
 def _guardian_key(task: EpisodeTask) -> tuple:
-    return ("guardian", task.agent, json.dumps(task.guardian_kwargs(), sort_keys=True))
+    return ("guardian", task.agent, json.dumps(task.guardian_kwargs(), sort_keys=True), json.dumps(task.run.inputs, sort_keys=True))
 
 
 def _guardian(task: EpisodeTask):
+    """The worker's guardian for ``task``, built once; its files must still be those the run was
+    keyed with (:class:`InputChanged` otherwise: the episode would mix two models in one run)."""
     key = _guardian_key(task)
     if key not in _CACHE:
         from guardians import make_guardian
 
-        _CACHE[key] = make_guardian(task.agent, env_id=task.run.env_id, **task.guardian_kwargs())
+        guardian = make_guardian(task.agent, env_id=task.run.env_id, **task.guardian_kwargs())
+        if task.run.inputs:
+            changed = changed_inputs(task.run.inputs, input_digests(guardian, task.run.agent_kwargs, task.run.env_kwargs))
+            if changed:
+                raise InputChanged(f"{changed}: a file changed after the run started, so this episode was not run; "
+                                   "rerun the command: it starts a new run with the file as it is now")
+        _CACHE[key] = guardian
     return _CACHE[key]
 
 
@@ -156,7 +165,8 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
                 raise EpisodeTimeout("episode time limit exceeded")
         fields.update(_statistics(run.env_id, info))
     except (Exception, SystemExit) as e:  # recorded, the run goes on
-        fields.update(outcome="error", error_kind="timeout" if isinstance(e, EpisodeTimeout) else "guardian", error=_error_text(e))
+        kind = "timeout" if isinstance(e, EpisodeTimeout) else "input_changed" if isinstance(e, InputChanged) else "guardian"
+        fields.update(outcome="error", error_kind=kind, error=_error_text(e))
         _CACHE.pop(_guardian_key(task), None)
     finally:
         if use_alarm:

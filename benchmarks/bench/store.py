@@ -15,8 +15,9 @@ Tables:
   - ``guardian``: the guardian raised (in ``reset``, ``act`` or ``stats``) or returned an
     action the env refused.  A result about the guardian: kept by a rerun, retried only with
     ``--retry-errors``.
-  - ``timeout`` (over ``--episode-timeout``) and ``lost_worker`` (the worker process died or
-    was killed): failures of the run, not results.  Every rerun retries them, replacing the row.
+  - ``timeout`` (over ``--episode-timeout``), ``lost_worker`` (the worker process died or
+    was killed) and ``input_changed`` (a file the run reads, such as a model, changed while it
+    ran): failures of the run, not results.  Every rerun retries them, replacing the row.
 
 * ``invocations``: each ``rmm-bench`` command: its arguments, run keys, episode count, the
   process id and host that ran it, and its status: ``running`` while it runs, then
@@ -25,9 +26,24 @@ Tables:
   ``failed`` (stopped on an error, or episodes left without a result; ``message`` says why).
   ``rmm-bench report DIR`` rebuilds exactly one command's table from it.
 
-A damaged file is reported as :class:`ResultsDatabaseError` naming the file and what to do
-(move it aside and rerun), never as a raw SQLite traceback; the whole file is checked
-(``PRAGMA quick_check``, milliseconds for a full Table I run) when it is opened.
+A file that cannot be used is reported as :class:`ResultsDatabaseError`: one line naming the
+file, what went wrong and what to do, never a raw SQLite traceback, and its ``status``, the
+exit status (:mod:`rmm_envs.failures`).  The causes are told apart, because only one of them
+means the stored episodes are gone:
+
+* not writable (the file, its directory or its file system is read-only for this user), or
+  ``--out`` is not a directory: status 2; the database is intact, change the path or the
+  permissions;
+* the disk is full, a file reached the size limit (``ulimit -f``), another I/O error on a
+  database whose integrity check passes: status 1; the stored episodes are kept (SQLite
+  commits atomically), rerun the same command once the cause is fixed;
+* locked by another process for over 30 s: status 1; wait for the other command;
+* truly damaged (its integrity check fails, or it is not a SQLite database): status 2; the
+  only case that suggests moving the file aside, saying that the episodes it holds are lost
+  to ``rmm-bench`` unless exported first, and how (the ``sqlite3`` shell's ``.recover``).
+
+The whole file is checked (``PRAGMA quick_check``, milliseconds for a full Table I run) when
+it is opened.
 """
 
 from __future__ import annotations
@@ -41,6 +57,7 @@ import time
 from pathlib import Path
 
 from benchmarks.bench.config import EpisodeResult
+from rmm_envs.failures import BAD_INPUT, RUN_FAILED, describe_os_error, file_size_limit
 
 __all__ = ["EPISODE_FIELDS", "RETRIED_ERRORS", "ResultsDatabaseError", "ResultsStore"]
 
@@ -68,17 +85,22 @@ EPISODE_FIELDS = {
     "error": "TEXT",
     "wall_time": "REAL",
     "finished": "REAL",
-    "error_kind": "TEXT",  # guardian / timeout / lost_worker (NULL unless outcome is error)
+    "error_kind": "TEXT",  # guardian / timeout / lost_worker / input_changed (NULL unless outcome is error)
 }
 
 # error kinds that are failures of the run rather than results: every rerun retries them
-RETRIED_ERRORS = ("timeout", "lost_worker")
+RETRIED_ERRORS = ("timeout", "lost_worker", "input_changed")
 
 _INVOCATION_COLUMNS = {"pid": "INTEGER", "host": "TEXT", "updated": "REAL", "message": "TEXT"}
 
 
 class ResultsDatabaseError(RuntimeError):
-    """``results.db`` cannot be read (damaged, not a database, locked)."""
+    """``results.db`` cannot be used; ``status`` is the exit status (2: change the command or the
+    file, 1: the run could not finish, rerun it)."""
+
+    def __init__(self, message: str, status: int = BAD_INPUT) -> None:
+        super().__init__(message)
+        self.status = status
 
 
 def _guarded(method):
@@ -105,7 +127,10 @@ def _pid_alive(pid: int) -> bool:
 class ResultsStore:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise ResultsDatabaseError(*describe_os_error(e, self.path.parent)) from None
         self.db = None
         try:
             self.db = sqlite3.connect(str(self.path), timeout=30)
@@ -120,16 +145,69 @@ class ResultsStore:
                 self.db.close()
             raise self._error(e) from None
 
+    def _intact(self) -> bool:
+        """Whether the file passes SQLite's integrity check, read through a separate read-only connection."""
+        try:
+            con = sqlite3.connect(self.path.resolve().as_uri() + "?mode=ro", uri=True, timeout=5)
+            try:
+                return [r[0] for r in con.execute("PRAGMA integrity_check(1)")] == ["ok"]
+            finally:
+                con.close()
+        except (sqlite3.Error, OSError):
+            return False
+
+    def _at_size_limit(self) -> bool:
+        limit = file_size_limit()
+        if limit is None:
+            return False
+        sizes = [f.stat().st_size for f in (self.path, Path(f"{self.path}-wal"), Path(f"{self.path}-journal")) if f.exists()]
+        return max(sizes, default=0) + (1 << 20) >= limit
+
+    def _disk_full(self) -> bool:
+        import shutil
+
+        try:
+            return shutil.disk_usage(self.path.parent).free < (1 << 20)
+        except OSError:
+            return False
+
     def _error(self, e: sqlite3.DatabaseError) -> ResultsDatabaseError:
+        """One line for a SQLite error on this file, the cause told apart (see the module docstring)."""
         text = str(e).replace("\n", " ")
-        if "full" in text:
-            return ResultsDatabaseError(f"cannot write {self.path} ({text}); free disk space and rerun the same command: "
-                                        "stored episodes are kept")
-        if "locked" in text or "busy" in text:
-            return ResultsDatabaseError(f"{self.path} is locked by another process ({text}); wait for the other "
-                                        "rmm-bench command to finish, or use another --out")
-        return ResultsDatabaseError(f"{self.path} is damaged or not a results database ({text}); move it aside "
-                                    f"(mv {self.path} {self.path}.damaged) and rerun: the run starts afresh")
+        name = getattr(e, "sqlite_errorname", "") or ""
+        path = self.path
+        kept = "the stored episodes are kept: rerun the same command"
+        if name.startswith("SQLITE_READONLY") or "readonly" in text:
+            return ResultsDatabaseError(f"cannot write {path} ({text}): the file, its directory (which holds its -wal and -shm "
+                                        f"files) or its file system is read-only for this user; make them writable or choose "
+                                        f"another --out; the database is intact", BAD_INPUT)
+        if name.startswith("SQLITE_CANTOPEN") or "unable to open" in text:
+            what = "is a directory" if path.is_dir() else "cannot be created or opened in its directory (not writable?)"
+            return ResultsDatabaseError(f"cannot open {path} ({text}): it {what}; choose another --out", BAD_INPUT)
+        if name.startswith(("SQLITE_BUSY", "SQLITE_LOCKED")) or "locked" in text or "busy" in text:
+            return ResultsDatabaseError(f"{path} is locked by another process ({text}); wait for the other rmm-bench "
+                                        "command to finish, or use another --out; the database is intact", RUN_FAILED)
+        if name == "SQLITE_FULL" or "full" in text:
+            return ResultsDatabaseError(f"cannot write {path} ({text}): the disk is full; free disk space, then {kept}",
+                                        RUN_FAILED)
+        damaged = name.startswith(("SQLITE_NOTADB", "SQLITE_CORRUPT")) or "not a database" in text or "malformed" in text
+        if not damaged and (name.startswith("SQLITE_IOERR") or "I/O error" in text):
+            if self._at_size_limit():
+                return ResultsDatabaseError(f"cannot write {path} ({text}): it reached the file-size limit (ulimit -f: "
+                                            f"{file_size_limit()} bytes); raise the limit (ulimit -f unlimited), then {kept}",
+                                            RUN_FAILED)
+            if self._disk_full():
+                return ResultsDatabaseError(f"cannot write {path} ({text}): the disk is full; free disk space, then {kept}",
+                                            RUN_FAILED)
+        if not damaged and self._intact():
+            return ResultsDatabaseError(f"cannot use {path} ({text}), though its integrity check passes: the stored "
+                                        f"episodes are intact; check the disk and the file's permissions, then rerun the "
+                                        f"same command", RUN_FAILED)
+        return ResultsDatabaseError(
+            f"{path} is damaged or not a results database ({text}); rmm-bench cannot read the episodes it holds. Export "
+            f"what is still readable first (sqlite3 {path} .recover > {path}.sql, with the sqlite3 shell), then move it "
+            f"aside (mv {path} {path}.damaged) and rerun: the run starts afresh in a new database, and the episodes of "
+            f"the old one are lost to rmm-bench", BAD_INPUT)
 
     def _create(self) -> None:
         cols = ", ".join(f"{k} {v}" for k, v in EPISODE_FIELDS.items())
@@ -169,6 +247,21 @@ class ResultsStore:
         if row is None:
             raise LookupError(f"run {run_key} is not recorded in {self.path}")
         return {"config": json.loads(row[0]), "provenance": json.loads(row[1]), "agent": row[2]}
+
+    @_guarded
+    def superseded_runs(self, run_key: str, config: dict) -> list[dict]:
+        """Other stored runs of ``config`` but for the files read (``inputs``): ``run_key``,
+        their ``inputs`` and how many ``episodes`` they hold; none if ``run_key`` itself is stored."""
+        if self.db.execute("SELECT 1 FROM runs WHERE run_key = ?", (run_key,)).fetchone():
+            return []
+        base = {k: v for k, v in config.items() if k != "inputs"}
+        out = []
+        for key, stored in self.db.execute("SELECT run_key, config FROM runs WHERE agent = ?", (config["agent"],)).fetchall():
+            stored = json.loads(stored)
+            if {k: v for k, v in stored.items() if k != "inputs"} == base:
+                n = self.db.execute("SELECT COUNT(*) FROM episodes WHERE run_key = ?", (key,)).fetchone()[0]
+                out.append({"run_key": key, "inputs": stored.get("inputs", {}), "episodes": int(n)})
+        return out
 
     # episodes
     @_guarded

@@ -193,6 +193,12 @@ class LRMMGuardian(Guardian):
         if action == "head":
             self._cands = [tuple(float(x) for x in c) for c in self.model.candidates]  # any control count
 
+    def input_files(self) -> dict[str, str]:
+        """The model file this guardian was built from (given or shipped) and the SHA-256 of the
+        bytes it was loaded from; none for a model given as an object."""
+        path, digest = getattr(self.model, "path", None), getattr(self.model, "file_sha256", None)
+        return {str(path): digest} if path is not None and digest is not None else {}
+
     def _fallback_warning(self, text: str) -> None:
         if type(self) is LRMMGuardian:  # the paper preset expects the paper's rule: nothing to warn about
             warnings.warn(f"lrmm: {text}", UserWarning, stacklevel=3)
@@ -219,6 +225,13 @@ class LRMMGuardian(Guardian):
             k = self.model.candidates.shape[1]
             raise ValueError(f"guardian {self.name!r} needs an action space with {k} controls (the model's candidate "
                              f"controls have {k} components), got {actions.control_dim} ({actions.controls})")
+        if self.action == "head":
+            low, high = np.asarray(actions.control_low, float), np.asarray(actions.control_high, float)
+            outside = [c.tolist() for c in self.model.candidates if np.any(c < low) or np.any(c > high)]
+            if outside:
+                raise ValueError(f"guardian {self.name!r}: candidate controls {outside} of "
+                                 f"{getattr(self.model, 'path', 'the model')} lie outside the env's control bounds "
+                                 f"[{low.tolist()}, {high.tolist()}] ({actions.controls})")
         if self.action == "heuristic":
             if actions.control_dim != 2 and actions.safe_default is not None:
                 raise ValueError(f"guardian {self.name!r}: the brake-and-turn heuristic (the action of a model without "

@@ -120,6 +120,15 @@ def _checksum(arrays: dict[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
+def _real(name: str, values) -> np.ndarray:
+    """``values`` as a float array; ``ValueError`` naming the array if they are not real numbers
+    (a complex array would lose its imaginary part in silence)."""
+    a = np.asarray(values)
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"LRMM model array {name!r} has dtype {a.dtype}; expected real numbers (float)")
+    return a.astype(float, copy=False)
+
+
 class LRMMModel:
     """A trained risk network ready for numpy inference.
 
@@ -130,10 +139,13 @@ class LRMMModel:
     """
 
     def __init__(self, weights, scaler_min, scaler_scale, meta: dict) -> None:
-        self.weights = [(np.asarray(W, float), None if b is None else np.asarray(b, float)) for W, b in weights]
-        self.scaler_min = np.asarray(scaler_min, float)
-        self.scaler_scale = np.asarray(scaler_scale, float)
+        self.weights = [(_real(f"W{i}", W), None if b is None else _real(f"b{i}", b)) for i, (W, b) in enumerate(weights)]
+        self.scaler_min = _real("scaler_min", scaler_min)
+        self.scaler_scale = _real("scaler_scale", scaler_scale)
         self.meta = dict(meta)
+        missing = [k for k in ("features", "obs_dim") if k not in self.meta]
+        if missing:
+            raise ValueError(f"metadata lacks {missing}: not a complete LRMM model")
         self.features = np.asarray(self.meta["features"], dtype=int)
         self.obs_dim = int(self.meta["obs_dim"])
         self.env_id = self.meta.get("env_id")
@@ -143,6 +155,9 @@ class LRMMModel:
         cands = self.meta.get("candidates")
         self.candidates = None if cands is None else np.asarray(cands, dtype=float)
         self.candidate_hold = self.meta.get("candidate_hold")
+        hold = self.candidate_hold
+        if hold is not None and (isinstance(hold, bool) or not isinstance(hold, (int, float)) or not 0 < hold < math.inf):
+            raise ValueError(f"meta 'candidate_hold' must be a finite number of seconds > 0, got {hold!r}")
         self._check_shapes()
         self._check_finite()
         # fold the scaler into the first layer: W0 ((x - m) * s) + b0 = (W0 * s) x + (b0 - W0 (m s))
@@ -185,7 +200,7 @@ class LRMMModel:
             if not np.all(np.isfinite(a)):
                 raise ValueError(f"LRMM model array {name!r} holds {int(np.sum(~np.isfinite(a)))} non-finite value(s) (NaN or inf); "
                                  "the training diverged or the file is damaged")
-        if self.candidates is not None and not np.all(np.isfinite(self.candidates)):
+        if self.candidates is not None and (self.candidates.dtype.kind not in "fiu" or not np.all(np.isfinite(self.candidates))):
             raise ValueError(f"meta 'candidates' holds non-finite controls: {self.candidates.tolist()}")
 
     # ------------------------------------------------------------------ inference
@@ -251,7 +266,8 @@ class LRMMModel:
         if not path.exists():
             raise FileNotFoundError(f"LRMM model file {path} does not exist")
         try:
-            with np.load(path, allow_pickle=False) as z:
+            data = path.read_bytes()  # read once: the digest is of exactly the bytes the model is built from
+            with np.load(io.BytesIO(data), allow_pickle=False) as z:
                 arrays = {k: z[k] for k in z.files}
         except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
             raise ValueError(f"{path} is not a readable LRMM model (truncated or not an .npz file: {e})") from None
@@ -274,6 +290,11 @@ class LRMMModel:
             raise ValueError(f"{path} was trained for env {meta.get('env_id')!r}, not {env_id!r}")
         if obs_dim is not None and int(meta.get("obs_dim", -1)) != int(obs_dim):
             raise ValueError(f"{path} expects observations of {meta.get('obs_dim')} values, the env gives {obs_dim}")
+        missing = [k for k in ("hidden", "features", "obs_dim") if k not in meta]
+        if missing:
+            raise ValueError(f"{path}: metadata lacks {missing}: not a complete LRMM model file")
+        if not isinstance(meta["hidden"], list) or len(meta["hidden"]) > 64:
+            raise ValueError(f"{path}: metadata 'hidden' must be a list of layer widths, got {meta['hidden']!r}"[:300])
         n_layers = len(meta["hidden"]) + 1
         weights = []
         for i in range(n_layers):
@@ -285,6 +306,7 @@ class LRMMModel:
         except ValueError as e:
             raise ValueError(f"{path}: {e}") from None
         model.path = path
+        model.file_sha256 = hashlib.sha256(data).hexdigest()
         return model
 
 

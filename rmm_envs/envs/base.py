@@ -6,7 +6,8 @@ provides, once:
 * **argument and option checks**: :func:`check_arguments` (constructor arguments, each error
   naming the argument, the expected kind of value and the value given),
   :meth:`LabelledEnvBase.check_options` (unknown reset options) and :func:`option_vector`
-  (a reset option that must be ``n`` finite numbers);
+  (a reset option that must be ``n`` finite numbers, each of magnitude at most
+  :data:`rmm_envs.worlds.bounds.MAX_MAGNITUDE`);
 * **running-state guards**: :meth:`LabelledEnvBase.check_can_step` (``step`` before ``reset`` or
   after the episode ended raises ``RuntimeError``) and :meth:`LabelledEnvBase.require_episode`
   (accessors that need a ``reset`` first);
@@ -36,6 +37,8 @@ from typing import Any, Callable, Iterable, TypeVar
 import gymnasium as gym
 import numpy as np
 
+from rmm_envs.worlds.bounds import MAX_MAGNITUDE, within_bounds
+
 __all__ = ["MAX_ROUNDS", "LabelledEnvBase", "check_arguments", "draw_until", "finite", "option_vector",
            "rejection_sample", "state_rows", "whole"]
 
@@ -52,8 +55,12 @@ MAX_ROUNDS = 10_000
 
 
 def finite(x) -> bool:
-    """A real, finite number (not a bool, string or array)."""
-    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool) and math.isfinite(x)
+    """A real number (not a bool, string or array), finite and of magnitude at most
+    :data:`rmm_envs.worlds.bounds.MAX_MAGNITUDE` (1e9): larger ones (``1e300``, ``10**400``)
+    overflow the arithmetic they configure (``ray_length=1e300`` gave infinite observations)."""
+    if not isinstance(x, (int, float, np.integer, np.floating)) or isinstance(x, bool):
+        return False
+    return within_bounds(x)
 
 
 def whole(x) -> bool:
@@ -66,7 +73,11 @@ def check_arguments(checks: Iterable[tuple[bool, str, Any, str]]) -> None:
     ``(ok, name, value, expected)`` check."""
     for ok, name, value, expected in checks:
         if not ok:
-            raise ValueError(f"{name} must be {expected}, got {value!r}")
+            numbers = list(value) if isinstance(value, (list, tuple)) else [value]
+            huge = [v for v in numbers if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+                    and not within_bounds(v) and not (isinstance(v, (float, np.floating)) and not math.isfinite(v))]
+            why = f" (at most {MAX_MAGNITUDE:g} in magnitude: larger values overflow the arithmetic)" if huge else ""
+            raise ValueError(f"{name} must be {expected}{why}, got {str(value)[:200] if huge else repr(value)}")
 
 
 def option_vector(value, n: int, name: str, what: str = "") -> np.ndarray:
@@ -74,11 +85,19 @@ def option_vector(value, n: int, name: str, what: str = "") -> np.ndarray:
     the option otherwise.  ``what`` describes the numbers (e.g. ``" [x, y, psi]"``)."""
     try:
         arr = np.array(value, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an integer beyond a float (10**400)
         arr = None
     if arr is None or arr.shape != (n,) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"option {name!r} must be {n} finite numbers{what}, got {value!r}")
+        raise ValueError(f"option {name!r} must be {n} finite numbers{what}, got {_short(value)}")
+    if not within_bounds(arr):
+        raise ValueError(f"option {name!r} must be {n} numbers of magnitude at most {MAX_MAGNITUDE:g}{what} (larger ones "
+                         f"overflow the geometry), got {_short(value)}")
     return arr
+
+
+def _short(value, limit: int = 200) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def state_rows(states, dim: int, what: str = "states") -> np.ndarray:

@@ -123,6 +123,7 @@ from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLa
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, option_vector, whole
+from rmm_envs.worlds.bounds import MAX_MAZE_SIDE
 from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv, maze_from_option
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.portable import wrap_angle
@@ -200,8 +201,8 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
             (finite(heading_noise) and 0 <= heading_noise <= math.pi, "heading_noise", heading_noise, "a number in [0, pi]"),
             (finite(lookahead) and lookahead > 0, "lookahead", lookahead, "a finite number > 0"),
             (finite(driver_gain) and driver_gain > 0, "driver_gain", driver_gain, "a finite number > 0"),
-            (whole(maze_rows) and maze_rows >= 2, "maze_rows", maze_rows, "an integer >= 2"),
-            (whole(maze_cols) and maze_cols >= 2, "maze_cols", maze_cols, "an integer >= 2"),
+            (whole(maze_rows) and 2 <= maze_rows <= MAX_MAZE_SIDE, "maze_rows", maze_rows, f"an integer in [2, {MAX_MAZE_SIDE}]"),
+            (whole(maze_cols) and 2 <= maze_cols <= MAX_MAZE_SIDE, "maze_cols", maze_cols, f"an integer in [2, {MAX_MAZE_SIDE}]"),
             (finite(speed) and speed > 0, "speed", speed, "a finite number > 0"),
             (finite(r_min) and r_min > 0, "r_min", r_min, "a finite number > 0"),
             self.check_render_mode(render_mode),

@@ -29,8 +29,9 @@ A JSON list of entries, each an object with one key:
 | ``{"start": [[x_min, y_min], [x_max, y_max]]}`` | optional, at most one: where starts (and drawn goals) are drawn; default the bounding box of every other entry |
 
 Or an object ``{"shapes": [...obstacle entries...], "goal": [...], "start": [...]}`` meaning the
-same.  At least one obstacle is required, every number must be finite, and obstacles may
-overlap.  A bad map (an unknown shape, a self-intersecting polygon, NaN or infinity, a wrong
+same.  At least one obstacle is required, every number must be finite and at most 1e9 in
+magnitude (larger ones overflow the geometry), a file holds at most 16 MiB and a polygon at most
+5,000 vertices, and obstacles may overlap.  A bad map (an unknown shape, a self-intersecting polygon, NaN or infinity, a wrong
 number of values, no obstacle, an unreadable or non-JSON file) raises one
 ``rmm_envs.worlds.shape_map.MapError`` (a ``ValueError``) naming the entry by its index and its
 content, e.g. ``map 'my_map.json', entry 3 {"polygon": ...}: edges 0 (...) and 2 (...) cross or

@@ -299,6 +299,8 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         print(f"rmm-datagen: error: --candidates must be a JSON list of controls, got {args.candidates!r}", file=sys.stderr)
         return 2
+    from rmm_envs.failures import describe_os_error
+
     cfg = DatagenConfig(
         env_id=args.env, configs=args.configs, samples_per_config=args.samples_per_config, seed=args.seed,
         branches=args.branches, depth=args.depth, horizon=args.horizon, n_steps=args.n_steps,
@@ -313,6 +315,10 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, TypeError, RuntimeError, FileNotFoundError) as e:  # TypeError: an env that is not a LabelledEnv
         print(f"rmm-datagen: error: {e}", file=sys.stderr)
         return 2
+    except OSError as e:  # an --out that is a file or not writable (2), a full disk in a worker or here (1)
+        message, status = describe_os_error(e, args.out)
+        print(f"rmm-datagen: error: {message}", file=sys.stderr)
+        return status
     run = manifest["last_run"]
     rate = f", {run['labels_per_second']:.0f} labels/s" if run["labels_per_second"] else ""
     print(f"{manifest['n_rows']} labelled samples in {args.out} ({manifest['n_shards']} shards); "

@@ -45,8 +45,14 @@ __all__ = [
 
 
 def as_circles(circles, name: str = "circles") -> np.ndarray:
-    """Validate and return circles as a float ``(K, 3)`` array with positive radii."""
-    arr = np.asarray(circles, dtype=float)
+    """Validate and return circles as a float ``(K, 3)`` array with positive radii, every number
+    of magnitude at most :data:`rmm_envs.worlds.bounds.MAX_MAGNITUDE`."""
+    from rmm_envs.worlds.bounds import MAX_MAGNITUDE, within_bounds
+
+    try:
+        arr = np.asarray(circles, dtype=float)
+    except OverflowError:  # an integer beyond a float (10**400)
+        raise ValueError(f"{name} must be numbers of magnitude at most {MAX_MAGNITUDE:g}, got {str(circles)[:200]}") from None
     if arr.size == 0:
         return np.zeros((0, 3))
     if arr.ndim == 1 and arr.shape[0] == 3:
@@ -55,6 +61,9 @@ def as_circles(circles, name: str = "circles") -> np.ndarray:
         raise ValueError(f"{name} must be a list of [x, y, r] triples, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+    if not within_bounds(arr):
+        raise ValueError(f"{name} must be numbers of magnitude at most {MAX_MAGNITUDE:g} (larger ones overflow the "
+                         f"geometry), got {arr.tolist()}")
     if np.any(arr[:, 2] <= 0):
         raise ValueError(f"{name} radii must be > 0, got {arr[:, 2].tolist()}")
     return arr

@@ -310,10 +310,16 @@ def generate_maze(rng: np.random.Generator, kind: str = "rectangular", rows: int
     """A seeded perfect maze of ``kind`` with a one-cell margin around it (pixel units)."""
     if kind not in MAZE_KINDS:
         raise ValueError(f"unknown maze kind {kind!r}; expected one of {MAZE_KINDS}")
-    if int(rows) != rows or int(cols) != cols or rows < 2 or cols < 2:
-        raise ValueError(f"rows and cols must be integers >= 2, got {rows}, {cols}")
-    if not (cell > thickness > 0):
-        raise ValueError(f"need cell > thickness > 0, got cell={cell}, thickness={thickness}")
+    from rmm_envs.worlds.bounds import MAX_MAGNITUDE, MAX_MAZE_SIDE, within_bounds
+
+    sides_ok = all(isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool) and within_bounds(x)
+                   and int(x) == x for x in (rows, cols))
+    if not sides_ok or not (2 <= rows <= MAX_MAZE_SIDE and 2 <= cols <= MAX_MAZE_SIDE):  # checked before any allocation
+        raise ValueError(f"rows and cols must be integers in [2, {MAX_MAZE_SIDE}], got {str(rows)[:40]}, {str(cols)[:40]}")
+    if not (within_bounds([cell, thickness]) and cell > thickness > 0):
+        raise ValueError(f"need finite cell > thickness > 0 of at most {MAX_MAGNITUDE:g}, got cell={str(cell)[:40]}, "
+                         f"thickness={str(thickness)[:40]}")
+    rows, cols = int(rows), int(cols)
     margin = cell
     if kind == "rectangular":
         walls, cells, passages = _rect_maze(rng, rows, cols, cell, margin)

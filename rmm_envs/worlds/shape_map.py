@@ -18,7 +18,10 @@ spec; this module checks it and builds :class:`ShapeMap`):
 * or an object ``{"shapes": [...], "goal": [x, y, r], "start": [[...], [...]]}`` (``goal`` and
   ``start`` optional) meaning the same.
 
-At least one obstacle (circle, polygon or segment) is required.  Every number must be finite.
+At least one obstacle (circle, polygon or segment) is required.  Every number must be finite
+and at most ``1e9`` in magnitude (:data:`rmm_envs.worlds.bounds.MAX_MAGNITUDE`: larger ones
+overflow the geometry); a map file holds at most 16 MiB and a polygon at most 5,000 vertices
+(checked before the rest is read or compared).
 A bad map raises :class:`MapError` (a ``ValueError``) naming the entry by its index and content
 and saying what was expected; an unreadable or non-JSON file raises it naming the file.
 Shapes are kept exactly as given; :func:`triangulate` splits a polygon into triangles for
@@ -37,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from rmm_envs.portable import dot
+from rmm_envs.worlds.bounds import MAX_MAGNITUDE, MAX_MAP_BYTES, MAX_POLYGON_VERTICES, within_bounds
 
 __all__ = ["OBSTACLE_KINDS", "MapError", "ShapeMap", "load_map", "triangulate"]
 
@@ -64,10 +68,12 @@ def _numbers(value, n: int, what: str) -> np.ndarray:
     """``value`` as ``n`` finite floats, else ``ValueError(what)``."""
     if not isinstance(value, (list, tuple)) or len(value) != n or not all(_number(v) for v in value):
         raise ValueError(f"expected {what}")
-    arr = np.array(value, dtype=float)
-    if not np.all(np.isfinite(arr)):
+    if not all(isinstance(v, (int, np.integer)) or math.isfinite(v) for v in value):
         raise ValueError(f"expected {what} with finite numbers (no NaN or infinity)")
-    return arr
+    if not within_bounds(list(value)):  # before converting: 10**400 would overflow
+        raise ValueError(f"expected {what} with numbers of magnitude at most {MAX_MAGNITUDE:g} (larger ones overflow "
+                         "the geometry)")
+    return np.array(value, dtype=float)
 
 
 def _point(value, what: str) -> np.ndarray:
@@ -93,10 +99,35 @@ def _segments_meet(p1, p2, q1, q2) -> bool:
             or (d3 == 0 and _on_segment(p1, q1, p2)) or (d4 == 0 and _on_segment(p1, q2, p2)))
 
 
+def _cross_many(o, a, b) -> np.ndarray:
+    """:func:`_cross` with ``o``, ``a`` or ``b`` arrays of points ``(K, 2)``: the same operations, elementwise."""
+    o, a, b = np.asarray(o), np.asarray(a), np.asarray(b)
+    return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (b[..., 0] - o[..., 0])
+
+
+def _on_segment_many(p, q, r) -> np.ndarray:
+    return ((np.minimum(p[..., 0], r[..., 0]) <= q[..., 0]) & (q[..., 0] <= np.maximum(p[..., 0], r[..., 0]))
+            & (np.minimum(p[..., 1], r[..., 1]) <= q[..., 1]) & (q[..., 1] <= np.maximum(p[..., 1], r[..., 1])))
+
+
+def _segments_meet_many(p1, p2, q1, q2) -> np.ndarray:
+    """:func:`_segments_meet` of one segment ``p1p2`` against segments ``q1[k]q2[k]``, ``(K,)`` bool:
+    the same tests, vectorised (a polygon of thousands of vertices is checked in seconds)."""
+    p1b, p2b = np.broadcast_to(p1, q1.shape), np.broadcast_to(p2, q1.shape)
+    d1, d2 = _cross_many(q1, q2, p1b), _cross_many(q1, q2, p2b)
+    d3, d4 = _cross_many(p1b, p2b, q1), _cross_many(p1b, p2b, q2)
+    proper = (((d1 > 0) & (0 > d2)) | ((d1 < 0) & (0 < d2))) & (((d3 > 0) & (0 > d4)) | ((d3 < 0) & (0 < d4)))
+    return proper | ((d1 == 0) & _on_segment_many(q1, p1b, q2)) | ((d2 == 0) & _on_segment_many(q1, p2b, q2)) \
+        | ((d3 == 0) & _on_segment_many(p1b, q1, p2b)) | ((d4 == 0) & _on_segment_many(p1b, q2, p2b))
+
+
 def _polygon(value) -> np.ndarray:
     what = "a list of at least 3 [x, y] vertices"
     if not isinstance(value, (list, tuple)):
         raise ValueError(f"expected {what}")
+    if len(value) > MAX_POLYGON_VERTICES + 1:  # + 1: a closed ring repeats its first vertex
+        raise ValueError(f"expected at most {MAX_POLYGON_VERTICES:,} vertices, got {len(value):,}; split the outline "
+                         "into several polygons")
     pts = [_point(v, f"{what}; vertex {i} is not [x, y]") for i, v in enumerate(value)]
     if len(pts) >= 2 and np.array_equal(pts[0], pts[-1]):
         pts = pts[:-1]  # a closed ring: the repeated first vertex is dropped
@@ -107,19 +138,29 @@ def _polygon(value) -> np.ndarray:
     for i in range(n):
         if np.array_equal(v[i], v[(i + 1) % n]):
             raise ValueError(f"vertices {i} and {(i + 1) % n} are the same point {v[i].tolist()}")
-    for i in range(n):
-        a, b = v[i], v[(i + 1) % n]
-        for j in range(i + 1, n):
-            c, d = v[j], v[(j + 1) % n]
-            if j == i + 1 or (i == 0 and j == n - 1):  # neighbours share a vertex: they must not fold back
-                shared, p, q = (b, a, d) if j == i + 1 else (a, b, c)
-                if _cross(shared, p, q) == 0 and dot(p - shared, q - shared) > 0:
-                    raise ValueError(f"edges {i} and {j} overlap (the outline folds back at vertex "
-                                     f"{(i + 1) % n if j == i + 1 else 0}); a polygon must be simple")
-                continue
-            if _segments_meet(a, b, c, d):
+    ends = np.roll(v, -1, axis=0)  # edge k runs from v[k] to ends[k]
+
+    def fold(i: int, j: int) -> None:  # neighbours share a vertex: they must not fold back onto each other
+        a, b, c, d = v[i], ends[i], v[j], ends[j]
+        shared, p, q = (b, a, d) if j == i + 1 else (a, b, c)
+        if _cross(shared, p, q) == 0 and dot(p - shared, q - shared) > 0:
+            raise ValueError(f"edges {i} and {j} overlap (the outline folds back at vertex "
+                             f"{(i + 1) % n if j == i + 1 else 0}); a polygon must be simple")
+
+    for i in range(n):  # pairs in the order (i, j > i), each edge against all later ones at once
+        if i + 1 < n:
+            fold(i, i + 1)
+        last = n - 1 if i == 0 else n  # edge 0 and edge n - 1 are neighbours too
+        if i + 2 < last:
+            js = np.arange(i + 2, last)
+            meet = _segments_meet_many(v[i], ends[i], v[js], ends[js])
+            if meet.any():
+                j = int(js[np.argmax(meet)])
+                a, b, c, d = v[i], ends[i], v[j], ends[j]
                 raise ValueError(f"edges {i} ({a.tolist()} to {b.tolist()}) and {j} ({c.tolist()} to {d.tolist()}) "
                                  "cross or touch; a polygon must be simple (non-self-intersecting)")
+        if i == 0 and n - 1 > 1:
+            fold(0, n - 1)
     area = 0.5 * float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
     if area == 0:  # pragma: no cover - a simple polygon has an area (collinear ones fold back, above)
         raise ValueError("the polygon has zero area (all vertices on one line)")
@@ -131,8 +172,9 @@ def _segment(value) -> tuple[np.ndarray, np.ndarray, float]:
     if not isinstance(value, (list, tuple)) or len(value) != 3:
         raise ValueError(f"expected {what}")
     a, b = _point(value[0], f"{what}; the first end is not [x, y]"), _point(value[1], f"{what}; the second end is not [x, y]")
-    if not _number(value[2]) or not math.isfinite(value[2]) or value[2] <= 0:
-        raise ValueError(f"expected {what} with a finite thickness > 0, got thickness {value[2]!r}")
+    if not _number(value[2]) or not within_bounds(value[2]) or value[2] <= 0:
+        raise ValueError(f"expected {what} with a finite thickness > 0 of at most {MAX_MAGNITUDE:g}, got thickness "
+                         f"{str(value[2])[:40]}")
     if np.array_equal(a, b):
         raise ValueError("the segment's ends are the same point; use a circle for a disc")
     return a, b, float(value[2])
@@ -238,13 +280,23 @@ def load_map(map_spec) -> ShapeMap:
     if isinstance(map_spec, (str, os.PathLike)):
         source = repr(str(map_spec))
         try:
-            text = Path(map_spec).read_text()
+            with open(map_spec, "rb") as fh:
+                raw = fh.read(MAX_MAP_BYTES + 1)  # never more: a device such as /dev/zero has no end
+            if len(raw) > MAX_MAP_BYTES:
+                raise MapError(f"map file {source} holds more than {MAX_MAP_BYTES // 2**20} MiB; a map is a short JSON "
+                               "list of shapes")
+            text = raw.decode("utf-8")
         except (OSError, UnicodeDecodeError) as e:
             raise MapError(f"map file {source} cannot be read: {type(e).__name__}: {e}") from None
         try:
             data = json.loads(text)
         except json.JSONDecodeError as e:
             raise MapError(f"map file {source} is not valid JSON: {e}") from None
+        except RecursionError:
+            raise MapError(f"map file {source} nests its JSON too deeply; a map is a list of shapes, "
+                           "each a few levels deep") from None
+        except ValueError as e:  # an integer literal of thousands of digits
+            raise MapError(f"map file {source} holds a number that cannot be read: {e}") from None
     else:
         source, data = "(given as data)", map_spec
     circles, polygons, segments, entries = [], [], [], []
@@ -287,27 +339,30 @@ def triangulate(polygon: np.ndarray) -> list[np.ndarray]:
     """Triangles ``(3, 2)`` covering a simple counter-clockwise polygon exactly (ear clipping).
 
     Vertices on a straight line between their neighbours are dropped first (they change no
-    point of the polygon), so every triangle has a positive area.
+    point of the polygon), so every triangle has a positive area.  Each candidate ear is tested
+    against all other vertices at once (a polygon of thousands of vertices takes seconds).
     """
-    v = [np.asarray(p, dtype=float) for p in polygon]
+    v = np.array(polygon, dtype=float).reshape(-1, 2)
     tris = []
     while len(v) > 3:
         n = len(v)
-        flat = next((i for i in range(n) if _cross(v[i - 1], v[i], v[(i + 1) % n]) == 0), None)
-        if flat is not None:  # a vertex on the line between its neighbours: dropping it changes nothing
-            del v[flat]
+        prev, nxt = np.roll(v, 1, axis=0), np.roll(v, -1, axis=0)
+        turn = _cross_many(prev, v, nxt)
+        flat = np.flatnonzero(turn == 0)
+        if flat.size:  # a vertex on the line between its neighbours: dropping it changes nothing
+            v = np.delete(v, flat[0], axis=0)
             continue
-        for i in range(n):
-            a, b, c = v[i - 1], v[i], v[(i + 1) % n]
-            if _cross(a, b, c) < 0:
-                continue  # a reflex corner: not an ear
-            if any(_cross(a, b, p) >= 0 and _cross(b, c, p) >= 0 and _cross(c, a, p) >= 0
-                   for j, p in enumerate(v) if j not in ((i - 1) % n, i, (i + 1) % n)):
+        for i in np.flatnonzero(turn > 0):  # reflex corners (turn < 0) are no ears
+            a, b, c = prev[i], v[i], nxt[i]
+            others = np.ones(n, dtype=bool)
+            others[[(i - 1) % n, i, (i + 1) % n]] = False
+            p = v[others]
+            if np.any((_cross_many(a, b, p) >= 0) & (_cross_many(b, c, p) >= 0) & (_cross_many(c, a, p) >= 0)):
                 continue  # another vertex inside or on it
             tris.append(np.array([a, b, c]))
-            del v[i]
+            v = np.delete(v, i, axis=0)
             break
         else:  # pragma: no cover - a simple polygon always has an ear (two, in fact)
             raise MapError("polygon could not be triangulated; is it simple?")
-    tris.append(np.array(v))
+    tris.append(v.copy())
     return tris
