@@ -138,7 +138,8 @@ def bench_fingerprint(episodes: int, hj_episodes: int, other_episodes: int = 0, 
         runs.append(("Dubins4DParallel-v0", HJ_AGENTS, hj_episodes,
                      ("--agent-opt", "hj.cache=false", "--agent-opt", "hj-paper.cache=false")))
     if other_episodes:
-        runs += [(env_id, agents, other_episodes, ()) for env_id, agents in other.items()]
+        runs += [(env_id, agents, other_episodes, ("--agent-opt", "hj.cache=false") if "hj" in agents else ())
+                 for env_id, agents in other.items()]
     for env_id, agents, n, extra in runs:
         with tempfile.TemporaryDirectory() as tmp:
             _bench(tmp, env_id, agents, n, extra)
@@ -327,6 +328,13 @@ def arith_settings(host_flags: set[str] | None = None) -> list[dict]:
     return out
 
 
+#: a CPU without FMA (before Intel Haswell / AMD Piledriver): the C library's exp, log, sin,
+#: cos, atan2, ... then run other code (glibc picks FMA variants per CPU).  Not bit-identical;
+#: ``arith --pre-fma`` measures how far results move (docs/reproduction.md).
+PRE_FMA = {"OPENBLAS_CORETYPE": "Prescott", "NUMBA_CPU_NAME": "generic", "NPY_DISABLE_CPU_FEATURES": _NPY_NO_AVX2,
+           "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-FMA4,-AVX512F"}
+
+
 def describe(setting: dict) -> str:
     return ", ".join(f"{k}={'(host)' if v is None else v}" for k, v in setting.items())
 
@@ -364,6 +372,8 @@ def main(argv=None) -> int:
     p.add_argument("--size", choices=sorted(SIZES), default="full", help="what to compute (default: %(default)s)")
     p.add_argument("--episodes", type=int, default=None, help="Dubins4D benchmark episodes per agent")
     p.add_argument("--hj-episodes", type=int, default=None, help="episodes per HJ agent, 0 to skip")
+    p.add_argument("--pre-fma", action="store_true",
+                   help="arith: also a CPU without FMA (the C library's other code; known to differ, for measuring)")
     p.add_argument("--show", type=int, default=1, help="arith: differences listed per setting (default: %(default)s)")
     args = p.parse_args(argv)
     sz = SIZES[args.size]
@@ -375,7 +385,7 @@ def main(argv=None) -> int:
         print(json.dumps(fingerprint(episodes, hj_episodes, args.size), sort_keys=True))
         return 0
     if args.mode == "arith":
-        settings = arith_settings()
+        settings = arith_settings() + ([PRE_FMA] if args.pre_fma else [])
         ref = run_under(settings[0], args.size)
         print(f"reference: {describe(settings[0])}")
         bad = 0
