@@ -98,7 +98,10 @@ class GuardianActionSpace(spaces.Dict):
 
     The fields are stored in Gymnasium's default (sorted) key order, so sampling, seeding and
     flattening behave exactly as for the plain ``Dict`` with the same fields; the control
-    order lives in :attr:`controls`.  The continuous fields are float32 boxes.
+    order lives in :attr:`controls`.  The continuous fields are float64 boxes, the precision the
+    systems integrate in: the driver's control (``info["nominal_control"]``) goes through
+    :meth:`active` unrounded, so a guardian that hands it back applies exactly what the driver
+    would have (a float32 box would round it, and the episode would drift from the driver's).
     """
 
     def __init__(self, controls: Sequence[str], low: Iterable[float], high: Iterable[float], seed=None,
@@ -116,14 +119,14 @@ class GuardianActionSpace(spaces.Dict):
             raise ValueError(f"control bounds must be finite with low <= high, got low={lo.tolist()} high={hi.tolist()}")
         fields: dict[str, spaces.Space] = {ACTIVE: spaces.Discrete(2)}
         for name, a, b in zip(controls, lo, hi):
-            fields[name] = spaces.Box(a, b, shape=(1,), dtype=np.float32)
+            fields[name] = spaces.Box(a, b, shape=(1,), dtype=np.float64)
         super().__init__(fields, seed=seed)
         if safe_default is not None and not isinstance(safe_default, SafeDefault):
             raise TypeError(f"safe_default must be a rmm_envs.autonomy.SafeDefault, got {safe_default!r}")
         self.controls = controls
         self.safe_default = safe_default
         self.obstacle_shapes = None if obstacle_shapes is None else tuple(obstacle_shapes)
-        # the bounds actions are clipped to: those of the float32 boxes, as float64
+        # the bounds actions are clipped to: those of the boxes
         self.control_low = np.array([float(self.spaces[c].low[0]) for c in controls])
         self.control_high = np.array([float(self.spaces[c].high[0]) for c in controls])
 
@@ -143,13 +146,13 @@ class GuardianActionSpace(spaces.Dict):
         """The driver controls this step (the control fields are zeros and ignored)."""
         action: dict[str, Any] = {ACTIVE: 0}
         for c in self.controls:
-            action[c] = np.zeros(1, np.float32)
+            action[c] = np.zeros(1)
         return action
 
     def active(self, control) -> dict:
         """Take control and apply the control vector ``control`` (one number per control)."""
-        # one float32 buffer (float64 -> float32, as the boxes hold them), one field per element
-        u = np.array(np.asarray(control, dtype=float), dtype=np.float32).reshape(-1)
+        # one float64 buffer (a copy: the caller's array is never aliased), one field per element
+        u = np.array(control, dtype=float).reshape(-1)
         if u.shape != (len(self.controls),):
             raise ValueError(f"control must have one value per control {self.controls}, got {control!r}")
         action: dict[str, Any] = {ACTIVE: 1}

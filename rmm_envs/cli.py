@@ -68,7 +68,7 @@ def _demo(args: argparse.Namespace) -> int:
             obs, reward, terminated, truncated, info = env.step(inactive)
             steps += 1
             done = terminated or truncated
-        st = info["episode"]
+        st = info["episode_stats"]
         outcomes[info["outcome"]] = outcomes.get(info["outcome"], 0) + 1
         speed = f", final speed {speed_text(st['final_speed'], env.unwrapped)}" if "final_speed" in st else ""
         print(f"episode {ep:3d} seed {args.seed + ep:5d}: {info['outcome']:9s} after {st['n_env_steps']:4d} steps, "

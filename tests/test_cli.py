@@ -17,7 +17,7 @@ def test_driver_only_action_is_read_off_the_action_space():
     env.close()
     assert set(a) == {"active_ctrl", "turnrate_ctrl", "accel_ctrl"} and a["active_ctrl"] == 0
     for k in ("turnrate_ctrl", "accel_ctrl"):
-        assert a[k].dtype == np.float32 and a[k].shape == (1,) and not a[k].any()
+        assert a[k].dtype == np.float64 and a[k].shape == (1,) and not a[k].any()
     other = GuardianActionSpace(("thrust", "roll"), [0.0, -1.0], [2.0, 1.0])
     b = driver_only_action(other, "Other-v0")
     assert b["active_ctrl"] == 0 and set(b) == {"active_ctrl", "thrust", "roll"} and not b["thrust"].any()
@@ -38,7 +38,7 @@ def test_demo_prints_what_the_driver_alone_does(capsys):
         _, _, term, trunc, info = env.step(action)
         if term or trunc:
             break
-    st = info["episode"]
+    st = info["episode_stats"]
     assert line == (f"episode   0 seed     4: {info['outcome']:9s} after {st['n_env_steps']:4d} steps, "
                     f"{st['cum_sim_time']:6.1f} s simulated, final speed {st['final_speed']:.2f} m/s")
 

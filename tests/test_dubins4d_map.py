@@ -211,7 +211,7 @@ def test_check_env_and_the_contract(env_id):
         obs, r, te, tr, info = env.step(space.inactive())
         if te or tr:
             break
-    assert info["outcome"] in ("goal", "collision", "timeout") and info["episode"]["n_env_steps"] >= 1
+    assert info["outcome"] in ("goal", "collision", "timeout") and info["episode_stats"]["n_env_steps"] >= 1
 
 
 def test_reset_options_defaults_and_determinism():

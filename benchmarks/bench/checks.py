@@ -9,7 +9,7 @@ through (the Dubins4D envs' module docstring describes it in full):
   ``active_ctrl``, ``Discrete(2)``: 0 lets the built-in driver control the step, 1 applies the
   guardian's control, and the control fields);
 * on the step that ends an episode, ``info["outcome"]`` (``goal``, ``collision``,
-  ``timeout``) and ``info["episode"]``, the statistics the store keeps (see
+  ``timeout``) and ``info["episode_stats"]``, the statistics the store keeps (see
   :data:`benchmarks.bench.runner.EPISODE_STATISTICS`).
 
 Of this command's env options, the env is given those its constructor takes: ``clock``

@@ -119,6 +119,7 @@ class EpisodeResult:
     wall_time: float | None = None
     finished: float | None = None
     error_kind: str | None = None  # guardian / timeout / lost_worker (None unless outcome is error)
+    cost: float | None = None  # the episode's summed info["cost"] (None: the env reports none)
 
     def as_row(self) -> dict:
         return dataclasses.asdict(self)

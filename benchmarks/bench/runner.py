@@ -13,8 +13,8 @@ call stuck in compiled code is ended by the parent, which kills the worker after
 :func:`hard_timeout` seconds and records the episode as ``lost_worker``.
 
 The env is driven only through the parallel-autonomy contract (:mod:`benchmarks.bench.checks`):
-the result's columns come from the last step's ``info["outcome"]`` and ``info["episode"]``
-(:data:`EPISODE_STATISTICS`; ``final_speed`` is optional).  The guardian is built with the
+the result's columns come from the last step's ``info["outcome"]`` and ``info["episode_stats"]``
+(:data:`EPISODE_STATISTICS`; ``final_speed`` and ``cum_cost`` are optional).  The guardian is built with the
 run's options, plus ``threads`` when the task carries it (see :func:`benchmarks.bench.run.plan_tasks`).
 """
 
@@ -30,20 +30,22 @@ import traceback
 import numpy as np
 
 from benchmarks.bench.config import EpisodeResult, EpisodeTask, run_key
+from rmm_envs.envs.guarded import EPISODE_KEY
 
 __all__ = ["EPISODE_STATISTICS", "EpisodeTimeout", "episode_seed", "hard_timeout", "lost_episode", "run_episode", "run_key"]
 
 _SEED_DOMAIN = 0xBE7C  # keeps episode seeds apart from rmm-datagen's configuration seeds
 
-#: The store's columns read from ``info["episode"]`` on the step that ends an episode (the
+#: The store's columns read from ``info["episode_stats"]`` on the step that ends an episode (the
 #: parallel-autonomy contract), column -> statistic.  Every env offering the contract reports these.
 EPISODE_STATISTICS = {
     "steps": "n_env_steps", "active_steps": "n_active_ctrl_env_steps", "sim_time": "cum_sim_time",
     "active_sim_time": "active_ctrl_sim_time", "compute_time": "cum_compute_time", "avg_compute_time": "avg_compute_time",
     "cum_reward": "cum_reward",
 }
-#: Statistics an env may report (NULL in the store when it does not): ``final_speed`` (a vehicle's speed).
-OPTIONAL_STATISTICS = {"final_speed": "final_speed"}
+#: Statistics an env may report (NULL in the store when it does not): ``final_speed`` (a vehicle's
+#: speed) and ``cum_cost`` (the episode's summed ``info["cost"]``, Safety-Gymnasium's safety cost).
+OPTIONAL_STATISTICS = {"final_speed": "final_speed", "cost": "cum_cost"}
 
 
 def episode_seed(seed: int, episode: int) -> int:
@@ -103,13 +105,14 @@ def _guardian(task: EpisodeTask):
 
 
 def _statistics(env_id: str, info: dict) -> dict:
-    """The store's columns from the last step's ``info`` (the contract's ``outcome`` and ``episode``)."""
-    ep = info.get("episode")
-    missing = [k for k in ("outcome", "episode") if k not in info] or [k for k in EPISODE_STATISTICS.values() if k not in ep]
+    """The store's columns from the last step's ``info`` (the contract's ``outcome`` and ``episode_stats``)."""
+    ep = info.get(EPISODE_KEY)
+    missing = [k for k in ("outcome", EPISODE_KEY) if k not in info] or [k for k in EPISODE_STATISTICS.values() if k not in ep]
     if missing:
-        where = "info" if "episode" not in info or "outcome" not in info else 'info["episode"]'
+        where = "info" if EPISODE_KEY not in info or "outcome" not in info else f'info["{EPISODE_KEY}"]'
         raise EnvContractError(f"env {env_id} ended an episode without {where} keys {missing} (the parallel-autonomy "
-                               f"contract: info['outcome'] and info['episode'] with {sorted(EPISODE_STATISTICS.values())})")
+                               f"contract: info['outcome'] and info['{EPISODE_KEY}'] with "
+                               f"{sorted(EPISODE_STATISTICS.values())})")
     out = {col: ep[k] for col, k in EPISODE_STATISTICS.items()}
     out.update({col: ep.get(k) for col, k in OPTIONAL_STATISTICS.items()})
     return {"outcome": info["outcome"], **out}

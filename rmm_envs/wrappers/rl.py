@@ -28,7 +28,7 @@ the gap; they work on every env whose action space is an
     the brakes for ever is worse than intervening briefly but still better than crashing.  The
     intervention cost is charged per simulated second, not per step, because non-blocking
     steps have different lengths.  The env's own reward is kept in ``info["env_reward"]``; the
-    episode statistics in ``info["episode"]`` are unchanged.  The three weights must be
+    episode statistics in ``info["episode_stats"]`` are unchanged.  The three weights must be
     finite and ``>= 0``.
 """
 
