@@ -160,6 +160,39 @@ class GuardianActionSpace(spaces.Dict):
             action[c] = u[i:i + 1]
         return action
 
+    @property
+    def flat_dim(self) -> int:
+        """Length of the flat action of :meth:`from_unit`: the flag, then one number per control."""
+        return 1 + len(self.controls)
+
+    def from_unit(self, flat) -> dict:
+        """The action of a flat vector ``[active, z_1, ..., z_c]`` in the unit box (what RL
+        libraries train on; :class:`rmm_envs.wrappers.FlattenGuardianAction`'s action space and
+        :class:`guardians.adapters.SB3Guardian`'s input, so a policy trained through the one acts
+        the same through the other): ``active > 0.5`` takes control, and ``z_i in [-1, 1]`` maps
+        linearly onto ``[low_i, high_i]`` (``-1`` the lower bound, ``+1`` the upper; values
+        outside ``[-1, 1]`` are clipped first).  Non-finite numbers raise ``ValueError`` naming
+        the index."""
+        a = np.asarray(flat, dtype=float).reshape(-1)
+        if a.shape != (self.flat_dim,):
+            raise ValueError(f"a flat guardian action has {self.flat_dim} numbers [active, "
+                             f"{', '.join(self.controls)}], got shape {np.shape(flat)}")
+        bad = np.flatnonzero(~np.isfinite(a))
+        if bad.size:
+            raise ValueError(f"flat guardian action index {int(bad[0])} must be finite, got {a[bad[0]]}")
+        if a[0] <= 0.5:
+            return self.inactive()
+        z = np.clip(a[1:], -1.0, 1.0)
+        return self.active(self.control_low + (z + 1.0) * 0.5 * (self.control_high - self.control_low))
+
+    def to_unit(self, control) -> np.ndarray:
+        """The unit-box coordinates ``z`` of a control vector (the inverse of :meth:`from_unit`'s
+        scaling; ``0`` for a control whose bounds coincide)."""
+        u = np.asarray(control, dtype=float).reshape(-1)
+        span = self.control_high - self.control_low
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(span > 0, 2.0 * (u - self.control_low) / span - 1.0, 0.0)
+
     def parse(self, action) -> tuple[bool, np.ndarray]:
         """Validate ``action``; return ``(active, control vector clipped to the bounds)``."""
         keys = [ACTIVE, *self.controls]

@@ -121,9 +121,16 @@ def test_sb3_style_adapter():
     g = SB3Guardian(Model())
     g.reset(seed=0, **spaces())
     a = g.act(np.zeros(17), {})
-    assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5
+    # the unit box of FlattenGuardianAction: -0.25 -> a quarter of the way up [-0.25, 0.25]
+    assert a["active_ctrl"] == 1 and a["turnrate_ctrl"][0] == -0.0625 and a["accel_ctrl"][0] == -0.25
+    raw = SB3Guardian(Model(), flat="raw")
+    raw.reset(seed=0, **spaces())
+    a = raw.act(np.zeros(17), {})
+    assert a["active_ctrl"] == 1 and a["turnrate_ctrl"][0] == -0.25 and a["accel_ctrl"][0] == -0.5
     with pytest.raises(TypeError, match="predict"):
         SB3Guardian(object())
+    with pytest.raises(ValueError, match=r"flat must be one of \('unit', 'raw'\).*'scaled'"):
+        SB3Guardian(Model(), flat="scaled")
 
 
 def test_module_class_spec_and_entry_point(tmp_path, monkeypatch):
