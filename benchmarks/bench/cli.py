@@ -25,6 +25,11 @@ guardian's compute time passes in the world) and ``Dubins4DCircles-v0`` (blockin
 ``QuadrotorRoomGuarded-v0`` and the map envs ``Dubins4DMapParallel-v0`` / ``Dubins4DMap-v0`` in this
 package.  Another env is refused with one line naming it and what it lacks.
 
+Your own code: ``--agent module:Class`` (a guardian) and ``--env module:Id`` (an env that
+``module`` registers on import) are imported with the current directory first on the path, as
+``python -m`` does, in this process and in every worker: ``rmm-bench --agent
+my_guard:MyGuardian`` finds ``my_guard.py`` where you run it, without ``PYTHONPATH``.
+
 Clock modes (``--clock``): ``wall`` (default, the paper's: real time between steps, scaled by
 ``--time-accel``, passes in the world; results depend on the machine and on how many workers
 share its cores), ``cpu`` (the worker's own CPU time: insensitive to other processes) and
@@ -49,9 +54,11 @@ process is gone).
 
 from __future__ import annotations
 
+import os
 import sys
 
 from benchmarks.bench import args as _args
+from benchmarks.bench.config import import_from
 from benchmarks.bench.run import RunFailed, cmd_run, cmd_sweep
 
 __all__ = ["build_parser", "build_report_parser", "build_sweep_parser", "main"]
@@ -71,6 +78,7 @@ def build_sweep_parser():
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    import_from([os.getcwd()])  # module:Class and module:Id import from here, as under python -m
     try:
         if argv and argv[0] == "report":
             from benchmarks.bench.report import cmd_report

@@ -23,12 +23,22 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import sys
 from dataclasses import dataclass, field
 from typing import Any
 
 from guardians.registry import accepts_argument  # noqa: F401  (re-exported: the runner and the checks use it from here)
 
 __all__ = ["AgentRun", "BenchConfig", "EpisodeResult", "EpisodeTask", "accepts_argument", "run_key"]
+
+
+def import_from(paths) -> None:
+    """Put ``paths`` first on ``sys.path`` (in order, each once), as ``python -m`` puts the
+    current directory: ``module:Class`` agents and ``module:Id`` envs import from there."""
+    for path in reversed(tuple(paths)):
+        if path in sys.path:
+            sys.path.remove(path)
+        sys.path.insert(0, path)
 
 
 def run_key(config: dict) -> str:
@@ -82,6 +92,10 @@ class EpisodeTask:
     episode: int
     seed: int
     threads: int | None = None
+    #: folders the worker puts first on ``sys.path`` before importing the agent and the env (the
+    #: directory ``rmm-bench`` ran in, so ``module:Class`` and ``module:Id`` import from there in
+    #: every worker, as ``python -m`` would; not part of the run's identity)
+    import_path: tuple[str, ...] = ()
 
     @property
     def agent(self) -> str:

@@ -29,7 +29,7 @@ import traceback
 
 import numpy as np
 
-from benchmarks.bench.config import EpisodeResult, EpisodeTask, run_key
+from benchmarks.bench.config import EpisodeResult, EpisodeTask, import_from, run_key
 from rmm_envs.envs.guarded import EPISODE_KEY
 
 __all__ = ["EPISODE_STATISTICS", "EpisodeTimeout", "episode_seed", "hard_timeout", "lost_episode", "run_episode", "run_key"]
@@ -139,6 +139,7 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
                 signal.setitimer(signal.ITIMER_REAL, float(timeout))
             except ValueError:  # not the main thread (e.g. some Ray setups): check in the loop only
                 use_alarm = False
+        import_from(task.import_path)
         env = _env(run.env_id, run.env_kwargs)
         guardian = _guardian(task)
         obs, info = env.reset(seed=task.seed)
