@@ -64,3 +64,42 @@ def test_import_from_puts_each_folder_first_once(monkeypatch):
     assert sys.path == ["/a", "/d", "/b", "/c"]
     import_from(["/a", "/d"])
     assert sys.path == ["/a", "/d", "/b", "/c"]
+
+
+WARM = '''
+from guardians.base import Guardian
+
+CALLS = 0  # act() calls in this worker process
+
+
+class CountsCalls(Guardian):
+    name = "counts-calls"
+
+    def reset(self, **kwargs):
+        super().reset(**kwargs)
+        self.calls_before = CALLS
+
+    def act(self, observation, info):
+        global CALLS
+        CALLS += 1
+        return self.action_space.inactive()
+
+    def stats(self):
+        return {"calls_before": self.calls_before}
+'''
+
+
+def test_each_workers_first_timed_decision_comes_after_an_untimed_warm_up(tmp_path):
+    """Every episode, the first of each worker included, starts with act() already called in
+    that process: compiling or loading a guardian's kernels is never a timed decision."""
+    import json
+
+    from benchmarks import load_results
+
+    (tmp_path / "warm_guard.py").write_text(WARM)
+    res = _bench(tmp_path, "--agent", "warm_guard:CountsCalls", "--episodes", "4", "--workers", "2",
+                 "--env", "Dubins4DCircles-v0")
+    assert res.returncode == 0, res.stderr[-2000:]
+    df = load_results(tmp_path / "res")
+    calls = [json.loads(s)["calls_before"] for s in df.guardian_stats]
+    assert len(calls) == 4 and min(calls) >= 1

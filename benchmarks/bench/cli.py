@@ -34,6 +34,9 @@ Clock modes (``--clock``): ``wall`` (default, the paper's: real time between ste
 ``--time-accel``, passes in the world; results depend on the machine and on how many workers
 share its cores), ``cpu`` (the worker's own CPU time: insensitive to other processes) and
 ``fixed:MS`` (every decision takes exactly MS ms: bit-reproducible whatever the worker count).
+Each worker warms every guardian up with one untimed decision before its first timed one, so
+compiling (or loading compiled) code is never charged to a decision (``--charge-precompute``
+charges all setup, this included).
 
 Failures.  Every option is checked before any episode runs, including building the env and
 each guardian with its ``--agent-opt`` values: a bad one exits with status 2 and one line

@@ -5,6 +5,9 @@ the same configurations; the original drew seeds unseeded, with repeats).  The g
 ``reset`` (e.g. an HJ solve) is timed as ``precompute_time`` and, as in the paper's reported
 HJ row, not charged to the episode's clock unless ``charge_precompute`` is set.
 
+Before a guardian's first timed decision in a worker, one untimed ``act`` and a second
+``reset`` warm it up (:func:`_warm_up`): compiling its kernels is not charged to the episode.
+
 A guardian that raises (in ``reset``, ``act`` or ``stats``, or with ``sys.exit``), or an
 episode exceeding ``episode_timeout`` seconds of wall time, ends that episode with outcome
 ``error``, the message and its kind (``guardian`` or ``timeout``, see the store); the run goes
@@ -104,6 +107,20 @@ def _guardian(task: EpisodeTask):
     return _CACHE[key]
 
 
+def _warm_up(task: EpisodeTask, guardian, obs, info, env) -> None:
+    """Once per worker and guardian, before its first timed decision: one untimed ``act`` on
+    the episode's first observation, then ``reset`` again (the episode starts as if it had not
+    happened), so compiling or loading compiled code (numba kernels, lazy imports) is never
+    charged to a decision.  Skipped under ``--charge-precompute``, which charges all setup."""
+    key = ("warm",) + _guardian_key(task)
+    if key in _CACHE:
+        return
+    guardian.act(obs, info)
+    guardian.reset(seed=task.seed, observation_space=env.observation_space, action_space=env.action_space,
+                   privileged=env.unwrapped.privileged if getattr(guardian, "privileged", False) else None)
+    _CACHE[key] = True
+
+
 def _statistics(env_id: str, info: dict) -> dict:
     """The store's columns from the last step's ``info`` (the contract's ``outcome`` and ``episode_stats``)."""
     ep = info.get(EPISODE_KEY)
@@ -148,6 +165,7 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
                        privileged=env.unwrapped.privileged if getattr(guardian, "privileged", False) else None)
         fields["precompute_time"] = time.perf_counter() - t0
         if not run.charge_precompute:  # else the clock keeps running: the solve counts as thinking time on the first step
+            _warm_up(task, guardian, obs, info, env)
             env.get_wrapper_attr("clock").start()
         while True:
             t0 = time.perf_counter()
