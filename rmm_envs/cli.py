@@ -83,7 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rmm-envs", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="run a few episodes with the driver alone and print the outcomes")
-    demo.add_argument("--env", default="Dubins4DParallel-v0", choices=list(rmm_envs.ENV_IDS))
+    demo.add_argument("--env", default="Dubins4DParallel-v0", choices=list(rmm_envs.GUARDIAN_ENV_IDS),
+                      help="an env with a built-in driver (default: %(default)s)")
     demo.add_argument("--episodes", type=int, default=8)
     demo.add_argument("--seed", type=int, default=0)
     demo.set_defaults(func=_demo)

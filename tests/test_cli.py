@@ -44,8 +44,12 @@ def test_demo_prints_what_the_driver_alone_does(capsys):
 
 
 def test_demo_refuses_an_env_without_a_guardian_action_and_bad_counts(capsys):
-    assert main(["demo", "--env", "Dubins3DMaze-v0", "--episodes", "1"]) == 2
-    assert "env Dubins3DMaze-v0 has no guardian action" in capsys.readouterr().err
+    # --env offers only the envs with a built-in driver: a plain-control env is refused by argparse
+    with pytest.raises(SystemExit) as e:
+        main(["demo", "--env", "Dubins3DMaze-v0", "--episodes", "1"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "invalid choice: 'Dubins3DMaze-v0'" in err and "QuadrotorRoomGuarded-v0" in err
     assert main(["demo", "--episodes", "0"]) == 2
     assert "--episodes must be >= 1, got 0" in capsys.readouterr().err
 

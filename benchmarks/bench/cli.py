@@ -38,6 +38,10 @@ Each worker warms every guardian up with one untimed decision before its first t
 compiling (or loading compiled) code is never charged to a decision (``--charge-precompute``
 charges all setup, this included).
 
+Progress: the bar's postfix counts each agent's finished episodes by outcome, by initial: ``g``
+goal, ``c`` collision, ``t`` timeout, ``e`` guardian error, ``l`` lost worker (``lrmm: c3 g20 t9``:
+3 collisions, 20 goals, 9 timeouts so far).
+
 Failures.  Every option is checked before any episode runs, including building the env and
 each guardian with its ``--agent-opt`` values: a bad one exits with status 2 and one line
 naming the flag.  While running, an episode whose guardian raises is stored as that

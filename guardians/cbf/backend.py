@@ -49,7 +49,7 @@ def parse_solver(solver) -> str | None:
     name = solver[len(PREFIX):]
     installed = installed_solvers()
     if not installed:
-        raise ValueError(f"solver {solver!r} needs qpsolvers (pip install 'rmm-envs[qp]'); installed: {choices}")
+        raise ValueError(f"solver {solver!r} needs qpsolvers (the qp extra: pip install -e '.[qp]' in a clone); installed: {choices}")
     if name not in installed:
         raise ValueError(f"solver {solver!r}: qpsolvers has no installed solver {name!r}; installed: {choices}")
     return name
