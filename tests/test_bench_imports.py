@@ -8,7 +8,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-
 from benchmarks.bench.config import import_from
 
 GUARD = '''
