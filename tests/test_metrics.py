@@ -166,3 +166,15 @@ def test_the_table_says_which_spread_and_shows_measured_decision_time_under_a_fi
     assert md1.splitlines()[2].count("†") == 3  # success, collision and timeout
     assert md1.splitlines()[-1].endswith("†: fewer than two batches, so the rate is followed by its 95% Wilson "
                                          "score interval over the episodes, [low, high].")
+
+
+def test_table_i_names_the_wilson_interval_ends():
+    import pandas as pd
+
+    eps = [{"agent": "a", "episode": i, "outcome": "goal" if i % 2 else "collision", "steps": 10, "compute_time": 0.01,
+            "sim_time": 1.0, "active_sim_time": 0.0} for i in range(8)]
+    t = table_i(pd.DataFrame.from_records(eps), batch_size=64)
+    row = t.loc["a"]
+    assert row["rate_spread"] == "wilson95" and "goal_ci_std" not in t.columns
+    assert (row["goal_ci_low"], row["goal_ci_high"]) == pytest.approx(aggregate(eps, 64)["goal_ci"])
+    assert row["goal_ci_low"] < 50.0 < row["goal_ci_high"]

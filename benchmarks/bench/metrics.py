@@ -134,7 +134,8 @@ def table_i(df, batch_size: int = 64):
     :func:`benchmarks.load_results`): one row per agent, in order of first appearance, with
     columns ``episodes``, ``errors``, ``<stat>`` and ``<stat>_std`` for each statistic of
     :func:`aggregate` that has a spread (``compute_ms``, ``goal``, ``collision``, ``timeout``,
-    ``intervention``, ...), and the totals and counters as they are."""
+    ``intervention``, ...), ``<outcome>_ci_low``/``_high`` (the Wilson interval, NaN over two or
+    more batches), and the totals, counters and ``rate_spread`` as they are."""
     import pandas as pd
 
     rows = {}
@@ -142,7 +143,9 @@ def table_i(df, batch_size: int = 64):
         agg = _aggregate_frame(group, batch_size)
         row = {}
         for k, v in agg.items():
-            if isinstance(v, tuple):
+            if isinstance(v, tuple) and k.endswith("_ci"):  # a Wilson interval: its two ends
+                row[f"{k}_low"], row[f"{k}_high"] = v
+            elif isinstance(v, tuple):
                 row[k], row[f"{k}_std"] = v
             else:
                 row[k] = v
