@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -32,6 +33,13 @@ import numpy as np
 import rmm_envs  # noqa: F401  (registers the environments)
 
 __all__ = ["COMMANDS", "main", "quadrisk", "quadrisk_parser", "riskmap", "riskmap_parser"]
+
+
+def _png(out) -> Path:
+    """Where a figure goes: ``out``, with ``.png`` added when it has no suffix (as matplotlib
+    adds it), so the path printed is the file written."""
+    path = Path(out)
+    return path if path.suffix else path.with_name(path.name + ".png")
 
 
 def riskmap(args: argparse.Namespace) -> int:
@@ -72,8 +80,9 @@ def riskmap(args: argparse.Namespace) -> int:
     ax.set_ylim(0, maze.height)
     ax.set_aspect("equal")
     fig.tight_layout()
-    fig.savefig(args.out, dpi=args.dpi)
-    print(f"wrote {args.out}: mean risk {risk.mean():.3f}, {np.mean(risk > 0.5) * 100:.0f}% of states above 0.5")
+    out = _png(args.out)
+    fig.savefig(out, dpi=args.dpi)
+    print(f"wrote {out}: mean risk {risk.mean():.3f}, {np.mean(risk > 0.5) * 100:.0f}% of states above 0.5")
     return 0
 
 
@@ -115,8 +124,9 @@ def quadrisk(args: argparse.Namespace) -> int:
         ax.axis("off")
     fig.suptitle(f"QuadrotorRoom-v0 (room seed {args.seed}): the body coloured green to red by inferred risk")
     fig.tight_layout()
-    fig.savefig(args.out, dpi=args.dpi)
-    print(f"wrote {args.out}: inferred risks {[round(float(r), 3) for r in risk]}")
+    out = _png(args.out)
+    fig.savefig(out, dpi=args.dpi)
+    print(f"wrote {out}: inferred risks {[round(float(r), 3) for r in risk]}")
     return 0
 
 

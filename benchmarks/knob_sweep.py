@@ -33,7 +33,7 @@ def _row(out: Path, agent: str) -> dict:
     with open(out / "table_I.csv", newline="") as f:
         for r in csv.DictReader(f):
             if r["agent"] == agent:
-                return {k: (float(v) if k not in ("agent", "observation") else v) for k, v in r.items()}
+                return {k: (float(v) if k not in ("agent", "observation", "rate_spread") else v) for k, v in r.items()}
     raise RuntimeError(f"{out / 'table_I.csv'} has no row for agent {agent!r}")
 
 

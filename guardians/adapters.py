@@ -4,10 +4,17 @@
 * :class:`SB3Guardian` wraps an object with Stable-Baselines3's
   ``predict(observation, deterministic=True) -> (action, state)``.
 
-Actions may be the env's dict, or a flat array ``[active, u...]`` (``active > 0.5`` means take
-control; ``u`` the control vector in the order of the action space's ``controls``, for
-Dubins4D ``[active, turnrate, accel]``), which is converted through the action space given at
-``reset`` (:func:`to_guardian_action`).
+Actions may be the env's dict, or a flat array ``[active, ...]`` (``active > 0.5`` means take
+control), converted through the action space given at ``reset``:
+
+* :class:`SB3Guardian` reads ``[active, z...]`` in the unit box, exactly as
+  :class:`rmm_envs.wrappers.FlattenGuardianAction` (the wrapper RL models train through) does:
+  one mapping, :meth:`rmm_envs.autonomy.GuardianActionSpace.from_unit`, serves both, so a
+  model trained through the wrapper applies the same controls when benchmarked
+  (``flat="raw"`` reads the controls unscaled, for a model trained on another action box);
+* :class:`CallableGuardian` reads ``[active, u...]`` with ``u`` the control vector itself in the
+  order of the action space's ``controls`` (for Dubins4D ``[active, turnrate, accel]``,
+  :func:`to_guardian_action`).
 """
 
 from __future__ import annotations
@@ -19,7 +26,11 @@ import numpy as np
 from guardians.base import Guardian
 from rmm_envs.autonomy import GuardianActionSpace
 
-__all__ = ["CallableGuardian", "SB3Guardian", "to_guardian_action"]
+__all__ = ["CallableGuardian", "FLAT_FORMS", "SB3Guardian", "to_guardian_action"]
+
+#: How :class:`SB3Guardian` reads a flat action: in the unit box (``"unit"``, the training
+#: wrapper's) or as the controls themselves (``"raw"``).
+FLAT_FORMS = ("unit", "raw")
 
 
 def to_guardian_action(action: Any, space: GuardianActionSpace | None) -> dict:
@@ -54,17 +65,25 @@ class CallableGuardian(Guardian):
 
 
 class SB3Guardian(Guardian):
-    """Wrap a model with ``predict(obs, deterministic=True)`` (Stable-Baselines3 style)."""
+    """Wrap a model with ``predict(obs, deterministic=True)`` (Stable-Baselines3 style); a flat
+    action is read as ``flat`` says (module docstring; default ``"unit"``, the training wrapper's)."""
 
-    def __init__(self, model: Any, name: str = "sb3", deterministic: bool = True) -> None:
+    def __init__(self, model: Any, name: str = "sb3", deterministic: bool = True, flat: str = "unit") -> None:
         super().__init__()
         if not hasattr(model, "predict"):
             raise TypeError(f"SB3Guardian needs an object with predict(obs, deterministic=...), got {type(model).__name__}")
+        if flat not in FLAT_FORMS:
+            raise ValueError(f"flat must be one of {FLAT_FORMS} (the unit box of FlattenGuardianAction, or the "
+                             f"controls unscaled), got {flat!r}")
         self.model = model
         self.name = name
         self.deterministic = deterministic
+        self.flat = flat
 
     def act(self, observation, info):
         out = self.model.predict(observation, deterministic=self.deterministic)
         action = out[0] if isinstance(out, tuple) else out
-        return to_guardian_action(action, self.action_space)
+        if isinstance(action, dict) or self.flat == "raw":
+            return to_guardian_action(action, self.action_space)
+        self.require_action_space()
+        return self.action_space.from_unit(action)

@@ -29,6 +29,11 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
+#: The envs offering the parallel-autonomy contract (a built-in driver and a guardian action):
+#: every registered env but the two plain-control ones, ``Dubins3DMaze-v0`` and ``QuadrotorRoom-v0``.
+GUARDIAN_ENV_IDS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins4DMap-v0", "Dubins4DMapParallel-v0",
+                    "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoomGuarded-v0",
+                    "QuadrotorRoomParallel-v0")
 ENV_IDS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins4DMap-v0", "Dubins4DMapParallel-v0", "Dubins3DMaze-v0", "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0",
            "QuadrotorRoom-v0", "QuadrotorRoomGuarded-v0", "QuadrotorRoomParallel-v0")
 
@@ -55,4 +60,4 @@ def _register() -> None:
 
 _register()
 
-__all__ = ["ENV_IDS", "__version__"]
+__all__ = ["ENV_IDS", "GUARDIAN_ENV_IDS", "__version__"]

@@ -100,7 +100,10 @@ class GuardianActionSpace(spaces.Dict):
 
     The fields are stored in Gymnasium's default (sorted) key order, so sampling, seeding and
     flattening behave exactly as for the plain ``Dict`` with the same fields; the control
-    order lives in :attr:`controls`.  The continuous fields are float32 boxes.
+    order lives in :attr:`controls`.  The continuous fields are float64 boxes, the precision the
+    systems integrate in: the driver's control (``info["nominal_control"]``) goes through
+    :meth:`active` unrounded, so a guardian that hands it back applies exactly what the driver
+    would have (a float32 box would round it, and the episode would drift from the driver's).
     """
 
     def __init__(self, controls: Sequence[str], low: Iterable[float], high: Iterable[float], seed=None,
@@ -118,14 +121,14 @@ class GuardianActionSpace(spaces.Dict):
             raise ValueError(f"control bounds must be finite with low <= high, got low={lo.tolist()} high={hi.tolist()}")
         fields: dict[str, spaces.Space] = {ACTIVE: spaces.Discrete(2)}
         for name, a, b in zip(controls, lo, hi):
-            fields[name] = spaces.Box(a, b, shape=(1,), dtype=np.float32)
+            fields[name] = spaces.Box(a, b, shape=(1,), dtype=np.float64)
         super().__init__(fields, seed=seed)
         if safe_default is not None and not isinstance(safe_default, SafeDefault):
             raise TypeError(f"safe_default must be a rmm_envs.autonomy.SafeDefault, got {safe_default!r}")
         self.controls = controls
         self.safe_default = safe_default
         self.obstacle_shapes = None if obstacle_shapes is None else tuple(obstacle_shapes)
-        # the bounds actions are clipped to: those of the float32 boxes, as float64
+        # the bounds actions are clipped to: those of the boxes
         self.control_low = np.array([float(self.spaces[c].low[0]) for c in controls])
         self.control_high = np.array([float(self.spaces[c].high[0]) for c in controls])
 
@@ -145,19 +148,52 @@ class GuardianActionSpace(spaces.Dict):
         """The driver controls this step (the control fields are zeros and ignored)."""
         action: dict[str, Any] = {ACTIVE: 0}
         for c in self.controls:
-            action[c] = np.zeros(1, np.float32)
+            action[c] = np.zeros(1)
         return action
 
     def active(self, control) -> dict:
         """Take control and apply the control vector ``control`` (one number per control)."""
-        # one float32 buffer (float64 -> float32, as the boxes hold them), one field per element
-        u = np.array(np.asarray(control, dtype=float), dtype=np.float32).reshape(-1)
+        # one float64 buffer (a copy: the caller's array is never aliased), one field per element
+        u = np.array(control, dtype=float).reshape(-1)
         if u.shape != (len(self.controls),):
             raise ValueError(f"control must have one value per control {self.controls}, got {control!r}")
         action: dict[str, Any] = {ACTIVE: 1}
         for i, c in enumerate(self.controls):
             action[c] = u[i:i + 1]
         return action
+
+    @property
+    def flat_dim(self) -> int:
+        """Length of the flat action of :meth:`from_unit`: the flag, then one number per control."""
+        return 1 + len(self.controls)
+
+    def from_unit(self, flat) -> dict:
+        """The action of a flat vector ``[active, z_1, ..., z_c]`` in the unit box (what RL
+        libraries train on; :class:`rmm_envs.wrappers.FlattenGuardianAction`'s action space and
+        :class:`guardians.adapters.SB3Guardian`'s input, so a policy trained through the one acts
+        the same through the other): ``active > 0.5`` takes control, and ``z_i in [-1, 1]`` maps
+        linearly onto ``[low_i, high_i]`` (``-1`` the lower bound, ``+1`` the upper; values
+        outside ``[-1, 1]`` are clipped first).  Non-finite numbers raise ``ValueError`` naming
+        the index."""
+        a = np.asarray(flat, dtype=float).reshape(-1)
+        if a.shape != (self.flat_dim,):
+            raise ValueError(f"a flat guardian action has {self.flat_dim} numbers [active, "
+                             f"{', '.join(self.controls)}], got shape {np.shape(flat)}")
+        bad = np.flatnonzero(~np.isfinite(a))
+        if bad.size:
+            raise ValueError(f"flat guardian action index {int(bad[0])} must be finite, got {a[bad[0]]}")
+        if a[0] <= 0.5:
+            return self.inactive()
+        z = np.clip(a[1:], -1.0, 1.0)
+        return self.active(self.control_low + (z + 1.0) * 0.5 * (self.control_high - self.control_low))
+
+    def to_unit(self, control) -> np.ndarray:
+        """The unit-box coordinates ``z`` of a control vector (the inverse of :meth:`from_unit`'s
+        scaling; ``0`` for a control whose bounds coincide)."""
+        u = np.asarray(control, dtype=float).reshape(-1)
+        span = self.control_high - self.control_low
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(span > 0, 2.0 * (u - self.control_low) / span - 1.0, 0.0)
 
     def parse(self, action) -> tuple[bool, np.ndarray]:
         """Validate ``action``; return ``(active, control vector clipped to the bounds)``."""

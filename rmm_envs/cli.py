@@ -68,7 +68,7 @@ def _demo(args: argparse.Namespace) -> int:
             obs, reward, terminated, truncated, info = env.step(inactive)
             steps += 1
             done = terminated or truncated
-        st = info["episode"]
+        st = info["episode_stats"]
         outcomes[info["outcome"]] = outcomes.get(info["outcome"], 0) + 1
         speed = f", final speed {speed_text(st['final_speed'], env.unwrapped)}" if "final_speed" in st else ""
         print(f"episode {ep:3d} seed {args.seed + ep:5d}: {info['outcome']:9s} after {st['n_env_steps']:4d} steps, "
@@ -83,7 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rmm-envs", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="run a few episodes with the driver alone and print the outcomes")
-    demo.add_argument("--env", default="Dubins4DParallel-v0", choices=list(rmm_envs.ENV_IDS))
+    demo.add_argument("--env", default="Dubins4DParallel-v0", choices=list(rmm_envs.GUARDIAN_ENV_IDS),
+                      help="an env with a built-in driver (default: %(default)s)")
     demo.add_argument("--episodes", type=int, default=8)
     demo.add_argument("--seed", type=int, default=0)
     demo.set_defaults(func=_demo)

@@ -17,9 +17,10 @@ arrives.  The environment turns that into simulated time (``elapsed * time_accel
 
 from __future__ import annotations
 
+import math
 import time
 
-__all__ = ["CPUClock", "Clock", "FixedLatencyClock", "ManualClock", "WallClock", "make_clock"]
+__all__ = ["CLOCK_FORMS", "CPUClock", "Clock", "FixedLatencyClock", "ManualClock", "WallClock", "make_clock"]
 
 
 class Clock:
@@ -97,8 +98,16 @@ class ManualClock(Clock):
         self.t += float(dt)
 
 
+#: The forms :func:`make_clock` accepts, for error messages.
+CLOCK_FORMS = "'wall', 'cpu' or 'fixed:MS' (MS a number of milliseconds >= 0, e.g. 'fixed:2')"
+
+
 def make_clock(spec: str | Clock | None) -> Clock:
-    """``None`` or ``"wall"`` -> :class:`WallClock`; ``"cpu"``; ``"fixed:MS"``; or a Clock."""
+    """``None`` or ``"wall"`` -> :class:`WallClock`; ``"cpu"``; ``"fixed:MS"``; or a Clock.
+
+    Parsed strictly (case and surrounding spaces aside): anything else, ``"fixed"`` without
+    ``:MS``, ``"fixed2"`` or ``"fixed=2"`` included, raises ``ValueError`` naming the value and
+    the accepted forms, so a mistyped clock never runs as another one."""
     if spec is None:
         return WallClock()
     if isinstance(spec, Clock):
@@ -110,11 +119,12 @@ def make_clock(spec: str | Clock | None) -> Clock:
         return WallClock()
     if s == "cpu":
         return CPUClock()
-    if s.startswith("fixed"):
-        _, _, ms = s.partition(":")
+    kind, colon, ms = s.partition(":")
+    if kind == "fixed" and colon:
         try:
-            latency_ms = float(ms) if ms else 0.0
+            latency_ms = float(ms)
         except ValueError:
-            raise ValueError(f"clock {spec!r}: expected 'fixed:MS' with MS a number of milliseconds") from None
-        return FixedLatencyClock(latency_ms / 1000.0)
-    raise ValueError(f"unknown clock {spec!r}; expected 'wall', 'cpu' or 'fixed:MS'")
+            latency_ms = math.nan
+        if math.isfinite(latency_ms) and latency_ms >= 0:
+            return FixedLatencyClock(latency_ms / 1000.0)
+    raise ValueError(f"unknown clock {spec!r}; expected {CLOCK_FORMS}")

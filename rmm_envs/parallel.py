@@ -257,7 +257,7 @@ def run_ray(fn: Callable, tasks: Iterable, address: str | None = None, *, max_lo
     try:
         import ray
     except ImportError as e:
-        raise RuntimeError("the Ray backend needs Ray: pip install 'rmm-envs[ray]'") from e
+        raise RuntimeError("the Ray backend needs Ray: the ray extra, pip install -e '.[ray]' in a clone") from e
     if not ray.is_initialized():
         if address:
             check_reachable(address)

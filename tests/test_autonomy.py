@@ -23,8 +23,8 @@ D4 = GuardianActionSpace.for_system(Dubins4D(), ("turnrate_ctrl", "accel_ctrl"))
 
 def test_dubins4d_space_is_the_plain_dict_it_replaced():
     plain = spaces.Dict({"active_ctrl": spaces.Discrete(2),
-                         "turnrate_ctrl": spaces.Box(-0.25, 0.25, shape=(1,), dtype=np.float32),
-                         "accel_ctrl": spaces.Box(-0.5, 0.5, shape=(1,), dtype=np.float32)})
+                         "turnrate_ctrl": spaces.Box(-0.25, 0.25, shape=(1,), dtype=np.float64),
+                         "accel_ctrl": spaces.Box(-0.5, 0.5, shape=(1,), dtype=np.float64)})
     assert D4 == plain and list(D4.keys()) == list(plain.keys())
     # same seeding and sampling order, so seeded random actions are unchanged
     D4.seed(3), plain.seed(3)

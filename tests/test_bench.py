@@ -74,6 +74,10 @@ def _pm_text(v, digits=1):
     return "n/a" if np.isnan(v[0]) else f"{v[0]:.{digits}f}" if np.isnan(v[1]) else f"{v[0]:.{digits}f} ± {v[1]:.{digits}f}"
 
 
+def _digits(ms: float) -> int:
+    return 3 if ms < 0.1 else 2 if ms < 10 else 1
+
+
 def _check_rendered_numbers(out, aggs: dict) -> None:
     """table_I.md/.csv/.tex hold exactly the aggregation of the stored episodes."""
     import csv
@@ -91,11 +95,17 @@ def _check_rendered_numbers(out, aggs: dict) -> None:
             got = (float(r[f"{col}_mean"]), float(r[f"{col}_std"]))
             np.testing.assert_array_equal(got, agg[key])  # bit for bit (nan == nan)
         cells = _md_cells(md, agent)
-        digits = 3 if agg["compute_ms"][0] < 0.1 else 2 if agg["compute_ms"][0] < 10 else 1
-        assert cells[3:] == [str(agg["episodes"]), _pm_text(agg["compute_ms"], digits)] + [
-            _pm_text(agg[k]) for k in ("goal", "collision", "timeout", "intervention")] + [str(agg["errors"]), str(agg["qp_fallbacks"])]
+        expected = [str(agg["episodes"]), _pm_text(agg["compute_ms"], _digits(agg["compute_ms"][0]))]
+        if "Measured decision time [ms]" in md.splitlines()[0]:  # a fixed clock: the measured time beside
+            dec = agg["decision_ms"]
+            expected.append(_pm_text(dec, _digits(dec[0])))
+        for k in ("goal", "collision", "timeout"):  # fewer than two batches: the Wilson 95% interval
+            lo, hi = agg[f"{k}_ci"]
+            wilson = agg["rate_spread"] == "wilson95" and not np.isnan(agg[k][0])
+            expected.append(f"{agg[k][0]:.1f} [{lo:.1f}, {hi:.1f}]†" if wilson else _pm_text(agg[k]))
+        assert cells[3:] == expected + [_pm_text(agg["intervention"]), str(agg["errors"]), str(agg["qp_fallbacks"])]
         tex_line = [ln for ln in tex.splitlines() if ln.startswith(f"{agent} &")][0]
-        assert tex_line == " & ".join(cells[:-2]).replace("±", "$\\pm$").replace("%", "\\%") + " \\\\"
+        assert tex_line == " & ".join(cells[:-2]).replace("±", "$\\pm$").replace("†", "$^\\dagger$").replace("%", "\\%") + " \\\\"
 
 
 def test_rendered_tables_hold_the_aggregated_numbers(tmp_path):

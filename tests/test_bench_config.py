@@ -110,12 +110,13 @@ def test_env_statistics_contract_is_checked_and_optional_keys_may_be_absent():
     from benchmarks.bench.runner import EPISODE_STATISTICS, EnvContractError, _statistics
 
     ep = {k: i for i, k in enumerate(EPISODE_STATISTICS.values())}
-    got = _statistics("E-v0", {"outcome": "goal", "episode": ep})
-    assert got == {"outcome": "goal", "final_speed": None, **{c: ep[k] for c, k in EPISODE_STATISTICS.items()}}
-    assert _statistics("E-v0", {"outcome": "goal", "episode": ep | {"final_speed": 1.5}})["final_speed"] == 1.5
-    with pytest.raises(EnvContractError, match=r"env E-v0 ended an episode without info\[\"episode\"\] keys \['cum_reward'\]"):
-        _statistics("E-v0", {"outcome": "goal", "episode": {k: v for k, v in ep.items() if k != "cum_reward"}})
-    with pytest.raises(EnvContractError, match=r"without info keys \['outcome', 'episode'\]"):
+    got = _statistics("E-v0", {"outcome": "goal", "episode_stats": ep})
+    assert got == {"outcome": "goal", "final_speed": None, "cost": None, **{c: ep[k] for c, k in EPISODE_STATISTICS.items()}}
+    assert _statistics("E-v0", {"outcome": "goal", "episode_stats": ep | {"final_speed": 1.5}})["final_speed"] == 1.5
+    assert _statistics("E-v0", {"outcome": "goal", "episode_stats": ep | {"cum_cost": 1.0}})["cost"] == 1.0
+    with pytest.raises(EnvContractError, match=r"env E-v0 ended an episode without info\[\"episode_stats\"\] keys \['cum_reward'\]"):
+        _statistics("E-v0", {"outcome": "goal", "episode_stats": {k: v for k, v in ep.items() if k != "cum_reward"}})
+    with pytest.raises(EnvContractError, match=r"without info keys \['outcome', 'episode_stats'\]"):
         _statistics("E-v0", {})
 
 

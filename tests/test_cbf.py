@@ -10,11 +10,13 @@ import rmm_envs  # noqa: F401
 from guardians import make_guardian
 from guardians.cbf import CBFGuardian, CBFPaperGuardian
 from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.driver import CLFDriver
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D
 from tests.qp_reference import solve_qp_dense
 
 SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS)  # the Dubins4D envs' action space
+INFO0 = {"nominal_control": np.zeros(2)}  # a step's info whose driver control is (0, 0)
 
 
 def make(state, obstacles, goal=(20.0, 0.0, 0.5), cls=CBFGuardian, **kw):
@@ -37,20 +39,20 @@ def test_reference_worked_example():
 
 def test_paper_preset_takes_control_when_the_barrier_is_active():
     g, _ = make([0, 0, 0, 1.0], [[3.0, 0.0, 1.0]], cls=CBFPaperGuardian)
-    a = g.act(None, {})
+    a = g.act(None, INFO0)
     assert a["active_ctrl"] == 1
     assert a["accel_ctrl"][0] == pytest.approx(-0.42563, abs=1e-3)
 
 
 def test_default_decides_for_the_state_its_action_will_act_from():
     # The action returned now acts only after the coming lap.  The driver drives that lap
-    # (taken as zero control): straight at 1 m/s for 0.11 s -> (0.11, 0, 0, 1).
+    # (its nominal control, here zero): straight at 1 m/s for 0.11 s -> (0.11, 0, 0, 1).
     g, box = make([0, 0, 0, 1.0], [[3.0, 0.0, 1.0]])
     ref, _ = make([0.11, 0, 0, 1.0], [[3.0, 0.0, 1.0]], cls=CBFPaperGuardian)
     box["sim_time"] = 0.11  # the lap is measured from the reported simulated time
     g._last_time = 0.0
-    a = g.act(None, {})
-    r = ref.act(None, {})
+    a = g.act(None, INFO0)
+    r = ref.act(None, INFO0)
     # b = 2.89^2 - 1.1025, Lf b = -5.78: h = 2 + (p1+p2)(-5.78) + p1 p2 b, row 5.78 u2 <= -h
     b = 2.89 ** 2 - 1.05 ** 2
     h = 2.0 + (0.7535 + 0.6664) * -5.78 + 0.7535 * 0.6664 * b
@@ -65,7 +67,7 @@ def test_default_decides_for_the_state_its_action_will_act_from():
 def test_driver_keeps_control_far_from_obstacles():
     for cls in (CBFGuardian, CBFPaperGuardian):
         g, _ = make([0, 0, 0, 1.0], [[30.0, 30.0, 1.0]], cls=cls)
-        assert g.act(None, {})["active_ctrl"] == 0
+        assert g.act(None, INFO0)["active_ctrl"] == 0
 
 
 def _random_case(rng, goal_near=False):
@@ -83,14 +85,21 @@ def _random_case(rng, goal_near=False):
 
 
 @pytest.mark.parametrize("cls", [CBFGuardian, CBFPaperGuardian])
-def test_agrees_with_an_independent_dense_solver(cls):
+@pytest.mark.parametrize("filtered", [False, True])
+def test_agrees_with_an_independent_dense_solver(cls, filtered):
+    """The CBF-CLF problem, and the filter ``|u - u_ref|^2`` over the rows without the two CLF
+    rows (the last two), against exact active-set enumeration."""
     rng = np.random.default_rng(0)
     for trial in range(40):
         s, obstacles, goal = _random_case(rng, goal_near=trial % 2 == 1)
         g, box = make(s, obstacles, goal=goal, cls=cls)
-        z, G, h = g.solve(s)
+        u_ref = rng.uniform([-0.25, -0.5], [0.25, 0.5]) if filtered else None
+        z, G, h = g.solve(s, u_ref)
+        q = np.zeros(4) if u_ref is None else np.r_[-2.0 * u_ref, 0.0, 0.0]
+        if filtered:
+            G, h = G[:-2], h[:-2]
         try:
-            ref = solve_qp_dense(np.diag([2.0, 2.0, 2.0, 2.0]), np.zeros(4), G, h)
+            ref = solve_qp_dense(np.diag([2.0, 2.0, 2.0, 2.0]), q, G, h)
         except ValueError:
             assert z is None, f"trial {trial}: OSQP solved an infeasible QP"
             continue
@@ -111,11 +120,11 @@ def test_goal_aware_margin():
 def test_infeasible_qp_paper_brakes_default_recovers():
     # 1.5 m gap at 2 m/s: the barrier needs u2 <= -0.72, beyond the box
     p, _ = make([0, 0, 0, 2.0], [[2.5, 0.0, 1.0]], cls=CBFPaperGuardian)
-    a = p.act(None, {})
+    a = p.act(None, INFO0)
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and a["turnrate_ctrl"][0] == 0.0
     assert p.stats()["qp_fallbacks"] == 1 and p.stats()["recoveries"] == 0
     g, _ = make([0, 0, 0, 2.0], [[2.5, 0.0, 1.0]])
-    a = g.act(None, {})
+    a = g.act(None, INFO0)
     # brakes and turns at full rate (the centre is straight ahead: either side increases b'')
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and abs(a["turnrate_ctrl"][0]) == 0.25
     st_ = g.stats()
@@ -126,16 +135,16 @@ def test_infeasible_qp_paper_brakes_default_recovers():
 def test_nan_state_brakes_and_is_counted(cls):
     g, box = make([0, 0, 0, 1.0], [[30.0, 30.0, 1.0]], cls=cls)
     box["state"] = np.array([np.nan, 0, 0, 1.0])
-    a = g.act(None, {})
+    a = g.act(None, INFO0)
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5
     assert g.stats()["nan_states"] == 1 and g.stats()["recoveries"] == 0
 
 
 def test_low_speed_stop_option_reproduces_the_original():
     g, _ = make([0, 0, 0, 0.01], [[30.0, 30.0, 1.0]], low_speed_stop=True, cls=CBFPaperGuardian)
-    assert g.act(None, {})["active_ctrl"] == 1
+    assert g.act(None, INFO0)["active_ctrl"] == 1
     g, _ = make([0, 0, 0, 0.01], [[30.0, 30.0, 1.0]], cls=CBFPaperGuardian)
-    assert g.act(None, {})["active_ctrl"] == 0
+    assert g.act(None, INFO0)["active_ctrl"] == 0
 
 
 def test_configuration_errors():
@@ -210,8 +219,10 @@ def test_paper_preset_stays_stuck_where_the_default_reaches_the_goal():
     outcome, states = _run_env(CBFPaperGuardian(), *args, seconds=15.0)
     assert outcome is None and np.hypot(*states[-1, :2]) < 3.15
     g = CBFGuardian()
-    outcome, states = _run_env(g, *args, seconds=60.0)
-    assert outcome == "goal"
+    outcome, states = _run_env(g, *args, seconds=20.0)
+    # the default recovers: out of the margin and moving, then hands the car back to its
+    # driver (which, with the goal straight behind, then dithers at its heading branch cut)
+    assert outcome != "collision" and np.hypot(*states[-1, :2]) > 3.15 and states[-1, 3] > 0.5
     assert g.stats()["recovery_entries"] >= 1
 
 
@@ -222,13 +233,18 @@ def _closed_loop_min_barrier(g, state, seconds=6.0, dt=0.02):
     sysm = Dubins4D()
     s = np.asarray(state, float)
     worst = math.inf
+    driver = CLFDriver()  # the env's reckless driver: straight for the goal, through the obstacle
     for _ in range(int(seconds / dt)):
         g._lap = dt
-        a = g._decide(s)
+        u_nom = driver.control(s, g.goal[:2]) if g.reference == "nominal" else None
+        a = g._decide(s, u_nom)
         u = np.array([a["turnrate_ctrl"][0], a["accel_ctrl"][0]], float) if a["active_ctrl"] else np.zeros(2)
-        if not a["active_ctrl"]:  # the filter lets the nominal (QP, barrier inactive) control through
-            z, _, _ = g.solve(s)
-            u = np.clip(z[:2], [-0.25, -0.5], [0.25, 0.5])
+        if not a["active_ctrl"]:  # the filter lets the nominal control through (the driver's, or
+            if u_nom is not None:  # for the paper's rule the QP's with no barrier active)
+                u = u_nom
+            else:
+                z, _, _ = g.solve(s)
+                u = np.clip(z[:2], [-0.25, -0.5], [0.25, 0.5])
         path = sysm.states_at(s[None], u[None], np.linspace(dt / 4, dt, 4))[0]
         for p in path:
             worst = min(worst, float(np.min(g.barriers(p) / g.radii ** 2)))
@@ -313,7 +329,7 @@ def test_control_box_comes_from_the_action_space_unless_given():
     assert (g.u1_min, g.u1_max, g.u2_min, g.u2_max) == (-0.125, 0.125, -0.25, 0.375)
     G, h = g.rows(box["state"])
     assert (h[1], h[2], h[3], h[4]) == (0.125, 0.125, 0.375, 0.25)  # the box rows carry the space's bounds
-    a = g.act(None, {})  # the paper's example needs u2 = -0.426: clipped to this space's braking
+    a = g.act(None, INFO0)  # the paper's example needs u2 = -0.426: clipped to this space's braking
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == np.float32(-0.25)
     given = CBFPaperGuardian(u2_bounds=(-0.5, 0.5))
     given.reset(seed=0, privileged=lambda: box, action_space=narrow)
@@ -322,3 +338,66 @@ def test_control_box_comes_from_the_action_space_unless_given():
         CBFGuardian().reset(seed=0, privileged=lambda: box, action_space=GuardianActionSpace(CONTROLS, [0.1, -1], [0.2, 1]))
     with pytest.raises(ValueError, match="guardian 'cbf'.*action space"):
         CBFGuardian().reset(seed=0, privileged=lambda: box)
+
+
+# ---------------------------------------------------------------- the filter of the driver's control
+def test_filter_keeps_the_nominal_control_where_it_is_safe_and_projects_it_where_not():
+    # far from the obstacle: the driver's control passes (inactive), whatever it is
+    g, _ = make([0, 0, 0, 1.0], [[30.0, 30.0, 1.0]], predict_latency=False)
+    assert g.act(None, {"nominal_control": np.array([0.2, 0.5])})["active_ctrl"] == 0
+    assert g.stats()["qp_solves"] == 0  # a safe nominal control needs no solve
+    # the worked example: row 6 u2 <= -2.55381, so u2 <= -0.42563; u1 does not enter the row,
+    # so the closest safe control keeps the driver's turn rate and lowers u2 onto the bound
+    g, _ = make([0, 0, 0, 1.0], [[3.0, 0.0, 1.0]], predict_latency=False)
+    a = g.act(None, {"nominal_control": np.array([0.1, 0.3])})
+    assert a["active_ctrl"] == 1
+    assert a["turnrate_ctrl"][0] == pytest.approx(0.1, abs=1e-5)
+    assert a["accel_ctrl"][0] == pytest.approx(-0.42563, abs=1e-4)
+    # a nominal control already below the bound is safe: the driver keeps it
+    assert g.act(None, {"nominal_control": np.array([0.1, -0.45])})["active_ctrl"] == 0
+
+
+def test_filter_predicts_the_lap_under_the_drivers_nominal_control():
+    g, box = make([0, 0, 0, 1.0], [[30.0, 30.0, 1.0]])
+    box["sim_time"] = 0.11
+    g._last_time = 0.0
+    seen = []
+    g._decide = lambda state, u_nom=None: seen.append((state, u_nom)) or g.action_space.inactive()
+    g.act(None, {"nominal_control": np.array([0.0, 0.5])})
+    state, u_nom = seen[0]
+    # 0.11 s at 1 m/s accelerating at 0.5: x = 0.11 + 0.25 * 0.11^2, v = 1.055
+    np.testing.assert_allclose(state, [0.11 + 0.25 * 0.11 ** 2, 0.0, 0.0, 1.055], atol=1e-12)
+    assert u_nom.tolist() == [0.0, 0.5]
+
+
+def test_filter_needs_the_nominal_control_and_names_the_key():
+    g, _ = make([0, 0, 0, 1.0], [[3.0, 0.0, 1.0]])
+    with pytest.raises(ValueError, match=r"guardian 'cbf' filters the driver's control, info\['nominal_control'\].*"
+                                         r"keys: \['state'\].*reference='clf'"):
+        g.act(None, {"state": np.zeros(4)})
+    with pytest.raises(ValueError, match=r"nominal_control'\] must be 2 finite numbers.*nan"):
+        g.act(None, {"nominal_control": [np.nan, 0.0]})
+    with pytest.raises(ValueError, match=r"reference must be one of \('nominal', 'clf'\).*'driver'"):
+        CBFGuardian(reference="driver")
+    # the paper's rule, and reference="clf", re-derive their own control and read no info
+    p, _ = make([0, 0, 0, 1.0], [[3.0, 0.0, 1.0]], cls=CBFPaperGuardian)
+    assert p.reference == "clf" and p.act(None, {})["active_ctrl"] == 1
+    c, _ = make([0, 0, 0, 1.0], [[3.0, 0.0, 1.0]], reference="clf")
+    assert c.act(None, {})["active_ctrl"] == 1
+
+
+def test_filter_in_the_loop_never_collides_where_the_driver_alone_does():
+    """The env's own loop (``Dubins4DParallel-v0``, fixed clock): the car heads straight for an
+    obstacle with the goal behind it; the driver alone hits it, the filter does not."""
+    args = ([-6.0, 0.0, 0.0, 2.0], [[0.0, 0.0, 2.0]], [8.0, 0.0, 0.5])
+    env = gym.make("Dubins4DParallel-v0", clock="fixed:1")
+    env.reset(seed=0, options={"state": args[0], "obstacles": args[1], "goal": args[2]})
+    while True:
+        *_, te, tr, info = env.step(env.unwrapped.action_space.inactive())
+        if te or tr:
+            break
+    assert info["outcome"] == "collision"
+    g = CBFGuardian()
+    outcome, states = _run_env(g, *args, seconds=40.0)
+    assert outcome != "collision"
+    assert np.min(np.hypot(states[:, 0], states[:, 1])) >= 2.0

@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from guardians.cbf import CBFGuardian, CBFPaperGuardian
+from tests.test_cbf import INFO0
 from guardians.cbf.barrier import HOCBFParams, barrier_rows
 from guardians.cbf.recovery import recovery_control, recovery_done
 from rmm_envs.autonomy import GuardianActionSpace
@@ -56,7 +57,7 @@ def test_low_speed_stop_brakes_without_turning(cls):
     box = {"state": np.array([0.0, 0.0, 0.3, 0.01]), "obstacles": np.array([[30.0, 30.0, 1.0]]),
            "goal": np.array([20.0, 0.0, 0.5]), "sim_time": 0.0}
     g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
-    a = g.act(None, {})
+    a = g.act(None, INFO0)
     assert a["active_ctrl"] == 1 and a["turnrate_ctrl"][0] == 0.0 and a["accel_ctrl"][0] == -0.5
 
 

@@ -97,3 +97,22 @@ def test_maze_decisions_agree_with_direct_osqp(solver, f, g, psi):
         assert a0["active_ctrl"] == a1["active_ctrl"]
         if a0["active_ctrl"]:
             assert abs(float(a0["turnrate_ctrl"][0]) - float(a1["turnrate_ctrl"][0])) <= 1e-4
+
+
+@pytest.mark.parametrize("solver", OTHERS)
+def test_the_filter_of_the_nominal_control_agrees_with_direct_osqp(solver):
+    """The filter's QP (``|u - u_ref|^2``, no CLF rows) through qpsolvers and through OSQP."""
+    rng = np.random.default_rng(4)
+    ref, other = dubins4d("osqp"), dubins4d(solver)
+    solved = 0
+    for _ in range(40):
+        state = np.array([*rng.uniform(-9, 9, 2), rng.uniform(-math.pi, math.pi), rng.uniform(0, 2)])
+        u_ref = rng.uniform([-0.25, -0.5], [0.25, 0.5])
+        z0, G, h = ref.solve(state, u_ref)
+        z1, _, _ = other.solve(state, u_ref)
+        assert (z0 is None) == (z1 is None)
+        if z0 is not None:
+            solved += 1
+            assert np.allclose(z0[:2], z1[:2], atol=1e-3)
+            assert np.all(G[: ref.K + 4] @ z0 <= h[: ref.K + 4] + 1e-5)
+    assert solved >= 30

@@ -17,7 +17,7 @@ def test_driver_only_action_is_read_off_the_action_space():
     env.close()
     assert set(a) == {"active_ctrl", "turnrate_ctrl", "accel_ctrl"} and a["active_ctrl"] == 0
     for k in ("turnrate_ctrl", "accel_ctrl"):
-        assert a[k].dtype == np.float32 and a[k].shape == (1,) and not a[k].any()
+        assert a[k].dtype == np.float64 and a[k].shape == (1,) and not a[k].any()
     other = GuardianActionSpace(("thrust", "roll"), [0.0, -1.0], [2.0, 1.0])
     b = driver_only_action(other, "Other-v0")
     assert b["active_ctrl"] == 0 and set(b) == {"active_ctrl", "thrust", "roll"} and not b["thrust"].any()
@@ -38,14 +38,18 @@ def test_demo_prints_what_the_driver_alone_does(capsys):
         _, _, term, trunc, info = env.step(action)
         if term or trunc:
             break
-    st = info["episode"]
+    st = info["episode_stats"]
     assert line == (f"episode   0 seed     4: {info['outcome']:9s} after {st['n_env_steps']:4d} steps, "
                     f"{st['cum_sim_time']:6.1f} s simulated, final speed {st['final_speed']:.2f} m/s")
 
 
 def test_demo_refuses_an_env_without_a_guardian_action_and_bad_counts(capsys):
-    assert main(["demo", "--env", "Dubins3DMaze-v0", "--episodes", "1"]) == 2
-    assert "env Dubins3DMaze-v0 has no guardian action" in capsys.readouterr().err
+    # --env offers only the envs with a built-in driver: a plain-control env is refused by argparse
+    with pytest.raises(SystemExit) as e:
+        main(["demo", "--env", "Dubins3DMaze-v0", "--episodes", "1"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "invalid choice: 'Dubins3DMaze-v0'" in err and "QuadrotorRoomGuarded-v0" in err
     assert main(["demo", "--episodes", "0"]) == 2
     assert "--episodes must be >= 1, got 0" in capsys.readouterr().err
 

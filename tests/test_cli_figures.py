@@ -33,3 +33,9 @@ def test_figure_commands_are_listed_in_rmm_bench_help():
 
     text = build_parser().format_help()
     assert "rmm-bench riskmap --seed 3" in text and "rmm-bench quadrisk --seed 1" in text
+
+
+def test_an_out_path_without_a_suffix_gets_png_and_the_message_names_the_file_written(tmp_path, capsys):
+    assert main(["riskmap", "--n", "20", "--out", str(tmp_path / "res_fig"), "--dpi", "30"]) == 0
+    assert (tmp_path / "res_fig.png").is_file() and not (tmp_path / "res_fig").exists()
+    assert capsys.readouterr().out.startswith(f"wrote {tmp_path / 'res_fig.png'}: ")

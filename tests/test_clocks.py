@@ -1,5 +1,10 @@
 """The clocks' documented defaults and refusals, and the non-blocking wrapper's argument checks."""
 
+import re
+import subprocess
+import sys
+from pathlib import Path
+
 import gymnasium as gym
 import pytest
 
@@ -11,11 +16,17 @@ from rmm_envs.wrappers import NonBlockingStepping
 
 def test_clock_specs_by_name():
     assert type(make_clock("wall")) is WallClock and type(make_clock(" Wall ")) is WallClock
-    bare = make_clock("fixed")  # no milliseconds: a zero-latency clock
-    assert isinstance(bare, FixedLatencyClock) and bare.elapsed() == 0.0
-    assert make_clock("fixed:2.5").elapsed() == 0.0025
-    with pytest.raises(ValueError, match=r"clock 'fixed:2:3': expected 'fixed:MS'"):
-        make_clock("fixed:2:3")
+    zero = make_clock("fixed:0")
+    assert isinstance(zero, FixedLatencyClock) and zero.elapsed() == 0.0
+    assert make_clock("fixed:2.5").elapsed() == 0.0025 and make_clock(" FIXED:2 ").elapsed() == 0.002
+    # mistyped forms are refused, naming the value and the accepted forms (none runs as 0 ms)
+    for bad in ("fixed", "fixed2", "fixed=2", "fixed:", "fixed:2:3", "fixed:-1", "fixed:nan", "fixed:inf",
+                "fixed:2ms", "wal", "cpu:1", ""):
+        with pytest.raises(ValueError, match=rf"unknown clock {re.escape(repr(bad))}; expected 'wall', 'cpu' or "
+                                             r"'fixed:MS' \(MS a number of milliseconds >= 0, e\.g\. 'fixed:2'\)"):
+            make_clock(bad)
+    with pytest.raises(ValueError, match=r"unknown clock 'fixed2'"):
+        gym.make("Dubins4DCircles-v0", clock="fixed2")
     with pytest.raises(TypeError, match="clock must be a Clock or a string, got int"):
         make_clock(5)
 
@@ -59,3 +70,13 @@ def test_wrapper_accepts_the_papers_range_and_names_what_it_refuses():
         NonBlockingStepping(gym.make("CartPole-v1"))
     with pytest.raises(TypeError, match=r"NoGuardianSpace\.action_space must be a GuardianActionSpace.*got Box"):
         NonBlockingStepping(NoGuardianSpace())
+
+
+@pytest.mark.parametrize("bad", ["fixed2", "fixed=2", "fixed"])
+def test_rmm_bench_refuses_a_mistyped_clock_with_exit_2(bad, tmp_path):
+    exe = Path(sys.executable).parent / "rmm-bench"
+    res = subprocess.run([str(exe), "--agent", "inactive", "--episodes", "1", "--clock", bad, "--out", str(tmp_path)],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 2
+    assert f"--clock {bad}: unknown clock {bad!r}; expected 'wall', 'cpu' or 'fixed:MS'" in res.stderr
+    assert not (tmp_path / "results.db").exists()  # refused before anything ran

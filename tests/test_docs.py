@@ -18,6 +18,7 @@ import gen  # noqa: E402
     ("third_party_guardian.py", []),
     ("new_system.py", []),
     ("rl_guardian.py", ["--timesteps", "2048", "--episodes", "4"]),  # asserts its table's rows and counts
+    ("rl_guardian.py", ["--timesteps", "2048", "--episodes", "2", "--cost-limit", "0.1"]),  # PPO-Lagrangian on info["cost"]
 ])
 def test_example_scripts_run(script, args, tmp_path):
     env = dict(os.environ, MPLBACKEND="Agg")

@@ -94,7 +94,7 @@ def test_goal_reached_gives_plus_one():
     env.reset(options={"state": [0, 0, 0, 2.0], "goal": [0.4, 0, 0.3], "obstacles": [[0, 8, 1]]})
     obs, r, te, tr, info = env.step(act(0, 0))
     assert (r, te, tr, info["outcome"]) == (1.0, True, False, "goal")
-    assert info["episode"]["cum_reward"] == 1.0
+    assert info["episode_stats"]["cum_reward"] == 1.0
 
 
 def test_obstacle_first_then_goal_is_a_collision():
@@ -125,7 +125,7 @@ def test_timeout_truncates():
     for k in range(10):
         obs, r, te, tr, info = env.step(act(0, -0.5))
     assert tr and not te and info["outcome"] == "timeout"
-    ep = info["episode"]
+    ep = info["episode_stats"]
     assert ep["n_env_steps"] == 10 and ep["n_active_ctrl_env_steps"] == 10
     assert ep["active_ctrl_sim_time"] == pytest.approx(1.0) and ep["cum_sim_time"] == pytest.approx(1.0)
     assert ep["final_speed"] == 0.0
@@ -225,6 +225,6 @@ def test_rgb_render():
 def test_fixed_clock_counts_compute_time():
     env = Dubins4DCirclesEnv(clock=FixedLatencyClock(0.002))
     _, _, info = run_episode(env, 0)
-    ep = info["episode"]
+    ep = info["episode_stats"]
     assert ep["cum_compute_time"] == pytest.approx(0.002 * ep["n_env_steps"])
     assert ep["avg_compute_time"] == pytest.approx(0.002)

@@ -291,7 +291,7 @@ def _episode_bits(env, seed):
         obs, r, te, tr, info = env.step({"active_ctrl": 0, "turnrate_ctrl": np.zeros(1), "accel_ctrl": np.zeros(1)})
         trace += [obs.tobytes(), info["state"].tobytes(), info["control"].tobytes()]
         if te or tr:
-            stats = info["episode"]
+            stats = info["episode_stats"]
             return trace, {k: struct.pack("d", v) if isinstance(v, float) else v for k, v in stats.items()}
 
 

@@ -42,8 +42,8 @@ def test_one_row_per_stored_episode_with_every_field(results):
 def test_the_database_file_itself_and_expanded_stats(results):
     df = load_results(results / "results.db", expand_stats=True)
     assert "stats.qp_solves" in df.columns  # cbf reports its QP solves
-    cbf = df[df.agent == "cbf"]
-    assert (cbf["stats.qp_solves"] > 0).all()
+    cbf = df[df.agent == "cbf"]  # a safe nominal control passes without a solve: some episodes need none
+    assert (cbf["stats.qp_solves"] >= 0).all() and cbf["stats.qp_solves"].sum() > 0
     assert df[df.agent == "inactive"]["stats.qp_solves"].isna().all()
 
 
@@ -73,6 +73,11 @@ def _reference_row(episodes, batch_size):
     row = {"episodes": len(episodes), "errors": len(episodes) - len(ok)}
     row["compute_ms"], row["compute_ms_std"] = mean_std([e["compute_time"] / e["steps"] * 1e3 for e in ok if e["steps"]])
     for name in ("goal", "collision", "timeout"):
+        if 0 < len(rated) <= batch_size:  # one batch: the 95% Wilson half-width over the episodes
+            p, n, z = sum(e["outcome"] == name for e in rated) / len(rated), len(rated), 1.959963984540054
+            row[name] = 100 * p
+            row[f"{name}_std"] = 100 * z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+            continue
         batches = [rated[i:i + batch_size] for i in range(0, len(rated), batch_size)]
         rates = [sum(e["outcome"] == name for e in b) / len(b) for b in batches]
         w = [len(b) for b in batches]

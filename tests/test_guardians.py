@@ -50,7 +50,7 @@ def test_every_registered_guardian_conforms_over_an_episode(name):
 def test_inactive_never_takes_control():
     acts, infos = run(make_guardian("inactive"))
     assert all(a["active_ctrl"] == 0 for a in acts)
-    assert infos[-1]["episode"]["n_active_ctrl_env_steps"] == 0
+    assert infos[-1]["episode_stats"]["n_active_ctrl_env_steps"] == 0
 
 
 def test_random_is_seeded_and_half_active():
@@ -86,7 +86,7 @@ def test_brakes_constant_turn_per_episode():
 
 def test_brakes_stops_the_car():
     acts, infos = run(make_guardian("brakes", turn="zero"), seed=5)
-    ep = infos[-1]["episode"]
+    ep = infos[-1]["episode_stats"]
     if infos[-1]["outcome"] == "timeout":
         assert ep["final_speed"] == 0.0
     assert ep["n_active_ctrl_env_steps"] == ep["n_env_steps"] - 0  # blocking env: every step is the guardian's
@@ -102,7 +102,7 @@ def test_callable_adapter_with_dict_and_flat_actions():
     with pytest.raises(ValueError, match="flat action"):
         g.act(np.zeros(17), {})
     acts, infos = run(CallableGuardian(lambda obs: {"active_ctrl": 0, "turnrate_ctrl": [0.0], "accel_ctrl": [0.0]}))
-    assert infos[-1]["episode"]["n_active_ctrl_env_steps"] == 0
+    assert infos[-1]["episode_stats"]["n_active_ctrl_env_steps"] == 0
     with pytest.raises(TypeError, match="callable"):
         CallableGuardian(3)
     with pytest.raises(ValueError, match="active, turnrate_ctrl, accel_ctrl"):
@@ -121,9 +121,16 @@ def test_sb3_style_adapter():
     g = SB3Guardian(Model())
     g.reset(seed=0, **spaces())
     a = g.act(np.zeros(17), {})
-    assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5
+    # the unit box of FlattenGuardianAction: -0.25 -> a quarter of the way up [-0.25, 0.25]
+    assert a["active_ctrl"] == 1 and a["turnrate_ctrl"][0] == -0.0625 and a["accel_ctrl"][0] == -0.25
+    raw = SB3Guardian(Model(), flat="raw")
+    raw.reset(seed=0, **spaces())
+    a = raw.act(np.zeros(17), {})
+    assert a["active_ctrl"] == 1 and a["turnrate_ctrl"][0] == -0.25 and a["accel_ctrl"][0] == -0.5
     with pytest.raises(TypeError, match="predict"):
         SB3Guardian(object())
+    with pytest.raises(ValueError, match=r"flat must be one of \('unit', 'raw'\).*'scaled'"):
+        SB3Guardian(Model(), flat="scaled")
 
 
 def test_module_class_spec_and_entry_point(tmp_path, monkeypatch):
@@ -189,7 +196,7 @@ def test_baselines_build_actions_through_any_action_space():
     assert active and -1.0 <= u[0] <= 1.0 and u[1:].tolist() == [-2.0, 0.5]
     z = BrakesGuardian(turn="zero")
     z.reset(seed=3, action_space=GuardianActionSpace(("t", "s"), [0.1, -1.0], [0.2, 1.0], safe_default=FullBraking()))
-    assert z.act(None, {})["t"][0] == np.float32(0.1)  # zero clipped into the bounds
+    assert z.act(None, {})["t"][0] == 0.1  # zero clipped into the bounds
     i = InactiveGuardian()
     i.reset(seed=0, action_space=space)
     assert i.act(None, {}) == {**space.inactive(), "active_ctrl": 0}
@@ -206,7 +213,7 @@ def test_random_draws_exactly_as_before_on_dubins4d():
         a = g.act(None, {})
         assert a["active_ctrl"] == int(flag)
         if flag:
-            assert (a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (np.float32(u1), np.float32(u2))
+            assert (a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (u1, u2)  # float64: unrounded
 
 
 @pytest.mark.parametrize("cls", [InactiveGuardian, RandomGuardian, BrakesGuardian])

@@ -220,11 +220,11 @@ def test_heuristic_bounds_come_from_the_action_space():
     narrow = GuardianActionSpace(CONTROLS, [-0.1, -0.3], [0.125, 0.5])
     g.reset(seed=0, observation_space=SPACES["observation_space"], action_space=narrow)
     a = g.act(obs_with(1.0, left=8.0, right=2.0), {})
-    assert (a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (np.float32(0.125), np.float32(-0.3))
+    assert (a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (0.125, -0.3)
     override = LRMMGuardian(forward_ray_model(), action="heuristic", threshold=0.85, u1_max=0.2, u2_min=-0.4)
     override.reset(seed=0, **SPACES)
     a = override.act(obs_with(1.0, left=8.0, right=2.0), {})
-    assert (a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (np.float32(0.2), np.float32(-0.4))
+    assert (a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (0.2, -0.4)
 
 
 def test_lrmm_refuses_at_reset_spaces_that_lack_what_it_needs():

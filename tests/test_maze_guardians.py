@@ -99,6 +99,7 @@ def test_turning_away_always_satisfies_the_row_outside_the_barrier(y, psi):
 
 # ------------------------------------------------------------------ cbf: the guardian
 def test_cbf_on_the_maze_turns_only_when_holding_the_heading_is_unsafe():
+    """The default, ``reference="hold"``: it keeps the heading (u = 0) where that is safe."""
     env = Dubins3DMazeGuardedEnv()
     g = make_guardian("cbf", env_id="Dubins3DMazeParallel-v0")
     obs, info = reset_at(env, g, [125.0, 125.0, 0.0])
@@ -116,6 +117,27 @@ def test_cbf_on_the_maze_turns_only_when_holding_the_heading_is_unsafe():
     a = g.act(obs, info)
     assert a["active_ctrl"] == 1 and g.stats()["qp_fallbacks"] == 0  # a QP turn, not the fallback
     assert float(a["turnrate_ctrl"][0]) == pytest.approx((B - 10 * math.sin(psi)) / (50 * math.sin(psi)), abs=1e-5)
+
+
+def test_cbf_on_the_maze_filters_the_drivers_turn_rate():
+    """``reference="nominal"`` filters ``info["nominal_control"]``: a nominal turn toward the upper wall
+    (surface y = 181.25) is lowered exactly onto the barrier row at the pose predicted under
+    it one lap ahead, ``u <= (B - 10 sin psi) / (50 sin psi)`` (the row derived above); a turn
+    away from the wall passes to the driver untouched."""
+    env = Dubins3DMazeGuardedEnv()
+    g = make_guardian("cbf", env_id="Dubins3DMazeParallel-v0", maze={"reference": "nominal"})
+    obs, info = reset_at(env, g, [300.0, 150.0, 1.0])
+    x, y, psi = g._maze.predict([300.0, 150.0, 1.0], 0.2, 0.1)  # the driver turns left at 0.2 during the lap
+    B = (181.25 - y - 2.0) - 50.0 * (1 - math.cos(psi))
+    a = g.act(obs, {**info, "nominal_control": np.array([0.2])})
+    assert a["active_ctrl"] == 1
+    assert float(a["turnrate_ctrl"][0]) == pytest.approx((B - 10 * math.sin(psi)) / (50 * math.sin(psi)), abs=1e-5)
+    obs, info = reset_at(env, g, [300.0, 150.0, 1.0])
+    assert g.act(obs, {**info, "nominal_control": np.array([-0.2])})["active_ctrl"] == 0  # turning away: safe
+    with pytest.raises(ValueError, match=r"\(maze\) filters the driver's control, info\['nominal_control'\]"):
+        g.act(obs, {})
+    with pytest.raises(ValueError, match="reference must be one of"):
+        MazeCBFGuardian(reference="zero")
 
 
 def test_cbf_and_hj_avoid_a_collision_the_driver_makes():

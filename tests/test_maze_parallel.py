@@ -20,7 +20,7 @@ from rmm_envs.worlds.maze_kernels import dubins_path, maze_path_hit, maze_rays
 from rmm_envs.worlds.mazes import Maze, generate_maze
 
 EPISODE_KEYS = {"outcome", "n_env_steps", "n_active_ctrl_env_steps", "active_ctrl_sim_time", "cum_sim_time",
-                "cum_compute_time", "avg_compute_time", "cum_reward", "final_speed"}
+                "cum_compute_time", "avg_compute_time", "cum_reward", "cum_cost", "final_speed"}
 
 
 def corridor() -> Maze:
@@ -73,9 +73,9 @@ def test_driver_drives_straight_to_the_goal_hand_counted():
     obs, r, info = run(env, lambda o: env.action_space.inactive(), seed=0,
                        options={"maze": corridor(), "state": [125.0, 125.0, 0.0], "goal_cell": 2})
     # 1 px per step along y = 125: the path's end reaches x = 345, 30 px from the goal, on step 220
-    assert info["outcome"] == "goal" and r == 1.0 and info["episode"]["n_env_steps"] == 220
-    assert info["episode"]["cum_sim_time"] == pytest.approx(22.0) and info["episode"]["cum_reward"] == 1.0
-    assert info["episode"]["n_active_ctrl_env_steps"] == 0 and info["episode"]["final_speed"] == 10.0
+    assert info["outcome"] == "goal" and r == 1.0 and info["episode_stats"]["n_env_steps"] == 220
+    assert info["episode_stats"]["cum_sim_time"] == pytest.approx(22.0) and info["episode_stats"]["cum_reward"] == 1.0
+    assert info["episode_stats"]["n_active_ctrl_env_steps"] == 0 and info["episode_stats"]["final_speed"] == 10.0
 
 
 def test_driver_turns_toward_its_path_and_guardian_overrides():
@@ -92,8 +92,8 @@ def test_collision_hand_counted():
     _, r, info = run(env, lambda o: env.action_space.active([0.0]), seed=0,
                      options={"maze": corridor(), "state": [125.0, 125.0, math.pi / 2], "goal_cell": 2})
     # straight up from y = 125 at 1 px per step: the wall's surface y = 181.25 is crossed on step 57
-    assert info["outcome"] == "collision" and r == -1.0 and info["episode"]["n_env_steps"] == 57
-    assert info["episode"]["n_active_ctrl_env_steps"] == 57 and info["episode"]["active_ctrl_sim_time"] == pytest.approx(5.7)
+    assert info["outcome"] == "collision" and r == -1.0 and info["episode_stats"]["n_env_steps"] == 57
+    assert info["episode_stats"]["n_active_ctrl_env_steps"] == 57 and info["episode_stats"]["active_ctrl_sim_time"] == pytest.approx(5.7)
     with pytest.raises(RuntimeError, match="reset"):
         env.step(env.action_space.inactive())
 
@@ -118,8 +118,8 @@ def test_check_env_spaces_and_last_step_info(env_id):
     assert lay.names == ("rays", "goal_offset", "heading") and lay.size == 11
     assert lay.ray_angles == tuple(k * math.pi / 4 for k in range(8))
     _, _, info = run(env, lambda o: space.inactive(), seed=3)
-    assert set(info["episode"]) == EPISODE_KEYS and info["outcome"] in ("goal", "collision", "timeout")
-    assert info["episode"]["outcome"] == info["outcome"]
+    assert set(info["episode_stats"]) == EPISODE_KEYS and info["outcome"] in ("goal", "collision", "timeout")
+    assert info["episode_stats"]["outcome"] == info["outcome"]
 
 
 def test_observation_fields_match_the_maze_env_and_the_pose():
@@ -155,7 +155,7 @@ def test_same_seed_same_episode():
     a, b = (gym.make("Dubins3DMazeParallel-v0", clock="fixed:1") for _ in range(2))
     ta, ra, ia = run(a, lambda o: a.action_space.inactive(), seed=21)
     tb, rb, ib = run(b, lambda o: b.action_space.inactive(), seed=21)
-    assert np.array_equal(ta, tb) and ia["episode"] == ib["episode"]
+    assert np.array_equal(ta, tb) and ia["episode_stats"] == ib["episode_stats"]
     o1, _ = a.reset(seed=22)
     o2, _ = a.reset(seed=23)
     assert not np.array_equal(o1, o2)

@@ -52,7 +52,8 @@ def test_empty_inputs_give_nan_not_zero():
     a = aggregate([])
     assert a.keys() == aggregate(RUN).keys()  # the same statistics as any run
     assert (a["episodes"], a["errors"], a["qp_fallbacks"], a["nan_states"]) == (0, 0, 0, 0)
-    rest = [v for k, v in a.items() if k not in ("episodes", "errors", "qp_fallbacks", "nan_states")]
+    assert a["rate_spread"] == "batches"
+    rest = [v for k, v in a.items() if k not in ("episodes", "errors", "qp_fallbacks", "nan_states", "rate_spread")]
     assert all(math.isnan(x) for v in rest for x in (v if isinstance(v, tuple) else (v,)))
     assert all(map(math.isnan, weighted_mean_std([], [])))
     assert all(map(math.isnan, weighted_mean_std([1.0, 2.0], [0, 0])))
@@ -122,3 +123,65 @@ def test_episodes_with_equal_numbers_keep_their_stored_order():
     assert a["collision"] == pytest.approx((100 / 3, 100 * math.sqrt(1 / 18)), rel=1e-12)
     row = table_i(pd.DataFrame.from_records([dict(r, agent="x") for r in rows]), batch_size=3).loc["x"]
     assert (row["goal"], row["goal_std"]) == pytest.approx(a["goal"], rel=1e-12)
+
+
+def test_fewer_than_two_batches_give_the_wilson_interval_not_zero():
+    """One batch (64 episodes, batch size 64): the std over batches would be 0; the spread is
+    then the 95% Wilson half-width, by hand for 35 of 64 (p = 0.546875, z = 1.959964):
+    z sqrt(p (1-p) / 64 + z^2 / 16384) / (1 + z^2 / 64) = 0.125597 / 1.060023 = 0.118485"""
+    from benchmarks.bench.metrics import rate_spread, wilson_half_width
+
+    flags = [1] * 35 + [0] * 29
+    m, s = batch_rate(flags, 64)
+    z = 1.959963984540054
+    p = 35 / 64
+    assert m == p and s == pytest.approx(z * math.sqrt(p * (1 - p) / 64 + z * z / 16384) / (1 + z * z / 64), rel=1e-12)
+    assert s == pytest.approx(0.118485, abs=1e-6)
+    assert wilson_half_width(0.0, 10) > 0  # not 0 at a rate of 0, unlike p (1 - p)
+    assert math.isnan(wilson_half_width(0.5, 0))
+    assert rate_spread(64, 64) == "wilson95" and rate_spread(65, 64) == "batches"
+    m2, s2 = batch_rate(flags + [1], 64)  # two batches (64 and 1): the batch std again
+    assert s2 == pytest.approx(weighted_mean_std([35 / 64, 1.0], [64, 1])[1])
+    agg = aggregate([{"episode": i, "outcome": "goal" if f else "collision", "steps": 10, "compute_time": 0.01,
+                      "sim_time": 1.0, "active_sim_time": 0.0} for i, f in enumerate(flags)], batch_size=64)
+    assert agg["rate_spread"] == "wilson95" and agg["goal"] == pytest.approx((100 * p, 100 * s))
+    centre = (p + z * z / 128) / (1 + z * z / 64)  # the interval is centred here, not on p
+    assert agg["goal_ci"] == pytest.approx((100 * (centre - s), 100 * (centre + s)))
+    from benchmarks.bench.metrics import wilson_interval
+
+    assert wilson_interval(1.0, 2)[1] == 1.0 and 0.0 < wilson_interval(1.0, 2)[0] < 0.5  # within [0, 1]
+
+
+def test_the_table_says_which_spread_and_shows_measured_decision_time_under_a_fixed_clock():
+    from benchmarks.bench.report import format_tables
+
+    eps = [{"episode": i, "outcome": "goal" if i % 3 else "collision", "steps": 10, "compute_time": 0.01,
+            "decision_mean": 0.0004 * (1 + i % 2), "sim_time": 1.0, "active_sim_time": 0.0} for i in range(20)]
+    row = {"agent": "a", "obs": "none", "n_obst": 5, **aggregate(eps, batch_size=16)}
+    md = format_tables([row], batch_size=16, measured=True)["md"]
+    header, _, line, _, note = md.splitlines()
+    assert "| Policy compute time [ms] | Measured decision time [ms] |" in header
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert cells[4] == "1.00 ± 0.00" and cells[5] == "0.60 ± 0.20"  # 0.4 and 0.8 ms, alternately
+    assert note == "Rates: mean ± std over batches of 16 episodes (the paper's)."  # 20 > 16: two batches
+    row1 = {"agent": "a", "obs": "none", "n_obst": 5, **aggregate(eps[:16], batch_size=16)}
+    md1 = format_tables([row1], batch_size=16)["md"]
+    assert "Measured" not in md1.splitlines()[0]
+    cells1 = [c.strip() for c in md1.splitlines()[2].strip("|").split("|")]
+    lo, hi = row1["goal_ci"]
+    assert cells1[5] == f"{row1['goal'][0]:.1f} [{lo:.1f}, {hi:.1f}]†" and cells1[5].startswith("62.5 [")
+    assert md1.splitlines()[2].count("†") == 3  # success, collision and timeout
+    assert md1.splitlines()[-1].endswith("†: fewer than two batches, so the rate is followed by its 95% Wilson "
+                                         "score interval over the episodes, [low, high].")
+
+
+def test_table_i_names_the_wilson_interval_ends():
+    import pandas as pd
+
+    eps = [{"agent": "a", "episode": i, "outcome": "goal" if i % 2 else "collision", "steps": 10, "compute_time": 0.01,
+            "sim_time": 1.0, "active_sim_time": 0.0} for i in range(8)]
+    t = table_i(pd.DataFrame.from_records(eps), batch_size=64)
+    row = t.loc["a"]
+    assert row["rate_spread"] == "wilson95" and "goal_ci_std" not in t.columns
+    assert (row["goal_ci_low"], row["goal_ci_high"]) == pytest.approx(aggregate(eps, 64)["goal_ci"])
+    assert row["goal_ci_low"] < 50.0 < row["goal_ci_high"]

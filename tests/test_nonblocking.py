@@ -50,7 +50,7 @@ def test_thinking_time_is_charged_to_the_world_and_the_stats():
         _, _, te, tr, info = env.step(act(0, 0, active=0))
         n += 1
         done = te or tr
-    ep = info["episode"]
+    ep = info["episode_stats"]
     assert ep["n_env_steps"] == n == 10  # 0.5 s per step
     assert ep["cum_compute_time"] == pytest.approx(0.4)
     assert ep["cum_sim_time"] == pytest.approx(5.0)
@@ -70,7 +70,7 @@ def test_fixed_clock_episodes_are_reproducible():
     a, ia = run()
     b, ib = run()
     np.testing.assert_array_equal(a, b)
-    assert ia["episode"] == ib["episode"]
+    assert ia["episode_stats"] == ib["episode_stats"]
     np.testing.assert_allclose(np.diff(a[:, 0].astype(float)), 0.003 * 10 + 0.1, atol=1e-5)
 
 

@@ -188,7 +188,7 @@ def test_check_env_and_last_step_info(env_id):
             break
     assert info["outcome"] in ("goal", "collision", "timeout")
     assert reward == {"goal": 1.0, "collision": -1.0, "timeout": 0.0}[info["outcome"]]
-    assert info["episode"]["outcome"] == info["outcome"] and info["episode"]["n_env_steps"] > 0
+    assert info["episode_stats"]["outcome"] == info["outcome"] and info["episode_stats"]["n_env_steps"] > 0
     e.close()
 
 

@@ -28,9 +28,10 @@ def _common(p: argparse.ArgumentParser, default_agent: str) -> None:
     p.add_argument("--agent", default=default_agent, help="guardian name, comma list, 'all' (defaults), 'paper' (the paper's rules), or module:Class (default: %(default)s)")
     p.add_argument("--episodes", type=int, default=2048, help="episodes per agent (default: %(default)s)")
     p.add_argument("--env", default=DEFAULT_ENV,
-                   help="a registered env id offering the parallel-autonomy contract: Dubins4DParallel-v0, Dubins3DMazeParallel-v0 or "
-                        "QuadrotorRoomParallel-v0 (non-blocking), Dubins4DCircles-v0, Dubins3DMazeGuarded-v0 or QuadrotorRoomGuarded-v0 "
-                        "(blocking) in this package (default: %(default)s)")
+                   help="a registered env id offering the parallel-autonomy contract: Dubins4DParallel-v0, Dubins3DMazeParallel-v0, "
+                        "QuadrotorRoomParallel-v0 or Dubins4DMapParallel-v0 (non-blocking), Dubins4DCircles-v0, "
+                        "Dubins3DMazeGuarded-v0, QuadrotorRoomGuarded-v0 or Dubins4DMap-v0 (blocking) in this package, or "
+                        "module:Id for an env that module registers (default: %(default)s)")
     p.add_argument("--time-accel", type=float, default=NON_BLOCKING_DEFAULTS["time_accel"],
                    help="sim seconds per clock second, for a non-blocking env (default: %(default)s)")
     p.add_argument("--base-step", type=float, default=NON_BLOCKING_DEFAULTS["base_step"],

@@ -9,7 +9,7 @@ through (the Dubins4D envs' module docstring describes it in full):
   ``active_ctrl``, ``Discrete(2)``: 0 lets the built-in driver control the step, 1 applies the
   guardian's control, and the control fields);
 * on the step that ends an episode, ``info["outcome"]`` (``goal``, ``collision``,
-  ``timeout``) and ``info["episode"]``, the statistics the store keeps (see
+  ``timeout``) and ``info["episode_stats"]``, the statistics the store keeps (see
   :data:`benchmarks.bench.runner.EPISODE_STATISTICS`).
 
 Of this command's env options, the env is given those its constructor takes: ``clock``
@@ -75,6 +75,18 @@ def _env_creator(env_id: str):
 
     import rmm_envs
 
+    module, _, name = env_id.rpartition(":")
+    if module:  # "module:Id", as gym.make takes it: the module registers the env on import
+        import importlib
+
+        try:
+            importlib.import_module(module)
+        except ImportError as e:
+            raise ValueError(f"--env {env_id!r}: cannot import module {module!r} (looked in the current directory "
+                             f"first, then the installed packages): {e}") from None
+        if name not in gym.registry:
+            raise ValueError(f"--env {env_id!r}: importing {module!r} registered no env {name!r}")
+        env_id = name
     if env_id not in gym.registry:
         raise ValueError(f"--env {env_id!r} is not a registered Gymnasium env (this package registers {', '.join(rmm_envs.ENV_IDS)}; "
                          "another package's env is registered by importing it, e.g. from a guardian module)")

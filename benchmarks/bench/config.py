@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -34,6 +35,15 @@ from guardians.registry import accepts_argument  # noqa: F401  (re-exported: the
 __all__ = ["AgentRun", "BenchConfig", "EpisodeResult", "EpisodeTask", "InputChanged", "accepts_argument", "changed_inputs",
            "file_sha256",
            "input_digests", "run_key"]
+
+
+def import_from(paths) -> None:
+    """Put ``paths`` first on ``sys.path`` (in order, each once), as ``python -m`` puts the
+    current directory: ``module:Class`` agents and ``module:Id`` envs import from there."""
+    for path in reversed(tuple(paths)):
+        if path in sys.path:
+            sys.path.remove(path)
+        sys.path.insert(0, path)
 
 
 def run_key(config: dict) -> str:
@@ -140,6 +150,10 @@ class EpisodeTask:
     episode: int
     seed: int
     threads: int | None = None
+    #: folders the worker puts first on ``sys.path`` before importing the agent and the env (the
+    #: directory ``rmm-bench`` ran in, so ``module:Class`` and ``module:Id`` import from there in
+    #: every worker, as ``python -m`` would; not part of the run's identity)
+    import_path: tuple[str, ...] = ()
 
     @property
     def agent(self) -> str:
@@ -177,6 +191,7 @@ class EpisodeResult:
     wall_time: float | None = None
     finished: float | None = None
     error_kind: str | None = None  # guardian / timeout / lost_worker (None unless outcome is error)
+    cost: float | None = None  # the episode's summed info["cost"] (None: the env reports none)
 
     def as_row(self) -> dict:
         return dataclasses.asdict(self)

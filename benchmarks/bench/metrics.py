@@ -10,7 +10,11 @@
   :data:`benchmarks.bench.store.RETRIED_ERRORS`) are left out, and the report marks the run
   incomplete.  Episodes are split in order into consecutive batches of ``batch_size`` (64);
   the rate per batch; mean and population std across batches weighted by batch size (the
-  paper's +-);
+  paper's +-).  With fewer than two batches that std is 0 whatever the episodes say, so the
+  spread is then the half-width of the 95% Wilson score interval of the rate over the
+  episodes (:func:`wilson_half_width`; ``rate_spread`` says which: ``"batches"`` or
+  ``"wilson95"``), and ``<outcome>_ci`` holds the interval itself, in % (it is not centred on
+  the rate: the table prints it);
 * intervention rate, %: per episode ``active_sim_time / sim_time``; mean and population std
   across the episodes without an error.
 
@@ -26,7 +30,7 @@ import numpy as np
 
 from benchmarks.bench.store import RETRIED_ERRORS
 
-__all__ = ["aggregate", "batch_rate", "table_i", "weighted_mean_std"]
+__all__ = ["aggregate", "batch_rate", "rate_spread", "table_i", "weighted_mean_std", "wilson_half_width", "wilson_interval"]
 
 _NAN2 = (float("nan"), float("nan"))
 _OUTCOMES = ("goal", "collision", "timeout")
@@ -43,13 +47,42 @@ def weighted_mean_std(values, weights) -> tuple[float, float]:
     return m, float(np.sqrt(np.sum(w * (v - m) ** 2) / np.sum(w)))
 
 
+def wilson_half_width(p: float, n: int, z: float = 1.959963984540054) -> float:
+    """Half the width of the Wilson score interval (95% for the default ``z``) of a rate ``p``
+    observed over ``n`` episodes: ``z sqrt(p (1 - p) / n + z^2 / (4 n^2)) / (1 + z^2 / n)``.
+    Unlike the normal approximation it is not 0 at ``p = 0`` or ``1``."""
+    if n <= 0:
+        return float("nan")
+    return float(z * np.sqrt(p * (1.0 - p) / n + z * z / (4.0 * n * n)) / (1.0 + z * z / n))
+
+
+def wilson_interval(p: float, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """The Wilson score interval ``(low, high)`` of a rate ``p`` over ``n`` episodes: centred on
+    ``(p + z^2 / (2 n)) / (1 + z^2 / n)``, :func:`wilson_half_width` either side."""
+    if n <= 0:
+        return _NAN2
+    centre = (p + z * z / (2.0 * n)) / (1.0 + z * z / n)
+    w = wilson_half_width(p, n, z)
+    return max(0.0, centre - w), min(1.0, centre + w)
+
+
+def rate_spread(n: int, batch_size: int = 64) -> str:
+    """Which spread :func:`batch_rate` gives for ``n`` episodes: ``"batches"`` (std over two or
+    more batches) or ``"wilson95"`` (fewer: the Wilson half-width over episodes)."""
+    return "batches" if n > batch_size else "wilson95"
+
+
 def batch_rate(flags, batch_size: int = 64) -> tuple[float, float]:
-    """Mean and std (weighted by batch size) of the per-batch rate of ``flags`` (in order)."""
+    """Mean and spread of the rate of ``flags`` (in order): the std (weighted by batch size)
+    of the per-batch rate over two or more batches, else :func:`wilson_half_width`."""
     import pandas as pd
 
     f = pd.Series(np.asarray(flags, float))
     if f.empty:
         return _NAN2
+    if rate_spread(f.size, batch_size) == "wilson95":
+        p = float(f.mean())
+        return p, wilson_half_width(p, f.size)
     per_batch = f.groupby(np.arange(f.size) // batch_size).agg(["mean", "size"])
     return weighted_mean_std(per_batch["mean"], per_batch["size"])
 
@@ -75,10 +108,13 @@ def _aggregate_frame(df, batch_size: int) -> dict:
     stepped = ok[ok["steps"] != 0]
     out["compute_ms"] = _mean_std(stepped["compute_time"] / stepped["steps"] * 1e3)
     out["decision_ms"] = _mean_std(ok["decision_mean"].dropna().astype(float) * 1e3)
+    out["rate_spread"] = rate_spread(len(resulted), batch_size)  # the rates run over these episodes
     for name in _OUTCOMES:
         flags = (resulted["outcome"] == name).to_numpy(float)
         m, s = batch_rate(flags, batch_size)
         out[name] = (100 * m, 100 * s)
+        lo, hi = wilson_interval(m, flags.size) if out["rate_spread"] == "wilson95" else _NAN2
+        out[f"{name}_ci"] = (100 * lo, 100 * hi)
         out[f"total_{name}"] = 100 * float(flags.mean()) if flags.size else float("nan")
     timed = ok[ok["sim_time"] != 0]
     m, s = _mean_std(timed["active_sim_time"] / timed["sim_time"])
@@ -100,7 +136,7 @@ def aggregate(episodes: list[dict], batch_size: int = 64) -> dict:
         return {"episodes": 0, "errors": 0, "error_rate": float("nan"), "compute_ms": _NAN2, "decision_ms": _NAN2,
                 **{k: _NAN2 for k in _OUTCOMES}, **{f"total_{k}": float("nan") for k in _OUTCOMES},
                 "intervention": _NAN2, "steps": _NAN2, "precompute_s": _NAN2, "qp_fallbacks": 0, "nan_states": 0,
-                "collision_speed": _NAN2}
+                "collision_speed": _NAN2, "rate_spread": "batches", **{f"{k}_ci": _NAN2 for k in _OUTCOMES}}
     return _aggregate_frame(pd.DataFrame.from_records(episodes), batch_size)
 
 
@@ -109,7 +145,8 @@ def table_i(df, batch_size: int = 64):
     :func:`benchmarks.load_results`): one row per agent, in order of first appearance, with
     columns ``episodes``, ``errors``, ``<stat>`` and ``<stat>_std`` for each statistic of
     :func:`aggregate` that has a spread (``compute_ms``, ``goal``, ``collision``, ``timeout``,
-    ``intervention``, ...), and the totals and counters as they are."""
+    ``intervention``, ...), ``<outcome>_ci_low``/``_high`` (the Wilson interval, NaN over two or
+    more batches), and the totals, counters and ``rate_spread`` as they are."""
     import pandas as pd
 
     rows = {}
@@ -117,7 +154,9 @@ def table_i(df, batch_size: int = 64):
         agg = _aggregate_frame(group, batch_size)
         row = {}
         for k, v in agg.items():
-            if isinstance(v, tuple):
+            if isinstance(v, tuple) and k.endswith("_ci"):  # a Wilson interval: its two ends
+                row[f"{k}_low"], row[f"{k}_high"] = v
+            elif isinstance(v, tuple):
                 row[k], row[f"{k}_std"] = v
             else:
                 row[k] = v

@@ -44,27 +44,63 @@ def _pm(v, digits=1) -> str:
     return f"{m:.{digits}f} ± {s:.{digits}f}"
 
 
-def format_tables(rows: list[dict]) -> dict[str, str]:
-    """``rows``: dicts with agent, obs, n_obst, episodes, errors and the aggregate stats."""
+#: The mark on rates whose spread is the Wilson interval (fewer than two batches).
+WILSON_MARK = "†"
+
+
+def _digits(ms: float) -> int:
+    return 3 if ms < 0.1 else 2 if ms < 10 else 1
+
+
+def spread_note(rows: list[dict], batch_size: int) -> str:
+    """What the ± of the rates means in these rows (a line under the table)."""
+    note = f"Rates: mean ± std over batches of {batch_size} episodes (the paper's)"
+    if any(r.get("rate_spread") == "wilson95" for r in rows):
+        note += (f"; {WILSON_MARK}: fewer than two batches, so the rate is followed by its 95% Wilson score "
+                 "interval over the episodes, [low, high]")
+    return note + "."
+
+
+def _rate(r: dict, key: str) -> str:
+    """A rate's cell: ``mean ± std`` over batches, or ``mean [low, high]†`` (the Wilson interval)."""
+    ci = r.get(f"{key}_ci")
+    if r.get("rate_spread") != "wilson95" or ci is None or math.isnan(ci[0]) or math.isnan(r[key][0]):
+        return _pm(r[key])
+    return f"{r[key][0]:.1f} [{ci[0]:.1f}, {ci[1]:.1f}]{WILSON_MARK}"
+
+
+def format_tables(rows: list[dict], batch_size: int = 64, measured: bool = False) -> dict[str, str]:
+    """``rows``: dicts with agent, obs, n_obst, episodes, errors and the aggregate stats.
+    ``measured``: add the guardian's measured decision time (``decision_ms``) beside the
+    compute time the clock charged (under a fixed clock the two differ)."""
     header = ["Agent", "Observation", "Obstacles", "Episodes"] + [c[1] for c in COLUMNS] + ["Errors", "QP fallbacks"]
+    if measured:
+        header.insert(5, "Measured decision time [ms]")
     body = []
     for r in rows:
-        digits = 3 if r["compute_ms"][0] < 0.1 else 2 if r["compute_ms"][0] < 10 else 1
         n_obst = "-" if isinstance(r["n_obst"], int) and r["n_obst"] < 0 else str(r["n_obst"])  # -1: the env counts none
-        body.append([r["agent"], r["obs"], n_obst, str(r["episodes"]), _pm(r["compute_ms"], digits)]
-                    + [_pm(r[k]) for k, _ in COLUMNS[1:]] + [str(r["errors"]), str(r["qp_fallbacks"])])
+        cells = [r["agent"], r["obs"], n_obst, str(r["episodes"]), _pm(r["compute_ms"], _digits(r["compute_ms"][0]))]
+        if measured:
+            dec = r.get("decision_ms", (float("nan"), float("nan")))
+            cells.append(_pm(dec, _digits(dec[0])) if not math.isnan(dec[0]) else "n/a")
+        cells += [_rate(r, k) for k, _ in COLUMNS[1:]]
+        body.append(cells + [str(r["errors"]), str(r["qp_fallbacks"])])
     md = "| " + " | ".join(header) + " |\n|" + "|".join("---" for _ in header) + "|\n"
     md += "".join("| " + " | ".join(b) + " |\n" for b in body)
+    md += "\n" + spread_note(rows, batch_size) + "\n"
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["agent", "observation", "obstacles", "episodes", "compute_ms_mean", "compute_ms_std", "success_mean", "success_std",
                 "collision_mean", "collision_std", "timeout_mean", "timeout_std", "intervention_mean", "intervention_std",
-                "errors", "qp_fallbacks", "precompute_s_mean"])
+                "errors", "qp_fallbacks", "precompute_s_mean", "decision_ms_mean", "decision_ms_std", "rate_spread"])
     for r in rows:
         w.writerow([r["agent"], r["obs"], r["n_obst"], r["episodes"], *r["compute_ms"], *r["goal"], *r["collision"], *r["timeout"],
-                    *r["intervention"], r["errors"], r["qp_fallbacks"], r["precompute_s"][0]])
-    tex = "\\begin{tabular}{llcrrrrrr}\n" + " & ".join(h.replace("%", "\\%") for h in header[:-2]) + " \\\\ \\hline\n"
-    tex += "".join(" & ".join(c.replace("±", "$\\pm$") for c in b[:-2]) + " \\\\\n" for b in body) + "\\end{tabular}\n"
+                    *r["intervention"], r["errors"], r["qp_fallbacks"], r["precompute_s"][0],
+                    *r.get("decision_ms", (float("nan"), float("nan"))), r.get("rate_spread", "batches")])
+    cols = "llcr" + "r" * (len(header) - 6)
+    tex = f"\\begin{{tabular}}{{{cols}}}\n" + " & ".join(h.replace("%", "\\%") for h in header[:-2]) + " \\\\ \\hline\n"
+    tex += "".join(" & ".join(c.replace("±", "$\\pm$").replace(WILSON_MARK, "$^\\dagger$") for c in b[:-2]) + " \\\\\n"
+                   for b in body) + "\\end{tabular}\n"
     return {"md": md, "csv": buf.getvalue(), "tex": tex}
 
 
@@ -77,7 +113,10 @@ def _plt():
     return plt
 
 
-def plot_outcomes(rows: list[dict], path: Path) -> Path:
+def plot_outcomes(rows: list[dict], path: Path, batch_size: int = 64, measured: bool = False) -> Path:
+    """Outcome rates per agent, and collisions against compute time: the time the clock charged,
+    or with ``measured`` (a fixed clock, which charges every agent the same) the guardian's
+    measured decision time."""
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     names = [r["agent"] for r in rows]
@@ -87,17 +126,26 @@ def plot_outcomes(rows: list[dict], path: Path) -> Path:
         axes[0].bar([j + (i - 1) * width for j in x], [r[key][0] for r in rows], width,
                     yerr=[0 if math.isnan(r[key][1]) else r[key][1] for r in rows], color=colour, capsize=3, label=key)
     axes[0].set_xticks(list(x), names)
-    axes[0].set_ylabel("% of episodes (mean ± std over batches of 64)")
+    wilson = any(r.get("rate_spread") == "wilson95" for r in rows)
+    axes[0].set_ylabel(f"% of episodes (mean ± std over batches of {batch_size}"
+                       + ("; 95% Wilson where < 2 batches)" if wilson else ")"))
     axes[0].legend()
     axes[0].set_title("Outcomes")
-    for r in rows:
-        axes[1].errorbar(max(r["compute_ms"][0], 1e-4), r["collision"][0], yerr=r["collision"][1], fmt="o", capsize=3)
-        axes[1].annotate(r["agent"], (max(r["compute_ms"][0], 1e-4), r["collision"][0]), textcoords="offset points", xytext=(5, 5))
+    key = "decision_ms" if measured else "compute_ms"
+    for i, r in enumerate(rows):
+        x_ms = r.get(key, (float("nan"),))[0]
+        if math.isnan(x_ms):
+            continue
+        axes[1].errorbar(max(x_ms, 1e-4), r["collision"][0], yerr=r["collision"][1], fmt="o", capsize=3)
+        # labels of nearby points are staggered vertically so that they do not overlap
+        axes[1].annotate(r["agent"], (max(x_ms, 1e-4), r["collision"][0]), textcoords="offset points",
+                         xytext=(5, 5 + 11 * (i % 3)))
     axes[1].set_xscale("log")
     from matplotlib.ticker import NullFormatter
 
     axes[1].xaxis.set_minor_formatter(NullFormatter())  # minor labels collide on short decades
-    axes[1].set_xlabel("policy compute time per step [ms] (log)")
+    axes[1].set_xlabel("measured decision time [ms] (log; the fixed clock charged every agent the same)"
+                       if measured else "policy compute time per step [ms] (log)")
     axes[1].set_ylabel("collision rate [% episodes]")
     axes[1].set_title("Compute time vs collisions")
     fig.tight_layout()
@@ -230,7 +278,8 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
             for agent, key in inv["run_keys"].items():
                 run_keys[agent], episodes[agent] = key, inv["episodes"]
         rows = table_rows(store, run_keys, episodes, batch_size)
-        tables = format_tables(rows)
+        measured = str(group[-1]["args"].get("clock", "")).strip().lower().startswith("fixed")
+        tables = format_tables(rows, batch_size, measured)
         args = group[-1]["args"]
         label = f"[{number}] " if mixed else ""
         md.append(f"{label}{_header(args)}\n\n{tables['md']}" if mixed else tables["md"])
@@ -250,7 +299,8 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
         (out / "table_I.md").write_text("\n".join(md))
         (out / "table_I.csv").write_text(_merge_csv(csv_parts) if mixed else csv_parts[0][1])
         (out / "table_I.tex").write_text("\n".join(tex))
-        plot_outcomes(figure_rows, out / "outcomes.png")
+        plot_outcomes(figure_rows, out / "outcomes.png", batch_size,
+                      any(str(g[-1]["args"].get("clock", "")).strip().lower().startswith("fixed") for g in groups.values()))
     except OSError as e:  # a full disk names no file: name the directory (the CLI prints one line)
         if e.filename is None:
             raise OSError(e.errno, e.strerror or str(e), str(out)) from None

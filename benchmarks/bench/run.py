@@ -65,7 +65,8 @@ def plan_tasks(store: ResultsStore, runs: dict[str, AgentRun], episodes: int, wo
         key = run.key
         threads = guardian_threads(agent, run.agent_kwargs, workers, backend)
         done = store.done_episodes(key, retry_errors)
-        tasks += [EpisodeTask(run=run, run_key=key, episode=i, seed=episode_seed(run.seed, i), threads=threads)
+        tasks += [EpisodeTask(run=run, run_key=key, episode=i, seed=episode_seed(run.seed, i), threads=threads,
+                              import_path=(os.getcwd(),))
                   for i in range(episodes) if i not in done]
     return tasks
 

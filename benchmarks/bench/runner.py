@@ -5,6 +5,9 @@ the same configurations; the original drew seeds unseeded, with repeats).  The g
 ``reset`` (e.g. an HJ solve) is timed as ``precompute_time`` and, as in the paper's reported
 HJ row, not charged to the episode's clock unless ``charge_precompute`` is set.
 
+Before a guardian's first timed decision in a worker, one untimed ``act`` and a second
+``reset`` warm it up (:func:`_warm_up`): compiling its kernels is not charged to the episode.
+
 A guardian that raises (in ``reset``, ``act`` or ``stats``, or with ``sys.exit``), or an
 episode exceeding ``episode_timeout`` seconds of wall time, ends that episode with outcome
 ``error``, the message and its kind (``guardian`` or ``timeout``, see the store); the run goes
@@ -14,8 +17,8 @@ call stuck in compiled code is ended by the parent, which kills the worker after
 :func:`hard_timeout` seconds and records the episode as ``lost_worker``.
 
 The env is driven only through the parallel-autonomy contract (:mod:`benchmarks.bench.checks`):
-the result's columns come from the last step's ``info["outcome"]`` and ``info["episode"]``
-(:data:`EPISODE_STATISTICS`; ``final_speed`` is optional).  The guardian is built with the
+the result's columns come from the last step's ``info["outcome"]`` and ``info["episode_stats"]``
+(:data:`EPISODE_STATISTICS`; ``final_speed`` and ``cum_cost`` are optional).  The guardian is built with the
 run's options, plus ``threads`` when the task carries it (see :func:`benchmarks.bench.run.plan_tasks`).
 """
 
@@ -30,21 +33,24 @@ import traceback
 
 import numpy as np
 
-from benchmarks.bench.config import EpisodeResult, EpisodeTask, InputChanged, changed_inputs, input_digests, run_key
+from benchmarks.bench.config import (EpisodeResult, EpisodeTask, InputChanged, changed_inputs, import_from, input_digests,
+                                     run_key)
+from rmm_envs.envs.guarded import EPISODE_KEY
 
 __all__ = ["EPISODE_STATISTICS", "EpisodeTimeout", "episode_seed", "hard_timeout", "lost_episode", "run_episode", "run_key"]
 
 _SEED_DOMAIN = 0xBE7C  # keeps episode seeds apart from rmm-datagen's configuration seeds
 
-#: The store's columns read from ``info["episode"]`` on the step that ends an episode (the
+#: The store's columns read from ``info["episode_stats"]`` on the step that ends an episode (the
 #: parallel-autonomy contract), column -> statistic.  Every env offering the contract reports these.
 EPISODE_STATISTICS = {
     "steps": "n_env_steps", "active_steps": "n_active_ctrl_env_steps", "sim_time": "cum_sim_time",
     "active_sim_time": "active_ctrl_sim_time", "compute_time": "cum_compute_time", "avg_compute_time": "avg_compute_time",
     "cum_reward": "cum_reward",
 }
-#: Statistics an env may report (NULL in the store when it does not): ``final_speed`` (a vehicle's speed).
-OPTIONAL_STATISTICS = {"final_speed": "final_speed"}
+#: Statistics an env may report (NULL in the store when it does not): ``final_speed`` (a vehicle's
+#: speed) and ``cum_cost`` (the episode's summed ``info["cost"]``, Safety-Gymnasium's safety cost).
+OPTIONAL_STATISTICS = {"final_speed": "final_speed", "cost": "cum_cost"}
 
 
 def episode_seed(seed: int, episode: int) -> int:
@@ -111,14 +117,29 @@ def _guardian(task: EpisodeTask):
     return _CACHE[key]
 
 
+def _warm_up(task: EpisodeTask, guardian, obs, info, env) -> None:
+    """Once per worker and guardian, before its first timed decision: one untimed ``act`` on
+    the episode's first observation, then ``reset`` again (the episode starts as if it had not
+    happened), so compiling or loading compiled code (numba kernels, lazy imports) is never
+    charged to a decision.  Skipped under ``--charge-precompute``, which charges all setup."""
+    key = ("warm",) + _guardian_key(task)
+    if key in _CACHE:
+        return
+    guardian.act(obs, info)
+    guardian.reset(seed=task.seed, observation_space=env.observation_space, action_space=env.action_space,
+                   privileged=env.unwrapped.privileged if getattr(guardian, "privileged", False) else None)
+    _CACHE[key] = True
+
+
 def _statistics(env_id: str, info: dict) -> dict:
-    """The store's columns from the last step's ``info`` (the contract's ``outcome`` and ``episode``)."""
-    ep = info.get("episode")
-    missing = [k for k in ("outcome", "episode") if k not in info] or [k for k in EPISODE_STATISTICS.values() if k not in ep]
+    """The store's columns from the last step's ``info`` (the contract's ``outcome`` and ``episode_stats``)."""
+    ep = info.get(EPISODE_KEY)
+    missing = [k for k in ("outcome", EPISODE_KEY) if k not in info] or [k for k in EPISODE_STATISTICS.values() if k not in ep]
     if missing:
-        where = "info" if "episode" not in info or "outcome" not in info else 'info["episode"]'
+        where = "info" if EPISODE_KEY not in info or "outcome" not in info else f'info["{EPISODE_KEY}"]'
         raise EnvContractError(f"env {env_id} ended an episode without {where} keys {missing} (the parallel-autonomy "
-                               f"contract: info['outcome'] and info['episode'] with {sorted(EPISODE_STATISTICS.values())})")
+                               f"contract: info['outcome'] and info['{EPISODE_KEY}'] with "
+                               f"{sorted(EPISODE_STATISTICS.values())})")
     out = {col: ep[k] for col, k in EPISODE_STATISTICS.items()}
     out.update({col: ep.get(k) for col, k in OPTIONAL_STATISTICS.items()})
     return {"outcome": info["outcome"], **out}
@@ -145,6 +166,7 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
                 signal.setitimer(signal.ITIMER_REAL, float(timeout))
             except ValueError:  # not the main thread (e.g. some Ray setups): check in the loop only
                 use_alarm = False
+        import_from(task.import_path)
         env = _env(run.env_id, run.env_kwargs)
         guardian = _guardian(task)
         obs, info = env.reset(seed=task.seed)
@@ -153,6 +175,7 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
                        privileged=env.unwrapped.privileged if getattr(guardian, "privileged", False) else None)
         fields["precompute_time"] = time.perf_counter() - t0
         if not run.charge_precompute:  # else the clock keeps running: the solve counts as thinking time on the first step
+            _warm_up(task, guardian, obs, info, env)
             env.get_wrapper_attr("clock").start()
         while True:
             t0 = time.perf_counter()

@@ -86,6 +86,7 @@ EPISODE_FIELDS = {
     "wall_time": "REAL",
     "finished": "REAL",
     "error_kind": "TEXT",  # guardian / timeout / lost_worker / input_changed (NULL unless outcome is error)
+    "cost": "REAL",  # the episode's summed safety cost, info["cost"] (NULL: the env reports none)
 }
 
 # error kinds that are failures of the run rather than results: every rerun retries them
@@ -224,6 +225,8 @@ class ResultsStore:
             self.db.execute("ALTER TABLE episodes ADD COLUMN error_kind TEXT")
             self.db.execute("UPDATE episodes SET error_kind = CASE WHEN error LIKE 'EpisodeTimeout%' THEN 'timeout' "
                             "ELSE 'guardian' END WHERE outcome = 'error'")
+        if "cost" not in have:  # databases written before the safety cost was stored
+            self.db.execute("ALTER TABLE episodes ADD COLUMN cost REAL")
         have = {r[1] for r in self.db.execute("PRAGMA table_info(invocations)")}
         for name, kind in _INVOCATION_COLUMNS.items():
             if name not in have:

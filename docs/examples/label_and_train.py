@@ -58,7 +58,7 @@ def main(argv=None):
     while not done:
         obs, reward, terminated, truncated, info = env.step(guardian.act(obs, info))
         done = terminated or truncated
-    ep = info["episode"]
+    ep = info["episode_stats"]
     assert info["outcome"] in ("goal", "collision", "timeout")
     print(f"episode: {info['outcome']} after {ep['n_env_steps']} steps, guardian in control "
           f"{100 * ep['active_ctrl_sim_time'] / ep['cum_sim_time']:.0f}% of the time; dataset {manifest['dataset_sha256'][:12]}")

@@ -4,8 +4,8 @@ Both use **privileged** information: the true state, the obstacles, the goal and
 time (from the env's documented ``privileged()`` accessor).  After Xiao & Belta's HOCBFs, as in
 the paper.
 
-The QP (shared by both)
------------------------
+The QP
+------
 For each circular obstacle ``i`` a relative-degree-2 barrier with inflation ``k``::
 
     b_i = (x - x_i)^2 + (y - y_i)^2 - (k r_i)^2
@@ -13,12 +13,23 @@ For each circular obstacle ``i`` a relative-degree-2 barrier with inflation ``k`
     LgLf b = [2 v ((y - y_i) cos th - (x - x_i) sin th),  2 ((x - x_i) cos th + (y - y_i) sin th)]
     Lf^2 b + LgLf b . u + p1 Lf b + p2 (Lf b + p1 b) >= 0        (linear class-K, p1, p2)
 
-The QP over ``z = (u1, u2, d_th, d_v)``::
+``cbf`` is a safety filter (``reference="nominal"``): it keeps the driver's intended
+control, the env's ``info["nominal_control"]`` ``u_nom``, as close as the barriers allow::
+
+    minimise |u - u_nom|^2
+    s.t. the barrier rows above (hard), the speed barriers and control box (merged into one
+    row on u2, as in the driver).
+
+A nominal control that satisfies every row is the solution itself, and is passed on without
+a solve.  ``cbf-paper`` (``reference="clf"``) re-derives a goal-seeking control instead, as the
+paper did, over ``z = (u1, u2, d_th, d_v)``::
 
     minimise u1^2 + u2^2 + p_th d_th^2 + p_v d_v^2
-    s.t. the barrier rows above (hard), the speed barriers and control box (merged into one
-    row on u2, as in the driver), the heading CLF (as the driver's) and a speed CLF toward
+    s.t. the same rows, the heading CLF (as the driver's) and a speed CLF toward
     v_d = min((d/2)^2, d/2) with V_v = (v - v_d)^2.
+
+Both are one OSQP problem with a fixed sparsity (:mod:`guardians.cbf.qp`; the filter sets the
+CLF rows' coefficients to 0 and their bounds to infinity).
 
 Defaults shared by both guardians, and why:
 
@@ -26,7 +37,7 @@ Defaults shared by both guardians, and why:
 * ``inflation = 1.05``: the paper's 5% obstacle inflation (a margin of 0.1-0.25 m for radii of
   2-5 m, about one step of travel at full speed).
 * ``gamma_vmin = gamma_vmax = lambda_theta = lambda_v = p_theta = p_v = 1``: the paper's (the
-  same values the env's driver uses).
+  same values the env's driver uses; the CLF gains and weights act under ``reference="clf"`` only).
 * control box: read at ``reset`` from the env's action space (:class:`rmm_envs.autonomy.GuardianActionSpace`,
   ``|u1| <= 0.25``, ``|u2| <= 0.5`` for Dubins4D; ``u1_bounds``/``u2_bounds`` override it);
   speeds ``[0, 2]``: the Dubins4D system's (``rmm_envs.systems.dubins4d.Dubins4D``;
@@ -35,7 +46,7 @@ Defaults shared by both guardians, and why:
   square.  The original also braked fully whenever ``v < 0.05`` (so a stopped car never moved
   again); that is off (``low_speed_stop=True`` restores it).
 * Intervention: the guardian takes control, applying the QP's ``(u1, u2)``, when a barrier
-  row is active at the solution: ``|G_i z* - h_i| <= active_atol + active_rtol |h_i|``
+  row is active at the solution (for the filter: when the barriers change the driver's control): ``|G_i z* - h_i| <= active_atol + active_rtol |h_i|``
   (``1e-3`` and ``0``: equality up to the solver's polished accuracy; the original used a loose
   0.1/0.1).  Otherwise the driver keeps control.  The rule is kept: a row that is not active
   at the CBF-CLF optimum is slack by more than ``1e-3``, and the one-step prediction below
@@ -59,7 +70,18 @@ equilibrium with the barrier active and ``u = 0`` feasible but no motion).
 
 ``cbf``: the default (:class:`CBFGuardian`)
 -------------------------------------------
-Three changes, each for a stated reason:
+Four changes, each for a stated reason:
+
+0. **It filters the driver's control** (``reference="nominal"``) instead of re-deriving one.
+   A safety filter's job is to change the controller's intended control minimally; the
+   paper's QP replaced it with its own CLF controller whenever a barrier was active, so what
+   the car did under "guardian control" was a different goal-seeker's choice.  The filter
+   reads ``info["nominal_control"]`` (a ``ValueError`` naming the key when an env gives none;
+   ``reference="clf"`` serves such envs).  Measured (``rmm-bench --agent cbf --clock fixed:1
+   --episodes 256``, seed 0): 87.5 / 7.0 / 5.5 % success / collision / timeout, intervening
+   27.7% of the simulated time, against 90.2 / 6.6 / 3.1 and 24.4% with the CLF reference
+   (the sweep below): the same collisions within the noise (± 4), a few more timeouts where
+   the driver heads for a goal behind an obstacle and the filter holds it at the margin.
 
 1. **One-step latency** (``predict_latency=True``).  Under parallel autonomy the action
    returned for the state ``s_k`` is applied only from ``s_{k+1}``: during the lap from
@@ -69,9 +91,10 @@ Three changes, each for a stated reason:
    inflation margin.  So the guardian solves its QP at the *predicted* state ``s_{k+1}``:
    the exact Dubins4D flow (``rmm_envs.systems``) from ``s_k`` under the control that will
    act during the lap.  If the guardian was in control that is its own last action, known
-   exactly; if the driver was, the driver's control is unknown to the guardian and taken as
+   exactly; if the driver was, it is the driver's control at ``s_k``, the step's
+   ``info["nominal_control"]``, also exact (``reference="clf"`` does not read it and takes
    zero, which bounds the prediction error by ``|u2|max lap^2 / 2`` = 3.0 mm in position and
-   ``|u1|max lap`` = 0.0275 rad in heading at 0.11 s.  The lap is measured from the simulated
+   ``|u1|max lap`` = 0.0275 rad in heading at 0.11 s).  The lap is measured from the simulated
    times the env reports (the previous lap's length; ``lap_guess = 0.1`` s, the base step,
    before the first measurement).  Nothing here is tuned: it is the env's documented timing.
    Measured (256 episodes, fixed 1 ms clock, seed 0), its effect on outcomes is within the
@@ -124,7 +147,8 @@ Three changes, each for a stated reason:
    ``k r`` for every obstacle not near the goal.
 
 Inflation ``k = 1.05`` is kept at the paper's value.  A sweep over ``k`` (256 episodes, fixed
-1 ms clock, seed 0; success / collision / timeout %) puts it at the knee: 1.0: 87.5 / 9.8 /
+1 ms clock, seed 0; success / collision / timeout %; measured with the CLF reference, before
+the filter) puts it at the knee: 1.0: 87.5 / 9.8 /
 2.7; 1.02: 89.5 / 7.0 / 3.5; 1.05: 90.2 / 6.6 / 3.1; 1.1: 89.1 / 6.2 / 4.7; 1.2: 86.7 / 6.2 /
 7.0.  Without a margin the sampled (0.11-s, zero-order-hold) loop lets the car graze
 obstacles; beyond 5% collisions no longer fall while the margin blocks more gaps and goals.

@@ -49,7 +49,7 @@ def parse_solver(solver) -> str | None:
     name = solver[len(PREFIX):]
     installed = installed_solvers()
     if not installed:
-        raise ValueError(f"solver {solver!r} needs qpsolvers (pip install 'rmm-envs[qp]'); installed: {choices}")
+        raise ValueError(f"solver {solver!r} needs qpsolvers (the qp extra: pip install -e '.[qp]' in a clone); installed: {choices}")
     if name not in installed:
         raise ValueError(f"solver {solver!r}: qpsolvers has no installed solver {name!r}; installed: {choices}")
     return name
@@ -114,9 +114,13 @@ class Dubins4DQpsolversQP:
         self.K = K
         self._qp = QpsolversQP(np.diag([2.0, 2.0, 2.0 * p_theta, 2.0 * p_v]), name, eps)
 
-    def solve(self, G, h) -> np.ndarray | None:
+    def solve(self, G, h, u_ref=None) -> np.ndarray | None:
         K = self.K
         h = np.array(h, float)
+        self._qp.q[:] = 0.0
+        if u_ref is not None:  # the safety filter: |u - u_ref|^2, no CLF rows (as BarrierQP)
+            h[K + 4] = h[K + 5] = np.inf
+            self._qp.q[:2] = -2.0 * np.asarray(u_ref, float)[:2]
         # the u2 box merged with the speed barriers: an empty interval (a speed outside its
         # range) becomes the point u2 = its upper end, as on the direct path
         if -h[K + 3] > h[K + 2]:

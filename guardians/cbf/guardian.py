@@ -17,7 +17,11 @@ from guardians.cbf.maze import MazeCBFGuardian
 from guardians.cbf.recovery import recovery_control, recovery_done
 from rmm_envs.systems.dubins4d import Dubins4D
 
-__all__ = ["CBFGuardian", "CBFPaperGuardian"]
+__all__ = ["CBFGuardian", "CBFPaperGuardian", "REFERENCES"]
+
+#: What the QP keeps the control close to: the driver's ``info["nominal_control"]`` (a safety
+#: filter) or, as the paper, a goal-seeking control re-derived from CLF rows.
+REFERENCES = ("nominal", "clf")
 
 
 def _box_problem(u1, u2) -> str | None:
@@ -31,7 +35,9 @@ class CBFGuardian(MazeDelegation, Guardian):
     """HOCBF safety filter with one-step latency prediction and recovery (see :mod:`guardians.cbf`).
 
     ``u1_bounds``/``u2_bounds`` (default ``None``: the action space's, read at ``reset``) and
-    ``v_bounds`` (default ``None``: the Dubins4D system's speed range) override the bounds."""
+    ``v_bounds`` (default ``None``: the Dubins4D system's speed range) override the bounds.
+    ``reference``: ``"nominal"`` (default) filters the driver's control, ``info["nominal_control"]``;
+    ``"clf"`` re-derives a goal-seeking control from CLF rows, as the paper did."""
 
     name = "cbf"
     observation_type = "global"
@@ -45,8 +51,13 @@ class CBFGuardian(MazeDelegation, Guardian):
                  active_atol: float = 1e-3, active_rtol: float = 0.0, low_speed_stop: bool = False,
                  max_obstacles: int = 64, eps: float = 1e-6, predict_latency: bool = True,
                  recovery: bool = True, v_stuck: float = 0.05, lap_guess: float = 0.1,
-                 goal_aware_margin: bool = True, solver: str = "osqp", maze: dict | None = None) -> None:
+                 goal_aware_margin: bool = True, solver: str = "osqp", maze: dict | None = None,
+                 reference: str = "nominal") -> None:
         super().__init__()
+        if reference not in REFERENCES:
+            raise ValueError(f"reference must be one of {REFERENCES} (filter the driver's info['nominal_control'], "
+                             f"or the paper's CLF rows), got {reference!r}")
+        self.reference = reference
         parse_solver(solver)  # a bad name fails here, listing the installed solvers
         self.solver = solver
         self._maze_args = _maze_arguments(maze, solver, eps, predict_latency, lap_guess)
@@ -123,7 +134,7 @@ class CBFGuardian(MazeDelegation, Guardian):
         self.radii = inflated_radii(obstacles, self.goal, self.k, self.goal_aware_margin)
         self._rows = BarrierRows(obstacles, self.radii, self.goal, self.params)
         self._counts = self._zero_counts()
-        self._pending = np.zeros(2)  # the control acting during the coming lap (the driver's: unknown, 0)
+        self._pending = None  # the guardian's control acting during the coming lap; None: the driver's
         self._last_time = float(priv.get("sim_time", 0.0))
         self._lap = self.lap_guess
         self._recovering = None  # index of the obstacle being recovered from
@@ -140,10 +151,12 @@ class CBFGuardian(MazeDelegation, Guardian):
         for tests against independent solvers."""
         return self._rows(state)
 
-    def solve(self, state):
-        """OSQP solution ``z*`` at ``state`` and the dense rows ``(G, h)``; ``z* = None`` if it failed."""
+    def solve(self, state, u_ref=None):
+        """OSQP solution ``z*`` at ``state`` and the dense rows ``(G, h)``; ``z* = None`` if it
+        failed.  ``u_ref``: the control to filter (``|u - u_ref|^2``, no CLF rows); ``None``:
+        the paper's CBF-CLF problem."""
         G, h = self.rows(state)
-        z = self._qp.solve(G, h)
+        z = self._qp.solve(G, h, u_ref)
         self._counts["qp_solves"] += 1
         return z, G, h
 
@@ -202,12 +215,29 @@ class CBFGuardian(MazeDelegation, Guardian):
         return self.action_space.active(self._pending)
 
     def _inactive(self):
-        self._pending = np.zeros(2)
+        self._pending = None
         return self.action_space.inactive()
+
+    def nominal(self, info) -> np.ndarray | None:
+        """The driver's control this step, ``info["nominal_control"]`` (``reference="nominal"``;
+        a ``ValueError`` naming the key when the env gives none), or ``None`` (``"clf"``)."""
+        if self.reference != "nominal":
+            return None
+        u = None if not isinstance(info, dict) else info.get("nominal_control")
+        if u is None:
+            raise ValueError(f"guardian {self.name!r} filters the driver's control, info['nominal_control'] (the "
+                             f"parallel-autonomy contract), but the step's info has none (keys: "
+                             f"{sorted(info) if isinstance(info, dict) else info!r}); use reference='clf' for an env "
+                             "without it")
+        u = np.asarray(u, dtype=float).reshape(-1)
+        if u.shape != (2,) or not all(map(math.isfinite, u.tolist())):
+            raise ValueError(f"info['nominal_control'] must be 2 finite numbers (u1, u2), got {info['nominal_control']!r}")
+        return u
 
     def act(self, observation, info=None):
         if self._maze is not None:
             return self._maze.act(observation, info)
+        u_nom = self.nominal(info)
         priv = self._privileged()
         state = np.asarray(priv["state"], float)
         if not all(map(math.isfinite, state.tolist())):
@@ -218,10 +248,13 @@ class CBFGuardian(MazeDelegation, Guardian):
             if t > self._last_time:
                 self._lap = t - self._last_time
             self._last_time = t
-            state = self.predict(state, self._pending, self._lap)
-        return self._decide(state)
+            # the control acting during the coming lap: the guardian's own last one, or the
+            # driver's, which is the nominal control at this state (unknown to "clf": 0)
+            during = self._pending if self._pending is not None else (u_nom if u_nom is not None else np.zeros(2))
+            state = self.predict(state, during, self._lap)
+        return self._decide(state, u_nom)
 
-    def _decide(self, state):
+    def _decide(self, state, u_nom=None):
         """The decision for the state the action will act from (already predicted)."""
         if self.low_speed_stop and state[3] < 0.05:
             return self._emit(0.0, self.u2_min)
@@ -232,7 +265,16 @@ class CBFGuardian(MazeDelegation, Guardian):
             if not recovery_done(state, b, self._recovering, self.obstacles, self.radii, self.goal):
                 return self._emit(*self._recover(state))
             self._recovering = None
-        z, G, h = self.solve(state)
+        z = None
+        if u_nom is not None:
+            # a nominal control that satisfies every row is the filter's solution itself (the
+            # QP's unconstrained optimum is feasible): no solve
+            G, h = self.rows(state)
+            z = np.array([u_nom[0], u_nom[1], 0.0, 0.0])
+            if not np.all(G[: self.K + 4] @ z <= h[: self.K + 4] + self.eps):  # within the QP's tolerance
+                z = None
+        if z is None:
+            z, G, h = self.solve(state, u_nom)
         if z is None:
             self._counts["qp_fallbacks"] += 1
             if self.recovery:
@@ -263,12 +305,12 @@ def _maze_arguments(maze, solver, eps, predict_latency, lap_guess) -> dict | Non
 
 
 class CBFPaperGuardian(CBFGuardian):
-    """The paper's CBF rule (the previous ``cbf`` exactly): the QP at the observed state, maximum
-    braking when it is infeasible, no recovery."""
+    """The paper's CBF rule (the previous ``cbf`` exactly): the CBF-CLF QP at the observed state,
+    maximum braking when it is infeasible, no recovery."""
 
     name = "cbf-paper"
 
     def __init__(self, *args, predict_latency: bool = False, recovery: bool = False,
-                 goal_aware_margin: bool = False, maze=False, **kwargs) -> None:
+                 goal_aware_margin: bool = False, maze=False, reference: str = "clf", **kwargs) -> None:
         super().__init__(*args, predict_latency=predict_latency, recovery=recovery,
-                         goal_aware_margin=goal_aware_margin, maze=maze, **kwargs)
+                         goal_aware_margin=goal_aware_margin, maze=maze, reference=reference, **kwargs)

@@ -1,7 +1,10 @@
-"""The HOCBF-CLF quadratic programme, solved with OSQP: set up once per episode, updated per step.
+"""The HOCBF quadratic programme, solved with OSQP: set up once per episode, updated per step.
 
 Over ``z = (u1, u2, d_th, d_v)``: minimise ``u1^2 + u2^2 + p_th d_th^2 + p_v d_v^2`` subject to
-the rows of :func:`guardians.cbf.barrier.barrier_rows`.  The sparse constraint matrix has one
+the rows of :func:`guardians.cbf.barrier.barrier_rows` (the paper's CBF-CLF problem), or, given
+a reference control ``u_ref`` (the driver's nominal control), the safety filter
+``|u - u_ref|^2`` subject to the same rows without the two CLF rows (their coefficients set to
+0 and their bounds to infinity, so the sparsity stays fixed; the slacks then settle at 0).  The sparse constraint matrix has one
 row per obstacle and four more (``u1`` box; ``u2`` box merged with the speed barriers, as one
 two-sided row; heading CLF; speed CLF), so its sparsity is fixed for the episode's obstacles:
 each step only updates values and bounds, then re-solves warm-started.
@@ -60,8 +63,9 @@ class BarrierQP:
         self._l[K], self._u[K] = prm.u1_min, prm.u1_max
         self._l[K + 1], self._u[K + 1] = prm.u2_min, prm.u2_max
         self._u[K + 2] = self._u[K + 3] = 0.0
+        self._q = np.zeros(4)
         self._solver = osqp.OSQP()
-        self._solver.setup(P, np.zeros(4), A, self._l, self._u, verbose=False, eps_abs=eps, eps_rel=eps,
+        self._solver.setup(P, self._q.copy(), A, self._l, self._u, verbose=False, eps_abs=eps, eps_rel=eps,
                            polishing=True, warm_starting=True, max_iter=4000)
         # Per step, talk to the compiled solver object directly when the wrapper exposes it:
         # the Python wrapper's ``update``/``solve`` spend longer on bookkeeping (bound
@@ -69,24 +73,33 @@ class BarrierQP:
         # solving this 4-variable problem.  The same calls with the same data: the bounds are
         # clipped to OSQP's infinity here once, as the wrapper clips them on every update.
         inf = float(self._solver.constant("OSQP_INFTY"))
+        self._inf = inf
         np.clip(self._l, -inf, inf, out=self._l)
         np.clip(self._u, -inf, inf, out=self._u)
         native = getattr(self._solver, "_solver", None)
         self._native = native if all(hasattr(native, a) for a in _NATIVE_API) else None
 
-    def solve(self, G: np.ndarray, h: np.ndarray) -> np.ndarray | None:
+    def solve(self, G: np.ndarray, h: np.ndarray, u_ref=None) -> np.ndarray | None:
         """The solution ``z*`` for the dense rows ``(G, h)`` of the current state; ``None`` if the
-        problem is infeasible or the solver failed."""
+        problem is infeasible or the solver failed.  ``u_ref``: filter this control (module
+        docstring); ``None``: the CBF-CLF problem."""
         Ax, l, u = self._Ax, self._l, self._u
         _fill(Ax, l, u, G, h, self.K, self._p0, self._p1)
+        q = None
+        if u_ref is not None:
+            K = self.K
+            Ax[self._p0 + K + 1] = Ax[self._p1 + K + 1] = 0.0  # no CLF rows: the reference leads
+            u[K + 2] = u[K + 3] = self._inf
+            q = self._q
+            q[0], q[1] = -2.0 * float(u_ref[0]), -2.0 * float(u_ref[1])
         native = self._native
         if native is not None:
-            native.update_data_vec(q=None, l=l, u=u)
+            native.update_data_vec(q=q, l=l, u=u)
             native.update_data_mat(P_x=None, P_i=None, A_x=Ax, A_i=None)
             native.solve()
             status, x = native.info.status_val, native.solution.x
         else:
-            self._solver.update(Ax=Ax, l=l, u=u)
+            self._solver.update(Ax=Ax, l=l, u=u, **({} if q is None else {"q": q}))
             res = self._solver.solve(raise_error=False)
             status, x = res.info.status_val, res.x
         self.last_status = status

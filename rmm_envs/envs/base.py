@@ -225,7 +225,7 @@ class LabelledEnvBase(gym.Env):
         try:
             import pygame
         except ImportError as e:  # pragma: no cover - optional extra
-            raise gym.error.DependencyNotInstalled("render_mode='human' needs pygame: pip install rmm-envs[human]") from e
+            raise gym.error.DependencyNotInstalled("render_mode='human' needs pygame: the human extra, pip install -e '.[human]' in a clone") from e
         if self._window is None:  # pragma: no cover - needs a display
             pygame.init()
             self._window = pygame.display.set_mode(frame.shape[:2])

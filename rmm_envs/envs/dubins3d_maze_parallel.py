@@ -82,11 +82,14 @@ observation of those poses (no random feature).
 ## Info
 
 Every step: ``sim_time``, ``state`` (the true pose, **privileged**), ``active`` and ``control``
-(what was applied during the step).  On the last step also ``outcome`` (``"goal"``,
-``"collision"`` or ``"timeout"``) and ``episode``, the same statistics as Dubins4D's
-(``n_env_steps``, ``n_active_ctrl_env_steps``, ``active_ctrl_sim_time``, ``cum_sim_time``,
-``cum_compute_time``, ``avg_compute_time``, ``cum_reward``, ``final_speed`` (the constant
-speed), ``outcome``).  :meth:`Dubins3DMazeGuardedEnv.privileged` returns the pose, the maze,
+(what was applied during the step), ``cost`` (1.0 on the step that touches a wall, else 0.0)
+and ``nominal_control`` (also on ``reset``): the driver's turn rate at the pose the returned
+observation shows, exactly what it applies if the guardian leaves it the next interval.  On
+the last step also ``outcome`` (``"goal"``, ``"collision"`` or ``"timeout"``) and
+``episode_stats``, the same statistics as Dubins4D's (``n_env_steps``,
+``n_active_ctrl_env_steps``, ``active_ctrl_sim_time``, ``cum_sim_time``, ``cum_compute_time``,
+``avg_compute_time``, ``cum_reward``, ``cum_cost``, ``final_speed`` (the constant speed),
+``outcome``).  :meth:`Dubins3DMazeGuardedEnv.privileged` returns the pose, the maze,
 the goal ``[x, y, r]``, the car's speed (px/s) and the simulated time.
 
 ## Arguments
@@ -287,8 +290,9 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         self._last_active = False
         self._last_control = np.zeros(1)
         self.begin_episode()
+        info = {"sim_time": 0.0, "state": self._state.copy(), "nominal_control": self.update_nominal()}
         self.clock.start()
-        return self._observe(), {"sim_time": 0.0, "state": self._state.copy()}
+        return self._observe(), info
 
     # ------------------------------------------------------------------ stepping
     def _observe(self) -> np.ndarray:
@@ -305,8 +309,11 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         (already validated).  ``compute_time`` is the agent's time charged to this step
         (statistics only).  Used by :meth:`step` and the non-blocking wrapper."""
         self.check_interval(duration)
-        u = float(np.asarray(control, dtype=float).reshape(-1)[0]) if active else self.driver.control(self._state)
-        u = min(max(u, -self.system.u_max), self.system.u_max)
+        if active:
+            u = float(np.asarray(control, dtype=float).reshape(-1)[0])
+            u = min(max(u, -self.system.u_max), self.system.u_max)
+        else:
+            u = float(self._nominal[0])
         path = dubins_path(self._state[0], self._state[1], self._state[2], self.system.speed, u, float(duration),
                            np.empty((self.n_path_points, 3)), _COEF_ARRAY)
         hit = maze_path_hit(*self._geom, path)
@@ -324,6 +331,9 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
 
     def final_speed(self) -> float:
         return self.system.speed
+
+    def driver_control(self) -> np.ndarray:
+        return np.array([self.driver.control(self._state)])
 
     # ------------------------------------------------------------------ accessors and labelling hooks
     def privileged(self) -> dict:

@@ -87,10 +87,16 @@ left it 0 in every training sample and met 0-100 s at run time).
 
 Every step: ``sim_time``; ``state`` (the true state: **privileged**, for analysis and for
 guardians that declare they use it); ``active`` and ``control`` (what was applied during the
-step and whether the guardian applied it).  On the last step also ``outcome`` (``"goal"``, ``"collision"``
-or ``"timeout"``) and ``episode`` (the statistics of the paper's Table I: ``n_env_steps``,
+step and whether the guardian applied it); ``cost`` (Safety-Gymnasium's per-step safety cost:
+1.0 on the step that collides, else 0.0); ``nominal_control`` (also on ``reset``): the
+driver's ``(u1, u2)`` at the state the returned observation shows, within the action space's
+bounds, exactly what the driver applies if the guardian leaves it the next interval (a safety
+filter's ``u_nom``; ``action_space.active(info["nominal_control"])`` drives as the driver
+does, bit for bit).  On the last step also ``outcome`` (``"goal"``, ``"collision"``
+or ``"timeout"``) and ``episode_stats`` (the statistics of the paper's Table I: ``n_env_steps``,
 ``n_active_ctrl_env_steps``, ``active_ctrl_sim_time``, ``cum_sim_time``, ``cum_compute_time``,
-``avg_compute_time``, ``cum_reward``, ``final_speed``, ``outcome``).
+``avg_compute_time``, ``cum_reward``, ``cum_cost``, ``final_speed``, ``outcome``; not
+``episode``, which Gymnasium's ``RecordEpisodeStatistics`` and SB3's ``Monitor`` write).
 
 Privileged information is also available through :meth:`Dubins4DCirclesEnv.privileged`.
 
@@ -136,7 +142,7 @@ from rmm_envs.driver import CLFDriver, DriverParams
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, rejection_sample, whole
 from rmm_envs.envs.dubins4d_start import HALF as _HALF, Dubins4DStarts
-from rmm_envs.envs.dubins4d_step import advance
+from rmm_envs.envs.dubins4d_step import advance, nominal_controls
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.scenes.dubins4d import Dubins4DScene, observation
 from rmm_envs.systems.dubins4d import Dubins4D, FullBraking
@@ -235,7 +241,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         obstacles, state, goal = self.generate_start(self.np_random, options)
         self._start_episode(obstacles, state, goal)
         obs = self._observe()
-        info = {"sim_time": 0.0, "state": self._state.copy()}
+        info = {"sim_time": 0.0, "state": self._state.copy(), "nominal_control": self.update_nominal()}
         if self.render_mode == "human":
             self.render()
         self.clock.start()
@@ -268,7 +274,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
             times = self._step_times
         else:
             times = np.linspace(0.0, float(duration), self.n_path_points)
-        nxt, u, hit_obst, hit_goal = advance(self.system, self.driver, self._state[None, :], self._circles[None],
+        nxt, u, hit_obst, hit_goal = advance(self.system, self._nominal[None, :], self._state[None, :], self._circles[None],
                                              np.array([bool(active)]), np.zeros((1, 2)) if control is None else np.asarray(control, dtype=float).reshape(1, 2),
                                              times, self._obstacle_contact)
         hit_obst, hit_goal = float(hit_obst[0]), float(hit_goal[0])
@@ -299,6 +305,9 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
 
     def final_speed(self) -> float:
         return float(self._state[3])
+
+    def driver_control(self) -> np.ndarray:
+        return nominal_controls(self.driver, self._state[None, :], self._circles[None])[0]
 
     # ------------------------------------------------------------------ accessors
     def privileged(self) -> dict:

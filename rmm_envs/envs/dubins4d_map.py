@@ -98,7 +98,8 @@ unchanged (every configuration of a dataset is the same map; episodes differ in 
 ## Info
 
 As ``Dubins4DCircles-v0``: every step ``sim_time``, ``state`` (privileged), ``active``,
-``control``; on the last step ``outcome`` and ``episode``.  :meth:`Dubins4DMapEnv.privileged`
+``control``, ``cost`` and ``nominal_control`` (the driver's control, also on ``reset``); on
+the last step ``outcome`` and ``episode_stats``.  :meth:`Dubins4DMapEnv.privileged`
 returns ``state``, ``goal``, ``sim_time``, ``obstacles`` (the map's circles ``(K, 3)``: all of
 its obstacles only on a map of circles only) and ``map`` (the map's entries, as JSON data).
 

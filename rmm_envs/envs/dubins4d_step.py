@@ -1,5 +1,9 @@
 """One Dubins4D environment step for ``N`` worlds at once: driver, exact path, contacts.
 
+The driver's control at each world's state (:func:`nominal_controls`) is computed once, when
+the state is observed, and handed to :func:`advance`: the same numbers are the env's
+``info["nominal_control"]`` and what the driver applies when the guardian stays inactive.
+
 Shared by :class:`rmm_envs.envs.dubins4d.Dubins4DCirclesEnv` (``N = 1``) and
 :class:`rmm_envs.envs.dubins4d_vector.Dubins4DCirclesVectorEnv` (``N`` sub-environments), so
 both run the very same floating-point operations: every stage is a compiled loop over the
@@ -15,14 +19,21 @@ from rmm_envs.driver import CLFDriver
 from rmm_envs.systems.dubins4d import Dubins4D, wrap_angle
 from rmm_envs.worlds.circles import contact_params_each
 
-__all__ = ["advance"]
+__all__ = ["advance", "nominal_controls"]
 
 
-def advance(system: Dubins4D, driver: CLFDriver, states: np.ndarray, circles: np.ndarray, active: np.ndarray,
+def nominal_controls(driver: CLFDriver, states: np.ndarray, circles: np.ndarray) -> np.ndarray:
+    """The driver's controls ``(N, 2)`` at ``states`` ``(N, 4)`` toward each world's goal (the
+    last row of ``circles`` ``(N, K + 1, 3)``)."""
+    return driver.controls(states, circles[:, -1, :2])
+
+
+def advance(system: Dubins4D, nominal: np.ndarray, states: np.ndarray, circles: np.ndarray, active: np.ndarray,
             controls: np.ndarray, times: np.ndarray, obstacle_contact=None):
     """Advance ``N`` worlds by one held control each.
 
     Args:
+        nominal: ``(N, 2)`` the driver's controls at ``states`` (:func:`nominal_controls`).
         states: ``(N, 4)`` states.
         circles: ``(N, K + 1, 3)``: each world's obstacles, then its goal (last).
         active: ``(N,)`` bool: the guardian's control applies; otherwise the driver's.
@@ -37,12 +48,7 @@ def advance(system: Dubins4D, driver: CLFDriver, states: np.ndarray, circles: np
     heading wrapped to ``[-pi, pi)``, ``(N, 2)``, and the first contact parameters ``(N,)``
     with any obstacle and with the goal (``inf`` where none).
     """
-    u = np.array(controls, dtype=float)
-    inactive = ~active
-    if inactive.all():
-        u = driver.controls(states, circles[:, -1, :2])
-    elif inactive.any():
-        u[inactive] = driver.controls(states[inactive], circles[inactive, -1, :2])
+    u = np.where(active[:, None], np.asarray(controls, dtype=float), nominal)
     paths = system.states_at(states, u, times, compiled=True)
     cp = contact_params_each(paths, circles)
     hit_goal = cp[:, -1]

@@ -53,14 +53,15 @@ plus ``reset_mask``) apply to every sub-env reset by that call; given ``obstacle
 ## Infos
 
 Dicts of arrays, Gymnasium's convention: each key ``k`` has an ``(N, ...)`` array and a boolean
-mask ``_k`` telling which sub-envs have it.  Every step: ``sim_time`` ``(N,)`` and ``state``
-``(N, 4)`` (privileged: the true state); ``active`` ``(N,)`` and ``control`` ``(N, 2)`` for the
+mask ``_k`` telling which sub-envs have it.  Every step (and ``reset``): ``sim_time`` ``(N,)``,
+``state`` ``(N, 4)`` (privileged: the true state) and ``nominal_control`` ``(N, 2)`` (the
+driver's control at the state the returned observation shows, the single env's); ``active``
+``(N,)``, ``control`` ``(N, 2)`` and ``cost`` ``(N,)`` (1.0 on a collision, else 0.0) for the
 sub-envs that stepped (not those being reset in ``NEXT_STEP`` mode); for the sub-envs whose
 episode ended, ``outcome`` (object array of ``"goal"``/``"collision"``/``"timeout"``) and
-``episode`` (a dict of arrays of the single env's episode statistics, with its own masks).
-The key ``episode`` is the env's own (the paper's Table I statistics), so Gymnasium's
-``RecordEpisodeStatistics`` wrapper needs another key: ``RecordEpisodeStatistics(env,
-stats_key="rl_episode")`` (tested, with ``NormalizeObservation`` on top).
+``episode_stats`` (a dict of arrays of the single env's episode statistics, with its own
+masks).  ``episode`` is left to Gymnasium's ``RecordEpisodeStatistics`` (tested, with
+``NormalizeObservation`` on top).
 
 ## Compute time and clock
 
@@ -91,7 +92,8 @@ from gymnasium.vector.utils import batch_space
 from rmm_envs.clocks import make_clock
 from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
 from rmm_envs.scenes.dubins4d import observation
-from rmm_envs.envs.dubins4d_step import advance
+from rmm_envs.envs.dubins4d_step import advance, nominal_controls
+from rmm_envs.envs.guarded import EPISODE_KEY
 from rmm_envs.worlds.circles import ray_cast_each
 
 __all__ = ["Dubins4DCirclesVectorEnv"]
@@ -137,6 +139,8 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         self._active_time = np.zeros(n)
         self._cum_compute = np.zeros(n)
         self._cum_reward = np.zeros(n)
+        self._cum_cost = np.zeros(n)
+        self._nominal = np.zeros((n, 2))  # the driver's control at each state (info["nominal_control"])
         self._ended = np.zeros(n, dtype=bool)  # the episode ended at the last step
         self._obs = np.zeros((n, self._single.observation_space.shape[0]), dtype=np.float32)
         self._started = False
@@ -164,6 +168,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         self._active_time[i] = 0.0
         self._cum_compute[i] = 0.0
         self._cum_reward[i] = 0.0
+        self._cum_cost[i] = 0.0
         self._ended[i] = False
 
     def _check_start(self, obstacles, state, goal) -> None:
@@ -178,7 +183,10 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         sim_time = np.zeros(self.num_envs)
         state = np.zeros((self.num_envs, 4))
         state[idx] = self._states[idx]
-        return {"sim_time": sim_time, "_sim_time": mask, "state": state, "_state": mask.copy()}
+        nominal = np.zeros((self.num_envs, 2))
+        nominal[idx] = self._nominal[idx]
+        return {"sim_time": sim_time, "_sim_time": mask, "state": state, "_state": mask.copy(),
+                "nominal_control": nominal, "_nominal_control": mask.copy()}
 
     def reset(self, *, seed: int | list | None = None, options: dict[str, Any] | None = None):
         """Reset every sub-env (or those of ``options["reset_mask"]``); see the module docstring."""
@@ -213,6 +221,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         self._started = True
         self._obs = self._obs.copy()  # the array returned earlier stays as it was
         self._obs[idx] = self._observe(idx)
+        self._update_nominal(idx)
         self.clock.start()
         return self._obs, self._reset_info(idx)
 
@@ -239,7 +248,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         # computed is discarded and their bookkeeping restarts in _reset_one.
         resetting = self._ended if mode == AutoresetMode.NEXT_STEP else np.zeros(n, dtype=bool)
         any_resetting = bool(resetting.any())
-        nxt, u, hit_obst, hit_goal = advance(e.system, e.driver, self._states, self._circles, active, ctrl,
+        nxt, u, hit_obst, hit_goal = advance(e.system, self._nominal, self._states, self._circles, active, ctrl,
                                              e._step_times)
         dt = e.step_dt
         self._n_steps += 1
@@ -252,12 +261,15 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         goal = ~collision & np.isfinite(hit_goal)
         rewards = np.where(collision, -1.0, np.where(goal, 1.0, 0.0))
         self._cum_reward += rewards
+        cost = collision.astype(float)
+        self._cum_cost += cost
         truncated = self._sim_time >= e.max_episode_sim_time - 1e-9
         if any_resetting:
             stepping = ~resetting
             collision &= stepping
             goal &= stepping
             rewards[resetting] = 0.0
+            cost[resetting] = 0.0
             truncated &= stepping
             active = active & stepping
             u[resetting] = 0.0
@@ -269,7 +281,8 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         control, act_all, coll_all, goal_all = u, active, collision, goal
         infos = {"sim_time": self._sim_time.copy(), "_sim_time": np.ones(n, dtype=bool),
                  "state": self._states.copy(), "_state": np.ones(n, dtype=bool),
-                 "active": act_all, "_active": stepping.copy(), "control": control, "_control": stepping.copy()}
+                 "active": act_all, "_active": stepping.copy(), "control": control, "_control": stepping.copy(),
+                 "cost": cost, "_cost": stepping.copy()}
         any_ended = bool(ended.any())
         if any_ended:
             ended_info = self._ended_info(ended, coll_all, goal_all)
@@ -281,6 +294,8 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
             infos["sim_time"][ridx] = 0.0
             infos["state"][ridx] = self._states[ridx]
         obs = self._observe()
+        self._update_nominal()
+        infos["nominal_control"], infos["_nominal_control"] = self._nominal.copy(), np.ones(n, dtype=bool)
         if mode == AutoresetMode.SAME_STEP:
             if any_ended:
                 ended_idx = np.nonzero(ended)[0]
@@ -289,7 +304,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
                     final_obs[i] = obs[i].copy()
                 final_info = {k: (_masked(v, ended) if not k.startswith("_") else v & ended)
                               for k, v in infos.items()} | ended_info
-                for key in ("active", "control"):  # now in final_info: absent (zero, unmasked) at the top
+                for key in ("active", "control", "cost"):  # now in final_info: absent (zero, unmasked) at the top
                     infos[f"_{key}"] = infos[f"_{key}"] & ~ended
                     infos[key] = _masked(infos[key], ~ended)
                 for i in ended_idx:
@@ -297,6 +312,8 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
                 infos["sim_time"][ended_idx] = 0.0
                 infos["state"][ended_idx] = self._states[ended_idx]
                 obs[ended_idx] = self._observe(ended_idx)
+                self._update_nominal(ended_idx)
+                infos["nominal_control"][ended_idx] = self._nominal[ended_idx]
                 infos.update({"final_obs": final_obs, "_final_obs": ended.copy(),
                               "final_info": final_info, "_final_info": ended.copy()})
             self._ended[:] = False
@@ -304,12 +321,17 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
             if any_ended:
                 infos.update(ended_info)
             self._ended = ended
-        for key in ("active", "control"):  # a key no sub-env has is absent, as in Gymnasium's own vector envs
+        for key in ("active", "control", "cost"):  # a key no sub-env has is absent, as in Gymnasium's own vector envs
             if not infos[f"_{key}"].any():
                 del infos[key], infos[f"_{key}"]
         self._obs = obs  # a fresh array every step, never written to afterwards: no copy needed
         self.clock.start()
         return obs, rewards, terminated, truncated, infos
+
+    def _update_nominal(self, idx=slice(None)) -> None:
+        """The driver's control at the states of sub-envs ``idx`` (kept in ``_nominal``: what an
+        interval the driver controls applies)."""
+        self._nominal[idx] = nominal_controls(self._single.driver, self._states[idx], self._circles[idx])
 
     def _ended_info(self, ended: np.ndarray, collision: np.ndarray, goal: np.ndarray) -> dict:
         """``outcome`` and ``episode`` (the single env's ``episode_statistics``) of the sub-envs
@@ -320,16 +342,16 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         outcome = np.full(self.num_envs, None, dtype=object)
         for i in np.nonzero(ended)[0]:
             outcome[i] = "collision" if collision[i] else "goal" if goal[i] else "timeout"
-        masks = np.repeat(ended[None], 11, axis=0)  # one independent mask row per key
+        masks = np.repeat(ended[None], 12, axis=0)  # one independent mask row per key
         episode = {"outcome": outcome.copy(), "_outcome": masks[0]}
         for j, (key, value) in enumerate((
                 ("n_env_steps", n_steps), ("n_active_ctrl_env_steps", self._n_active),
                 ("active_ctrl_sim_time", self._active_time), ("cum_sim_time", self._sim_time),
                 ("cum_compute_time", self._cum_compute), ("avg_compute_time", avg),
-                ("cum_reward", self._cum_reward), ("final_speed", self._states[:, 3])), start=1):
+                ("cum_reward", self._cum_reward), ("cum_cost", self._cum_cost), ("final_speed", self._states[:, 3])), start=1):
             episode[key] = np.where(ended, value, value.dtype.type(0))
             episode[f"_{key}"] = masks[j]
-        return {"outcome": outcome, "_outcome": masks[9], "episode": episode, "_episode": masks[10]}
+        return {"outcome": outcome, "_outcome": masks[10], EPISODE_KEY: episode, f"_{EPISODE_KEY}": masks[11]}
 
     def close_extras(self, **kwargs: Any) -> None:
         self._single.close()

@@ -7,25 +7,44 @@ What every env with a built-in driver and a guardian action shares (``Dubins4DCi
   with the action space (:class:`rmm_envs.autonomy.GuardianActionSpace`), advance by
   ``step_dt`` with the env's ``simulate(duration, active, control, compute_time)`` (which the
   non-blocking wrapper calls directly with its own durations), restart the clock;
-* the statistics of the paper's Table I (:meth:`GuardedEnv.episode_statistics`, the
-  ``info["episode"]`` of the contract) and the end of a step: :meth:`GuardedEnv.end_interval`
-  ends the episode on an outcome (``"goal"``, ``"collision"``) or at ``max_episode_sim_time``
-  (``"timeout"``, truncated) and adds ``outcome`` and ``episode`` to the last step's ``info``.
+* the driver's intended control, ``info["nominal_control"]`` on ``reset`` and every step
+  (:meth:`GuardedEnv.update_nominal`): computed from the state the returned observation shows,
+  in the action space's control order and bounds, and kept, so that an interval the driver
+  controls applies exactly these numbers.  A safety filter reads it as its ``u_nom``; a
+  guardian returning ``action_space.active(info["nominal_control"])`` drives exactly as the
+  driver does (tested bit for bit);
+* the per-step safety cost of Safety-Gymnasium's convention, ``info["cost"]``: 1.0 on a step
+  that ends in a collision, 0.0 otherwise; its episode sum is ``cum_cost`` in the statistics;
+* the statistics of the paper's Table I (:meth:`GuardedEnv.episode_statistics`,
+  ``info["episode_stats"]``: a key of its own, so that Gymnasium's ``RecordEpisodeStatistics``
+  and SB3's ``Monitor`` can write their ``info["episode"]``) and the end of a step:
+  :meth:`GuardedEnv.end_interval` ends the episode on an outcome (``"goal"``,
+  ``"collision"``) or at ``max_episode_sim_time`` (``"timeout"``, truncated) and adds
+  ``outcome`` and ``episode_stats`` to the last step's ``info``.
 
 A subclass sets ``step_dt``, ``max_episode_sim_time``, ``clock`` and ``action_space``, calls
-:meth:`~GuardedEnv.begin_statistics` at ``reset`` and, in ``simulate``,
-:meth:`~GuardedEnv.check_interval`, :meth:`~GuardedEnv.count_interval` and
-:meth:`~GuardedEnv.end_interval`; it reports its speed through :meth:`~GuardedEnv.final_speed`.
+:meth:`~GuardedEnv.begin_statistics` and :meth:`~GuardedEnv.update_nominal` at ``reset`` and,
+in ``simulate``, :meth:`~GuardedEnv.check_interval`, :meth:`~GuardedEnv.count_interval` and
+:meth:`~GuardedEnv.end_interval` (after the state has advanced), applying ``self._nominal`` on
+an interval the driver controls; it reports its speed through :meth:`~GuardedEnv.final_speed`
+and its driver through :meth:`~GuardedEnv.driver_control`.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from rmm_envs.autonomy import parse
 from rmm_envs.envs.base import LabelledEnvBase
 
-__all__ = ["GuardedEnv", "parallel_entry_point"]
+__all__ = ["EPISODE_KEY", "GuardedEnv", "parallel_entry_point"]
+
+#: The ``info`` key of the env's own episode statistics (Table I's), on the last step of an
+#: episode.  Not ``"episode"``: Gymnasium's ``RecordEpisodeStatistics`` and SB3's ``Monitor``
+#: write that key themselves (the first refuses to run when it is taken).
+EPISODE_KEY = "episode_stats"
 
 
 class GuardedEnv(LabelledEnvBase):
@@ -52,6 +71,24 @@ class GuardedEnv(LabelledEnvBase):
         self._active_sim_time = 0.0
         self._cum_compute = 0.0
         self._cum_reward = 0.0
+        self._cum_cost = 0.0
+
+    def driver_control(self) -> np.ndarray:  # pragma: no cover - each env implements it
+        """The driver's control at the current state.  Called once per observed state, whoever
+        controls: a driver that keeps progress along a route (the maze's, the quadrotor's)
+        follows the car there while the guardian drives, so handing its control back every
+        step is the driver's episode exactly."""
+        raise NotImplementedError
+
+    def update_nominal(self) -> np.ndarray:
+        """Compute and keep the driver's control at the current state (``self._nominal``, what an
+        interval the driver controls applies); return a copy for ``info["nominal_control"]``.
+        Call it once the state is the one the returned observation shows."""
+        u = np.array(self.driver_control(), dtype=float).reshape(-1)
+        space = self.action_space
+        np.minimum(np.maximum(u, space.control_low, out=u), space.control_high, out=u)
+        self._nominal = u
+        return u.copy()
 
     def check_interval(self, duration: float) -> None:
         """``RuntimeError`` before ``reset`` or after the end; ``ValueError`` for a bad duration."""
@@ -70,17 +107,22 @@ class GuardedEnv(LabelledEnvBase):
 
     def end_interval(self, outcome: str | None, reward: float, info: dict) -> tuple[bool, bool]:
         """``(terminated, truncated)`` after an interval with ``outcome`` (``None``: the episode
-        goes on unless its time is up) and ``reward``; on the last step, ends the episode and
-        adds ``outcome`` and ``episode`` to ``info``."""
+        goes on unless its time is up) and ``reward``; adds ``cost`` and ``nominal_control`` (the
+        driver's control at the new state) to ``info`` and, on the last step, ends the episode and
+        adds ``outcome`` and ``episode_stats``."""
         terminated = outcome is not None
         truncated = not terminated and self._sim_time >= self.max_episode_sim_time - 1e-9
         if truncated:
             outcome = "timeout"
         self._cum_reward += reward
+        cost = 1.0 if outcome == "collision" else 0.0
+        self._cum_cost += cost
+        info["cost"] = cost
+        info["nominal_control"] = self.update_nominal()
         if terminated or truncated:
             self.end_episode()
             info["outcome"] = outcome
-            info["episode"] = self.episode_statistics(outcome)
+            info[EPISODE_KEY] = self.episode_statistics(outcome)
         return terminated, truncated
 
     def final_speed(self) -> float:  # pragma: no cover - each env implements it
@@ -97,6 +139,7 @@ class GuardedEnv(LabelledEnvBase):
             "cum_compute_time": self._cum_compute,
             "avg_compute_time": self._cum_compute / n if n else 0.0,
             "cum_reward": self._cum_reward,
+            "cum_cost": self._cum_cost,
             "final_speed": self.final_speed(),
         }
 

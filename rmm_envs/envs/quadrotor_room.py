@@ -157,7 +157,7 @@ class QuadrotorRoomEnv(LabelledEnvBase):
             import pybullet as p
         except ImportError as e:
             raise gym.error.DependencyNotInstalled(
-                "QuadrotorRoom-v0 needs PyBullet: pip install 'rmm-envs[quadrotor]' (pybullet==3.2.7)"
+                "QuadrotorRoom-v0 needs PyBullet: the quadrotor extra, pip install -e '.[quadrotor]' in a clone (pybullet==3.2.7)"
             ) from e
 
         n_sub = control_dt / QUADROTOR.dt if finite(control_dt) else math.nan

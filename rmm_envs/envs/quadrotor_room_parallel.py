@@ -93,8 +93,11 @@ env's observation of them (PyBullet rays; the goal offset from the episode's goa
 ## Info
 
 Every step: ``sim_time``, ``state`` (13 numbers, **privileged**), ``active`` and ``control``
-(the command applied).  On the last step also ``outcome`` (``"goal"``, ``"collision"`` or
-``"timeout"``) and ``episode`` (the statistics of :class:`rmm_envs.envs.guarded.GuardedEnv`,
+(the command applied), ``cost`` (1.0 on the step that collides, else 0.0) and
+``nominal_control`` (also on ``reset``): the pilot's command at the state the returned
+observation shows, exactly what it applies if the guardian leaves it the next interval.  On
+the last step also ``outcome`` (``"goal"``, ``"collision"`` or ``"timeout"``) and
+``episode_stats`` (the statistics of :class:`rmm_envs.envs.guarded.GuardedEnv`,
 ``final_speed`` the body's speed).  :meth:`QuadrotorRoomGuardedEnv.privileged` returns the
 state, the room, the goal, the waypoints and the simulated time.
 
@@ -319,8 +322,9 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         self._gap, self._gap_at = -math.inf, state[:3].copy()  # no clearance known yet
         self.begin_statistics()
         self.begin_episode()
+        info = {"sim_time": 0.0, "state": state.copy(), "nominal_control": self.update_nominal()}
         self.clock.start()
-        return self._observe(state), {"sim_time": 0.0, "state": state.copy()}
+        return self._observe(state), info
 
     # ------------------------------------------------------------------ stepping
     def rays(self) -> np.ndarray:
@@ -361,8 +365,11 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         self.check_interval(duration)
         p, c, body, par = self.p, self.client, self.body, self.params
         s = self.get_state()
-        cmd = np.asarray(control, dtype=float).reshape(4) if active else self.pilot.command(s)
-        cmd = np.minimum(np.maximum(cmd, self.system.control_low), self.system.control_high)
+        if active:
+            cmd = np.minimum(np.maximum(np.asarray(control, dtype=float).reshape(4), self.system.control_low),
+                             self.system.control_high)
+        else:
+            cmd = self._nominal.copy()
         target = math.floor((self._sim_time + duration) / par.dt + 1e-9)
         n = max(0, target - self._physics_steps)
         t = n * par.dt
@@ -398,6 +405,9 @@ class QuadrotorRoomGuardedEnv(GuardedEnv, QuadrotorRoomEnv):
         info = {"sim_time": self._sim_time, "state": s.copy(), "active": bool(active), "control": cmd.copy()}
         terminated, truncated = self.end_interval(outcome, reward, info)
         return self._observe(s), reward, terminated, truncated, info
+
+    def driver_control(self) -> np.ndarray:
+        return self.pilot.command(self.get_state())
 
     def final_speed(self) -> float:
         v = self.get_state()[7:10]

@@ -41,7 +41,7 @@ def require_pymunk():
     except ImportError as e:
         import gymnasium as gym
 
-        raise gym.error.DependencyNotInstalled("maps of your own need pymunk: pip install 'rmm-envs[map]'") from e
+        raise gym.error.DependencyNotInstalled("maps of your own need pymunk: the map extra, pip install -e '.[map]' in a clone") from e
     return pymunk
 
 

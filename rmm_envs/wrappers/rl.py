@@ -28,7 +28,7 @@ the gap; they work on every env whose action space is an
     the brakes for ever is worse than intervening briefly but still better than crashing.  The
     intervention cost is charged per simulated second, not per step, because non-blocking
     steps have different lengths.  The env's own reward is kept in ``info["env_reward"]``; the
-    episode statistics in ``info["episode"]`` are unchanged.  The three weights must be
+    episode statistics in ``info["episode_stats"]`` are unchanged.  The three weights must be
     finite and ``>= 0``.
 """
 
@@ -65,18 +65,10 @@ class FlattenGuardianAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
 
     @staticmethod
     def to_guardian(space: GuardianActionSpace, action) -> dict:
-        """The guardian action of ``space`` for a flat vector ``[active, scaled controls...]``."""
-        a = np.asarray(action, dtype=float).reshape(-1)
-        if a.shape != (1 + space.control_dim,):
-            raise ValueError(f"a flat guardian action has {1 + space.control_dim} numbers [active, "
-                             f"{', '.join(space.controls)}], got shape {np.shape(action)}")
-        bad = np.flatnonzero(~np.isfinite(a))
-        if bad.size:
-            raise ValueError(f"flat guardian action index {int(bad[0])} must be finite, got {a[bad[0]]}")
-        if a[0] <= 0.5:
-            return space.inactive()
-        z = np.clip(a[1:], -1.0, 1.0)
-        return space.active(space.control_low + (z + 1.0) * 0.5 * (space.control_high - space.control_low))
+        """The guardian action of ``space`` for a flat vector ``[active, scaled controls...]``:
+        :meth:`rmm_envs.autonomy.GuardianActionSpace.from_unit`, the one mapping this wrapper
+        and :class:`guardians.adapters.SB3Guardian` share."""
+        return space.from_unit(action)
 
     def action(self, action) -> dict:
         return self.to_guardian(self.guardian_space, action)

@@ -1,0 +1,103 @@
+"""``rmm-bench --agent module:Class`` and ``--env module:Id`` import from the directory the
+command runs in, as ``python -m`` would, in the parent and in every worker (issue 27)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from benchmarks.bench.config import import_from
+
+GUARD = '''
+from guardians.base import Guardian
+
+
+class Steady(Guardian):
+    name = "steady"
+
+    def act(self, observation, info):
+        return self.action_space.inactive()
+'''
+ENV = '''
+import gymnasium as gym
+
+gym.register(id="MyCircles-v0", entry_point="rmm_envs.envs.dubins4d:Dubins4DCirclesEnv")
+'''
+
+
+def _bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    exe = Path(sys.executable).parent / "rmm-bench"
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    return subprocess.run([str(exe), *args, "--clock", "fixed:1", "--no-progress", "--out", str(cwd / "res")],
+                          cwd=cwd, capture_output=True, text=True, timeout=600, env=env)
+
+
+def test_agent_and_env_modules_are_found_in_the_current_directory_by_every_worker(tmp_path):
+    (tmp_path / "my_guard.py").write_text(GUARD)
+    (tmp_path / "my_env.py").write_text(ENV)
+    res = _bench(tmp_path, "--agent", "my_guard:Steady", "--env", "my_env:MyCircles-v0", "--episodes", "4",
+                 "--workers", "2")
+    assert res.returncode == 0, res.stderr[-2000:]
+    row = next(line for line in res.stdout.splitlines() if line.startswith("| my_guard:Steady"))
+    assert "| 4 |" in row and "| 0 | 0 |" in row  # four episodes, no errors
+
+
+def test_a_module_that_is_not_there_exits_2_naming_it(tmp_path):
+    res = _bench(tmp_path, "--agent", "no_such_guard:X", "--episodes", "1")
+    assert res.returncode == 2
+    assert "cannot import module 'no_such_guard'" in res.stderr
+    res = _bench(tmp_path, "--env", "no_such_env:E-v0", "--episodes", "1")
+    assert res.returncode == 2
+    assert "--env 'no_such_env:E-v0': cannot import module 'no_such_env'" in res.stderr
+    (tmp_path / "empty_env.py").write_text("")
+    res = _bench(tmp_path, "--env", "empty_env:E-v0", "--episodes", "1")
+    assert res.returncode == 2 and "importing 'empty_env' registered no env 'E-v0'" in res.stderr
+
+
+def test_import_from_puts_each_folder_first_once(monkeypatch):
+    monkeypatch.setattr(sys, "path", ["/b", "/a", "/c"])
+    import_from(["/a", "/d"])
+    assert sys.path == ["/a", "/d", "/b", "/c"]
+    import_from(["/a", "/d"])
+    assert sys.path == ["/a", "/d", "/b", "/c"]
+
+
+WARM = '''
+from guardians.base import Guardian
+
+CALLS = 0  # act() calls in this worker process
+
+
+class CountsCalls(Guardian):
+    name = "counts-calls"
+
+    def reset(self, **kwargs):
+        super().reset(**kwargs)
+        self.calls_before = CALLS
+
+    def act(self, observation, info):
+        global CALLS
+        CALLS += 1
+        return self.action_space.inactive()
+
+    def stats(self):
+        return {"calls_before": self.calls_before}
+'''
+
+
+def test_each_workers_first_timed_decision_comes_after_an_untimed_warm_up(tmp_path):
+    """Every episode, the first of each worker included, starts with act() already called in
+    that process: compiling or loading a guardian's kernels is never a timed decision."""
+    import json
+
+    from benchmarks import load_results
+
+    (tmp_path / "warm_guard.py").write_text(WARM)
+    res = _bench(tmp_path, "--agent", "warm_guard:CountsCalls", "--episodes", "4", "--workers", "2",
+                 "--env", "Dubins4DCircles-v0")
+    assert res.returncode == 0, res.stderr[-2000:]
+    df = load_results(tmp_path / "res")
+    calls = [json.loads(s)["calls_before"] for s in df.guardian_stats]
+    assert len(calls) == 4 and min(calls) >= 1
