@@ -119,7 +119,9 @@ def test_rendered_tables_hold_the_aggregated_numbers(tmp_path):
     # (episode 7, a goal, is a guardian error: a failure in the rates)
     rates, w = np.array([31 / 64, 16 / 64, 1.0]), np.array([64, 64, 2])
     assert aggs["a"]["goal"][0] == pytest.approx(100 * (rates * w).sum() / w.sum())
-    assert _pm_text(aggs["c"]["goal"]) == "0.0 ± 0.0" and _pm_text(aggs["c"]["intervention"]) == "n/a"
+    # "c": one episode, a guardian error, so a failure: rate 0 over one episode, whose 95% Wilson
+    # half-width is z^2 / 2 / (1 + z^2) = 39.7%
+    assert _pm_text(aggs["c"]["goal"]) == "0.0 ± 39.7" and _pm_text(aggs["c"]["intervention"]) == "n/a"
     rows = [{"agent": k, "obs": "none", "n_obst": 5, **v} for k, v in aggs.items()]
     tables = format_tables(rows)
     for ext in ("md", "csv", "tex"):

@@ -60,7 +60,8 @@ def test_empty_inputs_give_nan_not_zero():
     assert all(map(math.isnan, batch_rate([])))
     only_errors = aggregate([{"episode": 0, "outcome": "error"}])  # a guardian error: a failure, not a missing result
     assert only_errors["errors"] == 1 and only_errors["error_rate"] == 1.0
-    assert only_errors["total_goal"] == 0.0 and only_errors["goal"] == (0.0, 0.0)
+    assert only_errors["total_goal"] == 0.0 and only_errors["goal"][0] == 0.0
+    assert only_errors["goal"][1] == pytest.approx(100 * 1.959963984540054 ** 2 / 2 / (1 + 1.959963984540054 ** 2))  # Wilson, n = 1
     no_result = aggregate([{"episode": 0, "outcome": "error", "error_kind": "timeout"}])
     assert math.isnan(no_result["total_goal"]) and all(map(math.isnan, no_result["goal"]))
 
