@@ -1,22 +1,26 @@
-"""Behaviour fingerprint: prove a refactor changed no result.
+"""Behaviour fingerprint: prove a refactor changed no result, and that a machine's arithmetic
+changes none either.
 
 ``python benchmarks/check_behaviour.py record FILE`` writes a JSON fingerprint of what the
-project computes; ``python benchmarks/check_behaviour.py compare FILE`` recomputes it and
-lists every difference (exit 1 if any).  Run ``record`` on the commit before a refactor and
-``compare`` after it.  The fingerprint holds:
+project computes; ``compare FILE`` recomputes it and lists every difference (exit 1 if any):
+run ``record`` on the commit before a refactor and ``compare`` after it.  ``arith`` computes
+it in fresh interpreters under several machines' arithmetic (BLAS kernel, numpy's SIMD
+dispatch, numba's target CPU; see :func:`arith_settings`) and compares them.  The
+fingerprint holds:
 
-* **benchmark episodes**: every non-timing column of every episode ``rmm-bench`` stores for
-  the agents below on ``Dubins4DParallel-v0`` under a fixed 1 ms clock (so timing and machine
-  load cannot change them), seed 0: outcome, steps, simulated and intervention time, final
-  speed, reward, guardian counters;
-* **environments**: a SHA-256 of the observations, rewards and flags of a seeded rollout of
-  each registered environment under seeded random actions;
-* **risk labels**: a SHA-256 of the sampled states, observations and sampling-tree risk labels
-  of each labelled environment (small trees, a fixed seed).
+* **worlds**: rooms, mazes, and every env's world and start state at reset (privileged view);
+* **envs**: a SHA-256 of the observations, rewards, flags and info of a seeded rollout of each
+  of the ten envs under seeded random actions;
+* **labels**: sampled states, observations and sampling-tree risk labels of each labelled env;
+* **datasets**: ``rmm-datagen``'s rows for the three systems;
+* **hj**: HJ value functions solved afresh;
+* **bench**: every non-timing column of fixed-clock ``rmm-bench`` episodes of all three
+  systems (Dubins4D's seven agents and HJ, the maze's and the quadrotor's guardians);
+* **applied**: the arithmetic the interpreter really ran under (numpy's dispatch target of
+  ``exp``, the OpenBLAS kernel), so that a setting which did not take effect is noticed.
 
-Hashes are of exact bytes: a change in the last bit of one float is a difference.  The
-default sizes take about two minutes on one core (``--episodes`` and ``--hj-episodes`` set
-the benchmark's share; HJ is slow because each episode solves a PDE).
+Hashes are of exact bytes: a change in the last bit of one float is a difference.  ``--size
+full`` takes about five minutes on one core, ``--size quick`` (the test suite's) about 20 s.
 """
 
 from __future__ import annotations
@@ -34,8 +38,8 @@ from pathlib import Path
 import numpy as np
 
 # Columns that measure time (machine-dependent) or identify a run, never compared.
-_TIMING = {"decision_mean", "decision_std", "decision_max", "precompute_time", "wall_time", "finished", "run_key",
-           "invocation", "config"}
+_MEASURED = {"decision_mean", "decision_std", "decision_max", "precompute_time", "wall_time"}
+_TIMING = _MEASURED | {"finished", "run_key", "invocation", "config"}
 
 # Sizes: "full" is the refactor check (about two minutes on one core), "quick" the cheap one the
 # default test suite runs under several machines' arithmetic (tests/test_reproducibility.py).
@@ -73,8 +77,10 @@ def _digest(*arrays) -> str:
 
 
 def _measured(key) -> bool:
-    """An info key that holds a measured (wall or CPU) time, not behaviour."""
-    return isinstance(key, str) and any(w in key for w in ("compute", "wall", "seconds", "elapsed"))
+    """An info or stats key that holds a measured (wall-clock or CPU) time, not behaviour: the
+    blocking envs' ``cum_compute_time`` / ``avg_compute_time``, a guardian's ``solve_seconds``.
+    (Exact names: a room's ``walls`` or a maze's ``wall_height`` are behaviour.)"""
+    return isinstance(key, str) and (key.endswith(("compute_time", "_seconds")) or key in _MEASURED)
 
 
 def _flatten(value, out: list) -> None:
@@ -230,7 +236,8 @@ def label_fingerprint(n_states: int = 16) -> dict:
 
 
 def dataset_fingerprint(configs: int, samples: int) -> dict:
-    """The dataset hash ``rmm-datagen`` writes in its manifest (every shard's bytes), per system."""
+    """What ``rmm-datagen`` writes, per system: every value of every shard (read back, so not the
+    Parquet bytes, which carry pyarrow's version) and the row count of its manifest."""
     from rmm_envs.risk.datagen import DatagenConfig, generate
 
     out = {}
@@ -244,12 +251,13 @@ def dataset_fingerprint(configs: int, samples: int) -> dict:
 
             cols = [pq.read_table(p).to_pydict() for p in shards]
         out[env_id] = {"content": _digest(*[np.asarray(v, dtype=object).astype(str) for c in cols for v in c.values()]),
-                       "rows": manifest.get("rows")}
+                       "rows": manifest.get("n_rows")}
     return out
 
 
 def hj_fingerprint() -> dict:
-    """HJ value functions solved afresh on small grids: Dubins4D (second and first order) and the maze."""
+    """HJ value functions solved afresh on a small Dubins4D grid, second and first order (the maze's
+    are solved in the benchmark episodes of ``hj`` on the maze)."""
     from guardians.hj.guardian import HJGuardian
 
     obstacles = np.array([[3.0, 1.0, 1.5], [-4.0, -2.0, 2.0]])
@@ -266,14 +274,43 @@ def fingerprint(episodes: int, hj_episodes: int, size: str | None = None) -> dic
     return {"bench": bench_fingerprint(sz["episodes"], sz["hj_episodes"], sz["other_episodes"], other),
             "envs": env_fingerprint(sz["steps"]), "worlds": world_fingerprint(sz["seeds"]),
             "labels": label_fingerprint(sz["states"]), "datasets": dataset_fingerprint(sz["configs"], sz["samples"]),
-            "hj": hj_fingerprint(), "sizes": {**sz, "size": size or "full"}, "versions": versions()}
+            "hj": hj_fingerprint(), "sizes": {**sz, "size": size or "full"}, "versions": versions(),
+            "applied": applied()}
+
+
+def applied() -> dict:
+    """The arithmetic this interpreter really runs under: numpy's dispatch target of float64
+    ``exp`` and ``arctan2``, the OpenBLAS kernel numpy's BLAS picked (None where it cannot be
+    read: another BLAS), and the target numba compiles for."""
+    import ctypes
+    import glob
+
+    import numba
+
+    info = np.lib.introspect.opt_func_info(func_name="^(exp|arctan2)$", signature="float64")
+    out = {f"numpy_{k}": next(iter(v.values()))["current"] for k, v in sorted(info.items())}
+    out["blas_core"] = None
+    for lib in glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "*openblas*")):
+        for name in ("scipy_openblas_get_corename64_", "openblas_get_corename64_", "openblas_get_corename"):
+            try:
+                fn = getattr(ctypes.CDLL(lib), name)
+            except (OSError, AttributeError):
+                continue
+            fn.restype = ctypes.c_char_p
+            out["blas_core"] = fn().decode()
+            break
+    out["numba_cpu"] = numba.config.CPU_NAME or "host"
+    out["numba_svml"] = bool(numba.config.USING_SVML)
+    return out
 
 
 def versions() -> dict:
     """What the bits are promised for: the versions of the packages that compute them."""
     from importlib.metadata import version
 
-    out = {"python": ".".join(map(str, sys.version_info[:3]))}
+    import platform
+
+    out = {"python": ".".join(map(str, sys.version_info[:3])), "libc": " ".join(platform.libc_ver())}
     for pkg in ("numpy", "numba", "scipy", "osqp", "pybullet", "pymunk", "pyarrow"):
         try:
             out[pkg] = version(pkg)
@@ -312,6 +349,12 @@ _NPY_NO_AVX512 = "X86_V4 AVX512_ICL AVX512_SPR"
 _NPY_NO_AVX2 = "X86_V3 " + _NPY_NO_AVX512
 
 
+#: every environment variable that changes which arithmetic a process runs; ``run_under`` sets
+#: those a setting names and clears the rest
+_ARITH_VARIABLES = ("OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE", "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES",
+                    "NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES", "GLIBC_TUNABLES", "ATEN_CPU_CAPABILITY")
+
+
 def arith_settings(host_flags: set[str] | None = None) -> list[dict]:
     """The settings to compare, the portable one (oldest kernel, generic CPU, no SIMD dispatch) first."""
     if host_flags is None:
@@ -341,12 +384,8 @@ def describe(setting: dict) -> str:
 
 def run_under(setting: dict, size: str, timeout: float | None = None) -> dict:
     """The fingerprint computed in a fresh interpreter under one setting (None: unset)."""
-    env = dict(os.environ)
-    for k, v in setting.items():
-        env.pop(k, None)
-        if v is not None:
-            env[k] = v
-    env.pop("OPENBLAS_L2_SIZE", None) if setting.get("OPENBLAS_CORETYPE") is None else None
+    env = {k: v for k, v in os.environ.items() if k not in _ARITH_VARIABLES}  # none leaks in from this shell
+    env.update({k: v for k, v in setting.items() if v is not None})
     root = Path(__file__).resolve().parent.parent
     env["PYTHONPATH"] = os.pathsep.join([str(root), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     with tempfile.TemporaryDirectory() as tmp:
@@ -356,11 +395,6 @@ def run_under(setting: dict, size: str, timeout: float | None = None) -> dict:
         if proc.returncode != 0:
             raise RuntimeError(f"fingerprint under {describe(setting)} failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
         return json.loads(out.read_text())
-
-
-def first_difference(ref: dict, other: dict) -> str | None:
-    diffs = compare(ref, other)
-    return diffs[0] if diffs else None
 
 
 def main(argv=None) -> int:
@@ -387,11 +421,13 @@ def main(argv=None) -> int:
     if args.mode == "arith":
         settings = arith_settings() + ([PRE_FMA] if args.pre_fma else [])
         ref = run_under(settings[0], args.size)
-        print(f"reference: {describe(settings[0])}")
+        print(f"reference: {describe(settings[0])} (ran under {ref['applied']})")
         bad = 0
         for s in settings[1:]:
-            diffs = compare(ref, run_under(s, args.size))
-            print(f"{describe(s)}: " + ("same bits" if not diffs else f"{len(diffs)} DIFFER, first: {diffs[0]}"))
+            fp = run_under(s, args.size)
+            diffs = compare(ref, fp)
+            print(f"{describe(s)} (ran under {fp['applied']}): "
+                  + ("same bits" if not diffs else f"{len(diffs)} DIFFER, first: {diffs[0]}"))
             for d in diffs[1:args.show]:
                 print(f"    {d}")
             bad += bool(diffs)

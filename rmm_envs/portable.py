@@ -7,16 +7,20 @@ Three things make a float result depend on the CPU rather than on the inputs alo
   different orders and some use fused multiply-adds.
 * **numpy's SIMD dispatch.**  On AVX-512 CPUs numpy computes ``exp``, ``log``, ``arctan2``,
   ``arctan``, ``power``, ... with its own vector code, on AVX2 CPUs ``tanh`` too; each differs
-  from the C library in the last bit for some inputs.  (``sin``, ``cos``, ``sqrt``, ``hypot``,
-  ``+ - * /`` and numpy's ordered sums ``np.add.reduce`` / ``.sum`` are the same everywhere.)
+  from the C library in the last bit for some inputs.  (``+ - * /``, ``sqrt`` and numpy's
+  ordered sums ``np.add.reduce`` / ``.sum`` are exact or fixed-order; numpy's ``sin``, ``cos``
+  and ``hypot`` call the C library, as ``math`` does.)
 * **Compiled kernels** built for the host CPU could contract ``a * b + c`` into one FMA; numba
   does not without ``fastmath``, which the project never uses.
 
 So code whose result a seed determines (worlds, dynamics, observations, labels, decisions)
 uses the helpers here instead: sums of small products written out in a fixed order, numpy's
-ordered reductions, and element-wise ``atan2`` / ``exp`` / ``tanh`` from the C library through a
-compiled loop.  ``tests/test_reproducibility.py`` recomputes a fingerprint of everything under
-several machines' arithmetic.  What remains machine-dependent is said in docs/reproduction.md.
+ordered reductions, and the C library's ``atan2`` through a compiled loop (numba kernels call
+the C library for every transcendental function).  The C library itself (glibc) picks FMA
+variants of ``exp``, ``sin``, ``cos``, ... on CPUs that have FMA, so the promise is for
+x86-64 CPUs with AVX2 and FMA, on Linux with the same C library.
+``tests/test_reproducibility.py`` recomputes a fingerprint of everything under several
+machines' arithmetic and checks the code statically; docs/reproduction.md says what remains.
 """
 
 from __future__ import annotations
@@ -24,15 +28,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import vectorize
+from numba import njit
 
 __all__ = ["arctan2", "dot", "matvec", "norm", "norms", "wrap_angle"]
 
 
 def dot(a, b) -> float:
-    """``sum(a[i] * b[i])`` of two short vectors, left to right, as a Python float."""
+    """``sum(a[i] * b[i])`` of two short vectors of one length, left to right, as a Python float."""
     s = 0.0
-    for x, y in zip(np.asarray(a, float).tolist(), np.asarray(b, float).tolist()):
+    for x, y in zip(np.asarray(a, float).ravel().tolist(), np.asarray(b, float).ravel().tolist(), strict=True):
         s += x * y
     return s
 
@@ -58,10 +62,19 @@ def matvec(A, x) -> np.ndarray:
     return np.add.reduce(A * x[..., None, :], axis=-1)
 
 
-@vectorize(["float64(float64, float64)"], cache=True)
-def arctan2(y, x):  # pragma: no cover - compiled
-    """Element-wise ``atan2(y, x)`` from the C library (numpy's own is SIMD code on AVX-512)."""
-    return math.atan2(y, x)
+@njit(cache=True)
+def _atan2_into(y, x, out):  # pragma: no cover - compiled
+    for i in range(out.size):
+        out[i] = math.atan2(y[i], x[i])
+
+
+def arctan2(y, x):
+    """Element-wise ``atan2(y, x)`` from the C library, broadcast like ``np.arctan2`` (numpy's
+    own is SIMD code on AVX-512).  A 0-d result is returned as a numpy float."""
+    y, x = np.broadcast_arrays(np.asarray(y, dtype=float), np.asarray(x, dtype=float))
+    out = np.empty(y.shape)
+    _atan2_into(np.ascontiguousarray(y).ravel(), np.ascontiguousarray(x).ravel(), out.reshape(-1))
+    return out[()] if out.ndim == 0 else out
 
 
 def wrap_angle(theta):

@@ -29,7 +29,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from benchmarks.check_behaviour import SECTIONS, arith_settings, compare, describe, run_under
+from benchmarks.check_behaviour import SECTIONS, applied, arith_settings, compare, describe, run_under
 from rmm_envs import portable
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -46,7 +46,9 @@ def _fingerprint(i: int) -> dict:
 def test_the_same_bits_under_each_machines_arithmetic(i):
     record = json.loads(RECORD.read_text())
     fp = _fingerprint(i)
-    assert set(SECTIONS) <= set(fp), f"the fingerprint lacks sections {set(SECTIONS) - set(fp)}"
+    assert set(SECTIONS) <= set(fp) and set(SECTIONS) <= set(record), \
+        f"sections missing: fingerprint {set(SECTIONS) - set(fp)}, record {set(SECTIONS) - set(record)}"
+    _check_applied(SETTINGS[i], fp["applied"])
     if fp["versions"] == record["versions"]:
         ref, what = record, f"the committed record {RECORD.relative_to(ROOT)}"
     elif i == 0:
@@ -57,6 +59,19 @@ def test_the_same_bits_under_each_machines_arithmetic(i):
     diffs = compare(ref, fp)
     assert not diffs, (f"under {describe(SETTINGS[i])} the fingerprint differs from {what} in {len(diffs)} field(s); "
                        f"first: {diffs[0]}")
+
+
+def _check_applied(setting: dict, got: dict) -> None:
+    """The setting really changed the arithmetic (a variable that a numpy, numba or BLAS build
+    ignores would make the comparison vacuous)."""
+    assert got["numba_cpu"] == (setting["NUMBA_CPU_NAME"] or "host"), got
+    disabled = (setting["NPY_DISABLE_CPU_FEATURES"] or "").split()
+    for func in ("numpy_exp", "numpy_arctan2"):
+        assert not any(got[func].startswith(f) for f in disabled), f"{func} still runs {got[func]} under {setting}"
+    here = applied()["blas_core"]
+    want = setting["OPENBLAS_CORETYPE"]
+    if want and here and got["blas_core"] and want.lower() != here.lower():
+        assert got["blas_core"] != here, f"OPENBLAS_CORETYPE={want} did not change the kernel ({here})"
 
 
 def test_the_settings_cover_the_kernels_the_issue_names():
@@ -77,48 +92,105 @@ def test_compare_names_the_first_field_that_differs():
 
 # ---------------------------------------------------------------------------- static check
 # numpy calls whose result depends on the CPU: BLAS, or numpy's own SIMD code on some CPUs
-_BLAS = {"dot", "inner", "vdot", "matmul", "tensordot", "outer"}
-_LINALG = {"norm", "solve", "inv", "lstsq", "eig", "eigh", "svd", "det", "pinv", "cholesky", "qr", "multi_dot"}
+_BLAS = {"dot", "inner", "vdot", "matmul", "tensordot", "outer", "convolve", "correlate", "cov", "corrcoef", "vecdot",
+         "matvec", "vecmat", "kron"}
 _DISPATCHED = {"exp", "log", "expm1", "log1p", "arctan2", "arctan", "arcsin", "arccos", "tan", "tanh", "sinh", "cosh",
-               "power", "cbrt", "exp2", "log2", "log10", "angle", "float_power"}
-# where a machine-dependent result is harmless: drawing, torch training, perf scripts' own timing
-_EXEMPT_FILES = {"rmm_envs/envs/_render.py", "guardians/lrmm/train.py", "rmm_envs/cli.py"}
+               "arcsinh", "arccosh", "arctanh", "power", "float_power", "cbrt", "exp2", "log2", "log10", "angle",
+               "logaddexp", "logaddexp2"}
+# np.argpartition / np.partition, and argsort unless stable: the tie order is the SIMD sort code's
+_EXACT_POWERS = {0, 1, 2, -1, 0.5}  # numpy's fast paths: a product, a square, a reciprocal or sqrt
+# where a machine-dependent result is harmless: drawing figures
+_EXEMPT_FILES = {"rmm_envs/envs/_render.py", "benchmarks/figures.py"}
+#: a line may say why a flagged form is exact there, e.g. an integer power: ``# exact: integers``
+_PRAGMA = "# exact:"
+
+
+def _aliases(tree: ast.AST) -> dict[str, str]:
+    """Local name -> dotted numpy name, from the module's imports (``np`` -> ``numpy``,
+    ``la`` -> ``numpy.linalg``, ``exp`` -> ``numpy.exp``)."""
+    out = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] == "numpy":
+                    out[a.asname or a.name.split(".")[0]] = a.name if a.asname else "numpy"
+        elif isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "numpy":
+            for a in node.names:
+                out[a.asname or a.name] = f"{node.module}.{a.name}"
+    return out
 
 
 def _compiled(fn: ast.AST) -> bool:
-    """A function numba compiles: its numpy calls become C-library calls, the same everywhere."""
-    decos = getattr(fn, "decorator_list", [])
-    names = {ast.unparse(d).split("(")[0].split(".")[-1] for d in decos}
+    """A function numba compiles: its transcendental calls become C-library calls, the same
+    everywhere (but ``@``, ``np.dot`` and ``np.linalg`` still reach BLAS there)."""
+    names = {ast.unparse(d).split("(")[0].split(".")[-1] for d in getattr(fn, "decorator_list", [])}
     return bool(names & {"njit", "jit", "vectorize", "guvectorize", "stencil"})
 
 
 def machine_dependent_calls(path: Path) -> list[str]:
-    tree = ast.parse(path.read_text())
-    rel = path.relative_to(ROOT).as_posix()
+    text = path.read_text()
+    lines = text.splitlines()
+    tree = ast.parse(text)
+    try:
+        rel = path.relative_to(ROOT).as_posix()
+    except ValueError:
+        rel = path.name
+    alias = _aliases(tree)
     compiled_names = {n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef) and _compiled(n)}
-    # functions compiled by a call (``f = njit(cache=True)(f)``) count too
-    for node in ast.walk(tree):
+    for node in ast.walk(tree):  # compiled by a call: ``f = njit(cache=True)(f)``
         if isinstance(node, ast.Assign) and isinstance(node.value, ast.Call) and isinstance(node.value.func, ast.Call):
             if ast.unparse(node.value.func.func).split(".")[-1] in {"njit", "jit"}:
                 compiled_names |= {t.id for t in node.targets if isinstance(t, ast.Name)}
     found = []
 
+    def flag(node, what):
+        line = lines[node.lineno - 1] if node.lineno <= len(lines) else ""
+        if _PRAGMA not in line:
+            found.append(f"{rel}:{node.lineno}: {what}")
+
+    def numpy_name(func) -> str:
+        parts = ast.unparse(func).split(".")
+        head = alias.get(parts[0])
+        return ".".join([head] + parts[1:]) if head else ""
+
     def visit(node, in_compiled: bool):
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             in_compiled = in_compiled or node.name in compiled_names
-        if not in_compiled:
-            if isinstance(node, ast.BinOp) and isinstance(node.op, ast.MatMult):
-                found.append(f"{rel}:{node.lineno}: '@' ({ast.unparse(node)[:60]})")
-            if isinstance(node, ast.Call):
-                f = ast.unparse(node.func)
-                parts = f.split(".")
-                if parts[0] in ("np", "numpy") and len(parts) == 2 and parts[1] in _BLAS | _DISPATCHED:
-                    found.append(f"{rel}:{node.lineno}: {f}")
-                elif f.endswith(".dot") and parts[0] not in ("np", "numpy", "portable"):
-                    found.append(f"{rel}:{node.lineno}: {f}")
-                elif parts[:2] in (["np", "linalg"], ["numpy", "linalg"]) and parts[-1] in _LINALG:
-                    if not (parts[-1] == "norm" and any(k.arg == "axis" for k in node.keywords)):
-                        found.append(f"{rel}:{node.lineno}: {f} (BLAS)")
+        if isinstance(node, ast.Call) and "fastmath" in {k.arg for k in node.keywords}:
+            flag(node, "fastmath (FMA contraction and reordering differ by CPU)")
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.MatMult) or \
+                isinstance(node, ast.AugAssign) and isinstance(node.op, ast.MatMult):
+            flag(node, f"'@' ({ast.unparse(node)[:60]})")
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow) and not in_compiled:
+            e = node.right
+            v = e.value if isinstance(e, ast.Constant) else (-e.operand.value if isinstance(e, ast.UnaryOp) and
+                                                             isinstance(e.op, ast.USub) and isinstance(e.operand, ast.Constant) else None)
+            base = node.left.operand if isinstance(node.left, ast.UnaryOp) else node.left
+            int_base = isinstance(base, ast.Constant) and isinstance(base.value, int)  # 2 ** 20, (-1) ** j: integers
+            if v not in _EXACT_POWERS and not int_base:
+                flag(node, f"'**' ({ast.unparse(node)[:60]}: np.power on arrays)")
+        if isinstance(node, ast.Call):
+            name = numpy_name(node.func)
+            parts = name.split(".")
+            method = ast.unparse(node.func).split(".")[-1] if isinstance(node.func, ast.Attribute) else ""
+            kinds = {k.arg: ast.unparse(k.value) for k in node.keywords}
+            if parts[:1] == ["numpy"] and len(parts) == 2 and parts[1] in _BLAS:
+                flag(node, f"{name} (BLAS)")
+            elif parts[:2] == ["numpy", "linalg"]:
+                exact_norm = parts[-1] == "norm" and "axis" in kinds and kinds.get("ord", "None") in ("None", "2") \
+                    and not in_compiled
+                if not exact_norm:
+                    flag(node, f"{name} (BLAS or LAPACK)")
+            elif parts[:1] == ["numpy"] and parts[-1] == "einsum" and kinds.get("optimize", "False") != "False":
+                flag(node, f"{name}(optimize=...) (BLAS)")
+            elif parts[:1] == ["numpy"] and len(parts) == 2 and parts[1] in _DISPATCHED and not in_compiled:
+                flag(node, f"{name} (numpy's SIMD code on some CPUs)")
+            elif not name and method == "dot" and not ast.unparse(node.func).startswith("portable."):
+                flag(node, f"{ast.unparse(node.func)} (BLAS)")
+            elif parts[-1:] == ["argpartition"] or method == "argpartition" or parts[-1:] == ["partition"] or \
+                    ((parts[-1:] == ["argsort"] or method == "argsort") and
+                     kinds.get("kind", "None").strip("'\"") not in ("stable", "mergesort")):
+                flag(node, f"{ast.unparse(node.func)} (tie order depends on the CPU's sort code)")
         for child in ast.iter_child_nodes(node):
             visit(child, in_compiled)
 
@@ -127,22 +199,25 @@ def machine_dependent_calls(path: Path) -> list[str]:
 
 
 def test_seeded_code_sends_nothing_to_blas_or_numpys_simd_transcendentals():
-    files = sorted(p for pkg in ("rmm_envs", "guardians") for p in (ROOT / pkg).rglob("*.py"))
+    files = sorted(p for pkg in ("rmm_envs", "guardians", "benchmarks/bench") for p in (ROOT / pkg).rglob("*.py"))
     found = [hit for p in files if p.relative_to(ROOT).as_posix() not in _EXEMPT_FILES for hit in machine_dependent_calls(p)]
     assert not found, ("machine-dependent arithmetic in seeded code (use rmm_envs.portable: dot, norm, norms, matvec, "
-                       "arctan2, wrap_angle, or a numba kernel):\n" + "\n".join(found))
+                       f"arctan2, wrap_angle, a numba kernel, or say why it is exact with '{_PRAGMA} ...'):\n"
+                       + "\n".join(found))
 
 
 def test_the_static_check_finds_what_it_looks_for(tmp_path):
-    src = ROOT / "rmm_envs" / "_probe_static_check.py"
-    src.write_text("import numpy as np\nfrom numba import njit\n\n"
-                   "def f(a, b):\n    return a @ b, np.dot(a, b), np.linalg.norm(a), np.exp(a), a.dot(b), np.linalg.norm(a, axis=1)\n\n"
-                   "@njit(cache=False)\ndef g(a):\n    return np.exp(a)\n")
-    try:
-        hits = machine_dependent_calls(src)
-    finally:
-        src.unlink()
-    assert [h.split(": ", 1)[1].split(" ")[0] for h in hits] == ["'@'", "np.dot", "np.linalg.norm", "np.exp", "a.dot"]
+    src = tmp_path / "probe.py"  # not in the package: other tests walk it
+    src.write_text("import numpy as np\nimport numpy.linalg as la\nfrom numpy import exp as e\nfrom numba import njit\n\n"
+                   "def f(a, b):\n    a @= b\n"
+                   "    return (a @ b, np.dot(a, b), np.linalg.norm(a), np.exp(a), a.dot(b), np.linalg.norm(a, axis=1),\n"
+                   "            la.solve(a, b), e(a), a ** 3, a ** 2, a ** 0.5, np.argsort(a), np.argsort(a, kind='stable'),\n"
+                   "            np.convolve(a, b), np.arcsinh(a), np.einsum('ij,j', a, b, optimize=True),\n"
+                   "            a ** 3)  # exact: a pragma names why a flagged form is exact on its line\n\n"
+                   "@njit(cache=False)\ndef g(a):\n    return np.exp(a), a ** 3, a @ a\n")
+    hits = [h.split(": ", 1)[1].split(" ")[0] for h in machine_dependent_calls(src)]
+    assert hits == ["'@'", "'@'", "numpy.dot", "numpy.linalg.norm", "numpy.exp", "a.dot", "numpy.linalg.solve", "numpy.exp",
+                    "'**'", "np.argsort", "numpy.convolve", "numpy.arcsinh", "numpy.einsum(optimize=...)", "'@'"], hits
 
 
 # ---------------------------------------------------------------------------- the helpers

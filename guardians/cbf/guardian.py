@@ -15,6 +15,7 @@ from guardians.cbf.backend import dubins4d_qp, parse_solver
 from guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_values, critical_obstacle, inflated_radii
 from guardians.cbf.maze import MazeCBFGuardian
 from guardians.cbf.recovery import recovery_control, recovery_done
+from rmm_envs.portable import matvec
 from rmm_envs.systems.dubins4d import Dubins4D
 
 __all__ = ["CBFGuardian", "CBFPaperGuardian", "REFERENCES"]
@@ -271,7 +272,7 @@ class CBFGuardian(MazeDelegation, Guardian):
             # QP's unconstrained optimum is feasible): no solve
             G, h = self.rows(state)
             z = np.array([u_nom[0], u_nom[1], 0.0, 0.0])
-            if not np.all(G[: self.K + 4] @ z <= h[: self.K + 4] + self.eps):  # within the QP's tolerance
+            if not np.all(matvec(G[: self.K + 4], z) <= h[: self.K + 4] + self.eps):  # within the QP's tolerance
                 z = None
         if z is None:
             z, G, h = self.solve(state, u_nom)

@@ -242,8 +242,7 @@ class MazeCBFGuardian(Guardian):
         """``(b, G, h)`` of the ``n_walls`` walls nearest ``state`` (smallest ``b`` first)."""
         b, G, h = wall_rows(state, self.speed, self.walls, self.half, self.margin, self.p1, self.p2, self.barrier,
                             self.u_max)
-        idx = np.argpartition(b, self.K - 1)[: self.K] if self.K < b.shape[0] else np.arange(b.shape[0])
-        idx = idx[np.argsort(b[idx], kind="stable")]
+        idx = np.argsort(b, kind="stable")[: self.K]  # stable: ties keep wall order on every CPU (argpartition's do not)
         return b[idx], G[idx], h[idx]
 
     def solve(self, state, u_ref: float = 0.0):

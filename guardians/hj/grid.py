@@ -87,7 +87,7 @@ class Grid:
         With numba it is one compiled call over arrays flattened once here (numpy's per-call
         overhead on the 16 corners of a 4-D cell was most of a decision's time); the corner
         order and weights are :meth:`interp_many`'s, the sums may differ in the last bits
-        (sequential rather than BLAS order)."""
+        (sequential rather than numpy's pairwise order; each is the same on every CPU)."""
         arrays = [np.asarray(a) for a in arrays]
         for a in arrays:
             if a.shape != self.shape:

@@ -225,10 +225,12 @@ class LRMMModel:
             if out is None:
                 raise ValueError(f"observation contains NaN or inf: {np.asarray(obs, dtype=float).tolist()}")
             return out
-        if not np.all(np.isfinite(x)):
-            raise ValueError("observation contains NaN or inf: batch")
         if not self._all_features:
-            x = x[..., self.features]
+            x = x[..., self.features]  # as the one-observation path: only the model's inputs must be finite
+        bad = np.flatnonzero(~np.isfinite(x).all(axis=1))
+        if bad.size:
+            raise ValueError(f"observation {int(bad[0])} of the batch contains NaN or inf ({bad.size} rows do): "
+                             f"{np.asarray(obs, dtype=float)[bad[0]].tolist()}")
         # the same compiled sums row by row: the bits of a batch equal those of its rows, and
         # neither depends on the CPU (numpy's ``@`` goes to BLAS, ``np.exp`` to SIMD code)
         return _forward_rows(np.ascontiguousarray(x), self._Ws, self._bs, self._act_code)

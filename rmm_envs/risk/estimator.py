@@ -58,7 +58,7 @@ def tree_nodes(branches: int, depth: int) -> int | float:
         return m
     if m * math.log2(n) > 64:
         return math.inf
-    return (n ** (m + 1) - n) // (n - 1)
+    return (n ** (m + 1) - n) // (n - 1)  # exact: integers
 
 
 def validate_tree_params(branches, depth, horizon, n_steps, metric="expected", alpha=None, leaf="zero") -> None:
@@ -136,7 +136,7 @@ class RiskEstimator:
         self.alpha = alpha
         self.policy = policy
         self.leaf = leaf
-        nodes = self.n**self.m if self.m else 1
+        nodes = self.n**self.m if self.m else 1  # exact: integers
         self.chunk_size = int(chunk_size) if chunk_size else max(1, 32768 // max(nodes, 1))
 
     def params(self) -> dict:
@@ -148,7 +148,7 @@ class RiskEstimator:
     def draw_controls(self, rng: np.random.Generator, n_roots: int) -> list[np.ndarray]:
         """Uniform controls for every level: level ``l`` has shape ``(n_roots, n^l, c)``."""
         lo, hi = np.asarray(self.system.control_low, float), np.asarray(self.system.control_high, float)
-        return [rng.uniform(lo, hi, size=(n_roots, self.n ** (lvl + 1), lo.shape[0])) for lvl in range(self.m)]
+        return [rng.uniform(lo, hi, size=(n_roots, self.n ** (lvl + 1), lo.shape[0])) for lvl in range(self.m)]  # exact: integers
 
     def estimate(self, states, rng: np.random.Generator | None = None, controls: list[np.ndarray] | None = None) -> RiskResult:
         """Estimate the risk of each root state ``(B, d)``.
@@ -170,8 +170,8 @@ class RiskEstimator:
             if len(controls) != self.m:
                 raise ValueError(f"controls must have one array per level ({self.m}), got {len(controls)}")
             for lvl, c in enumerate(controls):
-                if c.shape[:2] != (B, self.n ** (lvl + 1)):
-                    raise ValueError(f"controls[{lvl}] must have shape ({B}, {self.n ** (lvl + 1)}, c), got {c.shape}")
+                if c.shape[:2] != (B, self.n ** (lvl + 1)):  # exact: integers
+                    raise ValueError(f"controls[{lvl}] must have shape ({B}, {self.n ** (lvl + 1)}, c), got {c.shape}")  # exact: ints
         elif self.m > 0 and rng is None:
             raise ValueError("estimate() needs rng (a numpy Generator) for a custom policy")
 
@@ -238,7 +238,7 @@ class RiskEstimator:
         parents, parent_idx = roots[~root_fail], np.nonzero(~root_fail)[0]
         fails, live, finals, first_ctrls = [], [], [], None
         for lvl in range(m):
-            n_nodes = B * n ** (lvl + 1)
+            n_nodes = B * n ** (lvl + 1)  # exact: integers
             child_idx = (parent_idx[:, None] * n + np.arange(n)[None, :]).reshape(-1)
             rep = np.repeat(parents, n, axis=0)
             if controls is not None:
