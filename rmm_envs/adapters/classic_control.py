@@ -163,7 +163,8 @@ class PendulumAdapter(AdaptedEnv):
         if failure is None:
             raise TypeError(f"{_name(env)} never terminates, so the risk adapter needs failure=callable(states "
                             f"(N, 2) of (theta, theta_dot)) -> (N,) bool, for example "
-                            f"lambda s: np.abs(s[:, 1]) > 6.0 (angular speed beyond 6 rad/s)")
+                            f"lambda s: np.abs(s[:, 1]) > 6.0 (angular speed beyond 6 rad/s); "
+                            f"rmm-datagen takes it as --failure module:callable")
         super().__init__(env, PendulumScene(env, failure))
 
     @property

@@ -265,7 +265,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--branches", type=int, default=32, help="tree branching factor n (default: %(default)s)")
     p.add_argument("--depth", type=int, default=2, help="tree depth m (default: %(default)s)")
-    p.add_argument("--horizon", type=float, default=2.0, help="seconds per tree level t (default: %(default)s)")
+    p.add_argument("--horizon", type=float, default=None,
+                   help="seconds per tree level t (default: 2 for the package's envs, the risk adapter's own for "
+                   "an adapted env such as CartPole-v1, see rmm_envs.adapters)")
+    p.add_argument("--failure", default=None,
+                   help="'module:callable', failure(states) -> (N,) bool, for an env served by a risk adapter "
+                   "(required for Pendulum-v1; added to the adapter's own test elsewhere)")
     p.add_argument("--n-steps", type=int, default=8, help="path points per branch (default: %(default)s)")
     p.add_argument("--metric", default="expected", choices=["expected", "cvar", "worst"], help="coherent risk metric (default: %(default)s)")
     p.add_argument("--alpha", type=float, default=None, help="CVaR level in (0, 1) (with --metric cvar)")
@@ -305,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
         env_id=args.env, configs=args.configs, samples_per_config=args.samples_per_config, seed=args.seed,
         branches=args.branches, depth=args.depth, horizon=args.horizon, n_steps=args.n_steps,
         metric=args.metric, alpha=args.alpha, leaf=args.leaf, configs_per_shard=args.configs_per_shard,
-        env_kwargs=env_kwargs, candidates=candidates, candidate_hold=args.candidate_hold,
+        env_kwargs=env_kwargs, candidates=candidates, candidate_hold=args.candidate_hold, failure=args.failure,
     )
     try:
         manifest = generate(cfg, args.out, workers=args.workers, backend=args.backend,
