@@ -302,3 +302,63 @@ def test_an_unbounded_action_space_is_refused_by_name():
         SimulatorScene("Mine", 2, 0.1, gym.spaces.Box(-np.inf, np.inf, (1,), np.float32))
     with pytest.raises(ValueError, match=r"Mine: the env's step length dt must be a finite number of seconds > 0, got 0.0"):
         SimulatorScene("Mine", 2, 0.0, gym.spaces.Discrete(3))
+
+
+# -- datasets of adapted envs (rmm-datagen) -------------------------------------------------
+def test_datagen_labels_cartpole_with_the_adapters_sampler_and_horizon(tmp_path):
+    from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
+
+    tiny = dict(env_id="CartPole-v1", configs=2, samples_per_config=8, branches=4, configs_per_shard=1, seed=3)
+    one = generate(DatagenConfig(**tiny), tmp_path / "a", workers=1, progress=False)
+    two = generate(DatagenConfig(**tiny), tmp_path / "b", workers=2, progress=False)
+    assert one["dataset_sha256"] == two["dataset_sha256"]
+    data = load_dataset(tmp_path / "a")
+    assert data.meta["estimator"]["horizon"] == 0.08 and data.meta["failure"] is None
+    assert (data.meta["obs_dim"], data.meta["state_dim"], data.meta["control_dim"]) == (4, 4, 1)
+    assert np.array_equal(data.obs, data.state.astype(np.float32))
+    assert np.all((data.risk >= 0) & (data.risk <= 1))
+    # the labels are the estimator's on the sampled states, with the configuration's generator
+    from rmm_envs.risk.labelling import config_seeds
+
+    env, ad = made("CartPole-v1")
+    _, rng = config_seeds(3, 0)
+    states = ad.sample_states(rng, 8)
+    risk = RiskEstimator(ad.scene, branches=4, horizon=0.08).estimate(states, rng).risk
+    assert np.array_equal(data.state[:8], states) and np.array_equal(data.risk[:8], risk)
+
+
+def test_datagen_failure_is_imported_by_name_and_recorded(tmp_path, monkeypatch):
+    from rmm_envs.risk.datagen import main
+
+    (tmp_path / "pendulum_failure.py").write_text(
+        "import numpy as np\n\ndef too_fast(s):\n    return np.abs(s[:, 1]) > 6.0\n\nnot_callable = 3\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    args = ["--env", "Pendulum-v1", "--configs", "1", "--samples-per-config", "4", "--branches", "2", "--no-progress"]
+    assert main(args + ["--out", str(tmp_path / "ok"), "--failure", "pendulum_failure:too_fast"]) == 0
+    import json
+
+    assert json.loads((tmp_path / "ok" / "metadata.json").read_text())["failure"] == "pendulum_failure:too_fast"
+
+
+@pytest.mark.parametrize("extra, match", [
+    ([], r"Pendulum-v1 never terminates.*--failure module:callable"),
+    (["--failure", "no_colon"], r"failure \(--failure\) must be 'module:callable', got 'no_colon'"),
+    (["--failure", "no_such_module_26:f"], r"failure \(--failure\) 'no_such_module_26:f' cannot be imported: No module named"),
+    (["--failure", "numpy:pi"], r"failure \(--failure\) 'numpy:pi' is not callable: 3.14"),
+])
+def test_datagen_refuses_a_missing_or_bad_failure_by_name(extra, match, tmp_path, capsys):
+    from rmm_envs.risk.datagen import main
+
+    out = tmp_path / "d"
+    assert main(["--env", "Pendulum-v1", "--configs", "1", "--out", str(out), "--no-progress", *extra]) == 2
+    import re
+
+    assert re.search(match, capsys.readouterr().err) and not (out / "metadata.json").exists()
+
+
+def test_datagen_refuses_a_failure_for_a_package_env(tmp_path, capsys):
+    from rmm_envs.risk.datagen import main
+
+    assert main(["--env", "Dubins4DCircles-v0", "--configs", "1", "--out", str(tmp_path / "d"), "--no-progress",
+                 "--failure", "numpy:isnan"]) == 2
+    assert "failure (--failure) is for envs served by a risk adapter; Dubins4DCircles-v0 defines its own" in capsys.readouterr().err
