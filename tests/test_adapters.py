@@ -4,6 +4,8 @@ properties (range, order, determinism), the snapshot protocol and every refusal.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -362,3 +364,24 @@ def test_datagen_refuses_a_failure_for_a_package_env(tmp_path, capsys):
     assert main(["--env", "Dubins4DCircles-v0", "--configs", "1", "--out", str(tmp_path / "d"), "--no-progress",
                  "--failure", "numpy:isnan"]) == 2
     assert "failure (--failure) is for envs served by a risk adapter; Dubins4DCircles-v0 defines its own" in capsys.readouterr().err
+
+
+def test_adapted_envs_follow_the_labelled_env_protocol_and_sampling_leaves_the_episode_alone():
+    from rmm_envs.risk import check_labelled_env
+
+    for env_id, failure in (("CartPole-v1", None), ("Pendulum-v1", speed_failure), ("Hopper-v5", None)):
+        env, ad = made(env_id, failure)
+        check_labelled_env(SimpleNamespace(unwrapped=ad))  # the hooks are the adapter's (its .unwrapped is the env's)
+        before = ad.true_state
+        ad.sample_states(np.random.default_rng(0), 5)
+        assert np.array_equal(ad.true_state, before)
+        assert ad.privileged()["state"].tolist() == before.tolist() and ad.dataset_notes() == {"obs_time_feature": None}
+    # the env's generator is untouched by the MuJoCo sampler's resets
+    a, b = made("Hopper-v5")[0], made("Hopper-v5")
+    adapt(b[0]).sample_states(np.random.default_rng(0), 3)
+    assert np.array_equal(a.reset()[0], b[0].reset()[0])
+
+
+def test_true_state_before_reset_is_refused():
+    with pytest.raises(RuntimeError, match=r"CartPole-v1 has no state before its first reset"):
+        adapt(gym.make("CartPole-v1")).true_state

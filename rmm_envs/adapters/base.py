@@ -53,7 +53,7 @@ a package env.  :func:`rmm_envs.adapters.adapt` picks the adapter for an env.
 from __future__ import annotations
 
 import math
-from typing import Callable, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import gymnasium as gym
 import numpy as np
@@ -187,13 +187,6 @@ class SimulatorScene:
         idx = np.round(np.linspace(0, k, int(n_steps))).astype(int)
         return traj[:, idx]
 
-    def describe(self) -> dict:
-        """What a label means here (for docs, metadata and error messages)."""
-        return {"env": self.name, "dt": self.dt, "default_horizon": self.default_horizon,
-                "controls": f"uniform on [{self.control_low.tolist()}, {self.control_high.tolist()}], held for t",
-                "failure": ("env" if type(self).env_failed is not SimulatorScene.env_failed else "")
-                + (" + user" if self.failure is not None else "")}
-
 
 class SnapshotScene(SimulatorScene):
     """The step-by-step scene of any :class:`SnapshotSimulator`: every branch restores its start
@@ -293,5 +286,3 @@ class AdaptedEnv:
     def dataset_notes(self) -> dict:
         return {"obs_time_feature": None}
 
-
-FailureFn = Callable[[np.ndarray], np.ndarray]

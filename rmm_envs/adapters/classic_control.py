@@ -137,15 +137,19 @@ class ClassicControlSnapshot:
         return self._scene.env_failed(np.asarray(states, dtype=float))
 
 
-class CartPoleAdapter(AdaptedEnv):
+class _ClassicAdapter(AdaptedEnv):
+    @property
+    def true_state(self):
+        if self.unwrapped.state is None:
+            raise RuntimeError(f"{self.scene.name} has no state before its first reset")
+        return np.array(self.unwrapped.state, dtype=float)
+
+
+class CartPoleAdapter(_ClassicAdapter):
     env_ids = ("CartPole-v1",)
 
     def __init__(self, env, failure=None) -> None:
         super().__init__(env, CartPoleScene(env, failure))
-
-    @property
-    def true_state(self):
-        return np.array(self.unwrapped.state, dtype=float)
 
     def draw_states(self, rng, n):
         p = self.scene.p
@@ -156,7 +160,7 @@ class CartPoleAdapter(AdaptedEnv):
         return np.asarray(states, dtype=np.float32)
 
 
-class PendulumAdapter(AdaptedEnv):
+class PendulumAdapter(_ClassicAdapter):
     env_ids = ("Pendulum-v1",)
 
     def __init__(self, env, failure=None) -> None:
@@ -166,10 +170,6 @@ class PendulumAdapter(AdaptedEnv):
                             f"lambda s: np.abs(s[:, 1]) > 6.0 (angular speed beyond 6 rad/s); "
                             f"rmm-datagen takes it as --failure module:callable")
         super().__init__(env, PendulumScene(env, failure))
-
-    @property
-    def true_state(self):
-        return np.array(self.unwrapped.state, dtype=float)
 
     def draw_states(self, rng, n):
         v = self.scene.p["max_speed"]

@@ -37,12 +37,14 @@ any other MuJoCo env
 Every state that is not finite fails as well, and a user's ``failure`` adds to the env's.
 
 Sampler (``sample_states``, for datasets): *visited states*: the env is reset (seeded from the
-generator) and then stepped with uniform random actions, a fresh one each env step, for a
+generator; the env's state and generator are restored afterwards) and then stepped with uniform random actions, a fresh one each env step, for a
 number of steps drawn uniformly from 0 to 1 s of simulated time; a branch that fails stops at
 its last healthy state.  Observation: the env's own ``_get_obs`` in that state.
 """
 
 from __future__ import annotations
+
+import copy
 
 import numpy as np
 
@@ -186,9 +188,15 @@ class MujocoAdapter(AdaptedEnv):
     def draw_states(self, rng, n):
         sc = self.scene
         starts = np.empty((n, sc.state_dim))
-        for i in range(n):
-            self.env.reset(seed=int(rng.integers(2**31)))
-            starts[i] = self._snap.get_state()
+        u = self.unwrapped
+        saved_state, saved_rng = self._snap.get_state(), copy.deepcopy(u.np_random)
+        try:  # the env's own reset draws the starts; its episode and generator are put back after
+            for i in range(n):
+                self.env.reset(seed=int(rng.integers(2**31)))
+                starts[i] = self._snap.get_state()
+        finally:
+            self._snap.set_state(saved_state)
+            u.np_random = saved_rng
         kmax = max(1, int(round(1.0 / sc.dt)))
         k = rng.integers(0, kmax + 1, size=n)
         acts = rng.uniform(sc.control_low, sc.control_high, size=(n, kmax, len(sc.control_low)))

@@ -9,7 +9,9 @@ hooks of the :class:`rmm_envs.risk.LabelledEnv` protocol, and on the envs a risk
 estimator on the true state and adds:
 
 * ``info["risk"]``: the risk metric (float in [0, 1]);
-* ``info["risk_min_ctrl"]``: the first control of the minimum-risk branch;
+* ``info["risk_min_ctrl"]``: the first control of the minimum-risk branch (for an adapted env
+  with a ``Discrete`` action space, a value ``u`` of the box ``[start, start + n)`` meaning
+  action ``floor(u)``);
 * ``info["risk_n_leaves"]``: the number of terminal nodes behind the estimate.
 
 The labelling time is real CPU work done between the inner ``step`` returning and this
