@@ -385,3 +385,51 @@ def test_adapted_envs_follow_the_labelled_env_protocol_and_sampling_leaves_the_e
 def test_true_state_before_reset_is_refused():
     with pytest.raises(RuntimeError, match=r"CartPole-v1 has no state before its first reset"):
         adapt(gym.make("CartPole-v1")).true_state
+
+
+MY_MODULE = '''import gymnasium as gym
+
+if "MyCartPole-v0" not in gym.registry:
+    gym.register("MyCartPole-v0", entry_point="gymnasium.envs.classic_control:CartPoleEnv", max_episode_steps=200)
+'''
+
+
+def test_the_two_commands_the_lrmm_refusal_names_make_a_model_for_a_module_env(tmp_path, monkeypatch):
+    """An env of one's own (``module:Id``, the module in the current directory) has no shipped
+    model; the refusal names two commands, and running exactly those (sized down) makes one."""
+    import re
+    import shlex
+
+    from guardians.lrmm.model import LRMMModel, default_model_path
+    from guardians.lrmm.train import main as train_main
+    from rmm_envs.risk.datagen import main as datagen_main
+
+    (tmp_path / "mycartpole.py").write_text(MY_MODULE)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("sys.path", list(__import__("sys").path))  # datagen puts the cwd first
+    with pytest.raises(ValueError) as e:
+        default_model_path("mycartpole:MyCartPole-v0")
+    msg = str(e.value)
+    m = re.search(r"two commands: rmm-datagen (.*) and rmm-train (.*); then give it: --agent-opt lrmm\.model='\"(.*)\"'", msg)
+    assert m and msg.startswith("no shipped LRMM model for 'mycartpole:MyCartPole-v0' (shipped for ['"), msg
+    assert datagen_main(shlex.split(m.group(1)) + ["--configs", "3", "--samples-per-config", "8", "--branches", "4",
+                                                   "--workers", "2", "--no-progress"]) == 0
+    assert train_main(shlex.split(m.group(2)) + ["--epochs", "2", "--quiet"]) == 0
+    model = LRMMModel.load(tmp_path / m.group(3))
+    assert model.env_id == "mycartpole:MyCartPole-v0" and model.obs_dim == 4
+
+
+@pytest.mark.parametrize("env, match", [
+    ("no_such_module_26:X-v0", r"env 'no_such_module_26:X-v0': cannot import module 'no_such_module_26'"),
+    ("mycartpole:Other-v0", r"env 'mycartpole:Other-v0': importing 'mycartpole' registered no env 'Other-v0'"),
+])
+def test_datagen_refuses_a_module_env_that_does_not_register_by_name(env, match, tmp_path, monkeypatch, capsys):
+    import re
+
+    from rmm_envs.risk.datagen import main
+
+    (tmp_path / "mycartpole.py").write_text(MY_MODULE)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("sys.path", list(__import__("sys").path))
+    assert main(["--env", env, "--out", str(tmp_path / "d"), "--no-progress"]) == 2
+    assert re.search(match, capsys.readouterr().err)

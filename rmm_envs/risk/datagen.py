@@ -258,7 +258,9 @@ def build_parser() -> argparse.ArgumentParser:
         "valid states, their observations and sampling-tree risk labels, written as Parquet shards. "
         "Rerun the same command to resume an interrupted run.",
     )
-    p.add_argument("--env", default="Dubins4DCircles-v0", help="environment id (default: %(default)s)")
+    p.add_argument("--env", default="Dubins4DCircles-v0",
+                   help="environment id, or module:Id to import the module that registers it first "
+                   "(from the current directory first) (default: %(default)s)")
     p.add_argument("--configs", type=int, default=274, help="number of obstacle configurations (default: %(default)s)")
     p.add_argument("--samples-per-config", type=int, default=128, help="labelled states per configuration (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="master seed (default: %(default)s)")
@@ -290,6 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if os.getcwd() not in sys.path:  # --env module:Id and --failure module:callable import from here first,
+        sys.path.insert(0, os.getcwd())  # as under python -m (local workers inherit the path)
     try:
         env_kwargs = json.loads(args.env_kwargs)
         if not isinstance(env_kwargs, dict):

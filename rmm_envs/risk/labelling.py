@@ -50,7 +50,17 @@ class DatagenConfig:
         import rmm_envs
         from rmm_envs.risk.estimator import validate_tree_params
 
-        if not isinstance(self.env_id, str) or self.env_id not in gym.registry:
+        module, _, name = self.env_id.rpartition(":") if isinstance(self.env_id, str) else ("", "", None)
+        if module:  # "module:Id", as gym.make takes it: importing the module registers the env
+            import importlib
+
+            try:
+                importlib.import_module(module)
+            except ImportError as e:
+                raise ValueError(f"env {self.env_id!r}: cannot import module {module!r}: {e}") from None
+            if name not in gym.registry:
+                raise ValueError(f"env {self.env_id!r}: importing {module!r} registered no env {name!r}")
+        elif not isinstance(self.env_id, str) or self.env_id not in gym.registry:
             raise ValueError(f"unknown env {self.env_id!r}: not a registered Gymnasium id; this package registers "
                              f"{list(rmm_envs.ENV_IDS)} (any registered env that follows rmm_envs.risk.LabelledEnv works)")
         if self.failure is not None and not (isinstance(self.failure, str) and self.failure.count(":") == 1):
