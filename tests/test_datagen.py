@@ -178,7 +178,8 @@ def test_datagen_reaches_any_env_through_the_labelled_env_protocol_only(tmp_path
     generate(DatagenConfig(**tiny), tmp_path / "d4", workers=1, progress=False)
     d4 = json.loads((tmp_path / "d4" / "metadata.json").read_text())
     assert d4["obs_time_feature"] == "uniform over [0, max_episode_sim_time]" and d4["control_dim"] == 2
-    with pytest.raises(TypeError, match=r"CartPole-v1 \(CartPoleEnv\) is not a LabelledEnv.*risk_scene is missing"):
-        generate(DatagenConfig(env_id="CartPole-v1", **tiny), tmp_path / "cp", workers=1, progress=False)
-    assert main(["--env", "CartPole-v1", "--out", str(tmp_path / "cp2"), "--no-progress"]) == 2
-    assert "is not a LabelledEnv" in capsys.readouterr().err and not (tmp_path / "cp2").exists()
+    with pytest.raises(TypeError, match=r"MountainCar-v0 \(MountainCarEnv\) is not a LabelledEnv.*risk_scene is missing"
+                                        r".*no risk adapter serves it either"):
+        generate(DatagenConfig(env_id="MountainCar-v0", **tiny), tmp_path / "mc", workers=1, progress=False)
+    assert main(["--env", "MountainCar-v0", "--out", str(tmp_path / "mc2"), "--no-progress"]) == 2
+    assert "is not a LabelledEnv" in capsys.readouterr().err and not (tmp_path / "mc2").exists()

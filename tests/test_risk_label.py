@@ -40,9 +40,11 @@ def test_works_on_the_parallel_env_and_is_seeded():
 
 
 def test_needs_a_labelled_env_and_names_it_and_the_missing_hooks():
-    with pytest.raises(TypeError, match=r"CartPole-v1 \(CartPoleEnv\) is not a LabelledEnv.*risk_scene is missing; "
-                                        r"true_state is missing$"):
-        RiskLabel(gym.make("CartPole-v1"))
+    with pytest.raises(TypeError, match=r"^MountainCar-v0 \(MountainCarEnv\) is not a LabelledEnv.*risk_scene is missing; "
+                                        r"true_state is missing; no risk adapter serves it either \(adapters exist "
+                                        r"for CartPole-v1, Pendulum-v1 \(with failure=\), InvertedPendulum-v5, "
+                                        r".*SnapshotSimulator"):
+        RiskLabel(gym.make("MountainCar-v0"))
 
 
 @pytest.mark.parametrize("kwargs, match", [({"branches": 0}, "branches"), ({"metric": "cvar", "alpha": 2.0}, "alpha"), ({"metric": "nope"}, "metric")])

@@ -371,7 +371,14 @@ def default_model_path(env_id: str = "Dubins4DCircles-v0", variant: str = "paper
     head).  ``"risk"`` (the quadrotor's parallel envs): the risk-only command model.
     """
     ship = SHIPPED.get(env_id)
-    if ship is None or variant not in ship.files:
+    if ship is None:
+        stem = env_id.rpartition(":")[2].lower().replace("-", "_")
+        raise ValueError(
+            f"no shipped LRMM model for {env_id!r} (shipped for {sorted(SHIPPED)}); make one from this env's "
+            f"labelled states with two commands: rmm-datagen --env {env_id} --out data_{stem} and "
+            f"rmm-train --data data_{stem} --out {stem}.npz; then give it: --agent-opt lrmm.model='\"{stem}.npz\"' "
+            f"(in Python, model=\"{stem}.npz\")")
+    if variant not in ship.files:
         shipped = sorted((e, v) for e, sh in SHIPPED.items() for v in sh.files)
         raise ValueError(f"no shipped LRMM model for {env_id!r} (variant {variant!r}); shipped: {shipped}")
     return Path(str(resources.files("guardians.lrmm") / "models" / ship.files[variant]))

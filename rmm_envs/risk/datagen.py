@@ -258,14 +258,21 @@ def build_parser() -> argparse.ArgumentParser:
         "valid states, their observations and sampling-tree risk labels, written as Parquet shards. "
         "Rerun the same command to resume an interrupted run.",
     )
-    p.add_argument("--env", default="Dubins4DCircles-v0", help="environment id (default: %(default)s)")
+    p.add_argument("--env", default="Dubins4DCircles-v0",
+                   help="environment id, or module:Id to import the module that registers it first "
+                   "(from the current directory first) (default: %(default)s)")
     p.add_argument("--configs", type=int, default=274, help="number of obstacle configurations (default: %(default)s)")
     p.add_argument("--samples-per-config", type=int, default=128, help="labelled states per configuration (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="master seed (default: %(default)s)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--branches", type=int, default=32, help="tree branching factor n (default: %(default)s)")
     p.add_argument("--depth", type=int, default=2, help="tree depth m (default: %(default)s)")
-    p.add_argument("--horizon", type=float, default=2.0, help="seconds per tree level t (default: %(default)s)")
+    p.add_argument("--horizon", type=float, default=None,
+                   help="seconds per tree level t (default: 2 for the package's envs, the risk adapter's own for "
+                   "an adapted env such as CartPole-v1, see rmm_envs.adapters)")
+    p.add_argument("--failure", default=None,
+                   help="'module:callable', failure(states) -> (N,) bool, for an env served by a risk adapter "
+                   "(required for Pendulum-v1; added to the adapter's own test elsewhere)")
     p.add_argument("--n-steps", type=int, default=8, help="path points per branch (default: %(default)s)")
     p.add_argument("--metric", default="expected", choices=["expected", "cvar", "worst"], help="coherent risk metric (default: %(default)s)")
     p.add_argument("--alpha", type=float, default=None, help="CVaR level in (0, 1) (with --metric cvar)")
@@ -285,6 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if os.getcwd() not in sys.path:  # --env module:Id and --failure module:callable import from here first,
+        sys.path.insert(0, os.getcwd())  # as under python -m (local workers inherit the path)
     try:
         env_kwargs = json.loads(args.env_kwargs)
         if not isinstance(env_kwargs, dict):
@@ -305,7 +314,7 @@ def main(argv: list[str] | None = None) -> int:
         env_id=args.env, configs=args.configs, samples_per_config=args.samples_per_config, seed=args.seed,
         branches=args.branches, depth=args.depth, horizon=args.horizon, n_steps=args.n_steps,
         metric=args.metric, alpha=args.alpha, leaf=args.leaf, configs_per_shard=args.configs_per_shard,
-        env_kwargs=env_kwargs, candidates=candidates, candidate_hold=args.candidate_hold,
+        env_kwargs=env_kwargs, candidates=candidates, candidate_hold=args.candidate_hold, failure=args.failure,
     )
     try:
         manifest = generate(cfg, args.out, workers=args.workers, backend=args.backend,

@@ -106,7 +106,7 @@ def shard_ok(path: Path, rows: int) -> bool:
 
 def identity(meta: dict) -> dict:
     keys = ("format", "format_version", "env_id", "env_kwargs", "configs", "samples_per_config",
-            "seed", "configs_per_shard", "estimator")
+            "seed", "configs_per_shard", "estimator", "failure")
     return {k: meta.get(k) for k in keys}
 
 

@@ -1,7 +1,13 @@
 """Algorithm 2 for a block of obstacle configurations: :class:`DatagenConfig`, the env (any
-registered env that follows :class:`rmm_envs.risk.LabelledEnv`), :func:`label_configs` and the
-metadata of a dataset.  The env is reached through the protocol only, so a new labelled env
-needs no change here.
+registered env that follows :class:`rmm_envs.risk.LabelledEnv`, or one a risk adapter of
+:mod:`rmm_envs.adapters` serves), :func:`label_configs` and the metadata of a dataset.  The env
+is reached through the protocol only, so a new labelled env needs no change here.
+
+For an adapted env (``CartPole-v1``, the MuJoCo envs, ...) a "configuration" is one seeded
+``reset`` of the env and its ``samples_per_config`` states come from the adapter's state
+sampler (documented per adapter); ``horizon=None`` takes the adapter's default ``t`` (2 s for
+the package's own envs) and ``failure="module:callable"`` names a failure test
+``failure(states) -> (N,) bool`` (required for ``Pendulum-v1``), imported in every worker.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ class DatagenConfig:
     seed: int = 0
     branches: int = 32
     depth: int = 2
-    horizon: float = 2.0
+    horizon: float | None = None  # None: 2 s for the package's envs, the adapter's default for an adapted env
     n_steps: int = 8
     metric: str = "expected"
     alpha: float | None = None
@@ -36,6 +42,7 @@ class DatagenConfig:
     env_kwargs: dict = field(default_factory=dict)
     candidates: list | None = None  # action-conditioned labels: controls held for candidate_hold s
     candidate_hold: float = 1.0
+    failure: str | None = None  # "module:callable", failure(states) -> (N,) bool for an adapted env
 
     def validate(self) -> None:
         import gymnasium as gym
@@ -43,9 +50,21 @@ class DatagenConfig:
         import rmm_envs
         from rmm_envs.risk.estimator import validate_tree_params
 
-        if not isinstance(self.env_id, str) or self.env_id not in gym.registry:
+        module, _, name = self.env_id.rpartition(":") if isinstance(self.env_id, str) else ("", "", None)
+        if module:  # "module:Id", as gym.make takes it: importing the module registers the env
+            import importlib
+
+            try:
+                importlib.import_module(module)
+            except ImportError as e:
+                raise ValueError(f"env {self.env_id!r}: cannot import module {module!r}: {e}") from None
+            if name not in gym.registry:
+                raise ValueError(f"env {self.env_id!r}: importing {module!r} registered no env {name!r}")
+        elif not isinstance(self.env_id, str) or self.env_id not in gym.registry:
             raise ValueError(f"unknown env {self.env_id!r}: not a registered Gymnasium id; this package registers "
                              f"{list(rmm_envs.ENV_IDS)} (any registered env that follows rmm_envs.risk.LabelledEnv works)")
+        if self.failure is not None and not (isinstance(self.failure, str) and self.failure.count(":") == 1):
+            raise ValueError(f"failure (--failure) must be 'module:callable', got {self.failure!r}")
         for name in ("configs", "samples_per_config", "configs_per_shard"):
             v = getattr(self, name)
             if not isinstance(v, int) or v < 1:
@@ -68,26 +87,62 @@ class DatagenConfig:
         lo = shard * self.configs_per_shard
         return range(lo, min(self.configs, lo + self.configs_per_shard))
 
+    def resolved_horizon(self) -> float:
+        """``horizon``, or the env's default when it is ``None`` (see the module docstring)."""
+        if self.horizon is not None:
+            return self.horizon
+        from rmm_envs.adapters import AdaptedEnv
+
+        env = labelled_env(self)
+        return env.scene.default_horizon if isinstance(env, AdaptedEnv) else 2.0
+
     def estimator_params(self) -> dict:
-        return {"branches": self.branches, "depth": self.depth, "horizon": self.horizon,
+        return {"branches": self.branches, "depth": self.depth, "horizon": self.resolved_horizon(),
                 "n_steps": self.n_steps, "metric": self.metric, "alpha": self.alpha, "leaf": self.leaf}
 
 
 _ENV_CACHE: dict = {}  # one env per (id, arguments) and process, reused by every configuration (reset re-seeds it)
 
 
+def load_failure(spec: str | None):
+    """The callable ``"module:callable"`` names (``None`` for ``None``); ``ValueError`` naming
+    what cannot be imported."""
+    if spec is None:
+        return None
+    import importlib
+
+    module, _, attr = spec.partition(":")
+    try:
+        fn = getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as e:
+        raise ValueError(f"failure (--failure) {spec!r} cannot be imported: {e}") from None
+    if not callable(fn):
+        raise ValueError(f"failure (--failure) {spec!r} is not callable: {fn!r}")
+    return fn
+
+
 def labelled_env(cfg: DatagenConfig):
     """The unwrapped env of ``cfg`` (cached per process), checked against
-    :class:`rmm_envs.risk.LabelledEnv` (``TypeError`` naming the env and the missing hooks)."""
-    key = (cfg.env_id, json.dumps(cfg.env_kwargs, sort_keys=True))
+    :class:`rmm_envs.risk.LabelledEnv`, or its risk adapter (:func:`rmm_envs.adapters.adapt`)
+    where the env lacks the hooks (``TypeError`` naming the env and what is missing when
+    neither serves)."""
+    key = (cfg.env_id, json.dumps(cfg.env_kwargs, sort_keys=True), cfg.failure)
     if key not in _ENV_CACHE:
         import gymnasium as gym
 
         import rmm_envs  # noqa: F401  (registers the package's envs)
 
-        env = gym.make(cfg.env_id, **cfg.env_kwargs).unwrapped
-        check_labelled_env(env)
-        _ENV_CACHE[key] = env
+        env = gym.make(cfg.env_id, **cfg.env_kwargs)
+        try:
+            check_labelled_env(env.unwrapped)
+            hooks = env.unwrapped
+            if cfg.failure is not None:
+                raise ValueError(f"failure (--failure) is for envs served by a risk adapter; {cfg.env_id} defines its own failures")
+        except TypeError:
+            from rmm_envs.adapters import adapt
+
+            hooks = adapt(env, load_failure(cfg.failure))
+        _ENV_CACHE[key] = hooks
     return _ENV_CACHE[key]
 
 
@@ -152,6 +207,7 @@ def dataset_metadata(cfg: DatagenConfig) -> dict:
         "samples_per_config": cfg.samples_per_config,
         "seed": cfg.seed,
         "configs_per_shard": cfg.configs_per_shard,
+        "failure": cfg.failure,
         "estimator": cfg.estimator_params() | {"policy": "uniform"}
         | ({} if cfg.candidates is None else {"candidates": cfg.candidates, "candidate_hold": cfg.candidate_hold}),
         "obs_dim": int(env.observation_space.shape[0]),

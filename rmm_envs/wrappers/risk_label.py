@@ -1,12 +1,17 @@
 """RiskLabel: add the sampling-tree risk of the current true state to ``info["risk"]``.
 
 Works on any environment whose unwrapped env offers the ``risk_scene()`` and ``true_state``
-hooks of the :class:`rmm_envs.risk.LabelledEnv` protocol (checked at construction by
-:func:`rmm_envs.risk.check_labelled_env`, which names what is missing).  At ``reset`` and
-after every ``step`` it runs the estimator on the true state and adds:
+hooks of the :class:`rmm_envs.risk.LabelledEnv` protocol, and on the envs a risk adapter of
+:mod:`rmm_envs.adapters` serves (chosen by :func:`rmm_envs.adapters.adapt`: Gymnasium's
+``CartPole-v1``, ``Pendulum-v1`` with a ``failure`` callable, MuJoCo's ``InvertedPendulum-v5``,
+``InvertedDoublePendulum-v5``, ``Hopper-v5``); any other env is refused at construction with a
+``TypeError`` naming it and what is missing.  At ``reset`` and after every ``step`` it runs the
+estimator on the true state and adds:
 
 * ``info["risk"]``: the risk metric (float in [0, 1]);
-* ``info["risk_min_ctrl"]``: the first control of the minimum-risk branch;
+* ``info["risk_min_ctrl"]``: the first control of the minimum-risk branch (for an adapted env
+  with a ``Discrete`` action space, a value ``u`` of the box ``[start, start + n)`` meaning
+  action ``floor(u)``);
 * ``info["risk_n_leaves"]``: the number of terminal nodes behind the estimate.
 
 The labelling time is real CPU work done between the inner ``step`` returning and this
@@ -28,22 +33,40 @@ __all__ = ["RiskLabel"]
 class RiskLabel(gym.Wrapper):
     """Args: ``branches`` (n), ``depth`` (m), ``horizon`` (t, s), ``n_steps``, ``metric``
     (``expected``/``cvar``/``worst``), ``alpha`` (for cvar), ``leaf`` (``zero``/``heuristic``),
-    ``seed`` (for the estimator's own generator; ``None``: fresh entropy)."""
+    ``seed`` (for the estimator's own generator; ``None``: fresh entropy), ``failure`` (only for
+    an adapted env: ``failure(states (N, d)) -> (N,) bool``, added to the adapter's own test).
+    ``horizon=None`` (default) is 2 s for the package's envs and the adapter's own default for
+    an adapted env (a whole number of its steps, see :mod:`rmm_envs.adapters`)."""
 
-    def __init__(self, env: gym.Env, branches: int = 32, depth: int = 2, horizon: float = 2.0,
+    def __init__(self, env: gym.Env, branches: int = 32, depth: int = 2, horizon: float | None = None,
                  n_steps: int = 8, metric: str = "expected", alpha: float | None = None,
-                 leaf: str = "zero", seed: int | None = None):
+                 leaf: str = "zero", seed: int | None = None, failure=None):
         super().__init__(env)
-        check_labelled_env(env, needs=("risk_scene", "true_state"))
+        adapted = None
+        try:
+            check_labelled_env(env, needs=("risk_scene", "true_state"))
+            self._hooks = self.env.unwrapped
+        except TypeError:
+            from rmm_envs.adapters import adapt
+
+            self._hooks = adapted = adapt(env, failure)
+        else:
+            if failure is not None:
+                raise TypeError(f"failure= is for envs served by a risk adapter (rmm_envs.adapters); "
+                                f"{type(self._hooks).__name__} defines its own failures in its risk_scene()")
+        if horizon is None:
+            horizon = 2.0 if adapted is None else adapted.scene.default_horizon
         self._kw = dict(branches=branches, depth=depth, horizon=horizon, n_steps=n_steps,
                         metric=metric, alpha=alpha, leaf=leaf)
         validate_tree_params(**self._kw)  # now, not at the first reset
+        if adapted is not None:  # its horizon must be whole env steps
+            adapted.scene.env_steps(self._kw["horizon"])
         self.rng = np.random.default_rng(seed)
         self._estimator = None
         self._scene = None
 
     def _label(self, info: dict) -> dict:
-        base = self.env.unwrapped
+        base = self._hooks
         scene = base.risk_scene()
         if scene is not self._scene:
             self._scene = scene
