@@ -1,0 +1,97 @@
+"""Time accounting adds up: the guarded env's intervention time (``rmm_envs/envs/guarded.py``, Table I's
+"in control" column) and ``GuardianReward``'s intervention cost (``rmm_envs/wrappers/rl.py``).
+
+For any sequence of guardian actions, over several episodes of one env object, blocking and
+non-blocking: the episode statistics' ``active_ctrl_sim_time`` is the sum of the simulated
+lengths of the intervals the guardian held control (read off ``info["sim_time"]`` and
+``info["active"]`` step by step), ``cum_sim_time`` the sum of all intervals, and the shaped reward
+with only an intervention cost of 1 per second is exactly minus that time."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import rmm_envs  # noqa: F401
+from rmm_envs.wrappers.rl import GuardianReward
+
+ENVS = {  # short episodes: every run below ends a few of them, by timeout or earlier
+    "Dubins4DCircles-v0": dict(max_episode_sim_time=2.0),
+    "Dubins4DParallel-v0": dict(max_episode_sim_time=2.0, clock="fixed:7"),  # intervals 0.007 x 10 + 0.1 s
+    "Dubins3DMazeGuarded-v0": dict(max_episode_sim_time=3.0, clock="fixed:1"),
+    "Dubins3DMazeParallel-v0": dict(max_episode_sim_time=3.0, clock="fixed:3"),
+}
+_made: dict = {}
+
+
+def _env(env_id: str):
+    """One wrapped env per id for the whole module (hypothesis reuses it across examples)."""
+    if env_id not in _made:
+        _made[env_id] = GuardianReward(gym.make(env_id, **ENVS[env_id]), goal_bonus=0.0, collision_penalty=0.0,
+                                       intervention_cost=1.0)
+    return _made[env_id]
+
+
+def _action(space, on: bool, rng: np.random.Generator):
+    if not on:
+        return space.inactive()
+    return space.active(rng.uniform(space.control_low, space.control_high))
+
+
+def _episodes(env, bits: list[bool], seed: int, n_episodes: int) -> list[dict]:
+    """Run ``n_episodes`` episodes, the guardian taking control by ``bits`` (cycled); per episode the
+    sums read step by step and the env's own statistics."""
+    rng = np.random.default_rng(seed)
+    space = env.action_space
+    out = []
+    for e in range(n_episodes):
+        _, info = env.reset(seed=seed + e)
+        last, active_time, total, reward, active_steps, steps = float(info.get("sim_time", 0.0)), 0.0, 0.0, 0.0, 0, 0
+        while True:
+            _, r, term, trunc, info = env.step(_action(space, bits[steps % len(bits)], rng))
+            dt, last = info["sim_time"] - last, info["sim_time"]
+            assert dt > 0
+            total += dt
+            active_time += dt if info["active"] else 0.0
+            active_steps += bool(info["active"])
+            reward += r
+            steps += 1
+            if term or trunc:
+                break
+        out.append(dict(active_time=active_time, total=total, reward=reward, steps=steps, active_steps=active_steps,
+                        stats=info["episode"]))
+    return out
+
+
+@pytest.mark.parametrize("env_id", list(ENVS))
+@settings(max_examples=4, deadline=None)
+@given(bits=st.lists(st.booleans(), min_size=1, max_size=8), seed=st.integers(0, 1000))
+def test_intervention_time_and_reward_add_up_to_the_simulated_time(env_id, bits, seed):
+    for ep in _episodes(_env(env_id), bits, seed, 2):
+        s = ep["stats"]
+        assert s["n_env_steps"] == ep["steps"] and s["n_active_ctrl_env_steps"] == ep["active_steps"]
+        assert s["cum_sim_time"] == pytest.approx(ep["total"], abs=1e-9)
+        assert s["active_ctrl_sim_time"] == pytest.approx(ep["active_time"], abs=1e-9)
+        assert ep["reward"] == pytest.approx(-ep["active_time"], abs=1e-9)
+        assert 0.0 <= s["active_ctrl_sim_time"] <= s["cum_sim_time"]
+
+
+def test_hand_counted_non_blocking_intervals():
+    """``Dubins4DParallel-v0`` at a fixed 7 ms lap: every interval is 0.007 x 10 + 0.1 = 0.17 s, and an
+    action takes effect one interval late (the first interval is the driver's).  Guardian on at
+    steps 1 and 2 only (actions given at steps 0 and 1): 2 of 3 intervals, 0.34 of 0.51 s, each
+    charged 0.5 x 0.17 = 0.085."""
+    env = GuardianReward(gym.make("Dubins4DParallel-v0", clock="fixed:7", max_episode_sim_time=0.51),
+                         goal_bonus=0.0, collision_penalty=0.0, intervention_cost=0.5)
+    env.reset(seed=1, options={"state": [0.0, 0.0, 0.0, 0.0], "obstacles": [[30.0, 30.0, 1.0]], "goal": [-30.0, 30.0, 0.5]})
+    space = env.action_space
+    steps = [env.step(a) for a in (space.active([0.0, 0.0]), space.active([0.0, 0.0]), space.inactive())]
+    assert [s[4]["active"] for s in steps] == [False, True, True]
+    assert [s[4]["sim_time"] for s in steps] == pytest.approx([0.17, 0.34, 0.51], abs=1e-12)
+    assert [s[1] for s in steps] == pytest.approx([0.0, -0.085, -0.085], abs=1e-12)
+    assert steps[-1][3] and steps[-1][4]["episode"]["active_ctrl_sim_time"] == pytest.approx(0.34, abs=1e-12)
+    assert steps[-1][4]["episode"]["cum_sim_time"] == pytest.approx(0.51, abs=1e-12)
+    assert steps[-1][4]["episode"]["n_active_ctrl_env_steps"] == 2
