@@ -1,0 +1,139 @@
+"""A dataset directory is read only when it is whole and what it says it is (``rmm_envs/risk/dataset.py``,
+``rmm_envs/risk/datagen.py``).
+
+``load_dataset`` reads exactly the shards the metadata implies, each matching the manifest's
+checksum: a shard missing from the disk or from the manifest, or one the manifest lists beyond
+those, is refused with a message naming it; a stray file nobody listed is never read.  A rerun
+of ``rmm-datagen`` into a directory made with other parameters (any of them: env id, env
+arguments, sizes, seed, estimator) is refused naming the parameter, before a shard is touched."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from rmm_envs.risk.datagen import DatagenConfig, generate
+from rmm_envs.risk.dataset import identity, load_dataset
+
+CFG = dict(configs=3, samples_per_config=4, branches=4, depth=1, configs_per_shard=1, seed=7)
+SHARDS = [f"shard-{i:05d}.parquet" for i in range(3)]
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("ds") / "d"
+    generate(DatagenConfig(**CFG), out, workers=1, progress=False)
+    return out
+
+
+def _copy(made: Path, tmp: Path) -> Path:
+    d = tmp / "copy"
+    if d.exists():
+        shutil.rmtree(d)
+    shutil.copytree(made, d)
+    return d
+
+
+def _edit_manifest(d: Path, edit) -> None:
+    m = json.loads((d / "manifest.json").read_text())
+    edit(m["shards"])
+    (d / "manifest.json").write_text(json.dumps(m))
+
+
+def test_the_whole_dataset_loads(made):
+    ds = load_dataset(made)
+    assert len(ds) == 12 and ds.config_id.tolist() == [0] * 4 + [1] * 4 + [2] * 4
+    assert sorted(p.name for p in made.glob("shard-*")) == SHARDS  # the checksum files are folded in
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(gone=st.sets(st.sampled_from(SHARDS), min_size=1))
+def test_a_shard_missing_from_the_disk_is_refused_by_name(made, tmp_path, gone):
+    d = _copy(made, tmp_path)
+    for name in gone:
+        (d / name).unlink()
+    with pytest.raises(ValueError, match=rf"{min(gone)} is listed in the manifest but missing: rerun `rmm-datagen"):
+        load_dataset(d)
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(gone=st.sets(st.sampled_from(SHARDS), min_size=1))
+def test_a_shard_missing_from_the_manifest_is_refused_by_name(made, tmp_path, gone):
+    """Even with its file on the disk: the manifest, not the directory listing, says what the dataset is."""
+    d = _copy(made, tmp_path)
+    _edit_manifest(d, lambda shards: [shards.pop(n) for n in gone])
+    with pytest.raises(ValueError, match=r"does not list the shards metadata.json implies") as e:
+        load_dataset(d)
+    assert f"missing {sorted(gone)[:3]}" in str(e.value) and "unexpected []" in str(e.value)
+
+
+def test_a_shard_the_manifest_lists_beyond_the_metadata_is_refused_by_name(made, tmp_path):
+    d = _copy(made, tmp_path)
+    shutil.copy(d / SHARDS[2], d / "shard-00003.parquet")
+    _edit_manifest(d, lambda shards: shards.update({"shard-00003.parquet": shards[SHARDS[2]]}))
+    with pytest.raises(ValueError, match=r"missing \[\], unexpected \['shard-00003.parquet'\]"):
+        load_dataset(d)
+
+
+def test_a_stray_shard_file_is_never_read(made, tmp_path):
+    """A shard file in the directory that the manifest does not list (left by another run) is not
+    part of the dataset: the rows are exactly the listed shards'."""
+    d = _copy(made, tmp_path)
+    shutil.copy(d / SHARDS[0], d / "shard-00003.parquet")
+    shutil.copy(d / SHARDS[1], d / "shard-00099.parquet")
+    a, b = load_dataset(made), load_dataset(d)
+    assert len(b) == len(a) == 12
+    np.testing.assert_array_equal(b.config_id, a.config_id)
+    np.testing.assert_array_equal(b.risk, a.risk)
+    assert b.sha256 == a.sha256
+
+
+def test_metadata_implying_other_shards_is_refused(made, tmp_path):
+    d = _copy(made, tmp_path)
+    meta = json.loads((d / "metadata.json").read_text())
+    (d / "metadata.json").write_text(json.dumps(meta | {"configs": 4}))
+    with pytest.raises(ValueError, match=r"missing \['shard-00003.parquet'\]"):
+        load_dataset(d)
+
+
+# ------------------------------------------------------------------ other parameters are refused by name
+def test_identity_is_every_parameter_that_makes_the_data():
+    meta = {"format": "rmm-dataset", "format_version": 1, "env_id": "E", "env_kwargs": {"a": 1}, "configs": 3,
+            "samples_per_config": 4, "seed": 7, "configs_per_shard": 1, "estimator": {"branches": 4},
+            "package_version": "1", "created": "now", "obs_dim": 17}
+    base = identity(meta)
+    for key in ("format", "format_version", "env_id", "env_kwargs", "configs", "samples_per_config", "seed",
+                "configs_per_shard", "estimator"):
+        assert identity(meta | {key: "other"}) != base, key
+    # what records the run rather than defines the data is not part of it
+    assert identity(meta | {"package_version": "2", "created": "later"}) == base
+
+
+@pytest.mark.parametrize("key, value", [
+    ("env_kwargs", {"n_obstacles": 4}), ("env_id", "Dubins4DMap-v0"), ("seed", 8), ("configs", 2),
+    ("samples_per_config", 5), ("configs_per_shard", 3), ("estimator", {"branches": 5})])
+def test_a_rerun_into_a_dataset_made_with_other_parameters_is_refused_by_name(made, tmp_path, key, value):
+    """The existing ``metadata.json`` records other parameters than the rerun's: refused, naming the
+    parameter with both values, and no file of the dataset changes."""
+    d = _copy(made, tmp_path)
+    meta = json.loads((d / "metadata.json").read_text())
+    recorded = meta[key] | value if isinstance(value, dict) and key == "estimator" else value
+    (d / "metadata.json").write_text(json.dumps(meta | {key: recorded}))
+    before = {p.name: p.read_bytes() for p in d.iterdir()}
+    with pytest.raises(ValueError, match="holds a dataset made with other parameters") as e:
+        generate(DatagenConfig(**CFG), d, workers=1, progress=False)
+    assert f"'{key}': ({recorded!r}, {meta[key]!r})" in str(e.value)
+    assert {p.name: p.read_bytes() for p in d.iterdir()} == before
+
+
+def test_other_env_arguments_are_refused_before_any_work(made, tmp_path):
+    """The same command with other ``--env-kwargs``: refused, naming ``env_kwargs``."""
+    d = _copy(made, tmp_path)
+    with pytest.raises(ValueError, match=r"'env_kwargs': \(\{\}, \{'n_obstacles': 4\}\)"):
+        generate(DatagenConfig(**CFG, env_kwargs={"n_obstacles": 4}), d, workers=1, progress=False)
