@@ -161,14 +161,18 @@ def test_pilot_does_not_pass_a_waypoint_above_or_below_it():
 
 
 @settings(max_examples=100, deadline=None)
-@given(pos=point, wp=point, yaw=st.floats(-math.pi, math.pi, **finite))
-def test_pilot_command_points_at_the_waypoint_in_the_heading_frame(pos, wp, yaw):
-    """The command's horizontal velocity, turned back into the world by ``psi``, is
-    ``gain (w - p)_xy`` limited to the cruise speed; the climb is ``gain (w - p)_z`` limited to the
-    climb speed; the yaw rate turns toward the waypoint's bearing the short way (clipped to the box)."""
+@given(pos=point, wp=point, yaw=st.floats(-math.pi, math.pi, **finite),
+       tilt=st.tuples(st.floats(-0.5, 0.5, **finite), st.floats(-0.5, 0.5, **finite)))
+def test_pilot_command_points_at_the_waypoint_in_the_heading_frame(pos, wp, yaw, tilt):
+    """The command's horizontal velocity, turned back into the world by ``psi`` (the yaw of the
+    body x axis, whatever the tilt), is ``gain (w - p)_xy`` limited to the cruise speed; the climb
+    is ``gain (w - p)_z`` limited to the climb speed; the yaw rate turns toward the waypoint's
+    bearing the short way (clipped to the box)."""
     p = pilot()
     p.reset([wp])
-    cmd = p.command(hover(yaw=yaw) + np.r_[pos[0], pos[1], pos[2] - 1.5, np.zeros(10)])
+    body = hover(roll=tilt[0], pitch=tilt[1], yaw=yaw)
+    yaw = float(heading_of(body[3:7]))
+    cmd = p.command(body + np.r_[pos[0], pos[1], pos[2] - 1.5, np.zeros(10)])
     dx, dy, dz = wp[0] - pos[0], wp[1] - pos[1], wp[2] - pos[2]
     world = np.array([math.cos(yaw) * cmd[0] - math.sin(yaw) * cmd[1], math.sin(yaw) * cmd[0] + math.cos(yaw) * cmd[1]])
     want = np.array([dx, dy]) * min(1.0, 1.5 / math.hypot(dx, dy)) if math.hypot(dx, dy) > 0 else np.zeros(2)
@@ -179,3 +183,54 @@ def test_pilot_command_points_at_the_waypoint_in_the_heading_frame(pos, wp, yaw)
     else:
         err = (math.atan2(dy, dx) - yaw + math.pi) % (2 * math.pi) - math.pi
         assert cmd[3] == pytest.approx(min(max(2.0 * err, -1.0), 1.0), abs=1e-9)
+
+
+@pytest.mark.parametrize("name", ["cruise_speed", "climb_speed", "gain", "yaw_gain", "reach"])
+@pytest.mark.parametrize("bad", [0, 0.0, -1.0, math.nan, math.inf, True, "1"])
+def test_pilot_arguments_are_checked_by_name(name, bad):
+    with pytest.raises(ValueError, match=rf"^{name} must be a finite number > 0, got {bad!r}$".replace("(", r"\(")):
+        pilot(**{name: bad})
+    p = pilot(**{name: 1e-9})  # any positive number is accepted, as given
+    assert getattr(p, name) == 1e-9
+
+
+def test_pilot_reads_its_box_and_waypoints_as_given():
+    p = WaypointPilot(np.array([[-1, -2], [-3, -4]]), [1, 2, 3, 4])  # integers, any shape of 4 numbers
+    assert p.low.tolist() == [-1, -2, -3, -4] and p.high.tolist() == [1, 2, 3, 4] and p.index == 0
+    assert p.low.shape == p.high.shape == (4,) and p.low.dtype == p.high.dtype == np.float64
+    assert p.waypoints.shape == (0, 3)
+    w = np.array([[1.0, 2.0, 3.0]])
+    p.reset(w)
+    w[0, 0] = 9.0  # the pilot keeps its own copy
+    assert p.target.tolist() == [1.0, 2.0, 3.0]
+    p.reset([[1, 2, 3]])
+    assert p.target.dtype == np.float64
+    for bad in ([[1.0, 2.0]], np.zeros((0, 3)), [[1.0, math.nan, 2.0]], [[[1.0, 2.0, 3.0]]]):
+        with pytest.raises(ValueError, match=r"waypoints must be \(K >= 1, 3\) finite points, got shape"):
+            p.reset(bad)
+    p.reset([[0.0, 0.0, 5.0], [1.0, 0.0, 5.0]])
+    p.index = 1
+    p.reset([[0.0, 0.0, 5.0], [1.0, 0.0, 5.0]])
+    assert p.index == 0  # a reset starts from the first waypoint
+
+
+def test_pilot_commands_are_clipped_to_the_box_it_is_given():
+    """A tight box (0.3 m/s each way, 0.1 rad/s): every number of the command clipped to it."""
+    p = WaypointPilot([-0.3, -0.3, -0.3, -0.1], [0.3, 0.3, 0.3, 0.1])
+    p.reset([[10.0, 10.0, 10.0]])
+    assert p.command(hover()).tolist() == [0.3, 0.3, 0.3, 0.1]
+    p.reset([[-10.0, -10.0, -10.0]])
+    assert p.command(hover()).tolist() == [-0.3, -0.3, -0.3, -0.1]
+
+
+def test_pilot_boundaries_at_exactly_reach():
+    """A waypoint exactly ``reach`` (0.5 m) away is not within reach: not passed, and (the last
+    one, 0.5 m to the left) still turned toward; a turn needs more than ``reach`` horizontally."""
+    p = pilot()
+    p.reset([[0.0, 0.5, 1.5], [5.0, 0.0, 1.5]])
+    p.command(hover())
+    assert p.index == 0
+    p.reset([[0.0, 0.5, 1.5]])
+    assert p.command(hover())[3] == 0.0  # 0.5 m is not more than reach: no turn
+    p.reset([[0.0, 0.5 + 1e-9, 1.5]])
+    assert p.command(hover())[3] == 1.0  # just beyond it: the turn (2 x pi/2, clipped to 1)
