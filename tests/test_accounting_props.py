@@ -9,6 +9,8 @@ with only an intervention cost of 1 per second is exactly minus that time."""
 
 from __future__ import annotations
 
+import math
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -95,3 +97,48 @@ def test_hand_counted_non_blocking_intervals():
     assert steps[-1][3] and steps[-1][4]["episode"]["active_ctrl_sim_time"] == pytest.approx(0.34, abs=1e-12)
     assert steps[-1][4]["episode"]["cum_sim_time"] == pytest.approx(0.51, abs=1e-12)
     assert steps[-1][4]["episode"]["n_active_ctrl_env_steps"] == 2
+
+
+# ------------------------------------------------------------------ the guarded env's interval bookkeeping
+@pytest.mark.parametrize("env_id", ["Dubins4DCircles-v0", "Dubins3DMazeGuarded-v0"])
+def test_intervals_are_checked_counted_and_ended_by_hand(env_id):
+    """``simulate`` refuses a bad duration by value before anything is counted, counts a
+    zero-length interval as a step of no time, charges the given compute time, and ends the
+    episode (truncated, ``"timeout"``) when the simulated time reaches the limit within 1e-9."""
+    env = gym.make(env_id, max_episode_sim_time=0.5, clock="fixed:4").unwrapped
+    with pytest.raises(RuntimeError, match=r"reset\(\)"):
+        env.simulate(0.1, False, None)
+    env.reset(seed=2)
+    for bad in (-0.1, math.nan, math.inf):
+        with pytest.raises(ValueError, match=rf"^duration must be a finite number >= 0, got {bad}$"):
+            env.simulate(bad, False, None)
+    zero = env.action_space.parse(env.action_space.active(np.zeros(env.action_space.control_dim)))[1]
+    _, r, term, trunc, info = env.simulate(0.0, True, zero, 0.25)
+    assert (r, term, trunc) == (0.0, False, False) and info["sim_time"] == 0.0 and "episode" not in info
+    _, _, term, trunc, info = env.simulate(0.2, False, None, 0.5)
+    assert not (term or trunc) and info["sim_time"] == pytest.approx(0.2)
+    _, _, term, trunc, info = env.simulate(0.3 - 5e-10, True, zero, 0.75)  # 0.5 less half the tolerance: the end
+    assert not term and trunc and info["outcome"] == "timeout"
+    ep = info["episode"]
+    assert ep["outcome"] == "timeout" and ep["n_env_steps"] == 3 and ep["n_active_ctrl_env_steps"] == 2
+    assert ep["active_ctrl_sim_time"] == pytest.approx(0.3 - 5e-10, abs=1e-15)
+    assert ep["cum_sim_time"] == pytest.approx(0.5 - 5e-10, abs=1e-15)
+    assert ep["cum_compute_time"] == pytest.approx(1.5) and ep["avg_compute_time"] == pytest.approx(0.5)
+    assert ep["cum_reward"] == 0.0 and ep["final_speed"] == env.final_speed()
+    with pytest.raises(RuntimeError):
+        env.simulate(0.1, False, None)  # the episode has ended
+    env.reset(seed=2)
+    _, _, term, trunc, info = env.simulate(0.5 - 2e-9, False, None)  # short of the limit by more than 1e-9
+    assert not (term or trunc)
+
+
+def test_a_step_charges_the_clock_and_steps_by_step_dt():
+    """``step`` charges the clock's lap (4 ms) to the step and advances by ``step_dt``."""
+    env = gym.make("Dubins4DCircles-v0", clock="fixed:4", step_dt=0.25, max_episode_sim_time=0.5)
+    env.reset(seed=0, options={"state": [0.0, 0.0, 0.0, 0.0], "obstacles": [[30.0, 30.0, 1.0]], "goal": [-30.0, 30.0, 0.5]})
+    env.step(env.action_space.inactive())
+    _, _, _, trunc, info = env.step(env.action_space.inactive())
+    assert trunc and info["sim_time"] == 0.5
+    ep = info["episode"]
+    assert ep["n_env_steps"] == 2 and ep["cum_compute_time"] == pytest.approx(0.008) and ep["avg_compute_time"] == pytest.approx(0.004)
+    assert ep["active_ctrl_sim_time"] == 0.0 and ep["n_active_ctrl_env_steps"] == 0
