@@ -8,6 +8,7 @@ wrong bound would pass any test that only runs an episode.  These tests read the
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -161,3 +162,68 @@ def test_pursuit_wraps_the_error_across_the_branch_cut():
     d.reset([(0.0, 0.0), (1000.0 * math.cos(-3.0), 1000.0 * math.sin(-3.0))])
     assert d.control([0.0, 0.0, 3.0]) == pytest.approx(0.5 * (2 * math.pi - 6.0), rel=1e-9)
     assert d.control([0.0, 0.0, -3.0 + 0.1]) == pytest.approx(-0.05, rel=1e-9)
+
+
+# ------------------------------------------------------------------ arguments
+GAINS = ("gamma_vmin", "gamma_vmax", "lambda_theta", "lambda_v", "p_theta", "p_v")
+
+
+@pytest.mark.parametrize("name", GAINS)
+@pytest.mark.parametrize("bad", [-1.0, math.nan, math.inf, -math.inf, "1", None])
+def test_driver_parameters_are_checked_by_name(name, bad):
+    op = "> 0" if name.startswith("p_") else ">= 0"
+    with pytest.raises(ValueError, match=rf"^driver parameter {name} must be a finite number {op}, got {bad!r}$"):
+        DriverParams(**{name: bad})
+
+
+def test_driver_parameter_bounds_and_layout():
+    """Gains may be 0 (a row turned off by choice), slack weights may not (the QP must stay
+    strictly convex); ``as_array`` is the order the compiled solver reads."""
+    for name in GAINS[:4]:
+        assert getattr(DriverParams(**{name: 0}), name) == 0
+    for name in GAINS[4:]:
+        with pytest.raises(ValueError, match=rf"{name} must be a finite number > 0, got 0"):
+            DriverParams(**{name: 0})
+    assert DriverParams(1, 2, 3, 4, 5, 6).as_array().tolist() == [1, 2, 3, 4, 5, 6]
+    d = CLFDriver(u1_bounds=(-1, 2), u2_bounds=(-3, 4), v_bounds=(0.5, 6))
+    assert d.lim.tolist() == [-1, 2, -3, 4, 0.5, 6] and d.gain.tolist() == [1] * 6
+    for kw in ({"u1_bounds": (1, -1)}, {"u2_bounds": (0.1, 0.0)}):
+        with pytest.raises(ValueError, match=r"control bounds must satisfy min <= max, got"):
+            CLFDriver(**kw)
+    CLFDriver(u1_bounds=(0.2, 0.2))  # an interval of one point is an interval
+    with pytest.raises(ValueError, match=r"^driver solver must be one of \('closed_form', 'osqp'\), got 'cvxpy'$"):
+        CLFDriver(solver="cvxpy")
+
+
+@pytest.mark.parametrize("states, goals", [(np.zeros((3, 3)), np.zeros((3, 2))), (np.zeros(4), np.zeros(2)),
+                                           (np.zeros((3, 4)), np.zeros((3, 1))), (np.zeros((3, 4)), np.zeros((2, 2)))])
+def test_clf_qp_refuses_bad_shapes(states, goals):
+    with pytest.raises(ValueError, match=rf"states must be \(N, 4\) and goals \(N, 2\), got {re.escape(str(states.shape))}"):
+        clf_qp(states, goals, CLFDriver().lim, CLFDriver().gain)
+
+
+def test_wider_rows_and_an_output_array_are_accepted():
+    """States of the env (more than 4 columns) and goal circles (x, y, r) are read by their first
+    columns; ``out`` is written in place and returned."""
+    d = CLFDriver()
+    s, g = np.array([[1.0, 2.0, 0.3, 1.0, 99.0]]), np.array([[5.0, -1.0, 0.7]])
+    out = np.full((1, 4), np.nan)
+    r = clf_qp(s, g, d.lim, d.gain, out=out)
+    assert r is out and np.array_equal(out, clf_qp(s[:, :4], g[:, :2], d.lim, d.gain))
+    assert np.array_equal(d.control(s[0], g[0]), out[0, :2]) and np.array_equal(d.solve(s[0], g[0]), out[0])
+
+
+@pytest.mark.parametrize("kw, name", [({"u_max": 0.0}, "u_max"), ({"lookahead": -1.0}, "lookahead"), ({"gain": math.nan}, "gain"),
+                                      ({"u_max": True}, "u_max"), ({"lookahead": "190"}, "lookahead"), ({"gain": math.inf}, "gain")])
+def test_pursuit_arguments_are_checked_by_name(kw, name):
+    args = {"u_max": 0.2} | kw
+    with pytest.raises(ValueError, match=rf"^{name} must be a finite number > 0, got {kw[name]!r}$"):
+        PursuitDriver(**args)
+
+
+def test_pursuit_waypoints_are_checked():
+    d = PursuitDriver(u_max=0.2)
+    assert d.waypoints.shape == (0, 2)
+    for bad in ([(0.0, 0.0)], [(0.0, 0.0, 0.0), (1.0, 1.0, 1.0)], [(0.0, 0.0), (math.inf, 1.0)], [[[0.0, 0.0], [1.0, 1.0]]]):
+        with pytest.raises(ValueError, match=r"^waypoints must be \(K >= 2, 2\) finite points, got shape"):
+            d.reset(bad)
