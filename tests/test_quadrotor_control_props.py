@@ -195,7 +195,7 @@ def test_pilot_arguments_are_checked_by_name(name, bad):
 
 
 def test_pilot_reads_its_box_and_waypoints_as_given():
-    p = WaypointPilot(np.array([[-1, -2], [-3, -4]]), [1, 2, 3, 4])  # integers, any shape of 4 numbers
+    p = WaypointPilot(np.array([[-1, -2], [-3, -4]]), np.array([[1, 2], [3, 4]]))  # integers, any shape of 4 numbers
     assert p.low.tolist() == [-1, -2, -3, -4] and p.high.tolist() == [1, 2, 3, 4] and p.index == 0
     assert p.low.shape == p.high.shape == (4,) and p.low.dtype == p.high.dtype == np.float64
     assert p.waypoints.shape == (0, 3)
