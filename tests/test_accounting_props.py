@@ -10,6 +10,7 @@ with only an intervention cost of 1 per second is exactly minus that time."""
 from __future__ import annotations
 
 import math
+import re
 
 import gymnasium as gym
 import numpy as np
@@ -142,3 +143,47 @@ def test_a_step_charges_the_clock_and_steps_by_step_dt():
     ep = info["episode"]
     assert ep["n_env_steps"] == 2 and ep["cum_compute_time"] == pytest.approx(0.008) and ep["avg_compute_time"] == pytest.approx(0.004)
     assert ep["active_ctrl_sim_time"] == 0.0 and ep["n_active_ctrl_env_steps"] == 0
+
+
+# ------------------------------------------------------------------ GuardianReward's arguments and record
+@pytest.mark.parametrize("name", ["goal_bonus", "collision_penalty", "intervention_cost"])
+@pytest.mark.parametrize("bad", [-1, -1e-300, math.nan, math.inf, True, "1", None])
+def test_reward_weights_are_refused_by_name_and_value(name, bad):
+    with pytest.raises(ValueError, match=rf"^{name} must be a finite number >= 0, got {re.escape(repr(bad))}$"):
+        GuardianReward(gym.make("Dubins4DCircles-v0"), **{name: bad})
+
+
+def test_reward_weights_are_kept_as_floats_and_recorded_in_the_spec():
+    env = GuardianReward(gym.make("Dubins4DCircles-v0"), goal_bonus=np.float32(2), collision_penalty=np.int64(0),
+                         intervention_cost=3)
+    assert (env.goal_bonus, env.collision_penalty, env.intervention_cost) == (2.0, 0.0, 3.0)
+    assert all(type(v) is float for v in (env.goal_bonus, env.collision_penalty, env.intervention_cost))
+    spec = env.spec.additional_wrappers[-1]
+    assert spec.name == "GuardianReward" and spec.kwargs == {"goal_bonus": np.float32(2), "collision_penalty": 0,
+                                                            "intervention_cost": 3}
+    default = GuardianReward(gym.make("Dubins4DCircles-v0"))
+    assert (default.goal_bonus, default.collision_penalty, default.intervention_cost) == (1.0, 10.0, 0.05)
+
+
+def test_reward_refuses_an_env_without_the_contract_naming_it_and_its_space():
+    with pytest.raises(TypeError) as e:
+        GuardianReward(gym.make("Dubins3DMaze-v0"))
+    assert str(e.value) == ("GuardianReward needs a parallel-autonomy env (action space rmm_envs.autonomy.GuardianActionSpace); "
+                            "Dubins3DMaze-v0 has Box(-0.2, 0.2, (1,), float32)")
+
+
+def test_reward_keeps_the_env_reward_and_every_info_entry():
+    """The shaped reward replaces the env's; the env's goes to ``info["env_reward"]`` and nothing
+    else of the step changes (a collision: -1 from the env, -10 - 0.05 x 0.1 shaped)."""
+    opts = {"state": [0.0, 0.0, 0.0, 1.0], "obstacles": [[0.15, 0.0, 0.1]], "goal": [-8.0, -8.0, 0.5]}
+    plain, wrapped = gym.make("Dubins4DCircles-v0"), GuardianReward(gym.make("Dubins4DCircles-v0"))
+    o1, i1 = plain.reset(seed=0, options=opts)
+    o2, i2 = wrapped.reset(seed=0, options=opts)
+    assert np.array_equal(o1, o2) and i1.keys() == i2.keys()
+    a = plain.action_space.active([0.0, 0.0])
+    obs1, r1, t1, tr1, info1 = plain.step(a)
+    obs2, r2, t2, tr2, info2 = wrapped.step(a)
+    assert np.array_equal(obs1, obs2) and (t1, tr1) == (t2, tr2) == (True, False)
+    assert r1 == -1.0 and info2["env_reward"] == -1.0 and info1["outcome"] == info2["outcome"] == "collision"
+    assert r2 == pytest.approx(-10.0 - 0.05 * 0.1, abs=1e-15) and type(r2) is float
+    assert {k: v for k, v in info2.items() if k != "env_reward"}.keys() == info1.keys()
