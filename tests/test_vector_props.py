@@ -105,3 +105,67 @@ def test_partial_resets_leave_earlier_observations_alone(seed, masks):
             k.keep("reset ended", obs)
     k.check()
     env.close()
+
+
+# ------------------------------------------------------------------ arguments, refused by exact message
+@pytest.mark.parametrize("kw, message", [
+    ({"num_envs": 0}, "num_envs must be an integer >= 1, got 0"),
+    ({"num_envs": True}, "num_envs must be an integer >= 1, got True"),
+    ({"num_envs": 1.5}, "num_envs must be an integer >= 1, got 1.5"),
+    ({"num_envs": 2, "autoreset_mode": "sometimes"},
+     "autoreset_mode must be one of ['NextStep', 'SameStep', 'Disabled'], got 'sometimes'"),
+    ({"num_envs": 2, "render_mode": "human"},
+     "render_mode must be None for the vector env (render a single env instead), got 'human'"),
+    ({"num_envs": 2, "driver_solver": "osqp"},
+     "driver_solver must be 'closed_form' in the vector env (the batched exact solver), got 'osqp'"),
+])
+def test_constructor_arguments_are_refused_by_exact_message(kw, message):
+    with pytest.raises(ValueError) as e:
+        Dubins4DCirclesVectorEnv(**kw)
+    assert str(e.value) == message
+
+
+def test_accepted_arguments_are_kept():
+    env = Dubins4DCirclesVectorEnv(np.int64(3), autoreset_mode="SameStep", driver_solver="closed_form", n_obstacles=2)
+    assert env.num_envs == 3 and type(env.num_envs) is int
+    assert env.autoreset_mode is AutoresetMode.SAME_STEP and env.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+    assert Dubins4DCirclesVectorEnv.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP  # the class's stays
+    assert env.render_mode is None and env.observation_space.shape == (3, 17)
+    obs, info = env.reset(seed=0)
+    assert obs.shape == (3, 17) and info["state"].shape == (3, 4) and info["_state"].all()
+    assert info["sim_time"].tolist() == [0.0] * 3
+    env.close()
+
+
+@pytest.mark.parametrize("call, message", [
+    ({"seed": [1, 2, 3]}, "seed must be None, an int or a list of 2 ints or None, got [1, 2, 3]"),
+    ({"seed": 1.5}, "seed must be None, an int or a list of 2 ints or None, got 1.5"),
+    ({"seed": True}, "seed must be None, an int or a list of 2 ints or None, got True"),
+    ({"options": {"reset_mask": np.array([1, 0])}},
+     "options['reset_mask'] must be a numpy bool array of shape (2,), got array([1, 0])"),
+    ({"options": {"reset_mask": np.zeros(2, bool)}}, "options['reset_mask'] must select at least one sub-env, got none"),
+    ({"options": {"reset_mask": np.array([True, False])}},
+     "the first reset must reset every sub-env; options['reset_mask'] selects only some"),
+    ({"seed": 0, "options": {"obstacles": [[0.0, 0.0, 1.0]], "state": [5.0, 5.0, 0.0, 1.0]}},
+     "option 'obstacles' must hold n_obstacles = 5 circles in the vector env (every world of a batch has as many), got 1"),
+])
+def test_bad_resets_are_refused_by_exact_message(call, message):
+    env = Dubins4DCirclesVectorEnv(2)
+    with pytest.raises(ValueError) as e:
+        env.reset(**call)
+    assert str(e.value) == message
+
+
+def test_stepping_an_ended_sub_env_without_autoreset_names_it():
+    env = Dubins4DCirclesVectorEnv(2, autoreset_mode=AutoresetMode.DISABLED, max_episode_sim_time=0.1)
+    env.reset(seed=0)
+    a = {"active_ctrl": np.zeros(2, np.int64), "turnrate_ctrl": np.zeros((2, 1)), "accel_ctrl": np.zeros((2, 1))}
+    _, _, term, trunc, info = env.step(a)
+    assert trunc.tolist() == [True, True] and info["outcome"].tolist() == ["timeout", "timeout"]
+    with pytest.raises(RuntimeError) as e:
+        env.step(a)
+    assert str(e.value) == ("sub-env 0's episode has ended and autoreset_mode is DISABLED: reset it first "
+                            "with reset(options={'reset_mask': mask})")
+    env.reset(options={"reset_mask": np.array([True, False])})
+    with pytest.raises(RuntimeError, match="^sub-env 1's episode has ended"):
+        env.step(a)
