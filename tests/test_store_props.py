@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from benchmarks.bench.config import AgentRun, EpisodeResult
 from benchmarks.bench.run import plan_tasks
 from benchmarks.bench.runner import episode_seed
-from benchmarks.bench.store import RETRIED_ERRORS, ResultsStore
+from benchmarks.bench.store import EPISODE_FIELDS, RETRIED_ERRORS, ResultsStore
 
 RUNS = {a: AgentRun(agent=a, agent_kwargs={}, env_id="Dubins4DCircles-v0", env_kwargs={}, seed=s, episode_timeout=60.0,
                     charge_precompute=False) for a, s in (("inactive", 0), ("brakes", 5))}
@@ -85,3 +85,100 @@ def test_a_stored_result_is_replaced_only_where_it_is_an_error(tmp_path, first, 
     store.close()
     with sqlite3.connect(tmp_path / "results.db") as db:  # one row, the file holds no duplicate
         assert db.execute("SELECT COUNT(*) FROM episodes").fetchone()[0] == 1
+
+
+# ------------------------------------------------------------------ opening, errors, older files, stale invocations
+def test_opening_makes_the_folder_and_a_wal_database(tmp_path):
+    store = ResultsStore(tmp_path / "a" / "b" / "results.db")
+    assert store.db.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    assert store.db.execute("PRAGMA synchronous").fetchone()[0] == 1  # NORMAL
+    cols = [r[1] for r in store.db.execute("PRAGMA table_info(episodes)")]
+    assert cols == list(EPISODE_FIELDS)
+    assert [r[1] for r in store.db.execute("PRAGMA table_info(episodes)") if r[5]] == ["run_key", "episode"]  # the key
+    inv = [r[1] for r in store.db.execute("PRAGMA table_info(invocations)")]
+    assert inv == ["id", "created", "kind", "args", "run_keys", "episodes", "status", "pid", "host", "updated", "message"]
+    store.close()
+    ResultsStore(tmp_path / "a" / "b" / "results.db").close()  # opening again changes nothing
+    with sqlite3.connect(tmp_path / "a" / "b" / "results.db") as db:
+        assert [r[1] for r in db.execute("PRAGMA table_info(episodes)")] == list(EPISODE_FIELDS)
+
+
+@pytest.mark.parametrize("text, start", [
+    ("database or disk is full", "cannot write {p} (database or disk is full); free disk space and rerun the same command: "
+                                 "stored episodes are kept"),
+    ("database is locked", "{p} is locked by another process (database is locked); wait for the other rmm-bench command "
+                           "to finish, or use another --out"),
+    ("database is busy\nretry", "{p} is locked by another process (database is busy retry); wait for the other rmm-bench "
+                                "command to finish, or use another --out"),
+    ("file is not a database", "{p} is damaged or not a results database (file is not a database); move it aside "
+                               "(mv {p} {p}.damaged) and rerun: the run starts afresh"),
+])
+def test_each_database_error_is_one_line_saying_what_to_do(tmp_path, text, start):
+    store = ResultsStore(tmp_path / "results.db")
+    e = store._error(sqlite3.OperationalError(text))
+    assert type(e).__name__ == "ResultsDatabaseError" and str(e) == start.format(p=store.path)
+    store.close()
+
+
+def test_a_file_that_is_not_a_database_is_refused_by_name(tmp_path):
+    path = tmp_path / "results.db"
+    path.write_bytes(b"not a database at all" * 200)
+    with pytest.raises(Exception) as e:
+        ResultsStore(path)
+    assert type(e.value).__name__ == "ResultsDatabaseError"
+    assert str(e.value) == (f"{path} is damaged or not a results database (file is not a database); move it aside "
+                            f"(mv {path} {path}.damaged) and rerun: the run starts afresh")
+
+
+def test_a_database_written_before_error_kinds_and_invocation_bookkeeping_is_brought_up_to_date(tmp_path):
+    """A file of the first format (no ``error_kind``, invocations without pid/host/updated/message,
+    status ``done``): its error rows get their kind from the message, ``done`` reads ``finished``."""
+    path = tmp_path / "results.db"
+    old_fields = {k: v for k, v in EPISODE_FIELDS.items() if k != "error_kind"}
+    with sqlite3.connect(path) as db:
+        db.executescript(f"""
+            CREATE TABLE runs (run_key TEXT PRIMARY KEY, agent TEXT NOT NULL, created REAL, config TEXT NOT NULL,
+                provenance TEXT NOT NULL);
+            CREATE TABLE episodes ({", ".join(f"{k} {v}" for k, v in old_fields.items())}, PRIMARY KEY (run_key, episode));
+            CREATE TABLE invocations (id INTEGER PRIMARY KEY AUTOINCREMENT, created REAL, kind TEXT, args TEXT,
+                run_keys TEXT, episodes INTEGER, status TEXT);
+            INSERT INTO invocations (created, kind, args, run_keys, episodes, status) VALUES (1, 'run', '{{}}', '{{}}', 2, 'done');
+            INSERT INTO invocations (created, kind, args, run_keys, episodes, status) VALUES (2, 'run', '{{}}', '{{}}', 2, 'failed');
+        """)
+        for i, (outcome, error) in enumerate((("goal", None), ("error", "EpisodeTimeout: over 60 s"), ("error", "boom"))):
+            db.execute("INSERT INTO episodes (run_key, episode, agent, seed, outcome, error) VALUES (?, ?, ?, ?, ?, ?)",
+                       ("k", i, "a", i, outcome, error))
+    store = ResultsStore(path)
+    rows = store.episodes("k")
+    assert [r["error_kind"] for r in rows] == [None, "timeout", "guardian"]
+    assert store.done_episodes("k") == {0, 2}  # the timeout is retried, the guardian error kept
+    assert [store.invocation(i)["status"] for i in (1, 2)] == ["finished", "failed"]
+    assert store.invocation(1)["pid"] is None and store.invocation(1)["state"] == "finished"
+    store.close()
+
+
+def test_only_a_running_invocation_of_a_dead_process_on_this_host_is_stale(tmp_path):
+    import os
+    import socket
+    import subprocess
+    import sys
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()  # a process id that no longer runs
+    store = ResultsStore(tmp_path / "results.db")
+    host = socket.gethostname()
+    rows = [("running", dead.pid, host), ("running", os.getpid(), host), ("running", dead.pid, host + "-elsewhere"),
+            ("finished", dead.pid, host), ("running", None, host)]
+    ids = []
+    for status, pid, h in rows:
+        i = store.add_invocation("run", {}, {}, 1)
+        store.db.execute("UPDATE invocations SET status = ?, pid = ?, host = ? WHERE id = ?", (status, pid, h, i))
+        ids.append(i)
+    store.db.commit()
+    assert [store.invocation(i)["state"] for i in ids] == ["stale", "running", "running", "finished", "running"]
+    assert store.mark_stale_invocations() == 1
+    inv = store.invocation(ids[0])
+    assert (inv["status"], inv["state"]) == ("interrupted", "interrupted")
+    assert inv["message"] == f"its process {dead.pid} ended without recording an end (killed)"
+    assert store.invocation(ids[1])["status"] == "running"
+    store.close()
