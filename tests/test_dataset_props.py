@@ -137,3 +137,100 @@ def test_other_env_arguments_are_refused_before_any_work(made, tmp_path):
     d = _copy(made, tmp_path)
     with pytest.raises(ValueError, match=r"'env_kwargs': \(\{\}, \{'n_obstacles': 4\}\)"):
         generate(DatagenConfig(**CFG, env_kwargs={"n_obstacles": 4}), d, workers=1, progress=False)
+
+
+# ------------------------------------------------------------------ the files' helpers, by hand
+def test_rerun_command_names_every_parameter_and_quotes_the_folder():
+    from rmm_envs.risk.dataset import rerun_command
+
+    meta = {"env_id": "Dubins3DMaze-v0", "configs": 5, "samples_per_config": 6, "seed": 2, "configs_per_shard": 3,
+            "estimator": {"branches": 7, "depth": 2, "horizon": 1.5, "n_steps": 4, "metric": "cvar", "alpha": 0.1,
+                          "leaf": "heuristic", "policy": "uniform"},
+            "env_kwargs": {"maze_kind": "mixed", "a": 1}}
+    assert rerun_command(meta, "/data/my set") == (
+        "rmm-datagen --env Dubins3DMaze-v0 --configs 5 --samples-per-config 6 --seed 2 --configs-per-shard 3 "
+        "--branches 7 --depth 2 --horizon 1.5 --n-steps 4 --metric cvar --alpha 0.1 --leaf heuristic "
+        """--env-kwargs '{"a": 1, "maze_kind": "mixed"}' --out '/data/my set'""")
+    # parameters that are not set are left out; no estimator or env arguments at all
+    meta = {"env_id": "E", "configs": 1, "samples_per_config": 2, "seed": 0, "configs_per_shard": 1,
+            "estimator": {"branches": 3, "alpha": None}, "env_kwargs": {}}
+    assert rerun_command(meta, "out") == ("rmm-datagen --env E --configs 1 --samples-per-config 2 --seed 0 "
+                                          "--configs-per-shard 1 --branches 3 --out out")
+    assert rerun_command({}, "o") == ("rmm-datagen --env None --configs None --samples-per-config None --seed None "
+                                      "--configs-per-shard None --out o")
+
+
+def test_checksums_are_written_beside_a_shard_and_read_back_only_when_well_formed(tmp_path):
+    import hashlib
+
+    import pyarrow as pa
+
+    from rmm_envs.risk.dataset import checksum_path, recorded_checksum, sha256_file, shard_ok, shard_path, write_table
+
+    p = shard_path(tmp_path, 3)
+    assert p.name == "shard-00003.parquet" and checksum_path(p).name == "shard-00003.sha256"
+    write_table(p, pa.table({"x": [1, 2, 3]}))
+    digest = hashlib.sha256(p.read_bytes()).hexdigest()
+    assert checksum_path(p).read_text() == f"{digest}  shard-00003.parquet\n"  # sha256sum -c format
+    assert recorded_checksum(p) == digest == sha256_file(p)
+    assert shard_ok(p, 3) and not shard_ok(p, 4) and not shard_ok(tmp_path / "none.parquet", 0)
+    assert not list(tmp_path.glob(".*.tmp"))  # written through a temporary file, renamed into place
+    for bad in (digest[:63], digest.upper(), "g" * 64, "", "\xff"):
+        checksum_path(p).write_text(bad)
+        assert recorded_checksum(p) is None, bad
+    checksum_path(p).write_bytes(b"\xff\xfe")
+    assert recorded_checksum(p) is None
+    checksum_path(p).unlink()
+    assert recorded_checksum(p) is None
+
+
+def test_an_unreadable_manifest_is_a_problem_named_not_a_crash(tmp_path):
+    from rmm_envs.risk.dataset import read_manifest_shards
+
+    assert read_manifest_shards(tmp_path) == ({}, None)
+    (tmp_path / "manifest.json").write_text(json.dumps({"shards": {"shard-00000.parquet": "ab", 7: 1}}))
+    assert read_manifest_shards(tmp_path) == ({"shard-00000.parquet": "ab", "7": "1"}, None)
+    for text, kind in (("{", "JSONDecodeError"), ('{"shards": []}', "TypeError"), ("{}", "KeyError")):
+        (tmp_path / "manifest.json").write_text(text)
+        shards, problem = read_manifest_shards(tmp_path)
+        assert shards == {} and problem.startswith(f"{tmp_path / 'manifest.json'} is unreadable ({kind}")
+        assert problem.endswith("its checksums cannot be used")
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda d: (d / "manifest.json").unlink(), r"is incomplete \(no manifest.json\): rerun `rmm-datagen"),
+    (lambda d: (d / "manifest.json").write_text("[1]"), r"manifest.json is unreadable \(TypeError"),
+    (lambda d: (d / "manifest.json").write_text('{"shards": {}}'), r"manifest.json is unreadable \(KeyError: 'dataset_sha256'\)"),
+    (lambda d: (d / "metadata.json").write_text("[]"), r"metadata.json is unreadable or not valid JSON \(not a JSON object\)"),
+    (lambda d: (d / "metadata.json").write_text(json.dumps(json.loads((d / "metadata.json").read_text()) | {"format_version": 2})),
+     r"metadata.json: expected format rmm-dataset v1, got rmm-dataset v2"),
+    (lambda d: (d / "metadata.json").write_text(json.dumps(json.loads((d / "metadata.json").read_text()) | {"obs_dim": 5})),
+     r"observations have 17 features, metadata says 5"),
+])
+def test_each_damaged_file_is_refused_naming_it(made, tmp_path, damage, message):
+    d = _copy(made, tmp_path)
+    damage(d)
+    with pytest.raises(ValueError, match=message):
+        load_dataset(d)
+
+
+def test_a_shard_that_matches_its_checksum_but_is_not_parquet_is_refused(made, tmp_path):
+    import hashlib
+
+    d = _copy(made, tmp_path)
+    (d / SHARDS[1]).write_bytes(b"PAR1 not really")
+    _edit_manifest(d, lambda shards: shards.update({SHARDS[1]: hashlib.sha256(b"PAR1 not really").hexdigest()}))
+    with pytest.raises(ValueError, match=rf"{SHARDS[1]} cannot be read \("):
+        load_dataset(d)
+
+
+def test_metadata_without_sizes_skips_the_shard_list_check(made, tmp_path):
+    """An older metadata file without ``configs_per_shard``: the shards are those the manifest lists."""
+    d = _copy(made, tmp_path)
+    meta = json.loads((d / "metadata.json").read_text())
+    del meta["configs_per_shard"]
+    (d / "metadata.json").write_text(json.dumps(meta))
+    assert len(load_dataset(d)) == 12
+    _edit_manifest(d, lambda shards: shards.clear())
+    with pytest.raises(ValueError, match=r"holds no shards$"):
+        load_dataset(d)
