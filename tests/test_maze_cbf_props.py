@@ -87,3 +87,57 @@ def test_hand_computed_full_turns_away():
         assert a["active_ctrl"] == 1 and float(a["turnrate_ctrl"][0]) == np.float32(u), pose
     assert g.stats()["qp_fallbacks"] == 4
     env.close()
+
+
+# ------------------------------------------------------------------ arguments
+@pytest.mark.parametrize("kw, message", [
+    ({"barrier": "circle"}, "barrier must be one of ('turning', 'distance'), got 'circle'"),
+    ({"p1": 0.0}, "p1 (class-K gain) must be a finite number > 0.0, got 0.0"),
+    ({"p2": -1.0}, "p2 (class-K gain) must be a finite number > 0.0, got -1.0"),
+    ({"margin": -0.5}, "margin must be a finite number >= 0.0, got -0.5"),
+    ({"n_walls": 0}, "n_walls must be an integer >= 1, got 0"),
+    ({"active_atol": math.nan}, "active_atol must be a finite number >= 0.0, got nan"),
+    ({"lap_guess": 0.0}, "lap_guess must be a finite number > 0.0, got 0.0"),
+    ({"eps": math.inf}, "eps must be a finite number > 0.0, got inf"),
+    ({"solver": "nope"}, None),
+])
+def test_arguments_are_refused_by_exact_message(kw, message):
+    with pytest.raises(ValueError) as e:
+        MazeCBFGuardian(**kw)
+    if message is not None:
+        assert str(e.value) == message
+    else:
+        assert "'nope'" in str(e.value)
+
+
+def test_defaults_and_the_barrier_dependent_gain():
+    g = MazeCBFGuardian()
+    assert (g.barrier, g.p1, g.p2, g.margin, g.n_walls, g.active_atol, g.predict_latency, g.lap_guess, g.eps, g.solver) == \
+        ("turning", 1.0, 0.1, 2.0, 8, 1e-3, True, 0.1, 1e-6, "osqp")
+    assert MazeCBFGuardian(barrier="distance").p1 == 0.1 and MazeCBFGuardian(barrier="distance", p1=0.5).p1 == 0.5
+    assert MazeCBFGuardian(p1=3).p1 == 3.0 and MazeCBFGuardian(margin=0).margin == 0.0
+    assert MazeCBFGuardian(predict_latency=0).predict_latency is False
+    assert g.stats() == {"qp_fallbacks": 0, "nan_states": 0, "qp_solves": 0}
+    assert (g.name, g.observation_type, g.privileged) == ("cbf", "global", True)
+
+
+def test_reset_reads_the_maze_the_speed_and_the_bound(guardian):
+    """After ``reset`` in the corridor: its four walls, half-thickness 6.25 px, the car's 10 px/s and
+    0.2 rad/s; the nearest ``min(n_walls, walls)`` rows, smallest barrier first."""
+    assert guardian.walls.shape == (4, 4) and guardian.half == 6.25 and guardian.speed == 10.0
+    assert guardian.u_max == float(np.float32(U_MAX)) and guardian.K == 4  # the action space bound, float32
+    b, G, h = guardian.rows(np.array([250.0, 100.0, 0.0]))  # 31.25 px above the lower wall's surface
+    assert G.shape == (4, 1) and np.all(np.diff(b) >= 0)
+    assert b[0] == pytest.approx(100.0 - 68.75 - MARGIN)
+
+
+def test_a_pose_with_nan_applies_the_safe_default_and_is_counted():
+    """The env's safe default (the full turn away from the nearer wall, read on the rays), counted."""
+    env = Dubins3DMazeGuardedEnv()
+    g = MazeCBFGuardian()
+    obs, info = reset_at(env, g, [250.0, 160.0, 0.0])  # the upper wall is the nearer: turn right
+    env.unwrapped._state[:] = np.nan
+    a = g.act(obs, info)
+    assert a["active_ctrl"] == 1 and float(a["turnrate_ctrl"][0]) == np.float32(-U_MAX)
+    assert g.stats()["nan_states"] == 1 and g.stats()["qp_solves"] == 0
+    env.close()
