@@ -187,3 +187,79 @@ def test_reward_keeps_the_env_reward_and_every_info_entry():
     assert r1 == -1.0 and info2["env_reward"] == -1.0 and info1["outcome"] == info2["outcome"] == "collision"
     assert r2 == pytest.approx(-10.0 - 0.05 * 0.1, abs=1e-15) and type(r2) is float
     assert {k: v for k, v in info2.items() if k != "env_reward"}.keys() == info1.keys()
+
+
+class _ShiftedClock(gym.Wrapper):
+    """Reports the env's simulated time ``shift`` seconds late, and (``drop_at_reset``) none at reset:
+    what an env with its own time origin, or an older one, gives."""
+
+    def __init__(self, env, shift=0.0, drop_at_reset=False):
+        super().__init__(env)
+        self.shift, self.drop = shift, drop_at_reset
+
+    def reset(self, **kw):
+        obs, info = self.env.reset(**kw)
+        info = dict(info)
+        if self.drop:
+            info.pop("sim_time", None)
+        else:
+            info["sim_time"] = info.get("sim_time", 0.0) + self.shift
+        return obs, info
+
+    def step(self, action):
+        obs, r, te, tr, info = self.env.step(action)
+        return obs, r, te, tr, {**info, "sim_time": info["sim_time"] + self.shift}
+
+
+@pytest.mark.parametrize("shift, drop", [(5.0, False), (0.0, True)])
+def test_the_cost_is_charged_from_the_time_reset_reports(shift, drop):
+    """The first step's length is measured from the simulated time ``reset`` reported (0 when it
+    reports none): 0.1 s here, whatever the time origin."""
+    env = GuardianReward(_ShiftedClock(gym.make("Dubins4DCircles-v0"), shift, drop), intervention_cost=1.0)
+    env.reset(seed=0, options=STRAIGHT_ON)
+    _, r, *_ = env.step(env.action_space.active([0.0, 0.0]))
+    assert r == pytest.approx(-0.1, abs=1e-12)
+
+
+STRAIGHT_ON = {"state": [0.0, 0.0, 0.0, 1.0], "obstacles": [[-6.0, 6.0, 1.0]], "goal": [1.45, 0.0, 0.5]}
+
+
+def test_reaching_the_goal_under_guardian_control_pays_the_bonus_less_the_cost():
+    """Holding course at 1 m/s to a goal whose edge is 0.95 m ahead: 10 steps of 0.1 s under guardian
+    control, each charged 0.1 s x 1; the last also earns the bonus 2."""
+    env = GuardianReward(gym.make("Dubins4DCircles-v0"), goal_bonus=2.0, intervention_cost=1.0)
+    env.reset(seed=0, options=STRAIGHT_ON)
+    rewards = []
+    while True:
+        _, r, te, tr, info = env.step(env.action_space.active([0.0, 0.0]))
+        rewards.append(r)
+        if te or tr:
+            break
+    assert info["outcome"] == "goal" and len(rewards) == 10
+    assert rewards[:-1] == pytest.approx([-0.1] * 9, abs=1e-12) and rewards[-1] == pytest.approx(2.0 - 0.1, abs=1e-12)
+
+
+def test_an_env_made_without_gym_make_is_named_by_its_class():
+    from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
+
+    with pytest.raises(TypeError) as e:
+        GuardianReward(Dubins3DMazeEnv())
+    assert str(e.value).endswith("; Dubins3DMazeEnv has Box(-0.2, 0.2, (1,), float32)")
+
+
+def test_a_flat_action_maps_to_the_guardian_action_exactly():
+    """``to_guardian`` itself (not the env's parsing after it): components beyond [-1, 1] are clipped
+    to the bounds, any shape of 1 + c numbers (and numbers as strings) is read, a wrong count is
+    refused naming the controls."""
+    from rmm_envs.wrappers.rl import FlattenGuardianAction
+
+    space = gym.make("Dubins4DCircles-v0").action_space
+    to = FlattenGuardianAction.to_guardian
+    for flat, controls in (([1.0, 7.0, -3.0], [0.25, -0.5]), ([1.0, -1.5, 1.5], [-0.25, 0.5]),
+                           ([[0.9], [0.0], [0.5]], [0.0, 0.25]), (np.array([["1", "-1", "1"]]), [-0.25, 0.5])):
+        a = to(space, flat)
+        assert a["active_ctrl"] == 1
+        assert float(a["turnrate_ctrl"][0]) == np.float32(controls[0]) and float(a["accel_ctrl"][0]) == np.float32(controls[1])
+    with pytest.raises(ValueError) as e:
+        to(space, [1.0, 0.0])
+    assert str(e.value) == "a flat guardian action has 3 numbers [active, turnrate_ctrl, accel_ctrl], got shape (2,)"
