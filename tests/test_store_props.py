@@ -182,3 +182,69 @@ def test_only_a_running_invocation_of_a_dead_process_on_this_host_is_stale(tmp_p
     assert inv["message"] == f"its process {dead.pid} ended without recording an end (killed)"
     assert store.invocation(ids[1])["status"] == "running"
     store.close()
+
+
+def test_a_live_process_is_only_asked_whether_it_exists():
+    """``_pid_alive`` sends signal 0 (existence check): a live process is reported alive and left
+    running; a process of another user is alive too (permission denied is an answer)."""
+    import os
+    import subprocess
+    import sys
+
+    from benchmarks.bench.store import _pid_alive
+
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        assert _pid_alive(child.pid) is True
+        with pytest.raises(subprocess.TimeoutExpired):  # not signalled: still sleeping
+            child.wait(timeout=0.5)
+    finally:
+        child.kill()
+        child.wait()
+    assert _pid_alive(child.pid) is False
+    # another user's process: pid 1 seen from an unprivileged process (this one, or a child that
+    # drops root's privileges first)
+    drop = "os.setgid(65534); os.setuid(65534); " if os.getuid() == 0 else ""
+    code = f"import os; from benchmarks.bench.store import _pid_alive; {drop}print(_pid_alive(1))"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=os.getcwd(), check=True)
+    assert r.stdout.strip() == "True"
+
+
+def test_a_folder_in_place_of_the_file_is_refused_by_name(tmp_path):
+    (tmp_path / "results.db").mkdir()
+    with pytest.raises(Exception) as e:
+        ResultsStore(tmp_path / "results.db")
+    assert type(e.value).__name__ == "ResultsDatabaseError" and str(e.value).startswith(
+        f"{tmp_path / 'results.db'} is damaged or not a results database (unable to open database file)")
+
+
+def test_quick_check_problems_are_quoted_and_the_file_is_let_go(tmp_path):
+    """A file whose header reads but whose pages are damaged: the message quotes SQLite's first
+    problems, and the connection is closed (the file can be moved aside at once)."""
+    import os
+
+    path = tmp_path / "results.db"
+    store = ResultsStore(path)
+    run = RUNS["inactive"]
+    for i in range(60):
+        store.add_episode(_result(run, i, "goal"))
+    store.db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    store.close()
+    data = bytearray(path.read_bytes())
+    data[4096:4104] = b"\xff" * 8  # the b-tree page header of page 2
+    path.write_bytes(bytes(data))
+    with sqlite3.connect(path) as db:
+        try:
+            problems = [r[0] for r in db.execute("PRAGMA quick_check(5)")]
+        except sqlite3.DatabaseError as err:
+            problems = [str(err)]
+    db.close()
+    assert problems != ["ok"]
+    with pytest.raises(Exception) as e:
+        ResultsStore(path)
+    text = "; ".join(problems)[:300].replace("\n", " ")
+    assert f"({text})" in str(e.value), (str(e.value), problems)
+    if os.path.isdir("/proc/self/fd"):
+        open_files = {os.path.realpath(f"/proc/self/fd/{fd}") for fd in os.listdir("/proc/self/fd")
+                      if os.path.exists(f"/proc/self/fd/{fd}")}
+        assert str(path.resolve()) not in open_files
