@@ -193,8 +193,10 @@ def test_a_live_process_is_only_asked_whether_it_exists():
 
     from benchmarks.bench.store import _pid_alive
 
-    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    child = subprocess.Popen([sys.executable, "-c", "import signal, time; signal.signal(signal.SIGHUP, signal.SIG_DFL); "
+                              "print('ready', flush=True); time.sleep(30)"], stdout=subprocess.PIPE, text=True)
     try:
+        assert child.stdout.readline() == "ready\n"  # any signal but 0 would now end it
         assert _pid_alive(child.pid) is True
         with pytest.raises(subprocess.TimeoutExpired):  # not signalled: still sleeping
             child.wait(timeout=0.5)
