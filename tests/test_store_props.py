@@ -203,6 +203,7 @@ def test_a_live_process_is_only_asked_whether_it_exists():
     finally:
         child.kill()
         child.wait()
+        child.stdout.close()
     assert _pid_alive(child.pid) is False
     # another user's process: pid 1 seen from an unprivileged process (this one, or a child that
     # drops root's privileges first)
