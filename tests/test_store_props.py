@@ -8,7 +8,11 @@ and a stored result is replaced only where it is an error."""
 
 from __future__ import annotations
 
+import contextlib
+import os
 import sqlite3
+import subprocess
+import sys
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -87,6 +91,21 @@ def test_a_stored_result_is_replaced_only_where_it_is_an_error(tmp_path, first, 
         assert db.execute("SELECT COUNT(*) FROM episodes").fetchone()[0] == 1
 
 
+@contextlib.contextmanager
+def _sleeping_child():
+    """A live process of this user that any signal but 0 would end (SIGHUP restored to its default
+    first), running until the block ends."""
+    child = subprocess.Popen([sys.executable, "-c", "import signal, time; signal.signal(signal.SIGHUP, signal.SIG_DFL); "
+                              "print('ready', flush=True); time.sleep(60)"], stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline() == "ready\n"
+        yield child
+    finally:
+        child.kill()
+        child.wait()
+        child.stdout.close()
+
+
 # ------------------------------------------------------------------ opening, errors, older files, stale invocations
 def test_opening_makes_the_folder_and_a_wal_database(tmp_path):
     store = ResultsStore(tmp_path / "a" / "b" / "results.db")
@@ -158,25 +177,23 @@ def test_a_database_written_before_error_kinds_and_invocation_bookkeeping_is_bro
 
 
 def test_only_a_running_invocation_of_a_dead_process_on_this_host_is_stale(tmp_path):
-    import os
     import socket
-    import subprocess
-    import sys
 
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()  # a process id that no longer runs
     store = ResultsStore(tmp_path / "results.db")
     host = socket.gethostname()
-    rows = [("running", dead.pid, host), ("running", os.getpid(), host), ("running", dead.pid, host + "-elsewhere"),
-            ("finished", dead.pid, host), ("running", None, host)]
-    ids = []
-    for status, pid, h in rows:
-        i = store.add_invocation("run", {}, {}, 1)
-        store.db.execute("UPDATE invocations SET status = ?, pid = ?, host = ? WHERE id = ?", (status, pid, h, i))
-        ids.append(i)
-    store.db.commit()
-    assert [store.invocation(i)["state"] for i in ids] == ["stale", "running", "running", "finished", "running"]
-    assert store.mark_stale_invocations() == 1
+    with _sleeping_child() as live:
+        rows = [("running", dead.pid, host), ("running", live.pid, host), ("running", dead.pid, host + "-elsewhere"),
+                ("finished", dead.pid, host), ("running", None, host)]
+        ids = []
+        for status, pid, h in rows:
+            i = store.add_invocation("run", {}, {}, 1)
+            store.db.execute("UPDATE invocations SET status = ?, pid = ?, host = ? WHERE id = ?", (status, pid, h, i))
+            ids.append(i)
+        store.db.commit()
+        assert [store.invocation(i)["state"] for i in ids] == ["stale", "running", "running", "finished", "running"]
+        assert store.mark_stale_invocations() == 1
     inv = store.invocation(ids[0])
     assert (inv["status"], inv["state"]) == ("interrupted", "interrupted")
     assert inv["message"] == f"its process {dead.pid} ended without recording an end (killed)"
@@ -187,23 +204,12 @@ def test_only_a_running_invocation_of_a_dead_process_on_this_host_is_stale(tmp_p
 def test_a_live_process_is_only_asked_whether_it_exists():
     """``_pid_alive`` sends signal 0 (existence check): a live process is reported alive and left
     running; a process of another user is alive too (permission denied is an answer)."""
-    import os
-    import subprocess
-    import sys
-
     from benchmarks.bench.store import _pid_alive
 
-    child = subprocess.Popen([sys.executable, "-c", "import signal, time; signal.signal(signal.SIGHUP, signal.SIG_DFL); "
-                              "print('ready', flush=True); time.sleep(30)"], stdout=subprocess.PIPE, text=True)
-    try:
-        assert child.stdout.readline() == "ready\n"  # any signal but 0 would now end it
+    with _sleeping_child() as child:
         assert _pid_alive(child.pid) is True
         with pytest.raises(subprocess.TimeoutExpired):  # not signalled: still sleeping
             child.wait(timeout=0.5)
-    finally:
-        child.kill()
-        child.wait()
-        child.stdout.close()
     assert _pid_alive(child.pid) is False
     # another user's process: pid 1 seen from an unprivileged process (this one, or a child that
     # drops root's privileges first)
@@ -224,8 +230,6 @@ def test_a_folder_in_place_of_the_file_is_refused_by_name(tmp_path):
 def test_quick_check_problems_are_quoted_and_the_file_is_let_go(tmp_path):
     """A file whose header reads but whose pages are damaged: the message quotes SQLite's first
     problems, and the connection is closed (the file can be moved aside at once)."""
-    import os
-
     path = tmp_path / "results.db"
     store = ResultsStore(path)
     run = RUNS["inactive"]
