@@ -227,3 +227,56 @@ def test_pursuit_waypoints_are_checked():
     for bad in ([(0.0, 0.0)], [(0.0, 0.0, 0.0), (1.0, 1.0, 1.0)], [(0.0, 0.0), (math.inf, 1.0)], [[[0.0, 0.0], [1.0, 1.0]]]):
         with pytest.raises(ValueError, match=r"^waypoints must be \(K >= 2, 2\) finite points, got shape"):
             d.reset(bad)
+
+
+def test_pursuit_defaults_and_projection_past_a_corner():
+    d = PursuitDriver(u_max=0.2)
+    assert (d.u_max, d.lookahead, d.gain) == (0.2, 190.0, 1.0)  # the env's look-ahead, one rad/s per rad
+    d = _pursuit()
+    # past the corner's x and below the first segment: the projection stops at the corner (t = 1),
+    # equally near both segments, so the first is kept: 50 px on from the corner
+    assert d.target(110.0, -5.0) == pytest.approx((100.0, 50.0))
+
+
+@settings(max_examples=60, deadline=None)
+@given(dx=st.floats(-500.0, 500.0, **finite), dy=st.floats(-500.0, 500.0, **finite),
+       x=st.floats(-20.0, 120.0, **finite), y=st.floats(-20.0, 120.0, **finite))
+def test_pursuit_target_moves_with_the_path(dx, dy, x, y):
+    """Translating the path and the car translates the target (segment lengths and projections
+    depend on differences only)."""
+    a, b = _pursuit(), PursuitDriver(u_max=0.2, lookahead=50.0)
+    b.reset([(dx, dy), (100.0 + dx, dy), (100.0 + dx, 100.0 + dy)])
+    tx, ty = a.target(x, y)
+    ux, uy = b.target(x + dx, y + dy)
+    assert ux == pytest.approx(tx + dx, abs=1e-6) and uy == pytest.approx(ty + dy, abs=1e-6)
+
+
+def test_cell_path_reads_passages_as_indices_and_names_an_unreachable_cell():
+    from types import SimpleNamespace
+
+    from rmm_envs.maze_driver import cell_path
+
+    maze = SimpleNamespace(cells=np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]]),
+                           passages=[[0.0, 1.0], [2.0, 1.0]])  # numbers that are not ints, as JSON may give them
+    assert cell_path(maze, 0, 2) == [0, 1, 2] and cell_path(maze, 2, 0) == [2, 1, 0] and cell_path(maze, 1, 1) == [1]
+    with pytest.raises(ValueError) as e:
+        cell_path(maze, 0, 3)
+    assert str(e.value) == "cell 3 cannot be reached from cell 0 through the maze's passages"
+    with pytest.raises(ValueError, match=r"^goal cell must be in \[0, 4\), got 4$"):
+        cell_path(maze, 0, 4)
+    with pytest.raises(ValueError, match=r"^start cell must be in \[0, 4\), got -1$"):
+        cell_path(maze, -1, 2)
+
+
+def test_osqp_checking_solver_batches_and_prints_nothing(capfd):
+    """The OSQP driver (for checking) solves a batch row by row (any count, none included) and
+    is silent."""
+    d = CLFDriver(solver="osqp")
+    s = np.array([[0.0, 0.0, 0.0, 1.0], [1.0, 2.0, -1.0, 0.5], [3.0, -2.0, 2.5, 1.5]])
+    g = np.array([[5.0, 0.0], [-3.0, 4.0], [0.0, 0.0]])
+    z = d.solve_batch(s, g)
+    assert z.shape == (3, 4) and d.solve_batch(s[:0], g[:0]).shape == (0, 4)
+    np.testing.assert_allclose(z, CLFDriver().solve_batch(s, g), atol=1e-5)
+    np.testing.assert_allclose(d.controls(s, g), CLFDriver().controls(s, g), atol=1e-5)
+    out, err = capfd.readouterr()
+    assert out == "" and err == ""
