@@ -169,3 +169,39 @@ def test_stepping_an_ended_sub_env_without_autoreset_names_it():
     env.reset(options={"reset_mask": np.array([True, False])})
     with pytest.raises(RuntimeError, match="^sub-env 1's episode has ended"):
         env.step(a)
+
+
+def test_an_obstacle_and_the_goal_reached_at_the_same_instant_is_a_collision():
+    """Mirror images about the car's path (same radius, same distance): both circles are entered at
+    the same time; the collision counts, in the vector env as in the single env."""
+    import gymnasium as gym
+
+    import rmm_envs  # noqa: F401
+
+    opts = {"state": [0.0, 0.0, 0.0, 1.0], "obstacles": [[2.0, 0.6, 0.7]], "goal": [2.0, -0.6, 0.7]}
+    a = {"active_ctrl": np.ones(1, np.int64), "turnrate_ctrl": np.zeros((1, 1)), "accel_ctrl": np.zeros((1, 1))}
+    vec = Dubins4DCirclesVectorEnv(1, n_obstacles=1)
+    vec.reset(seed=0, options=opts)
+    single = gym.make("Dubins4DCircles-v0", n_obstacles=1)
+    single.reset(seed=0, options=opts)
+    for _ in range(40):
+        _, r, term, trunc, info = vec.step(a)
+        _, r1, term1, _, info1 = single.step(single.action_space.active([0.0, 0.0]))
+        assert term[0] == term1
+        if term[0]:
+            break
+    assert info["outcome"][0] == info1["outcome"] == "collision" and r[0] == r1 == -1.0
+
+
+def test_ended_info_masks_are_independent_arrays():
+    """Each info key has its own mask array (a caller may edit one without changing another)."""
+    env = Dubins4DCirclesVectorEnv(2, max_episode_sim_time=0.1)
+    env.reset(seed=0)
+    a = {"active_ctrl": np.zeros(2, np.int64), "turnrate_ctrl": np.zeros((2, 1)), "accel_ctrl": np.zeros((2, 1))}
+    _, _, _, trunc, info = env.step(a)
+    assert trunc.all()
+    masks = [v for k, v in info.items() if k.startswith("_")] + [v for k, v in info["episode"].items() if k.startswith("_")]
+    assert len(masks) >= 10 and all(m.all() for m in masks)
+    for i, m in enumerate(masks):
+        for other in masks[i + 1:]:
+            assert not np.shares_memory(m, other)
