@@ -234,3 +234,80 @@ def test_pilot_boundaries_at_exactly_reach():
     assert p.command(hover())[3] == 0.0  # 0.5 m is not more than reach: no turn
     p.reset([[0.0, 0.5 + 1e-9, 1.5]])
     assert p.command(hover())[3] == 1.0  # just beyond it: the turn (2 x pi/2, clipped to 1)
+
+
+# ------------------------------------------------------------------ the controller's arguments and packed gains
+@pytest.mark.parametrize("name", ["k_v", "k_vz", "a_max_h", "a_max_z", "k_R", "k_w", "k_wz"])
+@pytest.mark.parametrize("bad", [0, -1.0, math.nan, math.inf, True, "1"])
+def test_controller_gains_are_refused_by_exact_message(name, bad):
+    with pytest.raises(ValueError) as e:
+        CommandController(**{name: bad})
+    assert str(e.value) == f"CommandController.{name} must be a finite number > 0, got {bad!r}"
+
+
+BOUNDS = "CommandController: command bounds must be 4 finite numbers each with low <= 0 <= high (zero is hover), got "
+
+
+@pytest.mark.parametrize("kw, message", [
+    ({"a_max_z": 9.81}, "CommandController.a_max_z must be below gravity (9.81), got 9.81"),
+    ({"command_low": (-1, -1, -1)}, BOUNDS + "(-1, -1, -1) and (2.0, 2.0, 1.0, 1.0)"),
+    ({"command_high": (1, 1, 1, math.inf)}, BOUNDS + "(-2.0, -2.0, -1.0, -1.0) and (1, 1, 1, inf)"),
+    ({"command_low": (0.5, -1, -1, -1)}, BOUNDS + "(0.5, -1, -1, -1) and (2.0, 2.0, 1.0, 1.0)"),
+    ({"command_high": (1, 1, -0.1, 1)}, BOUNDS + "(-2.0, -2.0, -1.0, -1.0) and (1, 1, -0.1, 1)"),
+    ({"command_low": (-1, -1, -1, math.nan)}, BOUNDS + "(-1, -1, -1, nan) and (2.0, 2.0, 1.0, 1.0)"),
+])
+def test_controller_bounds_are_refused_by_exact_message(kw, message):
+    with pytest.raises(ValueError) as e:
+        CommandController(**kw)
+    assert str(e.value) == message
+
+
+def test_controller_keeps_its_arguments_and_packs_the_gains_in_the_kernels_order():
+    c = CommandController(command_low=np.array([[-1, -2], [-3, 0]]), command_high=[0, 2, 3, 4], k_v=1.5, a_max_z=9.8)
+    assert c.command_low == (-1.0, -2.0, -3.0, 0.0) and c.command_high == (0.0, 2.0, 3.0, 4.0)
+    assert all(type(x) is float for x in c.command_low + c.command_high)
+    assert CommandController().packed.tolist() == [0.5, 9.81, 0.0023, 0.0023, 0.004, 2.5, 3.0, 5.0, 4.0, 400.0, 36.0,
+                                                   10.0, 0.0, 8.0, -2.0, -2.0, -1.0, 2.0, 2.0, 1.0]
+    assert c.packed[5] == 1.5 and c.packed[8] == 9.8 and not c.packed.flags.writeable
+    with pytest.raises(TypeError) as e:
+        CommandController(params="heavy")
+    assert str(e.value) == "CommandController(params=...) needs a QuadrotorParams, got str"
+
+
+def test_a_command_outside_the_box_is_clipped_to_it_and_hover_and_level_is_zero():
+    from rmm_envs.autonomy import GuardianActionSpace
+    from rmm_envs.systems.quadrotor_control import HoverAndLevel
+
+    np.testing.assert_array_equal(CTRL.wrench(hover(), [9.0, -9.0, 9.0, -9.0]), CTRL.wrench(hover(), [2.0, -2.0, 1.0, -1.0]))
+    space = GuardianActionSpace(("a", "b", "c", "d"), [-2.0, 0.5, -1.0, -1.0], [2.0, 2.0, -0.5, 1.0])
+    act = HoverAndLevel().policy(space, np.random.default_rng(0))
+    assert act(None).tolist() == [0.0, 0.5, -0.5, 0.0]  # zero, within the box
+    assert HoverAndLevel.description == "hover and level (the zero command)"
+    with pytest.raises(ValueError):
+        HoverAndLevel().policy(space, np.random.default_rng(0), speed=1.0)
+
+
+def test_closed_loop_system_box_and_samples():
+    rng = np.random.default_rng(5)
+    u = LOOP.sample_controls(rng, 500)
+    assert u.shape == (500, 4) and np.all(u >= LOOP.control_low) and np.all(u <= LOOP.control_high)
+    assert np.all(u.min(axis=0) < LOOP.control_low + 0.1) and np.all(u.max(axis=0) > LOOP.control_high - 0.1)
+    assert LOOP.control_low.tolist() == [-2.0, -2.0, -1.0, -1.0] and LOOP.control_high.tolist() == [2.0, 2.0, 1.0, 1.0]
+    assert (LOOP.state_dim, LOOP.control_dim) == (13, 4) and LOOP.body.params is QUADROTOR
+
+
+@settings(max_examples=40, deadline=None)
+@given(q=st.tuples(*[st.floats(-1.0, 1.0, **finite)] * 4))
+def test_scalar_and_array_yaw_agree_and_read_the_body_x_axis(q):
+    from rmm_envs.systems.quadrotor_control import yaw_of
+
+    n = math.sqrt(sum(x * x for x in q))
+    if n < 0.1:
+        return
+    q = np.array(q) / n
+    R = quat_to_rot(q)
+    if math.hypot(R[0, 0], R[1, 0]) < 1e-3:
+        return
+    assert yaw_of(*q) == pytest.approx(float(heading_of(q)), abs=1e-12)
+    assert yaw_of(*q) == pytest.approx(math.atan2(R[1, 0], R[0, 0]), abs=1e-9)
+    np.testing.assert_allclose(heading_of(np.array([q, q])), [yaw_of(*q)] * 2, atol=1e-12)
