@@ -311,3 +311,11 @@ def test_scalar_and_array_yaw_agree_and_read_the_body_x_axis(q):
     assert yaw_of(*q) == pytest.approx(float(heading_of(q)), abs=1e-12)
     assert yaw_of(*q) == pytest.approx(math.atan2(R[1, 0], R[0, 0]), abs=1e-9)
     np.testing.assert_allclose(heading_of(np.array([q, q])), [yaw_of(*q)] * 2, atol=1e-12)
+
+
+def test_hover_and_level_is_held_exactly_by_the_closed_loop():
+    """At rest, level, the zero command: thrust m g, no moment, no rotation step: every point of
+    the path is the start (to the last bit of the quaternion's renormalisation)."""
+    s = hover(yaw=0.4, z=3.0)
+    path = LOOP.propagate(s[None], np.zeros((1, 4)), 2.0, 5)[0]
+    np.testing.assert_allclose(path, np.repeat(s[None], 5, axis=0), rtol=0, atol=1e-12)
