@@ -141,3 +141,77 @@ def test_a_pose_with_nan_applies_the_safe_default_and_is_counted():
     assert a["active_ctrl"] == 1 and float(a["turnrate_ctrl"][0]) == np.float32(-U_MAX)
     assert g.stats()["nan_states"] == 1 and g.stats()["qp_solves"] == 0
     env.close()
+
+
+def test_head_on_the_turn_away_is_left_on_a_tie():
+    """Heading straight at a flat wall (``n . e_perp = 0`` exactly): the row asks for the left turn
+    (``sigma = +1``): ``G = -R sigma (-n . e) = -50``, so a left turn (u > 0) raises the barrier."""
+    from guardians.cbf.maze import wall_rows
+
+    B, G, h = wall_rows([0.0, 0.0, 0.0], 10.0, np.array([[30.0, -100.0, 30.0, 100.0]]), 6.25, 2.0, 1.0, 0.1)
+    assert G[0, 0] == -R and B[0] == pytest.approx(30.0 - 6.25 - 2.0 - R)
+    assert h[0] == pytest.approx(-10.0 + B[0])
+
+
+def test_predict_is_the_exact_arc():
+    """``lap`` seconds of turn rate ``u`` at 10 px/s from the origin heading +x: the arc of radius
+    ``10 / u``; straight for ``u = 0``; the heading wrapped to [-pi, pi)."""
+    g = MazeCBFGuardian()
+    g.speed = 10.0
+    np.testing.assert_allclose(g.predict(np.array([0.0, 0.0, 0.0]), 0.1, 1.0),
+                               [100.0 * math.sin(0.1), 100.0 * (1 - math.cos(0.1)), 0.1], atol=1e-12)
+    np.testing.assert_allclose(g.predict(np.array([5.0, 1.0, 0.5]), 0.0, 2.0),
+                               [5.0 + 20.0 * math.cos(0.5), 1.0 + 20.0 * math.sin(0.5), 0.5], atol=1e-12)
+    x, y, psi = g.predict(np.array([0.0, 0.0, 3.1]), 0.2, 1.0)
+    assert psi == pytest.approx(3.3 - 2 * math.pi, abs=1e-12)
+    assert x == pytest.approx(50.0 * (math.sin(3.3) - math.sin(3.1)), abs=1e-12)
+    assert y == pytest.approx(-50.0 * (math.cos(3.3) - math.cos(3.1)), abs=1e-12)
+
+
+def test_rows_keep_the_nearest_walls_smallest_barrier_first_for_either_barrier():
+    """With ``n_walls = 2`` of the corridor's four walls: the two rows of smallest barrier value, in
+    that order, of the guardian's own barrier."""
+    from guardians.cbf.maze import wall_rows
+
+    env = Dubins3DMazeGuardedEnv()
+
+    pose = np.array([300.0, 160.0, 0.3])
+    for barrier in ("turning", "distance"):
+        g = MazeCBFGuardian(barrier=barrier, n_walls=2)
+        reset_at(env, g, [250.0, 125.0, 0.0])
+        b, G, h = g.rows(pose)
+        B, GG, hh = wall_rows(pose, 10.0, g.walls, 6.25, 2.0, g.p1, g.p2, barrier, g.u_max)
+        order = np.argsort(B, kind="stable")[:2]
+        np.testing.assert_array_equal(b, B[order])
+        np.testing.assert_array_equal(G, GG[order])
+        np.testing.assert_array_equal(h, hh[order])
+    env.close()
+
+
+def test_a_qpsolvers_backend_decides_as_the_direct_osqp_path():
+    from qpsolvers import available_solvers
+
+    name = next(n for n in ("clarabel", "daqp") if n in available_solvers)
+    env = Dubins3DMazeGuardedEnv()
+    a, b = MazeCBFGuardian(), MazeCBFGuardian(solver=f"qpsolvers:{name}")
+    reset_at(env, a, [250.0, 125.0, 0.0])
+    reset_at(env, b, [250.0, 125.0, 0.0])
+    assert b._qp.name == name and a._qp.name is None
+    for pose in ([300.0, 150.0, 1.0], [250.0, 171.25, math.pi / 4], [250.0, 125.0, 0.0], [200.0, 90.0, -0.7]):
+        da, db = a.decide(np.array(pose)), b.decide(np.array(pose))
+        assert da["active_ctrl"] == db["active_ctrl"]
+        assert float(da["turnrate_ctrl"][0]) == pytest.approx(float(db["turnrate_ctrl"][0]), abs=1e-4)
+    env.close()
+
+
+def test_without_a_safe_default_a_nan_pose_turns_left_at_full_rate():
+    from guardians.cbf.maze import MazeCBFGuardian as G
+    from rmm_envs.autonomy import GuardianActionSpace
+    from tests.test_maze_guardians import corridor
+
+    space = GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2])
+    g = G()
+    g.reset(seed=0, observation_space=None, action_space=space,
+            privileged=lambda: {"maze": corridor(), "speed": 10.0, "state": [math.nan, 1.0, 0.0], "sim_time": 0.0})
+    a = g.act(None)
+    assert a["active_ctrl"] == 1 and float(a["turnrate_ctrl"][0]) == np.float32(0.2) and g.stats()["nan_states"] == 1
