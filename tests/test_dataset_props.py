@@ -10,6 +10,7 @@ arguments, sizes, seed, estimator) is refused naming the parameter, before a sha
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -175,7 +176,7 @@ def test_checksums_are_written_beside_a_shard_and_read_back_only_when_well_forme
     assert recorded_checksum(p) == digest == sha256_file(p)
     assert shard_ok(p, 3) and not shard_ok(p, 4) and not shard_ok(tmp_path / "none.parquet", 0)
     assert not list(tmp_path.glob(".*.tmp"))  # written through a temporary file, renamed into place
-    for bad in (digest[:63], digest.upper(), "g" * 64, "", "\xff"):
+    for bad in (digest[:63], digest.upper(), "g" * 64, "X" * 64, "", "\xff"):
         checksum_path(p).write_text(bad)
         assert recorded_checksum(p) is None, bad
     checksum_path(p).write_bytes(b"\xff\xfe")
@@ -234,3 +235,38 @@ def test_metadata_without_sizes_skips_the_shard_list_check(made, tmp_path):
     _edit_manifest(d, lambda shards: shards.clear())
     with pytest.raises(ValueError, match=r"holds no shards$"):
         load_dataset(d)
+
+
+def test_more_than_three_missing_shards_are_listed_three_and_an_ellipsis(made, tmp_path):
+    d = _copy(made, tmp_path)
+    meta = json.loads((d / "metadata.json").read_text())
+    (d / "metadata.json").write_text(json.dumps(meta | {"configs": 7}))  # 7 shards of 1 config: 4 missing
+    with pytest.raises(ValueError, match=re.escape(
+            "(missing ['shard-00003.parquet', 'shard-00004.parquet', 'shard-00005.parquet']..., unexpected [])")):
+        load_dataset(d)
+
+
+def test_a_column_that_is_not_a_fixed_size_list_is_named(made, tmp_path):
+    import hashlib
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    d = _copy(made, tmp_path)
+    for name in SHARDS:  # every shard alike (shards of different schemas are refused earlier, by pyarrow)
+        t = pq.read_table(d / name)
+        t = t.set_column(t.column_names.index("obs"), "obs", t["obs"].cast(pa.list_(pa.float32())))  # variable length
+        pq.write_table(t, d / name)
+        _edit_manifest(d, lambda shards: shards.update({name: hashlib.sha256((d / name).read_bytes()).hexdigest()}))
+    with pytest.raises(ValueError, match=r"column 'obs' should be a fixed-size list, got list<"):
+        load_dataset(d)
+
+
+def test_candidate_labels_are_read_back(tmp_path):
+    """A dataset made with ``candidates``: one risk per candidate control and row."""
+    cands = [[-0.25, -0.5], [0.25, 0.5], [0.0, 0.0]]
+    generate(DatagenConfig(**(CFG | {"configs": 1, "samples_per_config": 3}), candidates=cands), tmp_path / "c",
+             workers=1, progress=False)
+    ds = load_dataset(tmp_path / "c")
+    assert ds.candidate_risk.shape == (3, 3) and np.all((ds.candidate_risk >= 0) & (ds.candidate_risk <= 1))
+    assert load_dataset(tmp_path / "c").meta["estimator"]["candidates"] == cands
