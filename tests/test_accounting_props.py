@@ -263,3 +263,15 @@ def test_a_flat_action_maps_to_the_guardian_action_exactly():
     with pytest.raises(ValueError) as e:
         to(space, [1.0, 0.0])
     assert str(e.value) == "a flat guardian action has 3 numbers [active, turnrate_ctrl, accel_ctrl], got shape (2,)"
+
+
+@pytest.mark.parametrize("env_id", ["Dubins4DCircles-v0", "Dubins3DMazeGuarded-v0"])
+def test_the_time_limit_is_reached_at_exactly_its_tolerance_and_statistics_before_a_step(env_id):
+    """One interval of ``max_episode_sim_time - 1e-9`` ends the episode (the limit holds with that
+    tolerance, inclusive); before any step the statistics are all zero (no division by 0 steps)."""
+    env = gym.make(env_id, max_episode_sim_time=0.5, clock="fixed:4").unwrapped
+    env.reset(seed=3)
+    s = env.episode_statistics()
+    assert (s["n_env_steps"], s["cum_sim_time"], s["avg_compute_time"], s["cum_reward"], s["outcome"]) == (0, 0.0, 0.0, 0.0, None)
+    _, _, term, trunc, info = env.simulate(0.5 - 1e-9, False, None)
+    assert trunc and not term and info["outcome"] == "timeout"
