@@ -270,3 +270,22 @@ def test_candidate_labels_are_read_back(tmp_path):
     ds = load_dataset(tmp_path / "c")
     assert ds.candidate_risk.shape == (3, 3) and np.all((ds.candidate_risk >= 0) & (ds.candidate_risk <= 1))
     assert load_dataset(tmp_path / "c").meta["estimator"]["candidates"] == cands
+
+
+def test_shards_of_different_schemas_are_refused_in_one_line(made, tmp_path):
+    """Shards whose checksums match but whose columns differ (written by different versions):
+    one line naming the folder and the repair, not pyarrow's schema dump."""
+    import hashlib
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    d = _copy(made, tmp_path)
+    t = pq.read_table(d / SHARDS[1])
+    pq.write_table(t.set_column(t.column_names.index("obs"), "obs", t["obs"].cast(pa.list_(pa.float32()))), d / SHARDS[1])
+    _edit_manifest(d, lambda shards: shards.update({SHARDS[1]: hashlib.sha256((d / SHARDS[1]).read_bytes()).hexdigest()}))
+    with pytest.raises(ValueError) as e:
+        load_dataset(d)
+    assert "\n" not in str(e.value)
+    assert str(e.value).startswith(f"{d}: the shards do not share one schema (Schema at index 1 was different:")
+    assert "rerun `rmm-datagen" in str(e.value)
