@@ -188,7 +188,9 @@ def test_rows_keep_the_nearest_walls_smallest_barrier_first_for_either_barrier()
     env.close()
 
 
+@pytest.mark.filterwarnings("ignore:Converted matrix:UserWarning", "ignore:Clarabel.rs terminated with status:UserWarning")
 def test_a_qpsolvers_backend_decides_as_the_direct_osqp_path():
+    """(The fallback poses are infeasible QPs: qpsolvers warns of each; the decision is the same.)"""
     from qpsolvers import available_solvers
 
     name = next(n for n in ("clarabel", "daqp") if n in available_solvers)
