@@ -217,3 +217,69 @@ def test_without_a_safe_default_a_nan_pose_turns_left_at_full_rate():
             privileged=lambda: {"maze": corridor(), "speed": 10.0, "state": [math.nan, 1.0, 0.0], "sim_time": 0.0})
     a = g.act(None)
     assert a["active_ctrl"] == 1 and float(a["turnrate_ctrl"][0]) == np.float32(0.2) and g.stats()["nan_states"] == 1
+
+
+def _maze_privileged(**over):
+    from tests.test_maze_guardians import corridor
+
+    priv = {"maze": corridor(), "speed": 10.0, "state": [300.0, 150.0, 1.0]} | over
+    return lambda: priv
+
+
+@pytest.mark.parametrize("speed", [0.0, -1.0, math.nan])
+def test_a_non_positive_speed_in_the_privileged_data_is_refused_by_name(speed):
+    from rmm_envs.autonomy import GuardianActionSpace
+
+    g = MazeCBFGuardian()
+    with pytest.raises(ValueError) as e:
+        g.reset(seed=0, action_space=GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2]),
+                privileged=_maze_privileged(speed=speed))
+    assert str(e.value) == f"privileged speed must be a finite number > 0.0, got {speed!r}"
+
+
+def test_the_next_decision_is_for_the_pose_after_the_turn_it_emitted():
+    """Latency prediction: the second ``act`` (no simulated time passed: the guessed lap, 0.1 s)
+    decides for the pose reached by holding the first decision's turn over that lap; no
+    ``sim_time`` in the privileged data is read as no time passing."""
+    from rmm_envs.autonomy import GuardianActionSpace
+
+    space = GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2])
+    g, ref = MazeCBFGuardian(), MazeCBFGuardian()
+    for x in (g, ref):
+        x.reset(seed=0, action_space=space, privileged=_maze_privileged())
+    first = g.act(None)
+    u1 = float(first["turnrate_ctrl"][0])
+    assert first["active_ctrl"] == 1 and u1 != 0.0
+    second = g.act(None)
+    expect = ref.decide(ref.predict(np.array([300.0, 150.0, 1.0]), u1, 0.1))
+    assert second["active_ctrl"] == expect["active_ctrl"]
+    assert float(second["turnrate_ctrl"][0]) == pytest.approx(float(expect["turnrate_ctrl"][0]), abs=1e-6)
+
+
+@settings(max_examples=60, deadline=None)
+@given(px=st.floats(5.0, 40.0), py=st.floats(-40.0, 40.0), psi=st.floats(-math.pi, math.pi),
+       u=st.floats(-0.2, 0.2))
+def test_at_a_walls_end_the_row_is_the_barriers_rate(px, py, psi, u):
+    """Past the end of a wall (the segment from (-100, 0) to (0, 0), the car at x > 0, so the
+    nearest point is the end): ``B' = (h - p1 B) - G u`` is the barrier's rate along the exact
+    arc (central difference over 1e-4 s), while approaching and not head-on."""
+    from guardians.cbf.maze import wall_rows
+
+    wall = np.array([[-100.0, 0.0, 0.0, 0.0]])
+    g = MazeCBFGuardian()
+    g.speed = 10.0
+
+    def rows(pose):
+        return wall_rows(pose, 10.0, wall, 6.25, 2.0, 1.0, 0.1, "turning", 0.2)
+
+    s = np.array([px, py, psi])
+    d = math.hypot(px, py)
+    ne = (px * math.cos(psi) + py * math.sin(psi)) / d
+    nperp = (-px * math.sin(psi) + py * math.cos(psi)) / d
+    if d < 7.0 or ne > -0.05 or abs(nperp) < 0.05:
+        return
+    B, G, h = rows(s)
+    rate = (h[0] - 1.0 * B[0]) - G[0, 0] * u
+    dt = 1e-4
+    fwd, back = rows(g.predict(s, u, dt))[0][0], rows(g.predict(s, u, -dt))[0][0]
+    assert rate == pytest.approx((fwd - back) / (2 * dt), rel=1e-4, abs=1e-5)
