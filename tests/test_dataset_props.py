@@ -48,8 +48,17 @@ def _edit_manifest(d: Path, edit) -> None:
 
 
 def test_the_whole_dataset_loads(made):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     ds = load_dataset(made)
     assert len(ds) == 12 and ds.config_id.tolist() == [0] * 4 + [1] * 4 + [2] * 4
+    t = pa.concat_tables([pq.read_table(made / name) for name in SHARDS])  # every field is the files' column
+    for name in ("risk", "min_risk_ctrl_dur", "n_leaves", "config_id"):
+        np.testing.assert_array_equal(getattr(ds, name), t[name].to_numpy())
+    for name, width in (("obs", 17), ("state", 4), ("min_risk_ctrl", 2)):
+        np.testing.assert_array_equal(getattr(ds, name), np.array(t[name].to_pylist()).reshape(12, width))
+    assert ds.obs.dtype == np.float32 and ds.candidate_risk is None
     assert sorted(p.name for p in made.glob("shard-*")) == SHARDS  # the checksum files are folded in
 
 
@@ -174,6 +183,9 @@ def test_checksums_are_written_beside_a_shard_and_read_back_only_when_well_forme
     digest = hashlib.sha256(p.read_bytes()).hexdigest()
     assert checksum_path(p).read_text() == f"{digest}  shard-00003.parquet\n"  # sha256sum -c format
     assert recorded_checksum(p) == digest == sha256_file(p)
+    import pyarrow.parquet as pq
+
+    assert pq.ParquetFile(p).metadata.row_group(0).column(0).compression == "ZSTD"
     assert shard_ok(p, 3) and not shard_ok(p, 4) and not shard_ok(tmp_path / "none.parquet", 0)
     assert not list(tmp_path.glob(".*.tmp"))  # written through a temporary file, renamed into place
     for bad in (digest[:63], digest.upper(), "g" * 64, "X" * 64, "", "\xff"):
@@ -191,6 +203,9 @@ def test_an_unreadable_manifest_is_a_problem_named_not_a_crash(tmp_path):
     assert read_manifest_shards(tmp_path) == ({}, None)
     (tmp_path / "manifest.json").write_text(json.dumps({"shards": {"shard-00000.parquet": "ab", 7: 1}}))
     assert read_manifest_shards(tmp_path) == ({"shard-00000.parquet": "ab", "7": "1"}, None)
+    (tmp_path / "manifest.json").write_text('{"shards": []}')
+    assert read_manifest_shards(tmp_path)[1] == (f"{tmp_path / 'manifest.json'} is unreadable (TypeError: 'shards' is not "
+                                                 "a mapping); its checksums cannot be used")
     for text, kind in (("{", "JSONDecodeError"), ('{"shards": []}', "TypeError"), ("{}", "KeyError")):
         (tmp_path / "manifest.json").write_text(text)
         shards, problem = read_manifest_shards(tmp_path)
@@ -246,20 +261,22 @@ def test_more_than_three_missing_shards_are_listed_three_and_an_ellipsis(made, t
         load_dataset(d)
 
 
-def test_a_column_that_is_not_a_fixed_size_list_is_named(made, tmp_path):
+@pytest.mark.parametrize("column", ["obs", "state", "min_risk_ctrl"])
+def test_a_column_that_is_not_a_fixed_size_list_is_named(made, tmp_path, column):
     import hashlib
 
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     d = _copy(made, tmp_path)
-    for name in SHARDS:  # every shard alike (shards of different schemas are refused earlier, by pyarrow)
+    for name in SHARDS:  # every shard alike (shards of different schemas are refused earlier)
         t = pq.read_table(d / name)
-        t = t.set_column(t.column_names.index("obs"), "obs", t["obs"].cast(pa.list_(pa.float32())))  # variable length
+        t = t.set_column(t.column_names.index(column), column, t[column].cast(pa.list_(t[column].type.value_type)))
         pq.write_table(t, d / name)
         _edit_manifest(d, lambda shards: shards.update({name: hashlib.sha256((d / name).read_bytes()).hexdigest()}))
-    with pytest.raises(ValueError, match=r"column 'obs' should be a fixed-size list, got list<"):
+    with pytest.raises(ValueError) as e:
         load_dataset(d)
+    assert str(e.value).startswith(f"{d}: column '{column}' should be a fixed-size list, got list<")
 
 
 def test_candidate_labels_are_read_back(tmp_path):
@@ -270,6 +287,19 @@ def test_candidate_labels_are_read_back(tmp_path):
     ds = load_dataset(tmp_path / "c")
     assert ds.candidate_risk.shape == (3, 3) and np.all((ds.candidate_risk >= 0) & (ds.candidate_risk <= 1))
     assert load_dataset(tmp_path / "c").meta["estimator"]["candidates"] == cands
+    import hashlib
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    d, name = tmp_path / "c", SHARDS[0]
+    t = pq.read_table(d / name)
+    col = t["candidate_risk"]
+    pq.write_table(t.set_column(t.column_names.index("candidate_risk"), "candidate_risk",
+                                col.cast(pa.list_(col.type.value_type))), d / name)
+    _edit_manifest(d, lambda shards: shards.update({name: hashlib.sha256((d / name).read_bytes()).hexdigest()}))
+    with pytest.raises(ValueError, match=rf"^{re.escape(str(d))}: column 'candidate_risk' should be a fixed-size list"):
+        load_dataset(d)
 
 
 def test_shards_of_different_schemas_are_refused_in_one_line(made, tmp_path):
