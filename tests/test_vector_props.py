@@ -205,3 +205,21 @@ def test_ended_info_masks_are_independent_arrays():
     for i, m in enumerate(masks):
         for other in masks[i + 1:]:
             assert not np.shares_memory(m, other)
+
+
+def test_the_time_limit_holds_with_its_tolerance_inclusive():
+    """With ``max_episode_sim_time = step_dt + 1e-9`` (``step_dt = 0.25``: ``max - 1e-9`` is exactly
+    0.25), the first step reaches the limit: truncated, as the single env."""
+    import gymnasium as gym
+
+    import rmm_envs  # noqa: F401
+
+    kw = dict(step_dt=0.25, max_episode_sim_time=0.25 + 1e-9)
+    vec = Dubins4DCirclesVectorEnv(2, **kw)
+    vec.reset(seed=0)
+    a = {"active_ctrl": np.zeros(2, np.int64), "turnrate_ctrl": np.zeros((2, 1)), "accel_ctrl": np.zeros((2, 1))}
+    _, _, term, trunc, info = vec.step(a)
+    assert trunc.tolist() == [True, True] and not term.any() and info["outcome"].tolist() == ["timeout"] * 2
+    single = gym.make("Dubins4DCircles-v0", **kw)
+    single.reset(seed=0)
+    assert single.step(single.action_space.inactive())[3]
