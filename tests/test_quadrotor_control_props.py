@@ -263,7 +263,8 @@ def test_controller_bounds_are_refused_by_exact_message(kw, message):
 
 
 def test_controller_keeps_its_arguments_and_packs_the_gains_in_the_kernels_order():
-    c = CommandController(command_low=np.array([[-1, -2], [-3, 0]]), command_high=[0, 2, 3, 4], k_v=1.5, a_max_z=9.8)
+    c = CommandController(command_low=np.array([[-1, -2], [-3, 0]]), command_high=np.array([[0, 2], [3, 4]]), k_v=1.5,
+                          a_max_z=9.8)
     assert c.command_low == (-1.0, -2.0, -3.0, 0.0) and c.command_high == (0.0, 2.0, 3.0, 4.0)
     assert all(type(x) is float for x in c.command_low + c.command_high)
     assert CommandController().packed.tolist() == [0.5, 9.81, 0.0023, 0.0023, 0.004, 2.5, 3.0, 5.0, 4.0, 400.0, 36.0,
@@ -319,3 +320,31 @@ def test_hover_and_level_is_held_exactly_by_the_closed_loop():
     s = hover(yaw=0.4, z=3.0)
     path = LOOP.propagate(s[None], np.zeros((1, 4)), 2.0, 5)[0]
     np.testing.assert_allclose(path, np.repeat(s[None], 5, axis=0), rtol=0, atol=1e-12)
+
+
+def test_the_gyroscopic_term_and_the_moment_bounds_by_hand():
+    """Level hover, body rates ``w_b`` on two axes: ``M = I (-k_w w_b) + w_b x I w_b`` (``k_wz`` about
+    z), e.g. ``Mx = w_y w_z (I_z - I_y)``; a pitch-rate error of 20 rad/s asks 1.656 N m, inside the
+    2 N m pitch bound (the yaw bound is 1)."""
+    for wb in ((0.0, 0.5, 2.0), (0.7, 0.0, -1.5), (1.0, -2.0, 0.0)):
+        wx, wy, wz = wb
+        u = CTRL.wrench(hover(w=wb), [0, 0, 0, 0])
+        expect = [IX * -36.0 * wx + wy * wz * (IZ - IY), IY * -36.0 * wy + wz * wx * (IX - IZ),
+                  IZ * -10.0 * wz + wx * wy * (IY - IX)]
+        np.testing.assert_allclose(u, [M * G, *expect], atol=1e-12)
+    np.testing.assert_allclose(CTRL.wrench(hover(w=(0.0, -20.0, 0.0)), [0, 0, 0, 0]), [M * G, 0.0, IY * 36.0 * 20.0, 0.0],
+                               atol=1e-12)
+    np.testing.assert_allclose(CTRL.wrench(hover(w=(30.0, 0.0, 0.0)), [0, 0, 0, 0]), [M * G, -2.0, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(CTRL.wrench(hover(w=(0.0, 0.0, -30.0)), [0, 0, 0, 0]), [M * G, 0.0, 0.0, 1.0], atol=1e-12)
+
+
+def test_with_the_body_x_axis_vertical_the_heading_is_zero():
+    """Pitched by 90 degrees (any yaw before it), the body x axis is vertical: the heading frame is the
+    world's (psi = 0), so "forward" 1 m/s asks a = (2.5, 0, 0) and the thrust is ``m a . z_b`` with
+    the horizontal body z axis ``(cos yaw, sin yaw, 0)``."""
+    for yaw in (0.0, 1.0, -2.0):
+        s = hover(pitch=math.pi / 2, yaw=yaw)
+        R = quat_to_rot(s[3:7])
+        assert math.hypot(R[0, 0], R[1, 0]) < 1e-12
+        F = CTRL.wrench(s, [1.0, 0, 0, 0])[0]
+        assert F == pytest.approx(min(max(M * (2.5 * R[0, 2] + G * R[2, 2]), 0.0), 8.0), abs=1e-9)
