@@ -59,7 +59,7 @@ def test_bad_bounds():
 
 
 # ---------------------------------------------------------------------- the closed form
-from hypothesis import assume, given, settings  # noqa: E402
+from hypothesis import assume, example, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from rmm_envs.driver import DriverParams, clf_qp  # noqa: E402
@@ -73,9 +73,10 @@ _weight = st.floats(0.05, 5.0)
 @given(x=_coord, y=_coord, th=st.floats(-4, 4), v=st.floats(-0.5, 2.5), gx=_coord, gy=_coord,
        gains=st.tuples(_gain, _gain, _gain, _gain), weights=st.tuples(_weight, _weight),
        u1=st.floats(0.01, 1.0), u2=st.floats(0.01, 1.0))
+@example(x=0.0, y=11.0, th=0.0, v=0.0, gx=0.0, gy=0.0, gains=(0.0, 0.0, 0.0, 1e-09), weights=(1.0, 1.0), u1=1.0, u2=1.0)
 def test_closed_form_matches_osqp_and_the_dense_reference(x, y, th, v, gx, gy, gains, weights, u1, u2):
     """Random instances, speeds outside the bounds included: the closed form is OSQP's solution
-    to 1e-6 and the exact active-set enumeration's to 1e-9 (relative to the solution's size).
+    to 1e-6 and the exact active-set enumeration's to 3e-9 (relative to the solution's size).
 
     The goal is kept at least 1 um from the car: the heading CLF's row scales as 1 / distance^2,
     and past about 1e12 OSQP's own data validation fails (it returns zeros or controls outside
@@ -95,7 +96,10 @@ def test_closed_form_matches_osqp_and_the_dense_reference(x, y, th, v, gx, gy, g
     G = np.array([[1, 0, 0, 0], [-1, 0, 0, 0], [0, 1, 0, 0], [0, -1, 0, 0], [a1, 0, -1, 0], [0, a2, 0, -1]], float)
     h = np.array([u1, u1, h2, -l2, b1, b2])
     ref = solve_qp_dense(np.diag([2, 2, 2 * p.p_theta, 2 * p.p_v]), np.zeros(4), G, h)
-    assert np.all(np.abs(z - ref) <= 1e-9 * (1 + np.abs(ref))), (z, ref)
+    # the reference accepts a vertex that breaks a row by up to 1e-9 (its feasibility tolerance), and
+    # a slack then differs by a few times that: u2 in the one-point interval [0, 0] (gains 0) taken
+    # as 5e-10 moved d_v by 1.25e-9 (found by hypothesis; pinned by the @example)
+    assert np.all(np.abs(z - ref) <= 3e-9 * (1 + np.abs(ref))), (z, ref)
 
 
 @pytest.mark.parametrize("eps", [0.0, 1e-30, 1e-44])

@@ -219,7 +219,11 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
             raise ValueError(f"{p} cannot be read ({e}): {repair}") from None
     if not parts:
         raise ValueError(f"{path} holds no shards")
-    t = pa.concat_tables(parts)
+    try:
+        t = pa.concat_tables(parts)
+    except pa.ArrowInvalid as e:  # shards written by different versions: pyarrow's message is many lines
+        raise ValueError(f"{path}: the shards do not share one schema ({str(e).splitlines()[0].strip()}): "
+                         f"{repair}") from None
     obs = _fixed_list(t["obs"], "obs", path).astype(np.float32)
     if obs.shape[1] != meta["obs_dim"]:
         raise ValueError(f"{path}: observations have {obs.shape[1]} features, metadata says {meta['obs_dim']}")
