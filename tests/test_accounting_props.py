@@ -19,6 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
+from rmm_envs.envs.guarded import EPISODE_KEY
 from rmm_envs.wrappers.rl import GuardianReward
 
 ENVS = {  # short episodes: every run below ends a few of them, by timeout or earlier
@@ -64,8 +65,9 @@ def _episodes(env, bits: list[bool], seed: int, n_episodes: int) -> list[dict]:
             steps += 1
             if term or trunc:
                 break
+        assert "episode" not in info  # Gymnasium's RecordEpisodeStatistics owns that key
         out.append(dict(active_time=active_time, total=total, reward=reward, steps=steps, active_steps=active_steps,
-                        stats=info["episode"]))
+                        stats=info[EPISODE_KEY]))
     return out
 
 
@@ -95,9 +97,9 @@ def test_hand_counted_non_blocking_intervals():
     assert [s[4]["active"] for s in steps] == [False, True, True]
     assert [s[4]["sim_time"] for s in steps] == pytest.approx([0.17, 0.34, 0.51], abs=1e-12)
     assert [s[1] for s in steps] == pytest.approx([0.0, -0.085, -0.085], abs=1e-12)
-    assert steps[-1][3] and steps[-1][4]["episode"]["active_ctrl_sim_time"] == pytest.approx(0.34, abs=1e-12)
-    assert steps[-1][4]["episode"]["cum_sim_time"] == pytest.approx(0.51, abs=1e-12)
-    assert steps[-1][4]["episode"]["n_active_ctrl_env_steps"] == 2
+    assert steps[-1][3] and steps[-1][4][EPISODE_KEY]["active_ctrl_sim_time"] == pytest.approx(0.34, abs=1e-12)
+    assert steps[-1][4][EPISODE_KEY]["cum_sim_time"] == pytest.approx(0.51, abs=1e-12)
+    assert steps[-1][4][EPISODE_KEY]["n_active_ctrl_env_steps"] == 2
 
 
 # ------------------------------------------------------------------ the guarded env's interval bookkeeping
@@ -115,12 +117,13 @@ def test_intervals_are_checked_counted_and_ended_by_hand(env_id):
             env.simulate(bad, False, None)
     zero = env.action_space.parse(env.action_space.active(np.zeros(env.action_space.control_dim)))[1]
     _, r, term, trunc, info = env.simulate(0.0, True, zero, 0.25)
-    assert (r, term, trunc) == (0.0, False, False) and info["sim_time"] == 0.0 and "episode" not in info
+    assert (r, term, trunc) == (0.0, False, False) and info["sim_time"] == 0.0 and EPISODE_KEY not in info
     _, _, term, trunc, info = env.simulate(0.2, False, None, 0.5)
     assert not (term or trunc) and info["sim_time"] == pytest.approx(0.2)
     _, _, term, trunc, info = env.simulate(0.3 - 5e-10, True, zero, 0.75)  # 0.5 less half the tolerance: the end
     assert not term and trunc and info["outcome"] == "timeout"
-    ep = info["episode"]
+    assert "episode" not in info  # Gymnasium's RecordEpisodeStatistics owns that key
+    ep = info[EPISODE_KEY]
     assert ep["outcome"] == "timeout" and ep["n_env_steps"] == 3 and ep["n_active_ctrl_env_steps"] == 2
     assert ep["active_ctrl_sim_time"] == pytest.approx(0.3 - 5e-10, abs=1e-15)
     assert ep["cum_sim_time"] == pytest.approx(0.5 - 5e-10, abs=1e-15)
@@ -140,7 +143,7 @@ def test_a_step_charges_the_clock_and_steps_by_step_dt():
     env.step(env.action_space.inactive())
     _, _, _, trunc, info = env.step(env.action_space.inactive())
     assert trunc and info["sim_time"] == 0.5
-    ep = info["episode"]
+    ep = info[EPISODE_KEY]
     assert ep["n_env_steps"] == 2 and ep["cum_compute_time"] == pytest.approx(0.008) and ep["avg_compute_time"] == pytest.approx(0.004)
     assert ep["active_ctrl_sim_time"] == 0.0 and ep["n_active_ctrl_env_steps"] == 0
 

@@ -84,7 +84,7 @@ def test_hand_computed_full_turns_away():
     for pose, u in (([250.0, 171.25, q], -U_MAX), ([250.0, 171.25, math.pi - q], U_MAX),
                     ([250.0, 78.75, -q], U_MAX), ([250.0, 78.75, -math.pi + q], -U_MAX)):
         a = g.decide(np.array(pose))
-        assert a["active_ctrl"] == 1 and float(a["turnrate_ctrl"][0]) == np.float32(u), pose
+        assert a["active_ctrl"] == 1 and a["turnrate_ctrl"].dtype == np.float64 and a["turnrate_ctrl"][0] == u, pose
     assert g.stats()["qp_fallbacks"] == 4
     env.close()
 
@@ -125,7 +125,7 @@ def test_reset_reads_the_maze_the_speed_and_the_bound(guardian):
     """After ``reset`` in the corridor: its four walls, half-thickness 6.25 px, the car's 10 px/s and
     0.2 rad/s; the nearest ``min(n_walls, walls)`` rows, smallest barrier first."""
     assert guardian.walls.shape == (4, 4) and guardian.half == 6.25 and guardian.speed == 10.0
-    assert guardian.u_max == float(np.float32(U_MAX)) and guardian.K == 4  # the action space bound, float32
+    assert guardian.u_max == U_MAX and guardian.K == 4  # the action space bound, float64: exactly 0.2
     b, G, h = guardian.rows(np.array([250.0, 100.0, 0.0]))  # 31.25 px above the lower wall's surface
     assert G.shape == (4, 1) and np.all(np.diff(b) >= 0)
     assert b[0] == pytest.approx(100.0 - 68.75 - MARGIN)
@@ -138,7 +138,7 @@ def test_a_pose_with_nan_applies_the_safe_default_and_is_counted():
     obs, info = reset_at(env, g, [250.0, 160.0, 0.0])  # the upper wall is the nearer: turn right
     env.unwrapped._state[:] = np.nan
     a = g.act(obs, info)
-    assert a["active_ctrl"] == 1 and float(a["turnrate_ctrl"][0]) == np.float32(-U_MAX)
+    assert a["active_ctrl"] == 1 and a["turnrate_ctrl"].dtype == np.float64 and a["turnrate_ctrl"][0] == -U_MAX
     assert g.stats()["nan_states"] == 1 and g.stats()["qp_solves"] == 0
     env.close()
 
@@ -216,7 +216,7 @@ def test_without_a_safe_default_a_nan_pose_turns_left_at_full_rate():
     g.reset(seed=0, observation_space=None, action_space=space,
             privileged=lambda: {"maze": corridor(), "speed": 10.0, "state": [math.nan, 1.0, 0.0], "sim_time": 0.0})
     a = g.act(None)
-    assert a["active_ctrl"] == 1 and float(a["turnrate_ctrl"][0]) == np.float32(0.2) and g.stats()["nan_states"] == 1
+    assert a["active_ctrl"] == 1 and a["turnrate_ctrl"].dtype == np.float64 and a["turnrate_ctrl"][0] == 0.2 and g.stats()["nan_states"] == 1
 
 
 def _maze_privileged(**over):
