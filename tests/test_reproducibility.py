@@ -22,6 +22,7 @@ import ast
 import functools
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -68,9 +69,9 @@ def _check_applied(setting: dict, got: dict) -> None:
     disabled = (setting["NPY_DISABLE_CPU_FEATURES"] or "").split()
     for func in ("numpy_exp", "numpy_arctan2"):
         assert not any(got[func].startswith(f) for f in disabled), f"{func} still runs {got[func]} under {setting}"
-    here = applied()["blas_core"]
+    here = applied()["blas_core"]  # this process's kernel: the machine's default unless chosen by hand
     want = setting["OPENBLAS_CORETYPE"]
-    if want and here and got["blas_core"] and want.lower() != here.lower():
+    if want and here and got["blas_core"] and want.lower() != here.lower() and not os.environ.get("OPENBLAS_CORETYPE"):
         assert got["blas_core"] != here, f"OPENBLAS_CORETYPE={want} did not change the kernel ({here})"
 
 
