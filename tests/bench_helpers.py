@@ -106,3 +106,14 @@ class Threaded(Guardian):
 
     def stats(self):
         return {"threads": self.threads or 0, "env_threads": int(os.environ.get("RMM_HJ_THREADS", -1))}
+
+
+def query(out, sql: str) -> list[tuple]:
+    """The rows of one SQL query on the results database in ``out`` (closed again at once)."""
+    import sqlite3
+
+    con = sqlite3.connect(out / "results.db")
+    try:
+        return con.execute(sql).fetchall()
+    finally:
+        con.close()

@@ -17,7 +17,7 @@ import pytest
 
 from benchmarks.bench.cli import main
 from rmm_envs.parallel import TaskLost, WorkersLost, run_local
-from tests.bench_helpers import faulty_task
+from tests.bench_helpers import faulty_task, query
 
 FAST = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DParallel-v0"]
 
@@ -43,19 +43,11 @@ def within(seconds, fn):
 
 
 def rows(out, cols="agent, episode, outcome, error_kind, error"):
-    con = sqlite3.connect(out / "results.db")
-    try:
-        return con.execute(f"SELECT {cols} FROM episodes ORDER BY agent, episode").fetchall()
-    finally:
-        con.close()
+    return query(out, f"SELECT {cols} FROM episodes ORDER BY agent, episode")
 
 
 def invocations(out):
-    con = sqlite3.connect(out / "results.db")
-    try:
-        return con.execute("SELECT id, status, message FROM invocations ORDER BY id").fetchall()
-    finally:
-        con.close()
+    return query(out, "SELECT id, status, message FROM invocations ORDER BY id")
 
 
 # ------------------------------------------------------------------ the worker pool

@@ -14,16 +14,13 @@ import sqlite3
 import pytest
 
 from benchmarks.bench.cli import main
+from tests.bench_helpers import query
 
 FAST = ["--clock", "fixed:1", "--no-progress", "--workers", "1"]
 
 
 def stored(out, cols="run_key, agent, episode, outcome, error_kind"):
-    con = sqlite3.connect(out / "results.db")
-    try:
-        return con.execute(f"SELECT {cols} FROM episodes ORDER BY run_key, episode").fetchall()
-    finally:
-        con.close()
+    return query(out, f"SELECT {cols} FROM episodes ORDER BY run_key, episode")
 
 
 # ------------------------------------------------------------------ 1. a run is what ran

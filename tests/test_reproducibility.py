@@ -30,7 +30,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from benchmarks.check_behaviour import SECTIONS, applied, arith_settings, compare, describe, run_under
+from benchmarks.arith import applied, arith_settings, describe, run_under
+from benchmarks.check_behaviour import SECTIONS, compare
 from rmm_envs import portable
 
 ROOT = Path(__file__).resolve().parent.parent

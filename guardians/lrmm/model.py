@@ -48,8 +48,8 @@ from pathlib import Path
 
 import numpy as np
 
-from numba import njit
-
+from guardians.lrmm.inference import forward_one as _forward_one
+from guardians.lrmm.inference import forward_rows as _forward_rows
 from rmm_envs.portable import matvec
 
 __all__ = ["FORMAT", "SHIPPED", "LRMMModel", "Shipped", "default_model_path", "load_model"]
@@ -58,55 +58,6 @@ FORMAT = "rmm-lrmm-model"
 FORMAT_VERSION = 2
 READABLE_VERSIONS = (1, 2)  # version 1: one output unit, no candidates or decision fields
 ACTIVATIONS = ("sigmoid", "tanh", "relu", "elu")
-
-
-def _forward_one(x, Ws, bs, act_code):
-    """The network at one observation ``x`` (``Ws``: transposed weights, the scaler folded into
-    the first; ``bs``: biases): hidden layers with
-    activation ``ACTIVATIONS[act_code]``, a sigmoid output; ``None`` if ``x`` is not finite."""
-    for i in range(x.shape[0]):
-        if not math.isfinite(x[i]):
-            return None
-    h = x
-    last = len(Ws) - 1
-    for layer in range(len(Ws)):
-        WT = Ws[layer]  # (inputs, outputs): the inner loop runs along contiguous outputs
-        b = bs[layer]
-        n_out = WT.shape[1]
-        z = np.zeros(n_out)
-        for k in range(WT.shape[0]):
-            hk = h[k]
-            for j in range(n_out):
-                z[j] += WT[k, j] * hk
-        for j in range(n_out):
-            acc = z[j] + b[j]  # after the products, as numpy's ``x @ W.T + b``
-            if layer == last or act_code == 0:
-                acc = 1.0 / (1.0 + math.exp(-acc))
-            elif act_code == 1:
-                acc = math.tanh(acc)
-            elif act_code == 2:
-                acc = max(acc, 0.0)
-            elif acc <= 0.0:
-                acc = math.expm1(acc)
-            z[j] = acc
-        h = z
-    return h
-
-
-_forward_one = njit(cache=True)(_forward_one)
-
-
-def _forward_rows(X, Ws, bs, act_code):
-    """:func:`_forward_one` of every (finite) row of ``X``: the batch path computes the same
-    bits as the one-observation path, in sums of a fixed order (no BLAS, whose kernel and so
-    whose rounding depends on the CPU)."""
-    out = np.empty((X.shape[0], bs[len(bs) - 1].shape[0]))
-    for i in range(X.shape[0]):
-        out[i] = _forward_one(X[i], Ws, bs, act_code)
-    return out
-
-
-_forward_rows = njit(cache=True)(_forward_rows)
 
 
 def _checksum(arrays: dict[str, np.ndarray]) -> str:
