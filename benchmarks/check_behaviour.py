@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.arith import PRE_FMA, applied, arith_settings, describe, run_under
+from rmm_envs.catalog import stored_id  # fingerprint keys: the ids results were first recorded under
 
 # Columns that measure time (machine-dependent) or identify a run, never compared.
 _MEASURED = {"decision_mean", "decision_std", "decision_max", "precompute_time", "wall_time"}
@@ -55,12 +56,12 @@ HJ_AGENTS = ("hj", "hj-paper")
 OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "brakes", "lrmm", "cbf", "hj"),
                "QuadrotorRoomParallel-v0": ("inactive", "brakes", "lrmm")}
 QUICK_OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "lrmm", "cbf"), "QuadrotorRoomParallel-v0": ("inactive", "lrmm")}
-ENVS = ("Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins4DMap-v0", "Dubins4DMapParallel-v0", "Dubins3DMaze-v0",
+ENVS = ("Dubins4DCirclesGuarded-v0", "Dubins4DCirclesParallel-v0", "Dubins4DMapGuarded-v0", "Dubins4DMapParallel-v0", "Dubins3DMaze-v0",
         "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoom-v0", "QuadrotorRoomGuarded-v0",
         "QuadrotorRoomParallel-v0")
-LABELLED = {"Dubins4DCircles-v0": {}, "Dubins4DMap-v0": {}, "Dubins3DMaze-v0": {}, "Dubins3DMazeGuarded-v0": {},
+LABELLED = {"Dubins4DCirclesGuarded-v0": {}, "Dubins4DMapGuarded-v0": {}, "Dubins3DMaze-v0": {}, "Dubins3DMazeGuarded-v0": {},
             "QuadrotorRoom-v0": {}, "QuadrotorRoomGuarded-v0": {}}
-DATASETS = ("Dubins4DCircles-v0", "Dubins3DMazeGuarded-v0", "QuadrotorRoomGuarded-v0")
+DATASETS = ("Dubins4DCirclesGuarded-v0", "Dubins3DMazeGuarded-v0", "QuadrotorRoomGuarded-v0")
 
 
 def _is_timing(key: str) -> bool:
@@ -139,9 +140,9 @@ def bench_fingerprint(episodes: int, hj_episodes: int, other_episodes: int = 0, 
     from benchmarks import load_results
 
     out: dict = {}
-    runs = [("Dubins4DParallel-v0", AGENTS, episodes, ())]
+    runs = [("Dubins4DCirclesParallel-v0", AGENTS, episodes, ())]
     if hj_episodes:  # solve afresh: a cached value function would hide a change of the solver
-        runs.append(("Dubins4DParallel-v0", HJ_AGENTS, hj_episodes,
+        runs.append(("Dubins4DCirclesParallel-v0", HJ_AGENTS, hj_episodes,
                      ("--agent-opt", "hj.cache=false", "--agent-opt", "hj-paper.cache=false")))
     if other_episodes:
         runs += [(env_id, agents, other_episodes, ("--agent-opt", "hj.cache=false") if "hj" in agents else ())
@@ -151,7 +152,7 @@ def bench_fingerprint(episodes: int, hj_episodes: int, other_episodes: int = 0, 
             _bench(tmp, env_id, agents, n, extra)
             df = load_results(tmp)
         cols = [c for c in df.columns if c not in _TIMING]
-        prefix = "" if env_id == "Dubins4DParallel-v0" else f"{env_id}/"
+        prefix = "" if env_id == "Dubins4DCirclesParallel-v0" else f"{stored_id(env_id)}/"
         for row in df[cols].to_dict("records"):
             if row.get("guardian_stats"):  # guardians' own timings (e.g. HJ's solve_seconds) are not behaviour
                 stats = json.loads(row["guardian_stats"])
@@ -186,7 +187,7 @@ def env_fingerprint(steps: int = 200, envs=ENVS) -> dict:
                 obs, _ = env.reset()
                 record.append(obs)
         env.close()
-        out[env_id] = _digest(*record)
+        out[stored_id(env_id)] = _digest(*record)
     return out
 
 
@@ -211,7 +212,7 @@ def world_fingerprint(seeds: int) -> dict:
             record.append(obs)
             _flatten(env.unwrapped.privileged(), record)
         env.close()
-        out[env_id] = _digest(*record)
+        out[stored_id(env_id)] = _digest(*record)
     return out
 
 
@@ -231,7 +232,7 @@ def label_fingerprint(n_states: int = 16) -> dict:
         est = RiskEstimator(env.risk_scene(), branches=4, depth=2, horizon=0.5, n_steps=4)
         res = est.estimate(states, np.random.default_rng(5))
         env.close()
-        out[env_id] = _digest(states, obs, res.risk, res.min_risk_ctrl, res.min_risk_ctrl_dur, res.n_leaves)
+        out[stored_id(env_id)] = _digest(states, obs, res.risk, res.min_risk_ctrl, res.min_risk_ctrl_dur, res.n_leaves)
     return out
 
 
@@ -250,8 +251,8 @@ def dataset_fingerprint(configs: int, samples: int) -> dict:
             import pyarrow.parquet as pq
 
             cols = [pq.read_table(p).to_pydict() for p in shards]
-        out[env_id] = {"content": _digest(*[np.asarray(v, dtype=object).astype(str) for c in cols for v in c.values()]),
-                       "rows": manifest.get("n_rows")}
+        out[stored_id(env_id)] = {"content": _digest(*[np.asarray(v, dtype=object).astype(str) for c in cols for v in c.values()]),
+                                  "rows": manifest.get("n_rows")}
     return out
 
 

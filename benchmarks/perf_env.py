@@ -24,7 +24,7 @@ from rmm_envs.worlds.circles import CircleWorld, _ray_cast_numpy, points_in_circ
 
 
 
-def steps_per_second(env_id: str = "Dubins4DCircles-v0", episodes: int = 10, repeats: int = 5, **env_kwargs) -> list[float]:
+def steps_per_second(env_id: str = "Dubins4DCirclesGuarded-v0", episodes: int = 10, repeats: int = 5, **env_kwargs) -> list[float]:
     """Steps per second of ``env_id`` driven by the inactive guardian, one value per repeat
     (the same ``episodes`` seeded episodes each time)."""
     env = gym.make(env_id, **env_kwargs)
@@ -48,7 +48,7 @@ def steps_per_second(env_id: str = "Dubins4DCircles-v0", episodes: int = 10, rep
 
 
 def profile_step() -> dict[str, float]:
-    env = gym.make("Dubins4DCircles-v0").unwrapped
+    env = gym.make("Dubins4DCirclesGuarded-v0").unwrapped
     env.reset(seed=0)
     st = env.true_state
     goal = env.scene.goal
@@ -98,7 +98,7 @@ def _loop_rays(x, y, th, circles, n=12, L=10.0):
 def main() -> None:
     rng = np.random.default_rng(0)
     circles = CircleWorld.generate(rng)
-    print("Dubins4DCircles-v0, driver in control (inactive guardian), one process")
+    print("Dubins4DCirclesGuarded-v0, driver in control (inactive guardian), one process")
     rates = steps_per_second()
     print(f"  steps/s: median {statistics.median(rates):8.0f} over {len(rates)} runs "
           f"(min {min(rates):.0f}, max {max(rates):.0f}); target >= 5,000")

@@ -1,7 +1,7 @@
 """Guardian decision time: observation in, action out, one state (issue figures).
 
 Run: ``python benchmarks/perf_guardians.py``.  Prints, for every available guardian, the
-median and 90th percentile of its decisions over an episode stream on ``Dubins4DCircles-v0``,
+median and 90th percentile of its decisions over an episode stream on ``Dubins4DCirclesGuarded-v0``,
 twice: **wall** time (``time.perf_counter``) and the calling thread's **CPU** time
 (``time.thread_time_ns``).  On a quiet machine the two agree; on a shared one the wall time
 also counts the moments the process waited for a core, which the CPU time leaves out (it still
@@ -22,7 +22,7 @@ import rmm_envs  # noqa: F401
 from guardians import available_guardians, make_guardian
 
 
-def decision_times(guardian, env_id="Dubins4DCircles-v0", steps=3000, seed=0, cpu: list | None = None) -> list[float]:
+def decision_times(guardian, env_id="Dubins4DCirclesGuarded-v0", steps=3000, seed=0, cpu: list | None = None) -> list[float]:
     """Wall seconds of each of ``steps`` decisions; when ``cpu`` is a list, the thread CPU
     seconds of each decision are appended to it."""
     env = gym.make(env_id)
@@ -73,7 +73,7 @@ def torch_lrmm_time(model, obs, repeats=3000) -> float:
 
 
 def main() -> None:
-    print("Guardian decision time (observation in, action out), Dubins4DCircles-v0, one process; "
+    print("Guardian decision time (observation in, action out), Dubins4DCirclesGuarded-v0, one process; "
           "targets: lrmm <= 20 us, cbf <= 100 us, hj <= 50 us")
     print(f"  {'':10s} {'wall median':>12s} {'wall p90':>10s} {'CPU median':>12s} {'CPU p90':>10s}")
     for name in available_guardians():
@@ -83,7 +83,7 @@ def main() -> None:
         print(f"  {name:10s} {statistics.median(t) * 1e6:9.1f} us {np.quantile(t, 0.9) * 1e6:7.1f} us "
               f"{statistics.median(cpu) * 1e6:9.1f} us {np.quantile(cpu, 0.9) * 1e6:7.1f} us")
     lrmm = make_guardian("lrmm")
-    obs = gym.make("Dubins4DCircles-v0").reset(seed=0)[0]
+    obs = gym.make("Dubins4DCirclesGuarded-v0").reset(seed=0)[0]
     t_np = statistics.median(timeit_np(lrmm.model, obs))
     t_torch = torch_lrmm_time(lrmm.model, obs)
     print(f"LRMM network only: numpy {t_np * 1e6:.1f} us, torch {t_torch * 1e6:.1f} us ({t_torch / t_np:.1f}x); "

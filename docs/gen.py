@@ -14,10 +14,10 @@ from pathlib import Path
 DOCS = Path(__file__).resolve().parent
 
 ENV_PAGES = {
-    "environments/dubins4d.md": ("rmm_envs.envs.dubins4d", "Dubins4D among circles: `Dubins4DCircles-v0`, `Dubins4DParallel-v0`",
+    "environments/dubins4d.md": ("rmm_envs.envs.dubins4d", "Dubins4D among circles: `Dubins4DCirclesGuarded-v0`, `Dubins4DCirclesParallel-v0`",
                                  "figures/dubins4d_frame.png"),
     "environments/dubins4d_map.md": ("rmm_envs.envs.dubins4d_map",
-                                     "Dubins4D on a map of your own: `Dubins4DMap-v0`, `Dubins4DMapParallel-v0`",
+                                     "Dubins4D on a map of your own: `Dubins4DMapGuarded-v0`, `Dubins4DMapParallel-v0`",
                                      "figures/dubins4d_map_frame.png"),
     "environments/dubins3d_maze.md": ("rmm_envs.envs.dubins3d_maze", "Dubins3D in mazes: `Dubins3DMaze-v0`",
                                       "figures/dubins3d_maze_frame.png"),
@@ -68,7 +68,7 @@ def cli_parsers():
     import argparse
 
     envs = argparse.ArgumentParser(prog="rmm-envs demo", description="Run a few episodes with the driver alone and print the outcomes.")
-    envs.add_argument("--env", default="Dubins4DParallel-v0")
+    envs.add_argument("--env", default="Dubins4DCirclesParallel-v0")
     envs.add_argument("--episodes", type=int, default=8)
     envs.add_argument("--seed", type=int, default=0)
     return [
@@ -108,7 +108,7 @@ def render_frame(path: Path) -> None:
 
     import rmm_envs  # noqa: F401
 
-    env = gym.make("Dubins4DCircles-v0", render_mode="rgb_array")
+    env = gym.make("Dubins4DCirclesGuarded-v0", render_mode="rgb_array")
     inactive = {"active_ctrl": 0, "turnrate_ctrl": np.zeros(1, np.float32), "accel_ctrl": np.zeros(1, np.float32)}
     for seed in range(100):  # a frame with the vehicle mid-arena and clear of obstacles
         env.reset(seed=seed)
@@ -145,7 +145,7 @@ def render_map_frame(path: Path) -> None:
 
     import rmm_envs  # noqa: F401
 
-    env = gym.make("Dubins4DMap-v0", render_mode="rgb_array")  # the shipped example map
+    env = gym.make("Dubins4DMapGuarded-v0", render_mode="rgb_array")  # the shipped example map
     env.reset(seed=3)
     plt.imsave(path, env.render())
 

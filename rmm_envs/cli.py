@@ -1,7 +1,7 @@
 """``rmm-envs``: small utilities around the environments.
 
 ``rmm-envs demo`` runs a few episodes of a parallel-autonomy env (default
-``Dubins4DParallel-v0``; 8 episodes from seed 0, enough to see both goals and collisions) with a guardian
+``Dubins4DCirclesParallel-v0``; 8 episodes from seed 0, enough to see both goals and collisions) with a guardian
 that never takes control, so the reckless driver alone decides, and prints each outcome.
 Speeds are in m/s; an env measured in other units (the maze, in pixels) also gets its own
 unit in brackets, converted at the scale the env states (``0.10 m/s (10.00 px/s)``).
@@ -83,7 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rmm-envs", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="run a few episodes with the driver alone and print the outcomes")
-    demo.add_argument("--env", default="Dubins4DParallel-v0", choices=list(rmm_envs.GUARDIAN_ENV_IDS),
+    demo.add_argument("--env", default="Dubins4DCirclesParallel-v0", choices=list(rmm_envs.GUARDIAN_ENV_IDS),
                       help="an env with a built-in driver (default: %(default)s)")
     demo.add_argument("--episodes", type=int, default=8)
     demo.add_argument("--seed", type=int, default=0)

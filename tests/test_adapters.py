@@ -291,7 +291,7 @@ def test_a_failure_of_the_wrong_shape_is_refused_by_name():
 
 def test_failure_for_a_package_env_is_refused():
     with pytest.raises(TypeError, match=r"failure= is for envs served by a risk adapter"):
-        RiskLabel(gym.make("Dubins4DCircles-v0"), failure=speed_failure)
+        RiskLabel(gym.make("Dubins4DCirclesGuarded-v0"), failure=speed_failure)
 
 
 def test_an_object_that_is_not_a_snapshot_simulator_is_refused_listing_what_it_lacks():
@@ -368,9 +368,9 @@ def test_datagen_refuses_a_missing_or_bad_failure_by_name(extra, match, tmp_path
 def test_datagen_refuses_a_failure_for_a_package_env(tmp_path, capsys):
     from rmm_envs.risk.datagen import main
 
-    assert main(["--env", "Dubins4DCircles-v0", "--configs", "1", "--out", str(tmp_path / "d"), "--no-progress",
+    assert main(["--env", "Dubins4DCirclesGuarded-v0", "--configs", "1", "--out", str(tmp_path / "d"), "--no-progress",
                  "--failure", "numpy:isnan"]) == 2
-    assert "failure (--failure) is for envs served by a risk adapter; Dubins4DCircles-v0 defines its own" in capsys.readouterr().err
+    assert "failure (--failure) is for envs served by a risk adapter; Dubins4DCirclesGuarded-v0 defines its own" in capsys.readouterr().err
 
 
 def test_adapted_envs_follow_the_labelled_env_protocol_and_sampling_leaves_the_episode_alone():

@@ -12,7 +12,7 @@ from benchmarks.bench.cli import main
 from benchmarks.bench.metrics import aggregate, batch_rate, weighted_mean_std
 from benchmarks.bench.runner import episode_seed
 
-FAST = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DParallel-v0"]
+FAST = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DCirclesParallel-v0"]
 
 
 def ep(i, outcome, steps=10, sim=2.0, active=0.5, compute=0.02):

@@ -27,7 +27,7 @@ def test_run_keys_and_stored_config_are_those_of_the_untyped_harness():
     con.close()
     assert stored["inactive"][0] == "3990ef051d980703" and stored["random"][0] == "c731fab8951b5132"
     par = parse_run(["--agent", "inactive,brakes", "--episodes", "3", "--out", "olddb", *FAST], "")
-    circ = parse_run(["--agent", "random", "--agent-opt", "random.p_active=0.5", "--env", "Dubins4DCircles-v0", "--episodes", "2",
+    circ = parse_run(["--agent", "random", "--agent-opt", "random.p_active=0.5", "--env", "Dubins4DCirclesGuarded-v0", "--episodes", "2",
                       "--out", "olddb", *FAST], "")
     runs = par.agent_runs() | circ.agent_runs()
     assert set(runs) == set(stored)
@@ -36,6 +36,14 @@ def test_run_keys_and_stored_config_are_those_of_the_untyped_harness():
         assert run.key == stored[agent][0] == run_key(stored[agent][1])
     assert circ.env_kwargs == {"clock": "fixed:1"}  # the blocking env takes no time_accel / base_step
     assert par.env_kwargs == {"time_accel": 10.0, "base_step": 0.1, "clock": "fixed:1"}
+    # the same commands under the old ids (renamed since): the same env, the same stored runs
+    old_par = parse_run(["--agent", "inactive,brakes", "--env", "Dubins4DParallel-v0", "--episodes", "3", "--out", "olddb",
+                         *FAST], "")
+    old_circ = parse_run(["--agent", "random", "--agent-opt", "random.p_active=0.5", "--env", "Dubins4DCircles-v0",
+                          "--episodes", "2", "--out", "olddb", *FAST], "")
+    assert (old_par.env_id, old_circ.env_id) == ("Dubins4DCirclesParallel-v0", "Dubins4DCirclesGuarded-v0")
+    for agent, run in (old_par.agent_runs() | old_circ.agent_runs()).items():
+        assert run.key == stored[agent][0] and run.as_dict() == stored[agent][1]
 
 
 def test_old_database_reports_the_same_table_and_resume_runs_nothing(tmp_path, capsys):
@@ -67,7 +75,7 @@ def test_episode_result_fields_are_the_store_columns():
 
 def test_configs_are_frozen_copies_and_refuse_what_cannot_be_stored():
     kw = {"grid_n": [8, 8]}
-    run = AgentRun("hj", kw, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 600.0, False)
+    run = AgentRun("hj", kw, "Dubins4DCirclesParallel-v0", {"clock": "fixed:1"}, 0, 600.0, False)
     kw["grid_n"].append(9)
     assert run.agent_kwargs == {"grid_n": [8, 8]}  # a copy: the caller's dict does not reach the run
     with pytest.raises(dataclasses.FrozenInstanceError):
@@ -99,7 +107,7 @@ def test_envs_without_the_parallel_autonomy_contract_are_refused_by_name(tmp_pat
 
 def test_the_blocking_env_runs_through_the_same_contract(tmp_path, capsys):
     out = tmp_path / "b"
-    assert main(["--agent", "brakes", "--env", "Dubins4DCircles-v0", "--episodes", "2", "--out", str(out), *FAST]) == 0
+    assert main(["--agent", "brakes", "--env", "Dubins4DCirclesGuarded-v0", "--episodes", "2", "--out", str(out), *FAST]) == 0
     con = sqlite3.connect(out / "results.db")
     rows = con.execute("SELECT outcome, steps, compute_time, final_speed FROM episodes").fetchall()
     assert len(rows) == 2 and all(o != "error" and s > 0 and c == pytest.approx(s * 1e-3) and v is not None for o, s, c, v in rows)

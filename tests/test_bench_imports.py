@@ -96,7 +96,7 @@ def test_each_workers_first_timed_decision_comes_after_an_untimed_warm_up(tmp_pa
 
     (tmp_path / "warm_guard.py").write_text(WARM)
     res = _bench(tmp_path, "--agent", "warm_guard:CountsCalls", "--episodes", "4", "--workers", "2",
-                 "--env", "Dubins4DCircles-v0")
+                 "--env", "Dubins4DCirclesGuarded-v0")
     assert res.returncode == 0, res.stderr[-2000:]
     df = load_results(tmp_path / "res")
     calls = [json.loads(s)["calls_before"] for s in df.guardian_stats]

@@ -12,8 +12,8 @@ from rmm_envs.cli import driver_only_action, main
 
 
 def test_driver_only_action_is_read_off_the_action_space():
-    env = gym.make("Dubins4DCircles-v0")
-    a = driver_only_action(env.action_space, "Dubins4DCircles-v0")
+    env = gym.make("Dubins4DCirclesGuarded-v0")
+    a = driver_only_action(env.action_space, "Dubins4DCirclesGuarded-v0")
     env.close()
     assert set(a) == {"active_ctrl", "turnrate_ctrl", "accel_ctrl"} and a["active_ctrl"] == 0
     for k in ("turnrate_ctrl", "accel_ctrl"):
@@ -29,9 +29,9 @@ def test_driver_only_action_is_read_off_the_action_space():
 
 
 def test_demo_prints_what_the_driver_alone_does(capsys):
-    assert main(["demo", "--env", "Dubins4DCircles-v0", "--episodes", "1", "--seed", "4"]) == 0
+    assert main(["demo", "--env", "Dubins4DCirclesGuarded-v0", "--episodes", "1", "--seed", "4"]) == 0
     line = capsys.readouterr().out.splitlines()[0]
-    env = gym.make("Dubins4DCircles-v0")
+    env = gym.make("Dubins4DCirclesGuarded-v0")
     env.reset(seed=4)
     action = {"active_ctrl": 0, "turnrate_ctrl": np.zeros(1, np.float32), "accel_ctrl": np.zeros(1, np.float32)}
     while True:

@@ -126,7 +126,7 @@ def test_identity_is_every_parameter_that_makes_the_data():
 
 
 @pytest.mark.parametrize("key, value", [
-    ("env_kwargs", {"n_obstacles": 4}), ("env_id", "Dubins4DMap-v0"), ("seed", 8), ("configs", 2),
+    ("env_kwargs", {"n_obstacles": 4}), ("env_id", "Dubins4DMapGuarded-v0"), ("seed", 8), ("configs", 2),
     ("samples_per_config", 5), ("configs_per_shard", 3), ("estimator", {"branches": 5})])
 def test_a_rerun_into_a_dataset_made_with_other_parameters_is_refused_by_name(made, tmp_path, key, value):
     """The existing ``metadata.json`` records other parameters than the rerun's: refused, naming the

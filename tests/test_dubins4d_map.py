@@ -1,4 +1,4 @@
-"""Dubins4DMap-v0 / Dubins4DMapParallel-v0: maps of your own on pymunk.
+"""Dubins4DMapGuarded-v0 / Dubins4DMapParallel-v0: maps of your own on pymunk.
 
 Agreement with the analytic circle world, hand-computed polygon and wall geometry, every bad
 map, the reset options, labelling through the LabelledEnv protocol and the guardians' checks.
@@ -67,7 +67,7 @@ def test_circle_map_episode_equals_the_circle_env(seed, k):
         if not points_in_circles(goal[None, :2], circles)[0] and math.hypot(*(goal[:2] - state[:2])) > goal[2] + 1e-3:
             break
     m = Dubins4DMapEnv(map=[{"circle": c.tolist()} for c in circles])
-    c = gym.make("Dubins4DCircles-v0").unwrapped
+    c = gym.make("Dubins4DCirclesGuarded-v0").unwrapped
     om, _ = m.reset(seed=0, options={"state": state, "goal": goal})
     oc, _ = c.reset(seed=0, options={"state": state, "goal": goal, "obstacles": circles})
     np.testing.assert_allclose(om, oc, atol=1e-4)
@@ -180,7 +180,7 @@ def test_bad_map_files_and_containers(tmp_path):
     with pytest.raises(MapError, match="its goal .* centre inside an obstacle"):
         Dubins4DMapEnv(map=[{"circle": [0, 0, 2]}, {"goal": [0.5, 0, 1]}])
     with pytest.raises(MapError, match="unknown shape"):
-        gym.make("Dubins4DMap-v0", map=[{"circle": [0, 0, 2]}, {"box": [0, 0, 1]}])
+        gym.make("Dubins4DMapGuarded-v0", map=[{"circle": [0, 0, 2]}, {"box": [0, 0, 1]}])
 
 
 def test_map_forms_round_trip(tmp_path):
@@ -200,7 +200,7 @@ def test_map_forms_round_trip(tmp_path):
 
 
 # ------------------------------------------------------------------ the env
-@pytest.mark.parametrize("env_id", ["Dubins4DMap-v0", "Dubins4DMapParallel-v0"])
+@pytest.mark.parametrize("env_id", ["Dubins4DMapGuarded-v0", "Dubins4DMapParallel-v0"])
 def test_check_env_and_the_contract(env_id):
     env = gym.make(env_id, clock="fixed:1")
     check_env(env.unwrapped, skip_render_check=True)
@@ -249,7 +249,7 @@ def test_risk_labelling_through_the_protocol():
     from rmm_envs.risk.protocol import check_labelled_env
     from rmm_envs.wrappers import RiskLabel
 
-    env = RiskLabel(gym.make("Dubins4DMap-v0"), branches=8, depth=2, seed=0)
+    env = RiskLabel(gym.make("Dubins4DMapGuarded-v0"), branches=8, depth=2, seed=0)
     check_labelled_env(env)
     _, info = env.reset(seed=2)
     assert 0.0 <= info["risk"] <= 1.0 and info["risk_n_leaves"] >= 1
@@ -265,7 +265,7 @@ def test_risk_labelling_through_the_protocol():
     # circles only: the map scene's labels equal the analytic scene's, draw for draw
     circles = np.array([[0.0, 0.0, 3.0], [6.0, 2.0, 2.0]])
     m = Dubins4DMapEnv(map=[{"circle": c.tolist()} for c in circles])
-    c = gym.make("Dubins4DCircles-v0").unwrapped
+    c = gym.make("Dubins4DCirclesGuarded-v0").unwrapped
     m.reset(seed=0, options={"state": [-5, 0, 0, 1], "goal": [9, 9, 0.5]})
     c.reset(seed=0, options={"state": [-5, 0, 0, 1], "goal": [9, 9, 0.5], "obstacles": circles})
     s = c.sample_states(np.random.default_rng(3), 64)
@@ -278,7 +278,7 @@ def test_risk_labelling_through_the_protocol():
 def test_datagen_on_a_map(tmp_path):
     from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 
-    generate(DatagenConfig(env_id="Dubins4DMap-v0", configs=2, samples_per_config=6, branches=4, depth=2, seed=1),
+    generate(DatagenConfig(env_id="Dubins4DMapGuarded-v0", configs=2, samples_per_config=6, branches=4, depth=2, seed=1),
              tmp_path / "d", workers=1, progress=False)
     ds = load_dataset(tmp_path / "d")
     assert len(ds) == 12 and ds.obs.shape == (12, 17) and np.all((ds.risk >= 0) & (ds.risk <= 1))
@@ -317,7 +317,7 @@ def test_rmm_bench_runs_on_the_example_map(tmp_path):
 
 
 def test_render_draws_the_map():
-    env = gym.make("Dubins4DMap-v0", render_mode="rgb_array")
+    env = gym.make("Dubins4DMapGuarded-v0", render_mode="rgb_array")
     env.reset(seed=3)
     img = env.render()
     assert img.shape == (512, 512, 3)

@@ -15,7 +15,7 @@ from rmm_envs.risk import LabelledEnv, RiskScene, System, check_labelled_env, ch
 from rmm_envs.scenes import Dubins4DScene, MazeScene
 
 
-@pytest.mark.parametrize("env_id", ["Dubins4DCircles-v0", "Dubins4DParallel-v0", "Dubins3DMaze-v0", "QuadrotorRoom-v0"])
+@pytest.mark.parametrize("env_id", ["Dubins4DCirclesGuarded-v0", "Dubins4DCirclesParallel-v0", "Dubins3DMaze-v0", "QuadrotorRoom-v0"])
 def test_every_registered_env_is_a_labelled_env_before_and_after_reset(env_id):
     env = gym.make(env_id)
     check_labelled_env(env)  # on the class: no reset needed
@@ -160,7 +160,7 @@ def test_maze_scene_is_the_env_scene_and_observations_are_named():
     q.close()
 
 
-@pytest.mark.parametrize("env_id", ["Dubins4DParallel-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoomParallel-v0",
+@pytest.mark.parametrize("env_id", ["Dubins4DCirclesParallel-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoomParallel-v0",
                                     "Dubins4DMapParallel-v0"])
 def test_parallel_envs_refuse_step_dt_which_non_blocking_stepping_would_ignore(env_id):
     import gymnasium as gym

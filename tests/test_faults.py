@@ -19,7 +19,7 @@ from benchmarks.bench.cli import main
 from rmm_envs.parallel import TaskLost, WorkersLost, run_local
 from tests.bench_helpers import faulty_task, query
 
-FAST = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DParallel-v0"]
+FAST = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DCirclesParallel-v0"]
 
 
 def within(seconds, fn):
@@ -145,10 +145,10 @@ def test_bad_options_exit_2_naming_the_flag_before_any_episode(tmp_path, capsys,
 def test_non_blocking_options_on_a_blocking_env_exit_2_instead_of_being_ignored(tmp_path, capsys, flag, value):
     out = tmp_path / "r"
     argv = ["--agent", "inactive", "--episodes", "1", "--workers", "1", "--out", str(out), "--clock", "fixed:1",
-            "--no-progress", "--env", "Dubins4DCircles-v0", flag, value]
+            "--no-progress", "--env", "Dubins4DCirclesGuarded-v0", flag, value]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
-    assert err.endswith(f"{flag} {value}: Dubins4DCircles-v0 steps by a fixed step per decision and takes no "
+    assert err.endswith(f"{flag} {value}: Dubins4DCirclesGuarded-v0 steps by a fixed step per decision and takes no "
                         f"{flag[2:].replace('-', '_')}; leave {flag} out, or run its non-blocking (Parallel) twin"), err
     assert not out.exists()
     assert main(argv[:-2]) == 0  # the defaults are what a blocking env runs with

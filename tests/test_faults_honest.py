@@ -30,7 +30,7 @@ def _two_models(tmp_path):
 
     first = tmp_path / "first.npz"
     second = tmp_path / "second.npz"
-    shutil.copy(default_model_path("Dubins4DParallel-v0", variant="act"), first)
+    shutil.copy(default_model_path("Dubins4DCirclesParallel-v0", variant="act"), first)
     shutil.copy(first, second)
     set_decision(second, threshold=0.05, commit=0, chosen_by="a drill: a different model file", action="head")
     assert first.read_bytes() != second.read_bytes()
@@ -42,7 +42,7 @@ def test_resume_after_the_model_file_changed_starts_a_new_run_naming_the_file(tm
     model = tmp_path / "model.npz"
     shutil.copy(first, model)
     out = tmp_path / "r"
-    cmd = ["--agent", "lrmm", "--agent-opt", f"lrmm.model={model}", "--out", str(out), "--env", "Dubins4DParallel-v0", *FAST]
+    cmd = ["--agent", "lrmm", "--agent-opt", f"lrmm.model={model}", "--out", str(out), "--env", "Dubins4DCirclesParallel-v0", *FAST]
     assert main(cmd + ["--episodes", "2"]) == 0
     (old_key,) = {r[0] for r in stored(out)}
     capsys.readouterr()
@@ -77,14 +77,14 @@ def test_shipped_model_is_part_of_the_run_key(tmp_path):
     from benchmarks.bench.config import AgentRun
     from guardians.lrmm.model import default_model_path
 
-    run = AgentRun("lrmm", {}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
+    run = AgentRun("lrmm", {}, "Dubins4DCirclesParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
     meta = check_runs({"lrmm": run})
-    shipped = default_model_path("Dubins4DParallel-v0", variant="act")
+    shipped = default_model_path("Dubins4DCirclesParallel-v0", variant="act")
     assert meta["lrmm"]["inputs"] == {str(shipped): file_sha256(shipped)}
     keyed = AgentRun(**{**run.__dict__, "inputs": meta["lrmm"]["inputs"]})
     other = AgentRun(**{**run.__dict__, "inputs": {str(shipped): "0" * 64}})
     assert len({run.key, keyed.key, other.key}) == 3
-    inactive = AgentRun("inactive", {}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
+    inactive = AgentRun("inactive", {}, "Dubins4DCirclesParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
     assert check_runs({"inactive": inactive})["inactive"]["inputs"] == {}
     assert "inputs" not in inactive.as_dict()  # runs that read no file keep the keys they always had
 
@@ -95,7 +95,7 @@ def test_a_file_changed_while_the_run_runs_is_not_used(tmp_path):
     from benchmarks.bench.store import RETRIED_ERRORS
 
     first, second = _two_models(tmp_path)
-    run = AgentRun("lrmm", {"model": str(second)}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False,
+    run = AgentRun("lrmm", {"model": str(second)}, "Dubins4DCirclesParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False,
                    inputs={str(second): file_sha256(first)})  # keyed before the file was replaced
     res = run_episode(EpisodeTask(run=run, run_key=run.key, episode=0, seed=1))
     assert res.outcome == "error" and res.error_kind == "input_changed" and "input_changed" in RETRIED_ERRORS
@@ -129,7 +129,7 @@ def test_guardian_errors_count_as_failures_and_the_command_fails_naming_them(tmp
     n, agent = 8, "tests.test_faults_honest:ErrsOnEvenSeeds"
     out = tmp_path / "r"
     assert main(["--agent", f"{agent},inactive", "--episodes", str(n), "--out", str(out), "--batch-size", str(n),
-                 "--env", "Dubins4DParallel-v0", *FAST]) == 1
+                 "--env", "Dubins4DCirclesParallel-v0", *FAST]) == 1
     captured = capsys.readouterr()
     got = {(a, e): o for _, a, e, o, _ in stored(out)}
     even = [i for i in range(n) if episode_seed(0, i) % 2 == 0]
@@ -336,7 +336,7 @@ def test_a_report_over_two_configurations_prints_one_header_each(tmp_path, capsy
     import csv
 
     out = tmp_path / "r"
-    assert main(["--agent", "inactive", "--episodes", "1", "--seed", "1", "--out", str(out), "--env", "Dubins4DParallel-v0",
+    assert main(["--agent", "inactive", "--episodes", "1", "--seed", "1", "--out", str(out), "--env", "Dubins4DCirclesParallel-v0",
                  *FAST]) == 0
     assert main(["--agent", "brakes", "--episodes", "1", "--seed", "2", "--out", str(out), "--env", "Dubins3DMazeParallel-v0",
                  "--clock", "fixed:20", "--no-progress", "--workers", "1"]) == 0
@@ -344,17 +344,17 @@ def test_a_report_over_two_configurations_prints_one_header_each(tmp_path, capsy
     assert main(["report", str(out), "--invocation", "1", "--invocation", "2"]) == 0
     text = capsys.readouterr().out
     assert text.startswith("2 configurations, one table each (they differ in env, clock, seed):")
-    first = "Table I [1]: Dubins4DParallel-v0, clock fixed:1, time accel 10.0, seed 1, 1 episodes requested per agent"
+    first = "Table I [1]: Dubins4DCirclesParallel-v0, clock fixed:1, time accel 10.0, seed 1, 1 episodes requested per agent"
     second = "Table I [2]: Dubins3DMazeParallel-v0, clock fixed:20, time accel 10.0, seed 2, 1 episodes requested per agent"
     assert first in text and second in text
     a, b = text.index(first), text.index(second)
     assert a < text.index("| inactive |") < b < text.index("| brakes |")  # each row under its own header
     md = (out / "table_I.md").read_text()
-    assert md.index("[1] Dubins4DParallel-v0, clock fixed:1") < md.index("| inactive |") \
+    assert md.index("[1] Dubins4DCirclesParallel-v0, clock fixed:1") < md.index("| inactive |") \
         < md.index("[2] Dubins3DMazeParallel-v0, clock fixed:20") < md.index("| brakes |")
     with open(out / "table_I.csv") as fh:
         got = [(r["agent"], r["env"], r["clock"], r["seed"]) for r in csv.DictReader(fh)]
-    assert got == [("inactive", "Dubins4DParallel-v0", "fixed:1", "1"), ("brakes", "Dubins3DMazeParallel-v0", "fixed:20", "2")]
+    assert got == [("inactive", "Dubins4DCirclesParallel-v0", "fixed:1", "1"), ("brakes", "Dubins3DMazeParallel-v0", "fixed:20", "2")]
     # one configuration: the table as it always was, no numbering
     assert main(["report", str(out), "--invocation", "2"]) == 0
     assert capsys.readouterr().out.startswith("Table I: Dubins3DMazeParallel-v0, clock fixed:20, time accel 10.0, seed 2")
@@ -369,7 +369,7 @@ def _edited_model(tmp_path, arrays=None, meta=None, drop=()):
 
     from guardians.lrmm.model import _checksum, default_model_path
 
-    with np.load(default_model_path("Dubins4DParallel-v0", variant="act")) as z:
+    with np.load(default_model_path("Dubins4DCirclesParallel-v0", variant="act")) as z:
         arrs = {k: z[k] for k in z.files}
     m = json.loads(arrs.pop("meta").tobytes().decode())
     arrs.update(arrays or {})
@@ -387,7 +387,7 @@ def _W0():
 
     from guardians.lrmm.model import default_model_path
 
-    with np.load(default_model_path("Dubins4DParallel-v0", variant="act")) as z:
+    with np.load(default_model_path("Dubins4DCirclesParallel-v0", variant="act")) as z:
         return z["W0"]
 
 
@@ -403,7 +403,7 @@ def test_a_bad_model_file_is_refused_before_any_episode_naming_the_value(tmp_pat
     path = _edited_model(tmp_path, **edit)
     out = tmp_path / "r"
     assert main(["--agent", "lrmm", "--agent-opt", f"lrmm.model={path}", "--episodes", "1", "--out", str(out),
-                 "--env", "Dubins4DParallel-v0", *FAST]) == 2
+                 "--env", "Dubins4DCirclesParallel-v0", *FAST]) == 2
     line = _one_line(capsys.readouterr().err)
     assert str(path) in line and message in line and "KeyError" not in line
     assert not out.exists()
@@ -415,7 +415,7 @@ def _make_map_env(spec):
 
     import rmm_envs  # noqa: F401
 
-    return gym.make("Dubins4DMap-v0", map=spec)
+    return gym.make("Dubins4DMapGuarded-v0", map=spec)
 
 
 @pytest.mark.parametrize("radius", [1e150, 1e300, 10**400])
@@ -488,10 +488,10 @@ def test_the_vectorised_polygon_checks_agree_with_the_scalar_tests():
 
 
 @pytest.mark.parametrize("env_id, option, value", [
-    ("Dubins4DCircles-v0", "state", [1e300, 1e300, 0, 1]),
-    ("Dubins4DCircles-v0", "state", [2e9, 0, 0, 1]),
-    ("Dubins4DCircles-v0", "goal", [0, 0, 1e200]),
-    ("Dubins4DCircles-v0", "obstacles", [[0, 0, 1e150]]),
+    ("Dubins4DCirclesGuarded-v0", "state", [1e300, 1e300, 0, 1]),
+    ("Dubins4DCirclesGuarded-v0", "state", [2e9, 0, 0, 1]),
+    ("Dubins4DCirclesGuarded-v0", "goal", [0, 0, 1e200]),
+    ("Dubins4DCirclesGuarded-v0", "obstacles", [[0, 0, 1e150]]),
 ])
 def test_reset_options_too_large_for_the_geometry_are_refused(env_id, option, value):
     import gymnasium as gym
@@ -580,9 +580,9 @@ def test_an_unreachable_ray_cluster_is_one_line_exit_1_within_seconds(tmp_path, 
 
 
 @pytest.mark.parametrize("env_id, kwargs, name", [
-    ("Dubins4DCircles-v0", {"ray_length": 1e300}, "ray_length"),  # the finding: infinite observations
-    ("Dubins4DCircles-v0", {"step_dt": 1e300}, "step_dt"),
-    ("Dubins4DCircles-v0", {"n_rays": 10**400}, "n_rays"),  # an OverflowError traceback before
+    ("Dubins4DCirclesGuarded-v0", {"ray_length": 1e300}, "ray_length"),  # the finding: infinite observations
+    ("Dubins4DCirclesGuarded-v0", {"step_dt": 1e300}, "step_dt"),
+    ("Dubins4DCirclesGuarded-v0", {"n_rays": 10**400}, "n_rays"),  # an OverflowError traceback before
     ("Dubins3DMazeParallel-v0", {"speed": 1e200}, "speed"),
     ("QuadrotorRoomParallel-v0", {"cruise_speed": 1e200}, "cruise_speed"),
 ])

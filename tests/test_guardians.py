@@ -22,7 +22,7 @@ def spaces(action_space=SPACE, n_rays=12):
             "observation_space": ObservationBox(np.full(lay.size, -np.inf), np.full(lay.size, np.inf), lay)}
 
 
-def run(guardian, seed=0, env_id="Dubins4DCircles-v0", max_steps=2000):
+def run(guardian, seed=0, env_id="Dubins4DCirclesGuarded-v0", max_steps=2000):
     env = gym.make(env_id)
     obs, info = env.reset(seed=seed)
     guardian.reset(seed=seed, observation_space=env.observation_space, action_space=env.action_space,

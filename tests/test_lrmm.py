@@ -75,7 +75,7 @@ def test_numpy_inference_equals_torch(small_dataset, trained):
 
 def test_save_load_round_trip_is_bit_exact(tmp_path, small_dataset, trained):
     p = trained.save(tmp_path / "m.npz")
-    m = LRMMModel.load(p, env_id="Dubins4DCircles-v0", obs_dim=17)
+    m = LRMMModel.load(p, env_id="Dubins4DCirclesGuarded-v0", obs_dim=17)
     for (Wa, ba), (Wb, bb) in zip(trained.weights, m.weights):
         np.testing.assert_array_equal(Wa, Wb)
         assert (ba is None and bb is None) or np.array_equal(ba, bb)
@@ -175,7 +175,7 @@ def forward_ray_model(obs_dim=17):
     b0 = np.array([8.0])  # hidden = sigmoid(8 - 4 ray0): ~1 when ray0 < 1.5, ~0 when ray0 > 2.5
     W1 = np.array([[10.0]])
     b1 = np.array([-5.0])  # risk = sigmoid(10 h - 5): ~0.99 or ~0.007
-    meta = {"env_id": "Dubins4DCircles-v0", "obs_dim": obs_dim, "features": list(range(obs_dim)), "hidden": [1],
+    meta = {"env_id": "Dubins4DCirclesGuarded-v0", "obs_dim": obs_dim, "features": list(range(obs_dim)), "hidden": [1],
             "activation": "sigmoid", "output_bias": True}
     return LRMMModel([(W0, b0), (W1, b1)], np.zeros(obs_dim), np.ones(obs_dim), meta)
 
@@ -275,7 +275,7 @@ def test_lrmm_guardian_bad_input():
 def test_shipped_model_loads_and_is_documented():
     m = load_model()
     assert default_model_path().exists()
-    assert m.env_id == "Dubins4DCircles-v0" and m.obs_dim == 17
+    assert m.env_id == "Dubins4DCirclesGuarded-v0" and m.obs_dim == 17
     assert m.meta["data"]["n_rows"] >= 35072 and m.meta["data"]["configs"] >= 274
     assert m.meta["metrics"]["test"]["mae"] <= 0.030
     assert m.meta["labeller"]["branches"] == 32 and m.meta["labeller"]["depth"] == 2
@@ -471,7 +471,7 @@ def test_non_finite_risk_is_an_error_not_safe():
     """Finite weights can still overflow to inf - inf = NaN; the guardian must raise, not read it as 'safe'."""
     W0 = np.zeros((1, 17))
     W0[0, 5], W0[0, 6] = 1e308, -1e308
-    meta = {"env_id": "Dubins4DCircles-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1],
+    meta = {"env_id": "Dubins4DCirclesGuarded-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1],
             "activation": "relu", "output_bias": False, "decision": {"threshold": 0.5}}
     m = LRMMModel([(W0, np.zeros(1)), (np.ones((1, 1)), None)], np.zeros(17), np.ones(17), meta)
     for g in (LRMMGuardian(m, action="heuristic"), __import__("guardians.lrmm.guardian", fromlist=["x"]).LRMMPaperGuardian(m)):
@@ -529,7 +529,7 @@ def head_model_by_hand(risks_bias=(0.0, 1.0, -1.0, 2.0), decision=None):
     W0 = np.zeros((1, 17))
     W0[0, 5] = -1.0
     W1 = np.array([[1.0], [0.0], [0.0], [0.0]])
-    meta = {"env_id": "Dubins4DCircles-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1], "activation": "relu",
+    meta = {"env_id": "Dubins4DCirclesGuarded-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1], "activation": "relu",
             "output_bias": True, "candidates": [[-0.25, -0.5], [0.25, -0.5], [0.0, 0.5]], "candidate_hold": 1.0}
     if decision:
         meta["decision"] = decision
@@ -584,9 +584,9 @@ def test_defaults_are_pinned():
     paper.reset(seed=0, **SPACES)
     assert (paper.u1_max, paper.u2_min) == (0.25, -0.5)  # the Dubins4D control box, read from the action space
     assert (paper.name, paper.threshold, paper.action, paper.commit, paper.hysteresis, paper.window) == ("lrmm-paper", 0.85, "heuristic", 0, False, 20)
-    assert paper.model.path == default_model_path("Dubins4DCircles-v0", variant="paper")
+    assert paper.model.path == default_model_path("Dubins4DCirclesGuarded-v0", variant="paper")
     g = LRMMGuardian()
-    assert g.name == "lrmm" and g.model.path == default_model_path("Dubins4DCircles-v0", variant="act")
+    assert g.name == "lrmm" and g.model.path == default_model_path("Dubins4DCirclesGuarded-v0", variant="act")
     d = g.model.meta["decision"]
     assert (g.threshold, g.commit, g.action) == (d["threshold"], d["commit"], d.get("action", "head"))
     assert (g.threshold, g.commit, g.action) == SHIPPED_DECISION

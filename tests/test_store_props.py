@@ -23,7 +23,7 @@ from benchmarks.bench.run import plan_tasks
 from benchmarks.bench.runner import episode_seed
 from benchmarks.bench.store import EPISODE_FIELDS, RETRIED_ERRORS, ResultsStore
 
-RUNS = {a: AgentRun(agent=a, agent_kwargs={}, env_id="Dubins4DCircles-v0", env_kwargs={}, seed=s, episode_timeout=60.0,
+RUNS = {a: AgentRun(agent=a, agent_kwargs={}, env_id="Dubins4DCirclesGuarded-v0", env_kwargs={}, seed=s, episode_timeout=60.0,
                     charge_precompute=False) for a, s in (("inactive", 0), ("brakes", 5))}
 KINDS = ("goal", "collision", "timeout", "error:guardian", "error:timeout", "error:lost_worker")
 

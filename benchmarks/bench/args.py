@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from benchmarks.bench.config import BenchConfig
 __all__ = ["DEFAULT_ENV", "ReportRequest", "parse_report", "parse_run", "parse_sweep", "report_parser", "run_parser",
            "sweep_parser"]
 
-DEFAULT_ENV = "Dubins4DParallel-v0"
+DEFAULT_ENV = "Dubins4DCirclesParallel-v0"
 #: the non-blocking stepping options and their defaults (what a blocking env must be left with)
 NON_BLOCKING_DEFAULTS = {"time_accel": 10.0, "base_step": 0.1}
 
@@ -28,9 +29,9 @@ def _common(p: argparse.ArgumentParser, default_agent: str) -> None:
     p.add_argument("--agent", default=default_agent, help="guardian name, comma list, 'all' (defaults), 'paper' (the paper's rules), or module:Class (default: %(default)s)")
     p.add_argument("--episodes", type=int, default=2048, help="episodes per agent (default: %(default)s)")
     p.add_argument("--env", default=DEFAULT_ENV,
-                   help="a registered env id offering the parallel-autonomy contract: Dubins4DParallel-v0, Dubins3DMazeParallel-v0, "
-                        "QuadrotorRoomParallel-v0 or Dubins4DMapParallel-v0 (non-blocking), Dubins4DCircles-v0, "
-                        "Dubins3DMazeGuarded-v0, QuadrotorRoomGuarded-v0 or Dubins4DMap-v0 (blocking) in this package, or "
+                   help="a registered env id offering the parallel-autonomy contract: Dubins4DCirclesParallel-v0, Dubins3DMazeParallel-v0, "
+                        "QuadrotorRoomParallel-v0 or Dubins4DMapParallel-v0 (non-blocking), Dubins4DCirclesGuarded-v0, "
+                        "Dubins3DMazeGuarded-v0, QuadrotorRoomGuarded-v0 or Dubins4DMapGuarded-v0 (blocking) in this package, or "
                         "module:Id for an env that module registers (default: %(default)s)")
     p.add_argument("--time-accel", type=float, default=NON_BLOCKING_DEFAULTS["time_accel"],
                    help="sim seconds per clock second, for a non-blocking env (default: %(default)s)")
@@ -96,18 +97,23 @@ def _check_counts(args) -> None:
 def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
     from benchmarks.bench.checks import env_arguments, parse_agent_opts, resolve_agents
     from guardians.registry import guardian_set
+    from rmm_envs.catalog import canonical_id
 
     agents = resolve_agents(args.agent)
     agent_kwargs = parse_agent_opts(args.agent_opt or [], agents)
     options = {"time_accel": args.time_accel, "base_step": args.base_step, "clock": clock}
-    takes = env_arguments(args.env)  # ValueError if not registered; the contract is checked when the env is built
+    env_id = canonical_id(args.env)
+    if env_id != args.env:  # an old id: run its new id (the same env; its stored runs are found by either id)
+        print(f"rmm-bench: --env {args.env} was renamed {env_id} (the old id still works but will be removed)",
+              file=sys.stderr)
+    takes = env_arguments(env_id)  # ValueError if not registered; the contract is checked when the env is built
     for name, default in NON_BLOCKING_DEFAULTS.items():
         if name not in takes and options[name] != default:  # a blocking env would silently ignore it
             flag = "--" + name.replace("_", "-")
-            raise ValueError(f"{flag} {options[name]:g}: {args.env} steps by a fixed step per decision and takes no "
+            raise ValueError(f"{flag} {options[name]:g}: {env_id} steps by a fixed step per decision and takes no "
                              f"{name}; leave {flag} out, or run its non-blocking (Parallel) twin")
     return BenchConfig(
-        agents=tuple(agents), agent_kwargs=agent_kwargs, env_id=args.env,
+        agents=tuple(agents), agent_kwargs=agent_kwargs, env_id=env_id,
         env_kwargs={k: v for k, v in options.items() if k in takes}, clock=clock, seed=args.seed, episodes=args.episodes,
         out=args.out, workers=args.workers, backend=args.backend, ray_address=args.ray_address,
         episode_timeout=args.episode_timeout, charge_precompute=args.charge_precompute, batch_size=args.batch_size,

@@ -14,7 +14,7 @@ through (the Dubins4D envs' module docstring describes it in full):
 
 Of this command's env options, the env is given those its constructor takes: ``clock``
 always, ``time_accel`` and ``base_step`` only if it takes them (a non-blocking env such as
-``Dubins4DParallel-v0``).  The last part of the contract can only be seen when an episode
+``Dubins4DCirclesParallel-v0``).  The last part of the contract can only be seen when an episode
 ends: an env that breaks it gets an error naming the missing key in every episode.
 """
 

@@ -19,10 +19,10 @@ or adding ``--resume``, finishes an interrupted run without repeating stored epi
 Environments (``--env``): any registered env offering the parallel-autonomy contract (an
 action ``active_ctrl`` choosing between the built-in driver and the guardian's control, a
 ``clock`` argument timing the guardian, and the episode statistics in the last step's info;
-described in ``benchmarks.bench.checks``): ``Dubins4DParallel-v0`` (default, non-blocking: the
-guardian's compute time passes in the world) and ``Dubins4DCircles-v0`` (blocking), the maze car's
+described in ``benchmarks.bench.checks``): ``Dubins4DCirclesParallel-v0`` (default, non-blocking: the
+guardian's compute time passes in the world) and ``Dubins4DCirclesGuarded-v0`` (blocking), the maze car's
 ``Dubins3DMazeParallel-v0`` / ``Dubins3DMazeGuarded-v0``, the quadrotor's ``QuadrotorRoomParallel-v0`` /
-``QuadrotorRoomGuarded-v0`` and the map envs ``Dubins4DMapParallel-v0`` / ``Dubins4DMap-v0`` in this
+``QuadrotorRoomGuarded-v0`` and the map envs ``Dubins4DMapParallel-v0`` / ``Dubins4DMapGuarded-v0`` in this
 package.  Another env is refused with one line naming it and what it lacks.
 
 Your own code: ``--agent module:Class`` (a guardian) and ``--env module:Id`` (an env that

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from guardians.registry import accepts_argument  # noqa: F401  (re-exported: the runner and the checks use it from here)
+from rmm_envs.catalog import stored_id
 
 __all__ = ["AgentRun", "BenchConfig", "EpisodeResult", "EpisodeTask", "InputChanged", "accepts_argument", "changed_inputs",
            "file_sha256",
@@ -128,8 +129,10 @@ class AgentRun:
 
     def as_dict(self) -> dict:
         """The stored configuration (``runs.config``), as every version of the store wrote it, plus
-        ``inputs`` for a run that reads files."""
-        out = {"agent": self.agent, "agent_kwargs": self.agent_kwargs, "env_id": self.env_id, "env_kwargs": self.env_kwargs,
+        ``inputs`` for a run that reads files.  A renamed env is stored under its old id
+        (:func:`rmm_envs.catalog.stored_id`), so a command naming either id finds the runs stored
+        before the rename."""
+        out = {"agent": self.agent, "agent_kwargs": self.agent_kwargs, "env_id": stored_id(self.env_id), "env_kwargs": self.env_kwargs,
                "seed": self.seed, "episode_timeout": self.episode_timeout, "charge_precompute": self.charge_precompute}
         return out | ({"inputs": self.inputs} if self.inputs else {})
 

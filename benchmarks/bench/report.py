@@ -15,13 +15,14 @@ from pathlib import Path
 
 from benchmarks.bench.metrics import aggregate
 from benchmarks.bench.store import RETRIED_ERRORS, ResultsStore
+from rmm_envs.catalog import canonical_id
 
 __all__ = ["PAPER_TABLE_I", "cmd_report", "format_tables", "plot_latency", "plot_outcomes", "table_rows", "write_report"]
 
 # The paper's Table I (2048 episodes per agent; its HJ row used single-obstacle envs)
 #: The envs the paper's Table I describes (it evaluated guardians on Dubins4D only); the report
 #: prints the paper's rows next to a run on one of them.
-PAPER_ENVS = ("Dubins4DParallel-v0", "Dubins4DCircles-v0")
+PAPER_ENVS = ("Dubins4DCirclesParallel-v0", "Dubins4DCirclesGuarded-v0")
 PAPER_TABLE_I = {
     "lrmm": {"obs": "local", "n_obst": 5, "compute_ms": (2.4, 5.0), "goal": (45.3, 7.3), "collision": (29.7, 5.6), "timeout": (25.0, 4.8), "intervention": (30.7, 32.5)},
     "cbf": {"obs": "global", "n_obst": 5, "compute_ms": (52.9, 41.2), "goal": (46.2, 5.9), "collision": (35.1, 5.2), "timeout": (18.8, 3.8), "intervention": (32.8, 39.4)},
@@ -184,10 +185,11 @@ def _legacy_meta(agent: str, config: dict) -> dict:
             meta["observation"] = getattr(load_guardian_class(agent), "observation_type", "?")
         except Exception:
             pass
-    if config.get("env_id") in ENV_IDS:
+    env_id = canonical_id(str(config.get("env_id")))  # stored under its old id if it was renamed
+    if env_id in ENV_IDS:
         import gymnasium as gym
 
-        env = gym.make(config["env_id"])
+        env = gym.make(env_id)
         meta["n_obstacles"] = getattr(env.unwrapped, "n_obstacles", "?")
         env.close()
     return meta
@@ -292,7 +294,7 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
         counts = sorted(set(episodes.values()))
         text = (f"Table I{' ' + label.strip() if mixed else ''}: {_header(args)}, {'/'.join(map(str, counts))} episodes "
                 f"requested per agent (results in {out})\n{_completeness(rows, group)}\n{tables['md']}")
-        if str(args.get("env", "")) in PAPER_ENVS:  # the paper evaluated guardians on Dubins4D only
+        if canonical_id(str(args.get("env", ""))) in PAPER_ENVS:  # the paper evaluated guardians on Dubins4D only
             text += f"\nThe paper's Table I for the same agents:\n\n{paper}"
         texts.append(text)
     try:

@@ -7,7 +7,7 @@
 
 Steps:
 
-1. wrap ``Dubins4DCircles-v0`` so that an RL library can train on it:
+1. wrap ``Dubins4DCirclesGuarded-v0`` so that an RL library can train on it:
    :class:`~rmm_envs.wrappers.FlattenGuardianAction` (a ``Box(-1, 1, (3,))`` action:
    ``[active > 0.5, turn rate, acceleration]`` scaled to the bounds) and
    :class:`~rmm_envs.wrappers.GuardianReward` (goal bonus, collision penalty, a cost per
@@ -17,7 +17,7 @@ Steps:
    step's ``info["cost"]`` (1 on a collision) is charged at a multiplier ``lam`` that rises
    while the episodes' mean cost exceeds ``C`` and falls (to 0 at least) while below
    (:class:`LagrangianPenalty`, :class:`LagrangeUpdate`);
-3. evaluate it with ``rmm-bench`` on ``Dubins4DParallel-v0`` as the guardian
+3. evaluate it with ``rmm-bench`` on ``Dubins4DCirclesParallel-v0`` as the guardian
    ``rl_guardian:PPOGuardian`` (this module's class, an :class:`guardians.SB3Guardian` reading
    the model's flat actions exactly as the training wrapper did; given the model file with
    ``--agent-opt rl_guardian:PPOGuardian.model=PATH``), next to ``lrmm``, ``cbf`` and ``inactive``.
@@ -47,7 +47,7 @@ from rmm_envs.wrappers import FlattenGuardianAction, GuardianReward
 
 def make_training_env(seed: int = 0) -> gym.Env:
     """The env PPO trains on: flat Box actions, shaped reward (defaults of GuardianReward)."""
-    env = GuardianReward(FlattenGuardianAction(gym.make("Dubins4DCircles-v0")))
+    env = GuardianReward(FlattenGuardianAction(gym.make("Dubins4DCirclesGuarded-v0")))
     env.reset(seed=seed)
     return env
 
@@ -68,7 +68,7 @@ class LagrangianPenalty(gym.Wrapper):
 def make_constrained_env(lam: np.ndarray, seed: int = 0) -> gym.Env:
     """The constrained problem: goal bonus and intervention cost as the reward, no collision
     penalty; collisions enter through ``info["cost"]`` at the multiplier ``lam``."""
-    env = LagrangianPenalty(GuardianReward(FlattenGuardianAction(gym.make("Dubins4DCircles-v0")),
+    env = LagrangianPenalty(GuardianReward(FlattenGuardianAction(gym.make("Dubins4DCirclesGuarded-v0")),
                                            collision_penalty=0.0), lam)
     env.reset(seed=seed)
     return env

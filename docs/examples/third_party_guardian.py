@@ -63,7 +63,7 @@ def main():
     import rmm_envs  # noqa: F401
 
     # 1. a callable, in a hand-written loop
-    env = gym.make("Dubins4DParallel-v0", clock="fixed:1")
+    env = gym.make("Dubins4DCirclesParallel-v0", clock="fixed:1")
     guardian = CallableGuardian(keep_distance, name="keep-distance")
     outcomes = {}
     for seed in range(5):

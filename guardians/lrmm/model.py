@@ -50,6 +50,7 @@ import numpy as np
 
 from guardians.lrmm.inference import forward_one as _forward_one
 from guardians.lrmm.inference import forward_rows as _forward_rows
+from rmm_envs.catalog import canonical_id
 from rmm_envs.portable import matvec
 
 __all__ = ["FORMAT", "SHIPPED", "LRMMModel", "Shipped", "default_model_path", "load_model"]
@@ -295,14 +296,31 @@ _MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays", decision={
 #: no head), for ``action="safe"`` (hover and level) with an explicit threshold.
 _QUAD_PARALLEL = Shipped({"act": "quadrotor_cmd_act.npz", "risk": "quadrotor_cmd.npz"})
 
+class ShippedById(dict):
+    """Shipped models by env id; an old id of a renamed env (:data:`rmm_envs.catalog.RENAMED`)
+    finds its new id's entry (iteration lists the current ids only)."""
+
+    def __missing__(self, env_id):
+        new = canonical_id(env_id) if isinstance(env_id, str) else env_id
+        if new == env_id or not dict.__contains__(self, new):
+            raise KeyError(env_id)
+        return self[new]
+
+    def __contains__(self, env_id) -> bool:
+        return dict.__contains__(self, env_id) or (isinstance(env_id, str) and dict.__contains__(self, canonical_id(env_id)))
+
+    def get(self, env_id, default=None):
+        return self[env_id] if env_id in self else default
+
+
 #: The one table of shipped models, by env id.
-SHIPPED: dict[str, Shipped] = {
-    "Dubins4DCircles-v0": _DUBINS4D,
-    "Dubins4DParallel-v0": _DUBINS4D,
+SHIPPED: ShippedById = ShippedById({
+    "Dubins4DCirclesGuarded-v0": _DUBINS4D,
+    "Dubins4DCirclesParallel-v0": _DUBINS4D,
     # the same car and observation on a map of your own: the circle-trained models, unchanged
     # (rays are distances whatever the obstacle's shape; how well that transfers is measured
     # in the map env's tests and docs, not assumed)
-    "Dubins4DMap-v0": _DUBINS4D,
+    "Dubins4DMapGuarded-v0": _DUBINS4D,
     "Dubins4DMapParallel-v0": _DUBINS4D,
     "Dubins3DMaze-v0": Shipped({"paper": "dubins3d_maze.npz"}),
     "Dubins3DMazeGuarded-v0": _MAZE_PARALLEL,
@@ -310,10 +328,10 @@ SHIPPED: dict[str, Shipped] = {
     "QuadrotorRoom-v0": Shipped({"paper": "quadrotor.npz"}),
     "QuadrotorRoomGuarded-v0": _QUAD_PARALLEL,
     "QuadrotorRoomParallel-v0": _QUAD_PARALLEL,
-}
+})
 
 
-def default_model_path(env_id: str = "Dubins4DCircles-v0", variant: str = "paper") -> Path:
+def default_model_path(env_id: str = "Dubins4DCirclesGuarded-v0", variant: str = "paper") -> Path:
     """Path of the model shipped with the package for ``env_id`` (:data:`SHIPPED`).
 
     ``variant="paper"`` (default): the paper's risk-only network (Table II).  ``"act"``: the
@@ -335,7 +353,7 @@ def default_model_path(env_id: str = "Dubins4DCircles-v0", variant: str = "paper
     return Path(str(resources.files("guardians.lrmm") / "models" / ship.files[variant]))
 
 
-def load_model(path=None, env_id: str = "Dubins4DCircles-v0") -> LRMMModel:
+def load_model(path=None, env_id: str = "Dubins4DCirclesGuarded-v0") -> LRMMModel:
     """Load ``path`` or the shipped model for ``env_id``."""
     return LRMMModel.load(path or default_model_path(env_id))
 

@@ -1,6 +1,6 @@
 """Dubins4D among circles: a reckless driver, a guardian that may take over, and lidar.
 
-``Dubins4DCircles-v0`` (blocking, fixed step) and ``Dubins4DParallel-v0`` (non-blocking: the
+``Dubins4DCirclesGuarded-v0`` (blocking, fixed step) and ``Dubins4DCirclesParallel-v0`` (non-blocking: the
 guardian's thinking time passes in the world).  This is the paper's parallel-autonomy case study
 (Sec. IV-A, Table I), rebuilt on Gymnasium.
 
@@ -102,7 +102,7 @@ Privileged information is also available through :meth:`Dubins4DCirclesEnv.privi
 
 ## Arguments
 
-``gym.make("Dubins4DCircles-v0", step_dt=0.1, n_rays=12, ray_length=10.0,
+``gym.make("Dubins4DCirclesGuarded-v0", step_dt=0.1, n_rays=12, ray_length=10.0,
 max_episode_sim_time=100.0, n_obstacles=5, obstacle_min_rad=2.0, obstacle_max_rad=5.0,
 goal_min_rad=0.1, goal_max_rad=1.0, n_path_points=16, driver_params=None, clock=None,
 render_mode=None, driver_solver="closed_form")``.  ``clock`` ("wall", "cpu", "fixed:MS" or a
@@ -110,12 +110,12 @@ render_mode=None, driver_solver="closed_form")``.  ``clock`` ("wall", "cpu", "fi
 blocking env.  ``driver_solver``: how the driver's QP is solved, ``"closed_form"`` (exact, the
 default) or ``"osqp"`` (the earlier solver, kept for checking; equal to about 1e-7).
 
-``gym.make_vec("Dubins4DCircles-v0", num_envs=N, vectorization_mode="vector_entry_point")``:
+``gym.make_vec("Dubins4DCirclesGuarded-v0", num_envs=N, vectorization_mode="vector_entry_point")``:
 :class:`rmm_envs.envs.dubins4d_vector.Dubins4DCirclesVectorEnv`, ``N`` copies of this env
 computed as arrays (sub-env ``i`` after ``reset(seed=s)`` is this env after ``reset(seed=s +
 i)``, bit for bit).
 
-``gym.make("Dubins4DParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same but step_dt)``:
+``gym.make("Dubins4DCirclesParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same but step_dt)``:
 the same world stepped by :class:`rmm_envs.wrappers.NonBlockingStepping`: each ``step(a)``
 advances the world by ``elapsed * time_accel + base_step`` seconds under the *previous* action
 and then stores ``a`` for the next interval (the first interval is the driver's).
@@ -363,4 +363,4 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         return _render.dubins4d_frame(self.scene, self._state, self._last_active, _HALF, size)
 
 
-make_parallel_env = parallel_entry_point(Dubins4DCirclesEnv, "Dubins4DParallel-v0")
+make_parallel_env = parallel_entry_point(Dubins4DCirclesEnv, "Dubins4DCirclesParallel-v0")

@@ -1,6 +1,6 @@
 """The blocking parallel-autonomy env skeleton: :class:`GuardedEnv`.
 
-What every env with a built-in driver and a guardian action shares (``Dubins4DCircles-v0``,
+What every env with a built-in driver and a guardian action shares (``Dubins4DCirclesGuarded-v0``,
 ``Dubins3DMazeGuarded-v0``), written once on top of :class:`rmm_envs.envs.base.LabelledEnvBase`:
 
 * :meth:`GuardedEnv.step`: read the agent's compute time off ``self.clock``, parse the action

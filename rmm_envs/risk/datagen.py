@@ -3,7 +3,7 @@
 For each procedurally generated obstacle configuration: sample valid states, observe them,
 label them with the sampling-tree estimator.  Example (the paper's Dubins4D scale)::
 
-    rmm-datagen --env Dubins4DCircles-v0 --configs 274 --samples-per-config 128 --seed 0 --out data/d4
+    rmm-datagen --env Dubins4DCirclesGuarded-v0 --configs 274 --samples-per-config 128 --seed 0 --out data/d4
 
 Output directory:
 
@@ -258,7 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
         "valid states, their observations and sampling-tree risk labels, written as Parquet shards. "
         "Rerun the same command to resume an interrupted run.",
     )
-    p.add_argument("--env", default="Dubins4DCircles-v0",
+    p.add_argument("--env", default="Dubins4DCirclesGuarded-v0",
                    help="environment id, or module:Id to import the module that registers it first "
                    "(from the current directory first) (default: %(default)s)")
     p.add_argument("--configs", type=int, default=274, help="number of obstacle configurations (default: %(default)s)")

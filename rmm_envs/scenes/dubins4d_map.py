@@ -18,7 +18,7 @@ __all__ = ["Dubins4DMapScene"]
 
 
 class Dubins4DMapScene(Dubins4DScene):
-    """The :class:`rmm_envs.risk.RiskScene` of ``Dubins4DMap-v0``: ``world`` is the map's
+    """The :class:`rmm_envs.risk.RiskScene` of ``Dubins4DMapGuarded-v0``: ``world`` is the map's
     :class:`PymunkWorld` (built once per map and shared by the episodes on it), ``goal`` the
     episode's goal disc ``(3,)``.  The env uses this very object for its own observations and
     collision checks, so labels and the env agree by construction."""

@@ -4,7 +4,7 @@ Most RL libraries (Stable-Baselines3, CleanRL, ...) train on ``Box`` or ``Discre
 not on the ``Dict`` guardian action of a parallel-autonomy env, and the env's own reward
 (+1 goal, -1 collision) says nothing about the cost of taking control.  Two wrappers close
 the gap; they work on every env whose action space is an
-:class:`rmm_envs.autonomy.GuardianActionSpace` (``Dubins4DCircles-v0``, ``Dubins4DParallel-v0``).
+:class:`rmm_envs.autonomy.GuardianActionSpace` (``Dubins4DCirclesGuarded-v0``, ``Dubins4DCirclesParallel-v0``).
 
 :class:`FlattenGuardianAction`
     Action space ``Box(-1, 1, (1 + c,), float32)`` for ``c`` controls: ``a[0] > 0.5`` takes
