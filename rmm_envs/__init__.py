@@ -1,34 +1,20 @@
 """rmm_envs: environments, risk labelling and datasets for learned risk metric maps.
 
-Importing the package registers the Gymnasium environments:
-
-* ``Dubins4DCirclesGuarded-v0``: Dubins4D among circles, blocking fixed-step (guardian action);
-  also a native vector env, ``gym.make_vec("Dubins4DCirclesGuarded-v0", num_envs=N)`` (numpy
-  arrays, :mod:`rmm_envs.envs.dubins4d_vector`).
-* ``Dubins4DCirclesParallel-v0``: the same, non-blocking (the guardian's compute time passes).
-* ``Dubins4DMapGuarded-v0``, ``Dubins4DMapParallel-v0``: the same world on a map of your own
-  (circles, polygons, walls from JSON; rays and collisions by pymunk, extra ``map``).
-* ``Dubins3DMaze-v0``: a constant-speed Dubins car in procedurally generated mazes.
-* ``Dubins3DMazeGuarded-v0``: that car driven to a goal cell by a reckless driver, a guardian
-  may take over the turn rate (blocking, fixed step).
-* ``Dubins3DMazeParallel-v0``: the same, non-blocking (the guardian's compute time passes).
-* ``QuadrotorRoom-v0``: a quadrotor in procedurally generated rooms (PyBullet; extra ``quadrotor``).
-* ``QuadrotorRoomGuarded-v0``: that quadrotor flown through waypoints by a reckless pilot on a
-  cascaded controller, a guardian may take over the velocity command (blocking, fixed step).
-* ``QuadrotorRoomParallel-v0``: the same, non-blocking (the guardian's compute time passes).
-
-The naming scheme (``<System>-v0`` plain control, ``<System>Guarded-v0`` blocking guardian env,
-``<System>Parallel-v0`` non-blocking) and the old ids kept as warning aliases:
-:mod:`rmm_envs.catalog`.
+Importing the package registers the Gymnasium environments of its systems, all read from one
+table, :data:`rmm_envs.catalog.SYSTEMS` (listed in docs/environments/index.md): per system
+``<System>-v0`` (plain control), ``<System>Guarded-v0`` (a built-in driver a guardian may
+override, blocking, fixed step) and ``<System>Parallel-v0`` (the same, non-blocking: the
+guardian's compute time passes), for Dubins4D among circles and on maps of your own, the
+Dubins3D maze car and the PyBullet quadrotor.  ``gym.make_vec("Dubins4DCirclesGuarded-v0",
+num_envs=N)`` is a native numpy vector env.  Ids renamed to this scheme stay registered and
+warn (:data:`rmm_envs.catalog.RENAMED`).
 """
 
 from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
 
-import gymnasium as gym
-
-from rmm_envs.catalog import register_aliases
+from rmm_envs import catalog
 
 try:
     __version__ = version("rmm-envs")
@@ -36,35 +22,11 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
 #: The envs offering the parallel-autonomy contract (a built-in driver and a guardian action):
-#: every registered env but the two plain-control ones, ``Dubins3DMaze-v0`` and ``QuadrotorRoom-v0``.
-GUARDIAN_ENV_IDS = ("Dubins4DCirclesGuarded-v0", "Dubins4DCirclesParallel-v0", "Dubins4DMapGuarded-v0", "Dubins4DMapParallel-v0",
-                    "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoomGuarded-v0",
-                    "QuadrotorRoomParallel-v0")
-ENV_IDS = ("Dubins4DCirclesGuarded-v0", "Dubins4DCirclesParallel-v0", "Dubins4DMapGuarded-v0", "Dubins4DMapParallel-v0", "Dubins3DMaze-v0", "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0",
-           "QuadrotorRoom-v0", "QuadrotorRoomGuarded-v0", "QuadrotorRoomParallel-v0")
+#: every system's ``Guarded`` and ``Parallel`` env (:data:`rmm_envs.catalog.SYSTEMS`).
+GUARDIAN_ENV_IDS = catalog.guardian_env_ids()
+#: Every env id this package registers (old ids of renamed envs, :data:`rmm_envs.catalog.RENAMED`, aside).
+ENV_IDS = catalog.env_ids()
 
-
-def _register() -> None:
-    specs = {
-        "Dubins4DCirclesGuarded-v0": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv",
-        "Dubins4DCirclesParallel-v0": "rmm_envs.envs.dubins4d:make_parallel_env",
-        "Dubins4DMapGuarded-v0": "rmm_envs.envs.dubins4d_map:Dubins4DMapEnv",
-        "Dubins4DMapParallel-v0": "rmm_envs.envs.dubins4d_map:make_parallel_env",
-        "Dubins3DMaze-v0": "rmm_envs.envs.dubins3d_maze:Dubins3DMazeEnv",
-        "Dubins3DMazeGuarded-v0": "rmm_envs.envs.dubins3d_maze_parallel:Dubins3DMazeGuardedEnv",
-        "Dubins3DMazeParallel-v0": "rmm_envs.envs.dubins3d_maze_parallel:make_parallel_env",
-        "QuadrotorRoom-v0": "rmm_envs.envs.quadrotor_room:QuadrotorRoomEnv",
-        "QuadrotorRoomGuarded-v0": "rmm_envs.envs.quadrotor_room_parallel:QuadrotorRoomGuardedEnv",
-        "QuadrotorRoomParallel-v0": "rmm_envs.envs.quadrotor_room_parallel:make_parallel_env",
-    }
-    vector_specs = {"Dubins4DCirclesGuarded-v0": "rmm_envs.envs.dubins4d_vector:Dubins4DCirclesVectorEnv"}
-    for env_id, entry in specs.items():
-        if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point=entry, vector_entry_point=vector_specs.get(env_id),
-                         disable_env_checker=False)
-    register_aliases()
-
-
-_register()
+catalog.register()
 
 __all__ = ["ENV_IDS", "GUARDIAN_ENV_IDS", "__version__"]

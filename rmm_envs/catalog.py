@@ -1,6 +1,14 @@
-"""The env ids this package registers, their naming scheme, and the renamed ids.
+"""The table of systems: one declaration per system, from which every env id is derived.
 
-Every system has up to three envs, named after the system (``<System>``):
+:data:`SYSTEMS` holds one :class:`SystemSpec` per system: its dynamics, risk scenes, env entry
+points, driver, safe default, the built-in guardians that apply, its docs page(s), and the ids
+it was known by before.  Registration (``import rmm_envs``), ``rmm_envs.ENV_IDS`` and
+``GUARDIAN_ENV_IDS``, the renamed-id aliases, the shipped LRMM models' lookup by id
+(:data:`guardians.lrmm.model.SHIPPED`), the ``--env`` help of ``rmm-bench`` and ``rmm-envs demo``
+and the docs' environment list (``docs/gen.py``) are all read from it.  Adding a system is its
+modules plus one entry here.
+
+Every system has up to three envs, named after it (``<System>``):
 
 * ``<System>-v0``: plain control (the agent drives; no built-in driver);
 * ``<System>Guarded-v0``: a built-in driver drives, a guardian may take over; blocking, fixed
@@ -8,7 +16,7 @@ Every system has up to three envs, named after the system (``<System>``):
 * ``<System>Parallel-v0``: the same, non-blocking (the guardian's compute time passes).
 
 Ids used before this scheme stay registered as aliases (:data:`RENAMED`): making one warns
-(``DeprecationWarning``, pointing at the caller) and builds the env of its new id.  Results a
+(``DeprecationWarning``, at the caller's line) and builds the env of its new id.  Results a
 benchmark stored under an old id keep their run keys: :func:`stored_id` is the id an env's
 results are keyed under, the same for its old and its new id.
 """
@@ -18,18 +26,136 @@ from __future__ import annotations
 import inspect
 import sys
 import warnings
+from dataclasses import dataclass, field
 
 import gymnasium as gym
 
-__all__ = ["RENAMED", "canonical_id", "stored_id"]
+__all__ = ["GUARDED_KINDS", "KINDS", "RENAMED", "SYSTEMS", "DocPage", "SystemSpec", "canonical_id", "env_help",
+           "guardian_env_ids", "env_ids", "register", "stored_id", "system_of"]
+
+#: The three kinds of env a system may have, and the suffix of each one's id.
+KINDS = {"plain": "-v0", "guarded": "Guarded-v0", "parallel": "Parallel-v0"}
+#: The kinds with a built-in driver and a guardian action (the parallel-autonomy contract).
+GUARDED_KINDS = ("guarded", "parallel")
+
+
+@dataclass(frozen=True)
+class DocPage:
+    """A generated docs page: ``path`` under docs/, the module whose docstring it renders (the
+    entry point of its first kind), its title (followed by the ids of ``kinds``), a figure."""
+
+    path: str
+    title: str
+    kinds: tuple[str, ...]
+    figure: str | None = None
+
+
+@dataclass(frozen=True)
+class SystemSpec:
+    """One system.  References are ``"module:attribute"`` strings (imported only when used, so
+    listing a system needs none of its optional dependencies)."""
+
+    name: str  #: ids are ``name + KINDS[kind]``
+    blurb: str  #: one line for the docs' environment list
+    dynamics: str
+    scenes: tuple[str, ...]  #: the RiskScene of each env (plain control first)
+    envs: dict  #: kind -> entry point, for the kinds the system has
+    driver: str | None = None  #: the built-in driver of its guarded envs
+    safe_default: str | None = None  #: the SafeDefault its guardian action space carries
+    guardians: tuple[str, ...] = ()  #: the built-in guardians that apply to its guarded envs
+    vector: str | None = None  #: vector entry point of its blocking guardian env
+    extra: str | None = None  #: the package extra its envs need
+    pages: tuple[DocPage, ...] = ()
+    renamed: dict = field(default_factory=dict)  #: old id -> kind, ids used before the naming scheme
+
+    def env_id(self, kind: str) -> str:
+        if kind not in self.envs:
+            raise KeyError(f"{self.name} has no {kind} env (it has {sorted(self.envs)})")
+        return self.name + KINDS[kind]
+
+    def ids(self, kinds=tuple(KINDS)) -> tuple[str, ...]:
+        return tuple(self.name + KINDS[k] for k in kinds if k in self.envs)
+
+
+_DUBINS4D_GUARDIANS = ("lrmm", "lrmm-paper", "cbf", "cbf-paper", "hj", "hj-paper", "random", "inactive", "brakes")
+
+SYSTEMS: tuple[SystemSpec, ...] = (
+    SystemSpec(
+        name="Dubins4DCircles",
+        blurb="a Dubins4D car driven to a goal among five circles by a reckless CLF-QP driver",
+        dynamics="rmm_envs.systems.dubins4d:Dubins4D", scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
+        envs={"guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv", "parallel": "rmm_envs.envs.dubins4d:make_parallel_env"},
+        driver="rmm_envs.driver:CLFDriver", safe_default="rmm_envs.systems.dubins4d:FullBraking",
+        guardians=_DUBINS4D_GUARDIANS, vector="rmm_envs.envs.dubins4d_vector:Dubins4DCirclesVectorEnv",
+        pages=(DocPage("environments/dubins4d.md", "Dubins4D among circles", ("guarded", "parallel"),
+                       "figures/dubins4d_frame.png"),),
+        renamed={"Dubins4DCircles-v0": "guarded", "Dubins4DParallel-v0": "parallel"}),
+    SystemSpec(
+        name="Dubins4DMap",
+        blurb="the same car and driver on a JSON map of your own (circles, polygons, walls; pymunk)",
+        dynamics="rmm_envs.systems.dubins4d:Dubins4D", scenes=("rmm_envs.scenes.dubins4d_map:Dubins4DMapScene",),
+        envs={"guarded": "rmm_envs.envs.dubins4d_map:Dubins4DMapEnv", "parallel": "rmm_envs.envs.dubins4d_map:make_parallel_env"},
+        driver="rmm_envs.driver:CLFDriver", safe_default="rmm_envs.systems.dubins4d:FullBraking",
+        guardians=("lrmm", "lrmm-paper", "random", "inactive", "brakes"), extra="map",
+        pages=(DocPage("environments/dubins4d_map.md", "Dubins4D on a map of your own", ("guarded", "parallel"),
+                       "figures/dubins4d_map_frame.png"),),
+        renamed={"Dubins4DMap-v0": "guarded"}),
+    SystemSpec(
+        name="Dubins3DMaze",
+        blurb="a constant-speed Dubins car in procedurally generated mazes, guarded from a corner-cutting pursuit driver",
+        dynamics="rmm_envs.systems.dubins3d:Dubins3D", scenes=("rmm_envs.scenes.maze:MazeScene",),
+        envs={"plain": "rmm_envs.envs.dubins3d_maze:Dubins3DMazeEnv",
+              "guarded": "rmm_envs.envs.dubins3d_maze_parallel:Dubins3DMazeGuardedEnv",
+              "parallel": "rmm_envs.envs.dubins3d_maze_parallel:make_parallel_env"},
+        driver="rmm_envs.maze_driver:PursuitDriver", safe_default="rmm_envs.envs.dubins3d_maze_parallel:TurnFromNearerWall",
+        guardians=("lrmm", "cbf", "hj", "random", "inactive", "brakes"),
+        pages=(DocPage("environments/dubins3d_maze.md", "Dubins3D in mazes", ("plain",), "figures/dubins3d_maze_frame.png"),
+               DocPage("environments/dubins3d_maze_parallel.md", "The maze car under parallel autonomy",
+                       ("guarded", "parallel")))),
+    SystemSpec(
+        name="QuadrotorRoom",
+        blurb="a quadrotor in procedurally generated rooms (PyBullet), flown through waypoints by a reckless pilot",
+        dynamics="rmm_envs.systems.quadrotor:Quadrotor",
+        scenes=("rmm_envs.scenes.quadrotor:QuadrotorScene", "rmm_envs.scenes.quadrotor:QuadrotorCommandScene"),
+        envs={"plain": "rmm_envs.envs.quadrotor_room:QuadrotorRoomEnv",
+              "guarded": "rmm_envs.envs.quadrotor_room_parallel:QuadrotorRoomGuardedEnv",
+              "parallel": "rmm_envs.envs.quadrotor_room_parallel:make_parallel_env"},
+        driver="rmm_envs.quadrotor_pilot:WaypointPilot", safe_default="rmm_envs.systems.quadrotor_control:HoverAndLevel",
+        guardians=("lrmm", "random", "inactive", "brakes"), extra="quadrotor",
+        pages=(DocPage("environments/quadrotor_room.md", "Quadrotor in rooms", ("plain",), "figures/quadrotor_room_frame.png"),
+               DocPage("environments/quadrotor_room_parallel.md", "The quadrotor under parallel autonomy",
+                       ("guarded", "parallel")))),
+)
 
 #: Old id -> new id, for the ids renamed when one naming scheme was applied to every system.
-RENAMED = {
-    "Dubins4DCircles-v0": "Dubins4DCirclesGuarded-v0",
-    "Dubins4DParallel-v0": "Dubins4DCirclesParallel-v0",
-    "Dubins4DMap-v0": "Dubins4DMapGuarded-v0",
-}
+RENAMED = {old: s.env_id(kind) for s in SYSTEMS for old, kind in s.renamed.items()}
 _STORED = {new: old for old, new in RENAMED.items()}
+
+
+def env_ids(kinds=tuple(KINDS)) -> tuple[str, ...]:
+    """Every registered id of ``kinds``, system by system, plain control first."""
+    return tuple(i for s in SYSTEMS for i in s.ids(kinds))
+
+
+def guardian_env_ids() -> tuple[str, ...]:
+    """The ids of every env with a built-in driver and a guardian action."""
+    return env_ids(GUARDED_KINDS)
+
+
+def system_of(env_id: str) -> tuple[SystemSpec, str]:
+    """The system of ``env_id`` (a current or an old id) and its kind; KeyError for other ids."""
+    env_id = canonical_id(env_id)
+    for s in SYSTEMS:
+        for kind in s.envs:
+            if s.env_id(kind) == env_id:
+                return s, kind
+    raise KeyError(f"{env_id!r} is not an env of this package's systems ({', '.join(env_ids())})")
+
+
+def env_help() -> str:
+    """The ids ``--env`` accepts, as the CLI help lists them."""
+    return (f"{', '.join(env_ids(('parallel',)))} (non-blocking) or {', '.join(env_ids(('guarded',)))} (blocking) "
+            "in this package")
 
 
 def canonical_id(env_id: str) -> str:
@@ -76,11 +202,15 @@ class Renamed:
         return f"Renamed({self.old!r} -> {self.new!r})"
 
 
-def register_aliases() -> None:
-    """Register every old id of :data:`RENAMED` (after the new ids)."""
+def register() -> None:
+    """Register every env of :data:`SYSTEMS`, then every old id of :data:`RENAMED` (idempotent)."""
+    for s in SYSTEMS:
+        for kind, entry in s.envs.items():
+            if s.env_id(kind) not in gym.registry:
+                gym.register(id=s.env_id(kind), entry_point=entry, vector_entry_point=s.vector if kind == "guarded" else None,
+                             disable_env_checker=False)
     for old, new in RENAMED.items():
-        if old in gym.registry:
-            continue
-        vector = gym.spec(new).vector_entry_point
-        gym.register(id=old, entry_point=Renamed(old, new), vector_entry_point=Renamed(old, new, True) if vector else None,
-                     disable_env_checker=False)
+        if old not in gym.registry:
+            vector = gym.spec(new).vector_entry_point
+            gym.register(id=old, entry_point=Renamed(old, new),
+                         vector_entry_point=Renamed(old, new, True) if vector else None, disable_env_checker=False)

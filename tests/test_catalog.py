@@ -59,3 +59,118 @@ def test_a_dataset_made_under_an_old_id_is_the_same_dataset_under_the_new_one():
 
     assert identity({"env_id": "Dubins4DCircles-v0", "seed": 1}) == identity({"env_id": "Dubins4DCirclesGuarded-v0", "seed": 1})
     assert identity({"env_id": "Dubins3DMaze-v0"}) != identity({"env_id": "Dubins3DMazeGuarded-v0"})
+
+
+# ------------------------------------------------------------------ one table per system
+def test_ids_registration_and_twins_come_from_the_table():
+    from rmm_envs.catalog import GUARDED_KINDS, KINDS, SYSTEMS
+
+    assert rmm_envs.ENV_IDS == tuple(s.name + KINDS[k] for s in SYSTEMS for k in KINDS if k in s.envs)
+    assert rmm_envs.GUARDIAN_ENV_IDS == tuple(s.name + KINDS[k] for s in SYSTEMS for k in GUARDED_KINDS if k in s.envs)
+    assert len(set(rmm_envs.ENV_IDS)) == len(rmm_envs.ENV_IDS) == 10
+    for s in SYSTEMS:
+        for kind, entry in s.envs.items():
+            spec = gym.spec(s.env_id(kind))
+            assert spec.entry_point == entry
+            assert spec.vector_entry_point == (s.vector if kind == "guarded" else None)
+    assert gym.spec("Dubins4DCirclesGuarded-v0").vector_entry_point == "rmm_envs.envs.dubins4d_vector:Dubins4DCirclesVectorEnv"
+    with pytest.raises(KeyError, match="Dubins4DCircles has no plain env"):
+        SYSTEMS[0].env_id("plain")
+
+
+def test_every_reference_of_the_table_imports():
+    from gymnasium.envs.registration import load_env_creator
+
+    from rmm_envs.autonomy import SafeDefault
+    from rmm_envs.catalog import SYSTEMS
+    from rmm_envs.scenes.base import SceneBase
+
+    for s in SYSTEMS:
+        for ref in (*s.envs.values(), s.dynamics, s.driver, *((s.vector,) if s.vector else ())):
+            assert callable(load_env_creator(ref)), ref
+        assert all(issubclass(load_env_creator(ref), SceneBase) for ref in s.scenes)
+        assert issubclass(load_env_creator(s.safe_default), SafeDefault)
+
+
+def test_system_of_finds_each_id_and_refuses_others():
+    from rmm_envs.catalog import system_of
+
+    assert [(s.name, k) for s, k in map(system_of, ("Dubins4DParallel-v0", "QuadrotorRoom-v0", "Dubins4DMapGuarded-v0"))] == \
+        [("Dubins4DCircles", "parallel"), ("QuadrotorRoom", "plain"), ("Dubins4DMap", "guarded")]
+    with pytest.raises(KeyError, match="'CartPole-v1' is not an env of this package's systems"):
+        system_of("CartPole-v1")
+
+
+def test_the_cli_help_and_the_docs_list_name_the_table_s_ids():
+    import sys
+    from pathlib import Path
+
+    from benchmarks.bench.args import run_parser, sweep_parser
+    from rmm_envs.catalog import RENAMED, SYSTEMS, env_help
+    from rmm_envs.cli import build_parser
+
+    assert env_help() == ("Dubins4DCirclesParallel-v0, Dubins4DMapParallel-v0, Dubins3DMazeParallel-v0, "
+                          "QuadrotorRoomParallel-v0 (non-blocking) or Dubins4DCirclesGuarded-v0, Dubins4DMapGuarded-v0, "
+                          "Dubins3DMazeGuarded-v0, QuadrotorRoomGuarded-v0 (blocking) in this package")
+    for parser in (run_parser(""), sweep_parser()):
+        env = next(a for a in parser._actions if a.dest == "env")
+        assert env_help() in env.help and env.default == "Dubins4DCirclesParallel-v0"
+    demo = next(a for a in build_parser()._actions if a.dest == "command").choices["demo"]
+    assert next(a for a in demo._actions if a.dest == "env").choices == list(rmm_envs.GUARDIAN_ENV_IDS)
+    docs = Path(__file__).resolve().parents[1] / "docs"
+    sys.path.insert(0, str(docs))
+    try:
+        import gen
+    finally:
+        sys.path.remove(str(docs))
+    page = gen.env_list_page()
+    assert (docs / "environments" / "index.md").read_text() == page
+    rows = [line for line in page.splitlines() if line.startswith("| ") and "`" in line]
+    assert sum(f"`{i}`" in line for line in rows for i in rmm_envs.ENV_IDS) == len(rmm_envs.ENV_IDS) + len(RENAMED)
+    assert set(gen.env_pages()) == {p.path for s in SYSTEMS for p in s.pages}
+
+
+def test_a_new_table_entry_is_registered_listed_and_helped(monkeypatch):
+    from rmm_envs import catalog
+
+    toy = catalog.SystemSpec(name="ToyCircles", blurb="a toy", dynamics="rmm_envs.systems.dubins4d:Dubins4D",
+                             scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
+                             envs={"guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv"})
+    monkeypatch.setattr(catalog, "SYSTEMS", (*catalog.SYSTEMS, toy))
+    try:
+        catalog.register()
+        assert gym.spec("ToyCirclesGuarded-v0").entry_point == "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv"
+        assert catalog.env_ids()[-1] == "ToyCirclesGuarded-v0" and "ToyCirclesGuarded-v0" in catalog.guardian_env_ids()
+        assert "Dubins3DMazeGuarded-v0, QuadrotorRoomGuarded-v0, ToyCirclesGuarded-v0 (blocking)" in catalog.env_help()
+        assert catalog.system_of("ToyCirclesGuarded-v0") == (toy, "guarded")
+    finally:
+        gym.registry.pop("ToyCirclesGuarded-v0", None)
+
+
+def test_shipped_models_are_keyed_by_system_and_found_by_every_id():
+    from guardians.lrmm.model import SHIPPED, SHIPPED_BY_SYSTEM
+    from rmm_envs.catalog import GUARDED_KINDS, SYSTEMS
+
+    names = {s.name: s for s in SYSTEMS}
+    assert set(SHIPPED_BY_SYSTEM) <= set(names)
+    for name, kinds in SHIPPED_BY_SYSTEM.items():
+        for kind, ship in kinds.items():
+            assert kind in ("plain", "guarded")
+            for env_id in names[name].ids(("plain",) if kind == "plain" else GUARDED_KINDS):
+                assert SHIPPED[env_id] is ship
+    assert list(SHIPPED) == list(rmm_envs.ENV_IDS)  # every current id, no old one
+    assert SHIPPED["Dubins4DParallel-v0"] is SHIPPED["Dubins4DCirclesParallel-v0"] and "Dubins4DMap-v0" in SHIPPED
+    assert SHIPPED.get("CartPole-v1") is None and "CartPole-v1" not in SHIPPED
+
+
+def test_the_guardians_the_table_lists_are_those_the_benchmark_accepts():
+    from benchmarks.bench.args import parse_run
+    from benchmarks.bench.checks import check_runs
+    from guardians.registry import BUILTIN
+    from rmm_envs.catalog import SYSTEMS
+
+    for s in SYSTEMS:
+        cfg = parse_run(["--agent", ",".join(BUILTIN), "--env", s.env_id("guarded"), "--clock", "fixed:1", "--episodes", "1",
+                         "--no-progress", "--workers", "1"], "")
+        meta = check_runs(cfg.agent_runs(), skip_inapplicable=True)
+        assert tuple(a for a in BUILTIN if "skipped" not in meta[a]) == tuple(a for a in BUILTIN if a in s.guardians), s.name

@@ -54,6 +54,8 @@ def test_every_console_script_help_matches_the_reference():
     for sub in ("report", "sweep"):
         out = subprocess.run([str(bindir / "rmm-bench"), sub, "--help"], capture_output=True, text=True, env=env, timeout=120)
         assert out.stdout.rstrip() == _section(page, f"rmm-bench {sub}")
+    out = subprocess.run([str(bindir / "rmm-envs"), "demo", "--help"], capture_output=True, text=True, env=env, timeout=120)
+    assert out.stdout.rstrip() == _section(page, "rmm-envs demo")
 
 
 def test_links_between_pages_resolve():

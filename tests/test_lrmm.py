@@ -275,7 +275,7 @@ def test_lrmm_guardian_bad_input():
 def test_shipped_model_loads_and_is_documented():
     m = load_model()
     assert default_model_path().exists()
-    assert m.env_id == "Dubins4DCirclesGuarded-v0" and m.obs_dim == 17
+    assert m.env_id == "Dubins4DCircles-v0" and m.obs_dim == 17  # as recorded at training, before the rename
     assert m.meta["data"]["n_rows"] >= 35072 and m.meta["data"]["configs"] >= 274
     assert m.meta["metrics"]["test"]["mae"] <= 0.030
     assert m.meta["labeller"]["branches"] == 32 and m.meta["labeller"]["depth"] == 2

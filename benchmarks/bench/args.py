@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from benchmarks.bench.config import BenchConfig
+from rmm_envs.catalog import env_help
 
 __all__ = ["DEFAULT_ENV", "ReportRequest", "parse_report", "parse_run", "parse_sweep", "report_parser", "run_parser",
            "sweep_parser"]
@@ -29,10 +30,8 @@ def _common(p: argparse.ArgumentParser, default_agent: str) -> None:
     p.add_argument("--agent", default=default_agent, help="guardian name, comma list, 'all' (defaults), 'paper' (the paper's rules), or module:Class (default: %(default)s)")
     p.add_argument("--episodes", type=int, default=2048, help="episodes per agent (default: %(default)s)")
     p.add_argument("--env", default=DEFAULT_ENV,
-                   help="a registered env id offering the parallel-autonomy contract: Dubins4DCirclesParallel-v0, Dubins3DMazeParallel-v0, "
-                        "QuadrotorRoomParallel-v0 or Dubins4DMapParallel-v0 (non-blocking), Dubins4DCirclesGuarded-v0, "
-                        "Dubins3DMazeGuarded-v0, QuadrotorRoomGuarded-v0 or Dubins4DMapGuarded-v0 (blocking) in this package, or "
-                        "module:Id for an env that module registers (default: %(default)s)")
+                   help=f"a registered env id offering the parallel-autonomy contract: {env_help()}, or module:Id for an "
+                        "env that module registers (default: %(default)s)")
     p.add_argument("--time-accel", type=float, default=NON_BLOCKING_DEFAULTS["time_accel"],
                    help="sim seconds per clock second, for a non-blocking env (default: %(default)s)")
     p.add_argument("--base-step", type=float, default=NON_BLOCKING_DEFAULTS["base_step"],

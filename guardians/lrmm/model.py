@@ -50,10 +50,10 @@ import numpy as np
 
 from guardians.lrmm.inference import forward_one as _forward_one
 from guardians.lrmm.inference import forward_rows as _forward_rows
-from rmm_envs.catalog import canonical_id
+from rmm_envs.catalog import GUARDED_KINDS, SYSTEMS, canonical_id
 from rmm_envs.portable import matvec
 
-__all__ = ["FORMAT", "SHIPPED", "LRMMModel", "Shipped", "default_model_path", "load_model"]
+__all__ = ["FORMAT", "SHIPPED", "SHIPPED_BY_SYSTEM", "LRMMModel", "Shipped", "default_model_path", "load_model"]
 
 FORMAT = "rmm-lrmm-model"
 FORMAT_VERSION = 2
@@ -296,9 +296,24 @@ _MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays", decision={
 #: no head), for ``action="safe"`` (hover and level) with an explicit threshold.
 _QUAD_PARALLEL = Shipped({"act": "quadrotor_cmd_act.npz", "risk": "quadrotor_cmd.npz"})
 
+#: The shipped models, per system of :data:`rmm_envs.catalog.SYSTEMS` (its ``name``) and kind of
+#: env: ``"plain"`` (plain control) and ``"guarded"`` (its blocking and non-blocking guardian envs,
+#: which share the world and the observation, so one entry serves both).
+SHIPPED_BY_SYSTEM: dict[str, dict[str, Shipped]] = {
+    "Dubins4DCircles": {"guarded": _DUBINS4D},
+    # the same car and observation on a map of your own: the circle-trained models, unchanged
+    # (rays are distances whatever the obstacle's shape; how well that transfers is measured
+    # in the map env's tests and docs, not assumed)
+    "Dubins4DMap": {"guarded": _DUBINS4D},
+    "Dubins3DMaze": {"plain": Shipped({"paper": "dubins3d_maze.npz"}), "guarded": _MAZE_PARALLEL},
+    "QuadrotorRoom": {"plain": Shipped({"paper": "quadrotor.npz"}), "guarded": _QUAD_PARALLEL},
+}
+
+
 class ShippedById(dict):
-    """Shipped models by env id; an old id of a renamed env (:data:`rmm_envs.catalog.RENAMED`)
-    finds its new id's entry (iteration lists the current ids only)."""
+    """:data:`SHIPPED_BY_SYSTEM` by env id (both twins of a system's guardian envs share an
+    entry); an old id of a renamed env (:data:`rmm_envs.catalog.RENAMED`) finds its new id's
+    entry, though iteration lists the current ids only."""
 
     def __missing__(self, env_id):
         new = canonical_id(env_id) if isinstance(env_id, str) else env_id
@@ -313,22 +328,17 @@ class ShippedById(dict):
         return self[env_id] if env_id in self else default
 
 
-#: The one table of shipped models, by env id.
-SHIPPED: ShippedById = ShippedById({
-    "Dubins4DCirclesGuarded-v0": _DUBINS4D,
-    "Dubins4DCirclesParallel-v0": _DUBINS4D,
-    # the same car and observation on a map of your own: the circle-trained models, unchanged
-    # (rays are distances whatever the obstacle's shape; how well that transfers is measured
-    # in the map env's tests and docs, not assumed)
-    "Dubins4DMapGuarded-v0": _DUBINS4D,
-    "Dubins4DMapParallel-v0": _DUBINS4D,
-    "Dubins3DMaze-v0": Shipped({"paper": "dubins3d_maze.npz"}),
-    "Dubins3DMazeGuarded-v0": _MAZE_PARALLEL,
-    "Dubins3DMazeParallel-v0": _MAZE_PARALLEL,
-    "QuadrotorRoom-v0": Shipped({"paper": "quadrotor.npz"}),
-    "QuadrotorRoomGuarded-v0": _QUAD_PARALLEL,
-    "QuadrotorRoomParallel-v0": _QUAD_PARALLEL,
-})
+def _by_id() -> ShippedById:
+    out = ShippedById()
+    for system in SYSTEMS:
+        for kind, ship in SHIPPED_BY_SYSTEM.get(system.name, {}).items():
+            for env_id in system.ids(("plain",) if kind == "plain" else GUARDED_KINDS):
+                out[env_id] = ship
+    return out
+
+
+#: The shipped model of each env id (:data:`SHIPPED_BY_SYSTEM`, looked up by id).
+SHIPPED: ShippedById = _by_id()
 
 
 def default_model_path(env_id: str = "Dubins4DCirclesGuarded-v0", variant: str = "paper") -> Path:

@@ -69,6 +69,7 @@ from rmm_envs.risk.dataset import (
     write_table,
 )
 from rmm_envs.risk.labelling import DatagenConfig, dataset_metadata, label_configs, labelled_env
+from rmm_envs.risk.metrics import METRICS
 
 __all__ = ["DatagenConfig", "Dataset", "generate", "label_configs", "load_dataset", "main"]
 
@@ -274,7 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="'module:callable', failure(states) -> (N,) bool, for an env served by a risk adapter "
                    "(required for Pendulum-v1; added to the adapter's own test elsewhere)")
     p.add_argument("--n-steps", type=int, default=8, help="path points per branch (default: %(default)s)")
-    p.add_argument("--metric", default="expected", choices=["expected", "cvar", "worst"], help="coherent risk metric (default: %(default)s)")
+    p.add_argument("--metric", default="expected", choices=list(METRICS), help="coherent risk metric (default: %(default)s)")
     p.add_argument("--alpha", type=float, default=None, help="CVaR level in (0, 1) (with --metric cvar)")
     p.add_argument("--leaf", default="zero", choices=["zero", "heuristic"], help="leaf value: 0 (Algorithm 1) or the system's heuristic (default: %(default)s)")
     p.add_argument("--env-kwargs", default="{}", help='environment arguments as JSON, e.g. \'{"maze_kind": "mixed"}\' (default: {})')
