@@ -117,13 +117,14 @@ def accepts_argument(factory, name: str) -> bool:
     return False
 
 
-def make_guardian(name: str, env_id: str | None = None, **kwargs) -> Guardian:
-    """Instantiate a guardian by registry name, entry-point name or ``module:Class``.
+def make_guardian(name, env_id: str | None = None, **kwargs) -> Guardian:
+    """Instantiate a guardian by registry name, entry-point name or ``module:Class``, or from the
+    class (or factory) :func:`load_guardian_class` gave for one.
 
     ``env_id``: the env the guardian will serve, passed on as the guardian's ``env_id``
     argument when its constructor takes one by that name (the ``lrmm`` guardians pick their
     shipped model by it) and ignored otherwise."""
-    cls = load_guardian_class(name)
+    cls = load_guardian_class(name) if isinstance(name, str) else name
     if env_id is not None and "env_id" not in kwargs and accepts_argument(cls, "env_id"):
         kwargs["env_id"] = env_id
     obj = cls(**kwargs) if isinstance(cls, type) else cls(**kwargs) if callable(cls) else cls

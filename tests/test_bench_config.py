@@ -71,6 +71,14 @@ def test_episode_result_fields_are_the_store_columns():
                           "outcome": "goal", "steps": 3}
     with pytest.raises(dataclasses.FrozenInstanceError):
         r.outcome = "error"
+    # the schema derived from the dataclass is the one every results.db was written with
+    assert EPISODE_FIELDS == {
+        "run_key": "TEXT NOT NULL", "episode": "INTEGER NOT NULL", "agent": "TEXT NOT NULL", "seed": "INTEGER NOT NULL",
+        "outcome": "TEXT NOT NULL", "steps": "INTEGER", "active_steps": "INTEGER", "sim_time": "REAL",
+        "active_sim_time": "REAL", "compute_time": "REAL", "avg_compute_time": "REAL", "decision_mean": "REAL",
+        "decision_std": "REAL", "decision_max": "REAL", "precompute_time": "REAL", "final_speed": "REAL",
+        "cum_reward": "REAL", "qp_fallbacks": "INTEGER", "nan_states": "INTEGER", "guardian_stats": "TEXT",
+        "error": "TEXT", "wall_time": "REAL", "finished": "REAL", "error_kind": "TEXT", "cost": "REAL"}
 
 
 def test_configs_are_frozen_copies_and_refuse_what_cannot_be_stored():
@@ -191,3 +199,42 @@ def test_bench_config_is_what_the_command_line_said():
     assert cfg.parsed["agent_opt"] == ["cbf.p1=2"] and cfg.parsed["clock"] == "cpu"
     task = EpisodeTask(run=cfg.agent_runs()["cbf"], run_key="k", episode=0, seed=1)
     assert task.guardian_kwargs() == {"p1": 2} and task.agent == "cbf"
+
+
+def test_each_guardian_class_is_resolved_once_per_command(monkeypatch, tmp_path):
+    # --agent resolves each name to its class once; the checks and the task plan use that class
+    import guardians.registry as registry
+    from benchmarks.bench.run import applicable, plan_tasks
+    from benchmarks.bench.store import ResultsStore
+    from tests.bench_helpers import Threaded
+
+    calls = []
+    resolve = registry.load_guardian_class
+    monkeypatch.setattr(registry, "load_guardian_class", lambda name: calls.append(name) or resolve(name))
+    cfg = parse_run(["--agent", "tests.bench_helpers:Threaded,inactive", "--episodes", "1", "--out", str(tmp_path),
+                     "--clock", "fixed:1", "--no-progress", "--workers", "2"], "")
+    assert calls == ["tests.bench_helpers:Threaded", "inactive"]
+    assert cfg.agent_classes == {"tests.bench_helpers:Threaded": Threaded, "inactive": resolve("inactive")}
+    cfg, meta = applicable(cfg)
+    store = ResultsStore(tmp_path / "results.db")
+    tasks = plan_tasks(store, cfg.agent_runs(), 1, cfg.workers, cfg.backend, classes=cfg.agent_classes)
+    store.close()
+    assert calls == ["tests.bench_helpers:Threaded", "inactive"]  # neither the checks nor the plan resolved again
+    assert set(meta) == {"tests.bench_helpers:Threaded", "inactive"} and [t.threads for t in tasks] == [1, None]
+    assert dataclasses.replace(cfg, agent_classes={}) == cfg  # not part of the configuration's identity
+
+
+def test_the_non_blocking_defaults_are_the_wrapper_s_everywhere():
+    import inspect
+
+    from benchmarks.bench.args import NON_BLOCKING_DEFAULTS
+    from benchmarks.bench.checks import _env_creator
+    from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL, NonBlockingStepping
+
+    assert (TIME_ACCEL, BASE_STEP) == (10.0, 0.1)  # the paper's 10x and 0.1 s
+    assert NON_BLOCKING_DEFAULTS == {"time_accel": TIME_ACCEL, "base_step": BASE_STEP}
+    for factory in (NonBlockingStepping, _env_creator("Dubins4DCirclesParallel-v0"), _env_creator("QuadrotorRoomParallel-v0")):
+        params = inspect.signature(factory).parameters
+        assert (params["time_accel"].default, params["base_step"].default) == (TIME_ACCEL, BASE_STEP)
+    cfg = parse_run(["--agent", "inactive", "--out", "x", *FAST], "")
+    assert (cfg.env_kwargs["time_accel"], cfg.env_kwargs["base_step"]) == (TIME_ACCEL, BASE_STEP)

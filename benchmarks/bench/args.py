@@ -17,13 +17,14 @@ from pathlib import Path
 
 from benchmarks.bench.config import BenchConfig
 from rmm_envs.catalog import env_help
+from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL
 
 __all__ = ["DEFAULT_ENV", "ReportRequest", "parse_report", "parse_run", "parse_sweep", "report_parser", "run_parser",
            "sweep_parser"]
 
 DEFAULT_ENV = "Dubins4DCirclesParallel-v0"
 #: the non-blocking stepping options and their defaults (what a blocking env must be left with)
-NON_BLOCKING_DEFAULTS = {"time_accel": 10.0, "base_step": 0.1}
+NON_BLOCKING_DEFAULTS = {"time_accel": TIME_ACCEL, "base_step": BASE_STEP}
 
 
 def _common(p: argparse.ArgumentParser, default_agent: str) -> None:
@@ -98,7 +99,8 @@ def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
     from guardians.registry import guardian_set
     from rmm_envs.catalog import canonical_id
 
-    agents = resolve_agents(args.agent)
+    classes = resolve_agents(args.agent)
+    agents = list(classes)
     agent_kwargs = parse_agent_opts(args.agent_opt or [], agents)
     options = {"time_accel": args.time_accel, "base_step": args.base_step, "clock": clock}
     env_id = canonical_id(args.env)
@@ -112,7 +114,7 @@ def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
             raise ValueError(f"{flag} {options[name]:g}: {env_id} steps by a fixed step per decision and takes no "
                              f"{name}; leave {flag} out, or run its non-blocking (Parallel) twin")
     return BenchConfig(
-        agents=tuple(agents), agent_kwargs=agent_kwargs, env_id=env_id,
+        agents=tuple(agents), agent_kwargs=agent_kwargs, env_id=env_id, agent_classes=classes,
         env_kwargs={k: v for k, v in options.items() if k in takes}, clock=clock, seed=args.seed, episodes=args.episodes,
         out=args.out, workers=args.workers, backend=args.backend, ray_address=args.ray_address,
         episode_timeout=args.episode_timeout, charge_precompute=args.charge_precompute, batch_size=args.batch_size,

@@ -23,6 +23,7 @@ from __future__ import annotations
 from rmm_envs.autonomy import ACTIVE
 
 import json
+from typing import Any
 
 from benchmarks.bench.config import AgentRun, accepts_argument, input_digests
 
@@ -32,8 +33,9 @@ __all__ = ["check_env_contract", "check_runs", "env_arguments", "parse_agent_opt
 ENV_OPTIONS = ("time_accel", "base_step", "clock")
 
 
-def resolve_agents(spec: str) -> list[str]:
-    """``--agent``: a name, a comma list, ``all``, ``paper`` or ``module:Class``; each one loadable."""
+def resolve_agents(spec: str) -> dict[str, Any]:
+    """``--agent``: a name, a comma list, ``all``, ``paper`` or ``module:Class``; each one's class
+    (or factory), resolved here once for the whole run (name -> class, in order)."""
     from guardians import available_guardians
     from guardians.registry import guardian_set, load_guardian_class
 
@@ -43,9 +45,7 @@ def resolve_agents(spec: str) -> list[str]:
         names = [s.strip() for s in spec.split(",") if s.strip()]
     if not names:
         raise ValueError(f"--agent is empty; choose from {available}, 'all', 'paper' or 'module:Class'")
-    for n in names:
-        load_guardian_class(n)  # raises ValueError listing the valid names
-    return names
+    return {n: load_guardian_class(n) for n in names}  # ValueError listing the valid names
 
 
 def parse_agent_opts(items: list[str], agents: list[str]) -> dict[str, dict]:
@@ -148,7 +148,7 @@ def _flag_for(message: str, env_kwargs: dict) -> str:
     return f"--env {env_kwargs}"
 
 
-def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False) -> dict[str, dict]:
+def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False, classes: dict | None = None) -> dict[str, dict]:
     """Build the env and every guardian as the workers will, before any episode runs.
 
     Raises ValueError naming the flag and value at fault; returns, per agent, what ``report``
@@ -157,7 +157,8 @@ def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False) -> di
     ``skip_inapplicable`` (the agents came from a named set, ``--agent all`` or ``paper``), a
     guardian that does not apply to the env (its ``check_spaces`` refuses it, or, given no
     ``--agent-opt``, it cannot be built for the env, e.g. no shipped model) is not an error: its
-    entry is ``{"skipped": reason}`` instead."""
+    entry is ``{"skipped": reason}`` instead.  ``classes``: each agent's class as the command
+    resolved it (:func:`resolve_agents`); an agent not in it is resolved by name."""
     import gymnasium as gym
 
     import rmm_envs  # noqa: F401
@@ -182,7 +183,7 @@ def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False) -> di
             finally:
                 env.close()
         try:
-            guardian = make_guardian(agent, env_id=run.env_id, **run.agent_kwargs)
+            guardian = make_guardian((classes or {}).get(agent, agent), env_id=run.env_id, **run.agent_kwargs)
         except Exception as e:
             if skip_inapplicable and not run.agent_kwargs:  # a set's member that cannot serve this env (no model)
                 meta[agent] = {"skipped": f"cannot be built for it: {type(e).__name__}: {e}"}

@@ -168,7 +168,9 @@ class EpisodeTask:
 
 @dataclass(frozen=True)
 class EpisodeResult:
-    """One row of the store's ``episodes`` table; see :mod:`benchmarks.bench.store` for the columns."""
+    """One row of the store's ``episodes`` table, one field per column (this class owns the
+    schema: :data:`benchmarks.bench.store.EPISODE_FIELDS` is derived from it, a field without
+    ``None`` in its type being ``NOT NULL``)."""
 
     run_key: str
     episode: int
@@ -179,12 +181,12 @@ class EpisodeResult:
     active_steps: int | None = None
     sim_time: float | None = None
     active_sim_time: float | None = None
-    compute_time: float | None = None
-    avg_compute_time: float | None = None
-    decision_mean: float | None = None
+    compute_time: float | None = None  # the env clock's total agent time, s
+    avg_compute_time: float | None = None  # per step, s (Table I's policy compute time)
+    decision_mean: float | None = None  # guardian.act() wall time per call, s
     decision_std: float | None = None
     decision_max: float | None = None
-    precompute_time: float | None = None
+    precompute_time: float | None = None  # guardian.reset(), s (e.g. an HJ solve)
     final_speed: float | None = None
     cum_reward: float | None = None
     qp_fallbacks: int | None = None
@@ -193,7 +195,7 @@ class EpisodeResult:
     error: str | None = None
     wall_time: float | None = None
     finished: float | None = None
-    error_kind: str | None = None  # guardian / timeout / lost_worker (None unless outcome is error)
+    error_kind: str | None = None  # guardian / timeout / lost_worker / input_changed (None unless outcome is error)
     cost: float | None = None  # the episode's summed info["cost"] (None: the env reports none)
 
     def as_row(self) -> dict:
@@ -230,6 +232,8 @@ class BenchConfig:
     latencies: tuple[float, ...] = ()  # a sweep's decision latencies, ms
     agent_set: str | None = None  # the named set --agent gave ("all", "paper"), or None for named agents
     agent_inputs: dict = field(default_factory=dict)  # agent -> the files its run reads (input_digests), set once checked
+    #: agent -> its guardian class, resolved once when the command is parsed (neither stored nor hashed)
+    agent_classes: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "agent_kwargs", {a: _json_copy(f"--agent-opt {a}", kw) for a, kw in self.agent_kwargs.items()})
@@ -248,7 +252,8 @@ class BenchConfig:
         drop = set(agents)
         return dataclasses.replace(self, agents=tuple(a for a in self.agents if a not in drop),
                                    agent_kwargs={a: kw for a, kw in self.agent_kwargs.items() if a not in drop},
-                                   agent_inputs={a: d for a, d in self.agent_inputs.items() if a not in drop})
+                                   agent_inputs={a: d for a, d in self.agent_inputs.items() if a not in drop},
+                                   agent_classes={a: c for a, c in self.agent_classes.items() if a not in drop})
 
     def with_inputs(self, inputs: dict[str, dict]) -> BenchConfig:
         """The same command with the files each agent's run reads (agent -> path -> SHA-256)."""

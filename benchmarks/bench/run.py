@@ -48,22 +48,24 @@ def _provenance(argv) -> dict:
             "python": platform.python_version(), "platform": platform.platform(), "cpus": os.cpu_count()}
 
 
-def guardian_threads(agent: str, agent_kwargs: dict, workers: int, backend: str) -> int | None:
-    """The ``threads`` a worker builds ``agent`` with (None: not passed); see the module docstring."""
+def guardian_threads(agent, agent_kwargs: dict, workers: int, backend: str) -> int | None:
+    """The ``threads`` a worker builds ``agent`` (its class, or its name) with (None: not passed);
+    see the module docstring."""
     from guardians.registry import load_guardian_class
 
     if not (workers > 1 or backend == "ray") or "threads" in agent_kwargs:
         return None
-    return 1 if accepts_argument(load_guardian_class(agent), "threads") else None
+    return 1 if accepts_argument(load_guardian_class(agent) if isinstance(agent, str) else agent, "threads") else None
 
 
 def plan_tasks(store: ResultsStore, runs: dict[str, AgentRun], episodes: int, workers: int, backend: str,
-               retry_errors: bool = False) -> list[EpisodeTask]:
-    """The episodes ``0 .. episodes-1`` of each run that the store lacks (or holds as a retried failure)."""
+               retry_errors: bool = False, classes: dict | None = None) -> list[EpisodeTask]:
+    """The episodes ``0 .. episodes-1`` of each run that the store lacks (or holds as a retried
+    failure); ``classes``: each agent's class as the command resolved it (else resolved by name)."""
     tasks = []
     for agent, run in runs.items():
         key = run.key
-        threads = guardian_threads(agent, run.agent_kwargs, workers, backend)
+        threads = guardian_threads((classes or {}).get(agent, agent), run.agent_kwargs, workers, backend)
         done = store.done_episodes(key, retry_errors)
         tasks += [EpisodeTask(run=run, run_key=key, episode=i, seed=episode_seed(run.seed, i), threads=threads,
                               import_path=(os.getcwd(),))
@@ -95,13 +97,13 @@ def execute(store: ResultsStore, config: BenchConfig, provenance: dict, meta: di
     """Run every episode of ``config`` not stored yet; returns, per agent, how many of this
     call's episodes ended without a result (time limit, lost worker).  Raises
     :class:`RunFailed` if too many episodes in a row lost their worker."""
-    from rmm_envs.parallel import TaskLost, WorkersLost, run_local, run_ray
+    from rmm_envs.pool import TaskLost, WorkersLost, run_local, run_ray
 
     runs = config.agent_runs()
     _announce_new_runs(store, runs)
     for agent, run in runs.items():
         store.ensure_run(run.key, agent, run.as_dict(), provenance | {"guardian": (meta or {}).get(agent, {})})
-    tasks = plan_tasks(store, runs, config.episodes, config.workers, config.backend, config.retry_errors)
+    tasks = plan_tasks(store, runs, config.episodes, config.workers, config.backend, config.retry_errors, config.agent_classes)
     unfinished = {a: 0 for a in runs}
     if not tasks:
         return unfinished
@@ -190,7 +192,7 @@ def applicable(config: BenchConfig) -> tuple[BenchConfig, dict]:
     not apply is an error, as is a set of which none applies."""
     from benchmarks.bench.checks import check_runs
 
-    meta = check_runs(config.agent_runs(), skip_inapplicable=config.agent_set is not None)
+    meta = check_runs(config.agent_runs(), skip_inapplicable=config.agent_set is not None, classes=config.agent_classes)
     skipped = {a: m["skipped"] for a, m in meta.items() if "skipped" in m}
     if skipped:
         if len(skipped) == len(config.agents):

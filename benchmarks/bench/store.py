@@ -54,6 +54,7 @@ import os
 import socket
 import sqlite3
 import time
+import typing
 from pathlib import Path
 
 from benchmarks.bench.config import EpisodeResult
@@ -61,33 +62,16 @@ from rmm_envs.failures import BAD_INPUT, RUN_FAILED, describe_os_error, file_siz
 
 __all__ = ["EPISODE_FIELDS", "RETRIED_ERRORS", "ResultsDatabaseError", "ResultsStore"]
 
-EPISODE_FIELDS = {
-    "run_key": "TEXT NOT NULL",
-    "episode": "INTEGER NOT NULL",
-    "agent": "TEXT NOT NULL",
-    "seed": "INTEGER NOT NULL",
-    "outcome": "TEXT NOT NULL",  # goal / collision / timeout / error
-    "steps": "INTEGER",
-    "active_steps": "INTEGER",
-    "sim_time": "REAL",
-    "active_sim_time": "REAL",
-    "compute_time": "REAL",  # the env clock's total agent time, s
-    "avg_compute_time": "REAL",  # per step, s (Table I's policy compute time)
-    "decision_mean": "REAL",  # guardian.act() wall time per call, s
-    "decision_std": "REAL",
-    "decision_max": "REAL",
-    "precompute_time": "REAL",  # guardian.reset(), s (e.g. an HJ solve)
-    "final_speed": "REAL",
-    "cum_reward": "REAL",
-    "qp_fallbacks": "INTEGER",
-    "nan_states": "INTEGER",
-    "guardian_stats": "TEXT",
-    "error": "TEXT",
-    "wall_time": "REAL",
-    "finished": "REAL",
-    "error_kind": "TEXT",  # guardian / timeout / lost_worker / input_changed (NULL unless outcome is error)
-    "cost": "REAL",  # the episode's summed safety cost, info["cost"] (NULL: the env reports none)
-}
+def _column(annotation) -> str:
+    """The SQL column of an :class:`EpisodeResult` field's type: ``X`` -> ``... NOT NULL``,
+    ``X | None`` -> nullable (``str`` TEXT, ``int`` INTEGER, ``float`` REAL)."""
+    args = [a for a in typing.get_args(annotation) if a is not type(None)]
+    sql = {str: "TEXT", int: "INTEGER", float: "REAL"}[args[0] if args else annotation]
+    return sql if args else f"{sql} NOT NULL"
+
+
+#: The ``episodes`` table's columns, in order: :class:`EpisodeResult`'s fields (its owner).
+EPISODE_FIELDS = {name: _column(tp) for name, tp in typing.get_type_hints(EpisodeResult).items()}
 
 # error kinds that are failures of the run rather than results: every rerun retries them
 RETRIED_ERRORS = ("timeout", "lost_worker", "input_changed")

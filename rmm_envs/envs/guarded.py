@@ -38,6 +38,7 @@ import numpy as np
 
 from rmm_envs.autonomy import parse
 from rmm_envs.envs.base import LabelledEnvBase
+from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL
 
 __all__ = ["EPISODE_KEY", "GuardedEnv", "parallel_entry_point"]
 
@@ -151,7 +152,7 @@ def parallel_entry_point(env_cls: type, env_id: str):
     by name: under non-blocking stepping each interval is ``elapsed * time_accel + base_step``,
     so a given ``step_dt`` would be silently ignored."""
 
-    def make_parallel_env(time_accel: float = 10.0, base_step: float = 0.1, clock=None, **kwargs):
+    def make_parallel_env(time_accel: float = TIME_ACCEL, base_step: float = BASE_STEP, clock=None, **kwargs):
         if "step_dt" in kwargs:
             raise ValueError(f"{env_id} steps by elapsed * time_accel + base_step, so step_dt (the fixed step of the "
                              f"blocking env) does not apply; set base_step and time_accel instead, got "

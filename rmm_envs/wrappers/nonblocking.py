@@ -26,7 +26,13 @@ import gymnasium as gym
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.clocks import Clock, make_clock
 
-__all__ = ["NonBlockingStepping"]
+__all__ = ["BASE_STEP", "TIME_ACCEL", "NonBlockingStepping"]
+
+#: The default simulated seconds per clock second (the paper's 10x) and simulated seconds added
+#: to every step: the one place they are written (the ``Parallel`` envs' entry points and
+#: ``rmm-bench --time-accel / --base-step`` read them from here).
+TIME_ACCEL = 10.0
+BASE_STEP = 0.1
 
 
 class NonBlockingStepping(gym.Wrapper):
@@ -42,7 +48,8 @@ class NonBlockingStepping(gym.Wrapper):
         clock: a :class:`rmm_envs.clocks.Clock`, or ``"wall"``, ``"cpu"``, ``"fixed:MS"``.
     """
 
-    def __init__(self, env: gym.Env, time_accel: float = 10.0, base_step: float = 0.1, clock: Clock | str | None = None):
+    def __init__(self, env: gym.Env, time_accel: float = TIME_ACCEL, base_step: float = BASE_STEP,
+                 clock: Clock | str | None = None):
         super().__init__(env)
         if not hasattr(env.unwrapped, "simulate"):
             raise TypeError(
