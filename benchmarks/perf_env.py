@@ -18,9 +18,9 @@ from scipy.integrate import odeint
 
 import rmm_envs  # noqa: F401
 from benchmarks._timing import fmt_us, median_time
-from rmm_envs.driver import CLFDriver
+from rmm_envs.drivers.dubins4d import CLFDriver
 from rmm_envs.systems.dubins4d import Dubins4D
-from rmm_envs.worlds.circles import CircleWorld, _ray_cast_numpy, points_in_circles, ray_cast
+from rmm_envs.worlds.circles import CircleWorld, ray_cast_numpy, points_in_circles, ray_cast
 
 
 
@@ -117,7 +117,7 @@ def main() -> None:
     o, h = np.array([[0.5, -1.0]]), np.array([0.3])
     t_ray = median_time(lambda: ray_cast(o, h, circles), number=2000)
     t_loop = median_time(lambda: _loop_rays(0.5, -1.0, 0.3, circles), number=2000)
-    t_ray_np = median_time(lambda: _ray_cast_numpy(o, h, circles, 12, 10.0), number=2000)
+    t_ray_np = median_time(lambda: ray_cast_numpy(o, h, circles, 12, 10.0), number=2000)
     print(f"  ours (compiled for a few states) {fmt_us(t_ray)} (target <= 20 us); the same formulas as numpy "
           f"array code {fmt_us(t_ray_np)}; python loop {fmt_us(t_loop)}")
     pts = rng.uniform(-10, 10, (10_000, 2))

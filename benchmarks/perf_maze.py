@@ -19,7 +19,7 @@ import numpy as np
 import rmm_envs  # noqa: F401
 from benchmarks._timing import fmt_us, median_time
 from benchmarks.perf_env import steps_per_second as _steps_per_second
-from rmm_envs.systems.dubins4d import _COEF_ARRAY
+from rmm_envs.systems.dubins4d import SERIES_COEFFICIENTS
 from rmm_envs.worlds.maze_kernels import dubins_path, maze_path_hit, maze_rays
 
 
@@ -40,7 +40,7 @@ def parts() -> dict[str, float]:
         "rays, numpy Maze.rays": median_time(lambda: m.rays(st[None], 8), number=100),
         "path contact, compiled": median_time(lambda: maze_path_hit(m.walls, m.half, m.width, m.height, path[0]), number=500),
         "path contact, numpy Maze.paths_hit": median_time(lambda: m.paths_hit(path), number=100),
-        "path, compiled": median_time(lambda: dubins_path(st[0], st[1], st[2], 10.0, 0.1, 0.11, np.empty((8, 3)), _COEF_ARRAY),
+        "path, compiled": median_time(lambda: dubins_path(st[0], st[1], st[2], 10.0, 0.1, 0.11, np.empty((8, 3)), SERIES_COEFFICIENTS),
                                       number=500),
         "path, numpy Dubins3D.propagate": median_time(lambda: env.system.propagate(st[None], np.array([[0.1]]), 0.11, 8), number=100),
         "driver": median_time(lambda: env.driver.control(st), number=500),

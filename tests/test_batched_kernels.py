@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from rmm_envs.systems.dubins4d import Dubins4D, _states_at_compiled
 from rmm_envs.worlds.circles import (
     CircleWorld,
-    _ray_cast_numpy,
+    ray_cast_numpy,
     contact_params,
     contact_params_each,
     points_in_circles,
@@ -31,7 +31,7 @@ def test_rays_each_equal_one_origin_at_a_time_and_the_numpy_formulas():
     each = ray_cast_each(xy, th, circles)
     one = np.array([ray_cast(xy[i:i + 1], th[i:i + 1], circles[i])[0] for i in range(300)])
     assert np.array_equal(each, one)  # the same compiled function, whatever the batch
-    ref = np.array([_ray_cast_numpy(xy[i:i + 1], th[i:i + 1], circles[i], 12, 10.0)[0] for i in range(300)])
+    ref = np.array([ray_cast_numpy(xy[i:i + 1], th[i:i + 1], circles[i], 12, 10.0)[0] for i in range(300)])
     np.testing.assert_allclose(each, ref, rtol=0, atol=1e-12)
     assert np.any(each == 0.0) and np.any(each == 10.0) and np.any((each > 0) & (each < 10))
 

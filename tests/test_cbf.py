@@ -10,7 +10,7 @@ import rmm_envs  # noqa: F401
 from guardians import make_guardian
 from guardians.cbf import CBFGuardian, CBFPaperGuardian
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.driver import CLFDriver
+from rmm_envs.drivers.dubins4d import CLFDriver
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D
 from tests.qp_reference import solve_qp_dense

@@ -11,7 +11,7 @@ from rmm_envs.envs.base import check_arguments, draw_until, option_vector, rejec
 from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
 from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
 from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
-from rmm_envs.risk import LabelledEnv, RiskScene, System, check_labelled_env, check_scene, check_system
+from rmm_envs.risk import LabelledEnv, RiskScene, check_labelled_env, check_scene
 from rmm_envs.scenes import Dubins4DScene, MazeScene
 
 
@@ -25,7 +25,8 @@ def test_every_registered_env_is_a_labelled_env_before_and_after_reset(env_id):
     base = env.unwrapped
     assert isinstance(base, LabelledEnv)
     scene = base.risk_scene()
-    assert isinstance(scene, RiskScene) and base.risk_system() is scene  # the deprecated alias
+    with pytest.warns(DeprecationWarning, match=r"risk_system\(\) is deprecated: use risk_scene\(\)"):
+        assert isinstance(scene, RiskScene) and base.risk_system() is scene  # the deprecated alias
     rng = np.random.default_rng(0)
     states = base.sample_states(rng, 5)
     assert states.shape == (5, scene.state_dim) and not scene.state_failed(states).any()
@@ -67,7 +68,18 @@ def test_the_checker_names_the_env_and_each_ill_formed_hook():
 
 
 def test_scene_protocol_asks_only_for_what_the_estimator_uses_and_keeps_the_old_names():
-    assert System is RiskScene and check_system is check_scene
+    import rmm_envs.envs.dubins4d as d4
+    import rmm_envs.risk as risk
+    import rmm_envs.risk.protocol as protocol
+    from rmm_envs.autonomy import parse
+
+    for module, old, new in ((risk, "System", RiskScene), (risk, "check_system", check_scene), (protocol, "System", RiskScene),
+                             (protocol, "check_system", check_scene), (d4, "parse_guardian_action", parse)):
+        with pytest.warns(DeprecationWarning, match=f"{module.__name__}.{old} is deprecated: use "):
+            assert getattr(module, old) is new
+        assert old not in module.__all__
+    with pytest.raises(AttributeError, match="module 'rmm_envs.risk' has no attribute 'Systems'"):
+        risk.Systems
 
     class Minimal:
         state_dim = 1

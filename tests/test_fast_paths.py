@@ -21,7 +21,7 @@ from guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barr
 from guardians.cbf.qp import BarrierQP
 from guardians.hj.grid import Grid
 from guardians.lrmm.model import ACTIVATIONS, LRMMModel
-from rmm_envs.driver import desired_heading
+from rmm_envs.drivers.dubins4d import desired_heading
 
 finite = st.floats(-50, 50, allow_nan=False)
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks.bench.cli import main
-from rmm_envs.parallel import TaskLost, WorkersLost, run_local
+from rmm_envs.pool import TaskLost, WorkersLost, run_local
 from tests.bench_helpers import faulty_task, query
 
 FAST = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DCirclesParallel-v0"]
@@ -271,7 +271,7 @@ def test_ray_backend_same_results_and_a_lost_task_is_reported(tmp_path):
         import ray
     except ImportError as e:  # a pinned test dependency: its absence is a broken install, not a skip
         raise ImportError("ray is a test dependency: pip install -e '.[test]'") from e
-    from rmm_envs.parallel import run_ray
+    from rmm_envs.pool import run_ray
 
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:

@@ -13,9 +13,9 @@ from guardians import make_guardian
 from guardians.baselines import BrakesGuardian
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv, TurnFromNearerWall, observation_layout
-from rmm_envs.maze_driver import PursuitDriver, cell_distances, cell_path
+from rmm_envs.drivers.maze import PursuitDriver, cell_distances, cell_path
 from rmm_envs.systems.dubins3d import Dubins3D
-from rmm_envs.systems.dubins4d import _COEF_ARRAY
+from rmm_envs.systems.dubins4d import SERIES_COEFFICIENTS
 from rmm_envs.worlds.maze_kernels import dubins_path, maze_path_hit, maze_rays
 from rmm_envs.worlds.mazes import Maze, generate_maze
 
@@ -147,7 +147,7 @@ def test_kernels_equal_the_numpy_maze_queries():
     hits = np.array([maze_path_hit(m.walls, m.half, m.width, m.height, p) for p in paths])
     assert np.array_equal(hits, m.paths_hit(paths)) and 0.1 < hits.mean() < 0.9
     for i in range(20):
-        mine = dubins_path(st[i, 0], st[i, 1], st[i, 2], 10.0, u[i], 3.0, np.empty((8, 3)), _COEF_ARRAY)
+        mine = dubins_path(st[i, 0], st[i, 1], st[i, 2], 10.0, u[i], 3.0, np.empty((8, 3)), SERIES_COEFFICIENTS)
         np.testing.assert_allclose(mine, paths[i], rtol=0, atol=1e-9)
 
 

@@ -1,4 +1,4 @@
-"""The local worker pool's parts (rmm_envs.parallel), pinned in this process where test_faults.py's
+"""The local worker pool's parts (rmm_envs.pool), pinned in this process where test_faults.py's
 drills only see them from outside: the worker loop's protocol over its pipe, exit causes in words,
 the start-up allowance of the time limit, graceful and forced stops, and the argument checks."""
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from rmm_envs.parallel import _STARTUP_S, TaskLost, _Worker, _worker_main, describe_exit, run_local
+from rmm_envs.pool import _STARTUP_S, TaskLost, _Worker, _worker_main, describe_exit, run_local
 from tests.bench_helpers import faulty_task
 from tests.test_faults import within  # fails a test that would hang (a pool that misses its end)
 
@@ -182,7 +182,7 @@ def test_task_lost_carries_the_task_and_its_cause():
 
 
 def test_remote_traceback_text_is_its_argument_or_empty():
-    from rmm_envs.parallel import _RemoteTraceback
+    from rmm_envs.pool import _RemoteTraceback
 
     assert str(_RemoteTraceback("in worker process 7:\nTraceback ...")) == "in worker process 7:\nTraceback ..."
     assert str(_RemoteTraceback()) == ""
@@ -243,7 +243,7 @@ def _finalized_or_raise(task):
 
 
 def test_stopping_after_lost_tasks_names_the_last_cause():
-    from rmm_envs.parallel import WorkersLost
+    from rmm_envs.pool import WorkersLost
 
     seen = []
 

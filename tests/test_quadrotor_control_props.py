@@ -1,5 +1,5 @@
 """What the quadrotor's cascaded controller and its reckless pilot promise
-(``rmm_envs/systems/quadrotor_control.py``, ``rmm_envs/quadrotor_pilot.py``).
+(``rmm_envs/systems/quadrotor_control.py``, ``rmm_envs/drivers/quadrotor.py``).
 
 The controller: each feedback term reads its own state component with the documented sign
 (a hand-computed response to every single-component error at hover), and the closed loop
@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rmm_envs.quadrotor_pilot import WaypointPilot
+from rmm_envs.drivers.quadrotor import WaypointPilot
 from rmm_envs.systems.quadrotor import QUADROTOR
 from rmm_envs.systems.quadrotor_control import ClosedLoopQuadrotor, CommandController, heading_of
 from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot

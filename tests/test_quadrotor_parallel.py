@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.envs.quadrotor_room_parallel import CONTROLS, HoverAndLevel, QuadrotorRoomGuardedEnv, observation_layout
-from rmm_envs.quadrotor_pilot import WaypointPilot
+from rmm_envs.drivers.quadrotor import WaypointPilot
 from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
 from rmm_envs.systems.quadrotor import QUADROTOR, Quadrotor
 from rmm_envs.systems.quadrotor_control import (ClosedLoopQuadrotor, CommandController, body_packed, body_step,
@@ -530,7 +530,7 @@ def test_lrmm_built_for_another_env_or_without_a_head_says_how_to_serve_the_quad
     spaces = {"observation_space": env.observation_space, "action_space": env.action_space}
     with pytest.raises(ValueError) as e:
         make_guardian("lrmm").reset(seed=0, **spaces)  # built for Dubins4D (no env_id)
-    assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins4DCirclesGuarded-v0) expects observations "
+    assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins4DCircles-v0) expects observations "
                             "of shape (17,), the env's observation space is (23,)" + REMEDY)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the risk-only model stores no decision: the paper's fallback warns

@@ -20,7 +20,7 @@ provides, once:
   ``render_mode``, returns :meth:`~LabelledEnvBase.render_frame` for ``"rgb_array"`` and shows it
   with pygame for ``"human"`` (offered by an env only where pygame is installed);
 * **the labelling hooks** of :class:`rmm_envs.risk.LabelledEnv`: :meth:`~LabelledEnvBase.risk_scene`
-  (the current episode's ``self.scene``), the deprecated alias ``risk_system()``,
+  (the current episode's ``self.scene``), the deprecated alias ``risk_system()`` (warns),
   :meth:`~LabelledEnvBase.dataset_notes` (none by default); each env adds ``true_state``,
   ``sample_states``, ``observe_states`` and ``privileged``.
 
@@ -32,6 +32,7 @@ new episode) and call :meth:`~LabelledEnvBase.begin_episode` there, and
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any, Callable, Iterable, TypeVar
 
 import gymnasium as gym
@@ -202,7 +203,8 @@ class LabelledEnvBase(gym.Env):
         return self.scene
 
     def risk_system(self):
-        """Deprecated: the former name of :meth:`risk_scene`."""
+        """Deprecated (warns): the former name of :meth:`risk_scene`."""
+        warnings.warn("risk_system() is deprecated: use risk_scene()", DeprecationWarning, stacklevel=2)
         return self.risk_scene()
 
     def dataset_notes(self) -> dict:

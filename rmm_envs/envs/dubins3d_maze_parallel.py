@@ -10,7 +10,7 @@ the guardian's thinking time passes in the world), the maze counterparts of
 The constant-speed car of ``Dubins3DMaze-v0`` (:class:`rmm_envs.systems.Dubins3D`: 10 px/s,
 minimum turning radius 50 px, so ``|u| <= 0.2`` rad/s) in a seeded perfect maze (10 x 10 cells
 of 125 px, walls 12.5 px thick; :mod:`rmm_envs.worlds.mazes`) must reach a goal disc in the
-centre of a goal cell.  A built-in reckless driver (:class:`rmm_envs.maze_driver.PursuitDriver`)
+centre of a goal cell.  A built-in reckless driver (:class:`rmm_envs.drivers.maze.PursuitDriver`)
 follows the maze's cell path to the goal by pure pursuit with a long look-ahead, cutting
 corners and ignoring the walls: alone it collides in 46% of the episodes (256 episodes of
 ``rmm-bench`` seed 0, fixed 1 ms clock) and reaches the goal in the rest.  The agent is a
@@ -99,7 +99,7 @@ goal_cells=(4, 8), goal_radius=30.0, start_jitter=15.0, heading_noise=pi/4, look
 driver_gain=1.0, maze_rows=10, maze_cols=10, speed=10.0, r_min=50.0, clock=None,
 render_mode=None)``.  ``step_dt`` 0.1 s as Dubins4D: the blocking env re-decides every 1 px of
 travel.  ``goal_radius`` 30 px: half a corridor, so the driver cannot miss it when it arrives.
-``lookahead`` (px) and ``driver_gain`` (1/s): the driver's (:mod:`rmm_envs.maze_driver`, where
+``lookahead`` (px) and ``driver_gain`` (1/s): the driver's (:mod:`rmm_envs.drivers.maze`, where
 the collision rate against the look-ahead is measured).  A 10 x 10 maze holds every drive (the
 goal is at most 8 cells away) and resets ~8x faster than the paper's 20 x 20 (the ``Maze``
 spatial index); the rays are local either way.  ``clock`` only measures the agent's compute
@@ -130,10 +130,10 @@ from rmm_envs.worlds.bounds import MAX_MAZE_SIDE
 from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv, maze_from_option
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.portable import wrap_angle
-from rmm_envs.maze_driver import PursuitDriver, cell_distances, cell_of, cell_path
+from rmm_envs.drivers.maze import PursuitDriver, cell_distances, cell_of, cell_path
 from rmm_envs.scenes.maze import MazeScene
 from rmm_envs.systems.dubins3d import Dubins3D
-from rmm_envs.systems.dubins4d import _COEF_ARRAY
+from rmm_envs.systems.dubins4d import SERIES_COEFFICIENTS
 from rmm_envs.worlds.maze_kernels import dubins_path, maze_path_hit, maze_rays, path_reaches_disc
 from rmm_envs.worlds.mazes import Maze, generate_maze
 
@@ -315,7 +315,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         else:
             u = float(self._nominal[0])
         path = dubins_path(self._state[0], self._state[1], self._state[2], self.system.speed, u, float(duration),
-                           np.empty((self.n_path_points, 3)), _COEF_ARRAY)
+                           np.empty((self.n_path_points, 3)), SERIES_COEFFICIENTS)
         hit = maze_path_hit(*self._geom, path)
         reached = not hit and path_reaches_disc(path, self.goal[0], self.goal[1], self.goal[2])
         self.count_interval(duration, active, compute_time)

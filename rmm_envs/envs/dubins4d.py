@@ -7,7 +7,7 @@ guardian's thinking time passes in the world).  This is the paper's parallel-aut
 ## Description
 
 A car-like vehicle (:class:`rmm_envs.systems.Dubins4D`) drives toward a circular goal among
-``n_obstacles`` circular obstacles.  A built-in "reckless driver" (:class:`rmm_envs.driver.
+``n_obstacles`` circular obstacles.  A built-in "reckless driver" (:class:`rmm_envs.drivers.dubins4d.
 CLFDriver`, a CLF-QP) steers it to the goal and ignores the obstacles.  The agent is a
 *guardian*: at every step it decides whether to take control and, if so, which control to apply.
 
@@ -136,9 +136,10 @@ import math
 
 import numpy as np
 
-from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout, parse
+from rmm_envs._deprecated import renamed_attributes
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.clocks import Clock, make_clock
-from rmm_envs.driver import CLFDriver, DriverParams
+from rmm_envs.drivers.dubins4d import CLFDriver, DriverParams
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, rejection_sample, whole
 from rmm_envs.envs.dubins4d_start import HALF as _HALF, Dubins4DStarts
@@ -147,7 +148,7 @@ from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.scenes.dubins4d import Dubins4DScene, observation
 from rmm_envs.systems.dubins4d import Dubins4D, FullBraking
 
-__all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "observation", "observation_layout", "parse_guardian_action"]
+__all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "observation", "observation_layout"]
 
 CONTROLS = ("turnrate_ctrl", "accel_ctrl")  # the action fields of u = (u1, u2)
 
@@ -158,8 +159,8 @@ def observation_layout(n_rays: int = 12) -> ObservationLayout:
                                 ray_angles=[2.0 * math.pi * i / n_rays for i in range(n_rays)])
 
 
-#: Validate a guardian action, return ``(active, (u1, u2) clipped)``: :func:`rmm_envs.autonomy.parse`.
-parse_guardian_action = parse
+#: ``parse_guardian_action``, the former name of :func:`rmm_envs.autonomy.parse`, answered with a warning.
+__getattr__ = renamed_attributes(__name__, {"parse_guardian_action": ("rmm_envs.autonomy:parse", "rmm_envs.autonomy.parse")})
 
 class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
     """Blocking Dubins4D parallel-autonomy env; see the module docstring for the full spec."""

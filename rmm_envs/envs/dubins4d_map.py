@@ -9,7 +9,7 @@ statistics) among obstacles you draw, with the optional extra ``rmm-envs[map]`` 
 
 ``gym.make("Dubins4DMapGuarded-v0", map="my_map.json")`` (or ``map=`` the list already loaded):
 the car drives from a start in the map's start box toward a goal disc; a built-in reckless
-driver (:class:`rmm_envs.driver.CLFDriver`) steers it to the goal's centre and ignores the
+driver (:class:`rmm_envs.drivers.dubins4d.CLFDriver`) steers it to the goal's centre and ignores the
 obstacles; the agent is a *guardian* that decides at each step whether to take control.
 Everything but the world is :class:`rmm_envs.envs.dubins4d.Dubins4DCirclesEnv`'s (this env is
 its subclass): read that spec for the parts only summarised here.  Without ``map`` the example

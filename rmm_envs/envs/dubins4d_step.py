@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rmm_envs.driver import CLFDriver
+from rmm_envs.drivers.dubins4d import CLFDriver
 from rmm_envs.systems.dubins4d import Dubins4D, wrap_angle
 from rmm_envs.worlds.circles import contact_params_each
 

@@ -193,7 +193,7 @@ def generate(cfg: DatagenConfig, out: str | os.PathLike, workers: int | None = N
 
 
 def _shard_job(job):
-    """Worker entry for :func:`rmm_envs.parallel.run_local` / ``run_ray``: ``job`` is ``(config dict, out or None, shard)``."""
+    """Worker entry for :func:`rmm_envs.pool.run_local` / ``run_ray``: ``job`` is ``(config dict, out or None, shard)``."""
     return _shard_task(*job)
 
 
@@ -213,7 +213,7 @@ def _lost_shards_error(lost: list, todo: list[int], out: Path, stopped: str | No
 def _collect(cfg: DatagenConfig, out: Path, todo: list[int], results, bar) -> int:
     """Count the rows of finished shards (writing those that came back as bytes, from Ray);
     a shard whose worker was lost is reported after the others finish."""
-    from rmm_envs.parallel import TaskLost, WorkersLost
+    from rmm_envs.pool import TaskLost, WorkersLost
 
     rows = 0
     lost: list = []
@@ -236,7 +236,7 @@ def _collect(cfg: DatagenConfig, out: Path, todo: list[int], results, bar) -> in
 
 def _run_local(cfg: DatagenConfig, out: Path, todo: list[int], workers: int | None, bar) -> int:
     """Label the ``todo`` shards on local processes; a shard whose worker dies is reported, the rest finish."""
-    from rmm_envs.parallel import run_local
+    from rmm_envs.pool import run_local
 
     if workers is None:
         workers = os.cpu_count() or 1  # generate() has refused anything but an integer >= 1
@@ -246,7 +246,7 @@ def _run_local(cfg: DatagenConfig, out: Path, todo: list[int], workers: int | No
 
 def _run_ray(cfg: DatagenConfig, out: Path, todo: list[int], address: str | None, bar) -> int:
     """Label the ``todo`` shards as Ray tasks and write them here; a shard Ray loses is reported."""
-    from rmm_envs.parallel import run_ray
+    from rmm_envs.pool import run_ray
 
     jobs = [(asdict(cfg), None, s) for s in todo]
     return _collect(cfg, out, todo, run_ray(_shard_job, jobs, address, max_lost_in_a_row=_MAX_LOST_IN_A_ROW), bar)

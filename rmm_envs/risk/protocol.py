@@ -21,8 +21,8 @@ Optional:
     leaf_estimate(states (N, d)) -> (N,) in [0, 1]: a value for non-failed leaves instead of 0.
 
 Observing states for datasets is not the scene's concern but the env's
-(:class:`LabelledEnv`, below).  ``System`` and ``check_system`` are the
-deprecated former names of :class:`RiskScene` and :func:`check_scene`.
+(:class:`LabelledEnv`, below).  ``System`` and ``check_system``, the former names of
+:class:`RiskScene` and :func:`check_scene`, still import, with a ``DeprecationWarning``.
 
 ## LabelledEnv
 
@@ -60,7 +60,9 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["HOOKS", "LabelledEnv", "RiskScene", "System", "check_labelled_env", "check_scene", "check_system"]
+from rmm_envs._deprecated import renamed_attributes
+
+__all__ = ["HOOKS", "LabelledEnv", "RiskScene", "check_labelled_env", "check_scene"]
 
 _REQUIRED = ("state_dim", "control_low", "control_high", "propagate", "path_failed", "state_failed")
 
@@ -88,10 +90,10 @@ def check_scene(scene) -> None:
         )
 
 
-#: Deprecated: the former name of :class:`RiskScene` (kept so existing imports work).
-System = RiskScene
-#: Deprecated: the former name of :func:`check_scene`.
-check_system = check_scene
+#: Deprecated names, answered with a warning: ``System`` (now :class:`RiskScene`) and
+#: ``check_system`` (now :func:`check_scene`).
+__getattr__ = renamed_attributes(__name__, {"System": (f"{__name__}:RiskScene", "RiskScene"),
+                                            "check_system": (f"{__name__}:check_scene", "check_scene")})
 
 
 @runtime_checkable

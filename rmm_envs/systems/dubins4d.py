@@ -38,7 +38,7 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency; numpy alone still works
     njit = None
 
-__all__ = ["Dubins4D", "FullBraking", "wrap_angle"]
+__all__ = ["SERIES_COEFFICIENTS", "Dubins4D", "FullBraking", "wrap_angle"]
 
 _COMPILED_MAX_N = 8  # up to this many states per call, the compiled scalar path is faster
 
@@ -180,7 +180,9 @@ def _state_after_1(x0, y0, th0, v0, w, a, t, lo, hi, coef):
     return _state_at_1(x0, y0, th0, v0, w, a, t, sat, t_sat, lo, hi, coef)
 
 
-_COEF_ARRAY = np.array(_COEF)
+#: The series coefficients of the turn integrals as one (4, 7) array: the argument ``coef`` of the
+#: compiled path kernels (here and :func:`rmm_envs.worlds.maze_kernels.dubins_path`).
+SERIES_COEFFICIENTS = np.array(_COEF)
 if njit is not None:  # the scalar path compiles the same closed forms and displacement as numpy's
     _closed_1 = njit(cache=True)(_closed_turn_integrals)
     _displace_1 = njit(cache=True)(_displace)
@@ -301,7 +303,7 @@ class Dubins4D:
         if (compiled or (compiled is None and states.shape[0] <= _COMPILED_MAX_N)) and _states_at_compiled is not None:
             out = np.empty((states.shape[0], len(times), 4))
             return _states_at_compiled(np.ascontiguousarray(states, dtype=float), np.ascontiguousarray(controls, dtype=float),
-                                       np.asarray(times, dtype=float), self._lo, self._hi, _COEF_ARRAY, out)
+                                       np.asarray(times, dtype=float), self._lo, self._hi, SERIES_COEFFICIENTS, out)
         return self._states_at_numpy(states, controls, times)
 
     def state_after(self, state, control, t: float) -> np.ndarray:
@@ -314,7 +316,7 @@ class Dubins4D:
                                          np.array([float(t)]))[0, 0]
         x, y, th, v = np.asarray(state, dtype=float).tolist()
         w, a = np.asarray(control, dtype=float).tolist()
-        return np.array(_state_after_compiled(x, y, th, v, w, a, float(t), self._lo, self._hi, _COEF_ARRAY))
+        return np.array(_state_after_compiled(x, y, th, v, w, a, float(t), self._lo, self._hi, SERIES_COEFFICIENTS))
 
     def _states_at_numpy(self, states: np.ndarray, controls: np.ndarray, times: np.ndarray) -> np.ndarray:
         x0, y0, th0 = states[:, 0:1], states[:, 1:2], states[:, 2:3]

@@ -40,6 +40,7 @@ __all__ = [
     "points_in_circles",
     "ray_cast",
     "ray_cast_each",
+    "ray_cast_numpy",
     "segments_hit_circles",
 ]
 
@@ -106,13 +107,12 @@ def segments_hit_circles(p0: np.ndarray, p1: np.ndarray, circles: np.ndarray) ->
     return np.any(_segment_circle_sq_dist(p0, p1, circles) <= circles[:, 2] ** 2, axis=-1)
 
 
-def paths_hit_circles(paths: np.ndarray, circles: np.ndarray, reach: float | None = None) -> np.ndarray:
+def paths_hit_circles(paths: np.ndarray, circles: np.ndarray) -> np.ndarray:
     """``(N,)`` bool: any point or segment of path ``i`` (``(N, S, 2+)``) touches a circle.
 
     Exact.  Path/circle pairs that cannot touch are skipped first: every point of a polyline
     of length ``L`` lies within ``L / 2`` of the midpoint of its chord (triangle inequality),
     so only circles within ``r + L / 2`` of that midpoint are tested segment by segment.
-    ``reach`` is accepted for compatibility and ignored (the bound is computed per path).
     """
     paths = np.asarray(paths, dtype=float)
     n = paths.shape[0]
@@ -244,10 +244,11 @@ def ray_cast(
         return _ray_cast_compiled(np.ascontiguousarray(origins), np.ascontiguousarray(headings.reshape(n)),
                                   np.ascontiguousarray(circles, dtype=float), int(n_rays), float(max_range),
                                   np.empty((n, int(n_rays))))
-    return _ray_cast_numpy(origins, headings, circles, n_rays, max_range)
+    return ray_cast_numpy(origins, headings, circles, n_rays, max_range)
 
 
-def _ray_cast_numpy(origins, headings, circles, n_rays, max_range):
+def ray_cast_numpy(origins, headings, circles, n_rays, max_range):
+    """:func:`ray_cast`'s numpy path (the one many origins take), whatever their number."""
     ang = headings[:, None] + (2.0 * np.pi / n_rays) * np.arange(n_rays)[None, :]
     dx, dy = np.cos(ang), np.sin(ang)  # (N, R)
     fx = circles[None, :, 0] - origins[:, 0:1]  # (N, K)
