@@ -20,7 +20,7 @@ FAST = ["--clock", "fixed:1", "--no-progress", "--workers", "1"]
 
 
 # ------------------------------------------------------------------ the stored format
-def test_run_keys_and_stored_config_are_those_of_the_untyped_harness():
+def test_run_keys_and_stored_config_are_those_of_the_untyped_harness(capsys):
     # keys and configs as written by the dict-based harness (tests/data/bench_results_v0.db)
     con = sqlite3.connect(DATA / "bench_results_v0.db")
     stored = {agent: (key, json.loads(cfg)) for key, agent, cfg in con.execute("SELECT run_key, agent, config FROM runs")}
@@ -42,6 +42,9 @@ def test_run_keys_and_stored_config_are_those_of_the_untyped_harness():
     old_circ = parse_run(["--agent", "random", "--agent-opt", "random.p_active=0.5", "--env", "Dubins4DCircles-v0",
                           "--episodes", "2", "--out", "olddb", *FAST], "")
     assert (old_par.env_id, old_circ.env_id) == ("Dubins4DCirclesParallel-v0", "Dubins4DCirclesGuarded-v0")
+    assert capsys.readouterr().err.splitlines() == [
+        "rmm-bench: --env Dubins4DParallel-v0 was renamed Dubins4DCirclesParallel-v0 (the old id still works but will be removed)",
+        "rmm-bench: --env Dubins4DCircles-v0 was renamed Dubins4DCirclesGuarded-v0 (the old id still works but will be removed)"]
     for agent, run in (old_par.agent_runs() | old_circ.agent_runs()).items():
         assert run.key == stored[agent][0] and run.as_dict() == stored[agent][1]
 

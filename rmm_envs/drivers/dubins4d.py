@@ -17,37 +17,10 @@ The speed barriers and the ``u2`` box are one interval ``[l2, h2]`` for ``u2`` (
 bounds); when the speed is outside its bounds the interval is empty and is replaced by the
 single point ``clip(0, u2_min, u2_max)`` (keep the problem feasible, favour the barrier).
 
-## Exact solution (the default, ``solver="closed_form"``)
-
-The problem separates into two independent problems of the same form, ``(u1, d_theta)`` and
-``(u2, d_v)``::
-
-    minimise u^2 + p d^2   subject to   lo <= u <= hi,   a u - d <= b
-
-For a fixed ``u`` the best slack is ``d = max(0, a u - b)``, leaving the convex, differentiable
-``f(u) = u^2 + p max(0, a u - b)^2``.  If ``b >= 0``, ``u = 0`` is its minimiser (``f >= 0 =
-f(0)``); if ``b < 0``, setting ``f'(u) = 0`` on the branch ``a u > b`` gives ``u = p a b / (1 + p
-a^2)``, which is on that branch (``a u - b = -b / (1 + p a^2) > 0``).  Both cases are ``u* = p a
-min(b, 0) / (1 + p a^2)``; a convex function of one variable is minimised over an interval by
-clipping its minimiser, so::
-
-    u = clip(u*, lo, hi),   d = max(0, a u - b)
-
-which is the exact optimum (the active-set enumeration in ``tests/qp_reference.py`` and OSQP
-agree with it to 1e-6 on random instances; tested).  :func:`clf_qp` evaluates it for ``N``
-states in one compiled loop (numba; the same Python function runs uncompiled without numba),
-so the single environment (``N = 1``) and the vector environment (``N`` sub-environments) run
-the very same floating-point operations.  No state is kept between calls: an episode's
-floats depend only on its own seed.
-
-## OSQP (``solver="osqp"``, for checking)
-
-The same rows handed to OSQP (tolerance ``eps``, default 1e-7, solutions polished): the problem
-is set up once with a fixed sparsity pattern and each call updates the constraint values and
-bounds and re-solves, warm-started from the previous solution.  :meth:`CLFDriver.reset` (called
-by the environment at every episode start) sets the problem up afresh, so warm starts never
-cross episodes.  This was the environment's solver before the closed form (about 20x slower per
-call); it stays available to check the closed form against an independent solver.
+:func:`clf_qp` solves it exactly for ``N`` states in one compiled loop (the default,
+``solver="closed_form"``); ``solver="osqp"`` hands the same rows to OSQP, to check it.
+:class:`CLFDriver` is the env's driver, :class:`DriverParams` its gains, :func:`desired_heading`
+the heading it steers to.  How the closed form is derived: "Design notes" at the end.
 """
 
 from __future__ import annotations
@@ -260,3 +233,38 @@ class CLFDriver:
         if self.solver == "osqp":
             return np.clip(z[:, :2], self.lim[[0, 2]], self.lim[[1, 3]])
         return z[:, :2]
+
+
+# ------------------------------------------------------------------ design notes
+#
+# ## Exact solution (the default, ``solver="closed_form"``)
+#
+# The problem separates into two independent problems of the same form, ``(u1, d_theta)`` and
+# ``(u2, d_v)``::
+#
+#     minimise u^2 + p d^2   subject to   lo <= u <= hi,   a u - d <= b
+#
+# For a fixed ``u`` the best slack is ``d = max(0, a u - b)``, leaving the convex, differentiable
+# ``f(u) = u^2 + p max(0, a u - b)^2``.  If ``b >= 0``, ``u = 0`` is its minimiser (``f >= 0 =
+# f(0)``); if ``b < 0``, setting ``f'(u) = 0`` on the branch ``a u > b`` gives ``u = p a b / (1 + p
+# a^2)``, which is on that branch (``a u - b = -b / (1 + p a^2) > 0``).  Both cases are ``u* = p a
+# min(b, 0) / (1 + p a^2)``; a convex function of one variable is minimised over an interval by
+# clipping its minimiser, so::
+#
+#     u = clip(u*, lo, hi),   d = max(0, a u - b)
+#
+# which is the exact optimum (the active-set enumeration in ``tests/qp_reference.py`` and OSQP
+# agree with it to 1e-6 on random instances; tested).  :func:`clf_qp` evaluates it for ``N``
+# states in one compiled loop (numba; the same Python function runs uncompiled without numba),
+# so the single environment (``N = 1``) and the vector environment (``N`` sub-environments) run
+# the very same floating-point operations.  No state is kept between calls: an episode's
+# floats depend only on its own seed.
+#
+# ## OSQP (``solver="osqp"``, for checking)
+#
+# The same rows handed to OSQP (tolerance ``eps``, default 1e-7, solutions polished): the problem
+# is set up once with a fixed sparsity pattern and each call updates the constraint values and
+# bounds and re-solves, warm-started from the previous solution.  :meth:`CLFDriver.reset` (called
+# by the environment at every episode start) sets the problem up afresh, so warm starts never
+# cross episodes.  This was the environment's solver before the closed form (about 20x slower per
+# call); it stays available to check the closed form against an independent solver.
