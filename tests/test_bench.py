@@ -160,9 +160,12 @@ def test_every_agent_end_to_end_and_report(tmp_path, capsys):
 def test_named_agent_sets():
     from benchmarks.bench.checks import resolve_agents as _agents
 
-    assert _agents("all") == ["lrmm", "cbf", "hj", "random", "inactive", "brakes"]
-    assert _agents(" paper ") == ["lrmm-paper", "cbf-paper", "hj-paper", "random", "inactive", "brakes"]
-    assert _agents("cbf-paper,inactive") == ["cbf-paper", "inactive"]
+    from guardians.registry import load_guardian_class
+
+    assert list(_agents("all")) == ["lrmm", "cbf", "hj", "random", "inactive", "brakes"]
+    assert list(_agents(" paper ")) == ["lrmm-paper", "cbf-paper", "hj-paper", "random", "inactive", "brakes"]
+    assert _agents("cbf-paper,inactive") == {"cbf-paper": load_guardian_class("cbf-paper"),
+                                             "inactive": load_guardian_class("inactive")}  # each name's class
 
 
 def test_agent_options_reach_the_guardian(tmp_path):
