@@ -16,6 +16,10 @@ Importing the package registers the Gymnasium environments:
 * ``QuadrotorRoomGuarded-v0``: that quadrotor flown through waypoints by a reckless pilot on a
   cascaded controller, a guardian may take over the velocity command (blocking, fixed step).
 * ``QuadrotorRoomParallel-v0``: the same, non-blocking (the guardian's compute time passes).
+* ``CartPoleGuarded-v0``, ``InvertedPendulumGuarded-v0`` and their non-blocking twins
+  ``CartPoleParallel-v0``, ``InvertedPendulumParallel-v0``: Gymnasium's CartPole and MuJoCo
+  InvertedPendulum driven to a target by a reckless driver (:mod:`rmm_envs.envs.driven_examples`,
+  built with :func:`rmm_envs.envs.driven.guarded`).
 """
 
 from __future__ import annotations
@@ -60,4 +64,11 @@ def _register() -> None:
 
 _register()
 
-__all__ = ["ENV_IDS", "GUARDIAN_ENV_IDS", "__version__"]
+# the guarded envs around simulators the project did not write (rmm_envs.envs.driven_examples)
+from rmm_envs.envs.driven_examples import register as _register_driven  # noqa: E402
+
+DRIVEN_ENV_IDS = _register_driven()
+GUARDIAN_ENV_IDS += DRIVEN_ENV_IDS
+ENV_IDS += DRIVEN_ENV_IDS
+
+__all__ = ["DRIVEN_ENV_IDS", "ENV_IDS", "GUARDIAN_ENV_IDS", "__version__"]

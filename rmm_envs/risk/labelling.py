@@ -94,7 +94,8 @@ class DatagenConfig:
         from rmm_envs.adapters import AdaptedEnv
 
         env = labelled_env(self)
-        return env.scene.default_horizon if isinstance(env, AdaptedEnv) else 2.0
+        # an env built on an adapted simulator (rmm_envs.envs.driven) states its adapter's default
+        return env.scene.default_horizon if isinstance(env, AdaptedEnv) else getattr(env, "default_horizon", 2.0)
 
     def estimator_params(self) -> dict:
         return {"branches": self.branches, "depth": self.depth, "horizon": self.resolved_horizon(),
