@@ -73,23 +73,9 @@ def _env_creator(env_id: str):
     import gymnasium as gym
     from gymnasium.envs.registration import load_env_creator
 
-    import rmm_envs
+    from rmm_envs.env_plugins import resolve_env_id
 
-    module, _, name = env_id.rpartition(":")
-    if module:  # "module:Id", as gym.make takes it: the module registers the env on import
-        import importlib
-
-        try:
-            importlib.import_module(module)
-        except ImportError as e:
-            raise ValueError(f"--env {env_id!r}: cannot import module {module!r} (looked in the current directory "
-                             f"first, then the installed packages): {e}") from None
-        if name not in gym.registry:
-            raise ValueError(f"--env {env_id!r}: importing {module!r} registered no env {name!r}")
-        env_id = name
-    if env_id not in gym.registry:
-        raise ValueError(f"--env {env_id!r} is not a registered Gymnasium env (this package registers {', '.join(rmm_envs.ENV_IDS)}; "
-                         "another package's env is registered by importing it, e.g. from a guardian module)")
+    env_id = resolve_env_id(env_id)  # module:Id imported, entry points loaded; ValueError naming the id otherwise
     entry = gym.spec(env_id).entry_point
     try:
         return load_env_creator(entry) if isinstance(entry, str) else entry
