@@ -89,6 +89,18 @@ def env_arguments(env_id: str) -> set[str]:
     return {name for name in ENV_OPTIONS if accepts_argument(creator, name)}
 
 
+def env_default(env_id: str, name: str, fallback):
+    """The default of the registered env ``env_id``'s constructor argument ``name`` (``fallback``
+    when it takes none or states no default)."""
+    import inspect
+
+    try:
+        param = inspect.signature(_env_creator(env_id)).parameters.get(name)
+    except (TypeError, ValueError):  # a creator without a signature
+        return fallback
+    return fallback if param is None or param.default is inspect.Parameter.empty else param.default
+
+
 def _action_space_lacks(space) -> str | None:
     from rmm_envs.autonomy import GuardianActionSpace
 
