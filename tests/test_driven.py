@@ -190,3 +190,64 @@ def test_a_short_interval_carries_over_to_the_next():
     obs1 = env.step(env.action_space.inactive())[0]  # 0.015 s: no env step of 0.02 s ends in it
     obs2 = env.step(env.action_space.inactive())[0]  # 0.03 s: one has
     assert np.array_equal(obs0, obs1) and not np.array_equal(obs1, obs2)
+
+
+def test_the_sampler_draws_non_failed_states_half_from_the_driver_and_repeats_with_its_generator():
+    env = gym.make("CartPoleGuarded-v0")
+    env.reset(seed=0)
+    base = env.unwrapped
+    a = base.sample_states(np.random.default_rng(7), 10)
+    b = base.sample_states(np.random.default_rng(7), 10)
+    assert a.shape == (10, 4) and np.array_equal(a, b)
+    assert np.all(np.abs(a[:, 0]) <= 2.4) and np.all(np.abs(a[:, 2]) <= 12 * 2 * np.pi / 360)
+    # the adapter's half is uniform on |x_dot| < 2 (1/8 of it below 0.25); the driver's half
+    # is mostly its cart holding still at a target
+    many = base.sample_states(np.random.default_rng(8), 400)
+    assert np.all(np.abs(many[:200, 1]) < 2.0)
+    assert np.mean(np.abs(many[:200, 1]) < 0.25) < 0.25 < 0.5 < np.mean(np.abs(many[200:, 1]) < 0.25)
+    assert np.array_equal(base.observe_states(a), a.astype(np.float32))
+    assert base.default_horizon == 0.08 and base.risk_scene().name == "CartPole-v1"
+
+
+def test_rmm_bench_runs_every_applicable_guardian_and_names_cbf_and_hj_as_not_applying(tmp_path, capsys):
+    from benchmarks.bench.args import parse_run
+    from benchmarks.bench.run import applicable
+
+    config = parse_run(["--env", "CartPoleParallel-v0", "--agent", "all", "--clock", "fixed:1", "--out",
+                        str(tmp_path)], "rmm-bench")
+    config, _ = applicable(config)
+    assert config.agents == ("lrmm", "random", "inactive", "brakes")
+    err = capsys.readouterr().err
+    for name in ("cbf", "hj"):
+        assert (f"--agent all: {name} does not apply to --env CartPoleParallel-v0, skipped: guardian {name!r} applies to "
+                "Dubins4D envs and the maze car") in err
+    assert config.env_kwargs == {"time_accel": 10.0, "base_step": 0.02, "clock": "fixed:1"}  # the env's own base step
+
+
+@pytest.mark.parametrize("env_id, upright, tipping", [
+    ("CartPoleParallel-v0", [0, 0, 0, 0], [0, 0, 0.19, 1.5]),
+    ("InvertedPendulumParallel-v0", [0, 0, 0, 0], [0, 0.18, 0, 1.0]),
+])
+def test_the_shipped_lrmm_applies_the_safe_default_when_the_pole_is_about_to_fall(env_id, upright, tipping):
+    if env_id.startswith("Inverted"):
+        pytest.importorskip("mujoco")
+    from guardians import make_guardian
+
+    env = gym.make(env_id, clock="fixed:1")
+    env.reset(seed=0)
+    g = make_guardian("lrmm", env_id=env_id)
+    assert g.action == "safe" and g.commit == 0
+    g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
+    space = env.action_space
+    calm = g.act(np.array(upright, dtype=space_dtype(env)), {})
+    assert calm == space.inactive() or (calm["active_ctrl"] == 0)
+    assert g.last_risk < g.threshold
+    hot = np.array(tipping, dtype=space_dtype(env))
+    act = g.act(hot, {})
+    assert g.last_risk > g.threshold and act["active_ctrl"] == 1
+    safe = space.safe_default.policy(space, np.random.default_rng(0))(hot)
+    assert np.array_equal(act["force_ctrl"], safe)
+
+
+def space_dtype(env):
+    return env.observation_space.dtype
