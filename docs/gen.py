@@ -29,6 +29,9 @@ ENV_PAGES = {
     "environments/quadrotor_room_parallel.md": ("rmm_envs.envs.quadrotor_room_parallel",
                                                 "The quadrotor under parallel autonomy: `QuadrotorRoomGuarded-v0`, "
                                                 "`QuadrotorRoomParallel-v0`", None),
+    "environments/driven_examples.md": ("rmm_envs.envs.driven_examples",
+                                        "Simulators the project did not write, guarded: `CartPoleGuarded-v0`, "
+                                        "`InvertedPendulumGuarded-v0` and their Parallel twins", None),
 }
 
 
