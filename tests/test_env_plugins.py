@@ -128,3 +128,28 @@ def test_an_env_a_worker_cannot_register_fails_the_run_naming_the_env_and_the_im
     with sqlite3.connect(tmp_path / "res" / "results.db") as db:
         kinds = db.execute("SELECT outcome, error_kind, COUNT(*) FROM episodes GROUP BY 1, 2").fetchall()
     assert kinds == [("error", "env", 4)]
+
+
+CARTPOLE_PLUGIN = '''
+import gymnasium as gym
+
+
+def register():
+    if "PlugCartPole-v0" not in gym.registry:
+        gym.register(id="PlugCartPole-v0", entry_point="gymnasium.envs.classic_control:CartPoleEnv",
+                     max_episode_steps=200)
+'''
+
+
+def test_rmm_datagen_labels_an_entry_point_env_in_every_worker(tmp_path):
+    site = tmp_path / "site"
+    site.mkdir()
+    _dist(site, "plugcart", "plugcart_envs", CARTPOLE_PLUGIN)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"} | {"PYTHONPATH": str(site)}
+    exe = Path(sys.executable).parent / "rmm-datagen"
+    res = subprocess.run([str(exe), "--env", "PlugCartPole-v0", "--configs", "4", "--samples-per-config", "8",
+                          "--branches", "4", "--configs-per-shard", "2", "--workers", "2", "--no-progress",
+                          "--out", str(tmp_path / "data")], cwd=tmp_path, capture_output=True, text=True, timeout=600,
+                         env=env)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "32 labelled samples" in res.stdout

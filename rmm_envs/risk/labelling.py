@@ -60,7 +60,11 @@ class DatagenConfig:
                 raise ValueError(f"env {self.env_id!r}: cannot import module {module!r}: {e}") from None
             if name not in gym.registry:
                 raise ValueError(f"env {self.env_id!r}: importing {module!r} registered no env {name!r}")
-        elif not isinstance(self.env_id, str) or self.env_id not in gym.registry:
+        elif isinstance(self.env_id, str) and self.env_id not in gym.registry:
+            from rmm_envs.env_plugins import load_env_plugins
+
+            load_env_plugins()  # a package's gymnasium.envs entry point may register it
+        if not module and (not isinstance(self.env_id, str) or self.env_id not in gym.registry):
             raise ValueError(f"unknown env {self.env_id!r}: not a registered Gymnasium id; this package registers "
                              f"{list(rmm_envs.ENV_IDS)} (any registered env that follows rmm_envs.risk.LabelledEnv works)")
         if self.failure is not None and not (isinstance(self.failure, str) and self.failure.count(":") == 1):
@@ -133,6 +137,10 @@ def labelled_env(cfg: DatagenConfig):
 
         import rmm_envs  # noqa: F401  (registers the package's envs)
 
+        if ":" not in cfg.env_id and cfg.env_id not in gym.registry:  # in a worker: the entry points register it
+            from rmm_envs.env_plugins import load_env_plugins
+
+            load_env_plugins()
         env = gym.make(cfg.env_id, **cfg.env_kwargs)
         try:
             check_labelled_env(env.unwrapped)
