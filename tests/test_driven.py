@@ -46,6 +46,7 @@ def test_failure_is_a_collision_with_cost_one_on_the_failing_step_only():
     assert infos[-1]["outcome"] == "collision" and infos[-1]["episode_stats"]["outcome"] == "collision"
     assert [i["cost"] for i in infos] == [0.0] * (len(infos) - 1) + [1.0]
     assert infos[-1]["episode_stats"]["cum_cost"] == 1.0
+    assert "final_speed" not in infos[-1]["episode_stats"]  # optional, and there is no vehicle
     assert abs(steps[-1][0][2]) > 12 * 2 * np.pi / 360 or abs(steps[-1][0][0]) > 2.4  # CartPole's own termination
 
 

@@ -53,7 +53,7 @@ make none), all under one control: the guardian's if it is active, else the driv
 the observed state.  After each env step: failure -> ``"collision"``, else success ->
 ``"goal"``, else the env's truncation (or a termination that is not a failure) -> ``"timeout"``;
 ``max_episode_sim_time`` -> ``"timeout"``.  ``info["episode_stats"]`` holds Table I's statistics
-(``final_speed`` is ``None``: no vehicle).
+(without the optional ``final_speed``: there is no vehicle).
 
 **Labels.**  Where a risk adapter serves the env (:mod:`rmm_envs.adapters`), the guarded env
 offers the :class:`rmm_envs.risk.LabelledEnv` hooks, so ``rmm-datagen --env <guarded id>`` labels
@@ -266,6 +266,12 @@ class DrivenGuardedEnv(GuardedEnv):
 
     def final_speed(self):
         return None
+
+    def episode_statistics(self, outcome: str | None = None) -> dict:
+        """Table I's statistics, without ``final_speed`` (an optional one: there is no vehicle)."""
+        stats = super().episode_statistics(outcome)
+        del stats["final_speed"]
+        return stats
 
     def close(self):
         self.env.close()
