@@ -5,6 +5,8 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace
@@ -72,7 +74,8 @@ def _twin(env):
     return raw
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
 def test_nominal_control_is_what_the_driver_applies_and_an_active_action_applies_the_guardians(seed):
     env = guarded("CartPole-v1", driver=balance, safe_default=0, success=never, max_episode_sim_time=0.5)
     obs, info = env.reset(seed=seed)
