@@ -125,6 +125,27 @@ SYSTEMS: tuple[SystemSpec, ...] = (
         pages=(DocPage("environments/quadrotor_room.md", "Quadrotor in rooms", ("plain",), "figures/quadrotor_room_frame.png"),
                DocPage("environments/quadrotor_room_parallel.md", "The quadrotor under parallel autonomy",
                        ("guarded", "parallel")))),
+    # simulators the project did not write, made guarded envs by rmm_envs.envs.driven.guarded
+    SystemSpec(
+        name="CartPole",
+        blurb="Gymnasium's CartPole-v1 driven to a target position by a reckless LQR, the balancing LQR as safe default",
+        dynamics="gymnasium.envs.classic_control.cartpole:CartPoleEnv",
+        scenes=("rmm_envs.adapters.classic_control:CartPoleScene",),
+        envs={"guarded": "rmm_envs.envs.driven_examples:cartpole_guarded",
+              "parallel": "rmm_envs.envs.driven_examples:cartpole_parallel"},
+        driver="rmm_envs.envs.driven_examples:TargetTask", safe_default="rmm_envs.envs.driven:GivenSafeDefault",
+        guardians=("lrmm", "random", "inactive", "brakes"),
+        pages=(DocPage("environments/driven_examples.md", "Simulators the project did not write, guarded",
+                       ("guarded", "parallel")),)),
+    SystemSpec(
+        name="InvertedPendulum",
+        blurb="Gymnasium's MuJoCo InvertedPendulum-v5 under the same target task (see the CartPole page)",
+        dynamics="gymnasium.envs.mujoco.inverted_pendulum_v5:InvertedPendulumEnv",
+        scenes=("rmm_envs.adapters.mujoco_envs:MujocoScene",),
+        envs={"guarded": "rmm_envs.envs.driven_examples:inverted_pendulum_guarded",
+              "parallel": "rmm_envs.envs.driven_examples:inverted_pendulum_parallel"},
+        driver="rmm_envs.envs.driven_examples:TargetTask", safe_default="rmm_envs.envs.driven:GivenSafeDefault",
+        guardians=("lrmm", "random", "inactive", "brakes"), extra="mujoco"),
 )
 
 #: Old id -> new id, for the ids renamed when one naming scheme was applied to every system.

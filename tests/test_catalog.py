@@ -67,7 +67,7 @@ def test_ids_registration_and_twins_come_from_the_table():
 
     assert rmm_envs.ENV_IDS == tuple(s.name + KINDS[k] for s in SYSTEMS for k in KINDS if k in s.envs)
     assert rmm_envs.GUARDIAN_ENV_IDS == tuple(s.name + KINDS[k] for s in SYSTEMS for k in GUARDED_KINDS if k in s.envs)
-    assert len(set(rmm_envs.ENV_IDS)) == len(rmm_envs.ENV_IDS) == 10
+    assert len(set(rmm_envs.ENV_IDS)) == len(rmm_envs.ENV_IDS) == 14
     for s in SYSTEMS:
         for kind, entry in s.envs.items():
             spec = gym.spec(s.env_id(kind))
@@ -83,12 +83,13 @@ def test_every_reference_of_the_table_imports():
 
     from rmm_envs.autonomy import SafeDefault
     from rmm_envs.catalog import SYSTEMS
+    from rmm_envs.adapters.base import SimulatorScene
     from rmm_envs.scenes.base import SceneBase
 
     for s in SYSTEMS:
         for ref in (*s.envs.values(), s.dynamics, s.driver, *((s.vector,) if s.vector else ())):
             assert callable(load_env_creator(ref)), ref
-        assert all(issubclass(load_env_creator(ref), SceneBase) for ref in s.scenes)
+        assert all(issubclass(load_env_creator(ref), (SceneBase, SimulatorScene)) for ref in s.scenes)
         assert issubclass(load_env_creator(s.safe_default), SafeDefault)
 
 
@@ -110,8 +111,9 @@ def test_the_cli_help_and_the_docs_list_name_the_table_s_ids():
     from rmm_envs.cli import build_parser
 
     assert env_help() == ("Dubins4DCirclesParallel-v0, Dubins4DMapParallel-v0, Dubins3DMazeParallel-v0, "
-                          "QuadrotorRoomParallel-v0 (non-blocking) or Dubins4DCirclesGuarded-v0, Dubins4DMapGuarded-v0, "
-                          "Dubins3DMazeGuarded-v0, QuadrotorRoomGuarded-v0 (blocking) in this package")
+                          "QuadrotorRoomParallel-v0, CartPoleParallel-v0, InvertedPendulumParallel-v0 (non-blocking) or "
+                          "Dubins4DCirclesGuarded-v0, Dubins4DMapGuarded-v0, Dubins3DMazeGuarded-v0, "
+                          "QuadrotorRoomGuarded-v0, CartPoleGuarded-v0, InvertedPendulumGuarded-v0 (blocking) in this package")
     for parser in (run_parser(""), sweep_parser()):
         env = next(a for a in parser._actions if a.dest == "env")
         assert env_help() in env.help and env.default == "Dubins4DCirclesParallel-v0"
@@ -141,7 +143,7 @@ def test_a_new_table_entry_is_registered_listed_and_helped(monkeypatch):
         catalog.register()
         assert gym.spec("ToyCirclesGuarded-v0").entry_point == "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv"
         assert catalog.env_ids()[-1] == "ToyCirclesGuarded-v0" and "ToyCirclesGuarded-v0" in catalog.guardian_env_ids()
-        assert "Dubins3DMazeGuarded-v0, QuadrotorRoomGuarded-v0, ToyCirclesGuarded-v0 (blocking)" in catalog.env_help()
+        assert "InvertedPendulumGuarded-v0, ToyCirclesGuarded-v0 (blocking)" in catalog.env_help()
         assert catalog.system_of("ToyCirclesGuarded-v0") == (toy, "guarded")
     finally:
         gym.registry.pop("ToyCirclesGuarded-v0", None)

@@ -17,7 +17,7 @@ import gen  # noqa: E402
     ("label_and_train.py", ["--configs", "6", "--samples", "16", "--branches", "8", "--epochs", "3"]),
     ("third_party_guardian.py", []),
     ("new_system.py", []),
-    ("own_simulator.py", ["--configs", "4", "--samples", "32", "--epochs", "3"]),
+    ("own_simulator.py", ["--configs", "4", "--samples", "32", "--epochs", "3", "--episodes", "4"]),
     ("rl_guardian.py", ["--timesteps", "2048", "--episodes", "4"]),  # asserts its table's rows and counts
     ("rl_guardian.py", ["--timesteps", "2048", "--episodes", "2", "--cost-limit", "0.1"]),  # PPO-Lagrangian on info["cost"]
 ])

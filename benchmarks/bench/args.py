@@ -35,8 +35,9 @@ def _common(p: argparse.ArgumentParser, default_agent: str) -> None:
                         "env that module registers (default: %(default)s)")
     p.add_argument("--time-accel", type=float, default=NON_BLOCKING_DEFAULTS["time_accel"],
                    help="sim seconds per clock second, for a non-blocking env (default: %(default)s)")
-    p.add_argument("--base-step", type=float, default=NON_BLOCKING_DEFAULTS["base_step"],
-                   help="sim seconds added every step, for a non-blocking env (default: %(default)s)")
+    p.add_argument("--base-step", type=float, default=None,
+                   help="sim seconds added every step, for a non-blocking env (default: the env's own, 0.1 for the "
+                        "package's vehicles, one env step for CartPoleParallel-v0 and InvertedPendulumParallel-v0)")
     p.add_argument("--seed", type=int, default=0, help="master seed; episode i's seed derives from it (default: %(default)s)")
     p.add_argument("--out", default="results", help="output directory (default: %(default)s)")
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (default: the core count)")
@@ -95,19 +96,21 @@ def _check_counts(args) -> None:
 
 
 def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
-    from benchmarks.bench.checks import env_arguments, parse_agent_opts, resolve_agents
+    from benchmarks.bench.checks import env_arguments, env_default, parse_agent_opts, resolve_agents
     from guardians.registry import guardian_set
     from rmm_envs.catalog import canonical_id
 
     classes = resolve_agents(args.agent)
     agents = list(classes)
     agent_kwargs = parse_agent_opts(args.agent_opt or [], agents)
-    options = {"time_accel": args.time_accel, "base_step": args.base_step, "clock": clock}
     env_id = canonical_id(args.env)
     if env_id != args.env:  # an old id: run its new id (the same env; its stored runs are found by either id)
         print(f"rmm-bench: --env {args.env} was renamed {env_id} (the old id still works but will be removed)",
               file=sys.stderr)
     takes = env_arguments(env_id)  # ValueError if not registered; the contract is checked when the env is built
+    if args.base_step is None:  # the env's own default (stored as given, so the run's identity names it)
+        args.base_step = env_default(env_id, "base_step", NON_BLOCKING_DEFAULTS["base_step"])
+    options = {"time_accel": args.time_accel, "base_step": args.base_step, "clock": clock}
     for name, default in NON_BLOCKING_DEFAULTS.items():
         if name not in takes and options[name] != default:  # a blocking env would silently ignore it
             flag = "--" + name.replace("_", "-")

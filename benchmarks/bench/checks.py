@@ -73,23 +73,9 @@ def _env_creator(env_id: str):
     import gymnasium as gym
     from gymnasium.envs.registration import load_env_creator
 
-    import rmm_envs
+    from rmm_envs.env_plugins import resolve_env_id
 
-    module, _, name = env_id.rpartition(":")
-    if module:  # "module:Id", as gym.make takes it: the module registers the env on import
-        import importlib
-
-        try:
-            importlib.import_module(module)
-        except ImportError as e:
-            raise ValueError(f"--env {env_id!r}: cannot import module {module!r} (looked in the current directory "
-                             f"first, then the installed packages): {e}") from None
-        if name not in gym.registry:
-            raise ValueError(f"--env {env_id!r}: importing {module!r} registered no env {name!r}")
-        env_id = name
-    if env_id not in gym.registry:
-        raise ValueError(f"--env {env_id!r} is not a registered Gymnasium env (this package registers {', '.join(rmm_envs.ENV_IDS)}; "
-                         "another package's env is registered by importing it, e.g. from a guardian module)")
+    env_id = resolve_env_id(env_id)  # module:Id imported, entry points loaded; ValueError naming the id otherwise
     entry = gym.spec(env_id).entry_point
     try:
         return load_env_creator(entry) if isinstance(entry, str) else entry
@@ -101,6 +87,18 @@ def env_arguments(env_id: str) -> set[str]:
     """Which of :data:`ENV_OPTIONS` the registered env ``env_id`` takes (ValueError if it is not registered)."""
     creator = _env_creator(env_id)
     return {name for name in ENV_OPTIONS if accepts_argument(creator, name)}
+
+
+def env_default(env_id: str, name: str, fallback):
+    """The default of the registered env ``env_id``'s constructor argument ``name`` (``fallback``
+    when it takes none or states no default)."""
+    import inspect
+
+    try:
+        param = inspect.signature(_env_creator(env_id)).parameters.get(name)
+    except (TypeError, ValueError):  # a creator without a signature
+        return fallback
+    return fallback if param is None or param.default is inspect.Parameter.empty else param.default
 
 
 def _action_space_lacks(space) -> str | None:

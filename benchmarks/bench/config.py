@@ -195,7 +195,7 @@ class EpisodeResult:
     error: str | None = None
     wall_time: float | None = None
     finished: float | None = None
-    error_kind: str | None = None  # guardian / timeout / lost_worker / input_changed (None unless outcome is error)
+    error_kind: str | None = None  # guardian / timeout / lost_worker / input_changed / env (None unless outcome is error)
     cost: float | None = None  # the episode's summed info["cost"] (None: the env reports none)
 
     def as_row(self) -> dict:

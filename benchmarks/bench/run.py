@@ -28,7 +28,7 @@ from benchmarks.bench.report import plot_latency, write_report
 from benchmarks.bench.runner import episode_seed, hard_timeout, lost_episode, run_episode
 from benchmarks.bench.store import RETRIED_ERRORS, ResultsStore
 
-__all__ = ["RunFailed", "cmd_run", "cmd_sweep", "execute", "guardian_error_lines", "plan_tasks"]
+__all__ = ["RunFailed", "cmd_run", "cmd_sweep", "env_error_lines", "execute", "guardian_error_lines", "plan_tasks"]
 
 
 class RunFailed(RuntimeError):
@@ -144,7 +144,8 @@ def _unfinished_message(unfinished: dict[str, int], store: ResultsStore) -> str:
     if not lacking:
         return ""
     return (f"{sum(lacking.values())} episodes ended without a result ({', '.join(f'{a}: {n}' for a, n in lacking.items())}): "
-            f"over --episode-timeout, their worker died or a file they read changed (causes in the error column of {store.path}); "
+            f"over --episode-timeout, their worker died, a file they read changed or their worker could not make the env "
+            f"(causes in the error column of {store.path}); "
             "the table counts them as errors; rerun the same command to retry them")
 
 
@@ -161,6 +162,19 @@ def guardian_error_lines(store: ResultsStore, run_keys: dict[str, str], episodes
                          f"rates (first, episode {errs[0]['episode']}: {first}); fix the guardian or its --agent-opt values "
                          "and rerun with --retry-errors")
     return lines
+
+
+def env_error_lines(store: ResultsStore, run_keys: dict[str, str], episodes: int, env_id: str) -> list[str]:
+    """One line when episodes of this command could not make ``env_id`` in their worker (error
+    kind ``env``): a failure of the run, named with the env id and the first cause, never a
+    guardian error."""
+    errs = [e for key in run_keys.values() for e in store.episodes(key, episodes)
+            if e["outcome"] == "error" and e["error_kind"] == "env"]
+    if not errs:
+        return []
+    first = (errs[0]["error"] or "no message").splitlines()[0][:400]
+    return [f"--env {env_id}: {len(errs)} episodes could not make the env in their worker, a failure of the run, not of "
+            f"a guardian (first: {first}); make the env importable in every worker and rerun the same command"]
 
 
 def _invoke(store: ResultsStore, kind: str, config: BenchConfig, argv, meta: dict, record_args: dict) -> tuple[int, str]:
@@ -221,7 +235,8 @@ def cmd_run(config: BenchConfig, argv) -> int:
         print(f"finished in {time.perf_counter() - t0:.1f} s")
         record = store.invocation(inv)
         write_report(store, out, record, config.batch_size)
-        errors = guardian_error_lines(store, record["run_keys"], config.episodes)
+        errors = (env_error_lines(store, record["run_keys"], config.episodes, config.env_id)
+                  + guardian_error_lines(store, record["run_keys"], config.episodes))
         for line in ([msg] if msg else []) + errors:
             print(f"rmm-bench: {line}", file=sys.stderr)
         return 1 if msg or errors else 0
@@ -246,8 +261,9 @@ def cmd_sweep(config: BenchConfig, argv) -> int:
                 _, msg = _invoke(store, "sweep", at, argv, meta, at.parsed | {"clock": at.clock, "latency_ms": lat})
             except KeyboardInterrupt:
                 return _interrupted(out)
+            keys = {a: r.key for a, r in at.agent_runs().items()}
             failed += [f"{lat:g} ms: {line}" for line in ([msg] if msg else [])
-                       + guardian_error_lines(store, {a: r.key for a, r in at.agent_runs().items()}, at.episodes)]
+                       + env_error_lines(store, keys, at.episodes, at.env_id) + guardian_error_lines(store, keys, at.episodes)]
             for agent, run in at.agent_runs().items():
                 agg = aggregate(store.episodes(run.key, at.episodes), at.batch_size)
                 series[agent].append((lat, agg["collision"][0], agg["collision"][1]))

@@ -86,13 +86,20 @@ _CACHE: dict = {}
 
 
 def _env(env_id: str, env_kwargs: dict):
+    """The worker's env (built once).  An env this worker cannot register or make is
+    :class:`EnvUnavailable`: a failure of the run, not of the guardian (the parent made it)."""
     key = ("env", env_id, json.dumps(env_kwargs, sort_keys=True))
     if key not in _CACHE:
         import gymnasium as gym
 
-        import rmm_envs  # noqa: F401
+        from rmm_envs.env_plugins import EnvUnavailable, resolve_env_id
 
-        _CACHE[key] = gym.make(env_id, **env_kwargs)
+        try:
+            _CACHE[key] = gym.make(resolve_env_id(env_id), **env_kwargs)
+        except EnvUnavailable as e:
+            raise EnvUnavailable(f"in this worker: {e}") from None
+        except Exception as e:  # noqa: BLE001 - its registration or constructor failed here, not in the parent
+            raise EnvUnavailable(f"in this worker: --env {env_id!r} cannot be made: {type(e).__name__}: {e}") from None
     return _CACHE[key]
 
 
@@ -188,7 +195,10 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
                 raise EpisodeTimeout("episode time limit exceeded")
         fields.update(_statistics(run.env_id, info))
     except (Exception, SystemExit) as e:  # recorded, the run goes on
-        kind = "timeout" if isinstance(e, EpisodeTimeout) else "input_changed" if isinstance(e, InputChanged) else "guardian"
+        from rmm_envs.env_plugins import EnvUnavailable
+
+        kind = ("timeout" if isinstance(e, EpisodeTimeout) else "input_changed" if isinstance(e, InputChanged)
+                else "env" if isinstance(e, EnvUnavailable) else "guardian")
         fields.update(outcome="error", error_kind=kind, error=_error_text(e))
         _CACHE.pop(_guardian_key(task), None)
     finally:

@@ -16,8 +16,10 @@ Tables:
     action the env refused.  A result about the guardian: kept by a rerun, retried only with
     ``--retry-errors``.
   - ``timeout`` (over ``--episode-timeout``), ``lost_worker`` (the worker process died or
-    was killed) and ``input_changed`` (a file the run reads, such as a model, changed while it
-    ran): failures of the run, not results.  Every rerun retries them, replacing the row.
+    was killed), ``input_changed`` (a file the run reads, such as a model, changed while it
+    ran) and ``env`` (the worker could not register or make the env the parent made: a
+    ``module:Id`` import or an entry point that fails there): failures of the run, not
+    results.  Every rerun retries them, replacing the row.
 
 * ``invocations``: each ``rmm-bench`` command: its arguments, run keys, episode count, the
   process id and host that ran it, and its status: ``running`` while it runs, then
@@ -74,7 +76,7 @@ def _column(annotation) -> str:
 EPISODE_FIELDS = {name: _column(tp) for name, tp in typing.get_type_hints(EpisodeResult).items()}
 
 # error kinds that are failures of the run rather than results: every rerun retries them
-RETRIED_ERRORS = ("timeout", "lost_worker", "input_changed")
+RETRIED_ERRORS = ("timeout", "lost_worker", "input_changed", "env")
 
 _INVOCATION_COLUMNS = {"pid": "INTEGER", "host": "TEXT", "updated": "REAL", "message": "TEXT"}
 

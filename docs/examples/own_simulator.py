@@ -7,7 +7,8 @@ Steps: (1) RiskLabel labels Gymnasium's CartPole-v1 while it runs, through the r
 chosen for it; Pendulum-v1 needs a failure test of the state; (2) a simulator of your own is
 labelled through the snapshot protocol; (3) rmm-datagen's API labels CartPole states from the
 adapter's sampler; (4) rmm-train's API fits a risk map to them, read from the env's own
-observation.
+observation; (5) a driver, a safe default and a success test make CartPole-v1 a guarded env,
+which is labelled, learned and benchmarked (rmm-bench's Table I) like the package's own.
 """
 
 import argparse
@@ -17,8 +18,10 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from benchmarks.bench.cli import main as rmm_bench
 from guardians.lrmm.train import TrainConfig, train
 from rmm_envs.adapters import SnapshotScene
+from rmm_envs.envs.driven import parallel
 from rmm_envs.risk import RiskEstimator
 from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 from rmm_envs.wrappers import RiskLabel
@@ -48,12 +51,45 @@ class Cliff:
         return np.zeros(len(states), dtype=bool)
 
 
+#: a balancing LQR of CartPole's linearised equations, u = -K (x, x_dot, theta, theta_dot)
+K = (-3.16, -5.92, -49.5, -12.8)
+
+
+def push(obs, mark=0.0, gain=1.0):
+    """CartPole's action (1: push right) of the LQR steering to ``mark``, its position gain times ``gain``."""
+    u = -K[0] * gain * (float(obs[0]) - mark) - sum(k * float(x) for k, x in zip(K[1:], obs[1:]))
+    return int(u > 0)
+
+
+class RushToTheMark:
+    """A reckless driver: to a random mark right of the centre, with an aggressive position gain."""
+
+    def begin_episode(self, rng):  # called by the guarded env at every reset
+        self.mark, self.gain, self.held = rng.uniform(1.0, 1.8), rng.uniform(1.0, 4.0), 0
+
+    def __call__(self, obs):
+        return push(obs, self.mark, self.gain)
+
+    def arrived(self, obs):  # success: at the mark with the pole up for 0.5 s (25 steps)
+        self.held = self.held + 1 if abs(obs[0] - self.mark) < 0.2 and abs(obs[2]) < 0.05 else 0
+        return self.held >= 25
+
+
+def make_rush_cartpole(time_accel=10.0, base_step=0.02, clock=None):
+    """The non-blocking guarded env (rmm-bench passes the clock, time_accel and base_step)."""
+    driver = RushToTheMark()
+    return parallel("CartPole-v1", driver=driver, safe_default=push, success=driver.arrived,
+                    controls=("force_ctrl",), max_episode_sim_time=6.0, time_accel=time_accel, base_step=base_step,
+                    clock=clock)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default=None, help="working directory (default: a temporary one)")
     ap.add_argument("--configs", type=int, default=8)
     ap.add_argument("--samples", type=int, default=64)
     ap.add_argument("--epochs", type=int, default=20)
+    ap.add_argument("--episodes", type=int, default=16, help="Table I episodes per guardian")
     args = ap.parse_args(argv)
     work = Path(args.out or tempfile.mkdtemp(prefix="own-simulator-"))
 
@@ -97,6 +133,26 @@ def main(argv=None):
     upright, tipping = np.array([[0, 0, 0, 0]], np.float32), np.array([[0, 0, 0.19, 1.5]], np.float32)
     print(f"model: test MAE {model.meta['metrics']['test']['mae']:.3f}; predicted risk upright at rest "
           f"{float(model.predict(upright)[0]):.2f}, tipping over {float(model.predict(tipping)[0]):.2f}")
+
+    # 5. parallel autonomy: CartPole-v1 with a reckless driver, the balancing LQR at the centre as
+    #    the safe default and "at the mark" as success (rmm_envs.envs.driven.parallel); its
+    #    failure is CartPole's termination.  Registered here; in a module of your own, rmm-bench
+    #    --env mymodule:RushCartPole-v0 imports it in every worker.
+    if "RushCartPole-v0" not in gym.registry:
+        gym.register("RushCartPole-v0", entry_point=make_rush_cartpole)
+    gcfg = DatagenConfig(env_id="RushCartPole-v0", configs=args.configs, samples_per_config=args.samples, seed=1)
+    generate(gcfg, work / "rush_data", workers=1, progress=False)  # labels at the adapter's horizon, 0.08 s
+    rush = train(load_dataset(work / "rush_data"), TrainConfig(epochs=args.epochs, seed=0, hidden=(64, 64),
+                                                                activation="tanh", output_bias=True, lr=0.003),
+                 log=lambda *a: None)
+    rush.save(work / "rush_model.npz")
+    # Table I: the driver alone (inactive), lrmm applying the safe default while the risk is
+    # above 0.2, and the safe default throughout (brakes); fixed 1 ms clock, one worker
+    status = rmm_bench(["--env", "RushCartPole-v0", "--agent", "inactive,lrmm,brakes", "--episodes", str(args.episodes),
+                        "--agent-opt", f'lrmm.model="{work / "rush_model.npz"}"', "--agent-opt", 'lrmm.action="safe"',
+                        "--agent-opt", "lrmm.threshold=0.2", "--agent-opt", "lrmm.commit=0", "--seed", "0",
+                        "--clock", "fixed:1", "--workers", "1", "--no-progress", "--out", str(work / "bench")])
+    assert status == 0
     return 0
 
 

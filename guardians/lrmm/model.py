@@ -296,6 +296,23 @@ _MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays", decision={
 #: no head), for ``action="safe"`` (hover and level) with an explicit threshold.
 _QUAD_PARALLEL = Shipped({"act": "quadrotor_cmd_act.npz", "risk": "quadrotor_cmd.npz"})
 
+#: The guarded envs around simulators the project did not write (rmm_envs.envs.driven_examples):
+#: risk-only models of each env's own observation (the risk adapter's labels: random pushes held
+#: for the adapter's default horizon, over half adapter-sampled and half driver-visited states),
+#: applying the env's safe default (the balancing LQR) while the risk is above the threshold.
+#: Decision defaults chosen on development episodes only (env seeds 500000-500099 and
+#: 600000-600099, fixed 1 ms clock), never on those of the reported ``rmm-bench --seed 11``.
+_CARTPOLE = Shipped({"act": "cartpole_guarded.npz"}, decision={
+    "threshold": 0.2, "commit": 0, "action": "safe",
+    "chosen_by": "fewest collisions, then most goals, over thresholds 0.1/0.15/0.2/0.3/0.5 x commit 0/3/10/25 steps on "
+                 "100 development episodes each of env seeds 500000-500099 and 600000-600099 of CartPoleParallel-v0 "
+                 "(fixed 1 ms clock): 2 and 0 collisions, 60 and 53 goals"})
+_PENDULUM = Shipped({"act": "inverted_pendulum_guarded.npz"}, decision={
+    "threshold": 0.05, "commit": 0, "action": "safe",
+    "chosen_by": "fewest collisions while keeping the goals, over thresholds 0.02/0.05/0.1/0.3/0.5 x commit 0/2/5 steps "
+                 "on 100 development episodes each of env seeds 500000-500099 and 600000-600099 of "
+                 "InvertedPendulumParallel-v0 (fixed 1 ms clock): 32 and 31 collisions, 62 and 64 goals"})
+
 #: The shipped models, per system of :data:`rmm_envs.catalog.SYSTEMS` (its ``name``) and kind of
 #: env: ``"plain"`` (plain control) and ``"guarded"`` (its blocking and non-blocking guardian envs,
 #: which share the world and the observation, so one entry serves both).
@@ -307,6 +324,8 @@ SHIPPED_BY_SYSTEM: dict[str, dict[str, Shipped]] = {
     "Dubins4DMap": {"guarded": _DUBINS4D},
     "Dubins3DMaze": {"plain": Shipped({"paper": "dubins3d_maze.npz"}), "guarded": _MAZE_PARALLEL},
     "QuadrotorRoom": {"plain": Shipped({"paper": "quadrotor.npz"}), "guarded": _QUAD_PARALLEL},
+    "CartPole": {"guarded": _CARTPOLE},
+    "InvertedPendulum": {"guarded": _PENDULUM},
 }
 
 

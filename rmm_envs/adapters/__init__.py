@@ -35,7 +35,7 @@ from rmm_envs.adapters.classic_control import (
 
 __all__ = ["AdaptedEnv", "CartPoleAdapter", "CartPoleScene", "ClassicControlSnapshot", "PendulumAdapter",
            "PendulumScene", "SimulatorScene", "SnapshotScene", "SnapshotSimulator", "adapt", "control_box",
-           "snapshot_of"]
+           "snapshot_of", "termination_is_failure"]
 
 SERVED = ("CartPole-v1", "Pendulum-v1 (with failure=)", "InvertedPendulum-v5", "InvertedDoublePendulum-v5",
           "Hopper-v5", "any other MuJoCo env (with failure=)")
@@ -76,6 +76,19 @@ def adapt(env: gym.Env, failure=None) -> AdaptedEnv:
         f"{lacks}; no risk adapter serves it either (adapters exist for {', '.join(SERVED)}); for a simulator of your own, "
         f"implement rmm_envs.adapters.SnapshotSimulator (get_state, set_state, step, state_failed, dt, action_space) "
         f"and label it through rmm_envs.adapters.SnapshotScene")
+
+
+def termination_is_failure(env: gym.Env) -> bool:
+    """Whether ``env``'s own termination means failure, as the adapters know it (the "failure"
+    column of the module's table: CartPole's termination, the unhealthy termination of the
+    MuJoCo envs with a known failure test); False for any other env, including Pendulum (which
+    never terminates) and envs whose termination may mean success."""
+    from gymnasium.envs.classic_control import CartPoleEnv
+
+    from rmm_envs.adapters.mujoco_envs import MujocoScene  # importable without mujoco itself
+
+    base = env.unwrapped
+    return isinstance(base, CartPoleEnv) or (_is_mujoco(base) and type(base).__name__ in MujocoScene.KINDS)
 
 
 def snapshot_of(adapter: AdaptedEnv):

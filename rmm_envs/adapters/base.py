@@ -58,7 +58,7 @@ from typing import Protocol, runtime_checkable
 import gymnasium as gym
 import numpy as np
 
-__all__ = ["AdaptedEnv", "SimulatorScene", "SnapshotScene", "SnapshotSimulator", "control_box"]
+__all__ = ["AdaptedEnv", "SimulatorScene", "SnapshotScene", "SnapshotSimulator", "control_box", "env_actions"]
 
 
 @runtime_checkable
@@ -87,6 +87,17 @@ def control_box(space, name: str) -> tuple[np.ndarray, np.ndarray]:
             return lo, hi
     raise TypeError(f"{name}: its action space {space} cannot be sampled uniformly; the risk adapters need "
                     f"a bounded 1-D Box or a Discrete action space")
+
+
+def env_actions(space, controls, low, high) -> np.ndarray:
+    """``(N, c)`` controls of the box :func:`control_box` gives -> ``(N, c)`` env actions:
+    ``floor`` (clipped to the ``n`` actions, as int64) for ``Discrete``, the ``Box``'s dtype (the
+    precision the env itself steps with) after clipping to ``[low, high]`` otherwise."""
+    controls = np.asarray(controls, dtype=float)
+    if isinstance(space, gym.spaces.Discrete):
+        a = np.floor(controls[:, :1]) - space.start
+        return np.clip(a, 0, space.n - 1).astype(np.int64) + space.start
+    return np.clip(controls, low, high).astype(space.dtype).astype(float)
 
 
 def _checked_failure(failure, name: str):
@@ -134,13 +145,8 @@ class SimulatorScene:
 
     # -- controls ------------------------------------------------------------------------------
     def to_actions(self, controls: np.ndarray) -> np.ndarray:
-        """Controls of the box -> env actions: ``floor`` for Discrete, the Box's dtype (the
-        precision the env itself steps with) otherwise."""
-        controls = np.asarray(controls, dtype=float)
-        if isinstance(self.action_space, gym.spaces.Discrete):
-            a = np.floor(controls[:, :1]) - self.action_space.start
-            return np.clip(a, 0, self.action_space.n - 1).astype(np.int64) + self.action_space.start
-        return np.clip(controls, self.control_low, self.control_high).astype(self.action_space.dtype).astype(float)
+        """Controls of the box -> env actions (:func:`env_actions`)."""
+        return env_actions(self.action_space, controls, self.control_low, self.control_high)
 
     def env_steps(self, duration: float) -> int:
         """The whole number of env steps in ``duration`` seconds (``ValueError`` otherwise)."""

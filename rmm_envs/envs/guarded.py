@@ -106,13 +106,14 @@ class GuardedEnv(LabelledEnvBase):
         self._cum_compute += compute_time
         self._sim_time += duration
 
-    def end_interval(self, outcome: str | None, reward: float, info: dict) -> tuple[bool, bool]:
+    def end_interval(self, outcome: str | None, reward: float, info: dict, truncate: bool = False) -> tuple[bool, bool]:
         """``(terminated, truncated)`` after an interval with ``outcome`` (``None``: the episode
-        goes on unless its time is up) and ``reward``; adds ``cost`` and ``nominal_control`` (the
-        driver's control at the new state) to ``info`` and, on the last step, ends the episode and
-        adds ``outcome`` and ``episode_stats``."""
+        goes on unless its time is up, or ``truncate`` says it ends without an outcome) and
+        ``reward``; adds ``cost`` and ``nominal_control`` (the driver's control at the new state)
+        to ``info`` and, on the last step, ends the episode and adds ``outcome`` and
+        ``episode_stats``."""
         terminated = outcome is not None
-        truncated = not terminated and self._sim_time >= self.max_episode_sim_time - 1e-9
+        truncated = not terminated and (truncate or self._sim_time >= self.max_episode_sim_time - 1e-9)
         if truncated:
             outcome = "timeout"
         self._cum_reward += reward
@@ -145,14 +146,16 @@ class GuardedEnv(LabelledEnvBase):
         }
 
 
-def parallel_entry_point(env_cls: type, env_id: str):
-    """The Gymnasium entry point of ``env_id``: the blocking ``env_cls`` under
-    :class:`rmm_envs.wrappers.NonBlockingStepping` (``time_accel``, ``base_step``, ``clock``; every
-    other keyword goes to ``env_cls``).  ``step_dt``, the blocking env's fixed step, is refused
+def parallel_entry_point(env_cls, env_id: str, base_step: float = BASE_STEP):
+    """The Gymnasium entry point of ``env_id``: the blocking ``env_cls`` (a class or any callable
+    returning the env) under :class:`rmm_envs.wrappers.NonBlockingStepping` (``time_accel``,
+    ``base_step``, default ``base_step``; ``clock``; every other keyword goes to ``env_cls``).  ``step_dt``, the blocking env's fixed step, is refused
     by name: under non-blocking stepping each interval is ``elapsed * time_accel + base_step``,
     so a given ``step_dt`` would be silently ignored."""
 
-    def make_parallel_env(time_accel: float = TIME_ACCEL, base_step: float = BASE_STEP, clock=None, **kwargs):
+    default_base_step = base_step
+
+    def make_parallel_env(time_accel: float = TIME_ACCEL, base_step: float = default_base_step, clock=None, **kwargs):
         if "step_dt" in kwargs:
             raise ValueError(f"{env_id} steps by elapsed * time_accel + base_step, so step_dt (the fixed step of the "
                              f"blocking env) does not apply; set base_step and time_accel instead, got "
@@ -161,6 +164,6 @@ def parallel_entry_point(env_cls: type, env_id: str):
 
         return NonBlockingStepping(env_cls(**kwargs), time_accel=time_accel, base_step=base_step, clock=clock)
 
-    make_parallel_env.__doc__ = (f"Entry point of ``{env_id}``: :class:`{env_cls.__name__}` under non-blocking "
+    make_parallel_env.__doc__ = (f"Entry point of ``{env_id}``: :obj:`{env_cls.__name__}` under non-blocking "
                                  "stepping (see :func:`rmm_envs.envs.guarded.parallel_entry_point`).")
     return make_parallel_env

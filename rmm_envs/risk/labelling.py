@@ -60,7 +60,11 @@ class DatagenConfig:
                 raise ValueError(f"env {self.env_id!r}: cannot import module {module!r}: {e}") from None
             if name not in gym.registry:
                 raise ValueError(f"env {self.env_id!r}: importing {module!r} registered no env {name!r}")
-        elif not isinstance(self.env_id, str) or self.env_id not in gym.registry:
+        elif isinstance(self.env_id, str) and self.env_id not in gym.registry:
+            from rmm_envs.env_plugins import load_env_plugins
+
+            load_env_plugins()  # a package's gymnasium.envs entry point may register it
+        if not module and (not isinstance(self.env_id, str) or self.env_id not in gym.registry):
             raise ValueError(f"unknown env {self.env_id!r}: not a registered Gymnasium id; this package registers "
                              f"{list(rmm_envs.ENV_IDS)} (any registered env that follows rmm_envs.risk.LabelledEnv works)")
         if self.failure is not None and not (isinstance(self.failure, str) and self.failure.count(":") == 1):
@@ -94,7 +98,8 @@ class DatagenConfig:
         from rmm_envs.adapters import AdaptedEnv
 
         env = labelled_env(self)
-        return env.scene.default_horizon if isinstance(env, AdaptedEnv) else 2.0
+        # an env built on an adapted simulator (rmm_envs.envs.driven) states its adapter's default
+        return env.scene.default_horizon if isinstance(env, AdaptedEnv) else getattr(env, "default_horizon", 2.0)
 
     def estimator_params(self) -> dict:
         return {"branches": self.branches, "depth": self.depth, "horizon": self.resolved_horizon(),
@@ -132,6 +137,10 @@ def labelled_env(cfg: DatagenConfig):
 
         import rmm_envs  # noqa: F401  (registers the package's envs)
 
+        if ":" not in cfg.env_id and cfg.env_id not in gym.registry:  # in a worker: the entry points register it
+            from rmm_envs.env_plugins import load_env_plugins
+
+            load_env_plugins()
         env = gym.make(cfg.env_id, **cfg.env_kwargs)
         try:
             check_labelled_env(env.unwrapped)

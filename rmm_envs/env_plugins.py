@@ -1,0 +1,80 @@
+"""Envs of other packages: ``module:Id`` and the ``gymnasium.envs`` entry points.
+
+Gymnasium registers an env when the code that calls ``gymnasium.register`` runs.  Two ways of
+making that happen for an env this package does not ship, both served by :func:`resolve_env_id`
+(which ``rmm-bench`` calls in its own process and in every worker, local or Ray, before making
+the env):
+
+``module:Id``
+    Gymnasium's own syntax (``gym.make`` takes it): ``module`` is imported (the current
+    directory first, where the command puts it on the path) and must register ``Id``.
+A package's entry point in the group ``gymnasium.envs``
+    As Gymnasium before 1.0 loaded them, so that a package declaring
+    ``[project.entry-points."gymnasium.envs"] my_envs = "my_envs.registration:register"`` works
+    with a plain ``--env MyEnv-v0``: when the id is not registered, each entry point of the group
+    is loaded once per process (a ``module:function`` value is then called, a bare ``module``
+    value registers on import).  An entry point that raises is named in the error of an id that
+    stays unregistered.
+"""
+
+from __future__ import annotations
+
+import importlib
+from importlib.metadata import entry_points
+
+__all__ = ["ENTRY_POINT_GROUP", "EnvUnavailable", "load_env_plugins", "resolve_env_id"]
+
+ENTRY_POINT_GROUP = "gymnasium.envs"
+
+_LOADED: dict[str, str | None] = {}  # entry point value -> None (loaded) or the error it raised
+
+
+class EnvUnavailable(ValueError):
+    """An env id that cannot be registered in this process; the message names the id and the cause."""
+
+
+def load_env_plugins() -> dict[str, str | None]:
+    """Load every ``gymnasium.envs`` entry point not loaded yet in this process; returns each
+    value's outcome so far (``None``: loaded, else the error it raised)."""
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        if ep.value in _LOADED:
+            continue
+        try:
+            obj = ep.load()
+            if ep.attr and callable(obj):
+                obj()
+            _LOADED[ep.value] = None
+        except Exception as e:  # noqa: BLE001 - reported with the id that needed it
+            _LOADED[ep.value] = f"{type(e).__name__}: {e}"
+    return dict(_LOADED)
+
+
+def resolve_env_id(env_id: str) -> str:
+    """Register ``env_id`` in this process if it can be (see the module docstring) and return the
+    id ``gym.make`` takes without importing anything (``Id`` of ``module:Id``).  Raises
+    :class:`EnvUnavailable` naming the id and the cause otherwise."""
+    import gymnasium as gym
+
+    import rmm_envs  # noqa: F401  (the package's own envs)
+
+    if not isinstance(env_id, str) or not env_id:
+        raise EnvUnavailable(f"an env id must be a non-empty string, got {env_id!r}")
+    module, _, name = env_id.rpartition(":")
+    if module:  # "module:Id", as gym.make takes it: the module registers the env on import
+        try:
+            importlib.import_module(module)
+        except Exception as e:  # noqa: BLE001 - an import that fails in any way leaves the id unregistered
+            raise EnvUnavailable(f"--env {env_id!r}: cannot import module {module!r} (looked in the current directory "
+                                 f"first, then the installed packages): {type(e).__name__}: {e}") from None
+        if name not in gym.registry:
+            raise EnvUnavailable(f"--env {env_id!r}: importing {module!r} registered no env {name!r}")
+        return name
+    if env_id not in gym.registry:
+        failed = {v: err for v, err in load_env_plugins().items() if err is not None}
+        if env_id not in gym.registry:
+            plugins = "; ".join(f"entry point {v!r} raised {err}" for v, err in failed.items())
+            raise EnvUnavailable(f"--env {env_id!r} is not a registered Gymnasium env (this package registers "
+                                 f"{', '.join(rmm_envs.ENV_IDS)}; another package's env is registered by importing it: "
+                                 f"--env module:Id, or that package's '{ENTRY_POINT_GROUP}' entry point)"
+                                 + (f"; {plugins}" if plugins else ""))
+    return env_id
