@@ -201,3 +201,17 @@ def test_stored_hand_back_defaults_round_trip(tmp_path):
     assert LRMMModel.load(p).meta["decision"] == {"threshold": 0.3, "commit": 18, "action": "head", "restart": 0.3,
                                                   "chosen_by": "t"}
     assert decision_main([str(p), "--threshold", "0.3", "--commit", "1", "--margin", "-2", "--chosen-by", "t"]) == 2
+
+
+def test_stored_hand_back_defaults_apply_only_to_the_rule_they_were_chosen_for(tmp_path):
+    from guardians.lrmm.guardian import LRMMPaperGuardian
+
+    p = speed_model().save(tmp_path / "m.npz")
+    set_decision(p, 0.4, 5, "a test", trigger="driver", margin=0.05, restart=0.3)
+    assert (LRMMGuardian(p).trigger, LRMMGuardian(p).restart) == ("driver", 0.3)
+    heuristic = LRMMGuardian(p, action="heuristic")  # brake-and-turn: no candidates to rate or to accelerate with
+    assert (heuristic.trigger, heuristic.margin, heuristic.restart) == ("risk", 0.0, 0.0)
+    paper = LRMMPaperGuardian(p)
+    assert (paper.action, paper.threshold, paper.trigger, paper.restart) == ("heuristic", 0.85, "risk", 0.0)
+    averaged = LRMMGuardian(p, hysteresis=True)  # the moving average is of the state risk
+    assert (averaged.trigger, averaged.restart) == ("risk", 0.3)

@@ -128,9 +128,12 @@ def driver_control(info, action_space, warn: bool = True) -> list | None:
 
 def hand_back_options(trigger, margin, restart, stored: dict | None, action: str, hysteresis: bool) -> tuple:
     """``lrmm``'s ``(trigger, margin, restart)``: each given one, else the model file's stored
-    decision, else ``"risk"``, 0, 0; ``ValueError`` naming a bad value or a combination that
-    cannot work (both rate or accelerate with the head's candidates)."""
-    stored = dict(stored or {})
+    decision (used only with ``action="head"`` and, for the trigger, without hysteresis: a file's
+    defaults are for its own rule), else ``"risk"``, 0, 0; ``ValueError`` naming a bad value or a
+    given combination that cannot work (both rate or accelerate with the head's candidates)."""
+    stored = dict(stored or {}) if action == "head" else {}
+    if hysteresis:
+        stored.pop("trigger", None)
     trigger = trigger if trigger is not None else stored.get("trigger", "risk")
     if trigger not in TRIGGERS:
         raise ValueError(f"trigger must be one of {TRIGGERS}, got {trigger!r}")
