@@ -41,8 +41,8 @@ model's action-conditioned head, and a commitment that outlasts the risk:
   rate on 128 episodes each of seeds 5 and 6, 0.25 against 0.3: 73.9 against 73.5; 0.3 had
   been the best without restart, on seed 7) and commit 18 steps (about 2 s, twice the labels'
   hold time; chosen among 5, 9, 18 and 27 on seed 5).  No reported result uses these seeds.
-  Explicit arguments override them.  The threshold is low next to the paper's 0.85 because the label is the
-  crash rate of *random* futures: at 0.85 it is already too late to avoid the obstacle.
+  Explicit arguments override them.  The threshold is low next to the paper's 0.85 because
+  the label is the crash rate of *random* futures: at 0.85 it is too late to avoid the obstacle.
 * ``hysteresis`` (default False): the original code's moving-average release rule, kept as an
   option; the commitment does that job here.
 
