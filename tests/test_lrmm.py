@@ -24,7 +24,7 @@ SPACES = env_spaces()
 
 
 # The shipped lrmm model's stored defaults (threshold, commit, action): changing them must fail a test.
-SHIPPED_DECISION = (0.3, 18, "head")
+SHIPPED_DECISION = (0.25, 18, "head", "risk", 0.0, 0.3)  # threshold, commit, action, trigger, margin, restart
 # The shipped act model on tests/fixtures/lrmm_heldout_d4.npz measured risk MAE 0.035, candidate
 # MAE 0.040, regret 0.005 (the picked candidate's labelled risk 0.133, the best 0.128, the best
 # fixed manoeuvre 0.174); bounds leave room for a retrained model of the same quality, not more.
@@ -589,7 +589,7 @@ def test_defaults_are_pinned():
     assert g.name == "lrmm" and g.model.path == default_model_path("Dubins4DCirclesGuarded-v0", variant="act")
     d = g.model.meta["decision"]
     assert (g.threshold, g.commit, g.action) == (d["threshold"], d["commit"], d.get("action", "head"))
-    assert (g.threshold, g.commit, g.action) == SHIPPED_DECISION
+    assert (g.threshold, g.commit, g.action, g.trigger, g.margin, g.restart) == SHIPPED_DECISION
     assert "seed" in d["chosen_by"]
 
 

@@ -429,10 +429,11 @@ def test_lrmm_reads_the_shipped_command_model_by_env_id(env):
     # quaternion nor the goal
     used = {f for f, a, b in lay.fields if any(a <= i < b for i in g.model.features)}
     assert used == {"rays", "rays_vertical", "velocity", "angular_velocity"}
-    obs, _ = env.reset(seed=0)
+    assert (g.trigger, g.margin, g.restart) == ("driver", 0.1, 0.0)  # acts on the pilot's command, rated
+    obs, info = env.reset(seed=0)
     g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
-    a = g.act(obs, {})
-    assert a["active_ctrl"] in (0, 1) and 0.0 < g.last_risk < 1.0
+    a = g.act(obs, info)
+    assert a["active_ctrl"] in (0, 1) and 0.0 < g.last_risk < 1.0 and 0.0 < g.last_driver_risk < 1.0
 
 
 def test_rmm_bench_set_runs_what_applies_and_lists_the_rest(tmp_path, capsys):

@@ -1,4 +1,5 @@
-"""``python -m guardians.lrmm.decision MODEL --threshold T --commit N --action A --chosen-by TEXT``
+"""``python -m guardians.lrmm.decision MODEL --threshold T --commit N --action A [--trigger risk|driver]
+[--margin M] [--restart V] --chosen-by TEXT``
 
 Stores the ``lrmm`` guardian's decision defaults in a trained model file (``meta["decision"]``,
 see :mod:`guardians.lrmm.model`); the weights are unchanged.  ``--chosen-by`` is required: a
@@ -22,14 +23,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--threshold", type=float, required=True, help="take control while the risk is above this")
     p.add_argument("--commit", type=int, required=True, help="steps to stay in control after the risk falls back")
     p.add_argument("--action", default="head", choices=["head", "heuristic"], help="avoidance action (default: %(default)s)")
+    p.add_argument("--trigger", choices=["risk", "driver"], help="take control on the state risk or the driver's "
+                   "control rated (default: not stored, i.e. risk)")
+    p.add_argument("--margin", type=float, help="with --trigger driver: the risk the safest candidate must save")
+    p.add_argument("--restart", type=float, help="speed (m/s) below which the guardian in control accelerates")
     p.add_argument("--chosen-by", required=True, help="how these values were chosen (stored with them)")
     args = p.parse_args(argv)
     try:
-        set_decision(args.model, args.threshold, args.commit, args.chosen_by, args.action)
+        set_decision(args.model, args.threshold, args.commit, args.chosen_by, args.action,
+                     trigger=args.trigger, margin=args.margin, restart=args.restart)
     except (ValueError, FileNotFoundError) as e:
         print(f"{p.prog}: error: {e}", file=sys.stderr)
         return 2
-    print(f"{args.model}: decision threshold {args.threshold}, commit {args.commit}, action {args.action}")
+    extra = "".join(f", {k} {v}" for k, v in (("trigger", args.trigger), ("margin", args.margin), ("restart", args.restart))
+                    if v is not None)
+    print(f"{args.model}: decision threshold {args.threshold}, commit {args.commit}, action {args.action}{extra}")
     return 0
 
 

@@ -387,8 +387,9 @@ def load_model(path=None, env_id: str = "Dubins4DCirclesGuarded-v0") -> LRMMMode
     return LRMMModel.load(path or default_model_path(env_id))
 
 
-def set_decision(path, threshold: float, commit: int, chosen_by: str, action: str = "head") -> LRMMModel:
-    """Store the guardian's decision defaults in the model file ``path`` (weights unchanged)."""
+def set_decision(path, threshold: float, commit: int, chosen_by: str, action: str = "head", **hand_back) -> LRMMModel:
+    """Store the guardian's decision defaults in the model file ``path`` (weights unchanged);
+    ``hand_back``: ``trigger``, ``margin``, ``restart`` (:mod:`guardians.lrmm.nominal`), stored when not None."""
     if not (isinstance(threshold, (int, float)) and 0.0 <= threshold <= 1.0):
         raise ValueError(f"threshold must be in [0, 1], got {threshold!r}")
     if int(commit) != commit or commit < 0:
@@ -400,7 +401,17 @@ def set_decision(path, threshold: float, commit: int, chosen_by: str, action: st
     model = LRMMModel.load(path)
     if model.candidates is None:
         raise ValueError(f"{path} has no 'candidates' head; its guardian uses the paper's rule")
-    model.meta["decision"] = {"threshold": float(threshold), "commit": int(commit), "action": action, "chosen_by": chosen_by.strip()}
+    from guardians.lrmm.nominal import hand_back_options  # checks them as the guardian will
+
+    unknown = sorted(set(hand_back) - {"trigger", "margin", "restart"})
+    if unknown:
+        raise ValueError(f"unknown decision field(s) {unknown}; expected trigger, margin, restart")
+    hand_back = {k: v for k, v in hand_back.items() if v is not None}
+    trigger, margin, restart = hand_back_options(hand_back.get("trigger"), hand_back.get("margin"), hand_back.get("restart"),
+                                                 None, action, False)
+    extra = {"trigger": trigger, "margin": margin, "restart": restart}
+    model.meta["decision"] = {"threshold": float(threshold), "commit": int(commit), "action": action,
+                              **{k: extra[k] for k in hand_back}, "chosen_by": chosen_by.strip()}
     model.save(path)
     return model
 

@@ -1,0 +1,217 @@
+"""lrmm's hand-back rule: the one-step prediction that rates the driver's control, the
+``trigger="driver"`` and ``restart`` rules on hand-built risk sequences, the driver's control
+read from ``info`` and every bad-input path."""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from guardians.lrmm.guardian import LRMMGuardian
+from guardians.lrmm.model import LRMMModel, set_decision
+from guardians.lrmm.nominal import PredictRater, make_rater
+from rmm_envs.autonomy import ObservationLayout
+from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
+from tests.test_lrmm import SPACES, env_spaces, head_model_by_hand, obs_with
+
+D4 = observation_layout(12)
+D4_LOW = np.array([0, -np.inf, -np.inf, -np.pi, 0] + [0] * 12, float)
+D4_HIGH = np.array([np.inf, np.inf, np.inf, np.pi, 2] + [10] * 12, float)
+QUAD = ObservationLayout.of(("rays", 8), ("rays_vertical", 2), ("orientation", 4), ("velocity", 3),
+                            ("angular_velocity", 3), ("goal_offset", 3), ray_angles=[k * math.pi / 4 for k in range(8)])
+QUAD_CONTROLS = ("vforward_ctrl", "vleft_ctrl", "vup_ctrl", "yawrate_ctrl")
+
+
+def d4_obs(speed=1.0, heading=0.5, rays=None):
+    rays = np.arange(12, dtype=float) if rays is None else np.asarray(rays, float)
+    return np.concatenate([[3.0, 4.0, -2.0, heading, speed], rays])
+
+
+def test_dubins_prediction_moves_speed_heading_and_rays_by_hand():
+    r = PredictRater(D4, CONTROLS, 1.0, D4_LOW, D4_HIGH)
+    x = d4_obs()
+    step = 2 * math.pi / 12  # one ray
+    y = r.predict(x, (step, 0.5))  # turn left by exactly one ray, speed up by 0.5 m/s
+    assert y[:3].tolist() == [3.0, 4.0, -2.0]  # time and goal offset unchanged
+    assert y[3] == pytest.approx(0.5 + step) and y[4] == 1.5
+    assert y[5:].tolist() == [float((k + 1) % 12) for k in range(12)]  # ray k now reads what ray k+1 read
+    half = r.predict(x, (-step / 2, 0.0))  # half a ray to the right: the mean of the two neighbours
+    assert half[5:].tolist() == pytest.approx([(k + (k - 1) % 12) / 2 for k in range(12)])
+    assert r.predict(x, (0.0, -0.5))[4] == 0.5
+    assert r.predict(d4_obs(speed=0.2), (0.0, -0.5))[4] == 0.0  # clipped to the observation's speed range
+    assert r.predict(d4_obs(speed=1.8), (0.0, 0.5))[4] == 2.0
+    wrapped = r.predict(d4_obs(heading=3.0), (0.25, 0.0))[3]
+    assert wrapped == pytest.approx(3.25 - 2 * math.pi)  # the heading stays in [-pi, pi)
+    assert r.predict(x, (0.0, 0.0)).tolist() == x.tolist()  # holding nothing predicts the observation
+
+
+def test_quadrotor_prediction_replaces_the_measured_velocity_with_the_command():
+    x = np.arange(23, dtype=float)
+    r = make_rater(QUAD_CONTROLS, QUAD, 1.0, np.full(23, -np.inf), np.full(23, np.inf))
+    y = r.predict(x, (1.5, -0.5, 0.25, 0.7))
+    assert y[14:17].tolist() == [1.5, -0.5, 0.25]
+    assert np.delete(y, [14, 15, 16]).tolist() == np.delete(x, [14, 15, 16]).tolist()  # nothing else moves
+
+
+def test_no_rater_without_a_layout_or_a_field_it_predicts():
+    assert make_rater(CONTROLS, None, 1.0, D4_LOW, D4_HIGH) is None
+    assert make_rater(CONTROLS, D4, None, D4_LOW, D4_HIGH) is None  # no hold time: a model without a head
+    rays_only = ObservationLayout.of(("rays", 4), ray_angles=[0, 1, 2, 3])  # uneven rays, no speed
+    assert make_rater(CONTROLS, rays_only, 1.0, np.zeros(4), np.ones(4)) is None
+
+
+def speed_model(cand_bias=(0.0, -2.0, -1.0), decision=None):
+    """Unit 0 = sigmoid(4 v - 4) of the speed v (a stopped car: 0.018, 1 m/s: 0.5, 1.5 m/s: 0.881);
+    the candidates' units are constants sigmoid(cand_bias): brake-left 0.5, brake-right 0.119,
+    accelerate 0.269 by default."""
+    W0 = np.zeros((1, 17))
+    W0[0, 4] = 4.0
+    W1 = np.array([[1.0], [0.0], [0.0], [0.0]])
+    meta = {"env_id": "Dubins4DCircles-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1], "activation": "relu",
+            "output_bias": True, "candidates": [[-0.25, -0.5], [0.25, -0.5], [0.0, 0.5]], "candidate_hold": 1.0}
+    if decision:
+        meta["decision"] = decision
+    return LRMMModel([(W0, np.array([0.0])), (W1, np.array([-4.0, *cand_bias]))], np.zeros(17), np.ones(17), meta)
+
+
+def at(speed):
+    o = obs_with(10.0, 10.0, 10.0)
+    o[4] = speed
+    return o
+
+
+def driver(a, turn=0.0):
+    return {"nominal_control": np.array([turn, a])}
+
+
+def test_driver_trigger_keeps_the_driver_while_its_own_control_is_rated_safe():
+    g = LRMMGuardian(speed_model(), threshold=0.5, commit=0, trigger="driver", margin=0.1)
+    g.reset(seed=0, **SPACES)
+    # at 1 m/s the state risk is 0.5; braking predicts 0.5 m/s (rated 0.119): the driver's control is kept
+    assert g.act(at(1.0), driver(-0.5))["active_ctrl"] == 0
+    assert g.last_driver_risk == pytest.approx(1 / (1 + math.exp(2)))
+    # accelerating predicts 1.5 m/s, rated 0.881, 0.76 above the best candidate rated alike: the guardian
+    # takes control with the safest candidate of the head (brake-right, 0.119)
+    a = g.act(at(1.0), driver(0.5))
+    assert (a["active_ctrl"], a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (1, 0.25, -0.5)
+    # the same state under trigger="risk" acts on the state risk alone (0.5 is not above 0.5; 0.45 is)
+    r = LRMMGuardian(speed_model(), threshold=0.45, commit=0)
+    r.reset(seed=0, **SPACES)
+    assert r.act(at(1.0), driver(-0.5))["active_ctrl"] == 1
+
+
+def test_driver_trigger_hand_back_sequence_with_commit_and_margin():
+    g = LRMMGuardian(speed_model(), threshold=0.5, commit=2, trigger="driver", margin=0.1)
+    g.reset(seed=0, **SPACES)
+    accels = [0.5, -0.5, -0.5, -0.5, -0.5, 0.5, -0.5]
+    assert [g.act(at(1.0), driver(u))["active_ctrl"] for u in accels] == [1, 1, 1, 0, 0, 1, 1]
+    # a margin larger than the risk the best candidate saves (0.881 - 0.119): the guardian never acts
+    lazy = LRMMGuardian(speed_model(), threshold=0.5, commit=2, trigger="driver", margin=0.77)
+    lazy.reset(seed=0, **SPACES)
+    assert [lazy.act(at(1.0), driver(u))["active_ctrl"] for u in accels] == [0] * 7
+    # the margin decides when to take control, not when to hand back: at 1 m/s holding the speed is rated
+    # 0.5, above the threshold 0.15 but only 0.38 above the best candidate
+    hold = LRMMGuardian(speed_model(), threshold=0.15, commit=0, trigger="driver", margin=0.5)
+    hold.reset(seed=0, **SPACES)
+    assert [hold.act(at(1.0), driver(u))["active_ctrl"] for u in (0.0, 0.5, 0.0, 0.0, -0.5, 0.0)] == [0, 1, 1, 1, 0, 0]
+    # at the threshold is safe: 1.0 m/s predicted exactly (0.5 m/s + 0.5), rated 0.5
+    edge = LRMMGuardian(speed_model(), threshold=0.5, commit=0, trigger="driver")
+    edge.reset(seed=0, **SPACES)
+    assert edge.act(at(0.5), driver(0.5))["active_ctrl"] == 0
+    assert edge.last_driver_risk == 0.5
+
+
+def test_restart_accelerates_a_slow_car_when_that_candidate_is_safe_enough():
+    # candidates: brake-left 0.5, brake-right 0.119 (the safest), accelerate 0.269
+    g = LRMMGuardian(speed_model(), threshold=0.3, commit=3, restart=0.3)
+    g.reset(seed=0, **SPACES)
+    fast, slow = at(1.5), at(0.2)  # state risks 0.881 and 0.039
+    steps = [g.act(o, {}) for o in (fast, fast, slow, slow, slow, slow)]
+    assert [(a["active_ctrl"], float(a["accel_ctrl"][0])) for a in steps] == \
+        [(1, -0.5), (1, -0.5), (1, 0.5), (1, 0.5), (1, 0.5), (0, 0.0)]  # brakes, then restarts, then hands back
+    strict = LRMMGuardian(speed_model(), threshold=0.25, commit=1, restart=0.3)  # accelerate (0.269) is above it
+    strict.reset(seed=0, **SPACES)
+    assert [float(strict.act(o, {})["accel_ctrl"][0]) for o in (fast, slow)] == [-0.5, -0.5]
+    off = LRMMGuardian(speed_model(), threshold=0.3, commit=1)  # restart 0: the rule before it
+    off.reset(seed=0, **SPACES)
+    assert [float(off.act(o, {})["accel_ctrl"][0]) for o in (fast, slow)] == [-0.5, -0.5]
+
+
+def test_missing_nominal_control_falls_back_to_the_state_risk_with_one_warning():
+    g = LRMMGuardian(speed_model(), threshold=0.45, commit=0, trigger="driver")
+    g.reset(seed=0, **SPACES)
+    with pytest.warns(UserWarning, match=r"info\['nominal_control'\].*state risk"):
+        assert g.act(at(1.0), {})["active_ctrl"] == 1  # state risk 0.5 > 0.45
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once per guardian
+        assert g.act(at(0.5), {"sim_time": 0.0})["active_ctrl"] == 0
+        assert g.act(at(1.0), driver(-0.5))["active_ctrl"] == 0  # given again: the driver's control decides
+
+
+@pytest.mark.parametrize("bad", [np.array([0.1]), np.array([0.1, float("nan")]), np.zeros((2, 2)), "fast",
+                                 [0.0, float("inf")]])
+def test_malformed_nominal_control_is_named(bad):
+    g = LRMMGuardian(speed_model(), threshold=0.5, trigger="driver")
+    g.reset(seed=0, **SPACES)
+    with pytest.raises(ValueError, match=r"info\['nominal_control'\] must be 2 finite numbers"):
+        g.act(at(1.0), {"nominal_control": bad})
+
+
+def test_bad_hand_back_options_are_named():
+    m = speed_model()
+    for kw, match in (({"trigger": "always"}, "trigger must be one of"), ({"margin": -0.1}, "margin"),
+                      ({"restart": float("nan")}, "restart"), ({"margin": True}, "margin"),
+                      ({"trigger": "driver", "action": "heuristic"}, "action='head'"),
+                      ({"trigger": "driver", "hysteresis": True}, "hysteresis"),
+                      ({"restart": 0.2, "action": "heuristic"}, "restart accelerates")):
+        with pytest.raises(ValueError, match=match):
+            LRMMGuardian(m, **kw)
+    W = [(np.zeros((1, 12)), np.zeros(1)), (np.zeros((4, 1)), np.zeros(4))]
+    on_rays = LRMMModel(W, np.zeros(12), np.ones(12), {**m.meta, "obs_dim": 12, "features": list(range(12))})
+    rays_only = LRMMGuardian(on_rays, trigger="driver", inputs="rays")  # the prediction moves fields it would not read
+    with pytest.raises(ValueError, match="trigger 'driver'"):
+        rays_only.check_spaces(SPACES["observation_space"], SPACES["action_space"])
+
+
+def test_restart_needs_a_speed_and_an_acceleration():
+    lay = ObservationLayout.of(("time", 1), ("goal_offset", 2), ("heading", 1), ("v", 1), ("rays", 12),
+                               ray_angles=[2.0 * math.pi * i / 12 for i in range(12)])
+    g = LRMMGuardian(speed_model(), restart=0.3)
+    with pytest.raises(ValueError, match="restart needs"):
+        g.reset(seed=0, **env_spaces(layout=lay))
+
+
+def test_stored_hand_back_defaults_round_trip(tmp_path):
+    p = speed_model().save(tmp_path / "m.npz")
+    set_decision(p, 0.4, 5, "a test", trigger="driver", margin=0.05)
+    m = LRMMModel.load(p)
+    assert m.meta["decision"] == {"threshold": 0.4, "commit": 5, "action": "head", "trigger": "driver", "margin": 0.05,
+                                  "chosen_by": "a test"}
+    g = LRMMGuardian(p)
+    assert (g.trigger, g.margin, g.restart) == ("driver", 0.05, 0.0)
+    assert LRMMGuardian(p, trigger="risk").trigger == "risk"  # an argument overrides the file
+    with pytest.raises(ValueError, match="unknown decision field"):
+        set_decision(p, 0.4, 5, "x", hold=3)
+    with pytest.raises(ValueError, match="restart"):
+        set_decision(p, 0.4, 5, "x", restart=-1.0)
+    from guardians.lrmm.decision import main as decision_main
+
+    assert decision_main([str(p), "--threshold", "0.3", "--commit", "18", "--restart", "0.3", "--chosen-by", "t"]) == 0
+    assert LRMMModel.load(p).meta["decision"] == {"threshold": 0.3, "commit": 18, "action": "head", "restart": 0.3,
+                                                  "chosen_by": "t"}
+    assert decision_main([str(p), "--threshold", "0.3", "--commit", "1", "--margin", "-2", "--chosen-by", "t"]) == 2
+
+
+def test_stored_hand_back_defaults_apply_only_to_the_rule_they_were_chosen_for(tmp_path):
+    from guardians.lrmm.guardian import LRMMPaperGuardian
+
+    p = speed_model().save(tmp_path / "m.npz")
+    set_decision(p, 0.4, 5, "a test", trigger="driver", margin=0.05, restart=0.3)
+    assert (LRMMGuardian(p).trigger, LRMMGuardian(p).restart) == ("driver", 0.3)
+    heuristic = LRMMGuardian(p, action="heuristic")  # brake-and-turn: no candidates to rate or to accelerate with
+    assert (heuristic.trigger, heuristic.margin, heuristic.restart) == ("risk", 0.0, 0.0)
+    paper = LRMMPaperGuardian(p)
+    assert (paper.action, paper.threshold, paper.trigger, paper.restart) == ("heuristic", 0.85, "risk", 0.0)
+    averaged = LRMMGuardian(p, hysteresis=True)  # the moving average is of the state risk
+    assert (averaged.trigger, averaged.restart) == ("risk", 0.3)
