@@ -1,0 +1,277 @@
+"""The ``cbf`` guardian on the quadrotor (``QuadrotorRoomParallel-v0``, ``QuadrotorRoomGuarded-v0``).
+
+``cbf`` serves three systems: :class:`guardians.cbf.guardian.CBFGuardian` hands an env whose
+action space has the quadrotor's four commands (``vforward_ctrl``, ``vleft_ctrl``,
+``vup_ctrl``, ``yawrate_ctrl``) to :class:`QuadrotorCBFGuardian`, which can also be used (and
+named, ``guardians.cbf.quadrotor:QuadrotorCBFGuardian``) on its own.  It uses **privileged**
+information: the room, the true body state and the simulated time (the env's
+``privileged()``), and filters the pilot's command, ``info["nominal_control"]``, as the
+Dubins4D ``cbf`` filters the driver's control.
+
+## The model
+
+The guardian issues what the pilot issues: a velocity command ``u = (u_forward, u_left,
+u_up)`` in the body's heading frame (and a yaw rate) to the cascaded controller of
+:mod:`rmm_envs.systems.quadrotor_control`.  Its velocity loop (``k_v = 2.5``/s horizontally,
+``k_vz = 3``/s vertically, behind a 20 rad/s attitude loop) makes the body's world velocity
+``v`` track the commanded one, ``w = (Rot(psi) (u_forward, u_left), u_up)``, as a first-order
+lag ``v' = (w - v) / tau`` with
+
+* ``tau_h = 0.42`` s horizontally and ``tau_z = 0.34`` s vertically: measured on the
+  controller and body (``ClosedLoopQuadrotor`` from hover, a step command of 1 and 2 m/s
+  forward and 0.5 and 1 m/s up): the velocity reaches 63% of a horizontal step after
+  0.42-0.43 s and of a vertical one after 0.34 s (``1 / k_v = 0.4`` s, plus the attitude
+  loop's lag horizontally), and settles 3-5% short of the command (the body's damping).
+
+Each part of the room (the floor, every wall box, every box, cylinder and sphere as
+generated) is a convex shape with signed distance ``d(p)``; its barrier is
+``b = d - rho`` with ``rho = body_radius + margin``: the body's bounding-sphere radius (0.304
+m: the collision cylinder of radius 0.3 m and length 0.1 m in any attitude) and a margin for
+what the model leaves out.  ``b`` has relative degree 2 in the command; the high-order
+condition ``b'' + (p1 + p2) b' + p1 p2 b >= 0`` is one linear row per shape, derived in
+:mod:`guardians.cbf.quadrotor_rows` (the Hessian of ``d`` is dropped: ``>= 0`` outside a
+convex shape, so the row is only tightened).  Rows for the ``n_rows`` shapes nearest the body
+enter the QP, together with the command box of the action space.
+
+## The QP
+
+Over ``(u, s)``: minimise ``|u - u_nom|^2 + slack_weight s^2`` subject to ``G u - s <= h``
+(the barrier rows), the command box, and ``s = 0`` (the strict filter).  A nominal command
+that satisfies every row is the solution itself and passes unchanged (the guardian leaves the
+pilot in control, no solve).  Otherwise the QP is solved; the guardian takes control with its
+command when a barrier row is active at the solution (``|h_i - G_i u*| <= active_atol``), as
+Dubins4D's ``cbf``.  **Recovery**: when the strict QP is infeasible (no command in the box
+satisfies every row: the body is already inside a margin too fast, or between two shapes) or
+fails, the same QP is solved with ``s >= 0``: the command closest to the nominal among those
+that violate the worst row least (the slack is shared by all rows, so it pushes away from
+every violated shape at once); counted in ``stats()["qp_fallbacks"]``.  Should that fail too
+(it is always feasible), the guardian applies the env's safe default (hover), counted in
+``stats()["hover_fallbacks"]``.  While in control it commands a zero yaw rate: the command is
+held for a lap in the heading frame, so a yaw rate would turn the commanded velocity in the
+world during the lap, which the rows do not see; the body is symmetric about its z axis, so
+its yaw plays no part in a collision, and the pilot's command is a world-frame velocity turned
+into the heading frame, so the pilot does not depend on the yaw either.
+
+## Latency (the Dubins4D ``cbf``'s rule)
+
+Under parallel autonomy the command returned for the state ``s_k`` acts only from ``s_{k+1}``:
+during the lap in between the previous command (the guardian's own, or the pilot's,
+``info["nominal_control"]`` of ``s_k``) still acts.  So the rows are written at the *predicted*
+state ``s_{k+1}``: the closed-loop flow (the controller and the body through
+:class:`rmm_envs.systems.quadrotor_control.ClosedLoopQuadrotor`, which reproduces PyBullet's
+integrator) from ``s_k`` under that command for the lap, measured from the simulated times the
+env reports (the previous lap's length; ``lap_guess = 0.1`` s before the first).
+
+## Defaults, and why
+
+Chosen on development episodes of ``--seed 5`` and ``--seed 6`` only (``rmm-bench --env
+QuadrotorRoomParallel-v0 --clock fixed:1``; numbers in ``docs/guardians.md``):
+
+* ``p1 = p2 = 2`` /s: TUNE.
+* ``margin = 0.1`` m: TUNE.
+* ``n_rows = 8``: the eight nearest shapes; a farther shape's row is slack.
+* ``slack_weight = 1e4``: the recovery minimises the worst violation first.
+* ``eps = 1e-6`` (OSQP's tolerance, solutions polished), ``active_atol = 1e-3``: as Dubins4D's.
+
+A body state with NaN applies the safe default (hover) and is counted (``nan_states``).  Bad
+arguments are refused at construction, naming the value; an env whose action space is not the
+quadrotor's, or whose command box does not contain 0, is refused by :meth:`check_spaces`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import osqp
+import scipy.sparse as sp
+
+from guardians._checks import finite, integer, quadrotor_only
+from guardians.base import Guardian
+from guardians.cbf.backend import QpsolversQP, parse_solver
+from guardians.cbf.quadrotor_rows import command_rows, room_shapes
+from rmm_envs.systems.quadrotor_control import ClosedLoopQuadrotor, CommandController
+from rmm_envs.worlds.room_collision import BOUND
+
+__all__ = ["CommandQP", "QuadrotorCBFGuardian"]
+
+#: OSQP's status values for "solved" and "solved inaccurate".
+_SOLVED = (1, 2)
+
+
+class CommandQP:
+    """``min |u - u_nom|^2 + w s^2  s.t.  G u - s <= h, lo <= u <= hi, 0 <= s <= s_max`` for ``K``
+    rows over the 3 velocity commands and one shared slack ``s``: ``s_max = 0`` (``relaxed=False``,
+    the strict filter) or ``inf`` (the recovery).  Set up once per episode on the direct OSQP path
+    (values and bounds updated per solve, warm-started) or through qpsolvers (``name``)."""
+
+    def __init__(self, K: int, lo, hi, slack_weight: float, eps: float, name: str | None = None) -> None:
+        self.K = K
+        self.name = name
+        P = np.diag([2.0, 2.0, 2.0, 2.0 * slack_weight])
+        if name is not None:
+            self._qp = QpsolversQP(P, name, eps, lb=np.r_[lo, 0.0], ub=np.r_[hi, 0.0])
+            return
+        # columns u_f, u_l, u_up (K barrier rows and their box row), s (K barrier rows and its box row)
+        A = sp.csc_matrix(np.vstack([np.hstack([np.ones((K, 3)), -np.ones((K, 1))]), np.eye(4)]))
+        self._Ax = A.data.copy()
+        self._col = A.indptr.copy()
+        self._l = np.r_[np.full(K, -np.inf), lo, 0.0]
+        self._u = np.r_[np.zeros(K), hi, 0.0]
+        self._solver = osqp.OSQP()
+        self._solver.setup(sp.csc_matrix(P), np.zeros(4), A, self._l, self._u, verbose=False, eps_abs=eps, eps_rel=eps,
+                           polishing=True, warm_starting=True, max_iter=4000)
+
+    def solve(self, G, h, u_nom, relaxed: bool = False) -> np.ndarray | None:
+        """``(u_forward, u_left, u_up, s)`` or ``None`` (infeasible, or the solver failed)."""
+        q = np.r_[-2.0 * np.asarray(u_nom, float)[:3], 0.0]
+        s_max = math.inf if relaxed else 0.0
+        if self.name is not None:
+            self._qp.q[:] = q
+            self._qp.ub[3] = s_max
+            return self._qp.solve(np.hstack([G, -np.ones((self.K, 1))]), h)
+        for j in range(3):  # column j holds rows 0..K-1 then its box row
+            self._Ax[self._col[j]: self._col[j] + self.K] = G[:, j]
+        self._u[: self.K] = h
+        self._u[-1] = 1e30 if relaxed else 0.0  # OSQP's infinity
+        self._solver.update(q=q, Ax=self._Ax, u=self._u)
+        res = self._solver.solve(raise_error=False)
+        if res.info.status_val not in _SOLVED or res.x is None or not np.all(np.isfinite(res.x)):
+            return None
+        return np.asarray(res.x, float)
+
+
+class QuadrotorCBFGuardian(Guardian):
+    """HOCBF safety filter of the quadrotor's velocity command; see the module docstring."""
+
+    name = "cbf"
+    observation_type = "global"
+    privileged = True
+
+    def __init__(self, p1: float = 2.0, p2: float = 2.0, margin: float = 0.1, tau_h: float = 0.42, tau_z: float = 0.34,
+                 body_radius: float = BOUND, n_rows: int = 8, slack_weight: float = 1e4, active_atol: float = 1e-3,
+                 predict_latency: bool = True, lap_guess: float = 0.1, eps: float = 1e-6, solver: str = "osqp") -> None:
+        super().__init__()
+        self.p1 = finite("p1 (class-K gain)", p1, 0.0, lo_open=True)
+        self.p2 = finite("p2 (class-K gain)", p2, 0.0, lo_open=True)
+        self.margin = finite("margin", margin, 0.0)
+        self.tau_h = finite("tau_h (horizontal velocity lag, s)", tau_h, 0.0, lo_open=True)
+        self.tau_z = finite("tau_z (vertical velocity lag, s)", tau_z, 0.0, lo_open=True)
+        self.body_radius = finite("body_radius", body_radius, 0.0)
+        self.n_rows = integer("n_rows", n_rows, 1, "how many of the nearest shapes get a barrier row")
+        self.slack_weight = finite("slack_weight", slack_weight, 0.0, lo_open=True)
+        self.active_atol = finite("active_atol", active_atol, 0.0)
+        self.predict_latency = bool(predict_latency)
+        self.lap_guess = finite("lap_guess", lap_guess, 0.0, lo_open=True)
+        self.eps = finite("eps", eps, 0.0, lo_open=True)
+        self._solver_name = parse_solver(solver)
+        self.solver = solver
+        self._flow = ClosedLoopQuadrotor(CommandController())
+        self._counts = self._zero()
+
+    @staticmethod
+    def _zero() -> dict:
+        return {"qp_fallbacks": 0, "hover_fallbacks": 0, "nan_states": 0, "qp_solves": 0}
+
+    @property
+    def rho(self) -> float:
+        """The distance from a shape at which a barrier is 0: ``body_radius + margin``."""
+        return self.body_radius + self.margin
+
+    def check_spaces(self, observation_space, action_space) -> None:
+        quadrotor_only(self, action_space)
+
+    def reset(self, **kwargs) -> None:
+        super().reset(**kwargs)
+        space = quadrotor_only(self, self.action_space)
+        priv = self._privileged()
+        if "room" not in priv:
+            raise ValueError(f"guardian {self.name!r} (quadrotor) needs the room in the env's privileged data "
+                             f"(keys: {sorted(priv)})")
+        self.shapes = room_shapes(priv["room"])
+        self.lo = np.asarray(space.control_low, float)
+        self.hi = np.asarray(space.control_high, float)
+        self.K = min(self.n_rows, len(self.shapes))
+        self._qp = CommandQP(self.K, self.lo[:3], self.hi[:3], self.slack_weight, self.eps, self._solver_name)
+        self._counts = self._zero()
+        self._pending = None  # the guardian's command acting during the coming lap; None: the pilot's
+        self._last_time = float(priv.get("sim_time", 0.0))
+        self._lap = self.lap_guess
+
+    # ------------------------------------------------------------------ the maths
+    def rows(self, state):
+        """``(b, G, h)`` of the ``n_rows`` shapes nearest the body at ``state`` (13 numbers),
+        smallest ``b`` first, over the heading-frame command (:mod:`guardians.cbf.quadrotor_rows`)."""
+        b, G, h, _ = command_rows(state, self.shapes, self.K, self.rho, self.tau_h, self.tau_z, self.p1, self.p2)
+        return b, G, h
+
+    def predict(self, state, command, lap: float) -> np.ndarray:
+        """The body state after ``lap`` seconds of ``command`` (4 numbers, clipped to the box)
+        from ``state``, through the controller and the body (whole physics steps)."""
+        cmd = np.minimum(np.maximum(np.asarray(command, float), self.lo), self.hi)
+        return self._flow.propagate(np.asarray(state, float)[None, :13], cmd[None], lap, 2)[0, 1]
+
+    # ------------------------------------------------------------------ the decision
+    def _emit(self, u) -> dict:
+        cmd = np.minimum(np.maximum(np.r_[np.asarray(u, float)[:3], 0.0], self.lo), self.hi)
+        self._pending = cmd
+        return self.action_space.active(cmd)
+
+    def _hover(self) -> dict:
+        return self._emit(np.zeros(3))
+
+    def nominal(self, info) -> np.ndarray:
+        """The pilot's command this step, ``info["nominal_control"]`` (4 finite numbers; a
+        ``ValueError`` naming the key otherwise)."""
+        u = None if not isinstance(info, dict) else info.get("nominal_control")
+        if u is None:
+            raise ValueError(f"guardian {self.name!r} (quadrotor) filters the pilot's command, info['nominal_control'] "
+                             f"(the parallel-autonomy contract), but the step's info has none (keys: "
+                             f"{sorted(info) if isinstance(info, dict) else info!r})")
+        arr = np.asarray(u, dtype=float).reshape(-1)
+        if arr.shape != (4,) or not all(map(math.isfinite, arr.tolist())):
+            raise ValueError(f"info['nominal_control'] must be 4 finite numbers (v_forward, v_left, v_up, yaw_rate), "
+                             f"got {u!r}")
+        return arr
+
+    def act(self, observation, info=None):
+        u_nom = self.nominal(info)
+        priv = self._privileged()
+        state = np.asarray(priv["state"], float)
+        if state.shape != (13,) or not all(map(math.isfinite, state.tolist())):
+            self._counts["nan_states"] += 1
+            return self._hover()
+        if self.predict_latency:
+            t = float(priv.get("sim_time", self._last_time))
+            if t > self._last_time:
+                self._lap = t - self._last_time
+            self._last_time = t
+            during = self._pending if self._pending is not None else u_nom
+            state = self.predict(state, during, self._lap)
+        return self.decide(state, u_nom)
+
+    def decide(self, state, u_nom) -> dict:
+        """The decision for the state the command will act from (already predicted)."""
+        _, G, h = self.rows(state)
+        u = np.minimum(np.maximum(np.asarray(u_nom, float)[:3], self.lo[:3]), self.hi[:3])
+        if all(g0 * u[0] + g1 * u[1] + g2 * u[2] <= hi + self.eps
+               for (g0, g1, g2), hi in zip(G.tolist(), h.tolist())):
+            self._pending = None  # the nominal satisfies every row: it is the solution, the pilot keeps control
+            return self.action_space.inactive()
+        self._counts["qp_solves"] += 1
+        z = self._qp.solve(G, h, u)
+        if z is None:
+            self._counts["qp_fallbacks"] += 1
+            z = self._qp.solve(G, h, u, relaxed=True)
+            if z is None:
+                self._counts["hover_fallbacks"] += 1
+                return self._hover()
+            return self._emit(z)
+        gaps = h - (G[:, 0] * z[0] + G[:, 1] * z[1] + G[:, 2] * z[2])
+        if np.any(np.abs(gaps) <= self.active_atol):
+            return self._emit(z)
+        self._pending = None
+        return self.action_space.inactive()
+
+    def stats(self) -> dict:
+        return dict(self._counts)

@@ -1,0 +1,195 @@
+"""The barrier maths of the quadrotor ``cbf``: distances to a generated room and the QP's rows.
+
+Pure functions of a body state and the episode's room (:class:`rmm_envs.worlds.rooms.Room`);
+the model, the gains and the margins are derived in :mod:`guardians.cbf.quadrotor`.
+
+Every part of the room is one convex *shape* in a flat table (:class:`RoomShapes`): the floor
+(the half-space ``z <= 0``), each wall (an axis-aligned box), and each object as generated
+(a box with half extents ``(a, b, c)``, a cylinder of radius ``r`` and length ``L`` along its
+local z axis, a sphere of radius ``r``; boxes and cylinders rotated by their quaternion).  For
+a point ``p``, :func:`shape_distances` gives each shape's signed distance ``d`` (negative
+inside) and the unit gradient ``n = grad d`` (the outward normal at the nearest point; inside,
+the normal of the nearest face).  A shape's barrier is ``b = d - rho`` (``rho``: the body's
+bounding-sphere radius plus a margin); with the world velocity ``v`` of the body and the
+commanded world velocity ``w`` tracked with first-order lags ``tau_h`` (horizontal) and
+``tau_z`` (vertical)::
+
+    b'  = n . v
+    b'' = n_h . (w_h - v_h) / tau_h + n_z (w_z - v_z) / tau_z + v' (Hess d) v
+    b'' + (p1 + p2) b' + p1 p2 b >= 0                                       (HOCBF, Xiao & Belta)
+
+The Hessian term is dropped: the distance to a convex set is convex outside it, so the term
+is ``>= 0`` and leaving it out only tightens the row (it is 0 along a face).  With the command
+in the heading frame, ``w_h = Rot(psi) (u_forward, u_left)``, ``w_z = u_up``, each shape gives
+the row ``G u <= h`` over ``u = (u_forward, u_left, u_up)``::
+
+    G = -(Rot(-psi) n_h / tau_h, n_z / tau_z)
+    h = (p1 + p2) n . v - n_h . v_h / tau_h - n_z v_z / tau_z + p1 p2 b
+
+:func:`command_rows` returns the rows of the ``n_rows`` shapes nearest the body (smallest
+``b`` first).  The loops are plain Python compiled by numba, scalar arithmetic only (the same
+bits on every CPU).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from rmm_envs.systems.rotations import quat_to_rot
+
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover - numba is a dependency; the Python loops still work
+    njit = None
+
+__all__ = ["FLOOR", "BOX", "CYLINDER", "SPHERE", "RoomShapes", "command_rows", "room_shapes", "shape_distances"]
+
+#: Shape kinds in :attr:`RoomShapes.kind`.
+FLOOR, BOX, CYLINDER, SPHERE = 0, 1, 2, 3
+_KINDS = {"box": BOX, "cylinder": CYLINDER, "sphere": SPHERE}
+
+
+@dataclass(frozen=True)
+class RoomShapes:
+    """A room as ``N`` convex shapes: ``kind`` ``(N,)`` (:data:`FLOOR`, :data:`BOX`,
+    :data:`CYLINDER`, :data:`SPHERE`), ``centre`` ``(N, 3)``, ``rot`` ``(N, 3, 3)`` (local to
+    world), ``size`` ``(N, 3)`` (box: half extents; cylinder: radius, length; sphere: radius)."""
+
+    kind: np.ndarray
+    centre: np.ndarray
+    rot: np.ndarray
+    size: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.kind.shape[0])
+
+
+def room_shapes(room) -> RoomShapes:
+    """The floor, the walls and the objects of ``room`` as :class:`RoomShapes` (in that order).
+    An object of another shape is refused (``ValueError`` naming it)."""
+    walls = np.asarray(room.walls, float).reshape(-1, 6)
+    n = 1 + walls.shape[0] + len(room.objects)
+    kind = np.empty(n, dtype=np.int64)
+    centre, rot, size = np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3))
+    kind[0], rot[0] = FLOOR, np.eye(3)
+    kind[1:1 + walls.shape[0]] = BOX
+    centre[1:1 + walls.shape[0]], size[1:1 + walls.shape[0]] = walls[:, :3], walls[:, 3:]
+    rot[1:1 + walls.shape[0]] = np.eye(3)
+    for i, o in enumerate(room.objects, start=1 + walls.shape[0]):
+        if o.get("shape") not in _KINDS:
+            raise ValueError(f"room object {i - 1 - walls.shape[0]} has shape {o.get('shape')!r}; the quadrotor cbf "
+                             f"models {sorted(_KINDS)}")
+        s = np.asarray(o["size"], float).reshape(-1)
+        kind[i] = _KINDS[o["shape"]]
+        centre[i], size[i, : s.size] = o["pos"], s
+        rot[i] = quat_to_rot(np.asarray(o["quat"], float))
+    return RoomShapes(kind, np.ascontiguousarray(centre), np.ascontiguousarray(rot), np.ascontiguousarray(size))
+
+
+def _box(qx, qy, qz, a, b, c):
+    """Signed distance and gradient of the box ``|x| <= a, |y| <= b, |z| <= c`` at ``(qx, qy, qz)``."""
+    ex, ey, ez = abs(qx) - a, abs(qy) - b, abs(qz) - c
+    sx, sy, sz = 1.0 if qx >= 0 else -1.0, 1.0 if qy >= 0 else -1.0, 1.0 if qz >= 0 else -1.0
+    if ex > 0 or ey > 0 or ez > 0:  # outside: the nearest point is on the box's surface
+        ox, oy, oz = max(ex, 0.0), max(ey, 0.0), max(ez, 0.0)
+        d = math.sqrt(ox * ox + oy * oy + oz * oz)
+        return d, sx * ox / d, sy * oy / d, sz * oz / d
+    if ex >= ey and ex >= ez:  # inside: the nearest face
+        return ex, sx, 0.0, 0.0
+    if ey >= ez:
+        return ey, 0.0, sy, 0.0
+    return ez, 0.0, 0.0, sz
+
+
+def _cylinder(qx, qy, qz, r, half):
+    """Signed distance and gradient of the cylinder ``x^2 + y^2 <= r^2, |z| <= half``."""
+    rho = math.sqrt(qx * qx + qy * qy)
+    cx, cy = (qx / rho, qy / rho) if rho > 1e-12 else (1.0, 0.0)
+    sz = 1.0 if qz >= 0 else -1.0
+    er, ez = rho - r, abs(qz) - half
+    if er > 0 or ez > 0:
+        orr, oz = max(er, 0.0), max(ez, 0.0)
+        d = math.sqrt(orr * orr + oz * oz)
+        return d, cx * orr / d, cy * orr / d, sz * oz / d
+    if er >= ez:
+        return er, cx, cy, 0.0
+    return ez, 0.0, 0.0, sz
+
+
+def shape_distances(p, kind, centre, rot, size, d, n):
+    """Fill ``d`` ``(N,)`` and ``n`` ``(N, 3)`` with each shape's signed distance and unit
+    gradient at the point ``p`` (module docstring)."""
+    for i in range(kind.shape[0]):
+        k = kind[i]
+        if k == FLOOR:
+            d[i], n[i, 0], n[i, 1], n[i, 2] = p[2], 0.0, 0.0, 1.0
+            continue
+        rx, ry, rz = p[0] - centre[i, 0], p[1] - centre[i, 1], p[2] - centre[i, 2]
+        if k == SPHERE:
+            dist = math.sqrt(rx * rx + ry * ry + rz * rz)
+            if dist > 1e-12:
+                d[i], n[i, 0], n[i, 1], n[i, 2] = dist - size[i, 0], rx / dist, ry / dist, rz / dist
+            else:
+                d[i], n[i, 0], n[i, 1], n[i, 2] = -size[i, 0], 0.0, 0.0, 1.0
+            continue
+        R = rot[i]
+        qx = R[0, 0] * rx + R[1, 0] * ry + R[2, 0] * rz  # R^T (p - c): the local frame
+        qy = R[0, 1] * rx + R[1, 1] * ry + R[2, 1] * rz
+        qz = R[0, 2] * rx + R[1, 2] * ry + R[2, 2] * rz
+        if k == BOX:
+            dd, gx, gy, gz = _box(qx, qy, qz, size[i, 0], size[i, 1], size[i, 2])
+        else:
+            dd, gx, gy, gz = _cylinder(qx, qy, qz, size[i, 0], 0.5 * size[i, 1])
+        d[i] = dd
+        n[i, 0] = R[0, 0] * gx + R[0, 1] * gy + R[0, 2] * gz  # R g: back to the world
+        n[i, 1] = R[1, 0] * gx + R[1, 1] * gy + R[1, 2] * gz
+        n[i, 2] = R[2, 0] * gx + R[2, 1] * gy + R[2, 2] * gz
+    return d, n
+
+
+def _rows_into(G, h, b_out, order, d, n, v, psi, rho, tau_h, tau_z, p1, p2):
+    """The rows of the shapes ``order`` (indices into ``d``, ``n``): ``G`` ``(K, 3)``, ``h``
+    ``(K,)`` and their barrier values ``b_out`` ``(K,)``."""
+    c, s = math.cos(psi), math.sin(psi)
+    for j in range(order.shape[0]):
+        i = order[j]
+        nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+        b = d[i] - rho
+        nv = nx * v[0] + ny * v[1] + nz * v[2]
+        G[j, 0] = -(c * nx + s * ny) / tau_h  # -(Rot(-psi) n_h) / tau_h
+        G[j, 1] = -(-s * nx + c * ny) / tau_h
+        G[j, 2] = -nz / tau_z
+        h[j] = (p1 + p2) * nv - (nx * v[0] + ny * v[1]) / tau_h - nz * v[2] / tau_z + p1 * p2 * b
+        b_out[j] = b
+    return G, h
+
+
+if njit is not None:  # one source: the compiled loops run these very functions
+    _box = njit(cache=True, inline="always")(_box)
+    _cylinder = njit(cache=True, inline="always")(_cylinder)
+    shape_distances = njit(cache=True)(shape_distances)
+    _rows_into = njit(cache=True)(_rows_into)
+
+
+def command_rows(state, shapes: RoomShapes, n_rows: int, rho: float, tau_h: float, tau_z: float, p1: float, p2: float,
+                 psi: float | None = None):
+    """``(b, G, h, idx)``: the barrier values, the rows ``G u <= h`` over the heading-frame
+    command ``u = (u_forward, u_left, u_up)`` and the shape indices of the ``n_rows`` shapes
+    nearest the body at ``state`` (13 numbers: position, quaternion xyzw, world velocity, ...),
+    smallest ``b`` first.  ``psi``: the heading the command is expressed in (default: the
+    state's yaw)."""
+    s = np.asarray(state, float)
+    if psi is None:
+        psi = math.atan2(2 * (s[3] * s[4] + s[5] * s[6]), 1 - 2 * (s[4] * s[4] + s[5] * s[5]))
+    N = len(shapes)
+    d, n = np.empty(N), np.empty((N, 3))
+    shape_distances(np.ascontiguousarray(s[:3]), shapes.kind, shapes.centre, shapes.rot, shapes.size, d, n)
+    K = min(int(n_rows), N)
+    order = np.argsort(d, kind="stable")[:K]  # stable: ties keep the shapes' order on every CPU
+    G, h, b = np.empty((K, 3)), np.empty(K), np.empty(K)
+    _rows_into(G, h, b, order, d, n, np.ascontiguousarray(s[7:10]), float(psi), float(rho), float(tau_h), float(tau_z),
+               float(p1), float(p2))
+    return b, G, h, order
