@@ -52,6 +52,24 @@ world during the lap, which the rows do not see; the body is symmetric about its
 its yaw plays no part in a collision, and the pilot's command is a world-frame velocity turned
 into the heading frame, so the pilot does not depend on the yaw either.
 
+## Deadlock escape (following the blocking shape)
+
+The pilot flies straight at its waypoint, often through a wall of the room (a union of
+rectangles) or an object.  A filter then removes only the command's part into the shape: the
+body slides along it while the command leans sideways, and stops for good when the pilot
+pushes straight at it (a stable equilibrium with the row active: the CBF-QP deadlock that
+Dubins4D's ``cbf`` also meets).  So when the strict QP leaves the pilot's command (at least
+``2 v_stuck`` horizontally) under ``v_stuck`` (0.25 m/s) of horizontal speed, the guardian
+*follows* the blocking shape instead, as a bug algorithm does: its reference becomes
+``v_slide`` (1 m/s) along the horizontal tangent of the nearest shape with a mostly horizontal
+normal (``|n_h| >= 0.5``), on the side the pilot's command leans to (kept while it follows:
+the shape stays on the same hand, and at a concave corner, a shape across the way, it turns
+to follow that one), with the pilot's climb rate; the same QP filters that reference.  It
+hands control back as soon as the pilot's command satisfies every row again.  Blocked again
+within ``slide_memory`` (3 m) of where it last followed, it goes on the same way (choosing by
+the lean again would send it back and forth along a wall whose far end the pilot's command
+points past).  Each entry is counted in ``stats()["slides"]``.
+
 ## Latency (the Dubins4D ``cbf``'s rule)
 
 Under parallel autonomy the command returned for the state ``s_k`` acts only from ``s_{k+1}``:
@@ -70,7 +88,8 @@ QuadrotorRoomParallel-v0 --clock fixed:1``; numbers in ``docs/guardians.md``):
 * ``p1 = p2 = 2`` /s: TUNE.
 * ``margin = 0.1`` m: TUNE.
 * ``n_rows = 8``: the eight nearest shapes; a farther shape's row is slack.
-* ``slack_weight = 1e4``: the recovery minimises the worst violation first.
+* ``slack_weight = 1e3``: the recovery minimises the worst violation first (1e4 leaves OSQP at its
+  iteration limit on a plain two-wall case, tested).
 * ``eps = 1e-6`` (OSQP's tolerance, solutions polished), ``active_atol = 1e-3``: as Dubins4D's.
 
 A body state with NaN applies the safe default (hover) and is counted (``nan_states``).  Bad
@@ -149,8 +168,9 @@ class QuadrotorCBFGuardian(Guardian):
     privileged = True
 
     def __init__(self, p1: float = 2.0, p2: float = 2.0, margin: float = 0.1, tau_h: float = 0.42, tau_z: float = 0.34,
-                 body_radius: float = BOUND, n_rows: int = 8, slack_weight: float = 1e4, active_atol: float = 1e-3,
-                 predict_latency: bool = True, lap_guess: float = 0.1, eps: float = 1e-6, solver: str = "osqp") -> None:
+                 body_radius: float = BOUND, n_rows: int = 8, slack_weight: float = 1e3, active_atol: float = 1e-3,
+                 predict_latency: bool = True, lap_guess: float = 0.1, eps: float = 1e-6, solver: str = "osqp",
+                 v_stuck: float = 0.25, v_slide: float = 1.0, slide_memory: float = 3.0) -> None:
         super().__init__()
         self.p1 = finite("p1 (class-K gain)", p1, 0.0, lo_open=True)
         self.p2 = finite("p2 (class-K gain)", p2, 0.0, lo_open=True)
@@ -164,6 +184,9 @@ class QuadrotorCBFGuardian(Guardian):
         self.predict_latency = bool(predict_latency)
         self.lap_guess = finite("lap_guess", lap_guess, 0.0, lo_open=True)
         self.eps = finite("eps", eps, 0.0, lo_open=True)
+        self.v_stuck = finite("v_stuck", v_stuck, 0.0)
+        self.v_slide = finite("v_slide (0: no deadlock escape)", v_slide, 0.0)
+        self.slide_memory = finite("slide_memory", slide_memory, 0.0)
         self._solver_name = parse_solver(solver)
         self.solver = solver
         self._flow = ClosedLoopQuadrotor(CommandController())
@@ -171,7 +194,7 @@ class QuadrotorCBFGuardian(Guardian):
 
     @staticmethod
     def _zero() -> dict:
-        return {"qp_fallbacks": 0, "hover_fallbacks": 0, "nan_states": 0, "qp_solves": 0}
+        return {"qp_fallbacks": 0, "hover_fallbacks": 0, "nan_states": 0, "qp_solves": 0, "slides": 0}
 
     @property
     def rho(self) -> float:
@@ -197,6 +220,8 @@ class QuadrotorCBFGuardian(Guardian):
         self._pending = None  # the guardian's command acting during the coming lap; None: the pilot's
         self._last_time = float(priv.get("sim_time", 0.0))
         self._lap = self.lap_guess
+        self._side = 0  # 0: filtering the nominal; +-1: following a shape (the deadlock escape), on that side
+        self._followed = None  # (x, y, side) of the last step spent following a shape
 
     # ------------------------------------------------------------------ the maths
     def rows(self, state):
@@ -250,28 +275,83 @@ class QuadrotorCBFGuardian(Guardian):
             state = self.predict(state, during, self._lap)
         return self.decide(state, u_nom)
 
-    def decide(self, state, u_nom) -> dict:
-        """The decision for the state the command will act from (already predicted)."""
-        _, G, h = self.rows(state)
-        u = np.minimum(np.maximum(np.asarray(u_nom, float)[:3], self.lo[:3]), self.hi[:3])
-        if all(g0 * u[0] + g1 * u[1] + g2 * u[2] <= hi + self.eps
-               for (g0, g1, g2), hi in zip(G.tolist(), h.tolist())):
-            self._pending = None  # the nominal satisfies every row: it is the solution, the pilot keeps control
-            return self.action_space.inactive()
+    def slide_reference(self, b, G, u) -> np.ndarray | None:
+        """The deadlock escape's reference (module docstring): ``v_slide`` along the horizontal
+        tangent ``side (-n_y, n_x)`` (heading frame) of the shape being followed, the nominal's
+        climb rate ``u[2]``; ``None`` when no row (barrier values ``b``, rows ``G``, nearest
+        first) has a mostly horizontal normal (``|n_h| >= 0.5``)."""
+        near = []  # unit horizontal normals of the shapes within 0.5 m of the nearest such one
+        for bj, (g0, g1, _) in zip(b.tolist(), G.tolist()):
+            nx, ny = -g0 * self.tau_h, -g1 * self.tau_h  # n_h in the heading frame (G = -n_h / tau_h)
+            r = math.hypot(nx, ny)
+            if r >= 0.5 and (not near or bj <= near[0][0] + 0.5):
+                near.append((bj, nx / r, ny / r))
+        if not near:
+            return None
+        _, nx, ny = near[0]
+        tx, ty = -self._side * ny, self._side * nx
+        ahead = min(near, key=lambda c: c[1] * tx + c[2] * ty)  # a shape across the way: a concave corner
+        if ahead[1] * tx + ahead[2] * ty < -0.3:
+            tx, ty = -self._side * ahead[2], self._side * ahead[1]  # follow it instead, on the same side
+        return np.array([tx * self.v_slide, ty * self.v_slide, u[2]])
+
+    def _solve(self, G, h, ref):
+        """The strict QP's command for ``ref`` and whether a barrier row is active there, or the
+        recovery's command (``active`` true), or ``None`` (both failed)."""
         self._counts["qp_solves"] += 1
-        z = self._qp.solve(G, h, u)
+        z = self._qp.solve(G, h, ref)
         if z is None:
             self._counts["qp_fallbacks"] += 1
-            z = self._qp.solve(G, h, u, relaxed=True)
+            z = self._qp.solve(G, h, ref, relaxed=True)
+            return (None, True) if z is None else (z, True)
+        gaps = h - (G[:, 0] * z[0] + G[:, 1] * z[1] + G[:, 2] * z[2])
+        return z, bool(np.any(np.abs(gaps) <= self.active_atol))
+
+    def _satisfies(self, G, h, u) -> bool:
+        """Whether the command ``u`` satisfies every row ``G u <= h`` (within the QP's tolerance)."""
+        return all(g0 * u[0] + g1 * u[1] + g2 * u[2] <= hi + self.eps for (g0, g1, g2), hi in zip(G.tolist(), h.tolist()))
+
+    def decide(self, state, u_nom) -> dict:
+        """The decision for the state the command will act from (already predicted)."""
+        b, G, h = self.rows(state)
+        u = np.minimum(np.maximum(np.asarray(u_nom, float)[:3], self.lo[:3]), self.hi[:3])
+        if self._satisfies(G, h, u):
+            self._side = 0  # the nominal satisfies every row: it is the solution, the pilot keeps control
+            self._pending = None
+            return self.action_space.inactive()
+        if self._side == 0:
+            z, active = self._solve(G, h, u)
             if z is None:
                 self._counts["hover_fallbacks"] += 1
                 return self._hover()
-            return self._emit(z)
-        gaps = h - (G[:, 0] * z[0] + G[:, 1] * z[1] + G[:, 2] * z[2])
-        if np.any(np.abs(gaps) <= self.active_atol):
-            return self._emit(z)
-        self._pending = None
-        return self.action_space.inactive()
+            if not active:
+                self._pending = None
+                return self.action_space.inactive()
+            if self.v_slide == 0 or math.hypot(z[0], z[1]) >= self.v_stuck or math.hypot(u[0], u[1]) < 2 * self.v_stuck:
+                return self._emit(z)
+            # deadlocked: the rows leave the pilot's command almost no horizontal speed.  Follow
+            # the blocking shape, on the side the nominal leans to, until the nominal is free
+            self._side = 1
+            t = self.slide_reference(b, G, u)
+            if t is None:  # blocked from above or below only: nothing to follow
+                self._side = 0
+                return self._emit(z)
+            last = self._followed
+            if last is not None and math.hypot(state[0] - last[0], state[1] - last[1]) < self.slide_memory:
+                self._side = last[2]  # blocked again near where the last escape left off: go on the same way
+            else:
+                self._side = 1 if t[0] * u[0] + t[1] * u[1] >= 0.0 else -1
+            self._counts["slides"] += 1
+        self._followed = (float(state[0]), float(state[1]), self._side)
+        ref = self.slide_reference(b, G, u)
+        if ref is None:  # nothing left to follow: filter the nominal again
+            self._side = 0
+            ref = u
+        z = ref if self._satisfies(G, h, ref) else self._solve(G, h, ref)[0]
+        if z is None:
+            self._counts["hover_fallbacks"] += 1
+            return self._hover()
+        return self._emit(z)
 
     def stats(self) -> dict:
         return dict(self._counts)
