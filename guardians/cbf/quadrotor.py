@@ -109,13 +109,35 @@ from guardians._checks import finite, integer, quadrotor_only
 from guardians.base import Guardian
 from guardians.cbf.backend import QpsolversQP, parse_solver
 from guardians.cbf.quadrotor_rows import command_rows, room_shapes
-from rmm_envs.systems.quadrotor_control import ClosedLoopQuadrotor, CommandController
+from rmm_envs.systems.quadrotor_control import CommandController, body_packed, body_step, command_wrench
 from rmm_envs.worlds.room_collision import BOUND
 
 __all__ = ["CommandQP", "QuadrotorCBFGuardian"]
 
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover - numba is a dependency; the Python loop still works
+    njit = None
+
 #: OSQP's status values for "solved" and "solved inaccurate".
 _SOLVED = (1, 2)
+
+
+def _flow(s, cmd, k, body, steps, a, b, u):
+    """The body state after ``steps`` physics steps of the controller (gains ``k``) and the body
+    (``body``) under the held command ``cmd`` from ``s`` (``a``, ``b``, ``u``: work arrays); the
+    per-step arithmetic of :class:`rmm_envs.systems.quadrotor_control.ClosedLoopQuadrotor`."""
+    for j in range(13):
+        a[j] = s[j]
+    for _ in range(steps):
+        command_wrench(a, cmd, k, u)
+        body_step(a, u, body, b)
+        a, b = b, a
+    return a.copy()
+
+
+if njit is not None:
+    _flow = njit(cache=True)(_flow)
 
 
 class CommandQP:
@@ -189,7 +211,8 @@ class QuadrotorCBFGuardian(Guardian):
         self.slide_memory = finite("slide_memory", slide_memory, 0.0)
         self._solver_name = parse_solver(solver)
         self.solver = solver
-        self._flow = ClosedLoopQuadrotor(CommandController())
+        controller = CommandController()
+        self._gains, self._body, self._dt = controller.packed, body_packed(controller.params), controller.params.dt
         self._counts = self._zero()
 
     @staticmethod
@@ -234,7 +257,9 @@ class QuadrotorCBFGuardian(Guardian):
         """The body state after ``lap`` seconds of ``command`` (4 numbers, clipped to the box)
         from ``state``, through the controller and the body (whole physics steps)."""
         cmd = np.minimum(np.maximum(np.asarray(command, float), self.lo), self.hi)
-        return self._flow.propagate(np.asarray(state, float)[None, :13], cmd[None], lap, 2)[0, 1]
+        steps = math.ceil(lap / self._dt - 1e-9)
+        return _flow(np.ascontiguousarray(state, dtype=float)[:13], cmd, self._gains, self._body, steps, np.empty(13),
+                     np.empty(13), np.empty(4))
 
     # ------------------------------------------------------------------ the decision
     def _emit(self, u) -> dict:

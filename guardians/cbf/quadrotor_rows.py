@@ -150,46 +150,58 @@ def shape_distances(p, kind, centre, rot, size, d, n):
     return d, n
 
 
-def _rows_into(G, h, b_out, order, d, n, v, psi, rho, tau_h, tau_z, p1, p2):
-    """The rows of the shapes ``order`` (indices into ``d``, ``n``): ``G`` ``(K, 3)``, ``h``
-    ``(K,)`` and their barrier values ``b_out`` ``(K,)``."""
-    c, s = math.cos(psi), math.sin(psi)
-    for j in range(order.shape[0]):
+def _command_rows(s, kind, centre, rot, size, rho, tau_h, tau_z, p1, p2, d, n, order, G, h, b):
+    """Fill the rows of the ``K = order.shape[0]`` shapes nearest the body state ``s`` (13):
+    their indices ``order`` (nearest first; on a tie the lower index), ``G`` ``(K, 3)``, ``h``
+    and their barrier values ``b`` (``d``, ``n``: work arrays of every shape's distance and
+    gradient)."""
+    shape_distances(s, kind, centre, rot, size, d, n)
+    N, K = d.shape[0], order.shape[0]
+    taken = np.zeros(N, dtype=np.bool_)
+    for j in range(K):  # selection by a strict minimum: the same order on every CPU
+        best = -1
+        for i in range(N):
+            if not taken[i] and (best < 0 or d[i] < d[best]):
+                best = i
+        taken[best] = True
+        order[j] = best
+    qx, qy, qz, qw = s[3], s[4], s[5], s[6]
+    r00, r10 = 1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy + qz * qw)
+    hh = math.sqrt(r00 * r00 + r10 * r10)  # the heading (cos psi, sin psi) as the controller reads it
+    c, sn = (r00 / hh, r10 / hh) if hh > 1e-12 else (1.0, 0.0)
+    vx, vy, vz = s[7], s[8], s[9]
+    for j in range(K):
         i = order[j]
         nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
-        b = d[i] - rho
-        nv = nx * v[0] + ny * v[1] + nz * v[2]
-        G[j, 0] = -(c * nx + s * ny) / tau_h  # -(Rot(-psi) n_h) / tau_h
-        G[j, 1] = -(-s * nx + c * ny) / tau_h
+        bj = d[i] - rho
+        nv = nx * vx + ny * vy + nz * vz
+        G[j, 0] = -(c * nx + sn * ny) / tau_h  # -(Rot(-psi) n_h) / tau_h
+        G[j, 1] = -(-sn * nx + c * ny) / tau_h
         G[j, 2] = -nz / tau_z
-        h[j] = (p1 + p2) * nv - (nx * v[0] + ny * v[1]) / tau_h - nz * v[2] / tau_z + p1 * p2 * b
-        b_out[j] = b
-    return G, h
+        h[j] = (p1 + p2) * nv - (nx * vx + ny * vy) / tau_h - nz * vz / tau_z + p1 * p2 * bj
+        b[j] = bj
 
 
 if njit is not None:  # one source: the compiled loops run these very functions
     _box = njit(cache=True, inline="always")(_box)
     _cylinder = njit(cache=True, inline="always")(_cylinder)
     shape_distances = njit(cache=True)(shape_distances)
-    _rows_into = njit(cache=True)(_rows_into)
+    _command_rows = njit(cache=True)(_command_rows)
 
 
-def command_rows(state, shapes: RoomShapes, n_rows: int, rho: float, tau_h: float, tau_z: float, p1: float, p2: float,
-                 psi: float | None = None):
+def command_rows(state, shapes: RoomShapes, n_rows: int, rho: float, tau_h: float, tau_z: float, p1: float, p2: float):
     """``(b, G, h, idx)``: the barrier values, the rows ``G u <= h`` over the heading-frame
     command ``u = (u_forward, u_left, u_up)`` and the shape indices of the ``n_rows`` shapes
     nearest the body at ``state`` (13 numbers: position, quaternion xyzw, world velocity, ...),
-    smallest ``b`` first.  ``psi``: the heading the command is expressed in (default: the
-    state's yaw)."""
-    s = np.asarray(state, float)
-    if psi is None:
-        psi = math.atan2(2 * (s[3] * s[4] + s[5] * s[6]), 1 - 2 * (s[4] * s[4] + s[5] * s[5]))
+    smallest ``b`` first (on a tie, the shape listed first).  The heading is the body's, read as
+    the controller reads it (the body x axis projected on the ground)."""
+    s = np.ascontiguousarray(state, dtype=float).reshape(-1)
+    if s.shape != (13,):
+        raise ValueError(f"state must be 13 numbers (position, quaternion xyzw, velocity, angular velocity), got shape {s.shape}")
     N = len(shapes)
-    d, n = np.empty(N), np.empty((N, 3))
-    shape_distances(np.ascontiguousarray(s[:3]), shapes.kind, shapes.centre, shapes.rot, shapes.size, d, n)
     K = min(int(n_rows), N)
-    order = np.argsort(d, kind="stable")[:K]  # stable: ties keep the shapes' order on every CPU
+    order = np.empty(K, dtype=np.int64)
     G, h, b = np.empty((K, 3)), np.empty(K), np.empty(K)
-    _rows_into(G, h, b, order, d, n, np.ascontiguousarray(s[7:10]), float(psi), float(rho), float(tau_h), float(tau_z),
-               float(p1), float(p2))
+    _command_rows(s, shapes.kind, shapes.centre, shapes.rot, shapes.size, float(rho), float(tau_h), float(tau_z),
+                  float(p1), float(p2), np.empty(N), np.empty((N, 3)), order, G, h, b)
     return b, G, h, order
