@@ -230,7 +230,7 @@ SPACE = GuardianActionSpace.for_system(ClosedLoopQuadrotor(CommandController()),
 
 
 def test_an_infeasible_qp_recovers_with_the_least_violation(env):
-    """Between two walls 0.7 m apart the body (bounding radius 0.304, margin 0.1) is inside
+    """Between two walls 0.7 m apart the body (bounding radius 0.304, margin 0.05) is inside
     both margins: each row asks for a positive speed away from its wall, which no command meets.
     The recovery shares one slack over the rows: by symmetry it stops across the corridor and
     keeps the rest of the nominal."""
@@ -238,7 +238,7 @@ def test_an_infeasible_qp_recovers_with_the_least_violation(env):
     r = room(walls=[[0.6, 0.0, 1.5, 0.25, 5.0, 1.5], [-0.6, 0.0, 1.5, 0.25, 5.0, 1.5]])  # faces at x = +-0.35
     obs, info = reset_at(env, g, r, level(z=1.5))
     b, G, h = g.rows(env.unwrapped.get_state())
-    assert b[0] == b[1] == pytest.approx(0.35 - BOUND - 0.1) and h[0] < 0 and h[1] < 0
+    assert b[0] == b[1] == pytest.approx(0.35 - BOUND - g.margin) and h[0] < 0 and h[1] < 0
     a = g.act(obs, {**info, "nominal_control": np.array([1.0, 0.5, 0.0, 0.0])})
     u = np.array([float(a[c][0]) for c in CONTROLS])
     assert a["active_ctrl"] == 1 and g.stats()["qp_fallbacks"] == 1 and g.stats()["hover_fallbacks"] == 0
@@ -247,23 +247,28 @@ def test_an_infeasible_qp_recovers_with_the_least_violation(env):
 
 
 def test_a_deadlock_follows_the_wall_and_turns_at_a_concave_corner(env):
-    """The pilot pushes straight at a wall (face x = 1.3, the body 0.45 m from it, still),
-    leaning a little to +y: the row lets through u_x <= 4 b tau_h = 0.077, so the filter alone
-    would leave it under v_stuck (0.25 m/s).  The guardian then follows the wall on the side the
-    nominal leans to at v_slide (1 m/s), the reference itself since it satisfies the rows.  With
-    a second wall across the way (face y = 0.9) it turns to follow that one, keeping the walls
-    on the same hand."""
+    """The pilot pushes straight at a wall (face x = 1.3, the body 0.36 m from it, still),
+    leaning a little to +y: the row lets through u_x <= p1 p2 b tau_h = 9 (0.36 - 0.304 - 0.05)
+    0.42 = 0.023, so the filter alone would leave it under v_stuck (0.25 m/s).  The guardian then
+    follows the wall on the side the nominal leans to at v_slide (1.5 m/s), the reference itself
+    since it satisfies the rows.  With a second wall across the way (face y = 0.9) it turns to
+    follow that one, keeping the walls on the same hand."""
     g = QuadrotorCBFGuardian(predict_latency=False)
     wall_a = [1.55, 0.0, 1.5, 0.25, 5.0, 1.5]
-    obs, info = reset_at(env, g, room(walls=[wall_a]), level(x=0.85, z=1.5))
+    obs, info = reset_at(env, g, room(walls=[wall_a]), level(x=0.94, z=1.5))
     a = g.act(obs, {**info, "nominal_control": np.array([1.5, 0.1, 0.0, 0.0])})
-    np.testing.assert_allclose([float(a[c][0]) for c in CONTROLS], [0.0, 1.0, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose([float(a[c][0]) for c in CONTROLS], [0.0, 1.5, 0.0, 0.0], atol=1e-12)
     assert g.stats()["slides"] == 1 and g._side == -1
-    obs, info = reset_at(env, g, room(walls=[wall_a, [0.0, 1.15, 1.5, 5.0, 0.25, 1.5]]), level(x=0.85, y=0.45, z=1.5))
+    obs, info = reset_at(env, g, room(walls=[wall_a, [0.0, 1.15, 1.5, 5.0, 0.25, 1.5]]), level(x=0.94, y=0.54, z=1.5))
     g._side = -1  # following wall A with it on the right, heading +y
     a = g.act(obs, {**info, "nominal_control": np.array([1.5, 0.1, 0.0, 0.0])})
-    np.testing.assert_allclose([float(a[c][0]) for c in CONTROLS], [-1.0, 0.0, 0.0, 0.0], atol=1e-12)
-    # the nominal free again (pointing away from both walls): back to the pilot
+    np.testing.assert_allclose([float(a[c][0]) for c in CONTROLS], [-1.5, 0.0, 0.0, 0.0], atol=1e-12)
+    # free, but still pushing into the wall it follows: it keeps following
+    obs, info = reset_at(env, g, room(walls=[wall_a]), level(x=0.3, z=1.5))
+    g._side = -1
+    a = g.act(obs, {**info, "nominal_control": np.array([0.2, 0.0, 0.0, 0.0])})
+    np.testing.assert_allclose([float(a[c][0]) for c in CONTROLS], [0.0, 1.5, 0.0, 0.0], atol=1e-12)
+    # free and pointing away from the wall: back to the pilot
     a = g.act(obs, {**info, "nominal_control": np.array([-1.0, -1.0, 0.0, 0.0])})
     assert a["active_ctrl"] == 0 and g._side == 0
 

@@ -1,4 +1,4 @@
-"""The barrier maths of the quadrotor ``cbf``: distances to a generated room and the QP's rows.
+"""The barrier maths of the quadrotor ``cbf``: distances to a generated room, the QP's rows, the QP.
 
 Pure functions of a body state and the episode's room (:class:`rmm_envs.worlds.rooms.Room`);
 the model, the gains and the margins are derived in :mod:`guardians.cbf.quadrotor`.
@@ -37,7 +37,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import osqp
+import scipy.sparse as sp
 
+from guardians.cbf.backend import QpsolversQP
 from rmm_envs.systems.rotations import quat_to_rot
 
 try:
@@ -45,7 +48,10 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency; the Python loops still work
     njit = None
 
-__all__ = ["FLOOR", "BOX", "CYLINDER", "SPHERE", "RoomShapes", "command_rows", "room_shapes", "shape_distances"]
+__all__ = ["FLOOR", "BOX", "CYLINDER", "SPHERE", "CommandQP", "RoomShapes", "command_rows", "room_shapes", "shape_distances"]
+
+#: OSQP's status values for "solved" and "solved inaccurate".
+_SOLVED = (1, 2)
 
 #: Shape kinds in :attr:`RoomShapes.kind`.
 FLOOR, BOX, CYLINDER, SPHERE = 0, 1, 2, 3
@@ -205,3 +211,45 @@ def command_rows(state, shapes: RoomShapes, n_rows: int, rho: float, tau_h: floa
     _command_rows(s, shapes.kind, shapes.centre, shapes.rot, shapes.size, float(rho), float(tau_h), float(tau_z),
                   float(p1), float(p2), np.empty(N), np.empty((N, 3)), order, G, h, b)
     return b, G, h, order
+
+
+class CommandQP:
+    """``min |u - u_nom|^2 + w s^2  s.t.  G u - s <= h, lo <= u <= hi, 0 <= s <= s_max`` for ``K``
+    rows over the 3 velocity commands and one shared slack ``s``: ``s_max = 0`` (``relaxed=False``,
+    the strict filter) or ``inf`` (the recovery).  Set up once per episode on the direct OSQP path
+    (values and bounds updated per solve, warm-started) or through qpsolvers (``name``)."""
+
+    def __init__(self, K: int, lo, hi, slack_weight: float, eps: float, name: str | None = None) -> None:
+        self.K = K
+        self.name = name
+        P = np.diag([2.0, 2.0, 2.0, 2.0 * slack_weight])
+        if name is not None:
+            self._qp = QpsolversQP(P, name, eps, lb=np.r_[lo, 0.0], ub=np.r_[hi, 0.0])
+            return
+        # columns u_f, u_l, u_up (K barrier rows and their box row), s (K barrier rows and its box row)
+        A = sp.csc_matrix(np.vstack([np.hstack([np.ones((K, 3)), -np.ones((K, 1))]), np.eye(4)]))
+        self._Ax = A.data.copy()
+        self._col = A.indptr.copy()
+        self._l = np.r_[np.full(K, -np.inf), lo, 0.0]
+        self._u = np.r_[np.zeros(K), hi, 0.0]
+        self._solver = osqp.OSQP()
+        self._solver.setup(sp.csc_matrix(P), np.zeros(4), A, self._l, self._u, verbose=False, eps_abs=eps, eps_rel=eps,
+                           polishing=True, warm_starting=True, max_iter=4000)
+
+    def solve(self, G, h, u_nom, relaxed: bool = False) -> np.ndarray | None:
+        """``(u_forward, u_left, u_up, s)`` or ``None`` (infeasible, or the solver failed)."""
+        q = np.r_[-2.0 * np.asarray(u_nom, float)[:3], 0.0]
+        s_max = math.inf if relaxed else 0.0
+        if self.name is not None:
+            self._qp.q[:] = q
+            self._qp.ub[3] = s_max
+            return self._qp.solve(np.hstack([G, -np.ones((self.K, 1))]), h)
+        for j in range(3):  # column j holds rows 0..K-1 then its box row
+            self._Ax[self._col[j]: self._col[j] + self.K] = G[:, j]
+        self._u[: self.K] = h
+        self._u[-1] = 1e30 if relaxed else 0.0  # OSQP's infinity
+        self._solver.update(q=q, Ax=self._Ax, u=self._u)
+        res = self._solver.solve(raise_error=False)
+        if res.info.status_val not in _SOLVED or res.x is None or not np.all(np.isfinite(res.x)):
+            return None
+        return np.asarray(res.x, float)
