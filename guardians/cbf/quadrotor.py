@@ -65,7 +65,9 @@ Dubins4D's ``cbf`` also meets).  So when the strict QP leaves the pilot's comman
 normal (``|n_h| >= 0.5``), on the side the pilot's command leans to (kept while it follows:
 the shape stays on the same hand, and at a concave corner, a shape across the way, it turns
 to follow that one), with the pilot's climb rate; the same QP filters that reference.  It
-hands control back as soon as the pilot's command satisfies every row again.  Blocked again
+hands control back once the pilot's command satisfies every row again and no longer points
+into the shape it follows (handing back on the first free command let the pilot slide back
+along the wall, and the escape started over: dozens of entries in the episodes that timed out).  Blocked again
 within ``slide_memory`` (3 m) of where it last followed, it goes on the same way (choosing by
 the lean again would send it back and forth along a wall whose far end the pilot's command
 points past).  Each entry is counted in ``stats()["slides"]``.
@@ -75,16 +77,16 @@ points past).  Each entry is counted in ``stats()["slides"]``.
 Under parallel autonomy the command returned for the state ``s_k`` acts only from ``s_{k+1}``:
 during the lap in between the previous command (the guardian's own, or the pilot's,
 ``info["nominal_control"]`` of ``s_k``) still acts.  So the rows are written at the *predicted*
-state ``s_{k+1}``: the closed-loop flow (the controller and the body through
-:class:`rmm_envs.systems.quadrotor_control.ClosedLoopQuadrotor`, which reproduces PyBullet's
-integrator) from ``s_k`` under that command for the lap, measured from the simulated times the
+state ``s_{k+1}``: the closed-loop flow from ``s_k`` under that command for the lap (the
+compiled controller and body steps of :mod:`rmm_envs.systems.quadrotor_control`, the
+arithmetic of its ``ClosedLoopQuadrotor``, which reproduces PyBullet's integrator; whole
+physics steps, ``ceil(lap / dt)``), the lap measured from the simulated times the
 env reports (the previous lap's length; ``lap_guess = 0.1`` s before the first).
 
 ## Defaults, and why
 
 Chosen on development episodes of ``--seed 5`` and ``--seed 6`` only (``rmm-bench --env
-QuadrotorRoomParallel-v0 --clock fixed:1``; numbers in ``docs/guardians.md``):
-
+QuadrotorRoomParallel-v0 --agent cbf --clock fixed:1 --agent-opt 'cbf.quadrotor={...}'``).
 Development runs (128 episodes per seed, success / collision / timeout %, seed 5 then seed 6):
 
 | setting | seed 5 | seed 6 |
@@ -94,13 +96,17 @@ Development runs (128 episodes per seed, success / collision / timeout %, seed 5
 | ``p1 = p2 = 3``, ``v_slide = 1.5`` | 78.9 / 0.0 / 21.1 | 89.8 / 0.0 / 10.2 |
 | the same, the escape ending only once the pilot no longer pushes into the shape | 81.2 / 0.0 / 18.8 | 89.8 / 0.0 / 10.2 |
 | the same, margin 0.05 m | 82.8 / 0.0 / 17.2 | 89.8 / 0.0 / 10.2 |
-| the same, margin 0.025 m | MARGIN25_5 | MARGIN25_6 |
+| the same, margin 0.025 m | 81.2 / 0.0 / 18.8 | 89.1 / 0.0 / 10.9 |
 | the same, margin 0 | 73.4 / 15.6 / 10.9 | - |
 
 * ``p1 = p2 = 3`` /s: the rows' class-K gains.  Against 2 /s the outcomes did not move and the
   guardian was in control less (30% of the simulated time against 48% on seed 5): it lets the
   pilot fly closer before it slows it.
-* ``margin = MARGIN`` m: MARGIN_REASON
+* ``margin = 0.05`` m: for the tracking error (the lag is not exactly first order: the
+  acceleration saturates at 5 m/s^2 and the attitude loop adds a delay), the command held over
+  a lap while the rows hold at its start, and PyBullet's contact distance (2 mm for the
+  walls' compound boxes).  Without it the body grazes the walls it slides along (15.6%
+  collisions on seed 5); 2.5 cm did no better than 5 cm, and 10 cm timed out a little more.
 * ``v_slide = 1.5`` m/s (the pilot's cruise speed), ``v_stuck = 0.25`` m/s, ``slide_memory = 3`` m:
   the deadlock escape above.
 * ``n_rows = 8``: the eight nearest shapes; a farther shape's row is slack.
