@@ -140,7 +140,6 @@ except ImportError:  # pragma: no cover - numba is a dependency; the Python loop
     njit = None
 
 
-
 def _flow(s, cmd, k, body, steps, a, b, u):
     """The body state after ``steps`` physics steps of the controller (gains ``k``) and the body
     (``body``) under the held command ``cmd`` from ``s`` (``a``, ``b``, ``u``: work arrays); the
