@@ -190,6 +190,26 @@ def test_the_filter_lowers_the_speed_toward_a_wall_onto_its_row(env):
     np.testing.assert_allclose(np.cross(u[:3] - nominal[:3], G[wall]), 0.0, atol=1e-4)
 
 
+@pytest.mark.parametrize("relaxed", [False, True])
+def test_qpsolvers_backends_agree_with_the_direct_osqp_path(relaxed):
+    """The same QP through qpsolvers (an interior-point and an active-set solver): the same
+    command to the solvers' tolerance, on a strict problem (one wall row active) and on a relaxed
+    one (two opposite walls)."""
+    from guardians.cbf.backend import installed_solvers
+    from guardians.cbf.quadrotor_rows import CommandQP
+
+    lo, hi = np.array([-2.0, -2.0, -1.0]), np.array([2.0, 2.0, 1.0])
+    G = np.array([[1 / TAU_H, 0.0, 0.0], [-1 / TAU_H, 0.0, 0.0]])
+    h = np.array([-0.2, -0.2]) if relaxed else np.array([1.0, 5.0])
+    u_nom = np.array([1.5, 0.5, 0.2])
+    want = CommandQP(2, lo, hi, 1e3, 1e-6).solve(G, h, u_nom, relaxed=relaxed)
+    assert want is not None and (want[0] == pytest.approx(0.0, abs=1e-5) if relaxed else want[0] == pytest.approx(TAU_H, abs=1e-5))
+    for name in {"clarabel", "daqp"} & set(installed_solvers()):
+        got = CommandQP(2, lo, hi, 1e3, 1e-6, name=name).solve(G, h, u_nom, relaxed=relaxed)
+        np.testing.assert_allclose(got, want, atol=1e-4, err_msg=name)
+    assert CommandQP(2, lo, hi, 1e3, 1e-6).solve(G, np.array([-0.2, -0.2]), u_nom) is None  # strict: infeasible
+
+
 def test_latency_prediction_is_the_closed_loop_flow(env):
     g = QuadrotorCBFGuardian()
     reset_at(env, g, room(), level(z=2.0, v=(1.0, 0.0, 0.0)))
