@@ -54,8 +54,9 @@ AGENTS = ("inactive", "random", "brakes", "lrmm", "lrmm-paper", "cbf", "cbf-pape
 HJ_AGENTS = ("hj", "hj-paper")
 # the other systems' parallel-autonomy envs and the guardians that apply to each
 OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "brakes", "lrmm", "cbf", "hj"),
-               "QuadrotorRoomParallel-v0": ("inactive", "brakes", "lrmm")}
-QUICK_OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "lrmm", "cbf"), "QuadrotorRoomParallel-v0": ("inactive", "lrmm")}
+               "QuadrotorRoomParallel-v0": ("inactive", "brakes", "lrmm", "cbf")}
+QUICK_OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "lrmm", "cbf"),
+                     "QuadrotorRoomParallel-v0": ("inactive", "lrmm", "cbf")}
 ENVS = ("Dubins4DCirclesGuarded-v0", "Dubins4DCirclesParallel-v0", "Dubins4DMapGuarded-v0", "Dubins4DMapParallel-v0", "Dubins3DMaze-v0",
         "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoom-v0", "QuadrotorRoomGuarded-v0",
         "QuadrotorRoomParallel-v0")

@@ -7,7 +7,8 @@ twice: **wall** time (``time.perf_counter``) and the calling thread's **CPU** ti
 also counts the moments the process waited for a core, which the CPU time leaves out (it still
 feels cache and memory contention), so the CPU column is the figure to compare across
 machines of unknown load.  Then, for the LRMM, its inference next to the same network in torch
-(measured in the same run).
+(measured in the same run).  Then the guardians that serve other systems, on those systems'
+blocking envs (:data:`OTHER_SYSTEMS`).
 """
 
 from __future__ import annotations
@@ -20,6 +21,10 @@ import numpy as np
 
 import rmm_envs  # noqa: F401
 from guardians import available_guardians, make_guardian
+
+
+#: ``(env id, guardian, decisions)`` timed after the Dubins4D ones (the blocking env of each system).
+OTHER_SYSTEMS = [("QuadrotorRoomGuarded-v0", "cbf", 1000)]
 
 
 def decision_times(guardian, env_id="Dubins4DCirclesGuarded-v0", steps=3000, seed=0, cpu: list | None = None) -> list[float]:
@@ -72,6 +77,12 @@ def torch_lrmm_time(model, obs, repeats=3000) -> float:
     return statistics.median(times)
 
 
+def _row(name: str, wall: list[float], cpu: list[float]) -> str:
+    """One line of the table: wall and CPU medians and 90th percentiles, in microseconds."""
+    return (f"  {name:10s} {statistics.median(wall) * 1e6:9.1f} us {np.quantile(wall, 0.9) * 1e6:7.1f} us "
+            f"{statistics.median(cpu) * 1e6:9.1f} us {np.quantile(cpu, 0.9) * 1e6:7.1f} us")
+
+
 def main() -> None:
     print("Guardian decision time (observation in, action out), Dubins4DCirclesGuarded-v0, one process; "
           "targets: lrmm <= 20 us, cbf <= 100 us, hj <= 50 us")
@@ -80,8 +91,12 @@ def main() -> None:
         g = make_guardian(name)
         cpu: list[float] = []
         t = decision_times(g, cpu=cpu)
-        print(f"  {name:10s} {statistics.median(t) * 1e6:9.1f} us {np.quantile(t, 0.9) * 1e6:7.1f} us "
-              f"{statistics.median(cpu) * 1e6:9.1f} us {np.quantile(cpu, 0.9) * 1e6:7.1f} us")
+        print(_row(name, t, cpu))
+    print("Guardians on other systems (the same measure)")
+    for env_id, name, steps in OTHER_SYSTEMS:
+        cpu = []
+        t = decision_times(make_guardian(name, env_id=env_id), env_id=env_id, steps=steps, cpu=cpu)
+        print(_row(name, t, cpu) + f"  on {env_id}")
     lrmm = make_guardian("lrmm")
     obs = gym.make("Dubins4DCirclesGuarded-v0").reset(seed=0)[0]
     t_np = statistics.median(timeit_np(lrmm.model, obs))

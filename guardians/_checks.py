@@ -7,7 +7,8 @@ import math
 
 import numpy as np
 
-__all__ = ["MazeDelegation", "dubins4d_only", "finite", "integer", "is_maze_space", "maze_car_only", "number_pair"]
+__all__ = ["MazeDelegation", "QuadrotorDelegation", "dubins4d_only", "finite", "integer", "is_maze_space", "is_quadrotor_space",
+           "maze_car_only", "number_pair", "quadrotor_only"]
 
 
 def finite(name: str, value, lo: float | None = None, lo_open: bool = False) -> float:
@@ -42,19 +43,20 @@ def number_pair(name: str, pair) -> tuple[float, float]:
     return lo, hi
 
 
-def dubins4d_only(guardian, action_space, maze: bool = False) -> None:
+def dubins4d_only(guardian, action_space, maze: bool = False, quadrotor: bool = False) -> None:
     """Refuse an env that is not a Dubins4D one (``ValueError`` naming the guardian and why): the
     privileged guardians (``cbf``, ``hj``) model the Dubins4D car among circles, so they need its
     two controls (turn rate, acceleration) and circular obstacles in its privileged data: an env
     whose action space states other obstacle shapes (``obstacle_shapes``, a map with polygons or
     walls) is refused too.  ``maze``: the guardian also serves the maze car (its own check ran
-    first), said in the message."""
+    first), said in the message; so is ``quadrotor``."""
     from rmm_envs.envs.dubins4d import CONTROLS
 
     name = guardian.name
     controls = guardian.require_action_space(space=action_space).controls
     if tuple(controls) != CONTROLS:
-        systems = ("Dubins4D envs and the maze car (controls ('turnrate_ctrl',))" if maze else "Dubins4D envs only")
+        systems = "Dubins4D envs" + (" and the maze car (controls ('turnrate_ctrl',))" if maze else "") \
+            + (f" and the quadrotor (controls {_quadrotor_controls()})" if quadrotor else "") + ("" if maze or quadrotor else " only")
         raise ValueError(f"guardian {name!r} applies to {systems}: it models the Dubins4D car (controls "
                          f"{CONTROLS}) among circular obstacles, and this env's controls are {controls}")
     shapes = getattr(action_space, "obstacle_shapes", None)
@@ -116,4 +118,59 @@ class MazeDelegation:
         maze = self._maze_guardian(action_space)
         if maze is not None:
             return maze.check_spaces(observation_space, action_space)
-        dubins4d_only(self, action_space, maze=self._maze_args is not None)
+        dubins4d_only(self, action_space, maze=self._maze_args is not None,
+                      quadrotor=getattr(self, "_quadrotor_args", None) is not None)
+
+
+def _quadrotor_controls() -> tuple[str, ...]:
+    from rmm_envs.envs.quadrotor_room_parallel import CONTROLS
+
+    return tuple(CONTROLS)
+
+
+def is_quadrotor_space(action_space) -> bool:
+    """Whether ``action_space`` is the quadrotor's: a guardian action space with its four
+    commands (:data:`rmm_envs.envs.quadrotor_room_parallel.CONTROLS`)."""
+    return tuple(getattr(action_space, "controls", ())) == _quadrotor_controls()
+
+
+def quadrotor_only(guardian, action_space):
+    """Refuse an env that is not the quadrotor's, or whose command box does not contain the zero
+    command (hover; ``ValueError`` naming the guardian and why); the checked action space otherwise."""
+    space = guardian.require_action_space(space=action_space)
+    if not is_quadrotor_space(space):
+        raise ValueError(f"guardian {guardian.name!r} (quadrotor) models the quadrotor's velocity command (controls "
+                         f"{_quadrotor_controls()}) in a room; this env's controls are {space.controls}")
+    lo, hi = np.asarray(space.control_low, float), np.asarray(space.control_high, float)
+    if not (np.all(lo <= 0.0) and np.all(hi >= 0.0) and np.all(lo < hi)):
+        raise ValueError(f"guardian {guardian.name!r} (quadrotor) needs a command box that contains the zero command "
+                         f"(hover) in each of {space.controls}, got low {lo.tolist()} and high {hi.tolist()}")
+    return space
+
+
+class QuadrotorDelegation:
+    """One guardian name for the quadrotor too: a mixin (before :class:`MazeDelegation` or the
+    guardian class) whose quadrotor counterpart is ``quadrotor_class``.  On an env whose action
+    space is the quadrotor's (and when the guardian serves it, ``self._quadrotor_args`` not
+    ``None``), the checks go to one delegate of ``quadrotor_class``, built on the first such env
+    with those arguments and the guardian's name; elsewhere the next class's checks apply."""
+
+    quadrotor_class: type
+    _quadrotor_args: dict | None = None
+    _quadrotor_delegate = None
+
+    def _quadrotor_guardian(self, action_space):
+        """The delegate when ``action_space`` is the quadrotor's (and this guardian serves it),
+        else ``None``."""
+        if self._quadrotor_args is None or not is_quadrotor_space(action_space):
+            return None
+        if self._quadrotor_delegate is None:
+            self._quadrotor_delegate = self.quadrotor_class(**self._quadrotor_args)
+            self._quadrotor_delegate.name = self.name
+        return self._quadrotor_delegate
+
+    def check_spaces(self, observation_space, action_space) -> None:
+        quad = self._quadrotor_guardian(action_space)
+        if quad is not None:
+            return quad.check_spaces(observation_space, action_space)
+        return super().check_spaces(observation_space, action_space)

@@ -158,14 +158,20 @@ ranges, negative tolerances) are refused at construction with a message naming t
 action space without two controls, or whose box does not contain ``u1 = 0`` and both signs of
 ``u2``, is refused at ``reset``, naming the guardian.
 
-The maze car and the solver
----------------------------
+The maze car, the quadrotor and the solver
+------------------------------------------
 ``cbf`` also serves the maze car (``Dubins3DMazeParallel-v0``): given an action space with the
 maze car's one control (``turnrate_ctrl``) it hands the episode to
 :class:`guardians.cbf.maze.MazeCBFGuardian` (walls as barriers that include the turn the car
 needs; its module docstring has the rows and defaults).  ``maze`` (a dict) sets that
 guardian's own arguments; ``solver``, ``eps``, ``predict_latency`` and ``lap_guess`` are
 shared; ``maze=False`` refuses maze envs (``cbf-paper`` does: the paper's rule is Dubins4D's).
+Given an action space with the quadrotor's four commands (``QuadrotorRoomGuarded-v0``,
+``QuadrotorRoomParallel-v0``) it hands the episode to
+:class:`guardians.cbf.quadrotor.QuadrotorCBFGuardian` in the same way (the room's floor, walls
+and objects as barriers on the velocity command, a first-order tracking model; its module
+docstring has the rows and defaults); ``quadrotor`` (a dict) sets that guardian's own
+arguments, ``quadrotor=False`` refuses quadrotor envs (``cbf-paper`` does).
 ``solver``: ``"osqp"`` (default, the direct path below) or ``"qpsolvers:<name>"`` for any
 solver qpsolvers has installed (:mod:`guardians.cbf.backend`).
 
@@ -173,7 +179,8 @@ The package, by responsibility: :mod:`guardians.cbf.barrier` (the barrier rows a
 obstacle choices, pure functions of the state), :mod:`guardians.cbf.qp` (the OSQP problem, set
 up once per episode), :mod:`guardians.cbf.recovery` (the backup manoeuvre) and
 :mod:`guardians.cbf.guardian` (the two guardians: configuration, latency and the decision),
-:mod:`guardians.cbf.backend` (the solver choice) and :mod:`guardians.cbf.maze` (the maze car).
+:mod:`guardians.cbf.backend` (the solver choice), :mod:`guardians.cbf.maze` (the maze car),
+:mod:`guardians.cbf.quadrotor` and :mod:`guardians.cbf.quadrotor_rows` (the quadrotor).
 """
 
 from guardians.cbf.guardian import CBFGuardian, CBFPaperGuardian

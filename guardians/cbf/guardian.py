@@ -9,11 +9,12 @@ import math
 
 import numpy as np
 
-from guardians._checks import MazeDelegation, finite, integer, number_pair
+from guardians._checks import MazeDelegation, QuadrotorDelegation, finite, integer, number_pair
 from guardians.base import Guardian
 from guardians.cbf.backend import dubins4d_qp, parse_solver
 from guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_values, critical_obstacle, inflated_radii
 from guardians.cbf.maze import MazeCBFGuardian
+from guardians.cbf.quadrotor import QuadrotorCBFGuardian
 from guardians.cbf.recovery import recovery_control, recovery_done
 from rmm_envs.portable import matvec
 from rmm_envs.systems.dubins4d import Dubins4D
@@ -32,7 +33,7 @@ def _box_problem(u1, u2) -> str | None:
     return "the control box must contain 0 in u1 and allow braking and accelerating in u2"
 
 
-class CBFGuardian(MazeDelegation, Guardian):
+class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
     """HOCBF safety filter with one-step latency prediction and recovery (see :mod:`guardians.cbf`).
 
     ``u1_bounds``/``u2_bounds`` (default ``None``: the action space's, read at ``reset``) and
@@ -44,6 +45,7 @@ class CBFGuardian(MazeDelegation, Guardian):
     observation_type = "global"
     privileged = True
     maze_class = MazeCBFGuardian
+    quadrotor_class = QuadrotorCBFGuardian
 
     def __init__(self, p1: float = 0.7535, p2: float = 0.6664, inflation: float = 1.05,
                  gamma_vmin: float = 1.0, gamma_vmax: float = 1.0, lambda_theta: float = 1.0,
@@ -53,7 +55,7 @@ class CBFGuardian(MazeDelegation, Guardian):
                  max_obstacles: int = 64, eps: float = 1e-6, predict_latency: bool = True,
                  recovery: bool = True, v_stuck: float = 0.05, lap_guess: float = 0.1,
                  goal_aware_margin: bool = True, solver: str = "osqp", maze: dict | None = None,
-                 reference: str = "nominal") -> None:
+                 reference: str = "nominal", quadrotor: dict | None = None) -> None:
         super().__init__()
         if reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES} (filter the driver's info['nominal_control'], "
@@ -61,9 +63,13 @@ class CBFGuardian(MazeDelegation, Guardian):
         self.reference = reference
         parse_solver(solver)  # a bad name fails here, listing the installed solvers
         self.solver = solver
-        self._maze_args = _maze_arguments(maze, solver, eps, predict_latency, lap_guess)
+        self._maze_args = _delegate_arguments("maze", MazeCBFGuardian, maze, solver, eps, predict_latency, lap_guess)
+        self._quadrotor_args = _delegate_arguments("quadrotor", QuadrotorCBFGuardian, quadrotor, solver, eps, predict_latency,
+                                                   lap_guess)
         self._delegate = None  # the maze car's guardian, built on the first maze env
+        self._quadrotor_delegate = None  # the quadrotor's, built on the first quadrotor env
         self._maze = None  # the delegate while an episode on a maze env runs
+        self._quad = None  # the delegate while an episode on a quadrotor env runs
         self.p1 = finite("p1 (class-K gain)", p1, 0.0, lo_open=True)
         self.p2 = finite("p2 (class-K gain)", p2, 0.0, lo_open=True)
         k = finite("inflation", inflation)
@@ -119,9 +125,12 @@ class CBFGuardian(MazeDelegation, Guardian):
                                 u2_min=self.u2_min, u2_max=self.u2_max)
 
     def reset(self, **kwargs) -> None:
-        self._maze = self._maze_guardian(kwargs.get("action_space"))
-        if self._maze is not None:
-            self._maze.reset(**kwargs)
+        space = kwargs.get("action_space")
+        self._maze = self._maze_guardian(space)
+        self._quad = None if self._maze is not None else self._quadrotor_guardian(space)
+        other = self._maze or self._quad
+        if other is not None:
+            other.reset(**kwargs)
             return
         super().reset(**kwargs)
         self.check_spaces(self.observation_space, self.action_space)
@@ -236,8 +245,9 @@ class CBFGuardian(MazeDelegation, Guardian):
         return u
 
     def act(self, observation, info=None):
-        if self._maze is not None:
-            return self._maze.act(observation, info)
+        other = self._maze or self._quad
+        if other is not None:
+            return other.act(observation, info)
         u_nom = self.nominal(info)
         priv = self._privileged()
         state = np.asarray(priv["state"], float)
@@ -288,20 +298,22 @@ class CBFGuardian(MazeDelegation, Guardian):
         return self._inactive()
 
     def stats(self) -> dict:
-        if self._maze is not None:
-            return self._maze.stats()
+        other = self._maze or self._quad
+        if other is not None:
+            return other.stats()
         return dict(self._counts)
 
 
-def _maze_arguments(maze, solver, eps, predict_latency, lap_guess) -> dict | None:
-    """The maze guardian's arguments: ``maze`` (a dict of :class:`MazeCBFGuardian` arguments;
-    ``False`` refuses maze envs) over the arguments both systems share."""
-    if maze is False:
+def _delegate_arguments(system: str, cls, given, solver, eps, predict_latency, lap_guess) -> dict | None:
+    """The arguments of ``system``'s guardian ``cls`` (the maze car's, the quadrotor's): ``given``
+    (a dict of its arguments; ``False`` refuses that system's envs) over the arguments the
+    systems share."""
+    if given is False:
         return None
-    if maze is not None and not isinstance(maze, dict):
-        raise ValueError(f"maze must be a dict of guardians.cbf.maze.MazeCBFGuardian arguments (or False), got {maze!r}")
-    args = {"solver": solver, "eps": eps, "predict_latency": predict_latency, "lap_guess": lap_guess} | dict(maze or {})
-    MazeCBFGuardian(**args)  # a bad argument fails at construction, naming it
+    if given is not None and not isinstance(given, dict):
+        raise ValueError(f"{system} must be a dict of {cls.__module__}.{cls.__name__} arguments (or False), got {given!r}")
+    args = {"solver": solver, "eps": eps, "predict_latency": predict_latency, "lap_guess": lap_guess} | dict(given or {})
+    cls(**args)  # a bad argument fails at construction, naming it
     return args
 
 
@@ -312,6 +324,6 @@ class CBFPaperGuardian(CBFGuardian):
     name = "cbf-paper"
 
     def __init__(self, *args, predict_latency: bool = False, recovery: bool = False,
-                 goal_aware_margin: bool = False, maze=False, reference: str = "clf", **kwargs) -> None:
+                 goal_aware_margin: bool = False, maze=False, reference: str = "clf", quadrotor=False, **kwargs) -> None:
         super().__init__(*args, predict_latency=predict_latency, recovery=recovery,
-                         goal_aware_margin=goal_aware_margin, maze=maze, reference=reference, **kwargs)
+                         goal_aware_margin=goal_aware_margin, maze=maze, reference=reference, quadrotor=quadrotor, **kwargs)
