@@ -276,6 +276,12 @@ def test_shipped_model_loads_and_is_documented():
     m = load_model()
     assert default_model_path().exists()
     assert m.env_id == "Dubins4DCircles-v0" and m.obs_dim == 17  # as recorded at training, before the rename
+    # a model recorded under an old id is the model of its new id (and still of no other env)
+    for env_id in ("Dubins4DCirclesGuarded-v0", "Dubins4DCircles-v0"):
+        assert LRMMModel.load(default_model_path(), env_id=env_id).meta["weights_sha256"] == m.meta["weights_sha256"]
+    with pytest.raises(ValueError, match="trained for env 'Dubins4DCircles-v0' .now 'Dubins4DCirclesGuarded-v0'., "
+                                         "not 'Dubins4DCirclesParallel-v0'"):
+        LRMMModel.load(default_model_path(), env_id="Dubins4DCirclesParallel-v0")
     assert m.meta["data"]["n_rows"] >= 35072 and m.meta["data"]["configs"] >= 274
     assert m.meta["metrics"]["test"]["mae"] <= 0.030
     assert m.meta["labeller"]["branches"] == 32 and m.meta["labeller"]["depth"] == 2

@@ -50,7 +50,7 @@ import numpy as np
 
 from guardians.lrmm.inference import forward_one as _forward_one
 from guardians.lrmm.inference import forward_rows as _forward_rows
-from rmm_envs.catalog import GUARDED_KINDS, SYSTEMS, canonical_id
+from rmm_envs.catalog import GUARDED_KINDS, RENAMED, SYSTEMS, canonical_id
 from rmm_envs.portable import matvec
 
 __all__ = ["FORMAT", "SHIPPED", "SHIPPED_BY_SYSTEM", "LRMMModel", "Shipped", "default_model_path", "load_model"]
@@ -240,8 +240,9 @@ class LRMMModel:
                     raise ValueError(f"{path}: field {key!r} needs format version 2, the file says version 1")
         if _checksum(arrays) != meta.get("weights_sha256"):
             raise ValueError(f"{path}: weights checksum mismatch (the file is corrupted or was edited)")
-        if env_id is not None and meta.get("env_id") != env_id:
-            raise ValueError(f"{path} was trained for env {meta.get('env_id')!r}, not {env_id!r}")
+        trained, now = meta.get("env_id"), f" (now {RENAMED[meta['env_id']]!r})" if meta.get("env_id") in RENAMED else ""
+        if env_id is not None and canonical_id(str(trained)) != canonical_id(env_id):  # an old id is its new id's env
+            raise ValueError(f"{path} was trained for env {trained!r}{now}, not {env_id!r}")
         if obs_dim is not None and int(meta.get("obs_dim", -1)) != int(obs_dim):
             raise ValueError(f"{path} expects observations of {meta.get('obs_dim')} values, the env gives {obs_dim}")
         missing = [k for k in ("hidden", "features", "obs_dim") if k not in meta]
