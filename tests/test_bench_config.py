@@ -65,6 +65,12 @@ def test_old_database_reports_the_same_table_and_resume_runs_nothing(tmp_path, c
     assert set(json.loads(args)) == set(json.loads(old_args))  # the invocation records the same arguments
     con.close()
     capsys.readouterr()
+    # the run under the old id (1) and its rerun under the new one (3) are one configuration, headed by the new id
+    assert main(["report", str(out), "--invocation", "1", "--invocation", "3"]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("Table I: Dubins4DCirclesParallel-v0, clock fixed:1, time accel 10.0, seed 0, 3 episodes")
+    assert "configurations" not in text and "Dubins4DParallel-v0" not in text
+    assert (out / "table_I.csv").read_text().startswith("agent,")  # one configuration: no configuration columns
 
 
 def test_episode_result_fields_are_the_store_columns():
