@@ -30,7 +30,8 @@ from dataclasses import dataclass, field
 
 import gymnasium as gym
 
-__all__ = ["GUARDED_KINDS", "KINDS", "RENAMED", "SYSTEMS", "DocPage", "SystemSpec", "canonical_id", "env_help",
+__all__ = ["GUARDED_KINDS", "KINDS", "RENAMED", "SYSTEMS", "DocPage", "SystemSpec", "canonical_id", "command_env_id",
+           "env_help",
            "guardian_env_ids", "env_ids", "register", "stored_id", "system_of"]
 
 #: The three kinds of env a system may have, and the suffix of each one's id.
@@ -182,6 +183,15 @@ def env_help() -> str:
 def canonical_id(env_id: str) -> str:
     """The current id of ``env_id`` (its new id if it was renamed, else itself)."""
     return RENAMED.get(env_id, env_id)
+
+
+def command_env_id(env_id: str, prog: str) -> str:
+    """The current id of a command's ``--env`` value; for an old id, ``prog`` notes the rename on
+    stderr (a command line is not a script: Python's filter would hide the DeprecationWarning)."""
+    new = canonical_id(env_id)
+    if new != env_id:
+        print(f"{prog}: --env {env_id} was renamed {new} (the old id still works but will be removed)", file=sys.stderr)
+    return new
 
 
 def stored_id(env_id: str) -> str:

@@ -54,6 +54,21 @@ def test_an_alias_accepts_what_its_new_id_accepts():
     assert env_arguments("Dubins4DParallel-v0") == env_arguments("Dubins4DCirclesParallel-v0") >= {"time_accel", "clock"}
 
 
+def test_every_command_taking_an_env_id_takes_an_old_one_with_the_same_note(tmp_path, capsys):
+    import json
+
+    from rmm_envs.cli import build_parser
+    from rmm_envs.risk.datagen import main as datagen
+
+    note = "{}: --env Dubins4DCircles-v0 was renamed Dubins4DCirclesGuarded-v0 (the old id still works but will be removed)"
+    assert build_parser().parse_args(["demo", "--env", "Dubins4DCircles-v0"]).env == "Dubins4DCirclesGuarded-v0"
+    assert capsys.readouterr().err.splitlines() == [note.format("rmm-envs demo")]
+    assert datagen(["--env", "Dubins4DCircles-v0", "--configs", "1", "--samples-per-config", "2", "--branches", "2",
+                    "--depth", "1", "--no-progress", "--out", str(tmp_path / "d")]) == 0
+    assert capsys.readouterr().err.splitlines() == [note.format("rmm-datagen")]
+    assert json.loads((tmp_path / "d" / "metadata.json").read_text())["env_id"] == "Dubins4DCirclesGuarded-v0"
+
+
 def test_a_dataset_made_under_an_old_id_is_the_same_dataset_under_the_new_one():
     from rmm_envs.risk.dataset import identity
 
