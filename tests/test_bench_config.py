@@ -247,3 +247,21 @@ def test_the_non_blocking_defaults_are_the_wrapper_s_everywhere():
         assert (params["time_accel"].default, params["base_step"].default) == (TIME_ACCEL, BASE_STEP)
     cfg = parse_run(["--agent", "inactive", "--out", "x", *FAST], "")
     assert (cfg.env_kwargs["time_accel"], cfg.env_kwargs["base_step"]) == (TIME_ACCEL, BASE_STEP)
+
+
+def test_no_function_of_the_packages_writes_its_own_non_blocking_default():
+    """TIME_ACCEL and BASE_STEP have one owner: a parameter ``time_accel`` or ``base_step`` defaults to
+    them (or to None, "the env's own"), never to a number of its own."""
+    import ast
+
+    root = Path(__file__).resolve().parents[1]
+    found = []
+    for path in sorted(p for pkg in ("rmm_envs", "guardians", "benchmarks") for p in (root / pkg).rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                args = node.args.posonlyargs + node.args.args
+                pairs = [*zip(args[len(args) - len(node.args.defaults):], node.args.defaults),
+                         *zip(node.args.kwonlyargs, node.args.kw_defaults)]
+                found += [f"{path.relative_to(root)}:{node.lineno} {node.name}({a.arg}={d.value!r})" for a, d in pairs
+                          if a.arg in ("time_accel", "base_step") and isinstance(d, ast.Constant) and d.value is not None]
+    assert found == []

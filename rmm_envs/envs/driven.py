@@ -74,6 +74,7 @@ import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace, SafeDefault
 from rmm_envs.envs.guarded import GuardedEnv
+from rmm_envs.wrappers.nonblocking import TIME_ACCEL, NonBlockingStepping
 
 __all__ = ["DrivenGuardedEnv", "GivenSafeDefault", "guarded", "parallel"]
 
@@ -349,11 +350,10 @@ def guarded(env, driver, safe_default, success, failure=None, **kwargs) -> Drive
     return DrivenGuardedEnv(env, driver, safe_default, success, failure=failure, **kwargs)
 
 
-def parallel(env, driver, safe_default, success, failure=None, time_accel: float = 10.0,
+def parallel(env, driver, safe_default, success, failure=None, time_accel: float = TIME_ACCEL,
              base_step: float | None = None, clock=None, **kwargs):
     """The non-blocking twin of :func:`guarded`: the same env under
     :class:`rmm_envs.wrappers.NonBlockingStepping` (``base_step`` defaults to the env's own step)."""
-    from rmm_envs.wrappers.nonblocking import NonBlockingStepping
 
     inner = DrivenGuardedEnv(env, driver, safe_default, success, failure=failure, **kwargs)
     return NonBlockingStepping(inner, time_accel=time_accel, base_step=inner.dt if base_step is None else base_step,
