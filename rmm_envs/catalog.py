@@ -31,8 +31,7 @@ from dataclasses import dataclass, field
 import gymnasium as gym
 
 __all__ = ["GUARDED_KINDS", "KINDS", "RENAMED", "SYSTEMS", "DocPage", "SystemSpec", "canonical_id", "command_env_id",
-           "env_help",
-           "guardian_env_ids", "env_ids", "register", "stored_id", "system_of"]
+           "env_help", "guardian_env_ids", "guardian_envs_of", "env_ids", "register", "stored_id", "system_of"]
 
 #: The three kinds of env a system may have, and the suffix of each one's id.
 KINDS = {"plain": "-v0", "guarded": "Guarded-v0", "parallel": "Parallel-v0"}
@@ -172,6 +171,17 @@ def system_of(env_id: str) -> tuple[SystemSpec, str]:
             if s.env_id(kind) == env_id:
                 return s, kind
     raise KeyError(f"{env_id!r} is not an env of this package's systems ({', '.join(env_ids())})")
+
+
+def guardian_envs_of(env_id: str) -> tuple[str, ...]:
+    """The guardian envs (non-blocking first) of the system that ``env_id`` belongs to, or whose
+    dynamics it is (``CartPole-v1`` for ``CartPole``); ``()`` for an env of no system."""
+    try:
+        system = system_of(env_id)[0]
+    except KeyError:
+        spec = gym.spec(env_id) if env_id in gym.registry else None
+        system = next((s for s in SYSTEMS if spec is not None and s.dynamics == spec.entry_point), None)
+    return () if system is None else system.ids(("parallel", "guarded"))
 
 
 def env_help() -> str:

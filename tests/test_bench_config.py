@@ -117,8 +117,16 @@ def test_envs_without_the_parallel_autonomy_contract_are_refused_by_name(tmp_pat
     assert len(err.splitlines()) == 1
     assert "--env Dubins3DMaze-v0: rmm-bench runs guardians only on envs offering the parallel-autonomy contract" in err
     assert "takes no `clock`" in err and "its action space is Box(" in err and "'active_ctrl'" in err
+    assert err.endswith("; its system's guardian envs are Dubins3DMazeParallel-v0 (non-blocking) and "
+                        "Dubins3DMazeGuarded-v0 (blocking)")
     assert main(["--agent", "inactive", "--env", "CartPole-v1", "--out", str(tmp_path / "c"), *FAST]) == 2
-    assert "CartPole-v1 does not: its constructor takes no `clock`" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "CartPole-v1 does not: its constructor takes no `clock`" in err
+    assert err.endswith("; its system's guardian envs are CartPoleParallel-v0 (non-blocking) and CartPoleGuarded-v0 "
+                        "(blocking)\n")  # CartPole-v1 is the dynamics the table's CartPole system guards
+    assert main(["--agent", "inactive", "--env", "Acrobot-v1", "--out", str(tmp_path / "a"), *FAST]) == 2
+    assert capsys.readouterr().err.endswith("; rmm_envs.envs.driven.parallel(env, driver, safe_default, success) makes "
+                                            "a guardian env of it (docs/tutorials/own-simulator.md, step 5)\n")
     assert not (tmp_path / "m").exists() and not (tmp_path / "c").exists()
 
 
