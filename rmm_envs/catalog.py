@@ -4,7 +4,7 @@
 points, driver, safe default, the built-in guardians that apply, its docs page(s), and the ids
 it was known by before.  Registration (``import rmm_envs``), ``rmm_envs.ENV_IDS`` and
 ``GUARDIAN_ENV_IDS``, the renamed-id aliases, the shipped LRMM models' lookup by id
-(:data:`guardians.lrmm.model.SHIPPED`), the ``--env`` help of ``rmm-bench`` and ``rmm-envs demo``
+(:data:`guardians.lrmm.shipped.SHIPPED`), the ``--env`` help of ``rmm-bench`` and ``rmm-envs demo``
 and the docs' environment list (``docs/gen.py``) are all read from it.  Adding a system is its
 modules plus one entry here.
 

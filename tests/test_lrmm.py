@@ -272,6 +272,15 @@ def test_lrmm_guardian_bad_input():
         LRMMGuardian("/nonexistent/model.npz")
 
 
+def test_a_mistyped_env_id_is_named_as_such_not_answered_with_commands_to_train_for_it():
+    with pytest.raises(ValueError, match=r"^no env 'Dubins4DCirclesParalel-v0' is registered \(did you mean "
+                                         r"'Dubins4DCirclesParallel-v0'\?\); the shipped LRMM models are for \["):
+        default_model_path("Dubins4DCirclesParalel-v0")
+    with pytest.raises(ValueError, match=r"^no shipped LRMM model for 'Dubins4DCirclesGuarded-v0' \(variant 'actt'\); "
+                                         r"its variants: \['act', 'paper'\]$"):
+        default_model_path("Dubins4DCirclesGuarded-v0", variant="actt")
+
+
 def test_shipped_model_loads_and_is_documented():
     m = load_model()
     assert default_model_path().exists()
