@@ -221,7 +221,8 @@ def _completeness(rows: list[dict], invs: list[dict]) -> str:
     why = []
     lost = sum(r["episodes"] - r["with_result"] for r in short)
     if lost:
-        why.append(f"{lost} stored over the time limit, lost with their worker or not run as a file changed")
+        why.append(f"{lost} stored over the time limit, lost with their worker, not run as a file changed or unable "
+                   "to make the env in their worker")
     for inv in invs:
         state = inv.get("state", inv["status"])
         if state == "stale":
