@@ -108,6 +108,23 @@ def test_every_reference_of_the_table_imports():
         assert issubclass(load_env_creator(s.safe_default), SafeDefault)
 
 
+@pytest.mark.parametrize("name", ["Dubins4DCircles", "Dubins4DMap", "Dubins3DMaze", "QuadrotorRoom", "CartPole",
+                                  "InvertedPendulum"])
+def test_the_driver_and_safe_default_the_table_names_are_those_its_guarded_env_uses(name):
+    from gymnasium.envs.registration import load_env_creator
+
+    from rmm_envs.catalog import SYSTEMS
+
+    s = next(s for s in SYSTEMS if s.name == name)
+    pytest.importorskip({"map": "pymunk", "quadrotor": "pybullet", "mujoco": "mujoco"}.get(s.extra, "numpy"))
+    env = gym.make(s.env_id("guarded"))
+    env.reset(seed=0)
+    driver = load_env_creator(s.driver)
+    assert type(env.action_space.safe_default) is load_env_creator(s.safe_default)
+    assert [k for k, v in vars(env.unwrapped).items() if type(v) is driver], f"{name}: no {driver.__name__} drives it"
+    env.close()
+
+
 def test_system_of_finds_each_id_and_refuses_others():
     from rmm_envs.catalog import system_of
 
