@@ -4,7 +4,7 @@
 points, driver, safe default, the built-in guardians that apply, its docs page(s), and the ids
 it was known by before.  Registration (``import rmm_envs``), ``rmm_envs.ENV_IDS`` and
 ``GUARDIAN_ENV_IDS``, the renamed-id aliases, the shipped LRMM models' lookup by id
-(:data:`guardians.lrmm.model.SHIPPED`), the ``--env`` help of ``rmm-bench`` and ``rmm-envs demo``
+(:data:`guardians.lrmm.shipped.SHIPPED`), the ``--env`` help of ``rmm-bench`` and ``rmm-envs demo``
 and the docs' environment list (``docs/gen.py``) are all read from it.  Adding a system is its
 modules plus one entry here.
 
@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 
 import gymnasium as gym
 
-__all__ = ["GUARDED_KINDS", "KINDS", "RENAMED", "SYSTEMS", "DocPage", "SystemSpec", "canonical_id", "env_help",
-           "guardian_env_ids", "env_ids", "register", "stored_id", "system_of"]
+__all__ = ["GUARDED_KINDS", "KINDS", "RENAMED", "SYSTEMS", "DocPage", "SystemSpec", "canonical_id", "command_env_id",
+           "env_help", "guardian_env_ids", "guardian_envs_of", "env_ids", "register", "stored_id", "system_of"]
 
 #: The three kinds of env a system may have, and the suffix of each one's id.
 KINDS = {"plain": "-v0", "guarded": "Guarded-v0", "parallel": "Parallel-v0"}
@@ -173,6 +173,17 @@ def system_of(env_id: str) -> tuple[SystemSpec, str]:
     raise KeyError(f"{env_id!r} is not an env of this package's systems ({', '.join(env_ids())})")
 
 
+def guardian_envs_of(env_id: str) -> tuple[str, ...]:
+    """The guardian envs (non-blocking first) of the system that ``env_id`` belongs to, or whose
+    dynamics it is (``CartPole-v1`` for ``CartPole``); ``()`` for an env of no system."""
+    try:
+        system = system_of(env_id)[0]
+    except KeyError:
+        spec = gym.spec(env_id) if env_id in gym.registry else None
+        system = next((s for s in SYSTEMS if spec is not None and s.dynamics == spec.entry_point), None)
+    return () if system is None else system.ids(("parallel", "guarded"))
+
+
 def env_help() -> str:
     """The ids ``--env`` accepts, as the CLI help lists them."""
     return (f"{', '.join(env_ids(('parallel',)))} (non-blocking) or {', '.join(env_ids(('guarded',)))} (blocking) "
@@ -182,6 +193,15 @@ def env_help() -> str:
 def canonical_id(env_id: str) -> str:
     """The current id of ``env_id`` (its new id if it was renamed, else itself)."""
     return RENAMED.get(env_id, env_id)
+
+
+def command_env_id(env_id: str, prog: str) -> str:
+    """The current id of a command's ``--env`` value; for an old id, ``prog`` notes the rename on
+    stderr (a command line is not a script: Python's filter would hide the DeprecationWarning)."""
+    new = canonical_id(env_id)
+    if new != env_id:
+        print(f"{prog}: --env {env_id} was renamed {new} (the old id still works but will be removed)", file=sys.stderr)
+    return new
 
 
 def stored_id(env_id: str) -> str:

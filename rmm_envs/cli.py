@@ -25,6 +25,7 @@ from gymnasium import spaces
 
 import rmm_envs  # noqa: F401  (registers the environments)
 from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.catalog import command_env_id
 
 MOVED = {"riskmap": "rmm-bench riskmap", "quadrisk": "rmm-bench quadrisk"}
 
@@ -84,6 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="run a few episodes with the driver alone and print the outcomes")
     demo.add_argument("--env", default="Dubins4DCirclesParallel-v0", choices=list(rmm_envs.GUARDIAN_ENV_IDS),
+                      type=lambda env_id: command_env_id(env_id, "rmm-envs demo"),  # an old id: its new one
                       help="an env with a built-in driver (default: %(default)s)")
     demo.add_argument("--episodes", type=int, default=8)
     demo.add_argument("--seed", type=int, default=0)

@@ -19,6 +19,7 @@ A package's entry point in the group ``gymnasium.envs``
 
 from __future__ import annotations
 
+import difflib
 import importlib
 from importlib.metadata import entry_points
 
@@ -73,8 +74,10 @@ def resolve_env_id(env_id: str) -> str:
         failed = {v: err for v, err in load_env_plugins().items() if err is not None}
         if env_id not in gym.registry:
             plugins = "; ".join(f"entry point {v!r} raised {err}" for v, err in failed.items())
-            raise EnvUnavailable(f"--env {env_id!r} is not a registered Gymnasium env (this package registers "
-                                 f"{', '.join(rmm_envs.ENV_IDS)}; another package's env is registered by importing it: "
-                                 f"--env module:Id, or that package's '{ENTRY_POINT_GROUP}' entry point)"
-                                 + (f"; {plugins}" if plugins else ""))
+            near = difflib.get_close_matches(env_id, list(gym.registry), n=1)
+            raise EnvUnavailable(f"--env {env_id!r} is not a registered Gymnasium env"
+                                 + (f" (did you mean {near[0]!r}?)" if near else "")
+                                 + f"; this package registers {', '.join(rmm_envs.ENV_IDS)}; another package's env is "
+                                 f"registered by importing it (--env module:Id) or by that package's '{ENTRY_POINT_GROUP}' "
+                                 "entry point" + (f"; {plugins}" if plugins else ""))
     return env_id

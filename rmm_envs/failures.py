@@ -40,6 +40,9 @@ def describe_os_error(e: OSError, path: str | os.PathLike | None = None) -> tupl
     where = e.filename if getattr(e, "filename", None) else path
     name = f"{where}" if where is not None else "a file"
     reason = e.strerror or str(e) or type(e).__name__
+    if isinstance(e, BrokenPipeError):  # `| head`: the reader of the output stopped early
+        return (f"{reason}: the output was closed before the command finished writing it (a reader such as `| head` "
+                f"that stops early); {_KEPT}", RUN_FAILED)
     if isinstance(e, ConnectionError) and not e.filename:
         return (f"{reason}; check the address (--ray-address) or leave it out to start a local Ray, then {_KEPT}",
                 RUN_FAILED)

@@ -426,6 +426,20 @@ def test_the_two_commands_the_lrmm_refusal_names_make_a_model_for_a_module_env(t
     assert model.env_id == "mycartpole:MyCartPole-v0" and model.obs_dim == 4
 
 
+def test_datagen_names_a_module_that_fails_to_import_and_the_nearest_id_of_a_typo(tmp_path, monkeypatch, capsys):
+    from rmm_envs.risk.datagen import main
+
+    (tmp_path / "brokenmod26.py").write_text("undefined_name_in_module\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("sys.path", list(__import__("sys").path))
+    assert main(["--env", "brokenmod26:X-v0", "--out", str(tmp_path / "d"), "--no-progress"]) == 2
+    assert ("cannot import module 'brokenmod26' (looked in the current directory first, then the installed packages): "
+            "NameError: name 'undefined_name_in_module' is not defined") in capsys.readouterr().err
+    assert main(["--env", "CartPoleGuardd-v0", "--out", str(tmp_path / "d"), "--no-progress"]) == 2
+    assert "is not a registered Gymnasium env (did you mean 'CartPoleGuarded-v0'?)" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
+
+
 @pytest.mark.parametrize("env, match", [
     ("no_such_module_26:X-v0", r"env 'no_such_module_26:X-v0': cannot import module 'no_such_module_26'"),
     ("mycartpole:Other-v0", r"env 'mycartpole:Other-v0': importing 'mycartpole' registered no env 'Other-v0'"),

@@ -65,6 +65,12 @@ def test_old_database_reports_the_same_table_and_resume_runs_nothing(tmp_path, c
     assert set(json.loads(args)) == set(json.loads(old_args))  # the invocation records the same arguments
     con.close()
     capsys.readouterr()
+    # the run under the old id (1) and its rerun under the new one (3) are one configuration, headed by the new id
+    assert main(["report", str(out), "--invocation", "1", "--invocation", "3"]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("Table I: Dubins4DCirclesParallel-v0, clock fixed:1, time accel 10.0, seed 0, 3 episodes")
+    assert "configurations" not in text and "Dubins4DParallel-v0" not in text
+    assert (out / "table_I.csv").read_text().startswith("agent,")  # one configuration: no configuration columns
 
 
 def test_episode_result_fields_are_the_store_columns():
@@ -111,8 +117,16 @@ def test_envs_without_the_parallel_autonomy_contract_are_refused_by_name(tmp_pat
     assert len(err.splitlines()) == 1
     assert "--env Dubins3DMaze-v0: rmm-bench runs guardians only on envs offering the parallel-autonomy contract" in err
     assert "takes no `clock`" in err and "its action space is Box(" in err and "'active_ctrl'" in err
+    assert err.endswith("; its system's guardian envs are Dubins3DMazeParallel-v0 (non-blocking) and "
+                        "Dubins3DMazeGuarded-v0 (blocking)")
     assert main(["--agent", "inactive", "--env", "CartPole-v1", "--out", str(tmp_path / "c"), *FAST]) == 2
-    assert "CartPole-v1 does not: its constructor takes no `clock`" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "CartPole-v1 does not: its constructor takes no `clock`" in err
+    assert err.endswith("; its system's guardian envs are CartPoleParallel-v0 (non-blocking) and CartPoleGuarded-v0 "
+                        "(blocking)\n")  # CartPole-v1 is the dynamics the table's CartPole system guards
+    assert main(["--agent", "inactive", "--env", "Acrobot-v1", "--out", str(tmp_path / "a"), *FAST]) == 2
+    assert capsys.readouterr().err.endswith("; rmm_envs.envs.driven.parallel(env, driver, safe_default, success) makes "
+                                            "a guardian env of it (docs/tutorials/own-simulator.md, step 5)\n")
     assert not (tmp_path / "m").exists() and not (tmp_path / "c").exists()
 
 
@@ -241,3 +255,21 @@ def test_the_non_blocking_defaults_are_the_wrapper_s_everywhere():
         assert (params["time_accel"].default, params["base_step"].default) == (TIME_ACCEL, BASE_STEP)
     cfg = parse_run(["--agent", "inactive", "--out", "x", *FAST], "")
     assert (cfg.env_kwargs["time_accel"], cfg.env_kwargs["base_step"]) == (TIME_ACCEL, BASE_STEP)
+
+
+def test_no_function_of_the_packages_writes_its_own_non_blocking_default():
+    """TIME_ACCEL and BASE_STEP have one owner: a parameter ``time_accel`` or ``base_step`` defaults to
+    them (or to None, "the env's own"), never to a number of its own."""
+    import ast
+
+    root = Path(__file__).resolve().parents[1]
+    found = []
+    for path in sorted(p for pkg in ("rmm_envs", "guardians", "benchmarks") for p in (root / pkg).rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                args = node.args.posonlyargs + node.args.args
+                pairs = [*zip(args[len(args) - len(node.args.defaults):], node.args.defaults),
+                         *zip(node.args.kwonlyargs, node.args.kw_defaults)]
+                found += [f"{path.relative_to(root)}:{node.lineno} {node.name}({a.arg}={d.value!r})" for a, d in pairs
+                          if a.arg in ("time_accel", "base_step") and isinstance(d, ast.Constant) and d.value is not None]
+    assert found == []

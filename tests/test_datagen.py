@@ -134,7 +134,7 @@ def test_ray_backend_gives_the_same_data(tmp_path):
 @pytest.mark.parametrize(
     "kw, match",
     [({"configs": 0}, "configs"), ({"depth": -1}, "depth"), ({"horizon": 0.0}, "horizon"), ({"n_steps": 1}, "n_steps"),
-     ({"metric": "cvar", "alpha": 1.5}, "alpha"), ({"env_id": "Nope-v0"}, "unknown env"), ({"branches": 0}, "branches")],
+     ({"metric": "cvar", "alpha": 1.5}, "alpha"), ({"env_id": "Nope-v0"}, "is not a registered Gymnasium env"), ({"branches": 0}, "branches")],
 )
 def test_bad_configuration(tmp_path, kw, match):
     with pytest.raises(ValueError, match=match):

@@ -162,6 +162,12 @@ def test_bad_input_is_named():
                 success=never)
     with pytest.raises(TypeError, match=r"failure must be None, 'terminated' or a callable failure\(obs\) -> bool, got 'x'"):
         guarded("CartPole-v1", driver=balance, safe_default=0, success=never, failure="x")
+    with pytest.raises(ValueError, match=r"controls must name each control of CartPole-v1's action space Discrete\(2\) "
+                                         r"\(1 control\), got \('force', 'angle'\)"):
+        guarded("CartPole-v1", driver=balance, safe_default=0, success=never, controls=("force", "angle"))
+    with pytest.raises(ValueError, match=r"controls must name each control .* got 'force' \(a string; one name is "
+                                         r"\('force',\)\)"):  # not five controls 'f', 'o', 'r', 'c', 'e'
+        guarded("CartPole-v1", driver=balance, safe_default=0, success=never, controls="force")
 
 
 def test_a_failure_of_ones_own_ends_a_never_terminating_env():

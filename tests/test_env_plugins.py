@@ -89,6 +89,14 @@ def test_a_failing_entry_point_is_named_in_the_error_of_the_id_it_left_unregiste
     assert "entry point 'brokenplug_envs:register' raised RuntimeError: the plugin's simulator is not installed" in msg
 
 
+def test_a_mistyped_id_is_answered_with_the_nearest_registered_one():
+    with pytest.raises(EnvUnavailable, match=r"^--env 'Dubins4DCirclesParalel-v0' is not a registered Gymnasium env "
+                                             r"\(did you mean 'Dubins4DCirclesParallel-v0'\?\); this package registers "):
+        resolve_env_id("Dubins4DCirclesParalel-v0")
+    with pytest.raises(EnvUnavailable, match=r"^--env 'Zzqx-v0' is not a registered Gymnasium env; this package"):
+        resolve_env_id("Zzqx-v0")
+
+
 def test_module_ids_are_resolved_to_the_id_the_module_registers(tmp_path, monkeypatch):
     (tmp_path / "regmod26.py").write_text(
         'import gymnasium as gym\ngym.register(id="Reg26-v0", entry_point="rmm_envs.envs.dubins4d:Dubins4DCirclesEnv")\n')
@@ -125,6 +133,8 @@ def test_an_env_a_worker_cannot_register_fails_the_run_naming_the_env_and_the_im
     assert ("cannot import module 'workerfail' (looked in the current directory first, then the installed packages): "
             "ImportError: the licence server of MyEnv is not reachable from worker processes") in line
     assert "guardian error" not in res.stderr
+    assert ("INCOMPLETE: episodes with a result: inactive 0 of 4 (4 stored over the time limit, lost with their worker, "
+            "not run as a file changed or unable to make the env in their worker;") in res.stdout
     with sqlite3.connect(tmp_path / "res" / "results.db") as db:
         kinds = db.execute("SELECT outcome, error_kind, COUNT(*) FROM episodes GROUP BY 1, 2").fetchall()
     assert kinds == [("error", "env", 4)]

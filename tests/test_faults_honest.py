@@ -560,6 +560,18 @@ def test_datagen_under_a_file_size_limit_is_one_line_exit_1_and_a_rerun_finishes
     assert "200 labelled samples" in done.stdout
 
 
+def test_a_closed_output_pipe_is_not_called_an_unreachable_ray_cluster():
+    """``rmm-bench report dir | head -1``: the reader closes the pipe, print raises BrokenPipeError
+    (a ConnectionError, as the Ray check's are); the line says what happened."""
+    import errno
+
+    from rmm_envs.failures import describe_os_error
+
+    line, status = describe_os_error(BrokenPipeError(errno.EPIPE, "Broken pipe"))
+    assert (line, status) == ("Broken pipe: the output was closed before the command finished writing it (a reader such "
+                              "as `| head` that stops early); what is stored is kept: rerun the same command", 1)
+
+
 def test_an_unreachable_ray_cluster_is_one_line_exit_1_within_seconds(tmp_path, capsys):
     """Port 1 of this host refuses connections: ray.init alone would retry for minutes."""
     import time

@@ -272,10 +272,25 @@ def test_lrmm_guardian_bad_input():
         LRMMGuardian("/nonexistent/model.npz")
 
 
+def test_a_mistyped_env_id_is_named_as_such_not_answered_with_commands_to_train_for_it():
+    with pytest.raises(ValueError, match=r"^no env 'Dubins4DCirclesParalel-v0' is registered \(did you mean "
+                                         r"'Dubins4DCirclesParallel-v0'\?\); the shipped LRMM models are for \["):
+        default_model_path("Dubins4DCirclesParalel-v0")
+    with pytest.raises(ValueError, match=r"^no shipped LRMM model for 'Dubins4DCirclesGuarded-v0' \(variant 'actt'\); "
+                                         r"its variants: \['act', 'paper'\]$"):
+        default_model_path("Dubins4DCirclesGuarded-v0", variant="actt")
+
+
 def test_shipped_model_loads_and_is_documented():
     m = load_model()
     assert default_model_path().exists()
     assert m.env_id == "Dubins4DCircles-v0" and m.obs_dim == 17  # as recorded at training, before the rename
+    # a model recorded under an old id is the model of its new id (and still of no other env)
+    for env_id in ("Dubins4DCirclesGuarded-v0", "Dubins4DCircles-v0"):
+        assert LRMMModel.load(default_model_path(), env_id=env_id).meta["weights_sha256"] == m.meta["weights_sha256"]
+    with pytest.raises(ValueError, match="trained for env 'Dubins4DCircles-v0' .now 'Dubins4DCirclesGuarded-v0'., "
+                                         "not 'Dubins4DCirclesParallel-v0'"):
+        LRMMModel.load(default_model_path(), env_id="Dubins4DCirclesParallel-v0")
     assert m.meta["data"]["n_rows"] >= 35072 and m.meta["data"]["configs"] >= 274
     assert m.meta["metrics"]["test"]["mae"] <= 0.030
     assert m.meta["labeller"]["branches"] == 32 and m.meta["labeller"]["depth"] == 2

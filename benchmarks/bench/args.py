@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -98,15 +97,12 @@ def _check_counts(args) -> None:
 def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
     from benchmarks.bench.checks import env_arguments, env_default, parse_agent_opts, resolve_agents
     from guardians.registry import guardian_set
-    from rmm_envs.catalog import canonical_id
+    from rmm_envs.catalog import command_env_id
 
     classes = resolve_agents(args.agent)
     agents = list(classes)
     agent_kwargs = parse_agent_opts(args.agent_opt or [], agents)
-    env_id = canonical_id(args.env)
-    if env_id != args.env:  # an old id: run its new id (the same env; its stored runs are found by either id)
-        print(f"rmm-bench: --env {args.env} was renamed {env_id} (the old id still works but will be removed)",
-              file=sys.stderr)
+    env_id = command_env_id(args.env, "rmm-bench")  # an old id runs its new id (its stored runs are found by either)
     takes = env_arguments(env_id)  # ValueError if not registered; the contract is checked when the env is built
     if args.base_step is None:  # the env's own default (stored as given, so the run's identity names it)
         args.base_step = env_default(env_id, "base_step", NON_BLOCKING_DEFAULTS["base_step"])

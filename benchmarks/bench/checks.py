@@ -135,6 +135,12 @@ def check_env_contract(env_id: str, env=None) -> None:
         if problem:
             lacks.append(problem)
     if lacks:
+        from rmm_envs.catalog import guardian_envs_of
+
+        twins = [f"{i} ({'non-blocking' if 'Parallel' in i else 'blocking'})" for i in guardian_envs_of(env_id)]
+        lacks.append(f"its system's guardian envs are {' and '.join(twins)}" if twins
+                     else "rmm_envs.envs.driven.parallel(env, driver, safe_default, success) makes a guardian env of it "
+                          "(docs/tutorials/own-simulator.md, step 5)")
         raise ValueError(f"--env {env_id}: rmm-bench runs guardians only on envs offering the parallel-autonomy contract, "
                          f"and {env_id} does not: {'; '.join(lacks)}")
 

@@ -221,7 +221,8 @@ def _completeness(rows: list[dict], invs: list[dict]) -> str:
     why = []
     lost = sum(r["episodes"] - r["with_result"] for r in short)
     if lost:
-        why.append(f"{lost} stored over the time limit, lost with their worker or not run as a file changed")
+        why.append(f"{lost} stored over the time limit, lost with their worker, not run as a file changed or unable "
+                   "to make the env in their worker")
     for inv in invs:
         state = inv.get("state", inv["status"])
         if state == "stale":
@@ -269,6 +270,9 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
     in the printed report and in ``table_I.md``/``.tex``, the CSV gets the configuration's
     columns, and the figure labels each agent with its table's number."""
     invs = [invs] if isinstance(invs, dict) else list(invs)
+    # a renamed env is its new id: a run under the old id and its rerun under the new one are one configuration
+    invs = [inv | {"args": inv["args"] | {"env": canonical_id(inv["args"]["env"])}}
+            if isinstance(inv["args"].get("env"), str) else inv for inv in invs]
     groups: dict[tuple, list[dict]] = {}
     for inv in invs:
         groups.setdefault(_configuration(inv), []).append(inv)
@@ -294,7 +298,7 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
         counts = sorted(set(episodes.values()))
         text = (f"Table I{' ' + label.strip() if mixed else ''}: {_header(args)}, {'/'.join(map(str, counts))} episodes "
                 f"requested per agent (results in {out})\n{_completeness(rows, group)}\n{tables['md']}")
-        if canonical_id(str(args.get("env", ""))) in PAPER_ENVS:  # the paper evaluated guardians on Dubins4D only
+        if args.get("env") in PAPER_ENVS:  # the paper evaluated guardians on Dubins4D only
             text += f"\nThe paper's Table I for the same agents:\n\n{paper}"
         texts.append(text)
     try:

@@ -74,6 +74,7 @@ import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace, SafeDefault
 from rmm_envs.envs.guarded import GuardedEnv
+from rmm_envs.wrappers.nonblocking import TIME_ACCEL, NonBlockingStepping
 
 __all__ = ["DrivenGuardedEnv", "GivenSafeDefault", "guarded", "parallel"]
 
@@ -190,8 +191,12 @@ class DrivenGuardedEnv(GuardedEnv):
                                 f"action in the env's action space {self.env.action_space}, got {safe_default!r}") from None
             safe = GivenSafeDefault(None, self._acts, constant)
         k = len(self._acts.low)
-        controls = tuple(controls) if controls is not None else tuple(f"u{i}" for i in range(k))
-        self.action_space = GuardianActionSpace(controls, self._acts.low, self._acts.high, safe_default=safe)
+        names = tuple(f"u{i}" for i in range(k)) if controls is None else () if isinstance(controls, str) else tuple(controls)
+        if len(names) != k:  # a string would be one name per letter
+            hint = f" (a string; one name is {(controls,)!r})" if isinstance(controls, str) else ""
+            raise ValueError(f"controls must name each control of {self.env_name}'s action space {self.env.action_space} "
+                             f"({k} control{'s' if k > 1 else ''}), got {controls!r}{hint}")
+        self.action_space = GuardianActionSpace(names, self._acts.low, self._acts.high, safe_default=safe)
         self.observation_space = self.env.observation_space
         self.dt = self._env_dt()
         self.step_dt = self.dt if step_dt is None else float(step_dt)
@@ -349,11 +354,10 @@ def guarded(env, driver, safe_default, success, failure=None, **kwargs) -> Drive
     return DrivenGuardedEnv(env, driver, safe_default, success, failure=failure, **kwargs)
 
 
-def parallel(env, driver, safe_default, success, failure=None, time_accel: float = 10.0,
+def parallel(env, driver, safe_default, success, failure=None, time_accel: float = TIME_ACCEL,
              base_step: float | None = None, clock=None, **kwargs):
     """The non-blocking twin of :func:`guarded`: the same env under
     :class:`rmm_envs.wrappers.NonBlockingStepping` (``base_step`` defaults to the env's own step)."""
-    from rmm_envs.wrappers.nonblocking import NonBlockingStepping
 
     inner = DrivenGuardedEnv(env, driver, safe_default, success, failure=failure, **kwargs)
     return NonBlockingStepping(inner, time_accel=time_accel, base_step=inner.dt if base_step is None else base_step,

@@ -311,8 +311,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     from rmm_envs.failures import describe_os_error
 
+    from rmm_envs.catalog import command_env_id
+
     cfg = DatagenConfig(
-        env_id=args.env, configs=args.configs, samples_per_config=args.samples_per_config, seed=args.seed,
+        env_id=command_env_id(args.env, "rmm-datagen"), configs=args.configs, samples_per_config=args.samples_per_config, seed=args.seed,
         branches=args.branches, depth=args.depth, horizon=args.horizon, n_steps=args.n_steps,
         metric=args.metric, alpha=args.alpha, leaf=args.leaf, configs_per_shard=args.configs_per_shard,
         env_kwargs=env_kwargs, candidates=candidates, candidate_hold=args.candidate_hold, failure=args.failure,

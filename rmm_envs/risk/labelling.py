@@ -45,28 +45,12 @@ class DatagenConfig:
     failure: str | None = None  # "module:callable", failure(states) -> (N,) bool for an adapted env
 
     def validate(self) -> None:
-        import gymnasium as gym
-
-        import rmm_envs
+        from rmm_envs.env_plugins import resolve_env_id
         from rmm_envs.risk.estimator import validate_tree_params
 
-        module, _, name = self.env_id.rpartition(":") if isinstance(self.env_id, str) else ("", "", None)
-        if module:  # "module:Id", as gym.make takes it: importing the module registers the env
-            import importlib
-
-            try:
-                importlib.import_module(module)
-            except ImportError as e:
-                raise ValueError(f"env {self.env_id!r}: cannot import module {module!r}: {e}") from None
-            if name not in gym.registry:
-                raise ValueError(f"env {self.env_id!r}: importing {module!r} registered no env {name!r}")
-        elif isinstance(self.env_id, str) and self.env_id not in gym.registry:
-            from rmm_envs.env_plugins import load_env_plugins
-
-            load_env_plugins()  # a package's gymnasium.envs entry point may register it
-        if not module and (not isinstance(self.env_id, str) or self.env_id not in gym.registry):
-            raise ValueError(f"unknown env {self.env_id!r}: not a registered Gymnasium id; this package registers "
-                             f"{list(rmm_envs.ENV_IDS)} (any registered env that follows rmm_envs.risk.LabelledEnv works)")
+        # a module:Id or an entry point's env registers here (and in each worker, which builds its env from env_id);
+        # an id that cannot is EnvUnavailable, a ValueError naming the id, the cause and the nearest registered id
+        resolve_env_id(self.env_id)
         if self.failure is not None and not (isinstance(self.failure, str) and self.failure.count(":") == 1):
             raise ValueError(f"failure (--failure) must be 'module:callable', got {self.failure!r}")
         for name in ("configs", "samples_per_config", "configs_per_shard"):

@@ -5,7 +5,8 @@ They pin the store's format as written before the benchmark configuration became
 that ``report`` rebuilds the same table from it and that ``--resume`` finds every episode
 done.  To remake them, run this with that commit's code on the path (``git archive 9f15a24``
 into a folder, then ``PYTHONPATH=that-folder python tests/data/make_bench_results_v0.py``
-from an empty directory); machine-specific fields are replaced by fixed strings.
+from an empty directory); machine-specific fields are replaced by fixed strings.  The table's two
+headers were then edited to the envs' current ids, as ``report`` names a renamed env today.
 """
 
 import json

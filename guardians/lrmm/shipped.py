@@ -1,0 +1,138 @@
+"""The LRMM models this package ships: :data:`SHIPPED_BY_SYSTEM` (per system of
+:data:`rmm_envs.catalog.SYSTEMS`), :data:`SHIPPED` (the same by env id) and
+:func:`default_model_path` (the file of one env id and variant).  :mod:`guardians.lrmm.model`
+re-exports them."""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import gymnasium as gym
+
+from rmm_envs.catalog import GUARDED_KINDS, SYSTEMS, canonical_id
+
+__all__ = ["SHIPPED", "SHIPPED_BY_SYSTEM", "Shipped", "ShippedById", "default_model_path"]
+
+
+@dataclass(frozen=True)
+class Shipped:
+    """What this package ships for one env id: its model file per variant, the observation field
+    the model reads (``None``: the whole observation) and, where the model file stores none, the
+    ``lrmm`` guardian's decision defaults for that env (``threshold``, ``commit``, ``action``,
+    ``chosen_by``, as ``meta["decision"]``)."""
+
+    files: dict
+    inputs: str | None = None
+    decision: dict | None = None
+
+
+_DUBINS4D = Shipped({"paper": "dubins4d.npz", "act": "dubins4d_act.npz"})
+#: The maze car under parallel autonomy reads the maze model (trained on ``Dubins3DMaze-v0``'s 8
+#: rays) on its observation's ``"rays"`` field.  Its decision defaults were chosen on development
+#: seeds (env seeds 5000-5063 of ``Dubins3DMazeParallel-v0``, 1 ms fixed clock), never on the
+#: seeds that reported results use; see :mod:`guardians.lrmm.guardian`.
+_MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays", decision={
+    "threshold": 0.7, "commit": 5, "action": "turn",
+    "chosen_by": "fewest collisions, then most goals, then least time in control, over thresholds 0.3/0.5/0.7/0.85 x "
+                 "commit 5/10/20 steps on 64 development episodes (env seeds 5000-5063 of Dubins3DMazeParallel-v0, "
+                 "fixed 1 ms clock): 0 collisions and 64 goals with 1.3% of the steps in control"})
+
+#: The quadrotor under parallel autonomy: ``lrmm`` reads the command model with the
+#: action-conditioned head (``quadrotor_cmd_act.npz``: ``QuadrotorRoomGuarded-v0``'s labels under
+#: random velocity commands to the stabilising controller, plus the risk of holding each of four
+#: commands for 1 s: hover, climb, back off, back off and climb) on the whole observation (its
+#: ``features`` leave out the orientation and the goal); its decision defaults are stored in the
+#: file.  ``"risk"``: the risk-only command model of Table II (``quadrotor_cmd.npz``, more labels,
+#: no head), for ``action="safe"`` (hover and level) with an explicit threshold.
+_QUAD_PARALLEL = Shipped({"act": "quadrotor_cmd_act.npz", "risk": "quadrotor_cmd.npz"})
+
+#: The guarded envs around simulators the project did not write (rmm_envs.envs.driven_examples):
+#: risk-only models of each env's own observation (the risk adapter's labels: random pushes held
+#: for the adapter's default horizon, over half adapter-sampled and half driver-visited states),
+#: applying the env's safe default (the balancing LQR) while the risk is above the threshold.
+#: Decision defaults chosen on development episodes only (env seeds 500000-500099 and
+#: 600000-600099, fixed 1 ms clock), never on those of the reported ``rmm-bench --seed 11``.
+_CARTPOLE = Shipped({"act": "cartpole_guarded.npz"}, decision={
+    "threshold": 0.2, "commit": 0, "action": "safe",
+    "chosen_by": "fewest collisions, then most goals, over thresholds 0.1/0.15/0.2/0.3/0.5 x commit 0/3/10/25 steps on "
+                 "100 development episodes each of env seeds 500000-500099 and 600000-600099 of CartPoleParallel-v0 "
+                 "(fixed 1 ms clock): 2 and 0 collisions, 60 and 53 goals"})
+_PENDULUM = Shipped({"act": "inverted_pendulum_guarded.npz"}, decision={
+    "threshold": 0.05, "commit": 0, "action": "safe",
+    "chosen_by": "fewest collisions while keeping the goals, over thresholds 0.02/0.05/0.1/0.3/0.5 x commit 0/2/5 steps "
+                 "on 100 development episodes each of env seeds 500000-500099 and 600000-600099 of "
+                 "InvertedPendulumParallel-v0 (fixed 1 ms clock): 32 and 31 collisions, 62 and 64 goals"})
+
+#: The shipped models, per system of :data:`rmm_envs.catalog.SYSTEMS` (its ``name``) and kind of
+#: env: ``"plain"`` (plain control) and ``"guarded"`` (its blocking and non-blocking guardian envs,
+#: which share the world and the observation, so one entry serves both).
+SHIPPED_BY_SYSTEM: dict[str, dict[str, Shipped]] = {
+    "Dubins4DCircles": {"guarded": _DUBINS4D},
+    # the same car and observation on a map of your own: the circle-trained models, unchanged
+    # (rays are distances whatever the obstacle's shape; how well that transfers is measured
+    # in the map env's tests and docs, not assumed)
+    "Dubins4DMap": {"guarded": _DUBINS4D},
+    "Dubins3DMaze": {"plain": Shipped({"paper": "dubins3d_maze.npz"}), "guarded": _MAZE_PARALLEL},
+    "QuadrotorRoom": {"plain": Shipped({"paper": "quadrotor.npz"}), "guarded": _QUAD_PARALLEL},
+    "CartPole": {"guarded": _CARTPOLE},
+    "InvertedPendulum": {"guarded": _PENDULUM},
+}
+
+
+class ShippedById(dict):
+    """:data:`SHIPPED_BY_SYSTEM` by env id (both twins of a system's guardian envs share an
+    entry); an old id of a renamed env (:data:`rmm_envs.catalog.RENAMED`) finds its new id's
+    entry, though iteration lists the current ids only."""
+
+    def __missing__(self, env_id):
+        new = canonical_id(env_id) if isinstance(env_id, str) else env_id
+        if new == env_id or not dict.__contains__(self, new):
+            raise KeyError(env_id)
+        return self[new]
+
+    def __contains__(self, env_id) -> bool:
+        return dict.__contains__(self, env_id) or (isinstance(env_id, str) and dict.__contains__(self, canonical_id(env_id)))
+
+    def get(self, env_id, default=None):
+        return self[env_id] if env_id in self else default
+
+
+def _by_id() -> ShippedById:
+    out = ShippedById()
+    for system in SYSTEMS:
+        for kind, ship in SHIPPED_BY_SYSTEM.get(system.name, {}).items():
+            for env_id in system.ids(("plain",) if kind == "plain" else GUARDED_KINDS):
+                out[env_id] = ship
+    return out
+
+
+#: The shipped model of each env id (:data:`SHIPPED_BY_SYSTEM`, looked up by id).
+SHIPPED: ShippedById = _by_id()
+
+
+def default_model_path(env_id: str = "Dubins4DCirclesGuarded-v0", variant: str = "paper") -> Path:
+    """Path of the model shipped with the package for ``env_id`` (:data:`SHIPPED`).
+
+    ``variant="paper"`` (default): the paper's risk-only network (Table II).  ``"act"``: the
+    network the ``lrmm`` guardian uses (Dubins4D: with the action-conditioned head; the maze's
+    parallel envs: the maze network; the quadrotor's parallel envs: the command model with its
+    head).  ``"risk"`` (the quadrotor's parallel envs): the risk-only command model.
+    """
+    ship = SHIPPED.get(env_id)
+    if ship is None and ":" not in env_id and env_id not in gym.registry:  # a module:Id registers when imported
+        near = difflib.get_close_matches(env_id, list(gym.registry), n=1)
+        raise ValueError(f"no env {env_id!r} is registered" + (f" (did you mean {near[0]!r}?)" if near else "")
+                         + f"; the shipped LRMM models are for {sorted(SHIPPED)}")
+    if ship is None:
+        stem = env_id.rpartition(":")[2].lower().replace("-", "_")
+        raise ValueError(
+            f"no shipped LRMM model for {env_id!r} (shipped for {sorted(SHIPPED)}); make one from this env's "
+            f"labelled states with two commands: rmm-datagen --env {env_id} --out data_{stem} and "
+            f"rmm-train --data data_{stem} --out {stem}.npz; then give it: --agent-opt lrmm.model='\"{stem}.npz\"' "
+            f"(in Python, model=\"{stem}.npz\")")
+    if variant not in ship.files:
+        raise ValueError(f"no shipped LRMM model for {env_id!r} (variant {variant!r}); its variants: {sorted(ship.files)}")
+    return Path(str(resources.files("guardians.lrmm") / "models" / ship.files[variant]))
