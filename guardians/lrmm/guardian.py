@@ -56,7 +56,7 @@ count that has rays in (or nearest to) those directions.
 At 0.85 the car is usually too close to brake in time (85% of *random* futures crash there).
 
 **Other systems** (``env_id``: the env served, which ``rmm-bench`` passes from ``--env``): one
-table, :data:`guardians.lrmm.model.SHIPPED`, gives per env id the shipped model, the
+table, :data:`guardians.lrmm.shipped.SHIPPED`, gives per env id the shipped model, the
 observation field it reads and, where the model file stores none, the decision defaults.  On
 ``Dubins3DMazeGuarded-v0`` / ``Dubins3DMazeParallel-v0`` the guardian reads the maze model
 (trained on ``Dubins3DMaze-v0``'s 8 rays: the risk of random 2 s futures) on the ``"rays"``
@@ -110,7 +110,7 @@ __all__ = ["PAPER_THRESHOLD", "TRIGGERS", "LRMMGuardian", "LRMMPaperGuardian"]
 
 PAPER_THRESHOLD = 0.85  # the paper's Table I setting
 ACTIONS = ("head", "heuristic", "turn", "safe")
-DEFAULT_ENV = "Dubins4DCircles-v0"  # whose shipped model a guardian built without env_id or model reads
+DEFAULT_ENV = "Dubins4DCirclesGuarded-v0"  # whose shipped model a guardian built without env_id or model reads
 #: how to get the model of another env: the guardian picks its model when it is built, not at reset
 REMEDY = ("; the shipped model is chosen when the guardian is built: make_guardian('lrmm', env_id=<this env's id>) "
           "(as rmm-bench does), or model=<a model trained on this env>")
@@ -136,7 +136,7 @@ class LRMMGuardian(Guardian):
             ``None`` (default): the action space's largest turn rate and strongest braking
             (0.25, -0.5 for Dubins4D).
         env_id: the env served (default ``None``: Dubins4D): picks the shipped model, its
-            input field and decision defaults from :data:`guardians.lrmm.model.SHIPPED`.
+            input field and decision defaults from :data:`guardians.lrmm.shipped.SHIPPED`.
         inputs: the observation field the model reads (default ``None``: the table's for
             ``env_id``, else the whole observation).
         trigger, margin, restart: the hand-back rule (module docstring); ``None`` (default):
