@@ -7,7 +7,8 @@ import math
 
 import numpy as np
 
-__all__ = ["MazeDelegation", "dubins4d_only", "finite", "integer", "is_maze_space", "maze_car_only", "number_pair"]
+__all__ = ["MazeDelegation", "dubins4d_only", "finite", "integer", "is_maze_space", "is_quadrotor_space", "maze_car_only",
+           "number_pair", "quadrotor_only"]
 
 
 def finite(name: str, value, lo: float | None = None, lo_open: bool = False) -> float:
@@ -88,6 +89,28 @@ def maze_car_only(guardian, action_space):
     lo, hi = float(space.control_low[0]), float(space.control_high[0])
     if not (hi > 0 and lo == -hi):
         raise ValueError(f"guardian {guardian.name!r} (maze) needs a turn-rate bound symmetric about 0, got [{lo}, {hi}]")
+    return space
+
+
+def _quadrotor_controls() -> tuple[str, ...]:
+    from rmm_envs.envs.quadrotor_room_parallel import CONTROLS
+
+    return tuple(CONTROLS)
+
+
+def is_quadrotor_space(action_space) -> bool:
+    """Whether ``action_space`` is the quadrotor's: a guardian action space with its four
+    velocity commands (:data:`rmm_envs.envs.quadrotor_room_parallel.CONTROLS`)."""
+    return tuple(getattr(action_space, "controls", ())) == _quadrotor_controls()
+
+
+def quadrotor_only(guardian, action_space):
+    """Refuse an env that is not the quadrotor's (``ValueError`` naming the guardian and why);
+    the checked action space otherwise."""
+    space = guardian.require_action_space(space=action_space)
+    if not is_quadrotor_space(space):
+        raise ValueError(f"guardian {guardian.name!r} (quadrotor) models the quadrotor's commanded flight (controls "
+                         f"{_quadrotor_controls()}) among a room's walls and objects; this env's controls are {space.controls}")
     return space
 
 

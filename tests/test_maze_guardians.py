@@ -172,7 +172,7 @@ def test_cbf_maze_bad_arguments_and_dispatch():
 # ------------------------------------------------------------------ hj
 @pytest.fixture(scope="module")
 def hj_corridor(tmp_path_factory):
-    g = HJGuardian(maze={"spacing": 10.0, "n_heading": 16, "horizon": 12.0, "region": "maze"},
+    g = HJGuardian(maze={"spacing": 10.0, "n_heading": 16, "horizon": 12.0, "region": "maze", "rule": "distance"},
                    cache_dir=tmp_path_factory.mktemp("hj"), threads=1)
     env = Dubins3DMazeGuardedEnv()
     return env, g

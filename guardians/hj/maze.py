@@ -84,13 +84,16 @@ from guardians._checks import finite, integer, maze_car_only
 from guardians.base import Guardian
 from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
-from guardians.hj.grid import Grid
+from guardians.hj.grid import Grid, central_gradient
+from guardians.hj.maze_lookahead import COEF, manoeuvres, near_walls, path_clearances
 from guardians.hj.solver import select_backend, solve_brt
 
 __all__ = ["MazeHJGuardian", "maze_grid", "wall_target"]
 
 #: The maze car's controls (:data:`rmm_envs.envs.dubins3d_maze_parallel.CONTROLS`).
 REGIONS = ("route", "maze")
+MAZE_RULES = ("lookahead", "distance")
+SAMPLE_DT = 0.2  # s between the look-ahead's path samples (2 px at 10 px/s)
 
 
 def maze_grid(lo, hi, spacing: float, n_heading: int, speed: float) -> Grid:
@@ -121,8 +124,14 @@ class MazeHJGuardian(Guardian):
     def __init__(self, spacing: float = 8.0, n_heading: int = 32, horizon: float = 20.0, region: str = "route",
                  route_margin: int = 1, order: int = 2, rk: int = 3, cfl: float = 0.8, margin: float | None = None,
                  delay: int = 1, lap: float | None = None, cache_dir=None, cache: bool = True,
-                 cache_max_files: int = 64, backend: str = "auto", threads: int | None = None) -> None:
+                 cache_max_files: int = 64, backend: str = "auto", threads: int | None = None,
+                 rule: str = "lookahead", lookahead: float = 6.0, band: float = 20.0) -> None:
         super().__init__()
+        if rule not in MAZE_RULES:
+            raise ValueError(f"rule must be one of {MAZE_RULES}, got {rule!r}")
+        self.rule = rule
+        self.lookahead = finite("lookahead", lookahead, 0.0, lo_open=True)
+        self.band = finite("band", band, 0.0)
         self.spacing = finite("spacing", spacing, 0.0, lo_open=True)
         self.n_heading = integer("n_heading", n_heading, 3)
         self.horizon = finite("horizon", horizon, 0.0, lo_open=True)
@@ -213,13 +222,15 @@ class MazeHJGuardian(Guardian):
         self.grid = maze_grid(lo, hi, self.spacing, self.n_heading, self.speed)
         select_backend(self.grid, self.dynamics, self.order, self.backend)
         self.V = self.value_function(maze, self.grid)
-        from guardians.hj.guardian import _gradient
-
-        self._arrays = [self.V, *_gradient(self.V, self.grid)[:3]]
+        self._arrays = [self.V, *central_gradient(self.V, self.grid)[:3]]
         self._margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if self.margin is None else self.margin
         self._safe = space.safe_default.policy(space, self.rng) if space.safe_default is not None else None
         self._last_time = None
         self._measured_lap = None
+        self._maze_geom = (np.ascontiguousarray(np.asarray(maze.walls, float)), float(maze.half), float(maze.width),
+                           float(maze.height))
+        self._manoeuvres = manoeuvres(self.u_max, self.lookahead)
+        self._pending = None  # the turn rate the guardian commanded last step (None: it was inactive)
 
     # ------------------------------------------------------------------ the decision
     def evaluate(self, state) -> np.ndarray:
@@ -244,6 +255,7 @@ class MazeHJGuardian(Guardian):
             if self._last_time is not None and t > self._last_time:
                 self._measured_lap = float(t - self._last_time)
             self._last_time = float(t)
+        self._pending, pending = None, self._pending
         if not np.all(np.isfinite(s)):
             self._counts["nan_states"] += 1
             u = self._safe(observation) if self._safe is not None else self.action_space.control_high
@@ -252,10 +264,77 @@ class MazeHJGuardian(Guardian):
         if not self.grid.contains(np.array([s[0], s[1], psi, self.speed])):
             self._counts["outside_grid"] += 1
             return self.action_space.inactive()
-        vals = self.evaluate((s[0], s[1], psi))
-        if vals[0] <= self.threshold():
-            return self.action_space.active(np.array([self.u_max if vals[3] >= 0 else -self.u_max]))
-        return self.action_space.inactive()
+        if self.rule == "distance":
+            vals = self.evaluate((s[0], s[1], psi))
+            if vals[0] <= self.threshold():
+                return self.action_space.active(np.array([self.u_max if vals[3] >= 0 else -self.u_max]))
+            return self.action_space.inactive()
+        nominal = _turn_rate(info, "nominal_control")
+        if pending is None and self.evaluate((s[0], s[1], psi))[0] > self.band:
+            return self.action_space.inactive()  # far from every wall's reach: no look-ahead needed
+        u = self._lookahead_decision(s[0], s[1], psi, nominal, pending)
+        self._pending = u
+        return self.action_space.inactive() if u is None else self.action_space.active(np.array([u]))
+
+    def _scores(self, x, y, psi, man=None) -> tuple[np.ndarray, np.ndarray]:
+        """Each manoeuvre's score from pose ``(x, y, psi)`` (module docstring of
+        :mod:`guardians.hj.maze_lookahead`) and its end pose."""
+        man = self._manoeuvres if man is None else man
+        walls, half, width, height = self._maze_geom
+        reach = self.speed * self.lookahead + 2.0 * self.speed / self.u_max + 2 * self.spacing
+        near = near_walls(walls, x, y, reach, half)
+        clear = np.empty(man.shape[0])
+        ends = np.empty((man.shape[0], 3))
+        path_clearances(x, y, psi, self.speed, man, SAMPLE_DT, near, half, width, height, COEF, clear, ends)
+        for m in range(man.shape[0]):
+            if man[m, 2] != 0.0:  # ends in a whole loop: clear all round, it is safe for ever
+                continue
+            e = ends[m]
+            p = (e[2] + math.pi) % (2 * math.pi) - math.pi
+            if clear[m] > 0 and self.grid.contains(np.array([e[0], e[1], p, self.speed])):
+                clear[m] = min(clear[m], float(self.grid.interp_many([self.V], np.array([e[0], e[1], p, self.speed]))[0]))
+        return clear, ends
+
+    def _hold(self, x, y, psi, u, duration):
+        """The least clearance over ``duration`` s holding turn rate ``u``, and the end pose."""
+        man = np.array([[u, 0.0, u, duration]])
+        walls, half, width, height = self._maze_geom
+        near = near_walls(walls, x, y, self.speed * duration + 2 * self.spacing, half)
+        clear, ends = np.empty(1), np.empty((1, 3))
+        path_clearances(x, y, psi, self.speed, man, min(SAMPLE_DT, duration), near, half, width, height, COEF, clear, ends)
+        return float(clear[0]), ends[0]
+
+    def _lookahead_decision(self, x, y, psi, nominal, held):
+        """The turn rate to command, or ``None`` to leave the driver in control (module
+        docstring); ``held``: the turn rate commanded last step (``None``: the driver's)."""
+        lap = self.current_lap()
+        pending = held if held is not None else nominal
+        c0, p1 = self._hold(x, y, psi, pending, lap * self.delay) if self.delay else (np.inf, np.array([x, y, psi]))
+        margin = self._margin
+        c1, p2 = self._hold(*p1, nominal, lap)  # one more lap of the driver, then the best recovery
+        if min(c0, c1, float(self._scores(*p2)[0].max())) > margin:
+            return None
+        scores, _ = self._scores(*p1)
+        man = self._manoeuvres
+        first = np.where(man[:, 1] > 0, man[:, 0], man[:, 2])
+        safe = np.flatnonzero(scores > margin)
+        if safe.size:  # the least invasive safe manoeuvre: first turn nearest the driver's, then the safest
+            key = np.abs(first[safe] - nominal)
+            near = safe[key <= key.min() + 1e-12]
+            return float(first[near[np.argmax(scores[near])]])
+        return float(first[int(np.argmax(scores))])
 
     def stats(self) -> dict:
         return dict(self._counts, solve_seconds=self.solve_seconds)
+
+
+def _turn_rate(info, key: str) -> float:
+    """The turn rate ``info[key]`` (the env's documented ``nominal_control``), refused (naming
+    it) when missing or not one finite number."""
+    if not isinstance(info, dict) or key not in info:
+        raise ValueError(f"guardian 'hj' (maze, rule='lookahead') needs info[{key!r}] from the env "
+                         f"(got keys {sorted(info) if isinstance(info, dict) else type(info).__name__})")
+    u = np.asarray(info[key], float).reshape(-1)
+    if u.shape != (1,) or not math.isfinite(float(u[0])):
+        raise ValueError(f"info[{key!r}] must be one finite turn rate, got {info[key]!r}")
+    return float(u[0])
