@@ -11,18 +11,21 @@ from guardians import make_guardian
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid
 from guardians.hj.guardian import HJGuardian, HJPaperGuardian
-from guardians.hj.quadrotor import QuadrotorHJGuardian, lag_prediction, room_target
+from guardians.hj.quadrotor import QuadrotorHJGuardian
+from guardians.hj.room import lag_prediction, room_target
 from guardians.hj.solver import solve_brt
 from rmm_envs.envs.quadrotor_room_parallel import QuadrotorRoomGuardedEnv
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_envs.worlds.rooms import Room
 
-# one wall box 4 m high whose face is the plane x = 0 (x from 0 to 1, y from -5 to 5), and a sphere
+# one wall box 4 m high whose face is the plane x = 0 (x from 0 to 1, y from -5 to 5), a far wall
+# at x = -12 (the walls' extent bounds the grids), and a sphere
 WALL = (0.5, 0.0, 2.0, 0.5, 5.0, 2.0)
+FAR = (-11.75, 0.0, 2.0, 0.25, 5.0, 2.0)
 SPHERE = {"shape": "sphere", "pos": [-4.0, 3.0, 0.6], "quat": [0.0, 0.0, 0.0, 1.0], "size": [0.6]}
 
 
-def room(objects=(SPHERE,), walls=(WALL,)) -> Room:
+def room(objects=(SPHERE,), walls=(WALL, FAR)) -> Room:
     return Room(footprint=np.ones((20, 20), bool), origin=np.array([-8.0, -5.0]), cell=0.5, wall_height=4.0,
                 walls=np.array(walls, float).reshape(-1, 6), objects=list(objects))
 
@@ -58,12 +61,12 @@ def test_room_target_hand_computed():
     at = lambda x, y: T[int(round((x + 6) / 0.5)), int(round((y + 2) / 0.5))]  # noqa: E731
     assert at(-2.0, 0.0) == pytest.approx(2.0 - BOUND, abs=1e-6)  # 2 m from the wall's face
     assert at(0.5, 0.0) == pytest.approx(-0.5 - BOUND, abs=1e-6)  # inside the wall, 0.5 m deep
-    # the sphere (radius 0.6 at height 0.6) at its nearest level of the band, z = 0.5: exact 3-D
-    # distance from (x, y, 0.5), less half the level spacing (0.05)
-    assert at(-4.0, 1.0) == pytest.approx(math.hypot(2.0, 0.1) - 0.6 - 0.05 - BOUND, abs=1e-6)
+    # the sphere (radius 0.6, centre at height 0.6): levels every 0.1 m from 0.5 to 1.5, the
+    # nearest at its centre's height, 2 m away; less half the level spacing (0.05)
+    assert at(-4.0, 1.0) == pytest.approx(2.0 - 0.6 - 0.05 - BOUND, abs=1e-6)
     assert T.dtype == np.float32 and at(-6.0, -2.0) > 2.0
     # a band above the sphere and the wall: nothing in it
-    high = room_target(grid, room(walls=[(0.5, 0.0, 0.25, 0.5, 5.0, 0.25)]), 1.5, 2.0)
+    high = room_target(grid, room(walls=[(0.5, 0.0, 0.25, 0.5, 5.0, 0.25), (-11.75, 0.0, 0.1, 0.25, 5.0, 0.1)]), 1.5, 2.0)
     assert np.all(high == np.float32(1e3 - BOUND))
 
 
@@ -117,21 +120,24 @@ def test_cache_round_trip_and_tampered_entry(space, tmp_path):
 
 def test_rule_acts_one_lap_ahead(solved, space):
     g, box = solved
-    # 1.5 m from the wall at 1.5 m/s toward it, the pilot pushing on at 1.5 m/s
-    box["state"], box["sim_time"] = state(-1.5, 0.0, vx=1.5), 0.0
+    # 1.2 m from the wall at 1.5 m/s toward it, the pilot pushing on at 1.5 m/s; the value there
+    # is near the closed form 1.2 - 0.304 - 1.5^2 / (2 * 2.5) = 0.446
+    h0 = (-1.2, 0.0, 1.5, 0.0)
+    box["state"], box["sim_time"] = state(-1.2, 0.0, vx=1.5), 0.0
     push = {"nominal_control": np.array([1.5, 0.0, 0.0, 0.0])}
-    now = float(g.evaluate(-1.5, 0.0, 1.5, 0.0)[0])
-    h2 = g.predict(g.predict((-1.5, 0.0, 1.5, 0.0), push["nominal_control"], 1.0, 0.0, 0.1), push["nominal_control"], 1.0, 0.0, 0.1)
-    ahead = float(g.evaluate(*h2)[0])
-    assert now > g._margin >= ahead  # only the latency makes it act now
+    now = float(g.evaluate(*h0)[0])
+    assert now == pytest.approx(1.2 - BOUND - 1.5 ** 2 / 5.0, abs=0.06)
+    h1 = g.predict(h0, push["nominal_control"], 1.0, 0.0, 0.1)  # the pending lap (0.1 s before any is measured)
+    h2 = g.predict(h1, push["nominal_control"], 1.0, 0.0, 0.1)  # and the lap the decision governs
+    assert now > float(g.evaluate(*h1)[0]) > g._margin >= float(g.evaluate(*h2)[0])  # only the latency makes it act
     a = g.act(None, push)
     assert a["active_ctrl"] == 1 and float(a["vforward_ctrl"][0]) < 1.5  # slows down (forward is +x at yaw 0)
     assert float(a["yawrate_ctrl"][0]) == 0.0 and float(a["vup_ctrl"][0]) == 0.0  # the pilot's vertical, no yaw
     g.delay = 0  # without the pending lap it would still wait
     box["sim_time"] = 0.1
     g._held = None
-    h1 = g.predict((-1.5, 0.0, 1.5, 0.0), push["nominal_control"], 1.0, 0.0, 0.1)
-    assert float(g.evaluate(*h1)[0]) > g._margin and g.act(None, push)["active_ctrl"] == 0
+    box["state"] = state(-1.2, 0.0, vx=1.5)
+    assert g.act(None, push)["active_ctrl"] == 0
     g.delay = 1
     # far from everything the pilot keeps control
     box["state"] = state(-4.0, -3.0, vx=1.0)

@@ -38,36 +38,58 @@ Defaults, and why:
   (``stats()["outside_grid"]``).  ``region = "maze"`` covers the whole maze.
 * scheme ``order = 2, rk = 3, cfl = 0.8``: ``hj``'s (see :mod:`guardians.hj.guardian`).
 
-## The rule
+## Why the value alone collided
 
-The rule is ``hj``'s ``"distance"`` rule: the decision at ``s_k`` commits ``T = (1 + delay) lap``
-seconds (``delay = 1``: the one-lap latency of the parallel env; the lap measured from the
-simulated times, 0.1 s before the first), and ``V`` is 1-Lipschitz in position, so the guardian
-takes control when ``V <= margin + s T`` (4 + 2.2 = 6.2 px at 0.11-s laps) and then applies the
-value's optimal turn, ``u = u_max sign(dV/dpsi)``.  ``margin`` (px; ``None``: half a position
-cell) is interpolation's worst over-statement at a kink, as for Dubins4D.
+With the rule below replaced by acting on the value (``rule="distance"``: take control when
+``V <= margin + s T`` and turn by the sign of ``dV/dpsi``), ``hj`` collided in 16.4% of 128
+episodes (seed 0).  In those collisions the guardian is in control from ``V`` about 6 px on, and
+``V`` falls under its own "optimal" turn until the car touches a wall: at seed 1214021410 it
+takes over at ``(334.3, 869.5, -2.3)`` with ``V = 6.0`` px and turns right for 9 s into the
+wall, while holding right for 2.5 s and then left keeps 2.2 px of clearance (a search over
+one-switch manoeuvres on the exact walls).  It is the resolution, not the latency: a maze cell
+leaves the car 6.25 px either side of a 100-px turning circle, the walls are 1.5 position cells
+thick, and the value's errors at 8 px x 11.25 degrees are of that size both ways (over-stated at
+wall ends, under-stated in dead ends, where the car can circle for ever with ``V = -3`` px).
+Finer grids, more headings, longer horizons and larger margins did not remove them (earlier
+runs: 8-11 of 11 collisions of 64 episodes remained), and a gradient's sign decides the turn
+exactly where the two turns are nearly as good.
+
+## The rule (``rule="lookahead"``, the default)
+
+Decisions are checked on the true walls over a short future, and the value only beyond it.
+:mod:`guardians.hj.maze_lookahead` scores two-turn manoeuvres (``u1`` for ``t1`` in
+``lookahead / 6`` steps up to ``lookahead = 6`` s, then ``u2``): the least exact clearance along
+the path; a manoeuvre whose second turn is a full-rate turn is followed for a **whole loop**
+(31.4 s), and a loop that is clear all round is safe for ever, so it needs no value; one that
+ends straight also takes ``V`` at its end pose.  With the one-lap latency (``delay = 1``), the
+decision at ``s_k`` cannot change the lap to ``s_{k+1}``: it runs under the guardian's last turn
+rate, or the driver's (``info["nominal_control"]``, exactly what the driver applies then).  The
+guardian stays passive when that lap, one more lap of the driver's turn rate, and then the best
+manoeuvre all keep more than ``margin`` (``None``: half a position cell, 4 px) of clearance.
+Otherwise it commands, from the pose one lap ahead, the **least invasive** manoeuvre that keeps
+``margin``: the one whose first turn rate is nearest the driver's (ties: the larger score), and
+the best-scoring one when none does.  Taking the safest manoeuvre instead turned the car round
+in corridors and the driver turned it back: on 32 development episodes of ``--seed 5``, 6
+timeouts against 2 (1 collision either way; the distance rule: 4 collisions, 1 timeout).
+Where the value exceeds ``band`` (20 px, past the 8 px of over-statement seen) no manoeuvre
+is scored: the car is far from every wall and the driver keeps control.
+
+``rule="distance"`` keeps the value-only rule above (``hj``'s Dubins4D rule): the decision
+commits ``T = (1 + delay) lap`` s and ``V`` is 1-Lipschitz in position, so it takes control when
+``V <= margin + s T`` (6.2 px at 0.11-s laps) with ``u = u_max sign(dV/dpsi)``.
 
 The value is cached on disk like the Dubins4D one (:class:`guardians.hj.cache.ValueCache`; the
 key holds the walls, the grid, the dynamics and the scheme).  The solve time of an episode is in
 ``stats()["solve_seconds"]`` and is reported as the episode's precompute time.
 
-## Measured, and what is left
+## Measured
 
-``rmm-bench --agent hj --env Dubins3DMazeParallel-v0 --episodes 128 --clock fixed:1`` (seed 0):
-83.6% success, 16.4% collisions, no timeouts (the driver alone: 46.1% collisions over 256),
-in control 8.9% of the simulated time.  A solve on the default route grid took 6.9 s on average (3.1-15.7 s over 126 solves) on a
-shared, loaded 2-core machine, one thread (not a timing benchmark: load inflates it); it is
-cached, so a rerun of the same episodes reads it back.
-
-The remaining collisions are not a grid or horizon effect: in them the guardian is in control
-with ``V`` a few px above zero, and ``V`` falls by about 7 px under its own optimal control
-until the car touches the wall (seed 1214021410: at ``(334.3, 869.5, -2.3)`` ``V = 5.7`` px,
-yet a full turn either way hits a wall).  A 4-px grid, 64 headings, a 40-s horizon, the whole
-maze as the region, or a margin of 12 or 20 px each left 8-11 of the 11 collisions of the first
-64 episodes in place (a larger margin adds timeouts instead).  So the value over-states the
-safety of some states near wall ends (the walls are 1.5 position cells thick: a numerical
-scheme that smooths across them is the suspect); the ``cbf`` guardian, which uses the exact
-wall geometry, collides in 0.4% of the episodes.
+``rule="distance"``: ``rmm-bench --agent hj --env Dubins3DMazeParallel-v0 --episodes 128 --clock
+fixed:1`` (seed 0): 83.6% success, 16.4% collisions, no timeouts (the driver alone: 46.1%
+collisions over 256), in control 8.9% of the simulated time.  A solve on the default route
+grid took 6.9 s on average (3.1-15.7 s over 126 solves) on a shared, loaded 2-core machine,
+one thread (not a timing benchmark: load inflates it); it is cached, so a rerun of the same
+episodes reads it back.  The look-ahead rule: docs/reproduction.md (the maze section).
 
 Explicit edge cases: a pose with NaN applies the env's safe default (the maximum turn away
 from the nearer wall) to the observation and is counted (``nan_states``); a maze with no walls
