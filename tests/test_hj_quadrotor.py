@@ -185,7 +185,7 @@ def test_fixed_clock_episode_the_pilot_crashes(tmp_path):
 
     from guardians.baselines import InactiveGuardian
 
-    def run(g, seed=7):
+    def run(g, seed=2110268680):  # episode 10 of rmm-bench --seed 5 (a development seed)
         env = gym.make("QuadrotorRoomParallel-v0", clock="fixed:1")
         obs, info = env.reset(seed=seed)
         g.reset(seed=seed, observation_space=env.observation_space, action_space=env.action_space,
@@ -198,4 +198,4 @@ def test_fixed_clock_episode_the_pilot_crashes(tmp_path):
     assert run(InactiveGuardian())[0] == "collision"
     g = make_guardian("hj", env_id="QuadrotorRoomParallel-v0", cache_dir=tmp_path, threads=1)
     outcome, stats = run(g)
-    assert outcome != "collision" and stats["n_active_ctrl_env_steps"] > 0 and g.stats()["solves"] == 1
+    assert outcome == "goal" and stats["n_active_ctrl_env_steps"] > 0 and g.stats()["solves"] == 3  # one value per leg
