@@ -109,7 +109,7 @@ coarse grids the reach-avoid set is under-estimated (conservative).  For a state
 the goal's centre at 1 m/s, with a 4 s horizon, the first-order value (about -1 exactly) is
 -0.04, -0.39 and -0.54 on 33, 65 and 97 points per position axis.
 
-## The maze car
+## The maze car and the quadrotor
 
 ``hj`` also serves the maze car (``Dubins3DMazeParallel-v0``): given an action space with the
 maze car's one control (``turnrate_ctrl``), it hands the episode to
@@ -117,7 +117,8 @@ maze car's one control (``turnrate_ctrl``), it hands the episode to
 module docstring has its defaults).  ``maze`` (a dict) sets that guardian's own arguments;
 ``cache_dir``, ``cache``, ``cache_max_files``, ``backend``, ``threads``, ``delay`` and ``lap``
 are shared.  ``maze=False`` refuses maze envs (``hj-paper`` does: the paper's rule is for
-Dubins4D only).
+Dubins4D only).  Likewise the quadrotor's action space (four velocity commands) goes to
+:class:`guardians.hj.quadrotor.QuadrotorHJGuardian` (``quadrotor``, a dict; ``False`` refuses).
 
 Explicit edge cases: a state outside the grid's position/speed box has no value: the guardian
 leaves control to the driver and counts it (``stats()["outside_grid"]``); a state with NaN
