@@ -279,3 +279,7 @@ def test_hj_maze_lookahead_decisions(tmp_path):
         MazeHJGuardian(rule="sign")
     with pytest.raises(ValueError, match="lookahead must be a finite number > 0"):
         MazeHJGuardian(lookahead=0.0)
+    with pytest.raises(ValueError, match="value_error must be a finite number >= 0"):
+        MazeHJGuardian(value_error=-1.0)
+    with pytest.raises(ValueError, match="band must be a finite number >= 0"):
+        MazeHJGuardian(band=float("nan"))
