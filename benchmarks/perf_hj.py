@@ -10,7 +10,12 @@ Run: ``python benchmarks/perf_hj.py [--quick] [--solve-only]``.
   does not (read it, or the ratios, there);  ``--solve-only`` stops after the compiled solves;
 * online decision time (interpolation of V and its gradient), median over many states;
 * convergence of the unsafe set (V <= 0) as the grid is refined: the unsafe fraction of a
-  fixed set of probe states for several grids, against the finest.
+  fixed set of probe states for several grids, against the finest;
+* ``--quadrotor N``: instead of all the above, the quadrotor ``hj``'s solves
+  (:mod:`guardians.hj.quadrotor`, one per leg of the route) on the rooms of the first ``N``
+  episodes of ``rmm-bench --env QuadrotorRoomParallel-v0 --seed 0``, one thread, no cache: grid
+  sizes and solve times per leg and per episode, and the guardian's decision time on those
+  episodes' starts.
 """
 
 from __future__ import annotations
@@ -38,7 +43,10 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="skip the finest grid of the convergence study")
     ap.add_argument("--solve-only", action="store_true", help="only the compiled solves on the default grid")
+    ap.add_argument("--quadrotor", type=int, default=0, metavar="N", help="time the quadrotor hj's solves on N rooms instead")
     args = ap.parse_args(argv)
+    if args.quadrotor:
+        return quadrotor(args.quadrotor)
     grid = default_grid()
     target = obstacle_target(grid, OBSTACLES)
     for order in (1, 2):  # compile / load both kernels
@@ -106,6 +114,38 @@ def main(argv=None) -> None:
     finest = verdicts[sizes[-1]]
     for n in sizes[:-1]:
         print(f"  grid {n}: verdicts differ from the finest grid on {np.mean(verdicts[n] != finest) * 100:.2f}% of probes")
+
+
+def quadrotor(n: int) -> None:
+    """The quadrotor ``hj``'s solve times (see the module docstring)."""
+    import gymnasium as gym
+
+    import rmm_envs  # noqa: F401
+    from benchmarks.bench.runner import episode_seed
+    from guardians.hj.quadrotor import QuadrotorHJGuardian
+
+    env = gym.make("QuadrotorRoomParallel-v0", clock="fixed:1")
+    g = QuadrotorHJGuardian(cache=False, threads=1)
+    set_threads(1)
+    legs, episodes, nodes, decisions = [], [], [], []
+    for i in range(n):
+        seed = episode_seed(0, i)
+        obs, info = env.reset(seed=seed)
+        c0 = time.process_time()
+        g.reset(seed=seed, observation_space=env.observation_space, action_space=env.action_space,
+                privileged=env.unwrapped.privileged)
+        episodes.append(time.process_time() - c0)
+        legs += [g.solve_seconds / len(g._legs)] * len(g._legs)
+        nodes += [int(np.prod(grid.shape)) for _, grid, _, _ in g._legs]
+        t = time.perf_counter()
+        g.act(obs, info)
+        decisions.append(time.perf_counter() - t)
+    print(f"quadrotor hj, {n} rooms of seed 0 (grid {g.spacing} m x {g.n_heading} headings x {g.n_speed} speeds, "
+          f"{g.horizon} s, ENO2/RK3, one thread, no cache):")
+    print(f"  nodes per leg: median {statistics.median(nodes):,.0f} (range {min(nodes):,}-{max(nodes):,})")
+    print(f"  reset (all legs' solves and targets), CPU: median {statistics.median(episodes):.2f} s, "
+          f"range {min(episodes):.2f}-{max(episodes):.2f} s; solve wall per leg: median {statistics.median(legs):.2f} s")
+    print(f"  first decision: median {statistics.median(decisions) * 1e6:.0f} us")
 
 
 if __name__ == "__main__":

@@ -121,7 +121,7 @@ SYSTEMS: tuple[SystemSpec, ...] = (
               "guarded": "rmm_envs.envs.quadrotor_room_parallel:QuadrotorRoomGuardedEnv",
               "parallel": "rmm_envs.envs.quadrotor_room_parallel:make_parallel_env"},
         driver="rmm_envs.drivers.quadrotor:WaypointPilot", safe_default="rmm_envs.systems.quadrotor_control:HoverAndLevel",
-        guardians=("lrmm", "cbf", "random", "inactive", "brakes"), extra="quadrotor",
+        guardians=("lrmm", "cbf", "hj", "random", "inactive", "brakes"), extra="quadrotor",
         pages=(DocPage("environments/quadrotor_room.md", "Quadrotor in rooms", ("plain",), "figures/quadrotor_room_frame.png"),
                DocPage("environments/quadrotor_room_parallel.md", "The quadrotor under parallel autonomy",
                        ("guarded", "parallel")))),

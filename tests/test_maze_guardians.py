@@ -172,7 +172,7 @@ def test_cbf_maze_bad_arguments_and_dispatch():
 # ------------------------------------------------------------------ hj
 @pytest.fixture(scope="module")
 def hj_corridor(tmp_path_factory):
-    g = HJGuardian(maze={"spacing": 10.0, "n_heading": 16, "horizon": 12.0, "region": "maze"},
+    g = HJGuardian(maze={"spacing": 10.0, "n_heading": 16, "horizon": 12.0, "region": "maze", "rule": "distance"},
                    cache_dir=tmp_path_factory.mktemp("hj"), threads=1)
     env = Dubins3DMazeGuardedEnv()
     return env, g
@@ -233,3 +233,53 @@ def test_hj_maze_bad_arguments_and_dispatch():
     no_speed = lambda: {k: v for k, v in env.unwrapped.privileged().items() if k != "speed"}  # noqa: E731
     with pytest.raises(ValueError, match="needs the car's speed"):
         g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space, privileged=no_speed)
+
+
+# ------------------------------------------------------------------ hj's look-ahead rule
+def test_lookahead_manoeuvres_and_path_clearances():
+    from guardians.hj.maze_lookahead import COEF, manoeuvres, path_clearances
+
+    man = manoeuvres(0.2, 6.0)
+    loop = 2 * math.pi / 0.2
+    assert man.shape == (3 + 5 * 6, 4)
+    assert man[:3].tolist() == [[-0.2, 0.0, -0.2, loop], [0.0, 0.0, 0.0, 6.0], [0.2, 0.0, 0.2, loop]]
+    straight = man[:, 2] == 0
+    assert np.allclose(man[straight, 1] + man[straight, 3], 6.0) and np.all(man[~straight, 3] == loop)
+    assert sorted(set(man[:, 1].tolist())) == pytest.approx([0.0, 1.0, 2.0, 3.0, 4.0, 5.0])
+    m = corridor()
+    walls = np.asarray(m.walls, float)
+    clear, ends = np.empty(2), np.empty((2, 3))
+    # straight along the corridor's centre line from x = 125 for 6 s; a left loop from x = 250
+    path_clearances(125.0, 125.0, 0.0, 10.0, np.array([[0.0, 0.0, 0.0, 6.0]]), 0.2, walls, m.half, 500.0, 250.0, COEF,
+                    clear[:1], ends[:1])
+    path_clearances(250.0, 125.0, 0.0, 10.0, np.array([[0.2, 0.0, 0.2, loop]]), 0.2, walls, m.half, 500.0, 250.0, COEF,
+                    clear[1:], ends[1:])
+    # 56.25 px to the side walls' surfaces all along, less half a sample's travel (1 px)
+    assert clear[0] == pytest.approx(56.25 - 1.0) and ends[0].tolist() == pytest.approx([185.0, 125.0, 0.0])
+    # the loop (radius 50 about (250, 175)) crosses the upper wall (centre line y = 187.5, 6.25 px
+    # half-thickness): its deepest sample is within one sample's travel of -6.25, less 1 px
+    assert -7.25 <= clear[1] < -5.25 and ends[1][:2] == pytest.approx([250.0, 125.0], abs=1e-6)
+
+
+def test_hj_maze_lookahead_decisions(tmp_path):
+    env = Dubins3DMazeGuardedEnv()
+    g = MazeHJGuardian(spacing=10.0, n_heading=16, horizon=12.0, region="maze", cache_dir=tmp_path, threads=1)
+    obs, info = reset_at(env, g, [250.0, 125.0, 0.0])
+    info = dict(info, nominal_control=np.array([0.0]))
+    assert g.act(obs, info)["active_ctrl"] == 0  # mid-corridor along it, the driver straight on: passive
+    env.unwrapped._state[:] = [380.0, 125.0, 0.0]  # 51 px from the end wall, heading at it (a test reaches into the env)
+    a = g.act(obs, info)
+    # no loop fits a 112.5-px corridor from its centre line; turning keeps the car off the wall longer
+    assert a["active_ctrl"] == 1 and abs(float(a["turnrate_ctrl"][0])) == pytest.approx(0.2)
+    with pytest.raises(ValueError, match="needs info\\['nominal_control'\\]"):
+        g.act(obs, {})
+    with pytest.raises(ValueError, match="one finite turn rate"):
+        g.act(obs, {"nominal_control": [np.nan]})
+    with pytest.raises(ValueError, match="rule must be one of"):
+        MazeHJGuardian(rule="sign")
+    with pytest.raises(ValueError, match="lookahead must be a finite number > 0"):
+        MazeHJGuardian(lookahead=0.0)
+    with pytest.raises(ValueError, match="value_error must be a finite number >= 0"):
+        MazeHJGuardian(value_error=-1.0)
+    with pytest.raises(ValueError, match="band must be a finite number >= 0"):
+        MazeHJGuardian(band=float("nan"))

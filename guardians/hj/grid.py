@@ -17,7 +17,7 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency; interpolation falls back to numpy
     njit = None
 
-__all__ = ["Grid"]
+__all__ = ["Grid", "central_gradient"]
 
 
 class Grid:
@@ -107,6 +107,34 @@ class Grid:
 
     def interp(self, array, x) -> float:
         return float(self.interp_many([array], x)[0])
+
+
+def central_gradient(V: np.ndarray, grid: "Grid") -> list[np.ndarray]:
+    """``V``'s gradient on ``grid``, one array per axis: central differences in float32 (one-sided
+    at non-periodic edges, as ``np.gradient``; periodic axes wrap)."""
+    out = []
+    for ax in range(grid.ndim):
+        n = V.shape[ax]
+
+        def sl(a, b):
+            s = [slice(None)] * V.ndim
+            s[ax] = slice(a, b)
+            return tuple(s)
+
+        g = np.empty_like(V, dtype=np.float32)
+        inv2 = np.float32(0.5 / grid.dx[ax])
+        np.subtract(V[sl(2, n)], V[sl(0, n - 2)], out=g[sl(1, n - 1)])
+        if grid.periodic[ax]:
+            np.subtract(V[sl(1, 2)], V[sl(n - 1, n)], out=g[sl(0, 1)])
+            np.subtract(V[sl(0, 1)], V[sl(n - 2, n - 1)], out=g[sl(n - 1, n)])
+            g *= inv2
+        else:
+            g[sl(1, n - 1)] *= inv2
+            inv = np.float32(1.0 / grid.dx[ax])
+            np.multiply(V[sl(1, 2)] - V[sl(0, 1)], inv, out=g[sl(0, 1)])
+            np.multiply(V[sl(n - 1, n)] - V[sl(n - 2, n - 1)], inv, out=g[sl(n - 1, n)])
+        out.append(g)
+    return out
 
 
 def _interp_point(flat, x, lo, dx, n, periodic, strides):

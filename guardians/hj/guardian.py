@@ -33,7 +33,7 @@ measures it as the difference of successive sim times (``lap=None``).  Before it
 lap it assumes 0.1 s, the environment's default base step.
 
 So a decision at ``s_k`` commits ``T = (1 + delay) * lap`` seconds (``delay=1``: the pending
-lap and the lap the decision governs; use ``delay=0`` in the blocking ``Dubins4DCircles-v0``,
+lap and the lap the decision governs; use ``delay=0`` in the blocking ``Dubins4DCirclesGuarded-v0``,
 where an action acts at once).  Staying passive is safe only if, whatever the driver does in
 that time, the guardian can still take over: the value at the end of ``T`` must still be
 positive.  The dynamics are invariant under translation and the target is a distance, so
@@ -109,7 +109,7 @@ coarse grids the reach-avoid set is under-estimated (conservative).  For a state
 the goal's centre at 1 m/s, with a 4 s horizon, the first-order value (about -1 exactly) is
 -0.04, -0.39 and -0.54 on 33, 65 and 97 points per position axis.
 
-## The maze car
+## The maze car and the quadrotor
 
 ``hj`` also serves the maze car (``Dubins3DMazeParallel-v0``): given an action space with the
 maze car's one control (``turnrate_ctrl``), it hands the episode to
@@ -117,7 +117,8 @@ maze car's one control (``turnrate_ctrl``), it hands the episode to
 module docstring has its defaults).  ``maze`` (a dict) sets that guardian's own arguments;
 ``cache_dir``, ``cache``, ``cache_max_files``, ``backend``, ``threads``, ``delay`` and ``lap``
 are shared.  ``maze=False`` refuses maze envs (``hj-paper`` does: the paper's rule is for
-Dubins4D only).
+Dubins4D only).  Likewise the quadrotor's action space (four velocity commands) goes to
+:class:`guardians.hj.quadrotor.QuadrotorHJGuardian` (``quadrotor``, a dict; ``False`` refuses).
 
 Explicit edge cases: a state outside the grid's position/speed box has no value: the guardian
 leaves control to the driver and counts it (``stats()["outside_grid"]``); a state with NaN
@@ -130,37 +131,20 @@ about +-pi; none of that applies here.
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 
-from guardians._checks import MazeDelegation, finite, integer
+from guardians._checks import MazeDelegation, finite, integer, is_quadrotor_space
 from guardians.base import Guardian
 from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid
+from guardians.hj.grid import central_gradient
 from guardians.hj.maze import MazeHJGuardian
-from guardians.hj.solver import select_backend, solve_brt
+from guardians.hj.quadrotor import QuadrotorHJGuardian
+from guardians.hj.solver import THREADS_VARIABLE, default_threads, select_backend, solve_brt  # noqa: F401
 
 __all__ = ["HJGuardian", "HJPaperGuardian", "default_grid", "default_threads", "obstacle_target"]
-
-THREADS_VARIABLE = "RMM_HJ_THREADS"
-
-
-def default_threads() -> int | None:
-    """The HJ guardians' ``threads`` when none is given: ``$RMM_HJ_THREADS`` (an integer >= 1)
-    if set, else ``None`` (numba's default, the core count).  The one place it is read."""
-    raw = os.environ.get(THREADS_VARIABLE)
-    if not raw:
-        return None
-    try:
-        n = int(raw)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise ValueError(f"{THREADS_VARIABLE} must be an integer >= 1, got {raw!r}")
-    return n
-
 
 def default_grid(n=(64, 64, 32, 32), half_width: float = 15.0, v_max: float = 4.0) -> Grid:
     return Grid([-half_width, -half_width, -np.pi, 0.0], [half_width, half_width, np.pi, v_max], n, periodic=[2])
@@ -173,33 +157,6 @@ def obstacle_target(grid: Grid, obstacles: np.ndarray) -> np.ndarray:
     for ox, oy, r in obstacles:
         l = np.minimum(l, np.sqrt((X - ox) ** 2 + (Y - oy) ** 2) - r)
     return np.broadcast_to(l, grid.shape).astype(np.float32)
-
-
-def _gradient(V: np.ndarray, grid: Grid) -> list[np.ndarray]:
-    """Central differences in float32 (one-sided at non-periodic edges, as ``np.gradient``)."""
-    out = []
-    for ax in range(grid.ndim):
-        n = V.shape[ax]
-
-        def sl(a, b):
-            s = [slice(None)] * V.ndim
-            s[ax] = slice(a, b)
-            return tuple(s)
-
-        g = np.empty_like(V, dtype=np.float32)
-        inv2 = np.float32(0.5 / grid.dx[ax])
-        np.subtract(V[sl(2, n)], V[sl(0, n - 2)], out=g[sl(1, n - 1)])
-        if grid.periodic[ax]:
-            np.subtract(V[sl(1, 2)], V[sl(n - 1, n)], out=g[sl(0, 1)])
-            np.subtract(V[sl(0, 1)], V[sl(n - 2, n - 1)], out=g[sl(n - 1, n)])
-            g *= inv2
-        else:
-            g[sl(1, n - 1)] *= inv2
-            inv = np.float32(1.0 / grid.dx[ax])
-            np.multiply(V[sl(1, 2)] - V[sl(0, 1)], inv, out=g[sl(0, 1)])
-            np.multiply(V[sl(n - 1, n)] - V[sl(n - 2, n - 1)], inv, out=g[sl(n - 1, n)])
-        out.append(g)
-    return out
 
 
 RULES = ("distance", "gradient", "value")
@@ -215,10 +172,14 @@ class HJGuardian(MazeDelegation, Guardian):
                  rule: str = "distance", margin: float | None = None, delay: int = 1, lap: float | None = None,
                  disturbance: float = 0.0, cache_dir=None, cache: bool = True, cache_max_files: int = 64,
                  mode: str = "avoid", ra_horizon: float = 10.0, ra_margin: float = 0.5, backend: str = "auto",
-                 standstill_lookup: bool = True, threads: int | None = None, maze: dict | None = None) -> None:
+                 standstill_lookup: bool = True, threads: int | None = None, maze: dict | None = None,
+                 quadrotor: dict | None = None) -> None:
         super().__init__()
-        self._maze_args = _maze_arguments(maze, cache_dir, cache, cache_max_files, backend, threads, delay, lap)
-        self._delegate = None  # the maze car's guardian, built on the first maze env
+        shared = {"cache_dir": cache_dir, "cache": cache, "cache_max_files": cache_max_files, "backend": backend,
+                  "threads": threads, "delay": delay, "lap": lap}
+        self._maze_args = _delegate_arguments(MazeHJGuardian, "maze", maze, shared)
+        self._quadrotor_args = _delegate_arguments(QuadrotorHJGuardian, "quadrotor", quadrotor, shared)
+        self._delegate = self._quadrotor = None  # the maze car's and the quadrotor's guardians, built on first use
         self._maze = None  # the delegate while an episode on a maze env runs
         self.standstill_lookup = bool(standstill_lookup)
         self.horizon = finite("horizon", horizon, 0.0, lo_open=True)
@@ -289,6 +250,15 @@ class HJGuardian(MazeDelegation, Guardian):
             self.solve_seconds = seconds
         return V
 
+    def _maze_guardian(self, action_space):
+        """The delegate for the maze car's or the quadrotor's action space (``None``: Dubins4D)."""
+        if self._quadrotor_args is None or not is_quadrotor_space(action_space):
+            return super()._maze_guardian(action_space)
+        if self._quadrotor is None:
+            self._quadrotor = QuadrotorHJGuardian(**self._quadrotor_args)
+            self._quadrotor.name = self.name
+        return self._quadrotor
+
     def reset(self, **kwargs) -> None:
         maze = self._maze_guardian(kwargs.get("action_space"))
         self._maze = maze
@@ -308,7 +278,7 @@ class HJGuardian(MazeDelegation, Guardian):
         self._counts = {"outside_grid": 0, "nan_states": 0, "cache_hits": 0, "solves": 0}
         priv = self._privileged()
         self.V = self.value_function(priv["obstacles"])
-        self.grads = _gradient(self.V, self.grid)
+        self.grads = central_gradient(self.V, self.grid)
         self._arrays = [self.V, *self.grads]
         self._interp = self.grid.interpolator(self._arrays)
         self._ra_arrays = None
@@ -317,7 +287,7 @@ class HJGuardian(MazeDelegation, Guardian):
         self._measured_lap = None
         if self.mode == "reach_avoid":
             V_ra = self.value_function(priv["obstacles"], goal=priv["goal"])
-            self._ra_arrays = [V_ra, *_gradient(V_ra, self.grid)]
+            self._ra_arrays = [V_ra, *central_gradient(V_ra, self.grid)]
             self._ra_interp = self.grid.interpolator(self._ra_arrays)
 
     def evaluate(self, state) -> np.ndarray:
@@ -396,17 +366,15 @@ class HJGuardian(MazeDelegation, Guardian):
         return dict(self._counts, solve_seconds=self.solve_seconds)
 
 
-def _maze_arguments(maze, cache_dir, cache, cache_max_files, backend, threads, delay, lap) -> dict | None:
-    """The maze guardian's arguments: ``maze`` (a dict of :class:`MazeHJGuardian` arguments;
-    ``False`` refuses maze envs) over the arguments both systems share."""
-    if maze is False:
+def _delegate_arguments(cls, what: str, given, shared: dict) -> dict | None:
+    """The arguments of the ``what`` system's guardian ``cls``: ``given`` (a dict of its
+    arguments; ``False`` refuses that system's envs) over the arguments all systems share."""
+    if given is False:
         return None
-    if maze is not None and not isinstance(maze, dict):
-        raise ValueError(f"maze must be a dict of guardians.hj.maze.MazeHJGuardian arguments (or False), got {maze!r}")
-    shared = {"cache_dir": cache_dir, "cache": cache, "cache_max_files": cache_max_files, "backend": backend,
-              "threads": threads, "delay": delay, "lap": lap}
-    args = shared | dict(maze or {})
-    MazeHJGuardian(**args)  # a bad argument fails at construction, naming it
+    if given is not None and not isinstance(given, dict):
+        raise ValueError(f"{what} must be a dict of {cls.__module__}.{cls.__name__} arguments (or False), got {given!r}")
+    args = shared | dict(given or {})
+    cls(**args)  # a bad argument fails at construction, naming it
     return args
 
 
@@ -417,6 +385,6 @@ class HJPaperGuardian(HJGuardian):
     name = "hj-paper"
 
     def __init__(self, order: int = 1, rk: int = 2, rule: str = "value", margin: float = 0.0, standstill_lookup: bool = False,
-                 maze=False, **kwargs) -> None:
+                 maze=False, quadrotor=False, **kwargs) -> None:
         super().__init__(order=order, rk=rk, rule=rule, margin=margin, standstill_lookup=standstill_lookup, maze=maze,
-                         **kwargs)
+                         quadrotor=quadrotor, **kwargs)

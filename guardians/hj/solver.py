@@ -36,6 +36,7 @@ the result: every grid point is computed by exactly one thread.
 
 from __future__ import annotations
 
+import os
 import time
 from fractions import Fraction
 
@@ -45,7 +46,7 @@ from guardians._checks import integer
 from guardians.hj import _kernels
 from guardians.hj.grid import Grid
 
-__all__ = ["BACKENDS", "TVD_RK", "select_backend", "solve_brt", "spatial_derivatives"]
+__all__ = ["BACKENDS", "TVD_RK", "default_threads", "select_backend", "solve_brt", "spatial_derivatives"]
 
 BACKENDS = ("auto", "numpy", "numba")
 
@@ -73,6 +74,24 @@ def _scaled(X: np.ndarray, c: Fraction) -> np.ndarray:
 def _combine(V0: np.ndarray, E: np.ndarray, a: Fraction, b: Fraction) -> np.ndarray:
     """``a V0 + b E`` (one Runge-Kutta stage of :data:`TVD_RK`, ``E`` its Euler step)."""
     return _scaled(E, b) if a == 0 else _scaled(V0, a) + _scaled(E, b)
+
+
+THREADS_VARIABLE = "RMM_HJ_THREADS"
+
+
+def default_threads() -> int | None:
+    """The HJ guardians' ``threads`` when none is given: ``$RMM_HJ_THREADS`` (an integer >= 1)
+    if set, else ``None`` (numba's default, the core count).  The one place it is read."""
+    raw = os.environ.get(THREADS_VARIABLE)
+    if not raw:
+        return None
+    try:
+        n = int(raw)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ValueError(f"{THREADS_VARIABLE} must be an integer >= 1, got {raw!r}")
+    return n
 
 
 def select_backend(grid: Grid, dynamics, order: int, backend: str = "auto") -> str:

@@ -38,7 +38,7 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency; numpy alone still works
     njit = None
 
-__all__ = ["SERIES_COEFFICIENTS", "Dubins4D", "FullBraking", "wrap_angle"]
+__all__ = ["SERIES_COEFFICIENTS", "Dubins4D", "FullBraking", "segment_position", "wrap_angle"]
 
 _COMPILED_MAX_N = 8  # up to this many states per call, the compiled scalar path is faster
 
@@ -130,7 +130,9 @@ def _turn_integrals_1(phi, coef):
     return _closed_1(phi)
 
 
-def _segment_1(x0, y0, th0, v0, w, a, t, coef):
+def segment_position(x0, y0, th0, v0, w, a, t, coef):
+    """Position ``(x, y)`` after holding turn rate ``w`` and acceleration ``a`` for ``t`` s from
+    ``(x0, y0, th0, v0)``, without speed bounds (compiled; ``coef``: :data:`SERIES_COEFFICIENTS`)."""
     e1r, e1i, e2r, e2i = _turn_integrals_1(w * t, coef)
     return _displace_1(x0, y0, th0, v0, a, t, e1r, e1i, e2r, e2i)
 
@@ -151,13 +153,13 @@ def _state_at_1(x0, y0, th0, v0, w, a, t, sat, t_sat, lo, hi, coef):
     """The state at time ``t`` of a held control from a clamped start (:func:`_clamped_start`)."""
     th = th0 + w * t
     if not sat:
-        x, y = _segment_1(x0, y0, th0, v0, w, a, t, coef)
+        x, y = segment_position(x0, y0, th0, v0, w, a, t, coef)
         return x, y, th, v0 + a * t
     t1 = min(t, max(t_sat, 0.0))
-    x1, y1 = _segment_1(x0, y0, th0, v0, w, a, t1, coef)
+    x1, y1 = segment_position(x0, y0, th0, v0, w, a, t1, coef)
     v1 = min(max(v0 + a * t1, lo[0]), hi[0])
     th1 = th0 + w * t1
-    x, y = _segment_1(x1, y1, th1, v1, w, 0.0, t - t1, coef)
+    x, y = segment_position(x1, y1, th1, v1, w, 0.0, t - t1, coef)
     return x, y, th, v1
 
 
@@ -188,7 +190,7 @@ if njit is not None:  # the scalar path compiles the same closed forms and displ
     _displace_1 = njit(cache=True)(_displace)
     _horner_1 = njit(cache=True)(_horner_1)
     _turn_integrals_1 = njit(cache=True)(_turn_integrals_1)
-    _segment_1 = njit(cache=True)(_segment_1)
+    segment_position = njit(cache=True)(segment_position)
     _clamped_start = njit(cache=True)(_clamped_start)
     _state_at_1 = njit(cache=True)(_state_at_1)
     _states_at_compiled = njit(cache=True)(_states_at_loop)

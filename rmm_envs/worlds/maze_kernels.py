@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from rmm_envs.systems.dubins4d import _segment_1
+from rmm_envs.systems.dubins4d import segment_position
 
 try:
     from numba import njit
@@ -153,7 +153,7 @@ def dubins_path(x, y, psi, speed, u, duration, out, coef):
     step = duration / (s - 1)
     for k in range(s):
         t = duration if k == s - 1 else k * step
-        out[k, 0], out[k, 1] = _segment_1(x, y, psi, speed, u, 0.0, t, coef)
+        out[k, 0], out[k, 1] = segment_position(x, y, psi, speed, u, 0.0, t, coef)
         out[k, 2] = psi + u * t
     return out
 
