@@ -10,12 +10,14 @@ fingerprint holds:
 
 * **worlds**: rooms, mazes, and every env's world and start state at reset (privileged view);
 * **envs**: a SHA-256 of the observations, rewards, flags and info of a seeded rollout of each
-  of the ten envs under seeded random actions;
+  of the envs in :data:`ENVS` (every guardian env of the package's vehicles and the two guarded
+  Gymnasium simulators) under seeded random actions;
 * **labels**: sampled states, observations and sampling-tree risk labels of each labelled env;
-* **datasets**: ``rmm-datagen``'s rows for the three systems;
+* **datasets**: ``rmm-datagen``'s rows for the three vehicles;
 * **hj**: HJ value functions solved afresh;
-* **bench**: every non-timing column of fixed-clock ``rmm-bench`` episodes of all three
-  systems (Dubins4D's seven agents and HJ, the maze's and the quadrotor's guardians);
+* **bench**: every non-timing column of fixed-clock ``rmm-bench`` episodes of every system
+  (Dubins4D's seven agents and HJ, the maze's, the quadrotor's, CartPole's and
+  InvertedPendulum's guardians);
 * **applied**: the arithmetic the interpreter really ran under (numpy's dispatch target of
   ``exp``, the OpenBLAS kernel), so that a setting which did not take effect is noticed.
 
@@ -54,14 +56,16 @@ AGENTS = ("inactive", "random", "brakes", "lrmm", "lrmm-paper", "cbf", "cbf-pape
 HJ_AGENTS = ("hj", "hj-paper")
 # the other systems' parallel-autonomy envs and the guardians that apply to each
 OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "brakes", "lrmm", "cbf", "hj"),
-               "QuadrotorRoomParallel-v0": ("inactive", "brakes", "lrmm", "cbf")}
+               "QuadrotorRoomParallel-v0": ("inactive", "brakes", "lrmm", "cbf"),
+               "CartPoleParallel-v0": ("inactive", "brakes", "lrmm"), "InvertedPendulumParallel-v0": ("inactive", "brakes", "lrmm")}
 QUICK_OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "lrmm", "cbf"),
-                     "QuadrotorRoomParallel-v0": ("inactive", "lrmm", "cbf")}
+                     "QuadrotorRoomParallel-v0": ("inactive", "lrmm", "cbf"),
+                     "CartPoleParallel-v0": ("inactive", "lrmm"), "InvertedPendulumParallel-v0": ("inactive", "lrmm")}
 ENVS = ("Dubins4DCirclesGuarded-v0", "Dubins4DCirclesParallel-v0", "Dubins4DMapGuarded-v0", "Dubins4DMapParallel-v0", "Dubins3DMaze-v0",
         "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoom-v0", "QuadrotorRoomGuarded-v0",
-        "QuadrotorRoomParallel-v0")
+        "QuadrotorRoomParallel-v0", "CartPoleGuarded-v0", "InvertedPendulumGuarded-v0")
 LABELLED = {"Dubins4DCirclesGuarded-v0": {}, "Dubins4DMapGuarded-v0": {}, "Dubins3DMaze-v0": {}, "Dubins3DMazeGuarded-v0": {},
-            "QuadrotorRoom-v0": {}, "QuadrotorRoomGuarded-v0": {}}
+            "QuadrotorRoom-v0": {}, "QuadrotorRoomGuarded-v0": {}, "CartPoleGuarded-v0": {}, "InvertedPendulumGuarded-v0": {}}
 DATASETS = ("Dubins4DCirclesGuarded-v0", "Dubins3DMazeGuarded-v0", "QuadrotorRoomGuarded-v0")
 
 
@@ -230,7 +234,9 @@ def label_fingerprint(n_states: int = 16) -> dict:
         rng = np.random.default_rng(3)
         states = env.sample_states(rng, n_states)
         obs = env.observe_states(states, rng)
-        est = RiskEstimator(env.risk_scene(), branches=4, depth=2, horizon=0.5, n_steps=4)
+        # a simulator's own step fixes its horizons (the guarded envs around Gymnasium's simulators)
+        horizon = env.default_horizon if env_id in ("CartPoleGuarded-v0", "InvertedPendulumGuarded-v0") else 0.5
+        est = RiskEstimator(env.risk_scene(), branches=4, depth=2, horizon=horizon, n_steps=4)
         res = est.estimate(states, np.random.default_rng(5))
         env.close()
         out[stored_id(env_id)] = _digest(states, obs, res.risk, res.min_risk_ctrl, res.min_risk_ctrl_dur, res.n_leaves)

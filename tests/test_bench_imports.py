@@ -44,6 +44,16 @@ def test_agent_and_env_modules_are_found_in_the_current_directory_by_every_worke
     assert "| 4 |" in row and "| 0 | 0 |" in row  # four episodes, no errors
 
 
+def test_ray_workers_find_the_current_directory_s_modules_too(tmp_path):
+    (tmp_path / "my_guard.py").write_text(GUARD)
+    (tmp_path / "my_env.py").write_text(ENV)
+    res = _bench(tmp_path, "--agent", "my_guard:Steady", "--env", "my_env:MyCircles-v0", "--episodes", "4",
+                 "--backend", "ray")
+    assert res.returncode == 0, res.stderr[-2000:]
+    row = next(line for line in res.stdout.splitlines() if line.startswith("| my_guard:Steady"))
+    assert "| 4 |" in row and "| 0 | 0 |" in row  # four episodes, no errors
+
+
 def test_a_module_that_is_not_there_exits_2_naming_it(tmp_path):
     res = _bench(tmp_path, "--agent", "no_such_guard:X", "--episodes", "1")
     assert res.returncode == 2
