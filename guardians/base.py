@@ -17,6 +17,11 @@ control.  It has:
   control bounds from it (``control_low`` / ``control_high``), so the same guardian serves any
   system that offers what it needs;
 * ``stats()``: counters the guardian wants recorded with the episode (e.g. QP fallbacks);
+* :meth:`warm_up` ``(observation, info)``: called by ``rmm-bench`` once per worker, untimed,
+  before the first timed decision (the episode is then reset), so that compiling or loading
+  compiled code is never charged to a decision; the default is one :meth:`act`, and a guardian
+  whose first decision does not reach every compiled path (a QP solved only near an obstacle)
+  runs those paths here too;
 * :meth:`input_files`: the files it read when it was built (path -> SHA-256 of the bytes it
   read), which ``rmm-bench`` makes part of the run's identity, so a run resumed after a model
   file changed is a new run, never a mix of two models.
@@ -104,6 +109,11 @@ class Guardian:
 
     def act(self, observation: np.ndarray, info: dict[str, Any]) -> dict:  # pragma: no cover - abstract
         raise NotImplementedError
+
+    def warm_up(self, observation: np.ndarray, info: dict[str, Any]) -> None:
+        """Run the decision's compiled paths once, untimed (see the module docstring): one
+        :meth:`act`.  The caller resets the guardian afterwards."""
+        self.act(observation, info)
 
     def stats(self) -> dict[str, float]:
         return {}

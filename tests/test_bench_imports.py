@@ -111,3 +111,25 @@ def test_each_workers_first_timed_decision_comes_after_an_untimed_warm_up(tmp_pa
     df = load_results(tmp_path / "res")
     calls = [json.loads(s)["calls_before"] for s in df.guardian_stats]
     assert len(calls) == 4 and min(calls) >= 1
+
+
+def test_the_cbf_warm_up_reaches_the_qp_and_the_recovery_then_reset_forgets_it():
+    """cbf's first decision far from every obstacle solves no QP; its warm-up solves two (the
+    compiled matrix fill) and computes a recovery, and the episode's counters start at zero."""
+    import gymnasium as gym
+
+    from guardians import make_guardian
+
+    env = gym.make("Dubins4DCirclesGuarded-v0")
+    obs, info = env.reset(seed=0)
+    g = make_guardian("cbf")
+    kw = dict(seed=0, observation_space=env.observation_space, action_space=env.action_space,
+              privileged=env.unwrapped.privileged)
+    g.reset(**kw)
+    g.act(obs, info)
+    assert g.stats()["qp_solves"] == 0  # the first decision alone would leave the QP uncompiled
+    g.reset(**kw)
+    g.warm_up(obs, info)
+    assert g.stats()["qp_solves"] == 2
+    g.reset(**kw)
+    assert g.stats()["qp_solves"] == 0 and g.stats()["recovery_entries"] == 0

@@ -125,14 +125,16 @@ def _guardian(task: EpisodeTask):
 
 
 def _warm_up(task: EpisodeTask, guardian, obs, info, env) -> None:
-    """Once per worker and guardian, before its first timed decision: one untimed ``act`` on
-    the episode's first observation, then ``reset`` again (the episode starts as if it had not
-    happened), so compiling or loading compiled code (numba kernels, lazy imports) is never
-    charged to a decision.  Skipped under ``--charge-precompute``, which charges all setup."""
+    """Once per worker and guardian, before its first timed decision: the guardian's untimed
+    ``warm_up`` (one ``act`` on the episode's first observation, and whatever compiled paths
+    that decision skips), then ``reset`` again (the episode starts as if it had not happened),
+    so compiling or loading compiled code (numba kernels, lazy imports) is never charged to a
+    decision.  Skipped under ``--charge-precompute``, which charges all setup."""
     key = ("warm",) + _guardian_key(task)
     if key in _CACHE:
         return
-    guardian.act(obs, info)
+    warm = getattr(guardian, "warm_up", None)
+    (warm or guardian.act)(obs, info)
     guardian.reset(seed=task.seed, observation_space=env.observation_space, action_space=env.action_space,
                    privileged=env.unwrapped.privileged if getattr(guardian, "privileged", False) else None)
     _CACHE[key] = True

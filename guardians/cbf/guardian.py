@@ -265,6 +265,19 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
             state = self.predict(state, during, self._lap)
         return self._decide(state, u_nom)
 
+    def warm_up(self, observation, info=None) -> None:
+        """One decision, then the paths a first decision far from every obstacle skips: the QP
+        (its compiled matrix fill) with and without a control to filter, and the recovery
+        manoeuvre; the caller resets the guardian afterwards."""
+        self.act(observation, info)
+        if (self._maze or self._quad) is not None or self.K == 0:
+            return
+        state = np.asarray(self._privileged()["state"], float)
+        if all(map(math.isfinite, state.tolist())):
+            self.solve(state)
+            self.solve(state, np.zeros(2))
+            self.recovery_control(state, 0)
+
     def _decide(self, state, u_nom=None):
         """The decision for the state the action will act from (already predicted)."""
         if self.low_speed_stop and state[3] < 0.05:
