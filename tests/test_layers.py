@@ -66,3 +66,45 @@ def test_the_scanner_sees_imports_at_any_depth_and_resolves_relative_ones(tmp_pa
 @pytest.mark.parametrize("package", sorted(ABOVE))
 def test_no_import_runs_upward(package):
     assert upward_imports(package) == []
+
+
+def _reads_environment(path: Path) -> list[int]:
+    """Lines of ``path`` that read the process environment (``os.environ``, ``os.getenv``,
+    ``os.environ.get``, ``from os import environ/getenv``)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    lines = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and node.attr in ("environ", "getenv", "environb") and \
+                isinstance(node.value, ast.Name) and node.value.id == "os":
+            lines.append(node.lineno)
+        elif isinstance(node, ast.ImportFrom) and node.module == "os" and \
+                any(a.name in ("environ", "getenv", "environb") for a in node.names):
+            lines.append(node.lineno)
+    return lines
+
+
+def test_environment_variables_are_read_in_one_configuration_module_only():
+    """``rmm_envs/settings.py`` reads every setting taken from the environment; the one other
+    reader, ``benchmarks/arith.py``, copies the environment for its child interpreters."""
+    allowed = {ROOT / "rmm_envs" / "settings.py", ROOT / "benchmarks" / "arith.py"}
+    found = {str(p.relative_to(ROOT)): lines for pkg in ("rmm_envs", "guardians", "benchmarks")
+             for p in sorted((ROOT / pkg).rglob("*.py")) if p not in allowed and (lines := _reads_environment(p))}
+    assert found == {}
+    assert _reads_environment(ROOT / "rmm_envs" / "settings.py")  # the check sees a real reader
+
+
+def test_the_settings_module_reads_and_refuses_by_name(monkeypatch, tmp_path):
+    from rmm_envs import settings
+
+    monkeypatch.delenv("RMM_HJ_THREADS", raising=False)
+    assert settings.hj_threads() is None
+    monkeypatch.setenv("RMM_HJ_THREADS", "3")
+    assert settings.hj_threads() == 3
+    for bad in ("0", "two", "-1"):
+        monkeypatch.setenv("RMM_HJ_THREADS", bad)
+        with pytest.raises(ValueError, match=f"RMM_HJ_THREADS must be an integer >= 1, got '{bad}'"):
+            settings.hj_threads()
+    monkeypatch.setenv("RMM_HJ_CACHE", str(tmp_path))
+    assert settings.hj_cache_dir() == tmp_path
+    monkeypatch.setenv("RMM_HJ_CACHE", "")
+    assert settings.hj_cache_dir() == Path.home() / ".cache" / "rmm-envs" / "hj"

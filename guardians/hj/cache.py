@@ -13,7 +13,7 @@ are removed.  Several processes may share a directory (the benchmark's workers d
 another process removes at any moment is a cache miss, never an error.
 
 The directory is the HJ guardian's ``cache_dir`` argument; without one,
-:func:`default_cache_dir`: ``$RMM_HJ_CACHE`` if set (the one place it is read), else
+:func:`default_cache_dir`: ``$RMM_HJ_CACHE`` if set (read by :mod:`rmm_envs.settings`), else
 ``~/.cache/rmm-envs/hj`` (a per-user cache outside any checkout).
 """
 
@@ -28,6 +28,8 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+
+from rmm_envs.settings import hj_cache_dir
 
 __all__ = ["CacheEntryRejected", "ValueCache", "default_cache_dir", "load_or_solve"]
 
@@ -74,8 +76,8 @@ def load_or_solve(cache: "ValueCache | None", spec: dict, shape, solve: Callable
 
 
 def default_cache_dir() -> Path:
-    """``$RMM_HJ_CACHE`` if set, else ``~/.cache/rmm-envs/hj``."""
-    return Path(os.environ.get("RMM_HJ_CACHE") or Path.home() / ".cache" / "rmm-envs" / "hj")
+    """``$RMM_HJ_CACHE`` if set, else ``~/.cache/rmm-envs/hj`` (read by :mod:`rmm_envs.settings`)."""
+    return hj_cache_dir()
 
 
 class ValueCache:

@@ -36,7 +36,6 @@ the result: every grid point is computed by exactly one thread.
 
 from __future__ import annotations
 
-import os
 import time
 from fractions import Fraction
 
@@ -45,6 +44,7 @@ import numpy as np
 from guardians._checks import integer
 from guardians.hj import _kernels
 from guardians.hj.grid import Grid
+from rmm_envs.settings import HJ_THREADS, hj_threads
 
 __all__ = ["BACKENDS", "TVD_RK", "default_threads", "select_backend", "solve_brt", "spatial_derivatives"]
 
@@ -76,22 +76,13 @@ def _combine(V0: np.ndarray, E: np.ndarray, a: Fraction, b: Fraction) -> np.ndar
     return _scaled(E, b) if a == 0 else _scaled(V0, a) + _scaled(E, b)
 
 
-THREADS_VARIABLE = "RMM_HJ_THREADS"
+THREADS_VARIABLE = HJ_THREADS
 
 
 def default_threads() -> int | None:
     """The HJ guardians' ``threads`` when none is given: ``$RMM_HJ_THREADS`` (an integer >= 1)
-    if set, else ``None`` (numba's default, the core count).  The one place it is read."""
-    raw = os.environ.get(THREADS_VARIABLE)
-    if not raw:
-        return None
-    try:
-        n = int(raw)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise ValueError(f"{THREADS_VARIABLE} must be an integer >= 1, got {raw!r}")
-    return n
+    if set, else ``None`` (numba's default, the core count); read by :mod:`rmm_envs.settings`."""
+    return hj_threads()
 
 
 def select_backend(grid: Grid, dynamics, order: int, backend: str = "auto") -> str:

@@ -1,0 +1,44 @@
+"""The environment variables the project reads, and the one place each is read.
+
+=================== =====================================================================
+``RMM_HJ_THREADS``  threads of the HJ guardians' compiled solve when none is given
+                    (an integer >= 1; unset: numba's default, the core count)
+``RMM_HJ_CACHE``    folder of the HJ value-function cache (unset: ``~/.cache/rmm-envs/hj``)
+=================== =====================================================================
+
+Everything else is an argument.  ``tests/test_layers.py`` fails if another module of the
+package reads ``os.environ`` (``benchmarks/arith.py`` builds its children's environment and is
+the one exception: it passes variables on, it does not read a setting).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+__all__ = ["HJ_CACHE", "HJ_THREADS", "VARIABLES", "hj_cache_dir", "hj_threads"]
+
+HJ_THREADS = "RMM_HJ_THREADS"
+HJ_CACHE = "RMM_HJ_CACHE"
+#: every variable read here, with what it sets
+VARIABLES = {HJ_THREADS: "threads of the HJ guardians' compiled solve", HJ_CACHE: "folder of the HJ value cache"}
+
+
+def hj_threads() -> int | None:
+    """``$RMM_HJ_THREADS`` as an integer >= 1, or ``None`` when unset or empty; ``ValueError``
+    naming the value otherwise."""
+    raw = os.environ.get(HJ_THREADS)
+    if not raw:
+        return None
+    try:
+        n = int(raw)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ValueError(f"{HJ_THREADS} must be an integer >= 1, got {raw!r}")
+    return n
+
+
+def hj_cache_dir() -> Path:
+    """``$RMM_HJ_CACHE`` if set and not empty, else ``~/.cache/rmm-envs/hj``."""
+    return Path(os.environ.get(HJ_CACHE) or Path.home() / ".cache" / "rmm-envs" / "hj")
