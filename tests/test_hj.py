@@ -530,7 +530,7 @@ def test_hj_paper_is_the_papers_rule_and_both_are_registered():
     ({"delay": -1}, "delay must be an integer >= 0"),
     ({"delay": 0.5}, "delay must be an integer >= 0"),
     ({"order": 3}, "order must be 1 or 2, got 3"),
-    ({"rk": 4}, "rk must be 1, 2 or 3, got 4"),
+    ({"rk": 4}, "rk must be one of [1, 2, 3], got 4"),
     ({"rule": "eager"}, "rule must be one of"),
     ({"cache_max_files": 0}, "cache_max_files must be an integer >= 1, got 0"),
 ])

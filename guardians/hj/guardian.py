@@ -142,7 +142,7 @@ from guardians.hj.grid import Grid
 from guardians.hj.grid import central_gradient
 from guardians.hj.maze import MazeHJGuardian
 from guardians.hj.quadrotor import QuadrotorHJGuardian
-from guardians.hj.solver import THREADS_VARIABLE, default_threads, select_backend, solve_brt  # noqa: F401
+from guardians.hj.solver import THREADS_VARIABLE, check_scheme, default_threads, select_backend, solve_brt  # noqa: F401
 
 __all__ = ["HJGuardian", "HJPaperGuardian", "default_grid", "default_threads", "obstacle_target"]
 
@@ -187,13 +187,7 @@ class HJGuardian(MazeDelegation, Guardian):
             raise ValueError(f"mode must be 'avoid' or 'reach_avoid', got {mode!r}")
         if rule not in RULES:
             raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
-        if order not in (1, 2):
-            raise ValueError(f"order must be 1 or 2, got {order!r}")
-        if rk not in (1, 2, 3):
-            raise ValueError(f"rk must be 1, 2 or 3, got {rk!r}")
-        self.cfl = finite("cfl", cfl, 0.0, lo_open=True)
-        if self.cfl > 1:
-            raise ValueError(f"cfl must be in (0, 1], got {cfl!r}")
+        self.order, self.rk, self.cfl = check_scheme(order, rk, cfl)
         self.threads = default_threads() if threads is None else integer("threads", threads, 1, "or None")
         cache_max_files = integer("cache_max_files", cache_max_files, 1)
         self.mode, self.rule = mode, rule
@@ -207,7 +201,6 @@ class HJGuardian(MazeDelegation, Guardian):
         # default: half a position cell, the most multilinear interpolation can over-state V
         # at a kink of a function that is 1-Lipschitz in position
         self.margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if margin is None else finite("margin", margin)
-        self.order, self.rk = int(order), int(rk)
         # the Dubins4D system's bounds; reset replaces the control bounds by the action space's
         self.dynamics = Dubins4DHJ(d_max=finite("disturbance", disturbance, 0.0))
         self.backend = backend

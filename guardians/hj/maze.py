@@ -119,7 +119,7 @@ from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid, central_gradient
 from guardians.hj.maze_lookahead import COEF, manoeuvres, near_walls, path_clearances
-from guardians.hj.solver import select_backend, solve_brt
+from guardians.hj.solver import check_scheme, select_backend, solve_brt
 
 __all__ = ["MazeHJGuardian", "maze_grid", "wall_target"]
 
@@ -173,14 +173,7 @@ class MazeHJGuardian(Guardian):
             raise ValueError(f"region must be one of {REGIONS}, got {region!r}")
         self.region = region
         self.route_margin = integer("route_margin", route_margin, 0, "cells around the route's bounding box")
-        if order not in (1, 2):
-            raise ValueError(f"order must be 1 or 2, got {order!r}")
-        if rk not in (1, 2, 3):
-            raise ValueError(f"rk must be 1, 2 or 3, got {rk!r}")
-        self.order, self.rk = int(order), int(rk)
-        self.cfl = finite("cfl", cfl, 0.0, lo_open=True)
-        if self.cfl > 1:
-            raise ValueError(f"cfl must be in (0, 1], got {cfl!r}")
+        self.order, self.rk, self.cfl = check_scheme(order, rk, cfl)
         self.margin = None if margin is None else finite("margin", margin)
         self.delay = integer("delay", delay, 0, "laps between a decision and its effect")
         self.lap = None if lap is None else finite("lap", lap, 0.0, lo_open=True)

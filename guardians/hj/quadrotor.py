@@ -90,7 +90,7 @@ from guardians.base import Guardian
 from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid, central_gradient
-from guardians.hj.solver import select_backend, solve_brt
+from guardians.hj.solver import check_scheme, select_backend, solve_brt
 from guardians.hj.room import lag_prediction, room_target
 from rmm_envs.portable import arctan2
 from rmm_envs.systems.quadrotor_control import CommandController, yaw_of
@@ -122,14 +122,7 @@ class QuadrotorHJGuardian(Guardian):
         self.pad = finite("pad", pad, 0.0)
         self.band_margin = finite("band_margin", band_margin, 0.0)
         self.reach = finite("reach", reach, 0.0, lo_open=True)
-        if order not in (1, 2):
-            raise ValueError(f"order must be 1 or 2, got {order!r}")
-        if rk not in (1, 2, 3):
-            raise ValueError(f"rk must be 1, 2 or 3, got {rk!r}")
-        self.order, self.rk = int(order), int(rk)
-        self.cfl = finite("cfl", cfl, 0.0, lo_open=True)
-        if self.cfl > 1:
-            raise ValueError(f"cfl must be in (0, 1], got {cfl!r}")
+        self.order, self.rk, self.cfl = check_scheme(order, rk, cfl)
         self.margin = None if margin is None else finite("margin", margin)
         self.tracking = finite("tracking", tracking, 0.0)
         self.hysteresis = finite("hysteresis", hysteresis, 0.0)

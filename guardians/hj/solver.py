@@ -41,7 +41,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from guardians._checks import integer
+from guardians._checks import finite, integer
 from guardians.hj import _kernels
 from guardians.hj.grid import Grid
 from rmm_envs.settings import HJ_THREADS, hj_threads
@@ -83,6 +83,20 @@ def default_threads() -> int | None:
     """The HJ guardians' ``threads`` when none is given: ``$RMM_HJ_THREADS`` (an integer >= 1)
     if set, else ``None`` (numba's default, the core count); read by :mod:`rmm_envs.settings`."""
     return hj_threads()
+
+
+def check_scheme(order, rk, cfl) -> tuple[int, int, float]:
+    """The numerical scheme's settings checked (``ValueError`` naming the bad one): spatial
+    ``order`` 1 or 2, ``rk`` stages 1-3 (:data:`TVD_RK`), ``cfl`` in (0, 1]; returned as
+    ``(order, rk, cfl)``.  The one check the solver and every HJ guardian use."""
+    if isinstance(order, bool) or order not in (1, 2):
+        raise ValueError(f"order must be 1 or 2, got {order!r}")
+    if isinstance(rk, bool) or rk not in TVD_RK:
+        raise ValueError(f"rk must be one of {sorted(TVD_RK)}, got {rk!r}")
+    cfl = finite("cfl", cfl, 0.0, lo_open=True)
+    if cfl > 1:
+        raise ValueError(f"cfl must be in (0, 1], got {cfl!r}")
+    return int(order), int(rk), cfl
 
 
 def select_backend(grid: Grid, dynamics, order: int, backend: str = "auto") -> str:
@@ -174,14 +188,9 @@ def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: i
         raise ValueError(f"target has shape {target.shape}, the grid {grid.shape}")
     if not horizon >= 0:
         raise ValueError(f"horizon must be >= 0, got {horizon}")
-    if rk not in TVD_RK:
-        raise ValueError(f"rk must be one of {sorted(TVD_RK)}, got {rk}")
     if threads is not None:
         integer("threads", threads, 1, "or None")
-    if not 0 < cfl <= 1:
-        raise ValueError(f"cfl must be in (0, 1], got {cfl}")
-    if order not in (1, 2):
-        raise ValueError(f"order must be 1 or 2, got {order}")
+    check_scheme(order, rk, cfl)
     impl = select_backend(grid, dynamics, order, backend)
     control = "max" if constraint is None else "min"
     if constraint is not None:
