@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
@@ -283,3 +283,21 @@ def test_at_a_walls_end_the_row_is_the_barriers_rate(px, py, psi, u):
     dt = 1e-4
     fwd, back = rows(g.predict(s, u, dt))[0][0], rows(g.predict(s, u, -dt))[0][0]
     assert rate == pytest.approx((fwd - back) / (2 * dt), rel=1e-4, abs=1e-5)
+
+
+@settings(max_examples=60, deadline=None)
+@given(psi=st.floats(-math.pi, math.pi), u=st.floats(-0.2, 0.2), lap=st.floats(-0.2, 0.2))
+@example(psi=-2.5, u=5.960464477539063e-08, lap=1e-4)  # the arc form lost 6e-6 of the chord here (found by hypothesis)
+def test_the_predicted_pose_is_the_arc_to_rounding_at_every_turn_rate(psi, u, lap):
+    """``predict`` against the arc's displacement summed as its Taylor series in ``u lap``
+    (40 terms, no cancellation at any turn rate): equal to 1e-12 px, tiny ``u lap`` included."""
+    g = MazeCBFGuardian()
+    g.speed = 10.0
+    x1, y1, _ = g.predict(np.array([5.0, 5.0, psi]), u, lap)
+    # displacement = s lap * sum_k (i u lap)^k / (k+1)! * e^{i psi}, summed in complex arithmetic
+    w, term, total = complex(0.0, u * lap), 1.0 + 0j, 0j
+    for k in range(40):
+        total += term
+        term *= w / (k + 2)
+    z = 10.0 * lap * total * complex(math.cos(psi), math.sin(psi))
+    assert x1 - 5.0 == pytest.approx(z.real, abs=1e-12) and y1 - 5.0 == pytest.approx(z.imag, abs=1e-12)

@@ -254,13 +254,13 @@ class MazeCBFGuardian(Guardian):
     def predict(self, state, u: float, lap: float) -> np.ndarray:
         """The exact pose after ``lap`` seconds of turn rate ``u`` (heading wrapped)."""
         x, y, psi = (float(v) for v in state[:3])
-        s = self.speed
-        if abs(u) < 1e-12:
-            x, y = x + s * lap * math.cos(psi), y + s * lap * math.sin(psi)
-        else:
-            p2 = psi + u * lap
-            x, y = x + s / u * (math.sin(p2) - math.sin(psi)), y - s / u * (math.cos(p2) - math.cos(psi))
-            psi = p2
+        # the chord of the arc in its half-angle form, (s lap) sinc(u lap / 2) along the mean
+        # heading: the same value as (s / u)(sin(psi + u lap) - sin(psi)), ..., without that
+        # form's cancellation at small turn rates (a relative error of eps / (u lap))
+        half = 0.5 * u * lap
+        chord = self.speed * lap * (math.sin(half) / half if half != 0.0 else 1.0)
+        x, y = x + chord * math.cos(psi + half), y + chord * math.sin(psi + half)
+        psi += u * lap
         return np.array([x, y, (psi + math.pi) % (2 * math.pi) - math.pi])
 
     # ------------------------------------------------------------------ the decision
