@@ -50,7 +50,7 @@ def dubins4d_only(guardian, action_space, maze: bool = False, quadrotor: bool = 
     whose action space states other obstacle shapes (``obstacle_shapes``, a map with polygons or
     walls) is refused too.  ``maze``: the guardian also serves the maze car (its own check ran
     first), said in the message; so is ``quadrotor``."""
-    from rmm_envs.envs.dubins4d import CONTROLS
+    from rmm_envs.systems.dubins4d import CONTROLS
 
     name = guardian.name
     controls = guardian.require_action_space(space=action_space).controls
@@ -68,7 +68,7 @@ def dubins4d_only(guardian, action_space, maze: bool = False, quadrotor: bool = 
 
 
 def _maze_controls() -> tuple[str, ...]:
-    from rmm_envs.envs.dubins3d_maze_parallel import CONTROLS
+    from rmm_envs.systems.dubins3d import CONTROLS
 
     return tuple(CONTROLS)
 
@@ -123,7 +123,7 @@ class MazeDelegation:
 
 
 def _quadrotor_controls() -> tuple[str, ...]:
-    from rmm_envs.envs.quadrotor_room_parallel import CONTROLS
+    from rmm_envs.systems.quadrotor_control import CONTROLS
 
     return tuple(CONTROLS)
 

@@ -108,3 +108,18 @@ def test_the_settings_module_reads_and_refuses_by_name(monkeypatch, tmp_path):
     assert settings.hj_cache_dir() == tmp_path
     monkeypatch.setenv("RMM_HJ_CACHE", "")
     assert settings.hj_cache_dir() == Path.home() / ".cache" / "rmm-envs" / "hj"
+
+
+#: what a guardian may not import: the envs, the drivers and the risk scenes (it meets a system
+#: through rmm_envs.autonomy, the systems' dynamics and the worlds' geometry)
+PAST_THE_CONTRACT = ("rmm_envs.envs", "rmm_envs.drivers", "rmm_envs.scenes", "rmm_envs.driver", "rmm_envs.maze_driver",
+                     "rmm_envs.quadrotor_pilot")
+
+
+def test_guardians_never_import_an_env_a_driver_or_a_scene():
+    found = []
+    for path in sorted((ROOT / "guardians").rglob("*.py")):
+        for line, name in imported_modules(path, _module_package(path)):
+            if any(name == m or name.startswith(m + ".") for m in PAST_THE_CONTRACT):
+                found.append(f"{path.relative_to(ROOT)}:{line} imports {name}")
+    assert found == []

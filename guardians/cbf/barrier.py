@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rmm_envs.drivers.dubins4d import desired_heading
+from rmm_envs.systems.dubins4d import desired_heading
 
 try:
     from numba import njit

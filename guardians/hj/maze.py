@@ -32,7 +32,7 @@ Defaults, and why:
   20 s almost nothing more is doomed; 20 s costs half of 40 s.
 * ``region = "route"``: the grid covers the cells of the maze path from the car's cell to the
   goal's, plus ``route_margin = 1`` cell around their bounding box (the guardian computes the
-  path itself from the privileged maze, pose and goal, :func:`rmm_envs.drivers.maze.cell_path`).
+  path itself from the privileged maze, pose and goal, :func:`rmm_envs.worlds.mazes.cell_path`).
   The driver keeps to that path, so this is where the value is needed, and it is about a third
   of a 10 x 10 maze.  Outside the grid the guardian leaves control to the driver and counts it
   (``stats()["outside_grid"]``).  ``region = "maze"`` covers the whole maze.
@@ -203,7 +203,7 @@ class MazeHJGuardian(Guardian):
         hi = np.maximum(w[:, :2].max(0), w[:, 2:].max(0))
         if self.region == "maze" or maze.cells.shape[0] < 2:
             return lo, hi
-        from rmm_envs.drivers.maze import cell_of, cell_path
+        from rmm_envs.worlds.mazes import cell_of, cell_path
 
         path = cell_path(maze, cell_of(maze, state), cell_of(maze, goal))
         a, b = np.asarray(maze.passages[0], dtype=int)

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rmm_envs.systems.dubins4d import desired_heading  # the CLF's target heading, shared with the cbf guardian
+
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; the Python loop still works
@@ -60,15 +62,6 @@ class DriverParams:
 
     def as_array(self) -> np.ndarray:
         return np.array([self.gamma_vmin, self.gamma_vmax, self.lambda_theta, self.lambda_v, self.p_theta, self.p_v])
-
-
-def desired_heading(theta: float, theta_goal: float) -> float:
-    """The original's literal branch-cut heuristic for the target heading."""
-    if -math.pi < theta < 0 and math.pi + theta <= theta_goal <= math.pi:
-        return -1.5 * math.pi
-    if 0 < theta < math.pi and -math.pi <= theta_goal <= -math.pi + theta:
-        return 1.5 * math.pi
-    return theta_goal
 
 
 def _clf_rows(x, y, theta, v, gx, gy, lim, gain):

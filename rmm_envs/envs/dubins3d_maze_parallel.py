@@ -139,7 +139,7 @@ from rmm_envs.worlds.mazes import Maze, generate_maze
 
 __all__ = ["CONTROLS", "Dubins3DMazeGuardedEnv", "TurnFromNearerWall", "make_parallel_env", "observation_layout"]
 
-CONTROLS = ("turnrate_ctrl",)
+from rmm_envs.systems.dubins3d import CONTROLS  # noqa: E402  (owned by the system; re-exported)
 N_RAYS = 8
 
 

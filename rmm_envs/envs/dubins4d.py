@@ -150,7 +150,7 @@ from rmm_envs.systems.dubins4d import Dubins4D, FullBraking
 
 __all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "observation", "observation_layout"]
 
-CONTROLS = ("turnrate_ctrl", "accel_ctrl")  # the action fields of u = (u1, u2)
+from rmm_envs.systems.dubins4d import CONTROLS  # noqa: E402  (the action fields of u = (u1, u2); owned by the system)
 
 
 def observation_layout(n_rays: int = 12) -> ObservationLayout:

@@ -140,7 +140,7 @@ from rmm_envs.worlds.room_collision import BOUND
 
 __all__ = ["CONTROLS", "HoverAndLevel", "QuadrotorRoomGuardedEnv", "make_parallel_env", "observation_layout"]
 
-CONTROLS = ("vforward_ctrl", "vleft_ctrl", "vup_ctrl", "yawrate_ctrl")
+from rmm_envs.systems.quadrotor_control import CONTROLS  # noqa: E402  (owned by the system; re-exported)
 N_RAYS = 8
 _CONTACT_MARGIN = 0.05  # m added to the travel bound before contact queries are skipped
 

@@ -17,7 +17,10 @@ import numpy as np
 
 from rmm_envs.systems.dubins4d import _segment
 
-__all__ = ["Dubins3D"]
+__all__ = ["CONTROLS", "Dubins3D"]
+
+#: the guardian action's control field (the maze car's turn rate; its guarded envs' action space)
+CONTROLS = ("turnrate_ctrl",)
 
 
 @dataclass(frozen=True)

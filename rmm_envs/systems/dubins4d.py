@@ -26,6 +26,7 @@ through the same formulas compiled with numba, where numpy's per-call overhead w
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,7 +39,7 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency; numpy alone still works
     njit = None
 
-__all__ = ["SERIES_COEFFICIENTS", "Dubins4D", "FullBraking", "segment_position", "wrap_angle"]
+__all__ = ["CONTROLS", "SERIES_COEFFICIENTS", "Dubins4D", "FullBraking", "desired_heading", "segment_position", "wrap_angle"]
 
 _COMPILED_MAX_N = 8  # up to this many states per call, the compiled scalar path is faster
 
@@ -350,3 +351,16 @@ class Dubins4D:
         block[..., 3] = v1
         out[sat] = block
         return out
+
+
+#: the guardian action's control fields of ``u = (u1, u2)``, in order (the Dubins4D envs' action space)
+CONTROLS = ("turnrate_ctrl", "accel_ctrl")
+
+
+def desired_heading(theta: float, theta_goal: float) -> float:
+    """The original's literal branch-cut heuristic for the target heading."""
+    if -math.pi < theta < 0 and math.pi + theta <= theta_goal <= math.pi:
+        return -1.5 * math.pi
+    if 0 < theta < math.pi and -math.pi <= theta_goal <= -math.pi + theta:
+        return 1.5 * math.pi
+    return theta_goal
