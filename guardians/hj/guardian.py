@@ -319,13 +319,7 @@ class HJGuardian(MazeDelegation, Guardian):
     def act(self, observation, info=None):
         if self._maze is not None:
             return self._maze.act(observation, info)
-        priv = self._privileged()
-        s = np.asarray(priv["state"], float)
-        t = priv.get("sim_time")
-        if t is not None:
-            if self._last_time is not None and t > self._last_time:
-                self._measured_lap = float(t - self._last_time)
-            self._last_time = float(t)
+        s = self._state_and_lap()
         return self._decide(s)
 
     def _decide(self, s):

@@ -275,13 +275,7 @@ class MazeHJGuardian(Guardian):
         return self._margin + self.speed * (1 + self.delay) * self.current_lap()
 
     def act(self, observation, info=None):
-        priv = self._privileged()
-        s = np.asarray(priv["state"], float)
-        t = priv.get("sim_time")
-        if t is not None:
-            if self._last_time is not None and t > self._last_time:
-                self._measured_lap = float(t - self._last_time)
-            self._last_time = float(t)
+        s = self._state_and_lap()
         self._pending, pending = None, self._pending
         if not np.all(np.isfinite(s)):
             self._counts["nan_states"] += 1

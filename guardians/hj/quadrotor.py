@@ -245,13 +245,7 @@ class QuadrotorHJGuardian(Guardian):
         return (x, y, vx, vy)
 
     def act(self, observation, info=None):
-        priv = self._privileged()
-        s = np.asarray(priv["state"], float)
-        t = priv.get("sim_time")
-        if t is not None:
-            if self._last_time is not None and t > self._last_time:
-                self._measured_lap = float(t - self._last_time)
-            self._last_time = float(t)
+        s = self._state_and_lap()
         held, self._held = self._held, None
         if not np.all(np.isfinite(s)):
             self._counts["nan_states"] += 1
