@@ -9,14 +9,16 @@ import math
 
 import numpy as np
 
-from guardians._checks import MazeDelegation, QuadrotorDelegation, finite, integer, number_pair
+from guardians._checks import finite, integer, number_pair
 from guardians.base import Guardian
 from guardians.cbf.backend import dubins4d_qp, parse_solver
 from guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_values, critical_obstacle, inflated_radii
 from guardians.cbf.maze import MazeCBFGuardian
 from guardians.cbf.quadrotor import QuadrotorCBFGuardian
 from guardians.cbf.recovery import recovery_control, recovery_done
+from guardians.dispatch import SystemDispatch, delegate_arguments
 from rmm_envs.portable import matvec
+from rmm_envs.systems import dubins3d, quadrotor_control
 from rmm_envs.systems.dubins4d import Dubins4D
 
 __all__ = ["CBFGuardian", "CBFPaperGuardian", "REFERENCES"]
@@ -33,7 +35,7 @@ def _box_problem(u1, u2) -> str | None:
     return "the control box must contain 0 in u1 and allow braking and accelerating in u2"
 
 
-class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
+class CBFGuardian(SystemDispatch, Guardian):
     """HOCBF safety filter with one-step latency prediction and recovery (see :mod:`guardians.cbf`).
 
     ``u1_bounds``/``u2_bounds`` (default ``None``: the action space's, read at ``reset``) and
@@ -44,8 +46,7 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
     name = "cbf"
     observation_type = "global"
     privileged = True
-    maze_class = MazeCBFGuardian
-    quadrotor_class = QuadrotorCBFGuardian
+    others = {dubins3d.KIND: MazeCBFGuardian, quadrotor_control.KIND: QuadrotorCBFGuardian}
 
     def __init__(self, p1: float = 0.7535, p2: float = 0.6664, inflation: float = 1.05,
                  gamma_vmin: float = 1.0, gamma_vmax: float = 1.0, lambda_theta: float = 1.0,
@@ -63,13 +64,9 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
         self.reference = reference
         parse_solver(solver)  # a bad name fails here, listing the installed solvers
         self.solver = solver
-        self._maze_args = _delegate_arguments("maze", MazeCBFGuardian, maze, solver, eps, predict_latency, lap_guess)
-        self._quadrotor_args = _delegate_arguments("quadrotor", QuadrotorCBFGuardian, quadrotor, solver, eps, predict_latency,
-                                                   lap_guess)
-        self._delegate = None  # the maze car's guardian, built on the first maze env
-        self._quadrotor_delegate = None  # the quadrotor's, built on the first quadrotor env
-        self._maze = None  # the delegate while an episode on a maze env runs
-        self._quad = None  # the delegate while an episode on a quadrotor env runs
+        shared = {"solver": solver, "eps": eps, "predict_latency": predict_latency, "lap_guess": lap_guess}
+        self._system_args = {dubins3d.KIND: delegate_arguments(MazeCBFGuardian, "maze", maze, shared),
+                             quadrotor_control.KIND: delegate_arguments(QuadrotorCBFGuardian, "quadrotor", quadrotor, shared)}
         self.p1 = finite("p1 (class-K gain)", p1, 0.0, lo_open=True)
         self.p2 = finite("p2 (class-K gain)", p2, 0.0, lo_open=True)
         k = finite("inflation", inflation)
@@ -125,12 +122,7 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
                                 u2_min=self.u2_min, u2_max=self.u2_max)
 
     def reset(self, **kwargs) -> None:
-        space = kwargs.get("action_space")
-        self._maze = self._maze_guardian(space)
-        self._quad = None if self._maze is not None else self._quadrotor_guardian(space)
-        other = self._maze or self._quad
-        if other is not None:
-            other.reset(**kwargs)
+        if self._dispatch_reset(kwargs):
             return
         super().reset(**kwargs)
         self.check_spaces(self.observation_space, self.action_space)
@@ -245,9 +237,8 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
         return u
 
     def act(self, observation, info=None):
-        other = self._maze or self._quad
-        if other is not None:
-            return other.act(observation, info)
+        if self.delegate is not None:
+            return self.delegate.act(observation, info)
         u_nom = self.nominal(info)
         priv = self._privileged()
         state = np.asarray(priv["state"], float)
@@ -270,7 +261,7 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
         (its compiled matrix fill) with and without a control to filter, and the recovery
         manoeuvre; the caller resets the guardian afterwards."""
         self.act(observation, info)
-        if (self._maze or self._quad) is not None or self.K == 0:
+        if self.delegate is not None or self.K == 0:
             return
         state = np.asarray(self._privileged()["state"], float)
         if all(map(math.isfinite, state.tolist())):
@@ -311,23 +302,9 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
         return self._inactive()
 
     def stats(self) -> dict:
-        other = self._maze or self._quad
-        if other is not None:
-            return other.stats()
+        if self.delegate is not None:
+            return self.delegate.stats()
         return dict(self._counts)
-
-
-def _delegate_arguments(system: str, cls, given, solver, eps, predict_latency, lap_guess) -> dict | None:
-    """The arguments of ``system``'s guardian ``cls`` (the maze car's, the quadrotor's): ``given``
-    (a dict of its arguments; ``False`` refuses that system's envs) over the arguments the
-    systems share."""
-    if given is False:
-        return None
-    if given is not None and not isinstance(given, dict):
-        raise ValueError(f"{system} must be a dict of {cls.__module__}.{cls.__name__} arguments (or False), got {given!r}")
-    args = {"solver": solver, "eps": eps, "predict_latency": predict_latency, "lap_guess": lap_guess} | dict(given or {})
-    cls(**args)  # a bad argument fails at construction, naming it
-    return args
 
 
 class CBFPaperGuardian(CBFGuardian):

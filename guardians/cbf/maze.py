@@ -91,7 +91,8 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from guardians._checks import finite, integer, maze_car_only
+from guardians._checks import finite, integer
+from guardians.dispatch import maze_car_only
 from guardians.base import Guardian
 from guardians.cbf.backend import QpsolversQP, parse_solver
 

@@ -125,7 +125,8 @@ import math
 
 import numpy as np
 
-from guardians._checks import finite, integer, quadrotor_only
+from guardians._checks import finite, integer
+from guardians.dispatch import quadrotor_only
 from guardians.base import Guardian
 from guardians.cbf.backend import parse_solver
 from guardians.cbf.quadrotor_rows import CommandQP, command_rows, room_shapes

@@ -134,8 +134,9 @@ import math
 
 import numpy as np
 
-from guardians._checks import MazeDelegation, finite, integer, is_quadrotor_space
+from guardians._checks import finite, integer
 from guardians.base import Guardian
+from guardians.dispatch import SystemDispatch, delegate_arguments
 from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid
@@ -143,6 +144,7 @@ from guardians.hj.grid import central_gradient
 from guardians.hj.maze import MazeHJGuardian
 from guardians.hj.quadrotor import QuadrotorHJGuardian
 from guardians.hj.solver import THREADS_VARIABLE, check_scheme, default_threads, select_backend, solve_brt  # noqa: F401
+from rmm_envs.systems import dubins3d, quadrotor_control
 
 __all__ = ["HJGuardian", "HJPaperGuardian", "default_grid", "default_threads", "obstacle_target"]
 
@@ -162,9 +164,9 @@ def obstacle_target(grid: Grid, obstacles: np.ndarray) -> np.ndarray:
 RULES = ("distance", "gradient", "value")
 
 
-class HJGuardian(MazeDelegation, Guardian):
+class HJGuardian(SystemDispatch, Guardian):
     name = "hj"
-    maze_class = MazeHJGuardian
+    others = {dubins3d.KIND: MazeHJGuardian, quadrotor_control.KIND: QuadrotorHJGuardian}
     observation_type = "global"
     privileged = True
 
@@ -177,10 +179,8 @@ class HJGuardian(MazeDelegation, Guardian):
         super().__init__()
         shared = {"cache_dir": cache_dir, "cache": cache, "cache_max_files": cache_max_files, "backend": backend,
                   "threads": threads, "delay": delay, "lap": lap}
-        self._maze_args = _delegate_arguments(MazeHJGuardian, "maze", maze, shared)
-        self._quadrotor_args = _delegate_arguments(QuadrotorHJGuardian, "quadrotor", quadrotor, shared)
-        self._delegate = self._quadrotor = None  # the maze car's and the quadrotor's guardians, built on first use
-        self._maze = None  # the delegate while an episode on a maze env runs
+        self._system_args = {dubins3d.KIND: delegate_arguments(MazeHJGuardian, "maze", maze, shared),
+                             quadrotor_control.KIND: delegate_arguments(QuadrotorHJGuardian, "quadrotor", quadrotor, shared)}
         self.standstill_lookup = bool(standstill_lookup)
         self.horizon = finite("horizon", horizon, 0.0, lo_open=True)
         if mode not in ("avoid", "reach_avoid"):
@@ -243,20 +243,8 @@ class HJGuardian(MazeDelegation, Guardian):
             self.solve_seconds = seconds
         return V
 
-    def _maze_guardian(self, action_space):
-        """The delegate for the maze car's or the quadrotor's action space (``None``: Dubins4D)."""
-        if self._quadrotor_args is None or not is_quadrotor_space(action_space):
-            return super()._maze_guardian(action_space)
-        if self._quadrotor is None:
-            self._quadrotor = QuadrotorHJGuardian(**self._quadrotor_args)
-            self._quadrotor.name = self.name
-        return self._quadrotor
-
     def reset(self, **kwargs) -> None:
-        maze = self._maze_guardian(kwargs.get("action_space"))
-        self._maze = maze
-        if maze is not None:
-            maze.reset(**kwargs)
+        if self._dispatch_reset(kwargs):
             return
         super().reset(**kwargs)
         self.check_spaces(self.observation_space, self.action_space)
@@ -317,8 +305,8 @@ class HJGuardian(MazeDelegation, Guardian):
         return self.margin + T * self.decrease_rate(state, grad) + 0.5 * T * T * bend
 
     def act(self, observation, info=None):
-        if self._maze is not None:
-            return self._maze.act(observation, info)
+        if self.delegate is not None:
+            return self.delegate.act(observation, info)
         s = self._state_and_lap()
         return self._decide(s)
 
@@ -348,21 +336,9 @@ class HJGuardian(MazeDelegation, Guardian):
         return self.action_space.inactive()
 
     def stats(self) -> dict:
-        if self._maze is not None:
-            return self._maze.stats()
+        if self.delegate is not None:
+            return self.delegate.stats()
         return dict(self._counts, solve_seconds=self.solve_seconds)
-
-
-def _delegate_arguments(cls, what: str, given, shared: dict) -> dict | None:
-    """The arguments of the ``what`` system's guardian ``cls``: ``given`` (a dict of its
-    arguments; ``False`` refuses that system's envs) over the arguments all systems share."""
-    if given is False:
-        return None
-    if given is not None and not isinstance(given, dict):
-        raise ValueError(f"{what} must be a dict of {cls.__module__}.{cls.__name__} arguments (or False), got {given!r}")
-    args = shared | dict(given or {})
-    cls(**args)  # a bad argument fails at construction, naming it
-    return args
 
 
 class HJPaperGuardian(HJGuardian):

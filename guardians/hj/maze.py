@@ -113,7 +113,8 @@ import math
 
 import numpy as np
 
-from guardians._checks import finite, integer, maze_car_only
+from guardians._checks import finite, integer
+from guardians.dispatch import maze_car_only
 from guardians.base import Guardian
 from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
@@ -123,7 +124,6 @@ from guardians.hj.solver import check_scheme, select_backend, solve_brt
 
 __all__ = ["MazeHJGuardian", "maze_grid", "wall_target"]
 
-#: The maze car's controls (:data:`rmm_envs.envs.dubins3d_maze_parallel.CONTROLS`).
 REGIONS = ("route", "maze")
 MAZE_RULES = ("lookahead", "distance")
 SAMPLE_DT = 0.2  # s between the look-ahead's path samples (2 px at 10 px/s)

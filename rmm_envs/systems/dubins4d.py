@@ -39,7 +39,7 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency; numpy alone still works
     njit = None
 
-__all__ = ["CONTROLS", "SERIES_COEFFICIENTS", "Dubins4D", "FullBraking", "desired_heading", "segment_position", "wrap_angle"]
+__all__ = ["CONTROLS", "KIND", "SERIES_COEFFICIENTS", "Dubins4D", "FullBraking", "desired_heading", "segment_position", "wrap_angle"]
 
 _COMPILED_MAX_N = 8  # up to this many states per call, the compiled scalar path is faster
 
@@ -355,6 +355,8 @@ class Dubins4D:
 
 #: the guardian action's control fields of ``u = (u1, u2)``, in order (the Dubins4D envs' action space)
 CONTROLS = ("turnrate_ctrl", "accel_ctrl")
+#: the system's kind in its guardian action space's contract (rmm_envs.autonomy.SystemContract)
+KIND = "dubins4d"
 
 
 def desired_heading(theta: float, theta_goal: float) -> float:
