@@ -110,19 +110,6 @@ class Guardian:
     def act(self, observation: np.ndarray, info: dict[str, Any]) -> dict:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def _state_and_lap(self) -> np.ndarray:
-        """For a privileged guardian: the env's privileged ``state`` as floats; also measures the simulated time between consecutive calls from ``sim_time`` into
-        ``self._measured_lap`` (``self._last_time``: the previous call's time, ``None`` at
-        first; neither moves when the env reports no time or the time does not advance)."""
-        priv = self._privileged()
-        t = priv.get("sim_time")
-        if t is not None:
-            last = getattr(self, "_last_time", None)
-            if last is not None and t > last:
-                self._measured_lap = float(t - last)
-            self._last_time = float(t)
-        return np.asarray(priv["state"], float)
-
     def warm_up(self, observation: np.ndarray, info: dict[str, Any]) -> None:
         """Run the decision's compiled paths once, untimed (see the module docstring): one
         :meth:`act`.  The caller resets the guardian afterwards."""

@@ -235,7 +235,7 @@ def _closed_loop_min_barrier(g, state, seconds=6.0, dt=0.02):
     worst = math.inf
     driver = CLFDriver()  # the env's reckless driver: straight for the goal, through the obstacle
     for _ in range(int(seconds / dt)):
-        g._lap = dt
+        g._measured_lap = dt
         u_nom = driver.control(s, g.goal[:2]) if g.reference == "nominal" else None
         a = g._decide(s, u_nom)
         u = np.array([a["turnrate_ctrl"][0], a["accel_ctrl"][0]], float) if a["active_ctrl"] else np.zeros(2)

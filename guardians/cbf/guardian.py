@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from guardians._checks import finite, integer, number_pair
-from guardians.base import Guardian
+from guardians.privileged import PrivilegedGuardian
 from guardians.cbf.backend import dubins4d_qp, parse_solver
 from guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_values, critical_obstacle, inflated_radii
 from guardians.cbf.maze import MazeCBFGuardian
@@ -35,7 +35,7 @@ def _box_problem(u1, u2) -> str | None:
     return "the control box must contain 0 in u1 and allow braking and accelerating in u2"
 
 
-class CBFGuardian(SystemDispatch, Guardian):
+class CBFGuardian(SystemDispatch, PrivilegedGuardian):
     """HOCBF safety filter with one-step latency prediction and recovery (see :mod:`guardians.cbf`).
 
     ``u1_bounds``/``u2_bounds`` (default ``None``: the action space's, read at ``reset``) and
@@ -44,8 +44,6 @@ class CBFGuardian(SystemDispatch, Guardian):
     ``"clf"`` re-derives a goal-seeking control from CLF rows, as the paper did."""
 
     name = "cbf"
-    observation_type = "global"
-    privileged = True
     others = {dubins3d.KIND: MazeCBFGuardian, quadrotor_control.KIND: QuadrotorCBFGuardian}
 
     def __init__(self, p1: float = 0.7535, p2: float = 0.6664, inflation: float = 1.05,
@@ -137,8 +135,7 @@ class CBFGuardian(SystemDispatch, Guardian):
         self._rows = BarrierRows(obstacles, self.radii, self.goal, self.params)
         self._counts = self._zero_counts()
         self._pending = None  # the guardian's control acting during the coming lap; None: the driver's
-        self._last_time = float(priv.get("sim_time", 0.0))
-        self._lap = self.lap_guess
+        self.start_laps(self.lap_guess, since=priv.get("sim_time", 0.0))
         self._recovering = None  # index of the obstacle being recovered from
         self.K = obstacles.shape[0]
         self._qp = dubins4d_qp(self.solver, self.K, self.params, self.p_theta, self.p_v, self.eps)
@@ -180,7 +177,7 @@ class CBFGuardian(SystemDispatch, Guardian):
         """The backup manoeuvre about obstacle ``i`` at ``state`` (:mod:`guardians.cbf`): ``(u1, u2)``.
         ``side`` (+1: counter-clockwise tangent, -1: clockwise) overrides the choice of tangent."""
         u, self._last_side = recovery_control(state, i, self.obstacles, self.radii, self.goal, self.params,
-                                              self._lap if lap is None else lap, self.v_stuck, side, rows=self._rows)
+                                              self._measured_lap if lap is None else lap, self.v_stuck, side, rows=self._rows)
         return u
 
     def _recover(self, state):
@@ -192,7 +189,7 @@ class CBFGuardian(SystemDispatch, Guardian):
         self._counts["recoveries"] += 1
         u = self.recovery_control(state, self._recovering, side=self._side)
         self._side = self._last_side  # keep going round the same way
-        if abs(u[0]) * self._lap < 1e-3 and state[3] + u[1] * self._lap <= self.v_stuck:
+        if abs(u[0]) * self._measured_lap < 1e-3 and state[3] + u[1] * self._measured_lap <= self.v_stuck:
             # stalled: stopped, facing the target and blocked by another obstacle's row (two
             # overlapping obstacles form a notch).  Go round the other way; if that is blocked
             # too, recover from the obstacle that now blocks.
@@ -242,18 +239,14 @@ class CBFGuardian(SystemDispatch, Guardian):
         u_nom = self.nominal(info)
         priv = self._privileged()
         state = np.asarray(priv["state"], float)
-        if not all(map(math.isfinite, state.tolist())):
-            self._counts["nan_states"] += 1
+        if not self.finite_state(state):
             return self._emit(0.0, self.u2_min)
         if self.predict_latency:
-            t = float(priv.get("sim_time", self._last_time))
-            if t > self._last_time:
-                self._lap = t - self._last_time
-            self._last_time = t
+            self.measure_lap(priv)
             # the control acting during the coming lap: the guardian's own last one, or the
             # driver's, which is the nominal control at this state (unknown to "clf": 0)
             during = self._pending if self._pending is not None else (u_nom if u_nom is not None else np.zeros(2))
-            state = self.predict(state, during, self._lap)
+            state = self.predict(state, during, self._measured_lap)
         return self._decide(state, u_nom)
 
     def warm_up(self, observation, info=None) -> None:
@@ -296,7 +289,7 @@ class CBFGuardian(SystemDispatch, Guardian):
                 return self._emit(*self._recover(state))
             return self._emit(0.0, self.u2_min)
         if any_row_active(G, h, z, self.K, self.active_atol, self.active_rtol):
-            if self.recovery and state[3] + z[1] * self._lap <= self.v_stuck:
+            if self.recovery and state[3] + z[1] * self._measured_lap <= self.v_stuck:
                 return self._emit(*self._recover(state))
             return self._emit(z[0], z[1])
         return self._inactive()

@@ -93,7 +93,7 @@ import scipy.sparse as sp
 
 from guardians._checks import finite, integer
 from guardians.dispatch import maze_car_only
-from guardians.base import Guardian
+from guardians.privileged import PrivilegedGuardian
 from guardians.cbf.backend import QpsolversQP, parse_solver
 
 __all__ = ["MazeCBFGuardian", "WallQP", "wall_rows"]
@@ -177,12 +177,10 @@ class WallQP:
         return np.asarray(res.x)
 
 
-class MazeCBFGuardian(Guardian):
+class MazeCBFGuardian(PrivilegedGuardian):
     """HOCBF safety filter for the maze car; see the module docstring."""
 
     name = "cbf"
-    observation_type = "global"
-    privileged = True
 
     def __init__(self, barrier: str = "turning", p1: float | None = None, p2: float = 0.1, margin: float = 2.0, n_walls: int = 8,
                  active_atol: float = 1e-3, predict_latency: bool = True, lap_guess: float = 0.1,
@@ -235,8 +233,7 @@ class MazeCBFGuardian(Guardian):
         self._safe = space.safe_default.policy(space, self.rng) if space.safe_default is not None else None
         self._counts = self._zero()
         self._pending = None  # the guardian's turn rate acting during the coming lap; None: the driver's
-        self._last_time = float(priv.get("sim_time", 0.0))
-        self._lap = self.lap_guess
+        self.start_laps(self.lap_guess, since=priv.get("sim_time", 0.0))
 
     # ------------------------------------------------------------------ the maths
     def rows(self, state):
@@ -289,17 +286,13 @@ class MazeCBFGuardian(Guardian):
         u_nom = self.nominal(info)
         priv = self._privileged()
         state = np.asarray(priv["state"], float)
-        if not np.all(np.isfinite(state)):
-            self._counts["nan_states"] += 1
+        if not self.finite_state(state):
             u = self._safe(observation)[0] if self._safe is not None else self.u_max
             return self._emit(u)
         if self.predict_latency:
-            t = float(priv.get("sim_time", self._last_time))
-            if t > self._last_time:
-                self._lap = t - self._last_time
-            self._last_time = t
+            self.measure_lap(priv)
             during = self._pending if self._pending is not None else u_nom  # the driver's is the nominal
-            state = self.predict(state, during, self._lap)
+            state = self.predict(state, during, self._measured_lap)
         return self.decide(state, u_nom)
 
     def decide(self, state, u_ref: float = 0.0):

@@ -127,7 +127,7 @@ import numpy as np
 
 from guardians._checks import finite, integer
 from guardians.dispatch import quadrotor_only
-from guardians.base import Guardian
+from guardians.privileged import PrivilegedGuardian
 from guardians.cbf.backend import parse_solver
 from guardians.cbf.quadrotor_rows import CommandQP, command_rows, room_shapes
 from rmm_envs.systems.quadrotor_control import CommandController, body_packed, body_step, command_wrench
@@ -158,12 +158,10 @@ if njit is not None:
     _flow = njit(cache=True)(_flow)
 
 
-class QuadrotorCBFGuardian(Guardian):
+class QuadrotorCBFGuardian(PrivilegedGuardian):
     """HOCBF safety filter of the quadrotor's velocity command; see the module docstring."""
 
     name = "cbf"
-    observation_type = "global"
-    privileged = True
 
     def __init__(self, p1: float = 3.0, p2: float = 3.0, margin: float = 0.05, tau_h: float = 0.42, tau_z: float = 0.34,
                  body_radius: float = BOUND, n_rows: int = 8, slack_weight: float = 1e3, active_atol: float = 1e-3,
@@ -217,8 +215,7 @@ class QuadrotorCBFGuardian(Guardian):
         self._qp = CommandQP(self.K, self.lo[:3], self.hi[:3], self.slack_weight, self.eps, self._solver_name)
         self._counts = self._zero()
         self._pending = None  # the guardian's command acting during the coming lap; None: the pilot's
-        self._last_time = float(priv.get("sim_time", 0.0))
-        self._lap = self.lap_guess
+        self.start_laps(self.lap_guess, since=priv.get("sim_time", 0.0))
         self._side = 0  # 0: filtering the nominal; +-1: following a shape (the deadlock escape), on that side
         self._followed = None  # (x, y, side) of the last step spent following a shape
         self._normal = (0.0, 0.0)  # the horizontal normal of the shape followed (heading frame)
@@ -265,16 +262,12 @@ class QuadrotorCBFGuardian(Guardian):
         u_nom = self.nominal(info)
         priv = self._privileged()
         state = np.asarray(priv["state"], float)
-        if state.shape != (13,) or not all(map(math.isfinite, state.tolist())):
-            self._counts["nan_states"] += 1
+        if not self.finite_state(state, 13):
             return self._hover()
         if self.predict_latency:
-            t = float(priv.get("sim_time", self._last_time))
-            if t > self._last_time:
-                self._lap = t - self._last_time
-            self._last_time = t
+            self.measure_lap(priv)
             during = self._pending if self._pending is not None else u_nom
-            state = self.predict(state, during, self._lap)
+            state = self.predict(state, during, self._measured_lap)
         return self.decide(state, u_nom)
 
     def slide_reference(self, b, G, u) -> np.ndarray | None:

@@ -135,7 +135,7 @@ import math
 import numpy as np
 
 from guardians._checks import finite, integer
-from guardians.base import Guardian
+from guardians.privileged import PrivilegedGuardian
 from guardians.dispatch import SystemDispatch, delegate_arguments
 from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
@@ -164,11 +164,9 @@ def obstacle_target(grid: Grid, obstacles: np.ndarray) -> np.ndarray:
 RULES = ("distance", "gradient", "value")
 
 
-class HJGuardian(SystemDispatch, Guardian):
+class HJGuardian(SystemDispatch, PrivilegedGuardian):
     name = "hj"
     others = {dubins3d.KIND: MazeHJGuardian, quadrotor_control.KIND: QuadrotorHJGuardian}
-    observation_type = "global"
-    privileged = True
 
     def __init__(self, grid: Grid | None = None, grid_n=None, horizon: float = 4.0, order: int = 2, rk: int = 3, cfl: float = 0.8,
                  rule: str = "distance", margin: float | None = None, delay: int = 1, lap: float | None = None,
@@ -209,8 +207,6 @@ class HJGuardian(SystemDispatch, Guardian):
         self._counts = {"outside_grid": 0, "nan_states": 0, "cache_hits": 0, "solves": 0}
         self.solve_seconds = 0.0
         self.V = None
-        self._last_time = None  # sim time of the previous decision (for the lap)
-        self._measured_lap = None
 
     def spec(self, obstacles, goal=None) -> dict:
         spec = {"dynamics": self.dynamics.key(), "grid": self.grid.key(), "horizon": self.horizon, "order": self.order,
@@ -264,8 +260,7 @@ class HJGuardian(SystemDispatch, Guardian):
         self._interp = self.grid.interpolator(self._arrays)
         self._ra_arrays = None
         self._ra_interp = None
-        self._last_time = None  # sim time of the previous decision (for the lap)
-        self._measured_lap = None
+        self.start_laps()
         if self.mode == "reach_avoid":
             V_ra = self.value_function(priv["obstacles"], goal=priv["goal"])
             self._ra_arrays = [V_ra, *central_gradient(V_ra, self.grid)]
@@ -274,13 +269,6 @@ class HJGuardian(SystemDispatch, Guardian):
     def evaluate(self, state) -> np.ndarray:
         """``(V, dV/dx, dV/dy, dV/dtheta, dV/dv)`` at ``state``."""
         return self._interp(np.asarray(state, float))
-
-    def current_lap(self) -> float:
-        """The lap length the rule assumes: ``lap`` if given, else the last one measured
-        (0.1 s, the environment's default base step, before any)."""
-        if self.lap is not None:
-            return self.lap
-        return self._measured_lap if self._measured_lap is not None else 0.1
 
     def decrease_rate(self, state, grad) -> float:
         """How fast ``V`` can fall at ``state`` under the worst held control (first order, ``>= 0``)."""
@@ -311,8 +299,7 @@ class HJGuardian(SystemDispatch, Guardian):
         return self._decide(s)
 
     def _decide(self, s):
-        if not all(map(math.isfinite, s.tolist())):
-            self._counts["nan_states"] += 1
+        if not self.finite_state(s):
             return self.action_space.active((0.0, -self.dynamics.u2_max))
         if not self.grid.contains(s):
             self._counts["outside_grid"] += 1

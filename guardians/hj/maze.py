@@ -115,7 +115,7 @@ import numpy as np
 
 from guardians._checks import finite, integer
 from guardians.dispatch import maze_car_only
-from guardians.base import Guardian
+from guardians.privileged import PrivilegedGuardian
 from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid, central_gradient
@@ -147,12 +147,10 @@ def wall_target(grid: Grid, maze) -> np.ndarray:
     return np.broadcast_to(d[:, :, None, None], grid.shape).astype(np.float32)
 
 
-class MazeHJGuardian(Guardian):
+class MazeHJGuardian(PrivilegedGuardian):
     """Grid HJ reachability guardian for the maze car; see the module docstring."""
 
     name = "hj"
-    observation_type = "global"
-    privileged = True
 
     def __init__(self, spacing: float = 8.0, n_heading: int = 32, horizon: float = 20.0, region: str = "route",
                  route_margin: int = 1, order: int = 2, rk: int = 3, cfl: float = 0.8, margin: float | None = None,
@@ -252,8 +250,7 @@ class MazeHJGuardian(Guardian):
         self._arrays = [self.V, *central_gradient(self.V, self.grid)[:3]]
         self._margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if self.margin is None else self.margin
         self._safe = space.safe_default.policy(space, self.rng) if space.safe_default is not None else None
-        self._last_time = None
-        self._measured_lap = None
+        self.start_laps()
         self._maze_geom = (np.ascontiguousarray(np.asarray(maze.walls, float)), float(maze.half), float(maze.width),
                            float(maze.height))
         self._manoeuvres = manoeuvres(self.u_max, self.lookahead)
@@ -265,11 +262,6 @@ class MazeHJGuardian(Guardian):
         x, y, psi = (float(s) for s in state[:3])
         return self.grid.interp_many(self._arrays, np.array([x, y, psi, self.speed]))
 
-    def current_lap(self) -> float:
-        if self.lap is not None:
-            return self.lap
-        return self._measured_lap if self._measured_lap is not None else 0.1
-
     def threshold(self) -> float:
         """The value at or below which the guardian takes control."""
         return self._margin + self.speed * (1 + self.delay) * self.current_lap()
@@ -277,8 +269,7 @@ class MazeHJGuardian(Guardian):
     def act(self, observation, info=None):
         s = self._state_and_lap()
         self._pending, pending = None, self._pending
-        if not np.all(np.isfinite(s)):
-            self._counts["nan_states"] += 1
+        if not self.finite_state(s):
             u = self._safe(observation) if self._safe is not None else self.action_space.control_high
             return self.action_space.active(u)
         psi = (s[2] + math.pi) % (2 * math.pi) - math.pi
