@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rmm_envs.systems.dubins4d import desired_heading
+from rmm_envs.systems.dubins4d import desired_heading_compiled as _desired_heading
 
 try:
     from numba import njit
@@ -133,9 +133,7 @@ def any_row_active(G: np.ndarray, h: np.ndarray, z: np.ndarray, K: int, atol: fl
     return False
 
 
-_desired_heading = desired_heading
 if njit is not None:  # one source: the compiled loop runs these very functions
-    _desired_heading = njit(cache=True)(desired_heading)
     _rows_into = njit(cache=True)(_rows_into)
     any_row_active = njit(cache=True)(any_row_active)
 
