@@ -102,13 +102,13 @@ import numpy as np
 
 from guardians._checks import integer
 from guardians.base import Guardian
+from guardians.lrmm.defaults import PAPER_THRESHOLD, check_threshold, decision_threshold, stored_decision
 from guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, load_model
 from guardians.lrmm.nominal import TRIGGERS, driver_control, hand_back_options, make_rater
 from rmm_envs.portable import wrap_angle
 
 __all__ = ["PAPER_THRESHOLD", "TRIGGERS", "LRMMGuardian", "LRMMPaperGuardian"]
 
-PAPER_THRESHOLD = 0.85  # the paper's Table I setting
 ACTIONS = ("head", "heuristic", "turn", "safe")
 DEFAULT_ENV = "Dubins4DCirclesGuarded-v0"  # whose shipped model a guardian built without env_id or model reads
 #: how to get the model of another env: the guardian picks its model when it is built, not at reset
@@ -154,10 +154,7 @@ class LRMMGuardian(Guardian):
                  inputs: str | None = None, trigger: str | None = None, margin: float | None = None,
                  restart: float | None = None) -> None:
         super().__init__()
-        if threshold is not None and (isinstance(threshold, bool) or not isinstance(threshold, (int, float, np.number))):
-            raise ValueError(f"threshold must be a number in [0, 1], got {threshold!r}")
-        if threshold is not None and not 0.0 <= threshold <= 1.0:
-            raise ValueError(f"threshold must be in [0, 1], got {threshold}")
+        check_threshold(threshold)  # refused before any file is read
         integer("window", window, 1)
         if commit is not None:
             integer("commit", commit, 0, "steps to stay in control after the risk falls back")
@@ -174,7 +171,7 @@ class LRMMGuardian(Guardian):
         where = str(getattr(self.model, "path", "the model"))
         # the observation field the model reads: given, else the env's entry in the table, else all of it
         self.inputs = inputs if inputs is not None else (ship.inputs if ship is not None else None)
-        decision = self.model.meta.get("decision") or (ship.decision if ship is not None and model is None else None)
+        decision = stored_decision(self.model.meta, ship, model is not None)
         if action is None and decision and decision.get("action") is not None:
             action = decision["action"]
             if action not in ACTIONS:
@@ -189,15 +186,10 @@ class LRMMGuardian(Guardian):
             raise ValueError(f"action='head' needs a model with a 'candidates' head; {where} has none")
         if commit is None:
             commit = int(decision.get("commit", 0)) if decision else 0
-        if threshold is None:
-            if decision is None or "threshold" not in decision:
-                threshold = PAPER_THRESHOLD
-                self._fallback_warning(f"{where} has no 'decision' threshold: using the paper's {PAPER_THRESHOLD}")
-            else:
-                threshold = float(decision["threshold"])
-                if not 0.0 <= threshold <= 1.0:
-                    raise ValueError(f"{where}: stored decision threshold must be in [0, 1], got {threshold}")
-        self.threshold = float(threshold)
+        # argument > the model's stored decision > the shipped entry's > the paper's (guardians.lrmm.defaults)
+        self.threshold, self.threshold_source = decision_threshold(threshold, decision, where)
+        if self.threshold_source == "paper":
+            self._fallback_warning(f"{where} has no 'decision' threshold: using the paper's {PAPER_THRESHOLD}")
         self.trigger, self.margin, self.restart = hand_back_options(trigger, margin, restart, decision, action, hysteresis)
         self._warned = False
         self.action = action
