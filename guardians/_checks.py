@@ -1,13 +1,56 @@
 """Argument checks shared by the guardians' constructors: a bad value is refused with a
-message that names the argument, the value and what was expected."""
+message that names the argument, the value and what was expected.  :class:`Settings` is the
+base of a guardian's frozen settings object (checked once, with named presets), and
+:func:`settings_signature` gives the constructor that builds one its keyword signature."""
 
 from __future__ import annotations
 
+import dataclasses
+import inspect
 import math
 
 import numpy as np
 
-__all__ = ["finite", "integer", "number_pair"]
+__all__ = ["Settings", "finite", "integer", "number_pair", "settings_signature"]
+
+
+class Settings:
+    """Base of a frozen dataclass of a guardian's settings: subclasses check and normalise every
+    value in ``__post_init__`` (through ``_set``) and list named presets in ``PRESETS``."""
+
+    PRESETS: dict = {}
+
+    def _set(self, name: str, value) -> None:
+        object.__setattr__(self, name, value)
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in dataclasses.fields(cls))
+
+    def replace(self, **changes) -> "Settings":
+        """These settings with ``changes`` (checked again); an unknown name is a ``TypeError``
+        naming it and the settings there are."""
+        unknown = sorted(set(changes) - set(self.names()))
+        if unknown:
+            raise TypeError(f"unknown {type(self).__name__} setting(s) {unknown}; the settings are: {', '.join(self.names())}")
+        return dataclasses.replace(self, **changes) if changes else self
+
+    @classmethod
+    def preset(cls, name: str, **changes) -> "Settings":
+        """The preset ``name`` (a key of ``PRESETS``) with ``changes``."""
+        if name not in cls.PRESETS:
+            raise ValueError(f"unknown {cls.__name__} preset {name!r}; the presets are: {sorted(cls.PRESETS)}")
+        return cls.PRESETS[name].replace(**changes)
+
+
+def settings_signature(cls, default: Settings) -> inspect.Signature:
+    """The signature of a constructor ``(self, settings=None, **options)`` that builds ``cls``
+    settings from ``default`` and ``options``: one keyword parameter per setting, with
+    ``default``'s values, so introspection (``rmm-bench``'s ``threads``, ``help()``) sees them."""
+    params = [inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD),
+              inspect.Parameter("settings", inspect.Parameter.POSITIONAL_OR_KEYWORD, default=None)]
+    params += [inspect.Parameter(n, inspect.Parameter.KEYWORD_ONLY, default=getattr(default, n)) for n in cls.names()]
+    return inspect.Signature(params)
 
 
 def finite(name: str, value, lo: float | None = None, lo_open: bool = False) -> float:

@@ -9,31 +9,20 @@ import math
 
 import numpy as np
 
-from guardians._checks import finite, integer, number_pair
+from guardians._checks import settings_signature
 from guardians.privileged import PrivilegedGuardian
-from guardians.cbf.backend import dubins4d_qp, parse_solver
+from guardians.cbf.backend import dubins4d_qp
 from guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_values, critical_obstacle, inflated_radii
 from guardians.cbf.maze import MazeCBFGuardian
 from guardians.cbf.quadrotor import QuadrotorCBFGuardian
 from guardians.cbf.recovery import recovery_control, recovery_done
+from guardians.cbf.settings import CBF_PRESETS, REFERENCES, CBFSettings, box_problem
 from guardians.dispatch import SystemDispatch, delegate_arguments
 from rmm_envs.portable import matvec
 from rmm_envs.systems import dubins3d, quadrotor_control
 from rmm_envs.systems.dubins4d import Dubins4D
 
 __all__ = ["CBFGuardian", "CBFPaperGuardian", "REFERENCES"]
-
-#: What the QP keeps the control close to: the driver's ``info["nominal_control"]`` (a safety
-#: filter) or, as the paper, a goal-seeking control re-derived from CLF rows.
-REFERENCES = ("nominal", "clf")
-
-
-def _box_problem(u1, u2) -> str | None:
-    """Why the control box ``u1 x u2`` cannot serve the guardian, or ``None``."""
-    if u1[0] <= 0 <= u1[1] and u2[0] < 0 < u2[1]:
-        return None
-    return "the control box must contain 0 in u1 and allow braking and accelerating in u2"
-
 
 class CBFGuardian(SystemDispatch, PrivilegedGuardian):
     """HOCBF safety filter with one-step latency prediction and recovery (see :mod:`guardians.cbf`).
@@ -46,54 +35,25 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
     name = "cbf"
     others = {dubins3d.KIND: MazeCBFGuardian, quadrotor_control.KIND: QuadrotorCBFGuardian}
 
-    def __init__(self, p1: float = 0.7535, p2: float = 0.6664, inflation: float = 1.05,
-                 gamma_vmin: float = 1.0, gamma_vmax: float = 1.0, lambda_theta: float = 1.0,
-                 lambda_v: float = 1.0, p_theta: float = 1.0, p_v: float = 1.0,
-                 u1_bounds=None, u2_bounds=None, v_bounds=None,
-                 active_atol: float = 1e-3, active_rtol: float = 0.0, low_speed_stop: bool = False,
-                 max_obstacles: int = 64, eps: float = 1e-6, predict_latency: bool = True,
-                 recovery: bool = True, v_stuck: float = 0.05, lap_guess: float = 0.1,
-                 goal_aware_margin: bool = True, solver: str = "osqp", maze: dict | None = None,
-                 reference: str = "nominal", quadrotor: dict | None = None) -> None:
+    preset = "cbf"  #: the CBFSettings preset the keyword arguments change
+
+    def __init__(self, settings: CBFSettings | None = None, **options) -> None:
+        """``settings`` (default: the class's :attr:`preset`) with ``options``, any of
+        :class:`~guardians.cbf.settings.CBFSettings`' fields, changed."""
         super().__init__()
-        if reference not in REFERENCES:
-            raise ValueError(f"reference must be one of {REFERENCES} (filter the driver's info['nominal_control'], "
-                             f"or the paper's CLF rows), got {reference!r}")
-        self.reference = reference
-        parse_solver(solver)  # a bad name fails here, listing the installed solvers
-        self.solver = solver
-        shared = {"solver": solver, "eps": eps, "predict_latency": predict_latency, "lap_guess": lap_guess}
-        self._system_args = {dubins3d.KIND: delegate_arguments(MazeCBFGuardian, "maze", maze, shared),
-                             quadrotor_control.KIND: delegate_arguments(QuadrotorCBFGuardian, "quadrotor", quadrotor, shared)}
-        self.p1 = finite("p1 (class-K gain)", p1, 0.0, lo_open=True)
-        self.p2 = finite("p2 (class-K gain)", p2, 0.0, lo_open=True)
-        k = finite("inflation", inflation)
-        if not k >= 1:
-            raise ValueError(f"inflation must be >= 1 (1 = the obstacle itself), got {inflation!r}")
-        self.k = k
-        self.gamma_vmin = finite("gamma_vmin", gamma_vmin, 0.0, lo_open=True)
-        self.gamma_vmax = finite("gamma_vmax", gamma_vmax, 0.0, lo_open=True)
-        self.lambda_theta = finite("lambda_theta", lambda_theta, 0.0, lo_open=True)
-        self.lambda_v = finite("lambda_v", lambda_v, 0.0, lo_open=True)
-        self.p_theta = finite("p_theta", p_theta, 0.0, lo_open=True)
-        self.p_v = finite("p_v", p_v, 0.0, lo_open=True)
-        self._u1_arg = None if u1_bounds is None else number_pair("u1_bounds", u1_bounds)
-        self._u2_arg = None if u2_bounds is None else number_pair("u2_bounds", u2_bounds)
-        self.v_min, self.v_max = (Dubins4D.v_min, Dubins4D.v_max) if v_bounds is None else number_pair("v_bounds", v_bounds)
-        if self._u1_arg is not None and _box_problem(self._u1_arg, (-1.0, 1.0)):
-            raise ValueError(f"u1_bounds must contain 0, got {u1_bounds!r}")
-        if self._u2_arg is not None and _box_problem((0.0, 0.0), self._u2_arg):
-            raise ValueError(f"u2_bounds must allow braking and accelerating (min < 0 < max), got {u2_bounds!r}")
-        self.active_atol = finite("active_atol", active_atol, 0.0)
-        self.active_rtol = finite("active_rtol", active_rtol, 0.0)
-        self.low_speed_stop = bool(low_speed_stop)
-        self.max_obstacles = integer("max_obstacles", max_obstacles, 0)
-        self.eps = finite("eps", eps, 0.0, lo_open=True)
-        self.predict_latency = bool(predict_latency)
-        self.recovery = bool(recovery)
-        self.v_stuck = finite("v_stuck", v_stuck, 0.0)
-        self.lap_guess = finite("lap_guess", lap_guess, 0.0, lo_open=True)
-        self.goal_aware_margin = bool(goal_aware_margin)
+        s = self.settings = (settings if settings is not None else CBF_PRESETS[self.preset]).replace(**options)
+        self.reference, self.solver = s.reference, s.solver
+        shared = {"solver": s.solver, "eps": s.eps, "predict_latency": s.predict_latency, "lap_guess": s.lap_guess}
+        self._system_args = {dubins3d.KIND: delegate_arguments(MazeCBFGuardian, "maze", s.maze, shared),
+                             quadrotor_control.KIND: delegate_arguments(QuadrotorCBFGuardian, "quadrotor", s.quadrotor, shared)}
+        self.p1, self.p2, self.k = s.p1, s.p2, s.inflation
+        self.gamma_vmin, self.gamma_vmax, self.lambda_theta, self.lambda_v = s.gamma_vmin, s.gamma_vmax, s.lambda_theta, s.lambda_v
+        self.p_theta, self.p_v = s.p_theta, s.p_v
+        self._u1_arg, self._u2_arg = s.u1_bounds, s.u2_bounds
+        self.v_min, self.v_max = s.speed_bounds
+        self.active_atol, self.active_rtol, self.low_speed_stop = s.active_atol, s.active_rtol, s.low_speed_stop
+        self.max_obstacles, self.eps, self.v_stuck, self.lap_guess = s.max_obstacles, s.eps, s.v_stuck, s.lap_guess
+        self.predict_latency, self.recovery, self.goal_aware_margin = s.predict_latency, s.recovery, s.goal_aware_margin
         self._qp = None
         self._counts = self._zero_counts()
 
@@ -109,7 +69,7 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         lo, hi = space.control_low, space.control_high
         u1 = self._u1_arg or (float(lo[0]), float(hi[0]))
         u2 = self._u2_arg or (float(lo[1]), float(hi[1]))
-        problem = _box_problem(u1, u2)
+        problem = box_problem(u1, u2)
         if problem:
             raise ValueError(f"guardian {self.name!r}: {problem}, got u1 in {list(u1)} and u2 in {list(u2)} "
                              f"(from the action space {space} unless given)")
@@ -300,13 +260,12 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         return dict(self._counts)
 
 
+CBFGuardian.__init__.__signature__ = settings_signature(CBFSettings, CBF_PRESETS["cbf"])
+
+
 class CBFPaperGuardian(CBFGuardian):
     """The paper's CBF rule (the previous ``cbf`` exactly): the CBF-CLF QP at the observed state,
-    maximum braking when it is infeasible, no recovery."""
+    maximum braking when it is infeasible, no recovery (the ``cbf-paper`` preset)."""
 
     name = "cbf-paper"
-
-    def __init__(self, *args, predict_latency: bool = False, recovery: bool = False,
-                 goal_aware_margin: bool = False, maze=False, reference: str = "clf", quadrotor=False, **kwargs) -> None:
-        super().__init__(*args, predict_latency=predict_latency, recovery=recovery,
-                         goal_aware_margin=goal_aware_margin, maze=maze, reference=reference, quadrotor=quadrotor, **kwargs)
+    preset = "cbf-paper"

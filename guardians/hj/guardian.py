@@ -134,7 +134,7 @@ import math
 
 import numpy as np
 
-from guardians._checks import finite, integer
+from guardians._checks import settings_signature
 from guardians.privileged import PrivilegedGuardian
 from guardians.dispatch import SystemDispatch, delegate_arguments
 from guardians.hj.cache import ValueCache, load_or_solve
@@ -143,7 +143,8 @@ from guardians.hj.grid import Grid
 from guardians.hj.grid import central_gradient
 from guardians.hj.maze import MazeHJGuardian
 from guardians.hj.quadrotor import QuadrotorHJGuardian
-from guardians.hj.solver import THREADS_VARIABLE, check_scheme, default_threads, select_backend, solve_brt  # noqa: F401
+from guardians.hj.settings import HJ_PRESETS, HJSettings
+from guardians.hj.solver import THREADS_VARIABLE, default_threads, select_backend, solve_brt  # noqa: F401
 from rmm_envs.systems import dubins3d, quadrotor_control
 
 __all__ = ["HJGuardian", "HJPaperGuardian", "default_grid", "default_threads", "obstacle_target"]
@@ -161,49 +162,34 @@ def obstacle_target(grid: Grid, obstacles: np.ndarray) -> np.ndarray:
     return np.broadcast_to(l, grid.shape).astype(np.float32)
 
 
-RULES = ("distance", "gradient", "value")
-
-
 class HJGuardian(SystemDispatch, PrivilegedGuardian):
     name = "hj"
     others = {dubins3d.KIND: MazeHJGuardian, quadrotor_control.KIND: QuadrotorHJGuardian}
 
-    def __init__(self, grid: Grid | None = None, grid_n=None, horizon: float = 4.0, order: int = 2, rk: int = 3, cfl: float = 0.8,
-                 rule: str = "distance", margin: float | None = None, delay: int = 1, lap: float | None = None,
-                 disturbance: float = 0.0, cache_dir=None, cache: bool = True, cache_max_files: int = 64,
-                 mode: str = "avoid", ra_horizon: float = 10.0, ra_margin: float = 0.5, backend: str = "auto",
-                 standstill_lookup: bool = True, threads: int | None = None, maze: dict | None = None,
-                 quadrotor: dict | None = None) -> None:
+    preset = "hj"  #: the HJSettings preset the keyword arguments change
+
+    def __init__(self, settings: HJSettings | None = None, **options) -> None:
+        """``settings`` (default: the class's :attr:`preset`) with ``options``, any of
+        :class:`~guardians.hj.settings.HJSettings`' fields, changed."""
         super().__init__()
-        shared = {"cache_dir": cache_dir, "cache": cache, "cache_max_files": cache_max_files, "backend": backend,
-                  "threads": threads, "delay": delay, "lap": lap}
-        self._system_args = {dubins3d.KIND: delegate_arguments(MazeHJGuardian, "maze", maze, shared),
-                             quadrotor_control.KIND: delegate_arguments(QuadrotorHJGuardian, "quadrotor", quadrotor, shared)}
-        self.standstill_lookup = bool(standstill_lookup)
-        self.horizon = finite("horizon", horizon, 0.0, lo_open=True)
-        if mode not in ("avoid", "reach_avoid"):
-            raise ValueError(f"mode must be 'avoid' or 'reach_avoid', got {mode!r}")
-        if rule not in RULES:
-            raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
-        self.order, self.rk, self.cfl = check_scheme(order, rk, cfl)
-        self.threads = default_threads() if threads is None else integer("threads", threads, 1, "or None")
-        cache_max_files = integer("cache_max_files", cache_max_files, 1)
-        self.mode, self.rule = mode, rule
-        self.ra_horizon = finite("ra_horizon", ra_horizon, 0.0, lo_open=True)
-        self.ra_margin = finite("ra_margin", ra_margin, 0.0)
-        self.delay = integer("delay", delay, 0, "laps between a decision and its effect")
-        self.lap = None if lap is None else finite("lap", lap, 0.0, lo_open=True)
-        if grid is not None and grid_n is not None:
-            raise ValueError("give grid or grid_n, not both")
-        self.grid = grid or (default_grid(tuple(int(k) for k in grid_n)) if grid_n is not None else default_grid())
+        s = self.settings = (settings if settings is not None else HJ_PRESETS[self.preset]).replace(**options)
+        shared = {"cache_dir": s.cache_dir, "cache": s.cache, "cache_max_files": s.cache_max_files, "backend": s.backend,
+                  "threads": s.threads, "delay": s.delay, "lap": s.lap}
+        self._system_args = {dubins3d.KIND: delegate_arguments(MazeHJGuardian, "maze", s.maze, shared),
+                             quadrotor_control.KIND: delegate_arguments(QuadrotorHJGuardian, "quadrotor", s.quadrotor, shared)}
+        self.standstill_lookup, self.horizon, self.mode, self.rule = s.standstill_lookup, s.horizon, s.mode, s.rule
+        self.order, self.rk, self.cfl = s.order, s.rk, s.cfl
+        self.threads = default_threads() if s.threads is None else s.threads
+        self.ra_horizon, self.ra_margin, self.delay, self.lap = s.ra_horizon, s.ra_margin, s.delay, s.lap
+        self.grid = s.grid or (default_grid(s.grid_n) if s.grid_n is not None else default_grid())
         # default: half a position cell, the most multilinear interpolation can over-state V
         # at a kink of a function that is 1-Lipschitz in position
-        self.margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if margin is None else finite("margin", margin)
+        self.margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if s.margin is None else s.margin
         # the Dubins4D system's bounds; reset replaces the control bounds by the action space's
-        self.dynamics = Dubins4DHJ(d_max=finite("disturbance", disturbance, 0.0))
-        self.backend = backend
-        select_backend(self.grid, self.dynamics, self.order, backend)  # a bad choice fails here, not at reset
-        self.cache = ValueCache(cache_dir, cache_max_files) if cache else None
+        self.dynamics = Dubins4DHJ(d_max=s.disturbance)
+        self.backend = s.backend
+        select_backend(self.grid, self.dynamics, self.order, s.backend)  # a bad choice fails here, not at reset
+        self.cache = ValueCache(s.cache_dir, s.cache_max_files) if s.cache else None
         self._counts = {"outside_grid": 0, "nan_states": 0, "cache_hits": 0, "solves": 0}
         self.solve_seconds = 0.0
         self.V = None
@@ -328,13 +314,13 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
         return dict(self._counts, solve_seconds=self.solve_seconds)
 
 
+HJGuardian.__init__.__signature__ = settings_signature(HJSettings, HJ_PRESETS["hj"])
+
+
 class HJPaperGuardian(HJGuardian):
     """The paper's HJ guardian (``hj-paper``): first-order scheme with RK2, take control when
-    ``V <= 0`` with the bang-bang optimal control, no allowance for the action latency."""
+    ``V <= 0`` with the bang-bang optimal control, no allowance for the action latency (the
+    ``hj-paper`` preset)."""
 
     name = "hj-paper"
-
-    def __init__(self, order: int = 1, rk: int = 2, rule: str = "value", margin: float = 0.0, standstill_lookup: bool = False,
-                 maze=False, quadrotor=False, **kwargs) -> None:
-        super().__init__(order=order, rk=rk, rule=rule, margin=margin, standstill_lookup=standstill_lookup, maze=maze,
-                         quadrotor=quadrotor, **kwargs)
+    preset = "hj-paper"
