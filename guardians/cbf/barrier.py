@@ -1,6 +1,6 @@
 """The barrier maths of the HOCBF guardians: pure functions of a state and the episode's scene.
 
-The rows of ``G z <= h`` over ``z = (u1, u2, d_th, d_v)`` (the package docstring derives them),
+The rows of ``G z <= h`` over ``z = (u1, u2, d_th, d_v)`` (`docs/design-notes.md` derives them),
 the inflated radii, the barrier values and the obstacle hardest to satisfy.  Nothing here
 keeps state; the guardian, the QP and the recovery manoeuvre all call these functions.
 """

@@ -1,6 +1,6 @@
 """The HOCBF guardians ``cbf`` and ``cbf-paper``: configuration, latency prediction and the decision.
 
-Their defaults, the rule and the reasons are in the package docstring (:mod:`guardians.cbf`).
+Their defaults, the rule and the reasons are in `docs/design-notes.md` (cbf); the settings in :mod:`guardians.cbf.settings`.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from rmm_envs.systems.dubins4d import Dubins4D
 __all__ = ["CBFGuardian", "CBFPaperGuardian", "REFERENCES"]
 
 class CBFGuardian(SystemDispatch, PrivilegedGuardian):
-    """HOCBF safety filter with one-step latency prediction and recovery (see :mod:`guardians.cbf`).
+    """HOCBF safety filter with one-step latency prediction and recovery (see `docs/design-notes.md`).
 
     ``u1_bounds``/``u2_bounds`` (default ``None``: the action space's, read at ``reset``) and
     ``v_bounds`` (default ``None``: the Dubins4D system's speed range) override the bounds.
