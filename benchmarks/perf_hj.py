@@ -34,7 +34,7 @@ from guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
 from guardians.hj.solver import solve_brt
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins4d import CONTROLS
-from rmm_envs.systems.dubins4d import Dubins4D
+from rmm_envs.systems.dubins4d import KIND, Dubins4D
 
 OBSTACLES = np.array([[0.0, 0.0, 3.0], [6.0, 5.0, 2.5], [-7.0, 3.0, 4.0], [4.0, -8.0, 2.0], [-5.0, -6.0, 3.0]])
 
@@ -89,7 +89,7 @@ def main(argv=None) -> None:
 
     box = {"obstacles": OBSTACLES, "goal": np.array([9.0, 9.0, 0.5]), "state": np.zeros(4)}
     g = HJGuardian(cache=False)
-    g.reset(seed=0, privileged=lambda: box, action_space=GuardianActionSpace.for_system(Dubins4D(), CONTROLS))
+    g.reset(seed=0, privileged=lambda: box, action_space=GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind=KIND))
     rng = np.random.default_rng(0)
     states = np.column_stack([rng.uniform(-12, 12, 2000), rng.uniform(-12, 12, 2000), rng.uniform(-np.pi, np.pi, 2000), rng.uniform(0, 2, 2000)])
     times = []

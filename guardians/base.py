@@ -1,35 +1,17 @@
 """The Guardian protocol: what a guardian is to the benchmark and to users.
 
 A guardian watches a driver and decides, each step, whether to take control and with which
-control.  It has:
-
-* ``name``: a short identifier (used in result tables);
-* ``observation_type``: ``"local"`` (uses only the env's observation), ``"global"`` (needs
-  privileged information: the true state and the obstacle geometry) or ``"none"``;
-* ``privileged`` (bool): whether :meth:`reset` must be given the env's privileged accessor;
-* :meth:`reset` at the start of every episode, with the episode's seed, the env's spaces and,
-  for privileged guardians, ``privileged``: a zero-argument callable returning the env's
-  documented privileged data (``Dubins4DCirclesEnv.privileged()``: true ``state``,
-  ``obstacles``, ``goal``, ``sim_time``).  Guardians never read private attributes of an env;
-* :meth:`act` ``(observation, info) -> action`` in the env's action space.  The action space
-  is a :class:`rmm_envs.autonomy.GuardianActionSpace`: a guardian builds every action through
-  it (``self.action_space.inactive()``, ``self.action_space.active(u)``) and reads the
-  control bounds from it (``control_low`` / ``control_high``), so the same guardian serves any
-  system that offers what it needs;
-* ``stats()``: counters the guardian wants recorded with the episode (e.g. QP fallbacks);
-* :meth:`warm_up` ``(observation, info)``: called by ``rmm-bench`` once per worker, untimed,
-  before the first timed decision (the episode is then reset), so that compiling or loading
-  compiled code is never charged to a decision; the default is one :meth:`act`, and a guardian
-  whose first decision does not reach every compiled path (a QP solved only near an obstacle)
-  runs those paths here too;
-* :meth:`input_files`: the files it read when it was built (path -> SHA-256 of the bytes it
-  read), which ``rmm-bench`` makes part of the run's identity, so a run resumed after a model
-  file changed is a new run, never a mix of two models.
-
-A guardian checks at :meth:`reset` that the spaces it was given offer what it needs, with
-:meth:`Guardian.require_action_space` and :meth:`Guardian.require_layout`; a missing piece
-raises there (``ValueError`` naming the guardian and the piece), not in the middle of an
-episode.
+control.  :class:`Guardian` is the base class: ``name``, ``observation_type`` (``"local"``,
+``"global"`` or ``"none"``), ``privileged``; :meth:`~Guardian.reset` each episode with the
+seed, the env's spaces and, for privileged guardians, the env's ``privileged()`` accessor;
+:meth:`~Guardian.act` ``(observation, info) -> action``, built through the env's
+:class:`rmm_envs.autonomy.GuardianActionSpace`; :meth:`~Guardian.stats`,
+:meth:`~Guardian.warm_up` (run once, untimed, by ``rmm-bench``) and :meth:`~Guardian.input_files`
+(files whose digests join the run's identity).  :meth:`~Guardian.check_spaces`,
+:meth:`~Guardian.require_action_space` and :meth:`~Guardian.require_layout` refuse an env that
+lacks what the guardian needs (``ValueError`` naming the guardian and the piece) before any
+episode.  Guardians never read an env's private attributes.  The protocol in full:
+``docs/guardians.md``; privileged guardians share :mod:`guardians.privileged`.
 """
 
 from __future__ import annotations
@@ -69,7 +51,8 @@ class Guardian:
         """The files this guardian read when it was built: path -> SHA-256 (hex) of the bytes it
         read.  A guardian that reads a file its arguments do not name (a shipped model, a
         default data file) must list it here; files named by a string argument are hashed by
-        ``rmm-bench`` anyway.  Default: none."""
+        ``rmm-bench`` anyway.  ``rmm-bench`` makes them part of the run's identity, so a run
+        resumed after a model file changed is a new run, never a mix of two models.  Default: none."""
         return {}
 
     def check_spaces(self, observation_space, action_space) -> None:
@@ -110,22 +93,11 @@ class Guardian:
     def act(self, observation: np.ndarray, info: dict[str, Any]) -> dict:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def _state_and_lap(self) -> np.ndarray:
-        """For a privileged guardian: the env's privileged ``state`` as floats; also measures the simulated time between consecutive calls from ``sim_time`` into
-        ``self._measured_lap`` (``self._last_time``: the previous call's time, ``None`` at
-        first; neither moves when the env reports no time or the time does not advance)."""
-        priv = self._privileged()
-        t = priv.get("sim_time")
-        if t is not None:
-            last = getattr(self, "_last_time", None)
-            if last is not None and t > last:
-                self._measured_lap = float(t - last)
-            self._last_time = float(t)
-        return np.asarray(priv["state"], float)
-
     def warm_up(self, observation: np.ndarray, info: dict[str, Any]) -> None:
-        """Run the decision's compiled paths once, untimed (see the module docstring): one
-        :meth:`act`.  The caller resets the guardian afterwards."""
+        """Run the decision's compiled paths once, untimed, so that compiling or loading compiled
+        code is never charged to a timed decision: one :meth:`act` (a guardian whose first
+        decision skips some compiled path, a QP solved only near an obstacle, runs it here too).
+        ``rmm-bench`` calls it once per worker and resets the guardian afterwards."""
         self.act(observation, info)
 
     def stats(self) -> dict[str, float]:

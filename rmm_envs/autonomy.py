@@ -1,45 +1,19 @@
 """The parallel-autonomy contract: how a guardian and an environment talk.
 
-A *parallel-autonomy* environment has a built-in driver that controls the system by default.
-At every step a guardian returns an action that says whether it takes control this step and,
-if so, with which control.  This module owns that contract, for every system:
+A parallel-autonomy env has a built-in driver; each step a guardian's action says whether it
+takes control and with which control vector.  This module offers:
 
-**The action.**  A dict ``{"active_ctrl": 0 or 1, <control field>: shape-(1,) array, ...}``
-with one field per component of the system's control vector (for Dubins4D ``turnrate_ctrl``
-and ``accel_ctrl``, in that order: ``u = (turn rate, acceleration)``).  Its space is a
-:class:`GuardianActionSpace`, a Gymnasium ``Dict`` (so ``check_env``, ``sample()``, vector
-batching and every Gymnasium utility work as for any ``Dict``) that also knows the order of
-the control vector and its bounds:
+* :class:`GuardianActionSpace`: the action's space (a Gymnasium ``Dict``: ``active_ctrl`` and
+  one shape-(1,) box per control), with ``inactive()``, ``active(u)``, ``parse(action)``;
+* :class:`SystemContract` (``space.contract``, :func:`contract`): what a guardian may know of
+  the system the space drives: its kind (``"dubins4d"``, ``"dubins3d"``, ``"quadrotor"``;
+  :data:`GENERIC` for a third-party simulator), control names, bounds, safe default and
+  obstacle shapes.  Guardians dispatch on the kind, never on control names;
+* :class:`SafeDefault`: a system's safe control (what ``brakes`` applies);
+* :class:`ObservationBox` / :class:`ObservationLayout` / :func:`layout`: named observation fields;
+* :func:`inactive`, :func:`active`, :func:`parse`: the same given the space.
 
-* ``space.inactive()``: the action that leaves control with the driver;
-* ``space.active(u)``: take control and apply the control vector ``u``;
-* ``space.parse(action) -> (active, u)``: validate an action and return the flag and the
-  control vector, clipped to the bounds (as the paper's environment clipped).  A missing or
-  unknown field, a wrong type or shape, a non-finite number or an ``active_ctrl`` other than
-  0/1 raises ``ValueError`` naming the field and the space.
-
-The module-level :func:`inactive`, :func:`active` and :func:`parse` do the same given the
-space, and refuse a space that is not a :class:`GuardianActionSpace` with a message saying so.
-The bounds are those of the system's dynamics object (:meth:`GuardianActionSpace.for_system`
-reads ``system.control_low`` / ``control_high``), so they are written once.
-
-**The observation layout.**  An environment's observation space is an :class:`ObservationBox`:
-a Gymnasium ``Box`` that also carries an :class:`ObservationLayout`, the named slices of the
-flat observation vector (``"goal_offset"``, ``"rays"``, ...) and the directions of its range
-rays relative to the heading.  A guardian reads positions in the vector by name
-(``layout(space)["rays"]``) rather than assuming indices, so the same guardian code serves any
-system whose observation offers the fields it needs, and refuses one that does not with a
-message naming the missing field.
-
-**The safe default.**  What "do the safe thing" means is a property of the system: full
-braking for Dubins4D, the maximum turn away from the nearer wall for the constant-speed maze
-car.  An env states it by giving its action space a :class:`SafeDefault`
-(``GuardianActionSpace(..., safe_default=...)``, read back as ``space.safe_default``); the
-``brakes`` guardian applies it on any env that offers one.  A new system adds its own in its
-env (or system) module: one subclass with a ``policy`` method, no change elsewhere.
-
-Guardians receive both spaces at ``reset`` (see :mod:`guardians.base`) and read bounds and
-layout from them.
+The rules (clipping, error messages, float64 boxes) are in ``docs/concepts.md``.
 """
 
 from __future__ import annotations
@@ -53,10 +27,12 @@ from gymnasium import spaces
 
 from rmm_envs.portable import wrap_angle
 
-__all__ = ["ACTIVE", "GuardianActionSpace", "ObservationBox", "ObservationLayout", "SafeDefault", "active", "inactive",
-           "layout", "parse"]
+__all__ = ["ACTIVE", "GENERIC", "GuardianActionSpace", "ObservationBox", "ObservationLayout", "SafeDefault", "SystemContract",
+           "active", "contract", "inactive", "layout", "parse"]
 
 ACTIVE = "active_ctrl"  # the action field that says whether the guardian takes control
+#: The kind of a system no built-in guardian models (a third-party simulator made a guarded env).
+GENERIC = "generic"
 
 
 class SafeDefault:
@@ -85,6 +61,23 @@ class SafeDefault:
         raise NotImplementedError
 
 
+@dataclass(frozen=True)
+class SystemContract:
+    """What a guardian may know of the system an env's action space drives (``space.contract``).
+
+    ``kind`` names the system's model (a guardian that models one system serves exactly the
+    spaces of its kind; :data:`GENERIC`: no built-in model); ``controls``, ``control_low`` and
+    ``control_high`` the control vector's fields and bounds; ``safe_default`` and
+    ``obstacle_shapes`` as given to :class:`GuardianActionSpace`."""
+
+    kind: str
+    controls: tuple[str, ...]
+    control_low: tuple[float, ...]
+    control_high: tuple[float, ...]
+    safe_default: SafeDefault | None = None
+    obstacle_shapes: tuple[str, ...] | None = None
+
+
 class GuardianActionSpace(spaces.Dict):
     """``Dict(active_ctrl=Discrete(2), <name>=Box(low_i, high_i, (1,)) for each control)``.
 
@@ -97,6 +90,8 @@ class GuardianActionSpace(spaces.Dict):
         obstacle_shapes: the kinds of obstacle in the env's world (e.g. ``("circle",
             "polygon")``), for guardians whose model of the privileged obstacles assumes a kind
             (``cbf`` and ``hj`` need circles); ``None``: not stated (the circle envs).
+        kind: the system's kind (:class:`SystemContract`), stated by the env from its system
+            module's ``KIND``; default :data:`GENERIC`.
 
     The fields are stored in Gymnasium's default (sorted) key order, so sampling, seeding and
     flattening behave exactly as for the plain ``Dict`` with the same fields; the control
@@ -107,8 +102,11 @@ class GuardianActionSpace(spaces.Dict):
     """
 
     def __init__(self, controls: Sequence[str], low: Iterable[float], high: Iterable[float], seed=None,
-                 safe_default: SafeDefault | None = None, obstacle_shapes: Sequence[str] | None = None) -> None:
+                 safe_default: SafeDefault | None = None, obstacle_shapes: Sequence[str] | None = None,
+                 kind: str = GENERIC) -> None:
         controls = tuple(controls)
+        if not isinstance(kind, str) or not kind:
+            raise ValueError(f"kind must be a non-empty system name (e.g. {GENERIC!r}), got {kind!r}")
         lo = np.asarray(list(low), dtype=float).reshape(-1)
         hi = np.asarray(list(high), dtype=float).reshape(-1)
         if not controls or len(set(controls)) != len(controls) or not all(isinstance(c, str) and c for c in controls):
@@ -126,6 +124,7 @@ class GuardianActionSpace(spaces.Dict):
         if safe_default is not None and not isinstance(safe_default, SafeDefault):
             raise TypeError(f"safe_default must be a rmm_envs.autonomy.SafeDefault, got {safe_default!r}")
         self.controls = controls
+        self.kind = kind
         self.safe_default = safe_default
         self.obstacle_shapes = None if obstacle_shapes is None else tuple(obstacle_shapes)
         # the bounds actions are clipped to: those of the boxes
@@ -135,10 +134,16 @@ class GuardianActionSpace(spaces.Dict):
     @classmethod
     def for_system(cls, system: Any, controls: Sequence[str], seed=None,
                    safe_default: SafeDefault | None = None,
-                   obstacle_shapes: Sequence[str] | None = None) -> "GuardianActionSpace":
+                   obstacle_shapes: Sequence[str] | None = None, kind: str = GENERIC) -> "GuardianActionSpace":
         """The action space of a system whose dynamics object has ``control_low``/``control_high``."""
         return cls(controls, np.asarray(system.control_low, float), np.asarray(system.control_high, float), seed=seed,
-                   safe_default=safe_default, obstacle_shapes=obstacle_shapes)
+                   safe_default=safe_default, obstacle_shapes=obstacle_shapes, kind=kind)
+
+    @property
+    def contract(self) -> SystemContract:
+        """The system's contract: kind, controls, bounds, safe default, obstacle shapes."""
+        return SystemContract(self.kind, self.controls, tuple(self.control_low.tolist()), tuple(self.control_high.tolist()),
+                              self.safe_default, self.obstacle_shapes)
 
     @property
     def control_dim(self) -> int:
@@ -286,6 +291,11 @@ def inactive(space: GuardianActionSpace) -> dict:
 def active(space: GuardianActionSpace, control) -> dict:
     """The action of ``space`` that takes control and applies ``control``."""
     return _action_space(space).active(control)
+
+
+def contract(space) -> SystemContract:
+    """The :class:`SystemContract` of an env's action space (``TypeError`` for another space)."""
+    return _action_space(space).contract
 
 
 def parse(action, space: GuardianActionSpace) -> tuple[bool, np.ndarray]:

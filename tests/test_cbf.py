@@ -15,7 +15,7 @@ from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D
 from tests.qp_reference import solve_qp_dense
 
-SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS)  # the Dubins4D envs' action space
+SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")  # the Dubins4D envs' action space
 INFO0 = {"nominal_control": np.zeros(2)}  # a step's info whose driver control is (0, 0)
 
 
@@ -235,7 +235,7 @@ def _closed_loop_min_barrier(g, state, seconds=6.0, dt=0.02):
     worst = math.inf
     driver = CLFDriver()  # the env's reckless driver: straight for the goal, through the obstacle
     for _ in range(int(seconds / dt)):
-        g._lap = dt
+        g._measured_lap = dt
         u_nom = driver.control(s, g.goal[:2]) if g.reference == "nominal" else None
         a = g._decide(s, u_nom)
         u = np.array([a["turnrate_ctrl"][0], a["accel_ctrl"][0]], float) if a["active_ctrl"] else np.zeros(2)
@@ -324,7 +324,7 @@ def test_control_box_comes_from_the_action_space_unless_given():
     g = CBFPaperGuardian()
     g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
     assert (g.u1_min, g.u1_max, g.u2_min, g.u2_max, g.v_min, g.v_max) == (-0.25, 0.25, -0.5, 0.5, 0.0, 2.0)
-    narrow = GuardianActionSpace(CONTROLS, [-0.125, -0.25], [0.125, 0.375])
+    narrow = GuardianActionSpace(CONTROLS, [-0.125, -0.25], [0.125, 0.375], kind="dubins4d")
     g.reset(seed=0, privileged=lambda: box, action_space=narrow)
     assert (g.u1_min, g.u1_max, g.u2_min, g.u2_max) == (-0.125, 0.125, -0.25, 0.375)
     G, h = g.rows(box["state"])
@@ -335,7 +335,7 @@ def test_control_box_comes_from_the_action_space_unless_given():
     given.reset(seed=0, privileged=lambda: box, action_space=narrow)
     assert (given.u1_min, given.u2_min) == (-0.125, -0.5)
     with pytest.raises(ValueError, match="guardian 'cbf'.*control box"):
-        CBFGuardian().reset(seed=0, privileged=lambda: box, action_space=GuardianActionSpace(CONTROLS, [0.1, -1], [0.2, 1]))
+        CBFGuardian().reset(seed=0, privileged=lambda: box, action_space=GuardianActionSpace(CONTROLS, [0.1, -1], [0.2, 1], kind="dubins4d"))
     with pytest.raises(ValueError, match="guardian 'cbf'.*action space"):
         CBFGuardian().reset(seed=0, privileged=lambda: box)
 

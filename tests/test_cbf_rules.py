@@ -18,7 +18,7 @@ from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D
 
-SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS)
+SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")
 # the default gains; the Dubins4D control box and speed range
 PRM = HOCBFParams(0.7535, 0.6664, 1.0, 1.0, 1.0, 1.0, -0.25, 0.25, -0.5, 0.5, 0.0, 2.0)
 OBST = np.array([[0.0, 0.0, 3.0]])

@@ -22,7 +22,7 @@ from rmm_envs.systems.dubins4d import Dubins4D
 import qpsolvers  # noqa: E402,F401  (pinned in the test extra: a missing install fails here, it is not skipped)
 # every solver the test extra pins (qpsolvers[clarabel,daqp]): one that is missing fails its tests, it is not left out
 OTHERS = [f"qpsolvers:{n}" for n in ("osqp", "clarabel", "daqp")]
-SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS)
+SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")
 OBSTACLES = np.array([[3.0, 0.0, 2.0], [-4.0, 5.0, 3.0], [0.0, -6.0, 2.5]])
 GOAL = np.array([8.0, 8.0, 1.0])
 

@@ -9,7 +9,7 @@ from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D
 
-SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS)  # the Dubins4D envs' action space
+SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")  # the Dubins4D envs' action space
 
 
 def zero_crossing(xs, values):
@@ -598,7 +598,7 @@ def test_hj_dynamics_take_their_bounds_from_the_system():
 def test_guardian_reads_the_control_bounds_from_the_action_space(tmp_path):
     box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-3.0, 0.0, 0.0, 2.0])}
     g = HJGuardian(grid=small_grid(), horizon=2.0, cache_dir=tmp_path)
-    narrow = GuardianActionSpace(CONTROLS, [-0.125, -0.25], [0.125, 0.25])
+    narrow = GuardianActionSpace(CONTROLS, [-0.125, -0.25], [0.125, 0.25], kind="dubins4d")
     g.reset(seed=0, privileged=lambda: box, action_space=narrow)
     assert (g.dynamics.u1_max, g.dynamics.u2_max) == (0.125, 0.25)
     a = g.act(None, {})
@@ -606,7 +606,7 @@ def test_guardian_reads_the_control_bounds_from_the_action_space(tmp_path):
     g.reset(seed=0, privileged=lambda: box, action_space=SPACE)  # another value: a second cache entry
     assert g.dynamics == Dubins4DHJ() and g.stats()["solves"] == 1 and len(list(tmp_path.glob("*.npz"))) == 2
     with pytest.raises(ValueError, match="guardian 'hj'.*symmetric"):
-        g.reset(seed=0, privileged=lambda: box, action_space=GuardianActionSpace(CONTROLS, [-0.25, -0.4], [0.25, 0.5]))
+        g.reset(seed=0, privileged=lambda: box, action_space=GuardianActionSpace(CONTROLS, [-0.25, -0.4], [0.25, 0.5], kind="dubins4d"))
     with pytest.raises(ValueError, match="guardian 'hj'.*action space"):
         g.reset(seed=0, privileged=lambda: box)
 

@@ -127,7 +127,7 @@ def test_cbf_on_the_maze_filters_the_drivers_turn_rate():
     env = Dubins3DMazeGuardedEnv()
     g = make_guardian("cbf", env_id="Dubins3DMazeParallel-v0", maze={"reference": "nominal"})
     obs, info = reset_at(env, g, [300.0, 150.0, 1.0])
-    x, y, psi = g._maze.predict([300.0, 150.0, 1.0], 0.2, 0.1)  # the driver turns left at 0.2 during the lap
+    x, y, psi = g.delegate.predict([300.0, 150.0, 1.0], 0.2, 0.1)  # the driver turns left at 0.2 during the lap
     B = (181.25 - y - 2.0) - 50.0 * (1 - math.cos(psi))
     a = g.act(obs, {**info, "nominal_control": np.array([0.2])})
     assert a["active_ctrl"] == 1
@@ -164,7 +164,7 @@ def test_cbf_maze_bad_arguments_and_dispatch():
     three = GuardianActionSpace(("a", "b", "c"), [-1.0] * 3, [1.0] * 3)
     with pytest.raises(ValueError, match="applies to Dubins4D envs and the maze car"):
         CBFGuardian().check_spaces(None, three)
-    lopsided = GuardianActionSpace(("turnrate_ctrl",), [-0.1], [0.2])
+    lopsided = GuardianActionSpace(("turnrate_ctrl",), [-0.1], [0.2], kind="dubins3d")
     with pytest.raises(ValueError, match="symmetric about 0"):
         CBFGuardian().check_spaces(None, lopsided)
 
@@ -181,7 +181,7 @@ def hj_corridor(tmp_path_factory):
 def test_hj_maze_value_and_decisions(hj_corridor):
     env, g = hj_corridor
     obs, info = reset_at(env, g, [125.0, 125.0, 0.0])
-    m = g._maze
+    m = g.delegate
     assert isinstance(m, MazeHJGuardian) and m.stats()["solves"] == 1
     V = m.V[..., 0]
     from guardians.hj.maze import wall_target

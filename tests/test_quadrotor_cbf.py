@@ -152,7 +152,7 @@ def test_cbf_dispatches_to_the_quadrotor_and_cbf_paper_does_not_apply(env):
     g = make_guardian("cbf", env_id="QuadrotorRoomParallel-v0")
     g.check_spaces(env.observation_space, env.action_space)
     reset_at(env, g, room(), level(z=2.0))
-    assert isinstance(g._quad, QuadrotorCBFGuardian) and g._quad.name == "cbf"
+    assert isinstance(g.delegate, QuadrotorCBFGuardian) and g.delegate.name == "cbf"
     with pytest.raises(ValueError, match=r"guardian 'cbf-paper' applies to Dubins4D envs only: it models the Dubins4D car"):
         make_guardian("cbf-paper").check_spaces(env.observation_space, env.action_space)
     with pytest.raises(ValueError, match="applies to Dubins4D envs and the maze car"):
@@ -246,7 +246,7 @@ def test_decisions_keep_their_rows_and_the_box(x, y, z, yaw, vh, vz, nominal):
         assert np.all(G @ u[:3] <= h + 1e-4)
 
 
-SPACE = GuardianActionSpace.for_system(ClosedLoopQuadrotor(CommandController()), CONTROLS)  # the env's
+SPACE = GuardianActionSpace.for_system(ClosedLoopQuadrotor(CommandController()), CONTROLS, kind="quadrotor")  # the env's
 
 
 def test_an_infeasible_qp_recovers_with_the_least_violation(env):

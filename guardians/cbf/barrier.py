@@ -1,6 +1,6 @@
 """The barrier maths of the HOCBF guardians: pure functions of a state and the episode's scene.
 
-The rows of ``G z <= h`` over ``z = (u1, u2, d_th, d_v)`` (the package docstring derives them),
+The rows of ``G z <= h`` over ``z = (u1, u2, d_th, d_v)`` (`docs/design-notes.md` derives them),
 the inflated radii, the barrier values and the obstacle hardest to satisfy.  Nothing here
 keeps state; the guardian, the QP and the recovery manoeuvre all call these functions.
 """
@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rmm_envs.systems.dubins4d import desired_heading
+from rmm_envs.systems.dubins4d import desired_heading_compiled as _desired_heading
 
 try:
     from numba import njit
@@ -133,9 +133,7 @@ def any_row_active(G: np.ndarray, h: np.ndarray, z: np.ndarray, K: int, atol: fl
     return False
 
 
-_desired_heading = desired_heading
 if njit is not None:  # one source: the compiled loop runs these very functions
-    _desired_heading = njit(cache=True)(desired_heading)
     _rows_into = njit(cache=True)(_rows_into)
     any_row_active = njit(cache=True)(any_row_active)
 

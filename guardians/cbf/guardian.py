@@ -1,6 +1,6 @@
 """The HOCBF guardians ``cbf`` and ``cbf-paper``: configuration, latency prediction and the decision.
 
-Their defaults, the rule and the reasons are in the package docstring (:mod:`guardians.cbf`).
+Their defaults, the rule and the reasons are in `docs/design-notes.md` (cbf); the settings in :mod:`guardians.cbf.settings`.
 """
 
 from __future__ import annotations
@@ -9,32 +9,23 @@ import math
 
 import numpy as np
 
-from guardians._checks import MazeDelegation, QuadrotorDelegation, finite, integer, number_pair
-from guardians.base import Guardian
-from guardians.cbf.backend import dubins4d_qp, parse_solver
+from guardians._checks import settings_signature
+from guardians.privileged import PrivilegedGuardian
+from guardians.cbf.backend import dubins4d_qp
 from guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_values, critical_obstacle, inflated_radii
 from guardians.cbf.maze import MazeCBFGuardian
 from guardians.cbf.quadrotor import QuadrotorCBFGuardian
 from guardians.cbf.recovery import recovery_control, recovery_done
+from guardians.cbf.settings import CBF_PRESETS, REFERENCES, CBFSettings, box_problem
+from guardians.dispatch import SystemDispatch, delegate_arguments
 from rmm_envs.portable import matvec
+from rmm_envs.systems import dubins3d, quadrotor_control
 from rmm_envs.systems.dubins4d import Dubins4D
 
 __all__ = ["CBFGuardian", "CBFPaperGuardian", "REFERENCES"]
 
-#: What the QP keeps the control close to: the driver's ``info["nominal_control"]`` (a safety
-#: filter) or, as the paper, a goal-seeking control re-derived from CLF rows.
-REFERENCES = ("nominal", "clf")
-
-
-def _box_problem(u1, u2) -> str | None:
-    """Why the control box ``u1 x u2`` cannot serve the guardian, or ``None``."""
-    if u1[0] <= 0 <= u1[1] and u2[0] < 0 < u2[1]:
-        return None
-    return "the control box must contain 0 in u1 and allow braking and accelerating in u2"
-
-
-class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
-    """HOCBF safety filter with one-step latency prediction and recovery (see :mod:`guardians.cbf`).
+class CBFGuardian(SystemDispatch, PrivilegedGuardian):
+    """HOCBF safety filter with one-step latency prediction and recovery (see `docs/design-notes.md`).
 
     ``u1_bounds``/``u2_bounds`` (default ``None``: the action space's, read at ``reset``) and
     ``v_bounds`` (default ``None``: the Dubins4D system's speed range) override the bounds.
@@ -42,63 +33,27 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
     ``"clf"`` re-derives a goal-seeking control from CLF rows, as the paper did."""
 
     name = "cbf"
-    observation_type = "global"
-    privileged = True
-    maze_class = MazeCBFGuardian
-    quadrotor_class = QuadrotorCBFGuardian
+    others = {dubins3d.KIND: MazeCBFGuardian, quadrotor_control.KIND: QuadrotorCBFGuardian}
 
-    def __init__(self, p1: float = 0.7535, p2: float = 0.6664, inflation: float = 1.05,
-                 gamma_vmin: float = 1.0, gamma_vmax: float = 1.0, lambda_theta: float = 1.0,
-                 lambda_v: float = 1.0, p_theta: float = 1.0, p_v: float = 1.0,
-                 u1_bounds=None, u2_bounds=None, v_bounds=None,
-                 active_atol: float = 1e-3, active_rtol: float = 0.0, low_speed_stop: bool = False,
-                 max_obstacles: int = 64, eps: float = 1e-6, predict_latency: bool = True,
-                 recovery: bool = True, v_stuck: float = 0.05, lap_guess: float = 0.1,
-                 goal_aware_margin: bool = True, solver: str = "osqp", maze: dict | None = None,
-                 reference: str = "nominal", quadrotor: dict | None = None) -> None:
+    preset = "cbf"  #: the CBFSettings preset the keyword arguments change
+
+    def __init__(self, settings: CBFSettings | None = None, **options) -> None:
+        """``settings`` (default: the class's :attr:`preset`) with ``options``, any of
+        :class:`~guardians.cbf.settings.CBFSettings`' fields, changed."""
         super().__init__()
-        if reference not in REFERENCES:
-            raise ValueError(f"reference must be one of {REFERENCES} (filter the driver's info['nominal_control'], "
-                             f"or the paper's CLF rows), got {reference!r}")
-        self.reference = reference
-        parse_solver(solver)  # a bad name fails here, listing the installed solvers
-        self.solver = solver
-        self._maze_args = _delegate_arguments("maze", MazeCBFGuardian, maze, solver, eps, predict_latency, lap_guess)
-        self._quadrotor_args = _delegate_arguments("quadrotor", QuadrotorCBFGuardian, quadrotor, solver, eps, predict_latency,
-                                                   lap_guess)
-        self._delegate = None  # the maze car's guardian, built on the first maze env
-        self._quadrotor_delegate = None  # the quadrotor's, built on the first quadrotor env
-        self._maze = None  # the delegate while an episode on a maze env runs
-        self._quad = None  # the delegate while an episode on a quadrotor env runs
-        self.p1 = finite("p1 (class-K gain)", p1, 0.0, lo_open=True)
-        self.p2 = finite("p2 (class-K gain)", p2, 0.0, lo_open=True)
-        k = finite("inflation", inflation)
-        if not k >= 1:
-            raise ValueError(f"inflation must be >= 1 (1 = the obstacle itself), got {inflation!r}")
-        self.k = k
-        self.gamma_vmin = finite("gamma_vmin", gamma_vmin, 0.0, lo_open=True)
-        self.gamma_vmax = finite("gamma_vmax", gamma_vmax, 0.0, lo_open=True)
-        self.lambda_theta = finite("lambda_theta", lambda_theta, 0.0, lo_open=True)
-        self.lambda_v = finite("lambda_v", lambda_v, 0.0, lo_open=True)
-        self.p_theta = finite("p_theta", p_theta, 0.0, lo_open=True)
-        self.p_v = finite("p_v", p_v, 0.0, lo_open=True)
-        self._u1_arg = None if u1_bounds is None else number_pair("u1_bounds", u1_bounds)
-        self._u2_arg = None if u2_bounds is None else number_pair("u2_bounds", u2_bounds)
-        self.v_min, self.v_max = (Dubins4D.v_min, Dubins4D.v_max) if v_bounds is None else number_pair("v_bounds", v_bounds)
-        if self._u1_arg is not None and _box_problem(self._u1_arg, (-1.0, 1.0)):
-            raise ValueError(f"u1_bounds must contain 0, got {u1_bounds!r}")
-        if self._u2_arg is not None and _box_problem((0.0, 0.0), self._u2_arg):
-            raise ValueError(f"u2_bounds must allow braking and accelerating (min < 0 < max), got {u2_bounds!r}")
-        self.active_atol = finite("active_atol", active_atol, 0.0)
-        self.active_rtol = finite("active_rtol", active_rtol, 0.0)
-        self.low_speed_stop = bool(low_speed_stop)
-        self.max_obstacles = integer("max_obstacles", max_obstacles, 0)
-        self.eps = finite("eps", eps, 0.0, lo_open=True)
-        self.predict_latency = bool(predict_latency)
-        self.recovery = bool(recovery)
-        self.v_stuck = finite("v_stuck", v_stuck, 0.0)
-        self.lap_guess = finite("lap_guess", lap_guess, 0.0, lo_open=True)
-        self.goal_aware_margin = bool(goal_aware_margin)
+        s = self.settings = (settings if settings is not None else CBF_PRESETS[self.preset]).replace(**options)
+        self.reference, self.solver = s.reference, s.solver
+        shared = {"solver": s.solver, "eps": s.eps, "predict_latency": s.predict_latency, "lap_guess": s.lap_guess}
+        self._system_args = {dubins3d.KIND: delegate_arguments(MazeCBFGuardian, "maze", s.maze, shared),
+                             quadrotor_control.KIND: delegate_arguments(QuadrotorCBFGuardian, "quadrotor", s.quadrotor, shared)}
+        self.p1, self.p2, self.k = s.p1, s.p2, s.inflation
+        self.gamma_vmin, self.gamma_vmax, self.lambda_theta, self.lambda_v = s.gamma_vmin, s.gamma_vmax, s.lambda_theta, s.lambda_v
+        self.p_theta, self.p_v = s.p_theta, s.p_v
+        self._u1_arg, self._u2_arg = s.u1_bounds, s.u2_bounds
+        self.v_min, self.v_max = s.speed_bounds
+        self.active_atol, self.active_rtol, self.low_speed_stop = s.active_atol, s.active_rtol, s.low_speed_stop
+        self.max_obstacles, self.eps, self.v_stuck, self.lap_guess = s.max_obstacles, s.eps, s.v_stuck, s.lap_guess
+        self.predict_latency, self.recovery, self.goal_aware_margin = s.predict_latency, s.recovery, s.goal_aware_margin
         self._qp = None
         self._counts = self._zero_counts()
 
@@ -114,7 +69,7 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
         lo, hi = space.control_low, space.control_high
         u1 = self._u1_arg or (float(lo[0]), float(hi[0]))
         u2 = self._u2_arg or (float(lo[1]), float(hi[1]))
-        problem = _box_problem(u1, u2)
+        problem = box_problem(u1, u2)
         if problem:
             raise ValueError(f"guardian {self.name!r}: {problem}, got u1 in {list(u1)} and u2 in {list(u2)} "
                              f"(from the action space {space} unless given)")
@@ -125,12 +80,7 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
                                 u2_min=self.u2_min, u2_max=self.u2_max)
 
     def reset(self, **kwargs) -> None:
-        space = kwargs.get("action_space")
-        self._maze = self._maze_guardian(space)
-        self._quad = None if self._maze is not None else self._quadrotor_guardian(space)
-        other = self._maze or self._quad
-        if other is not None:
-            other.reset(**kwargs)
+        if self._dispatch_reset(kwargs):
             return
         super().reset(**kwargs)
         self.check_spaces(self.observation_space, self.action_space)
@@ -145,8 +95,7 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
         self._rows = BarrierRows(obstacles, self.radii, self.goal, self.params)
         self._counts = self._zero_counts()
         self._pending = None  # the guardian's control acting during the coming lap; None: the driver's
-        self._last_time = float(priv.get("sim_time", 0.0))
-        self._lap = self.lap_guess
+        self.start_laps(self.lap_guess, since=priv.get("sim_time", 0.0))
         self._recovering = None  # index of the obstacle being recovered from
         self.K = obstacles.shape[0]
         self._qp = dubins4d_qp(self.solver, self.K, self.params, self.p_theta, self.p_v, self.eps)
@@ -188,7 +137,7 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
         """The backup manoeuvre about obstacle ``i`` at ``state`` (:mod:`guardians.cbf`): ``(u1, u2)``.
         ``side`` (+1: counter-clockwise tangent, -1: clockwise) overrides the choice of tangent."""
         u, self._last_side = recovery_control(state, i, self.obstacles, self.radii, self.goal, self.params,
-                                              self._lap if lap is None else lap, self.v_stuck, side, rows=self._rows)
+                                              self._measured_lap if lap is None else lap, self.v_stuck, side, rows=self._rows)
         return u
 
     def _recover(self, state):
@@ -200,7 +149,7 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
         self._counts["recoveries"] += 1
         u = self.recovery_control(state, self._recovering, side=self._side)
         self._side = self._last_side  # keep going round the same way
-        if abs(u[0]) * self._lap < 1e-3 and state[3] + u[1] * self._lap <= self.v_stuck:
+        if abs(u[0]) * self._measured_lap < 1e-3 and state[3] + u[1] * self._measured_lap <= self.v_stuck:
             # stalled: stopped, facing the target and blocked by another obstacle's row (two
             # overlapping obstacles form a notch).  Go round the other way; if that is blocked
             # too, recover from the obstacle that now blocks.
@@ -245,24 +194,19 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
         return u
 
     def act(self, observation, info=None):
-        other = self._maze or self._quad
-        if other is not None:
-            return other.act(observation, info)
+        if self.delegate is not None:
+            return self.delegate.act(observation, info)
         u_nom = self.nominal(info)
         priv = self._privileged()
         state = np.asarray(priv["state"], float)
-        if not all(map(math.isfinite, state.tolist())):
-            self._counts["nan_states"] += 1
+        if not self.finite_state(state):
             return self._emit(0.0, self.u2_min)
         if self.predict_latency:
-            t = float(priv.get("sim_time", self._last_time))
-            if t > self._last_time:
-                self._lap = t - self._last_time
-            self._last_time = t
+            self.measure_lap(priv)
             # the control acting during the coming lap: the guardian's own last one, or the
             # driver's, which is the nominal control at this state (unknown to "clf": 0)
             during = self._pending if self._pending is not None else (u_nom if u_nom is not None else np.zeros(2))
-            state = self.predict(state, during, self._lap)
+            state = self.predict(state, during, self._measured_lap)
         return self._decide(state, u_nom)
 
     def warm_up(self, observation, info=None) -> None:
@@ -270,7 +214,7 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
         (its compiled matrix fill) with and without a control to filter, and the recovery
         manoeuvre; the caller resets the guardian afterwards."""
         self.act(observation, info)
-        if (self._maze or self._quad) is not None or self.K == 0:
+        if self.delegate is not None or self.K == 0:
             return
         state = np.asarray(self._privileged()["state"], float)
         if all(map(math.isfinite, state.tolist())):
@@ -305,38 +249,23 @@ class CBFGuardian(QuadrotorDelegation, MazeDelegation, Guardian):
                 return self._emit(*self._recover(state))
             return self._emit(0.0, self.u2_min)
         if any_row_active(G, h, z, self.K, self.active_atol, self.active_rtol):
-            if self.recovery and state[3] + z[1] * self._lap <= self.v_stuck:
+            if self.recovery and state[3] + z[1] * self._measured_lap <= self.v_stuck:
                 return self._emit(*self._recover(state))
             return self._emit(z[0], z[1])
         return self._inactive()
 
     def stats(self) -> dict:
-        other = self._maze or self._quad
-        if other is not None:
-            return other.stats()
+        if self.delegate is not None:
+            return self.delegate.stats()
         return dict(self._counts)
 
 
-def _delegate_arguments(system: str, cls, given, solver, eps, predict_latency, lap_guess) -> dict | None:
-    """The arguments of ``system``'s guardian ``cls`` (the maze car's, the quadrotor's): ``given``
-    (a dict of its arguments; ``False`` refuses that system's envs) over the arguments the
-    systems share."""
-    if given is False:
-        return None
-    if given is not None and not isinstance(given, dict):
-        raise ValueError(f"{system} must be a dict of {cls.__module__}.{cls.__name__} arguments (or False), got {given!r}")
-    args = {"solver": solver, "eps": eps, "predict_latency": predict_latency, "lap_guess": lap_guess} | dict(given or {})
-    cls(**args)  # a bad argument fails at construction, naming it
-    return args
+CBFGuardian.__init__.__signature__ = settings_signature(CBFSettings, CBF_PRESETS["cbf"])
 
 
 class CBFPaperGuardian(CBFGuardian):
     """The paper's CBF rule (the previous ``cbf`` exactly): the CBF-CLF QP at the observed state,
-    maximum braking when it is infeasible, no recovery."""
+    maximum braking when it is infeasible, no recovery (the ``cbf-paper`` preset)."""
 
     name = "cbf-paper"
-
-    def __init__(self, *args, predict_latency: bool = False, recovery: bool = False,
-                 goal_aware_margin: bool = False, maze=False, reference: str = "clf", quadrotor=False, **kwargs) -> None:
-        super().__init__(*args, predict_latency=predict_latency, recovery=recovery,
-                         goal_aware_margin=goal_aware_margin, maze=maze, reference=reference, quadrotor=quadrotor, **kwargs)
+    preset = "cbf-paper"

@@ -1,86 +1,14 @@
 """The ``cbf`` guardian on the maze car (``Dubins3DMazeParallel-v0``): walls as control barriers.
 
-``cbf`` serves both systems: :class:`guardians.cbf.guardian.CBFGuardian` hands an env whose
-action space has the maze car's single control (``turnrate_ctrl``) to :class:`MazeCBFGuardian`,
-which can also be used (and named, ``guardians.cbf.maze:MazeCBFGuardian``) on its own.  It
-uses **privileged** information: the maze, the true pose, the car's speed and the simulated
-time (the env's ``privileged()``).
+:class:`guardians.cbf.guardian.CBFGuardian` hands an env whose action space is of the maze car's
+kind (``"dubins3d"``) to :class:`MazeCBFGuardian`, also usable (and named,
+``guardians.cbf.maze:MazeCBFGuardian``) on its own.  It reads **privileged** data (the maze, the
+true pose, the car's speed, the sim time) and keeps the driver's turn rate as close as barriers
+on the nearest walls allow, for the pose one lap ahead; the barriers include the turn the
+constant-speed car needs to keep off a wall.
 
-## The barriers
-
-The car ``x' = s cos psi, y' = s sin psi, psi' = u`` has a constant speed ``s`` (10 px/s) and
-a bounded turn rate ``|u| <= u_max`` (0.2 rad/s, from the action space).  A wall is a capsule:
-the points within ``r`` (half the thickness, 6.25 px) of a segment.  For each wall, with ``c``
-the segment's point nearest the car, ``d = |p - c|``, ``n = (p - c) / d`` and the heading
-``e = (cos psi, sin psi)``, ``e_perp = (-sin psi, cos psi)``::
-
-    b      = d - r - margin                          (px; >= 0: clear of the wall and the margin)
-    b'     = s n . e
-    b''    = s^2 kappa + s (n . e_perp) u            kappa = (1 - (n . e)^2) / d at a wall's end
-                                                      (c an endpoint), 0 along its side
-
-The turn rate enters only ``b''``: the distance has relative degree 2, and the high-order
-condition (Xiao & Belta, linear class-K gains ``p1, p2``) reads
-``-s (n . e_perp) u <= s^2 kappa + (p1 + p2) b' + p1 p2 b``.  It fails on this car: its first
-set ``b' + p1 b >= 0`` asks for ``b >= s sin(phi) / p1`` when heading into a wall at ``phi``,
-more than a corridor allows at any gain that the car's ``u_max`` can also hold (heading
-straight at a wall ``n . e_perp = 0``: no turn helps to first order).  Measured
-(``barrier="distance"``, ``p1 = p2 = 0.1``, 64 episodes, fixed 1 ms clock, seed 0): 96.9%
-collisions, QP infeasible at most steps.  So the default barrier builds the turn in.
-
-**The turning barrier** (``barrier="turning"``, the default).  A car approaching a flat wall at
-angle ``phi`` (``sin phi = -n . e``) that turns away at full rate (radius ``R = s / u_max``,
-50 px) comes closest at ``b - R (1 - cos phi)``, with ``cos phi = |n . e_perp|``.  So::
-
-    B = b - R (1 - |n . e_perp|)   while approaching (n . e < 0),   B = b otherwise
-
-is ``C^1`` (the two forms meet with equal slope at ``n . e = 0``) except head-on
-(``n . e_perp = 0``, where either turn raises it), and has relative degree 1:
-with ``sigma = sign(n . e_perp)`` (the turn away from the wall; left on a tie),
-``B' = s n . e + R sigma ((dn/dt) . e_perp - u n . e)`` while approaching, ``(dn/dt) . e_perp
-= -s (n . e_perp)(n . e) / d`` at a wall's end, 0 along its side.  Along a flat wall the full
-turn away, ``u = sigma u_max``, gives exactly ``B' = 0``: the condition ``B' + p1 B >= 0`` is
-always feasible where ``B >= 0`` (the input bound is built into the barrier, tested).  Each
-wall gives the row ``-(coefficient of u in B') u <= (the rest of B') + p1 B``.
-
-The QP over the turn rate alone: minimise ``(u - u_ref)^2`` subject to the rows for the
-``n_walls`` nearest walls and ``|u| <= u_max``, where ``u_ref`` is ``0`` (``reference="hold"``,
-the default: keep the heading) or the driver's turn rate, the env's ``info["nominal_control"]``
-(``reference="nominal"``: a filter of the driver's control, as Dubins4D's ``cbf``).  A
-reference that satisfies every row is the solution itself (no solve).  The guardian takes
-control, applying the QP's ``u``, when a barrier row is active at the solution
-(``|G_i u* - h_i| <= active_atol``, as Dubins4D's ``cbf``); otherwise the driver keeps control.
-The default holds the heading because it measured safer here (``rmm-bench --agent cbf --env
-Dubins3DMazeParallel-v0 --clock fixed:1 --episodes 256``, seed 0, with ``--agent-opt
-'cbf.maze={"reference": "nominal"}'`` for the filter): holding, 99.6% success, 0.4%
-collisions, 16 QP fallbacks; filtering the driver's turn, 98.4%, 1.6% and 287 fallbacks, in
-control 8.5% of the simulated time.  The driver cuts corners by design, so following its turn
-until a barrier binds leaves the car in tighter spots than turning only when going straight
-would be unsafe.  An infeasible
-or failed QP turns at full rate the way that best satisfies the hardest row (the largest
-``h_i - G_i u`` over ``|u| <= u_max``), counted in ``stats()["qp_fallbacks"]``.
-
-Defaults, and why:
-
-* ``p1 = 1`` /s for the turning barrier (``0.1`` for the distance barrier; ``p2 = 0.1`` is
-  used by that one only): ``B`` may fall at most at ``p1 B`` px/s, so the filter lets the car
-  drive at a wall until ``B`` is a lap or two of travel; with the margin below this keeps the
-  sampled loop clear.  Measured with the defaults (256 episodes, ``rmm-bench --clock
-  fixed:1``, seed 0): 99.6% success, 0.4% collisions (the driver alone: 53.9% / 46.1%), in
-  control 6.2% of the simulated time, 16 QP fallbacks in all.
-* ``margin = 2`` px: about two laps of travel (1.1 px each at 0.11 s), the loop's sampling.
-* ``n_walls = 8``: the nearest eight walls; farther ones are more than a corridor away and
-  their rows are slack.
-* ``predict_latency = True``: as Dubins4D's ``cbf``, the QP is solved at the pose predicted one
-  lap ahead under the control acting during the lap (the guardian's own last turn rate, or the
-  driver's, ``info["nominal_control"]``; ``reference="hold"`` takes 0 for it, at most
-  ``u_max lap`` = 0.022 rad of heading error at 0.11 s),
-  the lap measured from the simulated times (``lap_guess = 0.1`` s before the first).
-* ``eps = 1e-6``, ``solver = "osqp"``: the QP's tolerance and solver
-  (:mod:`guardians.cbf.backend`); ``active_atol = 1e-3`` as Dubins4D's.
-
-A pose with NaN applies the env's safe default (the maximum turn away from the nearer wall) and
-is counted (``nan_states``).
+Offers :class:`MazeCBFGuardian`, :func:`wall_rows` (the barrier rows of a pose) and
+:class:`WallQP`.  The barriers, the defaults and why: ``docs/design-notes.md``.
 """
 
 from __future__ import annotations
@@ -91,8 +19,9 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from guardians._checks import finite, integer, maze_car_only
-from guardians.base import Guardian
+from guardians._checks import finite, integer
+from guardians.dispatch import maze_car_only
+from guardians.privileged import PrivilegedGuardian
 from guardians.cbf.backend import QpsolversQP, parse_solver
 
 __all__ = ["MazeCBFGuardian", "WallQP", "wall_rows"]
@@ -176,12 +105,10 @@ class WallQP:
         return np.asarray(res.x)
 
 
-class MazeCBFGuardian(Guardian):
+class MazeCBFGuardian(PrivilegedGuardian):
     """HOCBF safety filter for the maze car; see the module docstring."""
 
     name = "cbf"
-    observation_type = "global"
-    privileged = True
 
     def __init__(self, barrier: str = "turning", p1: float | None = None, p2: float = 0.1, margin: float = 2.0, n_walls: int = 8,
                  active_atol: float = 1e-3, predict_latency: bool = True, lap_guess: float = 0.1,
@@ -234,8 +161,7 @@ class MazeCBFGuardian(Guardian):
         self._safe = space.safe_default.policy(space, self.rng) if space.safe_default is not None else None
         self._counts = self._zero()
         self._pending = None  # the guardian's turn rate acting during the coming lap; None: the driver's
-        self._last_time = float(priv.get("sim_time", 0.0))
-        self._lap = self.lap_guess
+        self.start_laps(self.lap_guess, since=priv.get("sim_time", 0.0))
 
     # ------------------------------------------------------------------ the maths
     def rows(self, state):
@@ -288,17 +214,13 @@ class MazeCBFGuardian(Guardian):
         u_nom = self.nominal(info)
         priv = self._privileged()
         state = np.asarray(priv["state"], float)
-        if not np.all(np.isfinite(state)):
-            self._counts["nan_states"] += 1
+        if not self.finite_state(state):
             u = self._safe(observation)[0] if self._safe is not None else self.u_max
             return self._emit(u)
         if self.predict_latency:
-            t = float(priv.get("sim_time", self._last_time))
-            if t > self._last_time:
-                self._lap = t - self._last_time
-            self._last_time = t
+            self.measure_lap(priv)
             during = self._pending if self._pending is not None else u_nom  # the driver's is the nominal
-            state = self.predict(state, during, self._lap)
+            state = self.predict(state, during, self._measured_lap)
         return self.decide(state, u_nom)
 
     def decide(self, state, u_ref: float = 0.0):

@@ -1,122 +1,15 @@
 """The ``cbf`` guardian on the quadrotor (``QuadrotorRoomParallel-v0``, ``QuadrotorRoomGuarded-v0``).
 
-``cbf`` serves three systems: :class:`guardians.cbf.guardian.CBFGuardian` hands an env whose
-action space has the quadrotor's four commands (``vforward_ctrl``, ``vleft_ctrl``,
-``vup_ctrl``, ``yawrate_ctrl``) to :class:`QuadrotorCBFGuardian`, which can also be used (and
-named, ``guardians.cbf.quadrotor:QuadrotorCBFGuardian``) on its own.  It uses **privileged**
-information: the room, the true body state and the simulated time (the env's
-``privileged()``), and filters the pilot's command, ``info["nominal_control"]``, as the
-Dubins4D ``cbf`` filters the driver's control.
+:class:`guardians.cbf.guardian.CBFGuardian` hands an env whose action space is of the
+quadrotor's kind (``"quadrotor"``) to :class:`QuadrotorCBFGuardian`, also usable (and named,
+``guardians.cbf.quadrotor:QuadrotorCBFGuardian``) on its own.  It reads **privileged** data
+(the room, the true body state, the sim time) and filters the pilot's velocity command,
+``info["nominal_control"]``, with HOCBF rows on the room's floor, walls and objects (a
+first-order model of the velocity loop, :mod:`guardians.cbf.quadrotor_rows`), for the state
+one lap ahead, sliding along a shape when the filter deadlocks.
 
-## The model
-
-The guardian issues what the pilot issues: a velocity command ``u = (u_forward, u_left,
-u_up)`` in the body's heading frame (and a yaw rate) to the cascaded controller of
-:mod:`rmm_envs.systems.quadrotor_control`.  Its velocity loop (``k_v = 2.5``/s horizontally,
-``k_vz = 3``/s vertically, behind a 20 rad/s attitude loop) makes the body's world velocity
-``v`` track the commanded one, ``w = (Rot(psi) (u_forward, u_left), u_up)``, as a first-order
-lag ``v' = (w - v) / tau`` with
-
-* ``tau_h = 0.42`` s horizontally and ``tau_z = 0.34`` s vertically: measured on the
-  controller and body (``ClosedLoopQuadrotor`` from hover, a step command of 1 and 2 m/s
-  forward and 0.5 and 1 m/s up): the velocity reaches 63% of a horizontal step after
-  0.42-0.43 s and of a vertical one after 0.34 s (``1 / k_v = 0.4`` s, plus the attitude
-  loop's lag horizontally), and settles 3-5% short of the command (the body's damping).
-
-Each part of the room (the floor, every wall box, every box, cylinder and sphere as
-generated) is a convex shape with signed distance ``d(p)``; its barrier is
-``b = d - rho`` with ``rho = body_radius + margin``: the body's bounding-sphere radius (0.304
-m: the collision cylinder of radius 0.3 m and length 0.1 m in any attitude) and a margin for
-what the model leaves out.  ``b`` has relative degree 2 in the command; the high-order
-condition ``b'' + (p1 + p2) b' + p1 p2 b >= 0`` is one linear row per shape, derived in
-:mod:`guardians.cbf.quadrotor_rows` (the Hessian of ``d`` is dropped: ``>= 0`` outside a
-convex shape, so the row is only tightened).  Rows for the ``n_rows`` shapes nearest the body
-enter the QP, together with the command box of the action space.
-
-## The QP
-
-Over ``(u, s)``: minimise ``|u - u_nom|^2 + slack_weight s^2`` subject to ``G u - s <= h``
-(the barrier rows), the command box, and ``s = 0`` (the strict filter).  A nominal command
-that satisfies every row is the solution itself and passes unchanged (the guardian leaves the
-pilot in control, no solve).  Otherwise the QP is solved; the guardian takes control with its
-command when a barrier row is active at the solution (``|h_i - G_i u*| <= active_atol``), as
-Dubins4D's ``cbf``.  **Recovery**: when the strict QP is infeasible (no command in the box
-satisfies every row: the body is already inside a margin too fast, or between two shapes) or
-fails, the same QP is solved with ``s >= 0``: the command closest to the nominal among those
-that violate the worst row least (the slack is shared by all rows, so it pushes away from
-every violated shape at once); counted in ``stats()["qp_fallbacks"]``.  Should that fail too
-(it is always feasible), the guardian applies the env's safe default (hover), counted in
-``stats()["hover_fallbacks"]``.  While in control it commands a zero yaw rate: the command is
-held for a lap in the heading frame, so a yaw rate would turn the commanded velocity in the
-world during the lap, which the rows do not see; the body is symmetric about its z axis, so
-its yaw plays no part in a collision, and the pilot's command is a world-frame velocity turned
-into the heading frame, so the pilot does not depend on the yaw either.
-
-## Deadlock escape (following the blocking shape)
-
-The pilot flies straight at its waypoint, often through a wall of the room (a union of
-rectangles) or an object.  A filter then removes only the command's part into the shape: the
-body slides along it while the command leans sideways, and stops for good when the pilot
-pushes straight at it (a stable equilibrium with the row active: the CBF-QP deadlock that
-Dubins4D's ``cbf`` also meets).  So when the strict QP leaves the pilot's command (at least
-``2 v_stuck`` horizontally) under ``v_stuck`` (0.25 m/s) of horizontal speed, the guardian
-*follows* the blocking shape instead, as a bug algorithm does: its reference becomes
-``v_slide`` (1.5 m/s) along the horizontal tangent of the nearest shape with a mostly horizontal
-normal (``|n_h| >= 0.5``), on the side the pilot's command leans to (kept while it follows:
-the shape stays on the same hand, and at a concave corner, a shape across the way, it turns
-to follow that one), with the pilot's climb rate; the same QP filters that reference.  It
-hands control back once the pilot's command satisfies every row again and no longer points
-into the shape it follows (handing back on the first free command let the pilot slide back
-along the wall, and the escape started over: dozens of entries in the episodes that timed out).  Blocked again
-within ``slide_memory`` (3 m) of where it last followed, it goes on the same way (choosing by
-the lean again would send it back and forth along a wall whose far end the pilot's command
-points past).  Each entry is counted in ``stats()["slides"]``.
-
-## Latency (the Dubins4D ``cbf``'s rule)
-
-Under parallel autonomy the command returned for the state ``s_k`` acts only from ``s_{k+1}``:
-during the lap in between the previous command (the guardian's own, or the pilot's,
-``info["nominal_control"]`` of ``s_k``) still acts.  So the rows are written at the *predicted*
-state ``s_{k+1}``: the closed-loop flow from ``s_k`` under that command for the lap (the
-compiled controller and body steps of :mod:`rmm_envs.systems.quadrotor_control`, the
-arithmetic of its ``ClosedLoopQuadrotor``, which reproduces PyBullet's integrator; whole
-physics steps, ``ceil(lap / dt)``), the lap measured from the simulated times the
-env reports (the previous lap's length; ``lap_guess = 0.1`` s before the first).
-
-## Defaults, and why
-
-Chosen on development episodes of ``--seed 5`` and ``--seed 6`` only (``rmm-bench --env
-QuadrotorRoomParallel-v0 --agent cbf --clock fixed:1 --agent-opt 'cbf.quadrotor={...}'``).
-Development runs (128 episodes per seed, success / collision / timeout %, seed 5 then seed 6):
-
-| setting | seed 5 | seed 6 |
-|---|---|---|
-| ``p1 = p2 = 2``, margin 0.1 m, no deadlock escape (256 episodes on seed 5) | 77.7 / 0.0 / 22.3 | - |
-| the same with the escape, ``v_slide = 1`` | 78.9 / 0.0 / 21.1 | 89.8 / 0.0 / 10.2 |
-| ``p1 = p2 = 3``, ``v_slide = 1.5`` | 78.9 / 0.0 / 21.1 | 89.8 / 0.0 / 10.2 |
-| the same, the escape ending only once the pilot no longer pushes into the shape | 81.2 / 0.0 / 18.8 | 89.8 / 0.0 / 10.2 |
-| the same, margin 0.05 m | 82.8 / 0.0 / 17.2 | 89.8 / 0.0 / 10.2 |
-| the same, margin 0.025 m | 81.2 / 0.0 / 18.8 | 89.1 / 0.0 / 10.9 |
-| the same, margin 0 | 73.4 / 15.6 / 10.9 | - |
-
-* ``p1 = p2 = 3`` /s: the rows' class-K gains.  Against 2 /s the outcomes did not move and the
-  guardian was in control less (30% of the simulated time against 48% on seed 5): it lets the
-  pilot fly closer before it slows it.
-* ``margin = 0.05`` m: for the tracking error (the lag is not exactly first order: the
-  acceleration saturates at 5 m/s^2 and the attitude loop adds a delay), the command held over
-  a lap while the rows hold at its start, and PyBullet's contact distance (2 mm for the
-  walls' compound boxes).  Without it the body grazes the walls it slides along (15.6%
-  collisions on seed 5); 2.5 cm did no better than 5 cm, and 10 cm timed out a little more.
-* ``v_slide = 1.5`` m/s (the pilot's cruise speed), ``v_stuck = 0.25`` m/s, ``slide_memory = 3`` m:
-  the deadlock escape above.
-* ``n_rows = 8``: the eight nearest shapes; a farther shape's row is slack.
-* ``slack_weight = 1e3``: the recovery minimises the worst violation first (1e4 leaves OSQP at its
-  iteration limit on a plain two-wall case, tested).
-* ``eps = 1e-6`` (OSQP's tolerance, solutions polished), ``active_atol = 1e-3``: as Dubins4D's.
-
-A body state with NaN applies the safe default (hover) and is counted (``nan_states``).  Bad
-arguments are refused at construction, naming the value; an env whose action space is not the
-quadrotor's, or whose command box does not contain 0, is refused by :meth:`check_spaces`.
+Offers :class:`QuadrotorCBFGuardian`.  The model, the rows, the defaults and why:
+``docs/design-notes.md``.
 """
 
 from __future__ import annotations
@@ -125,8 +18,9 @@ import math
 
 import numpy as np
 
-from guardians._checks import finite, integer, quadrotor_only
-from guardians.base import Guardian
+from guardians._checks import finite, integer
+from guardians.dispatch import quadrotor_only
+from guardians.privileged import PrivilegedGuardian
 from guardians.cbf.backend import parse_solver
 from guardians.cbf.quadrotor_rows import CommandQP, command_rows, room_shapes
 from rmm_envs.systems.quadrotor_control import CommandController, body_packed, body_step, command_wrench
@@ -157,12 +51,10 @@ if njit is not None:
     _flow = njit(cache=True)(_flow)
 
 
-class QuadrotorCBFGuardian(Guardian):
+class QuadrotorCBFGuardian(PrivilegedGuardian):
     """HOCBF safety filter of the quadrotor's velocity command; see the module docstring."""
 
     name = "cbf"
-    observation_type = "global"
-    privileged = True
 
     def __init__(self, p1: float = 3.0, p2: float = 3.0, margin: float = 0.05, tau_h: float = 0.42, tau_z: float = 0.34,
                  body_radius: float = BOUND, n_rows: int = 8, slack_weight: float = 1e3, active_atol: float = 1e-3,
@@ -216,8 +108,7 @@ class QuadrotorCBFGuardian(Guardian):
         self._qp = CommandQP(self.K, self.lo[:3], self.hi[:3], self.slack_weight, self.eps, self._solver_name)
         self._counts = self._zero()
         self._pending = None  # the guardian's command acting during the coming lap; None: the pilot's
-        self._last_time = float(priv.get("sim_time", 0.0))
-        self._lap = self.lap_guess
+        self.start_laps(self.lap_guess, since=priv.get("sim_time", 0.0))
         self._side = 0  # 0: filtering the nominal; +-1: following a shape (the deadlock escape), on that side
         self._followed = None  # (x, y, side) of the last step spent following a shape
         self._normal = (0.0, 0.0)  # the horizontal normal of the shape followed (heading frame)
@@ -264,16 +155,12 @@ class QuadrotorCBFGuardian(Guardian):
         u_nom = self.nominal(info)
         priv = self._privileged()
         state = np.asarray(priv["state"], float)
-        if state.shape != (13,) or not all(map(math.isfinite, state.tolist())):
-            self._counts["nan_states"] += 1
+        if not self.finite_state(state, 13):
             return self._hover()
         if self.predict_latency:
-            t = float(priv.get("sim_time", self._last_time))
-            if t > self._last_time:
-                self._lap = t - self._last_time
-            self._last_time = t
+            self.measure_lap(priv)
             during = self._pending if self._pending is not None else u_nom
-            state = self.predict(state, during, self._lap)
+            state = self.predict(state, during, self._measured_lap)
         return self.decide(state, u_nom)
 
     def slide_reference(self, b, G, u) -> np.ndarray | None:

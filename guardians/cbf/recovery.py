@@ -1,6 +1,6 @@
 """The ``cbf`` guardian's recovery: a backup manoeuvre about one obstacle, and when it ends.
 
-Pure functions of the state and the scene (the package docstring, item 2, explains the
+Pure functions of the state and the scene (`docs/design-notes.md`, cbf item 2, explains the
 manoeuvre); the guardian keeps the state of a recovery (which obstacle, which way round).
 """
 

@@ -1,24 +1,63 @@
-"""Dynamics for the level-set solver: the optimal Hamiltonian and its partial bounds.
+"""The HJ dynamics contract, as code, and the systems that satisfy it.
 
-A dynamics object gives, on a :class:`Grid`:
-
-* ``hamiltonian(grid, p)``: ``max_u min_d  p . f(x, u, d)`` for the co-state ``p`` (a list of
-  arrays, one per axis), i.e. the control tries to *avoid* the target set (keep the value
-  high) and the disturbance tries to reach it;
-* ``alphas(grid)``: per axis, a bound on ``|dH/dp_i|`` (scalar or broadcastable array) for the
-  Lax-Friedrichs dissipation and the CFL step;
-* ``optimal_control(x, grad)``: the bang-bang maximiser at a state.
+:class:`HJDynamics` is what :func:`guardians.hj.solver.solve_brt` needs of a system (a
+``typing.Protocol``, checked at run time by :func:`check_dynamics`): ``key()`` (the value
+cache's identity), ``hamiltonian(grid, p)`` (``max_u min_d p . f(x, u, d)`` for the co-state
+``p``, one array per axis: the control avoids the target, the disturbance reaches it; with
+``control="min"`` for reach-avoid) and ``alphas(grid)`` (per axis, a bound on ``|dH/dp_i|`` for
+the Lax-Friedrichs dissipation and the CFL step).  :class:`HJControlDynamics` adds
+``optimal_control(x, grad)``, the bang-bang maximiser a guardian applies.  A new system is a
+frozen dataclass with these methods.  Offered: :class:`Dubins4DHJ` (the guardians' model) and,
+for accuracy tests, :class:`DoubleIntegrator1D`, :class:`Integrator1D`, :class:`Translation`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
 from rmm_envs.systems.dubins4d import Dubins4D
 
-__all__ = ["DoubleIntegrator1D", "Dubins4DHJ", "Integrator1D", "Translation"]
+__all__ = ["DoubleIntegrator1D", "Dubins4DHJ", "HJControlDynamics", "HJDynamics", "Integrator1D", "Translation",
+           "check_dynamics"]
+
+
+@runtime_checkable
+class HJDynamics(Protocol):
+    """What the level-set solver needs of a system (see the module docstring)."""
+
+    def key(self) -> dict:
+        """A JSON-able identity: equal keys mean equal Hamiltonians (the value cache's key)."""
+        ...
+
+    def hamiltonian(self, grid, p: Sequence[np.ndarray]) -> np.ndarray:
+        """``max_u min_d p . f`` on ``grid`` (float32, the grid's shape) for the co-state ``p``;
+        dynamics used for reach-avoid also take ``control="min"`` (the control minimises)."""
+        ...
+
+    def alphas(self, grid) -> Sequence:
+        """Per axis, a bound on ``|dH/dp_i|`` over the grid (a number or a broadcastable array)."""
+        ...
+
+
+@runtime_checkable
+class HJControlDynamics(HJDynamics, Protocol):
+    """An :class:`HJDynamics` a guardian acts with: also the optimal control at a state."""
+
+    def optimal_control(self, x, grad, control: str = "max") -> tuple:
+        """The bang-bang control maximising (``"max"``: avoid) or minimising (reach) ``grad . f``."""
+        ...
+
+
+def check_dynamics(dynamics) -> HJDynamics:
+    """``dynamics`` if it satisfies :class:`HJDynamics`; a ``TypeError`` naming what it lacks otherwise."""
+    missing = [m for m in ("key", "hamiltonian", "alphas") if not callable(getattr(dynamics, m, None))]
+    if missing:
+        raise TypeError(f"HJ dynamics must offer key(), hamiltonian(grid, p) and alphas(grid) "
+                        f"(guardians.hj.dynamics.HJDynamics); {dynamics!r} lacks {', '.join(missing)}")
+    return dynamics
 
 
 @dataclass(frozen=True)

@@ -1,110 +1,15 @@
 """The ``hj`` guardian on the maze car (``Dubins3DMazeParallel-v0``): a 3-D avoid value over the walls.
 
-``hj`` serves both systems: :class:`guardians.hj.guardian.HJGuardian` hands an env whose action
-space has the maze car's single control (``turnrate_ctrl``) to :class:`MazeHJGuardian`, which
-can also be used (and named, ``guardians.hj.maze:MazeHJGuardian``) on its own.  It uses
-**privileged** information: the maze, the goal, the true pose and the car's speed (the env's
-``privileged()``).
+:class:`guardians.hj.guardian.HJGuardian` hands an env whose action space is of the maze car's
+kind (``"dubins3d"``) to :class:`MazeHJGuardian`, also usable (and named,
+``guardians.hj.maze:MazeHJGuardian``) on its own.  It reads **privileged** data (the maze, the
+goal, the true pose, the car's speed) and, at reset, solves the walls' backward reachable tube
+for the constant-speed car with the Dubins4D solver (a speed axis of three equal nodes); each
+step its look-ahead rule (:mod:`guardians.hj.maze_lookahead`) checks the driver's next laps and
+the best two-turn recovery against the walls and the value.
 
-## The value function
-
-The car has a constant speed ``s`` (10 px/s) and a bounded turn rate ``|u| <= u_max`` (0.2
-rad/s), read at ``reset`` from the action space.  Its backward reachable tube of the walls over
-``horizon`` seconds is solved on a grid ``(x, y, psi)``, heading periodic.  The target is the
-exact signed distance to the walls' surfaces (:meth:`rmm_envs.worlds.mazes.Maze.point_clearance`,
-capped at 60 px far from every wall, where it never decides anything), so ``V`` is in pixels:
-the closest the car can be kept to a wall over the horizon.
-
-The solve reuses the Dubins4D solver and its compiled kernels unchanged: the constant-speed car
-*is* the Dubins4D car at a fixed speed with no acceleration, so the grid gets a speed axis of
-three nodes, all at ``s`` (``Dubins4DHJ(u1_max=u_max, u2_max=0, v_min=v_max=s)``); its
-Hamiltonian and dissipation along that axis are exactly zero and every speed slice holds the
-same 3-D value.  That costs 3x the nodes of a dedicated 3-D kernel and no new numerical code.
-
-Defaults, and why:
-
-* ``spacing = 8`` px between position nodes: under a wall's thickness (12.5 px), so every wall
-  has a node inside it; the distance rule's margin is half of it (4 px).
-* ``n_heading = 32``: 11.25 degrees, 2.2 s of full turn between nodes.
-* ``horizon = 20`` s: the avoid set has converged to a point.  On a 10 x 10 maze (seed 0,
-  ENO2/RK3) the unsafe share of the grid is 22.9%, 26.4%, 28.2%, 29.3%, 29.9% and 30.0% for
-  horizons of 5, 10, 15, 20, 30 and 40 s: a half turn takes pi / u_max = 15.7 s, and past
-  20 s almost nothing more is doomed; 20 s costs half of 40 s.
-* ``region = "route"``: the grid covers the cells of the maze path from the car's cell to the
-  goal's, plus ``route_margin = 1`` cell around their bounding box (the guardian computes the
-  path itself from the privileged maze, pose and goal, :func:`rmm_envs.worlds.mazes.cell_path`).
-  The driver keeps to that path, so this is where the value is needed, and it is about a third
-  of a 10 x 10 maze.  Outside the grid the guardian leaves control to the driver and counts it
-  (``stats()["outside_grid"]``).  ``region = "maze"`` covers the whole maze.
-* scheme ``order = 2, rk = 3, cfl = 0.8``: ``hj``'s (see :mod:`guardians.hj.guardian`).
-
-## Why the value alone collided
-
-With the rule below replaced by acting on the value (``rule="distance"``: take control when
-``V <= margin + s T`` and turn by the sign of ``dV/dpsi``), ``hj`` collided in 16.4% of 128
-episodes (seed 0).  In those collisions the guardian is in control from ``V`` about 6 px on, and
-``V`` falls under its own "optimal" turn until the car touches a wall: at seed 1214021410 it
-takes over at ``(334.3, 869.5, -2.3)`` with ``V = 6.0`` px and turns right for 9 s into the
-wall, while holding right for 2.5 s and then left keeps 2.2 px of clearance (a search over
-one-switch manoeuvres on the exact walls).  It is the resolution, not the latency: a maze cell
-leaves the car 6.25 px either side of a 100-px turning circle, the walls are 1.5 position cells
-thick, and the value's errors at 8 px x 11.25 degrees are of that size both ways (over-stated at
-wall ends, under-stated in dead ends, where the car can circle for ever with ``V = -3`` px).
-Finer grids, more headings, longer horizons and larger margins did not remove them (earlier
-runs: 8-11 of 11 collisions of 64 episodes remained), and a gradient's sign decides the turn
-exactly where the two turns are nearly as good.
-
-## The rule (``rule="lookahead"``, the default)
-
-Decisions are checked on the true walls over a short future, and the value only beyond it.
-:mod:`guardians.hj.maze_lookahead` scores two-turn manoeuvres (``u1`` for ``t1`` in
-``lookahead / 6`` steps up to ``lookahead = 6`` s, then ``u2``): the least exact clearance along
-the path; a manoeuvre whose second turn is a full-rate turn is followed for a **whole loop**
-(31.4 s), and a loop that is clear all round is safe for ever, so it needs no value; one that
-ends straight also counts ``V - value_error`` at its end pose (``value_error = 6`` px: the
-value's over-statement seen above, 6-8 px, so that the value is trusted only where it is
-clearly positive).  With the one-lap latency (``delay = 1``), the decision at ``s_k`` cannot
-change the lap to ``s_{k+1}``: it runs under the guardian's last turn rate, or the driver's
-(``info["nominal_control"]``, exactly what the driver applies then).  The guardian stays
-passive when that lap, one more lap of the driver's turn rate, and then the best manoeuvre all
-keep more than ``margin`` (``None``: half a position cell, 4 px) of clearance.  Otherwise it
-commands, from the pose one lap ahead, the **least invasive** manoeuvre that keeps ``margin``:
-the one whose first turn rate is nearest the driver's (ties: the larger score), and the
-best-scoring one when none does.  Where the value exceeds ``band`` (20 px, past the 8 px of
-over-statement seen) no manoeuvre is scored: the car is far from every wall and the driver
-keeps control.
-
-How it was chosen, on 32 development episodes of ``--seed 5`` (fixed 1 ms clock; the driver
-alone collides in about half): the value-only rule below, 4 collisions and 1 timeout; the
-look-ahead taking the best-scoring manoeuvre, 1 collision and 6 timeouts (it turned the car
-round in corridors and the driver turned it back); the least invasive one, 1 collision and 2
-timeouts; the same with ``value_error = 6``, no collision and 2 timeouts (30 goals), the
-default.  Requiring instead that each turn rate leave a checked manoeuvre one lap later
-collided twice in the first 23 (a turn's checked manoeuvres need not be there one lap on:
-``t1`` moves in 1-s steps), so the simpler rule stays.
-
-``rule="distance"`` keeps the value-only rule above (``hj``'s Dubins4D rule): the decision
-commits ``T = (1 + delay) lap`` s and ``V`` is 1-Lipschitz in position, so it takes control when
-``V <= margin + s T`` (6.2 px at 0.11-s laps) with ``u = u_max sign(dV/dpsi)``.
-
-The value is cached on disk like the Dubins4D one (:class:`guardians.hj.cache.ValueCache`; the
-key holds the walls, the grid, the dynamics and the scheme).  The solve time of an episode is in
-``stats()["solve_seconds"]`` and is reported as the episode's precompute time.
-
-## Measured
-
-``rule="distance"``: ``rmm-bench --agent hj --env Dubins3DMazeParallel-v0 --episodes 128 --clock
-fixed:1`` (seed 0): 83.6% success, 16.4% collisions, no timeouts (the driver alone: 46.1%
-collisions over 256), in control 8.9% of the simulated time.  A solve on the default route
-grid took 6.9 s on average (3.1-15.7 s over 126 solves) on a shared, loaded 2-core machine,
-one thread (not a timing benchmark: load inflates it); it is cached, so a rerun of the same
-episodes reads it back.  The look-ahead rule, ``rmm-bench --agent hj --env Dubins3DMazeParallel-v0
---episodes 512 --seed 11 --clock fixed:1`` (a seed no default was chosen on): 93.9% success, no
-collision, 6.1% timeouts, in control 12.9% of the simulated time (docs/reproduction.md).
-
-Explicit edge cases: a pose with NaN applies the env's safe default (the maximum turn away
-from the nearer wall) to the observation and is counted (``nan_states``); a maze with no walls
-is refused at reset.
+Offers :class:`MazeHJGuardian`, :func:`maze_grid` and :func:`wall_target`.  The value, the
+rule, the alternatives tried, the defaults and why: ``docs/design-notes.md``.
 """
 
 from __future__ import annotations
@@ -113,8 +18,9 @@ import math
 
 import numpy as np
 
-from guardians._checks import finite, integer, maze_car_only
-from guardians.base import Guardian
+from guardians._checks import finite, integer
+from guardians.dispatch import maze_car_only
+from guardians.privileged import PrivilegedGuardian
 from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid, central_gradient
@@ -123,7 +29,6 @@ from guardians.hj.solver import check_scheme, select_backend, solve_brt
 
 __all__ = ["MazeHJGuardian", "maze_grid", "wall_target"]
 
-#: The maze car's controls (:data:`rmm_envs.envs.dubins3d_maze_parallel.CONTROLS`).
 REGIONS = ("route", "maze")
 MAZE_RULES = ("lookahead", "distance")
 SAMPLE_DT = 0.2  # s between the look-ahead's path samples (2 px at 10 px/s)
@@ -147,12 +52,10 @@ def wall_target(grid: Grid, maze) -> np.ndarray:
     return np.broadcast_to(d[:, :, None, None], grid.shape).astype(np.float32)
 
 
-class MazeHJGuardian(Guardian):
+class MazeHJGuardian(PrivilegedGuardian):
     """Grid HJ reachability guardian for the maze car; see the module docstring."""
 
     name = "hj"
-    observation_type = "global"
-    privileged = True
 
     def __init__(self, spacing: float = 8.0, n_heading: int = 32, horizon: float = 20.0, region: str = "route",
                  route_margin: int = 1, order: int = 2, rk: int = 3, cfl: float = 0.8, margin: float | None = None,
@@ -252,8 +155,7 @@ class MazeHJGuardian(Guardian):
         self._arrays = [self.V, *central_gradient(self.V, self.grid)[:3]]
         self._margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if self.margin is None else self.margin
         self._safe = space.safe_default.policy(space, self.rng) if space.safe_default is not None else None
-        self._last_time = None
-        self._measured_lap = None
+        self.start_laps()
         self._maze_geom = (np.ascontiguousarray(np.asarray(maze.walls, float)), float(maze.half), float(maze.width),
                            float(maze.height))
         self._manoeuvres = manoeuvres(self.u_max, self.lookahead)
@@ -265,11 +167,6 @@ class MazeHJGuardian(Guardian):
         x, y, psi = (float(s) for s in state[:3])
         return self.grid.interp_many(self._arrays, np.array([x, y, psi, self.speed]))
 
-    def current_lap(self) -> float:
-        if self.lap is not None:
-            return self.lap
-        return self._measured_lap if self._measured_lap is not None else 0.1
-
     def threshold(self) -> float:
         """The value at or below which the guardian takes control."""
         return self._margin + self.speed * (1 + self.delay) * self.current_lap()
@@ -277,8 +174,7 @@ class MazeHJGuardian(Guardian):
     def act(self, observation, info=None):
         s = self._state_and_lap()
         self._pending, pending = None, self._pending
-        if not np.all(np.isfinite(s)):
-            self._counts["nan_states"] += 1
+        if not self.finite_state(s):
             u = self._safe(observation) if self._safe is not None else self.action_space.control_high
             return self.action_space.active(u)
         psi = (s[2] + math.pi) % (2 * math.pi) - math.pi

@@ -86,7 +86,7 @@ import math
 import numpy as np
 
 from guardians._checks import finite, integer, quadrotor_only
-from guardians.base import Guardian
+from guardians.privileged import PrivilegedGuardian
 from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid, central_gradient
@@ -99,7 +99,7 @@ from rmm_envs.worlds.room_collision import BOUND
 __all__ = ["QuadrotorHJGuardian"]
 
 
-class QuadrotorHJGuardian(Guardian):
+class QuadrotorHJGuardian(PrivilegedGuardian):
     """Grid HJ reachability guardian for the quadrotor; see the module docstring."""
 
     name = "hj"

@@ -43,6 +43,7 @@ import numpy as np
 
 from guardians._checks import finite, integer
 from guardians.hj import _kernels
+from guardians.hj.dynamics import HJDynamics, check_dynamics
 from guardians.hj.grid import Grid
 from rmm_envs.settings import HJ_THREADS, hj_threads
 
@@ -99,7 +100,7 @@ def check_scheme(order, rk, cfl) -> tuple[int, int, float]:
     return int(order), int(rk), cfl
 
 
-def select_backend(grid: Grid, dynamics, order: int, backend: str = "auto") -> str:
+def select_backend(grid: Grid, dynamics: HJDynamics, order: int, backend: str = "auto") -> str:
     """The implementation ``solve_brt`` will use: ``"numba"`` or ``"numpy"``."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
@@ -155,7 +156,7 @@ def spatial_derivatives(V: np.ndarray, grid: Grid, axis: int, order: int = 1):
     raise ValueError(f"order must be 1 or 2, got {order}")
 
 
-def _rate(V: np.ndarray, grid: Grid, dynamics, alphas, order: int, control: str = "max") -> np.ndarray:
+def _rate(V: np.ndarray, grid: Grid, dynamics: HJDynamics, alphas, order: int, control: str = "max") -> np.ndarray:
     p_mean, diss = [], None
     for ax in range(grid.ndim):
         left, right = spatial_derivatives(V, grid, ax, order)
@@ -168,7 +169,7 @@ def _rate(V: np.ndarray, grid: Grid, dynamics, alphas, order: int, control: str 
     return np.minimum(H, 0.0, out=H)
 
 
-def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: int = 2, rk: int = 3,
+def solve_brt(grid: Grid, dynamics: HJDynamics, target: np.ndarray, horizon: float, order: int = 2, rk: int = 3,
               cfl: float = 0.8, progress=None, constraint: np.ndarray | None = None,
               backend: str = "auto", threads: int | None = None) -> tuple[np.ndarray, dict]:
     """Backward reachable tube of ``target`` (``l``: <= 0 inside) over ``horizon`` seconds.
@@ -184,6 +185,7 @@ def solve_brt(grid: Grid, dynamics, target: np.ndarray, horizon: float, order: i
 
     Returns ``V(x, horizon)`` (float32, the grid's shape) and a dict of solver statistics.
     """
+    check_dynamics(dynamics)
     if target.shape != grid.shape:
         raise ValueError(f"target has shape {target.shape}, the grid {grid.shape}")
     if not horizon >= 0:

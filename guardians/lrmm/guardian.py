@@ -1,94 +1,16 @@
 """The LRMM guardians: take control when the learned risk of the local observation is high.
 
 Both read the local observation only (no privileged data) and run one numpy forward pass per
-step.  Two registered names:
+step.  ``lrmm`` (:class:`LRMMGuardian`, the default) takes control while the model's risk (or,
+with ``trigger="driver"``, the driver's own control rated) is above the threshold, applies the
+candidate manoeuvre its action-conditioned head rates safest, and stays in control ``commit``
+steps past the risk; its defaults come from the model file or the env's shipped entry
+(:mod:`guardians.lrmm.defaults`).  ``lrmm-paper`` (:class:`LRMMPaperGuardian`) is the paper's
+rule: risk above 0.85, maximum braking and a maximum turn toward the more open side.
 
-``lrmm`` (:class:`LRMMGuardian`, the default) -- *when* from the learned risk, *what* from the
-model's action-conditioned head, and a commitment that outlasts the risk:
-
-* **Model**: ``guardians/lrmm/models/dubins4d_act.npz``.  Its output has the risk of the state
-  (the paper's label: uniformly random 4 s futures) and, for each of six candidate
-  manoeuvres (turn rate -0.25, 0, +0.25 rad/s x acceleration -0.5, +0.5 m/s^2), the risk of
-  holding that manoeuvre for 1 s and then driving randomly (``rmm-datagen --candidates``).
-  Six because the control box has two useful accelerations (brake to shed speed; accelerate
-  to leave a spot where a stopped car would stay stuck) and three turn choices; 1 s because
-  it is about nine 0.11 s laps of the parallel-autonomy loop: long enough for the weak
-  controls (at most 0.25 rad/s) to change the outcome, short enough to be re-decided often.
-* **When**: take control while ``risk > threshold`` (strictly above, as the paper's rule).
-* **What**: the candidate with the lowest predicted risk (the first on ties), as is.
-* **Commitment**: after the risk falls back to the threshold or below, stay in control for
-  ``commit`` more steps, still applying the safest candidate.  Without it the guardian
-  chatters: the 12 rays are 30 degrees apart, so once the car has turned a few degrees away
-  from an obstacle's edge the forward ray misses it, the risk drops at once, the driver turns
-  straight back and the next observation is already too close.  The action also lands one lap
-  late in this loop (it is computed from the observation of the previous lap).
-* **Restart** (``restart``, m/s; 0.3 for Dubins4D): in control of a car slower than that (the
-  ``"speed"`` field), apply the lowest-risk candidate that accelerates if its risk is at or
-  below the threshold.  This driver asks for the speed ``(d / 10)^2`` at ``d`` m from the goal,
-  so a car braked to a stop near the goal creeps on at micrometres per second: half the
-  timeouts of 128 development episodes (seed 5) were such stops, 0.4-1.8 m from the goal.
-  Handing back a car that moves lets the driver finish (timeouts 26.6% -> 9.4% there).
-* **Trigger** (``trigger``): ``"risk"`` (Dubins4D) acts while the state risk is above the
-  threshold; ``"driver"`` (the quadrotor) while the driver's own next control,
-  ``info["nominal_control"]``, rated by :mod:`guardians.lrmm.nominal` (the state risk after
-  holding it, predicted from the observation), is above the threshold *and* more than
-  ``margin`` above the best candidate rated the same way (only when the driver heads into
-  risk and a candidate does materially better); it hands back once the driver's control has
-  been rated at or below the threshold for ``commit`` steps.  A step without the nominal
-  control in ``info`` uses ``"risk"`` (one ``UserWarning``); a malformed one raises ``ValueError``.
-* **Defaults** come from the model file (``meta["decision"]``), where they are stored with how
-  they were chosen: threshold 0.25 with restart 0.3 (the best mean success-minus-collision
-  rate on 128 episodes each of seeds 5 and 6, 0.25 against 0.3: 73.9 against 73.5; 0.3 had
-  been the best without restart, on seed 7) and commit 18 steps (about 2 s, twice the labels'
-  hold time; chosen among 5, 9, 18 and 27 on seed 5).  No reported result uses these seeds.
-  Explicit arguments override them.  The threshold is low next to the paper's 0.85 because
-  the label is the crash rate of *random* futures: at 0.85 it is too late to avoid the obstacle.
-* ``hysteresis`` (default False): the original code's moving-average release rule, kept as an
-  option; the commitment does that job here.
-
-``lrmm-paper`` (:class:`LRMMPaperGuardian`) -- exactly the paper's rule, on the model that
-reproduced the paper's Table II (``dubins4d.npz``): take control while ``risk > 0.85`` with
-maximum braking (-0.5) and a maximum turn (0.25) toward the more open side, comparing the +30
-and -30 degree rays (no turn when they are equal within ``numpy.isclose``); no commitment.
-The bounds are read from the env's action space and the two rays are found by direction in
-the observation's layout (``layout.ray_index(+-30 degrees)``), so the rule holds for any ray
-count that has rays in (or nearest to) those directions.
-At 0.85 the car is usually too close to brake in time (85% of *random* futures crash there).
-
-**Other systems** (``env_id``: the env served, which ``rmm-bench`` passes from ``--env``): one
-table, :data:`guardians.lrmm.shipped.SHIPPED`, gives per env id the shipped model, the
-observation field it reads and, where the model file stores none, the decision defaults.  On
-``Dubins3DMazeGuarded-v0`` / ``Dubins3DMazeParallel-v0`` the guardian reads the maze model
-(trained on ``Dubins3DMaze-v0``'s 8 rays: the risk of random 2 s futures) on the ``"rays"``
-field and acts with ``action="turn"``: the maximum turn rate toward the side the model rates
-safer, comparing its risk of the rays as they would read with the heading one ray (45 degrees)
-further left or right (a cyclic shift of the rays: the pose turned in place, a stand-in for the
-turn the car will make); threshold 0.7, commit 5 steps (how they were chosen is stored in the
-table).  The car cannot brake, so turning is the whole action.  On ``QuadrotorRoomGuarded-v0``
-/ ``QuadrotorRoomParallel-v0`` it reads the quadrotor command model with a head
-(``quadrotor_cmd_act.npz``: the risk of random velocity commands to the stabilising controller,
-and of holding hover, climb, back off, or back off and climb for 1 s first, from the rays, the
-heading-frame velocity and the body rates) and applies the safest of those four commands while
-the pilot's command, rated, is above 0.2 and 0.1 above the best candidate (``trigger="driver"``),
-until it has been rated at most 0.2 for 20 steps (stored in the file with how they were chosen).
-``action="safe"`` applies the env's safe default instead (hover and level).  Without
-``env_id`` (or a model) the guardian serves Dubins4D, as before.
-
-``hysteresis=True`` (either guardian): the original code's release rule, a deque of the last
-``window`` (20) risks, initialised at the threshold; it acts while the risk or their mean is above it.
-
-**What it needs from the env** (checked at ``reset``, a ``ValueError`` naming the guardian and
-the missing piece otherwise): an observation space (or the field ``inputs``) of the model's
-input size; an action space (:class:`rmm_envs.autonomy.GuardianActionSpace`) through which
-every action is built, with the head's control count (``head``), the two Dubins4D controls and
-a ``"rays"`` field (``heuristic``), one control and evenly spaced rays (``turn``) or a safe
-default (``safe``).
-
-**Bad input.**  A model file without the head (``candidates``) or without stored defaults
-(``decision``), such as a file written before these fields existed, makes ``lrmm`` fall back
-to the paper's rule for the missing part (brake-and-turn; threshold 0.85, no commitment) with
-a ``UserWarning`` naming the missing field.  A risk that is NaN or inf raises ``ValueError``:
-``nan > threshold`` is False, so reading it as a number would silently mean "safe".
+Offers :class:`LRMMGuardian`, :class:`LRMMPaperGuardian`, :data:`PAPER_THRESHOLD` and
+:data:`TRIGGERS`.  What each rule does on each system, how the defaults were chosen and what
+it needs from an env: ``docs/design-notes.md``.
 """
 
 from __future__ import annotations
@@ -102,13 +24,13 @@ import numpy as np
 
 from guardians._checks import integer
 from guardians.base import Guardian
+from guardians.lrmm.defaults import PAPER_THRESHOLD, check_threshold, decision_threshold, stored_decision
 from guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, load_model
 from guardians.lrmm.nominal import TRIGGERS, driver_control, hand_back_options, make_rater
 from rmm_envs.portable import wrap_angle
 
 __all__ = ["PAPER_THRESHOLD", "TRIGGERS", "LRMMGuardian", "LRMMPaperGuardian"]
 
-PAPER_THRESHOLD = 0.85  # the paper's Table I setting
 ACTIONS = ("head", "heuristic", "turn", "safe")
 DEFAULT_ENV = "Dubins4DCirclesGuarded-v0"  # whose shipped model a guardian built without env_id or model reads
 #: how to get the model of another env: the guardian picks its model when it is built, not at reset
@@ -154,10 +76,7 @@ class LRMMGuardian(Guardian):
                  inputs: str | None = None, trigger: str | None = None, margin: float | None = None,
                  restart: float | None = None) -> None:
         super().__init__()
-        if threshold is not None and (isinstance(threshold, bool) or not isinstance(threshold, (int, float, np.number))):
-            raise ValueError(f"threshold must be a number in [0, 1], got {threshold!r}")
-        if threshold is not None and not 0.0 <= threshold <= 1.0:
-            raise ValueError(f"threshold must be in [0, 1], got {threshold}")
+        check_threshold(threshold)  # refused before any file is read
         integer("window", window, 1)
         if commit is not None:
             integer("commit", commit, 0, "steps to stay in control after the risk falls back")
@@ -174,7 +93,7 @@ class LRMMGuardian(Guardian):
         where = str(getattr(self.model, "path", "the model"))
         # the observation field the model reads: given, else the env's entry in the table, else all of it
         self.inputs = inputs if inputs is not None else (ship.inputs if ship is not None else None)
-        decision = self.model.meta.get("decision") or (ship.decision if ship is not None and model is None else None)
+        decision = stored_decision(self.model.meta, ship, model is not None)
         if action is None and decision and decision.get("action") is not None:
             action = decision["action"]
             if action not in ACTIONS:
@@ -189,15 +108,10 @@ class LRMMGuardian(Guardian):
             raise ValueError(f"action='head' needs a model with a 'candidates' head; {where} has none")
         if commit is None:
             commit = int(decision.get("commit", 0)) if decision else 0
-        if threshold is None:
-            if decision is None or "threshold" not in decision:
-                threshold = PAPER_THRESHOLD
-                self._fallback_warning(f"{where} has no 'decision' threshold: using the paper's {PAPER_THRESHOLD}")
-            else:
-                threshold = float(decision["threshold"])
-                if not 0.0 <= threshold <= 1.0:
-                    raise ValueError(f"{where}: stored decision threshold must be in [0, 1], got {threshold}")
-        self.threshold = float(threshold)
+        # argument > the model's stored decision > the shipped entry's > the paper's (guardians.lrmm.defaults)
+        self.threshold, self.threshold_source = decision_threshold(threshold, decision, where)
+        if self.threshold_source == "paper":
+            self._fallback_warning(f"{where} has no 'decision' threshold: using the paper's {PAPER_THRESHOLD}")
         self.trigger, self.margin, self.restart = hand_back_options(trigger, margin, restart, decision, action, hysteresis)
         self._warned = False
         self.action = action

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rmm_envs.systems.dubins4d import desired_heading  # the CLF's target heading, shared with the cbf guardian
+from rmm_envs.systems.dubins4d import desired_heading_compiled as _desired_heading
 
 try:
     from numba import njit
@@ -101,9 +102,7 @@ def _clf_qp_loop(states, goals, lim, gain, out):
     return out
 
 
-_desired_heading = desired_heading
 if njit is not None:  # one source: the compiled loop runs these very functions
-    _desired_heading = njit(cache=True)(desired_heading)
     _clf_rows = njit(cache=True)(_clf_rows)
     _min_box_slack = njit(cache=True)(_min_box_slack)
     _clf_qp_loop = njit(cache=True)(_clf_qp_loop)

@@ -72,7 +72,7 @@ import math
 import gymnasium as gym
 import numpy as np
 
-from rmm_envs.autonomy import GuardianActionSpace, SafeDefault
+from rmm_envs.autonomy import GENERIC, GuardianActionSpace, SafeDefault
 from rmm_envs.envs.guarded import GuardedEnv
 from rmm_envs.wrappers.nonblocking import TIME_ACCEL, NonBlockingStepping
 
@@ -196,7 +196,7 @@ class DrivenGuardedEnv(GuardedEnv):
             hint = f" (a string; one name is {(controls,)!r})" if isinstance(controls, str) else ""
             raise ValueError(f"controls must name each control of {self.env_name}'s action space {self.env.action_space} "
                              f"({k} control{'s' if k > 1 else ''}), got {controls!r}{hint}")
-        self.action_space = GuardianActionSpace(names, self._acts.low, self._acts.high, safe_default=safe)
+        self.action_space = GuardianActionSpace(names, self._acts.low, self._acts.high, safe_default=safe, kind=GENERIC)
         self.observation_space = self.env.observation_space
         self.dt = self._env_dt()
         self.step_dt = self.dt if step_dt is None else float(step_dt)

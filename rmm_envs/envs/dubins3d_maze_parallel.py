@@ -139,7 +139,7 @@ from rmm_envs.worlds.mazes import Maze, generate_maze
 
 __all__ = ["CONTROLS", "Dubins3DMazeGuardedEnv", "TurnFromNearerWall", "make_parallel_env", "observation_layout"]
 
-from rmm_envs.systems.dubins3d import CONTROLS  # noqa: E402  (owned by the system; re-exported)
+from rmm_envs.systems.dubins3d import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
 N_RAYS = 8
 
 
@@ -223,7 +223,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         self.driver = PursuitDriver(self.system.u_max, float(lookahead), float(driver_gain))
         self.clock = make_clock(clock)
         lay = observation_layout()
-        self.action_space = GuardianActionSpace.for_system(self.system, CONTROLS, safe_default=TurnFromNearerWall(lay))
+        self.action_space = GuardianActionSpace.for_system(self.system, CONTROLS, safe_default=TurnFromNearerWall(lay), kind=KIND)
         low = np.array([0.0] * N_RAYS + [-np.inf, -np.inf, -np.pi], dtype=np.float32)
         high = np.array([np.inf] * N_RAYS + [np.inf, np.inf, np.pi], dtype=np.float32)
         self.observation_space = ObservationBox(low, high, lay)

@@ -150,7 +150,7 @@ from rmm_envs.systems.dubins4d import Dubins4D, FullBraking
 
 __all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "observation", "observation_layout"]
 
-from rmm_envs.systems.dubins4d import CONTROLS  # noqa: E402  (the action fields of u = (u1, u2); owned by the system)
+from rmm_envs.systems.dubins4d import CONTROLS, KIND  # noqa: E402  (the action fields of u = (u1, u2); owned by the system)
 
 
 def observation_layout(n_rays: int = 12) -> ObservationLayout:
@@ -228,7 +228,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         self.driver = CLFDriver((s.u1_min, s.u1_max), (s.u2_min, s.u2_max), (s.v_min, s.v_max),
                                 driver_params or DriverParams(), solver=driver_solver)
         self.clock = make_clock(clock)
-        self.action_space = GuardianActionSpace.for_system(s, CONTROLS, safe_default=FullBraking())
+        self.action_space = GuardianActionSpace.for_system(s, CONTROLS, safe_default=FullBraking(), kind=KIND)
         low = np.array([0.0, -np.inf, -np.inf, -np.pi, s.v_min] + [0.0] * self.n_rays, dtype=np.float32)
         high = np.array([np.inf, np.inf, np.inf, np.pi, s.v_max] + [self.ray_length] * self.n_rays, dtype=np.float32)
         self.observation_space = ObservationBox(low, high, observation_layout(self.n_rays))

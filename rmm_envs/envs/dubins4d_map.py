@@ -144,7 +144,7 @@ import numpy as np
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import draw_until, option_vector, rejection_sample
-from rmm_envs.envs.dubins4d import CONTROLS, Dubins4DCirclesEnv
+from rmm_envs.envs.dubins4d import CONTROLS, KIND, Dubins4DCirclesEnv
 from rmm_envs.envs.dubins4d_start import in_goal
 from rmm_envs.envs.guarded import parallel_entry_point
 from rmm_envs.scenes.dubins4d_map import Dubins4DMapScene
@@ -182,7 +182,7 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
             self._check_goal(self.map.goal, f"map {self.map.source}: its goal")
         self._obstacle_contact = self.world.first_contacts
         self.action_space = GuardianActionSpace.for_system(self.system, CONTROLS, safe_default=FullBraking(),
-                                                           obstacle_shapes=self.map.kinds)
+                                                           obstacle_shapes=self.map.kinds, kind=KIND)
 
     # ------------------------------------------------------------------ starts
     def _check_goal(self, goal: np.ndarray, what: str) -> None:

@@ -140,7 +140,7 @@ from rmm_envs.worlds.room_collision import BOUND
 
 __all__ = ["CONTROLS", "HoverAndLevel", "QuadrotorRoomGuardedEnv", "make_parallel_env", "observation_layout"]
 
-from rmm_envs.systems.quadrotor_control import CONTROLS  # noqa: E402  (owned by the system; re-exported)
+from rmm_envs.systems.quadrotor_control import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
 N_RAYS = 8
 _CONTACT_MARGIN = 0.05  # m added to the travel bound before contact queries are skipped
 
@@ -204,7 +204,7 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         self.system = ClosedLoopQuadrotor(self.controller)
         self.pilot = WaypointPilot(self.system.control_low, self.system.control_high, cruise_speed, climb_speed)
         self.clock = make_clock(clock)
-        self.action_space = GuardianActionSpace.for_system(self.system, CONTROLS, safe_default=HoverAndLevel())
+        self.action_space = GuardianActionSpace.for_system(self.system, CONTROLS, safe_default=HoverAndLevel(), kind=KIND)
         low, high = np.full(_LAYOUT.size, -np.inf, np.float32), np.full(_LAYOUT.size, np.inf, np.float32)
         low[_RANGES], high[_RANGES] = 0.0, self.ray_range
         low[_QUAT], high[_QUAT] = -1.0, 1.0

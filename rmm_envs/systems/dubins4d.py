@@ -39,7 +39,7 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency; numpy alone still works
     njit = None
 
-__all__ = ["CONTROLS", "SERIES_COEFFICIENTS", "Dubins4D", "FullBraking", "desired_heading", "segment_position", "wrap_angle"]
+__all__ = ["CONTROLS", "KIND", "SERIES_COEFFICIENTS", "Dubins4D", "FullBraking", "desired_heading", "desired_heading_compiled", "segment_position", "wrap_angle"]
 
 _COMPILED_MAX_N = 8  # up to this many states per call, the compiled scalar path is faster
 
@@ -355,6 +355,8 @@ class Dubins4D:
 
 #: the guardian action's control fields of ``u = (u1, u2)``, in order (the Dubins4D envs' action space)
 CONTROLS = ("turnrate_ctrl", "accel_ctrl")
+#: the system's kind in its guardian action space's contract (rmm_envs.autonomy.SystemContract)
+KIND = "dubins4d"
 
 
 def desired_heading(theta: float, theta_goal: float) -> float:
@@ -364,3 +366,8 @@ def desired_heading(theta: float, theta_goal: float) -> float:
     if 0 < theta < math.pi and -math.pi <= theta_goal <= -math.pi + theta:
         return 1.5 * math.pi
     return theta_goal
+
+
+#: :func:`desired_heading` compiled once (numba; the Python function without it): the driver's
+#: CLF rows and the cbf guardian's rows call it from their compiled loops
+desired_heading_compiled = njit(cache=True)(desired_heading) if njit is not None else desired_heading

@@ -54,11 +54,13 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency
     njit = None
 
-__all__ = ["CONTROLS", "yaw_of", "ClosedLoopQuadrotor", "CommandController", "HoverAndLevel", "body_packed", "body_step", "command_wrench", "command_wrenches",
+__all__ = ["CONTROLS", "KIND", "yaw_of", "ClosedLoopQuadrotor", "CommandController", "HoverAndLevel", "body_packed", "body_step", "command_wrench", "command_wrenches",
            "heading_of"]
 
 #: the guardian action's control fields: the commanded velocity in the heading frame and the yaw rate
 CONTROLS = ("vforward_ctrl", "vleft_ctrl", "vup_ctrl", "yawrate_ctrl")
+#: the system's kind in its guardian action space's contract (rmm_envs.autonomy.SystemContract)
+KIND = "quadrotor"
 
 # the layout of the packed gain vector the compiled kernel reads
 _MASS, _G, _IX, _IY, _IZ, _KV, _KVZ, _AH, _AZ, _KR, _KW, _KWZ, _FLO, _FHI, _MLO, _MHI = (

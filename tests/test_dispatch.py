@@ -1,0 +1,101 @@
+"""Guardians dispatch on the system kind an env's action space states (rmm_envs.autonomy's
+SystemContract), never on control names; third-party envs state the kind "generic"."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import rmm_envs  # noqa: F401  (registers the ids)
+from guardians.cbf import CBFGuardian, CBFPaperGuardian
+from guardians.cbf.maze import MazeCBFGuardian
+from guardians.dispatch import SYSTEMS, require_system
+from guardians.hj.guardian import HJGuardian
+from rmm_envs.autonomy import GENERIC, GuardianActionSpace, SystemContract, contract
+from rmm_envs.systems import dubins3d, dubins4d, quadrotor_control
+
+
+@pytest.mark.parametrize("env_id, kind, controls", [
+    ("Dubins4DCirclesParallel-v0", "dubins4d", ("turnrate_ctrl", "accel_ctrl")),
+    ("Dubins4DCirclesGuarded-v0", "dubins4d", ("turnrate_ctrl", "accel_ctrl")),
+    ("Dubins3DMazeParallel-v0", "dubins3d", ("turnrate_ctrl",)),
+    ("QuadrotorRoomParallel-v0", "quadrotor", ("vforward_ctrl", "vleft_ctrl", "vup_ctrl", "yawrate_ctrl")),
+    ("CartPoleParallel-v0", "generic", ("force_ctrl",)),
+])
+def test_each_env_states_its_system_in_its_action_space(env_id, kind, controls):
+    if env_id.startswith("Quadrotor"):
+        pytest.importorskip("pybullet")
+    env = gym.make(env_id)
+    c = contract(env.action_space)
+    assert c == env.action_space.contract and c.kind == kind and c.controls == controls
+    assert c.control_low == tuple(env.action_space.control_low.tolist())
+    assert c.control_high == tuple(env.action_space.control_high.tolist())
+    assert c.safe_default is env.action_space.safe_default and c.safe_default is not None
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        c.kind = "other"
+    env.close()
+
+
+def test_the_systems_own_their_kinds_and_the_default_is_generic():
+    assert (dubins4d.KIND, dubins3d.KIND, quadrotor_control.KIND, GENERIC) == ("dubins4d", "dubins3d", "quadrotor", "generic")
+    assert set(SYSTEMS) == {"dubins4d", "dubins3d", "quadrotor"}
+    space = GuardianActionSpace(("a",), [-1.0], [2.0])
+    assert space.contract == SystemContract("generic", ("a",), (-1.0,), (2.0,), None, None)
+    for bad in ("", None, 3):
+        with pytest.raises(ValueError, match=f"kind must be a non-empty system name .*got {bad!r}"):
+            GuardianActionSpace(("a",), [-1.0], [1.0], kind=bad)
+    with pytest.raises(TypeError, match="GuardianActionSpace"):
+        contract(gym.spaces.Discrete(2))
+
+
+def test_the_kind_not_the_control_names_picks_the_guardian():
+    # the maze car's control names under the generic kind: no guardian that models a system serves it
+    lookalike = GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2])
+    for g in (CBFGuardian(), HJGuardian()):
+        with pytest.raises(ValueError, match=f"guardian {g.name!r} applies to Dubins4D envs and the maze car .*and the "
+                                             r"quadrotor .*this env's system is 'generic'"):
+            g.check_spaces(None, lookalike)
+    # the same names under the maze car's kind: the maze guardian
+    maze = GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2], kind="dubins3d")
+    g = CBFGuardian()
+    g.check_spaces(None, maze)
+    assert isinstance(g._delegate_for(maze), MazeCBFGuardian) and g._delegate_for(maze) is g._delegate_for(maze)
+    assert g.served() == ("dubins3d", "quadrotor") and CBFPaperGuardian().served() == ()
+    with pytest.raises(ValueError, match="'cbf-paper' applies to Dubins4D envs only"):
+        CBFPaperGuardian().check_spaces(None, maze)
+
+
+def test_a_space_whose_controls_contradict_its_kind_is_refused_naming_both():
+    wrong = GuardianActionSpace(("turn", "accel"), [-0.25, -0.5], [0.25, 0.5], kind="dubins4d")
+    with pytest.raises(ValueError, match=r"guardian 'cbf': this env states system 'dubins4d', whose controls are "
+                                         r"\('turnrate_ctrl', 'accel_ctrl'\), but its action space's controls are "
+                                         r"\('turn', 'accel'\)"):
+        CBFGuardian().check_spaces(None, wrong)
+
+
+def test_require_system_returns_the_space_of_its_kind():
+    space = GuardianActionSpace(quadrotor_control.CONTROLS, [-1.0] * 4, [1.0] * 4, kind="quadrotor")
+    assert require_system(CBFGuardian(), space, "quadrotor", "models the quadrotor") is space
+    with pytest.raises(ValueError, match=r"guardian 'cbf' models the quadrotor \(system 'quadrotor'.*system is 'dubins3d'"):
+        require_system(CBFGuardian(), GuardianActionSpace(("turnrate_ctrl",), [-1.0], [1.0], kind="dubins3d"),
+                       "quadrotor", "models the quadrotor")
+
+
+def test_a_third_party_env_is_served_by_the_model_free_guardians_only():
+    from guardians.baselines import BrakesGuardian
+
+    env = gym.make("CartPoleParallel-v0")
+    assert env.action_space.kind == GENERIC
+    BrakesGuardian().check_spaces(env.observation_space, env.action_space)
+    for g in (CBFGuardian(), HJGuardian()):
+        with pytest.raises(ValueError, match="this env's system is 'generic'"):
+            g.check_spaces(env.observation_space, env.action_space)
+    obs, info = env.reset(seed=0)
+    b = BrakesGuardian()
+    b.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
+    a = b.act(obs, info)
+    assert a["active_ctrl"] == 1 and np.all(np.isfinite(a[env.action_space.controls[0]]))
+    env.close()
