@@ -47,10 +47,10 @@ def cache_dir(maze_hj_cache):
     return maze_hj_cache  # tests/conftest.py: one cache for the session (or make mutate's run)
 
 
-def make(space, cache_dir, state=(250.0, 125.0, 0.0), maze=None, **kw):
+def make(space, cache_dir, state=(250.0, 125.0, 0.0), maze=None, goal=(375.0, 125.0), **kw):
     """A guardian reset on ``maze`` (the corridor) with the car at ``state``; returns it and
     the privileged dict it reads (change ``state`` / ``sim_time`` there to move the car)."""
-    priv = {"state": np.array(state, float), "maze": maze or corridor(), "goal": np.array([375.0, 125.0, 10.0]),
+    priv = {"state": np.array(state, float), "maze": maze or corridor(), "goal": np.array([*goal, 10.0]),
             "speed": SPEED, "sim_time": 0.0}
     g = MazeHJGuardian(**{**SETTINGS, "cache_dir": cache_dir, **kw})
     g.reset(seed=0, action_space=space, privileged=lambda: priv)
@@ -113,6 +113,13 @@ def test_region_box_hand_computed():
     assert lo.tolist() == [62.5, 62.5] and hi.tolist() == [312.5, 312.5]
     lo, hi = g.region_box(m, np.array([125.0, 125.0, 0.0]), np.array([125.0, 250.0, 10.0]))
     assert lo.tolist() == [62.5, 62.5] and hi.tolist() == [187.5, 312.5]
+    # cells 1 -> 3, a column: x is the column's +- 62.5 (not the smaller y of the route's cells)
+    lo, hi = g.region_box(m, np.array([250.0, 125.0, 0.0]), np.array([250.0, 250.0, 10.0]))
+    assert lo.tolist() == [187.5, 62.5] and hi.tolist() == [312.5, 312.5]
+    # the walls' extent takes each coordinate from both ends of every wall
+    rails = Maze(np.array([[0.0, 10.0, 100.0, 10.0], [0.0, 50.0, 100.0, 50.0]]), width=200.0, height=200.0)
+    lo, hi = MazeHJGuardian(region="maze", cache=False).region_box(rails, np.zeros(3), np.zeros(3))
+    assert lo.tolist() == [0.0, 10.0] and hi.tolist() == [100.0, 50.0]
     # region "maze", and a maze of one cell: the walls' extent
     for guardian, maze in ((MazeHJGuardian(region="maze", cache=False), m),
                            (g, Maze(m.walls, width=400.0, height=400.0, cells=np.array([[125.0, 125.0]])))):
@@ -140,6 +147,14 @@ def test_reset_reads_the_car_and_the_value(space, cache_dir):
     g2, _ = make(space, cache_dir, margin=1.5)
     assert g2.stats() == {"outside_grid": 0, "nan_states": 0, "cache_hits": 1, "solves": 0, "solve_seconds": 0.0}
     assert g2._margin == 1.5 and g2.threshold() == pytest.approx(1.5 + SPEED * 2 * 0.1)
+    for backend in ("numba", "numpy"):  # checked against the grid and the dynamics at reset (the value is cached)
+        assert make(space, cache_dir, backend=backend)[0].stats()["cache_hits"] == 1
+    # the value's turn rate is the action space's bound (a coarse, short solve)
+    wide = GuardianActionSpace(("turnrate_ctrl",), [-0.3], [0.3])
+    g3 = MazeHJGuardian(spacing=25.0, n_heading=8, horizon=2.0, region="maze", cache=False, threads=1)
+    g3.reset(seed=0, action_space=wide, privileged=lambda: priv)
+    assert g3.u_max == 0.3 and g3.dynamics.u1_max == 0.3 and g3.dynamics.u2_max == 0.0
+    assert g3.dynamics.v_min == g3.dynamics.v_max == SPEED
     priv["maze"] = Maze(np.zeros((0, 4)), width=500.0, height=250.0)
     with pytest.raises(ValueError, match="needs a maze with walls, got none"):
         g.reset(seed=0, action_space=space, privileged=lambda: priv)
@@ -215,6 +230,25 @@ def test_lookahead_hand_built_cases(space, cache_dir):
     # the best-scoring one is a full turn
     g, priv = make(space, cache_dir)
     assert abs(act(g, priv, (400.0, 125.0, 0.0), 0.0)) == U
+    # the least invasive certified manoeuvre: the driver's right turn keeps the margin, so the
+    # guardian keeps that turn though a left turn would score higher
+    g, priv = make(space, cache_dir)
+    assert act(g, priv, (200.2, 161.46, -1.9058), -U) == -U
+    want, _, scores = reference(g, 200.2, 161.46, -1.9058, -U, None)
+    first = manoeuvres(U, 6.0)[int(np.argmax(scores))]
+    assert want == -U and (first[0] if first[1] > 0 else first[2]) == U
+    # a lap of 2 s: the lap under way starts 3.75 px from the wall (within the margin plus a
+    # sample's slack), so the guardian is not passive though the car heads away from the wall
+    g, priv = make(space, cache_dir, lap=2.0)
+    assert act(g, priv, (150.0, 171.25, -math.pi / 2), 0.0) == reference(g, 150.0, 171.25, -math.pi / 2, 0.0, None)[0] == U
+    # band 0: where the value is positive the guardian leaves the driver alone without a look-ahead
+    # (V = 5.2 px 5.25 px under the wall, where the look-ahead would turn right), unless it holds control
+    g, priv = make(space, cache_dir, band=0.0)
+    assert g.evaluate((150.0, 176.0, 0.0))[0] > 0 and act(g, priv, (150.0, 176.0, 0.0), U) is None
+    assert g.evaluate((400.0, 125.0, 0.0))[0] <= 0 and abs(act(g, priv, (400.0, 125.0, 0.0), 0.0)) == U
+    assert act(g, priv, (150.0, 176.0, 0.0), U) == -U  # held control: the look-ahead decides
+    assert act(g, priv, (250.0, 125.0, 0.0), 0.0) is None  # handed back mid-corridor
+    assert g.act(np.zeros(3), {"nominal_control": 0.0})["active_ctrl"] == 0  # one plain number is a turn rate too
     with pytest.raises(ValueError, match=r"needs info\['nominal_control'\] from the env \(got keys NoneType\)"):
         g.act(np.zeros(3), None)
     with pytest.raises(ValueError, match="must be one finite turn rate, got"):
@@ -224,6 +258,8 @@ def test_lookahead_hand_built_cases(space, cache_dir):
 # ------------------------------------------------------------------ the look-ahead rule: reference and exact geometry
 def reference(g, x, y, psi, nominal, held):
     """The module docstring's rule over every wall of the maze, in plain loops."""
+    if not g.grid.contains([x, y, psi, g.speed]):
+        return None, None, None
     walls, half, width, height = g._maze_geom
     lap, s, margin = g.current_lap(), g.speed, g._margin
 
@@ -259,8 +295,10 @@ def reference(g, x, y, psi, nominal, held):
     return first[max((m for m in safe if abs(first[m] - nominal) <= nearest + 1e-12), key=lambda m: sc[m])], p1, sc
 
 
-@pytest.fixture(scope="module", params=[1, 0, 2], ids=["delay1", "delay0", "delay2"])
+@pytest.fixture(scope="module", params=[1, 0, 2, "route"], ids=["delay1", "delay0", "delay2", "route"])
 def lookahead_guardian(request, space, cache_dir):
+    if request.param == "route":  # a grid over cells 0 and 1 only: manoeuvres end beyond it
+        return make(space, cache_dir, band=60.0, region="route", route_margin=0, goal=(250.0, 125.0))
     return make(space, cache_dir, delay=request.param, band=60.0)  # a wide band: the rule runs almost everywhere
 
 
@@ -269,12 +307,15 @@ def lookahead_guardian(request, space, cache_dir):
        st.sampled_from([None, -U, 0.0, U]))
 @example(150.0, 161.25, 0.0, U, None)
 @example(380.0, 125.0, 0.2, 0.0, U)
+@example(290.0, 120.0, 0.1, 0.0, None)  # straight manoeuvres end beyond the route's grid
 def test_lookahead_matches_the_rule_and_keeps_the_margin_on_the_exact_arcs(lookahead_guardian, x, y, psi, nominal, held):
     g, priv = lookahead_guardian
     g._pending = held  # the turn rate commanded at the previous step (None: the guardian was passive)
     u = act(g, priv, (x, y, psi), nominal)
     want, p1, sc = reference(g, x, y, psi, nominal, held)
     assert u == want
+    if p1 is None:  # outside the grid: left to the driver
+        return
     lap, margin = g.current_lap(), g._margin
     u0 = nominal if held is None else held
     fine = []
