@@ -18,3 +18,13 @@ def small_dataset(tmp_path_factory):
     generate(DatagenConfig(configs=8, samples_per_config=24, branches=6, depth=2, configs_per_shard=4, seed=11),
              out, workers=1, progress=False)
     return load_dataset(out), out
+
+
+@pytest.fixture(scope="session")
+def maze_hj_cache(tmp_path_factory):
+    """One value cache for the maze ``hj`` tests of a session (they share the corridor's value),
+    or ``$RMM_TEST_HJ_CACHE`` when set: kept between sessions, so that ``make mutate``'s runs,
+    one session per mutant, solve it once."""
+    import os
+
+    return os.environ.get("RMM_TEST_HJ_CACHE") or tmp_path_factory.mktemp("maze_hj")

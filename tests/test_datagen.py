@@ -81,7 +81,8 @@ def test_rerun_is_a_no_op_and_other_parameters_are_refused(tmp_path):
 
 def test_resume_after_kill_minus_nine(tmp_path):
     out = tmp_path / "k"
-    args = [sys.executable, "-m", "rmm_envs.risk.datagen", "--configs", "24", "--samples-per-config", "40",
+    # a small tree (8 branches, not the default 32): the labels' cost is not what is tested
+    args = [sys.executable, "-m", "rmm_envs.risk.datagen", "--configs", "24", "--samples-per-config", "40", "--branches", "8",
             "--configs-per-shard", "1", "--workers", "1", "--seed", "5", "--out", str(out), "--no-progress"]
     proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 60
@@ -98,7 +99,8 @@ def test_resume_after_kill_minus_nine(tmp_path):
     resumed = load_dataset(out)
     pairs = set(zip(resumed.config_id.tolist(), resumed.obs[:, 0].tolist()))
     assert len(resumed) == 24 * 40 == len(pairs)  # nothing lost, nothing duplicated
-    generate(DatagenConfig(configs=24, samples_per_config=40, configs_per_shard=1, seed=5), tmp_path / "ref", workers=2, progress=False)
+    generate(DatagenConfig(configs=24, samples_per_config=40, branches=8, configs_per_shard=1, seed=5), tmp_path / "ref", workers=2,
+             progress=False)
     np.testing.assert_array_equal(load_dataset(tmp_path / "ref").risk, resumed.risk)
 
 

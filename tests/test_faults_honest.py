@@ -200,7 +200,8 @@ def test_file_size_limit_mid_run_is_a_run_failure_that_keeps_every_episode(tmp_p
     assert _bench(cmd + ["--episodes", "2"]).returncode == 0
     before = stored(out, "episode, outcome, steps")
     db = out / "results.db"
-    res = _bench(cmd + ["--episodes", "400"], limit_bytes=db.stat().st_size + 16384)
+    # 40 episodes: the limit stops the run after a few (each episode is a row and an index entry)
+    res = _bench(cmd + ["--episodes", "40"], limit_bytes=db.stat().st_size + 16384)
     assert res.returncode == 1, res.stderr
     line = _one_line(res.stderr)
     assert line.startswith(f"rmm-bench: error: cannot write {db} (disk I/O error): it reached the file-size limit (ulimit -f: ")
@@ -209,9 +210,10 @@ def test_file_size_limit_mid_run_is_a_run_failure_that_keeps_every_episode(tmp_p
     con = sqlite3.connect(db)
     assert con.execute("PRAGMA integrity_check").fetchall() == [("ok",)]
     con.close()
-    assert stored(out, "episode, outcome, steps")[:2] == before
-    assert _bench(cmd + ["--episodes", "400"]).returncode == 0  # the same command, the limit lifted
-    assert [r[0] for r in stored(out, "episode")] == list(range(400))
+    kept = stored(out, "episode, outcome, steps")
+    assert kept[:2] == before and len(kept) < 40  # stopped mid-run
+    assert _bench(cmd + ["--episodes", "40"]).returncode == 0  # the same command, the limit lifted
+    assert [r[0] for r in stored(out, "episode")] == list(range(40))
 
 
 def test_disk_full_while_writing_the_tables_is_one_line_naming_the_directory(tmp_path, capsys):
