@@ -32,10 +32,14 @@ model's action-conditioned head, and a commitment that outlasts the risk:
   threshold; ``"driver"`` (the quadrotor) while the driver's own next control,
   ``info["nominal_control"]``, rated by :mod:`guardians.lrmm.nominal` (the state risk after
   holding it, predicted from the observation), is above the threshold *and* more than
-  ``margin`` above the best candidate rated the same way (only when the driver heads into
-  risk and a candidate does materially better); it hands back once the driver's control has
-  been rated at or below the threshold for ``commit`` steps.  A step without the nominal
+  ``margin`` above the best candidate rated the same way, or (``still``) more than ``still``
+  above holding still; it hands back once the driver's control has been rated at or below the
+  threshold for ``commit`` steps (``stay=False``: once that test fails, then ``commit`` steps).  A step without the nominal
   control in ``info`` uses ``"risk"`` (one ``UserWarning``); a malformed one raises ``ValueError``.
+* **Slide** (``slide``, with ``trigger="driver"``; the quadrotor): in control, apply the variant
+  of the driver's control nearest to it that is rated at or below the threshold (its velocity
+  turned and slowed, or climbing: :class:`guardians.lrmm.nominal.Slide`), the head's safest
+  candidate only when no variant is; why, and what else was tried, in :mod:`guardians.lrmm.nominal`.
 * **Defaults** come from the model file (``meta["decision"]``), where they are stored with how
   they were chosen: threshold 0.25 with restart 0.3 (the best mean success-minus-collision
   rate on 128 episodes each of seeds 5 and 6, 0.25 against 0.3: 73.9 against 73.5; 0.3 had
@@ -43,8 +47,9 @@ model's action-conditioned head, and a commitment that outlasts the risk:
   hold time; chosen among 5, 9, 18 and 27 on seed 5).  No reported result uses these seeds.
   Explicit arguments override them.  The threshold is low next to the paper's 0.85 because
   the label is the crash rate of *random* futures: at 0.85 it is too late to avoid the obstacle.
-* ``hysteresis`` (default False): the original code's moving-average release rule, kept as an
-  option; the commitment does that job here.
+* ``hysteresis`` (default False; either guardian): the original code's release rule, kept as an
+  option (the commitment does that job here): it acts while the risk or the mean of the last
+  ``window`` (20) risks, a deque initialised at the threshold, is above the threshold.
 
 ``lrmm-paper`` (:class:`LRMMPaperGuardian`) -- exactly the paper's rule, on the model that
 reproduced the paper's Table II (``dubins4d.npz``): take control while ``risk > 0.85`` with
@@ -68,14 +73,10 @@ table).  The car cannot brake, so turning is the whole action.  On ``QuadrotorRo
 / ``QuadrotorRoomParallel-v0`` it reads the quadrotor command model with a head
 (``quadrotor_cmd_act.npz``: the risk of random velocity commands to the stabilising controller,
 and of holding hover, climb, back off, or back off and climb for 1 s first, from the rays, the
-heading-frame velocity and the body rates) and applies the safest of those four commands while
-the pilot's command, rated, is above 0.2 and 0.1 above the best candidate (``trigger="driver"``),
-until it has been rated at most 0.2 for 20 steps (stored in the file with how they were chosen).
+heading-frame velocity and the body rates) with ``trigger="driver"`` and ``slide``, its defaults
+stored in the file with how they were chosen (:mod:`guardians.lrmm.nominal`).
 ``action="safe"`` applies the env's safe default instead (hover and level).  Without
 ``env_id`` (or a model) the guardian serves Dubins4D, as before.
-
-``hysteresis=True`` (either guardian): the original code's release rule, a deque of the last
-``window`` (20) risks, initialised at the threshold; it acts while the risk or their mean is above it.
 
 **What it needs from the env** (checked at ``reset``, a ``ValueError`` naming the guardian and
 the missing piece otherwise): an observation space (or the field ``inputs``) of the model's
@@ -103,7 +104,7 @@ import numpy as np
 from guardians._checks import integer
 from guardians.base import Guardian
 from guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, load_model
-from guardians.lrmm.nominal import TRIGGERS, driver_control, hand_back_options, make_rater
+from guardians.lrmm.nominal import TRIGGERS, Slide, driver_at_risk, driver_control, hand_back_options, make_rater
 from rmm_envs.portable import wrap_angle
 
 __all__ = ["PAPER_THRESHOLD", "TRIGGERS", "LRMMGuardian", "LRMMPaperGuardian"]
@@ -139,8 +140,8 @@ class LRMMGuardian(Guardian):
             input field and decision defaults from :data:`guardians.lrmm.shipped.SHIPPED`.
         inputs: the observation field the model reads (default ``None``: the table's for
             ``env_id``, else the whole observation).
-        trigger, margin, restart: the hand-back rule (module docstring); ``None`` (default):
-            the model's stored values, else ``"risk"``, 0, 0 (no restart).
+        trigger, margin, restart, slide, still, stay: the hand-back rule (module docstring);
+            ``None`` (default): the model's stored values, else ``"risk"``, 0, 0, False, None, True.
     """
 
     name = "lrmm"
@@ -152,7 +153,8 @@ class LRMMGuardian(Guardian):
                  action: str | None = None, hysteresis: bool = False, window: int = 20, commit: int | None = None,
                  u1_max: float | None = None, u2_min: float | None = None, env_id: str | None = None,
                  inputs: str | None = None, trigger: str | None = None, margin: float | None = None,
-                 restart: float | None = None) -> None:
+                 restart: float | None = None, slide: bool | None = None, still: float | None = None,
+                 stay: bool | None = None) -> None:
         super().__init__()
         if threshold is not None and (isinstance(threshold, bool) or not isinstance(threshold, (int, float, np.number))):
             raise ValueError(f"threshold must be a number in [0, 1], got {threshold!r}")
@@ -198,7 +200,8 @@ class LRMMGuardian(Guardian):
                 if not 0.0 <= threshold <= 1.0:
                     raise ValueError(f"{where}: stored decision threshold must be in [0, 1], got {threshold}")
         self.threshold = float(threshold)
-        self.trigger, self.margin, self.restart = hand_back_options(trigger, margin, restart, decision, action, hysteresis)
+        self.trigger, self.margin, self.restart, self.slide, self.still, self.stay = hand_back_options(
+            trigger, margin, restart, decision, action, hysteresis, slide, still, stay)
         self._warned = False
         self.action = action
         self.hysteresis = bool(hysteresis)
@@ -299,6 +302,7 @@ class LRMMGuardian(Guardian):
             self._rside = [rays.start + i for i, a in enumerate(lay.ray_angles) if -math.pi < math.remainder(a, 2 * math.pi) < 0]
         if self.trigger == "driver":
             self._rater = self._rater_for(self.observation_space, actions)
+        self._slide = Slide(actions.controls, actions.control_low, actions.control_high) if self.slide else None
         if self.restart > 0:
             self._speed, self._accel = lay.index("speed"), actions.controls.index("accel_ctrl")
         self._history = deque([self.threshold] * self.window, maxlen=self.window)
@@ -332,6 +336,9 @@ class LRMMGuardian(Guardian):
             cand = out[1:].tolist()
             if not all(map(math.isfinite, cand)):
                 raise ValueError(f"the LRMM model returned non-finite candidate risks {cand}")
+            bent = self._slide.choose(self._rater, self.model, x, nominal, self.threshold) if self._slide and nominal is not None else None
+            if bent is not None:
+                return self.action_space.active(bent)
             k = cand.index(min(cand))  # the first of the lowest
             if self.restart > 0 and observation[self._speed] < self.restart:  # a stopped car: move on safely
                 go = [(r, i) for i, r in enumerate(cand) if self._cands[i][self._accel] > 0 and r <= self.threshold]
@@ -342,14 +349,8 @@ class LRMMGuardian(Guardian):
         if self.action == "safe":
             return self.action_space.active(self._safe(observation))
         left, right = observation[self._left], observation[self._right]
-        if np.isclose(left, right):
-            turn = 0.0
-        elif left > right:
-            turn = self.u1_max
-        else:
-            turn = -self.u1_max
+        turn = 0.0 if np.isclose(left, right) else (self.u1_max if left > right else -self.u1_max)
         return self.action_space.active((turn, self.u2_min))
-
 
     def _rater_for(self, observation_space, actions):
         if self.inputs is not None:  # the model reads one field; the prediction moves others
@@ -363,12 +364,9 @@ class LRMMGuardian(Guardian):
         return u
 
     def _driver_at_risk(self, x, nominal) -> bool:
-        rated = self._rater.rate_many([nominal, *self._cands], self.model, x)
-        if not all(map(math.isfinite, rated)):
-            raise ValueError(f"the LRMM model rated the driver's control {nominal} and the candidates with non-finite "
-                             f"risks {rated}")
+        rated = self._rater.rate_many([nominal, [0.0] * len(nominal), *self._cands], self.model, x)
         self.last_driver_risk = rated[0]
-        return rated[0] > self.threshold and (self._active or rated[0] - min(rated[1:]) > self.margin)
+        return driver_at_risk(rated, self.threshold, self.margin, self.still, self._active and self.stay)
 
     def _turn(self, observation, rays) -> float:
         """The maximum turn rate toward the lower-risk side: the model's risk of the rays as
