@@ -34,12 +34,13 @@ model's action-conditioned head, and a commitment that outlasts the risk:
   holding it, predicted from the observation), is above the threshold *and* more than
   ``margin`` above the best candidate rated the same way, or (``still``) more than ``still``
   above holding still; it hands back once the driver's control has been rated at or below the
-  threshold for ``commit`` steps (``stay=False``: once that test fails, then ``commit`` steps).  A step without the nominal
-  control in ``info`` uses ``"risk"`` (one ``UserWarning``); a malformed one raises ``ValueError``.
+  threshold for ``commit`` steps (``stay=False``: once that test fails, then ``commit`` steps).
+  A step without the nominal control in ``info`` uses ``"risk"`` (one ``UserWarning``); a
+  malformed one raises ``ValueError``.
 * **Slide** (``slide``, with ``trigger="driver"``; the quadrotor): in control, apply the variant
-  of the driver's control nearest to it that is rated at or below the threshold (its velocity
-  turned and slowed, or climbing: :class:`guardians.lrmm.nominal.Slide`), the head's safest
-  candidate only when no variant is; why, and what else was tried, in :mod:`guardians.lrmm.nominal`.
+  of the driver's control nearest to it that is rated at or below the threshold (climbing at
+  its horizontal velocity, half of it or none: :class:`guardians.lrmm.nominal.Slide`), the
+  head's safest candidate only when none is; why, and what else was tried: :mod:`guardians.lrmm.nominal`.
 * **Defaults** come from the model file (``meta["decision"]``), where they are stored with how
   they were chosen: threshold 0.25 with restart 0.3 (the best mean success-minus-collision
   rate on 128 episodes each of seeds 5 and 6, 0.25 against 0.3: 73.9 against 73.5; 0.3 had
@@ -336,7 +337,7 @@ class LRMMGuardian(Guardian):
             cand = out[1:].tolist()
             if not all(map(math.isfinite, cand)):
                 raise ValueError(f"the LRMM model returned non-finite candidate risks {cand}")
-            bent = self._slide.choose(self._rater, self.model, x, nominal, self.threshold) if self._slide and nominal is not None else None
+            bent = self._slide.choose(self._rater, self.model, x, nominal, self.threshold) if self._slide and nominal else None
             if bent is not None:
                 return self.action_space.active(bent)
             k = cand.index(min(cand))  # the first of the lowest
