@@ -429,7 +429,8 @@ def test_lrmm_reads_the_shipped_command_model_by_env_id(env):
     # quaternion nor the goal
     used = {f for f, a, b in lay.fields if any(a <= i < b for i in g.model.features)}
     assert used == {"rays", "rays_vertical", "velocity", "angular_velocity"}
-    assert (g.trigger, g.margin, g.restart) == ("driver", 0.1, 0.0)  # acts on the pilot's command, rated
+    # acts on the pilot's command, rated against the best candidate and against holding still; slides by climbing
+    assert (g.trigger, g.margin, g.restart, g.slide, g.still, g.stay) == ("driver", 0.15, 0.0, True, 0.05, True)
     obs, info = env.reset(seed=0)
     g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
     a = g.act(obs, info)

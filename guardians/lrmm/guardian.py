@@ -26,7 +26,7 @@ from guardians._checks import integer
 from guardians.base import Guardian
 from guardians.lrmm.defaults import PAPER_THRESHOLD, check_threshold, decision_threshold, stored_decision
 from guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, load_model
-from guardians.lrmm.nominal import TRIGGERS, driver_control, hand_back_options, make_rater
+from guardians.lrmm.nominal import TRIGGERS, Slide, driver_at_risk, driver_control, hand_back_options, make_rater
 from rmm_envs.portable import wrap_angle
 
 __all__ = ["PAPER_THRESHOLD", "TRIGGERS", "LRMMGuardian", "LRMMPaperGuardian"]
@@ -61,8 +61,8 @@ class LRMMGuardian(Guardian):
             input field and decision defaults from :data:`guardians.lrmm.shipped.SHIPPED`.
         inputs: the observation field the model reads (default ``None``: the table's for
             ``env_id``, else the whole observation).
-        trigger, margin, restart: the hand-back rule (module docstring); ``None`` (default):
-            the model's stored values, else ``"risk"``, 0, 0 (no restart).
+        trigger, margin, restart, slide, still, stay: the hand-back rule (module docstring);
+            ``None`` (default): the model's stored values, else ``"risk"``, 0, 0, False, None, True.
     """
 
     name = "lrmm"
@@ -74,7 +74,8 @@ class LRMMGuardian(Guardian):
                  action: str | None = None, hysteresis: bool = False, window: int = 20, commit: int | None = None,
                  u1_max: float | None = None, u2_min: float | None = None, env_id: str | None = None,
                  inputs: str | None = None, trigger: str | None = None, margin: float | None = None,
-                 restart: float | None = None) -> None:
+                 restart: float | None = None, slide: bool | None = None, still: float | None = None,
+                 stay: bool | None = None) -> None:
         super().__init__()
         check_threshold(threshold)  # refused before any file is read
         integer("window", window, 1)
@@ -112,7 +113,8 @@ class LRMMGuardian(Guardian):
         self.threshold, self.threshold_source = decision_threshold(threshold, decision, where)
         if self.threshold_source == "paper":
             self._fallback_warning(f"{where} has no 'decision' threshold: using the paper's {PAPER_THRESHOLD}")
-        self.trigger, self.margin, self.restart = hand_back_options(trigger, margin, restart, decision, action, hysteresis)
+        self.trigger, self.margin, self.restart, self.slide, self.still, self.stay = hand_back_options(
+            trigger, margin, restart, decision, action, hysteresis, slide, still, stay)
         self._warned = False
         self.action = action
         self.hysteresis = bool(hysteresis)
@@ -213,6 +215,7 @@ class LRMMGuardian(Guardian):
             self._rside = [rays.start + i for i, a in enumerate(lay.ray_angles) if -math.pi < math.remainder(a, 2 * math.pi) < 0]
         if self.trigger == "driver":
             self._rater = self._rater_for(self.observation_space, actions)
+        self._slide = Slide(actions.controls, actions.control_low, actions.control_high) if self.slide else None
         if self.restart > 0:
             self._speed, self._accel = lay.index("speed"), actions.controls.index("accel_ctrl")
         self._history = deque([self.threshold] * self.window, maxlen=self.window)
@@ -246,6 +249,9 @@ class LRMMGuardian(Guardian):
             cand = out[1:].tolist()
             if not all(map(math.isfinite, cand)):
                 raise ValueError(f"the LRMM model returned non-finite candidate risks {cand}")
+            bent = self._slide.choose(self._rater, self.model, x, nominal, self.threshold) if self._slide and nominal else None
+            if bent is not None:
+                return self.action_space.active(bent)
             k = cand.index(min(cand))  # the first of the lowest
             if self.restart > 0 and observation[self._speed] < self.restart:  # a stopped car: move on safely
                 go = [(r, i) for i, r in enumerate(cand) if self._cands[i][self._accel] > 0 and r <= self.threshold]
@@ -256,14 +262,8 @@ class LRMMGuardian(Guardian):
         if self.action == "safe":
             return self.action_space.active(self._safe(observation))
         left, right = observation[self._left], observation[self._right]
-        if np.isclose(left, right):
-            turn = 0.0
-        elif left > right:
-            turn = self.u1_max
-        else:
-            turn = -self.u1_max
+        turn = 0.0 if np.isclose(left, right) else (self.u1_max if left > right else -self.u1_max)
         return self.action_space.active((turn, self.u2_min))
-
 
     def _rater_for(self, observation_space, actions):
         if self.inputs is not None:  # the model reads one field; the prediction moves others
@@ -277,12 +277,9 @@ class LRMMGuardian(Guardian):
         return u
 
     def _driver_at_risk(self, x, nominal) -> bool:
-        rated = self._rater.rate_many([nominal, *self._cands], self.model, x)
-        if not all(map(math.isfinite, rated)):
-            raise ValueError(f"the LRMM model rated the driver's control {nominal} and the candidates with non-finite "
-                             f"risks {rated}")
+        rated = self._rater.rate_many([nominal, [0.0] * len(nominal), *self._cands], self.model, x)
         self.last_driver_risk = rated[0]
-        return rated[0] > self.threshold and (self._active or rated[0] - min(rated[1:]) > self.margin)
+        return driver_at_risk(rated, self.threshold, self.margin, self.still, self._active and self.stay)
 
     def _turn(self, observation, rays) -> float:
         """The maximum turn rate toward the lower-risk side: the model's risk of the rays as

@@ -274,7 +274,8 @@ def load_model(path=None, env_id: str = "Dubins4DCirclesGuarded-v0") -> LRMMMode
 
 def set_decision(path, threshold: float, commit: int, chosen_by: str, action: str = "head", **hand_back) -> LRMMModel:
     """Store the guardian's decision defaults in the model file ``path`` (weights unchanged);
-    ``hand_back``: ``trigger``, ``margin``, ``restart`` (:mod:`guardians.lrmm.nominal`), stored when not None."""
+    ``hand_back``: ``trigger``, ``margin``, ``restart``, ``slide``, ``still``, ``stay``
+    (:mod:`guardians.lrmm.nominal`), stored when not None."""
     if not (isinstance(threshold, (int, float)) and 0.0 <= threshold <= 1.0):
         raise ValueError(f"threshold must be in [0, 1], got {threshold!r}")
     if int(commit) != commit or commit < 0:
@@ -288,13 +289,14 @@ def set_decision(path, threshold: float, commit: int, chosen_by: str, action: st
         raise ValueError(f"{path} has no 'candidates' head; its guardian uses the paper's rule")
     from guardians.lrmm.nominal import hand_back_options  # checks them as the guardian will
 
-    unknown = sorted(set(hand_back) - {"trigger", "margin", "restart"})
+    fields = ("trigger", "margin", "restart", "slide", "still", "stay")
+    unknown = sorted(set(hand_back) - set(fields))
     if unknown:
-        raise ValueError(f"unknown decision field(s) {unknown}; expected trigger, margin, restart")
+        raise ValueError(f"unknown decision field(s) {unknown}; expected {', '.join(fields)}")
     hand_back = {k: v for k, v in hand_back.items() if v is not None}
-    trigger, margin, restart = hand_back_options(hand_back.get("trigger"), hand_back.get("margin"), hand_back.get("restart"),
-                                                 None, action, False)
-    extra = {"trigger": trigger, "margin": margin, "restart": restart}
+    checked = hand_back_options(*(hand_back.get(k) for k in fields[:3]), None, action, False,
+                                *(hand_back.get(k) for k in fields[3:]))
+    extra = dict(zip(fields, checked))
     model.meta["decision"] = {"threshold": float(threshold), "commit": int(commit), "action": action,
                               **{k: extra[k] for k in hand_back}, "chosen_by": chosen_by.strip()}
     model.save(path)
