@@ -5,16 +5,13 @@
   ``predict(observation, deterministic=True) -> (action, state)``.
 
 Actions may be the env's dict, or a flat array ``[active, ...]`` (``active > 0.5`` means take
-control), converted through the action space given at ``reset``:
+control), converted through the action space given at ``reset``: :class:`SB3Guardian` reads
+``[active, z...]`` in the unit box exactly as :class:`rmm_envs.wrappers.FlattenGuardianAction`
+does (``flat="raw"``: unscaled); :class:`CallableGuardian` reads ``[active, u...]`` with ``u``
+the control vector in the order of the action space's ``controls``
+(:func:`to_guardian_action`).
 
-* :class:`SB3Guardian` reads ``[active, z...]`` in the unit box, exactly as
-  :class:`rmm_envs.wrappers.FlattenGuardianAction` (the wrapper RL models train through) does:
-  one mapping, :meth:`rmm_envs.autonomy.GuardianActionSpace.from_unit`, serves both, so a
-  model trained through the wrapper applies the same controls when benchmarked
-  (``flat="raw"`` reads the controls unscaled, for a model trained on another action box);
-* :class:`CallableGuardian` reads ``[active, u...]`` with ``u`` the control vector itself in the
-  order of the action space's ``controls`` (for Dubins4D ``[active, turnrate, accel]``,
-  :func:`to_guardian_action`).
+Why one mapping serves the wrapper and the guardian: docs/design-notes.md#guardiansadapters.
 """
 
 from __future__ import annotations

@@ -5,10 +5,8 @@ takes control and with which control vector.  This module offers:
 
 * :class:`GuardianActionSpace`: the action's space (a Gymnasium ``Dict``: ``active_ctrl`` and
   one shape-(1,) box per control), with ``inactive()``, ``active(u)``, ``parse(action)``;
-* :class:`SystemContract` (``space.contract``, :func:`contract`): what a guardian may know of
-  the system the space drives: its kind (``"dubins4d"``, ``"dubins3d"``, ``"quadrotor"``;
-  :data:`GENERIC` for a third-party simulator), control names, bounds, safe default and
-  obstacle shapes.  Guardians dispatch on the kind, never on control names;
+* :class:`SystemContract` (``space.contract``, :func:`contract`): the system's kind (guardians
+  dispatch on it, never on control names), control names, bounds, safe default and obstacles;
 * :class:`SafeDefault`: a system's safe control (what ``brakes`` applies);
 * :class:`ObservationBox` / :class:`ObservationLayout` / :func:`layout`: named observation fields;
 * :func:`inactive`, :func:`active`, :func:`parse`: the same given the space.

@@ -2,23 +2,14 @@
 
 :data:`SYSTEMS` holds one :class:`SystemSpec` per system: its dynamics, risk scenes, env entry
 points, driver, safe default, the built-in guardians that apply, its docs page(s), and the ids
-it was known by before.  Registration (``import rmm_envs``), ``rmm_envs.ENV_IDS`` and
-``GUARDIAN_ENV_IDS``, the renamed-id aliases, the shipped LRMM models' lookup by id
-(:data:`guardians.lrmm.shipped.SHIPPED`), the ``--env`` help of ``rmm-bench`` and ``rmm-envs demo``
-and the docs' environment list (``docs/gen.py``) are all read from it.  Adding a system is its
-modules plus one entry here.
+it was known by before.  Registration, ``rmm_envs.ENV_IDS`` and ``GUARDIAN_ENV_IDS``, the
+renamed-id aliases (:data:`RENAMED`, :func:`stored_id`), the shipped LRMM models' lookup, the
+``--env`` help and the docs' environment list are all read from it.  Adding a system is its
+modules plus one entry here.  Each system has up to three envs: ``<System>-v0`` (plain
+control), ``<System>Guarded-v0`` (a built-in driver, a guardian may take over; blocking) and
+``<System>Parallel-v0`` (the same, non-blocking).
 
-Every system has up to three envs, named after it (``<System>``):
-
-* ``<System>-v0``: plain control (the agent drives; no built-in driver);
-* ``<System>Guarded-v0``: a built-in driver drives, a guardian may take over; blocking, fixed
-  step (the guardian's compute time does not pass in the simulated world);
-* ``<System>Parallel-v0``: the same, non-blocking (the guardian's compute time passes).
-
-Ids used before this scheme stay registered as aliases (:data:`RENAMED`): making one warns
-(``DeprecationWarning``, at the caller's line) and builds the env of its new id.  Results a
-benchmark stored under an old id keep their run keys: :func:`stored_id` is the id an env's
-results are keyed under, the same for its old and its new id.
+What is derived from the table, and the renamed ids: docs/design-notes.md#rmm_envscatalog.
 """
 
 from __future__ import annotations

@@ -1,20 +1,17 @@
 """Envs of other packages: ``module:Id`` and the ``gymnasium.envs`` entry points.
 
-Gymnasium registers an env when the code that calls ``gymnasium.register`` runs.  Two ways of
-making that happen for an env this package does not ship, both served by :func:`resolve_env_id`
-(which ``rmm-bench`` calls in its own process and in every worker, local or Ray, before making
-the env):
+:func:`resolve_env_id` (which ``rmm-bench`` calls in its own process and in every worker, local
+or Ray, before making the env) gets an env this package does not ship registered:
 
 ``module:Id``
-    Gymnasium's own syntax (``gym.make`` takes it): ``module`` is imported (the current
-    directory first, where the command puts it on the path) and must register ``Id``.
+    Gymnasium's own syntax: ``module`` is imported (the current directory first) and must
+    register ``Id``.
 A package's entry point in the group ``gymnasium.envs``
-    As Gymnasium before 1.0 loaded them, so that a package declaring
-    ``[project.entry-points."gymnasium.envs"] my_envs = "my_envs.registration:register"`` works
-    with a plain ``--env MyEnv-v0``: when the id is not registered, each entry point of the group
-    is loaded once per process (a ``module:function`` value is then called, a bare ``module``
-    value registers on import).  An entry point that raises is named in the error of an id that
-    stays unregistered.
+    When the id is not registered, each entry point of the group is loaded once per process (a
+    ``module:function`` value is then called, a bare ``module`` value registers on import).  An
+    entry point that raises is named in the error of an id that stays unregistered.
+
+Why entry points, and an example declaration: docs/design-notes.md#rmm_envsenv_plugins.
 """
 
 from __future__ import annotations

@@ -1,34 +1,14 @@
 """Running independent tasks on local worker processes or on Ray, results as they complete.
 
 Used by ``rmm-datagen`` (one task per shard) and ``rmm-bench`` (one task per episode).  Both
-yield ``fn(task)`` results in completion order and clean up on any error or Ctrl-C: local
-workers are terminated, pending Ray tasks cancelled, so the caller's own bookkeeping (shards
-on disk, rows in SQLite) stays the only record of what finished.
+yield ``fn(task)`` results in completion order and clean up on any error or Ctrl-C (local
+workers terminated, pending Ray tasks cancelled).  A task whose worker dies (or, with
+``task_timeout``, runs too long) is yielded as a :class:`TaskLost` and the run goes on;
+``max_lost_in_a_row`` losses in a row stop it with :class:`WorkersLost`.  An exception raised
+by ``fn`` itself is re-raised in the parent and stops the run, as with ``multiprocessing.Pool``.
+``workers == 1`` (or a single task) runs in this process, without isolation.
 
-A task whose worker dies is never waited for.  The local pool is supervised: each worker
-runs one task at a time over its own pipe, and the parent watches every worker's process
-handle, so a worker that disappears (the out-of-memory killer, a segfault in compiled code,
-``os._exit`` or ``sys.exit`` inside a task) is noticed at once.  Its task is yielded as a
-:class:`TaskLost` carrying the task and the cause, a fresh worker takes its place, and the
-run goes on.  With ``task_timeout`` the parent also kills a worker whose task has run that
-many seconds (counted from when the worker starts it, so a worker's start-up is not charged) (the last resort for a task stuck where no in-process time limit can reach, such
-as a long call into compiled code) and reports the task as lost.  ``max_lost_in_a_row`` stops
-the whole run with :class:`WorkersLost` when that many tasks in a row were lost with no task
-finishing in between: a cause that kills every worker (too little memory for any task) then
-ends with an error instead of restarting workers for every remaining task.
-
-An exception raised by ``fn`` itself is not a lost task: it is re-raised in the parent (with
-the worker's traceback as its cause) and the run stops, as with ``multiprocessing.Pool``.
-Callers that want per-task errors catch them inside ``fn``.
-
-``workers == 1`` (or a single task) runs in this process: no isolation, so a task that kills
-its process kills the caller too; the callers' resume logic then finishes the run.
-
-Ray: a task whose worker or node dies is retried by Ray once (``max_retries=1``: one retry
-rides out a transient node loss without doubling the cost of a task that always crashes),
-then yielded as a :class:`TaskLost` with Ray's reason; application errors are re-raised.
-There is no parent-side time limit on Ray tasks: a time limit inside the task (rmm-bench's
-episode timer) is the only one.
+Supervision, time limits and Ray's retries in detail: docs/design-notes.md#rmm_envspool.
 """
 
 from __future__ import annotations

@@ -1,26 +1,14 @@
 """Arithmetic whose bits do not depend on the machine it runs on.
 
-Three things make a float result depend on the CPU rather than on the inputs alone:
+BLAS (``@``, ``np.dot``, the no-axis ``np.linalg.norm``) and numpy's SIMD transcendentals pick
+code per CPU and differ in the last bit.  So code whose result a seed determines (worlds,
+dynamics, observations, labels, decisions) uses the helpers here instead: sums of small
+products written out in a fixed order, numpy's ordered reductions, and the C library's
+``atan2`` through a compiled loop.  The promise is for x86-64 CPUs with AVX2 and FMA, on Linux
+with the same C library; ``tests/test_reproducibility.py`` checks it.
 
-* **BLAS.**  numpy hands ``@``, ``np.dot``, ``np.inner`` and the no-axis ``np.linalg.norm`` to
-  OpenBLAS, which picks a kernel per CPU at start-up (``OPENBLAS_CORETYPE``); kernels sum in
-  different orders and some use fused multiply-adds.
-* **numpy's SIMD dispatch.**  On AVX-512 CPUs numpy computes ``exp``, ``log``, ``arctan2``,
-  ``arctan``, ``power``, ... with its own vector code, on AVX2 CPUs ``tanh`` too; each differs
-  from the C library in the last bit for some inputs.  (``+ - * /``, ``sqrt`` and numpy's
-  ordered sums ``np.add.reduce`` / ``.sum`` are exact or fixed-order; numpy's ``sin``, ``cos``
-  and ``hypot`` call the C library, as ``math`` does.)
-* **Compiled kernels** built for the host CPU could contract ``a * b + c`` into one FMA; numba
-  does not without ``fastmath``, which the project never uses.
-
-So code whose result a seed determines (worlds, dynamics, observations, labels, decisions)
-uses the helpers here instead: sums of small products written out in a fixed order, numpy's
-ordered reductions, and the C library's ``atan2`` through a compiled loop (numba kernels call
-the C library for every transcendental function).  The C library itself (glibc) picks FMA
-variants of ``exp``, ``sin``, ``cos``, ... on CPUs that have FMA, so the promise is for
-x86-64 CPUs with AVX2 and FMA, on Linux with the same C library.
-``tests/test_reproducibility.py`` recomputes a fingerprint of everything under several
-machines' arithmetic and checks the code statically; docs/reproduction.md says what remains.
+What makes a result machine-dependent, and why these helpers avoid it:
+docs/design-notes.md#rmm_envsportable.
 """
 
 from __future__ import annotations

@@ -1,48 +1,32 @@
 """Module openings stay short: each module of ``guardians`` and ``rmm_envs`` opens with what it is
-and offers in at most 20 lines of docstring; rationale lives in ``docs/design-notes.md`` (or the
+and offers in at most 15 lines of docstring; rationale lives in ``docs/design-notes.md`` (or the
 docs pages).  Exempt: the env modules whose docstring is the env's spec (the catalog renders
-them as the docs' environment pages).  Modules written before this rule are pinned at their
-current length, which may only shrink (a new module, or one brought under 20, is held to 20)."""
+them as the docs' environment pages) and the few other Gymnasium-style specs of SPEC_OPENINGS.
+Modules not yet shortened are pinned at their length, which may only shrink."""
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-LIMIT = 20
+LIMIT = 15
 
-#: openings longer than LIMIT when the rule came in: path -> lines, a ceiling that may only fall
+#: openings longer than LIMIT when the rule came in and not yet shortened: path -> lines, a ceiling
+#: that may only fall (these two are being edited elsewhere; bring them under LIMIT and drop them)
 LONG_OPENINGS = {
-    "guardians/cbf/quadrotor_rows.py": 31,
-    "guardians/hj/_kernels.py": 27,
     "guardians/hj/quadrotor.py": 79,
-    "guardians/hj/solver.py": 34,
-    "guardians/lrmm/model.py": 38,
     "guardians/lrmm/nominal.py": 23,
-    "guardians/lrmm/train.py": 31,
-    "rmm_envs/adapters/base.py": 50,
-    "rmm_envs/adapters/classic_control.py": 29,
-    "rmm_envs/adapters/mujoco_envs.py": 42,
-    "rmm_envs/catalog.py": 21,
-    "rmm_envs/drivers/dubins4d.py": 23,
-    "rmm_envs/drivers/maze.py": 22,
-    "rmm_envs/drivers/quadrotor.py": 21,
-    "rmm_envs/envs/base.py": 29,
-    "rmm_envs/envs/driven.py": 64,
-    "rmm_envs/envs/dubins4d_vector.py": 80,
-    "rmm_envs/envs/guarded.py": 30,
-    "rmm_envs/pool.py": 31,
-    "rmm_envs/portable.py": 23,
-    "rmm_envs/risk/datagen.py": 42,
-    "rmm_envs/risk/estimator.py": 30,
-    "rmm_envs/risk/protocol.py": 53,
-    "rmm_envs/systems/dubins4d.py": 24,
-    "rmm_envs/systems/quadrotor.py": 24,
-    "rmm_envs/systems/quadrotor_control.py": 37,
-    "rmm_envs/worlds/mazes.py": 23,
-    "rmm_envs/worlds/shape_map.py": 28,
-    "rmm_envs/wrappers/rl.py": 32,
+}
+
+#: modules whose docstring is a user-facing spec in the Gymnasium style, exempt as the env pages are:
+#: path -> why (their rationale is in docs/design-notes.md all the same)
+SPEC_OPENINGS = {
+    "rmm_envs/adapters/classic_control.py": "each adapter's spec: state, failure, controls, horizon, sampler, observation",
+    "rmm_envs/adapters/mujoco_envs.py": "each adapter's spec: state, failure, controls, horizon, sampler, observation",
+    "rmm_envs/envs/driven.py": "guarded()'s spec: every argument, the controls, stepping, outcomes, labels",
+    "rmm_envs/envs/dubins4d_vector.py": "the vector env's spec: spaces, autoreset, infos, clock, arguments",
 }
 
 
@@ -73,12 +57,39 @@ def test_module_openings_are_short():
     for pkg in ("guardians", "rmm_envs"):
         for path in sorted((ROOT / pkg).rglob("*.py")):
             rel = path.relative_to(ROOT).as_posix()
-            if rel.removesuffix(".py").removesuffix("/__init__").replace("/", ".") in spec:
+            if rel in SPEC_OPENINGS or rel.removesuffix(".py").removesuffix("/__init__").replace("/", ".") in spec:
                 continue
             n = opening_lines(path)
             if n > LONG_OPENINGS.get(rel, LIMIT):
                 long[rel] = n
     assert not long, (f"module openings over {LIMIT} lines (or over their pinned length): {long}; say what the "
                       "module is and offers, and move the rationale to docs/design-notes.md")
-    missing = sorted(p for p in LONG_OPENINGS if not (ROOT / p).exists())
-    assert not missing, f"pinned modules that no longer exist (remove them from LONG_OPENINGS): {missing}"
+    missing = sorted(p for p in (*LONG_OPENINGS, *SPEC_OPENINGS) if not (ROOT / p).exists())
+    assert not missing, f"pinned or exempt modules that no longer exist (remove them): {missing}"
+
+
+def heading_anchors(page: Path) -> set[str]:
+    """The anchors GitHub gives the page's headings: lower case, punctuation dropped, spaces as '-'."""
+    heads = [line.lstrip("#").strip() for line in page.read_text().splitlines() if line.startswith("#")]
+    return {re.sub(r"[^\w\- ]", "", h.lower()).replace(" ", "-") for h in heads}
+
+
+def test_heading_anchors_follow_github():
+    page = ROOT / "docs" / "design-notes.md"
+    anchors = heading_anchors(page)
+    assert "rmm_envspool" in anchors and "cbf-on-the-quadrotor-guardianscbfquadrotor" in anchors
+    assert "design-notes" in anchors
+
+
+def test_every_pointer_to_the_design_notes_names_a_section():
+    """A "design-notes.md#..." in the code (the openings' pointers) or in the docs names a heading there."""
+    anchors = heading_anchors(ROOT / "docs" / "design-notes.md")
+    dangling = {}
+    for pkg, pattern in (("guardians", "*.py"), ("rmm_envs", "*.py"), ("benchmarks", "*.py"), ("docs", "*.md")):
+        for path in sorted((ROOT / pkg).rglob(pattern)):
+            for anchor in re.findall(r"design-notes\.md#([\w\-]+)", path.read_text()):
+                if anchor not in anchors:
+                    dangling.setdefault(path.relative_to(ROOT).as_posix(), []).append(anchor)
+    assert not dangling, f"pointers to sections docs/design-notes.md does not have: {dangling}"
+    pointed = sum(len(re.findall(r"design-notes\.md#", p.read_text())) for p in (ROOT / "rmm_envs").rglob("*.py"))
+    assert pointed >= 20  # the openings shortened for issue 29 point at their sections

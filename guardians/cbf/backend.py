@@ -3,20 +3,12 @@
 ``solver="osqp"`` (the default) keeps the direct OSQP path: the problem is set up once per
 episode with a fixed sparsity and each step only updates values and bounds, then re-solves
 warm-started (:class:`guardians.cbf.qp.BarrierQP` for Dubins4D,
-:class:`guardians.cbf.maze.WallQP` for the maze car).  It is the fast path: qpsolvers' front
-end rebuilds the problem on every call.
+:class:`guardians.cbf.maze.WallQP` for the maze car).  ``solver="qpsolvers:<name>"`` hands the
+same QP, as dense rows ``G z <= h`` and box bounds, to ``qpsolvers.solve_qp(..., solver=name)``
+for any solver qpsolvers has installed (the optional extra ``rmm-envs[qp]``).  Any other name
+is refused at the guardian's construction, with the installed solvers listed.
 
-``solver="qpsolvers:<name>"`` hands the same QP, as dense rows ``G z <= h`` and box bounds, to
-``qpsolvers.solve_qp(..., solver=name)`` for any solver qpsolvers has installed
-(``qpsolvers.available_solvers``; qpsolvers itself is the optional extra ``rmm-envs[qp]``).
-It is for choice and cross-checking: the decisions agree with the default to the solvers'
-tolerance (``tests/test_cbf_solvers.py``).  The guardian's ``eps`` (``1e-6``) is passed on as
-OSQP's absolute and relative tolerance (solutions polished, as on the direct path); the
-others run at their own defaults, which are tighter than ``1e-6`` (``clarabel``'s interior
-point 1e-8; ``daqp`` is a dense active-set method, exact up to rounding).
-
-A name that is not ``"osqp"`` and not ``"qpsolvers:<installed solver>"`` is refused at the
-guardian's construction, with the installed solvers listed.
+Why the direct path is the default, and the tolerances: docs/design-notes.md#guardianscbfbackend.
 """
 
 from __future__ import annotations

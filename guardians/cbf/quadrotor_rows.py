@@ -1,34 +1,15 @@
 """The barrier maths of the quadrotor ``cbf``: distances to a generated room, the QP's rows, the QP.
 
 Pure functions of a body state and the episode's room (:class:`rmm_envs.worlds.rooms.Room`);
-the model, the gains and the margins are derived in :mod:`guardians.cbf.quadrotor`.
+the model, the gains and the margins are derived in :mod:`guardians.cbf.quadrotor`.  Every part
+of the room (floor, walls, boxes, cylinders, spheres) is one convex shape of a flat table
+(:class:`RoomShapes`); :func:`shape_distances` gives each shape's signed distance and unit
+gradient at a point, and :func:`command_rows` the HOCBF rows ``G u <= h`` over the command
+``u = (u_forward, u_left, u_up)`` of the ``n_rows`` shapes nearest the body (smallest barrier
+first).  The loops are plain Python compiled by numba, scalar arithmetic only (the same bits on
+every CPU).
 
-Every part of the room is one convex *shape* in a flat table (:class:`RoomShapes`): the floor
-(the half-space ``z <= 0``), each wall (an axis-aligned box), and each object as generated
-(a box with half extents ``(a, b, c)``, a cylinder of radius ``r`` and length ``L`` along its
-local z axis, a sphere of radius ``r``; boxes and cylinders rotated by their quaternion).  For
-a point ``p``, :func:`shape_distances` gives each shape's signed distance ``d`` (negative
-inside) and the unit gradient ``n = grad d`` (the outward normal at the nearest point; inside,
-the normal of the nearest face).  A shape's barrier is ``b = d - rho`` (``rho``: the body's
-bounding-sphere radius plus a margin); with the world velocity ``v`` of the body and the
-commanded world velocity ``w`` tracked with first-order lags ``tau_h`` (horizontal) and
-``tau_z`` (vertical)::
-
-    b'  = n . v
-    b'' = n_h . (w_h - v_h) / tau_h + n_z (w_z - v_z) / tau_z + v' (Hess d) v
-    b'' + (p1 + p2) b' + p1 p2 b >= 0                                       (HOCBF, Xiao & Belta)
-
-The Hessian term is dropped: the distance to a convex set is convex outside it, so the term
-is ``>= 0`` and leaving it out only tightens the row (it is 0 along a face).  With the command
-in the heading frame, ``w_h = Rot(psi) (u_forward, u_left)``, ``w_z = u_up``, each shape gives
-the row ``G u <= h`` over ``u = (u_forward, u_left, u_up)``::
-
-    G = -(Rot(-psi) n_h / tau_h, n_z / tau_z)
-    h = (p1 + p2) n . v - n_h . v_h / tau_h - n_z v_z / tau_z + p1 p2 b
-
-:func:`command_rows` returns the rows of the ``n_rows`` shapes nearest the body (smallest
-``b`` first).  The loops are plain Python compiled by numba, scalar arithmetic only (the same
-bits on every CPU).
+The rows' derivation: docs/design-notes.md#guardianscbfquadrotor_rows.
 """
 
 from __future__ import annotations

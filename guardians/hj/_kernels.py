@@ -1,30 +1,18 @@
 """Compiled (numba) kernels for the Dubins4D Lax-Friedrichs update on a 4-D grid.
 
 Two kernels: ``_stage`` (first-order upwind differences, one ghost cell per side) and
-``_stage2`` (ENO2 differences, two ghost cells per side; the default scheme).  Both are
-described here for the first-order one; ``_stage2`` differs only in the one-sided
-differences (see its comments) and in its ghost width.  ENO2 reads two neighbours per side and
-chooses the smaller second difference, about 2.2x the work of the first-order stage; with
-RK3 (3 stages instead of 2) a default-grid solve costs about 3.3x the first-order RK2 one.
-
-The arrays are kept **padded** with ghost cells on each side of every axis (heading:
-periodic copies; the other axes: linear extrapolation, so that the outer one-sided difference
-equals the inner one, as in the numpy path).  One call of :func:`lf_stage` then computes a
-whole Runge-Kutta stage in a single branch-free, vectorisable pass over the interior:
+``_stage2`` (ENO2 differences, two ghost cells per side; the default scheme).  On arrays kept
+padded with ghost cells, one call of :func:`lf_stage` computes a whole Runge-Kutta stage in
+one pass over the interior:
 
 ``out = a * V0 + b * (W + dt * min(0, H_LF(W)))``, then ``out = max(out, floor)`` if a floor
 is given,
 
-where ``H_LF`` is the first-order upwind Lax-Friedrichs numerical Hamiltonian of
-:class:`guardians.hj.dynamics.Dubins4DHJ` on axes ``(x, y, theta, v)``.  The numpy path in
-``solver.py`` is the reference; the tests compare the two.  Fusing the differences, the
-Hamiltonian, the dissipation and the stage combination avoids the dozen full-size
-temporaries of the numpy path (each 17 MB on the default grid) and lets the compiler use
-SIMD; it is what makes 2,048-episode HJ benchmarks feasible.
+with ``H_LF`` the Lax-Friedrichs numerical Hamiltonian of
+:class:`guardians.hj.dynamics.Dubins4DHJ`.  The numpy path in ``solver.py`` is the reference
+(the tests compare the two).  ``out`` must not be ``W``.
 
-``out`` must not be ``W`` (the stencil reads ``W``'s neighbours) and should not be ``V0``
-either: that would be correct (each output point reads ``V0`` only at itself) but LLVM's
-run-time alias check then falls back to scalar code, 3x slower.
+Why fused, the padding, the cost of ENO2 and aliasing: docs/design-notes.md#guardianshj_kernels.
 """
 
 from __future__ import annotations

@@ -1,20 +1,15 @@
 """On-disk cache of solved value functions, keyed by a hash of everything that determines them.
 
-Each entry is one uncompressed ``.npz`` file (17 MB on the default grid) named by the SHA-256
-of its solve parameters ``{dynamics, grid, horizon, scheme, obstacles}`` (the ``spec``),
-holding the float32 value ``V`` and ``meta``: a JSON document with the ``spec`` itself and the
-SHA-256 of ``V``'s bytes.  An entry is used only if it is verified: its parameters equal the
-ones asked for and its array has the recorded shape and checksum.  Anything else (a damaged or
-edited file, an array overwritten with another of the same shape, an entry of another solve, a
-file of the older raw ``.npy`` format) is recomputed and replaced, said once with a
-``RuntimeWarning`` naming the file and counted (``counts["cache_rejected"]``, which the HJ
-guardians report in their stats).  Written atomically; the oldest files beyond ``max_files``
-are removed.  Several processes may share a directory (the benchmark's workers do): a file
-another process removes at any moment is a cache miss, never an error.
+Each entry is one uncompressed ``.npz`` file named by the SHA-256 of its solve parameters
+``{dynamics, grid, horizon, scheme, obstacles}`` (the ``spec``), holding the float32 value
+``V`` and ``meta`` (the ``spec`` and the SHA-256 of ``V``).  An entry is used only if it is
+verified; anything else is recomputed and replaced, with a ``RuntimeWarning`` naming the file
+(counted in ``counts["cache_rejected"]``).  Written atomically; the oldest files beyond
+``max_files`` are removed; several processes may share a directory.  The directory is the HJ
+guardian's ``cache_dir`` argument; without one, :func:`default_cache_dir`: ``$RMM_HJ_CACHE`` if
+set (read by :mod:`rmm_envs.settings`), else ``~/.cache/rmm-envs/hj``.
 
-The directory is the HJ guardian's ``cache_dir`` argument; without one,
-:func:`default_cache_dir`: ``$RMM_HJ_CACHE`` if set (read by :mod:`rmm_envs.settings`), else
-``~/.cache/rmm-envs/hj`` (a per-user cache outside any checkout).
+What is verified and what sharing a directory means: docs/design-notes.md#guardianshjcache.
 """
 
 from __future__ import annotations

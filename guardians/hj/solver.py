@@ -3,35 +3,15 @@
 Solves ``V_tau = min(0, H(x, grad V))``, ``V(x, 0) = l(x)``, from ``tau = 0`` to the
 horizon, where ``l <= 0`` on the target (obstacle) set and ``H = max_u min_d grad V . f``.
 The result ``V(x, T)`` is ``<= 0`` exactly on the states from which the target cannot be
-avoided within ``T`` seconds (the value is the minimum over time of ``l`` along the best
-trajectory, so the tube only grows).
+avoided within ``T`` seconds.  Lax-Friedrichs with first-order upwind (``order=1``) or ENO2
+(``order=2``, default) differences, TVD Runge-Kutta in time (:data:`TVD_RK`, ``rk=3`` default),
+optional reach-avoid, float32 arrays.  Two implementations of the same scheme: a generic numpy
+one (any dimension and dynamics; the reference) and, for the Dubins4D dynamics, compiled numba
+kernels (``guardians/hj/_kernels.py``); ``backend="auto"`` takes the compiled one where it
+applies, and both agree to float32 rounding (tested).  ``threads`` sets the compiled kernel's
+thread count without changing the result.
 
-Numerics (Osher-Fedkiw, Mitchell's toolbox conventions):
-
-* spatial derivatives: one-sided differences, first-order upwind (``order=1``) or ENO2
-  (``order=2``), with periodic axes wrapped and the others extrapolated linearly;
-* Lax-Friedrichs numerical Hamiltonian
-  ``H(x, (p- + p+)/2) + sum_i alpha_i (p+_i - p-_i) / 2`` (plus sign because the equation is
-  ``V_tau = +H``), with ``alpha_i >= max |dH/dp_i|`` from the dynamics;
-* reach-avoid (optional): the control minimises, and the obstacle constraint is imposed as
-  ``V = max(V, -g)`` after every Runge-Kutta stage;
-* time: TVD Runge-Kutta (``rk=1``: forward Euler, ``rk=2``: Heun, ``rk=3``: Shu-Osher), one
-  tableau (:data:`TVD_RK`) that both implementations step through, with
-  ``dt = cfl / sum_i (alpha_i / dx_i)`` (CFL 0.8 by default);
-* defaults ``order=2, rk=3``: second-order accurate in space (away from kinks) and third in
-  time.  First order is kept (``order=1, rk=2``, the paper's scheme); it is diffusive and
-  under-estimates the unsafe set (the circle convergence test in ``tests/test_hj.py``);
-* float32 arrays (the default grid has 4.2 M points, 17 MB per array).
-
-Two implementations of the same scheme: a generic numpy one (any dimension, any dynamics
-object, ``order`` 1 or 2), the reference, and, for the Dubins4D dynamics, compiled numba
-kernels (first order and ENO2) that fuse a whole Runge-Kutta stage into one pass over the
-grid (``guardians/hj/_kernels.py``; 10-20x faster on the default grid).  ``backend="auto"`` (the
-default) takes the compiled one where it applies; both agree to float32 rounding (tested).
-The compiled kernel runs on ``threads`` threads when given (the HJ guardian passes its own
-``threads`` argument, see :mod:`guardians.hj.guardian`); ``None`` leaves numba's setting as it
-is (numba's default, the core count, unless the process changed it).  Threads do not change
-the result: every grid point is computed by exactly one thread.
+The numerics, the defaults and why: docs/design-notes.md#guardianshjsolver.
 """
 
 from __future__ import annotations

@@ -2,40 +2,16 @@
 
 Network: ``x_scaled = (obs[features] - data_min) * scale`` (a MinMax scaler fitted on the
 training split only), then ``len(hidden)`` layers ``act(W x + b)``, then an output layer
-``sigmoid(W x [+ b])`` giving the inferred risk in ``(0, 1)``.  The paper's network is one
-hidden layer of 64 sigmoids and a bias-free sigmoid output.
-
-Action-conditioned head (format version 2, optional): the output layer has ``1 + K`` sigmoid
-units.  Unit 0 is the risk of the state (uniformly random futures); unit ``k`` is the risk of
-holding candidate control ``k`` (``meta["candidates"][k - 1]``) for ``meta["candidate_hold"]``
-seconds, then random futures (the labels of ``rmm-datagen --candidates``).  A guardian uses
-unit 0 to decide *when* to act and the other units to decide *what* to do.
-
-Artifact: one ``.npz`` file, loaded with ``allow_pickle=False`` (no code runs on load),
-holding the arrays ``scaler_min``, ``scaler_scale``, ``W0, b0, W1, b1, ...`` (the output
-layer's bias absent when ``output_bias`` is false) and ``meta``, a UTF-8 JSON document:
-
-* ``format`` / ``format_version``; ``env_id``; ``obs_dim``; ``features`` (indices into the
-  observation) and ``feature_names``;
-* ``hidden``, ``activation``, ``output_bias``;
-* ``labeller`` (the estimator's parameters), ``data_sha256`` (the dataset's hash);
-* ``metrics`` (train/val/test MSE and MAE), ``training`` (the command's arguments, seed,
-  wall time, library versions);
-* ``weights_sha256``: a checksum over every array, verified on load;
-* version 2 only, both optional: ``candidates`` and ``candidate_hold`` (the head above), and
-  ``decision``: ``{"threshold": ..., "commit": ..., "action": ..., "chosen_by": ...}``, the
-  risk threshold, the commitment (steps kept in control after the risk falls back), the
-  avoidance action (``"head"`` or ``"heuristic"``) a guardian uses by default, and how they
-  were chosen.  Written after training by::
-
-      python -m guardians.lrmm.decision MODEL --threshold T --commit N --action A --chosen-by "..."
-
-Every array must be finite: constructing, saving or loading a model with NaN or inf weights
-raises ``ValueError`` naming the array (a NaN risk would compare as "safe" and silently
-disable a guardian).
+``sigmoid(W x [+ b])`` giving the inferred risk in ``(0, 1)``; format version 2 optionally adds
+one output unit per candidate control (the action-conditioned head).  Artifact: one ``.npz``
+file loaded with ``allow_pickle=False`` (no code runs on load): the scaler, the weights and a
+JSON ``meta`` document, with a checksum over every array verified on load.  Every array must be
+finite: a model with NaN or inf weights raises ``ValueError`` naming the array.
 
 The shipped models' table (:data:`SHIPPED_BY_SYSTEM`, :data:`SHIPPED`, :func:`default_model_path`)
 lives in :mod:`guardians.lrmm.shipped`; this module re-exports it.
+
+The head, the artifact's fields and why: docs/design-notes.md#guardianslrmmmodel.
 """
 
 from __future__ import annotations

@@ -2,33 +2,15 @@
 
 ``rmm-train --data data/d4 --out model.npz`` trains the paper's network by default:
 ``Linear(17, 64) -> sigmoid -> Linear(64, 1, no bias) -> sigmoid``, MSE loss, Adam (lr 1e-3),
-batch 64, float64, on the dataset written by ``rmm-datagen``.
+batch 64, float64, on the dataset written by ``rmm-datagen``.  Splits are by obstacle
+configuration (test metrics on layouts the model never saw); the scaler is fitted on the
+training split only; the epoch is chosen on validation MSE (``--select``); the same data,
+arguments and ``--seed`` give the same model bit for bit; with ``candidate_risk`` labels an
+action-conditioned head is trained too (``--head``).  A NaN or inf loss stops training with a
+message naming the epoch, and no model is written.  The guardian's decision defaults are
+chosen after training (``python -m guardians.lrmm.decision``).
 
-* **Split by obstacle configuration**: whole configurations go to train, validation or test
-  (fractions ``--val-frac`` and ``--test-frac`` of the configurations, seeded), so the test
-  metrics are on layouts the model never saw.  (The paper's Dubins4D "test" set was a random
-  15 % of the samples, i.e. its validation split.)
-* **Input scaling**: a MinMax scaler fitted on the training split only (the original refitted
-  it on the test data, docs/original-code.md item 9), saved in the model and folded into the first layer.
-* **Model selection**: the epoch with the lowest validation MSE (``--select best``, default)
-  or the last one (``--select last``, the original's behaviour).
-* **Determinism**: the same data, arguments and ``--seed`` give the same model bit for bit
-  (single-threaded torch, seeded initialisation and shuffling).
-* Prints and saves train / validation / test MSE and MAE (computed with the saved numpy model,
-  i.e. exactly what the guardian will run).
-* **Action-conditioned head** (``--head auto``, default): when the dataset has
-  ``candidate_risk`` labels (``rmm-datagen --candidates``), the output layer gets one more
-  sigmoid unit per candidate and the loss is the MSE over all units (risk and candidates
-  weigh the same); the candidates and their hold time are copied into the model.  ``--head
-  none`` trains the risk alone (the paper's network).  Metrics then add the candidates' MAE
-  and the *regret* of picking the predicted safest candidate: its labelled risk minus the
-  lowest labelled risk, averaged over rows.
-* **Only training rows reach the loss**; validation rows only choose the epoch; test rows
-  only score the result.  The validation MSE of every epoch is saved (``val_mse_history``).
-* **Divergence is an error**: a NaN or inf loss (for instance from a huge ``--lr``) stops
-  training with a message naming the epoch; no model is written.
-* The guardian's decision defaults are not set here: they are chosen in closed loop after
-  training and stored with ``python -m guardians.lrmm.decision`` (see there).
+Each choice and how it differs from the original: docs/design-notes.md#guardianslrmmtrain.
 """
 
 from __future__ import annotations

@@ -1,19 +1,13 @@
 """Risk maps for simulators the project did not write (see :mod:`rmm_envs.adapters.base` for the
-snapshot protocol and what a label means, and the tutorial ``docs/tutorials/own-simulator.md``).
+snapshot protocol, and the tutorial ``docs/tutorials/own-simulator.md``).
 
 :func:`adapt` turns a Gymnasium env into an :class:`AdaptedEnv` (the
 :class:`rmm_envs.risk.LabelledEnv` hooks), choosing by the env's class:
 
-================================  ===================================  ==========================
-env                               adapter                              failure
-================================  ===================================  ==========================
-``CartPole-v1``                   :class:`CartPoleAdapter` (numpy)      its termination
-``Pendulum-v1``                   :class:`PendulumAdapter` (numpy)      ``failure=`` (required)
-``InvertedPendulum-v5``           :class:`MujocoAdapter` (rollout)      unhealthy termination
-``InvertedDoublePendulum-v5``     :class:`MujocoAdapter` (rollout)      unhealthy termination
-``Hopper-v5``                     :class:`MujocoAdapter` (rollout)      unhealthy termination
-any other MuJoCo env              :class:`MujocoAdapter` (rollout)      ``failure=`` (required)
-================================  ===================================  ==========================
+* ``CartPole-v1``: :class:`CartPoleAdapter` (numpy), failure: its termination;
+* ``Pendulum-v1``: :class:`PendulumAdapter` (numpy), failure: ``failure=`` (required);
+* ``InvertedPendulum-v5``, ``InvertedDoublePendulum-v5``, ``Hopper-v5``: :class:`MujocoAdapter`
+  (rollout), failure: the unhealthy termination; any other MuJoCo env: ``failure=`` (required).
 
 The MuJoCo adapters need the optional extra ``rmm-envs[mujoco]``.  Any other env is refused
 with a ``TypeError`` naming it and what it lacks; a simulator of your own is served by

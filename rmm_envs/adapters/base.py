@@ -1,53 +1,16 @@
 """Risk labels for a simulator the project did not write: the snapshot protocol, the scene built
 on it and the labelling hooks an adapted env offers.
 
-## The snapshot protocol
-
 A simulator can be risk-labelled when it can save and restore its **full** state and step from
-it.  :class:`SnapshotSimulator` is what the step-by-step scene (:class:`SnapshotScene`) needs:
+it: :class:`SnapshotSimulator` (``dt``, ``action_space``, ``get_state``, ``set_state``,
+``step``, ``state_failed``).  :class:`SimulatorScene` turns one into a
+:class:`rmm_envs.risk.RiskScene` (each branch holds one uniformly drawn control for the horizon
+``t``, a whole number of env steps, and fails if any env step fails), so the estimator runs
+unchanged; :class:`AdaptedEnv` offers the :class:`rmm_envs.risk.LabelledEnv` hooks for the env
+it wraps, so :class:`rmm_envs.wrappers.RiskLabel` and ``rmm-datagen`` use it in place of a
+package env.  :func:`rmm_envs.adapters.adapt` picks the adapter for an env.
 
-``dt``
-    Seconds of simulated time per ``step``.
-``action_space``
-    A ``gymnasium.spaces.Box`` (controls are drawn uniformly in it) or ``Discrete(n)`` (served
-    as the control box ``[start, start + n)``, a control ``u`` meaning action ``floor(u)``: each
-    action is drawn with probability ``1/n``).
-``get_state() -> (d,) float array``
-    The full state: restoring it with ``set_state`` and stepping must give the same future as
-    stepping on from where it was read.
-``set_state(state)``
-    Restore a state returned by ``get_state`` (or one a sampler made).
-``step(action) -> bool``
-    Advance ``dt`` seconds under ``action``; ``True`` when this step failed (for a Gymnasium
-    env: its ``terminated``, where termination means failure).
-``state_failed(states (N, d)) -> (N,) bool``
-    Whether each state itself fails (checked at the root and after every step).
-
-## What "risk" means for an adapted simulator
-
-:class:`SimulatorScene` turns such a simulator into a :class:`rmm_envs.risk.RiskScene`, so the
-estimator's Algorithm 1 runs unchanged: each branch holds one control, drawn uniformly from the
-action space, for the horizon ``t`` (a whole number of env steps: ``t / dt`` must be an
-integer up to 1e-9, else ``ValueError`` naming both); the env is stepped every ``dt`` and a
-branch **fails** if any env step fails (the step reports it, or the state after it fails by the
-adapter's failure test or the user's ``failure`` callable, or is not finite).  The path the
-scene returns holds ``n_steps`` of the ``t / dt + 1`` env-step states, equally spaced (rounded
-to env steps), and is ``NaN`` from the first failed env step on: failure is absorbing, so
-``path_failed`` reads the path's last point.  A label is then the tree's risk metric over
-``depth`` levels, i.e. the chance (expected value, CVaR or worst case) that random held
-controls reach a failure within ``depth * t`` seconds.
-
-Failure: an adapter's own test (CartPole's termination, the MuJoCo envs' unhealthy states),
-or/and a user's ``failure(states (N, d)) -> (N,) bool`` (vectorised: one call per batch of
-states); where both exist a state fails if either says so.
-
-## The labelling hooks
-
-:class:`AdaptedEnv` offers the :class:`rmm_envs.risk.LabelledEnv` hooks for the env it wraps
-(``risk_scene``, ``true_state``, ``sample_states``, ``observe_states`` with the env's own
-observation, ``privileged``, ``dataset_notes``), plus ``reset`` and ``observation_space``
-passed through, so :class:`rmm_envs.wrappers.RiskLabel` and ``rmm-datagen`` use it in place of
-a package env.  :func:`rmm_envs.adapters.adapt` picks the adapter for an env.
+What "risk" means for an adapted simulator, in full: docs/design-notes.md#rmm_envsadaptersbase.
 """
 
 from __future__ import annotations
@@ -63,6 +26,26 @@ __all__ = ["AdaptedEnv", "SimulatorScene", "SnapshotScene", "SnapshotSimulator",
 
 @runtime_checkable
 class SnapshotSimulator(Protocol):
+    """What the step-by-step scene (:class:`SnapshotScene`) needs of a simulator.
+
+    ``dt``
+        Seconds of simulated time per ``step``.
+    ``action_space``
+        A ``gymnasium.spaces.Box`` (controls are drawn uniformly in it) or ``Discrete(n)`` (served
+        as the control box ``[start, start + n)``, a control ``u`` meaning action ``floor(u)``: each
+        action is drawn with probability ``1/n``).
+    ``get_state() -> (d,) float array``
+        The full state: restoring it with ``set_state`` and stepping must give the same future as
+        stepping on from where it was read.
+    ``set_state(state)``
+        Restore a state returned by ``get_state`` (or one a sampler made).
+    ``step(action) -> bool``
+        Advance ``dt`` seconds under ``action``; ``True`` when this step failed (for a Gymnasium
+        env: its ``terminated``, where termination means failure).
+    ``state_failed(states (N, d)) -> (N,) bool``
+        Whether each state itself fails (checked at the root and after every step).
+    """
+
     dt: float
     action_space: gym.Space
 
@@ -76,7 +59,7 @@ class SnapshotSimulator(Protocol):
 
 
 def control_box(space, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """The control box the estimator samples for ``space`` (see the module docstring);
+    """The control box the estimator samples for ``space`` (see :class:`SnapshotSimulator`);
     ``TypeError`` naming ``name`` and the space for any other kind of action space."""
     if isinstance(space, gym.spaces.Discrete):
         lo = float(space.start)
@@ -107,8 +90,8 @@ def _checked_failure(failure, name: str):
 
 
 class SimulatorScene:
-    """The :class:`rmm_envs.risk.RiskScene` of a simulator stepped every ``dt`` seconds (see the
-    module docstring for what its risk means).
+    """The :class:`rmm_envs.risk.RiskScene` of a simulator stepped every ``dt`` seconds (what its risk
+    means: docs/design-notes.md#rmm_envsadaptersbase).
 
     Subclasses implement :meth:`advance` (the env steps, batched where the simulator allows) and
     may implement :meth:`env_failed` (their env's own failure test of states).

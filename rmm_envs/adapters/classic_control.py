@@ -12,10 +12,8 @@ CartPole-v1 (:class:`CartPoleAdapter`)
     State ``(x, x_dot, theta, theta_dot)``.  Fails where the env terminates: ``|x| > 2.4`` m
     or ``|theta| > 12 deg`` (the env's ``x_threshold`` and ``theta_threshold_radians``).
     Controls: ``Discrete(2)`` as the box ``[0, 2)``, each branch pushing left or right (10 N)
-    with probability 1/2 for its whole ``t``.  Default ``t`` = 0.08 s (4 steps of 0.02 s), so the
-    paper's ``m = 2`` looks 0.16 s ahead: two full pushes the same way for 0.16 s tip a pole
-    upright at rest to 9.5 deg, short of failing, while 0.18 s tip it to 12.3 deg (so longer
-    holds label almost every state near 1).  Sampler: uniform on the non-failed box
+    with probability 1/2 for its whole ``t``.  Default ``t`` = 0.08 s (4 steps of 0.02 s; why:
+    docs/design-notes.md#rmm_envsadaptersclassic_control).  Sampler: uniform on the non-failed box
     ``|x| < 2.4``, ``|x_dot| < 2`` m/s, ``|theta| < 12 deg``, ``|theta_dot| < 2`` rad/s.
     Observation: the state (float32), as the env returns it.
 

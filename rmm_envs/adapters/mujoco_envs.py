@@ -15,26 +15,20 @@ Failure (the env's unhealthy termination, evaluated on states, whether or not th
 to terminate on it), and the default horizon ``t``:
 
 ``InvertedPendulum-v5``
-    ``|qpos[1]| > 0.2`` rad (the pole's hinge angle).  ``t`` = 0.04 s (1 step): the actuator is
-    strong, so random full pushes held for 2 steps each (0.16 s over ``m = 2``) already fail
-    64% of the branches from the pole upright at rest; with 1 step none do.
+    ``|qpos[1]| > 0.2`` rad (the pole's hinge angle).  ``t`` = 0.04 s (1 step).
 ``InvertedDoublePendulum-v5``
     The tip's height ``site_xpos[0][2] <= 1`` m (MuJoCo's kinematics per state).  ``t`` = 0.1 s
-    (2 steps of 0.05 s): 35% of the branches fail from upright at rest, all of them from the
-    lower pole at 0.25 rad turning outwards at 2 rad/s.
+    (2 steps of 0.05 s).
 ``Hopper-v5``
     Not ``is_healthy``: ``qpos[1]`` (height) outside the env's ``healthy_z_range``,
     ``qpos[2]`` (torso angle) outside ``healthy_angle_range``, or an element of
     ``(qpos, qvel)[2:]`` outside ``healthy_state_range`` (all open intervals, as the env's).
-    ``t`` = 0.04 s (5 steps of 0.008 s): 24% of the branches fail from the initial pose at rest,
-    66% with the torso at 0.18 rad turning at 1.5 rad/s.
-
-(The fractions above are labels with ``n = 32, m = 2`` and generator seed 0 of the states in
-``tests/test_adapters.py``.)
+    ``t`` = 0.04 s (5 steps of 0.008 s).
 any other MuJoCo env
     Only the user's ``failure(states)`` (required), on the full-state vectors; ``t`` = 2 steps.
 
-Every state that is not finite fails as well, and a user's ``failure`` adds to the env's.
+Every state that is not finite fails as well, and a user's ``failure`` adds to the env's.  Why
+these horizons: docs/design-notes.md#rmm_envsadaptersmujoco_envs.
 
 Sampler (``sample_states``, for datasets): *visited states*: the env is reset (seeded from the
 generator; the env's state and generator are restored afterwards) and then stepped with uniform random actions, a fresh one each env step, for a

@@ -1,25 +1,14 @@
 """The reckless maze driver: pure pursuit along the maze's cell path, cutting corners.
 
 :class:`PursuitDriver` drives a constant-speed Dubins car (turn rate ``u``, ``|u| <= u_max``)
-to a goal cell of a :class:`rmm_envs.worlds.mazes.Maze`:
+to a goal cell of a :class:`rmm_envs.worlds.mazes.Maze`: it follows the polyline through the
+centres of the cells of the maze's unique cell path (:func:`cell_path`), aims at the point
+``lookahead`` px further along it than the car's projection, and turns toward it with
+``u = clip(gain * bearing error, -u_max, u_max)``.  It ignores the walls and cuts corners on
+purpose (``Dubins3DMazeParallel-v0``'s 190 px look-ahead collides in about half the episodes).
+The driver is deterministic: all randomness of an episode is in its start.
 
-* **Plan** (:func:`cell_path`): the maze is a tree of cells joined by passages, so there is
-  exactly one cell path from the start to the goal; the driver follows the polyline through
-  the centres of its cells (the car's own cell first, the goal cell last).
-* **Pursue**: each call projects the car's position onto the polyline (the nearest point on
-  the current segment or the next two, so progress never runs backwards by more than the
-  current segment), takes the point ``lookahead`` px further along it (the goal centre once
-  past the end) and turns toward it: ``u = clip(gain * bearing error, -u_max, u_max)``.
-
-It is deliberately careless, and it ignores the walls: a look-ahead longer than a cell
-(125 px) makes it start each turn early and cut across the inner corner, and the car's
-minimum turning radius (50 px at the maze's defaults) is close to half a corridor (56 px from
-a cell centre to a wall's surface), so a corner taken on the inside often grazes the wall's
-end.  ``Dubins3DMazeParallel-v0`` uses 190 px: alone, the driver then collides in 46% of the
-episodes (256 episodes of ``rmm-bench`` seed 0, fixed 1 ms clock) and reaches the goal in the
-rest.  Collisions rise steeply with the look-ahead (measured on 64-128 episodes: none at
-165 px, 23% at 175, 38% at 185, 40% at 190, 62% at 200, 75% at 210).  The driver is
-deterministic: all randomness of an episode is in its start.
+The pursuit in detail and the look-ahead's measurements: docs/design-notes.md#rmm_envsdriversmaze.
 """
 
 from __future__ import annotations

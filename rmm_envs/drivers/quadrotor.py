@@ -3,22 +3,13 @@
 :class:`WaypointPilot` flies the quadrotor through a list of waypoints (the last one is the
 goal) by issuing *commands* to the cascaded controller
 (:mod:`rmm_envs.systems.quadrotor_control`): ``(v_forward, v_left, v_up, yaw_rate)`` in the
-body's heading frame.  From position ``p`` and yaw ``psi``, toward the current waypoint
-``w``:
+body's heading frame, proportional to the offset to the current waypoint (limited to
+``cruise_speed`` and ``climb_speed``), turning to look where it flies, each number clipped to
+the command box.  A waypoint other than the last is passed within ``reach`` of it.  It is
+deliberately careless (straight lines cross walls and meet objects); it is deterministic: all
+the randomness of an episode is in its waypoints.
 
-* horizontal velocity ``gain * (w - p)_xy`` in the world frame, its norm limited to
-  ``cruise_speed``, turned into the heading frame (by ``-psi``);
-* vertical velocity ``gain * (w - p)_z``, limited to ``climb_speed``;
-* yaw rate ``yaw_gain * wrap(bearing - psi)`` (limited by the command box), where ``bearing``
-  is the direction of ``(w - p)_xy``, so the body's forward ray looks where it flies; no turn
-  within ``reach`` of the waypoint horizontally;
-* each number clipped to the command box it is given.
-
-A waypoint other than the last counts as passed once the body is within ``reach`` of it (3-D
-distance), and the pilot turns to the next.  It is deliberately careless: a straight line
-between two points of a room that is a union of rectangles often crosses a wall, and at the
-room's heights it often meets an object on the floor.  The pilot is deterministic: all the
-randomness of an episode is in its waypoints.
+The command law in full: docs/design-notes.md#rmm_envsdriversquadrotor.
 """
 
 from __future__ import annotations

@@ -1,32 +1,17 @@
 """The skeleton every environment of this package shares: :class:`LabelledEnvBase`.
 
-An env module is then its system, its world, its driver (if any) and its docstring; this class
-provides, once:
-
-* **argument and option checks**: :func:`check_arguments` (constructor arguments, each error
-  naming the argument, the expected kind of value and the value given),
-  :meth:`LabelledEnvBase.check_options` (unknown reset options) and :func:`option_vector`
-  (a reset option that must be ``n`` finite numbers, each of magnitude at most
-  :data:`rmm_envs.worlds.bounds.MAX_MAGNITUDE`);
-* **running-state guards**: :meth:`LabelledEnvBase.check_can_step` (``step`` before ``reset`` or
-  after the episode ended raises ``RuntimeError``) and :meth:`LabelledEnvBase.require_episode`
-  (accessors that need a ``reset`` first);
-* **seeded rejection sampling**: :func:`draw_until` (one object: draw until accepted, or give up
-  after ``max_draws``) and :func:`rejection_sample` (a batch of ``n`` accepted rows, drawn in
-  rounds of ``max(2 * missing, 16)`` candidates, at most :data:`MAX_ROUNDS` rounds, then a
-  ``RuntimeError`` naming what could not be drawn).  Every draw takes the caller's
-  ``numpy.random.Generator``, so the same seed gives the same samples;
-* **rendering**: :meth:`LabelledEnvBase.render` warns and returns ``None`` without a
-  ``render_mode``, returns :meth:`~LabelledEnvBase.render_frame` for ``"rgb_array"`` and shows it
-  with pygame for ``"human"`` (offered by an env only where pygame is installed);
-* **the labelling hooks** of :class:`rmm_envs.risk.LabelledEnv`: :meth:`~LabelledEnvBase.risk_scene`
-  (the current episode's ``self.scene``), the deprecated alias ``risk_system()`` (warns),
-  :meth:`~LabelledEnvBase.dataset_notes` (none by default); each env adds ``true_state``,
-  ``sample_states``, ``observe_states`` and ``privileged``.
+An env module is then its system, its world, its driver (if any) and its docstring; this module
+provides, once: argument and option checks (:func:`check_arguments`, :func:`option_vector`,
+:meth:`LabelledEnvBase.check_options`), running-state guards (``step`` before ``reset`` or after
+the episode ended raises ``RuntimeError``), seeded rejection sampling (:func:`draw_until`,
+:func:`rejection_sample`), rendering (``"rgb_array"``, ``"human"``) and the labelling hooks of
+:class:`rmm_envs.risk.LabelledEnv` that do not depend on the env.
 
 Subclasses set ``self.scene`` at every ``reset`` (to the :class:`rmm_envs.risk.RiskScene` of the
 new episode) and call :meth:`~LabelledEnvBase.begin_episode` there, and
 :meth:`~LabelledEnvBase.end_episode` on the step that ends it.
+
+Each piece in detail: docs/design-notes.md#rmm_envsenvsbase.
 """
 
 from __future__ import annotations

@@ -1,33 +1,17 @@
 """The blocking parallel-autonomy env skeleton: :class:`GuardedEnv`.
 
 What every env with a built-in driver and a guardian action shares (``Dubins4DCirclesGuarded-v0``,
-``Dubins3DMazeGuarded-v0``), written once on top of :class:`rmm_envs.envs.base.LabelledEnvBase`:
-
-* :meth:`GuardedEnv.step`: read the agent's compute time off ``self.clock``, parse the action
-  with the action space (:class:`rmm_envs.autonomy.GuardianActionSpace`), advance by
-  ``step_dt`` with the env's ``simulate(duration, active, control, compute_time)`` (which the
-  non-blocking wrapper calls directly with its own durations), restart the clock;
-* the driver's intended control, ``info["nominal_control"]`` on ``reset`` and every step
-  (:meth:`GuardedEnv.update_nominal`): computed from the state the returned observation shows,
-  in the action space's control order and bounds, and kept, so that an interval the driver
-  controls applies exactly these numbers.  A safety filter reads it as its ``u_nom``; a
-  guardian returning ``action_space.active(info["nominal_control"])`` drives exactly as the
-  driver does (tested bit for bit);
-* the per-step safety cost of Safety-Gymnasium's convention, ``info["cost"]``: 1.0 on a step
-  that ends in a collision, 0.0 otherwise; its episode sum is ``cum_cost`` in the statistics;
-* the statistics of the paper's Table I (:meth:`GuardedEnv.episode_statistics`,
-  ``info["episode_stats"]``: a key of its own, so that Gymnasium's ``RecordEpisodeStatistics``
-  and SB3's ``Monitor`` can write their ``info["episode"]``) and the end of a step:
-  :meth:`GuardedEnv.end_interval` ends the episode on an outcome (``"goal"``,
-  ``"collision"``) or at ``max_episode_sim_time`` (``"timeout"``, truncated) and adds
-  ``outcome`` and ``episode_stats`` to the last step's ``info``.
+``Dubins3DMazeGuarded-v0``), on top of :class:`rmm_envs.envs.base.LabelledEnvBase`: ``step``
+(the agent's compute time, the parsed guardian action, ``step_dt`` of the env's ``simulate``),
+the driver's intended control ``info["nominal_control"]`` (applied exactly where the driver
+controls), the per-step safety cost ``info["cost"]`` and the paper's Table I statistics
+(``info["episode_stats"]``) with the episode's end.
 
 A subclass sets ``step_dt``, ``max_episode_sim_time``, ``clock`` and ``action_space``, calls
 :meth:`~GuardedEnv.begin_statistics` and :meth:`~GuardedEnv.update_nominal` at ``reset`` and,
 in ``simulate``, :meth:`~GuardedEnv.check_interval`, :meth:`~GuardedEnv.count_interval` and
-:meth:`~GuardedEnv.end_interval` (after the state has advanced), applying ``self._nominal`` on
-an interval the driver controls; it reports its speed through :meth:`~GuardedEnv.final_speed`
-and its driver through :meth:`~GuardedEnv.driver_control`.
+:meth:`~GuardedEnv.end_interval`; it reports :meth:`~GuardedEnv.final_speed` and
+:meth:`~GuardedEnv.driver_control`.  Each piece in detail: docs/design-notes.md#rmm_envsenvsguarded.
 """
 
 from __future__ import annotations

@@ -5,41 +5,13 @@ label them with the sampling-tree estimator.  Example (the paper's Dubins4D scal
 
     rmm-datagen --env Dubins4DCirclesGuarded-v0 --configs 274 --samples-per-config 128 --seed 0 --out data/d4
 
-Output directory:
+The output directory holds ``metadata.json``, ``shard-NNNNN.parquet`` files (rows grouped by
+configuration) and, written last, ``manifest.json`` with every shard's SHA-256.  The same seed
+gives identical data whatever the worker count or backend (``--backend local`` or ``ray``); a
+rerun of the same command resumes, verifying and regenerating any damaged shard;
+:func:`load_dataset` verifies every shard.
 
-* ``metadata.json``: env id and arguments, estimator parameters, seed, sizes, package version.
-* ``shard-NNNNN.parquet``: rows for a fixed block of configurations (``--configs-per-shard``),
-  grouped by configuration so train/test can be split by configuration.  Columns:
-  ``config_id``, ``sample``, ``obs`` (float32 list), ``state`` (float64 list), ``risk``,
-  ``min_risk_ctrl`` (list), ``min_risk_ctrl_dur``, ``n_leaves``; with ``--candidates`` also
-  ``candidate_risk`` (list, one action-conditioned label per candidate control, see
-  :meth:`rmm_envs.risk.RiskEstimator.estimate_candidates`; drawn after the plain labels, so
-  ``risk`` is the same with or without candidates).
-* ``manifest.json`` (written last): row count, per-shard SHA-256 and the dataset hash.
-* ``shard-NNNNN.sha256`` (only while a run is unfinished): the SHA-256 of a shard, written
-  right after the shard itself (``sha256sum -c`` format); folded into the manifest at the end.
-
-Determinism: configuration ``c`` draws everything from ``SeedSequence(seed, spawn_key=(c, ...))``
-so the same seed gives identical data whatever the worker count or backend.
-
-Crash safety: each shard is written to a temporary file and renamed into place, so a shard is
-either complete or absent.  Rerunning the same command (after Ctrl-C, ``kill -9`` or a crash)
-checks the existing shards and computes only the missing ones; a directory made with other
-parameters is refused rather than mixed.
-
-Integrity: every shard's SHA-256 is recorded when it is written (its ``.sha256`` file, then
-the manifest), and nothing else is ever trusted.  A rerun verifies every existing shard
-against its recorded checksum and regenerates, with a line naming the file, any that does not
-match or has no recorded checksum: generation is deterministic, so the result is exactly what
-the damaged file held before.  The manifest is then built from the recorded checksums, never
-from whatever the files hold now, so a damaged shard cannot be laundered into a valid-looking
-dataset.  :func:`load_dataset` verifies every shard too and refuses a damaged dataset with
-one line naming the file and the command that repairs it.
-
-Backends: ``--backend local`` (processes, ``--workers`` default the core count) or
-``--backend ray`` (``--ray-address`` of a cluster, else a local Ray; the optional extra
-``rmm-envs[ray]``).  Ray tasks return their rows to this process, which writes the shards, so
-no shared file system is needed.
+The columns, determinism, crash safety and integrity: docs/design-notes.md#rmm_envsriskdatagen.
 """
 
 from __future__ import annotations

@@ -2,32 +2,14 @@
 
 For a root state ``s`` the tree has branching factor ``n`` and depth ``m``: each node samples
 ``n`` controls from the policy, holds each for ``t`` seconds, and records the path at
-``n_steps`` equally spaced points (point 0 is the parent).  A child whose path fails (any
-point or segment) is worth 1 and is not expanded; a child at depth ``m`` that did not fail is
-worth 0 (or the system's ``leaf_estimate`` with ``leaf="heuristic"``); every other node is
-worth the coherent risk metric of its children.  A root that already fails is worth 1.
+``n_steps`` equally spaced points (point 0 is the parent).  A child whose path fails is worth 1
+and is not expanded; a child at depth ``m`` that did not fail is worth 0 (or the system's
+``leaf_estimate`` with ``leaf="heuristic"``); every other node is worth the coherent risk
+metric of its children.  A root that already fails is worth 1.  Also returned per root: the
+minimum-risk child's first control, its hold time and the number of terminal nodes;
+:meth:`RiskEstimator.estimate_candidates` labels given controls (action-conditioned labels).
 
-Batching: all ``B * n`` branches of level 1 are one ``propagate`` and one ``path_failed`` call,
-all ``B * n^2`` of level 2 the next, and so on; roots are processed in chunks to bound memory.
-A tree of more than ``MAX_TREE_NODES`` (2^20) nodes per root is refused before anything is
-allocated: that is a thousand times the paper's n = 32, m = 2, and beyond it one root's paths
-alone outgrow an ordinary machine's memory.
-Only the children of live nodes are propagated (a failed node is not expanded), so the
-value is exactly Algorithm 1's and cluttered states cost less.
-
-Randomness: the default policy (uniform over the control box) draws every control of the
-tree for all roots up front, level by level in root-major order, so results do not depend on
-the chunk size.  A custom ``policy(states, rng) -> controls`` is called per chunk and level.
-
-Also returned per root: the first control of the minimum-risk child (first index on ties),
-how long it is held (``t``: the control is constant over the branch; the original stored the
-duration of one path segment, ``t / (n_steps - 1)``, of the same constant control) and the
-number of terminal nodes (failed or depth-``m``) that the estimate averages over.
-
-Action-conditioned labels (:meth:`RiskEstimator.estimate_candidates`): the risk of holding
-each of ``K`` given controls for ``hold`` seconds (one branch of ``n_steps`` points, worth 1
-if it fails), then the same random tree from where it ends.  They tell a guardian which of a
-few manoeuvres is safest, which the plain label (uniform controls from the root) cannot.
+Batching, the tree-size limit, randomness and the candidates: docs/design-notes.md#rmm_envsriskestimator.
 """
 
 from __future__ import annotations

@@ -1,56 +1,17 @@
 """The two protocols of risk labelling: :class:`RiskScene` (what the estimator needs of a system
 placed in a world) and :class:`LabelledEnv` (what ``RiskLabel`` and ``rmm-datagen`` need of an env).
 
-## RiskScene
+A *scene* is a dynamics object (:mod:`rmm_envs.systems`) placed in one obstacle configuration,
+and that is what the estimator labels: ``state_dim``, the control box ``control_low`` /
+``control_high``, ``propagate``, ``path_failed``, ``state_failed`` and optionally
+``leaf_estimate``.  A labelled env offers ``risk_scene()``, ``true_state``, ``sample_states``,
+``observe_states``, ``privileged()`` and ``dataset_notes()`` on its unwrapped env.  Each
+member's contract is in its class's docstring; :func:`check_scene` and
+:func:`check_labelled_env` check an object against them, naming each missing or ill-formed
+member.  ``System`` and ``check_system``, the former names of :class:`RiskScene` and
+:func:`check_scene`, still import, with a ``DeprecationWarning``.
 
-"System" in this project means *dynamics* (:mod:`rmm_envs.systems`); a *scene* is a dynamics
-object placed in one obstacle configuration, and that is what the estimator labels.  The
-estimator knows nothing else about it: a new scene is a class with these members (usually a
-dynamics file in ``systems/`` plus a world in ``worlds/``, combined in :mod:`rmm_envs.scenes`).
-
-Members (exactly what :class:`rmm_envs.risk.RiskEstimator` reads):
-    state_dim: int, the length of a state vector.
-    control_low, control_high: ``(control_dim,)`` arrays, the control box the estimator samples
-        uniformly.
-    propagate(states (N, d), controls (N, c), duration, n_steps) -> (N, n_steps, d): the path
-        under a zero-order-hold control; point 0 is the start.
-    path_failed(paths (N, S, d)) -> (N,) bool: any point or segment of the path fails.
-    state_failed(states (N, d)) -> (N,) bool: the state itself fails.
-
-Optional:
-    leaf_estimate(states (N, d)) -> (N,) in [0, 1]: a value for non-failed leaves instead of 0.
-
-Observing states for datasets is not the scene's concern but the env's
-(:class:`LabelledEnv`, below).  ``System`` and ``check_system``, the former names of
-:class:`RiskScene` and :func:`check_scene`, still import, with a ``DeprecationWarning``.
-
-## LabelledEnv
-
-An environment whose states can be risk-labelled offers, on its unwrapped env (every env of
-this package does, through :class:`rmm_envs.envs.base.LabelledEnvBase`):
-
-``risk_scene() -> RiskScene``
-    The :class:`rmm_envs.risk.RiskScene` of the current episode (its dynamics in its obstacle
-    configuration); ``RuntimeError`` before the first ``reset``.  ``risk_system()`` is its
-    deprecated former name.
-``true_state``
-    Property: the current true state, a ``(state_dim,)`` float array (a copy).
-``sample_states(rng, n) -> (n, state_dim)``
-    ``n`` states of the current episode's scene for a dataset, drawn from the
-    ``numpy.random.Generator`` ``rng`` only (so a seed fixes them).
-``observe_states(states, rng=None) -> (n, obs_dim) float32``
-    The observations the env would return in those states.  ``rng`` draws any feature that a
-    state does not determine (the Dubins4D simulated time); envs without such a feature ignore
-    it, envs with one require it.
-``privileged() -> dict``
-    The true state and the obstacle geometry (copies): **privileged** information, for
-    guardians that declare they use it and for analysis.
-``dataset_notes() -> dict``
-    Facts about ``observe_states`` that a dataset records in its metadata
-    (``{"obs_time_feature": description or None}``).
-
-:func:`check_labelled_env` checks an env against this list (on its class, so before any
-``reset``) and names the env and each missing or ill-formed hook.
+Why a scene and an env are two protocols: docs/design-notes.md#rmm_envsriskprotocol.
 """
 
 from __future__ import annotations
@@ -69,6 +30,21 @@ _REQUIRED = ("state_dim", "control_low", "control_high", "propagate", "path_fail
 
 @runtime_checkable
 class RiskScene(Protocol):
+    """A dynamics object placed in one obstacle configuration: what the estimator labels.
+
+    Members (exactly what :class:`rmm_envs.risk.RiskEstimator` reads):
+        state_dim: int, the length of a state vector.
+        control_low, control_high: ``(control_dim,)`` arrays, the control box the estimator samples
+            uniformly.
+        propagate(states (N, d), controls (N, c), duration, n_steps) -> (N, n_steps, d): the path
+            under a zero-order-hold control; point 0 is the start.
+        path_failed(paths (N, S, d)) -> (N,) bool: any point or segment of the path fails.
+        state_failed(states (N, d)) -> (N,) bool: the state itself fails.
+
+    Optional:
+        leaf_estimate(states (N, d)) -> (N,) in [0, 1]: a value for non-failed leaves instead of 0.
+    """
+
     state_dim: int
     control_low: np.ndarray
     control_high: np.ndarray
@@ -98,6 +74,33 @@ __getattr__ = renamed_attributes(__name__, {"System": (f"{__name__}:RiskScene", 
 
 @runtime_checkable
 class LabelledEnv(Protocol):
+    """An environment whose states can be risk-labelled, on its unwrapped env (every env of this
+    package is one, through :class:`rmm_envs.envs.base.LabelledEnvBase`).
+
+    ``risk_scene() -> RiskScene``
+        The :class:`rmm_envs.risk.RiskScene` of the current episode (its dynamics in its obstacle
+        configuration); ``RuntimeError`` before the first ``reset``.  ``risk_system()`` is its
+        deprecated former name.
+    ``true_state``
+        Property: the current true state, a ``(state_dim,)`` float array (a copy).
+    ``sample_states(rng, n) -> (n, state_dim)``
+        ``n`` states of the current episode's scene for a dataset, drawn from the
+        ``numpy.random.Generator`` ``rng`` only (so a seed fixes them).
+    ``observe_states(states, rng=None) -> (n, obs_dim) float32``
+        The observations the env would return in those states.  ``rng`` draws any feature that a
+        state does not determine (the Dubins4D simulated time); envs without such a feature ignore
+        it, envs with one require it.
+    ``privileged() -> dict``
+        The true state and the obstacle geometry (copies): **privileged** information, for
+        guardians that declare they use it and for analysis.
+    ``dataset_notes() -> dict``
+        Facts about ``observe_states`` that a dataset records in its metadata
+        (``{"obs_time_feature": description or None}``).
+
+    :func:`check_labelled_env` checks an env against this list (on its class, so before any
+    ``reset``) and names the env and each missing or ill-formed hook.
+    """
+
     def risk_scene(self) -> RiskScene: ...
 
     @property

@@ -5,23 +5,12 @@ State ``s = (x, y, theta, v)`` in metres, radians and m/s; control ``u = (u1, u2
     x' = v cos(theta),   y' = v sin(theta),   theta' = u1,   v' = u2
 
 with the speed held in ``[v_min, v_max]`` (default ``[0, 2]`` m/s): when the speed reaches a
-bound, ``v'`` is zero for as long as ``u2`` pushes past it.  This is the same clamp the paper's
-environment applies inside its ODE right-hand side; the original's *risk sampler* had the clamp
-removed (docs/original-code.md, item 5), we keep it everywhere so sampled branches obey the same
-limits as the environment.
+bound, ``v'`` is zero for as long as ``u2`` pushes past it.  Control bounds: ``u1`` in
+``[-0.25, 0.25]`` rad/s and ``u2`` in ``[-0.5, 0.5]`` m/s^2.  Propagation is **exact** for a
+zero-order-hold control (closed-form integrals, no ODE solver).  All functions are batched
+over ``N`` states of shape ``(N, 4)``.
 
-Control bounds: ``u1`` in ``[-0.25, 0.25]`` rad/s and ``u2`` in ``[-0.5, 0.5]`` m/s^2.
-
-Propagation is **exact** for a zero-order-hold control: the speed is piecewise linear in time
-(accelerate until a speed bound, then hold), the heading is linear, and the position is the
-closed-form integral of ``v(t) (cos, sin)(theta(t))``: ``int_0^T (v0 + a s) exp(i (th0 + w s)) ds``,
-evaluated in real arithmetic (a power series where ``|w T| <= 0.6``, closed forms beyond), so straight and turning motion are both exact to rounding.  No ODE solver is involved,
-which is what makes labelling thousands of branches per call cheap.
-
-All functions are batched over ``N`` states: states are arrays of shape ``(N, 4)``.  Large
-batches (risk labels) run as numpy array code; a handful of states (an environment step) run
-through the same formulas compiled with numba, where numpy's per-call overhead would dominate
-(about 40 us -> 3 us for one 16-point path; both paths agree to rounding, tested).
+The speed clamp, the exact propagation and its two code paths: docs/design-notes.md#rmm_envssystemsdubins4d.
 """
 
 from __future__ import annotations

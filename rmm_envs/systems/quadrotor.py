@@ -2,26 +2,14 @@
 
 State (13): position, quaternion ``(x, y, z, w)``, linear and angular velocity, all in the
 **world** frame (PyBullet's convention).  Control (4): body-frame thrust ``F`` in [0, 8] N
-along the body z axis and body-frame moments ``(Mx, My, Mz)`` in [+-2, +-2, +-1] N m.
+along the body z axis and body-frame moments ``(Mx, My, Mz)`` in [+-2, +-2, +-1] N m.  One
+physics step of ``dt = 1/240`` s as PyBullet's multibody integrator does it (semi-implicit
+Euler; checked against PyBullet by the tests).  Every number (and the body's mass, inertia and
+collision cylinder) is written once, in :class:`QuadrotorParams`; ``QUADROTOR`` is the paper's
+quadrotor, which both ``QuadrotorRoom-v0`` (PyBullet) and :class:`Quadrotor` (this propagator)
+read.
 
-One physics step of ``dt = 1/240`` s, as PyBullet's multibody integrator does it
-(semi-implicit Euler; checked against PyBullet by the tests):
-
-* forces: gravity, the thrust ``R e_z F``, and damping ``-m (d + d |v|) v`` (PyBullet's
-  multibody damping, linear in and proportional to the speed, default ``d = 0.04``);
-* torques: ``R M``, the gyroscopic term ``-w x (I_w w)`` with ``I_w = R I R^T``, and damping
-  ``-I_w (d + d |w|) w``;
-* velocities first (``v += a dt``, ``w += alpha dt``), then the position with the new
-  velocity and the orientation by the exact rotation ``exp(w dt)``.
-
-A branch of the risk tree holds one control for ``duration`` split into ``n_steps - 1``
-equal segments; each segment runs ``ceil(segment / dt)`` physics steps (the original's
-overshoot to whole steps is kept, so a 2 s branch with 8 points lasts 7 x 69 steps).
-
-Every number above (and the body's mass, inertia and collision cylinder) is written once, in
-:class:`QuadrotorParams`; ``QUADROTOR`` is the paper's quadrotor, which both
-``QuadrotorRoom-v0`` (PyBullet) and :class:`Quadrotor` (this propagator) read.  Quaternion
-arithmetic comes from :mod:`rmm_envs.systems.rotations`.
+The forces, the torques, the step and a branch's timing: docs/design-notes.md#rmm_envssystemsquadrotor.
 """
 
 from __future__ import annotations

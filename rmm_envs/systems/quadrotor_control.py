@@ -1,40 +1,16 @@
 """The quadrotor's cascaded velocity/attitude controller, and the body flown through it.
 
 A **command** is four numbers in the body's *heading frame* (the world frame turned by the
-body's yaw ``psi``, so "forward" is the body x axis projected on the horizontal plane):
-``(v_forward, v_left, v_up, yaw_rate)``, velocities in m/s and the yaw rate in rad/s, within
-the box of :class:`CommandController` (default ``[-2, 2] x [-2, 2] x [-1, 1] x [-1, 1]``).
-Zero is *hover and level*.  :func:`command_wrench` turns a command and a body state (13
-numbers, world frame, :mod:`rmm_envs.systems.quadrotor`) into the body's thrust and moments
-``(F, Mx, My, Mz)``, every physics step:
+body's yaw): ``(v_forward, v_left, v_up, yaw_rate)``, within the box of
+:class:`CommandController`; zero is *hover and level*.  :func:`command_wrench` turns a command
+and a body state (:mod:`rmm_envs.systems.quadrotor`) into the body's thrust and moments
+``(F, Mx, My, Mz)``, every physics step: a velocity loop, the thrust along the body z axis and
+a geometric attitude loop (after Lee, Leok and McClamroch 2010).  :func:`command_wrenches` is
+the same function in a compiled loop, serving the batched :class:`ClosedLoopQuadrotor` (the
+risk labels' dynamics, whose control *is* the command).  Every physical number is read from
+the body's :class:`~rmm_envs.systems.quadrotor.QuadrotorParams`.
 
-1. **Velocity loop** (outer): the desired world velocity is the command's, rotated by ``psi``
-   (``psi = atan2(R[1, 0], R[0, 0])``, the yaw of the body x axis; 0 when that axis is
-   vertical).  The desired acceleration
-   is ``k_v (v_des - v)`` horizontally, its norm limited to ``a_max_h``, and
-   ``k_vz (v_up - v_z)`` vertically, clipped to ``+-a_max_z``; gravity is added:
-   ``f = a + g e_z`` (the specific force the rotors must produce).
-2. **Thrust**: ``F = m f . R e_z`` (the part of ``m f`` along the current body z axis),
-   clipped to the body's thrust bounds.
-3. **Attitude loop** (inner, geometric, after Lee, Leok and McClamroch 2010): the desired
-   attitude ``R_d`` has its z axis along ``f`` and the body's current yaw;
-   ``e_R = vee(R_d^T R - R^T R_d) / 2``, ``e_w = w_b - (0, 0, yaw_rate)`` with ``w_b = R^T w``,
-   and ``M = I (-k_R e_R - k_w e_w) + w_b x I w_b`` (body frame), ``k_w`` replaced by
-   ``k_wz`` about z; each moment clipped to the body's bounds.
-
-Horizontal accelerations up to 5 m/s^2 tilt the body at most ``atan(5 / 9.81) = 27`` degrees
-in level flight, and ``atan(5 / (9.81 - 4)) = 41`` degrees while descending at the vertical
-limit of 4 m/s^2; the thrust needed stays within 8 N (at most ``0.5 sqrt(5^2 + 13.81^2) = 7.3``
-N, climbing).  The gains (``k_R = 400`` s^-2, ``k_w = 36`` s^-1:
-natural frequency 20 rad/s, damping 0.9) make the attitude loop about six times faster than
-the velocity loop (``k_v = 2.5`` s^-1), and ``k_w dt = 0.15`` is well inside the stability of
-the 240 Hz integrator.
-
-:func:`command_wrench` is plain Python over numpy arrays, compiled by numba when it is there:
-the env calls it once per PyBullet step, and :func:`command_wrenches` (the same function in a
-compiled loop) serves the batched :class:`ClosedLoopQuadrotor`, the risk labels' dynamics,
-whose control *is* the command.  Every physical number is read from the body's
-:class:`~rmm_envs.systems.quadrotor.QuadrotorParams`.
+The loops in full and the gains' reasons: docs/design-notes.md#rmm_envssystemsquadrotor_control.
 """
 
 from __future__ import annotations

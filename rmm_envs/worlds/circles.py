@@ -1,20 +1,15 @@
 """Circular obstacles in the plane: generation, exact collision tests and ray casting.
 
 Circles are arrays of shape ``(K, 3)`` holding ``(x_c, y_c, r)``.  Every test here is analytic
-(the original approximated circles by 64-gons for segments and rays; we do not), and batched:
-points are ``(N, 2)``, segments are pairs of ``(N, 2)`` arrays, paths are ``(N, S, 2+)``.
+and batched: points are ``(N, 2)``, segments are pairs of ``(N, 2)`` arrays, paths are
+``(N, S, 2+)``.  Conventions (shared by the environment and the risk estimator): a point or a
+segment collides when it comes within ``r`` of a centre (the boundary counts); a path's
+*contact parameter* is ``j + s`` for the first segment ``j`` that touches a circle at fraction
+``s`` in ``[0, 1]`` along it, ``inf`` when it never touches.  Generation follows the paper's
+environment: the first obstacle's centre drawn from ``N(0, 2^2)`` per axis, the others uniform
+on the arena square, radii uniform in ``[r_min, r_max]``; obstacles may overlap.
 
-Conventions (shared by the environment and the risk estimator):
-
-* a point collides when ``(x - x_c)^2 + (y - y_c)^2 <= r^2`` (the boundary counts);
-* a segment collides when its closest point to a centre is within ``r``;
-* a path's *contact parameter* is ``j + s`` for the first segment ``j`` that touches a circle at
-  fraction ``s`` in ``[0, 1]`` along it, ``inf`` when it never touches.  It orders goal and
-  obstacle contacts within one step exactly (the original compared segment indices only).
-
-Generation follows the paper's environment (docs/original-code.md, item 21): the first obstacle's centre
-is drawn from ``N(0, 2^2)`` per axis (biased to the centre), the others uniformly on the arena
-square; radii uniform in ``[r_min, r_max]``; obstacles may overlap and may extend past the arena.
+Where this differs from the original, and why: docs/design-notes.md#rmm_envsworldscircles.
 """
 
 from __future__ import annotations

@@ -1,22 +1,17 @@
 """Compiled maze geometry for one car: the per-step queries of ``Dubins3DMazeGuarded-v0``.
 
-:class:`rmm_envs.worlds.mazes.Maze` answers batched queries with numpy, which costs
-0.2-0.7 ms per call for a single car (numpy's per-operation overhead over a few hundred walls).
-An environment step asks three questions of one car, so these kernels answer them with the
-same formulas in compiled loops (numba, a dependency; plain Python without it):
+The queries of :class:`rmm_envs.worlds.mazes.Maze` for a single car, with the same formulas in
+compiled loops (numba, a dependency; plain Python without it):
 
-* :func:`maze_rays`: the ray lengths of :meth:`Maze.rays` (same ray-capsule formulas, same
-  border and "inside a wall reads 0" rules);
-* :func:`maze_path_hit`: :meth:`Maze.paths_hit` for one path (a point inside a wall or
-  outside the image, or a segment between points touching a wall), tested against **every**
-  wall whose bounding box, grown by the wall's half thickness, meets the path's (the numpy
-  version tests the walls near the path's first point only, which holds for short paths);
+* :func:`maze_rays`: the ray lengths of :meth:`Maze.rays`;
+* :func:`maze_path_hit`: :meth:`Maze.paths_hit` for one path, tested against **every** wall
+  whose bounding box, grown by the wall's half thickness, meets the path's;
 * :func:`dubins_path`: the car's exact path under a held turn rate (the closed forms of
   :meth:`rmm_envs.systems.Dubins3D.propagate`, compiled);
-* :func:`path_reaches_disc`: whether a path (its points and the segments between them) comes
-  within a disc, for the goal.
+* :func:`path_reaches_disc`: whether a path comes within a disc, for the goal.
 
-Tests check them against the numpy versions on random poses and paths.
+Tests check them against the numpy versions on random poses and paths.  Why compiled, and how
+they differ from the numpy versions: docs/design-notes.md#rmm_envsworldsmaze_kernels.
 """
 
 from __future__ import annotations

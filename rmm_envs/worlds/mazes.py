@@ -1,26 +1,14 @@
 """Procedurally generated mazes with exact thick-wall geometry (the paper's Dubins-3D world).
 
-Units are the paper's pixels (docs/original-code.md, item 25): the defaults give a 2750 x 2750 px image
-holding a maze of 20 x 20 cells of 125 px, with a one-cell margin, and walls 12.5 px thick
-(mazegen's 3-unit round-capped stroke at 300 dpi).  A wall is a segment with round caps: the
-set of points within ``thickness / 2`` of the segment (a capsule).
+Units are the paper's pixels: the defaults give a 2750 x 2750 px image holding a maze of
+20 x 20 cells of 125 px, with walls 12.5 px thick; a wall is a capsule (a segment with round
+caps).  Generators (seeded, both perfect mazes built with Kruskal's algorithm):
+``"rectangular"`` and ``"honeycomb"``.  Batched, exact geometry queries:
+:meth:`Maze.point_clearance` (signed distance to the nearest wall surface),
+:meth:`Maze.paths_hit` (a path touches a wall or leaves the image) and :meth:`Maze.rays`
+(distance to the first wall surface or the image border).
 
-Generators (seeded with a ``numpy.random.Generator``; both are perfect mazes: every cell is
-reachable from every other by exactly one path, built as a random spanning tree with
-Kruskal's algorithm):
-
-* ``"rectangular"``: a rows x cols grid of square cells;
-* ``"honeycomb"``: hexagonal cells (pointy-top hexagons in offset rows), a non-rectangular kind.
-
-Geometry queries (batched, exact):
-
-* :meth:`Maze.point_clearance`: distance from points to the nearest wall surface (negative
-  inside a wall); points outside the image are invalid;
-* :meth:`Maze.paths_hit`: a path (``(N, S, 2+)``) fails if a point is inside a wall or outside
-  the image, or if a segment between points touches a wall (segment-capsule distance);
-* :meth:`Maze.rays`: distance along rays to the first wall surface (or the image border).
-
-Per-root candidate walls come from a bucket grid, so a query tests only the few walls near it.
+The units, the generators and the queries in detail: docs/design-notes.md#rmm_envsworldsmazes.
 """
 
 from __future__ import annotations

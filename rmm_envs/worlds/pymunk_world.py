@@ -1,22 +1,15 @@
 """A :class:`~rmm_envs.worlds.shape_map.ShapeMap`'s obstacles in a pymunk space: rays, point and path tests.
 
-Every obstacle becomes static pymunk shapes (a circle a ``pymunk.Circle``; a segment a
-``pymunk.Segment`` of radius ``thickness / 2``, a capsule; a polygon its ear-clipping triangles,
-``pymunk.Poly``, since pymunk's polygons are convex).  Questions are answered by pymunk's
-spatial queries (its bounding-box tree finds the shapes near a query):
+Every obstacle becomes static pymunk shapes (a circle, a segment of radius ``thickness / 2``,
+a polygon's ear-clipping triangles), and questions are answered by pymunk's spatial queries
+with the conventions of :mod:`rmm_envs.worlds.circles`: a point is **inside** at distance
+``<= 0``; a **ray** reads the distance to the first shape up to ``max_range`` (0 from inside an
+obstacle); a path's **contact parameter** is ``0`` when its first point is inside, else
+``j + s`` for the first segment ``j`` entering an obstacle at fraction ``s``, ``inf`` when it
+never touches one.  On a map of circles only the answers agree with the analytic circle
+functions to rounding (tested to 1e-4).
 
-* a point is **inside** when ``point_query_nearest`` finds a shape at distance ``<= 0`` (the
-  boundary counts, as for :mod:`rmm_envs.worlds.circles`);
-* a **ray** is ``segment_query_first`` from the origin to ``max_range`` along it; from an
-  origin inside an obstacle every ray reads 0;
-* a path's **contact parameter** is ``0`` when its first point is inside, else ``j + s`` for the
-  first segment ``j`` that ``segment_query_first`` finds entering an obstacle at fraction ``s``
-  (a path can only become inside by crossing a boundary, so later points need no point query),
-  ``inf`` when it never touches one: the convention of :func:`rmm_envs.worlds.circles.contact_params`.
-
-Before any pymunk call a query is skipped when its bounding box meets no obstacle's (numpy for
-batches, pymunk's ``bb_query`` for one path), so free space costs almost nothing.  On a map of
-circles only the answers agree with the analytic circle functions to rounding (tested to 1e-4).
+The queries in detail and the bounding-box shortcut: docs/design-notes.md#rmm_envsworldspymunk_world.
 """
 
 from __future__ import annotations

@@ -1,21 +1,13 @@
 """Procedurally generated rooms for the quadrotor (docs/original-code.md, item 26), from primitives only.
 
-A room is:
+A room is a **footprint** (the union of 1-32 overlapping axis-aligned rectangles), **walls**
+of thickness 0.5 m around it, a **floor** (the plane z = 0, which counts as an obstacle) and
+0-50 each of **boxes**, **cylinders** and **spheres** with random orientations, resting on the
+floor inside the footprint and not overlapping one another.  No Blender, no convex
+decomposition: every shape is a PyBullet primitive.  :func:`build_room` creates the bodies in a
+PyBullet client; the arrays here are the geometry for everything else.
 
-* a **footprint**: the union of ``n_rectangles`` (1-32) axis-aligned rectangles with centres
-  uniform on ``[-X/2, X/2] x [-Y/2, Y/2]`` (``X, Y ~ U(5, 50)`` m), sides ``max(2, U(0, 10))`` m,
-  each new rectangle kept only if it overlaps the union so far (as pcg_gazebo did);
-* **walls** of thickness 0.5 m and height ``U(0.1, 5)`` m around it, built on a grid of
-  wall-thickness cells: every cell outside the footprint that touches it (8-neighbourhood)
-  is wall, merged row by row into boxes;
-* a **floor** (the plane z = 0, which counts as an obstacle);
-* ``0-50`` each of **boxes** (sides ``U(0.1, 1)`` m), **cylinders** (radius and length
-  ``U(0.1, 1)`` m) and **spheres** (radius ``U(0.1, 1)`` m), with random roll, pitch and yaw,
-  resting on the floor inside the footprint and not overlapping one another (their bounding
-  spheres are kept apart).
-
-No Blender, no convex decomposition: every shape is a PyBullet primitive.  :func:`build_room`
-creates the bodies in a PyBullet client; the arrays here are the geometry for everything else.
+The distributions of every part: docs/design-notes.md#rmm_envsworldsrooms.
 """
 
 from __future__ import annotations

@@ -1,31 +1,15 @@
 """A map of your own: obstacle shapes, an optional goal and start box, read from JSON.
 
-The format (the ``Map format`` section of :mod:`rmm_envs.envs.dubins4d_map` is the user's
-spec; this module checks it and builds :class:`ShapeMap`):
+The format's user spec is the ``Map format`` section of :mod:`rmm_envs.envs.dubins4d_map`; this
+module checks it and builds :class:`ShapeMap`: a JSON list of ``circle``, ``polygon``,
+``segment``, ``goal`` and ``start`` entries (or an object with ``shapes``, ``goal`` and
+``start``), at least one obstacle, every number finite and at most ``1e9`` in magnitude, a
+file of at most 16 MiB.  A bad map raises :class:`MapError` (a ``ValueError``) naming the entry
+by its index and content and saying what was expected; an unreadable or non-JSON file raises it
+naming the file.  Shapes are kept exactly as given; :func:`triangulate` splits a polygon into
+triangles for engines that need convex pieces.
 
-* a JSON **list of entries**, each an object with exactly one key:
-
-  - ``{"circle": [x, y, r]}``: a disc, ``r > 0``;
-  - ``{"polygon": [[x, y], [x, y], ...]}``: a simple polygon (at least 3 vertices, any
-    orientation, convex or not, no two edges crossing or touching except neighbours at their
-    shared vertex, non-zero area).  A last vertex equal to the first (a closed ring) is dropped;
-  - ``{"segment": [[x0, y0], [x1, y1], thickness]}``: a wall of that total ``thickness > 0``
-    with rounded ends (every point within ``thickness / 2`` of the segment), distinct ends;
-  - ``{"goal": [x, y, r]}`` (at most one): a fixed goal disc; without it each episode draws one;
-  - ``{"start": [[x_min, y_min], [x_max, y_max]]}`` (at most one): the box starts are drawn
-    in; without it the bounding box of all the other entries;
-
-* or an object ``{"shapes": [...], "goal": [x, y, r], "start": [[...], [...]]}`` (``goal`` and
-  ``start`` optional) meaning the same.
-
-At least one obstacle (circle, polygon or segment) is required.  Every number must be finite
-and at most ``1e9`` in magnitude (:data:`rmm_envs.worlds.bounds.MAX_MAGNITUDE`: larger ones
-overflow the geometry); a map file holds at most 16 MiB and a polygon at most 5,000 vertices
-(checked before the rest is read or compared).
-A bad map raises :class:`MapError` (a ``ValueError``) naming the entry by its index and content
-and saying what was expected; an unreadable or non-JSON file raises it naming the file.
-Shapes are kept exactly as given; :func:`triangulate` splits a polygon into triangles for
-engines that need convex pieces.
+Each entry's rules and the limits: docs/design-notes.md#rmm_envsworldsshape_map.
 """
 
 from __future__ import annotations

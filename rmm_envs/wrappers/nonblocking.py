@@ -1,20 +1,16 @@
 """Non-blocking stepping: the agent's thinking time passes in the simulated world.
 
 The paper's ``step_to_now`` semantics (docs/original-code.md, item 19), on Gymnasium's ``step``:
+``step(a)`` first advances the world by ``lap * time_accel + base_step`` simulated seconds,
+where ``lap`` is the clock time elapsed since the previous ``step`` (or ``reset``) returned,
+under the action set by the *previous* call; then it stores ``a`` for the next interval.  The
+first interval after ``reset`` belongs to the built-in driver.  The clock is injectable
+(:mod:`rmm_envs.clocks`): the real monotonic clock by default, a fixed-latency clock for
+reproducible runs, the process CPU clock for runs that share cores.  A bad action raises
+``ValueError`` *before* the world advances, so a caller can recover.
 
-* ``step(a)`` first advances the world by ``lap * time_accel + base_step`` simulated seconds,
-  where ``lap`` is the clock time elapsed since the previous ``step`` (or ``reset``) returned,
-  under the action set by the *previous* call; then it stores ``a`` for the next interval.
-* The first interval after ``reset`` belongs to the built-in driver (the reset action is
-  inactive), so an action takes effect one step late, exactly as in the original.
-* The clock is restarted just before ``step`` returns, so only the agent's time between
-  steps is charged; the environment's own physics and QP are not (the original started its
-  stopwatch at the end of propagation, which leaked a little post-processing into the lap).
-
-The clock is injectable (:mod:`rmm_envs.clocks`): the real monotonic clock by default, a
-fixed-latency clock for reproducible runs, the process CPU clock for runs that share cores.
-
-A bad action raises ``ValueError`` *before* the world advances, so a caller can recover.
+What is charged as the agent's time, and how it differs from the original:
+docs/design-notes.md#rmm_envswrappersnonblocking.
 """
 
 from __future__ import annotations

@@ -2,17 +2,11 @@
 
 Works on any environment whose unwrapped env offers the ``risk_scene()`` and ``true_state``
 hooks of the :class:`rmm_envs.risk.LabelledEnv` protocol, and on the envs a risk adapter of
-:mod:`rmm_envs.adapters` serves (chosen by :func:`rmm_envs.adapters.adapt`: Gymnasium's
-``CartPole-v1``, ``Pendulum-v1`` with a ``failure`` callable, MuJoCo's ``InvertedPendulum-v5``,
-``InvertedDoublePendulum-v5``, ``Hopper-v5``); any other env is refused at construction with a
-``TypeError`` naming it and what is missing.  At ``reset`` and after every ``step`` it runs the
-estimator on the true state and adds:
-
-* ``info["risk"]``: the risk metric (float in [0, 1]);
-* ``info["risk_min_ctrl"]``: the first control of the minimum-risk branch (for an adapted env
-  with a ``Discrete`` action space, a value ``u`` of the box ``[start, start + n)`` meaning
-  action ``floor(u)``);
-* ``info["risk_n_leaves"]``: the number of terminal nodes behind the estimate.
+:mod:`rmm_envs.adapters` serves; any other env is refused at construction with a ``TypeError``
+naming it and what is missing.  At ``reset`` and after every ``step`` it runs the estimator on
+the true state and adds ``info["risk"]`` (the risk metric, in [0, 1]), ``info["risk_min_ctrl"]``
+(the first control of the minimum-risk branch; for a ``Discrete`` action space a value ``u``
+meaning action ``floor(u)``) and ``info["risk_n_leaves"]`` (the terminal nodes behind it).
 
 The labelling time is real CPU work done between the inner ``step`` returning and this
 wrapper returning: wrap *inside* a non-blocking wrapper (or use a fixed clock) if it must not

@@ -1,35 +1,17 @@
 """Wrappers for training guardians with reinforcement-learning libraries.
 
-Most RL libraries (Stable-Baselines3, CleanRL, ...) train on ``Box`` or ``Discrete`` actions,
-not on the ``Dict`` guardian action of a parallel-autonomy env, and the env's own reward
-(+1 goal, -1 collision) says nothing about the cost of taking control.  Two wrappers close
-the gap; they work on every env whose action space is an
-:class:`rmm_envs.autonomy.GuardianActionSpace` (``Dubins4DCirclesGuarded-v0``, ``Dubins4DCirclesParallel-v0``).
+For every env whose action space is an :class:`rmm_envs.autonomy.GuardianActionSpace`:
 
 :class:`FlattenGuardianAction`
     Action space ``Box(-1, 1, (1 + c,), float32)`` for ``c`` controls: ``a[0] > 0.5`` takes
-    control (so a policy that outputs zeros, as a fresh Gaussian policy does on average, leaves
-    the driver in charge), and ``a[1:]`` are the controls scaled to the env's bounds, ``-1`` the
-    lower and ``+1`` the upper bound of each (values outside ``[-1, 1]`` are clipped first).  A
-    symmetric unit box is what SB3's PPO/SAC expect.  :meth:`FlattenGuardianAction.to_guardian`
-    converts such a vector for a given space, so a policy trained through the wrapper can act
-    as a guardian (see the tutorial ``docs/tutorials/rl-guardian.md``).  Non-finite values raise
-    ``ValueError`` naming the index.
-
+    control, ``a[1:]`` are the controls scaled to the env's bounds;
+    :meth:`FlattenGuardianAction.to_guardian` converts such a vector back.
 :class:`GuardianReward`
-    Replaces the reward by the usual shaping for a guardian:
-
     ``r = goal_bonus * [reached the goal] - collision_penalty * [collided]
-    - intervention_cost * (simulated seconds under guardian control this step)``
+    - intervention_cost * (simulated seconds under guardian control this step)``, defaults
+    1, 10 and 0.05 per second; the env's own reward is kept in ``info["env_reward"]``.
 
-    Defaults ``goal_bonus=1``, ``collision_penalty=10``, ``intervention_cost=0.05`` per second.
-    The penalty is ten times the bonus because a guardian's purpose is to prevent crashes;
-    a guardian that takes control for a whole 100 s episode pays 5, half a crash, so holding
-    the brakes for ever is worse than intervening briefly but still better than crashing.  The
-    intervention cost is charged per simulated second, not per step, because non-blocking
-    steps have different lengths.  The env's own reward is kept in ``info["env_reward"]``; the
-    episode statistics in ``info["episode_stats"]`` are unchanged.  The three weights must be
-    finite and ``>= 0``.
+Why these conventions and these weights: docs/design-notes.md#rmm_envswrappersrl.
 """
 
 from __future__ import annotations
