@@ -106,11 +106,13 @@ class QuadrotorHJGuardian(Guardian):
     observation_type = "global"
     privileged = True
 
-    def __init__(self, spacing: float = 0.3, n_heading: int = 16, n_speed: int = 7, v_max: float = 3.0,
-                 accel: float = 2.5, turn_rate: float = 1.0, horizon: float = 2.0, pad: float = 3.0,
-                 band_margin: float = 0.3, reach: float = 0.5, order: int = 2, rk: int = 3, cfl: float = 0.8, margin: float | None = None,
-                 tracking: float = 0.1, hysteresis: float = 0.15, delay: int = 1, lap: float | None = None, cache_dir=None, cache: bool = True,
-                 cache_max_files: int = 64, backend: str = "auto", threads: int | None = None) -> None:
+    def __init__(self, spacing: float = 0.3, n_heading: int = 16, n_speed: int = 5, v_max: float = 2.0,
+                 accel: float = 2.5, turn_rate: float = 1.0, horizon: float = 1.2, pad: float | None = 3.0,
+                 band_margin: float = 0.1, reach: float = 0.5, order: int = 2, rk: int = 3, cfl: float = 0.8, margin: float | None = None,
+                 tracking: float = 0.1, hysteresis: float = 0.15, delay: int = 1, lap: float | None = None,
+                 n_directions: int = 16, min_speed: float = 0.5, clear_time: float = 1.0, side_memory: float = 3.0,
+                 cache_dir=None, cache: bool = True, cache_max_files: int = 64, backend: str = "auto",
+                 threads: int | None = None) -> None:
         super().__init__()
         self.spacing = finite("spacing", spacing, 0.0, lo_open=True)
         self.n_heading = integer("n_heading", n_heading, 3)
@@ -119,7 +121,7 @@ class QuadrotorHJGuardian(Guardian):
         self.accel = finite("accel", accel, 0.0, lo_open=True)
         self.turn_rate = finite("turn_rate", turn_rate, 0.0, lo_open=True)
         self.horizon = finite("horizon", horizon, 0.0, lo_open=True)
-        self.pad = finite("pad", pad, 0.0)
+        self.pad = None if pad is None else finite("pad", pad, 0.0)
         self.band_margin = finite("band_margin", band_margin, 0.0)
         self.reach = finite("reach", reach, 0.0, lo_open=True)
         self.order, self.rk, self.cfl = check_scheme(order, rk, cfl)
@@ -128,6 +130,10 @@ class QuadrotorHJGuardian(Guardian):
         self.hysteresis = finite("hysteresis", hysteresis, 0.0)
         self.delay = integer("delay", delay, 0, "laps between a decision and its effect")
         self.lap = None if lap is None else finite("lap", lap, 0.0, lo_open=True)
+        self.n_directions = integer("n_directions", n_directions, 4)
+        self.min_speed = finite("min_speed", min_speed, 0.0, lo_open=True)
+        self.clear_time = finite("clear_time", clear_time, 0.0)
+        self.side_memory = finite("side_memory", side_memory, 0.0)
         self.threads = None if threads is None else integer("threads", threads, 1, "or None")
         if backend not in ("auto", "numpy", "numba"):
             raise ValueError(f"backend must be one of ('auto', 'numpy', 'numba'), got {backend!r}")
@@ -140,8 +146,8 @@ class QuadrotorHJGuardian(Guardian):
 
     @staticmethod
     def _zero() -> dict:
-        return {"outside_grid": 0, "outside_band": 0, "nan_states": 0, "cache_hits": 0, "solves": 0, "slides": 0,
-                "optimal": 0}
+        return {"outside_grid": 0, "outside_band": 0, "nan_states": 0, "cache_hits": 0, "solves": 0, "nominal": 0,
+                "turns": 0, "optimal": 0, "takeovers": 0}
 
     def check_spaces(self, observation_space, action_space) -> None:
         quadrotor_only(self, action_space)
@@ -152,11 +158,15 @@ class QuadrotorHJGuardian(Guardian):
         return min(float(a[2]), float(b[2])) - self.band_margin, max(float(a[2]), float(b[2])) + self.band_margin
 
     def region_grid(self, room, a, b) -> Grid:
-        """The grid over the box of the leg from ``a`` to ``b`` plus ``pad``, clipped to the walls' extent."""
+        """The grid over the box of the leg from ``a`` to ``b`` plus ``pad``, clipped to the walls'
+        extent (``pad=None``: the walls' extent, the whole room)."""
         pts = np.array([[float(a[0]), float(a[1])], [float(b[0]), float(b[1])]])
         lo_w, hi_w = room.bounds()
-        lo = np.maximum(pts.min(0) - self.pad, np.minimum(lo_w[:2], pts.min(0) - self.spacing))
-        hi = np.minimum(pts.max(0) + self.pad, np.maximum(hi_w[:2], pts.max(0) + self.spacing))
+        if self.pad is None:
+            lo, hi = np.minimum(lo_w[:2], pts.min(0) - self.spacing), np.maximum(hi_w[:2], pts.max(0) + self.spacing)
+        else:
+            lo = np.maximum(pts.min(0) - self.pad, np.minimum(lo_w[:2], pts.min(0) - self.spacing))
+            hi = np.minimum(pts.max(0) + self.pad, np.maximum(hi_w[:2], pts.max(0) + self.spacing))
         n = [max(3, int(math.ceil((hi[k] - lo[k]) / self.spacing)) + 1) for k in range(2)]
         return Grid([lo[0], lo[1], -math.pi, 0.0], [hi[0], hi[1], math.pi, self.v_max],
                     [n[0], n[1], self.n_heading, self.n_speed], periodic=[2])
@@ -167,7 +177,7 @@ class QuadrotorHJGuardian(Guardian):
                    for o in room.objects]
         return {"system": "quadrotor-horizontal", "dynamics": self.dynamics.key(), "grid": grid.key(),
                 "horizon": self.horizon, "order": self.order, "rk": self.rk, "cfl": self.cfl, "band": [round(z_lo, 9), round(z_hi, 9)],
-                "radius": BOUND, "walls": np.round(walls, 9).tolist(), "objects": objects, "version": 1}
+                "radius": BOUND, "walls": np.round(walls, 9).tolist(), "objects": objects, "version": 2}
 
     def value_function(self, room, grid: Grid, z_lo: float, z_hi: float) -> np.ndarray:
         """The avoid value of the room's cross-sections at the band on ``grid`` (cached)."""
@@ -210,7 +220,10 @@ class QuadrotorHJGuardian(Guardian):
         self._last_time = None
         self._measured_lap = None
         self._held = None  # the command the guardian returned last step (None: it was inactive)
-        self._side = None  # the side the guardian last slid the pilot along an obstacle (+1: left of grad V)
+        self._side = None  # the side it turns the pilot's command to while in control (+1: counter-clockwise)
+        self._last_turn = None  # (x, y, side) where it last turned the pilot's command
+        self._hit = math.inf  # distance to the pilot's waypoint where the guardian took over
+        self._turn = 0  # the turn (in steps of 2 pi / n_directions) of its last command from the pilot's
 
     def _next_leg(self, state) -> None:
         """Follow the pilot's leg: past a waypoint within ``reach`` of it, as the pilot counts."""
@@ -230,7 +243,7 @@ class QuadrotorHJGuardian(Guardian):
     def evaluate(self, x, y, vx, vy) -> np.ndarray:
         """``(V, dV/dx, dV/dy, dV/dtheta, dV/dv)`` at position ``(x, y)`` and world velocity
         ``(vx, vy)`` (a speed above the grid's ``v_max`` is read at ``v_max``)."""
-        th = float(arctan2(np.array([vy]), np.array([vx]))[0])
+        th = _angle(vy, vx)
         return self._interp(np.array([x, y, th, min(math.sqrt(vx * vx + vy * vy), self.v_max)]))
 
     def inside(self, x, y, vx, vy) -> bool:
@@ -252,6 +265,7 @@ class QuadrotorHJGuardian(Guardian):
             u = self._safe(observation) if self._safe is not None else np.zeros(4)
             return self.action_space.active(u)
         nominal = _command(info)
+        leg = self.leg
         self._next_leg(s)
         if not (self.z_band[0] - self.band_margin <= s[2] <= self.z_band[1] + self.band_margin):
             self._counts["outside_band"] += 1
@@ -266,20 +280,101 @@ class QuadrotorHJGuardian(Guardian):
         if not (self.inside(*h0) and self.inside(*h2)):
             self._counts["outside_grid"] += 1
             return self.action_space.inactive()
-        # hand back only with ``hysteresis`` to spare: no flicker at the level set
-        if float(self.evaluate(*h2)[0]) > self._margin + (self.hysteresis if held is not None else 0.0):
-            self._side = None
+        if held is None:
+            if float(self.evaluate(*h2)[0]) > self._margin:
+                return self.action_space.inactive()
+            self._counts["takeovers"] += 1
+            self._hit = self._to_waypoint(h0)
+        elif self.leg != leg:  # a waypoint passed while in control: progress counts to the next
+            self._hit = self._to_waypoint(h0)
+        elif self.hands_back(h1, h2, nominal, c, sn, lap):
+            self._side, self._turn = None, 0
             return self.action_space.inactive()
         cmd = self._choose(h1, nominal, c, sn, lap)
         self._held = cmd
         return self.action_space.active(cmd)
 
+    def _to_waypoint(self, h) -> float:
+        """Horizontal distance from ``h`` to the pilot's waypoint."""
+        w = self.waypoints[self.leg]
+        return math.hypot(h[0] - w[0], h[1] - w[1])
+
+    def hands_back(self, h1, h2, nominal, c, s, lap) -> bool:
+        """While in control: give the pilot back its command once (a) the body is nearer the
+        pilot's waypoint than where the guardian took over (as a bug algorithm leaves an
+        obstacle's boundary only nearer the goal than where it met it: handed back sooner, the
+        pilot flies back at the obstacle and the boundary is followed round again), (b) the value
+        after the pilot's next lap is above ``margin + hysteresis`` and (c) its command, held,
+        keeps the value above ``margin`` for ``clear_time`` more."""
+        if self._to_waypoint(h2) >= self._hit or float(self.evaluate(*h2)[0]) <= self._margin + self.hysteresis:
+            return False
+        h = h2
+        for _ in range(int(math.ceil(self.clear_time / lap - 1e-9))):
+            h = self.predict(h, nominal, c, s, lap)
+            if not self.inside(*h) or float(self.evaluate(*h)[0]) <= self._margin:
+                return False
+        return True
+
     def _choose(self, h1, nominal, c, s, lap) -> np.ndarray:
-        """The least invasive command whose predicted value is above the margin (module docstring)."""
+        """The safe command nearest the pilot's (module docstring): the pilot's horizontal
+        command turned toward the guardian's side by the least multiple of ``2 pi /
+        n_directions`` (from one step less than its last turn) whose predicted state after the
+        lap it governs is on the grid with a value above ``margin``, at the pilot's speed (at
+        least ``min_speed``, at most ``v_max``); if none, the value's optimal command."""
+        nx, ny = c * nominal[0] - s * nominal[1], s * nominal[0] + c * nominal[1]  # world frame
+        speed = math.sqrt(nx * nx + ny * ny)
         vals = self.evaluate(*h1)
         gx, gy = float(vals[1]), float(vals[2])
+        follow = self._to_waypoint(h1) >= self._hit and (gx != 0.0 or gy != 0.0)
+        if follow:  # not nearer the waypoint than where it took over: follow the obstacle's boundary
+            base = _angle(-gy, -gx)
+        elif speed > 1e-9:
+            base = _angle(ny, nx)
+        elif gx != 0.0 or gy != 0.0:
+            base = _angle(gy, gx)  # no pilot command: away from the obstacle
+        else:
+            base = 0.0
+        speed = min(max(speed, self.min_speed), self.v_max)
+
+        def first_safe(side, k0):
+            for k in range(k0, self.n_directions):
+                ang = base + side * k * 2.0 * math.pi / self.n_directions
+                wx, wy = speed * math.cos(ang), speed * math.sin(ang)
+                hc = self._clip((c * wx + s * wy, -s * wx + c * wy))
+                h = self.predict(h1, hc, c, s, lap)
+                if self.inside(*h) and float(self.evaluate(*h)[0]) > self._margin:  # off the grid: no value, not safe
+                    return k, hc
+            return None, None
+
+        if self._side is None:
+            self._side = self._choose_side(h1, first_safe)
+        k, hc = first_safe(self._side, max(0, self._turn - 1))
+        if k is None:
+            self._counts["optimal"] += 1
+            return self._full(self._clip(self._optimal(h1, vals, c, s)), nominal)
+        self._counts["nominal" if k == 0 else "turns"] += 1
+        self._turn = k
+        if k:
+            self._last_turn = (h1[0], h1[1], self._side)
+        return self._full(hc, nominal)
+
+    def _choose_side(self, h1, first_safe) -> float:
+        """The side the pilot's command is turned to, kept while in control: the side it turned
+        to last time if that was within ``side_memory`` of here (turning the other way would send
+        the body back and forth along an obstacle whose far end the pilot points past), else the
+        side with the smaller turn to a safe command (counter-clockwise on a tie)."""
+        last = self._last_turn
+        if last is not None and math.hypot(h1[0] - last[0], h1[1] - last[1]) <= self.side_memory:
+            return last[2]
+        left, right = first_safe(1.0, 0)[0], first_safe(-1.0, 0)[0]
+        if left is None or right is None:
+            return 1.0 if right is None else -1.0
+        return 1.0 if left <= right else -1.0
+
+    def _optimal(self, h1, vals, c, s):
+        """The value's optimal command (bang-bang in the polar velocity), heading frame."""
+        gx, gy = float(vals[1]), float(vals[2])
         vx, vy = h1[2], h1[3]
-        # the value's optimal acceleration (bang-bang in the polar velocity), as a world reference
         sp = math.sqrt(vx * vx + vy * vy)
         ex, ey = (vx / sp, vy / sp) if sp > 1e-9 else (c, s)
         u1 = self.turn_rate if vals[3] >= 0 else -self.turn_rate
@@ -289,35 +384,10 @@ class QuadrotorHJGuardian(Guardian):
             ex, ey, u2, u1 = (gx / gn, gy / gn, self.accel, 0.0) if gn > 0 else (ex, ey, 0.0, 0.0)
         ax, ay = u2 * ex - sp * u1 * ey, u2 * ey + sp * u1 * ex
         ox, oy = vx + 2.0 * ax / self.k_v, vy + 2.0 * ay / self.k_v
-        optimal = (c * ox + s * oy, -s * ox + c * oy)  # to the heading frame
-        slide = self._slide(nominal, gx, gy, float(vals[0]), c, s)
-        candidates = [slide] + [tuple((1 - w) * a + w * b for a, b in zip(slide, optimal)) for w in (1 / 3, 2 / 3)]
-        for k, hc in enumerate(candidates):
-            hc = self._clip(hc)
-            if float(self.evaluate(*self.predict(h1, hc, c, s, lap))[0]) > self._margin:
-                if k == 0:
-                    self._counts["slides"] += 1
-                return self._full(hc, nominal)
-        self._counts["optimal"] += 1
-        return self._full(self._clip(optimal), nominal)
-
-    def _slide(self, nominal, gx, gy, value, c, s):
-        """The pilot's horizontal command turned along the obstacle (heading frame): along the
-        level line of ``V`` at the pilot's speed, on the side the pilot's command leans to when
-        the guardian takes over (the left of ``grad V`` head-on), kept until it hands back, plus
-        ``2 (margin + hysteresis - V)`` m/s up the gradient (at most 1 m/s either way), which
-        holds the body on the level ``margin + hysteresis`` as it goes round."""
-        nx, ny = c * nominal[0] - s * nominal[1], s * nominal[0] + c * nominal[1]
-        speed, gn = math.sqrt(nx * nx + ny * ny), math.sqrt(gx * gx + gy * gy)
-        if gn == 0.0 or speed == 0.0:
-            return (nominal[0], nominal[1])
-        gx, gy = gx / gn, gy / gn
-        if self._side is None:
-            cross = gx * ny - gy * nx  # > 0: the command leans to the left of grad V
-            self._side = 1.0 if cross >= -0.05 * speed else -1.0
-        push = min(1.0, max(-1.0, 2.0 * (self._margin + self.hysteresis - value)))
-        tx, ty = -self._side * gy * speed + push * gx, self._side * gx * speed + push * gy
-        return (c * tx + s * ty, -s * tx + c * ty)
+        on = math.sqrt(ox * ox + oy * oy)
+        if on > self.v_max:  # the value knows no faster flight
+            ox, oy = ox * self.v_max / on, oy * self.v_max / on
+        return (c * ox + s * oy, -s * ox + c * oy)
 
     def _clip(self, hc):
         return (min(max(hc[0], self._lo[0]), self._hi[0]), min(max(hc[1], self._lo[1]), self._hi[1]))
@@ -327,6 +397,11 @@ class QuadrotorHJGuardian(Guardian):
 
     def stats(self) -> dict:
         return dict(self._counts, solve_seconds=self.solve_seconds)
+
+
+def _angle(y: float, x: float) -> float:
+    """The direction of ``(x, y)`` (the portable arctan2: the same bits on every machine)."""
+    return float(arctan2(np.array([y]), np.array([x]))[0])
 
 
 def _command(info) -> np.ndarray:
