@@ -24,15 +24,16 @@ reason: the largest change per step stays above 1e-3 m).
 
 The vertical is decoupled.  The objects stand on the floor and the pilot flies straight from
 waypoint to waypoint, its height going monotonically from one end's to the other's, so on each
-**leg** the body's centre stays between the ends' heights widened by ``band_margin`` (0.2 m: the
-vertical loop settles up to 0.11 m short of a slow climb, measured).  The target over that band:
+**leg** the body's centre stays between the ends' heights widened by ``band_margin`` (0.1 m of
+vertical tracking; a centre ``d`` outside its band moves the target by at most ``d``).  The target over that band:
 a wall box whose top reaches the band, its exact rectangle; an object, the least of its exact 3-D
 signed distances at heights 0.1 m apart through the band, less 0.05 m (1-Lipschitz in height);
 less the body's bounding radius (0.304 m, the body in any attitude), in metres.  A leg whose ends'
-heights differ by more than ``band_margin`` gets a second value over its **arrival band** (the
-end's height +- ``band_margin``), used once the body is within ``0.75 band_margin`` of that
-height: the pilot's vertical command, which the guardian keeps, only brings it nearer; in a
-cluttered room a climb from a low start then no longer counts the low objects it has risen above.
+heights differ by more than ``2 band_margin`` gets a second value over its **arrival band** (the
+end's height +- ``2 band_margin``), used once the body is within ``1.5 band_margin`` of that
+height (the vertical loop settles up to 0.11 m short of a slow climb, measured): the pilot's
+vertical command, which the guardian keeps, only brings it nearer; in a cluttered room a climb
+from a low start then no longer counts the low objects it has risen above.
 Grid (``pad=None``, the default): the walls' extent, the whole room, so that a detour round an
 obstacle stays on the grid (a leg's box plus 3 m, ``pad=3``, cut detours off); ``spacing`` 0.3 m
 (walls are 0.5 m thick), ``n_heading`` 16, speeds ``[0, 2]`` m/s in ``n_speed`` 5 nodes.  Cost
@@ -112,7 +113,7 @@ class QuadrotorHJGuardian(Guardian):
 
     def __init__(self, spacing: float = 0.3, n_heading: int = 16, n_speed: int = 5, v_max: float = 2.0,
                  accel: float = 2.5, turn_rate: float = 1.0, horizon: float = 1.2, pad: float | None = None,
-                 band_margin: float = 0.2, reach: float = 0.5, order: int = 2, rk: int = 3, cfl: float = 0.8, margin: float | None = None,
+                 band_margin: float = 0.1, reach: float = 0.5, order: int = 2, rk: int = 3, cfl: float = 0.8, margin: float | None = None,
                  tracking: float = 0.1, hysteresis: float = 0.15, delay: int = 1, lap: float | None = None,
                  n_directions: int = 16, min_speed: float = 0.5, clear_time: float = 1.0, side_memory: float = 3.0,
                  cache_dir=None, cache: bool = True, cache_max_files: int = 64, backend: str = "auto",
@@ -211,8 +212,8 @@ class QuadrotorHJGuardian(Guardian):
             grid = self.region_grid(room, a, b)
             select_backend(grid, self.dynamics, self.order, self.backend)
             bands = [self.band(a, b)]
-            if abs(float(b[2]) - float(a[2])) > self.band_margin:  # the arrival band is narrower: a value of its own
-                bands.append(self.band(b, b))
+            if abs(float(b[2]) - float(a[2])) > 2.0 * self.band_margin:  # the arrival band is narrower: a value of its own
+                bands.append((float(b[2]) - 1.5 * self.band_margin, float(b[2]) + 1.5 * self.band_margin))
             values = []
             for band in bands:
                 V = self.value_function(room, grid, *band)
@@ -242,9 +243,9 @@ class QuadrotorHJGuardian(Guardian):
             leg += 1
         self.leg = leg
         values = self._legs[leg]
-        # the arrival band's value once the height is within 3/4 band_margin of the waypoint's: the pilot's
+        # the arrival band's value once the height is within 1.5 band_margin of the waypoint's: the pilot's
         # vertical command (kept by the guardian) takes it monotonically to the waypoint's height
-        arrived = len(values) > 1 and abs(float(state[2]) - float(self.waypoints[leg][2])) <= 0.75 * self.band_margin
+        arrived = len(values) > 1 and abs(float(state[2]) - float(self.waypoints[leg][2])) <= 1.5 * self.band_margin
         self.z_band, self.grid, self.V, self._interp = values[1 if arrived else 0]
 
     # ------------------------------------------------------------------ the decision
