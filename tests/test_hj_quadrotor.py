@@ -218,7 +218,7 @@ def test_turns_to_the_safe_command_nearest_the_pilots(solved):
     h1 = (-0.9, 0.0, 1.0, 0.0)
     a = math.radians(-10.0)
     nominal = np.array([1.5 * math.cos(a), 1.5 * math.sin(a), 0.2, 0.5])
-    g._side, g._turn, g._last_turn = None, 0, None
+    g._side, g._turn, g._last_turn, g._hit = None, 0, None, math.inf  # nearer the waypoint than at the takeover
 
     def safe(k, side):
         ang = a + side * k * 2 * math.pi / 16
@@ -280,19 +280,43 @@ def test_hands_back_once_the_pilots_command_stays_safe(solved):
 
 def test_arrival_band_drops_what_the_climb_rose_above(space, tmp_path):
     # a leg from 0.5 m up to 1.5 m: its band [0.4, 1.6] reaches the sphere (centre 0.6 m up, radius
-    # 0.6 m, top 1.2 m); the arrival band [1.3, 1.7] does not.  At (-4, 1.9), 0.5 m from the sphere
+    # 0.6 m, top 1.2 m); the arrival band [1.35, 1.65] does not.  At (-4, 1.9), 0.5 m from the sphere
     # at its centre's height: 0.5 - 0.05 - 0.304 = 0.146 m at rest in the leg's band; in the arrival
     # band the nearest is the wall's face 4 m away: 4 - 0.304
     g = QuadrotorHJGuardian(cache_dir=tmp_path, threads=1)
     reset(g, space, state(-4.0, 1.9, z=0.5), waypoints=((-6.0, -3.0, 1.5),))
-    assert [v[0] for v in g._legs[0]] == [pytest.approx((0.4, 1.6)), pytest.approx((1.3, 1.7))]
+    assert [v[0] for v in g._legs[0]] == [pytest.approx((0.4, 1.6)), pytest.approx((1.35, 1.65))]
     assert g.z_band == pytest.approx((0.4, 1.6))
     assert float(g.evaluate(-4.0, 1.9, 0.0, 0.0)[0]) == pytest.approx(0.5 - 0.05 - BOUND, abs=0.02)
     g._next_leg(state(-4.0, 1.9, z=1.5 - 1.51 * g.band_margin))  # not yet within 1.5 band_margin
     assert g.z_band == pytest.approx((0.4, 1.6))
     g._next_leg(state(-4.0, 1.9, z=1.5 - 1.49 * g.band_margin))
-    assert g.z_band == pytest.approx((1.3, 1.7))
+    assert g.z_band == pytest.approx((1.35, 1.65))
     assert float(g.evaluate(-4.0, 1.9, 0.0, 0.0)[0]) == pytest.approx(4.0 - BOUND, abs=0.02)
     # a leg climbing no more than 2 band_margin has one value only
     reset(g, space, state(-4.0, 1.9, z=1.0), waypoints=((-6.0, -3.0, 1.2),))
     assert len(g._legs[0]) == 1
+
+
+def test_follows_the_boundary_until_nearer_the_waypoint(solved):
+    g, box = solved
+    # not nearer the waypoint than at the takeover: the scan starts straight at the obstacle
+    # (-grad V) instead of at the pilot's command (here straight away from the wall)
+    h1 = (-0.9, 0.0, 1.0, 0.0)
+    nominal = np.array([-1.5, 0.0, 0.0, 0.0])
+    vals = g.evaluate(*h1)
+    base = math.atan2(-float(vals[2]), -float(vals[1]))
+    assert abs(base) < 0.05  # the wall's face is the plane x = 0: straight at it is +x
+    g._side, g._turn, g._last_turn, g._hit = -1.0, 0, None, 0.0
+
+    def safe(ang):
+        h = g.predict(h1, (1.5 * math.cos(ang), 1.5 * math.sin(ang)), 1.0, 0.0, 0.1)
+        return g.inside(*h) and float(g.evaluate(*h)[0]) > g._margin
+
+    k = next(k for k in range(16) if safe(base - k * 2 * math.pi / 16))
+    assert k > 0  # straight at the wall is unsafe
+    ang = base - k * 2 * math.pi / 16
+    assert _world(g._choose(h1, nominal, 1.0, 0.0, 0.1)) == pytest.approx((1.5 * math.cos(ang), 1.5 * math.sin(ang)), abs=1e-9)
+    # nearer than at the takeover: the pilot's command itself, safe here
+    g._turn, g._hit = 0, math.inf
+    assert _world(g._choose(h1, nominal, 1.0, 0.0, 0.1)) == pytest.approx((-1.5, 0.0), abs=1e-12)
