@@ -153,7 +153,10 @@ def test_bad_input_named(solved, space):
     with pytest.raises(ValueError, match="four finite numbers"):
         g.act(None, {"nominal_control": [1.0, np.nan, 0.0, 0.0]})
     for kw, msg in (({"spacing": 0.0}, "spacing must be a finite number > 0"), ({"n_speed": 2}, "n_speed must be an integer >= 3"),
-                    ({"accel": -1.0}, "accel must be"), ({"cfl": 2.0}, "cfl must be in"), ({"order": 3}, "order must be 1 or 2")):
+                    ({"accel": -1.0}, "accel must be"), ({"cfl": 2.0}, "cfl must be in"), ({"order": 3}, "order must be 1 or 2"),
+                    ({"n_directions": 3}, "n_directions must be an integer >= 4"), ({"min_speed": 0.0}, "min_speed must be"),
+                    ({"clear_time": -0.1}, "clear_time must be"), ({"side_memory": float("nan")}, "side_memory must be"),
+                    ({"pad": -1.0}, "pad must be")):
         with pytest.raises(ValueError, match=msg):
             QuadrotorHJGuardian(**kw)
     with pytest.raises(ValueError, match="quadrotor must be a dict"):

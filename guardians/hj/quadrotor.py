@@ -37,15 +37,18 @@ from a low start then no longer counts the low objects it has risen above.
 Grid (``pad=None``, the default): the walls' extent, the whole room, so that a detour round an
 obstacle stays on the grid (a leg's box plus 3 m, ``pad=3``, cut detours off); ``spacing`` 0.3 m
 (walls are 0.5 m thick), ``n_heading`` 16, speeds ``[0, 2]`` m/s in ``n_speed`` 5 nodes.  Cost
-on one core: {COST}.  The guardian follows the pilot's leg by the pilot's own rule (a waypoint
+on one core (CPU time of a reset: targets and solves, no cache): 2.7 s median over 8 rooms of
+seed 0 (1.6-3.3 s, 3-6 values; ``python benchmarks/perf_hj.py --quadrotor 8``).  On 8 rooms of
+seed 5 the previous value (2 s, speeds to 3 m/s in 7 nodes, a leg's box plus 3 m) took 1.02 s
+for three legs, this value 0.40 s on the legs' boxes and 1.17 s over the whole room.  The guardian follows the pilot's leg by the pilot's own rule (a waypoint
 within ``reach``, 0.5 m, is passed).  A body outside its band, or off the grid, has no value:
 control is left to the pilot and counted (``outside_band``, ``outside_grid``).
 
 ## Error margin
 
-``margin`` (``None``: half a position cell plus ``tracking``, {MARGIN} m) is what the value may
+``margin`` (``None``: half a position cell plus ``tracking``, 0.25 m) is what the value may
 over-state: multilinear interpolation at a kink (half a cell, 0.15 m) plus the error of the
-prediction below (``tracking``, {TRACKING} m).  Measured on 858 steps of 0.1 s of
+prediction below (``tracking``, 0.1 m).  Measured on 858 steps of 0.1 s of
 ``QuadrotorRoomGuarded-v0`` (12 episodes, the pilot's command or a random one): the closed form
 predicts the position to 6 mm (median), 3.6 cm (99th percentile), 4.2 cm at worst.
 
