@@ -369,7 +369,7 @@ class QuadrotorHJGuardian(Guardian):
         if k is None:
             self._counts["optimal"] += 1
             return self._full(self._clip(optimal_command(h1, vals, c, s, self.turn_rate, self.accel, self.k_v, self.v_max)), nominal)
-        self._counts["nominal" if k == 0 else "turns"] += 1
+        self._counts["nominal" if k == 0 and not follow else "turns"] += 1
         self._turn = k
         if k:
             self._last_turn = (h1[0], h1[1], self._side)
