@@ -12,9 +12,9 @@ Run: ``python benchmarks/perf_hj.py [--quick] [--solve-only]``.
 * convergence of the unsafe set (V <= 0) as the grid is refined: the unsafe fraction of a
   fixed set of probe states for several grids, against the finest;
 * ``--quadrotor N``: instead of all the above, the quadrotor ``hj``'s solves
-  (:mod:`guardians.hj.quadrotor`, one per leg of the route) on the rooms of the first ``N``
+  (:mod:`guardians.hj.quadrotor`, one or two values per leg of the route) on the rooms of the first ``N``
   episodes of ``rmm-bench --env QuadrotorRoomParallel-v0 --seed 0``, one thread, no cache: grid
-  sizes and solve times per leg and per episode, and the guardian's decision time on those
+  sizes and solve times per value and per episode, and the guardian's decision time on those
   episodes' starts.
 """
 
@@ -135,16 +135,17 @@ def quadrotor(n: int) -> None:
         g.reset(seed=seed, observation_space=env.observation_space, action_space=env.action_space,
                 privileged=env.unwrapped.privileged)
         episodes.append(time.process_time() - c0)
-        legs += [g.solve_seconds / len(g._legs)] * len(g._legs)
-        nodes += [int(np.prod(grid.shape)) for _, grid, _, _ in g._legs]
+        values = [v for leg in g._legs for v in leg]
+        legs += [g.solve_seconds / len(values)] * len(values)
+        nodes += [int(np.prod(grid.shape)) for _, grid, _, _ in values]
         t = time.perf_counter()
         g.act(obs, info)
         decisions.append(time.perf_counter() - t)
     print(f"quadrotor hj, {n} rooms of seed 0 (grid {g.spacing} m x {g.n_heading} headings x {g.n_speed} speeds, "
           f"{g.horizon} s, ENO2/RK3, one thread, no cache):")
-    print(f"  nodes per leg: median {statistics.median(nodes):,.0f} (range {min(nodes):,}-{max(nodes):,})")
+    print(f"  nodes per value: median {statistics.median(nodes):,.0f} (range {min(nodes):,}-{max(nodes):,})")
     print(f"  reset (all legs' solves and targets), CPU: median {statistics.median(episodes):.2f} s, "
-          f"range {min(episodes):.2f}-{max(episodes):.2f} s; solve wall per leg: median {statistics.median(legs):.2f} s")
+          f"range {min(episodes):.2f}-{max(episodes):.2f} s; solve wall per value: median {statistics.median(legs):.2f} s")
     print(f"  first decision: median {statistics.median(decisions) * 1e6:.0f} us")
 
 

@@ -153,7 +153,10 @@ def test_bad_input_named(solved, space):
     with pytest.raises(ValueError, match="four finite numbers"):
         g.act(None, {"nominal_control": [1.0, np.nan, 0.0, 0.0]})
     for kw, msg in (({"spacing": 0.0}, "spacing must be a finite number > 0"), ({"n_speed": 2}, "n_speed must be an integer >= 3"),
-                    ({"accel": -1.0}, "accel must be"), ({"cfl": 2.0}, "cfl must be in"), ({"order": 3}, "order must be 1 or 2")):
+                    ({"accel": -1.0}, "accel must be"), ({"cfl": 2.0}, "cfl must be in"), ({"order": 3}, "order must be 1 or 2"),
+                    ({"n_directions": 3}, "n_directions must be an integer >= 4"), ({"min_speed": 0.0}, "min_speed must be"),
+                    ({"clear_time": -0.1}, "clear_time must be"), ({"side_memory": float("nan")}, "side_memory must be"),
+                    ({"pad": -1.0}, "pad must be")):
         with pytest.raises(ValueError, match=msg):
             QuadrotorHJGuardian(**kw)
     with pytest.raises(ValueError, match="quadrotor must be a dict"):
@@ -198,4 +201,125 @@ def test_fixed_clock_episode_the_pilot_crashes(tmp_path):
     assert run(InactiveGuardian())[0] == "collision"
     g = make_guardian("hj", env_id="QuadrotorRoomParallel-v0", cache_dir=tmp_path, threads=1)
     outcome, stats = run(g)
-    assert outcome == "goal" and stats["n_active_ctrl_env_steps"] > 0 and g.stats()["solves"] == 3  # one value per leg
+    assert outcome == "goal" and stats["n_active_ctrl_env_steps"] > 0
+    # one value per leg, and one more over the arrival band of each leg climbing or descending more than 2 band_margin
+    q = g._quadrotor
+    assert [len(v) for v in q._legs] == [1 + (v[0][0][1] - v[0][0][0] - 2 * q.band_margin > 2 * q.band_margin) for v in q._legs]
+    assert g.stats()["solves"] == sum(len(v) for v in q._legs) == 4
+
+
+def _world(cmd):
+    """A heading-frame command at yaw 0 is the world command itself."""
+    return float(cmd[0]), float(cmd[1])
+
+
+def test_turns_to_the_safe_command_nearest_the_pilots(solved):
+    g, box = solved
+    # 0.9 m from the wall's face (x = 0), moving at it at 1 m/s; the pilot commands 1.5 m/s 10
+    # degrees to the right of head-on: turning clockwise (toward -y) reaches a safe command in
+    # fewer steps of 2 pi / 16 than turning counter-clockwise
+    h1 = (-0.9, 0.0, 1.0, 0.0)
+    a = math.radians(-10.0)
+    nominal = np.array([1.5 * math.cos(a), 1.5 * math.sin(a), 0.2, 0.5])
+    g._side, g._turn, g._last_turn, g._hit = None, 0, None, math.inf  # nearer the waypoint than at the takeover
+
+    def safe(k, side):
+        ang = a + side * k * 2 * math.pi / 16
+        h = g.predict(h1, (1.5 * math.cos(ang), 1.5 * math.sin(ang)), 1.0, 0.0, 0.1)
+        return g.inside(*h) and float(g.evaluate(*h)[0]) > g._margin
+
+    first = {side: next(k for k in range(16) if safe(k, side)) for side in (1.0, -1.0)}
+    assert first[-1.0] < first[1.0] and not safe(0, 1.0)  # head-on is unsafe; clockwise is nearer
+    cmd = g._choose(h1, nominal, 1.0, 0.0, 0.1)
+    ang = a - first[-1.0] * 2 * math.pi / 16
+    assert _world(cmd) == pytest.approx((1.5 * math.cos(ang), 1.5 * math.sin(ang)), abs=1e-12)
+    assert cmd[2] == pytest.approx(0.2) and cmd[3] == 0.0  # the pilot's vertical, no yaw
+    assert g._side == -1.0 and g._turn == first[-1.0]
+    # held: the turn comes back toward the pilot's command one step a lap (from 3 steps past
+    # the nearest safe one to 2), on the same side
+    g._turn = first[-1.0] + 3
+    cmd2 = g._choose(h1, nominal, 1.0, 0.0, 0.1)
+    ang = a - (first[-1.0] + 2) * 2 * math.pi / 16
+    assert g._side == -1.0 and _world(cmd2) == pytest.approx((1.5 * math.cos(ang), 1.5 * math.sin(ang)), abs=1e-12)
+    # a slow pilot is turned at min_speed
+    g._side, g._turn = None, 0
+    slow = np.array([0.1 * math.cos(a), 0.1 * math.sin(a), 0.0, 0.0])
+    assert math.hypot(*_world(g._choose(h1, slow, 1.0, 0.0, 0.1))) == pytest.approx(g.min_speed)
+    # side memory: taken over again within side_memory of the last turn, it turns the same way
+    g._side, g._turn = None, 0
+    g._last_turn = (-0.9, 1.0, 1.0)
+    g._choose(h1, nominal, 1.0, 0.0, 0.1)
+    assert g._side == 1.0
+    g._side, g._last_turn = None, (-0.9, 1.0 + g.side_memory + 0.1, 1.0)
+    g._choose(h1, nominal, 1.0, 0.0, 0.1)
+    assert g._side == -1.0
+
+
+def test_hands_back_once_the_pilots_command_stays_safe(solved):
+    g, box = solved
+    g.delay, g._last_time = 1, None
+    # 2 m from the wall at rest, the guardian in control: the pilot's command straight at the
+    # wall is safe for the next two laps (value ~1.7 m) but not held for clear_time (1 s) more:
+    # 1.2 s at the lag's velocity covers 1.5 (1.2 - (1 - e^-3) / 2.5) = 1.23 m, leaving 0.77 m at
+    # 1.5 m/s, a value of 0.77 - 0.304 - 1.5^2 / 5 = 0.02 m < margin
+    box["state"], box["sim_time"] = state(-2.0, 0.0), 0.0
+    g._held, g._side, g._turn = np.array([0.0, 0.0, 0.0, 0.0]), -1.0, 2
+    at = {"nominal_control": np.array([1.5, 0.0, 0.0, 0.0])}
+    h2 = g.predict(g.predict((-2.0, 0.0, 0.0, 0.0), (0.0, 0.0), 1.0, 0.0, 0.1), (1.5, 0.0), 1.0, 0.0, 0.1)
+    assert float(g.evaluate(*h2)[0]) > g._margin + g.hysteresis
+    assert g.act(None, at)["active_ctrl"] == 1 and g._side == -1.0
+    # the pilot's command away from the wall: handed back, the side forgotten
+    box["state"], box["sim_time"] = state(-2.0, 0.0), 0.1
+    g._held = np.array([0.0, 0.0, 0.0, 0.0])
+    assert g.act(None, {"nominal_control": np.array([-1.5, 0.0, 0.0, 0.0])})["active_ctrl"] == 0
+    assert g._side is None and g._turn == 0 and g._held is None
+    # with clear_time 0 only the next two laps count: handed back even toward the wall
+    g.clear_time = 0.0
+    box["state"], box["sim_time"] = state(-2.0, 0.0), 0.2
+    g._held = np.array([0.0, 0.0, 0.0, 0.0])
+    assert g.act(None, at)["active_ctrl"] == 0
+    g.clear_time = 1.0
+
+
+def test_arrival_band_drops_what_the_climb_rose_above(space, tmp_path):
+    # a leg from 0.5 m up to 1.5 m: its band [0.4, 1.6] reaches the sphere (centre 0.6 m up, radius
+    # 0.6 m, top 1.2 m); the arrival band [1.35, 1.65] does not.  At (-4, 1.9), 0.5 m from the sphere
+    # at its centre's height: 0.5 - 0.05 - 0.304 = 0.146 m at rest in the leg's band; in the arrival
+    # band the nearest is the wall's face 4 m away: 4 - 0.304
+    g = QuadrotorHJGuardian(cache_dir=tmp_path, threads=1)
+    reset(g, space, state(-4.0, 1.9, z=0.5), waypoints=((-6.0, -3.0, 1.5),))
+    assert [v[0] for v in g._legs[0]] == [pytest.approx((0.4, 1.6)), pytest.approx((1.35, 1.65))]
+    assert g.z_band == pytest.approx((0.4, 1.6))
+    assert float(g.evaluate(-4.0, 1.9, 0.0, 0.0)[0]) == pytest.approx(0.5 - 0.05 - BOUND, abs=0.02)
+    g._next_leg(state(-4.0, 1.9, z=1.5 - 1.51 * g.band_margin))  # not yet within 1.5 band_margin
+    assert g.z_band == pytest.approx((0.4, 1.6))
+    g._next_leg(state(-4.0, 1.9, z=1.5 - 1.49 * g.band_margin))
+    assert g.z_band == pytest.approx((1.35, 1.65))
+    assert float(g.evaluate(-4.0, 1.9, 0.0, 0.0)[0]) == pytest.approx(4.0 - BOUND, abs=0.02)
+    # a leg climbing no more than 2 band_margin has one value only
+    reset(g, space, state(-4.0, 1.9, z=1.0), waypoints=((-6.0, -3.0, 1.2),))
+    assert len(g._legs[0]) == 1
+
+
+def test_follows_the_boundary_until_nearer_the_waypoint(solved):
+    g, box = solved
+    # not nearer the waypoint than at the takeover: the scan starts straight at the obstacle
+    # (-grad V) instead of at the pilot's command (here straight away from the wall)
+    h1 = (-0.9, 0.0, 1.0, 0.0)
+    nominal = np.array([-1.5, 0.0, 0.0, 0.0])
+    vals = g.evaluate(*h1)
+    base = math.atan2(-float(vals[2]), -float(vals[1]))
+    assert abs(base) < 0.05  # the wall's face is the plane x = 0: straight at it is +x
+    g._side, g._turn, g._last_turn, g._hit = -1.0, 0, None, 0.0
+
+    def safe(ang):
+        h = g.predict(h1, (1.5 * math.cos(ang), 1.5 * math.sin(ang)), 1.0, 0.0, 0.1)
+        return g.inside(*h) and float(g.evaluate(*h)[0]) > g._margin
+
+    k = next(k for k in range(16) if safe(base - k * 2 * math.pi / 16))
+    assert k > 0  # straight at the wall is unsafe
+    ang = base - k * 2 * math.pi / 16
+    assert _world(g._choose(h1, nominal, 1.0, 0.0, 0.1)) == pytest.approx((1.5 * math.cos(ang), 1.5 * math.sin(ang)), abs=1e-9)
+    # nearer than at the takeover: the pilot's command itself, safe here
+    g._turn, g._hit = 0, math.inf
+    assert _world(g._choose(h1, nominal, 1.0, 0.0, 0.1)) == pytest.approx((-1.5, 0.0), abs=1e-12)

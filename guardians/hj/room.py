@@ -1,5 +1,6 @@
 """The quadrotor ``hj``'s geometry and kinematics (:mod:`guardians.hj.quadrotor`): the target of a
-room in an altitude band, and the velocity loop's closed form."""
+room in an altitude band, the velocity loop's closed form, the value's optimal command, and the
+pilot's command read from ``info``."""
 
 from __future__ import annotations
 
@@ -8,10 +9,11 @@ import math
 import numpy as np
 
 from guardians.hj.grid import Grid
+from rmm_envs.portable import arctan2
 from rmm_envs.systems.rotations import quat_to_rot
 from rmm_envs.worlds.room_collision import BOUND
 
-__all__ = ["lag_prediction", "room_target"]
+__all__ = ["angle", "lag_prediction", "nominal_command", "optimal_command", "room_target"]
 
 
 def room_target(grid: Grid, room, z_lo: float, z_hi: float, radius: float = BOUND, dz: float = 0.1) -> np.ndarray:
@@ -82,3 +84,43 @@ def lag_prediction(p, v, c, k: float, t: float):
     from ``(p, v)`` (one axis each, scalars): ``v(t) = c + (v - c) e^{-k t}``."""
     e = math.exp(-k * t)
     return p + c * t + (v - c) * (1.0 - e) / k, c + (v - c) * e
+
+
+def optimal_command(h, vals, c: float, s: float, turn_rate: float, accel: float, k_v: float, v_max: float):
+    """The value's optimal command at the horizontal state ``h = (x, y, vx, vy)`` (heading frame,
+    heading ``(c, s) = (cos psi, sin psi)``), from ``vals = (V, dV/dx, dV/dy, dV/dtheta, dV/dv)``:
+    the bang-bang maximiser of ``grad V . f`` as an acceleration ``a``, commanded as ``v + 2 a /
+    k_v`` (the first-order lag still gives at least ``a`` over a lap), its norm held to ``v_max``.
+    At rest: ``accel`` straight up the position gradient."""
+    gx, gy = float(vals[1]), float(vals[2])
+    vx, vy = h[2], h[3]
+    sp = math.sqrt(vx * vx + vy * vy)
+    ex, ey = (vx / sp, vy / sp) if sp > 1e-9 else (c, s)
+    u1 = turn_rate if vals[3] >= 0 else -turn_rate
+    u2 = accel if vals[4] >= 0 else -accel
+    if sp <= 1e-9:
+        gn = math.sqrt(gx * gx + gy * gy)
+        ex, ey, u2, u1 = (gx / gn, gy / gn, accel, 0.0) if gn > 0 else (ex, ey, 0.0, 0.0)
+    ax, ay = u2 * ex - sp * u1 * ey, u2 * ey + sp * u1 * ex
+    ox, oy = vx + 2.0 * ax / k_v, vy + 2.0 * ay / k_v
+    on = math.sqrt(ox * ox + oy * oy)
+    if on > v_max:  # the value knows no faster flight
+        ox, oy = ox * v_max / on, oy * v_max / on
+    return (c * ox + s * oy, -s * ox + c * oy)
+
+
+def angle(y: float, x: float) -> float:
+    """The direction of ``(x, y)`` (the portable arctan2: the same bits on every machine)."""
+    return float(arctan2(np.array([y]), np.array([x]))[0])
+
+
+def nominal_command(info) -> np.ndarray:
+    """``info["nominal_control"]`` as four finite numbers, refused (naming it) otherwise."""
+    if not isinstance(info, dict) or "nominal_control" not in info:
+        raise ValueError("guardian 'hj' (quadrotor) needs info['nominal_control'] from the env (the pilot's command), "
+                         f"got {sorted(info) if isinstance(info, dict) else type(info).__name__}")
+    u = np.asarray(info["nominal_control"], float).reshape(-1)
+    if u.shape != (4,) or not np.all(np.isfinite(u)):
+        raise ValueError(f"info['nominal_control'] must be four finite numbers (forward, left, up, yaw rate), "
+                         f"got {info['nominal_control']!r}")
+    return u
