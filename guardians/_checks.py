@@ -84,6 +84,3 @@ def number_pair(name: str, pair) -> tuple[float, float]:
         raise ValueError(f"{name} must be a finite (min, max) with min < max, got {pair!r}")
     return lo, hi
 
-
-# the systems' checks live in guardians.dispatch; guardians.hj.quadrotor imports quadrotor_only from here
-from guardians.dispatch import quadrotor_only  # noqa: E402

@@ -203,7 +203,7 @@ def test_fixed_clock_episode_the_pilot_crashes(tmp_path):
     outcome, stats = run(g)
     assert outcome == "goal" and stats["n_active_ctrl_env_steps"] > 0
     # one value per leg, and one more over the arrival band of each leg climbing or descending more than 2 band_margin
-    q = g._quadrotor
+    q = g.delegate
     assert [len(v) for v in q._legs] == [1 + (v[0][0][1] - v[0][0][0] - 2 * q.band_margin > 2 * q.band_margin) for v in q._legs]
     assert g.stats()["solves"] == sum(len(v) for v in q._legs) == 4
 

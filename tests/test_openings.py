@@ -1,8 +1,7 @@
 """Module openings stay short: each module of ``guardians`` and ``rmm_envs`` opens with what it is
 and offers in at most 15 lines of docstring; rationale lives in ``docs/design-notes.md`` (or the
 docs pages).  Exempt: the env modules whose docstring is the env's spec (the catalog renders
-them as the docs' environment pages) and the few other Gymnasium-style specs of SPEC_OPENINGS.
-Modules not yet shortened are pinned at their length, which may only shrink."""
+them as the docs' environment pages) and the few other Gymnasium-style specs of SPEC_OPENINGS."""
 
 from __future__ import annotations
 
@@ -12,12 +11,6 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 LIMIT = 15
-
-#: openings longer than LIMIT when the rule came in and not yet shortened: path -> lines, a ceiling
-#: that may only fall (these two are being edited elsewhere; bring them under LIMIT and drop them)
-LONG_OPENINGS = {
-    "guardians/hj/quadrotor.py": 79,
-}
 
 #: modules whose docstring is a user-facing spec in the Gymnasium style, exempt as the env pages are:
 #: path -> why (their rationale is in docs/design-notes.md all the same)
@@ -59,12 +52,12 @@ def test_module_openings_are_short():
             if rel in SPEC_OPENINGS or rel.removesuffix(".py").removesuffix("/__init__").replace("/", ".") in spec:
                 continue
             n = opening_lines(path)
-            if n > LONG_OPENINGS.get(rel, LIMIT):
+            if n > LIMIT:
                 long[rel] = n
-    assert not long, (f"module openings over {LIMIT} lines (or over their pinned length): {long}; say what the "
+    assert not long, (f"module openings over {LIMIT} lines: {long}; say what the "
                       "module is and offers, and move the rationale to docs/design-notes.md")
-    missing = sorted(p for p in (*LONG_OPENINGS, *SPEC_OPENINGS) if not (ROOT / p).exists())
-    assert not missing, f"pinned or exempt modules that no longer exist (remove them): {missing}"
+    missing = sorted(p for p in SPEC_OPENINGS if not (ROOT / p).exists())
+    assert not missing, f"exempt modules that no longer exist (remove them): {missing}"
 
 
 def heading_anchors(page: Path) -> set[str]:

@@ -1,91 +1,18 @@
 """The ``hj`` guardian on the quadrotor (``QuadrotorRoomParallel-v0``): a 4-D avoid value of the
 horizontal flight in each leg's altitude band.
 
-``hj`` serves three systems: :class:`guardians.hj.guardian.HJGuardian` hands an env whose action
-space has the quadrotor's four commands (:data:`rmm_envs.envs.quadrotor_room_parallel.CONTROLS`)
-to :class:`QuadrotorHJGuardian` (``quadrotor``, a dict, sets its own arguments).  It uses
-**privileged** information: the room, the waypoints, the true state and the simulated time.
+:class:`guardians.hj.guardian.HJGuardian` hands an env whose action space states the quadrotor's
+system kind to :class:`QuadrotorHJGuardian` (``quadrotor``, a dict, sets its arguments).  It is
+**privileged**: it reads the room, the waypoints, the true state and the simulated time.  Model:
+the velocity loop as a point mass with bounded acceleration, which in polar velocity form is the
+Dubins4D car, solved by the project's compiled solver over the whole room in each leg's altitude
+band (the vertical decoupled); ``margin`` (0.25 m) is what the value may over-state.  Rule: take
+over when the value two laps ahead is at most the margin; in control, the safe command nearest
+the pilot's (one side, turns coming back a step a lap, boundary following until nearer the
+waypoint); hand back once nearer, clear by a hysteresis and safe for 1 s more under the pilot's
+command.  NaN states apply the hover default and are counted.
 
-## The model
-
-The guardian commands the cascaded controller's velocity reference.  Its velocity loop makes
-the horizontal acceleration ``k_v (v_ref - v)`` (``k_v = 2.5`` 1/s), of norm at most 5 m/s^2
-(:class:`rmm_envs.systems.quadrotor_control.CommandController`): horizontally a point mass with
-a bounded acceleration.  With the velocity in polar form (speed ``v``, direction ``theta``) that
-is exactly the Dubins4D car, ``x' = v cos theta, y' = v sin theta, theta' = u1, v' = u2``, solved
-by the project's compiled solver unchanged (``Dubins4DHJ(u1_max=turn_rate, u2_max=accel, v_min=0,
-v_max=v_max)``) for ``|u2| <= accel`` (2.5 m/s^2) and ``|u1| <= turn_rate`` (1 rad/s: ``v u1 <=
-2`` m/s^2 up to ``v_max``), inside what the controller gives.  ``v_max = 2`` m/s: the pilot
-cruises at 1.5 m/s and the guardian's own commands are held to ``v_max`` (a faster state is read
-at ``v_max``).  ``horizon`` 1.2 s: braking from ``v_max`` takes 0.8 s, and a body at rest stays
-safe, so a longer horizon only adds the scheme's slow erosion of the level set (2.0 s against
-1.2 s moved the value by at most 0.1 m; a converged-value early stop never triggered for that
-reason: the largest change per step stays above 1e-3 m).
-
-The vertical is decoupled.  The objects stand on the floor and the pilot flies straight from
-waypoint to waypoint, its height going monotonically from one end's to the other's, so on each
-**leg** the body's centre stays between the ends' heights widened by ``band_margin`` (0.1 m of
-vertical tracking; a centre ``d`` outside its band moves the target by at most ``d``).  The target over that band:
-a wall box whose top reaches the band, its exact rectangle; an object, the least of its exact 3-D
-signed distances at heights 0.1 m apart through the band, less 0.05 m (1-Lipschitz in height);
-less the body's bounding radius (0.304 m, the body in any attitude), in metres.  A leg whose ends'
-heights differ by more than ``2 band_margin`` gets a second value over its **arrival band** (the
-end's height +- ``2 band_margin``), used once the body is within ``1.5 band_margin`` of that
-height (the vertical loop settles up to 0.11 m short of a slow climb, measured): the pilot's
-vertical command, which the guardian keeps, only brings it nearer; in a cluttered room a climb
-from a low start then no longer counts the low objects it has risen above.
-Grid (``pad=None``, the default): the walls' extent, the whole room, so that a detour round an
-obstacle stays on the grid (a leg's box plus 3 m, ``pad=3``, cut detours off); ``spacing`` 0.3 m
-(walls are 0.5 m thick), ``n_heading`` 16, speeds ``[0, 2]`` m/s in ``n_speed`` 5 nodes.  Cost
-on one core (CPU time of a reset: targets and solves, no cache): 2.7 s median over 8 rooms of
-seed 0 (1.6-3.3 s, 3-6 values; ``python benchmarks/perf_hj.py --quadrotor 8``).  On 8 rooms of
-seed 5 the previous value (2 s, speeds to 3 m/s in 7 nodes, a leg's box plus 3 m) took 1.02 s
-for three legs, this value 0.40 s on the legs' boxes and 1.17 s over the whole room.  The guardian follows the pilot's leg by the pilot's own rule (a waypoint
-within ``reach``, 0.5 m, is passed).  A body outside its band, or off the grid, has no value:
-control is left to the pilot and counted (``outside_band``, ``outside_grid``).
-
-## Error margin
-
-``margin`` (``None``: half a position cell plus ``tracking``, 0.25 m) is what the value may
-over-state: multilinear interpolation at a kink (half a cell, 0.15 m) plus the error of the
-prediction below (``tracking``, 0.1 m).  Measured on 858 steps of 0.1 s of
-``QuadrotorRoomGuarded-v0`` (12 episodes, the pilot's command or a random one): the closed form
-predicts the position to 6 mm (median), 3.6 cm (99th percentile), 4.2 cm at worst.
-
-## The rule
-
-A command returned at ``s_k`` acts from ``s_{k+1}`` on; the lap from ``s_k`` runs under the
-previous command (the guardian's, if it acted, else the pilot's, ``info["nominal_control"]``).
-The guardian predicts the state one lap ahead under that pending command (``h1``) and one more
-under the pilot's command (``h2``), with the velocity loop's closed form (``v(t) = c + (v0 - c)
-e^{-k_v t}`` per axis and its integral; the lap measured from the simulated times, 0.1 s before
-the first).  It **takes over** when the value at ``h2`` is at most ``margin``.  In control it
-commands the **safe command nearest the pilot's**: the pilot's horizontal command (at its speed,
-at least ``min_speed`` 0.5 m/s, at most ``v_max``) turned by the least multiple of ``2 pi /
-n_directions`` (16) toward one side whose predicted state after the lap it governs is on the grid
-with a value above ``margin``; the vertical command is the pilot's, the yaw rate 0.  Three things
-keep it from circling:
-
-1. **one side**: the side is chosen at the takeover (the one with the smaller turn), kept while
-   in control, and reused when it takes over again within ``side_memory`` (3 m) of its last turn;
-2. **turns come back one step a lap**: the scan starts one step short of the last turn, so the
-   command swings back to the pilot's smoothly instead of chattering between the pilot's command
-   (safe for one lap from rest) and a turn (the body stood still between the two);
-3. **bug-style hand-back**: until the body is nearer the pilot's waypoint than where it took over,
-   the scan starts from straight at the obstacle (``-grad V``), so the body follows the
-   obstacle's boundary; it **hands back** only once it is nearer, the value at ``h2`` is above
-   ``margin + hysteresis`` (0.15 m) and the pilot's command, held, keeps the value above
-   ``margin`` for ``clear_time`` (1 s) more (handed back sooner, the pilot flew straight back at
-   the obstacle).
-
-When no direction is safe it commands the value's **optimal** command: the bang-bang maximiser of
-``grad V . f`` as an acceleration ``a``, commanded as ``v + 2 a / k_v`` (the lag still gives at
-least ``a`` over a lap), clipped to ``v_max`` and the command box.  ``stats()`` counts takeovers,
-the pilot's own command kept, turns and optimal commands.
-
-Explicit edge cases: a state with NaN applies the env's safe default (hover) and is counted
-(``nan_states``); a room with no walls, or an ``info`` without four finite numbers in
-``nominal_control``, is refused with ``ValueError`` naming it.
+The model, its error margin, the cost and the rule in full: docs/design-notes.md#guardianshjquadrotor.
 """
 
 from __future__ import annotations
@@ -94,7 +21,8 @@ import math
 
 import numpy as np
 
-from guardians._checks import finite, integer, quadrotor_only
+from guardians._checks import finite, integer
+from guardians.dispatch import quadrotor_only
 from guardians.privileged import PrivilegedGuardian
 from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
@@ -252,11 +180,6 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         self.z_band, self.grid, self.V, self._interp = values[1 if arrived else 0]
 
     # ------------------------------------------------------------------ the decision
-    def current_lap(self) -> float:
-        if self.lap is not None:
-            return self.lap
-        return self._measured_lap if self._measured_lap is not None else 0.1
-
     def evaluate(self, x, y, vx, vy) -> np.ndarray:
         """``(V, dV/dx, dV/dy, dV/dtheta, dV/dv)`` at position ``(x, y)`` and world velocity
         ``(vx, vy)`` (a speed above the grid's ``v_max`` is read at ``v_max``)."""
