@@ -49,11 +49,20 @@ def test_bad_solver_names_list_the_installed_ones():
 @given(x=st.floats(-9.0, 9.0), y=st.floats(-9.0, 9.0), th=st.floats(-math.pi, math.pi), v=st.floats(0.0, 2.0))
 @example(x=0.0, y=1.625, th=1.578125, v=1.5625)  # direct OSQP stops at its iteration limit here (found by hypothesis)
 @example(x=0.5625, y=-8.2265625, th=0.5625, v=0.5625)  # OSQP calls this feasible QP primal infeasible (found by hypothesis)
+@example(x=5.09375, y=8.15625, th=1.03125, v=1.34375)  # clarabel stops at its iteration limit on this feasible QP
+@example(x=-8.904070130177947, y=-8.761554916141465, th=0.07831726017930674, v=0.9406999930492526)  # CLF slack ~109
 def test_dubins4d_decisions_agree_with_direct_osqp(solver, x, y, th, v):
     ref, other = dubins4d("osqp"), dubins4d(solver)
     state = np.array([x, y, th, v])
     z0, G, h = ref.solve(state)
-    z1, _, _ = other.solve(state)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        z1, _, _ = other.solve(state)
+    if z1 is None and z0 is not None and any("MaxIterations" in str(w.message) for w in caught):
+        # the other solver's own documented failure on a feasible QP (its iteration limit; the
+        # guardian then falls back to its recovery manoeuvre): OSQP's answer must satisfy every row
+        assert np.all(G @ z0 <= h + 1e-4)
+        return
     if z0 is None and z1 is not None and ref._qp.last_status in (MAX_ITER, PRIMAL_INFEASIBLE):
         # OSQP's documented rare failures on a feasible QP (guardians/cbf/qp.py): its iteration
         # limit, or a false certificate of primal infeasibility; the guardian then falls back to
@@ -63,14 +72,17 @@ def test_dubins4d_decisions_agree_with_direct_osqp(solver, x, y, th, v):
     assert (z0 is None) == (z1 is None)
     if z0 is None:
         return
-    # solver tolerance: an interior-point solver (clarabel) stops up to ~3e-4 short of a bound here
-    assert np.allclose(z0[:2], z1[:2], atol=1e-3)
+    # solver tolerance: an interior-point solver (clarabel) stops up to ~3e-4 short of a bound here;
+    # its stopping tests are relative to the problem's scale, so a large CLF slack (z[3], ~109 far
+    # from the goal) loosens the controls by as much (1.3e-3 at the pinned example above)
+    atol = 1e-3 * max(1.0, float(np.abs(z0).max()) / 10.0)
+    assert np.allclose(z0[:2], z1[:2], atol=atol)
     gap = np.abs(h[: ref.K] - G[: ref.K] @ z0)
     if np.all(np.abs(gap - ref.active_atol) > 5e-4):  # not on the fence of the activity test
         a0, a1 = ref._decide(state), other._decide(state)
         assert a0["active_ctrl"] == a1["active_ctrl"]
         for k in ("turnrate_ctrl", "accel_ctrl"):
-            assert np.allclose(a0[k], a1[k], atol=1e-3)
+            assert np.allclose(a0[k], a1[k], atol=atol)
 
 
 @pytest.mark.parametrize("solver", OTHERS)
