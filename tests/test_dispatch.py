@@ -99,3 +99,64 @@ def test_a_third_party_env_is_served_by_the_model_free_guardians_only():
     a = b.act(obs, info)
     assert a["active_ctrl"] == 1 and np.all(np.isfinite(a[env.action_space.controls[0]]))
     env.close()
+
+
+def test_the_refusals_say_exactly_what_each_guardian_serves():
+    lookalike = GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2])
+    with pytest.raises(ValueError) as e:
+        CBFGuardian().check_spaces(None, lookalike)
+    assert str(e.value) == (
+        "guardian 'cbf' applies to Dubins4D envs and the maze car (controls ('turnrate_ctrl',)) and the quadrotor "
+        "(controls ('vforward_ctrl', 'vleft_ctrl', 'vup_ctrl', 'yawrate_ctrl')): it models the Dubins4D car among "
+        "circular obstacles (system 'dubins4d', controls ('turnrate_ctrl', 'accel_ctrl')); this env's system is "
+        "'generic' and its controls are ('turnrate_ctrl',)")
+    with pytest.raises(ValueError) as e:
+        CBFPaperGuardian().check_spaces(None, lookalike)
+    assert str(e.value).startswith("guardian 'cbf-paper' applies to Dubins4D envs only: it models the Dubins4D car")
+    with pytest.raises(ValueError) as e:
+        MazeCBFGuardian().check_spaces(None, lookalike)
+    assert str(e.value) == ("guardian 'cbf' (maze) models the constant-speed maze car among walls (system 'dubins3d', "
+                            "controls ('turnrate_ctrl',)); this env's system is 'generic' and its controls are "
+                            "('turnrate_ctrl',)")
+    lopsided = GuardianActionSpace(dubins3d.CONTROLS, [-0.1], [0.2], kind="dubins3d")
+    with pytest.raises(ValueError) as e:
+        MazeCBFGuardian().check_spaces(None, lopsided)
+    assert str(e.value) == "guardian 'cbf' (maze) needs a turn-rate bound symmetric about 0, got [-0.1, 0.2]"
+    MazeCBFGuardian().check_spaces(None, GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2], kind="dubins3d"))
+
+
+def test_reset_hands_the_episode_to_the_delegate_of_the_space_s_kind_and_back():
+    from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
+
+    maze_env = Dubins3DMazeGuardedEnv()
+    obs, info = maze_env.reset(seed=3)
+    priv = maze_env.privileged()
+    g = CBFGuardian()
+    assert g.delegate is None
+    g.reset(seed=0, observation_space=maze_env.observation_space, action_space=maze_env.action_space,
+            privileged=lambda: priv)
+    assert isinstance(g.delegate, MazeCBFGuardian) and g.delegate is g._delegate_for(maze_env.action_space)
+    assert g.delegate.name == "cbf"
+    a = g.act(obs, info)
+    assert set(a) == {"active_ctrl", "turnrate_ctrl"}  # the maze car's control, decided by the delegate
+    car = gym.make("Dubins4DCirclesGuarded-v0")
+    car.reset(seed=0)
+    g.reset(seed=0, observation_space=car.observation_space, action_space=car.action_space,
+            privileged=car.unwrapped.privileged)
+    assert g.delegate is None  # the Dubins4D car: the class's own episode
+    car.close()
+    maze_env.close()
+
+
+def test_delegate_arguments_merge_check_and_refuse():
+    from guardians.dispatch import delegate_arguments
+
+    assert delegate_arguments(MazeCBFGuardian, "maze", False, {"solver": "osqp"}) is None
+    assert delegate_arguments(MazeCBFGuardian, "maze", None, {"solver": "osqp"}) == {"solver": "osqp"}
+    assert delegate_arguments(MazeCBFGuardian, "maze", {"margin": 2.0}, {"margin": 1.0, "solver": "osqp"}) == \
+        {"margin": 2.0, "solver": "osqp"}
+    with pytest.raises(ValueError) as e:
+        delegate_arguments(MazeCBFGuardian, "maze", [1], {})
+    assert str(e.value) == "maze must be a dict of guardians.cbf.maze.MazeCBFGuardian arguments (or False), got [1]"
+    with pytest.raises((TypeError, ValueError)):
+        delegate_arguments(MazeCBFGuardian, "maze", {"no_such_argument": 1}, {})

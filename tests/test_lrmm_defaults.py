@@ -59,3 +59,12 @@ def test_the_guardian_reports_where_its_threshold_came_from():
     with pytest.warns(UserWarning, match="has no 'decision' threshold: using the paper's 0.85"):
         h = LRMMGuardian(model=bare)
     assert (h.threshold, h.threshold_source) == (0.85, "paper")
+
+
+def test_the_ends_of_the_threshold_range_are_values():
+    for t in (0, 0.0, 1, 1.0):
+        assert check_threshold(t) == float(t)
+        assert decision_threshold(None, {"threshold": t}, "m.npz") == (float(t), "stored decision")
+    for bad in (1.0000001, -1e-9):
+        with pytest.raises(ValueError, match="stored decision threshold must be in"):
+            decision_threshold(None, {"threshold": bad}, "m.npz")
