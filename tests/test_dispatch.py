@@ -160,3 +160,31 @@ def test_delegate_arguments_merge_check_and_refuse():
     assert str(e.value) == "maze must be a dict of guardians.cbf.maze.MazeCBFGuardian arguments (or False), got [1]"
     with pytest.raises((TypeError, ValueError)):
         delegate_arguments(MazeCBFGuardian, "maze", {"no_such_argument": 1}, {})
+
+
+def test_the_obstacle_shapes_and_the_quadrotor_s_command_box_are_checked_by_value():
+    from guardians.dispatch import quadrotor_only
+
+    car = dubins4d.CONTROLS
+    circles = GuardianActionSpace(car, [-0.25, -0.5], [0.25, 0.5], kind="dubins4d", obstacle_shapes=("circle",))
+    CBFGuardian().check_spaces(None, circles)
+    mixed = GuardianActionSpace(car, [-0.25, -0.5], [0.25, 0.5], kind="dubins4d", obstacle_shapes=("circle", "polygon"))
+    with pytest.raises(ValueError) as e:
+        CBFGuardian().check_spaces(None, mixed)
+    assert str(e.value) == ("guardian 'cbf' models circular obstacles only, and this env's world also has polygon "
+                            "obstacles (a map with shapes ['circle', 'polygon']); use a map of circles only, or a "
+                            "guardian that needs no obstacle geometry (lrmm, brakes)")
+    quad = quadrotor_control.CONTROLS
+    box = GuardianActionSpace(quad, [-1.0] * 4, [1.0] * 4, kind="quadrotor")
+    assert quadrotor_only(CBFGuardian(), box) is box
+    edge = GuardianActionSpace(quad, [0.0, -1.0, -1.0, -1.0], [1.0, 0.0, 1.0, 1.0], kind="quadrotor")
+    assert quadrotor_only(CBFGuardian(), edge) is edge  # zero on the box's edge still contains hover
+    no_hover = GuardianActionSpace(quad, [0.5, -1.0, -1.0, -1.0], [1.0, 1.0, 1.0, 1.0], kind="quadrotor")
+    with pytest.raises(ValueError) as e:
+        quadrotor_only(CBFGuardian(), no_hover)
+    assert str(e.value) == ("guardian 'cbf' (quadrotor) needs a command box that contains the zero command (hover) in "
+                            "each of ('vforward_ctrl', 'vleft_ctrl', 'vup_ctrl', 'yawrate_ctrl'), got low "
+                            "[0.5, -1.0, -1.0, -1.0] and high [1.0, 1.0, 1.0, 1.0]")
+    with pytest.raises(ValueError, match=r"^guardian 'cbf' \(quadrotor\) models the quadrotor's velocity command in a "
+                                         r"room \(system 'quadrotor'.*this env's system is 'dubins4d'"):
+        quadrotor_only(CBFGuardian(), circles)
