@@ -252,3 +252,16 @@ def test_latency_sweep(tmp_path, capsys):
     assert main(["sweep", "--agent", "inactive", "--latency", "0,50", "--episodes", "4", "--workers", "1", "--out", str(out), "--no-progress"]) == 0
     assert (out / "latency_sweep.png").stat().st_size > 0
     assert "| inactive |" in (out / "latency_sweep.md").read_text()
+    # `report` on a sweep's directory says what the directory holds and how to rebuild its files
+    capsys.readouterr()
+    assert main(["report", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "holds a latency sweep, not a benchmark run" in err and "rmm-bench sweep" in err
+    # a store with neither kind of invocation names what is missing, once
+    from benchmarks.bench.store import ResultsStore
+
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    ResultsStore(empty / "results.db").close()
+    assert main(["report", str(empty)]) == 2
+    assert "no benchmark run recorded in" in capsys.readouterr().err

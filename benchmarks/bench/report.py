@@ -126,11 +126,13 @@ def plot_outcomes(rows: list[dict], path: Path, batch_size: int = 64, measured: 
     for i, (key, colour) in enumerate([("goal", "tab:green"), ("collision", "tab:red"), ("timeout", "tab:gray")]):
         axes[0].bar([j + (i - 1) * width for j in x], [r[key][0] for r in rows], width,
                     yerr=[0 if math.isnan(r[key][1]) else r[key][1] for r in rows], color=colour, capsize=3, label=key)
-    axes[0].set_xticks(list(x), names)
+    # long names (``lrmm-paper``, ``cbf-paper``) run into each other when set level
+    axes[0].set_xticks(list(x), names, rotation=30, ha="right")
     wilson = any(r.get("rate_spread") == "wilson95" for r in rows)
     axes[0].set_ylabel(f"% of episodes (mean ± std over batches of {batch_size}"
                        + ("; 95% Wilson where < 2 batches)" if wilson else ")"))
-    axes[0].legend()
+    axes[0].set_ylim(0, 118)  # headroom above 100 % so the legend covers no bar
+    axes[0].legend(loc="upper center", ncols=3, fontsize="small")
     axes[0].set_title("Outcomes")
     key = "decision_ms" if measured else "compute_ms"
     for i, r in enumerate(rows):
@@ -142,6 +144,7 @@ def plot_outcomes(rows: list[dict], path: Path, batch_size: int = 64, measured: 
         axes[1].annotate(r["agent"], (max(x_ms, 1e-4), r["collision"][0]), textcoords="offset points",
                          xytext=(5, 5 + 11 * (i % 3)))
     axes[1].set_xscale("log")
+    axes[1].margins(x=0.2)  # room for the rightmost point's label inside the axes
     from matplotlib.ticker import NullFormatter
 
     axes[1].xaxis.set_minor_formatter(NullFormatter())  # minor labels collide on short decades
@@ -332,7 +335,16 @@ def cmd_report(request) -> int:
         if request.invocations:
             invs = [store.invocation(i) for i in request.invocations]
         else:
-            invs = [store.invocation(None, kind="run")]
+            try:
+                invs = [store.invocation(None, kind="run")]
+            except LookupError:
+                try:
+                    store.invocation(None, kind="sweep")
+                except LookupError:
+                    raise LookupError(f"no benchmark run recorded in {store.path}") from None
+                raise LookupError(f"{request.dir} holds a latency sweep, not a benchmark run: rerun its "
+                                  "`rmm-bench sweep` command with the same --out, which reads the stored "
+                                  "episodes back and rewrites latency_sweep.md and .png") from None
         write_report(store, request.dir, invs, request.batch_size)
     finally:
         store.close()

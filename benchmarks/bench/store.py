@@ -330,7 +330,9 @@ class ResultsStore:
         q += " ORDER BY id DESC LIMIT 1"
         row = self.db.execute(q, params).fetchone()
         if row is None:
-            raise LookupError(f"no {'invocation ' + str(inv_id) if inv_id else (kind or 'benchmark') + ' run'} recorded in {self.path}")
+            what = (f"invocation {inv_id}" if inv_id is not None
+                    else {"run": "benchmark run", "sweep": "latency sweep"}.get(kind, f"{kind or 'benchmark'} invocation"))
+            raise LookupError(f"no {what} recorded in {self.path}")
         inv = {"id": row[0], "created": row[1], "kind": row[2], "args": json.loads(row[3]),
                "run_keys": json.loads(row[4]), "episodes": row[5], "status": row[6], "pid": row[7], "host": row[8],
                "updated": row[9], "message": row[10]}
