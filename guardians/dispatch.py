@@ -59,25 +59,28 @@ def dubins4d_only(guardian, action_space, also: tuple[str, ...] = ()) -> None:
 
 
 def maze_car_only(guardian, action_space) -> GuardianActionSpace:
-    """Refuse an env that is not the maze car's, or whose turn-rate bound is not symmetric about
-    0 (``ValueError`` naming the guardian and why); the checked action space otherwise."""
+    """Refuse an env that is not the maze car's, or whose turn-rate bound is not ``[-b, b]`` with
+    ``b > 0`` (``ValueError`` naming the guardian and why); the checked action space otherwise."""
     space = require_system(guardian, action_space, dubins3d.KIND,
                            "(maze) models the constant-speed maze car among walls")
     lo, hi = float(space.control_low[0]), float(space.control_high[0])
     if not (hi > 0 and lo == -hi):
-        raise ValueError(f"guardian {guardian.name!r} (maze) needs a turn-rate bound symmetric about 0, got [{lo}, {hi}]")
+        raise ValueError(f"guardian {guardian.name!r} (maze) needs a turn-rate bound symmetric about 0 and wider than a "
+                         f"point ([-b, b] with b > 0), got [{lo}, {hi}]")
     return space
 
 
 def quadrotor_only(guardian, action_space) -> GuardianActionSpace:
     """Refuse an env that is not the quadrotor's, or whose command box does not contain the zero
-    command (hover; ``ValueError`` naming the guardian and why); the checked action space otherwise."""
+    command (hover) or is a single point on some axis (``low <= 0 <= high`` and ``low < high`` on
+    each; ``ValueError`` naming the guardian and why); the checked action space otherwise."""
     space = require_system(guardian, action_space, quadrotor_control.KIND,
                            "(quadrotor) models the quadrotor's velocity command in a room")
     lo, hi = np.asarray(space.control_low, float), np.asarray(space.control_high, float)
     if not (np.all(lo <= 0.0) and np.all(hi >= 0.0) and np.all(lo < hi)):
         raise ValueError(f"guardian {guardian.name!r} (quadrotor) needs a command box that contains the zero command "
-                         f"(hover) in each of {space.controls}, got low {lo.tolist()} and high {hi.tolist()}")
+                         f"(hover) and is wider than a point in each of {space.controls} (low <= 0 <= high, low < high), "
+                         f"got low {lo.tolist()} and high {hi.tolist()}")
     return space
 
 

@@ -12,6 +12,14 @@ Score: killed (a test failed, or the mutant ran past mutmut's timeout, which is 
 infinite loop shows) over all mutants that are not classified equivalent.  A mutant that no
 selected test calls ("no tests") counts as surviving: nothing would catch it.
 
+A mutant whose mutmut worker ended on a signal is judged again by running its tests directly
+(:func:`rejudge`), under a wall-clock limit: ``TIMEOUT_MULTIPLIER`` times the time its tests took
+on the unmutated code (as mutmut recorded it) plus ``TIMEOUT_CONSTANT`` seconds for pytest's
+start (``--timeout`` sets one limit for all).  A mutant that runs past it counts as killed
+("timeout"), as mutmut counts one that runs past its own limit; the test run's whole process
+group is killed then, so that no process it started (a pool worker, a pytest-xdist worker) is
+left running.  The report names every mutant killed by a time-out, and the limit it ran past.
+
 Defaults and why: ``--jobs 2`` (the machine this is tuned for has 2 cores); each mutmut child
 and the compiled kernels run single-threaded (``NUMBA_NUM_THREADS=1``, ``RMM_HJ_THREADS=1``)
 so two children do not fight over the cores; every run starts from a fresh copy (``--keep``
@@ -29,6 +37,7 @@ import json
 import os
 import random
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -46,6 +55,10 @@ SOURCE_PATHS = ["rmm_envs", "guardians", "benchmarks"]
 KILLED = {1: "killed", 3: "killed", 36: "timeout", -24: "timeout", 24: "timeout", 152: "timeout", 255: "timeout"}
 # everything else is not a detection: 0 survived, 5/33 no tests, None not checked, others suspicious
 OTHER = {0: "survived", 5: "no tests", 33: "no tests", None: "not checked", 34: "skipped"}
+# the time a mutant's tests may take, as a multiple of the time they took on the unmutated code
+# plus a constant: written into mutmut's configuration, and the re-judging's limit (rejudge)
+TIMEOUT_MULTIPLIER = 20.0
+TIMEOUT_CONSTANT = 60.0
 
 
 def load_targets(path: Path = ROOT / "mutation" / "targets.toml") -> dict:
@@ -92,7 +105,7 @@ def prepare(work: Path, target: dict, keep: bool) -> None:
         # a mutant's tests may take far longer than they took unmutated on a loaded shared machine
         # (or when the mutant sends a solver the long way): a generous limit, so that only a real
         # hang is a timeout, and a timeout is never the load
-        "timeout_multiplier = 20.0\ntimeout_constant = 60.0\n"
+        f"timeout_multiplier = {TIMEOUT_MULTIPLIER}\ntimeout_constant = {TIMEOUT_CONSTANT}\n"
     )
     (work / "pyproject.toml").write_text(text)
 
@@ -118,21 +131,68 @@ def verdicts(work: Path) -> dict[str, str]:
     return out
 
 
-def rejudge(work: Path, name: str, python: str, env: dict) -> str:
-    """The verdict of one mutant from its tests run directly, without mutmut's forked worker.
+def recorded_tests(work: Path, name: str) -> tuple[list[str], float]:
+    """The tests mutmut recorded as calling mutant ``name``'s function, and the seconds they took
+    together on the unmutated code (from its ``mutants/mutmut-stats.json``)."""
+    path = work / "mutants" / "mutmut-stats.json"
+    stats = json.loads(path.read_text())
+    try:
+        tests = sorted(stats["tests_by_mangled_function_name"].get(name.partition("__mutmut_")[0], ()))
+        seconds = sum(float(stats["duration_by_test"].get(t, 0.0)) for t in tests)
+    except (KeyError, AttributeError, TypeError, ValueError) as e:
+        raise ValueError(f"{path} is not mutmut 3's stats file (tests_by_mangled_function_name, duration_by_test): "
+                         f"{e!r}") from e
+    return tests, seconds
+
+
+def time_limit(seconds: float, timeout: float | None = None) -> float:
+    """The re-judging's wall-clock limit for tests that took ``seconds`` unmutated: ``timeout``
+    when given, else ``TIMEOUT_MULTIPLIER * seconds + TIMEOUT_CONSTANT``."""
+    return float(timeout) if timeout is not None else TIMEOUT_MULTIPLIER * seconds + TIMEOUT_CONSTANT
+
+
+def run_limited(cmd: list[str], cwd: Path, env: dict, limit: float, log) -> int | None:
+    """Run ``cmd`` in a process group of its own, its output to ``log``; its exit code, or ``None``
+    when it ran past ``limit`` seconds: then (or on any error or Ctrl-C while waiting) the whole
+    group is killed and reaped, so that no child of it is left running."""
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        return proc.wait(timeout=limit)
+    except subprocess.TimeoutExpired:
+        return None
+    finally:
+        if proc.returncode is None:  # still running: the group's leader is alive, so its id is the group's
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            proc.wait()
+
+
+def rejudge(work: Path, name: str, python: str, env: dict, timeout: float | None = None) -> tuple[str, dict]:
+    """The verdict of one mutant from its tests run directly, without mutmut's forked worker, and
+    how it was reached (the tests' unmutated seconds, the limit, the seconds taken).
 
     Used for the mutants whose worker ended on a signal (mutmut's "suspicious"): the HJ solver's
     compiled threads do not always survive the fork, which is the harness's failure, not a
-    verdict.  The tests are the ones mutmut recorded as calling the mutant's function."""
-    r = subprocess.run([python, "-m", "mutmut", "tests-for-mutant", name], cwd=work, capture_output=True, text=True,
-                       env=env)
-    tests = [ln.strip() for ln in r.stdout.splitlines() if ln.strip().startswith("tests/")]
+    verdict.  The tests are the ones mutmut recorded as calling the mutant's function; they run
+    under :func:`time_limit` (``timeout``: one limit for every mutant), and a mutant that runs
+    past it is killed by a time-out ("timeout").  Their output goes to ``<work>/rejudge.log``."""
+    tests, seconds = recorded_tests(work, name)
     if not tests:
-        return "no tests"
-    r = subprocess.run(["nice", "-n", "19", python, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", "-p", "no:xdist",
-                        *tests], cwd=work / "mutants", capture_output=True, text=True,
-                       env=env | {"MUTANT_UNDER_TEST": name, "PYTHONPATH": "."})
-    return {0: "survived", 1: "killed"}.get(r.returncode, f"suspicious (pytest exit {r.returncode})")
+        return "no tests", {"tests_s": 0.0}
+    limit = time_limit(seconds, timeout)
+    cmd = ["nice", "-n", "19", python, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", "-p", "no:xdist", *tests]
+    t0 = time.monotonic()
+    with open(work / "rejudge.log", "a") as log:
+        log.write(f"\n=== {name}: {len(tests)} tests, {seconds:.1f} s unmutated, limit {limit:.0f} s\n")
+        log.flush()
+        code = run_limited(cmd, work / "mutants", env | {"MUTANT_UNDER_TEST": name, "PYTHONPATH": "."}, limit, log)
+    how = {"tests_s": round(seconds, 2), "limit_s": round(limit, 1), "seconds": round(time.monotonic() - t0, 1),
+           "option": timeout is not None}
+    if code is None:
+        return "timeout", how
+    return {0: "survived", 1: "killed"}.get(code, f"suspicious (pytest exit {code})"), how
 
 
 def mutant_diff(work: Path, name: str, python: str) -> str:
@@ -169,9 +229,10 @@ def run_target(name: str, target: dict, args, equivalent: dict) -> dict:
         r = subprocess.run(["nice", "-n", str(args.nice), args.python, "-m", "mutmut", "run", "--max-children",
                             str(args.jobs), *chosen], cwd=work, stdout=f, stderr=subprocess.STDOUT, env=env)
     v = verdicts(work)
+    rejudged = {}
     for m in chosen:
         if v.get(m, "").startswith("suspicious"):
-            v[m] = rejudge(work, m, args.python, env)
+            v[m], rejudged[m] = rejudge(work, m, args.python, env, args.timeout)
     seconds = time.monotonic() - t0
     if prev is not None:
         if "killed_mutants" in prev:
@@ -195,7 +256,8 @@ def run_target(name: str, target: dict, args, equivalent: dict) -> dict:
            "mutants": len(v), "of": len(names), "killed_mutants": sorted(m for m in detected),
            "rerun": prev is not None, "killed": len([m for m in detected if m not in equiv]), "equivalent": len(equiv),
            "survived": survivors, "equivalent_mutants": equiv_survived, "equivalent_but_killed": killed_equiv,
-           "status": {m: v[m] for m in survivors}, "exit": r.returncode}
+           "status": {m: v[m] for m in survivors}, "exit": r.returncode,
+           "timeouts": sorted(m for m in detected if v[m] == "timeout"), "rejudged": rejudged}
     res["score"] = res["killed"] / len(counted) if counted else float("nan")
     res["diffs"] = {m: mutant_diff(work, m, args.python) for m in survivors + equiv_survived}
     (work / "result.json").write_text(json.dumps(res, indent=1))
@@ -232,8 +294,19 @@ def report(results: list[dict], equivalent: dict, to_test: dict) -> str:
                  f"{killed} | {counted - killed} | **{100 * killed / max(counted, 1):.1f}%** | "
                  f"{sum(r['seconds'] for r in results)} |")
     for r in results:
-        if r["survived"] or r["equivalent_mutants"] or r["equivalent_but_killed"]:
+        timeouts = r.get("timeouts", [])
+        if r["survived"] or r["equivalent_mutants"] or r["equivalent_but_killed"] or timeouts:
             lines.append(f"\n### {r['target']}\n")
+        for m in timeouts:
+            how = r.get("rejudged", {}).get(m)
+            if how is None:
+                limit = "it ran past mutmut's own time limit"
+            else:
+                rule = "--timeout" if how.get("option") else \
+                    f"{TIMEOUT_MULTIPLIER:g} x {how['tests_s']:g} s unmutated + {TIMEOUT_CONSTANT:g} s"
+                limit = (f"its tests ran past the re-judging's limit of {how['limit_s']:g} s ({rule}) and their process "
+                         "group was killed")
+            lines.append(f"- `{m}` killed by a time-out: {limit}")
         for m in r["survived"]:
             why = f"to test: {to_test[m]}" if m in to_test else "UNCLASSIFIED (add it to mutation/survivors.toml)"
             lines.append(f"- `{m}` ({r['status'][m]}) {why}\n\n```diff\n{r['diffs'][m]}\n```")
@@ -242,6 +315,16 @@ def report(results: list[dict], equivalent: dict, to_test: dict) -> str:
         for m in r["equivalent_but_killed"]:
             lines.append(f"- `{m}` is listed as equivalent but a test kills it: remove it from mutation/survivors.toml")
     return "\n".join(lines) + "\n"
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"--timeout must be a finite number of seconds above 0, got {text!r}")
+    return value
 
 
 def main(argv=None) -> int:
@@ -254,6 +337,10 @@ def main(argv=None) -> int:
                    help="test only this many of each target's mutants, drawn at random with a fixed seed (default 0: all)")
     p.add_argument("--rerun-survivors", action="store_true",
                    help="re-test only the previous run's survivors with the current tests (after adding tests)")
+    p.add_argument("--timeout", type=_seconds, default=None,
+                   help="wall-clock limit in seconds of the direct re-judging of a mutant whose mutmut worker ended on "
+                        f"a signal; past it the mutant counts as killed (timeout) (default: {TIMEOUT_MULTIPLIER:g} x the "
+                        f"time its tests took unmutated + {TIMEOUT_CONSTANT:g} s)")
     p.add_argument("--keep", action="store_true", help="reuse the previous scratch copy and mutmut's cached verdicts")
     p.add_argument("--python", default=sys.executable, help="python with mutmut and the test extra (default: this one)")
     p.add_argument("--report-only", action="store_true",

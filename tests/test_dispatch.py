@@ -121,7 +121,8 @@ def test_the_refusals_say_exactly_what_each_guardian_serves():
     lopsided = GuardianActionSpace(dubins3d.CONTROLS, [-0.1], [0.2], kind="dubins3d")
     with pytest.raises(ValueError) as e:
         MazeCBFGuardian().check_spaces(None, lopsided)
-    assert str(e.value) == "guardian 'cbf' (maze) needs a turn-rate bound symmetric about 0, got [-0.1, 0.2]"
+    assert str(e.value) == ("guardian 'cbf' (maze) needs a turn-rate bound symmetric about 0 and wider than a point "
+                            "([-b, b] with b > 0), got [-0.1, 0.2]")
     MazeCBFGuardian().check_spaces(None, GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2], kind="dubins3d"))
 
 
@@ -182,9 +183,67 @@ def test_the_obstacle_shapes_and_the_quadrotor_s_command_box_are_checked_by_valu
     no_hover = GuardianActionSpace(quad, [0.5, -1.0, -1.0, -1.0], [1.0, 1.0, 1.0, 1.0], kind="quadrotor")
     with pytest.raises(ValueError) as e:
         quadrotor_only(CBFGuardian(), no_hover)
-    assert str(e.value) == ("guardian 'cbf' (quadrotor) needs a command box that contains the zero command (hover) in "
-                            "each of ('vforward_ctrl', 'vleft_ctrl', 'vup_ctrl', 'yawrate_ctrl'), got low "
-                            "[0.5, -1.0, -1.0, -1.0] and high [1.0, 1.0, 1.0, 1.0]")
+    assert str(e.value) == ("guardian 'cbf' (quadrotor) needs a command box that contains the zero command (hover) and "
+                            "is wider than a point in each of ('vforward_ctrl', 'vleft_ctrl', 'vup_ctrl', 'yawrate_ctrl') "
+                            "(low <= 0 <= high, low < high), got low [0.5, -1.0, -1.0, -1.0] and high [1.0, 1.0, 1.0, 1.0]")
     with pytest.raises(ValueError, match=r"^guardian 'cbf' \(quadrotor\) models the quadrotor's velocity command in a "
                                          r"room \(system 'quadrotor'.*this env's system is 'dubins4d'"):
         quadrotor_only(CBFGuardian(), circles)
+
+
+def test_every_non_circle_shape_of_a_map_is_named_in_the_refusal():
+    car = dubins4d.CONTROLS
+    space = GuardianActionSpace(car, [-0.25, -0.5], [0.25, 0.5], kind="dubins4d",
+                                obstacle_shapes=("circle", "polygon", "segment"))
+    for g in (CBFGuardian(), HJGuardian()):
+        with pytest.raises(ValueError) as e:
+            g.check_spaces(None, space)
+        assert str(e.value) == (f"guardian {g.name!r} models circular obstacles only, and this env's world also has "
+                                "polygon, segment obstacles (a map with shapes ['circle', 'polygon', 'segment']); use a "
+                                "map of circles only, or a guardian that needs no obstacle geometry (lrmm, brakes)")
+
+
+def test_a_turn_rate_or_command_axis_of_zero_width_is_refused():
+    from guardians.dispatch import quadrotor_only
+    from guardians.hj.maze import MazeHJGuardian
+
+    # [0, 0] is symmetric about 0 and contains hover, but leaves the guardian no control to use
+    for lo, hi in ((0.0, 0.0), (-0.0, 0.0)):
+        still = GuardianActionSpace(dubins3d.CONTROLS, [lo], [hi], kind="dubins3d")
+        for g in (MazeCBFGuardian(), MazeHJGuardian(), CBFGuardian(), HJGuardian()):
+            with pytest.raises(ValueError) as e:
+                g.check_spaces(None, still)
+            assert str(e.value) == (f"guardian {g.name!r} (maze) needs a turn-rate bound symmetric about 0 and wider "
+                                    f"than a point ([-b, b] with b > 0), got [{lo}, {hi}]")
+    tiny = GuardianActionSpace(dubins3d.CONTROLS, [-1e-9], [1e-9], kind="dubins3d")
+    MazeCBFGuardian().check_spaces(None, tiny)
+    quad = quadrotor_control.CONTROLS
+    for axis in range(4):
+        lo, hi = [-1.0] * 4, [1.0] * 4
+        lo[axis] = hi[axis] = 0.0
+        flat = GuardianActionSpace(quad, lo, hi, kind="quadrotor")
+        with pytest.raises(ValueError) as e:
+            quadrotor_only(CBFGuardian(), flat)
+        assert str(e.value) == ("guardian 'cbf' (quadrotor) needs a command box that contains the zero command (hover) "
+                                f"and is wider than a point in each of {quad} (low <= 0 <= high, low < high), got low "
+                                f"{lo} and high {hi}")
+        with pytest.raises(ValueError, match=r"wider than a point"):
+            HJGuardian().check_spaces(None, flat)
+
+
+@pytest.mark.parametrize("make", [CBFGuardian, HJGuardian, CBFPaperGuardian])
+def test_a_space_that_is_not_a_guardian_action_space_is_refused_by_name(make):
+    env = gym.make("Dubins4DCirclesGuarded-v0")
+    plain = gym.spaces.Box(-1.0, 1.0, (2,), np.float64)
+    g = make()
+    with pytest.raises(ValueError) as e:
+        g.check_spaces(env.observation_space, plain)
+    assert str(e.value) == (f"guardian {g.name!r} builds its actions through the env's action space: pass "
+                            "reset(action_space=env.action_space) with a rmm_envs.autonomy.GuardianActionSpace, "
+                            f"got {plain!r}")
+    # a reset without any action space: the same refusal, naming what was got (None)
+    with pytest.raises(ValueError, match=f"^guardian {g.name!r} builds its actions through the env's action space: "
+                                         r"pass reset\(action_space=env.action_space\) .*got None$"):
+        g.reset(seed=0, observation_space=env.observation_space, privileged=env.unwrapped.privileged)
+    assert g.delegate is None
+    env.close()
