@@ -1,6 +1,18 @@
 import pytest
 
 
+def pytest_collection_modifyitems(config, items):
+    """Tests marked ``heavy`` run first, the rest in their own order: with two workers
+    (``make test``) a half-minute test started last keeps one core busy after the other has
+    finished; started first, the short tests fill in around it.  ``heavy(seconds=N)`` orders them
+    longest first (default 20)."""
+    def order(item):
+        mark = item.get_closest_marker("heavy")
+        return (1, 0.0) if mark is None else (0, -float(mark.kwargs.get("seconds", 20)))
+
+    items.sort(key=order)  # stable: the rest keep their order
+
+
 @pytest.fixture(autouse=True, scope="session")
 def _hj_cache(tmp_path_factory):
     """Keep HJ value functions solved by tests out of the user's cache."""
