@@ -5,7 +5,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test bench install clean mutate
+.PHONY: run test test-slow bench install clean mutate
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,6 +21,10 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2
+
+# The checks marked `slow` (README, Development): end-to-end drills and the paper-scale dataset.
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -q -n 2 -m slow
 
 # Mutation score of the decision-making modules (docs/mutation.md): targets and the tests that judge
 # each are in mutation/targets.toml; `make mutate TARGETS="cbf hj"` runs only those.

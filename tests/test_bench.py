@@ -176,6 +176,7 @@ def test_agent_options_reach_the_guardian(tmp_path):
     assert all(a == s for a, s in con.execute("SELECT active_steps, steps - 1 FROM episodes"))  # all but the driver's first lap
 
 
+@pytest.mark.heavy
 def test_resume_after_kill_minus_nine(tmp_path, capsys):
     out = tmp_path / "k"
     cmd = [sys.executable, "-m", "benchmarks.bench.cli", "--agent", "inactive", "--episodes", "40", "--workers", "1", "--out", str(out), *FAST]

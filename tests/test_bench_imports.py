@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from benchmarks.bench.config import import_from
 
 GUARD = '''
@@ -34,6 +36,7 @@ def _bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
                           cwd=cwd, capture_output=True, text=True, timeout=600, env=env)
 
 
+@pytest.mark.heavy
 def test_agent_and_env_modules_are_found_in_the_current_directory_by_every_worker(tmp_path):
     (tmp_path / "my_guard.py").write_text(GUARD)
     (tmp_path / "my_env.py").write_text(ENV)
@@ -44,6 +47,7 @@ def test_agent_and_env_modules_are_found_in_the_current_directory_by_every_worke
     assert "| 4 |" in row and "| 0 | 0 |" in row  # four episodes, no errors
 
 
+@pytest.mark.slow  # a Ray cluster of its own (25-35 s); the local pool's test of the same promise is above
 def test_ray_workers_find_the_current_directory_s_modules_too(tmp_path):
     (tmp_path / "my_guard.py").write_text(GUARD)
     (tmp_path / "my_env.py").write_text(ENV)
@@ -97,6 +101,7 @@ class CountsCalls(Guardian):
 '''
 
 
+@pytest.mark.heavy
 def test_each_workers_first_timed_decision_comes_after_an_untimed_warm_up(tmp_path):
     """Every episode, the first of each worker included, starts with act() already called in
     that process: compiling or loading a guardian's kernels is never a timed decision."""

@@ -79,6 +79,7 @@ def test_rerun_is_a_no_op_and_other_parameters_are_refused(tmp_path):
         generate(small(branches=7), tmp_path / "d", workers=1, progress=False)
 
 
+@pytest.mark.heavy
 def test_resume_after_kill_minus_nine(tmp_path):
     out = tmp_path / "k"
     # a small tree (8 branches, not the default 32): the labels' cost is not what is tested
@@ -119,6 +120,7 @@ def test_half_written_shard_is_redone(tmp_path):
     np.testing.assert_array_equal(load_dataset(out).risk, ref)
 
 
+@pytest.mark.slow  # a Ray cluster of its own (25-35 s); tests/test_faults.py keeps one Ray run in the default suite
 def test_ray_backend_gives_the_same_data(tmp_path):
     try:  # ray is in the test extra: a missing install must fail, not skip
         import ray

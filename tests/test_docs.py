@@ -3,6 +3,7 @@ import re
 import subprocess
 import sys
 import tomllib
+from importlib.metadata import entry_points
 from pathlib import Path
 
 import pytest
@@ -13,13 +14,19 @@ sys.path.insert(0, str(DOCS))
 import gen  # noqa: E402
 
 
+_TRAINS = pytest.mark.slow  # label, train and benchmark end to end: 7-10 s of CPU, 25-45 s on a busy machine
+
+
 @pytest.mark.parametrize("script, args", [
-    ("label_and_train.py", ["--configs", "6", "--samples", "16", "--branches", "8", "--epochs", "3"]),
     ("third_party_guardian.py", []),
     ("new_system.py", []),
-    ("own_simulator.py", ["--configs", "4", "--samples", "32", "--epochs", "3", "--episodes", "4"]),
-    ("rl_guardian.py", ["--timesteps", "2048", "--episodes", "4"]),  # asserts its table's rows and counts
-    ("rl_guardian.py", ["--timesteps", "2048", "--episodes", "2", "--cost-limit", "0.1"]),  # PPO-Lagrangian on info["cost"]
+    pytest.param("label_and_train.py", ["--configs", "6", "--samples", "16", "--branches", "8", "--epochs", "3"],
+                 marks=_TRAINS),
+    pytest.param("own_simulator.py", ["--configs", "4", "--samples", "32", "--epochs", "3", "--episodes", "4"],
+                 marks=_TRAINS),
+    # PPO-Lagrangian on info["cost"], and plain PPO; the script asserts its table's rows and counts
+    pytest.param("rl_guardian.py", ["--timesteps", "2048", "--episodes", "2", "--cost-limit", "0.1"], marks=_TRAINS),
+    pytest.param("rl_guardian.py", ["--timesteps", "2048", "--episodes", "4"], marks=_TRAINS),
 ])
 def test_example_scripts_run(script, args, tmp_path):
     env = dict(os.environ, MPLBACKEND="Agg")
@@ -40,7 +47,7 @@ def _section(page: str, name: str) -> str:
     return m.group(1)
 
 
-def test_every_console_script_help_matches_the_reference():
+def test_every_console_script_help_matches_the_reference(monkeypatch, capsys):
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
     page = (DOCS / "cli.md").read_text()
     bindir = Path(sys.executable).parent
@@ -48,14 +55,24 @@ def test_every_console_script_help_matches_the_reference():
     for name in scripts:
         exe = bindir / name
         assert exe.exists(), f"console script {name} is not installed next to {sys.executable}"
-        out = subprocess.run([str(exe), "--help"], capture_output=True, text=True, env=env, timeout=120)
-        assert out.returncode == 0, out.stderr
-        assert out.stdout.rstrip() == _section(page, name), f"`{name} --help` differs from docs/cli.md"
-    for sub in ("report", "sweep"):
-        out = subprocess.run([str(bindir / "rmm-bench"), sub, "--help"], capture_output=True, text=True, env=env, timeout=120)
-        assert out.stdout.rstrip() == _section(page, f"rmm-bench {sub}")
-    out = subprocess.run([str(bindir / "rmm-envs"), "demo", "--help"], capture_output=True, text=True, env=env, timeout=120)
-    assert out.stdout.rstrip() == _section(page, "rmm-envs demo")
+    # one installed script run as a user runs it; the rest in this process (a fresh interpreter
+    # each costs a second of imports, and the text is the same)
+    out = subprocess.run([str(bindir / "rmm-bench"), "--help"], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.rstrip() == _section(page, "rmm-bench"), "`rmm-bench --help` differs from docs/cli.md"
+    monkeypatch.setenv("COLUMNS", "100")
+    eps = {ep.name: ep for ep in entry_points(group="console_scripts") if ep.name in scripts}
+    assert set(eps) == set(scripts), f"console scripts not installed: {set(scripts) - set(eps)}"
+    calls = [(name, [name], ["--help"]) for name in scripts]
+    calls += [("rmm-bench", [f"rmm-bench {sub}"], [sub, "--help"]) for sub in ("report", "sweep")]
+    calls += [("rmm-envs", ["rmm-envs demo"], ["demo", "--help"])]
+    for name, (section,), argv in calls:
+        assert eps[name].value == scripts[name], f"{name} is installed as {eps[name].value}, pyproject says {scripts[name]}"
+        monkeypatch.setattr(sys, "argv", [name, *argv])
+        with pytest.raises(SystemExit) as stop:
+            eps[name].load()(argv)
+        assert stop.value.code in (0, None), f"`{section} --help` exited with {stop.value.code}"
+        assert capsys.readouterr().out.rstrip() == _section(page, section), f"`{section} --help` differs from docs/cli.md"
 
 
 def test_links_between_pages_resolve():

@@ -112,6 +112,7 @@ def test_module_ids_are_resolved_to_the_id_the_module_registers(tmp_path, monkey
         sys.modules.pop("regmod26", None)
 
 
+@pytest.mark.heavy
 def test_rmm_bench_runs_an_entry_point_env_in_every_worker(tmp_path):
     site = tmp_path / "site"
     site.mkdir()
@@ -123,6 +124,7 @@ def test_rmm_bench_runs_an_entry_point_env_in_every_worker(tmp_path):
     assert "| 4 |" in row
 
 
+@pytest.mark.heavy
 def test_an_env_a_worker_cannot_register_fails_the_run_naming_the_env_and_the_import_error(tmp_path):
     (tmp_path / "workerfail.py").write_text(WORKER_ONLY_FAILURE)
     res = _bench(tmp_path, "--env", "workerfail:MyEnv-v0", "--agent", "inactive", "--episodes", "4", "--workers", "2")

@@ -237,6 +237,7 @@ def test_report_never_imports_modules_named_in_the_database(tmp_path, capsys, mo
 
 
 # ------------------------------------------------------------------ rmm-datagen: a dead worker
+@pytest.mark.heavy
 def test_datagen_reports_a_dead_worker_and_a_rerun_finishes(tmp_path, monkeypatch):
     from rmm_envs.risk import datagen
     from tests.bench_helpers import dying_shard_job
@@ -266,6 +267,7 @@ def test_datagen_rejects_zero_workers(tmp_path):
                          tmp_path / "z", workers=0, progress=False)
 
 
+@pytest.mark.heavy
 def test_ray_backend_same_results_and_a_lost_task_is_reported(tmp_path):
     try:
         import ray

@@ -334,6 +334,7 @@ def _stored(db):
     return cols, [tuple(struct.pack("d", v) if isinstance(v, float) else v for v in r) for r in rows]
 
 
+@pytest.mark.heavy
 def test_bench_rows_bit_identical_with_1_and_2_workers(tmp_path):
     from benchmarks.bench.cli import main as bench
 

@@ -194,6 +194,7 @@ def _bench(args, limit_bytes=None):
                           text=True, timeout=300, preexec_fn=limit if limit_bytes else None)
 
 
+@pytest.mark.heavy
 def test_file_size_limit_mid_run_is_a_run_failure_that_keeps_every_episode(tmp_path):
     out = tmp_path / "r"
     cmd = ["--agent", "inactive", "--out", out, *FAST]
@@ -543,6 +544,7 @@ def test_maze_sizes_refused_before_anything_is_allocated(rows):
     assert time.perf_counter() - t0 < 5.0
 
 
+@pytest.mark.heavy
 def test_datagen_under_a_file_size_limit_is_one_line_exit_1_and_a_rerun_finishes(tmp_path):
     """The worker writing a shard hits the limit (EFBIG, as ENOSPC would): one line naming the
     directory and the fix, exit 1, and the same command afterwards finishes the dataset."""

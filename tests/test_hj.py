@@ -381,6 +381,7 @@ def circle_guardians(tmp_path_factory):
     return guards, box
 
 
+@pytest.mark.heavy
 def test_default_grid_value_against_the_exact_propagator(circle_guardians):
     guards, _ = circle_guardians
     g = guards["hj"]

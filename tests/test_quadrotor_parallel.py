@@ -437,6 +437,7 @@ def test_lrmm_reads_the_shipped_command_model_by_env_id(env):
     assert a["active_ctrl"] in (0, 1) and 0.0 < g.last_risk < 1.0 and 0.0 < g.last_driver_risk < 1.0
 
 
+@pytest.mark.heavy
 def test_rmm_bench_set_runs_every_default_guardian_on_the_quadrotor(tmp_path, capsys):
     import sqlite3
 

@@ -44,7 +44,17 @@ def _fingerprint(i: int) -> dict:
     return run_under(SETTINGS[i], "quick", timeout=900)
 
 
-@pytest.mark.parametrize("i", range(len(SETTINGS)), ids=[describe(s).replace(" ", "") for s in SETTINGS])
+def _ends_by_default(i: int):
+    """The default suite runs the two ends, the portable setting (oldest kernel, generic CPU, no
+    SIMD dispatch) and the host's own; the kernels in between each cost a fresh interpreter
+    computing the whole fingerprint (7 s of CPU) and run with ``-m slow``."""
+    ident = describe(SETTINGS[i]).replace(" ", "")
+    ends = (0, len(SETTINGS) - 1)
+    return pytest.param(i, id=ident, marks=() if i in ends else pytest.mark.slow)
+
+
+@pytest.mark.heavy(seconds=60)  # the portable child compiles every numba kernel for a generic CPU
+@pytest.mark.parametrize("i", [_ends_by_default(i) for i in range(len(SETTINGS))])
 def test_the_same_bits_under_each_machines_arithmetic(i):
     record = json.loads(RECORD.read_text())
     fp = _fingerprint(i)
