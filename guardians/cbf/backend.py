@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from guardians.cbf.quiet import quietly
+
 __all__ = ["DEFAULT_SOLVER", "QpsolversQP", "installed_solvers", "parse_solver"]
 
 DEFAULT_SOLVER = "osqp"
@@ -89,8 +91,8 @@ class QpsolversQP:
             return None
         keep = np.isfinite(h) & ~empty
         try:
-            z = self._solve_qp(self.P, self.q, G[keep], h[keep], lb=self.lb,
-                               ub=self.ub, solver=self.name, **self.options)
+            z = quietly(lambda: self._solve_qp(self.P, self.q, G[keep], h[keep], lb=self.lb,
+                                               ub=self.ub, solver=self.name, **self.options))
         except self._errors:  # a solver that raises on an infeasible problem: no solution, as OSQP's status says
             return None
         if z is None or not np.all(np.isfinite(z)):

@@ -18,6 +18,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
+from guardians.cbf.quiet import quietly
 from guardians.cbf.barrier import HOCBFParams
 
 __all__ = ["BarrierQP"]
@@ -96,11 +97,11 @@ class BarrierQP:
         if native is not None:
             native.update_data_vec(q=q, l=l, u=u)
             native.update_data_mat(P_x=None, P_i=None, A_x=Ax, A_i=None)
-            native.solve()
+            quietly(native.solve)
             status, x = native.info.status_val, native.solution.x
         else:
             self._solver.update(Ax=Ax, l=l, u=u, **({} if q is None else {"q": q}))
-            res = self._solver.solve(raise_error=False)
+            res = quietly(lambda: self._solver.solve(raise_error=False))
             status, x = res.info.status_val, res.x
         self.last_status = status
         if status not in _SOLVED or x is None:
