@@ -49,11 +49,12 @@ def _ends_by_default(i: int):
     SIMD dispatch) and the host's own; the kernels in between each cost a fresh interpreter
     computing the whole fingerprint (7 s of CPU) and run with ``-m slow``."""
     ident = describe(SETTINGS[i]).replace(" ", "")
-    ends = (0, len(SETTINGS) - 1)
-    return pytest.param(i, id=ident, marks=() if i in ends else pytest.mark.slow)
+    if i == 0:  # compiles every numba kernel for a generic CPU: first, while a worker fills the host's cache
+        return pytest.param(i, id=ident, marks=pytest.mark.heavy(seconds=60))
+    # the host's own runs where it falls, late, on kernels the suite has compiled by then
+    return pytest.param(i, id=ident, marks=() if i == len(SETTINGS) - 1 else pytest.mark.slow)
 
 
-@pytest.mark.heavy(seconds=60)  # the portable child compiles every numba kernel for a generic CPU
 @pytest.mark.parametrize("i", [_ends_by_default(i) for i in range(len(SETTINGS))])
 def test_the_same_bits_under_each_machines_arithmetic(i):
     record = json.loads(RECORD.read_text())
