@@ -3,7 +3,8 @@
 * The fingerprint of ``benchmarks/check_behaviour.py`` (generated worlds, env rollouts with
   their info, risk labels, ``rmm-datagen`` datasets, HJ value functions and fixed-clock
   ``rmm-bench`` episodes of all three systems), computed at its quick size in a fresh
-  interpreter under several machines' arithmetic: the BLAS kernel numpy's OpenBLAS uses
+  interpreter under several machines' arithmetic (two in the default suite, the rest with
+  ``-m slow``, see ``CASES``): the BLAS kernel numpy's OpenBLAS uses
   (``OPENBLAS_CORETYPE`` Prescott, Haswell, SkylakeX where the CPU has AVX-512), the CPU numba
   compiles for (``NUMBA_CPU_NAME`` generic, or the host) and the SIMD loops numpy dispatches to
   (``NPY_DISABLE_CPU_FEATURES``).  Each must equal the committed record
@@ -39,38 +40,45 @@ RECORD = ROOT / "tests" / "data" / "fingerprint_quick.json"
 SETTINGS = arith_settings()
 
 
+#: The default suite's two cases: the oldest BLAS kernel with numpy's SIMD dispatch below AVX2
+#: (everything that reaches BLAS or numpy's dispatched loops on an old machine), and the host's
+#: own arithmetic.  Both compile numba for the host, whose kernels the suite has cached by the
+#: time they run.  Numba's target CPU (``NUMBA_CPU_NAME=generic``) and the kernels in between
+#: are the ``-m slow`` cases below (each a fresh interpreter; a generic CPU compiles every
+#: kernel again, about 50 s of CPU on a fresh clone); the static check further down refuses
+#: ``fastmath``, the one way numba code comes to depend on the CPU it was compiled for.
+OLD_KERNEL = {**SETTINGS[0], "NUMBA_CPU_NAME": None}
+HOST = SETTINGS[-1]
+CASES = [pytest.param(OLD_KERNEL, id="old-kernel:" + describe(OLD_KERNEL).replace(" ", "")),
+         pytest.param(HOST, id="host:" + describe(HOST).replace(" ", ""))]
+CASES += [pytest.param(s, id=describe(s).replace(" ", ""), marks=pytest.mark.slow) for s in SETTINGS[:-1]]
+
+
 @functools.lru_cache(maxsize=None)
-def _fingerprint(i: int) -> dict:
-    return run_under(SETTINGS[i], "quick", timeout=900)
+def _fingerprint_of(key: tuple) -> dict:
+    return run_under(dict(key), "quick", timeout=900)
 
 
-def _ends_by_default(i: int):
-    """The default suite runs the two ends, the portable setting (oldest kernel, generic CPU, no
-    SIMD dispatch) and the host's own; the kernels in between each cost a fresh interpreter
-    computing the whole fingerprint (7 s of CPU) and run with ``-m slow``."""
-    ident = describe(SETTINGS[i]).replace(" ", "")
-    if i == 0:  # compiles every numba kernel for a generic CPU: first, while a worker fills the host's cache
-        return pytest.param(i, id=ident, marks=pytest.mark.heavy(seconds=60))
-    # the host's own runs where it falls, late, on kernels the suite has compiled by then
-    return pytest.param(i, id=ident, marks=() if i == len(SETTINGS) - 1 else pytest.mark.slow)
+def _fingerprint(setting: dict) -> dict:
+    return _fingerprint_of(tuple(sorted(setting.items())))
 
 
-@pytest.mark.parametrize("i", [_ends_by_default(i) for i in range(len(SETTINGS))])
-def test_the_same_bits_under_each_machines_arithmetic(i):
+@pytest.mark.parametrize("setting", CASES)
+def test_the_same_bits_under_each_machines_arithmetic(setting):
     record = json.loads(RECORD.read_text())
-    fp = _fingerprint(i)
+    fp = _fingerprint(setting)
     assert set(SECTIONS) <= set(fp) and set(SECTIONS) <= set(record), \
         f"sections missing: fingerprint {set(SECTIONS) - set(fp)}, record {set(SECTIONS) - set(record)}"
-    _check_applied(SETTINGS[i], fp["applied"])
+    _check_applied(setting, fp["applied"])
     if fp["versions"] == record["versions"]:
         ref, what = record, f"the committed record {RECORD.relative_to(ROOT)}"
-    elif i == 0:
+    elif setting == HOST:
         pytest.skip(f"the record was made with {record['versions']}, this install has {fp['versions']}: "
-                    "the other settings are compared with this one")
+                    "the other settings are compared with the host's own")
     else:
-        ref, what = _fingerprint(0), f"the portable setting ({describe(SETTINGS[0])})"
+        ref, what = _fingerprint(HOST), f"the host's own arithmetic ({describe(HOST)})"
     diffs = compare(ref, fp)
-    assert not diffs, (f"under {describe(SETTINGS[i])} the fingerprint differs from {what} in {len(diffs)} field(s); "
+    assert not diffs, (f"under {describe(setting)} the fingerprint differs from {what} in {len(diffs)} field(s); "
                        f"first: {diffs[0]}")
 
 
@@ -227,10 +235,12 @@ def test_the_static_check_finds_what_it_looks_for(tmp_path):
                    "            la.solve(a, b), e(a), a ** 3, a ** 2, a ** 0.5, np.argsort(a), np.argsort(a, kind='stable'),\n"
                    "            np.convolve(a, b), np.arcsinh(a), np.einsum('ij,j', a, b, optimize=True),\n"
                    "            a ** 3)  # exact: a pragma names why a flagged form is exact on its line\n\n"
-                   "@njit(cache=False)\ndef g(a):\n    return np.exp(a), a ** 3, a @ a\n")
+                   "@njit(cache=False)\ndef g(a):\n    return np.exp(a), a ** 3, a @ a\n\n"
+                   "@njit(cache=True, fastmath=True)\ndef h(a):\n    return a * a + a\n")
     hits = [h.split(": ", 1)[1].split(" ")[0] for h in machine_dependent_calls(src)]
     assert hits == ["'@'", "'@'", "numpy.dot", "numpy.linalg.norm", "numpy.exp", "a.dot", "numpy.linalg.solve", "numpy.exp",
-                    "'**'", "np.argsort", "numpy.convolve", "numpy.arcsinh", "numpy.einsum(optimize=...)", "'@'"], hits
+                    "'**'", "np.argsort", "numpy.convolve", "numpy.arcsinh", "numpy.einsum(optimize=...)", "'@'",
+                    "fastmath"], hits
 
 
 # ---------------------------------------------------------------------------- the helpers
