@@ -148,7 +148,7 @@ def plot_outcomes(rows: list[dict], path: Path, batch_size: int = 64, measured: 
     from matplotlib.ticker import NullFormatter
 
     axes[1].xaxis.set_minor_formatter(NullFormatter())  # minor labels collide on short decades
-    axes[1].set_xlabel("measured decision time [ms] (log; the fixed clock charged every agent the same)"
+    axes[1].set_xlabel("measured decision time [ms] (log)\n(the fixed clock charged every agent the same)"
                        if measured else "policy compute time per step [ms] (log)")
     axes[1].set_ylabel("collision rate [% episodes]")
     axes[1].set_title("Compute time vs collisions")
