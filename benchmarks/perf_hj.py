@@ -14,8 +14,9 @@ Run: ``python benchmarks/perf_hj.py [--quick] [--solve-only]``.
 * ``--quadrotor N``: instead of all the above, the quadrotor ``hj``'s solves
   (:mod:`guardians.hj.quadrotor`, one or two values per leg of the route) on the rooms of the first ``N``
   episodes of ``rmm-bench --env QuadrotorRoomParallel-v0 --seed 0``, one thread, no cache: grid
-  sizes and solve times per value and per episode, and the guardian's decision time on those
-  episodes' starts.
+  sizes and solve times per value and per episode, the guardian's decision time on those
+  episodes' starts, and the CPU time of a climb plan (:mod:`guardians.hj.quadrotor_climb`) along
+  each leg of their routes, from rest.
 """
 
 from __future__ import annotations
@@ -127,7 +128,7 @@ def quadrotor(n: int) -> None:
     env = gym.make("QuadrotorRoomParallel-v0", clock="fixed:1")
     g = QuadrotorHJGuardian(cache=False, threads=1)
     set_threads(1)
-    legs, episodes, nodes, decisions = [], [], [], []
+    legs, episodes, nodes, decisions, plans, found = [], [], [], [], [], 0
     for i in range(n):
         seed = episode_seed(0, i)
         obs, info = env.reset(seed=seed)
@@ -141,12 +142,19 @@ def quadrotor(n: int) -> None:
         t = time.perf_counter()
         g.act(obs, info)
         decisions.append(time.perf_counter() - t)
+        route = [g._privileged()["state"][:3], *g.waypoints]
+        for a, b in zip(route[:-1], route[1:]):
+            c0 = time.process_time()
+            found += g._climb.plan(a[:2], a[:2], (0.0, 0.0), float(a[2]), b) is not None
+            plans.append(time.process_time() - c0)
     print(f"quadrotor hj, {n} rooms of seed 0 (grid {g.spacing} m x {g.n_heading} headings x {g.n_speed} speeds, "
           f"{g.horizon} s, ENO2/RK3, one thread, no cache):")
     print(f"  nodes per value: median {statistics.median(nodes):,.0f} (range {min(nodes):,}-{max(nodes):,})")
     print(f"  reset (all legs' solves and targets), CPU: median {statistics.median(episodes):.2f} s, "
           f"range {min(episodes):.2f}-{max(episodes):.2f} s; solve wall per value: median {statistics.median(legs):.2f} s")
     print(f"  first decision: median {statistics.median(decisions) * 1e6:.0f} us")
+    print(f"  climb plan along each leg from rest, CPU: median {statistics.median(plans) * 1e3:.1f} ms, "
+          f"at most {max(plans) * 1e3:.1f} ms ({len(plans)} legs, {found} clear)")
 
 
 if __name__ == "__main__":

@@ -1,17 +1,17 @@
 """The ``hj`` guardian on the quadrotor (``QuadrotorRoomParallel-v0``): a 4-D avoid value of the
-horizontal flight in each leg's altitude band.
+horizontal flight in each leg's altitude band, and a climb over what blocks the way.
 
 :class:`guardians.hj.guardian.HJGuardian` hands an env whose action space states the quadrotor's
 system kind to :class:`QuadrotorHJGuardian` (``quadrotor``, a dict, sets its arguments).  It is
 **privileged**: it reads the room, the waypoints, the true state and the simulated time.  Model:
-the velocity loop as a point mass with bounded acceleration, which in polar velocity form is the
-Dubins4D car, solved by the project's compiled solver over the whole room in each leg's altitude
-band (the vertical decoupled); ``margin`` (0.25 m) is what the value may over-state.  Rule: take
-over when the value two laps ahead is at most the margin; in control, the safe command nearest
-the pilot's (one side, turns coming back a step a lap, boundary following until nearer the
-waypoint); hand back once nearer, clear by a hysteresis and safe for 1 s more under the pilot's
-command.  NaN states apply the hover default and are counted.
-
+the velocity loop as a point mass with bounded acceleration (in polar velocity form the Dubins4D
+car), solved by the project's compiled solver over the whole room in each leg's altitude band;
+``margin`` (0.25 m) is what the value may over-state.  Rule: take over when the value two laps
+ahead is at most the margin; in control, the safe command nearest the pilot's (one side, turns
+coming back a step a lap, boundary following until nearer the waypoint); after ``climb_after``
+(2 s) in control, a climb over the obstacles near the line to the waypoint if one is clear below
+``climb_ceiling`` (:mod:`guardians.hj.quadrotor_climb`); hand back once nearer, clear by a
+hysteresis and safe for 1 s more under the pilot's command.  NaN states apply the hover default.
 The model, its error margin, the cost and the rule in full: docs/design-notes.md#guardianshjquadrotor.
 """
 
@@ -27,6 +27,7 @@ from guardians.privileged import PrivilegedGuardian
 from guardians.hj.cache import ValueCache, load_or_solve
 from guardians.hj.dynamics import Dubins4DHJ
 from guardians.hj.grid import Grid, central_gradient
+from guardians.hj.quadrotor_climb import Climb
 from guardians.hj.solver import check_scheme, select_backend, solve_brt
 from guardians.hj.room import angle, lag_prediction, nominal_command, optimal_command, room_target
 from rmm_envs.systems.quadrotor_control import CommandController, yaw_of
@@ -47,6 +48,8 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
                  band_margin: float = 0.1, reach: float = 0.5, order: int = 2, rk: int = 3, cfl: float = 0.8, margin: float | None = None,
                  tracking: float = 0.1, hysteresis: float = 0.15, delay: int = 1, lap: float | None = None,
                  n_directions: int = 16, min_speed: float = 0.5, clear_time: float = 1.0, side_memory: float = 3.0,
+                 climb_after: float | None = 2.0, climb_margin: float = 0.15, climb_ceiling: float = 6.0,
+                 climb_speed: float = 1.0,
                  cache_dir=None, cache: bool = True, cache_max_files: int = 64, backend: str = "auto",
                  threads: int | None = None) -> None:
         super().__init__()
@@ -70,6 +73,10 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         self.min_speed = finite("min_speed", min_speed, 0.0, lo_open=True)
         self.clear_time = finite("clear_time", clear_time, 0.0)
         self.side_memory = finite("side_memory", side_memory, 0.0)
+        self.climb_after = None if climb_after is None else finite("climb_after", climb_after, 0.0)
+        self.climb_margin = finite("climb_margin", climb_margin, 0.0, lo_open=True)
+        self.climb_ceiling = finite("climb_ceiling", climb_ceiling, 0.0, lo_open=True)
+        self.climb_speed = finite("climb_speed", climb_speed, 0.0, lo_open=True)
         self.threads = None if threads is None else integer("threads", threads, 1, "or None")
         if backend not in ("auto", "numpy", "numba"):
             raise ValueError(f"backend must be one of ('auto', 'numpy', 'numba'), got {backend!r}")
@@ -83,7 +90,8 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
     @staticmethod
     def _zero() -> dict:
         return {"outside_grid": 0, "outside_band": 0, "nan_states": 0, "cache_hits": 0, "solves": 0, "nominal": 0,
-                "turns": 0, "optimal": 0, "takeovers": 0}
+                "turns": 0, "optimal": 0, "takeovers": 0,
+                "climbs": 0, "climb_steps": 0}
 
     def check_spaces(self, observation_space, action_space) -> None:
         quadrotor_only(self, action_space)
@@ -166,6 +174,10 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         self._last_turn = None  # (x, y, side) where it last turned the pilot's command
         self._hit = math.inf  # distance to the pilot's waypoint where the guardian took over
         self._turn = 0  # the turn (in steps of 2 pi / n_directions) of its last command from the pilot's
+        self._climb = None if self.climb_after is None else Climb(room, self.climb_margin, self.climb_ceiling,
+                                                                   self.climb_speed, self.k_v)
+        self._plan = None  # the climb in progress (guardians.hj.quadrotor_climb)
+        self._in_control = 0.0  # the simulated time (s) it has been in control since it took over
 
     def _next_leg(self, state) -> None:
         """Follow the pilot's leg: past a waypoint within ``reach`` of it, as the pilot counts."""
@@ -207,11 +219,13 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         nominal = nominal_command(info)
         leg = self.leg
         self._next_leg(s)
+        psi = yaw_of(*s[3:7])
+        c, sn = math.cos(psi), math.sin(psi)
+        if self._plan is not None:  # climbing: flown to its end, then handed back
+            return self._climbing(s, c, sn)
         if not (self.z_band[0] - self.band_margin <= s[2] <= self.z_band[1] + self.band_margin):
             self._counts["outside_band"] += 1
             return self.action_space.inactive()
-        psi = yaw_of(*s[3:7])
-        c, sn = math.cos(psi), math.sin(psi)
         lap = self.current_lap()
         h0 = (s[0], s[1], s[7], s[8])
         pending = held if held is not None else nominal
@@ -225,14 +239,33 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
                 return self.action_space.inactive()
             self._counts["takeovers"] += 1
             self._hit = self._to_waypoint(h0)
+            self._in_control = 0.0
         elif self.leg != leg:  # a waypoint passed while in control: progress counts to the next
             self._hit = self._to_waypoint(h0)
         elif self.hands_back(h1, h2, nominal, c, sn, lap):
             self._side, self._turn = None, 0
             return self.action_space.inactive()
+        else:
+            self._in_control += lap
+        if self._climb is not None and self._in_control >= self.climb_after:
+            self._plan = self._climb.plan(s[:2], h1[:2], h1[2:], s[2], self.waypoints[self.leg])
+            if self._plan is not None:
+                self._counts["climbs"] += 1
+                return self._climbing(s, c, sn)
         cmd = self._choose(h1, nominal, c, sn, lap)
         self._held = cmd
         return self.action_space.active(cmd)
+
+    def _climbing(self, s, c, sn):
+        """The climb's command (heading frame, no yaw), or the pilot's control once it is over."""
+        v = self._climb.command(self._plan, s[0], s[1], s[2], s[7], s[8])
+        if v is None:
+            self._plan, self._side, self._turn = None, None, 0
+            return self.action_space.inactive()
+        self._counts["climb_steps"] += 1
+        hc = self._clip((c * v[0] + sn * v[1], -sn * v[0] + c * v[1]))
+        self._held = np.array([hc[0], hc[1], min(max(v[2], self._lo[2]), self._hi[2]), 0.0])
+        return self.action_space.active(self._held)
 
     def _to_waypoint(self, h) -> float:
         """Horizontal distance from ``h`` to the pilot's waypoint."""

@@ -13,7 +13,7 @@ from rmm_envs.portable import arctan2
 from rmm_envs.systems.rotations import quat_to_rot
 from rmm_envs.worlds.room_collision import BOUND
 
-__all__ = ["angle", "lag_prediction", "nominal_command", "optimal_command", "room_target"]
+__all__ = ["angle", "bounding_radius", "lag_prediction", "nominal_command", "object_top", "optimal_command", "room_distance", "room_target"]
 
 
 def room_target(grid: Grid, room, z_lo: float, z_hi: float, radius: float = BOUND, dz: float = 0.1) -> np.ndarray:
@@ -37,7 +37,7 @@ def room_target(grid: Grid, room, z_lo: float, z_hi: float, radius: float = BOUN
     for o in room.objects:
         size = np.asarray(o["size"], float)
         c = np.asarray(o["pos"], float)
-        bound = _bounding_radius(o["shape"], size)
+        bound = bounding_radius(o["shape"], size)
         if c[2] - bound > z_hi or c[2] + bound < z_lo:
             continue
         reach = bound + 2.0  # nodes farther than this from the centre are decided by closer things or the cap
@@ -59,7 +59,38 @@ def room_target(grid: Grid, room, z_lo: float, z_hi: float, radius: float = BOUN
     return np.broadcast_to((d - radius)[:, :, None, None].astype(np.float32), grid.shape)
 
 
-def _bounding_radius(shape: str, size) -> float:
+def room_distance(room, points) -> np.ndarray:
+    """Exact signed distance (m) from each of ``points`` ``(N, 3)`` to the room: the floor (the
+    plane z = 0), its wall boxes and its objects (the body not included: subtract ``BOUND``)."""
+    p = np.asarray(points, float).reshape(-1, 3)
+    x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    d = z.copy()
+    walls = np.asarray(room.walls, float).reshape(-1, 6)
+    if walls.size:
+        d = np.minimum(d, _object_sd("box", walls[:, 3:].T[:, None, :], x[:, None] - walls[:, 0], y[:, None] - walls[:, 1],
+                                     z[:, None] - walls[:, 2]).min(axis=1))
+    for o in room.objects:
+        c, R = np.asarray(o["pos"], float), quat_to_rot(np.asarray(o["quat"], float))
+        px, py, pz = x - c[0], y - c[1], z - c[2]
+        lx = R[0, 0] * px + R[1, 0] * py + R[2, 0] * pz  # R^T (p - c), the sums written out (no BLAS)
+        ly = R[0, 1] * px + R[1, 1] * py + R[2, 1] * pz
+        lz = R[0, 2] * px + R[1, 2] * py + R[2, 2] * pz
+        d = np.minimum(d, _object_sd(o["shape"], np.asarray(o["size"], float), lx, ly, lz))
+    return d
+
+
+def object_top(o) -> float:
+    """The height (m) of the highest point of the room object ``o`` (its exact top)."""
+    c, R, size = np.asarray(o["pos"], float), quat_to_rot(np.asarray(o["quat"], float)), np.asarray(o["size"], float)
+    if o["shape"] == "box":  # the world-z extent of the three half axes
+        return float(c[2] + abs(R[2, 0]) * size[0] + abs(R[2, 1]) * size[1] + abs(R[2, 2]) * size[2])
+    if o["shape"] == "cylinder":
+        return float(c[2] + abs(R[2, 2]) * size[1] / 2 + size[0] * math.sqrt(max(0.0, 1.0 - R[2, 2] * R[2, 2])))
+    return float(c[2] + size[0])
+
+
+def bounding_radius(shape: str, size) -> float:
+    """The radius of the sphere about an object's centre that holds it (in any orientation)."""
     if shape == "box":
         return math.sqrt(float(size[0] * size[0] + size[1] * size[1] + size[2] * size[2]))
     return math.hypot(size[0], size[1] / 2) if shape == "cylinder" else float(size[0])
