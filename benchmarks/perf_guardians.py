@@ -24,7 +24,8 @@ from guardians import available_guardians, make_guardian
 
 
 #: ``(env id, guardian, decisions)`` timed after the Dubins4D ones (the blocking env of each system).
-OTHER_SYSTEMS = [("QuadrotorRoomGuarded-v0", "cbf", 1000)]
+OTHER_SYSTEMS = [("QuadrotorRoomGuarded-v0", "cbf", 1000), ("QuadrotorRoomGuarded-v0", "lrmm", 1000),
+                 ("Dubins3DMazeGuarded-v0", "lrmm", 1000), ("Dubins3DMazeGuarded-v0", "cbf", 1000)]
 
 
 def decision_times(guardian, env_id="Dubins4DCirclesGuarded-v0", steps=3000, seed=0, cpu: list | None = None) -> list[float]:
