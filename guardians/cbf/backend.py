@@ -91,8 +91,8 @@ class QpsolversQP:
             return None
         keep = np.isfinite(h) & ~empty
         try:
-            z = quietly(lambda: self._solve_qp(self.P, self.q, G[keep], h[keep], lb=self.lb,
-                                               ub=self.ub, solver=self.name, **self.options))
+            z = quietly(self._solve_qp, self.P, self.q, G[keep], h[keep], lb=self.lb,
+                            ub=self.ub, solver=self.name, **self.options)
         except self._errors:  # a solver that raises on an infeasible problem: no solution, as OSQP's status says
             return None
         if z is None or not np.all(np.isfinite(z)):

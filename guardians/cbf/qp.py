@@ -101,7 +101,7 @@ class BarrierQP:
             status, x = native.info.status_val, native.solution.x
         else:
             self._solver.update(Ax=Ax, l=l, u=u, **({} if q is None else {"q": q}))
-            res = quietly(lambda: self._solver.solve(raise_error=False))
+            res = quietly(self._solver.solve, raise_error=False)
             status, x = res.info.status_val, res.x
         self.last_status = status
         if status not in _SOLVED or x is None:

@@ -231,7 +231,7 @@ class CommandQP:
         self._u[: self.K] = h
         self._u[-1] = 1e30 if relaxed else 0.0  # OSQP's infinity
         self._solver.update(q=q, Ax=self._Ax, u=self._u)
-        res = quietly(lambda: self._solver.solve(raise_error=False))
+        res = quietly(self._solver.solve, raise_error=False)
         if res.info.status_val not in _SOLVED or res.x is None or not np.all(np.isfinite(res.x)):
             return None
         return np.asarray(res.x, float)

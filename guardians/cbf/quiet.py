@@ -26,13 +26,13 @@ class _Discard:
 _DISCARD = _Discard()
 
 
-def quietly(solve):
-    """``solve()`` with ``sys.stdout`` discarding what is written to it, and put back after (also
-    when the solve raises).  Anything another thread prints while the solve runs is dropped
-    too; the solve's outcome is in its status, which the callers check."""
+def quietly(solve, *args, **kwargs):
+    """``solve(*args, **kwargs)`` with ``sys.stdout`` discarding what is written to it, and put
+    back after (also when the solve raises).  Anything another thread prints while the solve
+    runs is dropped too; the solve's outcome is in its status, which the callers check."""
     saved = sys.stdout
     sys.stdout = _DISCARD
     try:
-        return solve()
+        return solve(*args, **kwargs)
     finally:
         sys.stdout = saved
