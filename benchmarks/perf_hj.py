@@ -16,7 +16,10 @@ Run: ``python benchmarks/perf_hj.py [--quick] [--solve-only]``.
   episodes of ``rmm-bench --env QuadrotorRoomParallel-v0 --seed 0``, one thread, no cache: grid
   sizes and solve times per value and per episode, the guardian's decision time on those
   episodes' starts, and the CPU time of a climb plan (:mod:`guardians.hj.quadrotor_climb`) along
-  each leg of their routes, from rest.
+  each leg of their routes, from rest;
+* ``--first-use``: instead of all the above, what a fresh install pays once: a fresh
+  interpreter's first solve of each scheme (a small grid, so the time is numba compiling the
+  kernels), with an empty numba cache and then again with the cache that run wrote.
 """
 
 from __future__ import annotations
@@ -40,12 +43,48 @@ from rmm_envs.systems.dubins4d import KIND, Dubins4D
 OBSTACLES = np.array([[0.0, 0.0, 3.0], [6.0, 5.0, 2.5], [-7.0, 3.0, 4.0], [4.0, -8.0, 2.0], [-5.0, -6.0, 3.0]])
 
 
+_FIRST_USE = """
+import json, time
+t0 = time.perf_counter()
+import numpy as np
+from guardians.hj.dynamics import Dubins4DHJ
+from guardians.hj.guardian import default_grid, obstacle_target
+from guardians.hj.solver import solve_brt
+out = {"import": time.perf_counter() - t0}
+grid = default_grid((8, 8, 8, 8))
+for order in (2, 1):
+    t = time.perf_counter()
+    solve_brt(grid, Dubins4DHJ(), obstacle_target(grid, np.array([[0.0, 0.0, 3.0]])), 0.5, order=order, backend="numba")
+    out[f"order {order}"] = time.perf_counter() - t
+print(json.dumps(out))
+"""
+
+
+def first_use() -> None:
+    """Fresh interpreters' first solves: numba compiling the kernels (empty cache), then loading them."""
+    import json
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        print("first solves in a fresh interpreter (8^4 grid, 0.5 s: the time is numba's), seconds:")
+        for label in ("empty numba cache", "cache of the run above"):
+            got = json.loads(subprocess.run([sys.executable, "-c", _FIRST_USE], env=env, check=True, capture_output=True,
+                                            text=True).stdout.splitlines()[-1])
+            print(f"  {label}: " + ", ".join(f"{k} {v:.2f}" for k, v in got.items()))
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="skip the finest grid of the convergence study")
     ap.add_argument("--solve-only", action="store_true", help="only the compiled solves on the default grid")
     ap.add_argument("--quadrotor", type=int, default=0, metavar="N", help="time the quadrotor hj's solves on N rooms instead")
+    ap.add_argument("--first-use", action="store_true", help="time a fresh interpreter's first solves, cold and cached")
     args = ap.parse_args(argv)
+    if args.first_use:
+        return first_use()
     if args.quadrotor:
         return quadrotor(args.quadrotor)
     grid = default_grid()

@@ -210,21 +210,30 @@ if HAVE_NUMBA:
     @njit(cache=True, boundscheck=False)
     def _fill_xy_ghosts2(P):
         """Two ghost faces per side of the position axes (linear extrapolation)."""
+        # Scalar loops over the flattened array: the same arithmetic as whole-face array
+        # expressions, which numba takes seconds to compile for a 4-D array.
         n0, n1 = P.shape[0], P.shape[1]
+        plane = P.shape[2] * P.shape[3]
+        sx = n1 * plane
+        Pf = P.reshape(-1)
         two = np.float32(2.0)
-        d = P[2] - P[3]
-        P[1] = P[2] + d
-        P[0] = P[2] + two * d
-        e = P[n0 - 3] - P[n0 - 4]
-        P[n0 - 2] = P[n0 - 3] + e
-        P[n0 - 1] = P[n0 - 3] + two * e
-        for i in range(n0):
-            d = P[i, 2] - P[i, 3]
-            P[i, 1] = P[i, 2] + d
-            P[i, 0] = P[i, 2] + two * d
-            e = P[i, n1 - 3] - P[i, n1 - 4]
-            P[i, n1 - 2] = P[i, n1 - 3] + e
-            P[i, n1 - 1] = P[i, n1 - 3] + two * e
+        lo, hi = 0, (n0 - 1) * sx
+        for k in range(sx):  # the x faces, whole (y, theta, v) slabs
+            d = Pf[lo + 2 * sx + k] - Pf[lo + 3 * sx + k]
+            Pf[lo + sx + k] = Pf[lo + 2 * sx + k] + d
+            Pf[lo + k] = Pf[lo + 2 * sx + k] + two * d
+            e = Pf[hi - 2 * sx + k] - Pf[hi - 3 * sx + k]
+            Pf[hi - sx + k] = Pf[hi - 2 * sx + k] + e
+            Pf[hi + k] = Pf[hi - 2 * sx + k] + two * e
+        for i in range(n0):  # then the y faces of every x row, ghost rows included
+            lo, hi = i * sx, i * sx + (n1 - 1) * plane
+            for k in range(plane):
+                d = Pf[lo + 2 * plane + k] - Pf[lo + 3 * plane + k]
+                Pf[lo + plane + k] = Pf[lo + 2 * plane + k] + d
+                Pf[lo + k] = Pf[lo + 2 * plane + k] + two * d
+                e = Pf[hi - 2 * plane + k] - Pf[hi - 3 * plane + k]
+                Pf[hi - plane + k] = Pf[hi - 2 * plane + k] + e
+                Pf[hi + k] = Pf[hi - 2 * plane + k] + two * e
 
     @njit(cache=True, boundscheck=False)
     def _fill_plane_ghosts(pl, n2, n3):
@@ -241,12 +250,19 @@ if HAVE_NUMBA:
     def _fill_xy_ghosts(P):
         """Ghost faces of the two position axes (linear extrapolation), whole (theta, v) planes."""
         n0, n1 = P.shape[0], P.shape[1]
+        plane = P.shape[2] * P.shape[3]
+        sx = n1 * plane
+        Pf = P.reshape(-1)
         two = np.float32(2.0)
-        P[0] = two * P[1] - P[2]
-        P[n0 - 1] = two * P[n0 - 2] - P[n0 - 3]
+        hi = (n0 - 1) * sx
+        for k in range(sx):
+            Pf[k] = two * Pf[sx + k] - Pf[2 * sx + k]
+            Pf[hi + k] = two * Pf[hi - sx + k] - Pf[hi - 2 * sx + k]
         for i in range(n0):
-            P[i, 0] = two * P[i, 1] - P[i, 2]
-            P[i, n1 - 1] = two * P[i, n1 - 2] - P[i, n1 - 3]
+            lo, hi = i * sx, i * sx + (n1 - 1) * plane
+            for k in range(plane):
+                Pf[lo + k] = two * Pf[lo + plane + k] - Pf[lo + 2 * plane + k]
+                Pf[hi + k] = two * Pf[hi - plane + k] - Pf[hi - 2 * plane + k]
 
     @njit(cache=True, boundscheck=False)
     def _fill_ghosts(P, ghosts):
