@@ -108,6 +108,19 @@ def test_one_observation_inference_matches_the_written_out_network(activation, f
         assert m.predict(x) == one[0]
 
 
+def test_the_batch_kernel_gives_each_row_the_bits_of_the_one_observation_kernel_and_nan_for_a_bad_row():
+    from guardians.lrmm.inference import forward_one, forward_rows
+
+    m = _model("tanh", n_out=3, seed=2)
+    X = np.random.default_rng(3).uniform(-3, 3, size=(6, m.obs_dim))
+    X[4, 2] = np.inf
+    out = forward_rows(X, m._Ws, m._bs, m._act_code)
+    assert out.shape == (6, 3)
+    for i in (0, 1, 2, 3, 5):
+        np.testing.assert_array_equal(out[i], forward_one(X[i], m._Ws, m._bs, m._act_code))
+    assert np.isnan(out[4]).all() and forward_one(X[4], m._Ws, m._bs, m._act_code) is None
+
+
 def test_one_observation_inference_refuses_non_finite_and_misshapen_input():
     m = _model("relu")
     for bad in (np.nan, np.inf, -np.inf):
