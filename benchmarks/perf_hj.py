@@ -44,7 +44,8 @@ OBSTACLES = np.array([[0.0, 0.0, 3.0], [6.0, 5.0, 2.5], [-7.0, 3.0, 4.0], [4.0, 
 
 
 _FIRST_USE = """
-import json, time
+import json, os, sys, time
+os.environ["NUMBA_CACHE_DIR"] = sys.argv[1]  # before numba is imported
 t0 = time.perf_counter()
 import numpy as np
 from guardians.hj.dynamics import Dubins4DHJ
@@ -68,10 +69,9 @@ def first_use() -> None:
     import tempfile
 
     with tempfile.TemporaryDirectory() as cache:
-        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
         print("first solves in a fresh interpreter (8^4 grid, 0.5 s: the time is numba's), seconds:")
         for label in ("empty numba cache", "cache of the run above"):
-            got = json.loads(subprocess.run([sys.executable, "-c", _FIRST_USE], env=env, check=True, capture_output=True,
+            got = json.loads(subprocess.run([sys.executable, "-c", _FIRST_USE, cache], check=True, capture_output=True,
                                             text=True).stdout.splitlines()[-1])
             print(f"  {label}: " + ", ".join(f"{k} {v:.2f}" for k, v in got.items()))
 
