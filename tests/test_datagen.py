@@ -79,7 +79,7 @@ def test_rerun_is_a_no_op_and_other_parameters_are_refused(tmp_path):
         generate(small(branches=7), tmp_path / "d", workers=1, progress=False)
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # rmm-bench's kill -9 drill runs in the default suite; this one costs three commands
 def test_resume_after_kill_minus_nine(tmp_path):
     out = tmp_path / "k"
     # a small tree (8 branches, not the default 32): the labels' cost is not what is tested

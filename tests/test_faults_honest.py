@@ -544,10 +544,27 @@ def test_maze_sizes_refused_before_anything_is_allocated(rows):
     assert time.perf_counter() - t0 < 5.0
 
 
-@pytest.mark.heavy
+def test_a_file_size_limit_error_names_the_file_the_limit_and_the_fix(monkeypatch):
+    """The line both commands print for EFBIG (the drills below run them under a real limit)."""
+    import errno
+
+    from rmm_envs import failures
+
+    e = OSError(errno.EFBIG, "File too large", "d/shard_0001.npz")
+    monkeypatch.setattr(failures, "file_size_limit", lambda: 4096)
+    assert failures.describe_os_error(e) == ("d/shard_0001.npz reached the file-size limit (ulimit -f: 4096 bytes); raise it "
+                                             "(ulimit -f unlimited), then what is stored is kept: rerun the same command", 1)
+    monkeypatch.setattr(failures, "file_size_limit", lambda: None)
+    assert failures.describe_os_error(OSError(errno.EFBIG, "File too large"), path="out")[0].startswith(
+        "out reached the file-size limit; raise it")
+
+
+@pytest.mark.slow
 def test_datagen_under_a_file_size_limit_is_one_line_exit_1_and_a_rerun_finishes(tmp_path):
     """The worker writing a shard hits the limit (EFBIG, as ENOSPC would): one line naming the
-    directory and the fix, exit 1, and the same command afterwards finishes the dataset."""
+    directory and the fix, exit 1, and the same command afterwards finishes the dataset.  In
+    the slow tier: rmm-bench's drill above runs in the default suite, this one costs two
+    commands with two workers each."""
     out = tmp_path / "d"
     cmd = [sys.executable, "-m", "rmm_envs.risk.datagen", "--configs", "4", "--samples-per-config", "50", "--branches", "3",
            "--depth", "1", "--configs-per-shard", "2", "--out", str(out), "--no-progress", "--workers", "2"]
