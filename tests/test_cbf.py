@@ -3,7 +3,7 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
@@ -195,6 +195,7 @@ def _run_env(guardian, state, obstacles, goal, seconds):
 @settings(max_examples=12, deadline=None)
 @given(depth=st.floats(0.02, 0.98), bearing=st.floats(-math.pi, math.pi), heading=st.floats(-math.pi, math.pi),
        goal_side=st.floats(-1.0, 1.0))
+@example(depth=0.875, bearing=0.0, heading=1.59375, goal_side=0.0)  # nearly tangent, feasible: no recovery needed
 def test_a_stopped_car_inside_the_margin_leaves_it_in_bounded_time(depth, bearing, heading, goal_side):
     # obstacle r = 3 (margin 3.15); the car stopped at a depth of 2-98% into the margin, any
     # heading, the goal beyond the obstacle: the paper's rule stays stuck here for good
@@ -209,7 +210,11 @@ def test_a_stopped_car_inside_the_margin_leaves_it_in_bounded_time(depth, bearin
     out = np.hypot(states[:, 0], states[:, 1]) >= R
     # turning in place takes at most pi / 0.25 = 12.6 s, then leaving the margin well under 2 s
     assert out.any(), f"still inside the margin after 25 s: {states[-1]}"
-    if math.cos(heading - bearing) < 0:  # facing inward: no admissible control satisfies the rows
+    # facing inward, no admissible control satisfies the rows.  Not quite tangent: near the
+    # margin's edge a car stopped nearly tangent to it (cos down to -0.023 at a depth of 0.875,
+    # found by hypothesis) still has a feasible QP; at depths 0.875-0.98 every case tried at
+    # -0.05 needed a recovery, so the check keeps twice that
+    if math.cos(heading - bearing) < -0.1:
         assert g.stats()["recoveries"] > 0
 
 
