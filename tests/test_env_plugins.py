@@ -153,6 +153,7 @@ def register():
 '''
 
 
+@pytest.mark.slow  # rmm-bench's entry-point drill above runs in the default suite
 def test_rmm_datagen_labels_an_entry_point_env_in_every_worker(tmp_path):
     site = tmp_path / "site"
     site.mkdir()

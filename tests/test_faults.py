@@ -237,7 +237,7 @@ def test_report_never_imports_modules_named_in_the_database(tmp_path, capsys, mo
 
 
 # ------------------------------------------------------------------ rmm-datagen: a dead worker
-@pytest.mark.heavy
+@pytest.mark.slow  # rmm-bench's dead-worker drill above runs in the default suite
 def test_datagen_reports_a_dead_worker_and_a_rerun_finishes(tmp_path, monkeypatch):
     from rmm_envs.risk import datagen
     from tests.bench_helpers import dying_shard_job
