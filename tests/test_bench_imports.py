@@ -36,14 +36,23 @@ def _bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
                           cwd=cwd, capture_output=True, text=True, timeout=600, env=env)
 
 
-@pytest.mark.heavy
-def test_agent_and_env_modules_are_found_in_the_current_directory_by_every_worker(tmp_path):
-    (tmp_path / "my_guard.py").write_text(GUARD)
-    (tmp_path / "my_env.py").write_text(ENV)
-    res = _bench(tmp_path, "--agent", "my_guard:Steady", "--env", "my_env:MyCircles-v0", "--episodes", "4",
+@pytest.fixture(scope="module")
+def current_directory_run(tmp_path_factory):
+    """One two-worker run whose guardian and env both come from modules in the directory it runs
+    in: the guardian counts its act() calls per process (``WARM`` below)."""
+    cwd = tmp_path_factory.mktemp("cwd")
+    (cwd / "warm_guard.py").write_text(WARM)
+    (cwd / "my_env.py").write_text(ENV)
+    res = _bench(cwd, "--agent", "warm_guard:CountsCalls", "--env", "my_env:MyCircles-v0", "--episodes", "4",
                  "--workers", "2")
+    return cwd, res
+
+
+@pytest.mark.heavy
+def test_agent_and_env_modules_are_found_in_the_current_directory_by_every_worker(current_directory_run):
+    _, res = current_directory_run
     assert res.returncode == 0, res.stderr[-2000:]
-    row = next(line for line in res.stdout.splitlines() if line.startswith("| my_guard:Steady"))
+    row = next(line for line in res.stdout.splitlines() if line.startswith("| warm_guard:CountsCalls"))
     assert "| 4 |" in row and "| 0 | 0 |" in row  # four episodes, no errors
 
 
@@ -101,19 +110,16 @@ class CountsCalls(Guardian):
 '''
 
 
-@pytest.mark.heavy
-def test_each_workers_first_timed_decision_comes_after_an_untimed_warm_up(tmp_path):
+def test_each_workers_first_timed_decision_comes_after_an_untimed_warm_up(current_directory_run):
     """Every episode, the first of each worker included, starts with act() already called in
     that process: compiling or loading a guardian's kernels is never a timed decision."""
     import json
 
     from benchmarks import load_results
 
-    (tmp_path / "warm_guard.py").write_text(WARM)
-    res = _bench(tmp_path, "--agent", "warm_guard:CountsCalls", "--episodes", "4", "--workers", "2",
-                 "--env", "Dubins4DCirclesGuarded-v0")
+    cwd, res = current_directory_run
     assert res.returncode == 0, res.stderr[-2000:]
-    df = load_results(tmp_path / "res")
+    df = load_results(cwd / "res")
     calls = [json.loads(s)["calls_before"] for s in df.guardian_stats]
     assert len(calls) == 4 and min(calls) >= 1
 
