@@ -105,6 +105,30 @@ def test_resume_after_kill_minus_nine(tmp_path):
     np.testing.assert_array_equal(load_dataset(tmp_path / "ref").risk, resumed.risk)
 
 
+def test_a_run_cut_short_resumes_with_exactly_the_missing_shards(tmp_path):
+    """What a kill -9 leaves (some shards with their checksums, no manifest), made in-process:
+    the rerun computes only the missing shards, and the data equal an uninterrupted run's.
+    The kill -9 itself is a slow drill above."""
+    from rmm_envs.risk.dataset import checksum_path, shard_path
+
+    out = tmp_path / "d"
+    man = generate(small(), out, workers=1, progress=False)
+    ref = load_dataset(out)
+    (out / "manifest.json").unlink()
+    first = shard_path(out, 0)  # written, with the checksum file a shard gets until the manifest holds it
+    checksum_path(first).write_text(f"{man['shards'][first.name]}  {first.name}\n")
+    for s in (1, 2):  # shards 1 and 2 of 0-2 never written
+        shard_path(out, s).unlink()
+    with pytest.raises(ValueError, match="incomplete"):
+        load_dataset(out)
+    man = generate(small(), out, workers=1, progress=False)
+    assert man["last_run"]["new_rows"] == 2 * 2 * 10  # two shards of two configurations of 10 samples
+    assert man["last_run"]["regenerated"] == []  # shard 0 verified and kept
+    resumed = load_dataset(out)
+    np.testing.assert_array_equal(resumed.risk, ref.risk)
+    np.testing.assert_array_equal(resumed.obs, ref.obs)
+
+
 def test_half_written_shard_is_redone(tmp_path):
     out = tmp_path / "d"
     generate(small(), out, workers=1, progress=False)
