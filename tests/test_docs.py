@@ -29,7 +29,9 @@ _TRAINS = pytest.mark.slow  # label, train and benchmark end to end: 7-10 s of C
     pytest.param("rl_guardian.py", ["--timesteps", "2048", "--episodes", "4"], marks=_TRAINS),
 ])
 def test_example_scripts_run(script, args, tmp_path):
-    env = dict(os.environ, MPLBACKEND="Agg")
+    # TMPDIR: the scripts' scratch folders (and stable-baselines3's logger folder) land in the
+    # test's own directory, which pytest prunes, not in the machine's /tmp
+    env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(tmp_path))
     res = subprocess.run([sys.executable, str(DOCS / "examples" / script), *args], capture_output=True, text=True,
                          timeout=600, cwd=tmp_path, env=env)
     assert res.returncode == 0, res.stderr[-3000:]
@@ -109,7 +111,7 @@ def test_the_readme_and_getting_started_have_snippets():
 def test_python_snippets_in_the_docs_run(where, code, tmp_path):
     """A reader pastes the snippet into a fresh interpreter: it must run, and an episode snippet
     must end with one of the three outcomes."""
-    env = dict(os.environ, MPLBACKEND="Agg")
+    env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(tmp_path))  # scratch folders in the test's own directory
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env)
     assert res.returncode == 0, f"{where} failed:\n{res.stderr[-3000:]}"
     if "env.step(" in code and "outcome" in code:

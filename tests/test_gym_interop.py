@@ -83,12 +83,16 @@ def test_the_flat_action_of_the_issue_maps_alike_through_the_wrapper_and_the_ada
     assert space.to_unit(u) == pytest.approx(np.float32([0.1, 0.3]))
 
 
-def test_a_saved_ppo_model_applies_the_same_controls_through_sb3guardian(tmp_path):
+def test_a_saved_ppo_model_applies_the_same_controls_through_sb3guardian(tmp_path, monkeypatch):
     """Train PPO (briefly) through the wrapper, save, load: on the observations of an episode
     the loaded model through ``SB3Guardian`` gives the very actions the wrapper made of the
     trained model's outputs."""
+    import tempfile
+
     import torch
     from stable_baselines3 import PPO
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # stable-baselines3's logger folder, not in /tmp
 
     torch.set_num_threads(1)
     train_env = FlattenGuardianAction(gym.make("Dubins4DCirclesGuarded-v0"))
