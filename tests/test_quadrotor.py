@@ -3,6 +3,8 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 try:  # pybullet is pinned in the test extra: a missing install must fail loudly, not skip every test here
     import pybullet  # noqa: F401
@@ -268,3 +270,22 @@ def test_shipped_quadrotor_model():
     wild = np.array([xy[0], xy[1], 0.5, 1, 0, 0, 0, 0, 0, -3.0, 5.0, 0, 0])
     r_calm, r_wild = m.predict(env.observe_states(np.stack([calm, wild])))
     assert r_wild > r_calm
+
+
+@settings(max_examples=60, deadline=None)
+@given(shape=st.sampled_from(["box", "cylinder", "sphere"]),
+       size=st.lists(st.floats(0.05, 2.0), min_size=3, max_size=3),
+       direction=st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3).filter(lambda v: math.hypot(*v) > 1e-3))
+def test_the_bounding_sphere_holds_the_object_and_touches_it(shape, size, direction):
+    """No point of the bounding sphere lies inside the object (in its own frame, so in any
+    orientation), and the sphere touches the object at a corner (box) or on a rim (cylinder)."""
+    from guardians.hj.room import _object_sd
+    from rmm_envs.worlds.rooms import bounding_radius
+
+    size = np.array(size[: {"box": 3, "cylinder": 2, "sphere": 1}[shape]])
+    r = bounding_radius(shape, size)
+    u = np.array(direction) / math.hypot(*direction)
+    assert _object_sd(shape, size, *(r * u)) >= -1e-12
+    corner = size if shape == "box" else np.array([size[0], 0.0, size[1] / 2] if shape == "cylinder" else [0.0, 0.0, size[0]])
+    assert math.sqrt(float(np.sum(corner * corner))) == pytest.approx(r, rel=1e-12)
+    assert abs(_object_sd(shape, size, *corner)) < 1e-12

@@ -20,8 +20,9 @@ import math
 
 import numpy as np
 
-from guardians.hj.room import bounding_radius, object_top, room_distance
+from guardians.hj.room import object_top, room_distance
 from rmm_envs.worlds.room_collision import BOUND
+from rmm_envs.worlds.rooms import bounding_radius
 
 __all__ = ["Climb", "ClimbPlan"]
 

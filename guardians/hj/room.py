@@ -12,8 +12,9 @@ from guardians.hj.grid import Grid
 from rmm_envs.portable import arctan2
 from rmm_envs.systems.rotations import quat_to_rot
 from rmm_envs.worlds.room_collision import BOUND
+from rmm_envs.worlds.rooms import bounding_radius
 
-__all__ = ["angle", "bounding_radius", "lag_prediction", "nominal_command", "object_top", "optimal_command", "room_distance", "room_target"]
+__all__ = ["angle", "lag_prediction", "nominal_command", "object_top", "optimal_command", "room_distance", "room_target"]
 
 
 def room_target(grid: Grid, room, z_lo: float, z_hi: float, radius: float = BOUND, dz: float = 0.1) -> np.ndarray:
@@ -87,13 +88,6 @@ def object_top(o) -> float:
     if o["shape"] == "cylinder":
         return float(c[2] + abs(R[2, 2]) * size[1] / 2 + size[0] * math.sqrt(max(0.0, 1.0 - R[2, 2] * R[2, 2])))
     return float(c[2] + size[0])
-
-
-def bounding_radius(shape: str, size) -> float:
-    """The radius of the sphere about an object's centre that holds it (in any orientation)."""
-    if shape == "box":
-        return math.sqrt(float(size[0] * size[0] + size[1] * size[1] + size[2] * size[2]))
-    return math.hypot(size[0], size[1] / 2) if shape == "cylinder" else float(size[0])
 
 
 def _object_sd(shape: str, size, x, y, z):

@@ -17,10 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from rmm_envs.portable import norm
 from rmm_envs.systems.quadrotor import QUADROTOR
 from rmm_envs.systems.rotations import quat_to_rot
-from rmm_envs.worlds.rooms import Room
+from rmm_envs.worlds.rooms import Room, bounding_radius
 
 __all__ = ["RoomCollision", "body_points"]
 
@@ -61,7 +60,7 @@ class RoomCollision:
         for i, o in enumerate(objs):
             s = np.asarray(o["size"], float)
             sizes[i, : s.size] = s
-            radii[i] = norm(s) if o["shape"] == "box" else (np.hypot(s[0], s[1] / 2) if o["shape"] == "cylinder" else s[0])
+            radii[i] = bounding_radius(o["shape"], s)
         self.obj_size, self.obj_radius = sizes, radii
 
     def clearance(self, point) -> float:

@@ -20,7 +20,7 @@ import numpy as np
 from rmm_envs.portable import dot, norm
 from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
 
-__all__ = ["Room", "build_room", "generate_room"]
+__all__ = ["Room", "bounding_radius", "build_room", "generate_room"]
 
 
 @dataclass
@@ -67,6 +67,18 @@ def _footprint_rects(rng, n, X, Y):
             continue
         rects.append(r)
     return rects
+
+
+def bounding_radius(shape: str, size) -> float:
+    """The radius of the sphere about an object's centre that holds it in any orientation: a
+    box's half diagonal (``size``: half extents), a cylinder's (``size``: radius, length) or a
+    sphere's radius.  The room generator spaces objects by it, the collision check and the
+    quadrotor ``hj`` cull by it."""
+    if shape == "box":
+        return norm(size)
+    if shape == "cylinder":
+        return float(np.hypot(size[0], size[1] / 2))
+    return float(size[0])
 
 
 def generate_room(rng: np.random.Generator, n_rectangles: int | None = None, x_range: float | None = None,
@@ -140,12 +152,7 @@ def generate_room(rng: np.random.Generator, n_rectangles: int | None = None, x_r
                     size = np.array([rng.uniform(0.1, 1.0)])
                 angles = rng.uniform(-np.pi, np.pi, 3)
                 # the footprint radius does not depend on the orientation: rotate only a kept object
-                if shape == "box":
-                    radius = norm(size)
-                elif shape == "cylinder":
-                    radius = float(np.hypot(size[0], size[1] / 2))
-                else:
-                    radius = float(size[0])
+                radius = bounding_radius(shape, size)
                 if free_cells.size == 0:
                     break
                 cell_ij = free_cells[rng.integers(len(free_cells))]
