@@ -208,6 +208,19 @@ if HAVE_NUMBA:
             pl[r + n3 - 1] = pl[r + n3 - 3] + two * e
 
     @njit(cache=True, boundscheck=False)
+    def _extrapolate2(Pf, lo, hi, stride, count):
+        """Two ghost slabs of ``count`` entries, ``stride`` apart, below the first inner slab at
+        ``lo + 2 stride`` and above the last at ``hi - 2 stride``: linear extrapolation."""
+        two = np.float32(2.0)
+        for k in range(count):
+            d = Pf[lo + 2 * stride + k] - Pf[lo + 3 * stride + k]
+            Pf[lo + stride + k] = Pf[lo + 2 * stride + k] + d
+            Pf[lo + k] = Pf[lo + 2 * stride + k] + two * d
+            e = Pf[hi - 2 * stride + k] - Pf[hi - 3 * stride + k]
+            Pf[hi - stride + k] = Pf[hi - 2 * stride + k] + e
+            Pf[hi + k] = Pf[hi - 2 * stride + k] + two * e
+
+    @njit(cache=True, boundscheck=False)
     def _fill_xy_ghosts2(P):
         """Two ghost faces per side of the position axes (linear extrapolation)."""
         # Scalar loops over the flattened array: the same arithmetic as whole-face array
@@ -216,24 +229,9 @@ if HAVE_NUMBA:
         plane = P.shape[2] * P.shape[3]
         sx = n1 * plane
         Pf = P.reshape(-1)
-        two = np.float32(2.0)
-        lo, hi = 0, (n0 - 1) * sx
-        for k in range(sx):  # the x faces, whole (y, theta, v) slabs
-            d = Pf[lo + 2 * sx + k] - Pf[lo + 3 * sx + k]
-            Pf[lo + sx + k] = Pf[lo + 2 * sx + k] + d
-            Pf[lo + k] = Pf[lo + 2 * sx + k] + two * d
-            e = Pf[hi - 2 * sx + k] - Pf[hi - 3 * sx + k]
-            Pf[hi - sx + k] = Pf[hi - 2 * sx + k] + e
-            Pf[hi + k] = Pf[hi - 2 * sx + k] + two * e
+        _extrapolate2(Pf, 0, (n0 - 1) * sx, sx, sx)  # the x faces, whole (y, theta, v) slabs
         for i in range(n0):  # then the y faces of every x row, ghost rows included
-            lo, hi = i * sx, i * sx + (n1 - 1) * plane
-            for k in range(plane):
-                d = Pf[lo + 2 * plane + k] - Pf[lo + 3 * plane + k]
-                Pf[lo + plane + k] = Pf[lo + 2 * plane + k] + d
-                Pf[lo + k] = Pf[lo + 2 * plane + k] + two * d
-                e = Pf[hi - 2 * plane + k] - Pf[hi - 3 * plane + k]
-                Pf[hi - plane + k] = Pf[hi - 2 * plane + k] + e
-                Pf[hi + k] = Pf[hi - 2 * plane + k] + two * e
+            _extrapolate2(Pf, i * sx, i * sx + (n1 - 1) * plane, plane, plane)
 
     @njit(cache=True, boundscheck=False)
     def _fill_plane_ghosts(pl, n2, n3):
@@ -247,22 +245,24 @@ if HAVE_NUMBA:
             pl[k * n3 + n3 - 1] = two * pl[k * n3 + n3 - 2] - pl[k * n3 + n3 - 3]
 
     @njit(cache=True, boundscheck=False)
+    def _extrapolate(Pf, lo, hi, stride, count):
+        """One ghost slab of ``count`` entries below ``lo + stride`` and one above ``hi - stride``
+        (``stride`` apart): linear extrapolation."""
+        two = np.float32(2.0)
+        for k in range(count):
+            Pf[lo + k] = two * Pf[lo + stride + k] - Pf[lo + 2 * stride + k]
+            Pf[hi + k] = two * Pf[hi - stride + k] - Pf[hi - 2 * stride + k]
+
+    @njit(cache=True, boundscheck=False)
     def _fill_xy_ghosts(P):
         """Ghost faces of the two position axes (linear extrapolation), whole (theta, v) planes."""
         n0, n1 = P.shape[0], P.shape[1]
         plane = P.shape[2] * P.shape[3]
         sx = n1 * plane
         Pf = P.reshape(-1)
-        two = np.float32(2.0)
-        hi = (n0 - 1) * sx
-        for k in range(sx):
-            Pf[k] = two * Pf[sx + k] - Pf[2 * sx + k]
-            Pf[hi + k] = two * Pf[hi - sx + k] - Pf[hi - 2 * sx + k]
+        _extrapolate(Pf, 0, (n0 - 1) * sx, sx, sx)
         for i in range(n0):
-            lo, hi = i * sx, i * sx + (n1 - 1) * plane
-            for k in range(plane):
-                Pf[lo + k] = two * Pf[lo + plane + k] - Pf[lo + 2 * plane + k]
-                Pf[hi + k] = two * Pf[hi - plane + k] - Pf[hi - 2 * plane + k]
+            _extrapolate(Pf, i * sx, i * sx + (n1 - 1) * plane, plane, plane)
 
     @njit(cache=True, boundscheck=False)
     def _fill_ghosts(P, ghosts):
