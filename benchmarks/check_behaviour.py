@@ -128,7 +128,7 @@ def _bench(tmp: str, env_id: str, agents, n: int, extra=()) -> None:
     from benchmarks.bench.cli import main as bench_main
 
     argv = ["--env", env_id, "--agent", ",".join(agents), "--episodes", str(n), "--seed", "0", "--clock", "fixed:1",
-            "--out", tmp, "--workers", "1", "--no-progress", *extra]
+            "--out", tmp, "--workers", "1", "--no-progress", "--no-figure", *extra]
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:

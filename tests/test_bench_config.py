@@ -16,7 +16,8 @@ from benchmarks.bench.config import AgentRun, BenchConfig, EpisodeResult, Episod
 from benchmarks.bench.store import EPISODE_FIELDS
 
 DATA = Path(__file__).parent / "data"
-FAST = ["--clock", "fixed:1", "--no-progress", "--workers", "1"]
+# tables and the database only: the figure has its own tests (test_bench, test_cli_figures)
+FAST = ["--clock", "fixed:1", "--no-progress", "--workers", "1", "--no-figure"]
 
 
 # ------------------------------------------------------------------ the stored format
@@ -62,7 +63,8 @@ def test_old_database_reports_the_same_table_and_resume_runs_nothing(tmp_path, c
     (args, keys, status), = con.execute("SELECT args, run_keys, status FROM invocations WHERE id = 3").fetchall()
     assert json.loads(keys) == {"inactive": "3990ef051d980703", "brakes": "c70cfd4516eee295"} and status == "finished"
     old_args, = con.execute("SELECT args FROM invocations WHERE id = 1").fetchone()
-    assert set(json.loads(args)) == set(json.loads(old_args))  # the invocation records the same arguments
+    # the invocation records the same arguments, and the options added since
+    assert set(json.loads(args)) == set(json.loads(old_args)) | {"no_figure"}
     con.close()
     capsys.readouterr()
     # the run under the old id (1) and its rerun under the new one (3) are one configuration, headed by the new id

@@ -39,3 +39,25 @@ def test_an_out_path_without_a_suffix_gets_png_and_the_message_names_the_file_wr
     assert main(["riskmap", "--n", "20", "--out", str(tmp_path / "res_fig"), "--dpi", "30"]) == 0
     assert (tmp_path / "res_fig.png").is_file() and not (tmp_path / "res_fig").exists()
     assert capsys.readouterr().out.startswith(f"wrote {tmp_path / 'res_fig.png'}: ")
+
+
+def test_no_figure_writes_the_tables_removes_a_stale_figure_and_report_draws_it(tmp_path):
+    out = tmp_path / "r"
+    out.mkdir()
+    (out / "outcomes.png").write_bytes(b"a figure of an earlier run")
+    argv = ["--agent", "inactive", "--episodes", "2", "--workers", "1", "--clock", "fixed:1", "--no-progress", "--out", str(out)]
+    assert main([*argv, "--no-figure"]) == 0
+    assert (out / "table_I.md").read_text().count("| inactive |") == 1
+    assert not (out / "outcomes.png").exists()  # it would not have matched the table
+    assert main(["report", str(out)]) == 0
+    assert (out / "outcomes.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_sweep_without_a_figure_writes_its_table_only(tmp_path):
+    out = tmp_path / "s"
+    out.mkdir()
+    (out / "latency_sweep.png").write_bytes(b"stale")
+    assert main(["sweep", "--agent", "inactive", "--latency", "0,5", "--episodes", "2", "--workers", "1", "--no-progress",
+                 "--no-figure", "--out", str(out)]) == 0
+    assert "| inactive |" in (out / "latency_sweep.md").read_text()
+    assert not (out / "latency_sweep.png").exists()

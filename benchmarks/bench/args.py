@@ -54,6 +54,8 @@ def _common(p: argparse.ArgumentParser, default_agent: str) -> None:
     p.add_argument("--retry-errors", action="store_true",
                    help="also run again the episodes stored as guardian errors (after fixing the guardian or its options)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-figure", action="store_true",
+                   help="write the tables, not the figure (one left from an earlier run is removed, as it would not match)")
 
 
 def run_parser(description: str) -> argparse.ArgumentParser:
@@ -117,7 +119,8 @@ def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
         env_kwargs={k: v for k, v in options.items() if k in takes}, clock=clock, seed=args.seed, episodes=args.episodes,
         out=args.out, workers=args.workers, backend=args.backend, ray_address=args.ray_address,
         episode_timeout=args.episode_timeout, charge_precompute=args.charge_precompute, batch_size=args.batch_size,
-        retry_errors=args.retry_errors, progress=not args.no_progress, parsed=vars(args), latencies=latencies,
+        retry_errors=args.retry_errors, progress=not args.no_progress, figure=not args.no_figure, parsed=vars(args),
+        latencies=latencies,
         agent_set=args.agent.strip() if guardian_set(args.agent) is not None else None)
 
 

@@ -228,6 +228,7 @@ class BenchConfig:
     batch_size: int
     retry_errors: bool
     progress: bool
+    figure: bool = True  # draw outcomes.png (a sweep: latency_sweep.png) after the tables
     parsed: dict = field(default_factory=dict)
     latencies: tuple[float, ...] = ()  # a sweep's decision latencies, ms
     agent_set: str | None = None  # the named set --agent gave ("all", "paper"), or None for named agents

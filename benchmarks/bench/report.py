@@ -265,8 +265,11 @@ def _merge_csv(parts: list[tuple[dict, str]]) -> str:
     return buf.getvalue()
 
 
-def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_size: int = 64, quiet: bool = False) -> str:
-    """Tables and figures for one recorded command, or several merged (later ones win per agent).
+def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_size: int = 64, quiet: bool = False,
+                 figure: bool = True) -> str:
+    """Tables and figures for one recorded command, or several merged (later ones win per agent);
+    ``figure=False`` writes the tables only and removes an ``outcomes.png`` left from an earlier
+    run, which would not match them.
 
     Commands run under different configurations (env, clock, time acceleration, base step,
     seed) are never put under one header: each configuration gets its own header and table,
@@ -308,8 +311,11 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
         (out / "table_I.md").write_text("\n".join(md))
         (out / "table_I.csv").write_text(_merge_csv(csv_parts) if mixed else csv_parts[0][1])
         (out / "table_I.tex").write_text("\n".join(tex))
-        plot_outcomes(figure_rows, out / "outcomes.png", batch_size,
-                      any(str(g[-1]["args"].get("clock", "")).strip().lower().startswith("fixed") for g in groups.values()))
+        if figure:
+            plot_outcomes(figure_rows, out / "outcomes.png", batch_size,
+                          any(str(g[-1]["args"].get("clock", "")).strip().lower().startswith("fixed") for g in groups.values()))
+        else:
+            (out / "outcomes.png").unlink(missing_ok=True)
     except OSError as e:  # a full disk names no file: name the directory (the CLI prints one line)
         if e.filename is None:
             raise OSError(e.errno, e.strerror or str(e), str(out)) from None

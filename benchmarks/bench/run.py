@@ -234,7 +234,7 @@ def cmd_run(config: BenchConfig, argv) -> int:
             return _interrupted(out)
         print(f"finished in {time.perf_counter() - t0:.1f} s")
         record = store.invocation(inv)
-        write_report(store, out, record, config.batch_size)
+        write_report(store, out, record, config.batch_size, figure=config.figure)
         errors = (env_error_lines(store, record["run_keys"], config.episodes, config.env_id)
                   + guardian_error_lines(store, record["run_keys"], config.episodes))
         for line in ([msg] if msg else []) + errors:
@@ -274,7 +274,10 @@ def cmd_sweep(config: BenchConfig, argv) -> int:
     md = (f"Collision rate [% episodes] against added decision latency (fixed clock, time accel {config.parsed['time_accel']}, "
           f"{config.episodes} episodes, seed {config.seed})\n\n" + "\n".join(lines) + "\n")
     (out / "latency_sweep.md").write_text(md)
-    plot_latency(series, out / "latency_sweep.png")
+    if config.figure:
+        plot_latency(series, out / "latency_sweep.png")
+    else:  # one from an earlier sweep would not match the table
+        (out / "latency_sweep.png").unlink(missing_ok=True)
     print(md)
     if failed:
         for line in failed:
