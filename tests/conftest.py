@@ -1,3 +1,6 @@
+import contextlib
+import fcntl
+
 import pytest
 
 
@@ -40,3 +43,38 @@ def maze_hj_cache(tmp_path_factory):
     import os
 
     return os.environ.get("RMM_TEST_HJ_CACHE") or tmp_path_factory.mktemp("maze_hj")
+
+
+@contextlib.contextmanager
+def _exclusive(path):
+    with open(path, "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+@pytest.fixture(scope="session")
+def once_per_run(tmp_path_factory, request):
+    """``once_per_run(name, make)``: a directory that ``make(directory)`` filled once for the
+    whole test run, whichever worker asked first; the others wait for it and share it.
+
+    A module-scoped fixture is set up once per worker, and ``make test``'s two workers each take
+    some of a module's tests: an expensive one (an HJ solve, a benchmark run in a fresh
+    interpreter) was made twice.  The directory is under the run's own base temporary
+    directory (shared by its xdist workers, fresh every run); a ``make`` that raises does not
+    mark it made, and the next worker to ask tries again."""
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if hasattr(request.config, "workerinput") else base  # an xdist worker's base is under the run's
+
+    def once(name: str, make):
+        out = shared / f"once-{name}"
+        with _exclusive(shared / f"once-{name}.lock"):
+            if not (out / ".made").exists():
+                out.mkdir(exist_ok=True)
+                make(out)
+                (out / ".made").touch()
+        return out
+
+    return once

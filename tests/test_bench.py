@@ -12,7 +12,8 @@ from benchmarks.bench.cli import main
 from benchmarks.bench.metrics import aggregate, batch_rate, weighted_mean_std
 from benchmarks.bench.runner import episode_seed
 
-FAST = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DCirclesParallel-v0"]
+RUN = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DCirclesParallel-v0"]
+FAST = [*RUN, "--no-figure"]  # the tests read the database and the tables; the end-to-end test draws the figure too
 
 
 def ep(i, outcome, steps=10, sim=2.0, active=0.5, compute=0.02):
@@ -139,7 +140,7 @@ def test_every_agent_end_to_end_and_report(tmp_path, capsys):
 
     out = tmp_path / "r"
     assert main(["--agent", "all", "--episodes", "1", "--workers", "1", "--out", str(out),
-                 "--agent-opt", "hj.grid_n=[32,32,16,16]", *FAST]) == 0
+                 "--agent-opt", "hj.grid_n=[32,32,16,16]", *RUN]) == 0
     text = capsys.readouterr().out
     agents = ("lrmm", "cbf", "hj", "random", "inactive", "brakes")  # 'all' = the defaults, not the -paper presets
     rows = _db_rows(out)

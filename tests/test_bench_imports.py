@@ -3,6 +3,7 @@ command runs in, as ``python -m`` would, in the parent and in every worker (issu
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -37,15 +38,18 @@ def _bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
 
 
 @pytest.fixture(scope="module")
-def current_directory_run(tmp_path_factory):
-    """One two-worker run whose guardian and env both come from modules in the directory it runs
-    in: the guardian counts its act() calls per process (``WARM`` below)."""
-    cwd = tmp_path_factory.mktemp("cwd")
-    (cwd / "warm_guard.py").write_text(WARM)
-    (cwd / "my_env.py").write_text(ENV)
-    res = _bench(cwd, "--agent", "warm_guard:CountsCalls", "--env", "my_env:MyCircles-v0", "--episodes", "4",
-                 "--workers", "2")
-    return cwd, res
+def current_directory_run(once_per_run):
+    """One two-worker run (once per test run) whose guardian and env both come from modules in the
+    directory it runs in: the guardian counts its act() calls per process (``WARM`` below)."""
+    def make(cwd):
+        (cwd / "warm_guard.py").write_text(WARM)
+        (cwd / "my_env.py").write_text(ENV)
+        res = _bench(cwd, "--agent", "warm_guard:CountsCalls", "--env", "my_env:MyCircles-v0", "--episodes", "4",
+                     "--workers", "2")
+        (cwd / "run.json").write_text(json.dumps({"returncode": res.returncode, "stdout": res.stdout, "stderr": res.stderr}))
+
+    cwd = once_per_run("current_directory_run", make)
+    return cwd, subprocess.CompletedProcess([], **json.loads((cwd / "run.json").read_text()))
 
 
 @pytest.mark.heavy

@@ -19,7 +19,8 @@ from benchmarks.bench.cli import main
 from rmm_envs.pool import TaskLost, WorkersLost, run_local
 from tests.bench_helpers import faulty_task, query
 
-FAST = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DCirclesParallel-v0"]
+# tables and the database only: the figure has its own tests (test_bench, test_cli_figures)
+FAST = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DCirclesParallel-v0", "--no-figure"]
 
 
 def within(seconds, fn):
@@ -267,7 +268,7 @@ def test_datagen_rejects_zero_workers(tmp_path):
                          tmp_path / "z", workers=0, progress=False)
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # a Ray cluster of its own: 10 s of wall and Ray's daemons' CPU besides
 def test_ray_backend_same_results_and_a_lost_task_is_reported(tmp_path):
     try:
         import ray

@@ -16,7 +16,8 @@ import pytest
 from benchmarks.bench.cli import main
 from tests.bench_helpers import query
 
-FAST = ["--clock", "fixed:1", "--no-progress", "--workers", "1"]
+# tables and the database only: the figure has its own tests (test_bench, test_cli_figures)
+FAST = ["--clock", "fixed:1", "--no-progress", "--workers", "1", "--no-figure"]
 
 
 def stored(out, cols="run_key, agent, episode, outcome, error_kind"):

@@ -362,23 +362,32 @@ def test_guardian_backend_is_checked_at_construction():
 from guardians.hj.guardian import HJPaperGuardian  # noqa: E402
 
 
-@pytest.fixture(scope="module")
-def circle_guardians(tmp_path_factory):
-    """``hj`` and ``hj-paper`` on the default grid around one circle of radius 3 at the origin.
+def _circle_box() -> dict:
+    return {"obstacles": np.array([[0.0, 0.0, 3.0]]), "goal": np.array([12.0, 12.0, 0.5]), "state": np.zeros(4), "sim_time": 0.0}
 
-    Their values are solved into a fresh cache, or into ``$RMM_TEST_HJ_CACHE`` when set: a
-    cache kept between test sessions, so that the mutation runs (``make mutate``), which run
-    these tests once per mutant, solve the two default-grid values once and not every time."""
-    import os
 
-    cache = os.environ.get("RMM_TEST_HJ_CACHE") or tmp_path_factory.mktemp("hj_circle")
-    box = {"obstacles": np.array([[0.0, 0.0, 3.0]]), "goal": np.array([12.0, 12.0, 0.5]), "state": np.zeros(4), "sim_time": 0.0}
+def _circle_guardians(cache, box) -> dict:
     guards = {}
     for cls in (HJGuardian, HJPaperGuardian):
         g = cls(cache_dir=cache)
         g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
         guards[cls.name] = g
-    return guards, box
+    return guards
+
+
+@pytest.fixture(scope="module")
+def circle_guardians(once_per_run):
+    """``hj`` and ``hj-paper`` on the default grid around one circle of radius 3 at the origin.
+
+    Their values are solved once per test run into a cache both workers read, or into
+    ``$RMM_TEST_HJ_CACHE`` when set: a cache kept between test sessions, so that the mutation
+    runs (``make mutate``), which run these tests once per mutant, solve the two default-grid
+    values once and not every time."""
+    import os
+
+    cache = os.environ.get("RMM_TEST_HJ_CACHE") or once_per_run("hj_circle", lambda d: _circle_guardians(d, _circle_box()))
+    box = _circle_box()
+    return _circle_guardians(cache, box), box
 
 
 @pytest.mark.heavy
