@@ -33,7 +33,7 @@ gym.register(id="MyCircles-v0", entry_point="rmm_envs.envs.dubins4d:Dubins4DCirc
 def _bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
     exe = Path(sys.executable).parent / "rmm-bench"
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    return subprocess.run([str(exe), *args, "--clock", "fixed:1", "--no-progress", "--out", str(cwd / "res")],
+    return subprocess.run([str(exe), *args, "--clock", "fixed:1", "--no-progress", "--no-figure", "--out", str(cwd / "res")],
                           cwd=cwd, capture_output=True, text=True, timeout=600, env=env)
 
 

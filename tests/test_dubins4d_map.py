@@ -313,7 +313,7 @@ def test_rmm_bench_runs_on_the_example_map(tmp_path):
     from benchmarks.bench.cli import main as bench_main
 
     assert bench_main(["--env", "Dubins4DMapParallel-v0", "--agent", "lrmm", "--episodes", "2", "--workers", "1",
-                       "--clock", "fixed:1", "--out", str(tmp_path), "--no-progress"]) == 0
+                       "--clock", "fixed:1", "--out", str(tmp_path), "--no-progress", "--no-figure"]) == 0
 
 
 def test_render_draws_the_map():

@@ -58,7 +58,7 @@ def _bench(cwd: Path, *args: str, pythonpath: Path | None = None) -> subprocess.
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     if pythonpath is not None:
         env["PYTHONPATH"] = str(pythonpath)
-    return subprocess.run([str(exe), *args, "--clock", "fixed:1", "--no-progress", "--out", str(cwd / "res")],
+    return subprocess.run([str(exe), *args, "--clock", "fixed:1", "--no-progress", "--no-figure", "--out", str(cwd / "res")],
                           cwd=cwd, capture_output=True, text=True, timeout=600, env=env)
 
 

@@ -339,7 +339,7 @@ def test_bench_rows_bit_identical_with_1_and_2_workers(tmp_path):
     from benchmarks.bench.cli import main as bench
 
     common = ["--agent", "random", "--episodes", "4", "--clock", "fixed:1", "--no-progress", "--env", "Dubins4DCirclesParallel-v0",
-              "--agent-opt", "random.p_active=0.3"]
+              "--agent-opt", "random.p_active=0.3", "--no-figure"]
     assert bench([*common, "--workers", "1", "--out", str(tmp_path / "w1")]) == 0
     assert bench([*common, "--workers", "2", "--out", str(tmp_path / "w2")]) == 0
     cols, one = _stored(tmp_path / "w1" / "results.db")

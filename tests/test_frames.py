@@ -20,7 +20,7 @@ from benchmarks.bench.store import ResultsDatabaseError
 def results(tmp_path_factory):
     out = tmp_path_factory.mktemp("frames")
     assert bench(["--agent", "inactive,cbf", "--episodes", "3", "--workers", "1", "--clock", "fixed:1",
-                  "--no-progress", "--out", str(out)]) == 0
+                  "--no-progress", "--no-figure", "--out", str(out)]) == 0
     return out
 
 

@@ -260,7 +260,7 @@ def test_rmm_bench_set_runs_what_applies_and_lists_the_rest(tmp_path, capsys):
     import sqlite3
 
     assert bench_main(["--env", "Dubins3DMazeParallel-v0", "--agent", "paper", "--episodes", "1", "--workers", "1",
-                       "--out", str(tmp_path), "--no-progress", "--clock", "fixed:1"]) == 0
+                       "--out", str(tmp_path), "--no-progress", "--no-figure", "--clock", "fixed:1"]) == 0
     err = capsys.readouterr().err
     for agent in ("cbf-paper", "hj-paper"):
         assert (f"--agent paper: {agent} does not apply to --env Dubins3DMazeParallel-v0, skipped: guardian {agent!r} "

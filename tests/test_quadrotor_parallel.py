@@ -444,7 +444,7 @@ def test_rmm_bench_set_runs_every_default_guardian_on_the_quadrotor(tmp_path, ca
     from benchmarks.bench.cli import main as bench_main
 
     assert bench_main(["--env", "QuadrotorRoomParallel-v0", "--agent", "all", "--episodes", "1", "--workers", "1",
-                       "--out", str(tmp_path), "--no-progress", "--clock", "fixed:1"]) == 0
+                       "--out", str(tmp_path), "--no-progress", "--no-figure", "--clock", "fixed:1"]) == 0
     err = capsys.readouterr().err
     assert "does not apply" not in err  # every default guardian applies to the quadrotor
     con = sqlite3.connect(tmp_path / "results.db")
