@@ -63,7 +63,6 @@ def _fingerprint(setting: dict) -> dict:
     return _fingerprint_of(tuple(sorted(setting.items())))
 
 
-@pytest.mark.heavy
 @pytest.mark.parametrize("setting", CASES)
 def test_the_same_bits_under_each_machines_arithmetic(setting):
     record = json.loads(RECORD.read_text())
