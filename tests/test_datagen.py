@@ -144,7 +144,7 @@ def test_half_written_shard_is_redone(tmp_path):
     np.testing.assert_array_equal(load_dataset(out).risk, ref)
 
 
-@pytest.mark.slow  # a Ray cluster of its own (25-35 s); tests/test_faults.py keeps one Ray run in the default suite
+@pytest.mark.slow  # a Ray cluster of its own (25-35 s), like the other Ray drills (tests/test_faults.py, test_bench_imports.py)
 def test_ray_backend_gives_the_same_data(tmp_path):
     try:  # ray is in the test extra: a missing install must fail, not skip
         import ray
