@@ -64,15 +64,20 @@ def once_per_run(tmp_path_factory, request):
     some of a module's tests: an expensive one (an HJ solve, a benchmark run in a fresh
     interpreter) was made twice.  The directory is under the run's own base temporary
     directory (shared by its xdist workers, fresh every run); a ``make`` that raises does not
-    mark it made, and the next worker to ask tries again."""
+    mark it made, and the next worker to ask starts it again in an empty directory."""
+    import shutil
+
     base = tmp_path_factory.getbasetemp()
-    shared = base.parent if hasattr(request.config, "workerinput") else base  # an xdist worker's base is under the run's
+    # a local xdist worker's base is the run's own base + popen-gwN; elsewhere (no xdist, or a
+    # remote worker) the base itself, which no other run shares
+    shared = base.parent if hasattr(request.config, "workerinput") and base.name.startswith("popen-") else base
 
     def once(name: str, make):
         out = shared / f"once-{name}"
         with _exclusive(shared / f"once-{name}.lock"):
             if not (out / ".made").exists():
-                out.mkdir(exist_ok=True)
+                shutil.rmtree(out, ignore_errors=True)  # what a failed attempt left
+                out.mkdir()
                 make(out)
                 (out / ".made").touch()
         return out

@@ -14,7 +14,8 @@
 Results go to ``--out`` (default ``results/``): ``results.db`` (SQLite: every episode and run),
 ``table_I.md``/``.csv``/``.tex`` and ``outcomes.png`` (rates and compute time against collisions);
 a sweep writes ``latency_sweep.md`` and ``latency_sweep.png`` (``--no-figure``: the tables only;
-``rmm-bench report DIR`` draws a run's figure later).  Rerunning the same command,
+``rmm-bench report DIR`` draws a run's figure later, a sweep's comes with its rerun without the
+flag).  Rerunning the same command,
 or adding ``--resume``, finishes an interrupted run without repeating stored episodes.
 
 Environments (``--env``): any registered env offering the parallel-autonomy contract (an

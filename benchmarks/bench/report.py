@@ -350,7 +350,8 @@ def cmd_report(request) -> int:
                     raise LookupError(f"no benchmark run recorded in {store.path}") from None
                 raise LookupError(f"{request.dir} holds a latency sweep, not a benchmark run: rerun its "
                                   "`rmm-bench sweep` command with the same --out, which reads the stored "
-                                  "episodes back and rewrites latency_sweep.md and .png") from None
+                                  "episodes back and rewrites latency_sweep.md and .png (the .png not with "
+                                  "--no-figure)") from None
         write_report(store, request.dir, invs, request.batch_size)
     finally:
         store.close()
