@@ -262,10 +262,12 @@ def test_given_waypoints_and_states_must_lie_over_the_room_and_clear_of_it(env):
     room = Room(footprint=np.ones((20, 20), bool), origin=np.array([-5.0, -5.0]), cell=0.5, wall_height=3.0,
                 walls=np.array([[3.0, 0.0, 1.5, 0.25, 1.0, 1.5]]))
     for w, bad in (([[2.0, 2.0, 1.0], [20.0, 0.0, 1.0]], 1),  # beyond the footprint
-                   ([[2.0, 2.0, 0.2]], 0),                    # the bounding sphere (0.304 m) in the floor
                    ([[3.0, 0.0, 1.0]], 0)):                   # inside the wall
         with pytest.raises(ValueError, match=rf"option 'waypoints': point {bad} .* must lie over the footprint of option 'room'"):
             env.reset(seed=0, options={"room": room, "waypoints": w})
+    # the bounding sphere (0.304 m) in the floor: refused for any room, before one is looked at
+    with pytest.raises(ValueError, match=r"option 'waypoints': point 0 \[2.0, 2.0, 0.2\] must lie higher than the body's"):
+        env.reset(seed=0, options={"room": room, "waypoints": [[2.0, 2.0, 0.2]]})
     with pytest.raises(ValueError, match=r"option 'state': the body at \[9.0, 0.0, 1.5\] is not over the footprint of option 'room'$"):
         env.reset(seed=0, options={"room": room, "state": list(level(x=9.0))})
     # a point just clear of the floor is accepted, and it becomes the goal
@@ -300,7 +302,8 @@ def test_same_seed_same_episode():
     ({"state": list(level(z=0.01))}, "in contact with the room drawn from the seed"),
     ({"state": list(level(x=1000.0, y=1000.0))}, r"the body at \[1000.0, 1000.0, 1.5\] is not over the footprint of the room"),
     ({"waypoints": [[1000.0, 1000.0, 1.0]]}, r"option 'waypoints' \[\[1000.0, 1000.0, 1.0\]\]: in none of 100 rooms"),
-    ({"waypoints": [[0.0, 0.0, -5.0]]}, "in none of 100 rooms drawn from the seed does every point lie over the footprint"),
+    ({"waypoints": [[0.0, 0.0, -5.0]]}, r"point 0 \[0.0, 0.0, -5.0\] must lie higher than the body's bounding radius \(0.304 m\)"),
+    ({"waypoints": [[1.0, 1.0, 2.0], [1.0, 1.0, 0.304]]}, r"point 1 \[1.0, 1.0, 0.304\] must lie higher than"),
     ({"waypoints": [[1.0, 2.0]]}, "option 'waypoints' must be a list of K >= 1 finite"),
     ({"waypoints": [[1.0, 2.0, np.nan]]}, "option 'waypoints' must be a list"),
     ({"room": 3}, "option 'room' must be a Room or a dict"),

@@ -75,7 +75,8 @@ the floor (``altitude``'s maximum must exceed 0.804).  A room where they cannot 
 "state": [13 numbers], "waypoints": [[x, y, z], ...]})`` sets any of them.  A given state must
 lie over the room's footprint and clear of it; given waypoints must lie over the footprint with
 the bounding sphere clear of the floor, walls and objects (generated rooms are redrawn until
-they are; a given room, or a room with a given state, raises).  Those, a non-unit quaternion,
+they are; a given room, or a room with a given state, raises; a point no higher than the
+bounding radius raises at once, as no room can hold it).  Those, a non-unit quaternion,
 an unknown key or malformed values raise ``ValueError`` naming the option.
 
 ## Risk labelling

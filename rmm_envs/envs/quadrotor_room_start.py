@@ -17,7 +17,7 @@ import numpy as np
 from rmm_envs.envs.base import draw_until, option_vector
 from rmm_envs.portable import norm
 from rmm_envs.systems.rotations import quat_from_euler
-from rmm_envs.worlds.room_collision import RoomCollision
+from rmm_envs.worlds.room_collision import BOUND, RoomCollision
 from rmm_envs.worlds.rooms import Room
 
 __all__ = ["START_CLEARANCE", "WAYPOINT_CLEARANCE", "QuadrotorRoomStarts"]
@@ -89,6 +89,10 @@ class QuadrotorRoomStarts:
             w = np.asarray(options["waypoints"], dtype=float) if isinstance(options["waypoints"], (list, tuple, np.ndarray)) else None
             if w is None or w.ndim != 2 or w.shape[0] < 1 or w.shape[1] != 3 or not np.isfinite(w).all():
                 raise ValueError(f"option 'waypoints' must be a list of K >= 1 finite [x, y, z] points, got {options['waypoints']!r}")
+            low = np.nonzero(w[:, 2] <= BOUND)[0]
+            if low.size:  # every room's floor is z = 0: no room to draw could hold it
+                raise ValueError(f"option 'waypoints': point {int(low[0])} {w[low[0]].tolist()} must lie higher than the "
+                                 f"body's bounding radius ({BOUND:.3f} m) above the floor, z = 0, in every room")
             waypoints = w.copy()
         spec = options.get("room")
         if spec is not None and not isinstance(spec, (Room, dict)):
