@@ -1,4 +1,3 @@
-import contextlib
 import fcntl
 
 import pytest
@@ -45,16 +44,6 @@ def maze_hj_cache(tmp_path_factory):
     return os.environ.get("RMM_TEST_HJ_CACHE") or tmp_path_factory.mktemp("maze_hj")
 
 
-@contextlib.contextmanager
-def _exclusive(path):
-    with open(path, "a") as f:
-        fcntl.flock(f, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(f, fcntl.LOCK_UN)
-
-
 @pytest.fixture(scope="session")
 def once_per_run(tmp_path_factory, request):
     """``once_per_run(name, make)``: a directory that ``make(directory)`` filled once for the
@@ -74,7 +63,8 @@ def once_per_run(tmp_path_factory, request):
 
     def once(name: str, make):
         out = shared / f"once-{name}"
-        with _exclusive(shared / f"once-{name}.lock"):
+        with open(shared / f"once-{name}.lock", "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # held until the file closes
             if not (out / ".made").exists():
                 shutil.rmtree(out, ignore_errors=True)  # what a failed attempt left
                 out.mkdir()
