@@ -39,13 +39,13 @@ mutate: $(MUTATE_STAMP)
 	$(BIN)/python mutation/run.py $(TARGETS)
 
 bench: $(STAMP)
-	$(BIN)/python benchmarks/perf_env.py
-	$(BIN)/python benchmarks/perf_risk.py
-	$(BIN)/python benchmarks/perf_guardians.py
-	$(BIN)/python benchmarks/perf_hj.py --quick
-	$(BIN)/python benchmarks/perf_quadrotor.py
-	$(BIN)/python benchmarks/perf_quadrotor_parallel.py
-	$(BIN)/python benchmarks/perf_vector.py
+	$(BIN)/python -m benchmarks.perf_env
+	$(BIN)/python -m benchmarks.perf_risk
+	$(BIN)/python -m benchmarks.perf_guardians
+	$(BIN)/python -m benchmarks.perf_hj --quick
+	$(BIN)/python -m benchmarks.perf_quadrotor
+	$(BIN)/python -m benchmarks.perf_quadrotor_parallel
+	$(BIN)/python -m benchmarks.perf_vector
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -1,22 +1,4 @@
-"""Benchmark harness (rmm-bench) and performance measurements.
-
-``load_results(path)`` reads an ``rmm-bench`` results database into a pandas DataFrame (one
-row per stored episode); see :func:`benchmarks.bench.frames.load_results`.  ``table_i(df)``
-aggregates such a frame into the paper's Table I, one row per agent.
+"""Development tools of the repository: performance measurements (``perf_*.py``), behaviour
+fingerprints and checks.  Not part of the installed package (the harness is :mod:`rmm_bench`);
+run them from the repository root as modules, e.g. ``python -m benchmarks.perf_env``.
 """
-
-__all__ = ["load_results", "table_i"]
-
-
-def load_results(path, *, expand_stats: bool = False):
-    """One row per stored episode of the results database at ``path`` (pandas DataFrame)."""
-    from benchmarks.bench.frames import load_results as _load  # pandas only when asked for
-
-    return _load(path, expand_stats=expand_stats)
-
-
-def table_i(df, batch_size: int = 64):
-    """Table I (one row per agent) of a DataFrame of episodes; see :func:`benchmarks.bench.metrics.table_i`."""
-    from benchmarks.bench.metrics import table_i as _table
-
-    return _table(df, batch_size)

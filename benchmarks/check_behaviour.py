@@ -1,7 +1,7 @@
 """Behaviour fingerprint: prove a refactor changed no result, and that a machine's arithmetic
 changes none either.
 
-``python benchmarks/check_behaviour.py record FILE`` writes a JSON fingerprint of what the
+``python -m benchmarks.check_behaviour record FILE`` writes a JSON fingerprint of what the
 project computes; ``compare FILE`` recomputes it and lists every difference (exit 1 if any):
 run ``record`` on the commit before a refactor and ``compare`` after it.  ``arith`` computes
 it in fresh interpreters under several machines' arithmetic (BLAS kernel, numpy's SIMD
@@ -61,12 +61,12 @@ OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "brakes", "lrmm", "cbf", 
 QUICK_OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "lrmm", "cbf"),
                      "QuadrotorRoomParallel-v0": ("inactive", "lrmm", "cbf"),
                      "CartPoleParallel-v0": ("inactive", "lrmm"), "InvertedPendulumParallel-v0": ("inactive", "lrmm")}
-ENVS = ("Dubins4DCirclesGuarded-v0", "Dubins4DCirclesParallel-v0", "Dubins4DMapGuarded-v0", "Dubins4DMapParallel-v0", "Dubins3DMaze-v0",
+ENVS = ("Dubins4DGuarded-v0", "Dubins4DParallel-v0", "Dubins4DMapGuarded-v0", "Dubins4DMapParallel-v0", "Dubins3DMaze-v0",
         "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoom-v0", "QuadrotorRoomGuarded-v0",
         "QuadrotorRoomParallel-v0", "CartPoleGuarded-v0", "InvertedPendulumGuarded-v0")
-LABELLED = {"Dubins4DCirclesGuarded-v0": {}, "Dubins4DMapGuarded-v0": {}, "Dubins3DMaze-v0": {}, "Dubins3DMazeGuarded-v0": {},
+LABELLED = {"Dubins4DGuarded-v0": {}, "Dubins4DMapGuarded-v0": {}, "Dubins3DMaze-v0": {}, "Dubins3DMazeGuarded-v0": {},
             "QuadrotorRoom-v0": {}, "QuadrotorRoomGuarded-v0": {}, "CartPoleGuarded-v0": {}, "InvertedPendulumGuarded-v0": {}}
-DATASETS = ("Dubins4DCirclesGuarded-v0", "Dubins3DMazeGuarded-v0", "QuadrotorRoomGuarded-v0")
+DATASETS = ("Dubins4DGuarded-v0", "Dubins3DMazeGuarded-v0", "QuadrotorRoomGuarded-v0")
 
 
 def _is_timing(key: str) -> bool:
@@ -125,7 +125,7 @@ def _bench(tmp: str, env_id: str, agents, n: int, extra=()) -> None:
     import contextlib
     import io
 
-    from benchmarks.bench.cli import main as bench_main
+    from rmm_bench.cli import main as bench_main
 
     argv = ["--env", env_id, "--agent", ",".join(agents), "--episodes", str(n), "--seed", "0", "--clock", "fixed:1",
             "--out", tmp, "--workers", "1", "--no-progress", "--no-figure", *extra]
@@ -142,12 +142,12 @@ def _bench(tmp: str, env_id: str, agents, n: int, extra=()) -> None:
 def bench_fingerprint(episodes: int, hj_episodes: int, other_episodes: int = 0, other=OTHER_BENCH) -> dict:
     """Every stored non-timing column of fixed-clock benchmark episodes, keyed agent/episode
     (Dubins4D, whose keys are kept as before) or env/agent/episode (the other systems)."""
-    from benchmarks import load_results
+    from rmm_bench import load_results
 
     out: dict = {}
-    runs = [("Dubins4DCirclesParallel-v0", AGENTS, episodes, ())]
+    runs = [("Dubins4DParallel-v0", AGENTS, episodes, ())]
     if hj_episodes:  # solve afresh: a cached value function would hide a change of the solver
-        runs.append(("Dubins4DCirclesParallel-v0", HJ_AGENTS, hj_episodes,
+        runs.append(("Dubins4DParallel-v0", HJ_AGENTS, hj_episodes,
                      ("--agent-opt", "hj.cache=false", "--agent-opt", "hj-paper.cache=false")))
     if other_episodes:
         runs += [(env_id, agents, other_episodes, ("--agent-opt", "hj.cache=false") if "hj" in agents else ())
@@ -157,7 +157,7 @@ def bench_fingerprint(episodes: int, hj_episodes: int, other_episodes: int = 0, 
             _bench(tmp, env_id, agents, n, extra)
             df = load_results(tmp)
         cols = [c for c in df.columns if c not in _TIMING]
-        prefix = "" if env_id == "Dubins4DCirclesParallel-v0" else f"{stored_id(env_id)}/"
+        prefix = "" if env_id == "Dubins4DParallel-v0" else f"{stored_id(env_id)}/"
         for row in df[cols].to_dict("records"):
             if row.get("guardian_stats"):  # guardians' own timings (e.g. HJ's solve_seconds) are not behaviour
                 stats = json.loads(row["guardian_stats"])
@@ -266,7 +266,7 @@ def dataset_fingerprint(configs: int, samples: int) -> dict:
 def hj_fingerprint() -> dict:
     """HJ value functions solved afresh on a small Dubins4D grid, second and first order (the maze's
     are solved in the benchmark episodes of ``hj`` on the maze)."""
-    from guardians.hj.guardian import HJGuardian
+    from rmm_guardians.hj.guardian import HJGuardian
 
     obstacles = np.array([[3.0, 1.0, 1.5], [-4.0, -2.0, 2.0]])
     out = {}

@@ -6,7 +6,7 @@ default marked.  This script runs ``rmm-bench`` once per knob value, under a fix
 clock (so the runs are bit-reproducible and independent of machine load), and writes a
 Markdown table and a figure::
 
-    python benchmarks/knob_sweep.py --agent lrmm --knob threshold --values 0.1,0.2,0.3,0.5,0.85 \\
+    python -m benchmarks.knob_sweep --agent lrmm --knob threshold --values 0.1,0.2,0.3,0.5,0.85 \\
         --default 0.3 --episodes 256 --out results/knobs
 
 Outputs, under ``--out``: ``<agent>_<knob>.md`` (success, collision, timeout and intervention
@@ -39,7 +39,7 @@ def _row(out: Path, agent: str) -> dict:
 
 def run_point(agent: str, opts: list[str], out: Path, episodes: int, seed: int, clock: str, workers: int | None) -> dict:
     """Run ``rmm-bench`` for one agent and options; return its Table I row (from table_I.csv)."""
-    from benchmarks.bench.cli import main as bench
+    from rmm_bench.cli import main as bench
 
     argv = ["--agent", agent, "--episodes", str(episodes), "--seed", str(seed), "--clock", clock,
             "--out", str(out), "--no-progress"]
@@ -133,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
         points.append((_label(v), row))
     reference = None if args.no_reference else run_point("inactive", [], out / tag / "inactive", args.episodes, args.seed,
                                                             args.clock, args.workers)
-    cmd = "python benchmarks/knob_sweep.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    cmd = "python -m benchmarks.knob_sweep " + " ".join(argv if argv is not None else sys.argv[1:])
     lines = [f"{args.agent}: {args.knob} sweep, {args.episodes} episodes, seed {args.seed}, clock {args.clock}", "",
              f"Command: `{cmd}`", "",
              f"| {args.knob} | Success [%] | Collision [%] | Timeout [%] | Intervention [% sim time] |",

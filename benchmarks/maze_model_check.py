@@ -1,6 +1,6 @@
 """Does the shipped maze risk model hold on the states the reckless driver visits?
 
-Run: ``python benchmarks/maze_model_check.py [--episodes 32] [--every 10] [--seed 0]``.
+Run: ``python -m benchmarks.maze_model_check [--episodes 32] [--every 10] [--seed 0]``.
 
 The maze model (``guardians/lrmm/models/dubins3d_maze.npz``) was trained on poses drawn
 uniformly over ``Dubins3DMaze-v0``'s images.  ``Dubins3DMazeParallel-v0``'s driver visits a
@@ -21,7 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 import rmm_envs  # noqa: F401
-from guardians.lrmm.model import default_model_path, load_model
+from rmm_guardians.lrmm.model import default_model_path, load_model
 from rmm_envs.risk.estimator import RiskEstimator
 
 

@@ -1,7 +1,7 @@
 """Labels/s of the risk adapters (rmm_envs.adapters) next to the straightforward loop, both
 measured in the same run on the same states with the same tree.
 
-Run: ``python benchmarks/perf_adapters.py [--labels 64] [--loop-labels 8] [--envs CartPole-v1 InvertedPendulum-v5]``.
+Run: ``python -m benchmarks.perf_adapters [--labels 64] [--loop-labels 8] [--envs CartPole-v1 InvertedPendulum-v5]``.
 
 For each env: the batched scene (numpy CartPole/Pendulum dynamics; ``mujoco.rollout`` for
 the MuJoCo envs) labels ``--labels`` sampled states with ``n = 32, m = 2`` at the adapter's

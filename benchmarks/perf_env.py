@@ -1,6 +1,6 @@
 """Dubins4D environment performance (issue figures: steps/s, rays, batched collision).
 
-Run: ``python benchmarks/perf_env.py``.  Prints medians over repeats and ratios against
+Run: ``python -m benchmarks.perf_env``.  Prints medians over repeats and ratios against
 baselines measured in the same run (an ``odeint`` propagation per step, as the original did,
 the numpy array code of the same formulas, and a Python loop over rays and circles).  The vector
 env, and the single env against its earlier OSQP driver: ``benchmarks/perf_vector.py``.
@@ -24,7 +24,7 @@ from rmm_envs.worlds.circles import CircleWorld, ray_cast_numpy, points_in_circl
 
 
 
-def steps_per_second(env_id: str = "Dubins4DCirclesGuarded-v0", episodes: int = 10, repeats: int = 5, **env_kwargs) -> list[float]:
+def steps_per_second(env_id: str = "Dubins4DGuarded-v0", episodes: int = 10, repeats: int = 5, **env_kwargs) -> list[float]:
     """Steps per second of ``env_id`` driven by the inactive guardian, one value per repeat
     (the same ``episodes`` seeded episodes each time)."""
     env = gym.make(env_id, **env_kwargs)
@@ -48,7 +48,7 @@ def steps_per_second(env_id: str = "Dubins4DCirclesGuarded-v0", episodes: int = 
 
 
 def profile_step() -> dict[str, float]:
-    env = gym.make("Dubins4DCirclesGuarded-v0").unwrapped
+    env = gym.make("Dubins4DGuarded-v0").unwrapped
     env.reset(seed=0)
     st = env.true_state
     goal = env.scene.goal
@@ -98,7 +98,7 @@ def _loop_rays(x, y, th, circles, n=12, L=10.0):
 def main() -> None:
     rng = np.random.default_rng(0)
     circles = CircleWorld.generate(rng)
-    print("Dubins4DCirclesGuarded-v0, driver in control (inactive guardian), one process")
+    print("Dubins4DGuarded-v0, driver in control (inactive guardian), one process")
     rates = steps_per_second()
     print(f"  steps/s: median {statistics.median(rates):8.0f} over {len(rates)} runs "
           f"(min {min(rates):.0f}, max {max(rates):.0f}); target >= 5,000")

@@ -1,7 +1,7 @@
 """Guardian decision time: observation in, action out, one state (issue figures).
 
-Run: ``python benchmarks/perf_guardians.py``.  Prints, for every available guardian, the
-median and 90th percentile of its decisions over an episode stream on ``Dubins4DCirclesGuarded-v0``,
+Run: ``python -m benchmarks.perf_guardians``.  Prints, for every available guardian, the
+median and 90th percentile of its decisions over an episode stream on ``Dubins4DGuarded-v0``,
 twice: **wall** time (``time.perf_counter``) and the calling thread's **CPU** time
 (``time.thread_time_ns``).  On a quiet machine the two agree; on a shared one the wall time
 also counts the moments the process waited for a core, which the CPU time leaves out (it still
@@ -20,7 +20,7 @@ import gymnasium as gym
 import numpy as np
 
 import rmm_envs  # noqa: F401
-from guardians import available_guardians, make_guardian
+from rmm_guardians import available_guardians, make_guardian
 
 
 #: ``(env id, guardian, decisions)`` timed after the Dubins4D ones (the blocking env of each system).
@@ -28,7 +28,7 @@ OTHER_SYSTEMS = [("QuadrotorRoomGuarded-v0", "cbf", 1000), ("QuadrotorRoomGuarde
                  ("Dubins3DMazeGuarded-v0", "lrmm", 1000), ("Dubins3DMazeGuarded-v0", "cbf", 1000)]
 
 
-def decision_times(guardian, env_id="Dubins4DCirclesGuarded-v0", steps=3000, seed=0, cpu: list | None = None) -> list[float]:
+def decision_times(guardian, env_id="Dubins4DGuarded-v0", steps=3000, seed=0, cpu: list | None = None) -> list[float]:
     """Wall seconds of each of ``steps`` decisions; when ``cpu`` is a list, the thread CPU
     seconds of each decision are appended to it."""
     env = gym.make(env_id)
@@ -85,7 +85,7 @@ def _row(name: str, wall: list[float], cpu: list[float]) -> str:
 
 
 def main() -> None:
-    print("Guardian decision time (observation in, action out), Dubins4DCirclesGuarded-v0, one process; "
+    print("Guardian decision time (observation in, action out), Dubins4DGuarded-v0, one process; "
           "targets: lrmm <= 20 us, cbf <= 100 us, hj <= 50 us")
     print(f"  {'':10s} {'wall median':>12s} {'wall p90':>10s} {'CPU median':>12s} {'CPU p90':>10s}")
     for name in available_guardians():
@@ -99,7 +99,7 @@ def main() -> None:
         t = decision_times(make_guardian(name, env_id=env_id), env_id=env_id, steps=steps, cpu=cpu)
         print(_row(name, t, cpu) + f"  on {env_id}")
     lrmm = make_guardian("lrmm")
-    obs = gym.make("Dubins4DCirclesGuarded-v0").reset(seed=0)[0]
+    obs = gym.make("Dubins4DGuarded-v0").reset(seed=0)[0]
     t_np = statistics.median(timeit_np(lrmm.model, obs))
     t_torch = torch_lrmm_time(lrmm.model, obs)
     print(f"LRMM network only: numpy {t_np * 1e6:.1f} us, torch {t_torch * 1e6:.1f} us ({t_torch / t_np:.1f}x); "

@@ -1,6 +1,6 @@
 """HJ reachability performance and convergence (issue figures).
 
-Run: ``python benchmarks/perf_hj.py [--quick] [--solve-only]``.
+Run: ``python -m benchmarks.perf_hj [--quick] [--solve-only]``.
 
 * solve time and peak memory on the default grid (64 x 64 x 32 x 32, 4 s, five obstacles):
   the default scheme (ENO2 + TVD-RK3, compiled; median of 3, one thread and all threads)
@@ -12,10 +12,10 @@ Run: ``python benchmarks/perf_hj.py [--quick] [--solve-only]``.
 * convergence of the unsafe set (V <= 0) as the grid is refined: the unsafe fraction of a
   fixed set of probe states for several grids, against the finest;
 * ``--quadrotor N``: instead of all the above, the quadrotor ``hj``'s solves
-  (:mod:`guardians.hj.quadrotor`, one or two values per leg of the route) on the rooms of the first ``N``
+  (:mod:`rmm_guardians.hj.quadrotor`, one or two values per leg of the route) on the rooms of the first ``N``
   episodes of ``rmm-bench --env QuadrotorRoomParallel-v0 --seed 0``, one thread, no cache: grid
   sizes and solve times per value and per episode, the guardian's decision time on those
-  episodes' starts, and the CPU time of a climb plan (:mod:`guardians.hj.quadrotor_climb`) along
+  episodes' starts, and the CPU time of a climb plan (:mod:`rmm_guardians.hj.quadrotor_climb`) along
   each leg of their routes, from rest;
 * ``--first-use``: instead of all the above, what a fresh install pays once: a fresh
   interpreter's first solve of each scheme (a small grid, so the time is numba compiling the
@@ -32,10 +32,10 @@ import time
 
 import numpy as np
 
-from guardians.hj._kernels import set_threads
-from guardians.hj.dynamics import Dubins4DHJ
-from guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
-from guardians.hj.solver import solve_brt
+from rmm_guardians.hj._kernels import set_threads
+from rmm_guardians.hj.dynamics import Dubins4DHJ
+from rmm_guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
+from rmm_guardians.hj.solver import solve_brt
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import KIND, Dubins4D
@@ -48,9 +48,9 @@ import json, os, sys, time
 os.environ["NUMBA_CACHE_DIR"] = sys.argv[1]  # before numba is imported
 t0 = time.perf_counter()
 import numpy as np
-from guardians.hj.dynamics import Dubins4DHJ
-from guardians.hj.guardian import default_grid, obstacle_target
-from guardians.hj.solver import solve_brt
+from rmm_guardians.hj.dynamics import Dubins4DHJ
+from rmm_guardians.hj.guardian import default_grid, obstacle_target
+from rmm_guardians.hj.solver import solve_brt
 out = {"import": time.perf_counter() - t0}
 grid = default_grid((8, 8, 8, 8))
 for order in (2, 1):
@@ -161,8 +161,8 @@ def quadrotor(n: int) -> None:
     import gymnasium as gym
 
     import rmm_envs  # noqa: F401
-    from benchmarks.bench.runner import episode_seed
-    from guardians.hj.quadrotor import QuadrotorHJGuardian
+    from rmm_bench.runner import episode_seed
+    from rmm_guardians.hj.quadrotor import QuadrotorHJGuardian
 
     env = gym.make("QuadrotorRoomParallel-v0", clock="fixed:1")
     g = QuadrotorHJGuardian(cache=False, threads=1)

@@ -1,11 +1,11 @@
-"""Map env performance: ``Dubins4DMapGuarded-v0`` (pymunk queries) against ``Dubins4DCirclesGuarded-v0``
+"""Map env performance: ``Dubins4DMapGuarded-v0`` (pymunk queries) against ``Dubins4DGuarded-v0``
 (compiled circle kernels), both measured in the same run, so the ratios are what a shared
 machine can compare.
 
-Run: ``python benchmarks/perf_map.py``.  Prints, with the driver in control (blocking envs,
-resets included): steps per CPU second of ``Dubins4DCirclesGuarded-v0``, of ``Dubins4DMapGuarded-v0`` on the
+Run: ``python -m benchmarks.perf_map``.  Prints, with the driver in control (blocking envs,
+resets included): steps per CPU second of ``Dubins4DGuarded-v0``, of ``Dubins4DMapGuarded-v0`` on the
 shipped example map (circles, polygons, walls) and on a map of five circles (those of
-``Dubins4DCirclesGuarded-v0``'s seed-0 episode); then the time of risk labels (the paper's tree, 32
+``Dubins4DGuarded-v0``'s seed-0 episode); then the time of risk labels (the paper's tree, 32
 branches, depth 2, 64 states) on that circle map against the analytic circle scene.  The envs
 are timed in turn within each repeat, on this process's CPU time (other processes' load
 barely moves it), and the ratios are the medians of the per-repeat ratios.
@@ -46,12 +46,12 @@ def main(argv=None) -> None:
     p.add_argument("--episodes", type=int, default=10)
     p.add_argument("--repeats", type=int, default=3)
     args = p.parse_args(argv)
-    circles_env = gym.make("Dubins4DCirclesGuarded-v0").unwrapped
+    circles_env = gym.make("Dubins4DGuarded-v0").unwrapped
     circles_env.reset(seed=0)
     circles = circles_env.scene.obstacles
     circle_map = [{"circle": c.tolist()} for c in circles]
     runs = {
-        "Dubins4DCirclesGuarded-v0": ("Dubins4DCirclesGuarded-v0", {}),
+        "Dubins4DGuarded-v0": ("Dubins4DGuarded-v0", {}),
         "Dubins4DMapGuarded-v0, example map": ("Dubins4DMapGuarded-v0", {}),
         "Dubins4DMapGuarded-v0, 5 circles": ("Dubins4DMapGuarded-v0", {"map": circle_map}),
     }
@@ -66,10 +66,10 @@ def main(argv=None) -> None:
     for name in runs:
         print(f"{name:30s} {statistics.median(rates[name]):8.0f} steps per CPU second "
               f"(median of {args.repeats} runs of {args.episodes} episodes)")
-    base = rates["Dubins4DCirclesGuarded-v0"]
+    base = rates["Dubins4DGuarded-v0"]
     for name in list(runs)[1:]:
         ratio = statistics.median(b / r for b, r in zip(base, rates[name]))
-        print(f"step time ratio {name} / Dubins4DCirclesGuarded-v0 (same run): {ratio:.2f}x")
+        print(f"step time ratio {name} / Dubins4DGuarded-v0 (same run): {ratio:.2f}x")
 
     m = Dubins4DMapEnv(map=circle_map)
     state, goal = circles_env.true_state, circles_env.scene.goal

@@ -1,8 +1,8 @@
 """Maze parallel-autonomy env performance: steps/s with the inactive guardian, one process.
 
-Run: ``python benchmarks/perf_maze.py``.  Steps ``Dubins3DMazeParallel-v0`` (fixed 1 ms clock,
+Run: ``python -m benchmarks.perf_maze``.  Steps ``Dubins3DMazeParallel-v0`` (fixed 1 ms clock,
 so the simulated intervals do not depend on the machine) with the driver in control, resets
-included, and ``Dubins4DCirclesParallel-v0`` the same way in the same run: the ratio between the two
+included, and ``Dubins4DParallel-v0`` the same way in the same run: the ratio between the two
 is what a shared machine can compare (issue target: >= 3,000 steps/s for the maze env).  Also
 times one step's parts: the compiled one-car kernels against the numpy ``Maze`` queries they
 replace (same values, checked by the tests).
@@ -53,10 +53,10 @@ def main(argv=None) -> None:
     p.add_argument("--repeats", type=int, default=3)
     args = p.parse_args(argv)
     rates = {}
-    for env_id in ("Dubins3DMazeParallel-v0", "Dubins4DCirclesParallel-v0"):
+    for env_id in ("Dubins3DMazeParallel-v0", "Dubins4DParallel-v0"):
         rates[env_id] = statistics.median(steps_per_second(env_id, args.episodes, args.repeats))
         print(f"{env_id:26s} inactive guardian, one process: {rates[env_id]:8.0f} steps/s (median of {args.repeats} runs)")
-    print(f"ratio maze / Dubins4D (same run): {rates['Dubins3DMazeParallel-v0'] / rates['Dubins4DCirclesParallel-v0']:.2f}")
+    print(f"ratio maze / Dubins4D (same run): {rates['Dubins3DMazeParallel-v0'] / rates['Dubins4DParallel-v0']:.2f}")
     for k, v in parts().items():
         print(f"  {k:36s} {fmt_us(v)}")
 

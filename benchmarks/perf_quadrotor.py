@@ -1,6 +1,6 @@
 """Quadrotor fast labelling: agreement with PyBullet and labels per second (issue figures).
 
-Run: ``python benchmarks/perf_quadrotor.py [--rooms 4] [--branches 100]``.
+Run: ``python -m benchmarks.perf_quadrotor [--rooms 4] [--branches 100]``.
 
 For states sampled as the dataset samples them and uniform random controls (2 s, 8 points),
 each branch is propagated by the numpy integrator and checked analytically, and simulated in

@@ -1,6 +1,6 @@
 """Quadrotor parallel-autonomy env performance: steps/s with the inactive guardian, one process.
 
-Run: ``python benchmarks/perf_quadrotor_parallel.py [--episodes 20] [--repeats 3]``.  Steps
+Run: ``python -m benchmarks.perf_quadrotor_parallel [--episodes 20] [--repeats 3]``.  Steps
 ``QuadrotorRoomParallel-v0`` (fixed 1 ms clock, so the simulated intervals do not depend on
 the machine: 0.11 s, 26-27 PyBullet steps each) with the pilot in control, resets included
 (perf_env's loop), and ``Dubins3DMazeParallel-v0`` the same way in the same run: the ratio

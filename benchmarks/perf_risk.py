@@ -1,7 +1,7 @@
 """Risk-labelling performance (issue figures: labels/s and the ratio to a straightforward
 implementation measured in the same run; memory of dataset generation).
 
-Run: ``python benchmarks/perf_risk.py [--labels 256] [--naive-labels 4]``.
+Run: ``python -m benchmarks.perf_risk [--labels 256] [--naive-labels 4]``.
 
 The straightforward baseline is Algorithm 1 as the original code ran it: recursion over the
 tree, one ``scipy.integrate.odeint`` solve per branch (8 points, the speed clamp in the

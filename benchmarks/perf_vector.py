@@ -1,12 +1,12 @@
 """Steps per second: the native vector env against the single env, and the single env against
 its earlier OSQP driver, all measured in one run.
 
-Run: ``python benchmarks/perf_vector.py [--num-envs 256] [--repeats 7] [--no-pin]``.
+Run: ``python -m benchmarks.perf_vector [--num-envs 256] [--repeats 7] [--no-pin]``.
 
 Three workloads, the driver in control in every world (the inactive guardian: the env's own
 work, no agent), interleaved round by round so that they share the machine's load:
 
-* ``single``: ``gym.make("Dubins4DCirclesGuarded-v0")`` (the closed-form driver), whole episodes from
+* ``single``: ``gym.make("Dubins4DGuarded-v0")`` (the closed-form driver), whole episodes from
   seeds ``0, 1, ...``, one ``step`` per call;
 * ``single-osqp``: the same env with ``driver_solver="osqp"``, the driver's QP solved by OSQP as
   before the closed form (the baseline of the single env's speed-up);
@@ -32,11 +32,11 @@ import numpy as np
 
 import rmm_envs  # noqa: F401
 
-ID = "Dubins4DCirclesGuarded-v0"
+ID = "Dubins4DGuarded-v0"
 
 
 def _inactive(n: int | None = None) -> dict:
-    one = gym.make("Dubins4DCirclesGuarded-v0").action_space.inactive()
+    one = gym.make("Dubins4DGuarded-v0").action_space.inactive()
     if n is None:
         return one
     return {k: np.zeros((n, 1), np.float32) if np.ndim(v) else np.zeros(n, np.int64) for k, v in one.items()}

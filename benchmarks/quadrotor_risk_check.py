@@ -1,6 +1,6 @@
 """Does the quadrotor's command-policy risk carry information, and does the shipped model hold?
 
-Run: ``python benchmarks/quadrotor_risk_check.py [--resets 200] [--episodes 16] [--seed 0] [--variant risk]``
+Run: ``python -m benchmarks.quadrotor_risk_check [--resets 200] [--episodes 16] [--seed 0] [--variant risk]``
 (``--variant act``: the model ``lrmm`` reads, with the action-conditioned head).
 
 1. **Labels at reset states** (issue target: mean in [0.1, 0.9], standard deviation >= 0.15):
@@ -23,7 +23,7 @@ import gymnasium as gym
 import numpy as np
 
 import rmm_envs  # noqa: F401
-from guardians.lrmm.model import default_model_path, load_model
+from rmm_guardians.lrmm.model import default_model_path, load_model
 from rmm_envs.risk.estimator import RiskEstimator
 from rmm_envs.scenes.quadrotor import QuadrotorScene
 

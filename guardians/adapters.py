@@ -11,7 +11,7 @@ does (``flat="raw"``: unscaled); :class:`CallableGuardian` reads ``[active, u...
 the control vector in the order of the action space's ``controls``
 (:func:`to_guardian_action`).
 
-Why one mapping serves the wrapper and the guardian: docs/design-notes.md#guardiansadapters.
+Why one mapping serves the wrapper and the guardian: docs/design-notes.md#rmm_guardiansadapters.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from guardians.base import Guardian
+from rmm_guardians.base import Guardian
 from rmm_envs.autonomy import GuardianActionSpace
 
 __all__ = ["CallableGuardian", "FLAT_FORMS", "SB3Guardian", "to_guardian_action"]

@@ -11,7 +11,7 @@ seed, the env's spaces and, for privileged guardians, the env's ``privileged()``
 :meth:`~Guardian.require_action_space` and :meth:`~Guardian.require_layout` refuse an env that
 lacks what the guardian needs (``ValueError`` naming the guardian and the piece) before any
 episode.  Guardians never read an env's private attributes.  The protocol in full:
-``docs/guardians.md``; privileged guardians share :mod:`guardians.privileged`.
+``docs/guardians.md``; privileged guardians share :mod:`rmm_guardians.privileged`.
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ episode on an env that states none.
 
 from __future__ import annotations
 
-from guardians.base import Guardian
+from rmm_guardians.base import Guardian
 
 __all__ = ["BrakesGuardian", "InactiveGuardian", "RandomGuardian"]
 

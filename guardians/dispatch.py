@@ -85,7 +85,7 @@ def quadrotor_only(guardian, action_space) -> GuardianActionSpace:
 
 
 class SystemDispatch:
-    """One guardian name for several systems: a mixin before :class:`guardians.base.Guardian`.
+    """One guardian name for several systems: a mixin before :class:`rmm_guardians.base.Guardian`.
 
     The class models the Dubins4D car itself; ``others`` maps each other kind it may serve to the
     class that models it, and ``self._system_args`` (set by the constructor) maps a kind to that

@@ -1,6 +1,6 @@
 """The base of privileged guardians (``cbf`` and ``hj`` on every system): what they share.
 
-:class:`PrivilegedGuardian` is a :class:`guardians.base.Guardian` that reads the env's privileged
+:class:`PrivilegedGuardian` is a :class:`rmm_guardians.base.Guardian` that reads the env's privileged
 data (``observation_type = "global"``, ``privileged = True``) and owns:
 
 * the lap measurement: the simulated time between consecutive decisions, read from the
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from guardians.base import Guardian
+from rmm_guardians.base import Guardian
 
 __all__ = ["DEFAULT_LAP", "PrivilegedGuardian"]
 

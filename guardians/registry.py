@@ -11,13 +11,13 @@ Third-party guardians register through the entry-point group ``rmm_envs.guardian
 
 from __future__ import annotations
 
-import importlib
 import importlib.util
 import inspect
 from importlib.metadata import entry_points
 from typing import Any
 
-from guardians.base import Guardian
+from rmm_envs.user_modules import UserModuleError, import_user_module, where
+from rmm_guardians.base import Guardian
 
 __all__ = ["DEFAULT_SET", "ENTRY_POINT_GROUP", "PAPER_SET", "accepts_argument", "available_guardians", "guardian_set",
            "load_guardian_class", "make_guardian"]
@@ -25,15 +25,15 @@ __all__ = ["DEFAULT_SET", "ENTRY_POINT_GROUP", "PAPER_SET", "accepts_argument", 
 ENTRY_POINT_GROUP = "rmm_envs.guardians"
 
 BUILTIN = {
-    "lrmm": "guardians.lrmm.guardian:LRMMGuardian",
-    "lrmm-paper": "guardians.lrmm.guardian:LRMMPaperGuardian",
-    "cbf": "guardians.cbf:CBFGuardian",
-    "cbf-paper": "guardians.cbf:CBFPaperGuardian",
-    "hj": "guardians.hj.guardian:HJGuardian",
-    "hj-paper": "guardians.hj.guardian:HJPaperGuardian",
-    "random": "guardians.baselines:RandomGuardian",
-    "inactive": "guardians.baselines:InactiveGuardian",
-    "brakes": "guardians.baselines:BrakesGuardian",
+    "lrmm": "rmm_guardians.lrmm.guardian:LRMMGuardian",
+    "lrmm-paper": "rmm_guardians.lrmm.guardian:LRMMPaperGuardian",
+    "cbf": "rmm_guardians.cbf:CBFGuardian",
+    "cbf-paper": "rmm_guardians.cbf:CBFPaperGuardian",
+    "hj": "rmm_guardians.hj.guardian:HJGuardian",
+    "hj-paper": "rmm_guardians.hj.guardian:HJPaperGuardian",
+    "random": "rmm_guardians.baselines:RandomGuardian",
+    "inactive": "rmm_guardians.baselines:InactiveGuardian",
+    "brakes": "rmm_guardians.baselines:BrakesGuardian",
 }
 
 #: The suite's guardians at their defaults: ``rmm-bench --agent all``.
@@ -60,15 +60,13 @@ def _import(spec: str):
     module, _, attr = spec.partition(":")
     if not module or not attr:
         raise ValueError(f"guardian spec {spec!r} must look like 'package.module:Class'")
-    try:
-        obj = importlib.import_module(module)
-    except ImportError as e:
-        raise ValueError(f"cannot import module {module!r} for guardian {spec!r}: {e}") from None
+    obj = mod = import_user_module(module, f"guardian {spec!r}")
     for part in attr.split("."):
         try:
             obj = getattr(obj, part)
         except AttributeError:
-            raise ValueError(f"module {module!r} has no attribute {attr!r} (guardian {spec!r})") from None
+            raise UserModuleError(f"guardian {spec!r}: module {module!r} (from {where(mod)}) has no attribute "
+                                  f"{attr!r}") from None
     return obj
 
 

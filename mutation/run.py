@@ -84,6 +84,25 @@ def load_survivors(path: Path = SURVIVORS) -> tuple[dict[str, str], dict[str, st
     return dict(data.get("equivalent", {})), dict(data.get("to_test", {}))
 
 
+#: Written at the top of the scratch copy's tests/conftest.py.  The wheel installs guardians/ and
+#: benchmarks/bench/ as rmm_guardians and rmm_bench (pyproject's package-dir); the editable install
+#: maps those names to the repository, not to the scratch copy that mutmut mutates, so the tests
+#: must import the copy's folders under the installed names before anything imports them.
+IMPORT_ALIASES = '''# added by mutation/run.py: the installed import names read this copy's (mutated) folders
+import importlib.util as _ilu
+import pathlib as _pl
+import sys as _sys
+
+for _name, _rel in (("rmm_guardians", "guardians"), ("rmm_bench", "benchmarks/bench")):
+    _dir = _pl.Path(__file__).resolve().parents[1] / _rel
+    if _name not in _sys.modules and (_dir / "__init__.py").is_file():
+        _spec = _ilu.spec_from_file_location(_name, _dir / "__init__.py", submodule_search_locations=[str(_dir)])
+        _mod = _ilu.module_from_spec(_spec)
+        _sys.modules[_name] = _mod
+        _spec.loader.exec_module(_mod)
+'''
+
+
 def prepare(work: Path, target: dict, keep: bool) -> None:
     if work.exists() and not keep:
         shutil.rmtree(work)
@@ -94,6 +113,9 @@ def prepare(work: Path, target: dict, keep: bool) -> None:
             shutil.copytree(ROOT / d, work / d, ignore=ignore, dirs_exist_ok=True)
     for f in COPY_FILES:
         shutil.copy2(ROOT / f, work / f)
+    conftest = work / "tests" / "conftest.py"
+    if conftest.is_file() and not conftest.read_text().startswith(IMPORT_ALIASES):
+        conftest.write_text(IMPORT_ALIASES + conftest.read_text())
     text = (work / "pyproject.toml").read_text()
     text += (
         "\n[tool.mutmut]\n"

@@ -173,7 +173,7 @@ class GuardianActionSpace(spaces.Dict):
     def from_unit(self, flat) -> dict:
         """The action of a flat vector ``[active, z_1, ..., z_c]`` in the unit box (what RL
         libraries train on; :class:`rmm_envs.wrappers.FlattenGuardianAction`'s action space and
-        :class:`guardians.adapters.SB3Guardian`'s input, so a policy trained through the one acts
+        :class:`rmm_guardians.adapters.SB3Guardian`'s input, so a policy trained through the one acts
         the same through the other): ``active > 0.5`` takes control, and ``z_i in [-1, 1]`` maps
         linearly onto ``[low_i, high_i]`` (``-1`` the lower bound, ``+1`` the upper; values
         outside ``[-1, 1]`` are clipped first).  Non-finite numbers raise ``ValueError`` naming

@@ -2,27 +2,23 @@
 
 :data:`SYSTEMS` holds one :class:`SystemSpec` per system: its dynamics, risk scenes, env entry
 points, driver, safe default, the built-in guardians that apply, its docs page(s), and the ids
-it was known by before.  Registration, ``rmm_envs.ENV_IDS`` and ``GUARDIAN_ENV_IDS``, the
-renamed-id aliases (:data:`RENAMED`, :func:`stored_id`), the shipped LRMM models' lookup, the
+its results are keyed under.  Registration, ``rmm_envs.ENV_IDS`` and ``GUARDIAN_ENV_IDS``, the
+stored-id mapping (:func:`stored_id`, :func:`current_id`), the shipped LRMM models' lookup, the
 ``--env`` help and the docs' environment list are all read from it.  Adding a system is its
 modules plus one entry here.  Each system has up to three envs: ``<System>-v0`` (plain
 control), ``<System>Guarded-v0`` (a built-in driver, a guardian may take over; blocking) and
 ``<System>Parallel-v0`` (the same, non-blocking).
 
-What is derived from the table, and the renamed ids: docs/design-notes.md#rmm_envscatalog.
+What is derived from the table, and the stored ids: docs/design-notes.md#rmm_envscatalog.
 """
 
 from __future__ import annotations
 
-import inspect
-import sys
-import warnings
 from dataclasses import dataclass, field
 
 import gymnasium as gym
 
-__all__ = ["GUARDED_KINDS", "KINDS", "RENAMED", "SYSTEMS", "DocPage", "SystemSpec", "canonical_id", "command_env_id",
-           "env_help", "guardian_env_ids", "guardian_envs_of", "env_ids", "register", "stored_id", "system_of"]
+__all__ = ["FORMER_IDS", "GUARDED_KINDS", "KINDS", "SYSTEMS", "DocPage", "SystemSpec", "current_id", "env_help", "guardian_env_ids", "guardian_envs_of", "env_ids", "register", "stored_id", "system_of"]
 
 #: The three kinds of env a system may have, and the suffix of each one's id.
 KINDS = {"plain": "-v0", "guarded": "Guarded-v0", "parallel": "Parallel-v0"}
@@ -57,7 +53,9 @@ class SystemSpec:
     vector: str | None = None  #: vector entry point of its blocking guardian env
     extra: str | None = None  #: the package extra its envs need
     pages: tuple[DocPage, ...] = ()
-    renamed: dict = field(default_factory=dict)  #: old id -> kind, ids used before the naming scheme
+    #: kind -> the id that kind's results, datasets and fingerprints are keyed under, where it is
+    #: not today's id (the id it was first recorded under; keys never change, so stored runs resume)
+    stored: dict = field(default_factory=dict)
 
     def env_id(self, kind: str) -> str:
         if kind not in self.envs:
@@ -72,7 +70,7 @@ _DUBINS4D_GUARDIANS = ("lrmm", "lrmm-paper", "cbf", "cbf-paper", "hj", "hj-paper
 
 SYSTEMS: tuple[SystemSpec, ...] = (
     SystemSpec(
-        name="Dubins4DCircles",
+        name="Dubins4D",
         blurb="a Dubins4D car driven to a goal among five circles by a reckless CLF-QP driver",
         dynamics="rmm_envs.systems.dubins4d:Dubins4D", scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
         envs={"guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv", "parallel": "rmm_envs.envs.dubins4d:make_parallel_env"},
@@ -80,7 +78,7 @@ SYSTEMS: tuple[SystemSpec, ...] = (
         guardians=_DUBINS4D_GUARDIANS, vector="rmm_envs.envs.dubins4d_vector:Dubins4DCirclesVectorEnv",
         pages=(DocPage("environments/dubins4d.md", "Dubins4D among circles", ("guarded", "parallel"),
                        "figures/dubins4d_frame.png"),),
-        renamed={"Dubins4DCircles-v0": "guarded", "Dubins4DParallel-v0": "parallel"}),
+        stored={"guarded": "Dubins4DCircles-v0"}),
     SystemSpec(
         name="Dubins4DMap",
         blurb="the same car and driver on a JSON map of your own (circles, polygons, walls; pymunk)",
@@ -90,7 +88,7 @@ SYSTEMS: tuple[SystemSpec, ...] = (
         guardians=("lrmm", "lrmm-paper", "random", "inactive", "brakes"), extra="map",
         pages=(DocPage("environments/dubins4d_map.md", "Dubins4D on a map of your own", ("guarded", "parallel"),
                        "figures/dubins4d_map_frame.png"),),
-        renamed={"Dubins4DMap-v0": "guarded"}),
+        stored={"guarded": "Dubins4DMap-v0"}),
     SystemSpec(
         name="Dubins3DMaze",
         blurb="a constant-speed Dubins car in procedurally generated mazes, guarded from a corner-cutting pursuit driver",
@@ -139,9 +137,13 @@ SYSTEMS: tuple[SystemSpec, ...] = (
         guardians=("lrmm", "random", "inactive", "brakes"), extra="mujoco"),
 )
 
-#: Old id -> new id, for the ids renamed when one naming scheme was applied to every system.
-RENAMED = {old: s.env_id(kind) for s in SYSTEMS for old, kind in s.renamed.items()}
-_STORED = {new: old for old, new in RENAMED.items()}
+#: Today's id -> the id its results are keyed under, where the two differ (:attr:`SystemSpec.stored`).
+_STORED = {s.env_id(kind): old for s in SYSTEMS for kind, old in s.stored.items()}
+#: An id found in a stored record (a results database, a dataset, a model's metadata) that is no
+#: longer registered -> today's id of the same env.  Only records are read through it: these ids
+#: are not registered and no command accepts them.
+FORMER_IDS = {**{old: new for new, old in _STORED.items()},
+              "Dubins4DCirclesGuarded-v0": "Dubins4DGuarded-v0", "Dubins4DCirclesParallel-v0": "Dubins4DParallel-v0"}
 
 
 def env_ids(kinds=tuple(KINDS)) -> tuple[str, ...]:
@@ -155,8 +157,9 @@ def guardian_env_ids() -> tuple[str, ...]:
 
 
 def system_of(env_id: str) -> tuple[SystemSpec, str]:
-    """The system of ``env_id`` (a current or an old id) and its kind; KeyError for other ids."""
-    env_id = canonical_id(env_id)
+    """The system of ``env_id`` (today's id, or a former one read from a record) and its kind;
+    KeyError for other ids."""
+    env_id = current_id(env_id)
     for s in SYSTEMS:
         for kind in s.envs:
             if s.env_id(kind) == env_id:
@@ -181,68 +184,23 @@ def env_help() -> str:
             "in this package")
 
 
-def canonical_id(env_id: str) -> str:
-    """The current id of ``env_id`` (its new id if it was renamed, else itself)."""
-    return RENAMED.get(env_id, env_id)
-
-
-def command_env_id(env_id: str, prog: str) -> str:
-    """The current id of a command's ``--env`` value; for an old id, ``prog`` notes the rename on
-    stderr (a command line is not a script: Python's filter would hide the DeprecationWarning)."""
-    new = canonical_id(env_id)
-    if new != env_id:
-        print(f"{prog}: --env {env_id} was renamed {new} (the old id still works but will be removed)", file=sys.stderr)
-    return new
+def current_id(env_id: str) -> str:
+    """Today's id of an id read from a stored record (:data:`FORMER_IDS`); any other id is itself."""
+    return FORMER_IDS.get(env_id, env_id)
 
 
 def stored_id(env_id: str) -> str:
-    """The id the results of ``env_id`` are stored and keyed under: for a renamed env its old id
-    (so results stored before the rename keep their keys), whichever of its two ids is given."""
+    """The id the results of ``env_id`` are stored and keyed under: the id its system first
+    recorded them under (:attr:`SystemSpec.stored`), so that results stored before an id changed
+    keep their keys.  Accepts today's id or a former one."""
+    env_id = current_id(env_id)
     return _STORED.get(env_id, env_id)
 
 
-def _caller_stacklevel() -> int:
-    """The ``stacklevel`` of the first frame outside gymnasium and this module (the user's
-    ``gym.make`` line), so that Python's default filter shows the warning to a script."""
-    frame, level = sys._getframe(1), 1
-    while frame is not None and frame.f_globals.get("__name__", "").startswith(("gymnasium", __name__)):
-        frame, level = frame.f_back, level + 1
-    return level
-
-
-class Renamed:
-    """The entry point of an old id: warns, then builds the env (or vector env) of its new id."""
-
-    def __init__(self, old: str, new: str, vector: bool = False) -> None:
-        self.old, self.new, self.vector = old, new, vector
-
-    def _target(self):
-        spec = gym.spec(self.new)
-        entry = spec.vector_entry_point if self.vector else spec.entry_point
-        return gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
-
-    @property
-    def __signature__(self) -> inspect.Signature:  # what the new id's entry point accepts
-        return inspect.signature(self._target())
-
-    def __call__(self, **kwargs):
-        warnings.warn(f"env id {self.old!r} was renamed {self.new!r}; the old id still works but will be removed, "
-                      f"use {self.new!r}", DeprecationWarning, stacklevel=_caller_stacklevel())
-        return self._target()(**kwargs)
-
-    def __repr__(self) -> str:
-        return f"Renamed({self.old!r} -> {self.new!r})"
-
-
 def register() -> None:
-    """Register every env of :data:`SYSTEMS`, then every old id of :data:`RENAMED` (idempotent)."""
+    """Register every env of :data:`SYSTEMS` (idempotent)."""
     for s in SYSTEMS:
         for kind, entry in s.envs.items():
             if s.env_id(kind) not in gym.registry:
                 gym.register(id=s.env_id(kind), entry_point=entry, vector_entry_point=s.vector if kind == "guarded" else None,
                              disable_env_checker=False)
-    for old, new in RENAMED.items():
-        if old not in gym.registry:
-            vector = gym.spec(new).vector_entry_point
-            gym.register(id=old, entry_point=Renamed(old, new),
-                         vector_entry_point=Renamed(old, new, True) if vector else None, disable_env_checker=False)

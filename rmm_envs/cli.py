@@ -1,16 +1,14 @@
 """``rmm-envs``: small utilities around the environments.
 
 ``rmm-envs demo`` runs a few episodes of a parallel-autonomy env (default
-``Dubins4DCirclesParallel-v0``; 8 episodes from seed 0, enough to see both goals and collisions) with a guardian
+``Dubins4DParallel-v0``; 8 episodes from seed 0, enough to see both goals and collisions) with a guardian
 that never takes control, so the reckless driver alone decides, and prints each outcome.
 Speeds are in m/s; an env measured in other units (the maze, in pixels) also gets its own
 unit in brackets, converted at the scale the env states (``0.10 m/s (10.00 px/s)``).
 The "no guardian" action is read off the env's action space: ``active_ctrl`` 0 and every
-control field zero.  An env whose action space has no ``active_ctrl`` is refused by name.
-
-The figure commands that need a learned model moved above the guardians, to ``rmm-bench
-riskmap`` (the paper's Fig. 1) and ``rmm-bench quadrisk`` (Fig. 3): ``rmm-envs riskmap`` and
-``rmm-envs quadrisk`` print that pointer and exit with status 2.
+control field zero.  An env whose action space has no ``active_ctrl`` is refused by name.  The figure commands that
+need a learned model are ``rmm-bench riskmap`` (the paper's Fig. 1) and ``rmm-bench quadrisk``
+(Fig. 3).
 """
 
 from __future__ import annotations
@@ -25,9 +23,7 @@ from gymnasium import spaces
 
 import rmm_envs  # noqa: F401  (registers the environments)
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.catalog import command_env_id
 
-MOVED = {"riskmap": "rmm-bench riskmap", "quadrisk": "rmm-bench quadrisk"}
 
 
 def driver_only_action(space: spaces.Space, env_id: str) -> dict:
@@ -84,22 +80,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rmm-envs", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="run a few episodes with the driver alone and print the outcomes")
-    demo.add_argument("--env", default="Dubins4DCirclesParallel-v0", choices=list(rmm_envs.GUARDIAN_ENV_IDS),
-                      type=lambda env_id: command_env_id(env_id, "rmm-envs demo"),  # an old id: its new one
+    demo.add_argument("--env", default="Dubins4DParallel-v0", choices=list(rmm_envs.GUARDIAN_ENV_IDS),
                       help="an env with a built-in driver (default: %(default)s)")
     demo.add_argument("--episodes", type=int, default=8)
     demo.add_argument("--seed", type=int, default=0)
     demo.set_defaults(func=_demo)
-    for old, new in MOVED.items():  # listed for --help; main() answers them before parsing
-        sub.add_parser(old, help=f"moved: run `{new}` (it loads a guardian's model)")
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] in MOVED:
-        print(f"rmm-envs {argv[0]} moved: run `{' '.join([MOVED[argv[0]], *argv[1:]])}`", file=sys.stderr)
-        return 2
     args = build_parser().parse_args(argv)
     return args.func(args)
 

@@ -17,8 +17,9 @@ Why entry points, and an example declaration: docs/design-notes.md#rmm_envsenv_p
 from __future__ import annotations
 
 import difflib
-import importlib
 from importlib.metadata import entry_points
+
+from rmm_envs.user_modules import UserModuleError, import_user_module, where
 
 __all__ = ["ENTRY_POINT_GROUP", "EnvUnavailable", "load_env_plugins", "resolve_env_id"]
 
@@ -60,12 +61,11 @@ def resolve_env_id(env_id: str) -> str:
     module, _, name = env_id.rpartition(":")
     if module:  # "module:Id", as gym.make takes it: the module registers the env on import
         try:
-            importlib.import_module(module)
-        except Exception as e:  # noqa: BLE001 - an import that fails in any way leaves the id unregistered
-            raise EnvUnavailable(f"--env {env_id!r}: cannot import module {module!r} (looked in the current directory "
-                                 f"first, then the installed packages): {type(e).__name__}: {e}") from None
+            mod = import_user_module(module, f"--env {env_id!r}")
+        except UserModuleError as e:  # an import that fails in any way leaves the id unregistered
+            raise EnvUnavailable(str(e)) from None
         if name not in gym.registry:
-            raise EnvUnavailable(f"--env {env_id!r}: importing {module!r} registered no env {name!r}")
+            raise EnvUnavailable(f"--env {env_id!r}: importing {module!r} (from {where(mod)}) registered no env {name!r}")
         return name
     if env_id not in gym.registry:
         failed = {v: err for v, err in load_env_plugins().items() if err is not None}

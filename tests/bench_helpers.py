@@ -2,7 +2,7 @@
 
 import time
 
-from guardians.base import Guardian
+from rmm_guardians.base import Guardian
 
 
 class Boom(Guardian):

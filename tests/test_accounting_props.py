@@ -23,8 +23,8 @@ from rmm_envs.envs.guarded import EPISODE_KEY
 from rmm_envs.wrappers.rl import GuardianReward
 
 ENVS = {  # short episodes: every run below ends a few of them, by timeout or earlier
-    "Dubins4DCirclesGuarded-v0": dict(max_episode_sim_time=2.0),
-    "Dubins4DCirclesParallel-v0": dict(max_episode_sim_time=2.0, clock="fixed:7"),  # intervals 0.007 x 10 + 0.1 s
+    "Dubins4DGuarded-v0": dict(max_episode_sim_time=2.0),
+    "Dubins4DParallel-v0": dict(max_episode_sim_time=2.0, clock="fixed:7"),  # intervals 0.007 x 10 + 0.1 s
     "Dubins3DMazeGuarded-v0": dict(max_episode_sim_time=3.0, clock="fixed:1"),
     "Dubins3DMazeParallel-v0": dict(max_episode_sim_time=3.0, clock="fixed:3"),
 }
@@ -85,11 +85,11 @@ def test_intervention_time_and_reward_add_up_to_the_simulated_time(env_id, bits,
 
 
 def test_hand_counted_non_blocking_intervals():
-    """``Dubins4DCirclesParallel-v0`` at a fixed 7 ms lap: every interval is 0.007 x 10 + 0.1 = 0.17 s, and an
+    """``Dubins4DParallel-v0`` at a fixed 7 ms lap: every interval is 0.007 x 10 + 0.1 = 0.17 s, and an
     action takes effect one interval late (the first interval is the driver's).  Guardian on at
     steps 1 and 2 only (actions given at steps 0 and 1): 2 of 3 intervals, 0.34 of 0.51 s, each
     charged 0.5 x 0.17 = 0.085."""
-    env = GuardianReward(gym.make("Dubins4DCirclesParallel-v0", clock="fixed:7", max_episode_sim_time=0.51),
+    env = GuardianReward(gym.make("Dubins4DParallel-v0", clock="fixed:7", max_episode_sim_time=0.51),
                          goal_bonus=0.0, collision_penalty=0.0, intervention_cost=0.5)
     env.reset(seed=1, options={"state": [0.0, 0.0, 0.0, 0.0], "obstacles": [[30.0, 30.0, 1.0]], "goal": [-30.0, 30.0, 0.5]})
     space = env.action_space
@@ -103,7 +103,7 @@ def test_hand_counted_non_blocking_intervals():
 
 
 # ------------------------------------------------------------------ the guarded env's interval bookkeeping
-@pytest.mark.parametrize("env_id", ["Dubins4DCirclesGuarded-v0", "Dubins3DMazeGuarded-v0"])
+@pytest.mark.parametrize("env_id", ["Dubins4DGuarded-v0", "Dubins3DMazeGuarded-v0"])
 def test_intervals_are_checked_counted_and_ended_by_hand(env_id):
     """``simulate`` refuses a bad duration by value before anything is counted, counts a
     zero-length interval as a step of no time, charges the given compute time, and ends the
@@ -138,7 +138,7 @@ def test_intervals_are_checked_counted_and_ended_by_hand(env_id):
 
 def test_a_step_charges_the_clock_and_steps_by_step_dt():
     """``step`` charges the clock's lap (4 ms) to the step and advances by ``step_dt``."""
-    env = gym.make("Dubins4DCirclesGuarded-v0", clock="fixed:4", step_dt=0.25, max_episode_sim_time=0.5)
+    env = gym.make("Dubins4DGuarded-v0", clock="fixed:4", step_dt=0.25, max_episode_sim_time=0.5)
     env.reset(seed=0, options={"state": [0.0, 0.0, 0.0, 0.0], "obstacles": [[30.0, 30.0, 1.0]], "goal": [-30.0, 30.0, 0.5]})
     env.step(env.action_space.inactive())
     _, _, _, trunc, info = env.step(env.action_space.inactive())
@@ -153,18 +153,18 @@ def test_a_step_charges_the_clock_and_steps_by_step_dt():
 @pytest.mark.parametrize("bad", [-1, -1e-300, math.nan, math.inf, True, "1", None])
 def test_reward_weights_are_refused_by_name_and_value(name, bad):
     with pytest.raises(ValueError, match=rf"^{name} must be a finite number >= 0, got {re.escape(repr(bad))}$"):
-        GuardianReward(gym.make("Dubins4DCirclesGuarded-v0"), **{name: bad})
+        GuardianReward(gym.make("Dubins4DGuarded-v0"), **{name: bad})
 
 
 def test_reward_weights_are_kept_as_floats_and_recorded_in_the_spec():
-    env = GuardianReward(gym.make("Dubins4DCirclesGuarded-v0"), goal_bonus=np.float32(2), collision_penalty=np.int64(0),
+    env = GuardianReward(gym.make("Dubins4DGuarded-v0"), goal_bonus=np.float32(2), collision_penalty=np.int64(0),
                          intervention_cost=3)
     assert (env.goal_bonus, env.collision_penalty, env.intervention_cost) == (2.0, 0.0, 3.0)
     assert all(type(v) is float for v in (env.goal_bonus, env.collision_penalty, env.intervention_cost))
     spec = env.spec.additional_wrappers[-1]
     assert spec.name == "GuardianReward" and spec.kwargs == {"goal_bonus": np.float32(2), "collision_penalty": 0,
                                                             "intervention_cost": 3}
-    default = GuardianReward(gym.make("Dubins4DCirclesGuarded-v0"))
+    default = GuardianReward(gym.make("Dubins4DGuarded-v0"))
     assert (default.goal_bonus, default.collision_penalty, default.intervention_cost) == (1.0, 10.0, 0.05)
 
 
@@ -179,7 +179,7 @@ def test_reward_keeps_the_env_reward_and_every_info_entry():
     """The shaped reward replaces the env's; the env's goes to ``info["env_reward"]`` and nothing
     else of the step changes (a collision: -1 from the env, -10 - 0.05 x 0.1 shaped)."""
     opts = {"state": [0.0, 0.0, 0.0, 1.0], "obstacles": [[0.15, 0.0, 0.1]], "goal": [-8.0, -8.0, 0.5]}
-    plain, wrapped = gym.make("Dubins4DCirclesGuarded-v0"), GuardianReward(gym.make("Dubins4DCirclesGuarded-v0"))
+    plain, wrapped = gym.make("Dubins4DGuarded-v0"), GuardianReward(gym.make("Dubins4DGuarded-v0"))
     o1, i1 = plain.reset(seed=0, options=opts)
     o2, i2 = wrapped.reset(seed=0, options=opts)
     assert np.array_equal(o1, o2) and i1.keys() == i2.keys()
@@ -218,7 +218,7 @@ class _ShiftedClock(gym.Wrapper):
 def test_the_cost_is_charged_from_the_time_reset_reports(shift, drop):
     """The first step's length is measured from the simulated time ``reset`` reported (0 when it
     reports none): 0.1 s here, whatever the time origin."""
-    env = GuardianReward(_ShiftedClock(gym.make("Dubins4DCirclesGuarded-v0"), shift, drop), intervention_cost=1.0)
+    env = GuardianReward(_ShiftedClock(gym.make("Dubins4DGuarded-v0"), shift, drop), intervention_cost=1.0)
     env.reset(seed=0, options=STRAIGHT_ON)
     _, r, *_ = env.step(env.action_space.active([0.0, 0.0]))
     assert r == pytest.approx(-0.1, abs=1e-12)
@@ -230,7 +230,7 @@ STRAIGHT_ON = {"state": [0.0, 0.0, 0.0, 1.0], "obstacles": [[-6.0, 6.0, 1.0]], "
 def test_reaching_the_goal_under_guardian_control_pays_the_bonus_less_the_cost():
     """Holding course at 1 m/s to a goal whose edge is 0.95 m ahead: 10 steps of 0.1 s under guardian
     control, each charged 0.1 s x 1; the last also earns the bonus 2."""
-    env = GuardianReward(gym.make("Dubins4DCirclesGuarded-v0"), goal_bonus=2.0, intervention_cost=1.0)
+    env = GuardianReward(gym.make("Dubins4DGuarded-v0"), goal_bonus=2.0, intervention_cost=1.0)
     env.reset(seed=0, options=STRAIGHT_ON)
     rewards = []
     while True:
@@ -256,7 +256,7 @@ def test_a_flat_action_maps_to_the_guardian_action_exactly():
     refused naming the controls."""
     from rmm_envs.wrappers.rl import FlattenGuardianAction
 
-    space = gym.make("Dubins4DCirclesGuarded-v0").action_space
+    space = gym.make("Dubins4DGuarded-v0").action_space
     to = FlattenGuardianAction.to_guardian
     for flat, controls in (([1.0, 7.0, -3.0], [0.25, -0.5]), ([1.0, -1.5, 1.5], [-0.25, 0.5]),
                            ([[0.9], [0.0], [0.5]], [0.0, 0.25]), (np.array([["1", "-1", "1"]]), [-0.25, 0.5])):
@@ -268,7 +268,7 @@ def test_a_flat_action_maps_to_the_guardian_action_exactly():
     assert str(e.value) == "a flat guardian action has 3 numbers [active, turnrate_ctrl, accel_ctrl], got shape (2,)"
 
 
-@pytest.mark.parametrize("env_id", ["Dubins4DCirclesGuarded-v0", "Dubins3DMazeGuarded-v0"])
+@pytest.mark.parametrize("env_id", ["Dubins4DGuarded-v0", "Dubins3DMazeGuarded-v0"])
 def test_the_time_limit_is_reached_at_exactly_its_tolerance_and_statistics_before_a_step(env_id):
     """One interval of ``max_episode_sim_time - 1e-9`` ends the episode (the limit holds with that
     tolerance, inclusive); before any step the statistics are all zero (no division by 0 steps)."""

@@ -291,7 +291,7 @@ def test_a_failure_of_the_wrong_shape_is_refused_by_name():
 
 def test_failure_for_a_package_env_is_refused():
     with pytest.raises(TypeError, match=r"failure= is for envs served by a risk adapter"):
-        RiskLabel(gym.make("Dubins4DCirclesGuarded-v0"), failure=speed_failure)
+        RiskLabel(gym.make("Dubins4DGuarded-v0"), failure=speed_failure)
 
 
 def test_an_object_that_is_not_a_snapshot_simulator_is_refused_listing_what_it_lacks():
@@ -368,9 +368,9 @@ def test_datagen_refuses_a_missing_or_bad_failure_by_name(extra, match, tmp_path
 def test_datagen_refuses_a_failure_for_a_package_env(tmp_path, capsys):
     from rmm_envs.risk.datagen import main
 
-    assert main(["--env", "Dubins4DCirclesGuarded-v0", "--configs", "1", "--out", str(tmp_path / "d"), "--no-progress",
+    assert main(["--env", "Dubins4DGuarded-v0", "--configs", "1", "--out", str(tmp_path / "d"), "--no-progress",
                  "--failure", "numpy:isnan"]) == 2
-    assert "failure (--failure) is for envs served by a risk adapter; Dubins4DCirclesGuarded-v0 defines its own" in capsys.readouterr().err
+    assert "failure (--failure) is for envs served by a risk adapter; Dubins4DGuarded-v0 defines its own" in capsys.readouterr().err
 
 
 def test_adapted_envs_follow_the_labelled_env_protocol_and_sampling_leaves_the_episode_alone():
@@ -407,8 +407,8 @@ def test_the_two_commands_the_lrmm_refusal_names_make_a_model_for_a_module_env(t
     import re
     import shlex
 
-    from guardians.lrmm.model import LRMMModel, default_model_path
-    from guardians.lrmm.train import main as train_main
+    from rmm_guardians.lrmm.model import LRMMModel, default_model_path
+    from rmm_guardians.lrmm.train import main as train_main
     from rmm_envs.risk.datagen import main as datagen_main
 
     (tmp_path / "mycartpole.py").write_text(MY_MODULE)
@@ -433,7 +433,7 @@ def test_datagen_names_a_module_that_fails_to_import_and_the_nearest_id_of_a_typ
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr("sys.path", list(__import__("sys").path))
     assert main(["--env", "brokenmod26:X-v0", "--out", str(tmp_path / "d"), "--no-progress"]) == 2
-    assert ("cannot import module 'brokenmod26' (looked in the current directory first, then the installed packages): "
+    assert ("cannot import module 'brokenmod26' (from brokenmod26.py): "
             "NameError: name 'undefined_name_in_module' is not defined") in capsys.readouterr().err
     assert main(["--env", "CartPoleGuardd-v0", "--out", str(tmp_path / "d"), "--no-progress"]) == 2
     assert "is not a registered Gymnasium env (did you mean 'CartPoleGuarded-v0'?)" in capsys.readouterr().err
@@ -442,7 +442,7 @@ def test_datagen_names_a_module_that_fails_to_import_and_the_nearest_id_of_a_typ
 
 @pytest.mark.parametrize("env, match", [
     ("no_such_module_26:X-v0", r"env 'no_such_module_26:X-v0': cannot import module 'no_such_module_26'"),
-    ("mycartpole:Other-v0", r"env 'mycartpole:Other-v0': importing 'mycartpole' registered no env 'Other-v0'"),
+    ("mycartpole:Other-v0", r"env 'mycartpole:Other-v0': importing 'mycartpole' \(from .*mycartpole\.py\) registered no env 'Other-v0'"),
 ])
 def test_datagen_refuses_a_module_env_that_does_not_register_by_name(env, match, tmp_path, monkeypatch, capsys):
     import re

@@ -33,7 +33,7 @@ def test_dubins4d_space_is_the_plain_dict_it_replaced():
         assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
     assert D4.controls == ("turnrate_ctrl", "accel_ctrl")
     assert D4.control_low.tolist() == [-0.25, -0.5] and D4.control_high.tolist() == [0.25, 0.5]
-    assert gym.make("Dubins4DCirclesGuarded-v0").action_space == D4
+    assert gym.make("Dubins4DGuarded-v0").action_space == D4
 
 
 def test_parse_clips_and_orders_the_control_vector():
@@ -117,7 +117,7 @@ def test_batch_parse_names_field_and_sub_env():
 
 
 def test_spaces_survive_pickle_and_deepcopy():
-    env = gym.make("Dubins4DCirclesGuarded-v0")
+    env = gym.make("Dubins4DGuarded-v0")
     for space in (env.action_space, env.observation_space):
         for clone in (pickle.loads(pickle.dumps(space)), copy.deepcopy(space)):
             assert clone == space and type(clone) is type(space)
@@ -126,7 +126,7 @@ def test_spaces_survive_pickle_and_deepcopy():
 
 
 def test_dubins4d_observation_layout_matches_the_observation():
-    env = gym.make("Dubins4DCirclesGuarded-v0", n_rays=8).unwrapped
+    env = gym.make("Dubins4DGuarded-v0", n_rays=8).unwrapped
     obs, _ = env.reset(seed=1, options={"state": [1.0, 2.0, 0.5, 1.5], "goal": [4.0, -2.0, 0.5],
                                         "obstacles": [[-5.0, -5.0, 2.0]]})
     lay = autonomy.layout(env.observation_space)

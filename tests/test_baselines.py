@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from guardians.baselines import BrakesGuardian, RandomGuardian
+from rmm_guardians.baselines import BrakesGuardian, RandomGuardian
 from rmm_envs.autonomy import GuardianActionSpace, SafeDefault
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D, FullBraking

@@ -8,11 +8,11 @@ import time
 import numpy as np
 import pytest
 
-from benchmarks.bench.cli import main
-from benchmarks.bench.metrics import aggregate, batch_rate, weighted_mean_std
-from benchmarks.bench.runner import episode_seed
+from rmm_bench.cli import main
+from rmm_bench.metrics import aggregate, batch_rate, weighted_mean_std
+from rmm_bench.runner import episode_seed
 
-RUN = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DCirclesParallel-v0"]
+RUN = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DParallel-v0"]
 FAST = [*RUN, "--no-figure"]  # the tests read the database and the tables; the end-to-end test draws the figure too
 
 
@@ -110,7 +110,7 @@ def _check_rendered_numbers(out, aggs: dict) -> None:
 
 
 def test_rendered_tables_hold_the_aggregated_numbers(tmp_path):
-    from benchmarks.bench.report import format_tables
+    from rmm_bench.report import format_tables
 
     outcomes = ["goal"] * 32 + ["collision"] * 32 + ["goal"] * 16 + ["timeout"] * 48 + ["goal"] * 2
     eps = [ep(i, o, compute=0.01 * (1 + i % 3), active=0.1 * (i % 5)) for i, o in enumerate(outcomes)]
@@ -136,7 +136,7 @@ def test_every_agent_end_to_end_and_report(tmp_path, capsys):
     error, the written tables hold the aggregation of the stored rows, and ``report`` rebuilds
     the same table from the database alone.  One episode each, in this process: the worker
     pool, resuming and determinism have their own tests."""
-    from benchmarks.bench.store import ResultsStore
+    from rmm_bench.store import ResultsStore
 
     out = tmp_path / "r"
     assert main(["--agent", "all", "--episodes", "1", "--workers", "1", "--out", str(out),
@@ -159,9 +159,9 @@ def test_every_agent_end_to_end_and_report(tmp_path, capsys):
 
 
 def test_named_agent_sets():
-    from benchmarks.bench.checks import resolve_agents as _agents
+    from rmm_bench.checks import resolve_agents as _agents
 
-    from guardians.registry import load_guardian_class
+    from rmm_guardians.registry import load_guardian_class
 
     assert list(_agents("all")) == ["lrmm", "cbf", "hj", "random", "inactive", "brakes"]
     assert list(_agents(" paper ")) == ["lrmm-paper", "cbf-paper", "hj-paper", "random", "inactive", "brakes"]
@@ -180,7 +180,7 @@ def test_agent_options_reach_the_guardian(tmp_path):
 @pytest.mark.heavy
 def test_resume_after_kill_minus_nine(tmp_path, capsys):
     out = tmp_path / "k"
-    cmd = [sys.executable, "-m", "benchmarks.bench.cli", "--agent", "inactive", "--episodes", "40", "--workers", "1", "--out", str(out), *FAST]
+    cmd = [sys.executable, "-m", "rmm_bench.cli", "--agent", "inactive", "--episodes", "40", "--workers", "1", "--out", str(out), *FAST]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 300  # generous: a loaded 2-core machine can start this slowly
     n = 0
@@ -260,7 +260,7 @@ def test_latency_sweep(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "holds a latency sweep, not a benchmark run" in err and "rmm-bench sweep" in err
     # a store with neither kind of invocation names what is missing, once
-    from benchmarks.bench.store import ResultsStore
+    from rmm_bench.store import ResultsStore
 
     empty = tmp_path / "empty"
     empty.mkdir()

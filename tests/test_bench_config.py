@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.bench.args import parse_run, parse_sweep
-from benchmarks.bench.cli import main
-from benchmarks.bench.config import AgentRun, BenchConfig, EpisodeResult, EpisodeTask, accepts_argument, run_key
-from benchmarks.bench.store import EPISODE_FIELDS
+from rmm_bench.args import parse_run, parse_sweep
+from rmm_bench.cli import main
+from rmm_bench.config import AgentRun, BenchConfig, EpisodeResult, EpisodeTask, accepts_argument, run_key
+from rmm_bench.store import EPISODE_FIELDS
 
 DATA = Path(__file__).parent / "data"
 # tables and the database only: the figure has its own tests (test_bench, test_cli_figures)
@@ -28,7 +28,7 @@ def test_run_keys_and_stored_config_are_those_of_the_untyped_harness(capsys):
     con.close()
     assert stored["inactive"][0] == "3990ef051d980703" and stored["random"][0] == "c731fab8951b5132"
     par = parse_run(["--agent", "inactive,brakes", "--episodes", "3", "--out", "olddb", *FAST], "")
-    circ = parse_run(["--agent", "random", "--agent-opt", "random.p_active=0.5", "--env", "Dubins4DCirclesGuarded-v0", "--episodes", "2",
+    circ = parse_run(["--agent", "random", "--agent-opt", "random.p_active=0.5", "--env", "Dubins4DGuarded-v0", "--episodes", "2",
                       "--out", "olddb", *FAST], "")
     runs = par.agent_runs() | circ.agent_runs()
     assert set(runs) == set(stored)
@@ -37,17 +37,7 @@ def test_run_keys_and_stored_config_are_those_of_the_untyped_harness(capsys):
         assert run.key == stored[agent][0] == run_key(stored[agent][1])
     assert circ.env_kwargs == {"clock": "fixed:1"}  # the blocking env takes no time_accel / base_step
     assert par.env_kwargs == {"time_accel": 10.0, "base_step": 0.1, "clock": "fixed:1"}
-    # the same commands under the old ids (renamed since): the same env, the same stored runs
-    old_par = parse_run(["--agent", "inactive,brakes", "--env", "Dubins4DParallel-v0", "--episodes", "3", "--out", "olddb",
-                         *FAST], "")
-    old_circ = parse_run(["--agent", "random", "--agent-opt", "random.p_active=0.5", "--env", "Dubins4DCircles-v0",
-                          "--episodes", "2", "--out", "olddb", *FAST], "")
-    assert (old_par.env_id, old_circ.env_id) == ("Dubins4DCirclesParallel-v0", "Dubins4DCirclesGuarded-v0")
-    assert capsys.readouterr().err.splitlines() == [
-        "rmm-bench: --env Dubins4DParallel-v0 was renamed Dubins4DCirclesParallel-v0 (the old id still works but will be removed)",
-        "rmm-bench: --env Dubins4DCircles-v0 was renamed Dubins4DCirclesGuarded-v0 (the old id still works but will be removed)"]
-    for agent, run in (old_par.agent_runs() | old_circ.agent_runs()).items():
-        assert run.key == stored[agent][0] and run.as_dict() == stored[agent][1]
+    assert capsys.readouterr().err == ""
 
 
 def test_old_database_reports_the_same_table_and_resume_runs_nothing(tmp_path, capsys):
@@ -67,11 +57,11 @@ def test_old_database_reports_the_same_table_and_resume_runs_nothing(tmp_path, c
     assert set(json.loads(args)) == set(json.loads(old_args)) | {"no_figure"}
     con.close()
     capsys.readouterr()
-    # the run under the old id (1) and its rerun under the new one (3) are one configuration, headed by the new id
+    # the run recorded before the ids settled (1) and its rerun (3) are one configuration, headed by today's id
     assert main(["report", str(out), "--invocation", "1", "--invocation", "3"]) == 0
     text = capsys.readouterr().out
-    assert text.startswith("Table I: Dubins4DCirclesParallel-v0, clock fixed:1, time accel 10.0, seed 0, 3 episodes")
-    assert "configurations" not in text and "Dubins4DParallel-v0" not in text
+    assert text.startswith("Table I: Dubins4DParallel-v0, clock fixed:1, time accel 10.0, seed 0, 3 episodes")
+    assert "configurations" not in text and text.count("Dubins4DParallel-v0") == 1
     assert (out / "table_I.csv").read_text().startswith("agent,")  # one configuration: no configuration columns
 
 
@@ -94,7 +84,7 @@ def test_episode_result_fields_are_the_store_columns():
 
 def test_configs_are_frozen_copies_and_refuse_what_cannot_be_stored():
     kw = {"grid_n": [8, 8]}
-    run = AgentRun("hj", kw, "Dubins4DCirclesParallel-v0", {"clock": "fixed:1"}, 0, 600.0, False)
+    run = AgentRun("hj", kw, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 600.0, False)
     kw["grid_n"].append(9)
     assert run.agent_kwargs == {"grid_n": [8, 8]}  # a copy: the caller's dict does not reach the run
     with pytest.raises(dataclasses.FrozenInstanceError):
@@ -134,7 +124,7 @@ def test_envs_without_the_parallel_autonomy_contract_are_refused_by_name(tmp_pat
 
 def test_the_blocking_env_runs_through_the_same_contract(tmp_path, capsys):
     out = tmp_path / "b"
-    assert main(["--agent", "brakes", "--env", "Dubins4DCirclesGuarded-v0", "--episodes", "2", "--out", str(out), *FAST]) == 0
+    assert main(["--agent", "brakes", "--env", "Dubins4DGuarded-v0", "--episodes", "2", "--out", str(out), *FAST]) == 0
     con = sqlite3.connect(out / "results.db")
     rows = con.execute("SELECT outcome, steps, compute_time, final_speed FROM episodes").fetchall()
     assert len(rows) == 2 and all(o != "error" and s > 0 and c == pytest.approx(s * 1e-3) and v is not None for o, s, c, v in rows)
@@ -142,7 +132,7 @@ def test_the_blocking_env_runs_through_the_same_contract(tmp_path, capsys):
 
 
 def test_env_statistics_contract_is_checked_and_optional_keys_may_be_absent():
-    from benchmarks.bench.runner import EPISODE_STATISTICS, EnvContractError, _statistics
+    from rmm_bench.runner import EPISODE_STATISTICS, EnvContractError, _statistics
 
     ep = {k: i for i, k in enumerate(EPISODE_STATISTICS.values())}
     got = _statistics("E-v0", {"outcome": "goal", "episode_stats": ep})
@@ -181,16 +171,16 @@ def test_accepts_argument_reads_signatures_and_follows_forwarded_kwargs():
 @pytest.mark.parametrize("workers, backend, opts, expected", [
     (2, "local", {}, 1), (1, "ray", {}, 1), (1, "local", {}, None), (4, "local", {"threads": 3}, None)])
 def test_threads_go_to_guardians_that_take_them_when_workers_share_the_machine(workers, backend, opts, expected):
-    from benchmarks.bench.run import guardian_threads
+    from rmm_bench.run import guardian_threads
 
     assert guardian_threads("tests.bench_helpers:Threaded", opts, workers, backend) == expected
     assert guardian_threads("inactive", {}, workers, backend) is None  # takes no threads
 
 
 def test_a_worker_builds_the_guardian_with_the_tasks_threads_and_sets_no_environment(tmp_path, monkeypatch):
-    from benchmarks.bench.run import plan_tasks
-    from benchmarks.bench.runner import run_episode
-    from benchmarks.bench.store import ResultsStore
+    from rmm_bench.run import plan_tasks
+    from rmm_bench.runner import run_episode
+    from rmm_bench.store import ResultsStore
 
     monkeypatch.delenv("RMM_HJ_THREADS", raising=False)
     cfg = parse_run(["--agent", "tests.bench_helpers:Threaded,inactive", "--agent-opt", "tests.bench_helpers:Threaded.margin=0.5",
@@ -222,9 +212,9 @@ def test_bench_config_is_what_the_command_line_said():
 
 def test_each_guardian_class_is_resolved_once_per_command(monkeypatch, tmp_path):
     # --agent resolves each name to its class once; the checks and the task plan use that class
-    import guardians.registry as registry
-    from benchmarks.bench.run import applicable, plan_tasks
-    from benchmarks.bench.store import ResultsStore
+    import rmm_guardians.registry as registry
+    from rmm_bench.run import applicable, plan_tasks
+    from rmm_bench.store import ResultsStore
     from tests.bench_helpers import Threaded
 
     calls = []
@@ -246,13 +236,13 @@ def test_each_guardian_class_is_resolved_once_per_command(monkeypatch, tmp_path)
 def test_the_non_blocking_defaults_are_the_wrapper_s_everywhere():
     import inspect
 
-    from benchmarks.bench.args import NON_BLOCKING_DEFAULTS
-    from benchmarks.bench.checks import _env_creator
+    from rmm_bench.args import NON_BLOCKING_DEFAULTS
+    from rmm_bench.checks import _env_creator
     from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL, NonBlockingStepping
 
     assert (TIME_ACCEL, BASE_STEP) == (10.0, 0.1)  # the paper's 10x and 0.1 s
     assert NON_BLOCKING_DEFAULTS == {"time_accel": TIME_ACCEL, "base_step": BASE_STEP}
-    for factory in (NonBlockingStepping, _env_creator("Dubins4DCirclesParallel-v0"), _env_creator("QuadrotorRoomParallel-v0")):
+    for factory in (NonBlockingStepping, _env_creator("Dubins4DParallel-v0"), _env_creator("QuadrotorRoomParallel-v0")):
         params = inspect.signature(factory).parameters
         assert (params["time_accel"].default, params["base_step"].default) == (TIME_ACCEL, BASE_STEP)
     cfg = parse_run(["--agent", "inactive", "--out", "x", *FAST], "")

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.bench.config import import_from
+from rmm_bench.config import import_from
 
 GUARD = '''
-from guardians.base import Guardian
+from rmm_guardians.base import Guardian
 
 
 class Steady(Guardian):
@@ -80,7 +80,7 @@ def test_a_module_that_is_not_there_exits_2_naming_it(tmp_path):
     assert "--env 'no_such_env:E-v0': cannot import module 'no_such_env'" in res.stderr
     (tmp_path / "empty_env.py").write_text("")
     res = _bench(tmp_path, "--env", "empty_env:E-v0", "--episodes", "1")
-    assert res.returncode == 2 and "importing 'empty_env' registered no env 'E-v0'" in res.stderr
+    assert res.returncode == 2 and "importing 'empty_env' (from empty_env.py) registered no env 'E-v0'" in res.stderr
 
 
 def test_import_from_puts_each_folder_first_once(monkeypatch):
@@ -92,7 +92,7 @@ def test_import_from_puts_each_folder_first_once(monkeypatch):
 
 
 WARM = '''
-from guardians.base import Guardian
+from rmm_guardians.base import Guardian
 
 CALLS = 0  # act() calls in this worker process
 
@@ -119,7 +119,7 @@ def test_each_workers_first_timed_decision_comes_after_an_untimed_warm_up(curren
     that process: compiling or loading a guardian's kernels is never a timed decision."""
     import json
 
-    from benchmarks import load_results
+    from rmm_bench import load_results
 
     cwd, res = current_directory_run
     assert res.returncode == 0, res.stderr[-2000:]
@@ -133,9 +133,9 @@ def test_the_cbf_warm_up_reaches_the_qp_and_the_recovery_then_reset_forgets_it()
     compiled matrix fill) and computes a recovery, and the episode's counters start at zero."""
     import gymnasium as gym
 
-    from guardians import make_guardian
+    from rmm_guardians import make_guardian
 
-    env = gym.make("Dubins4DCirclesGuarded-v0")
+    env = gym.make("Dubins4DGuarded-v0")
     obs, info = env.reset(seed=0)
     g = make_guardian("cbf")
     kw = dict(seed=0, observation_space=env.observation_space, action_space=env.action_space,

@@ -7,8 +7,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from guardians import make_guardian
-from guardians.cbf import CBFGuardian, CBFPaperGuardian
+from rmm_guardians import make_guardian
+from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.drivers.dubins4d import CLFDriver
 from rmm_envs.envs.dubins4d import CONTROLS
@@ -178,9 +178,9 @@ def test_registry_names():
 
 # ---------------------------------------------------------------- recovery, in the env's own loop
 def _run_env(guardian, state, obstacles, goal, seconds):
-    """Closed loop in ``Dubins4DCirclesParallel-v0`` (fixed 1 ms clock: 0.11-s laps, one-step action
+    """Closed loop in ``Dubins4DParallel-v0`` (fixed 1 ms clock: 0.11-s laps, one-step action
     latency, exact dynamics and contact checks).  Returns the outcome (or None) and the states."""
-    env = gym.make("Dubins4DCirclesParallel-v0", clock="fixed:1")
+    env = gym.make("Dubins4DParallel-v0", clock="fixed:1")
     obs, info = env.reset(seed=0, options={"state": state, "obstacles": obstacles, "goal": goal})
     guardian.reset(seed=0, privileged=env.unwrapped.privileged, action_space=env.action_space)
     states = [np.asarray(info["state"])]
@@ -392,10 +392,10 @@ def test_filter_needs_the_nominal_control_and_names_the_key():
 
 
 def test_filter_in_the_loop_never_collides_where_the_driver_alone_does():
-    """The env's own loop (``Dubins4DCirclesParallel-v0``, fixed clock): the car heads straight for an
+    """The env's own loop (``Dubins4DParallel-v0``, fixed clock): the car heads straight for an
     obstacle with the goal behind it; the driver alone hits it, the filter does not."""
     args = ([-6.0, 0.0, 0.0, 2.0], [[0.0, 0.0, 2.0]], [8.0, 0.0, 0.5])
-    env = gym.make("Dubins4DCirclesParallel-v0", clock="fixed:1")
+    env = gym.make("Dubins4DParallel-v0", clock="fixed:1")
     env.reset(seed=0, options={"state": args[0], "obstacles": args[1], "goal": args[2]})
     while True:
         *_, te, tr, info = env.step(env.unwrapped.action_space.inactive())

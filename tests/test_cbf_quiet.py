@@ -7,7 +7,7 @@ import osqp
 import pytest
 import scipy.sparse as sp
 
-from guardians.cbf.quiet import quietly
+from rmm_guardians.cbf.quiet import quietly
 
 
 def _unconstrained_solver():
@@ -49,7 +49,7 @@ def test_an_exception_in_the_solve_puts_standard_output_back(capsys):
 def test_the_cbf_solvers_print_nothing_when_no_row_is_active(capsys):
     """The quadrotor command QP (direct OSQP, polished) with its one barrier row far from active,
     and the Dubins4D CBF-CLF QP filtering a reference inside every row: solved, nothing printed."""
-    from guardians.cbf.quadrotor_rows import CommandQP
+    from rmm_guardians.cbf.quadrotor_rows import CommandQP
     from tests.test_cbf_solvers import dubins4d
 
     lo, hi = np.array([-2.0, -2.0, -1.0]), np.array([2.0, 2.0, 1.0])

@@ -1,7 +1,7 @@
 """The CBF guardians' rows, recovery manoeuvre and end of recovery, pinned on hand-computed cases.
 
 Values, not implementation: each case states the geometry and the answer worked out by hand
-from the rules of :mod:`guardians.cbf` (barrier rows, CLF rows, the recovery tangent)."""
+from the rules of :mod:`rmm_guardians.cbf` (barrier rows, CLF rows, the recovery tangent)."""
 
 import math
 
@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from guardians.cbf import CBFGuardian, CBFPaperGuardian
+from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from tests.test_cbf import INFO0
-from guardians.cbf.barrier import HOCBFParams, barrier_rows
-from guardians.cbf.recovery import recovery_control, recovery_done
+from rmm_guardians.cbf.barrier import HOCBFParams, barrier_rows
+from rmm_guardians.cbf.recovery import recovery_control, recovery_done
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D

@@ -8,10 +8,10 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from guardians.cbf import CBFGuardian
-from guardians.cbf.backend import installed_solvers, parse_solver
-from guardians.cbf.maze import MazeCBFGuardian
-from guardians.cbf.qp import MAX_ITER
+from rmm_guardians.cbf import CBFGuardian
+from rmm_guardians.cbf.backend import installed_solvers, parse_solver
+from rmm_guardians.cbf.maze import MazeCBFGuardian
+from rmm_guardians.cbf.qp import MAX_ITER
 
 PRIMAL_INFEASIBLE = 3  # OSQP's status value
 from rmm_envs.autonomy import GuardianActionSpace

@@ -1,4 +1,4 @@
-"""``rmm-envs``: the driver-only demo, read off the env's action space, and the moved figure commands."""
+"""``rmm-envs``: the driver-only demo, read off the env's action space."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from rmm_envs.cli import driver_only_action, main
 
 
 def test_driver_only_action_is_read_off_the_action_space():
-    env = gym.make("Dubins4DCirclesGuarded-v0")
-    a = driver_only_action(env.action_space, "Dubins4DCirclesGuarded-v0")
+    env = gym.make("Dubins4DGuarded-v0")
+    a = driver_only_action(env.action_space, "Dubins4DGuarded-v0")
     env.close()
     assert set(a) == {"active_ctrl", "turnrate_ctrl", "accel_ctrl"} and a["active_ctrl"] == 0
     for k in ("turnrate_ctrl", "accel_ctrl"):
@@ -29,9 +29,9 @@ def test_driver_only_action_is_read_off_the_action_space():
 
 
 def test_demo_prints_what_the_driver_alone_does(capsys):
-    assert main(["demo", "--env", "Dubins4DCirclesGuarded-v0", "--episodes", "1", "--seed", "4"]) == 0
+    assert main(["demo", "--env", "Dubins4DGuarded-v0", "--episodes", "1", "--seed", "4"]) == 0
     line = capsys.readouterr().out.splitlines()[0]
-    env = gym.make("Dubins4DCirclesGuarded-v0")
+    env = gym.make("Dubins4DGuarded-v0")
     env.reset(seed=4)
     action = {"active_ctrl": 0, "turnrate_ctrl": np.zeros(1, np.float32), "accel_ctrl": np.zeros(1, np.float32)}
     while True:
@@ -52,9 +52,3 @@ def test_demo_refuses_an_env_without_a_guardian_action_and_bad_counts(capsys):
     assert "invalid choice: 'Dubins3DMaze-v0'" in err and "QuadrotorRoomGuarded-v0" in err
     assert main(["demo", "--episodes", "0"]) == 2
     assert "--episodes must be >= 1, got 0" in capsys.readouterr().err
-
-
-@pytest.mark.parametrize("old", ["riskmap", "quadrisk"])
-def test_moved_figure_commands_point_to_rmm_figures(capsys, old):
-    assert main([old, "--seed", "3", "--out", "x.png"]) == 2
-    assert capsys.readouterr().err == f"rmm-envs {old} moved: run `rmm-bench {old} --seed 3 --out x.png`\n"

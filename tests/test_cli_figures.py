@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from benchmarks.bench.cli import main
+from rmm_bench.cli import main
 
 
 def test_riskmap_command(tmp_path, capsys):
@@ -29,7 +29,7 @@ def test_bad_counts_exit_2_naming_the_flag(tmp_path, capsys, argv, message):
 
 
 def test_figure_commands_are_listed_in_rmm_bench_help():
-    from benchmarks.bench.cli import build_parser
+    from rmm_bench.cli import build_parser
 
     text = build_parser().format_help()
     assert "rmm-bench riskmap --seed 3" in text and "rmm-bench quadrisk --seed 1" in text

@@ -26,7 +26,7 @@ def test_clock_specs_by_name():
                                              r"'fixed:MS' \(MS a number of milliseconds >= 0, e\.g\. 'fixed:2'\)"):
             make_clock(bad)
     with pytest.raises(ValueError, match=r"unknown clock 'fixed2'"):
-        gym.make("Dubins4DCirclesGuarded-v0", clock="fixed2")
+        gym.make("Dubins4DGuarded-v0", clock="fixed2")
     with pytest.raises(TypeError, match="clock must be a Clock or a string, got int"):
         make_clock(5)
 

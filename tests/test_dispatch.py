@@ -10,17 +10,17 @@ import numpy as np
 import pytest
 
 import rmm_envs  # noqa: F401  (registers the ids)
-from guardians.cbf import CBFGuardian, CBFPaperGuardian
-from guardians.cbf.maze import MazeCBFGuardian
-from guardians.dispatch import SYSTEMS, require_system
-from guardians.hj.guardian import HJGuardian
+from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
+from rmm_guardians.cbf.maze import MazeCBFGuardian
+from rmm_guardians.dispatch import SYSTEMS, require_system
+from rmm_guardians.hj.guardian import HJGuardian
 from rmm_envs.autonomy import GENERIC, GuardianActionSpace, SystemContract, contract
 from rmm_envs.systems import dubins3d, dubins4d, quadrotor_control
 
 
 @pytest.mark.parametrize("env_id, kind, controls", [
-    ("Dubins4DCirclesParallel-v0", "dubins4d", ("turnrate_ctrl", "accel_ctrl")),
-    ("Dubins4DCirclesGuarded-v0", "dubins4d", ("turnrate_ctrl", "accel_ctrl")),
+    ("Dubins4DParallel-v0", "dubins4d", ("turnrate_ctrl", "accel_ctrl")),
+    ("Dubins4DGuarded-v0", "dubins4d", ("turnrate_ctrl", "accel_ctrl")),
     ("Dubins3DMazeParallel-v0", "dubins3d", ("turnrate_ctrl",)),
     ("QuadrotorRoomParallel-v0", "quadrotor", ("vforward_ctrl", "vleft_ctrl", "vup_ctrl", "yawrate_ctrl")),
     ("CartPoleParallel-v0", "generic", ("force_ctrl",)),
@@ -85,7 +85,7 @@ def test_require_system_returns_the_space_of_its_kind():
 
 
 def test_a_third_party_env_is_served_by_the_model_free_guardians_only():
-    from guardians.baselines import BrakesGuardian
+    from rmm_guardians.baselines import BrakesGuardian
 
     env = gym.make("CartPoleParallel-v0")
     assert env.action_space.kind == GENERIC
@@ -140,7 +140,7 @@ def test_reset_hands_the_episode_to_the_delegate_of_the_space_s_kind_and_back():
     assert g.delegate.name == "cbf"
     a = g.act(obs, info)
     assert set(a) == {"active_ctrl", "turnrate_ctrl"}  # the maze car's control, decided by the delegate
-    car = gym.make("Dubins4DCirclesGuarded-v0")
+    car = gym.make("Dubins4DGuarded-v0")
     car.reset(seed=0)
     g.reset(seed=0, observation_space=car.observation_space, action_space=car.action_space,
             privileged=car.unwrapped.privileged)
@@ -150,7 +150,7 @@ def test_reset_hands_the_episode_to_the_delegate_of_the_space_s_kind_and_back():
 
 
 def test_delegate_arguments_merge_check_and_refuse():
-    from guardians.dispatch import delegate_arguments
+    from rmm_guardians.dispatch import delegate_arguments
 
     assert delegate_arguments(MazeCBFGuardian, "maze", False, {"solver": "osqp"}) is None
     assert delegate_arguments(MazeCBFGuardian, "maze", None, {"solver": "osqp"}) == {"solver": "osqp"}
@@ -158,13 +158,13 @@ def test_delegate_arguments_merge_check_and_refuse():
         {"margin": 2.0, "solver": "osqp"}
     with pytest.raises(ValueError) as e:
         delegate_arguments(MazeCBFGuardian, "maze", [1], {})
-    assert str(e.value) == "maze must be a dict of guardians.cbf.maze.MazeCBFGuardian arguments (or False), got [1]"
+    assert str(e.value) == "maze must be a dict of rmm_guardians.cbf.maze.MazeCBFGuardian arguments (or False), got [1]"
     with pytest.raises((TypeError, ValueError)):
         delegate_arguments(MazeCBFGuardian, "maze", {"no_such_argument": 1}, {})
 
 
 def test_the_obstacle_shapes_and_the_quadrotor_s_command_box_are_checked_by_value():
-    from guardians.dispatch import quadrotor_only
+    from rmm_guardians.dispatch import quadrotor_only
 
     car = dubins4d.CONTROLS
     circles = GuardianActionSpace(car, [-0.25, -0.5], [0.25, 0.5], kind="dubins4d", obstacle_shapes=("circle",))
@@ -204,8 +204,8 @@ def test_every_non_circle_shape_of_a_map_is_named_in_the_refusal():
 
 
 def test_a_turn_rate_or_command_axis_of_zero_width_is_refused():
-    from guardians.dispatch import quadrotor_only
-    from guardians.hj.maze import MazeHJGuardian
+    from rmm_guardians.dispatch import quadrotor_only
+    from rmm_guardians.hj.maze import MazeHJGuardian
 
     # [0, 0] is symmetric about 0 and contains hover, but leaves the guardian no control to use
     for lo, hi in ((0.0, 0.0), (-0.0, 0.0)):
@@ -233,7 +233,7 @@ def test_a_turn_rate_or_command_axis_of_zero_width_is_refused():
 
 @pytest.mark.parametrize("make", [CBFGuardian, HJGuardian, CBFPaperGuardian])
 def test_a_space_that_is_not_a_guardian_action_space_is_refused_by_name(make):
-    env = gym.make("Dubins4DCirclesGuarded-v0")
+    env = gym.make("Dubins4DGuarded-v0")
     plain = gym.spaces.Box(-1.0, 1.0, (2,), np.float64)
     g = make()
     with pytest.raises(ValueError) as e:

@@ -220,8 +220,8 @@ def test_the_sampler_draws_non_failed_states_half_from_the_driver_and_repeats_wi
 
 
 def test_rmm_bench_runs_every_applicable_guardian_and_names_cbf_and_hj_as_not_applying(tmp_path, capsys):
-    from benchmarks.bench.args import parse_run
-    from benchmarks.bench.run import applicable
+    from rmm_bench.args import parse_run
+    from rmm_bench.run import applicable
 
     config = parse_run(["--env", "CartPoleParallel-v0", "--agent", "all", "--clock", "fixed:1", "--out",
                         str(tmp_path)], "rmm-bench")
@@ -241,7 +241,7 @@ def test_rmm_bench_runs_every_applicable_guardian_and_names_cbf_and_hj_as_not_ap
 def test_the_shipped_lrmm_applies_the_safe_default_when_the_pole_is_about_to_fall(env_id, upright, tipping):
     if env_id.startswith("Inverted"):
         pytest.importorskip("mujoco")
-    from guardians import make_guardian
+    from rmm_guardians import make_guardian
 
     env = gym.make(env_id, clock="fixed:1")
     env.reset(seed=0)

@@ -167,7 +167,7 @@ def test_env_driver_solver_option():
     import rmm_envs  # noqa: F401
 
     inactive = {"active_ctrl": 0, "turnrate_ctrl": np.zeros(1, np.float32), "accel_ctrl": np.zeros(1, np.float32)}
-    a, b = gym.make("Dubins4DCirclesGuarded-v0"), gym.make("Dubins4DCirclesGuarded-v0", driver_solver="osqp")
+    a, b = gym.make("Dubins4DGuarded-v0"), gym.make("Dubins4DGuarded-v0", driver_solver="osqp")
     a.reset(seed=4)
     b.reset(seed=4)
     for _ in range(60):
@@ -178,4 +178,4 @@ def test_env_driver_solver_option():
         if ra[2] or ra[3]:
             break
     with pytest.raises(ValueError, match="driver solver must be one of"):
-        gym.make("Dubins4DCirclesGuarded-v0", driver_solver="qpoases")
+        gym.make("Dubins4DGuarded-v0", driver_solver="qpoases")

@@ -67,7 +67,7 @@ def test_circle_map_episode_equals_the_circle_env(seed, k):
         if not points_in_circles(goal[None, :2], circles)[0] and math.hypot(*(goal[:2] - state[:2])) > goal[2] + 1e-3:
             break
     m = Dubins4DMapEnv(map=[{"circle": c.tolist()} for c in circles])
-    c = gym.make("Dubins4DCirclesGuarded-v0").unwrapped
+    c = gym.make("Dubins4DGuarded-v0").unwrapped
     om, _ = m.reset(seed=0, options={"state": state, "goal": goal})
     oc, _ = c.reset(seed=0, options={"state": state, "goal": goal, "obstacles": circles})
     np.testing.assert_allclose(om, oc, atol=1e-4)
@@ -265,7 +265,7 @@ def test_risk_labelling_through_the_protocol():
     # circles only: the map scene's labels equal the analytic scene's, draw for draw
     circles = np.array([[0.0, 0.0, 3.0], [6.0, 2.0, 2.0]])
     m = Dubins4DMapEnv(map=[{"circle": c.tolist()} for c in circles])
-    c = gym.make("Dubins4DCirclesGuarded-v0").unwrapped
+    c = gym.make("Dubins4DGuarded-v0").unwrapped
     m.reset(seed=0, options={"state": [-5, 0, 0, 1], "goal": [9, 9, 0.5]})
     c.reset(seed=0, options={"state": [-5, 0, 0, 1], "goal": [9, 9, 0.5], "obstacles": circles})
     s = c.sample_states(np.random.default_rng(3), 64)
@@ -285,8 +285,8 @@ def test_datagen_on_a_map(tmp_path):
 
 
 def test_privileged_guardians_on_maps(tmp_path, capsys):
-    from benchmarks.bench.cli import main as bench_main
-    from guardians import make_guardian
+    from rmm_bench.cli import main as bench_main
+    from rmm_guardians import make_guardian
 
     env = Dubins4DMapEnv()
     assert env.action_space.obstacle_shapes == ("circle", "polygon", "segment")
@@ -310,7 +310,7 @@ def test_privileged_guardians_on_maps(tmp_path, capsys):
 
 
 def test_rmm_bench_runs_on_the_example_map(tmp_path):
-    from benchmarks.bench.cli import main as bench_main
+    from rmm_bench.cli import main as bench_main
 
     assert bench_main(["--env", "Dubins4DMapParallel-v0", "--agent", "lrmm", "--episodes", "2", "--workers", "1",
                        "--clock", "fixed:1", "--out", str(tmp_path), "--no-progress", "--no-figure"]) == 0

@@ -27,21 +27,21 @@ def run_episode(env, seed, policy=lambda obs: INACTIVE, options=None):
 
 
 def test_check_env_blocking():
-    check_env(gym.make("Dubins4DCirclesGuarded-v0").unwrapped)
-    check_env(gym.make("Dubins4DCirclesGuarded-v0", render_mode="rgb_array").unwrapped, skip_render_check=False)
+    check_env(gym.make("Dubins4DGuarded-v0").unwrapped)
+    check_env(gym.make("Dubins4DGuarded-v0", render_mode="rgb_array").unwrapped, skip_render_check=False)
 
 
 def test_check_env_parallel_with_fixed_clock():
-    check_env(gym.make("Dubins4DCirclesParallel-v0", clock="fixed:2").unwrapped)
-    env = gym.make("Dubins4DCirclesParallel-v0", clock="fixed:2")
+    check_env(gym.make("Dubins4DParallel-v0", clock="fixed:2").unwrapped)
+    env = gym.make("Dubins4DParallel-v0", clock="fixed:2")
     obs, _ = env.reset(seed=0)
     assert env.observation_space.contains(obs)
 
 
 def test_make_with_module_prefix_and_vector():
-    env = gym.make("rmm_envs:Dubins4DCirclesGuarded-v0")
+    env = gym.make("rmm_envs:Dubins4DGuarded-v0")
     assert env.observation_space.shape == (17,)
-    venv = gym.make_vec("Dubins4DCirclesGuarded-v0", num_envs=3)
+    venv = gym.make_vec("Dubins4DGuarded-v0", num_envs=3)
     obs, info = venv.reset(seed=1)
     assert obs.shape == (3, 17)
     acts = {"active_ctrl": np.zeros(3, int), "turnrate_ctrl": np.zeros((3, 1), np.float32), "accel_ctrl": np.zeros((3, 1), np.float32)}
@@ -214,7 +214,7 @@ def test_generated_scenarios_are_valid():
 
 
 def test_rgb_render():
-    env = gym.make("Dubins4DCirclesGuarded-v0", render_mode="rgb_array")
+    env = gym.make("Dubins4DGuarded-v0", render_mode="rgb_array")
     env.reset(seed=0)
     frame = env.render()
     assert frame.shape == (512, 512, 3) and frame.dtype == np.uint8

@@ -15,7 +15,7 @@ from rmm_envs.risk import LabelledEnv, RiskScene, check_labelled_env, check_scen
 from rmm_envs.scenes import Dubins4DScene, MazeScene
 
 
-@pytest.mark.parametrize("env_id", ["Dubins4DCirclesGuarded-v0", "Dubins4DCirclesParallel-v0", "Dubins3DMaze-v0", "QuadrotorRoom-v0"])
+@pytest.mark.parametrize("env_id", ["Dubins4DGuarded-v0", "Dubins4DParallel-v0", "Dubins3DMaze-v0", "QuadrotorRoom-v0"])
 def test_every_registered_env_is_a_labelled_env_before_and_after_reset(env_id):
     env = gym.make(env_id)
     check_labelled_env(env)  # on the class: no reset needed
@@ -25,8 +25,7 @@ def test_every_registered_env_is_a_labelled_env_before_and_after_reset(env_id):
     base = env.unwrapped
     assert isinstance(base, LabelledEnv)
     scene = base.risk_scene()
-    with pytest.warns(DeprecationWarning, match=r"risk_system\(\) is deprecated: use risk_scene\(\)"):
-        assert isinstance(scene, RiskScene) and base.risk_system() is scene  # the deprecated alias
+    assert isinstance(scene, RiskScene) and not hasattr(base, "risk_system")  # no former names
     rng = np.random.default_rng(0)
     states = base.sample_states(rng, 5)
     assert states.shape == (5, scene.state_dim) and not scene.state_failed(states).any()
@@ -67,19 +66,14 @@ def test_the_checker_names_the_env_and_each_ill_formed_hook():
     check_labelled_env(_Bad(), needs=("observe_states", "privileged"))  # only what is asked for
 
 
-def test_scene_protocol_asks_only_for_what_the_estimator_uses_and_keeps_the_old_names():
+def test_scene_protocol_asks_only_for_what_the_estimator_uses():
     import rmm_envs.envs.dubins4d as d4
     import rmm_envs.risk as risk
     import rmm_envs.risk.protocol as protocol
-    from rmm_envs.autonomy import parse
 
-    for module, old, new in ((risk, "System", RiskScene), (risk, "check_system", check_scene), (protocol, "System", RiskScene),
-                             (protocol, "check_system", check_scene), (d4, "parse_guardian_action", parse)):
-        with pytest.warns(DeprecationWarning, match=f"{module.__name__}.{old} is deprecated: use "):
-            assert getattr(module, old) is new
-        assert old not in module.__all__
-    with pytest.raises(AttributeError, match="module 'rmm_envs.risk' has no attribute 'Systems'"):
-        risk.Systems
+    for module, old in ((risk, "System"), (risk, "check_system"), (protocol, "System"), (protocol, "check_system"),
+                        (d4, "parse_guardian_action")):  # no former names kept alive
+        assert not hasattr(module, old)
 
     class Minimal:
         state_dim = 1
@@ -172,7 +166,7 @@ def test_maze_scene_is_the_env_scene_and_observations_are_named():
     q.close()
 
 
-@pytest.mark.parametrize("env_id", ["Dubins4DCirclesParallel-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoomParallel-v0",
+@pytest.mark.parametrize("env_id", ["Dubins4DParallel-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoomParallel-v0",
                                     "Dubins4DMapParallel-v0"])
 def test_parallel_envs_refuse_step_dt_which_non_blocking_stepping_would_ignore(env_id):
     import gymnasium as gym

@@ -17,10 +17,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_rows
-from guardians.cbf.qp import BarrierQP
-from guardians.hj.grid import Grid
-from guardians.lrmm.model import ACTIVATIONS, LRMMModel
+from rmm_guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_rows
+from rmm_guardians.cbf.qp import BarrierQP
+from rmm_guardians.hj.grid import Grid
+from rmm_guardians.lrmm.model import ACTIVATIONS, LRMMModel
 from rmm_envs.drivers.dubins4d import desired_heading
 
 finite = st.floats(-50, 50, allow_nan=False)
@@ -109,7 +109,7 @@ def test_one_observation_inference_matches_the_written_out_network(activation, f
 
 
 def test_the_batch_kernel_gives_each_row_the_bits_of_the_one_observation_kernel_and_nan_for_a_bad_row():
-    from guardians.lrmm.inference import forward_one, forward_rows
+    from rmm_guardians.lrmm.inference import forward_one, forward_rows
 
     m = _model("tanh", n_out=3, seed=2)
     X = np.random.default_rng(3).uniform(-3, 3, size=(6, m.obs_dim))

@@ -15,12 +15,12 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.bench.cli import main
+from rmm_bench.cli import main
 from rmm_envs.pool import TaskLost, WorkersLost, run_local
 from tests.bench_helpers import faulty_task, query
 
 # tables and the database only: the figure has its own tests (test_bench, test_cli_figures)
-FAST = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DCirclesParallel-v0", "--no-figure"]
+FAST = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DParallel-v0", "--no-figure"]
 
 
 def within(seconds, fn):
@@ -146,10 +146,10 @@ def test_bad_options_exit_2_naming_the_flag_before_any_episode(tmp_path, capsys,
 def test_non_blocking_options_on_a_blocking_env_exit_2_instead_of_being_ignored(tmp_path, capsys, flag, value):
     out = tmp_path / "r"
     argv = ["--agent", "inactive", "--episodes", "1", "--workers", "1", "--out", str(out), "--clock", "fixed:1",
-            "--no-progress", "--env", "Dubins4DCirclesGuarded-v0", flag, value]
+            "--no-progress", "--env", "Dubins4DGuarded-v0", flag, value]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
-    assert err.endswith(f"{flag} {value}: Dubins4DCirclesGuarded-v0 steps by a fixed step per decision and takes no "
+    assert err.endswith(f"{flag} {value}: Dubins4DGuarded-v0 steps by a fixed step per decision and takes no "
                         f"{flag[2:].replace('-', '_')}; leave {flag} out, or run its non-blocking (Parallel) twin"), err
     assert not out.exists()
     assert main(argv[:-2]) == 0  # the defaults are what a blocking env runs with
@@ -293,7 +293,7 @@ def test_ray_backend_same_results_and_a_lost_task_is_reported(tmp_path):
 # ------------------------------------------------------------------ rmm-bench: how an invocation ends
 @pytest.mark.parametrize("exc, code, status", [(KeyboardInterrupt(), 130, "interrupted"), (ZeroDivisionError("bug"), None, "failed")])
 def test_an_invocation_never_stays_running(tmp_path, monkeypatch, exc, code, status):
-    import benchmarks.bench.run as run
+    import rmm_bench.run as run
 
     def broken(*a, **k):
         raise exc

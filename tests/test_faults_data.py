@@ -65,7 +65,7 @@ def test_load_refuses_flipped_bytes_in_one_line_naming_the_file_and_the_fix(tmp_
     msg = str(e.value)
     assert "\n" not in msg and str(out / "shard-00000.parquet") in msg
     # the exact command that repairs it
-    assert "rmm-datagen --env Dubins4DCirclesGuarded-v0 --configs 4 --samples-per-config 6 --seed 11 --configs-per-shard 2 --branches 4 --depth 2" in msg
+    assert "rmm-datagen --env Dubins4DGuarded-v0 --configs 4 --samples-per-config 6 --seed 11 --configs-per-shard 2 --branches 4 --depth 2" in msg
     assert f"--out {out}" in msg
     # and that command does repair it
     cmd = shlex.split(msg.split("`")[1])[1:]
@@ -264,7 +264,7 @@ def test_dubins4d_non_finite_parameters_refused(kwargs, name):
     with pytest.raises(ValueError, match=f"{name} must be"):
         Dubins4DCirclesEnv(**kwargs)
     with pytest.raises(ValueError, match=f"{name} must be"):
-        gym.make("Dubins4DCirclesParallel-v0", **kwargs)
+        gym.make("Dubins4DParallel-v0", **kwargs)
 
 
 def test_maze_and_quadrotor_non_finite_parameters_refused():
@@ -336,9 +336,9 @@ def _stored(db):
 
 @pytest.mark.heavy
 def test_bench_rows_bit_identical_with_1_and_2_workers(tmp_path):
-    from benchmarks.bench.cli import main as bench
+    from rmm_bench.cli import main as bench
 
-    common = ["--agent", "random", "--episodes", "4", "--clock", "fixed:1", "--no-progress", "--env", "Dubins4DCirclesParallel-v0",
+    common = ["--agent", "random", "--episodes", "4", "--clock", "fixed:1", "--no-progress", "--env", "Dubins4DParallel-v0",
               "--agent-opt", "random.p_active=0.3", "--no-figure"]
     assert bench([*common, "--workers", "1", "--out", str(tmp_path / "w1")]) == 0
     assert bench([*common, "--workers", "2", "--out", str(tmp_path / "w2")]) == 0

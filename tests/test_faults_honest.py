@@ -13,7 +13,7 @@ import sqlite3
 
 import pytest
 
-from benchmarks.bench.cli import main
+from rmm_bench.cli import main
 from tests.bench_helpers import query
 
 # tables and the database only: the figure has its own tests (test_bench, test_cli_figures)
@@ -27,11 +27,11 @@ def stored(out, cols="run_key, agent, episode, outcome, error_kind"):
 # ------------------------------------------------------------------ 1. a run is what ran
 def _two_models(tmp_path):
     """The shipped Dubins4D head model, and the same weights with another stored threshold."""
-    from guardians.lrmm.model import default_model_path, set_decision
+    from rmm_guardians.lrmm.model import default_model_path, set_decision
 
     first = tmp_path / "first.npz"
     second = tmp_path / "second.npz"
-    shutil.copy(default_model_path("Dubins4DCirclesParallel-v0", variant="act"), first)
+    shutil.copy(default_model_path("Dubins4DParallel-v0", variant="act"), first)
     shutil.copy(first, second)
     set_decision(second, threshold=0.05, commit=0, chosen_by="a drill: a different model file", action="head")
     assert first.read_bytes() != second.read_bytes()
@@ -43,7 +43,7 @@ def test_resume_after_the_model_file_changed_starts_a_new_run_naming_the_file(tm
     model = tmp_path / "model.npz"
     shutil.copy(first, model)
     out = tmp_path / "r"
-    cmd = ["--agent", "lrmm", "--agent-opt", f"lrmm.model={model}", "--out", str(out), "--env", "Dubins4DCirclesParallel-v0", *FAST]
+    cmd = ["--agent", "lrmm", "--agent-opt", f"lrmm.model={model}", "--out", str(out), "--env", "Dubins4DParallel-v0", *FAST]
     assert main(cmd + ["--episodes", "2"]) == 0
     (old_key,) = {r[0] for r in stored(out)}
     capsys.readouterr()
@@ -62,7 +62,7 @@ def test_resume_after_the_model_file_changed_starts_a_new_run_naming_the_file(tm
     con = sqlite3.connect(out / "results.db")
     inputs = {k: json.loads(c)["inputs"] for k, c in con.execute("SELECT run_key, config FROM runs")}
     con.close()
-    from benchmarks.bench.config import file_sha256
+    from rmm_bench.config import file_sha256
 
     assert inputs == {old_key: {str(model): file_sha256(first)}, new_key: {str(model): file_sha256(second)}}
 
@@ -73,30 +73,30 @@ def test_resume_after_the_model_file_changed_starts_a_new_run_naming_the_file(tm
 
 
 def test_shipped_model_is_part_of_the_run_key(tmp_path):
-    from benchmarks.bench.config import file_sha256
-    from benchmarks.bench.checks import check_runs
-    from benchmarks.bench.config import AgentRun
-    from guardians.lrmm.model import default_model_path
+    from rmm_bench.config import file_sha256
+    from rmm_bench.checks import check_runs
+    from rmm_bench.config import AgentRun
+    from rmm_guardians.lrmm.model import default_model_path
 
-    run = AgentRun("lrmm", {}, "Dubins4DCirclesParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
+    run = AgentRun("lrmm", {}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
     meta = check_runs({"lrmm": run})
-    shipped = default_model_path("Dubins4DCirclesParallel-v0", variant="act")
+    shipped = default_model_path("Dubins4DParallel-v0", variant="act")
     assert meta["lrmm"]["inputs"] == {str(shipped): file_sha256(shipped)}
     keyed = AgentRun(**{**run.__dict__, "inputs": meta["lrmm"]["inputs"]})
     other = AgentRun(**{**run.__dict__, "inputs": {str(shipped): "0" * 64}})
     assert len({run.key, keyed.key, other.key}) == 3
-    inactive = AgentRun("inactive", {}, "Dubins4DCirclesParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
+    inactive = AgentRun("inactive", {}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
     assert check_runs({"inactive": inactive})["inactive"]["inputs"] == {}
     assert "inputs" not in inactive.as_dict()  # runs that read no file keep the keys they always had
 
 
 def test_a_file_changed_while_the_run_runs_is_not_used(tmp_path):
-    from benchmarks.bench.config import AgentRun, EpisodeTask, file_sha256
-    from benchmarks.bench.runner import run_episode
-    from benchmarks.bench.store import RETRIED_ERRORS
+    from rmm_bench.config import AgentRun, EpisodeTask, file_sha256
+    from rmm_bench.runner import run_episode
+    from rmm_bench.store import RETRIED_ERRORS
 
     first, second = _two_models(tmp_path)
-    run = AgentRun("lrmm", {"model": str(second)}, "Dubins4DCirclesParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False,
+    run = AgentRun("lrmm", {"model": str(second)}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False,
                    inputs={str(second): file_sha256(first)})  # keyed before the file was replaced
     res = run_episode(EpisodeTask(run=run, run_key=run.key, episode=0, seed=1))
     assert res.outcome == "error" and res.error_kind == "input_changed" and "input_changed" in RETRIED_ERRORS
@@ -104,7 +104,7 @@ def test_a_file_changed_while_the_run_runs_is_not_used(tmp_path):
 
 
 # ------------------------------------------------------------------ 4. honest rates
-from guardians.base import Guardian  # noqa: E402
+from rmm_guardians.base import Guardian  # noqa: E402
 
 
 class ErrsOnEvenSeeds(Guardian):
@@ -125,12 +125,12 @@ class ErrsOnEvenSeeds(Guardian):
 
 
 def test_guardian_errors_count_as_failures_and_the_command_fails_naming_them(tmp_path, capsys):
-    from benchmarks.bench.runner import episode_seed
+    from rmm_bench.runner import episode_seed
 
     n, agent = 8, "tests.test_faults_honest:ErrsOnEvenSeeds"
     out = tmp_path / "r"
     assert main(["--agent", f"{agent},inactive", "--episodes", str(n), "--out", str(out), "--batch-size", str(n),
-                 "--env", "Dubins4DCirclesParallel-v0", *FAST]) == 1
+                 "--env", "Dubins4DParallel-v0", *FAST]) == 1
     captured = capsys.readouterr()
     got = {(a, e): o for _, a, e, o, _ in stored(out)}
     even = [i for i in range(n) if episode_seed(0, i) % 2 == 0]
@@ -139,7 +139,7 @@ def test_guardian_errors_count_as_failures_and_the_command_fails_naming_them(tmp
     goals = sum(got[("inactive", e)] == "goal" for e in range(n) if e not in even)
     collisions = sum(got[("inactive", e)] == "collision" for e in range(n) if e not in even)
     cells = [c.strip() for c in captured.out.split(f"| {agent} |")[1].split("\n")[0].split("|")]
-    from benchmarks.bench.metrics import wilson_interval
+    from rmm_bench.metrics import wilson_interval
 
     def one_batch(k):  # one batch: the rate over all n, with its 95% Wilson interval
         lo, hi = wilson_interval(k / n, n)
@@ -191,7 +191,7 @@ def _bench(args, limit_bytes=None):
     def limit():
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
 
-    return subprocess.run([sys.executable, "-m", "benchmarks.bench.cli", *map(str, args)], cwd=ROOT, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "rmm_bench.cli", *map(str, args)], cwd=ROOT, capture_output=True,
                           text=True, timeout=300, preexec_fn=limit if limit_bytes else None)
 
 
@@ -235,7 +235,7 @@ def test_disk_full_while_writing_the_tables_is_one_line_naming_the_directory(tmp
 def test_a_read_only_database_is_not_called_damaged(tmp_path, capsys):
     """Permissions cannot make a file read-only for root (tests may run as root); SQLite's own read-only mode
     gives the error it raises for a read-only file, directory or file system."""
-    from benchmarks.bench.store import ResultsStore
+    from rmm_bench.store import ResultsStore
 
     out = tmp_path / "r"
     assert main(["--agent", "inactive", "--episodes", "2", "--out", str(out), *FAST]) == 0
@@ -270,8 +270,8 @@ def test_a_damaged_database_says_what_moving_it_aside_loses_and_how_to_export(tm
 def _hj_guardian(cache_dir):
     import numpy as np
 
-    from guardians.hj.grid import Grid
-    from guardians.hj.guardian import HJGuardian
+    from rmm_guardians.hj.grid import Grid
+    from rmm_guardians.hj.guardian import HJGuardian
     from rmm_envs.autonomy import GuardianActionSpace
     from rmm_envs.envs.dubins4d import CONTROLS
     from rmm_envs.systems.dubins4d import Dubins4D
@@ -303,7 +303,7 @@ def _other_solve(entry, V):
     """A genuine entry of another solve (another horizon) renamed to this one's name."""
     import numpy as np
 
-    from guardians.hj.cache import ValueCache
+    from rmm_guardians.hj.cache import ValueCache
 
     other = ValueCache(entry.parent / "other")
     other.save("x", V + 1.0, {"horizon": 9.0})
@@ -343,7 +343,7 @@ def test_a_report_over_two_configurations_prints_one_header_each(tmp_path, capsy
     import csv
 
     out = tmp_path / "r"
-    assert main(["--agent", "inactive", "--episodes", "1", "--seed", "1", "--out", str(out), "--env", "Dubins4DCirclesParallel-v0",
+    assert main(["--agent", "inactive", "--episodes", "1", "--seed", "1", "--out", str(out), "--env", "Dubins4DParallel-v0",
                  *FAST]) == 0
     assert main(["--agent", "brakes", "--episodes", "1", "--seed", "2", "--out", str(out), "--env", "Dubins3DMazeParallel-v0",
                  "--clock", "fixed:20", "--no-progress", "--workers", "1"]) == 0
@@ -351,17 +351,17 @@ def test_a_report_over_two_configurations_prints_one_header_each(tmp_path, capsy
     assert main(["report", str(out), "--invocation", "1", "--invocation", "2"]) == 0
     text = capsys.readouterr().out
     assert text.startswith("2 configurations, one table each (they differ in env, clock, seed):")
-    first = "Table I [1]: Dubins4DCirclesParallel-v0, clock fixed:1, time accel 10.0, seed 1, 1 episodes requested per agent"
+    first = "Table I [1]: Dubins4DParallel-v0, clock fixed:1, time accel 10.0, seed 1, 1 episodes requested per agent"
     second = "Table I [2]: Dubins3DMazeParallel-v0, clock fixed:20, time accel 10.0, seed 2, 1 episodes requested per agent"
     assert first in text and second in text
     a, b = text.index(first), text.index(second)
     assert a < text.index("| inactive |") < b < text.index("| brakes |")  # each row under its own header
     md = (out / "table_I.md").read_text()
-    assert md.index("[1] Dubins4DCirclesParallel-v0, clock fixed:1") < md.index("| inactive |") \
+    assert md.index("[1] Dubins4DParallel-v0, clock fixed:1") < md.index("| inactive |") \
         < md.index("[2] Dubins3DMazeParallel-v0, clock fixed:20") < md.index("| brakes |")
     with open(out / "table_I.csv") as fh:
         got = [(r["agent"], r["env"], r["clock"], r["seed"]) for r in csv.DictReader(fh)]
-    assert got == [("inactive", "Dubins4DCirclesParallel-v0", "fixed:1", "1"), ("brakes", "Dubins3DMazeParallel-v0", "fixed:20", "2")]
+    assert got == [("inactive", "Dubins4DParallel-v0", "fixed:1", "1"), ("brakes", "Dubins3DMazeParallel-v0", "fixed:20", "2")]
     # one configuration: the table as it always was, no numbering
     assert main(["report", str(out), "--invocation", "2"]) == 0
     assert capsys.readouterr().out.startswith("Table I: Dubins3DMazeParallel-v0, clock fixed:20, time accel 10.0, seed 2")
@@ -374,9 +374,9 @@ def _edited_model(tmp_path, arrays=None, meta=None, drop=()):
     consistent again (the edits a tool, not a damaged disk, would make)."""
     import numpy as np
 
-    from guardians.lrmm.model import _checksum, default_model_path
+    from rmm_guardians.lrmm.model import _checksum, default_model_path
 
-    with np.load(default_model_path("Dubins4DCirclesParallel-v0", variant="act")) as z:
+    with np.load(default_model_path("Dubins4DParallel-v0", variant="act")) as z:
         arrs = {k: z[k] for k in z.files}
     m = json.loads(arrs.pop("meta").tobytes().decode())
     arrs.update(arrays or {})
@@ -392,9 +392,9 @@ def _edited_model(tmp_path, arrays=None, meta=None, drop=()):
 def _W0():
     import numpy as np
 
-    from guardians.lrmm.model import default_model_path
+    from rmm_guardians.lrmm.model import default_model_path
 
-    with np.load(default_model_path("Dubins4DCirclesParallel-v0", variant="act")) as z:
+    with np.load(default_model_path("Dubins4DParallel-v0", variant="act")) as z:
         return z["W0"]
 
 
@@ -410,7 +410,7 @@ def test_a_bad_model_file_is_refused_before_any_episode_naming_the_value(tmp_pat
     path = _edited_model(tmp_path, **edit)
     out = tmp_path / "r"
     assert main(["--agent", "lrmm", "--agent-opt", f"lrmm.model={path}", "--episodes", "1", "--out", str(out),
-                 "--env", "Dubins4DCirclesParallel-v0", *FAST]) == 2
+                 "--env", "Dubins4DParallel-v0", *FAST]) == 2
     line = _one_line(capsys.readouterr().err)
     assert str(path) in line and message in line and "KeyError" not in line
     assert not out.exists()
@@ -495,10 +495,10 @@ def test_the_vectorised_polygon_checks_agree_with_the_scalar_tests():
 
 
 @pytest.mark.parametrize("env_id, option, value", [
-    ("Dubins4DCirclesGuarded-v0", "state", [1e300, 1e300, 0, 1]),
-    ("Dubins4DCirclesGuarded-v0", "state", [2e9, 0, 0, 1]),
-    ("Dubins4DCirclesGuarded-v0", "goal", [0, 0, 1e200]),
-    ("Dubins4DCirclesGuarded-v0", "obstacles", [[0, 0, 1e150]]),
+    ("Dubins4DGuarded-v0", "state", [1e300, 1e300, 0, 1]),
+    ("Dubins4DGuarded-v0", "state", [2e9, 0, 0, 1]),
+    ("Dubins4DGuarded-v0", "goal", [0, 0, 1e200]),
+    ("Dubins4DGuarded-v0", "obstacles", [[0, 0, 1e150]]),
 ])
 def test_reset_options_too_large_for_the_geometry_are_refused(env_id, option, value):
     import gymnasium as gym
@@ -617,9 +617,9 @@ def test_an_unreachable_ray_cluster_is_one_line_exit_1_within_seconds(tmp_path, 
 
 
 @pytest.mark.parametrize("env_id, kwargs, name", [
-    ("Dubins4DCirclesGuarded-v0", {"ray_length": 1e300}, "ray_length"),  # the finding: infinite observations
-    ("Dubins4DCirclesGuarded-v0", {"step_dt": 1e300}, "step_dt"),
-    ("Dubins4DCirclesGuarded-v0", {"n_rays": 10**400}, "n_rays"),  # an OverflowError traceback before
+    ("Dubins4DGuarded-v0", {"ray_length": 1e300}, "ray_length"),  # the finding: infinite observations
+    ("Dubins4DGuarded-v0", {"step_dt": 1e300}, "step_dt"),
+    ("Dubins4DGuarded-v0", {"n_rays": 10**400}, "n_rays"),  # an OverflowError traceback before
     ("Dubins3DMazeParallel-v0", {"speed": 1e200}, "speed"),
     ("QuadrotorRoomParallel-v0", {"cruise_speed": 1e200}, "cruise_speed"),
 ])

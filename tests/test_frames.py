@@ -1,4 +1,4 @@
-"""benchmarks.load_results: the results database as a pandas DataFrame."""
+"""rmm_bench.load_results: the results database as a pandas DataFrame."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from benchmarks import load_results, table_i
-from benchmarks.bench.metrics import aggregate
-from benchmarks.bench.cli import main as bench
-from benchmarks.bench.store import ResultsDatabaseError
+from rmm_bench import load_results, table_i
+from rmm_bench.metrics import aggregate
+from rmm_bench.cli import main as bench
+from rmm_bench.store import ResultsDatabaseError
 
 
 @pytest.fixture(scope="module")

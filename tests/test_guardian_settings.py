@@ -10,11 +10,11 @@ import math
 
 import pytest
 
-from guardians.cbf.guardian import CBFGuardian, CBFPaperGuardian
-from guardians.cbf.settings import CBF_PRESETS, CBFSettings
-from guardians.hj.guardian import HJGuardian, HJPaperGuardian
-from guardians.hj.settings import HJ_PRESETS, HJSettings
-from guardians.registry import accepts_argument, make_guardian
+from rmm_guardians.cbf.guardian import CBFGuardian, CBFPaperGuardian
+from rmm_guardians.cbf.settings import CBF_PRESETS, CBFSettings
+from rmm_guardians.hj.guardian import HJGuardian, HJPaperGuardian
+from rmm_guardians.hj.settings import HJ_PRESETS, HJSettings
+from rmm_guardians.registry import accepts_argument, make_guardian
 
 #: the constructors' keyword defaults before the settings objects (CBFGuardian, HJGuardian)
 OLD_CBF = dict(p1=0.7535, p2=0.6664, inflation=1.05, gamma_vmin=1.0, gamma_vmax=1.0, lambda_theta=1.0, lambda_v=1.0,

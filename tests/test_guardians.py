@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import rmm_envs  # noqa: F401
-from guardians import CallableGuardian, SB3Guardian, available_guardians, make_guardian
-from guardians.adapters import to_guardian_action
-from guardians.baselines import BrakesGuardian, InactiveGuardian, RandomGuardian
+from rmm_guardians import CallableGuardian, SB3Guardian, available_guardians, make_guardian
+from rmm_guardians.adapters import to_guardian_action
+from rmm_guardians.baselines import BrakesGuardian, InactiveGuardian, RandomGuardian
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
 from rmm_envs.systems.dubins4d import Dubins4D, FullBraking
@@ -22,7 +22,7 @@ def spaces(action_space=SPACE, n_rays=12):
             "observation_space": ObservationBox(np.full(lay.size, -np.inf), np.full(lay.size, np.inf), lay)}
 
 
-def run(guardian, seed=0, env_id="Dubins4DCirclesGuarded-v0", max_steps=2000):
+def run(guardian, seed=0, env_id="Dubins4DGuarded-v0", max_steps=2000):
     env = gym.make(env_id)
     obs, info = env.reset(seed=seed)
     guardian.reset(seed=seed, observation_space=env.observation_space, action_space=env.action_space,
@@ -137,7 +137,7 @@ def test_module_class_spec_and_entry_point(tmp_path, monkeypatch):
     pkg = tmp_path / "myguard"
     pkg.mkdir()
     (pkg / "__init__.py").write_text(textwrap.dedent("""
-        from guardians.base import Guardian
+        from rmm_guardians.base import Guardian
         class Swerve(Guardian):
             name = "swerve"
             def act(self, obs, info):
@@ -163,7 +163,7 @@ def test_unknown_guardian_names():
     with pytest.raises(ValueError, match="cannot import"):
         make_guardian("no_such_module_xyz:Thing")
     with pytest.raises(ValueError, match="no attribute"):
-        make_guardian("guardians.baselines:Nope")
+        make_guardian("rmm_guardians.baselines:Nope")
     with pytest.raises(TypeError, match="guardian"):
         make_guardian("collections:OrderedDict")
 
@@ -171,7 +171,7 @@ def test_unknown_guardian_names():
 def test_every_registered_name_makes_a_guardian_of_that_name():
     """Each name of both sets builds a guardian whose table name is the registered name, and a
     -paper preset is its default's class with other defaults (so options carry over)."""
-    from guardians.registry import DEFAULT_SET, PAPER_SET, load_guardian_class
+    from rmm_guardians.registry import DEFAULT_SET, PAPER_SET, load_guardian_class
 
     for name in set(DEFAULT_SET) | set(PAPER_SET):
         assert name in available_guardians()

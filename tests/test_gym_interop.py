@@ -10,7 +10,7 @@ import pytest
 from gymnasium.wrappers import RecordEpisodeStatistics
 
 import rmm_envs
-from guardians import SB3Guardian
+from rmm_guardians import SB3Guardian
 from rmm_envs.envs.guarded import EPISODE_KEY
 from rmm_envs.wrappers import FlattenGuardianAction
 
@@ -49,7 +49,7 @@ def test_vector_record_episode_statistics_on_the_default_key():
     from gymnasium.wrappers.vector import RecordEpisodeStatistics as VectorRecord
 
     n = 3
-    env = VectorRecord(gym.make_vec("Dubins4DCirclesGuarded-v0", num_envs=n, vectorization_mode="vector_entry_point",
+    env = VectorRecord(gym.make_vec("Dubins4DGuarded-v0", num_envs=n, vectorization_mode="vector_entry_point",
                                     max_episode_sim_time=2.0, clock="fixed:1"))
     env.reset(seed=0)
     zeros = {"active_ctrl": np.zeros(n, np.int64), "turnrate_ctrl": np.zeros(n), "accel_ctrl": np.zeros(n)}
@@ -66,7 +66,7 @@ def test_vector_record_episode_statistics_on_the_default_key():
 def test_the_flat_action_of_the_issue_maps_alike_through_the_wrapper_and_the_adapter():
     """``[0.9, 0.1, 0.3]``: turn 0.025 and acceleration 0.15 both ways (the midpoint of each
     bound plus 0.1 and 0.3 of its half-width), not 0.1 and 0.3 through one of them."""
-    env = FlattenGuardianAction(gym.make("Dubins4DCirclesGuarded-v0"))
+    env = FlattenGuardianAction(gym.make("Dubins4DGuarded-v0"))
     space = env.unwrapped.action_space
     through_wrapper = env.action(np.array([0.9, 0.1, 0.3], np.float32))  # what SB3 hands the wrapper
 
@@ -95,13 +95,13 @@ def test_a_saved_ppo_model_applies_the_same_controls_through_sb3guardian(tmp_pat
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # stable-baselines3's logger folder, not in /tmp
 
     torch.set_num_threads(1)
-    train_env = FlattenGuardianAction(gym.make("Dubins4DCirclesGuarded-v0"))
+    train_env = FlattenGuardianAction(gym.make("Dubins4DGuarded-v0"))
     model = PPO("MlpPolicy", train_env, n_steps=64, batch_size=64, n_epochs=1, seed=0, device="cpu", verbose=0)
     model.learn(total_timesteps=64)
     model.save(tmp_path / "ppo.zip")
     loaded = PPO.load(tmp_path / "ppo.zip", device="cpu")
 
-    env = gym.make("Dubins4DCirclesGuarded-v0", clock="fixed:1")
+    env = gym.make("Dubins4DGuarded-v0", clock="fixed:1")
     space = env.unwrapped.action_space
     guardian = SB3Guardian(loaded, deterministic=False)
     guardian.reset(seed=0, observation_space=env.observation_space, action_space=space)

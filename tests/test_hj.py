@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 
-from guardians.hj.dynamics import DoubleIntegrator1D, Dubins4DHJ, Translation
-from guardians.hj.grid import Grid
-from guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
-from guardians.hj.solver import solve_brt, spatial_derivatives
+from rmm_guardians.hj.dynamics import DoubleIntegrator1D, Dubins4DHJ, Translation
+from rmm_guardians.hj.grid import Grid
+from rmm_guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
+from rmm_guardians.hj.solver import solve_brt, spatial_derivatives
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D
@@ -177,7 +177,7 @@ def test_cache_tolerates_files_removed_by_another_process(tmp_path, monkeypatch)
     # the race seen in a 2-worker benchmark: a file listed by glob is gone before its stat
     from pathlib import Path
 
-    from guardians.hj.cache import ValueCache
+    from rmm_guardians.hj.cache import ValueCache
 
     cache = ValueCache(tmp_path, max_files=2)
     for k in range(3):
@@ -216,7 +216,7 @@ def test_default_grid_is_the_papers():
 
 
 def test_reach_avoid_in_one_dimension():
-    from guardians.hj.dynamics import Integrator1D
+    from rmm_guardians.hj.dynamics import Integrator1D
 
     g = Grid([-2.0], [8.0], [501])
     x = g.axes[0]
@@ -257,8 +257,8 @@ def test_reach_avoid_guardian_steers_to_the_goal_at_the_edge(tmp_path):
 
 # --- the compiled (numba) kernel against the numpy reference -------------------------------
 
-from guardians.hj import _kernels  # noqa: E402
-from guardians.hj.solver import _rate, select_backend  # noqa: E402
+from rmm_guardians.hj import _kernels  # noqa: E402
+from rmm_guardians.hj.solver import _rate, select_backend  # noqa: E402
 
 needs_numba = pytest.mark.skipif(not _kernels.HAVE_NUMBA, reason="numba not installed")
 
@@ -359,7 +359,7 @@ def test_guardian_backend_is_checked_at_construction():
 
 # --- the default grid: an independent check, closed-loop safety, the decision rules -------
 
-from guardians.hj.guardian import HJPaperGuardian  # noqa: E402
+from rmm_guardians.hj.guardian import HJPaperGuardian  # noqa: E402
 
 
 def _circle_box() -> dict:
@@ -513,7 +513,7 @@ def test_the_lap_is_measured_from_the_sim_time(tmp_path):
 
 
 def test_hj_paper_is_the_papers_rule_and_both_are_registered():
-    from guardians.registry import available_guardians, load_guardian_class, make_guardian
+    from rmm_guardians.registry import available_guardians, load_guardian_class, make_guardian
 
     assert {"hj", "hj-paper"} <= set(available_guardians())
     assert load_guardian_class("hj") is HJGuardian and load_guardian_class("hj-paper") is HJPaperGuardian
@@ -578,7 +578,7 @@ def test_tvd_rk_tableau_is_consistent_and_of_its_order():
     from fractions import Fraction
     from math import factorial
 
-    from guardians.hj.solver import TVD_RK
+    from rmm_guardians.hj.solver import TVD_RK
 
     assert sorted(TVD_RK) == [1, 2, 3]
     for order, stages in TVD_RK.items():
@@ -622,7 +622,7 @@ def test_guardian_reads_the_control_bounds_from_the_action_space(tmp_path):
 
 
 def test_threads_are_an_argument_with_a_documented_default(tmp_path, monkeypatch):
-    from guardians.hj import guardian as hjg
+    from rmm_guardians.hj import guardian as hjg
 
     monkeypatch.delenv("RMM_HJ_THREADS", raising=False)
     assert hjg.default_threads() is None and HJGuardian(grid=small_grid()).threads is None

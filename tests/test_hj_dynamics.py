@@ -1,4 +1,4 @@
-"""The HJ dynamics contract in code (guardians.hj.dynamics.HJDynamics): every dynamics the project
+"""The HJ dynamics contract in code (rmm_guardians.hj.dynamics.HJDynamics): every dynamics the project
 ships satisfies it, its alphas bound the Hamiltonian's slope as the solver assumes, and the solver
 refuses an object that does not offer it, naming what is missing."""
 
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from guardians.hj.dynamics import (DoubleIntegrator1D, Dubins4DHJ, HJControlDynamics, HJDynamics, Integrator1D,
+from rmm_guardians.hj.dynamics import (DoubleIntegrator1D, Dubins4DHJ, HJControlDynamics, HJDynamics, Integrator1D,
                                    Translation, check_dynamics)
-from guardians.hj.grid import Grid
-from guardians.hj.solver import solve_brt
+from rmm_guardians.hj.grid import Grid
+from rmm_guardians.hj.solver import solve_brt
 
 GRIDS = {
     "dubins4d": Grid([-2.0, -2.0, -np.pi, 0.0], [2.0, 2.0, np.pi, 2.0], [5, 5, 8, 5], periodic=[2]),

@@ -1,4 +1,4 @@
-"""``hj`` on the quadrotor: the horizontal 4-D value at the route's altitude band (guardians.hj.quadrotor)."""
+"""``hj`` on the quadrotor: the horizontal 4-D value at the route's altitude band (rmm_guardians.hj.quadrotor)."""
 
 import math
 import warnings
@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 import rmm_envs  # noqa: F401
-from guardians import make_guardian
-from guardians.hj.dynamics import Dubins4DHJ
-from guardians.hj.grid import Grid
-from guardians.hj.guardian import HJGuardian, HJPaperGuardian
-from guardians.hj.quadrotor import QuadrotorHJGuardian
-from guardians.hj.room import lag_prediction, room_target
-from guardians.hj.solver import solve_brt
+from rmm_guardians import make_guardian
+from rmm_guardians.hj.dynamics import Dubins4DHJ
+from rmm_guardians.hj.grid import Grid
+from rmm_guardians.hj.guardian import HJGuardian, HJPaperGuardian
+from rmm_guardians.hj.quadrotor import QuadrotorHJGuardian
+from rmm_guardians.hj.room import lag_prediction, room_target
+from rmm_guardians.hj.solver import solve_brt
 from rmm_envs.envs.quadrotor_room_parallel import QuadrotorRoomGuardedEnv
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_envs.worlds.rooms import Room
@@ -186,7 +186,7 @@ def test_dispatch_by_spaces(space):
 def test_fixed_clock_episode_the_pilot_crashes(tmp_path):
     import gymnasium as gym
 
-    from guardians.baselines import InactiveGuardian
+    from rmm_guardians.baselines import InactiveGuardian
 
     def run(g, seed=2110268680):  # episode 10 of rmm-bench --seed 5 (a development seed)
         env = gym.make("QuadrotorRoomParallel-v0", clock="fixed:1")

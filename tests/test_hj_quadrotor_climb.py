@@ -1,4 +1,4 @@
-"""``hj`` on the quadrotor climbs over what blocks the way (guardians.hj.quadrotor_climb): when it
+"""``hj`` on the quadrotor climbs over what blocks the way (rmm_guardians.hj.quadrotor_climb): when it
 climbs, to what height, that it never descends onto an obstacle, and its refused options."""
 
 import math
@@ -9,10 +9,10 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import rmm_envs  # noqa: F401
-from guardians import make_guardian
-from guardians.hj.quadrotor import QuadrotorHJGuardian
-from guardians.hj.quadrotor_climb import DESCEND, SETTLE, Climb, ClimbPlan
-from guardians.hj.room import object_top, room_distance
+from rmm_guardians import make_guardian
+from rmm_guardians.hj.quadrotor import QuadrotorHJGuardian
+from rmm_guardians.hj.quadrotor_climb import DESCEND, SETTLE, Climb, ClimbPlan
+from rmm_guardians.hj.room import object_top, room_distance
 from rmm_envs.systems.rotations import quat_from_euler
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_envs.worlds.rooms import Room

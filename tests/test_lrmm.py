@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 import rmm_envs  # noqa: F401
-from guardians.lrmm.guardian import LRMMGuardian
-from guardians.lrmm.model import LRMMModel, default_model_path, load_model
-from guardians.lrmm.train import TrainConfig, main as train_main, split_by_config, train
+from rmm_guardians.lrmm.guardian import LRMMGuardian
+from rmm_guardians.lrmm.model import LRMMModel, default_model_path, load_model
+from rmm_guardians.lrmm.train import TrainConfig, main as train_main, split_by_config, train
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
 from rmm_envs.systems.dubins4d import Dubins4D
@@ -75,7 +75,7 @@ def test_numpy_inference_equals_torch(small_dataset, trained):
 
 def test_save_load_round_trip_is_bit_exact(tmp_path, small_dataset, trained):
     p = trained.save(tmp_path / "m.npz")
-    m = LRMMModel.load(p, env_id="Dubins4DCirclesGuarded-v0", obs_dim=17)
+    m = LRMMModel.load(p, env_id="Dubins4DGuarded-v0", obs_dim=17)
     for (Wa, ba), (Wb, bb) in zip(trained.weights, m.weights):
         np.testing.assert_array_equal(Wa, Wb)
         assert (ba is None and bb is None) or np.array_equal(ba, bb)
@@ -175,7 +175,7 @@ def forward_ray_model(obs_dim=17):
     b0 = np.array([8.0])  # hidden = sigmoid(8 - 4 ray0): ~1 when ray0 < 1.5, ~0 when ray0 > 2.5
     W1 = np.array([[10.0]])
     b1 = np.array([-5.0])  # risk = sigmoid(10 h - 5): ~0.99 or ~0.007
-    meta = {"env_id": "Dubins4DCirclesGuarded-v0", "obs_dim": obs_dim, "features": list(range(obs_dim)), "hidden": [1],
+    meta = {"env_id": "Dubins4DGuarded-v0", "obs_dim": obs_dim, "features": list(range(obs_dim)), "hidden": [1],
             "activation": "sigmoid", "output_bias": True}
     return LRMMModel([(W0, b0), (W1, b1)], np.zeros(obs_dim), np.ones(obs_dim), meta)
 
@@ -274,11 +274,11 @@ def test_lrmm_guardian_bad_input():
 
 def test_a_mistyped_env_id_is_named_as_such_not_answered_with_commands_to_train_for_it():
     with pytest.raises(ValueError, match=r"^no env 'Dubins4DCirclesParalel-v0' is registered \(did you mean "
-                                         r"'Dubins4DCirclesParallel-v0'\?\); the shipped LRMM models are for \["):
+                                         r"'Dubins4DParallel-v0'\?\); the shipped LRMM models are for \["):
         default_model_path("Dubins4DCirclesParalel-v0")
-    with pytest.raises(ValueError, match=r"^no shipped LRMM model for 'Dubins4DCirclesGuarded-v0' \(variant 'actt'\); "
+    with pytest.raises(ValueError, match=r"^no shipped LRMM model for 'Dubins4DGuarded-v0' \(variant 'actt'\); "
                                          r"its variants: \['act', 'paper'\]$"):
-        default_model_path("Dubins4DCirclesGuarded-v0", variant="actt")
+        default_model_path("Dubins4DGuarded-v0", variant="actt")
 
 
 def test_shipped_model_loads_and_is_documented():
@@ -286,11 +286,11 @@ def test_shipped_model_loads_and_is_documented():
     assert default_model_path().exists()
     assert m.env_id == "Dubins4DCircles-v0" and m.obs_dim == 17  # as recorded at training, before the rename
     # a model recorded under an old id is the model of its new id (and still of no other env)
-    for env_id in ("Dubins4DCirclesGuarded-v0", "Dubins4DCircles-v0"):
+    for env_id in ("Dubins4DGuarded-v0", "Dubins4DCircles-v0"):
         assert LRMMModel.load(default_model_path(), env_id=env_id).meta["weights_sha256"] == m.meta["weights_sha256"]
-    with pytest.raises(ValueError, match="trained for env 'Dubins4DCircles-v0' .now 'Dubins4DCirclesGuarded-v0'., "
-                                         "not 'Dubins4DCirclesParallel-v0'"):
-        LRMMModel.load(default_model_path(), env_id="Dubins4DCirclesParallel-v0")
+    with pytest.raises(ValueError, match="trained for env 'Dubins4DCircles-v0' .now 'Dubins4DGuarded-v0'., "
+                                         "not 'Dubins4DParallel-v0'"):
+        LRMMModel.load(default_model_path(), env_id="Dubins4DParallel-v0")
     assert m.meta["data"]["n_rows"] >= 35072 and m.meta["data"]["configs"] >= 274
     assert m.meta["metrics"]["test"]["mae"] <= 0.030
     assert m.meta["labeller"]["branches"] == 32 and m.meta["labeller"]["depth"] == 2
@@ -389,8 +389,8 @@ def test_head_model_shape_round_trip_and_numpy_equals_torch(tmp_path, cand_datas
 
 
 def test_set_decision_round_trip_and_bad_values(tmp_path, head_model, trained):
-    from guardians.lrmm.decision import main as decision_main
-    from guardians.lrmm.model import set_decision
+    from rmm_guardians.lrmm.decision import main as decision_main
+    from rmm_guardians.lrmm.model import set_decision
 
     p = head_model.save(tmp_path / "h.npz")
     assert decision_main([str(p), "--threshold", "0.4", "--commit", "7", "--chosen-by", "a test"]) == 0
@@ -418,7 +418,7 @@ def _rewrite(src, dst, edit_meta=None, edit_arrays=None):
     """Copy a model file, editing its metadata/arrays and recomputing the checksum (a well-formed file)."""
     import json
 
-    from guardians.lrmm.model import _checksum
+    from rmm_guardians.lrmm.model import _checksum
 
     with np.load(src, allow_pickle=False) as z:
         arrs = {k: z[k] for k in z.files}
@@ -446,7 +446,7 @@ def test_old_format_model_loads_as_the_paper_preset_with_a_warning(tmp_path, tra
         LRMMGuardian(p, action="head", threshold=0.5)
     import warnings
 
-    from guardians.lrmm.guardian import LRMMPaperGuardian
+    from rmm_guardians.lrmm.guardian import LRMMPaperGuardian
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -486,17 +486,17 @@ def test_non_finite_risk_is_an_error_not_safe():
     """Finite weights can still overflow to inf - inf = NaN; the guardian must raise, not read it as 'safe'."""
     W0 = np.zeros((1, 17))
     W0[0, 5], W0[0, 6] = 1e308, -1e308
-    meta = {"env_id": "Dubins4DCirclesGuarded-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1],
+    meta = {"env_id": "Dubins4DGuarded-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1],
             "activation": "relu", "output_bias": False, "decision": {"threshold": 0.5}}
     m = LRMMModel([(W0, np.zeros(1)), (np.ones((1, 1)), None)], np.zeros(17), np.ones(17), meta)
-    for g in (LRMMGuardian(m, action="heuristic"), __import__("guardians.lrmm.guardian", fromlist=["x"]).LRMMPaperGuardian(m)):
+    for g in (LRMMGuardian(m, action="heuristic"), __import__("rmm_guardians.lrmm.guardian", fromlist=["x"]).LRMMPaperGuardian(m)):
         g.reset(seed=0, **SPACES)
         with np.errstate(all="ignore"), pytest.raises(ValueError, match="non-finite risk"):
             g.act(obs_with(10.0, 10.0, 10.0), {})
 
 
 def test_training_divergence_is_a_clear_error(small_dataset, tmp_path, capsys):
-    from guardians.lrmm.train import TrainingDiverged
+    from rmm_guardians.lrmm.train import TrainingDiverged
 
     ds, path = small_dataset
     with pytest.raises(TrainingDiverged, match="loss became"):
@@ -544,7 +544,7 @@ def head_model_by_hand(risks_bias=(0.0, 1.0, -1.0, 2.0), decision=None):
     W0 = np.zeros((1, 17))
     W0[0, 5] = -1.0
     W1 = np.array([[1.0], [0.0], [0.0], [0.0]])
-    meta = {"env_id": "Dubins4DCirclesGuarded-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1], "activation": "relu",
+    meta = {"env_id": "Dubins4DGuarded-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1], "activation": "relu",
             "output_bias": True, "candidates": [[-0.25, -0.5], [0.25, -0.5], [0.0, 0.5]], "candidate_hold": 1.0}
     if decision:
         meta["decision"] = decision
@@ -564,7 +564,7 @@ def test_rule_is_strictly_above_the_threshold():
     g2 = LRMMGuardian(m, threshold=just_below)
     g2.reset(seed=0, **SPACES)
     assert g2.act(o, {})["active_ctrl"] == 1  # the smallest step above the threshold: the guardian acts
-    paper = __import__("guardians.lrmm.guardian", fromlist=["x"]).LRMMPaperGuardian
+    paper = __import__("rmm_guardians.lrmm.guardian", fromlist=["x"]).LRMMPaperGuardian
     for thr, expected in ((0.5, 0), (just_below, 1)):
         p = paper(m, threshold=thr)
         p.reset(seed=0, **SPACES)
@@ -589,7 +589,7 @@ def test_head_applies_the_lowest_risk_candidate_and_commits():
 def test_defaults_are_pinned():
     import inspect
 
-    from guardians.lrmm.guardian import PAPER_THRESHOLD, LRMMPaperGuardian
+    from rmm_guardians.lrmm.guardian import PAPER_THRESHOLD, LRMMPaperGuardian
 
     assert PAPER_THRESHOLD == 0.85
     sig = inspect.signature(LRMMGuardian.__init__).parameters
@@ -599,9 +599,9 @@ def test_defaults_are_pinned():
     paper.reset(seed=0, **SPACES)
     assert (paper.u1_max, paper.u2_min) == (0.25, -0.5)  # the Dubins4D control box, read from the action space
     assert (paper.name, paper.threshold, paper.action, paper.commit, paper.hysteresis, paper.window) == ("lrmm-paper", 0.85, "heuristic", 0, False, 20)
-    assert paper.model.path == default_model_path("Dubins4DCirclesGuarded-v0", variant="paper")
+    assert paper.model.path == default_model_path("Dubins4DGuarded-v0", variant="paper")
     g = LRMMGuardian()
-    assert g.name == "lrmm" and g.model.path == default_model_path("Dubins4DCirclesGuarded-v0", variant="act")
+    assert g.name == "lrmm" and g.model.path == default_model_path("Dubins4DGuarded-v0", variant="act")
     d = g.model.meta["decision"]
     assert (g.threshold, g.commit, g.action) == (d["threshold"], d["commit"], d.get("action", "head"))
     assert (g.threshold, g.commit, g.action, g.trigger, g.margin, g.restart) == SHIPPED_DECISION
@@ -609,8 +609,8 @@ def test_defaults_are_pinned():
 
 
 def test_registry_names():
-    from guardians.lrmm.guardian import LRMMPaperGuardian
-    from guardians.registry import available_guardians, make_guardian
+    from rmm_guardians.lrmm.guardian import LRMMPaperGuardian
+    from rmm_guardians.registry import available_guardians, make_guardian
 
     assert {"lrmm", "lrmm-paper"} <= set(available_guardians())
     p = make_guardian("lrmm-paper")

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from guardians.lrmm.guardian import LRMMGuardian, LRMMPaperGuardian
-from guardians.lrmm.model import LRMMModel
+from rmm_guardians.lrmm.guardian import LRMMGuardian, LRMMPaperGuardian
+from rmm_guardians.lrmm.model import LRMMModel
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from tests.test_lrmm import SPACES, env_spaces, forward_ray_model, head_model_by_hand, obs_with
 from tests.test_lrmm_turn import TURN, U1, RaysModel, forward_risk, maze_obs, maze_spaces, nearest_wall_risk

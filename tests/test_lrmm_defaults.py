@@ -1,4 +1,4 @@
-"""guardians.lrmm.defaults: the lrmm threshold's one precedence (argument > the model file's
+"""rmm_guardians.lrmm.defaults: the lrmm threshold's one precedence (argument > the model file's
 stored decision > the shipped entry's > the paper's 0.85)."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from guardians.lrmm.defaults import PAPER_THRESHOLD, check_threshold, decision_threshold, stored_decision
-from guardians.lrmm.shipped import Shipped
+from rmm_guardians.lrmm.defaults import PAPER_THRESHOLD, check_threshold, decision_threshold, stored_decision
+from rmm_guardians.lrmm.shipped import Shipped
 
 SHIP = Shipped({"act": "x.npz"}, decision={"threshold": 0.6, "commit": 3, "chosen_by": "a test"})
 
@@ -46,8 +46,8 @@ def test_the_threshold_precedence():
 
 
 def test_the_guardian_reports_where_its_threshold_came_from():
-    from guardians.lrmm.guardian import LRMMGuardian, LRMMPaperGuardian
-    from guardians.lrmm.model import load_model
+    from rmm_guardians.lrmm.guardian import LRMMGuardian, LRMMPaperGuardian
+    from rmm_guardians.lrmm.model import load_model
 
     g = LRMMGuardian()
     stored = g.model.meta.get("decision") or {}

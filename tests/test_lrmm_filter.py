@@ -8,9 +8,9 @@ import warnings
 import numpy as np
 import pytest
 
-from guardians.lrmm.guardian import LRMMGuardian
-from guardians.lrmm.model import LRMMModel, set_decision
-from guardians.lrmm.nominal import PredictRater, make_rater
+from rmm_guardians.lrmm.guardian import LRMMGuardian
+from rmm_guardians.lrmm.model import LRMMModel, set_decision
+from rmm_guardians.lrmm.nominal import PredictRater, make_rater
 from rmm_envs.autonomy import ObservationLayout
 from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
 from tests.test_lrmm import SPACES, env_spaces, head_model_by_hand, obs_with
@@ -195,7 +195,7 @@ def test_stored_hand_back_defaults_round_trip(tmp_path):
         set_decision(p, 0.4, 5, "x", hold=3)
     with pytest.raises(ValueError, match="restart"):
         set_decision(p, 0.4, 5, "x", restart=-1.0)
-    from guardians.lrmm.decision import main as decision_main
+    from rmm_guardians.lrmm.decision import main as decision_main
 
     assert decision_main([str(p), "--threshold", "0.3", "--commit", "18", "--restart", "0.3", "--chosen-by", "t"]) == 0
     assert LRMMModel.load(p).meta["decision"] == {"threshold": 0.3, "commit": 18, "action": "head", "restart": 0.3,
@@ -204,7 +204,7 @@ def test_stored_hand_back_defaults_round_trip(tmp_path):
 
 
 def test_stored_hand_back_defaults_apply_only_to_the_rule_they_were_chosen_for(tmp_path):
-    from guardians.lrmm.guardian import LRMMPaperGuardian
+    from rmm_guardians.lrmm.guardian import LRMMPaperGuardian
 
     p = speed_model().save(tmp_path / "m.npz")
     set_decision(p, 0.4, 5, "a test", trigger="driver", margin=0.05, restart=0.3)

@@ -2,7 +2,7 @@
 
 import warnings
 
-from guardians.lrmm.guardian import PAPER_THRESHOLD, LRMMPaperGuardian
+from rmm_guardians.lrmm.guardian import PAPER_THRESHOLD, LRMMPaperGuardian
 
 
 def test_the_paper_preset_is_the_heuristic_at_085_without_any_fallback_warning():

@@ -1,4 +1,4 @@
-"""lrmm's slide and still rules (``guardians.lrmm.nominal``): the variants of the driver's velocity
+"""lrmm's slide and still rules (``rmm_guardians.lrmm.nominal``): the variants of the driver's velocity
 command, the take-over test, and the quadrotor guardian on a hand-built model whose risks are
 computed by hand below."""
 
@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from guardians.lrmm.guardian import LRMMGuardian
-from guardians.lrmm.model import LRMMModel, set_decision
-from guardians.lrmm.nominal import SLIDE_MOVES, Slide, driver_at_risk
+from rmm_guardians.lrmm.guardian import LRMMGuardian
+from rmm_guardians.lrmm.model import LRMMModel, set_decision
+from rmm_guardians.lrmm.nominal import SLIDE_MOVES, Slide, driver_at_risk
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox
 from rmm_envs.envs.dubins4d import CONTROLS
 from tests.test_lrmm_filter import QUAD, QUAD_CONTROLS
@@ -162,7 +162,7 @@ def test_stored_slide_still_and_stay_round_trip(tmp_path):
     g = LRMMGuardian(p)
     assert (g.trigger, g.margin, g.slide, g.still, g.stay) == ("driver", 0.15, True, 0.05, False)
     assert LRMMGuardian(p, slide=False, stay=True).slide is False  # arguments override the file
-    from guardians.lrmm.decision import main as decision_main
+    from rmm_guardians.lrmm.decision import main as decision_main
 
     assert decision_main([str(p), "--threshold", "0.2", "--commit", "20", "--trigger", "driver", "--margin", "0.15",
                           "--slide", "--still", "0.05", "--chosen-by", "t"]) == 0

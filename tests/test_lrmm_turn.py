@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from guardians.lrmm.guardian import REMEDY, LRMMGuardian
-from guardians.lrmm.model import LRMMModel
+from rmm_guardians.lrmm.guardian import REMEDY, LRMMGuardian
+from rmm_guardians.lrmm.model import LRMMModel
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.envs.dubins3d_maze_parallel import observation_layout
 from tests.test_lrmm import SPACES, forward_ray_model
@@ -185,11 +185,11 @@ def test_a_wrong_observation_size_is_refused_showing_the_space_or_the_field():
     g = LRMMGuardian(forward_ray_model(), action="heuristic", threshold=0.85)
     with pytest.raises(ValueError) as e:
         g.check_spaces("a space without a shape", SPACES["action_space"])
-    assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins4DCirclesGuarded-v0) expects observations of "
+    assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins4DGuarded-v0) expects observations of "
                             "shape (17,), the env's observation space is a space without a shape" + REMEDY)
     with pytest.raises(ValueError) as e:
         g.check_spaces(ObservationBox(np.zeros(11, np.float32), np.ones(11, np.float32), observation_layout()), SPACES["action_space"])
-    assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins4DCirclesGuarded-v0) expects observations of "
+    assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins4DGuarded-v0) expects observations of "
                             "shape (17,), the env's observation space is (11,)" + REMEDY)
     t = LRMMGuardian(RaysModel(forward_risk, obs_dim=12), threshold=0.3, action="turn", inputs="rays")
     with pytest.raises(ValueError) as e:

@@ -19,7 +19,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from guardians.cbf.maze import MazeCBFGuardian
+from rmm_guardians.cbf.maze import MazeCBFGuardian
 from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
 from tests.test_maze_guardians import reset_at
 
@@ -146,7 +146,7 @@ def test_a_pose_with_nan_applies_the_safe_default_and_is_counted():
 def test_head_on_the_turn_away_is_left_on_a_tie():
     """Heading straight at a flat wall (``n . e_perp = 0`` exactly): the row asks for the left turn
     (``sigma = +1``): ``G = -R sigma (-n . e) = -50``, so a left turn (u > 0) raises the barrier."""
-    from guardians.cbf.maze import wall_rows
+    from rmm_guardians.cbf.maze import wall_rows
 
     B, G, h = wall_rows([0.0, 0.0, 0.0], 10.0, np.array([[30.0, -100.0, 30.0, 100.0]]), 6.25, 2.0, 1.0, 0.1)
     assert G[0, 0] == -R and B[0] == pytest.approx(30.0 - 6.25 - 2.0 - R)
@@ -171,7 +171,7 @@ def test_predict_is_the_exact_arc():
 def test_rows_keep_the_nearest_walls_smallest_barrier_first_for_either_barrier():
     """With ``n_walls = 2`` of the corridor's four walls: the two rows of smallest barrier value, in
     that order, of the guardian's own barrier."""
-    from guardians.cbf.maze import wall_rows
+    from rmm_guardians.cbf.maze import wall_rows
 
     env = Dubins3DMazeGuardedEnv()
 
@@ -207,7 +207,7 @@ def test_a_qpsolvers_backend_decides_as_the_direct_osqp_path():
 
 
 def test_without_a_safe_default_a_nan_pose_turns_left_at_full_rate():
-    from guardians.cbf.maze import MazeCBFGuardian as G
+    from rmm_guardians.cbf.maze import MazeCBFGuardian as G
     from rmm_envs.autonomy import GuardianActionSpace
     from tests.test_maze_guardians import corridor
 
@@ -263,7 +263,7 @@ def test_at_a_walls_end_the_row_is_the_barriers_rate(px, py, psi, u):
     """Past the end of a wall (the segment from (-100, 0) to (0, 0), the car at x > 0, so the
     nearest point is the end): ``B' = (h - p1 B) - G u`` is the barrier's rate along the exact
     arc (central difference over 1e-4 s), while approaching and not head-on."""
-    from guardians.cbf.maze import wall_rows
+    from rmm_guardians.cbf.maze import wall_rows
 
     wall = np.array([[-100.0, 0.0, 0.0, 0.0]])
     g = MazeCBFGuardian()

@@ -8,11 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from guardians import make_guardian
-from guardians.cbf import CBFGuardian, CBFPaperGuardian
-from guardians.cbf.maze import MazeCBFGuardian, wall_rows
-from guardians.hj.guardian import HJGuardian, HJPaperGuardian
-from guardians.hj.maze import MazeHJGuardian
+from rmm_guardians import make_guardian
+from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
+from rmm_guardians.cbf.maze import MazeCBFGuardian, wall_rows
+from rmm_guardians.hj.guardian import HJGuardian, HJPaperGuardian
+from rmm_guardians.hj.maze import MazeHJGuardian
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
 from rmm_envs.worlds.mazes import Maze
@@ -141,7 +141,7 @@ def test_cbf_on_the_maze_filters_the_drivers_turn_rate():
 
 
 def test_cbf_and_hj_avoid_a_collision_the_driver_makes():
-    from guardians.baselines import InactiveGuardian
+    from rmm_guardians.baselines import InactiveGuardian
 
     env = Dubins3DMazeGuardedEnv()
     assert episode(env, InactiveGuardian(), 1) == "collision"
@@ -184,7 +184,7 @@ def test_hj_maze_value_and_decisions(hj_corridor):
     m = g.delegate
     assert isinstance(m, MazeHJGuardian) and m.stats()["solves"] + m.stats()["cache_hits"] == 1  # a cache shared by the session
     V = m.V[..., 0]
-    from guardians.hj.maze import wall_target
+    from rmm_guardians.hj.maze import wall_target
 
     target = wall_target(m.grid, corridor())[..., 0]
     assert np.all(V <= target + 1e-4)  # the tube only grows: never above the distance now
@@ -237,7 +237,7 @@ def test_hj_maze_bad_arguments_and_dispatch():
 
 # ------------------------------------------------------------------ hj's look-ahead rule
 def test_lookahead_manoeuvres_and_path_clearances():
-    from guardians.hj.maze_lookahead import COEF, manoeuvres, path_clearances
+    from rmm_guardians.hj.maze_lookahead import COEF, manoeuvres, path_clearances
 
     man = manoeuvres(0.2, 6.0)
     loop = 2 * math.pi / 0.2

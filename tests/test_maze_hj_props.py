@@ -23,8 +23,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from guardians.hj.maze import MazeHJGuardian, maze_grid, wall_target
-from guardians.hj.maze_lookahead import COEF, manoeuvres, path_clearances
+from rmm_guardians.hj.maze import MazeHJGuardian, maze_grid, wall_target
+from rmm_guardians.hj.maze_lookahead import COEF, manoeuvres, path_clearances
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
 from rmm_envs.worlds.mazes import Maze

@@ -18,7 +18,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from guardians.hj.maze_lookahead import COEF, manoeuvres, near_walls, path_clearances
+from rmm_guardians.hj.maze_lookahead import COEF, manoeuvres, near_walls, path_clearances
 
 SPEED, DT, HALF = 10.0, 0.2, 6.25
 # a closed box 500 x 250 px with one inner wall hanging from the top (capsules of half-width 6.25)

@@ -8,9 +8,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import rmm_envs  # noqa: F401
-from benchmarks.bench.cli import main as bench_main
-from guardians import make_guardian
-from guardians.baselines import BrakesGuardian
+from rmm_bench.cli import main as bench_main
+from rmm_guardians import make_guardian
+from rmm_guardians.baselines import BrakesGuardian
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv, TurnFromNearerWall, observation_layout
 from rmm_envs.drivers.maze import PursuitDriver, cell_distances, cell_path
@@ -277,7 +277,7 @@ def test_safe_default_contract_and_dubins4d_braking():
 
     with pytest.raises(TypeError, match="SafeDefault"):
         GuardianActionSpace(("turnrate_ctrl",), [-1.0], [1.0], safe_default="brake")
-    space = gym.make("Dubins4DCirclesParallel-v0").action_space
+    space = gym.make("Dubins4DParallel-v0").action_space
     assert isinstance(space.safe_default, FullBraking)
     u = space.safe_default.policy(space, np.random.default_rng(5))(None)
     assert u[1] == -0.5 and u[0] == np.random.default_rng(5).uniform(-0.25, 0.25)  # the draw brakes always made
@@ -290,12 +290,12 @@ def test_safe_default_contract_and_dubins4d_braking():
 
 def test_make_guardian_passes_env_id_only_to_guardians_that_take_it():
     assert make_guardian("inactive", env_id="Dubins3DMazeParallel-v0").name == "inactive"
-    assert make_guardian("lrmm", env_id="Dubins4DCirclesParallel-v0").model.env_id != "Dubins3DMaze-v0"
+    assert make_guardian("lrmm", env_id="Dubins4DParallel-v0").model.env_id != "Dubins3DMaze-v0"
     with pytest.raises(ValueError, match=r"no shipped LRMM model for 'Dubins3DMazeParallel-v0' \(variant 'paper'\)"):
         make_guardian("lrmm-paper", env_id="Dubins3DMazeParallel-v0")
     with pytest.raises(ValueError, match="env_id must be"):
         make_guardian("lrmm", env_id=3)
-    g = make_guardian("lrmm", env_id="Dubins4DCirclesParallel-v0")  # the Dubins4D model on the maze's spaces: refused by name
+    g = make_guardian("lrmm", env_id="Dubins4DParallel-v0")  # the Dubins4D model on the maze's spaces: refused by name
     env = Dubins3DMazeGuardedEnv()
     with pytest.raises(ValueError, match=r"guardian 'lrmm'.*shape \(17,\)"):
         g.check_spaces(env.observation_space, env.action_space)

@@ -163,7 +163,7 @@ def test_rgb_render():
 
 
 def test_shipped_maze_model():
-    from guardians.lrmm.model import LRMMModel, default_model_path
+    from rmm_guardians.lrmm.model import LRMMModel, default_model_path
 
     m = LRMMModel.load(default_model_path("Dubins3DMaze-v0"), env_id="Dubins3DMaze-v0", obs_dim=8)
     assert m.meta["data"]["n_rows"] >= 65536 + 4096

@@ -1,4 +1,4 @@
-"""Table I aggregation (benchmarks.bench.metrics): every statistic on a small hand-made run."""
+"""Table I aggregation (rmm_bench.metrics): every statistic on a small hand-made run."""
 
 import math
 
@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from benchmarks.bench.metrics import aggregate, batch_rate, table_i, weighted_mean_std
+from rmm_bench.metrics import aggregate, batch_rate, table_i, weighted_mean_std
 
 NAN = float("nan")
 
@@ -130,7 +130,7 @@ def test_fewer_than_two_batches_give_the_wilson_interval_not_zero():
     """One batch (64 episodes, batch size 64): the std over batches would be 0; the spread is
     then the 95% Wilson half-width, by hand for 35 of 64 (p = 0.546875, z = 1.959964):
     z sqrt(p (1-p) / 64 + z^2 / 16384) / (1 + z^2 / 64) = 0.125597 / 1.060023 = 0.118485"""
-    from benchmarks.bench.metrics import rate_spread, wilson_half_width
+    from rmm_bench.metrics import rate_spread, wilson_half_width
 
     flags = [1] * 35 + [0] * 29
     m, s = batch_rate(flags, 64)
@@ -148,13 +148,13 @@ def test_fewer_than_two_batches_give_the_wilson_interval_not_zero():
     assert agg["rate_spread"] == "wilson95" and agg["goal"] == pytest.approx((100 * p, 100 * s))
     centre = (p + z * z / 128) / (1 + z * z / 64)  # the interval is centred here, not on p
     assert agg["goal_ci"] == pytest.approx((100 * (centre - s), 100 * (centre + s)))
-    from benchmarks.bench.metrics import wilson_interval
+    from rmm_bench.metrics import wilson_interval
 
     assert wilson_interval(1.0, 2)[1] == 1.0 and 0.0 < wilson_interval(1.0, 2)[0] < 0.5  # within [0, 1]
 
 
 def test_the_table_says_which_spread_and_shows_measured_decision_time_under_a_fixed_clock():
-    from benchmarks.bench.report import format_tables
+    from rmm_bench.report import format_tables
 
     eps = [{"episode": i, "outcome": "goal" if i % 3 else "collision", "steps": 10, "compute_time": 0.01,
             "decision_mean": 0.0004 * (1 + i % 2), "sim_time": 1.0, "active_sim_time": 0.0} for i in range(20)]

@@ -1,4 +1,4 @@
-"""No file circle: the modules of ``guardians`` and ``rmm_envs`` import one another without a
+"""No file circle: the modules of ``rmm_guardians`` and ``rmm_envs`` import one another without a
 cycle (a shared piece lives below both of its users), read statically at any depth."""
 
 from __future__ import annotations
@@ -6,18 +6,20 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("guardians", "rmm_envs")
+from tests.layout import PACKAGE_DIRS
+
+PACKAGES = {name: PACKAGE_DIRS[name] for name in ("rmm_guardians", "rmm_envs")}
 
 
-def module_name(path: Path, root: Path = ROOT) -> str:
-    return path.relative_to(root).with_suffix("").as_posix().removesuffix("/__init__").replace("/", ".")
+def _module_name(path: Path, package: str, folder: Path) -> str:
+    rel = path.relative_to(folder).with_suffix("").as_posix().removesuffix("__init__").strip("/")
+    return ".".join([package] + ([rel.replace("/", ".")] if rel else []))
 
 
-def import_graph(root: Path = ROOT, packages=PACKAGES) -> dict[str, set[str]]:
-    """module -> the modules of ``packages`` it imports (``from pkg import sub`` is an edge to the
-    submodule when ``sub`` is one, else to the package)."""
-    paths = {module_name(p, root): p for pkg in packages for p in (root / pkg).rglob("*.py")}
+def import_graph(packages: dict[str, Path] = PACKAGES) -> dict[str, set[str]]:
+    """module -> the modules of ``packages`` (import name -> folder) it imports (``from pkg import
+    sub`` is an edge to the submodule when ``sub`` is one, else to the package)."""
+    paths = {_module_name(p, pkg, folder): p for pkg, folder in packages.items() for p in folder.rglob("*.py")}
     graph: dict[str, set[str]] = {}
     for mod, path in paths.items():
         is_pkg = path.name == "__init__.py"
@@ -76,12 +78,12 @@ def test_the_cycle_finder_finds_a_planted_circle(tmp_path):
     (pkg / "a.py").write_text("from pkg.b import f\n")
     (pkg / "b.py").write_text("def f():\n    from . import a\n")
     (pkg / "c.py").write_text("from pkg import a\n")
-    graph = import_graph(tmp_path, ("pkg",))
+    graph = import_graph({"pkg": pkg})
     assert graph["pkg.a"] == {"pkg.b"} and graph["pkg.b"] == {"pkg.a"} and graph["pkg.c"] == {"pkg.a"}
     assert cycles(graph) == [["pkg.a", "pkg.b"]]
 
 
 def test_no_file_circle():
     graph = import_graph()
-    assert "guardians.hj.maze" in graph and "guardians.hj.guardian" not in graph["guardians.hj.maze"]
+    assert "rmm_guardians.hj.maze" in graph and "rmm_guardians.hj.guardian" not in graph["rmm_guardians.hj.maze"]
     assert cycles(graph) == []

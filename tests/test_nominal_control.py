@@ -15,7 +15,7 @@ import pytest
 import rmm_envs  # noqa: F401
 from rmm_envs.envs.guarded import EPISODE_KEY
 
-BLOCKING = [("Dubins4DCirclesGuarded-v0", {}, 400), ("Dubins4DMapGuarded-v0", {}, 300), ("Dubins3DMazeGuarded-v0", {}, 600),
+BLOCKING = [("Dubins4DGuarded-v0", {}, 400), ("Dubins4DMapGuarded-v0", {}, 300), ("Dubins3DMazeGuarded-v0", {}, 600),
             ("QuadrotorRoomGuarded-v0", {}, 80)]
 
 
@@ -72,7 +72,7 @@ def test_handing_back_the_nominal_control_is_the_driver_bit_for_bit(env_id, kwar
 def test_the_nominal_control_is_the_drivers_control_at_the_observed_state():
     """Dubins4D's driver is a pure function of the state and the goal: the nominal control is
     the driver's QP at the state the observation shows (``info["state"]``), recomputed here."""
-    env = gym.make("Dubins4DCirclesGuarded-v0", clock="fixed:1")
+    env = gym.make("Dubins4DGuarded-v0", clock="fixed:1")
     obs, info = env.reset(seed=5)
     u = env.unwrapped
     for _ in range(30):
@@ -101,7 +101,7 @@ def test_the_maze_driver_follows_its_route_while_the_guardian_drives():
 
 
 def test_cost_is_one_on_the_collision_step_and_summed_per_episode():
-    env = gym.make("Dubins4DCirclesGuarded-v0", clock="fixed:1")
+    env = gym.make("Dubins4DGuarded-v0", clock="fixed:1")
     obs, info = env.reset(seed=0, options={"state": [0.0, 0.0, 0.0, 2.0], "obstacles": [[3.0, 0.0, 1.0]],
                                            "goal": [-8.0, 0.0, 0.5]})
     space = env.unwrapped.action_space
@@ -119,8 +119,8 @@ def test_cost_is_one_on_the_collision_step_and_summed_per_episode():
 
 def test_vector_env_reports_the_single_envs_nominal_control_and_cost():
     n = 3
-    venv = gym.make_vec("Dubins4DCirclesGuarded-v0", num_envs=n, vectorization_mode="vector_entry_point", clock="fixed:1")
-    singles = [gym.make("Dubins4DCirclesGuarded-v0", clock="fixed:1") for _ in range(n)]
+    venv = gym.make_vec("Dubins4DGuarded-v0", num_envs=n, vectorization_mode="vector_entry_point", clock="fixed:1")
+    singles = [gym.make("Dubins4DGuarded-v0", clock="fixed:1") for _ in range(n)]
     _, vinfo = venv.reset(seed=7)
     infos = [s.reset(seed=7 + i)[1] for i, s in enumerate(singles)]
     space = singles[0].unwrapped.action_space

@@ -58,7 +58,7 @@ def test_thinking_time_is_charged_to_the_world_and_the_stats():
 
 def test_fixed_clock_episodes_are_reproducible():
     def run():
-        env = gym.make("Dubins4DCirclesParallel-v0", clock="fixed:3")
+        env = gym.make("Dubins4DParallel-v0", clock="fixed:3")
         obs, _ = env.reset(seed=5)
         out = [obs]
         while True:

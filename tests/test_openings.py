@@ -69,7 +69,7 @@ def heading_anchors(page: Path) -> set[str]:
 def test_heading_anchors_follow_github():
     page = ROOT / "docs" / "design-notes.md"
     anchors = heading_anchors(page)
-    assert "rmm_envspool" in anchors and "cbf-on-the-quadrotor-guardianscbfquadrotor" in anchors
+    assert "rmm_envspool" in anchors and "cbf-on-the-quadrotor-rmm_guardianscbfquadrotor" in anchors
     assert "design-notes" in anchors
 
 

@@ -1,4 +1,4 @@
-"""guardians.privileged: the one lap measurement and non-finite-state guard that every privileged
+"""rmm_guardians.privileged: the one lap measurement and non-finite-state guard that every privileged
 guardian (cbf and hj on each system) uses."""
 
 from __future__ import annotations
@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from guardians.cbf.guardian import CBFGuardian
-from guardians.cbf.maze import MazeCBFGuardian
-from guardians.cbf.quadrotor import QuadrotorCBFGuardian
-from guardians.hj.guardian import HJGuardian
-from guardians.hj.maze import MazeHJGuardian
-from guardians.hj.quadrotor import QuadrotorHJGuardian
-from guardians.privileged import DEFAULT_LAP, PrivilegedGuardian
+from rmm_guardians.cbf.guardian import CBFGuardian
+from rmm_guardians.cbf.maze import MazeCBFGuardian
+from rmm_guardians.cbf.quadrotor import QuadrotorCBFGuardian
+from rmm_guardians.hj.guardian import HJGuardian
+from rmm_guardians.hj.maze import MazeHJGuardian
+from rmm_guardians.hj.quadrotor import QuadrotorHJGuardian
+from rmm_guardians.privileged import DEFAULT_LAP, PrivilegedGuardian
 
 
 class Probe(PrivilegedGuardian):

@@ -257,7 +257,7 @@ def test_risk_label_on_the_quadrotor():
 
 
 def test_shipped_quadrotor_model():
-    from guardians.lrmm.model import LRMMModel, default_model_path
+    from rmm_guardians.lrmm.model import LRMMModel, default_model_path
 
     m = LRMMModel.load(default_model_path("QuadrotorRoom-v0"), env_id="QuadrotorRoom-v0", obs_dim=16)
     assert m.meta["metrics"]["train"]["n"] == 65536 and m.meta["metrics"]["test"]["n"] == 8192
@@ -279,7 +279,7 @@ def test_shipped_quadrotor_model():
 def test_the_bounding_sphere_holds_the_object_and_touches_it(shape, size, direction):
     """No point of the bounding sphere lies inside the object (in its own frame, so in any
     orientation), and the sphere touches the object at a corner (box) or on a rim (cylinder)."""
-    from guardians.hj.room import _object_sd
+    from rmm_guardians.hj.room import _object_sd
     from rmm_envs.worlds.rooms import bounding_radius
 
     size = np.array(size[: {"box": 3, "cylinder": 2, "sphere": 1}[shape]])

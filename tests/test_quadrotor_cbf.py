@@ -1,4 +1,4 @@
-"""The quadrotor ``cbf`` (guardians.cbf.quadrotor): hand-computed barrier rows, the filter's
+"""The quadrotor ``cbf`` (rmm_guardians.cbf.quadrotor): hand-computed barrier rows, the filter's
 properties, the recovery, bad input, dispatch and a fixed-clock episode."""
 
 import math
@@ -10,9 +10,9 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace
-from guardians import make_guardian
-from guardians.cbf.quadrotor import QuadrotorCBFGuardian
-from guardians.cbf.quadrotor_rows import BOX, CYLINDER, FLOOR, SPHERE, command_rows, room_shapes, shape_distances
+from rmm_guardians import make_guardian
+from rmm_guardians.cbf.quadrotor import QuadrotorCBFGuardian
+from rmm_guardians.cbf.quadrotor_rows import BOX, CYLINDER, FLOOR, SPHERE, command_rows, room_shapes, shape_distances
 from rmm_envs.envs.quadrotor_room_parallel import CONTROLS, QuadrotorRoomGuardedEnv
 from rmm_envs.systems.quadrotor_control import ClosedLoopQuadrotor, CommandController
 from rmm_envs.systems.rotations import quat_from_euler
@@ -157,7 +157,7 @@ def test_cbf_dispatches_to_the_quadrotor_and_cbf_paper_does_not_apply(env):
         make_guardian("cbf-paper").check_spaces(env.observation_space, env.action_space)
     with pytest.raises(ValueError, match="applies to Dubins4D envs and the maze car"):
         make_guardian("cbf", quadrotor=False).check_spaces(env.observation_space, env.action_space)
-    with pytest.raises(ValueError, match="quadrotor must be a dict of guardians.cbf.quadrotor.QuadrotorCBFGuardian"):
+    with pytest.raises(ValueError, match="quadrotor must be a dict of rmm_guardians.cbf.quadrotor.QuadrotorCBFGuardian"):
         make_guardian("cbf", quadrotor="yes")
     with pytest.raises(ValueError, match=r"margin must be a finite number >= 0.0, got -1"):
         make_guardian("cbf", quadrotor={"margin": -1})
@@ -195,8 +195,8 @@ def test_qpsolvers_backends_agree_with_the_direct_osqp_path(relaxed):
     """The same QP through qpsolvers (an interior-point and an active-set solver): the same
     command to the solvers' tolerance, on a strict problem (one wall row active) and on a relaxed
     one (two opposite walls)."""
-    from guardians.cbf.backend import installed_solvers
-    from guardians.cbf.quadrotor_rows import CommandQP
+    from rmm_guardians.cbf.backend import installed_solvers
+    from rmm_guardians.cbf.quadrotor_rows import CommandQP
 
     lo, hi = np.array([-2.0, -2.0, -1.0]), np.array([2.0, 2.0, 1.0])
     G = np.array([[1 / TAU_H, 0.0, 0.0], [-1 / TAU_H, 0.0, 0.0]])

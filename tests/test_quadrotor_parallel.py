@@ -361,14 +361,14 @@ def test_sampled_states_are_clear_and_labels_are_seeded(env):
 def floor_model():
     """A real LRMM network on the down ray alone (feature 9): risk = sigmoid(3 sigmoid(10 - 10 x)),
     about 0.5 high above the floor and 0.95 below 0.5 m."""
-    from guardians.lrmm.model import LRMMModel
+    from rmm_guardians.lrmm.model import LRMMModel
 
     meta = {"features": [9], "obs_dim": 23, "env_id": "QuadrotorRoomGuarded-v0", "activation": "sigmoid"}
     return LRMMModel([(np.array([[-10.0]]), np.array([10.0])), (np.array([[3.0]]), None)], [0.0], [1.0], meta)
 
 
 def test_lrmm_applies_hover_and_level_while_the_risk_is_high_then_commits(env):
-    from guardians.lrmm.guardian import LRMMGuardian
+    from rmm_guardians.lrmm.guardian import LRMMGuardian
 
     g = LRMMGuardian(model=floor_model(), threshold=0.7, commit=2, action="safe", env_id="QuadrotorRoomParallel-v0")
     g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
@@ -386,7 +386,7 @@ def test_lrmm_applies_hover_and_level_while_the_risk_is_high_then_commits(env):
 
 
 def test_lrmm_safe_action_needs_a_safe_default():
-    from guardians.lrmm.guardian import LRMMGuardian
+    from rmm_guardians.lrmm.guardian import LRMMGuardian
     from rmm_envs.autonomy import GuardianActionSpace
 
     g = LRMMGuardian(model=floor_model(), threshold=0.7, action="safe")
@@ -399,7 +399,7 @@ def test_lrmm_safe_action_needs_a_safe_default():
 
 
 def test_brakes_is_hover_and_level_and_random_draws_commands_in_the_box(env):
-    from guardians import make_guardian
+    from rmm_guardians import make_guardian
 
     env.reset(seed=6)
     for name in ("brakes", "random"):
@@ -415,8 +415,8 @@ def test_brakes_is_hover_and_level_and_random_draws_commands_in_the_box(env):
 
 
 def test_lrmm_reads_the_shipped_command_model_by_env_id(env):
-    from guardians import make_guardian
-    from guardians.lrmm.model import SHIPPED
+    from rmm_guardians import make_guardian
+    from rmm_guardians.lrmm.model import SHIPPED
 
     g = make_guardian("lrmm", env_id="QuadrotorRoomParallel-v0")
     ship = SHIPPED["QuadrotorRoomParallel-v0"]
@@ -444,7 +444,7 @@ def test_lrmm_reads_the_shipped_command_model_by_env_id(env):
 def test_rmm_bench_set_runs_every_default_guardian_on_the_quadrotor(tmp_path, capsys):
     import sqlite3
 
-    from benchmarks.bench.cli import main as bench_main
+    from rmm_bench.cli import main as bench_main
 
     assert bench_main(["--env", "QuadrotorRoomParallel-v0", "--agent", "all", "--episodes", "1", "--workers", "1",
                        "--out", str(tmp_path), "--no-progress", "--no-figure", "--clock", "fixed:1"]) == 0
@@ -511,8 +511,8 @@ def test_generated_rooms_are_those_the_shipped_datasets_were_made_from():
 def test_lrmm_head_picks_the_lowest_risk_command_of_four_controls(env):
     """A real network with a two-candidate head on the down ray: risk sigmoid(3 h), hover
     sigmoid(2 h), climb sigmoid(-2 h) with h = sigmoid(10 - 10 x): climbing is rated safer."""
-    from guardians.lrmm.guardian import LRMMGuardian
-    from guardians.lrmm.model import LRMMModel
+    from rmm_guardians.lrmm.guardian import LRMMGuardian
+    from rmm_guardians.lrmm.model import LRMMModel
 
     meta = {"features": [9], "obs_dim": 23, "env_id": "QuadrotorRoomGuarded-v0", "activation": "sigmoid",
             "candidates": [[0, 0, 0, 0], [0, 0, 1, 0]], "candidate_hold": 1.0}
@@ -528,9 +528,9 @@ def test_lrmm_head_picks_the_lowest_risk_command_of_four_controls(env):
 def test_lrmm_built_for_another_env_or_without_a_head_says_how_to_serve_the_quadrotor(env):
     import warnings
 
-    from guardians import make_guardian
-    from guardians.lrmm.guardian import REMEDY, LRMMGuardian
-    from guardians.lrmm.model import default_model_path
+    from rmm_guardians import make_guardian
+    from rmm_guardians.lrmm.guardian import REMEDY, LRMMGuardian
+    from rmm_guardians.lrmm.model import default_model_path
 
     spaces = {"observation_space": env.observation_space, "action_space": env.action_space}
     with pytest.raises(ValueError) as e:

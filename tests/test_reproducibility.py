@@ -11,7 +11,7 @@
   ``tests/data/fingerprint_quick.json`` when the installed numpy, numba, ... are the versions it
   was made with, and the portable setting's own fingerprint otherwise.  After a change that is
   meant to move results, record it again:
-  ``python benchmarks/check_behaviour.py record tests/data/fingerprint_quick.json --size quick``.
+  ``python -m benchmarks.check_behaviour record tests/data/fingerprint_quick.json --size quick``.
 * A static check that the code whose results a seed determines sends nothing to BLAS and calls
   none of numpy's CPU-dispatched transcendental functions (see :mod:`rmm_envs.portable`).
 * The portable helpers themselves, against plain Python arithmetic.
@@ -121,7 +121,7 @@ _DISPATCHED = {"exp", "log", "expm1", "log1p", "arctan2", "arctan", "arcsin", "a
 # np.argpartition / np.partition, and argsort unless stable: the tie order is the SIMD sort code's
 _EXACT_POWERS = {0, 1, 2, -1, 0.5}  # numpy's fast paths: a product, a square, a reciprocal or sqrt
 # where a machine-dependent result is harmless: drawing figures
-_EXEMPT_FILES = {"rmm_envs/envs/_render.py", "benchmarks/figures.py"}
+_EXEMPT_FILES = {"rmm_envs/envs/_render.py", "benchmarks/bench/figures.py"}
 #: a line may say why a flagged form is exact there, e.g. an integer power: ``# exact: integers``
 _PRAGMA = "# exact:"
 

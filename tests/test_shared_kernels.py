@@ -12,7 +12,7 @@ ANGLE = st.floats(-math.pi, math.pi, allow_nan=False)
 
 
 def test_desired_heading_is_compiled_once_and_used_by_the_driver_and_the_cbf_rows():
-    from guardians.cbf import barrier
+    from rmm_guardians.cbf import barrier
     from rmm_envs.drivers import dubins4d as driver
 
     assert barrier._desired_heading is driver._desired_heading is dubins4d.desired_heading_compiled

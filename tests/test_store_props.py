@@ -18,12 +18,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from benchmarks.bench.config import AgentRun, EpisodeResult
-from benchmarks.bench.run import plan_tasks
-from benchmarks.bench.runner import episode_seed
-from benchmarks.bench.store import EPISODE_FIELDS, RETRIED_ERRORS, ResultsStore
+from rmm_bench.config import AgentRun, EpisodeResult
+from rmm_bench.run import plan_tasks
+from rmm_bench.runner import episode_seed
+from rmm_bench.store import EPISODE_FIELDS, RETRIED_ERRORS, ResultsStore
 
-RUNS = {a: AgentRun(agent=a, agent_kwargs={}, env_id="Dubins4DCirclesGuarded-v0", env_kwargs={}, seed=s, episode_timeout=60.0,
+RUNS = {a: AgentRun(agent=a, agent_kwargs={}, env_id="Dubins4DGuarded-v0", env_kwargs={}, seed=s, episode_timeout=60.0,
                     charge_precompute=False) for a, s in (("inactive", 0), ("brakes", 5))}
 KINDS = ("goal", "collision", "timeout", "error:guardian", "error:timeout", "error:lost_worker")
 
@@ -213,7 +213,7 @@ def test_only_a_running_invocation_of_a_dead_process_on_this_host_is_stale(tmp_p
 def test_a_live_process_is_only_asked_whether_it_exists():
     """``_pid_alive`` sends signal 0 (existence check): a live process is reported alive and left
     running; a process of another user is alive too (permission denied is an answer)."""
-    from benchmarks.bench.store import _pid_alive
+    from rmm_bench.store import _pid_alive
 
     with _sleeping_child() as child:
         assert _pid_alive(child.pid) is True
@@ -223,7 +223,7 @@ def test_a_live_process_is_only_asked_whether_it_exists():
     # another user's process: pid 1 seen from an unprivileged process (this one, or a child that
     # drops root's privileges first; after a first call, so that everything it imports is loaded)
     drop = "os.setgid(65534); os.setuid(65534); " if os.getuid() == 0 else ""
-    code = f"import os; from benchmarks.bench.store import _pid_alive; _pid_alive(os.getpid()); {drop}print(_pid_alive(1))"
+    code = f"import os; from rmm_bench.store import _pid_alive; _pid_alive(os.getpid()); {drop}print(_pid_alive(1))"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=os.getcwd(), check=True)
     assert r.stdout.strip() == "True"
 

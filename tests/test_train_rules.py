@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from guardians.lrmm.train import TrainConfig, fit_minmax, split_by_config, train
+from rmm_guardians.lrmm.train import TrainConfig, fit_minmax, split_by_config, train
 
 
 def quiet(*a):

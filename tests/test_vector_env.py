@@ -1,4 +1,4 @@
-"""The native vector env of Dubins4DCirclesGuarded-v0 against Gymnasium's SyncVectorEnv of single envs."""
+"""The native vector env of Dubins4DGuarded-v0 against Gymnasium's SyncVectorEnv of single envs."""
 
 import gymnasium as gym
 import numpy as np
@@ -9,7 +9,7 @@ from gymnasium.vector import AutoresetMode
 import rmm_envs  # noqa: F401
 from rmm_envs.envs.dubins4d_vector import Dubins4DCirclesVectorEnv
 
-ID = "Dubins4DCirclesGuarded-v0"
+ID = "Dubins4DGuarded-v0"
 
 
 def _pair(n, mode=AutoresetMode.NEXT_STEP, **kw):

@@ -183,7 +183,7 @@ def test_an_obstacle_and_the_goal_reached_at_the_same_instant_is_a_collision():
     a = {"active_ctrl": np.ones(1, np.int64), "turnrate_ctrl": np.zeros((1, 1)), "accel_ctrl": np.zeros((1, 1))}
     vec = Dubins4DCirclesVectorEnv(1, n_obstacles=1)
     vec.reset(seed=0, options=opts)
-    single = gym.make("Dubins4DCirclesGuarded-v0", n_obstacles=1)
+    single = gym.make("Dubins4DGuarded-v0", n_obstacles=1)
     single.reset(seed=0, options=opts)
     for _ in range(40):
         _, r, term, trunc, info = vec.step(a)
@@ -222,6 +222,6 @@ def test_the_time_limit_holds_with_its_tolerance_inclusive():
     a = {"active_ctrl": np.zeros(2, np.int64), "turnrate_ctrl": np.zeros((2, 1)), "accel_ctrl": np.zeros((2, 1))}
     _, _, term, trunc, info = vec.step(a)
     assert trunc.tolist() == [True, True] and not term.any() and info["outcome"].tolist() == ["timeout"] * 2
-    single = gym.make("Dubins4DCirclesGuarded-v0", **kw)
+    single = gym.make("Dubins4DGuarded-v0", **kw)
     single.reset(seed=0)
     assert single.step(single.action_space.inactive())[3]

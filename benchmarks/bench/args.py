@@ -1,7 +1,7 @@
 """``rmm-bench`` command lines: the parsers, and their validation into a :class:`BenchConfig`.
 
 Every option that needs no env or guardian built is checked here, once, and the result is a
-frozen :class:`~benchmarks.bench.config.BenchConfig`; :func:`benchmarks.bench.checks.check_runs`
+frozen :class:`~rmm_bench.config.BenchConfig`; :func:`rmm_bench.checks.check_runs`
 then builds the env and each guardian before any episode runs.  A bad value raises
 ValueError naming the flag and the value (``main`` turns it into one line and exit status 2).
 """
@@ -14,14 +14,14 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from benchmarks.bench.config import BenchConfig
+from rmm_bench.config import BenchConfig
 from rmm_envs.catalog import env_help
 from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL
 
 __all__ = ["DEFAULT_ENV", "ReportRequest", "parse_report", "parse_run", "parse_sweep", "report_parser", "run_parser",
            "sweep_parser"]
 
-DEFAULT_ENV = "Dubins4DCirclesParallel-v0"
+DEFAULT_ENV = "Dubins4DParallel-v0"
 #: the non-blocking stepping options and their defaults (what a blocking env must be left with)
 NON_BLOCKING_DEFAULTS = {"time_accel": TIME_ACCEL, "base_step": BASE_STEP}
 
@@ -97,14 +97,13 @@ def _check_counts(args) -> None:
 
 
 def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
-    from benchmarks.bench.checks import env_arguments, env_default, parse_agent_opts, resolve_agents
-    from guardians.registry import guardian_set
-    from rmm_envs.catalog import command_env_id
+    from rmm_bench.checks import env_arguments, env_default, parse_agent_opts, resolve_agents
+    from rmm_guardians.registry import guardian_set
 
     classes = resolve_agents(args.agent)
     agents = list(classes)
     agent_kwargs = parse_agent_opts(args.agent_opt or [], agents)
-    env_id = command_env_id(args.env, "rmm-bench")  # an old id runs its new id (its stored runs are found by either)
+    env_id = args.env
     takes = env_arguments(env_id)  # ValueError if not registered; the contract is checked when the env is built
     if args.base_step is None:  # the env's own default (stored as given, so the run's identity names it)
         args.base_step = env_default(env_id, "base_step", NON_BLOCKING_DEFAULTS["base_step"])

@@ -10,11 +10,11 @@ through (the Dubins4D envs' module docstring describes it in full):
   guardian's control, and the control fields);
 * on the step that ends an episode, ``info["outcome"]`` (``goal``, ``collision``,
   ``timeout``) and ``info["episode_stats"]``, the statistics the store keeps (see
-  :data:`benchmarks.bench.runner.EPISODE_STATISTICS`).
+  :data:`rmm_bench.runner.EPISODE_STATISTICS`).
 
 Of this command's env options, the env is given those its constructor takes: ``clock``
 always, ``time_accel`` and ``base_step`` only if it takes them (a non-blocking env such as
-``Dubins4DCirclesParallel-v0``).  The last part of the contract can only be seen when an episode
+``Dubins4DParallel-v0``).  The last part of the contract can only be seen when an episode
 ends: an env that breaks it gets an error naming the missing key in every episode.
 """
 
@@ -25,7 +25,7 @@ from rmm_envs.autonomy import ACTIVE
 import json
 from typing import Any
 
-from benchmarks.bench.config import AgentRun, accepts_argument, input_digests
+from rmm_bench.config import AgentRun, accepts_argument, input_digests
 
 __all__ = ["check_env_contract", "check_runs", "env_arguments", "parse_agent_opts", "resolve_agents"]
 
@@ -36,8 +36,8 @@ ENV_OPTIONS = ("time_accel", "base_step", "clock")
 def resolve_agents(spec: str) -> dict[str, Any]:
     """``--agent``: a name, a comma list, ``all``, ``paper`` or ``module:Class``; each one's class
     (or factory), resolved here once for the whole run (name -> class, in order)."""
-    from guardians import available_guardians
-    from guardians.registry import guardian_set, load_guardian_class
+    from rmm_guardians import available_guardians
+    from rmm_guardians.registry import guardian_set, load_guardian_class
 
     available = available_guardians()
     names = guardian_set(spec)
@@ -166,7 +166,7 @@ def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False, class
     import gymnasium as gym
 
     import rmm_envs  # noqa: F401
-    from guardians import make_guardian
+    from rmm_guardians import make_guardian
 
     meta: dict[str, dict] = {}
     envs: dict[str, int] = {}

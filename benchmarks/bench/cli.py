@@ -21,8 +21,8 @@ or adding ``--resume``, finishes an interrupted run without repeating stored epi
 Environments (``--env``): any registered env offering the parallel-autonomy contract (an
 action ``active_ctrl`` choosing between the built-in driver and the guardian's control, a
 ``clock`` argument timing the guardian, and the episode statistics in the last step's info;
-described in ``benchmarks.bench.checks``): ``Dubins4DCirclesParallel-v0`` (default, non-blocking: the
-guardian's compute time passes in the world) and ``Dubins4DCirclesGuarded-v0`` (blocking), the maze car's
+described in ``rmm_bench.checks``): ``Dubins4DParallel-v0`` (default, non-blocking: the
+guardian's compute time passes in the world) and ``Dubins4DGuarded-v0`` (blocking), the maze car's
 ``Dubins3DMazeParallel-v0`` / ``Dubins3DMazeGuarded-v0``, the quadrotor's ``QuadrotorRoomParallel-v0`` /
 ``QuadrotorRoomGuarded-v0`` and the map envs ``Dubins4DMapParallel-v0`` / ``Dubins4DMapGuarded-v0`` in this
 package.  Another env is refused with one line naming it and what it lacks.
@@ -77,10 +77,10 @@ from __future__ import annotations
 import os
 import sys
 
-from benchmarks.bench import args as _args
-from benchmarks.bench.config import import_from
-from benchmarks.bench.run import RunFailed, cmd_run, cmd_sweep
-from benchmarks.bench.store import ResultsDatabaseError
+from rmm_bench import args as _args
+from rmm_bench.config import import_from
+from rmm_bench.run import RunFailed, cmd_run, cmd_sweep
+from rmm_bench.store import ResultsDatabaseError
 from rmm_envs.failures import describe_os_error
 
 __all__ = ["build_parser", "build_report_parser", "build_sweep_parser", "main"]
@@ -103,11 +103,11 @@ def main(argv: list[str] | None = None) -> int:
     import_from([os.getcwd()])  # module:Class and module:Id import from here, as under python -m
     try:
         if argv and argv[0] == "report":
-            from benchmarks.bench.report import cmd_report
+            from rmm_bench.report import cmd_report
 
             return cmd_report(_args.parse_report(argv[1:]))
         if argv and argv[0] in ("riskmap", "quadrisk"):
-            from benchmarks.figures import main as figure
+            from rmm_bench.figures import main as figure
 
             return figure(argv)
         if argv and argv[0] == "sweep":

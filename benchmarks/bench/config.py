@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from guardians.registry import accepts_argument  # noqa: F401  (re-exported: the runner and the checks use it from here)
+from rmm_guardians.registry import accepts_argument  # noqa: F401  (re-exported: the runner and the checks use it from here)
 from rmm_envs.catalog import stored_id
 
 __all__ = ["AgentRun", "BenchConfig", "EpisodeResult", "EpisodeTask", "InputChanged", "accepts_argument", "changed_inputs",
@@ -75,7 +75,7 @@ def _strings(value):
 def input_digests(guardian, *options: dict) -> dict[str, str]:
     """Every file a run reads, path -> SHA-256 of its bytes: each string option (of the guardian
     or the env) naming a regular file, and the files the guardian reports it read
-    (:meth:`guardians.base.Guardian.input_files`, e.g. a shipped model)."""
+    (:meth:`rmm_guardians.base.Guardian.input_files`, e.g. a shipped model)."""
     out: dict[str, str] = {}
     for opts in options:
         for text in _strings(opts):
@@ -129,9 +129,9 @@ class AgentRun:
 
     def as_dict(self) -> dict:
         """The stored configuration (``runs.config``), as every version of the store wrote it, plus
-        ``inputs`` for a run that reads files.  A renamed env is stored under its old id
-        (:func:`rmm_envs.catalog.stored_id`), so a command naming either id finds the runs stored
-        before the rename."""
+        ``inputs`` for a run that reads files.  The env is stored under the id its results were
+        first recorded under (:func:`rmm_envs.catalog.stored_id`), so runs stored before an id
+        changed keep their keys."""
         out = {"agent": self.agent, "agent_kwargs": self.agent_kwargs, "env_id": stored_id(self.env_id), "env_kwargs": self.env_kwargs,
                "seed": self.seed, "episode_timeout": self.episode_timeout, "charge_precompute": self.charge_precompute}
         return out | ({"inputs": self.inputs} if self.inputs else {})
@@ -169,7 +169,7 @@ class EpisodeTask:
 @dataclass(frozen=True)
 class EpisodeResult:
     """One row of the store's ``episodes`` table, one field per column (this class owns the
-    schema: :data:`benchmarks.bench.store.EPISODE_FIELDS` is derived from it, a field without
+    schema: :data:`rmm_bench.store.EPISODE_FIELDS` is derived from it, a field without
     ``None`` in its type being ``NOT NULL``)."""
 
     run_key: str

@@ -18,11 +18,11 @@ def load_results(path, *, expand_stats: bool = False):
     agent, then episode.  ``expand_stats=True`` adds one ``stats.<name>`` column per key of the
     guardians' ``stats()`` (for example ``stats.recoveries`` of ``cbf``), NaN where a guardian
     did not report it.  Reading never changes the database; a damaged file raises
-    :class:`~benchmarks.bench.store.ResultsDatabaseError` naming it.
+    :class:`~rmm_bench.store.ResultsDatabaseError` naming it.
     """
     import pandas as pd
 
-    from benchmarks.bench.store import ResultsStore
+    from rmm_bench.store import ResultsStore
 
     p = Path(path)
     db = p / "results.db" if p.is_dir() else p

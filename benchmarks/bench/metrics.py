@@ -7,7 +7,7 @@
   timeout: a guardian that fails exactly when it would intervene must not look perfect, so the
   three rates add up to 100% minus the share of guardian errors, which the Errors column
   counts); episodes without a result (over the time limit, lost with their worker: kinds in
-  :data:`benchmarks.bench.store.RETRIED_ERRORS`) are left out, and the report marks the run
+  :data:`rmm_bench.store.RETRIED_ERRORS`) are left out, and the report marks the run
   incomplete.  Episodes are split in order into consecutive batches of ``batch_size`` (64);
   the rate per batch; mean and population std across batches weighted by batch size (the
   paper's +-).  With fewer than two batches that std is 0 whatever the episodes say, so the
@@ -19,7 +19,7 @@
   across the episodes without an error.
 
 Written once, with pandas: :func:`table_i` aggregates a DataFrame of episodes (as
-:func:`benchmarks.load_results` returns) into one row per agent; :func:`aggregate` gives the
+:func:`rmm_bench.load_results` returns) into one row per agent; :func:`aggregate` gives the
 same statistics for one agent's episodes as stored rows (dicts), which is what ``rmm-bench``'s
 report and sweep use.
 """
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from benchmarks.bench.store import RETRIED_ERRORS
+from rmm_bench.store import RETRIED_ERRORS
 
 __all__ = ["aggregate", "batch_rate", "rate_spread", "table_i", "weighted_mean_std", "wilson_half_width", "wilson_interval"]
 
@@ -142,7 +142,7 @@ def aggregate(episodes: list[dict], batch_size: int = 64) -> dict:
 
 def table_i(df, batch_size: int = 64):
     """Table I of a DataFrame of episodes (one row per stored episode, e.g. from
-    :func:`benchmarks.load_results`): one row per agent, in order of first appearance, with
+    :func:`rmm_bench.load_results`): one row per agent, in order of first appearance, with
     columns ``episodes``, ``errors``, ``<stat>`` and ``<stat>_std`` for each statistic of
     :func:`aggregate` that has a spread (``compute_ms``, ``goal``, ``collision``, ``timeout``,
     ``intervention``, ...), ``<outcome>_ci_low``/``_high`` (the Wilson interval, NaN over two or

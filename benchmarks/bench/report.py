@@ -13,16 +13,16 @@ import io
 import math
 from pathlib import Path
 
-from benchmarks.bench.metrics import aggregate
-from benchmarks.bench.store import RETRIED_ERRORS, ResultsStore
-from rmm_envs.catalog import canonical_id
+from rmm_bench.metrics import aggregate
+from rmm_bench.store import RETRIED_ERRORS, ResultsStore
+from rmm_envs.catalog import current_id
 
 __all__ = ["PAPER_TABLE_I", "cmd_report", "format_tables", "plot_latency", "plot_outcomes", "table_rows", "write_report"]
 
 # The paper's Table I (2048 episodes per agent; its HJ row used single-obstacle envs)
 #: The envs the paper's Table I describes (it evaluated guardians on Dubins4D only); the report
 #: prints the paper's rows next to a run on one of them.
-PAPER_ENVS = ("Dubins4DCirclesParallel-v0", "Dubins4DCirclesGuarded-v0")
+PAPER_ENVS = ("Dubins4DParallel-v0", "Dubins4DGuarded-v0")
 PAPER_TABLE_I = {
     "lrmm": {"obs": "local", "n_obst": 5, "compute_ms": (2.4, 5.0), "goal": (45.3, 7.3), "collision": (29.7, 5.6), "timeout": (25.0, 4.8), "intervention": (30.7, 32.5)},
     "cbf": {"obs": "global", "n_obst": 5, "compute_ms": (52.9, 41.2), "goal": (46.2, 5.9), "collision": (35.1, 5.2), "timeout": (18.8, 3.8), "intervention": (32.8, 39.4)},
@@ -179,7 +179,7 @@ def _legacy_meta(agent: str, config: dict) -> dict:
     """Observation type and obstacle count for runs stored before they were recorded: only
     built-in guardian names and this package's envs are looked up (our own modules); a name
     from the database is never imported."""
-    from guardians.registry import BUILTIN, load_guardian_class
+    from rmm_guardians.registry import BUILTIN, load_guardian_class
     from rmm_envs import ENV_IDS
 
     meta = {"observation": "?", "n_obstacles": "?"}
@@ -188,7 +188,7 @@ def _legacy_meta(agent: str, config: dict) -> dict:
             meta["observation"] = getattr(load_guardian_class(agent), "observation_type", "?")
         except Exception:
             pass
-    env_id = canonical_id(str(config.get("env_id")))  # stored under its old id if it was renamed
+    env_id = current_id(str(config.get("env_id")))  # a former id, read back under today's
     if env_id in ENV_IDS:
         import gymnasium as gym
 
@@ -276,8 +276,8 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
     in the printed report and in ``table_I.md``/``.tex``, the CSV gets the configuration's
     columns, and the figure labels each agent with its table's number."""
     invs = [invs] if isinstance(invs, dict) else list(invs)
-    # a renamed env is its new id: a run under the old id and its rerun under the new one are one configuration
-    invs = [inv | {"args": inv["args"] | {"env": canonical_id(inv["args"]["env"])}}
+    # a former env id is today's id: a run recorded under it and its rerun are one configuration
+    invs = [inv | {"args": inv["args"] | {"env": current_id(inv["args"]["env"])}}
             if isinstance(inv["args"].get("env"), str) else inv for inv in invs]
     groups: dict[tuple, list[dict]] = {}
     for inv in invs:
@@ -330,7 +330,7 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
 
 
 def cmd_report(request) -> int:
-    """``rmm-bench report``; ``request`` is an :class:`benchmarks.bench.args.ReportRequest`."""
+    """``rmm-bench report``; ``request`` is an :class:`rmm_bench.args.ReportRequest`."""
     import sys
 
     if not (request.dir / "results.db").is_file():

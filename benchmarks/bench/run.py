@@ -1,9 +1,9 @@
 """The run and sweep commands: plan the episodes a command still owes, run them, record the invocation.
 
-Each agent of a :class:`~benchmarks.bench.config.BenchConfig` is one
-:class:`~benchmarks.bench.config.AgentRun` in the store; :func:`plan_tasks` lists its episodes
-not stored yet as :class:`~benchmarks.bench.config.EpisodeTask` values, :func:`execute` runs
-them on local worker processes or Ray and stores each :class:`~benchmarks.bench.config.EpisodeResult`
+Each agent of a :class:`~rmm_bench.config.BenchConfig` is one
+:class:`~rmm_bench.config.AgentRun` in the store; :func:`plan_tasks` lists its episodes
+not stored yet as :class:`~rmm_bench.config.EpisodeTask` values, :func:`execute` runs
+them on local worker processes or Ray and stores each :class:`~rmm_bench.config.EpisodeResult`
 as it arrives.
 
 Compute threads: when several workers share the machine (``--workers`` > 1, or Ray), a
@@ -22,11 +22,11 @@ import sys
 import time
 from pathlib import Path
 
-from benchmarks.bench.config import AgentRun, BenchConfig, EpisodeResult, EpisodeTask, accepts_argument
-from benchmarks.bench.metrics import aggregate
-from benchmarks.bench.report import plot_latency, write_report
-from benchmarks.bench.runner import episode_seed, hard_timeout, lost_episode, run_episode
-from benchmarks.bench.store import RETRIED_ERRORS, ResultsStore
+from rmm_bench.config import AgentRun, BenchConfig, EpisodeResult, EpisodeTask, accepts_argument
+from rmm_bench.metrics import aggregate
+from rmm_bench.report import plot_latency, write_report
+from rmm_bench.runner import episode_seed, hard_timeout, lost_episode, run_episode
+from rmm_bench.store import RETRIED_ERRORS, ResultsStore
 
 __all__ = ["RunFailed", "cmd_run", "cmd_sweep", "env_error_lines", "execute", "guardian_error_lines", "plan_tasks"]
 
@@ -51,7 +51,7 @@ def _provenance(argv) -> dict:
 def guardian_threads(agent, agent_kwargs: dict, workers: int, backend: str) -> int | None:
     """The ``threads`` a worker builds ``agent`` (its class, or its name) with (None: not passed);
     see the module docstring."""
-    from guardians.registry import load_guardian_class
+    from rmm_guardians.registry import load_guardian_class
 
     if not (workers > 1 or backend == "ray") or "threads" in agent_kwargs:
         return None
@@ -152,7 +152,7 @@ def _unfinished_message(unfinished: dict[str, int], store: ResultsStore) -> str:
 def guardian_error_lines(store: ResultsStore, run_keys: dict[str, str], episodes: int) -> list[str]:
     """One line per agent whose first ``episodes`` stored episodes hold guardian errors: the
     count and the first error.  Those episodes count as failures in the rates (see
-    :mod:`benchmarks.bench.metrics`); the command exits with status 1 so they are never missed."""
+    :mod:`rmm_bench.metrics`); the command exits with status 1 so they are never missed."""
     lines = []
     for agent, key in run_keys.items():
         errs = [e for e in store.episodes(key, episodes) if e["outcome"] == "error" and (e["error_kind"] or "guardian") == "guardian"]
@@ -204,7 +204,7 @@ def applicable(config: BenchConfig) -> tuple[BenchConfig, dict]:
     Agents of a named set (``--agent all``, ``paper``) that do not apply to the env are dropped
     from the run and listed, with the reason, on stderr; an agent named explicitly that does
     not apply is an error, as is a set of which none applies."""
-    from benchmarks.bench.checks import check_runs
+    from rmm_bench.checks import check_runs
 
     meta = check_runs(config.agent_runs(), skip_inapplicable=config.agent_set is not None, classes=config.agent_classes)
     skipped = {a: m["skipped"] for a, m in meta.items() if "skipped" in m}

@@ -16,10 +16,10 @@ episode: each is stored as ``input_changed``, a failure of the run that any reru
 call stuck in compiled code is ended by the parent, which kills the worker after
 :func:`hard_timeout` seconds and records the episode as ``lost_worker``.
 
-The env is driven only through the parallel-autonomy contract (:mod:`benchmarks.bench.checks`):
+The env is driven only through the parallel-autonomy contract (:mod:`rmm_bench.checks`):
 the result's columns come from the last step's ``info["outcome"]`` and ``info["episode_stats"]``
 (:data:`EPISODE_STATISTICS`; ``final_speed`` and ``cum_cost`` are optional).  The guardian is built with the
-run's options, plus ``threads`` when the task carries it (see :func:`benchmarks.bench.run.plan_tasks`).
+run's options, plus ``threads`` when the task carries it (see :func:`rmm_bench.run.plan_tasks`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ import traceback
 
 import numpy as np
 
-from benchmarks.bench.config import (EpisodeResult, EpisodeTask, InputChanged, changed_inputs, import_from, input_digests,
+from rmm_bench.config import (EpisodeResult, EpisodeTask, InputChanged, changed_inputs, import_from, input_digests,
                                      run_key)
 from rmm_envs.envs.guarded import EPISODE_KEY
 
@@ -112,7 +112,7 @@ def _guardian(task: EpisodeTask):
     keyed with (:class:`InputChanged` otherwise: the episode would mix two models in one run)."""
     key = _guardian_key(task)
     if key not in _CACHE:
-        from guardians import make_guardian
+        from rmm_guardians import make_guardian
 
         guardian = make_guardian(task.agent, env_id=task.run.env_id, **task.guardian_kwargs())
         if task.run.inputs:

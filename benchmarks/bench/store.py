@@ -59,7 +59,7 @@ import time
 import typing
 from pathlib import Path
 
-from benchmarks.bench.config import EpisodeResult
+from rmm_bench.config import EpisodeResult
 from rmm_envs.failures import BAD_INPUT, RUN_FAILED, describe_os_error, file_size_limit
 
 __all__ = ["EPISODE_FIELDS", "RETRIED_ERRORS", "ResultsDatabaseError", "ResultsStore"]

@@ -15,8 +15,8 @@ from pathlib import Path
 import gymnasium as gym
 
 import rmm_envs  # noqa: F401  (registers the environments)
-from guardians.lrmm.guardian import LRMMGuardian
-from guardians.lrmm.train import TrainConfig, train
+from rmm_guardians.lrmm.guardian import LRMMGuardian
+from rmm_guardians.lrmm.train import TrainConfig, train
 from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 
 
@@ -31,7 +31,7 @@ def main(argv=None):
     work = Path(args.out or tempfile.mkdtemp(prefix="lrmm-tutorial-"))
 
     # 1. Algorithm 2: configurations -> valid states -> observations -> risk labels
-    cfg = DatagenConfig(env_id="Dubins4DCirclesGuarded-v0", configs=args.configs, samples_per_config=args.samples,
+    cfg = DatagenConfig(env_id="Dubins4DGuarded-v0", configs=args.configs, samples_per_config=args.samples,
                         branches=args.branches, depth=2, horizon=2.0, n_steps=8, seed=0)
     manifest = generate(cfg, work / "data", workers=2, progress=False)
     data = load_dataset(work / "data")
@@ -50,7 +50,7 @@ def main(argv=None):
     # 3. use it as a guardian.  This model predicts the risk only (no action-conditioned head,
     #    no stored decision defaults), so say how to act: take control above 0.3 and brake
     #    toward the more open side (the paper's manoeuvre)
-    env = gym.make("Dubins4DCirclesParallel-v0", clock="fixed:1")
+    env = gym.make("Dubins4DParallel-v0", clock="fixed:1")
     guardian = LRMMGuardian(work / "model.npz", threshold=0.3, action="heuristic")
     obs, info = env.reset(seed=123)
     guardian.reset(seed=123, observation_space=env.observation_space, action_space=env.action_space)

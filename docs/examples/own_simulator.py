@@ -18,8 +18,8 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from benchmarks.bench.cli import main as rmm_bench
-from guardians.lrmm.train import TrainConfig, train
+from rmm_bench.cli import main as rmm_bench
+from rmm_guardians.lrmm.train import TrainConfig, train
 from rmm_envs.adapters import SnapshotScene
 from rmm_envs.envs.driven import parallel
 from rmm_envs.risk import RiskEstimator

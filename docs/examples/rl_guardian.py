@@ -7,7 +7,7 @@
 
 Steps:
 
-1. wrap ``Dubins4DCirclesGuarded-v0`` so that an RL library can train on it:
+1. wrap ``Dubins4DGuarded-v0`` so that an RL library can train on it:
    :class:`~rmm_envs.wrappers.FlattenGuardianAction` (a ``Box(-1, 1, (3,))`` action:
    ``[active > 0.5, turn rate, acceleration]`` scaled to the bounds) and
    :class:`~rmm_envs.wrappers.GuardianReward` (goal bonus, collision penalty, a cost per
@@ -17,8 +17,8 @@ Steps:
    step's ``info["cost"]`` (1 on a collision) is charged at a multiplier ``lam`` that rises
    while the episodes' mean cost exceeds ``C`` and falls (to 0 at least) while below
    (:class:`LagrangianPenalty`, :class:`LagrangeUpdate`);
-3. evaluate it with ``rmm-bench`` on ``Dubins4DCirclesParallel-v0`` as the guardian
-   ``rl_guardian:PPOGuardian`` (this module's class, an :class:`guardians.SB3Guardian` reading
+3. evaluate it with ``rmm-bench`` on ``Dubins4DParallel-v0`` as the guardian
+   ``rl_guardian:PPOGuardian`` (this module's class, an :class:`rmm_guardians.SB3Guardian` reading
    the model's flat actions exactly as the training wrapper did; given the model file with
    ``--agent-opt rl_guardian:PPOGuardian.model=PATH``), next to ``lrmm``, ``cbf`` and ``inactive``.
 
@@ -41,13 +41,13 @@ import gymnasium as gym
 import numpy as np
 
 import rmm_envs  # noqa: F401  (registers the environments)
-from guardians import SB3Guardian
+from rmm_guardians import SB3Guardian
 from rmm_envs.wrappers import FlattenGuardianAction, GuardianReward
 
 
 def make_training_env(seed: int = 0) -> gym.Env:
     """The env PPO trains on: flat Box actions, shaped reward (defaults of GuardianReward)."""
-    env = GuardianReward(FlattenGuardianAction(gym.make("Dubins4DCirclesGuarded-v0")))
+    env = GuardianReward(FlattenGuardianAction(gym.make("Dubins4DGuarded-v0")))
     env.reset(seed=seed)
     return env
 
@@ -68,7 +68,7 @@ class LagrangianPenalty(gym.Wrapper):
 def make_constrained_env(lam: np.ndarray, seed: int = 0) -> gym.Env:
     """The constrained problem: goal bonus and intervention cost as the reward, no collision
     penalty; collisions enter through ``info["cost"]`` at the multiplier ``lam``."""
-    env = LagrangianPenalty(GuardianReward(FlattenGuardianAction(gym.make("Dubins4DCirclesGuarded-v0")),
+    env = LagrangianPenalty(GuardianReward(FlattenGuardianAction(gym.make("Dubins4DGuarded-v0")),
                                            collision_penalty=0.0), lam)
     env.reset(seed=seed)
     return env
@@ -109,7 +109,7 @@ def make_lagrange_update(lam: np.ndarray, cost_limit: float, lr: float):
 
 class PPOGuardian(SB3Guardian):
     """A PPO policy saved by :func:`train` acting as a guardian (local observation only): the
-    model's flat actions are read by :class:`guardians.SB3Guardian` through the same mapping
+    model's flat actions are read by :class:`rmm_guardians.SB3Guardian` through the same mapping
     :class:`FlattenGuardianAction` trained it with."""
 
     observation_type = "local"
@@ -170,7 +170,7 @@ def main(argv=None) -> int:
     train(args.timesteps, model_path, cost_limit=args.cost_limit)
     print(f"trained PPO for {args.timesteps} steps -> {model_path}")
 
-    from benchmarks.bench.cli import main as rmm_bench
+    from rmm_bench.cli import main as rmm_bench
 
     out = args.out or tmp / "bench"
     agent = "rl_guardian:PPOGuardian"  # this file's folder is on sys.path when it runs as a script
@@ -180,7 +180,7 @@ def main(argv=None) -> int:
     print((out / "table_I.md").read_text())
     assert rc == 0, f"rmm-bench exited with {rc}"
     # every agent ran every episode (the trained guardian included), without an error
-    from benchmarks import load_results
+    from rmm_bench import load_results
 
     df = load_results(out)
     counts = df.groupby("agent").size().to_dict()

@@ -20,8 +20,8 @@ import tempfile
 
 import numpy as np
 
-from benchmarks.bench.cli import main as rmm_bench
-from guardians import CallableGuardian, Guardian
+from rmm_bench.cli import main as rmm_bench
+from rmm_guardians import CallableGuardian, Guardian
 
 
 def keep_distance(obs):
@@ -63,7 +63,7 @@ def main():
     import rmm_envs  # noqa: F401
 
     # 1. a callable, in a hand-written loop
-    env = gym.make("Dubins4DCirclesParallel-v0", clock="fixed:1")
+    env = gym.make("Dubins4DParallel-v0", clock="fixed:1")
     guardian = CallableGuardian(keep_distance, name="keep-distance")
     outcomes = {}
     for seed in range(5):

@@ -8,12 +8,12 @@ lap ahead, recovers instead of braking forever and keeps its margin off the goal
 name ``cbf`` also serves the maze car and the quadrotor (dispatched on the action space's kind).
 
 Offers :class:`CBFGuardian` and :class:`CBFPaperGuardian`; their settings and presets are in
-:mod:`guardians.cbf.settings`, the rows in :mod:`~guardians.cbf.barrier`, the QP in
-:mod:`~guardians.cbf.qp` and :mod:`~guardians.cbf.backend`, the backup manoeuvre in
-:mod:`~guardians.cbf.recovery`, the other systems in :mod:`~guardians.cbf.maze` and
-:mod:`~guardians.cbf.quadrotor`.  The maths, the defaults and why: ``docs/design-notes.md``.
+:mod:`rmm_guardians.cbf.settings`, the rows in :mod:`~rmm_guardians.cbf.barrier`, the QP in
+:mod:`~rmm_guardians.cbf.qp` and :mod:`~rmm_guardians.cbf.backend`, the backup manoeuvre in
+:mod:`~rmm_guardians.cbf.recovery`, the other systems in :mod:`~rmm_guardians.cbf.maze` and
+:mod:`~rmm_guardians.cbf.quadrotor`.  The maths, the defaults and why: ``docs/design-notes.md``.
 """
 
-from guardians.cbf.guardian import CBFGuardian, CBFPaperGuardian
+from rmm_guardians.cbf.guardian import CBFGuardian, CBFPaperGuardian
 
 __all__ = ["CBFGuardian", "CBFPaperGuardian"]

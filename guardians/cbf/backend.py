@@ -2,20 +2,20 @@
 
 ``solver="osqp"`` (the default) keeps the direct OSQP path: the problem is set up once per
 episode with a fixed sparsity and each step only updates values and bounds, then re-solves
-warm-started (:class:`guardians.cbf.qp.BarrierQP` for Dubins4D,
-:class:`guardians.cbf.maze.WallQP` for the maze car).  ``solver="qpsolvers:<name>"`` hands the
+warm-started (:class:`rmm_guardians.cbf.qp.BarrierQP` for Dubins4D,
+:class:`rmm_guardians.cbf.maze.WallQP` for the maze car).  ``solver="qpsolvers:<name>"`` hands the
 same QP, as dense rows ``G z <= h`` and box bounds, to ``qpsolvers.solve_qp(..., solver=name)``
 for any solver qpsolvers has installed (the optional extra ``rmm-envs[qp]``).  Any other name
 is refused at the guardian's construction, with the installed solvers listed.
 
-Why the direct path is the default, and the tolerances: docs/design-notes.md#guardianscbfbackend.
+Why the direct path is the default, and the tolerances: docs/design-notes.md#rmm_guardianscbfbackend.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from guardians.cbf.quiet import quietly
+from rmm_guardians.cbf.quiet import quietly
 
 __all__ = ["DEFAULT_SOLVER", "QpsolversQP", "installed_solvers", "parse_solver"]
 
@@ -101,8 +101,8 @@ class QpsolversQP:
 
 
 class Dubins4DQpsolversQP:
-    """The Dubins4D HOCBF-CLF QP (:class:`guardians.cbf.qp.BarrierQP`'s) through qpsolvers: the
-    same ``solve(G, h)`` on the dense rows of :func:`guardians.cbf.barrier.barrier_rows`."""
+    """The Dubins4D HOCBF-CLF QP (:class:`rmm_guardians.cbf.qp.BarrierQP`'s) through qpsolvers: the
+    same ``solve(G, h)`` on the dense rows of :func:`rmm_guardians.cbf.barrier.barrier_rows`."""
 
     def __init__(self, K: int, p_theta: float, p_v: float, name: str, eps: float) -> None:
         self.K = K
@@ -126,7 +126,7 @@ def dubins4d_qp(solver: str, K: int, prm, p_theta: float, p_v: float, eps: float
     """The Dubins4D guardian's QP for ``solver`` (checked by :func:`parse_solver`)."""
     name = parse_solver(solver)
     if name is None:
-        from guardians.cbf.qp import BarrierQP
+        from rmm_guardians.cbf.qp import BarrierQP
 
         return BarrierQP(K, prm, p_theta, p_v, eps)
     return Dubins4DQpsolversQP(K, p_theta, p_v, name, eps)

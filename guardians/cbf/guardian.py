@@ -1,6 +1,6 @@
 """The HOCBF guardians ``cbf`` and ``cbf-paper``: configuration, latency prediction and the decision.
 
-Their defaults, the rule and the reasons are in `docs/design-notes.md` (cbf); the settings in :mod:`guardians.cbf.settings`.
+Their defaults, the rule and the reasons are in `docs/design-notes.md` (cbf); the settings in :mod:`rmm_guardians.cbf.settings`.
 """
 
 from __future__ import annotations
@@ -9,15 +9,15 @@ import math
 
 import numpy as np
 
-from guardians._checks import settings_signature
-from guardians.privileged import PrivilegedGuardian
-from guardians.cbf.backend import dubins4d_qp
-from guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_values, critical_obstacle, inflated_radii
-from guardians.cbf.maze import MazeCBFGuardian
-from guardians.cbf.quadrotor import QuadrotorCBFGuardian
-from guardians.cbf.recovery import recovery_control, recovery_done
-from guardians.cbf.settings import CBF_PRESETS, REFERENCES, CBFSettings, box_problem
-from guardians.dispatch import SystemDispatch, delegate_arguments
+from rmm_guardians._checks import settings_signature
+from rmm_guardians.privileged import PrivilegedGuardian
+from rmm_guardians.cbf.backend import dubins4d_qp
+from rmm_guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_values, critical_obstacle, inflated_radii
+from rmm_guardians.cbf.maze import MazeCBFGuardian
+from rmm_guardians.cbf.quadrotor import QuadrotorCBFGuardian
+from rmm_guardians.cbf.recovery import recovery_control, recovery_done
+from rmm_guardians.cbf.settings import CBF_PRESETS, REFERENCES, CBFSettings, box_problem
+from rmm_guardians.dispatch import SystemDispatch, delegate_arguments
 from rmm_envs.portable import matvec
 from rmm_envs.systems import dubins3d, quadrotor_control
 from rmm_envs.systems.dubins4d import Dubins4D
@@ -39,7 +39,7 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
 
     def __init__(self, settings: CBFSettings | None = None, **options) -> None:
         """``settings`` (default: the class's :attr:`preset`) with ``options``, any of
-        :class:`~guardians.cbf.settings.CBFSettings`' fields, changed."""
+        :class:`~rmm_guardians.cbf.settings.CBFSettings`' fields, changed."""
         super().__init__()
         s = self.settings = (settings if settings is not None else CBF_PRESETS[self.preset]).replace(**options)
         self.reference, self.solver = s.reference, s.solver
@@ -121,7 +121,7 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
 
     def critical_obstacle(self, state) -> int:
         """The obstacle whose barrier row is hardest to satisfy at ``state`` (see
-        :func:`guardians.cbf.barrier.critical_obstacle`)."""
+        :func:`rmm_guardians.cbf.barrier.critical_obstacle`)."""
         G, h = self.rows(state)
         return critical_obstacle(G, h, self.params)
 
@@ -134,7 +134,7 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
 
     # ------------------------------------------------------------------ recovery
     def recovery_control(self, state, i: int, lap: float | None = None, side: float | None = None) -> np.ndarray:
-        """The backup manoeuvre about obstacle ``i`` at ``state`` (:mod:`guardians.cbf`): ``(u1, u2)``.
+        """The backup manoeuvre about obstacle ``i`` at ``state`` (:mod:`rmm_guardians.cbf`): ``(u1, u2)``.
         ``side`` (+1: counter-clockwise tangent, -1: clockwise) overrides the choice of tangent."""
         u, self._last_side = recovery_control(state, i, self.obstacles, self.radii, self.goal, self.params,
                                               self._measured_lap if lap is None else lap, self.v_stuck, side, rows=self._rows)

@@ -1,8 +1,8 @@
 """The ``cbf`` guardian on the maze car (``Dubins3DMazeParallel-v0``): walls as control barriers.
 
-:class:`guardians.cbf.guardian.CBFGuardian` hands an env whose action space is of the maze car's
+:class:`rmm_guardians.cbf.guardian.CBFGuardian` hands an env whose action space is of the maze car's
 kind (``"dubins3d"``) to :class:`MazeCBFGuardian`, also usable (and named,
-``guardians.cbf.maze:MazeCBFGuardian``) on its own.  It reads **privileged** data (the maze, the
+``rmm_guardians.cbf.maze:MazeCBFGuardian``) on its own.  It reads **privileged** data (the maze, the
 true pose, the car's speed, the sim time) and keeps the driver's turn rate as close as barriers
 on the nearest walls allow, for the pose one lap ahead; the barriers include the turn the
 constant-speed car needs to keep off a wall.
@@ -19,10 +19,10 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from guardians._checks import finite, integer
-from guardians.dispatch import maze_car_only
-from guardians.privileged import PrivilegedGuardian
-from guardians.cbf.backend import QpsolversQP, parse_solver
+from rmm_guardians._checks import finite, integer
+from rmm_guardians.dispatch import maze_car_only
+from rmm_guardians.privileged import PrivilegedGuardian
+from rmm_guardians.cbf.backend import QpsolversQP, parse_solver
 
 __all__ = ["MazeCBFGuardian", "WallQP", "wall_rows"]
 
@@ -70,7 +70,7 @@ def wall_rows(state, speed: float, walls: np.ndarray, half: float, margin: float
 class WallQP:
     """``min (u - u_ref)^2  s.t.  G u <= h, |u| <= u_max`` for ``K`` wall rows, on the direct OSQP path
     (set up once, values and bounds updated per step, warm-started) or through qpsolvers
-    (``name``: an installed qpsolvers solver, :mod:`guardians.cbf.backend`)."""
+    (``name``: an installed qpsolvers solver, :mod:`rmm_guardians.cbf.backend`)."""
 
     def __init__(self, K: int, u_max: float, eps: float, name: str | None = None) -> None:
         self.K = K

@@ -1,7 +1,7 @@
 """The HOCBF quadratic programme, solved with OSQP: set up once per episode, updated per step.
 
 Over ``z = (u1, u2, d_th, d_v)``: minimise ``u1^2 + u2^2 + p_th d_th^2 + p_v d_v^2`` subject to
-the rows of :func:`guardians.cbf.barrier.barrier_rows` (the paper's CBF-CLF problem), or, given
+the rows of :func:`rmm_guardians.cbf.barrier.barrier_rows` (the paper's CBF-CLF problem), or, given
 a reference control ``u_ref`` (the driver's nominal control), the safety filter
 ``|u - u_ref|^2`` subject to the same rows without the two CLF rows (their coefficients set to
 0 and their bounds to infinity, so the sparsity stays fixed; the slacks then settle at 0).  The sparse constraint matrix has one
@@ -18,8 +18,8 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from guardians.cbf.quiet import quietly
-from guardians.cbf.barrier import HOCBFParams
+from rmm_guardians.cbf.quiet import quietly
+from rmm_guardians.cbf.barrier import HOCBFParams
 
 __all__ = ["BarrierQP"]
 

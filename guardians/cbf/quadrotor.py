@@ -1,11 +1,11 @@
 """The ``cbf`` guardian on the quadrotor (``QuadrotorRoomParallel-v0``, ``QuadrotorRoomGuarded-v0``).
 
-:class:`guardians.cbf.guardian.CBFGuardian` hands an env whose action space is of the
+:class:`rmm_guardians.cbf.guardian.CBFGuardian` hands an env whose action space is of the
 quadrotor's kind (``"quadrotor"``) to :class:`QuadrotorCBFGuardian`, also usable (and named,
-``guardians.cbf.quadrotor:QuadrotorCBFGuardian``) on its own.  It reads **privileged** data
+``rmm_guardians.cbf.quadrotor:QuadrotorCBFGuardian``) on its own.  It reads **privileged** data
 (the room, the true body state, the sim time) and filters the pilot's velocity command,
 ``info["nominal_control"]``, with HOCBF rows on the room's floor, walls and objects (a
-first-order model of the velocity loop, :mod:`guardians.cbf.quadrotor_rows`), for the state
+first-order model of the velocity loop, :mod:`rmm_guardians.cbf.quadrotor_rows`), for the state
 one lap ahead, sliding along a shape when the filter deadlocks.
 
 Offers :class:`QuadrotorCBFGuardian`.  The model, the rows, the defaults and why:
@@ -18,11 +18,11 @@ import math
 
 import numpy as np
 
-from guardians._checks import finite, integer
-from guardians.dispatch import quadrotor_only
-from guardians.privileged import PrivilegedGuardian
-from guardians.cbf.backend import parse_solver
-from guardians.cbf.quadrotor_rows import CommandQP, command_rows, room_shapes
+from rmm_guardians._checks import finite, integer
+from rmm_guardians.dispatch import quadrotor_only
+from rmm_guardians.privileged import PrivilegedGuardian
+from rmm_guardians.cbf.backend import parse_solver
+from rmm_guardians.cbf.quadrotor_rows import CommandQP, command_rows, room_shapes
 from rmm_envs.systems.quadrotor_control import CommandController, body_packed, body_step, command_wrench
 from rmm_envs.worlds.room_collision import BOUND
 
@@ -116,7 +116,7 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
     # ------------------------------------------------------------------ the maths
     def rows(self, state):
         """``(b, G, h)`` of the ``n_rows`` shapes nearest the body at ``state`` (13 numbers),
-        smallest ``b`` first, over the heading-frame command (:mod:`guardians.cbf.quadrotor_rows`)."""
+        smallest ``b`` first, over the heading-frame command (:mod:`rmm_guardians.cbf.quadrotor_rows`)."""
         b, G, h, _ = command_rows(state, self.shapes, self.K, self.rho, self.tau_h, self.tau_z, self.p1, self.p2)
         return b, G, h
 

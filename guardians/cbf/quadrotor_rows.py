@@ -1,7 +1,7 @@
 """The barrier maths of the quadrotor ``cbf``: distances to a generated room, the QP's rows, the QP.
 
 Pure functions of a body state and the episode's room (:class:`rmm_envs.worlds.rooms.Room`);
-the model, the gains and the margins are derived in :mod:`guardians.cbf.quadrotor`.  Every part
+the model, the gains and the margins are derived in :mod:`rmm_guardians.cbf.quadrotor`.  Every part
 of the room (floor, walls, boxes, cylinders, spheres) is one convex shape of a flat table
 (:class:`RoomShapes`); :func:`shape_distances` gives each shape's signed distance and unit
 gradient at a point, and :func:`command_rows` the HOCBF rows ``G u <= h`` over the command
@@ -9,7 +9,7 @@ gradient at a point, and :func:`command_rows` the HOCBF rows ``G u <= h`` over t
 first).  The loops are plain Python compiled by numba, scalar arithmetic only (the same bits on
 every CPU).
 
-The rows' derivation: docs/design-notes.md#guardianscbfquadrotor_rows.
+The rows' derivation: docs/design-notes.md#rmm_guardianscbfquadrotor_rows.
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from guardians.cbf.backend import QpsolversQP
-from guardians.cbf.quiet import quietly
+from rmm_guardians.cbf.backend import QpsolversQP
+from rmm_guardians.cbf.quiet import quietly
 from rmm_envs.systems.rotations import quat_to_rot
 
 try:

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from guardians.cbf.barrier import BarrierRows, HOCBFParams
+from rmm_guardians.cbf.barrier import BarrierRows, HOCBFParams
 
 __all__ = ["recovery_control", "recovery_done"]
 

@@ -1,7 +1,7 @@
 """The ``cbf`` guardian's settings, checked once, and its named presets (``cbf``, ``cbf-paper``).
 
-:class:`CBFSettings` holds every argument of :class:`guardians.cbf.guardian.CBFGuardian` (the
-meaning of each in :mod:`guardians.cbf`); a bad value is refused at construction with a message
+:class:`CBFSettings` holds every argument of :class:`rmm_guardians.cbf.guardian.CBFGuardian` (the
+meaning of each in :mod:`rmm_guardians.cbf`); a bad value is refused at construction with a message
 naming it.  :data:`CBF_PRESETS` names the guardians' defaults: ``CBFSettings.preset("cbf-paper",
 p1=0.5)`` is the paper's rule with another gain.  The guardian's keyword arguments and
 ``--agent-opt cbf.KEY=VALUE`` build one.
@@ -12,8 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from guardians._checks import Settings, finite, integer, number_pair
-from guardians.cbf.backend import parse_solver
+from rmm_guardians._checks import Settings, finite, integer, number_pair
+from rmm_guardians.cbf.backend import parse_solver
 from rmm_envs.systems.dubins4d import Dubins4D
 
 __all__ = ["CBFSettings", "CBF_PRESETS", "REFERENCES", "box_problem"]

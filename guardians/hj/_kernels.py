@@ -9,10 +9,10 @@ one pass over the interior:
 is given,
 
 with ``H_LF`` the Lax-Friedrichs numerical Hamiltonian of
-:class:`guardians.hj.dynamics.Dubins4DHJ`.  The numpy path in ``solver.py`` is the reference
+:class:`rmm_guardians.hj.dynamics.Dubins4DHJ`.  The numpy path in ``solver.py`` is the reference
 (the tests compare the two).  ``out`` must not be ``W``.
 
-Why fused, the padding, the cost of ENO2 and aliasing: docs/design-notes.md#guardianshj_kernels.
+Why fused, the padding, the cost of ENO2 and aliasing: docs/design-notes.md#rmm_guardianshj_kernels.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ __all__ = ["HAVE_NUMBA", "Dubins4DStepper", "kernel_mismatch", "set_threads"]
 
 def kernel_mismatch(grid, dynamics, order: int = 1) -> str | None:
     """Why the compiled kernel cannot solve this problem, or ``None`` if it can."""
-    from guardians.hj.dynamics import Dubins4DHJ
+    from rmm_guardians.hj.dynamics import Dubins4DHJ
 
     if not isinstance(dynamics, Dubins4DHJ) or order not in (1, 2):
         return f"the compiled kernel supports only Dubins4DHJ with order 1 or 2, got {type(dynamics).__name__}, order={order}"

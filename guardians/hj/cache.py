@@ -9,7 +9,7 @@ verified; anything else is recomputed and replaced, with a ``RuntimeWarning`` na
 guardian's ``cache_dir`` argument; without one, :func:`default_cache_dir`: ``$RMM_HJ_CACHE`` if
 set (read by :mod:`rmm_envs.settings`), else ``~/.cache/rmm-envs/hj``.
 
-What is verified and what sharing a directory means: docs/design-notes.md#guardianshjcache.
+What is verified and what sharing a directory means: docs/design-notes.md#rmm_guardianshjcache.
 """
 
 from __future__ import annotations

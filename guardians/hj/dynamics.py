@@ -1,6 +1,6 @@
 """The HJ dynamics contract, as code, and the systems that satisfy it.
 
-:class:`HJDynamics` is what :func:`guardians.hj.solver.solve_brt` needs of a system (a
+:class:`HJDynamics` is what :func:`rmm_guardians.hj.solver.solve_brt` needs of a system (a
 ``typing.Protocol``, checked at run time by :func:`check_dynamics`): ``key()`` (the value
 cache's identity), ``hamiltonian(grid, p)`` (``max_u min_d p . f(x, u, d)`` for the co-state
 ``p``, one array per axis: the control avoids the target, the disturbance reaches it; with
@@ -56,7 +56,7 @@ def check_dynamics(dynamics) -> HJDynamics:
     missing = [m for m in ("key", "hamiltonian", "alphas") if not callable(getattr(dynamics, m, None))]
     if missing:
         raise TypeError(f"HJ dynamics must offer key(), hamiltonian(grid, p) and alphas(grid) "
-                        f"(guardians.hj.dynamics.HJDynamics); {dynamics!r} lacks {', '.join(missing)}")
+                        f"(rmm_guardians.hj.dynamics.HJDynamics); {dynamics!r} lacks {', '.join(missing)}")
     return dynamics
 
 

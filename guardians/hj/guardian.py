@@ -9,7 +9,7 @@ can lose before its decision acts: ``margin + v T + u2_max T^2 / 2`` for ``hj``
 and the quadrotor (dispatched on the action space's kind).
 
 Offers :class:`HJGuardian`, :class:`HJPaperGuardian`, :func:`default_grid` and
-:func:`obstacle_target`; the settings and presets are in :mod:`guardians.hj.settings`.  The
+:func:`obstacle_target`; the settings and presets are in :mod:`rmm_guardians.hj.settings`.  The
 rule, the scheme, every argument and why: ``docs/design-notes.md``.
 """
 
@@ -19,17 +19,17 @@ import math
 
 import numpy as np
 
-from guardians._checks import settings_signature
-from guardians.privileged import PrivilegedGuardian
-from guardians.dispatch import SystemDispatch, delegate_arguments
-from guardians.hj.cache import ValueCache, load_or_solve
-from guardians.hj.dynamics import Dubins4DHJ
-from guardians.hj.grid import Grid
-from guardians.hj.grid import central_gradient
-from guardians.hj.maze import MazeHJGuardian
-from guardians.hj.quadrotor import QuadrotorHJGuardian
-from guardians.hj.settings import HJ_PRESETS, HJSettings
-from guardians.hj.solver import THREADS_VARIABLE, default_threads, select_backend, solve_brt  # noqa: F401
+from rmm_guardians._checks import settings_signature
+from rmm_guardians.privileged import PrivilegedGuardian
+from rmm_guardians.dispatch import SystemDispatch, delegate_arguments
+from rmm_guardians.hj.cache import ValueCache, load_or_solve
+from rmm_guardians.hj.dynamics import Dubins4DHJ
+from rmm_guardians.hj.grid import Grid
+from rmm_guardians.hj.grid import central_gradient
+from rmm_guardians.hj.maze import MazeHJGuardian
+from rmm_guardians.hj.quadrotor import QuadrotorHJGuardian
+from rmm_guardians.hj.settings import HJ_PRESETS, HJSettings
+from rmm_guardians.hj.solver import THREADS_VARIABLE, default_threads, select_backend, solve_brt  # noqa: F401
 from rmm_envs.systems import dubins3d, quadrotor_control
 
 __all__ = ["HJGuardian", "HJPaperGuardian", "default_grid", "default_threads", "obstacle_target"]
@@ -55,7 +55,7 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
 
     def __init__(self, settings: HJSettings | None = None, **options) -> None:
         """``settings`` (default: the class's :attr:`preset`) with ``options``, any of
-        :class:`~guardians.hj.settings.HJSettings`' fields, changed."""
+        :class:`~rmm_guardians.hj.settings.HJSettings`' fields, changed."""
         super().__init__()
         s = self.settings = (settings if settings is not None else HJ_PRESETS[self.preset]).replace(**options)
         shared = {"cache_dir": s.cache_dir, "cache": s.cache, "cache_max_files": s.cache_max_files, "backend": s.backend,

@@ -1,11 +1,11 @@
 """The ``hj`` guardian on the maze car (``Dubins3DMazeParallel-v0``): a 3-D avoid value over the walls.
 
-:class:`guardians.hj.guardian.HJGuardian` hands an env whose action space is of the maze car's
+:class:`rmm_guardians.hj.guardian.HJGuardian` hands an env whose action space is of the maze car's
 kind (``"dubins3d"``) to :class:`MazeHJGuardian`, also usable (and named,
-``guardians.hj.maze:MazeHJGuardian``) on its own.  It reads **privileged** data (the maze, the
+``rmm_guardians.hj.maze:MazeHJGuardian``) on its own.  It reads **privileged** data (the maze, the
 goal, the true pose, the car's speed) and, at reset, solves the walls' backward reachable tube
 for the constant-speed car with the Dubins4D solver (a speed axis of three equal nodes); each
-step its look-ahead rule (:mod:`guardians.hj.maze_lookahead`) checks the driver's next laps and
+step its look-ahead rule (:mod:`rmm_guardians.hj.maze_lookahead`) checks the driver's next laps and
 the best two-turn recovery against the walls and the value.
 
 Offers :class:`MazeHJGuardian`, :func:`maze_grid` and :func:`wall_target`.  The value, the
@@ -18,14 +18,14 @@ import math
 
 import numpy as np
 
-from guardians._checks import finite, integer
-from guardians.dispatch import maze_car_only
-from guardians.privileged import PrivilegedGuardian
-from guardians.hj.cache import ValueCache, load_or_solve
-from guardians.hj.dynamics import Dubins4DHJ
-from guardians.hj.grid import Grid, central_gradient
-from guardians.hj.maze_lookahead import COEF, manoeuvres, near_walls, path_clearances
-from guardians.hj.solver import check_scheme, select_backend, solve_brt
+from rmm_guardians._checks import finite, integer
+from rmm_guardians.dispatch import maze_car_only
+from rmm_guardians.privileged import PrivilegedGuardian
+from rmm_guardians.hj.cache import ValueCache, load_or_solve
+from rmm_guardians.hj.dynamics import Dubins4DHJ
+from rmm_guardians.hj.grid import Grid, central_gradient
+from rmm_guardians.hj.maze_lookahead import COEF, manoeuvres, near_walls, path_clearances
+from rmm_guardians.hj.solver import check_scheme, select_backend, solve_brt
 
 __all__ = ["MazeHJGuardian", "maze_grid", "wall_target"]
 
@@ -195,7 +195,7 @@ class MazeHJGuardian(PrivilegedGuardian):
 
     def _scores(self, x, y, psi, man=None) -> tuple[np.ndarray, np.ndarray]:
         """Each manoeuvre's score from pose ``(x, y, psi)`` (module docstring of
-        :mod:`guardians.hj.maze_lookahead`) and its end pose."""
+        :mod:`rmm_guardians.hj.maze_lookahead`) and its end pose."""
         man = self._manoeuvres if man is None else man
         walls, half, width, height = self._maze_geom
         reach = self.speed * self.lookahead + 2.0 * self.speed / self.u_max + 2 * self.spacing

@@ -1,6 +1,6 @@
 """The maze ``hj``'s look-ahead: exact short manoeuvres scored against the walls, the value at their end.
 
-Used by :class:`guardians.hj.maze.MazeHJGuardian` (``rule="lookahead"``, its default; the
+Used by :class:`rmm_guardians.hj.maze.MazeHJGuardian` (``rule="lookahead"``, its default; the
 module docstring there says why).  A *manoeuvre* is two held turn rates, ``u1`` for ``t1``
 seconds then ``u2`` up to the look-ahead ``H``, with ``u1, u2`` in ``{-u_max, 0, u_max}`` and
 ``t1`` in ``H / 6`` steps (:func:`manoeuvres`: 36 of them).  Its *score* from a pose is the

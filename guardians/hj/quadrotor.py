@@ -1,7 +1,7 @@
 """The ``hj`` guardian on the quadrotor (``QuadrotorRoomParallel-v0``): a 4-D avoid value of the
 horizontal flight in each leg's altitude band, and a climb over what blocks the way.
 
-:class:`guardians.hj.guardian.HJGuardian` hands an env whose action space states the quadrotor's
+:class:`rmm_guardians.hj.guardian.HJGuardian` hands an env whose action space states the quadrotor's
 system kind to :class:`QuadrotorHJGuardian` (``quadrotor``, a dict, sets its arguments).  It is
 **privileged**: it reads the room, the waypoints, the true state and the simulated time.  Model:
 the velocity loop as a point mass with bounded acceleration (in polar velocity form the Dubins4D
@@ -10,9 +10,9 @@ car), solved by the project's compiled solver over the whole room in each leg's 
 ahead is at most the margin; in control, the safe command nearest the pilot's (one side, turns
 coming back a step a lap, boundary following until nearer the waypoint); after ``climb_after``
 (2 s) in control, a climb over the obstacles near the line to the waypoint if one is clear below
-``climb_ceiling`` (:mod:`guardians.hj.quadrotor_climb`); hand back once nearer, clear by a
+``climb_ceiling`` (:mod:`rmm_guardians.hj.quadrotor_climb`); hand back once nearer, clear by a
 hysteresis and safe for 1 s more under the pilot's command.  NaN states apply the hover default.
-The model, its error margin, the cost and the rule in full: docs/design-notes.md#guardianshjquadrotor.
+The model, its error margin, the cost and the rule in full: docs/design-notes.md#rmm_guardianshjquadrotor.
 """
 
 from __future__ import annotations
@@ -21,15 +21,15 @@ import math
 
 import numpy as np
 
-from guardians._checks import finite, integer
-from guardians.dispatch import quadrotor_only
-from guardians.privileged import PrivilegedGuardian
-from guardians.hj.cache import ValueCache, load_or_solve
-from guardians.hj.dynamics import Dubins4DHJ
-from guardians.hj.grid import Grid, central_gradient
-from guardians.hj.quadrotor_climb import Climb
-from guardians.hj.solver import check_scheme, select_backend, solve_brt
-from guardians.hj.room import angle, lag_prediction, nominal_command, optimal_command, room_target
+from rmm_guardians._checks import finite, integer
+from rmm_guardians.dispatch import quadrotor_only
+from rmm_guardians.privileged import PrivilegedGuardian
+from rmm_guardians.hj.cache import ValueCache, load_or_solve
+from rmm_guardians.hj.dynamics import Dubins4DHJ
+from rmm_guardians.hj.grid import Grid, central_gradient
+from rmm_guardians.hj.quadrotor_climb import Climb
+from rmm_guardians.hj.solver import check_scheme, select_backend, solve_brt
+from rmm_guardians.hj.room import angle, lag_prediction, nominal_command, optimal_command, room_target
 from rmm_envs.systems.quadrotor_control import CommandController, yaw_of
 from rmm_envs.worlds.room_collision import BOUND
 
@@ -176,7 +176,7 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         self._turn = 0  # the turn (in steps of 2 pi / n_directions) of its last command from the pilot's
         self._climb = None if self.climb_after is None else Climb(room, self.climb_margin, self.climb_ceiling,
                                                                    self.climb_speed, self.k_v)
-        self._plan = None  # the climb in progress (guardians.hj.quadrotor_climb)
+        self._plan = None  # the climb in progress (rmm_guardians.hj.quadrotor_climb)
         self._in_control = 0.0  # the simulated time (s) it has been in control since it took over
 
     def _next_leg(self, state) -> None:

@@ -1,4 +1,4 @@
-"""The quadrotor ``hj``'s climb over what blocks the way (:mod:`guardians.hj.quadrotor`).
+"""The quadrotor ``hj``'s climb over what blocks the way (:mod:`rmm_guardians.hj.quadrotor`).
 
 The horizontal value sees one altitude band; the rooms have no ceiling.  :class:`Climb` plans,
 for a guardian that has been in control ``climb_after`` s, a 3-D way the value cannot see: brake
@@ -11,7 +11,7 @@ the rise (the braking run, at every height to ``z_c``), the line and the descent
 ``margin`` round the body (the descent column: ``margin`` plus ``DESCEND``, the distance from the
 waypoint it starts at): it never descends onto an obstacle.  Privileged: it reads the room.
 
-The reasoning and the figures: docs/design-notes.md#guardianshjquadrotor_climb.
+The reasoning and the figures: docs/design-notes.md#rmm_guardianshjquadrotor_climb.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from guardians.hj.room import object_top, room_distance
+from rmm_guardians.hj.room import object_top, room_distance
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_envs.worlds.rooms import bounding_radius
 

@@ -1,4 +1,4 @@
-"""The quadrotor ``hj``'s geometry and kinematics (:mod:`guardians.hj.quadrotor`): the target of a
+"""The quadrotor ``hj``'s geometry and kinematics (:mod:`rmm_guardians.hj.quadrotor`): the target of a
 room in an altitude band, the velocity loop's closed form, the value's optimal command, and the
 pilot's command read from ``info``."""
 
@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from guardians.hj.grid import Grid
+from rmm_guardians.hj.grid import Grid
 from rmm_envs.portable import arctan2
 from rmm_envs.systems.rotations import quat_to_rot
 from rmm_envs.worlds.room_collision import BOUND

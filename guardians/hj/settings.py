@@ -1,7 +1,7 @@
 """The ``hj`` guardian's settings, checked once, and its named presets (``hj``, ``hj-paper``).
 
-:class:`HJSettings` holds every argument of :class:`guardians.hj.guardian.HJGuardian` (the
-meaning of each in :mod:`guardians.hj.guardian`); a bad value is refused at construction with a
+:class:`HJSettings` holds every argument of :class:`rmm_guardians.hj.guardian.HJGuardian` (the
+meaning of each in :mod:`rmm_guardians.hj.guardian`); a bad value is refused at construction with a
 message naming it.  :data:`HJ_PRESETS` names the guardians' defaults: ``HJSettings.preset(
 "hj-paper", horizon=2.0)`` is the paper's rule over a shorter horizon.  The guardian's keyword
 arguments and ``--agent-opt hj.KEY=VALUE`` build one.
@@ -12,8 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from guardians._checks import Settings, finite, integer
-from guardians.hj.solver import BACKENDS, check_scheme
+from rmm_guardians._checks import Settings, finite, integer
+from rmm_guardians.hj.solver import BACKENDS, check_scheme
 
 __all__ = ["HJSettings", "HJ_PRESETS", "MODES", "RULES"]
 
@@ -25,7 +25,7 @@ MODES = ("avoid", "reach_avoid")
 class HJSettings(Settings):
     """The Dubins4D ``hj`` guardian's settings (normalised).  ``grid`` / ``grid_n``: the grid, or
     its node counts on the default box (at most one; neither: the default grid); ``margin``
-    ``None``: half a position cell; ``threads`` ``None``: :func:`guardians.hj.solver.default_threads`;
+    ``None``: half a position cell; ``threads`` ``None``: :func:`rmm_guardians.hj.solver.default_threads`;
     ``maze`` / ``quadrotor``: the arguments of the maze car's / the quadrotor's guardian (a dict;
     ``False`` refuses those envs), checked by the guardian that builds them."""
 

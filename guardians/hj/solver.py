@@ -11,7 +11,7 @@ kernels (``guardians/hj/_kernels.py``); ``backend="auto"`` takes the compiled on
 applies, and both agree to float32 rounding (tested).  ``threads`` sets the compiled kernel's
 thread count without changing the result.
 
-The numerics, the defaults and why: docs/design-notes.md#guardianshjsolver.
+The numerics, the defaults and why: docs/design-notes.md#rmm_guardianshjsolver.
 """
 
 from __future__ import annotations
@@ -21,10 +21,10 @@ from fractions import Fraction
 
 import numpy as np
 
-from guardians._checks import finite, integer
-from guardians.hj import _kernels
-from guardians.hj.dynamics import HJDynamics, check_dynamics
-from guardians.hj.grid import Grid
+from rmm_guardians._checks import finite, integer
+from rmm_guardians.hj import _kernels
+from rmm_guardians.hj.dynamics import HJDynamics, check_dynamics
+from rmm_guardians.hj.grid import Grid
 from rmm_envs.settings import HJ_THREADS, hj_threads
 
 __all__ = ["BACKENDS", "TVD_RK", "default_threads", "select_backend", "solve_brt", "spatial_derivatives"]

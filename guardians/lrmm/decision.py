@@ -1,8 +1,8 @@
-"""``python -m guardians.lrmm.decision MODEL --threshold T --commit N --action A [--trigger risk|driver]
+"""``python -m rmm_guardians.lrmm.decision MODEL --threshold T --commit N --action A [--trigger risk|driver]
 [--margin M] [--restart V] [--slide] [--still S] [--no-stay] --chosen-by TEXT``
 
 Stores the ``lrmm`` guardian's decision defaults in a trained model file (``meta["decision"]``,
-see :mod:`guardians.lrmm.model`); the weights are unchanged.  ``--chosen-by`` is required: a
+see :mod:`rmm_guardians.lrmm.model`); the weights are unchanged.  ``--chosen-by`` is required: a
 stored threshold always says how it was chosen.
 """
 
@@ -11,13 +11,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from guardians.lrmm.model import set_decision
+from rmm_guardians.lrmm.model import set_decision
 
 __all__ = ["main"]
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m guardians.lrmm.decision",
+    p = argparse.ArgumentParser(prog="python -m rmm_guardians.lrmm.decision",
                                 description="Store the lrmm guardian's decision defaults in a trained model file.")
     p.add_argument("model")
     p.add_argument("--threshold", type=float, required=True, help="take control while the risk is above this")
@@ -29,7 +29,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--restart", type=float, help="speed (m/s) below which the guardian in control accelerates")
     p.add_argument("--slide", action="store_true", default=None,
                    help="with --trigger driver: in control, apply the nearest variant of the driver's control rated safe "
-                        "(guardians.lrmm.nominal.Slide)")
+                        "(rmm_guardians.lrmm.nominal.Slide)")
     p.add_argument("--still", type=float, help="with --trigger driver: also take control when the driver's control is "
                    "rated more than this above holding still (the zero control)")
     p.add_argument("--no-stay", dest="stay", action="store_false", default=None,

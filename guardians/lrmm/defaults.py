@@ -5,8 +5,8 @@ first of these that states it:
 
 1. the guardian's argument (``threshold=...``, ``--agent-opt lrmm.threshold=...``);
 2. the model file's ``meta["decision"]`` (stored with how it was chosen,
-   ``python -m guardians.lrmm.decision``);
-3. the env's entry in :data:`guardians.lrmm.shipped.SHIPPED` (``decision``), only when the
+   ``python -m rmm_guardians.lrmm.decision``);
+3. the env's entry in :data:`rmm_guardians.lrmm.shipped.SHIPPED` (``decision``), only when the
    guardian uses that entry's shipped model (a model given by path has no shipped decision);
 4. the paper's :data:`PAPER_THRESHOLD` (0.85) for the threshold (the guardian warns when it falls back to it).
 

@@ -5,7 +5,7 @@ step.  ``lrmm`` (:class:`LRMMGuardian`, the default) takes control while the mod
 with ``trigger="driver"``, the driver's own control rated) is above the threshold, applies the
 candidate manoeuvre its action-conditioned head rates safest, and stays in control ``commit``
 steps past the risk; its defaults come from the model file or the env's shipped entry
-(:mod:`guardians.lrmm.defaults`).  ``lrmm-paper`` (:class:`LRMMPaperGuardian`) is the paper's
+(:mod:`rmm_guardians.lrmm.defaults`).  ``lrmm-paper`` (:class:`LRMMPaperGuardian`) is the paper's
 rule: risk above 0.85, maximum braking and a maximum turn toward the more open side.
 
 Offers :class:`LRMMGuardian`, :class:`LRMMPaperGuardian`, :data:`PAPER_THRESHOLD` and
@@ -22,17 +22,17 @@ from pathlib import Path
 
 import numpy as np
 
-from guardians._checks import integer
-from guardians.base import Guardian
-from guardians.lrmm.defaults import PAPER_THRESHOLD, check_threshold, decision_threshold, stored_decision
-from guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, load_model
-from guardians.lrmm.nominal import TRIGGERS, Slide, driver_at_risk, driver_control, hand_back_options, make_rater
+from rmm_guardians._checks import integer
+from rmm_guardians.base import Guardian
+from rmm_guardians.lrmm.defaults import PAPER_THRESHOLD, check_threshold, decision_threshold, stored_decision
+from rmm_guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, load_model
+from rmm_guardians.lrmm.nominal import TRIGGERS, Slide, driver_at_risk, driver_control, hand_back_options, make_rater
 from rmm_envs.portable import wrap_angle
 
 __all__ = ["PAPER_THRESHOLD", "TRIGGERS", "LRMMGuardian", "LRMMPaperGuardian"]
 
 ACTIONS = ("head", "heuristic", "turn", "safe")
-DEFAULT_ENV = "Dubins4DCirclesGuarded-v0"  # whose shipped model a guardian built without env_id or model reads
+DEFAULT_ENV = "Dubins4DGuarded-v0"  # whose shipped model a guardian built without env_id or model reads
 #: how to get the model of another env: the guardian picks its model when it is built, not at reset
 REMEDY = ("; the shipped model is chosen when the guardian is built: make_guardian('lrmm', env_id=<this env's id>) "
           "(as rmm-bench does), or model=<a model trained on this env>")
@@ -58,7 +58,7 @@ class LRMMGuardian(Guardian):
             ``None`` (default): the action space's largest turn rate and strongest braking
             (0.25, -0.5 for Dubins4D).
         env_id: the env served (default ``None``: Dubins4D): picks the shipped model, its
-            input field and decision defaults from :data:`guardians.lrmm.shipped.SHIPPED`.
+            input field and decision defaults from :data:`rmm_guardians.lrmm.shipped.SHIPPED`.
         inputs: the observation field the model reads (default ``None``: the table's for
             ``env_id``, else the whole observation).
         trigger, margin, restart, slide, still, stay: the hand-back rule (module docstring);
@@ -109,7 +109,7 @@ class LRMMGuardian(Guardian):
             raise ValueError(f"action='head' needs a model with a 'candidates' head; {where} has none")
         if commit is None:
             commit = int(decision.get("commit", 0)) if decision else 0
-        # argument > the model's stored decision > the shipped entry's > the paper's (guardians.lrmm.defaults)
+        # argument > the model's stored decision > the shipped entry's > the paper's (rmm_guardians.lrmm.defaults)
         self.threshold, self.threshold_source = decision_threshold(threshold, decision, where)
         if self.threshold_source == "paper":
             self._fallback_warning(f"{where} has no 'decision' threshold: using the paper's {PAPER_THRESHOLD}")
@@ -171,7 +171,7 @@ class LRMMGuardian(Guardian):
         if self.trigger == "driver" and self._rater_for(observation_space, actions) is None:
             raise ValueError(f"guardian {self.name!r}: trigger 'driver' needs the model reading the whole observation and a "
                              "field the controls move ('velocity', 'speed', or 'heading' with evenly spaced rays; "
-                             f"guardians.lrmm.nominal); got controls {actions.controls}, inputs={self.inputs!r}")
+                             f"rmm_guardians.lrmm.nominal); got controls {actions.controls}, inputs={self.inputs!r}")
         if self.restart > 0 and ("accel_ctrl" not in actions.controls or "speed" not in getattr(observation_space, "layout", ())):
             raise ValueError(f"guardian {self.name!r}: restart needs an 'accel_ctrl' control and a 'speed' observation "
                              f"field, got controls {actions.controls}")

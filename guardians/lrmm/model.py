@@ -9,9 +9,9 @@ JSON ``meta`` document, with a checksum over every array verified on load.  Ever
 finite: a model with NaN or inf weights raises ``ValueError`` naming the array.
 
 The shipped models' table (:data:`SHIPPED_BY_SYSTEM`, :data:`SHIPPED`, :func:`default_model_path`)
-lives in :mod:`guardians.lrmm.shipped`; this module re-exports it.
+lives in :mod:`rmm_guardians.lrmm.shipped`; this module re-exports it.
 
-The head, the artifact's fields and why: docs/design-notes.md#guardianslrmmmodel.
+The head, the artifact's fields and why: docs/design-notes.md#rmm_guardianslrmmmodel.
 """
 
 from __future__ import annotations
@@ -25,10 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from guardians.lrmm.inference import forward_one as _forward_one
-from guardians.lrmm.inference import forward_rows as _forward_rows
-from guardians.lrmm.shipped import SHIPPED, SHIPPED_BY_SYSTEM, Shipped, default_model_path
-from rmm_envs.catalog import RENAMED, canonical_id
+from rmm_guardians.lrmm.inference import forward_one as _forward_one
+from rmm_guardians.lrmm.inference import forward_rows as _forward_rows
+from rmm_guardians.lrmm.shipped import SHIPPED, SHIPPED_BY_SYSTEM, Shipped, default_model_path
+from rmm_envs.catalog import FORMER_IDS, current_id
 from rmm_envs.portable import matvec
 
 __all__ = ["FORMAT", "SHIPPED", "SHIPPED_BY_SYSTEM", "LRMMModel", "Shipped", "default_model_path", "load_model"]
@@ -218,8 +218,9 @@ class LRMMModel:
                     raise ValueError(f"{path}: field {key!r} needs format version 2, the file says version 1")
         if _checksum(arrays) != meta.get("weights_sha256"):
             raise ValueError(f"{path}: weights checksum mismatch (the file is corrupted or was edited)")
-        trained, now = meta.get("env_id"), f" (now {RENAMED[meta['env_id']]!r})" if meta.get("env_id") in RENAMED else ""
-        if env_id is not None and canonical_id(str(trained)) != canonical_id(env_id):  # an old id is its new id's env
+        trained = meta.get("env_id")
+        now = f" (now {FORMER_IDS[trained]!r})" if trained in FORMER_IDS else ""
+        if env_id is not None and current_id(str(trained)) != current_id(env_id):  # a former id is today's id's env
             raise ValueError(f"{path} was trained for env {trained!r}{now}, not {env_id!r}")
         if obs_dim is not None and int(meta.get("obs_dim", -1)) != int(obs_dim):
             raise ValueError(f"{path} expects observations of {meta.get('obs_dim')} values, the env gives {obs_dim}")
@@ -243,7 +244,7 @@ class LRMMModel:
         return model
 
 
-def load_model(path=None, env_id: str = "Dubins4DCirclesGuarded-v0") -> LRMMModel:
+def load_model(path=None, env_id: str = "Dubins4DGuarded-v0") -> LRMMModel:
     """Load ``path`` or the shipped model for ``env_id``."""
     return LRMMModel.load(path or default_model_path(env_id))
 
@@ -251,7 +252,7 @@ def load_model(path=None, env_id: str = "Dubins4DCirclesGuarded-v0") -> LRMMMode
 def set_decision(path, threshold: float, commit: int, chosen_by: str, action: str = "head", **hand_back) -> LRMMModel:
     """Store the guardian's decision defaults in the model file ``path`` (weights unchanged);
     ``hand_back``: ``trigger``, ``margin``, ``restart``, ``slide``, ``still``, ``stay``
-    (:mod:`guardians.lrmm.nominal`), stored when not None."""
+    (:mod:`rmm_guardians.lrmm.nominal`), stored when not None."""
     if not (isinstance(threshold, (int, float)) and 0.0 <= threshold <= 1.0):
         raise ValueError(f"threshold must be in [0, 1], got {threshold!r}")
     if int(commit) != commit or commit < 0:
@@ -263,7 +264,7 @@ def set_decision(path, threshold: float, commit: int, chosen_by: str, action: st
     model = LRMMModel.load(path)
     if model.candidates is None:
         raise ValueError(f"{path} has no 'candidates' head; its guardian uses the paper's rule")
-    from guardians.lrmm.nominal import hand_back_options  # checks them as the guardian will
+    from rmm_guardians.lrmm.nominal import hand_back_options  # checks them as the guardian will
 
     fields = ("trigger", "margin", "restart", "slide", "still", "stay")
     unknown = sorted(set(hand_back) - set(fields))

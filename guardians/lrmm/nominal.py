@@ -12,7 +12,7 @@ horizontal velocity, half of it or none), else the head's safest candidate.
 
 Offers :func:`make_rater`, :class:`PredictRater`, :func:`driver_control`, :func:`driver_at_risk`,
 :class:`Slide` and :func:`hand_back_options`.  The prediction's stated error, why this rule and
-the alternatives tried with their figures: docs/design-notes.md#guardianslrmmnominal.
+the alternatives tried with their figures: docs/design-notes.md#rmm_guardianslrmmnominal.
 """
 
 from __future__ import annotations

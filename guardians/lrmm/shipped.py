@@ -1,6 +1,6 @@
 """The LRMM models this package ships: :data:`SHIPPED_BY_SYSTEM` (per system of
 :data:`rmm_envs.catalog.SYSTEMS`), :data:`SHIPPED` (the same by env id) and
-:func:`default_model_path` (the file of one env id and variant).  :mod:`guardians.lrmm.model`
+:func:`default_model_path` (the file of one env id and variant).  :mod:`rmm_guardians.lrmm.model`
 re-exports them."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import gymnasium as gym
 
-from rmm_envs.catalog import GUARDED_KINDS, SYSTEMS, canonical_id
+from rmm_envs.catalog import GUARDED_KINDS, SYSTEMS, current_id
 
 __all__ = ["SHIPPED", "SHIPPED_BY_SYSTEM", "Shipped", "ShippedById", "default_model_path"]
 
@@ -33,7 +33,7 @@ _DUBINS4D = Shipped({"paper": "dubins4d.npz", "act": "dubins4d_act.npz"})
 #: The maze car under parallel autonomy reads the maze model (trained on ``Dubins3DMaze-v0``'s 8
 #: rays) on its observation's ``"rays"`` field.  Its decision defaults were chosen on development
 #: seeds (env seeds 5000-5063 of ``Dubins3DMazeParallel-v0``, 1 ms fixed clock), never on the
-#: seeds that reported results use; see :mod:`guardians.lrmm.guardian`.
+#: seeds that reported results use; see :mod:`rmm_guardians.lrmm.guardian`.
 _MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays", decision={
     "threshold": 0.7, "commit": 5, "action": "turn",
     "chosen_by": "fewest collisions, then most goals, then least time in control, over thresholds 0.3/0.5/0.7/0.85 x "
@@ -70,7 +70,7 @@ _PENDULUM = Shipped({"act": "inverted_pendulum_guarded.npz"}, decision={
 #: env: ``"plain"`` (plain control) and ``"guarded"`` (its blocking and non-blocking guardian envs,
 #: which share the world and the observation, so one entry serves both).
 SHIPPED_BY_SYSTEM: dict[str, dict[str, Shipped]] = {
-    "Dubins4DCircles": {"guarded": _DUBINS4D},
+    "Dubins4D": {"guarded": _DUBINS4D},
     # the same car and observation on a map of your own: the circle-trained models, unchanged
     # (rays are distances whatever the obstacle's shape; how well that transfers is measured
     # in the map env's tests and docs, not assumed)
@@ -84,17 +84,17 @@ SHIPPED_BY_SYSTEM: dict[str, dict[str, Shipped]] = {
 
 class ShippedById(dict):
     """:data:`SHIPPED_BY_SYSTEM` by env id (both twins of a system's guardian envs share an
-    entry); an old id of a renamed env (:data:`rmm_envs.catalog.RENAMED`) finds its new id's
-    entry, though iteration lists the current ids only."""
+    entry); a former id read from a stored record (:data:`rmm_envs.catalog.FORMER_IDS`) finds
+    today's id's entry, though iteration lists today's ids only."""
 
     def __missing__(self, env_id):
-        new = canonical_id(env_id) if isinstance(env_id, str) else env_id
+        new = current_id(env_id) if isinstance(env_id, str) else env_id
         if new == env_id or not dict.__contains__(self, new):
             raise KeyError(env_id)
         return self[new]
 
     def __contains__(self, env_id) -> bool:
-        return dict.__contains__(self, env_id) or (isinstance(env_id, str) and dict.__contains__(self, canonical_id(env_id)))
+        return dict.__contains__(self, env_id) or (isinstance(env_id, str) and dict.__contains__(self, current_id(env_id)))
 
     def get(self, env_id, default=None):
         return self[env_id] if env_id in self else default
@@ -113,7 +113,7 @@ def _by_id() -> ShippedById:
 SHIPPED: ShippedById = _by_id()
 
 
-def default_model_path(env_id: str = "Dubins4DCirclesGuarded-v0", variant: str = "paper") -> Path:
+def default_model_path(env_id: str = "Dubins4DGuarded-v0", variant: str = "paper") -> Path:
     """Path of the model shipped with the package for ``env_id`` (:data:`SHIPPED`).
 
     ``variant="paper"`` (default): the paper's risk-only network (Table II).  ``"act"``: the
@@ -135,4 +135,4 @@ def default_model_path(env_id: str = "Dubins4DCirclesGuarded-v0", variant: str =
             f"(in Python, model=\"{stem}.npz\")")
     if variant not in ship.files:
         raise ValueError(f"no shipped LRMM model for {env_id!r} (variant {variant!r}); its variants: {sorted(ship.files)}")
-    return Path(str(resources.files("guardians.lrmm") / "models" / ship.files[variant]))
+    return Path(str(resources.files("rmm_guardians.lrmm") / "models" / ship.files[variant]))

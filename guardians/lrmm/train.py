@@ -8,9 +8,9 @@ training split only; the epoch is chosen on validation MSE (``--select``); the s
 arguments and ``--seed`` give the same model bit for bit; with ``candidate_risk`` labels an
 action-conditioned head is trained too (``--head``).  A NaN or inf loss stops training with a
 message naming the epoch, and no model is written.  The guardian's decision defaults are
-chosen after training (``python -m guardians.lrmm.decision``).
+chosen after training (``python -m rmm_guardians.lrmm.decision``).
 
-Each choice and how it differs from the original: docs/design-notes.md#guardianslrmmtrain.
+Each choice and how it differs from the original: docs/design-notes.md#rmm_guardianslrmmtrain.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from guardians.lrmm.model import ACTIVATIONS, LRMMModel
+from rmm_guardians.lrmm.model import ACTIVATIONS, LRMMModel
 
 __all__ = ["TrainConfig", "main", "split_by_config", "train"]
 

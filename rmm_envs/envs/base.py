@@ -17,7 +17,6 @@ Each piece in detail: docs/design-notes.md#rmm_envsenvsbase.
 from __future__ import annotations
 
 import math
-import warnings
 from typing import Any, Callable, Iterable, TypeVar
 
 import gymnasium as gym
@@ -186,11 +185,6 @@ class LabelledEnvBase(gym.Env):
         """The :class:`rmm_envs.risk.RiskScene` of the current episode (for risk labelling)."""
         self.require_episode()
         return self.scene
-
-    def risk_system(self):
-        """Deprecated (warns): the former name of :meth:`risk_scene`."""
-        warnings.warn("risk_system() is deprecated: use risk_scene()", DeprecationWarning, stacklevel=2)
-        return self.risk_scene()
 
     def dataset_notes(self) -> dict:
         """Facts about :meth:`observe_states` a dataset records in its metadata; here

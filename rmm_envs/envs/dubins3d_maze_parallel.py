@@ -2,7 +2,7 @@
 
 ``Dubins3DMazeGuarded-v0`` (blocking, fixed step) and ``Dubins3DMazeParallel-v0`` (non-blocking:
 the guardian's thinking time passes in the world), the maze counterparts of
-``Dubins4DCirclesGuarded-v0`` and ``Dubins4DCirclesParallel-v0`` with the same contract
+``Dubins4DGuarded-v0`` and ``Dubins4DParallel-v0`` with the same contract
 (:mod:`rmm_envs.autonomy`), so the same guardians and ``rmm-bench --env`` run on both systems.
 
 ## Description
@@ -108,7 +108,7 @@ time in the blocking env.
 ``gym.make("Dubins3DMazeParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same but step_dt)``:
 the same world under :class:`rmm_envs.wrappers.NonBlockingStepping` (each ``step(a)`` advances
 the world by ``elapsed * time_accel + base_step`` seconds under the previous action, then
-stores ``a``; the first interval is the driver's), with ``Dubins4DCirclesParallel-v0``'s defaults.
+stores ``a``; the first interval is the driver's), with ``Dubins4DParallel-v0``'s defaults.
 
 ## Rendering
 

@@ -1,6 +1,6 @@
 """Dubins4D among circles: a reckless driver, a guardian that may take over, and lidar.
 
-``Dubins4DCirclesGuarded-v0`` (blocking, fixed step) and ``Dubins4DCirclesParallel-v0`` (non-blocking: the
+``Dubins4DGuarded-v0`` (blocking, fixed step) and ``Dubins4DParallel-v0`` (non-blocking: the
 guardian's thinking time passes in the world).  This is the paper's parallel-autonomy case study
 (Sec. IV-A, Table I), rebuilt on Gymnasium.
 
@@ -102,7 +102,7 @@ Privileged information is also available through :meth:`Dubins4DCirclesEnv.privi
 
 ## Arguments
 
-``gym.make("Dubins4DCirclesGuarded-v0", step_dt=0.1, n_rays=12, ray_length=10.0,
+``gym.make("Dubins4DGuarded-v0", step_dt=0.1, n_rays=12, ray_length=10.0,
 max_episode_sim_time=100.0, n_obstacles=5, obstacle_min_rad=2.0, obstacle_max_rad=5.0,
 goal_min_rad=0.1, goal_max_rad=1.0, n_path_points=16, driver_params=None, clock=None,
 render_mode=None, driver_solver="closed_form")``.  ``clock`` ("wall", "cpu", "fixed:MS" or a
@@ -110,12 +110,12 @@ render_mode=None, driver_solver="closed_form")``.  ``clock`` ("wall", "cpu", "fi
 blocking env.  ``driver_solver``: how the driver's QP is solved, ``"closed_form"`` (exact, the
 default) or ``"osqp"`` (the earlier solver, kept for checking; equal to about 1e-7).
 
-``gym.make_vec("Dubins4DCirclesGuarded-v0", num_envs=N, vectorization_mode="vector_entry_point")``:
+``gym.make_vec("Dubins4DGuarded-v0", num_envs=N, vectorization_mode="vector_entry_point")``:
 :class:`rmm_envs.envs.dubins4d_vector.Dubins4DCirclesVectorEnv`, ``N`` copies of this env
 computed as arrays (sub-env ``i`` after ``reset(seed=s)`` is this env after ``reset(seed=s +
 i)``, bit for bit).
 
-``gym.make("Dubins4DCirclesParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same but step_dt)``:
+``gym.make("Dubins4DParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same but step_dt)``:
 the same world stepped by :class:`rmm_envs.wrappers.NonBlockingStepping`: each ``step(a)``
 advances the world by ``elapsed * time_accel + base_step`` seconds under the *previous* action
 and then stores ``a`` for the next interval (the first interval is the driver's).
@@ -136,7 +136,6 @@ import math
 
 import numpy as np
 
-from rmm_envs._deprecated import renamed_attributes
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.drivers.dubins4d import CLFDriver, DriverParams
@@ -159,8 +158,6 @@ def observation_layout(n_rays: int = 12) -> ObservationLayout:
                                 ray_angles=[2.0 * math.pi * i / n_rays for i in range(n_rays)])
 
 
-#: ``parse_guardian_action``, the former name of :func:`rmm_envs.autonomy.parse`, answered with a warning.
-__getattr__ = renamed_attributes(__name__, {"parse_guardian_action": ("rmm_envs.autonomy:parse", "rmm_envs.autonomy.parse")})
 
 class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
     """Blocking Dubins4D parallel-autonomy env; see the module docstring for the full spec."""
@@ -364,4 +361,4 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         return _render.dubins4d_frame(self.scene, self._state, self._last_active, _HALF, size)
 
 
-make_parallel_env = parallel_entry_point(Dubins4DCirclesEnv, "Dubins4DCirclesParallel-v0")
+make_parallel_env = parallel_entry_point(Dubins4DCirclesEnv, "Dubins4DParallel-v0")

@@ -2,7 +2,7 @@
 
 ``Dubins4DMapGuarded-v0`` (blocking, fixed step) and ``Dubins4DMapParallel-v0`` (non-blocking: the
 guardian's thinking time passes in the world): the parallel-autonomy world of
-``Dubins4DCirclesGuarded-v0`` (same car, reckless driver, guardian action, observation, rewards and
+``Dubins4DGuarded-v0`` (same car, reckless driver, guardian action, observation, rewards and
 statistics) among obstacles you draw, with the optional extra ``rmm-envs[map]`` (pymunk).
 
 ## Description
@@ -39,21 +39,21 @@ touch; a polygon must be simple``.  A walk-through: ``docs/tutorials/own-map.md`
 
 ## Dynamics
 
-Those of ``Dubins4DCirclesGuarded-v0``: state ``(x, y, theta, v)``, ``x' = v cos theta, y' = v sin
+Those of ``Dubins4DGuarded-v0``: state ``(x, y, theta, v)``, ``x' = v cos theta, y' = v sin
 theta, theta' = u1, v' = u2``, ``v`` held in ``[0, 2]`` m/s, exact zero-order-hold steps.
 Nothing bounds the plane: leaving the start box is allowed.
 
 ## Action space
 
 ``Dict(active_ctrl=Discrete(2), turnrate_ctrl=Box(-0.25, 0.25, (1,)), accel_ctrl=Box(-0.5, 0.5,
-(1,)))``, as for ``Dubins4DCirclesGuarded-v0`` (out-of-bound controls clipped, malformed actions
+(1,)))``, as for ``Dubins4DGuarded-v0`` (out-of-bound controls clipped, malformed actions
 refused).  Its ``obstacle_shapes`` lists the map's obstacle kinds: the privileged guardians
 ``cbf`` and ``hj`` model circles only, so their ``check_spaces`` refuse a map with polygons or
 segments (naming them) and run on a map of circles only.
 
 ## Observation space
 
-``Box(5 + n_rays,)`` float32, the table of ``Dubins4DCirclesGuarded-v0``: simulated time, goal offset
+``Box(5 + n_rays,)`` float32, the table of ``Dubins4DGuarded-v0``: simulated time, goal offset
 ``(x, y)``, heading in ``[-pi, pi)``, speed, then ``n_rays`` ray lengths in ``[0, ray_length]``
 (ray ``i`` at ``theta + 2 pi i / n_rays``).  Rays see every obstacle of the map (pymunk
 ``segment_query_first``), are capped at ``ray_length`` and read 0 from inside an obstacle.
@@ -65,7 +65,7 @@ the step's whole path (``n_path_points`` points and the segments between them): 
 pymunk queries (the first point's ``point_query_nearest``, then ``segment_query_first`` along
 each segment, giving the exact first contact), the goal disc analytically; the first contact
 wins and a tie is a collision.  On a map of circles only, rays and contacts agree with
-``Dubins4DCirclesGuarded-v0`` given the same obstacles to rounding (tested to 1e-4).
+``Dubins4DGuarded-v0`` given the same obstacles to rounding (tested to 1e-4).
 
 ## Episode end
 
@@ -97,7 +97,7 @@ unchanged (every configuration of a dataset is the same map; episodes differ in 
 
 ## Info
 
-As ``Dubins4DCirclesGuarded-v0``: every step ``sim_time``, ``state`` (privileged), ``active``,
+As ``Dubins4DGuarded-v0``: every step ``sim_time``, ``state`` (privileged), ``active``,
 ``control``, ``cost`` and ``nominal_control`` (the driver's control, also on ``reset``); on
 the last step ``outcome`` and ``episode_stats``.  :meth:`Dubins4DMapEnv.privileged`
 returns ``state``, ``goal``, ``sim_time``, ``obstacles`` (the map's circles ``(K, 3)``: all of
@@ -109,7 +109,7 @@ its obstacles only on a map of circles only) and ``map`` (the map's entries, as 
 max_episode_sim_time=100.0, goal_min_rad=0.1, goal_max_rad=1.0, n_path_points=16,
 driver_params=None, clock=None, render_mode=None, driver_solver="closed_form")``; ``map`` is a
 path to a JSON file, the list (or object) already loaded, or ``None`` for the example; the
-other arguments and their defaults are ``Dubins4DCirclesGuarded-v0``'s (the paper's).  The map is
+other arguments and their defaults are ``Dubins4DGuarded-v0``'s (the paper's).  The map is
 parsed and its pymunk space built once, at construction.
 
 ``gym.make("Dubins4DMapParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same but step_dt)``:
@@ -124,7 +124,7 @@ kwargs={"map": "my_map.json"})``.
 
 A step costs a few pymunk queries (one bounding-box query skips a path far from every
 obstacle; rays need up to ``n_rays`` segment queries), so it is slower than the compiled
-circle kernels of ``Dubins4DCirclesGuarded-v0``: about 2.8-2.9x its step time on the example map and 2.4-2.6x
+circle kernels of ``Dubins4DGuarded-v0``: about 2.8-2.9x its step time on the example map and 2.4-2.6x
 on a map of its five circles, and about 2x its time per risk label (``benchmarks/perf_map.py``,
 CPU time, both envs in one run: ratios, not timings).
 

@@ -1,6 +1,6 @@
-"""``N`` Dubins4D parallel-autonomy worlds as arrays: the native vector env of ``Dubins4DCirclesGuarded-v0``.
+"""``N`` Dubins4D parallel-autonomy worlds as arrays: the native vector env of ``Dubins4DGuarded-v0``.
 
-``gym.make_vec("Dubins4DCirclesGuarded-v0", num_envs=N, vectorization_mode="vector_entry_point")``
+``gym.make_vec("Dubins4DGuarded-v0", num_envs=N, vectorization_mode="vector_entry_point")``
 returns a :class:`Dubins4DCirclesVectorEnv`.  It is ``N`` independent copies of
 :class:`rmm_envs.envs.dubins4d.Dubins4DCirclesEnv` (whose module docstring is the world's spec:
 dynamics, driver, rays, rewards, episode end, starting states, info) stepped together, with

@@ -1,6 +1,6 @@
 """The blocking parallel-autonomy env skeleton: :class:`GuardedEnv`.
 
-What every env with a built-in driver and a guardian action shares (``Dubins4DCirclesGuarded-v0``,
+What every env with a built-in driver and a guardian action shares (``Dubins4DGuarded-v0``,
 ``Dubins3DMazeGuarded-v0``), on top of :class:`rmm_envs.envs.base.LabelledEnvBase`: ``step``
 (the agent's compute time, the parsed guardian action, ``step_dt`` of the env's ``simulate``),
 the driver's intended control ``info["nominal_control"]`` (applied exactly where the driver

@@ -3,7 +3,7 @@
 For each procedurally generated obstacle configuration: sample valid states, observe them,
 label them with the sampling-tree estimator.  Example (the paper's Dubins4D scale)::
 
-    rmm-datagen --env Dubins4DCirclesGuarded-v0 --configs 274 --samples-per-config 128 --seed 0 --out data/d4
+    rmm-datagen --env Dubins4DGuarded-v0 --configs 274 --samples-per-config 128 --seed 0 --out data/d4
 
 The output directory holds ``metadata.json``, ``shard-NNNNN.parquet`` files (rows grouped by
 configuration) and, written last, ``manifest.json`` with every shard's SHA-256.  The same seed
@@ -231,7 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
         "valid states, their observations and sampling-tree risk labels, written as Parquet shards. "
         "Rerun the same command to resume an interrupted run.",
     )
-    p.add_argument("--env", default="Dubins4DCirclesGuarded-v0",
+    p.add_argument("--env", default="Dubins4DGuarded-v0",
                    help="environment id, or module:Id to import the module that registers it first "
                    "(from the current directory first) (default: %(default)s)")
     p.add_argument("--configs", type=int, default=274, help="number of obstacle configurations (default: %(default)s)")
@@ -283,10 +283,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     from rmm_envs.failures import describe_os_error
 
-    from rmm_envs.catalog import command_env_id
-
     cfg = DatagenConfig(
-        env_id=command_env_id(args.env, "rmm-datagen"), configs=args.configs, samples_per_config=args.samples_per_config, seed=args.seed,
+        env_id=args.env, configs=args.configs, samples_per_config=args.samples_per_config, seed=args.seed,
         branches=args.branches, depth=args.depth, horizon=args.horizon, n_steps=args.n_steps,
         metric=args.metric, alpha=args.alpha, leaf=args.leaf, configs_per_shard=args.configs_per_shard,
         env_kwargs=env_kwargs, candidates=candidates, candidate_hold=args.candidate_hold, failure=args.failure,

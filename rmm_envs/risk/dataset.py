@@ -105,15 +105,15 @@ def shard_ok(path: Path, rows: int) -> bool:
 
 
 def identity(meta: dict) -> dict:
-    """What makes two datasets the same dataset; a renamed env counts as its new id, so a dataset
-    made under an old id (:data:`rmm_envs.catalog.RENAMED`) is resumed under the new one."""
-    from rmm_envs.catalog import canonical_id
+    """What makes two datasets the same dataset; a former env id counts as today's id, so a dataset
+    made under a former id (:data:`rmm_envs.catalog.FORMER_IDS`) is resumed under today's."""
+    from rmm_envs.catalog import current_id
 
     keys = ("format", "format_version", "env_id", "env_kwargs", "configs", "samples_per_config",
             "seed", "configs_per_shard", "estimator", "failure")
     out = {k: meta.get(k) for k in keys}
     if isinstance(out["env_id"], str):
-        out["env_id"] = canonical_id(out["env_id"])
+        out["env_id"] = current_id(out["env_id"])
     return out
 
 

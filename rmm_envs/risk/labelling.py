@@ -27,7 +27,7 @@ __all__ = ["DatagenConfig", "config_seeds", "dataset_metadata", "label_configs",
 
 @dataclass
 class DatagenConfig:
-    env_id: str = "Dubins4DCirclesGuarded-v0"
+    env_id: str = "Dubins4DGuarded-v0"
     configs: int = 274
     samples_per_config: int = 128
     seed: int = 0

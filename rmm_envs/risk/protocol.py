@@ -8,8 +8,7 @@ and that is what the estimator labels: ``state_dim``, the control box ``control_
 ``observe_states``, ``privileged()`` and ``dataset_notes()`` on its unwrapped env.  Each
 member's contract is in its class's docstring; :func:`check_scene` and
 :func:`check_labelled_env` check an object against them, naming each missing or ill-formed
-member.  ``System`` and ``check_system``, the former names of :class:`RiskScene` and
-:func:`check_scene`, still import, with a ``DeprecationWarning``.
+member.
 
 Why a scene and an env are two protocols: docs/design-notes.md#rmm_envsriskprotocol.
 """
@@ -20,8 +19,6 @@ import inspect
 from typing import Protocol, runtime_checkable
 
 import numpy as np
-
-from rmm_envs._deprecated import renamed_attributes
 
 __all__ = ["HOOKS", "LabelledEnv", "RiskScene", "check_labelled_env", "check_scene"]
 
@@ -66,11 +63,6 @@ def check_scene(scene) -> None:
         )
 
 
-#: Deprecated names, answered with a warning: ``System`` (now :class:`RiskScene`) and
-#: ``check_system`` (now :func:`check_scene`).
-__getattr__ = renamed_attributes(__name__, {"System": (f"{__name__}:RiskScene", "RiskScene"),
-                                            "check_system": (f"{__name__}:check_scene", "check_scene")})
-
 
 @runtime_checkable
 class LabelledEnv(Protocol):
@@ -79,8 +71,7 @@ class LabelledEnv(Protocol):
 
     ``risk_scene() -> RiskScene``
         The :class:`rmm_envs.risk.RiskScene` of the current episode (its dynamics in its obstacle
-        configuration); ``RuntimeError`` before the first ``reset``.  ``risk_system()`` is its
-        deprecated former name.
+        configuration); ``RuntimeError`` before the first ``reset``. 
     ``true_state``
         Property: the current true state, a ``(state_dim,)`` float array (a copy).
     ``sample_states(rng, n) -> (n, state_dim)``

@@ -27,7 +27,7 @@ def observation(states: np.ndarray, sim_time, goals: np.ndarray, rays: np.ndarra
 
 class Dubins4DScene(SceneBase):
     """A Dubins4D vehicle among fixed circles: the :class:`rmm_envs.risk.RiskScene` of
-    ``Dubins4DCirclesGuarded-v0``.
+    ``Dubins4DGuarded-v0``.
 
     Batched exact propagation, path failure (any point or segment touching an obstacle), the
     17-dim observation (:meth:`observe`) and the stopping-distance leaf heuristic.  The

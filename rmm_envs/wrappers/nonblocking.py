@@ -38,7 +38,7 @@ class NonBlockingStepping(gym.Wrapper):
     parsed by it.
 
     Args:
-        env: the blocking environment (e.g. ``Dubins4DCirclesGuarded-v0``).
+        env: the blocking environment (e.g. ``Dubins4DGuarded-v0``).
         time_accel: simulated seconds per clock second, ``>= 1`` as in the paper (default 10).
         base_step: simulated seconds added to every step, ``> 0`` (default 0.1).
         clock: a :class:`rmm_envs.clocks.Clock`, or ``"wall"``, ``"cpu"``, ``"fixed:MS"``.

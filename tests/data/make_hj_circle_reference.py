@@ -26,9 +26,9 @@ OUT = HERE / "hj_circle_reference.npz"
 
 def circle_case(refine: int = 1):
     """``(grid, dynamics, target)`` of the case on the grid refined ``refine`` times."""
-    from guardians.hj.dynamics import Dubins4DHJ
-    from guardians.hj.grid import Grid
-    from guardians.hj.guardian import obstacle_target
+    from rmm_guardians.hj.dynamics import Dubins4DHJ
+    from rmm_guardians.hj.grid import Grid
+    from rmm_guardians.hj.guardian import obstacle_target
 
     k = int(refine)
     grid = Grid([-15.0, -15.0, -np.pi, 0.0], [15.0, 15.0, np.pi, 4.0], [40 * k + 1, 40 * k + 1, 21 * k, 20 * k + 1], periodic=[2])
@@ -50,7 +50,7 @@ def load_reference(path: Path = OUT) -> np.ndarray:
 
 
 def main(argv=None) -> None:
-    from guardians.hj.solver import solve_brt
+    from rmm_guardians.hj.solver import solve_brt
 
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--refine", type=int, default=2)

@@ -62,7 +62,7 @@ def riskmap(args: argparse.Namespace) -> int:
         risk = RiskEstimator(env.risk_scene()).estimate(states, rng).risk
         what = "sampling-tree risk (n=32, m=2, t=2 s)"
     else:
-        from guardians.lrmm.model import LRMMModel, default_model_path
+        from rmm_guardians.lrmm.model import LRMMModel, default_model_path
 
         model = LRMMModel.load(args.model or default_model_path("Dubins3DMaze-v0"), env_id="Dubins3DMaze-v0")
         risk = model.predict(obs)
@@ -94,7 +94,7 @@ def quadrisk(args: argparse.Namespace) -> int:
     import matplotlib.pyplot as plt
     import pybullet as p
 
-    from guardians.lrmm.model import LRMMModel, default_model_path
+    from rmm_guardians.lrmm.model import LRMMModel, default_model_path
 
     env = gym.make("QuadrotorRoom-v0", render_mode="rgb_array").unwrapped
     env.reset(seed=args.seed, options={"room": {"wall_height": 3.0}})
