@@ -26,8 +26,16 @@ _NPY_NO_AVX2 = "X86_V3 " + _NPY_NO_AVX512
 
 #: every environment variable that changes which arithmetic a process runs; ``run_under`` sets
 #: those a setting names and clears the rest
-_ARITH_VARIABLES = ("OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE", "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES",
-                    "NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES", "GLIBC_TUNABLES", "ATEN_CPU_CAPABILITY")
+_ARITH_VARIABLES = (
+    "OPENBLAS_CORETYPE",
+    "OPENBLAS_L2_SIZE",
+    "NUMBA_CPU_NAME",
+    "NUMBA_CPU_FEATURES",
+    "NPY_DISABLE_CPU_FEATURES",
+    "NPY_ENABLE_CPU_FEATURES",
+    "GLIBC_TUNABLES",
+    "ATEN_CPU_CAPABILITY",
+)
 
 
 def arith_settings(host_flags: set[str] | None = None) -> list[dict]:
@@ -37,10 +45,12 @@ def arith_settings(host_flags: set[str] | None = None) -> list[dict]:
             host_flags = set(Path("/proc/cpuinfo").read_text().split())
         except OSError:
             host_flags = set()
-    out = [{"OPENBLAS_CORETYPE": "Prescott", "NUMBA_CPU_NAME": "generic", "NPY_DISABLE_CPU_FEATURES": _NPY_NO_AVX2},
-           {"OPENBLAS_CORETYPE": "Haswell", "NUMBA_CPU_NAME": "generic", "NPY_DISABLE_CPU_FEATURES": _NPY_NO_AVX512},
-           {"OPENBLAS_CORETYPE": "Haswell", "NUMBA_CPU_NAME": None, "NPY_DISABLE_CPU_FEATURES": _NPY_NO_AVX512},
-           {"OPENBLAS_CORETYPE": None, "NUMBA_CPU_NAME": None, "NPY_DISABLE_CPU_FEATURES": None}]  # the host's own
+    out = [
+        {"OPENBLAS_CORETYPE": "Prescott", "NUMBA_CPU_NAME": "generic", "NPY_DISABLE_CPU_FEATURES": _NPY_NO_AVX2},
+        {"OPENBLAS_CORETYPE": "Haswell", "NUMBA_CPU_NAME": "generic", "NPY_DISABLE_CPU_FEATURES": _NPY_NO_AVX512},
+        {"OPENBLAS_CORETYPE": "Haswell", "NUMBA_CPU_NAME": None, "NPY_DISABLE_CPU_FEATURES": _NPY_NO_AVX512},
+        {"OPENBLAS_CORETYPE": None, "NUMBA_CPU_NAME": None, "NPY_DISABLE_CPU_FEATURES": None},
+    ]  # the host's own
     if "avx512f" in host_flags:
         out.insert(3, {"OPENBLAS_CORETYPE": "SkylakeX", "NUMBA_CPU_NAME": None, "NPY_DISABLE_CPU_FEATURES": None})
     return out
@@ -49,8 +59,12 @@ def arith_settings(host_flags: set[str] | None = None) -> list[dict]:
 #: a CPU without FMA (before Intel Haswell / AMD Piledriver): the C library's exp, log, sin,
 #: cos, atan2, ... then run other code (glibc picks FMA variants per CPU).  Not bit-identical;
 #: ``arith --pre-fma`` measures how far results move (docs/reproduction.md).
-PRE_FMA = {"OPENBLAS_CORETYPE": "Prescott", "NUMBA_CPU_NAME": "generic", "NPY_DISABLE_CPU_FEATURES": _NPY_NO_AVX2,
-           "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-FMA4,-AVX512F"}
+PRE_FMA = {
+    "OPENBLAS_CORETYPE": "Prescott",
+    "NUMBA_CPU_NAME": "generic",
+    "NPY_DISABLE_CPU_FEATURES": _NPY_NO_AVX2,
+    "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-FMA4,-AVX512F",
+}
 
 
 def describe(setting: dict) -> str:
@@ -66,10 +80,18 @@ def run_under(setting: dict, size: str, timeout: float | None = None) -> dict:
     env["PYTHONPATH"] = os.pathsep.join([str(root), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "fingerprint.json"
-        proc = subprocess.run([sys.executable, str(script), "record", str(out), "--size", size],
-                              env=env, capture_output=True, text=True, timeout=timeout, cwd=root)
+        proc = subprocess.run(
+            [sys.executable, str(script), "record", str(out), "--size", size],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            cwd=root,
+        )
         if proc.returncode != 0:
-            raise RuntimeError(f"fingerprint under {describe(setting)} failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
+            raise RuntimeError(
+                f"fingerprint under {describe(setting)} failed ({proc.returncode}):\n{proc.stderr[-3000:]}"
+            )
         return json.loads(out.read_text())
 
 

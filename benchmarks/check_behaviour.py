@@ -47,25 +47,66 @@ _TIMING = _MEASURED | {"finished", "run_key", "invocation", "config"}
 # Sizes: "full" is the refactor check (about two minutes on one core), "quick" the cheap one the
 # default test suite runs under several machines' arithmetic (tests/test_reproducibility.py).
 SIZES = {
-    "full": {"episodes": 32, "hj_episodes": 4, "other_episodes": 8, "steps": 200, "states": 16, "seeds": 20,
-             "configs": 2, "samples": 8},
-    "quick": {"episodes": 3, "hj_episodes": 0, "other_episodes": 1, "steps": 40, "states": 4, "seeds": 4,
-              "configs": 1, "samples": 4},
+    "full": {
+        "episodes": 32,
+        "hj_episodes": 4,
+        "other_episodes": 8,
+        "steps": 200,
+        "states": 16,
+        "seeds": 20,
+        "configs": 2,
+        "samples": 8,
+    },
+    "quick": {
+        "episodes": 3,
+        "hj_episodes": 0,
+        "other_episodes": 1,
+        "steps": 40,
+        "states": 4,
+        "seeds": 4,
+        "configs": 1,
+        "samples": 4,
+    },
 }
 AGENTS = ("inactive", "random", "brakes", "lrmm", "lrmm-paper", "cbf", "cbf-paper")
 HJ_AGENTS = ("hj", "hj-paper")
 # the other systems' parallel-autonomy envs and the guardians that apply to each
-OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "brakes", "lrmm", "cbf", "hj"),
-               "QuadrotorRoomParallel-v0": ("inactive", "brakes", "lrmm", "cbf"),
-               "CartPoleParallel-v0": ("inactive", "brakes", "lrmm"), "InvertedPendulumParallel-v0": ("inactive", "brakes", "lrmm")}
-QUICK_OTHER_BENCH = {"Dubins3DMazeParallel-v0": ("inactive", "lrmm", "cbf"),
-                     "QuadrotorRoomParallel-v0": ("inactive", "lrmm", "cbf"),
-                     "CartPoleParallel-v0": ("inactive", "lrmm"), "InvertedPendulumParallel-v0": ("inactive", "lrmm")}
-ENVS = ("Dubins4DGuarded-v0", "Dubins4DParallel-v0", "Dubins4DMapGuarded-v0", "Dubins4DMapParallel-v0", "Dubins3DMaze-v0",
-        "Dubins3DMazeGuarded-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoom-v0", "QuadrotorRoomGuarded-v0",
-        "QuadrotorRoomParallel-v0", "CartPoleGuarded-v0", "InvertedPendulumGuarded-v0")
-LABELLED = {"Dubins4DGuarded-v0": {}, "Dubins4DMapGuarded-v0": {}, "Dubins3DMaze-v0": {}, "Dubins3DMazeGuarded-v0": {},
-            "QuadrotorRoom-v0": {}, "QuadrotorRoomGuarded-v0": {}, "CartPoleGuarded-v0": {}, "InvertedPendulumGuarded-v0": {}}
+OTHER_BENCH = {
+    "Dubins3DMazeParallel-v0": ("inactive", "brakes", "lrmm", "cbf", "hj"),
+    "QuadrotorRoomParallel-v0": ("inactive", "brakes", "lrmm", "cbf"),
+    "CartPoleParallel-v0": ("inactive", "brakes", "lrmm"),
+    "InvertedPendulumParallel-v0": ("inactive", "brakes", "lrmm"),
+}
+QUICK_OTHER_BENCH = {
+    "Dubins3DMazeParallel-v0": ("inactive", "lrmm", "cbf"),
+    "QuadrotorRoomParallel-v0": ("inactive", "lrmm", "cbf"),
+    "CartPoleParallel-v0": ("inactive", "lrmm"),
+    "InvertedPendulumParallel-v0": ("inactive", "lrmm"),
+}
+ENVS = (
+    "Dubins4DGuarded-v0",
+    "Dubins4DParallel-v0",
+    "Dubins4DMapGuarded-v0",
+    "Dubins4DMapParallel-v0",
+    "Dubins3DMaze-v0",
+    "Dubins3DMazeGuarded-v0",
+    "Dubins3DMazeParallel-v0",
+    "QuadrotorRoom-v0",
+    "QuadrotorRoomGuarded-v0",
+    "QuadrotorRoomParallel-v0",
+    "CartPoleGuarded-v0",
+    "InvertedPendulumGuarded-v0",
+)
+LABELLED = {
+    "Dubins4DGuarded-v0": {},
+    "Dubins4DMapGuarded-v0": {},
+    "Dubins3DMaze-v0": {},
+    "Dubins3DMazeGuarded-v0": {},
+    "QuadrotorRoom-v0": {},
+    "QuadrotorRoomGuarded-v0": {},
+    "CartPoleGuarded-v0": {},
+    "InvertedPendulumGuarded-v0": {},
+}
 DATASETS = ("Dubins4DGuarded-v0", "Dubins3DMazeGuarded-v0", "QuadrotorRoomGuarded-v0")
 
 
@@ -127,8 +168,25 @@ def _bench(tmp: str, env_id: str, agents, n: int, extra=()) -> None:
 
     from rmm_bench.cli import main as bench_main
 
-    argv = ["--env", env_id, "--agent", ",".join(agents), "--episodes", str(n), "--seed", "0", "--clock", "fixed:1",
-            "--out", tmp, "--workers", "1", "--no-progress", "--no-figure", *extra]
+    argv = [
+        "--env",
+        env_id,
+        "--agent",
+        ",".join(agents),
+        "--episodes",
+        str(n),
+        "--seed",
+        "0",
+        "--clock",
+        "fixed:1",
+        "--out",
+        tmp,
+        "--workers",
+        "1",
+        "--no-progress",
+        "--no-figure",
+        *extra,
+    ]
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
@@ -136,7 +194,9 @@ def _bench(tmp: str, env_id: str, agents, n: int, extra=()) -> None:
         except SystemExit as e:
             rc = e.code
     if rc not in (0, None):
-        raise SystemExit(f"rmm-bench {' '.join(argv)} failed ({rc}):\n{out.getvalue()[-2000:]}\n{err.getvalue()[-2000:]}")
+        raise SystemExit(
+            f"rmm-bench {' '.join(argv)} failed ({rc}):\n{out.getvalue()[-2000:]}\n{err.getvalue()[-2000:]}"
+        )
 
 
 def bench_fingerprint(episodes: int, hj_episodes: int, other_episodes: int = 0, other=OTHER_BENCH) -> dict:
@@ -147,11 +207,19 @@ def bench_fingerprint(episodes: int, hj_episodes: int, other_episodes: int = 0, 
     out: dict = {}
     runs = [("Dubins4DParallel-v0", AGENTS, episodes, ())]
     if hj_episodes:  # solve afresh: a cached value function would hide a change of the solver
-        runs.append(("Dubins4DParallel-v0", HJ_AGENTS, hj_episodes,
-                     ("--agent-opt", "hj.cache=false", "--agent-opt", "hj-paper.cache=false")))
+        runs.append(
+            (
+                "Dubins4DParallel-v0",
+                HJ_AGENTS,
+                hj_episodes,
+                ("--agent-opt", "hj.cache=false", "--agent-opt", "hj-paper.cache=false"),
+            )
+        )
     if other_episodes:
-        runs += [(env_id, agents, other_episodes, ("--agent-opt", "hj.cache=false") if "hj" in agents else ())
-                 for env_id, agents in other.items()]
+        runs += [
+            (env_id, agents, other_episodes, ("--agent-opt", "hj.cache=false") if "hj" in agents else ())
+            for env_id, agents in other.items()
+        ]
     for env_id, agents, n, extra in runs:
         with tempfile.TemporaryDirectory() as tmp:
             _bench(tmp, env_id, agents, n, extra)
@@ -250,16 +318,27 @@ def dataset_fingerprint(configs: int, samples: int) -> dict:
 
     out = {}
     for env_id in DATASETS:
-        cfg = DatagenConfig(env_id=env_id, configs=configs, samples_per_config=samples, seed=11, branches=4, depth=2,
-                            horizon=0.5, n_steps=4, configs_per_shard=1)
+        cfg = DatagenConfig(
+            env_id=env_id,
+            configs=configs,
+            samples_per_config=samples,
+            seed=11,
+            branches=4,
+            depth=2,
+            horizon=0.5,
+            n_steps=4,
+            configs_per_shard=1,
+        )
         with tempfile.TemporaryDirectory() as tmp:
             manifest = generate(cfg, tmp, workers=1, progress=False)
             shards = sorted(Path(tmp).glob("shard-*.parquet"))
             import pyarrow.parquet as pq
 
             cols = [pq.read_table(p).to_pydict() for p in shards]
-        out[stored_id(env_id)] = {"content": _digest(*[np.asarray(v, dtype=object).astype(str) for c in cols for v in c.values()]),
-                                  "rows": manifest.get("n_rows")}
+        out[stored_id(env_id)] = {
+            "content": _digest(*[np.asarray(v, dtype=object).astype(str) for c in cols for v in c.values()]),
+            "rows": manifest.get("n_rows"),
+        }
     return out
 
 
@@ -279,18 +358,23 @@ def hj_fingerprint() -> dict:
 def fingerprint(episodes: int, hj_episodes: int, size: str | None = None) -> dict:
     sz = dict(SIZES[size or "full"], episodes=episodes, hj_episodes=hj_episodes)
     other = QUICK_OTHER_BENCH if size == "quick" else OTHER_BENCH
-    return {"bench": bench_fingerprint(sz["episodes"], sz["hj_episodes"], sz["other_episodes"], other),
-            "envs": env_fingerprint(sz["steps"]), "worlds": world_fingerprint(sz["seeds"]),
-            "labels": label_fingerprint(sz["states"]), "datasets": dataset_fingerprint(sz["configs"], sz["samples"]),
-            "hj": hj_fingerprint(), "sizes": {**sz, "size": size or "full"}, "versions": versions(),
-            "applied": applied()}
+    return {
+        "bench": bench_fingerprint(sz["episodes"], sz["hj_episodes"], sz["other_episodes"], other),
+        "envs": env_fingerprint(sz["steps"]),
+        "worlds": world_fingerprint(sz["seeds"]),
+        "labels": label_fingerprint(sz["states"]),
+        "datasets": dataset_fingerprint(sz["configs"], sz["samples"]),
+        "hj": hj_fingerprint(),
+        "sizes": {**sz, "size": size or "full"},
+        "versions": versions(),
+        "applied": applied(),
+    }
 
 
 def versions() -> dict:
     """What the bits are promised for: the versions of the packages that compute them."""
-    from importlib.metadata import version
-
     import platform
+    from importlib.metadata import version
 
     out = {"python": ".".join(map(str, sys.version_info[:3])), "libc": " ".join(platform.libc_ver())}
     for pkg in ("numpy", "numba", "scipy", "osqp", "pybullet", "pymunk", "pyarrow"):
@@ -318,7 +402,9 @@ def compare(old: dict, new: dict) -> list[str]:
             elif a[key] != b[key]:
                 if isinstance(a[key], dict):
                     fields = sorted(k for k in set(a[key]) | set(b[key]) if a[key].get(k) != b[key].get(k))
-                    diffs.append(f"{section}: {key}: " + ", ".join(f"{f} {a[key].get(f)!r} -> {b[key].get(f)!r}" for f in fields))
+                    diffs.append(
+                        f"{section}: {key}: " + ", ".join(f"{f} {a[key].get(f)!r} -> {b[key].get(f)!r}" for f in fields)
+                    )
                 else:
                     diffs.append(f"{section}: {key}: {a[key]} -> {b[key]}")
     return diffs
@@ -326,15 +412,21 @@ def compare(old: dict, new: dict) -> list[str]:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("mode", choices=["record", "compare", "print", "arith"],
-                   help="record FILE, compare FILE, print (JSON to stdout), or arith: the same fingerprint under "
-                        "several machines' arithmetic (BLAS kernel, numba CPU, numpy SIMD dispatch), compared")
+    p.add_argument(
+        "mode",
+        choices=["record", "compare", "print", "arith"],
+        help="record FILE, compare FILE, print (JSON to stdout), or arith: the same fingerprint under "
+        "several machines' arithmetic (BLAS kernel, numba CPU, numpy SIMD dispatch), compared",
+    )
     p.add_argument("file", type=Path, nargs="?")
     p.add_argument("--size", choices=sorted(SIZES), default="full", help="what to compute (default: %(default)s)")
     p.add_argument("--episodes", type=int, default=None, help="Dubins4D benchmark episodes per agent")
     p.add_argument("--hj-episodes", type=int, default=None, help="episodes per HJ agent, 0 to skip")
-    p.add_argument("--pre-fma", action="store_true",
-                   help="arith: also a CPU without FMA (the C library's other code; known to differ, for measuring)")
+    p.add_argument(
+        "--pre-fma",
+        action="store_true",
+        help="arith: also a CPU without FMA (the C library's other code; known to differ, for measuring)",
+    )
     p.add_argument("--show", type=int, default=1, help="arith: differences listed per setting (default: %(default)s)")
     args = p.parse_args(argv)
     sz = SIZES[args.size]
@@ -353,17 +445,21 @@ def main(argv=None) -> int:
         for s in settings[1:]:
             fp = run_under(s, args.size)
             diffs = compare(ref, fp)
-            print(f"{describe(s)} (ran under {fp['applied']}): "
-                  + ("same bits" if not diffs else f"{len(diffs)} DIFFER, first: {diffs[0]}"))
-            for d in diffs[1:args.show]:
+            print(
+                f"{describe(s)} (ran under {fp['applied']}): "
+                + ("same bits" if not diffs else f"{len(diffs)} DIFFER, first: {diffs[0]}")
+            )
+            for d in diffs[1 : args.show]:
                 print(f"    {d}")
             bad += bool(diffs)
         return 1 if bad else 0
     if args.mode == "record":
         fp = fingerprint(episodes, hj_episodes, args.size)
         args.file.write_text(json.dumps(fp, indent=1, sort_keys=True))
-        print(f"recorded {len(fp['bench'])} episodes, {len(fp['envs'])} env rollouts, {len(fp['labels'])} label sets, "
-              f"{len(fp['worlds'])} world sets, {len(fp['datasets'])} datasets -> {args.file}")
+        print(
+            f"recorded {len(fp['bench'])} episodes, {len(fp['envs'])} env rollouts, {len(fp['labels'])} label sets, "
+            f"{len(fp['worlds'])} world sets, {len(fp['datasets'])} datasets -> {args.file}"
+        )
         return 0
     old = json.loads(args.file.read_text())
     sizes = old.get("sizes", {})
@@ -371,8 +467,10 @@ def main(argv=None) -> int:
     diffs = compare(old, new)
     for d in diffs:
         print(d)
-    print(f"{len(diffs)} differences in {len(new['bench'])} episodes, {len(new['envs'])} env rollouts, "
-          f"{len(new['labels'])} label sets")
+    print(
+        f"{len(diffs)} differences in {len(new['bench'])} episodes, {len(new['envs'])} env rollouts, "
+        f"{len(new['labels'])} label sets"
+    )
     return 1 if diffs else 0
 
 

@@ -37,12 +37,25 @@ def _row(out: Path, agent: str) -> dict:
     raise RuntimeError(f"{out / 'table_I.csv'} has no row for agent {agent!r}")
 
 
-def run_point(agent: str, opts: list[str], out: Path, episodes: int, seed: int, clock: str, workers: int | None) -> dict:
+def run_point(
+    agent: str, opts: list[str], out: Path, episodes: int, seed: int, clock: str, workers: int | None
+) -> dict:
     """Run ``rmm-bench`` for one agent and options; return its Table I row (from table_I.csv)."""
     from rmm_bench.cli import main as bench
 
-    argv = ["--agent", agent, "--episodes", str(episodes), "--seed", str(seed), "--clock", clock,
-            "--out", str(out), "--no-progress"]
+    argv = [
+        "--agent",
+        agent,
+        "--episodes",
+        str(episodes),
+        "--seed",
+        str(seed),
+        "--clock",
+        clock,
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
     for o in opts:
         argv += ["--agent-opt", o]
     if workers:
@@ -68,12 +81,23 @@ def plot(points: list[tuple[str, dict]], default: str | None, reference: dict | 
     xs = [p["intervention_mean"] for _, p in points]
     ys = [p["collision_mean"] for _, p in points]
     ax.plot(xs, ys, "-o", color="tab:blue", ms=4, lw=1)
-    for (v, p) in points:
-        ax.annotate(v, (p["intervention_mean"], p["collision_mean"]), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    for v, p in points:
+        ax.annotate(
+            v, (p["intervention_mean"], p["collision_mean"]), textcoords="offset points", xytext=(4, 4), fontsize=7
+        )
         if v == default:
-            ax.plot([p["intervention_mean"]], [p["collision_mean"]], "*", color="tab:red", ms=14, label=f"default ({v})")
+            ax.plot(
+                [p["intervention_mean"]], [p["collision_mean"]], "*", color="tab:red", ms=14, label=f"default ({v})"
+            )
     if reference is not None:
-        ax.plot([reference["intervention_mean"]], [reference["collision_mean"]], "s", color="grey", ms=6, label="driver alone")
+        ax.plot(
+            [reference["intervention_mean"]],
+            [reference["collision_mean"]],
+            "s",
+            color="grey",
+            ms=6,
+            label="driver alone",
+        )
     ax.set_xlim(left=-1)  # the driver alone sits at 0
     ax.set_ylim(bottom=0)
     ax.set_xlabel("intervention [% sim time]")
@@ -87,13 +111,20 @@ def plot(points: list[tuple[str, dict]], default: str | None, reference: dict | 
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--agent", required=True, help="guardian name (e.g. lrmm, hj, cbf)")
     p.add_argument("--knob", required=True, help="the constructor argument to sweep (e.g. threshold)")
     p.add_argument("--values", required=True, help="comma-separated values, each parsed as JSON")
     p.add_argument("--default", default=None, help="the guardian's default value of the knob (marked in the figure)")
-    p.add_argument("--agent-opt", action="append", default=[], metavar="AGENT.KEY=VALUE",
-                   help="fixed options passed to every run (repeatable)")
+    p.add_argument(
+        "--agent-opt",
+        action="append",
+        default=[],
+        metavar="AGENT.KEY=VALUE",
+        help="fixed options passed to every run (repeatable)",
+    )
     p.add_argument("--episodes", type=int, default=256)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--clock", default="fixed:1", help="decision clock of every run (default fixed:1, reproducible)")
@@ -129,24 +160,37 @@ def main(argv: list[str] | None = None) -> int:
     points = []
     for v in values:
         opts = list(args.agent_opt) + [f"{args.agent}.{args.knob}={json.dumps(v)}"]
-        row = run_point(args.agent, opts, out / tag / f"{args.knob}={_label(v)}", args.episodes, args.seed, args.clock, args.workers)
+        row = run_point(
+            args.agent, opts, out / tag / f"{args.knob}={_label(v)}", args.episodes, args.seed, args.clock, args.workers
+        )
         points.append((_label(v), row))
-    reference = None if args.no_reference else run_point("inactive", [], out / tag / "inactive", args.episodes, args.seed,
-                                                            args.clock, args.workers)
+    reference = (
+        None
+        if args.no_reference
+        else run_point("inactive", [], out / tag / "inactive", args.episodes, args.seed, args.clock, args.workers)
+    )
     cmd = "python -m benchmarks.knob_sweep " + " ".join(argv if argv is not None else sys.argv[1:])
-    lines = [f"{args.agent}: {args.knob} sweep, {args.episodes} episodes, seed {args.seed}, clock {args.clock}", "",
-             f"Command: `{cmd}`", "",
-             f"| {args.knob} | Success [%] | Collision [%] | Timeout [%] | Intervention [% sim time] |",
-             "|---|---|---|---|---|"]
+    lines = [
+        f"{args.agent}: {args.knob} sweep, {args.episodes} episodes, seed {args.seed}, clock {args.clock}",
+        "",
+        f"Command: `{cmd}`",
+        "",
+        f"| {args.knob} | Success [%] | Collision [%] | Timeout [%] | Intervention [% sim time] |",
+        "|---|---|---|---|---|",
+    ]
     rows = points + ([("driver alone (inactive)", reference)] if reference else [])
     for v, p in rows:
         mark = " (default)" if v == default else ""
-        lines.append(f"| {v}{mark} | {p['success_mean']:.1f} ± {p['success_std']:.1f} | {p['collision_mean']:.1f} ± "
-                     f"{p['collision_std']:.1f} | {p['timeout_mean']:.1f} ± {p['timeout_std']:.1f} | "
-                     f"{p['intervention_mean']:.1f} ± {p['intervention_std']:.1f} |")
+        lines.append(
+            f"| {v}{mark} | {p['success_mean']:.1f} ± {p['success_std']:.1f} | {p['collision_mean']:.1f} ± "
+            f"{p['collision_std']:.1f} | {p['timeout_mean']:.1f} ± {p['timeout_std']:.1f} | "
+            f"{p['intervention_mean']:.1f} ± {p['intervention_std']:.1f} |"
+        )
     out.mkdir(parents=True, exist_ok=True)
     (out / f"{tag}.md").write_text("\n".join(lines) + "\n")
-    plot(points, default, reference, f"{args.agent}: collisions vs interventions across {args.knob}", out / f"{tag}.png")
+    plot(
+        points, default, reference, f"{args.agent}: collisions vs interventions across {args.knob}", out / f"{tag}.png"
+    )
     print("\n".join(lines))
     print(f"wrote {out / (tag + '.md')} and {out / (tag + '.png')}")
     return 0

@@ -21,8 +21,8 @@ import gymnasium as gym
 import numpy as np
 
 import rmm_envs  # noqa: F401
-from rmm_guardians.lrmm.model import default_model_path, load_model
 from rmm_envs.risk.estimator import RiskEstimator
+from rmm_guardians.lrmm.model import default_model_path, load_model
 
 
 def visited(episodes: int, every: int, seed: int):
@@ -60,18 +60,31 @@ def main(argv=None) -> None:
     rng = np.random.default_rng(args.seed)
     labels, preds, doomed = [], [], []
     for states, obs, scene, dm in visited(args.episodes, args.every, args.seed):
-        est = RiskEstimator(scene, branches=lab["branches"], depth=lab["depth"], horizon=lab["horizon"],
-                            n_steps=lab["n_steps"], metric=lab["metric"], leaf=lab["leaf"])
+        est = RiskEstimator(
+            scene,
+            branches=lab["branches"],
+            depth=lab["depth"],
+            horizon=lab["horizon"],
+            n_steps=lab["n_steps"],
+            metric=lab["metric"],
+            leaf=lab["leaf"],
+        )
         labels.append(est.estimate(states, rng).risk)
         preds.append(np.atleast_1d(model.predict(obs[:, :8].astype(float))))
         doomed.append(dm)
     y, f, d = np.concatenate(labels), np.concatenate(preds), np.concatenate(doomed)
     const = np.abs(y - y.mean()).mean()
-    print(f"{y.size} visited poses from {args.episodes} driver-alone episodes (seeds {args.seed}-{args.seed + args.episodes - 1})")
-    print(f"labels: mean {y.mean():.3f}, std {y.std():.3f}; model MAE {np.abs(y - f).mean():.4f} "
-          f"(constant predictor {const:.4f}, ratio {np.abs(y - f).mean() / const:.2f})")
-    print(f"last 2 s before a collision ({d.sum()} poses): label {y[d].mean():.3f}, model {f[d].mean():.3f}; "
-          f"other poses: label {y[~d].mean():.3f}, model {f[~d].mean():.3f}")
+    print(
+        f"{y.size} visited poses from {args.episodes} driver-alone episodes (seeds {args.seed}-{args.seed + args.episodes - 1})"
+    )
+    print(
+        f"labels: mean {y.mean():.3f}, std {y.std():.3f}; model MAE {np.abs(y - f).mean():.4f} "
+        f"(constant predictor {const:.4f}, ratio {np.abs(y - f).mean() / const:.2f})"
+    )
+    print(
+        f"last 2 s before a collision ({d.sum()} poses): label {y[d].mean():.3f}, model {f[d].mean():.3f}; "
+        f"other poses: label {y[~d].mean():.3f}, model {f[~d].mean():.3f}"
+    )
 
 
 if __name__ == "__main__":

@@ -62,24 +62,39 @@ def measure(env_id: str, labels: int, loop_labels: int, repeats: int, seed: int 
     same = few.shape[0] / statistics.median(times)
     if np.max(np.abs(r_slow - r_check)) > 1e-12:
         raise AssertionError(f"{env_id}: batched and step-by-step labels differ: {r_check} vs {r_slow}")
-    return {"env": env_id, "horizon": kw["horizon"], "batched_labels_per_s": fast, "batched_same_per_s": same,
-            "loop_labels_per_s": slow, "ratio": same / slow, "mean_risk": float(np.mean(r_fast)),
-            "mean_risk_same": float(np.mean(r_slow))}
+    return {
+        "env": env_id,
+        "horizon": kw["horizon"],
+        "batched_labels_per_s": fast,
+        "batched_same_per_s": same,
+        "loop_labels_per_s": slow,
+        "ratio": same / slow,
+        "mean_risk": float(np.mean(r_fast)),
+        "mean_risk_same": float(np.mean(r_slow)),
+    }
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--labels", type=int, default=64, help="states labelled by the batched scene (default: %(default)s)")
-    p.add_argument("--loop-labels", type=int, default=8, help="states labelled by the step-by-step loop (default: %(default)s)")
-    p.add_argument("--repeats", type=int, default=3, help="runs of the batched scene, median taken (default: %(default)s)")
+    p.add_argument(
+        "--loop-labels", type=int, default=8, help="states labelled by the step-by-step loop (default: %(default)s)"
+    )
+    p.add_argument(
+        "--repeats", type=int, default=3, help="runs of the batched scene, median taken (default: %(default)s)"
+    )
     p.add_argument("--envs", nargs="+", default=["CartPole-v1", "InvertedPendulum-v5"])
     args = p.parse_args(argv)
-    print(f"{'env':26s} {'t (s)':>6s} {'batched/s (all)':>15s} {'mean risk':>9s} | {'batched/s':>9s} "
-          f"{'loop/s':>8s} {'ratio':>6s} {'mean risk':>9s} (same states)")
+    print(
+        f"{'env':26s} {'t (s)':>6s} {'batched/s (all)':>15s} {'mean risk':>9s} | {'batched/s':>9s} "
+        f"{'loop/s':>8s} {'ratio':>6s} {'mean risk':>9s} (same states)"
+    )
     for env_id in args.envs:
         r = measure(env_id, args.labels, args.loop_labels, args.repeats)
-        print(f"{r['env']:26s} {r['horizon']:6.3f} {r['batched_labels_per_s']:15.1f} {r['mean_risk']:9.3f} | "
-              f"{r['batched_same_per_s']:9.1f} {r['loop_labels_per_s']:8.2f} {r['ratio']:6.1f} {r['mean_risk_same']:9.3f}")
+        print(
+            f"{r['env']:26s} {r['horizon']:6.3f} {r['batched_labels_per_s']:15.1f} {r['mean_risk']:9.3f} | "
+            f"{r['batched_same_per_s']:9.1f} {r['loop_labels_per_s']:8.2f} {r['ratio']:6.1f} {r['mean_risk_same']:9.3f}"
+        )
     return 0
 
 

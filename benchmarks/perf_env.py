@@ -20,11 +20,12 @@ import rmm_envs  # noqa: F401
 from benchmarks._timing import fmt_us, median_time
 from rmm_envs.drivers.dubins4d import CLFDriver
 from rmm_envs.systems.dubins4d import Dubins4D
-from rmm_envs.worlds.circles import CircleWorld, ray_cast_numpy, points_in_circles, ray_cast
+from rmm_envs.worlds.circles import CircleWorld, points_in_circles, ray_cast, ray_cast_numpy
 
 
-
-def steps_per_second(env_id: str = "Dubins4DGuarded-v0", episodes: int = 10, repeats: int = 5, **env_kwargs) -> list[float]:
+def steps_per_second(
+    env_id: str = "Dubins4DGuarded-v0", episodes: int = 10, repeats: int = 5, **env_kwargs
+) -> list[float]:
     """Steps per second of ``env_id`` driven by the inactive guardian, one value per repeat
     (the same ``episodes`` seeded episodes each time)."""
     env = gym.make(env_id, **env_kwargs)
@@ -54,7 +55,9 @@ def profile_step() -> dict[str, float]:
     goal = env.scene.goal
     sys_ = env.system
     u = env.driver.control(st, goal)
-    osqp_driver = CLFDriver(env.driver.lim[:2], env.driver.lim[2:4], env.driver.lim[4:], env.driver.params, solver="osqp")
+    osqp_driver = CLFDriver(
+        env.driver.lim[:2], env.driver.lim[2:4], env.driver.lim[4:], env.driver.params, solver="osqp"
+    )
     parts = {
         "driver QP (closed form)": median_time(lambda: env.driver.control(st, goal), number=500),
         "driver QP (OSQP)": median_time(lambda: osqp_driver.control(st, goal), number=500),
@@ -100,8 +103,10 @@ def main() -> None:
     circles = CircleWorld.generate(rng)
     print("Dubins4DGuarded-v0, driver in control (inactive guardian), one process")
     rates = steps_per_second()
-    print(f"  steps/s: median {statistics.median(rates):8.0f} over {len(rates)} runs "
-          f"(min {min(rates):.0f}, max {max(rates):.0f}); target >= 5,000")
+    print(
+        f"  steps/s: median {statistics.median(rates):8.0f} over {len(rates)} runs "
+        f"(min {min(rates):.0f}, max {max(rates):.0f}); target >= 5,000"
+    )
     parts = profile_step()
     for k, v in parts.items():
         print(f"  {k:24s} {fmt_us(v)} per step")
@@ -110,16 +115,20 @@ def main() -> None:
     t_ours = median_time(lambda: sysm.propagate(st[None], u, 0.1, 16), number=300)
     t_np = median_time(lambda: sysm._states_at_numpy(st[None], u, times), number=300)
     t_ode = median_time(lambda: _odeint_step(st, (0.1, 0.2)), number=300)
-    print(f"  propagation, one 16-point path: ours (compiled) {fmt_us(t_ours)}, same formulas as numpy array code "
-          f"{fmt_us(t_np)}, odeint (original) {fmt_us(t_ode)}: {t_ode / t_ours:.1f}x odeint")
+    print(
+        f"  propagation, one 16-point path: ours (compiled) {fmt_us(t_ours)}, same formulas as numpy array code "
+        f"{fmt_us(t_np)}, odeint (original) {fmt_us(t_ode)}: {t_ode / t_ours:.1f}x odeint"
+    )
 
     print("Rays (12 x 10 m, 5 circles), one state")
     o, h = np.array([[0.5, -1.0]]), np.array([0.3])
     t_ray = median_time(lambda: ray_cast(o, h, circles), number=2000)
     t_loop = median_time(lambda: _loop_rays(0.5, -1.0, 0.3, circles), number=2000)
     t_ray_np = median_time(lambda: ray_cast_numpy(o, h, circles, 12, 10.0), number=2000)
-    print(f"  ours (compiled for a few states) {fmt_us(t_ray)} (target <= 20 us); the same formulas as numpy "
-          f"array code {fmt_us(t_ray_np)}; python loop {fmt_us(t_loop)}")
+    print(
+        f"  ours (compiled for a few states) {fmt_us(t_ray)} (target <= 20 us); the same formulas as numpy "
+        f"array code {fmt_us(t_ray_np)}; python loop {fmt_us(t_loop)}"
+    )
     pts = rng.uniform(-10, 10, (10_000, 2))
     t_pts = median_time(lambda: points_in_circles(pts, circles), number=50)
     print(f"Point-in-circle, 10,000 points x 5 circles: {t_pts * 1e3:.3f} ms (target <= 1 ms)")

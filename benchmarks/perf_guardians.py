@@ -22,10 +22,13 @@ import numpy as np
 import rmm_envs  # noqa: F401
 from rmm_guardians import available_guardians, make_guardian
 
-
 #: ``(env id, guardian, decisions)`` timed after the Dubins4D ones (the blocking env of each system).
-OTHER_SYSTEMS = [("QuadrotorRoomGuarded-v0", "cbf", 1000), ("QuadrotorRoomGuarded-v0", "lrmm", 1000),
-                 ("Dubins3DMazeGuarded-v0", "lrmm", 1000), ("Dubins3DMazeGuarded-v0", "cbf", 1000)]
+OTHER_SYSTEMS = [
+    ("QuadrotorRoomGuarded-v0", "cbf", 1000),
+    ("QuadrotorRoomGuarded-v0", "lrmm", 1000),
+    ("Dubins3DMazeGuarded-v0", "lrmm", 1000),
+    ("Dubins3DMazeGuarded-v0", "cbf", 1000),
+]
 
 
 def decision_times(guardian, env_id="Dubins4DGuarded-v0", steps=3000, seed=0, cpu: list | None = None) -> list[float]:
@@ -33,8 +36,12 @@ def decision_times(guardian, env_id="Dubins4DGuarded-v0", steps=3000, seed=0, cp
     seconds of each decision are appended to it."""
     env = gym.make(env_id)
     obs, info = env.reset(seed=seed)
-    guardian.reset(seed=seed, observation_space=env.observation_space, action_space=env.action_space,
-                   privileged=env.unwrapped.privileged)
+    guardian.reset(
+        seed=seed,
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        privileged=env.unwrapped.privileged,
+    )
     times = []
     ep = 0
     for _ in range(steps):
@@ -48,8 +55,12 @@ def decision_times(guardian, env_id="Dubins4DGuarded-v0", steps=3000, seed=0, cp
         if te or tr:
             ep += 1
             obs, info = env.reset(seed=seed + ep)
-            guardian.reset(seed=seed + ep, observation_space=env.observation_space, action_space=env.action_space,
-                           privileged=env.unwrapped.privileged)
+            guardian.reset(
+                seed=seed + ep,
+                observation_space=env.observation_space,
+                action_space=env.action_space,
+                privileged=env.unwrapped.privileged,
+            )
     return times
 
 
@@ -80,13 +91,17 @@ def torch_lrmm_time(model, obs, repeats=3000) -> float:
 
 def _row(name: str, wall: list[float], cpu: list[float]) -> str:
     """One line of the table: wall and CPU medians and 90th percentiles, in microseconds."""
-    return (f"  {name:10s} {statistics.median(wall) * 1e6:9.1f} us {np.quantile(wall, 0.9) * 1e6:7.1f} us "
-            f"{statistics.median(cpu) * 1e6:9.1f} us {np.quantile(cpu, 0.9) * 1e6:7.1f} us")
+    return (
+        f"  {name:10s} {statistics.median(wall) * 1e6:9.1f} us {np.quantile(wall, 0.9) * 1e6:7.1f} us "
+        f"{statistics.median(cpu) * 1e6:9.1f} us {np.quantile(cpu, 0.9) * 1e6:7.1f} us"
+    )
 
 
 def main() -> None:
-    print("Guardian decision time (observation in, action out), Dubins4DGuarded-v0, one process; "
-          "targets: lrmm <= 20 us, cbf <= 100 us, hj <= 50 us")
+    print(
+        "Guardian decision time (observation in, action out), Dubins4DGuarded-v0, one process; "
+        "targets: lrmm <= 20 us, cbf <= 100 us, hj <= 50 us"
+    )
     print(f"  {'':10s} {'wall median':>12s} {'wall p90':>10s} {'CPU median':>12s} {'CPU p90':>10s}")
     for name in available_guardians():
         g = make_guardian(name)
@@ -102,8 +117,10 @@ def main() -> None:
     obs = gym.make("Dubins4DGuarded-v0").reset(seed=0)[0]
     t_np = statistics.median(timeit_np(lrmm.model, obs))
     t_torch = torch_lrmm_time(lrmm.model, obs)
-    print(f"LRMM network only: numpy {t_np * 1e6:.1f} us, torch {t_torch * 1e6:.1f} us ({t_torch / t_np:.1f}x); "
-          "the paper reports 2.4 ms per decision; target <= 20 us")
+    print(
+        f"LRMM network only: numpy {t_np * 1e6:.1f} us, torch {t_torch * 1e6:.1f} us ({t_torch / t_np:.1f}x); "
+        "the paper reports 2.4 ms per decision; target <= 20 us"
+    )
 
 
 def timeit_np(model, obs, repeats=3000):

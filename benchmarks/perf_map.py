@@ -64,8 +64,10 @@ def main(argv=None) -> None:
         for name, env in envs.items():
             rates[name].append(cpu_steps_per_second(env, args.episodes))
     for name in runs:
-        print(f"{name:30s} {statistics.median(rates[name]):8.0f} steps per CPU second "
-              f"(median of {args.repeats} runs of {args.episodes} episodes)")
+        print(
+            f"{name:30s} {statistics.median(rates[name]):8.0f} steps per CPU second "
+            f"(median of {args.repeats} runs of {args.episodes} episodes)"
+        )
     base = rates["Dubins4DGuarded-v0"]
     for name in list(runs)[1:]:
         ratio = statistics.median(b / r for b, r in zip(base, rates[name]))
@@ -80,7 +82,9 @@ def main(argv=None) -> None:
         est = RiskEstimator(scene, branches=32, depth=2)
         t[name] = median_time(lambda: est.estimate(states, np.random.default_rng(1)), repeats=3)
         print(f"risk labels of 64 states, {name:20s} {fmt_us(t[name])}")
-    print(f"labelling time ratio pymunk / analytic (same run): {t['circle map (pymunk)'] / t['circles (analytic)']:.1f}x")
+    print(
+        f"labelling time ratio pymunk / analytic (same run): {t['circle map (pymunk)'] / t['circles (analytic)']:.1f}x"
+    )
 
 
 if __name__ == "__main__":

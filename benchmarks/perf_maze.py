@@ -36,13 +36,20 @@ def parts() -> dict[str, float]:
     path = env.system.propagate(st[None], np.array([[0.1]]), 0.11, 8)
     out = np.empty(8)
     return {
-        "rays, compiled": median_time(lambda: maze_rays(m.walls, m.half, m.width, m.height, st[0], st[1], st[2], 8, out), number=500),
+        "rays, compiled": median_time(
+            lambda: maze_rays(m.walls, m.half, m.width, m.height, st[0], st[1], st[2], 8, out), number=500
+        ),
         "rays, numpy Maze.rays": median_time(lambda: m.rays(st[None], 8), number=100),
-        "path contact, compiled": median_time(lambda: maze_path_hit(m.walls, m.half, m.width, m.height, path[0]), number=500),
+        "path contact, compiled": median_time(
+            lambda: maze_path_hit(m.walls, m.half, m.width, m.height, path[0]), number=500
+        ),
         "path contact, numpy Maze.paths_hit": median_time(lambda: m.paths_hit(path), number=100),
-        "path, compiled": median_time(lambda: dubins_path(st[0], st[1], st[2], 10.0, 0.1, 0.11, np.empty((8, 3)), SERIES_COEFFICIENTS),
-                                      number=500),
-        "path, numpy Dubins3D.propagate": median_time(lambda: env.system.propagate(st[None], np.array([[0.1]]), 0.11, 8), number=100),
+        "path, compiled": median_time(
+            lambda: dubins_path(st[0], st[1], st[2], 10.0, 0.1, 0.11, np.empty((8, 3)), SERIES_COEFFICIENTS), number=500
+        ),
+        "path, numpy Dubins3D.propagate": median_time(
+            lambda: env.system.propagate(st[None], np.array([[0.1]]), 0.11, 8), number=100
+        ),
         "driver": median_time(lambda: env.driver.control(st), number=500),
     }
 
@@ -55,7 +62,9 @@ def main(argv=None) -> None:
     rates = {}
     for env_id in ("Dubins3DMazeParallel-v0", "Dubins4DParallel-v0"):
         rates[env_id] = statistics.median(steps_per_second(env_id, args.episodes, args.repeats))
-        print(f"{env_id:26s} inactive guardian, one process: {rates[env_id]:8.0f} steps/s (median of {args.repeats} runs)")
+        print(
+            f"{env_id:26s} inactive guardian, one process: {rates[env_id]:8.0f} steps/s (median of {args.repeats} runs)"
+        )
     print(f"ratio maze / Dubins4D (same run): {rates['Dubins3DMazeParallel-v0'] / rates['Dubins4DParallel-v0']:.2f}")
     for k, v in parts().items():
         print(f"  {k:36s} {fmt_us(v)}")

@@ -62,10 +62,14 @@ def main(argv=None):
         errs.append(err)
         fails.append(pb_any.mean())
     print(f"quadrotor branches vs PyBullet ({args.rooms} rooms x {args.branches} branches, 2 s, 8 points):")
-    print(f"  vs PyBullet's contact at any physics step (what the env terminates on): {100 * np.mean(agree_any):.1f}% "
-          f"of branches agree (target >= 98%); PyBullet fails {100 * np.mean(fails):.0f}% of branches")
-    print(f"  (checked at the same 8 states only: {100 * np.mean(agree8):.1f}%, lower because PyBullet's contact response "
-          "moves the body after a contact, so later states differ)")
+    print(
+        f"  vs PyBullet's contact at any physics step (what the env terminates on): {100 * np.mean(agree_any):.1f}% "
+        f"of branches agree (target >= 98%); PyBullet fails {100 * np.mean(fails):.0f}% of branches"
+    )
+    print(
+        f"  (checked at the same 8 states only: {100 * np.mean(agree8):.1f}%, lower because PyBullet's contact response "
+        "moves the body after a contact, so later states differ)"
+    )
     e = np.concatenate(errs)
     print(f"  position error before the first contact: median {np.median(e):.1e} m, max {e.max():.1e} m")
     # env steps per second: stepping alone, and with the resets that rebuild a room
@@ -81,8 +85,10 @@ def main(argv=None):
             if te or tr:
                 break
         t_step += time.perf_counter() - t0
-    print(f"QuadrotorRoom-v0 steps/s (hover thrust): {n / t_step:.0f} stepping (target >= 2,000), "
-          f"{n / (time.perf_counter() - t_all):.0f} including {seed} resets (each generates and builds a room)")
+    print(
+        f"QuadrotorRoom-v0 steps/s (hover thrust): {n / t_step:.0f} stepping (target >= 2,000), "
+        f"{n / (time.perf_counter() - t_all):.0f} including {seed} resets (each generates and builds a room)"
+    )
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     states = env.sample_states(rng, 64)

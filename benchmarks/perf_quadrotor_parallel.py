@@ -71,14 +71,16 @@ def parts() -> dict[str, float]:
         p.applyExternalTorque(b, -1, (0.0, 0.0, 0.0), p.LINK_FRAME, physicsClientId=c)
         p.stepSimulation(physicsClientId=c)
 
-    out.update({
-        "controller (compiled, one state)": median_time(lambda: command_wrench(s, cmd, k, w), number=1000),
-        "apply thrust and moments, stepSimulation": median_time(physics_step, number=200),
-        "getContactPoints": median_time(lambda: p.getContactPoints(bodyA=b, physicsClientId=c), number=500),
-        "get the state": median_time(env.get_state, number=500),
-        "10 rays": median_time(env.rays, number=200),
-        "room clearance (once per step)": median_time(lambda: env.scene.collision.clearance(s[:3]), number=200),
-    })
+    out.update(
+        {
+            "controller (compiled, one state)": median_time(lambda: command_wrench(s, cmd, k, w), number=1000),
+            "apply thrust and moments, stepSimulation": median_time(physics_step, number=200),
+            "getContactPoints": median_time(lambda: p.getContactPoints(bodyA=b, physicsClientId=c), number=500),
+            "get the state": median_time(env.get_state, number=500),
+            "10 rays": median_time(env.rays, number=200),
+            "room clearance (once per step)": median_time(lambda: env.scene.collision.clearance(s[:3]), number=200),
+        }
+    )
     env.close()
     return out
 
@@ -91,8 +93,10 @@ def main(argv=None) -> None:
     rates = {}
     for env_id in (QUAD, BASELINE):
         rates[env_id] = statistics.median(steps_per_second(env_id, args.episodes, args.repeats))
-        print(f"{env_id:26s} inactive guardian, one process, resets included: {rates[env_id]:8.0f} steps/s "
-              f"(median of {args.repeats} runs of {args.episodes} episodes)")
+        print(
+            f"{env_id:26s} inactive guardian, one process, resets included: {rates[env_id]:8.0f} steps/s "
+            f"(median of {args.repeats} runs of {args.episodes} episodes)"
+        )
     print(f"ratio quadrotor / maze (same run): {rates[QUAD] / rates[BASELINE]:.2f}")
     rate, reset = stepping_only(args.episodes)
     print(f"{QUAD}: {rate:.0f} steps/s stepping alone; a reset takes {1e3 * reset:.1f} ms")

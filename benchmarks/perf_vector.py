@@ -109,18 +109,28 @@ def main(argv=None) -> dict:
             rates[k].append(run())
     load1 = os.getloadavg()
     med = {k: statistics.median(v) for k, v in rates.items()}
-    print(f"load average (1, 5, 15 min) before {load0[0]:.1f} {load0[1]:.1f} {load0[2]:.1f}, "
-          f"after {load1[0]:.1f} {load1[1]:.1f} {load1[2]:.1f}; {os.cpu_count()} cores")
+    print(
+        f"load average (1, 5, 15 min) before {load0[0]:.1f} {load0[1]:.1f} {load0[2]:.1f}, "
+        f"after {load1[0]:.1f} {load1[1]:.1f} {load1[2]:.1f}; {os.cpu_count()} cores"
+    )
     print(f"steps/s, median (min-max) of {args.repeats} interleaved repeats, the driver in control:")
-    labels = {"single": "single env, closed-form driver", "single-osqp": "single env, OSQP driver (before)",
-              "vector": f"vector env, {args.num_envs} sub-envs"}
+    labels = {
+        "single": "single env, closed-form driver",
+        "single-osqp": "single env, OSQP driver (before)",
+        "vector": f"vector env, {args.num_envs} sub-envs",
+    }
     for k, v in rates.items():
         print(f"  {labels[k]:34s} {med[k]:10.0f}  ({min(v):.0f}-{max(v):.0f})")
     r_vec = med["vector"] / med["single"]
     r_single = med["single"] / med["single-osqp"]
     print(f"vector / single: {r_vec:.1f}x (target >= 20x); single closed form / OSQP: {r_single:.2f}x (target >= 2x)")
-    return {"median": med, "rates": rates, "load": (load0, load1), "vector_over_single": r_vec,
-            "single_over_osqp": r_single}
+    return {
+        "median": med,
+        "rates": rates,
+        "load": (load0, load1),
+        "vector_over_single": r_vec,
+        "single_over_osqp": r_single,
+    }
 
 
 if __name__ == "__main__":

@@ -23,16 +23,23 @@ import gymnasium as gym
 import numpy as np
 
 import rmm_envs  # noqa: F401
-from rmm_guardians.lrmm.model import default_model_path, load_model
 from rmm_envs.risk.estimator import RiskEstimator
 from rmm_envs.scenes.quadrotor import QuadrotorScene
+from rmm_guardians.lrmm.model import default_model_path, load_model
 
 ENV = "QuadrotorRoomParallel-v0"
 
 
 def estimator(scene, lab):
-    return RiskEstimator(scene, branches=lab["branches"], depth=lab["depth"], horizon=lab["horizon"],
-                         n_steps=lab["n_steps"], metric=lab["metric"], leaf=lab["leaf"])
+    return RiskEstimator(
+        scene,
+        branches=lab["branches"],
+        depth=lab["depth"],
+        horizon=lab["horizon"],
+        n_steps=lab["n_steps"],
+        metric=lab["metric"],
+        leaf=lab["leaf"],
+    )
 
 
 def reset_labels(resets: int, seed: int, lab) -> tuple[np.ndarray, np.ndarray]:
@@ -79,22 +86,32 @@ def main(argv=None) -> None:
     p.add_argument("--resets", type=int, default=200)
     p.add_argument("--episodes", type=int, default=16)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--variant", default="risk", choices=["risk", "act"], help="which shipped model (default: %(default)s)")
+    p.add_argument(
+        "--variant", default="risk", choices=["risk", "act"], help="which shipped model (default: %(default)s)"
+    )
     args = p.parse_args(argv)
     model = load_model(default_model_path(ENV, variant=args.variant))
     lab = model.meta["labeller"]
     ours, paper = reset_labels(args.resets, args.seed, lab)
     print(f"labels at {args.resets} reset states (env seeds {args.seed}-{args.seed + args.resets - 1}):")
-    print(f"  command policy ({lab['branches']} branches, {lab['depth']} levels of {lab['horizon']} s): mean {ours.mean():.3f}, "
-          f"std {ours.std():.3f} (targets: mean in [0.1, 0.9], std >= 0.15)")
-    print(f"  paper's labelling (random thrust and moments, 32 x 2 levels of 2 s): mean {paper.mean():.3f}, std {paper.std():.3f}")
+    print(
+        f"  command policy ({lab['branches']} branches, {lab['depth']} levels of {lab['horizon']} s): mean {ours.mean():.3f}, "
+        f"std {ours.std():.3f} (targets: mean in [0.1, 0.9], std >= 0.15)"
+    )
+    print(
+        f"  paper's labelling (random thrust and moments, 32 x 2 levels of 2 s): mean {paper.mean():.3f}, std {paper.std():.3f}"
+    )
     y, f, d = visited(args.episodes, args.seed, model, lab)
     const = np.abs(y - y.mean()).mean()
-    print(f"{y.size} states the pilot visited alone in {args.episodes} episodes: labels mean {y.mean():.3f}, std {y.std():.3f}; "
-          f"model MAE {np.abs(y - f).mean():.4f} (constant predictor {const:.4f}, ratio {np.abs(y - f).mean() / const:.2f})")
+    print(
+        f"{y.size} states the pilot visited alone in {args.episodes} episodes: labels mean {y.mean():.3f}, std {y.std():.3f}; "
+        f"model MAE {np.abs(y - f).mean():.4f} (constant predictor {const:.4f}, ratio {np.abs(y - f).mean() / const:.2f})"
+    )
     if d.any():
-        print(f"  last 2 s before a collision ({d.sum()} states): label {y[d].mean():.3f}, model {f[d].mean():.3f}; "
-              f"other states: label {y[~d].mean():.3f}, model {f[~d].mean():.3f}")
+        print(
+            f"  last 2 s before a collision ({d.sum()} states): label {y[d].mean():.3f}, model {f[d].mean():.3f}; "
+            f"other states: label {y[~d].mean():.3f}, model {f[~d].mean():.3f}"
+        )
 
 
 if __name__ == "__main__":

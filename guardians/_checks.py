@@ -27,16 +27,18 @@ class Settings:
     def names(cls) -> tuple[str, ...]:
         return tuple(f.name for f in dataclasses.fields(cls))
 
-    def replace(self, **changes) -> "Settings":
+    def replace(self, **changes) -> Settings:
         """These settings with ``changes`` (checked again); an unknown name is a ``TypeError``
         naming it and the settings there are."""
         unknown = sorted(set(changes) - set(self.names()))
         if unknown:
-            raise TypeError(f"unknown {type(self).__name__} setting(s) {unknown}; the settings are: {', '.join(self.names())}")
+            raise TypeError(
+                f"unknown {type(self).__name__} setting(s) {unknown}; the settings are: {', '.join(self.names())}"
+            )
         return dataclasses.replace(self, **changes) if changes else self
 
     @classmethod
-    def preset(cls, name: str, **changes) -> "Settings":
+    def preset(cls, name: str, **changes) -> Settings:
         """The preset ``name`` (a key of ``PRESETS``) with ``changes``."""
         if name not in cls.PRESETS:
             raise ValueError(f"unknown {cls.__name__} preset {name!r}; the presets are: {sorted(cls.PRESETS)}")
@@ -47,8 +49,10 @@ def settings_signature(cls, default: Settings) -> inspect.Signature:
     """The signature of a constructor ``(self, settings=None, **options)`` that builds ``cls``
     settings from ``default`` and ``options``: one keyword parameter per setting, with
     ``default``'s values, so introspection (``rmm-bench``'s ``threads``, ``help()``) sees them."""
-    params = [inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD),
-              inspect.Parameter("settings", inspect.Parameter.POSITIONAL_OR_KEYWORD, default=None)]
+    params = [
+        inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD),
+        inspect.Parameter("settings", inspect.Parameter.POSITIONAL_OR_KEYWORD, default=None),
+    ]
     params += [inspect.Parameter(n, inspect.Parameter.KEYWORD_ONLY, default=getattr(default, n)) for n in cls.names()]
     return inspect.Signature(params)
 
@@ -83,4 +87,3 @@ def number_pair(name: str, pair) -> tuple[float, float]:
     if not (math.isfinite(lo) and math.isfinite(hi)) or not lo < hi:
         raise ValueError(f"{name} must be a finite (min, max) with min < max, got {pair!r}")
     return lo, hi
-

@@ -16,12 +16,13 @@ Why one mapping serves the wrapper and the guardian: docs/design-notes.md#rmm_gu
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
-from rmm_guardians.base import Guardian
 from rmm_envs.autonomy import GuardianActionSpace
+from rmm_guardians.base import Guardian
 
 __all__ = ["CallableGuardian", "FLAT_FORMS", "SB3Guardian", "to_guardian_action"]
 
@@ -36,13 +37,17 @@ def to_guardian_action(action: Any, space: GuardianActionSpace | None) -> dict:
     if isinstance(action, dict):
         return action
     if not isinstance(space, GuardianActionSpace):
-        raise ValueError(f"a flat action {action!r} needs the env's action space (a GuardianActionSpace) to become "
-                         f"an action dict: pass reset(action_space=env.action_space), got {space!r}")
+        raise ValueError(
+            f"a flat action {action!r} needs the env's action space (a GuardianActionSpace) to become "
+            f"an action dict: pass reset(action_space=env.action_space), got {space!r}"
+        )
     arr = np.asarray(action, dtype=float).reshape(-1)
     n = space.control_dim + 1
     if arr.shape != (n,):
-        raise ValueError(f"a policy must return the env's action dict or [active, {', '.join(space.controls)}] "
-                         f"({n} numbers); got shape {np.shape(action)}")
+        raise ValueError(
+            f"a policy must return the env's action dict or [active, {', '.join(space.controls)}] "
+            f"({n} numbers); got shape {np.shape(action)}"
+        )
     return space.active(arr[1:]) if arr[0] > 0.5 else space.inactive()
 
 
@@ -68,10 +73,14 @@ class SB3Guardian(Guardian):
     def __init__(self, model: Any, name: str = "sb3", deterministic: bool = True, flat: str = "unit") -> None:
         super().__init__()
         if not hasattr(model, "predict"):
-            raise TypeError(f"SB3Guardian needs an object with predict(obs, deterministic=...), got {type(model).__name__}")
+            raise TypeError(
+                f"SB3Guardian needs an object with predict(obs, deterministic=...), got {type(model).__name__}"
+            )
         if flat not in FLAT_FORMS:
-            raise ValueError(f"flat must be one of {FLAT_FORMS} (the unit box of FlattenGuardianAction, or the "
-                             f"controls unscaled), got {flat!r}")
+            raise ValueError(
+                f"flat must be one of {FLAT_FORMS} (the unit box of FlattenGuardianAction, or the "
+                f"controls unscaled), got {flat!r}"
+            )
         self.model = model
         self.name = name
         self.deterministic = deterministic

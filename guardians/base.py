@@ -16,7 +16,8 @@ episode.  Guardians never read an env's private attributes.  The protocol in ful
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -38,13 +39,21 @@ class Guardian:
         self.rng = np.random.default_rng()
         self._privileged: Callable[[], dict] | None = None
 
-    def reset(self, *, seed: int | None = None, observation_space=None, action_space=None,
-              privileged: Callable[[], dict] | None = None) -> None:
+    def reset(
+        self,
+        *,
+        seed: int | None = None,
+        observation_space=None,
+        action_space=None,
+        privileged: Callable[[], dict] | None = None,
+    ) -> None:
         self.observation_space = observation_space
         self.action_space = action_space
         self.rng = np.random.default_rng(seed)
         if self.privileged and privileged is None:
-            raise ValueError(f"guardian {self.name!r} needs privileged information: pass reset(privileged=env.unwrapped.privileged)")
+            raise ValueError(
+                f"guardian {self.name!r} needs privileged information: pass reset(privileged=env.unwrapped.privileged)"
+            )
         self._privileged = privileged
 
     def input_files(self) -> dict[str, str]:
@@ -66,12 +75,16 @@ class Guardian:
         (with ``controls`` components when given); a ``ValueError`` naming this guardian otherwise."""
         space = self.action_space if space is None else space
         if not isinstance(space, GuardianActionSpace):
-            raise ValueError(f"guardian {self.name!r} builds its actions through the env's action space: pass "
-                             f"reset(action_space=env.action_space) with a rmm_envs.autonomy.GuardianActionSpace, "
-                             f"got {space!r}")
+            raise ValueError(
+                f"guardian {self.name!r} builds its actions through the env's action space: pass "
+                f"reset(action_space=env.action_space) with a rmm_envs.autonomy.GuardianActionSpace, "
+                f"got {space!r}"
+            )
         if controls is not None and space.control_dim != controls:
-            raise ValueError(f"guardian {self.name!r} needs an action space with {controls} controls, "
-                             f"got {space.control_dim} ({space.controls})")
+            raise ValueError(
+                f"guardian {self.name!r} needs an action space with {controls} controls, "
+                f"got {space.control_dim} ({space.controls})"
+            )
         return space
 
     def require_layout(self, *fields: str, observation_space=None) -> ObservationLayout:
@@ -81,13 +94,17 @@ class Guardian:
         space = self.observation_space if observation_space is None else observation_space
         lay = getattr(space, "layout", None)
         if not isinstance(lay, ObservationLayout):
-            raise ValueError(f"guardian {self.name!r} reads the observation by name: pass reset(observation_space="
-                             f"env.observation_space) with a layout (rmm_envs.autonomy.ObservationBox), "
-                             f"got {space!r}")
+            raise ValueError(
+                f"guardian {self.name!r} reads the observation by name: pass reset(observation_space="
+                f"env.observation_space) with a layout (rmm_envs.autonomy.ObservationBox), "
+                f"got {space!r}"
+            )
         missing = [f for f in fields if f not in lay]
         if missing:
-            raise ValueError(f"guardian {self.name!r} needs the observation field(s) {missing}; "
-                             f"the observation has {list(lay.names)}")
+            raise ValueError(
+                f"guardian {self.name!r} needs the observation field(s) {missing}; "
+                f"the observation has {list(lay.names)}"
+            )
         return lay
 
     def act(self, observation: np.ndarray, info: dict[str, Any]) -> dict:  # pragma: no cover - abstract

@@ -82,8 +82,10 @@ class BrakesGuardian(Guardian):
     def check_spaces(self, observation_space, action_space) -> None:
         space = self.require_action_space(space=action_space)
         if space.safe_default is None:
-            raise ValueError(f"guardian {self.name!r} applies the env's safe default, and this env's action space "
-                             "states none (GuardianActionSpace(safe_default=...), rmm_envs.autonomy.SafeDefault)")
+            raise ValueError(
+                f"guardian {self.name!r} applies the env's safe default, and this env's action space "
+                "states none (GuardianActionSpace(safe_default=...), rmm_envs.autonomy.SafeDefault)"
+            )
         if self.turn is not None:
             try:
                 space.safe_default.check_options({"turn": self.turn})

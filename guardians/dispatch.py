@@ -22,9 +22,11 @@ from rmm_envs.systems import dubins3d, dubins4d, quadrotor_control
 __all__ = ["SYSTEMS", "SystemDispatch", "dubins4d_only", "maze_car_only", "quadrotor_only", "require_system"]
 
 #: The systems built-in guardians model: kind -> (its controls, how messages name it).
-SYSTEMS = {dubins4d.KIND: (dubins4d.CONTROLS, "Dubins4D envs"),
-           dubins3d.KIND: (dubins3d.CONTROLS, "the maze car"),
-           quadrotor_control.KIND: (quadrotor_control.CONTROLS, "the quadrotor")}
+SYSTEMS = {
+    dubins4d.KIND: (dubins4d.CONTROLS, "Dubins4D envs"),
+    dubins3d.KIND: (dubins3d.CONTROLS, "the maze car"),
+    quadrotor_control.KIND: (quadrotor_control.CONTROLS, "the quadrotor"),
+}
 
 
 def require_system(guardian, action_space, kind: str, model: str) -> GuardianActionSpace:
@@ -34,11 +36,15 @@ def require_system(guardian, action_space, kind: str, model: str) -> GuardianAct
     space = guardian.require_action_space(space=action_space)
     controls = tuple(SYSTEMS[kind][0])
     if space.kind != kind:
-        raise ValueError(f"guardian {guardian.name!r} {model} (system {kind!r}, controls {controls}); this env's system "
-                         f"is {space.kind!r} and its controls are {space.controls}")
+        raise ValueError(
+            f"guardian {guardian.name!r} {model} (system {kind!r}, controls {controls}); this env's system "
+            f"is {space.kind!r} and its controls are {space.controls}"
+        )
     if tuple(space.controls) != controls:
-        raise ValueError(f"guardian {guardian.name!r}: this env states system {kind!r}, whose controls are {controls}, "
-                         f"but its action space's controls are {space.controls}")
+        raise ValueError(
+            f"guardian {guardian.name!r}: this env states system {kind!r}, whose controls are {controls}, "
+            f"but its action space's controls are {space.controls}"
+        )
     return space
 
 
@@ -48,25 +54,34 @@ def dubins4d_only(guardian, action_space, also: tuple[str, ...] = ()) -> None:
     states other obstacle shapes (a map with polygons or walls) is refused too.  ``also``: the
     other kinds the guardian serves (through :class:`SystemDispatch`), said in the message."""
     served = "Dubins4D envs" + "".join(f" and {SYSTEMS[k][1]} (controls {tuple(SYSTEMS[k][0])})" for k in also)
-    require_system(guardian, action_space, dubins4d.KIND,
-                   f"applies to {served}{'' if also else ' only'}: it models the Dubins4D car among circular obstacles")
+    require_system(
+        guardian,
+        action_space,
+        dubins4d.KIND,
+        f"applies to {served}{'' if also else ' only'}: it models the Dubins4D car among circular obstacles",
+    )
     shapes = action_space.obstacle_shapes
     other = [s for s in (shapes or ()) if s != "circle"]
     if other:
-        raise ValueError(f"guardian {guardian.name!r} models circular obstacles only, and this env's world also has "
-                         f"{', '.join(other)} obstacles (a map with shapes {list(shapes)}); use a map of circles only, "
-                         "or a guardian that needs no obstacle geometry (lrmm, brakes)")
+        raise ValueError(
+            f"guardian {guardian.name!r} models circular obstacles only, and this env's world also has "
+            f"{', '.join(other)} obstacles (a map with shapes {list(shapes)}); use a map of circles only, "
+            "or a guardian that needs no obstacle geometry (lrmm, brakes)"
+        )
 
 
 def maze_car_only(guardian, action_space) -> GuardianActionSpace:
     """Refuse an env that is not the maze car's, or whose turn-rate bound is not ``[-b, b]`` with
     ``b > 0`` (``ValueError`` naming the guardian and why); the checked action space otherwise."""
-    space = require_system(guardian, action_space, dubins3d.KIND,
-                           "(maze) models the constant-speed maze car among walls")
+    space = require_system(
+        guardian, action_space, dubins3d.KIND, "(maze) models the constant-speed maze car among walls"
+    )
     lo, hi = float(space.control_low[0]), float(space.control_high[0])
     if not (hi > 0 and lo == -hi):
-        raise ValueError(f"guardian {guardian.name!r} (maze) needs a turn-rate bound symmetric about 0 and wider than a "
-                         f"point ([-b, b] with b > 0), got [{lo}, {hi}]")
+        raise ValueError(
+            f"guardian {guardian.name!r} (maze) needs a turn-rate bound symmetric about 0 and wider than a "
+            f"point ([-b, b] with b > 0), got [{lo}, {hi}]"
+        )
     return space
 
 
@@ -74,13 +89,16 @@ def quadrotor_only(guardian, action_space) -> GuardianActionSpace:
     """Refuse an env that is not the quadrotor's, or whose command box does not contain the zero
     command (hover) or is a single point on some axis (``low <= 0 <= high`` and ``low < high`` on
     each; ``ValueError`` naming the guardian and why); the checked action space otherwise."""
-    space = require_system(guardian, action_space, quadrotor_control.KIND,
-                           "(quadrotor) models the quadrotor's velocity command in a room")
+    space = require_system(
+        guardian, action_space, quadrotor_control.KIND, "(quadrotor) models the quadrotor's velocity command in a room"
+    )
     lo, hi = np.asarray(space.control_low, float), np.asarray(space.control_high, float)
     if not (np.all(lo <= 0.0) and np.all(hi >= 0.0) and np.all(lo < hi)):
-        raise ValueError(f"guardian {guardian.name!r} (quadrotor) needs a command box that contains the zero command "
-                         f"(hover) and is wider than a point in each of {space.controls} (low <= 0 <= high, low < high), "
-                         f"got low {lo.tolist()} and high {hi.tolist()}")
+        raise ValueError(
+            f"guardian {guardian.name!r} (quadrotor) needs a command box that contains the zero command "
+            f"(hover) and is wider than a point in each of {space.controls} (low <= 0 <= high, low < high), "
+            f"got low {lo.tolist()} and high {hi.tolist()}"
+        )
     return space
 
 
@@ -137,7 +155,9 @@ def delegate_arguments(cls, what: str, given, shared: dict) -> dict | None:
     if given is False:
         return None
     if given is not None and not isinstance(given, dict):
-        raise ValueError(f"{what} must be a dict of {cls.__module__}.{cls.__name__} arguments (or False), got {given!r}")
+        raise ValueError(
+            f"{what} must be a dict of {cls.__module__}.{cls.__name__} arguments (or False), got {given!r}"
+        )
     args = shared | dict(given or {})
     cls(**args)
     return args

@@ -19,8 +19,16 @@ from typing import Any
 from rmm_envs.user_modules import UserModuleError, import_user_module, where
 from rmm_guardians.base import Guardian
 
-__all__ = ["DEFAULT_SET", "ENTRY_POINT_GROUP", "PAPER_SET", "accepts_argument", "available_guardians", "guardian_set",
-           "load_guardian_class", "make_guardian"]
+__all__ = [
+    "DEFAULT_SET",
+    "ENTRY_POINT_GROUP",
+    "PAPER_SET",
+    "accepts_argument",
+    "available_guardians",
+    "guardian_set",
+    "load_guardian_class",
+    "make_guardian",
+]
 
 ENTRY_POINT_GROUP = "rmm_envs.guardians"
 
@@ -65,8 +73,9 @@ def _import(spec: str):
         try:
             obj = getattr(obj, part)
         except AttributeError:
-            raise UserModuleError(f"guardian {spec!r}: module {module!r} (from {where(mod)}) has no attribute "
-                                  f"{attr!r}") from None
+            raise UserModuleError(
+                f"guardian {spec!r}: module {module!r} (from {where(mod)}) has no attribute {attr!r}"
+            ) from None
     return obj
 
 
@@ -100,8 +109,11 @@ def accepts_argument(factory, name: str) -> bool:
     keyword argument ``name`` by that name.  A class's ``__init__`` that forwards ``**kwargs``
     is followed up its bases, so a subclass of a guardian that takes ``threads`` or ``env_id``
     takes it too; a bare ``**kwargs`` that reaches no named parameter does not count."""
-    targets = [c.__dict__["__init__"] for c in factory.__mro__ if "__init__" in c.__dict__ and c is not object] \
-        if isinstance(factory, type) else [factory]
+    targets = (
+        [c.__dict__["__init__"] for c in factory.__mro__ if "__init__" in c.__dict__ and c is not object]
+        if isinstance(factory, type)
+        else [factory]
+    )
     for fn in targets:
         try:
             params = inspect.signature(fn).parameters

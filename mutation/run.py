@@ -66,7 +66,9 @@ def load_targets(path: Path = ROOT / "mutation" / "targets.toml") -> dict:
     for name, t in targets.items():
         for key in ("mutate", "tests"):
             if not t.get(key) or not all(isinstance(x, str) for x in t[key]):
-                raise ValueError(f"target {name!r} of {path}: {key!r} must be a non-empty list of paths, got {t.get(key)!r}")
+                raise ValueError(
+                    f"target {name!r} of {path}: {key!r} must be a non-empty list of paths, got {t.get(key)!r}"
+                )
         for f in t["mutate"]:
             if not (ROOT / f).is_file():
                 raise ValueError(f"target {name!r}: {f!r} is not a file of the repository")
@@ -88,7 +90,7 @@ def load_survivors(path: Path = SURVIVORS) -> tuple[dict[str, str], dict[str, st
 #: benchmarks/bench/ as rmm_guardians and rmm_bench (pyproject's package-dir); the editable install
 #: maps those names to the repository, not to the scratch copy that mutmut mutates, so the tests
 #: must import the copy's folders under the installed names before anything imports them.
-IMPORT_ALIASES = '''# added by mutation/run.py: the installed import names read this copy's (mutated) folders
+IMPORT_ALIASES = """# added by mutation/run.py: the installed import names read this copy's (mutated) folders
 import importlib.util as _ilu
 import pathlib as _pl
 import sys as _sys
@@ -100,7 +102,7 @@ for _name, _rel in (("rmm_guardians", "guardians"), ("rmm_bench", "benchmarks/be
         _mod = _ilu.module_from_spec(_spec)
         _sys.modules[_name] = _mod
         _spec.loader.exec_module(_mod)
-'''
+"""
 
 
 def prepare(work: Path, target: dict, keep: bool) -> None:
@@ -134,12 +136,15 @@ def prepare(work: Path, target: dict, keep: bool) -> None:
 
 def mutant_names(work: Path, target: dict, python: str) -> list[str]:
     """The names of the target's mutants (those of its files that ``only`` admits), as mutmut names them."""
-    code = ("import json, sys\nfrom mutmut.mutation.file_mutation import mutate_file_contents\nout = []\n"
-            "for f in sys.argv[1:]:\n    mod = f[:-3].replace('/', '.')\n"
-            "    out += [mod + '.' + n for n in mutate_file_contents(f, open(f).read()).mutant_names]\n"
-            "print(json.dumps(out))")
-    r = subprocess.run([python, "-c", code, *target["mutate"]], cwd=work, capture_output=True, text=True, env=_env(),
-                       check=True)
+    code = (
+        "import json, sys\nfrom mutmut.mutation.file_mutation import mutate_file_contents\nout = []\n"
+        "for f in sys.argv[1:]:\n    mod = f[:-3].replace('/', '.')\n"
+        "    out += [mod + '.' + n for n in mutate_file_contents(f, open(f).read()).mutant_names]\n"
+        "print(json.dumps(out))"
+    )
+    r = subprocess.run(
+        [python, "-c", code, *target["mutate"]], cwd=work, capture_output=True, text=True, env=_env(), check=True
+    )
     names = json.loads(r.stdout.strip().splitlines()[-1])
     only = target.get("only")  # mutants of the other functions of these files are not part of the target
     return sorted(n for n in names if not only or any(fnmatch.fnmatchcase(n, pat) for pat in only))
@@ -162,8 +167,9 @@ def recorded_tests(work: Path, name: str) -> tuple[list[str], float]:
         tests = sorted(stats["tests_by_mangled_function_name"].get(name.partition("__mutmut_")[0], ()))
         seconds = sum(float(stats["duration_by_test"].get(t, 0.0)) for t in tests)
     except (KeyError, AttributeError, TypeError, ValueError) as e:
-        raise ValueError(f"{path} is not mutmut 3's stats file (tests_by_mangled_function_name, duration_by_test): "
-                         f"{e!r}") from e
+        raise ValueError(
+            f"{path} is not mutmut 3's stats file (tests_by_mangled_function_name, duration_by_test): {e!r}"
+        ) from e
     return tests, seconds
 
 
@@ -210,8 +216,12 @@ def rejudge(work: Path, name: str, python: str, env: dict, timeout: float | None
         log.write(f"\n=== {name}: {len(tests)} tests, {seconds:.1f} s unmutated, limit {limit:.0f} s\n")
         log.flush()
         code = run_limited(cmd, work / "mutants", env | {"MUTANT_UNDER_TEST": name, "PYTHONPATH": "."}, limit, log)
-    how = {"tests_s": round(seconds, 2), "limit_s": round(limit, 1), "seconds": round(time.monotonic() - t0, 1),
-           "option": timeout is not None}
+    how = {
+        "tests_s": round(seconds, 2),
+        "limit_s": round(limit, 1),
+        "seconds": round(time.monotonic() - t0, 1),
+        "option": timeout is not None,
+    }
     if code is None:
         return "timeout", how
     return {0: "survived", 1: "killed"}.get(code, f"suspicious (pytest exit {code})"), how
@@ -225,8 +235,9 @@ def mutant_diff(work: Path, name: str, python: str) -> str:
 
 def _env() -> dict:
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "MUTANT_UNDER_TEST")}
-    env.update(NUMBA_NUM_THREADS="1", RMM_HJ_THREADS="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
-               MKL_NUM_THREADS="1")
+    env.update(
+        NUMBA_NUM_THREADS="1", RMM_HJ_THREADS="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1"
+    )
     return env
 
 
@@ -246,10 +257,30 @@ def run_target(name: str, target: dict, args, equivalent: dict) -> dict:
         chosen = sorted(set(prev["survived"]) | set(prev["equivalent_mutants"]))
         (work / "mutants" / "mutmut-stats.json").unlink(missing_ok=True)
     else:
-        chosen = names if not args.sample or args.sample >= len(names) else sorted(random.Random(0).sample(names, args.sample))
+        chosen = (
+            names
+            if not args.sample or args.sample >= len(names)
+            else sorted(random.Random(0).sample(names, args.sample))
+        )
     with open(log, "w") as f:
-        r = subprocess.run(["nice", "-n", str(args.nice), args.python, "-m", "mutmut", "run", "--max-children",
-                            str(args.jobs), *chosen], cwd=work, stdout=f, stderr=subprocess.STDOUT, env=env)
+        r = subprocess.run(
+            [
+                "nice",
+                "-n",
+                str(args.nice),
+                args.python,
+                "-m",
+                "mutmut",
+                "run",
+                "--max-children",
+                str(args.jobs),
+                *chosen,
+            ],
+            cwd=work,
+            stdout=f,
+            stderr=subprocess.STDOUT,
+            env=env,
+        )
     v = verdicts(work)
     rejudged = {}
     for m in chosen:
@@ -274,17 +305,33 @@ def run_target(name: str, target: dict, args, equivalent: dict) -> dict:
     survivors = sorted(m for m in counted if v[m] not in ("killed", "timeout"))
     equiv_survived = sorted(m for m in equiv if v[m] not in ("killed", "timeout"))
     killed_equiv = sorted(m for m in equiv if v[m] in ("killed", "timeout"))  # stale classification
-    res = {"target": name, "files": target["mutate"], "tests": target["tests"], "seconds": round(seconds),
-           "mutants": len(v), "of": len(names), "killed_mutants": sorted(m for m in detected),
-           "rerun": prev is not None, "killed": len([m for m in detected if m not in equiv]), "equivalent": len(equiv),
-           "survived": survivors, "equivalent_mutants": equiv_survived, "equivalent_but_killed": killed_equiv,
-           "status": {m: v[m] for m in survivors}, "exit": r.returncode,
-           "timeouts": sorted(m for m in detected if v[m] == "timeout"), "rejudged": rejudged}
+    res = {
+        "target": name,
+        "files": target["mutate"],
+        "tests": target["tests"],
+        "seconds": round(seconds),
+        "mutants": len(v),
+        "of": len(names),
+        "killed_mutants": sorted(m for m in detected),
+        "rerun": prev is not None,
+        "killed": len([m for m in detected if m not in equiv]),
+        "equivalent": len(equiv),
+        "survived": survivors,
+        "equivalent_mutants": equiv_survived,
+        "equivalent_but_killed": killed_equiv,
+        "status": {m: v[m] for m in survivors},
+        "exit": r.returncode,
+        "timeouts": sorted(m for m in detected if v[m] == "timeout"),
+        "rejudged": rejudged,
+    }
     res["score"] = res["killed"] / len(counted) if counted else float("nan")
     res["diffs"] = {m: mutant_diff(work, m, args.python) for m in survivors + equiv_survived}
     (work / "result.json").write_text(json.dumps(res, indent=1))
-    print(f"[{name}] {res['killed']}/{len(counted)} killed ({100 * res['score']:.1f}%), {len(equiv)} equivalent, "
-          f"{len(survivors)} surviving; {seconds:.0f} s", flush=True)
+    print(
+        f"[{name}] {res['killed']}/{len(counted)} killed ({100 * res['score']:.1f}%), {len(equiv)} equivalent, "
+        f"{len(survivors)} surviving; {seconds:.0f} s",
+        flush=True,
+    )
     return res
 
 
@@ -306,15 +353,21 @@ def _reclassify(r: dict, equivalent: dict) -> None:
 def report(results: list[dict], equivalent: dict, to_test: dict) -> str:
     killed = sum(r["killed"] for r in results)
     counted = sum(r["mutants"] - r["equivalent"] for r in results)
-    lines = ["| target | files | mutants | equivalent | killed | surviving | score | time (s) |",
-             "|---|---|---:|---:|---:|---:|---:|---:|"]
+    lines = [
+        "| target | files | mutants | equivalent | killed | surviving | score | time (s) |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
+    ]
     for r in results:
         sampled = f" of {r['of']}" if r.get("of", r["mutants"]) != r["mutants"] else ""
-        lines.append(f"| {r['target']} | {', '.join(r['files'])} | {r['mutants']}{sampled} | {r['equivalent']} | {r['killed']} | "
-                     f"{len(r['survived'])} | {100 * r['score']:.1f}% | {r['seconds']} |")
-    lines.append(f"| **all** | | {sum(r['mutants'] for r in results)} | {sum(r['equivalent'] for r in results)} | "
-                 f"{killed} | {counted - killed} | **{100 * killed / max(counted, 1):.1f}%** | "
-                 f"{sum(r['seconds'] for r in results)} |")
+        lines.append(
+            f"| {r['target']} | {', '.join(r['files'])} | {r['mutants']}{sampled} | {r['equivalent']} | {r['killed']} | "
+            f"{len(r['survived'])} | {100 * r['score']:.1f}% | {r['seconds']} |"
+        )
+    lines.append(
+        f"| **all** | | {sum(r['mutants'] for r in results)} | {sum(r['equivalent'] for r in results)} | "
+        f"{killed} | {counted - killed} | **{100 * killed / max(counted, 1):.1f}%** | "
+        f"{sum(r['seconds'] for r in results)} |"
+    )
     for r in results:
         timeouts = r.get("timeouts", [])
         if r["survived"] or r["equivalent_mutants"] or r["equivalent_but_killed"] or timeouts:
@@ -324,10 +377,15 @@ def report(results: list[dict], equivalent: dict, to_test: dict) -> str:
             if how is None:
                 limit = "it ran past mutmut's own time limit"
             else:
-                rule = "--timeout" if how.get("option") else \
-                    f"{TIMEOUT_MULTIPLIER:g} x {how['tests_s']:g} s unmutated + {TIMEOUT_CONSTANT:g} s"
-                limit = (f"its tests ran past the re-judging's limit of {how['limit_s']:g} s ({rule}) and their process "
-                         "group was killed")
+                rule = (
+                    "--timeout"
+                    if how.get("option")
+                    else f"{TIMEOUT_MULTIPLIER:g} x {how['tests_s']:g} s unmutated + {TIMEOUT_CONSTANT:g} s"
+                )
+                limit = (
+                    f"its tests ran past the re-judging's limit of {how['limit_s']:g} s ({rule}) and their process "
+                    "group was killed"
+                )
             lines.append(f"- `{m}` killed by a time-out: {limit}")
         for m in r["survived"]:
             why = f"to test: {to_test[m]}" if m in to_test else "UNCLASSIFIED (add it to mutation/survivors.toml)"
@@ -355,18 +413,32 @@ def main(argv=None) -> int:
     p.add_argument("--jobs", type=int, default=2, help="mutants tested at once (default 2)")
     p.add_argument("--nice", type=int, default=19, help="niceness of the runs (default 19: a shared machine)")
     p.add_argument("--out", default=str(ROOT / "build" / "mutate"), help="scratch folder (default build/mutate)")
-    p.add_argument("--sample", type=int, default=0,
-                   help="test only this many of each target's mutants, drawn at random with a fixed seed (default 0: all)")
-    p.add_argument("--rerun-survivors", action="store_true",
-                   help="re-test only the previous run's survivors with the current tests (after adding tests)")
-    p.add_argument("--timeout", type=_seconds, default=None,
-                   help="wall-clock limit in seconds of the direct re-judging of a mutant whose mutmut worker ended on "
-                        f"a signal; past it the mutant counts as killed (timeout) (default: {TIMEOUT_MULTIPLIER:g} x the "
-                        f"time its tests took unmutated + {TIMEOUT_CONSTANT:g} s)")
+    p.add_argument(
+        "--sample",
+        type=int,
+        default=0,
+        help="test only this many of each target's mutants, drawn at random with a fixed seed (default 0: all)",
+    )
+    p.add_argument(
+        "--rerun-survivors",
+        action="store_true",
+        help="re-test only the previous run's survivors with the current tests (after adding tests)",
+    )
+    p.add_argument(
+        "--timeout",
+        type=_seconds,
+        default=None,
+        help="wall-clock limit in seconds of the direct re-judging of a mutant whose mutmut worker ended on "
+        f"a signal; past it the mutant counts as killed (timeout) (default: {TIMEOUT_MULTIPLIER:g} x the "
+        f"time its tests took unmutated + {TIMEOUT_CONSTANT:g} s)",
+    )
     p.add_argument("--keep", action="store_true", help="reuse the previous scratch copy and mutmut's cached verdicts")
     p.add_argument("--python", default=sys.executable, help="python with mutmut and the test extra (default: this one)")
-    p.add_argument("--report-only", action="store_true",
-                   help="run nothing: rebuild the report from the targets' last results (build/mutate/<target>/result.json)")
+    p.add_argument(
+        "--report-only",
+        action="store_true",
+        help="run nothing: rebuild the report from the targets' last results (build/mutate/<target>/result.json)",
+    )
     args = p.parse_args(argv)
     targets = load_targets()
     unknown = [t for t in args.targets if t not in targets]
@@ -375,8 +447,11 @@ def main(argv=None) -> int:
     equivalent, to_test = load_survivors()
     names = args.targets or list(targets)
     if args.report_only:
-        results = [json.loads((Path(args.out) / n / "result.json").read_text()) for n in names
-                   if (Path(args.out) / n / "result.json").exists()]
+        results = [
+            json.loads((Path(args.out) / n / "result.json").read_text())
+            for n in names
+            if (Path(args.out) / n / "result.json").exists()
+        ]
         for r in results:  # the classification may have changed since the run
             _reclassify(r, equivalent)
     else:

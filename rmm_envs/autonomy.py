@@ -17,16 +17,29 @@ The rules (clipping, error messages, float64 boxes) are in ``docs/concepts.md``.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
 from rmm_envs.portable import wrap_angle
 
-__all__ = ["ACTIVE", "GENERIC", "GuardianActionSpace", "ObservationBox", "ObservationLayout", "SafeDefault", "SystemContract",
-           "active", "contract", "inactive", "layout", "parse"]
+__all__ = [
+    "ACTIVE",
+    "GENERIC",
+    "GuardianActionSpace",
+    "ObservationBox",
+    "ObservationLayout",
+    "SafeDefault",
+    "SystemContract",
+    "active",
+    "contract",
+    "inactive",
+    "layout",
+    "parse",
+]
 
 ACTIVE = "active_ctrl"  # the action field that says whether the guardian takes control
 #: The kind of a system no built-in guardian models (a third-party simulator made a guarded env).
@@ -51,10 +64,12 @@ class SafeDefault:
         unknown = sorted(set(options) - set(self.options))
         if unknown:
             accepted = ", ".join(repr(o) for o in self.options) or "none"
-            raise ValueError(f"the safe default of this env ({self.description}) takes no option(s) {unknown}; "
-                             f"it accepts: {accepted}")
+            raise ValueError(
+                f"the safe default of this env ({self.description}) takes no option(s) {unknown}; "
+                f"it accepts: {accepted}"
+            )
 
-    def policy(self, space: "GuardianActionSpace", rng: np.random.Generator, **options):  # pragma: no cover - abstract
+    def policy(self, space: GuardianActionSpace, rng: np.random.Generator, **options):  # pragma: no cover - abstract
         """``observation -> control vector`` for one episode; ``rng`` for any per-episode draw."""
         raise NotImplementedError
 
@@ -99,9 +114,16 @@ class GuardianActionSpace(spaces.Dict):
     would have (a float32 box would round it, and the episode would drift from the driver's).
     """
 
-    def __init__(self, controls: Sequence[str], low: Iterable[float], high: Iterable[float], seed=None,
-                 safe_default: SafeDefault | None = None, obstacle_shapes: Sequence[str] | None = None,
-                 kind: str = GENERIC) -> None:
+    def __init__(
+        self,
+        controls: Sequence[str],
+        low: Iterable[float],
+        high: Iterable[float],
+        seed=None,
+        safe_default: SafeDefault | None = None,
+        obstacle_shapes: Sequence[str] | None = None,
+        kind: str = GENERIC,
+    ) -> None:
         controls = tuple(controls)
         if not isinstance(kind, str) or not kind:
             raise ValueError(f"kind must be a non-empty system name (e.g. {GENERIC!r}), got {kind!r}")
@@ -114,7 +136,9 @@ class GuardianActionSpace(spaces.Dict):
         if lo.shape != (len(controls),) or hi.shape != (len(controls),):
             raise ValueError(f"low and high need one bound per control {controls}, got {lo.tolist()} and {hi.tolist()}")
         if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)):
-            raise ValueError(f"control bounds must be finite with low <= high, got low={lo.tolist()} high={hi.tolist()}")
+            raise ValueError(
+                f"control bounds must be finite with low <= high, got low={lo.tolist()} high={hi.tolist()}"
+            )
         fields: dict[str, spaces.Space] = {ACTIVE: spaces.Discrete(2)}
         for name, a, b in zip(controls, lo, hi):
             fields[name] = spaces.Box(a, b, shape=(1,), dtype=np.float64)
@@ -130,18 +154,37 @@ class GuardianActionSpace(spaces.Dict):
         self.control_high = np.array([float(self.spaces[c].high[0]) for c in controls])
 
     @classmethod
-    def for_system(cls, system: Any, controls: Sequence[str], seed=None,
-                   safe_default: SafeDefault | None = None,
-                   obstacle_shapes: Sequence[str] | None = None, kind: str = GENERIC) -> "GuardianActionSpace":
+    def for_system(
+        cls,
+        system: Any,
+        controls: Sequence[str],
+        seed=None,
+        safe_default: SafeDefault | None = None,
+        obstacle_shapes: Sequence[str] | None = None,
+        kind: str = GENERIC,
+    ) -> GuardianActionSpace:
         """The action space of a system whose dynamics object has ``control_low``/``control_high``."""
-        return cls(controls, np.asarray(system.control_low, float), np.asarray(system.control_high, float), seed=seed,
-                   safe_default=safe_default, obstacle_shapes=obstacle_shapes, kind=kind)
+        return cls(
+            controls,
+            np.asarray(system.control_low, float),
+            np.asarray(system.control_high, float),
+            seed=seed,
+            safe_default=safe_default,
+            obstacle_shapes=obstacle_shapes,
+            kind=kind,
+        )
 
     @property
     def contract(self) -> SystemContract:
         """The system's contract: kind, controls, bounds, safe default, obstacle shapes."""
-        return SystemContract(self.kind, self.controls, tuple(self.control_low.tolist()), tuple(self.control_high.tolist()),
-                              self.safe_default, self.obstacle_shapes)
+        return SystemContract(
+            self.kind,
+            self.controls,
+            tuple(self.control_low.tolist()),
+            tuple(self.control_high.tolist()),
+            self.safe_default,
+            self.obstacle_shapes,
+        )
 
     @property
     def control_dim(self) -> int:
@@ -162,7 +205,7 @@ class GuardianActionSpace(spaces.Dict):
             raise ValueError(f"control must have one value per control {self.controls}, got {control!r}")
         action: dict[str, Any] = {ACTIVE: 1}
         for i, c in enumerate(self.controls):
-            action[c] = u[i:i + 1]
+            action[c] = u[i : i + 1]
         return action
 
     @property
@@ -180,8 +223,10 @@ class GuardianActionSpace(spaces.Dict):
         the index."""
         a = np.asarray(flat, dtype=float).reshape(-1)
         if a.shape != (self.flat_dim,):
-            raise ValueError(f"a flat guardian action has {self.flat_dim} numbers [active, "
-                             f"{', '.join(self.controls)}], got shape {np.shape(flat)}")
+            raise ValueError(
+                f"a flat guardian action has {self.flat_dim} numbers [active, "
+                f"{', '.join(self.controls)}], got shape {np.shape(flat)}"
+            )
         bad = np.flatnonzero(~np.isfinite(a))
         if bad.size:
             raise ValueError(f"flat guardian action index {int(bad[0])} must be finite, got {a[bad[0]]}")
@@ -215,7 +260,12 @@ class GuardianActionSpace(spaces.Dict):
         if extra:
             raise ValueError(f"action has unknown fields {sorted(extra, key=str)}; expected the keys of {self}")
         flag = np.asarray(action[ACTIVE])
-        if flag.size != 1 or flag.dtype.kind not in "biuf" or flag.ndim > 1 or float(flag.reshape(-1)[0]) not in (0.0, 1.0):
+        if (
+            flag.size != 1
+            or flag.dtype.kind not in "biuf"
+            or flag.ndim > 1
+            or float(flag.reshape(-1)[0]) not in (0.0, 1.0)
+        ):
             raise ValueError(f"action field {ACTIVE!r} must be 0 or 1 (Discrete(2)), got {action[ACTIVE]!r}")
         u = np.empty(len(self.controls))
         for i, c in enumerate(self.controls):
@@ -232,8 +282,9 @@ class GuardianActionSpace(spaces.Dict):
             try:
                 actions = dict(actions)
             except (TypeError, ValueError):
-                raise ValueError(f"actions must be a dict of arrays with keys {keys} ({where}), "
-                                 f"got {type(actions).__name__}") from None
+                raise ValueError(
+                    f"actions must be a dict of arrays with keys {keys} ({where}), got {type(actions).__name__}"
+                ) from None
         missing = [k for k in keys if k not in actions]
         if missing:
             raise ValueError(f"actions are missing field {missing[0]!r}; expected the keys of {where}")
@@ -244,8 +295,10 @@ class GuardianActionSpace(spaces.Dict):
         for key in keys:
             arr = np.asarray(actions[key])
             if arr.dtype.kind not in "biuf" or arr.shape not in ((n,), (n, 1)):
-                raise ValueError(f"action field {key!r} must be {n} numbers, shape ({n},) or ({n}, 1), "
-                                 f"got {arr.dtype} array of shape {arr.shape}")
+                raise ValueError(
+                    f"action field {key!r} must be {n} numbers, shape ({n},) or ({n}, 1), "
+                    f"got {arr.dtype} array of shape {arr.shape}"
+                )
             arrs[key] = arr.reshape(n)
         flag = arrs[ACTIVE]
         act = flag == 1
@@ -327,7 +380,7 @@ class ObservationLayout:
             raise ValueError(f"ray_angles needs one angle per ray ({self.size_of('rays')}), got {len(self.ray_angles)}")
 
     @classmethod
-    def of(cls, *sizes: tuple[str, int], ray_angles: Sequence[float] = ()) -> "ObservationLayout":
+    def of(cls, *sizes: tuple[str, int], ray_angles: Sequence[float] = ()) -> ObservationLayout:
         """A layout from ``(name, length)`` pairs in order, e.g. ``of(("time", 1), ("rays", 12))``."""
         fields, pos = [], 0
         for name, n in sizes:

@@ -18,7 +18,22 @@ from dataclasses import dataclass, field
 
 import gymnasium as gym
 
-__all__ = ["FORMER_IDS", "GUARDED_KINDS", "KINDS", "SYSTEMS", "DocPage", "SystemSpec", "current_id", "env_help", "guardian_env_ids", "guardian_envs_of", "env_ids", "register", "stored_id", "system_of"]
+__all__ = [
+    "FORMER_IDS",
+    "GUARDED_KINDS",
+    "KINDS",
+    "SYSTEMS",
+    "DocPage",
+    "SystemSpec",
+    "current_id",
+    "env_help",
+    "guardian_env_ids",
+    "guardian_envs_of",
+    "env_ids",
+    "register",
+    "stored_id",
+    "system_of",
+]
 
 #: The three kinds of env a system may have, and the suffix of each one's id.
 KINDS = {"plain": "-v0", "guarded": "Guarded-v0", "parallel": "Parallel-v0"}
@@ -72,69 +87,133 @@ SYSTEMS: tuple[SystemSpec, ...] = (
     SystemSpec(
         name="Dubins4D",
         blurb="a Dubins4D car driven to a goal among five circles by a reckless CLF-QP driver",
-        dynamics="rmm_envs.systems.dubins4d:Dubins4D", scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
-        envs={"guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv", "parallel": "rmm_envs.envs.dubins4d:make_parallel_env"},
-        driver="rmm_envs.drivers.dubins4d:CLFDriver", safe_default="rmm_envs.systems.dubins4d:FullBraking",
-        guardians=_DUBINS4D_GUARDIANS, vector="rmm_envs.envs.dubins4d_vector:Dubins4DCirclesVectorEnv",
-        pages=(DocPage("environments/dubins4d.md", "Dubins4D among circles", ("guarded", "parallel"),
-                       "figures/dubins4d_frame.png"),),
-        stored={"guarded": "Dubins4DCircles-v0"}),
+        dynamics="rmm_envs.systems.dubins4d:Dubins4D",
+        scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
+        envs={
+            "guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv",
+            "parallel": "rmm_envs.envs.dubins4d:make_parallel_env",
+        },
+        driver="rmm_envs.drivers.dubins4d:CLFDriver",
+        safe_default="rmm_envs.systems.dubins4d:FullBraking",
+        guardians=_DUBINS4D_GUARDIANS,
+        vector="rmm_envs.envs.dubins4d_vector:Dubins4DCirclesVectorEnv",
+        pages=(
+            DocPage(
+                "environments/dubins4d.md",
+                "Dubins4D among circles",
+                ("guarded", "parallel"),
+                "figures/dubins4d_frame.png",
+            ),
+        ),
+        stored={"guarded": "Dubins4DCircles-v0"},
+    ),
     SystemSpec(
         name="Dubins4DMap",
         blurb="the same car and driver on a JSON map of your own (circles, polygons, walls; pymunk)",
-        dynamics="rmm_envs.systems.dubins4d:Dubins4D", scenes=("rmm_envs.scenes.dubins4d_map:Dubins4DMapScene",),
-        envs={"guarded": "rmm_envs.envs.dubins4d_map:Dubins4DMapEnv", "parallel": "rmm_envs.envs.dubins4d_map:make_parallel_env"},
-        driver="rmm_envs.drivers.dubins4d:CLFDriver", safe_default="rmm_envs.systems.dubins4d:FullBraking",
-        guardians=("lrmm", "lrmm-paper", "random", "inactive", "brakes"), extra="map",
-        pages=(DocPage("environments/dubins4d_map.md", "Dubins4D on a map of your own", ("guarded", "parallel"),
-                       "figures/dubins4d_map_frame.png"),),
-        stored={"guarded": "Dubins4DMap-v0"}),
+        dynamics="rmm_envs.systems.dubins4d:Dubins4D",
+        scenes=("rmm_envs.scenes.dubins4d_map:Dubins4DMapScene",),
+        envs={
+            "guarded": "rmm_envs.envs.dubins4d_map:Dubins4DMapEnv",
+            "parallel": "rmm_envs.envs.dubins4d_map:make_parallel_env",
+        },
+        driver="rmm_envs.drivers.dubins4d:CLFDriver",
+        safe_default="rmm_envs.systems.dubins4d:FullBraking",
+        guardians=("lrmm", "lrmm-paper", "random", "inactive", "brakes"),
+        extra="map",
+        pages=(
+            DocPage(
+                "environments/dubins4d_map.md",
+                "Dubins4D on a map of your own",
+                ("guarded", "parallel"),
+                "figures/dubins4d_map_frame.png",
+            ),
+        ),
+        stored={"guarded": "Dubins4DMap-v0"},
+    ),
     SystemSpec(
         name="Dubins3DMaze",
         blurb="a constant-speed Dubins car in procedurally generated mazes, guarded from a corner-cutting pursuit driver",
-        dynamics="rmm_envs.systems.dubins3d:Dubins3D", scenes=("rmm_envs.scenes.maze:MazeScene",),
-        envs={"plain": "rmm_envs.envs.dubins3d_maze:Dubins3DMazeEnv",
-              "guarded": "rmm_envs.envs.dubins3d_maze_parallel:Dubins3DMazeGuardedEnv",
-              "parallel": "rmm_envs.envs.dubins3d_maze_parallel:make_parallel_env"},
-        driver="rmm_envs.drivers.maze:PursuitDriver", safe_default="rmm_envs.envs.dubins3d_maze_parallel:TurnFromNearerWall",
+        dynamics="rmm_envs.systems.dubins3d:Dubins3D",
+        scenes=("rmm_envs.scenes.maze:MazeScene",),
+        envs={
+            "plain": "rmm_envs.envs.dubins3d_maze:Dubins3DMazeEnv",
+            "guarded": "rmm_envs.envs.dubins3d_maze_parallel:Dubins3DMazeGuardedEnv",
+            "parallel": "rmm_envs.envs.dubins3d_maze_parallel:make_parallel_env",
+        },
+        driver="rmm_envs.drivers.maze:PursuitDriver",
+        safe_default="rmm_envs.envs.dubins3d_maze_parallel:TurnFromNearerWall",
         guardians=("lrmm", "cbf", "hj", "random", "inactive", "brakes"),
-        pages=(DocPage("environments/dubins3d_maze.md", "Dubins3D in mazes", ("plain",), "figures/dubins3d_maze_frame.png"),
-               DocPage("environments/dubins3d_maze_parallel.md", "The maze car under parallel autonomy",
-                       ("guarded", "parallel")))),
+        pages=(
+            DocPage(
+                "environments/dubins3d_maze.md", "Dubins3D in mazes", ("plain",), "figures/dubins3d_maze_frame.png"
+            ),
+            DocPage(
+                "environments/dubins3d_maze_parallel.md",
+                "The maze car under parallel autonomy",
+                ("guarded", "parallel"),
+            ),
+        ),
+    ),
     SystemSpec(
         name="QuadrotorRoom",
         blurb="a quadrotor in procedurally generated rooms (PyBullet), flown through waypoints by a reckless pilot",
         dynamics="rmm_envs.systems.quadrotor:Quadrotor",
         scenes=("rmm_envs.scenes.quadrotor:QuadrotorScene", "rmm_envs.scenes.quadrotor:QuadrotorCommandScene"),
-        envs={"plain": "rmm_envs.envs.quadrotor_room:QuadrotorRoomEnv",
-              "guarded": "rmm_envs.envs.quadrotor_room_parallel:QuadrotorRoomGuardedEnv",
-              "parallel": "rmm_envs.envs.quadrotor_room_parallel:make_parallel_env"},
-        driver="rmm_envs.drivers.quadrotor:WaypointPilot", safe_default="rmm_envs.systems.quadrotor_control:HoverAndLevel",
-        guardians=("lrmm", "cbf", "hj", "random", "inactive", "brakes"), extra="quadrotor",
-        pages=(DocPage("environments/quadrotor_room.md", "Quadrotor in rooms", ("plain",), "figures/quadrotor_room_frame.png"),
-               DocPage("environments/quadrotor_room_parallel.md", "The quadrotor under parallel autonomy",
-                       ("guarded", "parallel")))),
+        envs={
+            "plain": "rmm_envs.envs.quadrotor_room:QuadrotorRoomEnv",
+            "guarded": "rmm_envs.envs.quadrotor_room_parallel:QuadrotorRoomGuardedEnv",
+            "parallel": "rmm_envs.envs.quadrotor_room_parallel:make_parallel_env",
+        },
+        driver="rmm_envs.drivers.quadrotor:WaypointPilot",
+        safe_default="rmm_envs.systems.quadrotor_control:HoverAndLevel",
+        guardians=("lrmm", "cbf", "hj", "random", "inactive", "brakes"),
+        extra="quadrotor",
+        pages=(
+            DocPage(
+                "environments/quadrotor_room.md", "Quadrotor in rooms", ("plain",), "figures/quadrotor_room_frame.png"
+            ),
+            DocPage(
+                "environments/quadrotor_room_parallel.md",
+                "The quadrotor under parallel autonomy",
+                ("guarded", "parallel"),
+            ),
+        ),
+    ),
     # simulators the project did not write, made guarded envs by rmm_envs.envs.driven.guarded
     SystemSpec(
         name="CartPole",
         blurb="Gymnasium's CartPole-v1 driven to a target position by a reckless LQR, the balancing LQR as safe default",
         dynamics="gymnasium.envs.classic_control.cartpole:CartPoleEnv",
         scenes=("rmm_envs.adapters.classic_control:CartPoleScene",),
-        envs={"guarded": "rmm_envs.envs.driven_examples:cartpole_guarded",
-              "parallel": "rmm_envs.envs.driven_examples:cartpole_parallel"},
-        driver="rmm_envs.envs.driven_examples:TargetTask", safe_default="rmm_envs.envs.driven:GivenSafeDefault",
+        envs={
+            "guarded": "rmm_envs.envs.driven_examples:cartpole_guarded",
+            "parallel": "rmm_envs.envs.driven_examples:cartpole_parallel",
+        },
+        driver="rmm_envs.envs.driven_examples:TargetTask",
+        safe_default="rmm_envs.envs.driven:GivenSafeDefault",
         guardians=("lrmm", "random", "inactive", "brakes"),
-        pages=(DocPage("environments/driven_examples.md", "Simulators the project did not write, guarded",
-                       ("guarded", "parallel")),)),
+        pages=(
+            DocPage(
+                "environments/driven_examples.md",
+                "Simulators the project did not write, guarded",
+                ("guarded", "parallel"),
+            ),
+        ),
+    ),
     SystemSpec(
         name="InvertedPendulum",
         blurb="Gymnasium's MuJoCo InvertedPendulum-v5 under the same target task (see the CartPole page)",
         dynamics="gymnasium.envs.mujoco.inverted_pendulum_v5:InvertedPendulumEnv",
         scenes=("rmm_envs.adapters.mujoco_envs:MujocoScene",),
-        envs={"guarded": "rmm_envs.envs.driven_examples:inverted_pendulum_guarded",
-              "parallel": "rmm_envs.envs.driven_examples:inverted_pendulum_parallel"},
-        driver="rmm_envs.envs.driven_examples:TargetTask", safe_default="rmm_envs.envs.driven:GivenSafeDefault",
-        guardians=("lrmm", "random", "inactive", "brakes"), extra="mujoco"),
+        envs={
+            "guarded": "rmm_envs.envs.driven_examples:inverted_pendulum_guarded",
+            "parallel": "rmm_envs.envs.driven_examples:inverted_pendulum_parallel",
+        },
+        driver="rmm_envs.envs.driven_examples:TargetTask",
+        safe_default="rmm_envs.envs.driven:GivenSafeDefault",
+        guardians=("lrmm", "random", "inactive", "brakes"),
+        extra="mujoco",
+    ),
 )
 
 #: Today's id -> the id its results are keyed under, where the two differ (:attr:`SystemSpec.stored`).
@@ -142,8 +221,11 @@ _STORED = {s.env_id(kind): old for s in SYSTEMS for kind, old in s.stored.items(
 #: An id found in a stored record (a results database, a dataset, a model's metadata) that is no
 #: longer registered -> today's id of the same env.  Only records are read through it: these ids
 #: are not registered and no command accepts them.
-FORMER_IDS = {**{old: new for new, old in _STORED.items()},
-              "Dubins4DCirclesGuarded-v0": "Dubins4DGuarded-v0", "Dubins4DCirclesParallel-v0": "Dubins4DParallel-v0"}
+FORMER_IDS = {
+    **{old: new for new, old in _STORED.items()},
+    "Dubins4DCirclesGuarded-v0": "Dubins4DGuarded-v0",
+    "Dubins4DCirclesParallel-v0": "Dubins4DParallel-v0",
+}
 
 
 def env_ids(kinds=tuple(KINDS)) -> tuple[str, ...]:
@@ -180,8 +262,10 @@ def guardian_envs_of(env_id: str) -> tuple[str, ...]:
 
 def env_help() -> str:
     """The ids ``--env`` accepts, as the CLI help lists them."""
-    return (f"{', '.join(env_ids(('parallel',)))} (non-blocking) or {', '.join(env_ids(('guarded',)))} (blocking) "
-            "in this package")
+    return (
+        f"{', '.join(env_ids(('parallel',)))} (non-blocking) or {', '.join(env_ids(('guarded',)))} (blocking) "
+        "in this package"
+    )
 
 
 def current_id(env_id: str) -> str:
@@ -202,5 +286,9 @@ def register() -> None:
     for s in SYSTEMS:
         for kind, entry in s.envs.items():
             if s.env_id(kind) not in gym.registry:
-                gym.register(id=s.env_id(kind), entry_point=entry, vector_entry_point=s.vector if kind == "guarded" else None,
-                             disable_env_checker=False)
+                gym.register(
+                    id=s.env_id(kind),
+                    entry_point=entry,
+                    vector_entry_point=s.vector if kind == "guarded" else None,
+                    disable_env_checker=False,
+                )

@@ -18,19 +18,19 @@ import sys
 import time
 
 import gymnasium as gym
-import numpy as np
 from gymnasium import spaces
 
 import rmm_envs  # noqa: F401  (registers the environments)
 from rmm_envs.autonomy import GuardianActionSpace
 
 
-
 def driver_only_action(space: spaces.Space, env_id: str) -> dict:
     """The action that leaves the step to the built-in driver (:func:`rmm_envs.autonomy.inactive`)."""
     if not isinstance(space, GuardianActionSpace):
-        raise ValueError(f"env {env_id} has no guardian action to leave to its driver: its action space is {space}, "
-                         "not a GuardianActionSpace (the parallel-autonomy contract, rmm_envs.autonomy)")
+        raise ValueError(
+            f"env {env_id} has no guardian action to leave to its driver: its action space is {space}, "
+            "not a GuardianActionSpace (the parallel-autonomy contract, rmm_envs.autonomy)"
+        )
     return space.inactive()
 
 
@@ -68,20 +68,31 @@ def _demo(args: argparse.Namespace) -> int:
         st = info["episode_stats"]
         outcomes[info["outcome"]] = outcomes.get(info["outcome"], 0) + 1
         speed = f", final speed {speed_text(st['final_speed'], env.unwrapped)}" if "final_speed" in st else ""
-        print(f"episode {ep:3d} seed {args.seed + ep:5d}: {info['outcome']:9s} after {st['n_env_steps']:4d} steps, "
-              f"{st['cum_sim_time']:6.1f} s simulated{speed}")
+        print(
+            f"episode {ep:3d} seed {args.seed + ep:5d}: {info['outcome']:9s} after {st['n_env_steps']:4d} steps, "
+            f"{st['cum_sim_time']:6.1f} s simulated{speed}"
+        )
     dt = time.perf_counter() - t0
-    print(f"\n{args.env}, driver alone, {args.episodes} episodes: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
+    print(
+        f"\n{args.env}, driver alone, {args.episodes} episodes: "
+        + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items()))
+    )
     print(f"{steps} steps in {dt:.2f} s ({steps / dt:.0f} steps/s)")
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="rmm-envs", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="rmm-envs", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="run a few episodes with the driver alone and print the outcomes")
-    demo.add_argument("--env", default="Dubins4DParallel-v0", choices=list(rmm_envs.GUARDIAN_ENV_IDS),
-                      help="an env with a built-in driver (default: %(default)s)")
+    demo.add_argument(
+        "--env",
+        default="Dubins4DParallel-v0",
+        choices=list(rmm_envs.GUARDIAN_ENV_IDS),
+        help="an env with a built-in driver (default: %(default)s)",
+    )
     demo.add_argument("--episodes", type=int, default=8)
     demo.add_argument("--seed", type=int, default=0)
     demo.set_defaults(func=_demo)

@@ -65,16 +65,20 @@ def resolve_env_id(env_id: str) -> str:
         except UserModuleError as e:  # an import that fails in any way leaves the id unregistered
             raise EnvUnavailable(str(e)) from None
         if name not in gym.registry:
-            raise EnvUnavailable(f"--env {env_id!r}: importing {module!r} (from {where(mod)}) registered no env {name!r}")
+            raise EnvUnavailable(
+                f"--env {env_id!r}: importing {module!r} (from {where(mod)}) registered no env {name!r}"
+            )
         return name
     if env_id not in gym.registry:
         failed = {v: err for v, err in load_env_plugins().items() if err is not None}
         if env_id not in gym.registry:
             plugins = "; ".join(f"entry point {v!r} raised {err}" for v, err in failed.items())
             near = difflib.get_close_matches(env_id, list(gym.registry), n=1)
-            raise EnvUnavailable(f"--env {env_id!r} is not a registered Gymnasium env"
-                                 + (f" (did you mean {near[0]!r}?)" if near else "")
-                                 + f"; this package registers {', '.join(rmm_envs.ENV_IDS)}; another package's env is "
-                                 f"registered by importing it (--env module:Id) or by that package's '{ENTRY_POINT_GROUP}' "
-                                 "entry point" + (f"; {plugins}" if plugins else ""))
+            raise EnvUnavailable(
+                f"--env {env_id!r} is not a registered Gymnasium env"
+                + (f" (did you mean {near[0]!r}?)" if near else "")
+                + f"; this package registers {', '.join(rmm_envs.ENV_IDS)}; another package's env is "
+                f"registered by importing it (--env module:Id) or by that package's '{ENTRY_POINT_GROUP}' "
+                "entry point" + (f"; {plugins}" if plugins else "")
+            )
     return env_id

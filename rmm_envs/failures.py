@@ -18,7 +18,6 @@ from __future__ import annotations
 import errno
 import os
 import resource
-from pathlib import Path
 
 __all__ = ["BAD_INPUT", "RUN_FAILED", "describe_os_error", "file_size_limit"]
 
@@ -41,11 +40,16 @@ def describe_os_error(e: OSError, path: str | os.PathLike | None = None) -> tupl
     name = f"{where}" if where is not None else "a file"
     reason = e.strerror or str(e) or type(e).__name__
     if isinstance(e, BrokenPipeError):  # `| head`: the reader of the output stopped early
-        return (f"{reason}: the output was closed before the command finished writing it (a reader such as `| head` "
-                f"that stops early); {_KEPT}", RUN_FAILED)
+        return (
+            f"{reason}: the output was closed before the command finished writing it (a reader such as `| head` "
+            f"that stops early); {_KEPT}",
+            RUN_FAILED,
+        )
     if isinstance(e, ConnectionError) and not e.filename:
-        return (f"{reason}; check the address (--ray-address) or leave it out to start a local Ray, then {_KEPT}",
-                RUN_FAILED)
+        return (
+            f"{reason}; check the address (--ray-address) or leave it out to start a local Ray, then {_KEPT}",
+            RUN_FAILED,
+        )
     if e.errno in (errno.ENOSPC, errno.EDQUOT):
         return f"no space left to write {name} ({reason}); free disk space (or quota), then {_KEPT}", RUN_FAILED
     if e.errno == errno.EFBIG:
@@ -63,4 +67,3 @@ def describe_os_error(e: OSError, path: str | os.PathLike | None = None) -> tupl
     if e.errno == errno.EIO:
         return f"I/O error writing {name} ({reason}); check the disk, then {_KEPT}", RUN_FAILED
     return f"{name}: {type(e).__name__}: {reason}", RUN_FAILED
-

@@ -18,8 +18,9 @@ import signal
 import time
 import traceback
 from collections import deque
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any
 
 __all__ = ["TaskLost", "WorkersLost", "check_reachable", "describe_exit", "run_local", "run_ray"]
 
@@ -50,8 +51,12 @@ def describe_exit(exitcode: int | None) -> str:
             name = signal.Signals(-exitcode).name
         except ValueError:
             name = f"signal {-exitcode}"
-        hint = {"SIGKILL": " (often the out-of-memory killer)", "SIGSEGV": " (a crash in compiled code)",
-                "SIGBUS": " (a crash in compiled code)", "SIGABRT": " (an abort in compiled code)"}.get(name, "")
+        hint = {
+            "SIGKILL": " (often the out-of-memory killer)",
+            "SIGSEGV": " (a crash in compiled code)",
+            "SIGBUS": " (a crash in compiled code)",
+            "SIGABRT": " (an abort in compiled code)",
+        }.get(name, "")
         return f"killed by {name}{hint}"
     return f"exited with code {exitcode} (os._exit or sys.exit inside the task?)"
 
@@ -81,8 +86,19 @@ def _worker_main(fn: Callable, conn) -> None:
             return
         except Exception as e:  # the result or the exception does not pickle
             text = reply[2][1] if reply[0] == "err" else ""
-            conn.send(("err", idx, (RuntimeError(f"task {idx}: its {'exception' if text else 'result'} cannot be sent "
-                                                 f"to the parent process ({type(e).__name__}: {e})"), text)))
+            conn.send(
+                (
+                    "err",
+                    idx,
+                    (
+                        RuntimeError(
+                            f"task {idx}: its {'exception' if text else 'result'} cannot be sent "
+                            f"to the parent process ({type(e).__name__}: {e})"
+                        ),
+                        text,
+                    ),
+                )
+            )
 
 
 _STARTUP_S = 120.0  # seconds a fresh worker may take to start before its first task's limit counts
@@ -125,8 +141,9 @@ class _Worker:
         self.conn.close()
 
 
-def run_local(fn: Callable, tasks: list, workers: int, *, task_timeout: float | None = None,
-              max_lost_in_a_row: int | None = None) -> Iterator:
+def run_local(
+    fn: Callable, tasks: list, workers: int, *, task_timeout: float | None = None, max_lost_in_a_row: int | None = None
+) -> Iterator:
     """``fn(task)`` for each task, in ``workers`` spawned processes (in this process if 1).
 
     Yields each result, or a :class:`TaskLost` for a task whose worker died or overran
@@ -202,8 +219,10 @@ def run_local(fn: Callable, tasks: list, workers: int, *, task_timeout: float | 
                     nw.give(*todo.popleft())
                 yield TaskLost(task, lost_cause)
                 if max_lost_in_a_row is not None and len(lost_in_a_row) >= max_lost_in_a_row:
-                    raise WorkersLost(f"{len(lost_in_a_row)} tasks in a row lost their worker with none finishing "
-                                      f"(last: {lost_in_a_row[-1]}); stopped")
+                    raise WorkersLost(
+                        f"{len(lost_in_a_row)} tasks in a row lost their worker with none finishing "
+                        f"(last: {lost_in_a_row[-1]}); stopped"
+                    )
         graceful = True
     finally:
         for w in pool:
@@ -228,7 +247,9 @@ def check_reachable(address: str, timeout: float = 10.0) -> None:
         raise ConnectionError(f"cannot reach the Ray cluster at {address} ({type(e).__name__}: {e})") from None
 
 
-def run_ray(fn: Callable, tasks: Iterable, address: str | None = None, *, max_lost_in_a_row: int | None = None) -> Iterator:
+def run_ray(
+    fn: Callable, tasks: Iterable, address: str | None = None, *, max_lost_in_a_row: int | None = None
+) -> Iterator:
     """``fn(task)`` for each task as Ray tasks (``address`` of a cluster, else a local Ray).
 
     Yields each result, or a :class:`TaskLost` for a task Ray lost twice (worker or node
@@ -264,8 +285,10 @@ def run_ray(fn: Callable, tasks: Iterable, address: str | None = None, *, max_lo
                     lost_in_a_row.append(cause)
                     yield TaskLost(task_of[ref], cause)
                     if max_lost_in_a_row is not None and len(lost_in_a_row) >= max_lost_in_a_row:
-                        raise WorkersLost(f"{len(lost_in_a_row)} Ray tasks in a row were lost with none finishing "
-                                          f"(last: {cause}); stopped")
+                        raise WorkersLost(
+                            f"{len(lost_in_a_row)} Ray tasks in a row were lost with none finishing "
+                            f"(last: {cause}); stopped"
+                        )
                 else:
                     lost_in_a_row.clear()
                     yield out

@@ -61,7 +61,13 @@ def import_user_module(module: str, what: str) -> ModuleType:
         return importlib.import_module(module)
     except Exception as e:  # noqa: BLE001 - whatever the module raised while importing is the user's error to see
         place = where(module)
-        if isinstance(e, ModuleNotFoundError) and e.name is not None and (e.name == module or module.startswith(e.name + ".")):
+        if (
+            isinstance(e, ModuleNotFoundError)
+            and e.name is not None
+            and (e.name == module or module.startswith(e.name + "."))
+        ):
             cause = f"no module named {e.name!r} in the current directory ({os.getcwd()}) or the installed packages"
             raise UserModuleError(f"{what}: cannot import module {module!r}: {cause}") from None
-        raise UserModuleError(f"{what}: cannot import module {module!r} (from {place}): {type(e).__name__}: {e}") from None
+        raise UserModuleError(
+            f"{what}: cannot import module {module!r} (from {place}): {type(e).__name__}: {e}"
+        ) from None

@@ -8,6 +8,7 @@ def pytest_collection_modifyitems(config, items):
     (``make test``) a half-minute test started last keeps one core busy after the other has
     finished; started first, the short tests fill in around it.  ``heavy(seconds=N)`` orders them
     longest first (default 20)."""
+
     def order(item):
         mark = item.get_closest_marker("heavy")
         return (1, 0.0) if mark is None else (0, -float(mark.kwargs.get("seconds", 20)))
@@ -29,8 +30,12 @@ def small_dataset(tmp_path_factory):
     from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 
     out = tmp_path_factory.mktemp("data") / "d4small"
-    generate(DatagenConfig(configs=8, samples_per_config=24, branches=6, depth=2, configs_per_shard=4, seed=11),
-             out, workers=1, progress=False)
+    generate(
+        DatagenConfig(configs=8, samples_per_config=24, branches=6, depth=2, configs_per_shard=4, seed=11),
+        out,
+        workers=1,
+        progress=False,
+    )
     return load_dataset(out), out
 
 

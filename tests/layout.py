@@ -32,8 +32,10 @@ def module_name(path: Path) -> str:
         if path.is_relative_to(folder):
             rel = path.relative_to(folder).with_suffix("").as_posix().removesuffix("__init__").strip("/")
             return ".".join([name] + ([rel.replace("/", ".")] if rel else []))
-    raise ValueError(f"{path} is not in an installed package; expected a file under one of "
-                     f"{sorted(str(p.relative_to(ROOT)) for p in PACKAGE_DIRS.values())}")
+    raise ValueError(
+        f"{path} is not in an installed package; expected a file under one of "
+        f"{sorted(str(p.relative_to(ROOT)) for p in PACKAGE_DIRS.values())}"
+    )
 
 
 def module_package(path: Path) -> str:

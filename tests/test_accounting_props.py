@@ -34,8 +34,9 @@ _made: dict = {}
 def _env(env_id: str):
     """One wrapped env per id for the whole module (hypothesis reuses it across examples)."""
     if env_id not in _made:
-        _made[env_id] = GuardianReward(gym.make(env_id, **ENVS[env_id]), goal_bonus=0.0, collision_penalty=0.0,
-                                       intervention_cost=1.0)
+        _made[env_id] = GuardianReward(
+            gym.make(env_id, **ENVS[env_id]), goal_bonus=0.0, collision_penalty=0.0, intervention_cost=1.0
+        )
     return _made[env_id]
 
 
@@ -66,8 +67,16 @@ def _episodes(env, bits: list[bool], seed: int, n_episodes: int) -> list[dict]:
             if term or trunc:
                 break
         assert "episode" not in info  # Gymnasium's RecordEpisodeStatistics owns that key
-        out.append(dict(active_time=active_time, total=total, reward=reward, steps=steps, active_steps=active_steps,
-                        stats=info[EPISODE_KEY]))
+        out.append(
+            dict(
+                active_time=active_time,
+                total=total,
+                reward=reward,
+                steps=steps,
+                active_steps=active_steps,
+                stats=info[EPISODE_KEY],
+            )
+        )
     return out
 
 
@@ -89,9 +98,15 @@ def test_hand_counted_non_blocking_intervals():
     action takes effect one interval late (the first interval is the driver's).  Guardian on at
     steps 1 and 2 only (actions given at steps 0 and 1): 2 of 3 intervals, 0.34 of 0.51 s, each
     charged 0.5 x 0.17 = 0.085."""
-    env = GuardianReward(gym.make("Dubins4DParallel-v0", clock="fixed:7", max_episode_sim_time=0.51),
-                         goal_bonus=0.0, collision_penalty=0.0, intervention_cost=0.5)
-    env.reset(seed=1, options={"state": [0.0, 0.0, 0.0, 0.0], "obstacles": [[30.0, 30.0, 1.0]], "goal": [-30.0, 30.0, 0.5]})
+    env = GuardianReward(
+        gym.make("Dubins4DParallel-v0", clock="fixed:7", max_episode_sim_time=0.51),
+        goal_bonus=0.0,
+        collision_penalty=0.0,
+        intervention_cost=0.5,
+    )
+    env.reset(
+        seed=1, options={"state": [0.0, 0.0, 0.0, 0.0], "obstacles": [[30.0, 30.0, 1.0]], "goal": [-30.0, 30.0, 0.5]}
+    )
     space = env.action_space
     steps = [env.step(a) for a in (space.active([0.0, 0.0]), space.active([0.0, 0.0]), space.inactive())]
     assert [s[4]["active"] for s in steps] == [False, True, True]
@@ -139,12 +154,18 @@ def test_intervals_are_checked_counted_and_ended_by_hand(env_id):
 def test_a_step_charges_the_clock_and_steps_by_step_dt():
     """``step`` charges the clock's lap (4 ms) to the step and advances by ``step_dt``."""
     env = gym.make("Dubins4DGuarded-v0", clock="fixed:4", step_dt=0.25, max_episode_sim_time=0.5)
-    env.reset(seed=0, options={"state": [0.0, 0.0, 0.0, 0.0], "obstacles": [[30.0, 30.0, 1.0]], "goal": [-30.0, 30.0, 0.5]})
+    env.reset(
+        seed=0, options={"state": [0.0, 0.0, 0.0, 0.0], "obstacles": [[30.0, 30.0, 1.0]], "goal": [-30.0, 30.0, 0.5]}
+    )
     env.step(env.action_space.inactive())
     _, _, _, trunc, info = env.step(env.action_space.inactive())
     assert trunc and info["sim_time"] == 0.5
     ep = info[EPISODE_KEY]
-    assert ep["n_env_steps"] == 2 and ep["cum_compute_time"] == pytest.approx(0.008) and ep["avg_compute_time"] == pytest.approx(0.004)
+    assert (
+        ep["n_env_steps"] == 2
+        and ep["cum_compute_time"] == pytest.approx(0.008)
+        and ep["avg_compute_time"] == pytest.approx(0.004)
+    )
     assert ep["active_ctrl_sim_time"] == 0.0 and ep["n_active_ctrl_env_steps"] == 0
 
 
@@ -157,13 +178,17 @@ def test_reward_weights_are_refused_by_name_and_value(name, bad):
 
 
 def test_reward_weights_are_kept_as_floats_and_recorded_in_the_spec():
-    env = GuardianReward(gym.make("Dubins4DGuarded-v0"), goal_bonus=np.float32(2), collision_penalty=np.int64(0),
-                         intervention_cost=3)
+    env = GuardianReward(
+        gym.make("Dubins4DGuarded-v0"), goal_bonus=np.float32(2), collision_penalty=np.int64(0), intervention_cost=3
+    )
     assert (env.goal_bonus, env.collision_penalty, env.intervention_cost) == (2.0, 0.0, 3.0)
     assert all(type(v) is float for v in (env.goal_bonus, env.collision_penalty, env.intervention_cost))
     spec = env.spec.additional_wrappers[-1]
-    assert spec.name == "GuardianReward" and spec.kwargs == {"goal_bonus": np.float32(2), "collision_penalty": 0,
-                                                            "intervention_cost": 3}
+    assert spec.name == "GuardianReward" and spec.kwargs == {
+        "goal_bonus": np.float32(2),
+        "collision_penalty": 0,
+        "intervention_cost": 3,
+    }
     default = GuardianReward(gym.make("Dubins4DGuarded-v0"))
     assert (default.goal_bonus, default.collision_penalty, default.intervention_cost) == (1.0, 10.0, 0.05)
 
@@ -171,8 +196,10 @@ def test_reward_weights_are_kept_as_floats_and_recorded_in_the_spec():
 def test_reward_refuses_an_env_without_the_contract_naming_it_and_its_space():
     with pytest.raises(TypeError) as e:
         GuardianReward(gym.make("Dubins3DMaze-v0"))
-    assert str(e.value) == ("GuardianReward needs a parallel-autonomy env (action space rmm_envs.autonomy.GuardianActionSpace); "
-                            "Dubins3DMaze-v0 has Box(-0.2, 0.2, (1,), float32)")
+    assert str(e.value) == (
+        "GuardianReward needs a parallel-autonomy env (action space rmm_envs.autonomy.GuardianActionSpace); "
+        "Dubins3DMaze-v0 has Box(-0.2, 0.2, (1,), float32)"
+    )
 
 
 def test_reward_keeps_the_env_reward_and_every_info_entry():
@@ -258,11 +285,17 @@ def test_a_flat_action_maps_to_the_guardian_action_exactly():
 
     space = gym.make("Dubins4DGuarded-v0").action_space
     to = FlattenGuardianAction.to_guardian
-    for flat, controls in (([1.0, 7.0, -3.0], [0.25, -0.5]), ([1.0, -1.5, 1.5], [-0.25, 0.5]),
-                           ([[0.9], [0.0], [0.5]], [0.0, 0.25]), (np.array([["1", "-1", "1"]]), [-0.25, 0.5])):
+    for flat, controls in (
+        ([1.0, 7.0, -3.0], [0.25, -0.5]),
+        ([1.0, -1.5, 1.5], [-0.25, 0.5]),
+        ([[0.9], [0.0], [0.5]], [0.0, 0.25]),
+        (np.array([["1", "-1", "1"]]), [-0.25, 0.5]),
+    ):
         a = to(space, flat)
         assert a["active_ctrl"] == 1
-        assert float(a["turnrate_ctrl"][0]) == np.float32(controls[0]) and float(a["accel_ctrl"][0]) == np.float32(controls[1])
+        assert float(a["turnrate_ctrl"][0]) == np.float32(controls[0]) and float(a["accel_ctrl"][0]) == np.float32(
+            controls[1]
+        )
     with pytest.raises(ValueError) as e:
         to(space, [1.0, 0.0])
     assert str(e.value) == "a flat guardian action has 3 numbers [active, turnrate_ctrl, accel_ctrl], got shape (2,)"
@@ -275,6 +308,12 @@ def test_the_time_limit_is_reached_at_exactly_its_tolerance_and_statistics_befor
     env = gym.make(env_id, max_episode_sim_time=0.5, clock="fixed:4").unwrapped
     env.reset(seed=3)
     s = env.episode_statistics()
-    assert (s["n_env_steps"], s["cum_sim_time"], s["avg_compute_time"], s["cum_reward"], s["outcome"]) == (0, 0.0, 0.0, 0.0, None)
+    assert (s["n_env_steps"], s["cum_sim_time"], s["avg_compute_time"], s["cum_reward"], s["outcome"]) == (
+        0,
+        0.0,
+        0.0,
+        0.0,
+        None,
+    )
     _, _, term, trunc, info = env.simulate(0.5 - 1e-9, False, None)
     assert trunc and not term and info["outcome"] == "timeout"

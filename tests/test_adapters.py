@@ -22,6 +22,7 @@ def needs_mujoco(env_id: str) -> None:
     if env_id.endswith("-v5"):
         pytest.importorskip("mujoco")
 
+
 SPEED_BOUND = 6.0
 
 
@@ -41,8 +42,14 @@ finite = st.floats(-3, 3, allow_nan=False)
 
 # -- batched dynamics == the env's own step ---------------------------------------------------
 @settings(max_examples=60, deadline=None)
-@given(x=finite, xd=finite, th=st.floats(-0.5, 0.5), thd=finite, action=st.integers(0, 1),
-       integrator=st.sampled_from(["euler", "semi-implicit"]))
+@given(
+    x=finite,
+    xd=finite,
+    th=st.floats(-0.5, 0.5),
+    thd=finite,
+    action=st.integers(0, 1),
+    integrator=st.sampled_from(["euler", "semi-implicit"]),
+)
 def test_cartpole_batched_step_is_the_envs_step_bit_for_bit(x, xd, th, thd, action, integrator):
     env, ad = made("CartPole-v1")
     env.unwrapped.kinematics_integrator = integrator
@@ -63,9 +70,16 @@ def test_pendulum_batched_step_is_the_envs_step_bit_for_bit(th, thd, u):
     assert ad.scene.p["g"] == 9.81 and np.array_equal(ours, env.unwrapped.state)
 
 
-@pytest.mark.parametrize("env_id, failure, tol", [
-    ("CartPole-v1", None, 0.0), ("Pendulum-v1", speed_failure, 0.0),
-    ("InvertedPendulum-v5", None, 0.0), ("InvertedDoublePendulum-v5", None, 0.0), ("Hopper-v5", None, 1e-9)])
+@pytest.mark.parametrize(
+    "env_id, failure, tol",
+    [
+        ("CartPole-v1", None, 0.0),
+        ("Pendulum-v1", speed_failure, 0.0),
+        ("InvertedPendulum-v5", None, 0.0),
+        ("InvertedDoublePendulum-v5", None, 0.0),
+        ("Hopper-v5", None, 1e-9),
+    ],
+)
 def test_batched_paths_equal_the_step_by_step_paths_through_the_envs_own_step(env_id, failure, tol):
     """The same held controls from the same sampled states: the batched scene's paths (NaN from
     the first failed env step on) are the step-by-step scene's, which calls env.step."""
@@ -160,8 +174,8 @@ def _state(ad, spec):
         return np.asarray(spec, float)
     sc = ad.scene
     s = np.zeros(sc.state_dim)
-    s[sc.qpos0:sc.qpos0 + sc.nq] = ad.unwrapped.init_qpos
-    for item in ([] if spec == "rest" else spec.split(", ")):
+    s[sc.qpos0 : sc.qpos0 + sc.nq] = ad.unwrapped.init_qpos
+    for item in [] if spec == "rest" else spec.split(", "):
         key, value = item.split("=")
         base = sc.qpos0 if key.startswith("qpos") else sc.qvel0
         s[base + int(key[4:])] = float(value)
@@ -187,8 +201,13 @@ def test_labels_lie_in_0_1_and_a_seed_fixes_them(seed, metric):
     for env_id, failure in (("CartPole-v1", None), ("Pendulum-v1", speed_failure), ("InvertedPendulum-v5", None)):
         env, ad = made(env_id, failure)
         states = ad.sample_states(np.random.default_rng(seed), 6)
-        kw = dict(branches=6, depth=2, horizon=ad.scene.default_horizon, metric=metric,
-                  alpha=0.3 if metric == "cvar" else None)
+        kw = dict(
+            branches=6,
+            depth=2,
+            horizon=ad.scene.default_horizon,
+            metric=metric,
+            alpha=0.3 if metric == "cvar" else None,
+        )
         a = RiskEstimator(ad.scene, **kw).estimate(states, np.random.default_rng(seed)).risk
         b = RiskEstimator(ad.scene, **kw).estimate(states, np.random.default_rng(seed)).risk
         assert np.all((a >= 0) & (a <= 1)) and np.array_equal(a, b)
@@ -259,8 +278,11 @@ def test_pendulum_without_a_failure_is_refused_by_name():
 
 
 def test_an_env_no_adapter_serves_is_refused_listing_what_is_missing():
-    with pytest.raises(TypeError, match=r"Acrobot-v1 \(AcrobotEnv\) is not a LabelledEnv.*risk_scene is missing; "
-                                        r"true_state is missing; no risk adapter serves it either.*SnapshotSimulator"):
+    with pytest.raises(
+        TypeError,
+        match=r"Acrobot-v1 \(AcrobotEnv\) is not a LabelledEnv.*risk_scene is missing; "
+        r"true_state is missing; no risk adapter serves it either.*SnapshotSimulator",
+    ):
         RiskLabel(gym.make("Acrobot-v1"))
 
 
@@ -272,12 +294,23 @@ def test_a_mujoco_env_without_a_known_failure_needs_one():
     assert ad.scene.default_horizon == pytest.approx(2 * ad.scene.dt)
 
 
-@pytest.mark.parametrize("kwargs, error, match", [
-    ({"failure": 3}, TypeError, r"CartPole-v1: failure must be a callable failure\(states \(N, d\)\) -> \(N,\) bool, got 3"),
-    ({"horizon": 0.03}, ValueError, r"CartPole-v1: the horizon t = 0.03 s must be a whole number >= 1 of the env's steps "
-                                    r"of dt = 0.02 s \(for example 0.04\)"),
-    ({"horizon": 0.005}, ValueError, r"t = 0.005 s must be a whole number >= 1"),
-])
+@pytest.mark.parametrize(
+    "kwargs, error, match",
+    [
+        (
+            {"failure": 3},
+            TypeError,
+            r"CartPole-v1: failure must be a callable failure\(states \(N, d\)\) -> \(N,\) bool, got 3",
+        ),
+        (
+            {"horizon": 0.03},
+            ValueError,
+            r"CartPole-v1: the horizon t = 0.03 s must be a whole number >= 1 of the env's steps "
+            r"of dt = 0.02 s \(for example 0.04\)",
+        ),
+        ({"horizon": 0.005}, ValueError, r"t = 0.005 s must be a whole number >= 1"),
+    ],
+)
 def test_bad_adapter_arguments_are_refused_by_name(kwargs, error, match):
     with pytest.raises(error, match=match):
         RiskLabel(gym.make("CartPole-v1"), **kwargs)
@@ -285,7 +318,9 @@ def test_bad_adapter_arguments_are_refused_by_name(kwargs, error, match):
 
 def test_a_failure_of_the_wrong_shape_is_refused_by_name():
     env = RiskLabel(gym.make("Pendulum-v1"), failure=lambda s: np.abs(s) > 1, seed=0)
-    with pytest.raises(ValueError, match=r"Pendulum-v1: failure\(states\) must return shape \(1,\) for 1 states, got \(1, 2\)"):
+    with pytest.raises(
+        ValueError, match=r"Pendulum-v1: failure\(states\) must return shape \(1,\) for 1 states, got \(1, 2\)"
+    ):
         env.reset(seed=0)
 
 
@@ -307,9 +342,13 @@ def test_an_object_that_is_not_a_snapshot_simulator_is_refused_listing_what_it_l
 
 
 def test_an_unbounded_action_space_is_refused_by_name():
-    with pytest.raises(TypeError, match=r"Mine: its action space Box\(-inf, inf, \(1,\), float32\) cannot be sampled uniformly"):
+    with pytest.raises(
+        TypeError, match=r"Mine: its action space Box\(-inf, inf, \(1,\), float32\) cannot be sampled uniformly"
+    ):
         SimulatorScene("Mine", 2, 0.1, gym.spaces.Box(-np.inf, np.inf, (1,), np.float32))
-    with pytest.raises(ValueError, match=r"Mine: the env's step length dt must be a finite number of seconds > 0, got 0.0"):
+    with pytest.raises(
+        ValueError, match=r"Mine: the env's step length dt must be a finite number of seconds > 0, got 0.0"
+    ):
         SimulatorScene("Mine", 2, 0.0, gym.spaces.Discrete(3))
 
 
@@ -340,7 +379,8 @@ def test_datagen_failure_is_imported_by_name_and_recorded(tmp_path, monkeypatch)
     from rmm_envs.risk.datagen import main
 
     (tmp_path / "pendulum_failure.py").write_text(
-        "import numpy as np\n\ndef too_fast(s):\n    return np.abs(s[:, 1]) > 6.0\n\nnot_callable = 3\n")
+        "import numpy as np\n\ndef too_fast(s):\n    return np.abs(s[:, 1]) > 6.0\n\nnot_callable = 3\n"
+    )
     monkeypatch.syspath_prepend(str(tmp_path))
     args = ["--env", "Pendulum-v1", "--configs", "1", "--samples-per-config", "4", "--branches", "2", "--no-progress"]
     assert main(args + ["--out", str(tmp_path / "ok"), "--failure", "pendulum_failure:too_fast"]) == 0
@@ -349,12 +389,18 @@ def test_datagen_failure_is_imported_by_name_and_recorded(tmp_path, monkeypatch)
     assert json.loads((tmp_path / "ok" / "metadata.json").read_text())["failure"] == "pendulum_failure:too_fast"
 
 
-@pytest.mark.parametrize("extra, match", [
-    ([], r"Pendulum-v1 never terminates.*--failure module:callable"),
-    (["--failure", "no_colon"], r"failure \(--failure\) must be 'module:callable', got 'no_colon'"),
-    (["--failure", "no_such_module_26:f"], r"failure \(--failure\) 'no_such_module_26:f' cannot be imported: No module named"),
-    (["--failure", "numpy:pi"], r"failure \(--failure\) 'numpy:pi' is not callable: 3.14"),
-])
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        ([], r"Pendulum-v1 never terminates.*--failure module:callable"),
+        (["--failure", "no_colon"], r"failure \(--failure\) must be 'module:callable', got 'no_colon'"),
+        (
+            ["--failure", "no_such_module_26:f"],
+            r"failure \(--failure\) 'no_such_module_26:f' cannot be imported: No module named",
+        ),
+        (["--failure", "numpy:pi"], r"failure \(--failure\) 'numpy:pi' is not callable: 3.14"),
+    ],
+)
 def test_datagen_refuses_a_missing_or_bad_failure_by_name(extra, match, tmp_path, capsys):
     from rmm_envs.risk.datagen import main
 
@@ -368,9 +414,26 @@ def test_datagen_refuses_a_missing_or_bad_failure_by_name(extra, match, tmp_path
 def test_datagen_refuses_a_failure_for_a_package_env(tmp_path, capsys):
     from rmm_envs.risk.datagen import main
 
-    assert main(["--env", "Dubins4DGuarded-v0", "--configs", "1", "--out", str(tmp_path / "d"), "--no-progress",
-                 "--failure", "numpy:isnan"]) == 2
-    assert "failure (--failure) is for envs served by a risk adapter; Dubins4DGuarded-v0 defines its own" in capsys.readouterr().err
+    assert (
+        main(
+            [
+                "--env",
+                "Dubins4DGuarded-v0",
+                "--configs",
+                "1",
+                "--out",
+                str(tmp_path / "d"),
+                "--no-progress",
+                "--failure",
+                "numpy:isnan",
+            ]
+        )
+        == 2
+    )
+    assert (
+        "failure (--failure) is for envs served by a risk adapter; Dubins4DGuarded-v0 defines its own"
+        in capsys.readouterr().err
+    )
 
 
 def test_adapted_envs_follow_the_labelled_env_protocol_and_sampling_leaves_the_episode_alone():
@@ -394,11 +457,11 @@ def test_true_state_before_reset_is_refused():
         adapt(gym.make("CartPole-v1")).true_state
 
 
-MY_MODULE = '''import gymnasium as gym
+MY_MODULE = """import gymnasium as gym
 
 if "MyCartPole-v0" not in gym.registry:
     gym.register("MyCartPole-v0", entry_point="gymnasium.envs.classic_control:CartPoleEnv", max_episode_steps=200)
-'''
+"""
 
 
 def test_the_two_commands_the_lrmm_refusal_names_make_a_model_for_a_module_env(tmp_path, monkeypatch):
@@ -407,9 +470,9 @@ def test_the_two_commands_the_lrmm_refusal_names_make_a_model_for_a_module_env(t
     import re
     import shlex
 
+    from rmm_envs.risk.datagen import main as datagen_main
     from rmm_guardians.lrmm.model import LRMMModel, default_model_path
     from rmm_guardians.lrmm.train import main as train_main
-    from rmm_envs.risk.datagen import main as datagen_main
 
     (tmp_path / "mycartpole.py").write_text(MY_MODULE)
     monkeypatch.chdir(tmp_path)
@@ -417,10 +480,17 @@ def test_the_two_commands_the_lrmm_refusal_names_make_a_model_for_a_module_env(t
     with pytest.raises(ValueError) as e:
         default_model_path("mycartpole:MyCartPole-v0")
     msg = str(e.value)
-    m = re.search(r"two commands: rmm-datagen (.*) and rmm-train (.*); then give it: --agent-opt lrmm\.model='\"(.*)\"'", msg)
+    m = re.search(
+        r"two commands: rmm-datagen (.*) and rmm-train (.*); then give it: --agent-opt lrmm\.model='\"(.*)\"'", msg
+    )
     assert m and msg.startswith("no shipped LRMM model for 'mycartpole:MyCartPole-v0' (shipped for ['"), msg
-    assert datagen_main(shlex.split(m.group(1)) + ["--configs", "3", "--samples-per-config", "8", "--branches", "4",
-                                                   "--workers", "2", "--no-progress"]) == 0
+    assert (
+        datagen_main(
+            shlex.split(m.group(1))
+            + ["--configs", "3", "--samples-per-config", "8", "--branches", "4", "--workers", "2", "--no-progress"]
+        )
+        == 0
+    )
     assert train_main(shlex.split(m.group(2)) + ["--epochs", "2", "--quiet"]) == 0
     model = LRMMModel.load(tmp_path / m.group(3))
     assert model.env_id == "mycartpole:MyCartPole-v0" and model.obs_dim == 4
@@ -433,17 +503,25 @@ def test_datagen_names_a_module_that_fails_to_import_and_the_nearest_id_of_a_typ
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr("sys.path", list(__import__("sys").path))
     assert main(["--env", "brokenmod26:X-v0", "--out", str(tmp_path / "d"), "--no-progress"]) == 2
-    assert ("cannot import module 'brokenmod26' (from brokenmod26.py): "
-            "NameError: name 'undefined_name_in_module' is not defined") in capsys.readouterr().err
+    assert (
+        "cannot import module 'brokenmod26' (from brokenmod26.py): "
+        "NameError: name 'undefined_name_in_module' is not defined"
+    ) in capsys.readouterr().err
     assert main(["--env", "CartPoleGuardd-v0", "--out", str(tmp_path / "d"), "--no-progress"]) == 2
     assert "is not a registered Gymnasium env (did you mean 'CartPoleGuarded-v0'?)" in capsys.readouterr().err
     assert not (tmp_path / "d").exists()
 
 
-@pytest.mark.parametrize("env, match", [
-    ("no_such_module_26:X-v0", r"env 'no_such_module_26:X-v0': cannot import module 'no_such_module_26'"),
-    ("mycartpole:Other-v0", r"env 'mycartpole:Other-v0': importing 'mycartpole' \(from .*mycartpole\.py\) registered no env 'Other-v0'"),
-])
+@pytest.mark.parametrize(
+    "env, match",
+    [
+        ("no_such_module_26:X-v0", r"env 'no_such_module_26:X-v0': cannot import module 'no_such_module_26'"),
+        (
+            "mycartpole:Other-v0",
+            r"env 'mycartpole:Other-v0': importing 'mycartpole' \(from .*mycartpole\.py\) registered no env 'Other-v0'",
+        ),
+    ],
+)
 def test_datagen_refuses_a_module_env_that_does_not_register_by_name(env, match, tmp_path, monkeypatch, capsys):
     import re
 

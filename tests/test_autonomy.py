@@ -22,9 +22,13 @@ D4 = GuardianActionSpace.for_system(Dubins4D(), ("turnrate_ctrl", "accel_ctrl"))
 
 
 def test_dubins4d_space_is_the_plain_dict_it_replaced():
-    plain = spaces.Dict({"active_ctrl": spaces.Discrete(2),
-                         "turnrate_ctrl": spaces.Box(-0.25, 0.25, shape=(1,), dtype=np.float64),
-                         "accel_ctrl": spaces.Box(-0.5, 0.5, shape=(1,), dtype=np.float64)})
+    plain = spaces.Dict(
+        {
+            "active_ctrl": spaces.Discrete(2),
+            "turnrate_ctrl": spaces.Box(-0.25, 0.25, shape=(1,), dtype=np.float64),
+            "accel_ctrl": spaces.Box(-0.5, 0.5, shape=(1,), dtype=np.float64),
+        }
+    )
     assert D4 == plain and list(D4.keys()) == list(plain.keys())
     # same seeding and sampling order, so seeded random actions are unchanged
     D4.seed(3), plain.seed(3)
@@ -53,16 +57,19 @@ def test_active_then_parse_round_trips_inside_the_bounds(w, a):
     assert D4.contains(D4.active([w, a]))
 
 
-@pytest.mark.parametrize("action, msg", [
-    ([1, 2, 3], "must be a dict"),
-    ({"active_ctrl": 1, "turnrate_ctrl": 0.0}, "missing field 'accel_ctrl'"),
-    ({"active_ctrl": 1, "turnrate_ctrl": 0.0, "accel_ctrl": 0.0, "brake": 1}, "unknown fields \\['brake'\\]"),
-    ({"active_ctrl": 2, "turnrate_ctrl": 0.0, "accel_ctrl": 0.0}, "'active_ctrl' must be 0 or 1"),
-    ({"active_ctrl": "1", "turnrate_ctrl": 0.0, "accel_ctrl": 0.0}, "'active_ctrl' must be 0 or 1"),
-    ({"active_ctrl": 1, "turnrate_ctrl": np.nan, "accel_ctrl": 0.0}, "'turnrate_ctrl' must be finite"),
-    ({"active_ctrl": 1, "turnrate_ctrl": 0.0, "accel_ctrl": [0.0, 1.0]}, "'accel_ctrl' must be a number"),
-    ({"active_ctrl": 1, "turnrate_ctrl": "x", "accel_ctrl": 0.0}, "'turnrate_ctrl' must be a number"),
-])
+@pytest.mark.parametrize(
+    "action, msg",
+    [
+        ([1, 2, 3], "must be a dict"),
+        ({"active_ctrl": 1, "turnrate_ctrl": 0.0}, "missing field 'accel_ctrl'"),
+        ({"active_ctrl": 1, "turnrate_ctrl": 0.0, "accel_ctrl": 0.0, "brake": 1}, "unknown fields \\['brake'\\]"),
+        ({"active_ctrl": 2, "turnrate_ctrl": 0.0, "accel_ctrl": 0.0}, "'active_ctrl' must be 0 or 1"),
+        ({"active_ctrl": "1", "turnrate_ctrl": 0.0, "accel_ctrl": 0.0}, "'active_ctrl' must be 0 or 1"),
+        ({"active_ctrl": 1, "turnrate_ctrl": np.nan, "accel_ctrl": 0.0}, "'turnrate_ctrl' must be finite"),
+        ({"active_ctrl": 1, "turnrate_ctrl": 0.0, "accel_ctrl": [0.0, 1.0]}, "'accel_ctrl' must be a number"),
+        ({"active_ctrl": 1, "turnrate_ctrl": "x", "accel_ctrl": 0.0}, "'turnrate_ctrl' must be a number"),
+    ],
+)
 def test_parse_names_the_bad_field(action, msg):
     with pytest.raises(ValueError, match=msg):
         D4.parse(action)
@@ -70,20 +77,26 @@ def test_parse_names_the_bad_field(action, msg):
 
 def test_module_functions_refuse_a_space_without_the_contract():
     plain = spaces.Dict({"active_ctrl": spaces.Discrete(2)})
-    for call in (lambda: autonomy.inactive(plain), lambda: autonomy.active(plain, [0]),
-                 lambda: autonomy.parse({}, plain)):
+    for call in (
+        lambda: autonomy.inactive(plain),
+        lambda: autonomy.active(plain, [0]),
+        lambda: autonomy.parse({}, plain),
+    ):
         with pytest.raises(TypeError, match="GuardianActionSpace"):
             call()
 
 
-@pytest.mark.parametrize("controls, low, high, msg", [
-    ((), [], [], "distinct non-empty"),
-    (("a", "a"), [0, 0], [1, 1], "distinct"),
-    (("active_ctrl",), [0], [1], "activation flag"),
-    (("a", "b"), [0], [1, 1], "one bound per control"),
-    (("a",), [1], [0], "low <= high"),
-    (("a",), [-math.inf], [0], "finite"),
-])
+@pytest.mark.parametrize(
+    "controls, low, high, msg",
+    [
+        ((), [], [], "distinct non-empty"),
+        (("a", "a"), [0, 0], [1, 1], "distinct"),
+        (("active_ctrl",), [0], [1], "activation flag"),
+        (("a", "b"), [0], [1, 1], "one bound per control"),
+        (("a",), [1], [0], "low <= high"),
+        (("a",), [-math.inf], [0], "finite"),
+    ],
+)
 def test_space_refuses_bad_definitions(controls, low, high, msg):
     with pytest.raises(ValueError, match=msg):
         GuardianActionSpace(controls, low, high)
@@ -98,8 +111,11 @@ def test_active_needs_one_value_per_control():
 @given(st.lists(st.tuples(st.integers(0, 1), st.floats(-2, 2), st.floats(-2, 2)), min_size=1, max_size=6))
 def test_batch_parse_agrees_with_single_parse(rows):
     n = len(rows)
-    batch = {"active_ctrl": np.array([r[0] for r in rows]), "turnrate_ctrl": np.array([[r[1]] for r in rows]),
-             "accel_ctrl": np.array([r[2] for r in rows])}
+    batch = {
+        "active_ctrl": np.array([r[0] for r in rows]),
+        "turnrate_ctrl": np.array([[r[1]] for r in rows]),
+        "accel_ctrl": np.array([r[2] for r in rows]),
+    }
     act, ctrl = D4.parse_batch(batch, n)
     for i, (f, w, a) in enumerate(rows):
         on, u = D4.parse({"active_ctrl": f, "turnrate_ctrl": w, "accel_ctrl": a})
@@ -127,8 +143,9 @@ def test_spaces_survive_pickle_and_deepcopy():
 
 def test_dubins4d_observation_layout_matches_the_observation():
     env = gym.make("Dubins4DGuarded-v0", n_rays=8).unwrapped
-    obs, _ = env.reset(seed=1, options={"state": [1.0, 2.0, 0.5, 1.5], "goal": [4.0, -2.0, 0.5],
-                                        "obstacles": [[-5.0, -5.0, 2.0]]})
+    obs, _ = env.reset(
+        seed=1, options={"state": [1.0, 2.0, 0.5, 1.5], "goal": [4.0, -2.0, 0.5], "obstacles": [[-5.0, -5.0, 2.0]]}
+    )
     lay = autonomy.layout(env.observation_space)
     assert lay.size == 13 and lay.names == ("time", "goal_offset", "heading", "speed", "rays")
     assert obs[lay["goal_offset"]].tolist() == [3.0, -4.0]

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from rmm_guardians.baselines import BrakesGuardian, RandomGuardian
 from rmm_envs.autonomy import GuardianActionSpace, SafeDefault
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D, FullBraking
+from rmm_guardians.baselines import BrakesGuardian, RandomGuardian
 
 DUBINS = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, safe_default=FullBraking())
 
@@ -45,7 +45,9 @@ def test_brakes_turn_random_is_the_dubins4d_default_and_both_choices_are_accepte
 
 def test_brakes_refuses_before_any_episode_naming_what_is_missing():
     g = BrakesGuardian()
-    with pytest.raises(ValueError, match=r"guardian 'brakes'.*states none \(GuardianActionSpace\(safe_default=\.\.\.\)"):
+    with pytest.raises(
+        ValueError, match=r"guardian 'brakes'.*states none \(GuardianActionSpace\(safe_default=\.\.\.\)"
+    ):
         g.check_spaces(None, space(None))
     # a turn choice on a safe default that has none: refused by check_spaces itself, naming the guardian
     with pytest.raises(ValueError, match=r"guardian 'brakes': the safe default .*steer by the observation.*'turn'"):

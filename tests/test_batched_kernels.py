@@ -10,12 +10,12 @@ from hypothesis import strategies as st
 from rmm_envs.systems.dubins4d import Dubins4D, _states_at_compiled
 from rmm_envs.worlds.circles import (
     CircleWorld,
-    ray_cast_numpy,
     contact_params,
     contact_params_each,
     points_in_circles,
     ray_cast,
     ray_cast_each,
+    ray_cast_numpy,
 )
 
 
@@ -29,9 +29,9 @@ def test_rays_each_equal_one_origin_at_a_time_and_the_numpy_formulas():
     xy = rng.uniform(-14, 14, (300, 2))
     th = rng.uniform(-7, 7, 300)
     each = ray_cast_each(xy, th, circles)
-    one = np.array([ray_cast(xy[i:i + 1], th[i:i + 1], circles[i])[0] for i in range(300)])
+    one = np.array([ray_cast(xy[i : i + 1], th[i : i + 1], circles[i])[0] for i in range(300)])
     assert np.array_equal(each, one)  # the same compiled function, whatever the batch
-    ref = np.array([ray_cast_numpy(xy[i:i + 1], th[i:i + 1], circles[i], 12, 10.0)[0] for i in range(300)])
+    ref = np.array([ray_cast_numpy(xy[i : i + 1], th[i : i + 1], circles[i], 12, 10.0)[0] for i in range(300)])
     np.testing.assert_allclose(each, ref, rtol=0, atol=1e-12)
     assert np.any(each == 0.0) and np.any(each == 10.0) and np.any((each > 0) & (each < 10))
 
@@ -80,7 +80,7 @@ def test_states_at_compiled_does_not_depend_on_the_batch():
     sys_ = Dubins4D()
     t = np.linspace(0, 3.0, 16)
     batch = sys_.states_at(s, u, t, compiled=True)
-    one = np.array([sys_.states_at(s[i:i + 1], u[i:i + 1], t)[0] for i in range(64)])  # N = 1: compiled too
+    one = np.array([sys_.states_at(s[i : i + 1], u[i : i + 1], t)[0] for i in range(64)])  # N = 1: compiled too
     assert np.array_equal(batch, one)
     assert _states_at_compiled is not None
     np.testing.assert_allclose(batch, sys_._states_at_numpy(s, u, t), rtol=0, atol=1e-12)

@@ -17,8 +17,17 @@ FAST = [*RUN, "--no-figure"]  # the tests read the database and the tables; the 
 
 
 def ep(i, outcome, steps=10, sim=2.0, active=0.5, compute=0.02):
-    return {"episode": i, "outcome": outcome, "steps": steps, "sim_time": sim, "active_sim_time": active,
-            "compute_time": compute, "decision_mean": 0.001, "final_speed": 1.0, "precompute_time": 0.0}
+    return {
+        "episode": i,
+        "outcome": outcome,
+        "steps": steps,
+        "sim_time": sim,
+        "active_sim_time": active,
+        "compute_time": compute,
+        "decision_mean": 0.001,
+        "final_speed": 1.0,
+        "precompute_time": 0.0,
+    }
 
 
 def test_batch_statistics_by_hand():
@@ -61,7 +70,9 @@ def test_episode_seeds_are_derived_and_distinct():
 def _db_rows(out, agent=None):
     con = sqlite3.connect(out / "results.db")
     q = "SELECT agent, episode, seed, outcome, steps, sim_time, active_sim_time FROM episodes"
-    rows = con.execute(q + (" WHERE agent = ?" if agent else "") + " ORDER BY agent, episode", (agent,) if agent else ()).fetchall()
+    rows = con.execute(
+        q + (" WHERE agent = ?" if agent else "") + " ORDER BY agent, episode", (agent,) if agent else ()
+    ).fetchall()
     con.close()
     return rows
 
@@ -72,7 +83,13 @@ def _md_cells(md: str, agent: str) -> list[str]:
 
 
 def _pm_text(v, digits=1):
-    return "n/a" if np.isnan(v[0]) else f"{v[0]:.{digits}f}" if np.isnan(v[1]) else f"{v[0]:.{digits}f} ± {v[1]:.{digits}f}"
+    return (
+        "n/a"
+        if np.isnan(v[0])
+        else f"{v[0]:.{digits}f}"
+        if np.isnan(v[1])
+        else f"{v[0]:.{digits}f} ± {v[1]:.{digits}f}"
+    )
 
 
 def _digits(ms: float) -> int:
@@ -91,8 +108,13 @@ def _check_rendered_numbers(out, aggs: dict) -> None:
         r = csv_rows[agent]
         assert int(r["episodes"]) == agg["episodes"] and int(r["errors"]) == agg["errors"]
         assert int(r["qp_fallbacks"]) == agg["qp_fallbacks"]
-        for col, key in (("compute_ms", "compute_ms"), ("success", "goal"), ("collision", "collision"),
-                         ("timeout", "timeout"), ("intervention", "intervention")):
+        for col, key in (
+            ("compute_ms", "compute_ms"),
+            ("success", "goal"),
+            ("collision", "collision"),
+            ("timeout", "timeout"),
+            ("intervention", "intervention"),
+        ):
             got = (float(r[f"{col}_mean"]), float(r[f"{col}_std"]))
             np.testing.assert_array_equal(got, agg[key])  # bit for bit (nan == nan)
         cells = _md_cells(md, agent)
@@ -106,7 +128,10 @@ def _check_rendered_numbers(out, aggs: dict) -> None:
             expected.append(f"{agg[k][0]:.1f} [{lo:.1f}, {hi:.1f}]†" if wilson else _pm_text(agg[k]))
         assert cells[3:] == expected + [_pm_text(agg["intervention"]), str(agg["errors"]), str(agg["qp_fallbacks"])]
         tex_line = [ln for ln in tex.splitlines() if ln.startswith(f"{agent} &")][0]
-        assert tex_line == " & ".join(cells[:-2]).replace("±", "$\\pm$").replace("†", "$^\\dagger$").replace("%", "\\%") + " \\\\"
+        assert (
+            tex_line
+            == " & ".join(cells[:-2]).replace("±", "$\\pm$").replace("†", "$^\\dagger$").replace("%", "\\%") + " \\\\"
+        )
 
 
 def test_rendered_tables_hold_the_aggregated_numbers(tmp_path):
@@ -139,8 +164,24 @@ def test_every_agent_end_to_end_and_report(tmp_path, capsys):
     from rmm_bench.store import ResultsStore
 
     out = tmp_path / "r"
-    assert main(["--agent", "all", "--episodes", "1", "--workers", "1", "--out", str(out),
-                 "--agent-opt", "hj.grid_n=[32,32,16,16]", *RUN]) == 0
+    assert (
+        main(
+            [
+                "--agent",
+                "all",
+                "--episodes",
+                "1",
+                "--workers",
+                "1",
+                "--out",
+                str(out),
+                "--agent-opt",
+                "hj.grid_n=[32,32,16,16]",
+                *RUN,
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     agents = ("lrmm", "cbf", "hj", "random", "inactive", "brakes")  # 'all' = the defaults, not the -paper presets
     rows = _db_rows(out)
@@ -160,27 +201,59 @@ def test_every_agent_end_to_end_and_report(tmp_path, capsys):
 
 def test_named_agent_sets():
     from rmm_bench.checks import resolve_agents as _agents
-
     from rmm_guardians.registry import load_guardian_class
 
     assert list(_agents("all")) == ["lrmm", "cbf", "hj", "random", "inactive", "brakes"]
     assert list(_agents(" paper ")) == ["lrmm-paper", "cbf-paper", "hj-paper", "random", "inactive", "brakes"]
-    assert _agents("cbf-paper,inactive") == {"cbf-paper": load_guardian_class("cbf-paper"),
-                                             "inactive": load_guardian_class("inactive")}  # each name's class
+    assert _agents("cbf-paper,inactive") == {
+        "cbf-paper": load_guardian_class("cbf-paper"),
+        "inactive": load_guardian_class("inactive"),
+    }  # each name's class
 
 
 def test_agent_options_reach_the_guardian(tmp_path):
     out = tmp_path / "o"
-    assert main(["--agent", "random", "--agent-opt", "random.p_active=1.0", "--episodes", "2", "--workers", "1",
-                 "--out", str(out), *FAST]) == 0
+    assert (
+        main(
+            [
+                "--agent",
+                "random",
+                "--agent-opt",
+                "random.p_active=1.0",
+                "--episodes",
+                "2",
+                "--workers",
+                "1",
+                "--out",
+                str(out),
+                *FAST,
+            ]
+        )
+        == 0
+    )
     con = sqlite3.connect(out / "results.db")
-    assert all(a == s for a, s in con.execute("SELECT active_steps, steps - 1 FROM episodes"))  # all but the driver's first lap
+    assert all(
+        a == s for a, s in con.execute("SELECT active_steps, steps - 1 FROM episodes")
+    )  # all but the driver's first lap
 
 
 @pytest.mark.heavy
 def test_resume_after_kill_minus_nine(tmp_path, capsys):
     out = tmp_path / "k"
-    cmd = [sys.executable, "-m", "rmm_bench.cli", "--agent", "inactive", "--episodes", "40", "--workers", "1", "--out", str(out), *FAST]
+    cmd = [
+        sys.executable,
+        "-m",
+        "rmm_bench.cli",
+        "--agent",
+        "inactive",
+        "--episodes",
+        "40",
+        "--workers",
+        "1",
+        "--out",
+        str(out),
+        *FAST,
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 300  # generous: a loaded 2-core machine can start this slowly
     n = 0
@@ -199,7 +272,10 @@ def test_resume_after_kill_minus_nine(tmp_path, capsys):
     assert 5 <= partial < 40
     assert main(["report", str(out)]) == 0  # the killed run: what is stored, and that it was killed
     text = capsys.readouterr().out
-    assert f"INCOMPLETE: episodes with a result: inactive {partial} of 40 (invocation 1 was killed: it is marked running" in text
+    assert (
+        f"INCOMPLETE: episodes with a result: inactive {partial} of 40 (invocation 1 was killed: it is marked running"
+        in text
+    )
     assert f"| inactive | none | 5 | {partial} |" in text
     assert main(cmd[3:] + ["--resume"]) == 0
     con = sqlite3.connect(out / "results.db")
@@ -214,7 +290,22 @@ def test_resume_after_kill_minus_nine(tmp_path, capsys):
 
 def test_a_raising_guardian_is_an_error_not_a_crash(tmp_path, capsys):
     out = tmp_path / "e"
-    assert main(["--agent", "tests.bench_helpers:Boom,inactive", "--episodes", "3", "--workers", "1", "--out", str(out), *FAST]) == 1
+    assert (
+        main(
+            [
+                "--agent",
+                "tests.bench_helpers:Boom,inactive",
+                "--episodes",
+                "3",
+                "--workers",
+                "1",
+                "--out",
+                str(out),
+                *FAST,
+            ]
+        )
+        == 1
+    )
     con = sqlite3.connect(out / "results.db")
     errs = con.execute("SELECT outcome, error FROM episodes WHERE agent LIKE '%Boom'").fetchall()
     assert len(errs) == 3 and all(o == "error" and "guardian exploded" in e for o, e in errs)
@@ -223,16 +314,28 @@ def test_a_raising_guardian_is_an_error_not_a_crash(tmp_path, capsys):
 
 def test_episode_time_limit_is_a_failure_that_a_rerun_retries(tmp_path, capsys):
     out = tmp_path / "t"
-    cmd = ["--agent", "tests.bench_helpers:Sleepy", "--episodes", "1", "--workers", "1", "--episode-timeout", "0.3", "--out", str(out), *FAST]
+    cmd = [
+        "--agent",
+        "tests.bench_helpers:Sleepy",
+        "--episodes",
+        "1",
+        "--workers",
+        "1",
+        "--episode-timeout",
+        "0.3",
+        "--out",
+        str(out),
+        *FAST,
+    ]
     assert main(cmd) == 1  # the episode has no result
     assert "1 episodes ended without a result" in capsys.readouterr().err
     con = sqlite3.connect(out / "results.db")
-    (outcome, kind, err, t1), = con.execute("SELECT outcome, error_kind, error, finished FROM episodes").fetchall()
+    ((outcome, kind, err, t1),) = con.execute("SELECT outcome, error_kind, error, finished FROM episodes").fetchall()
     assert outcome == "error" and kind == "timeout" and "time limit" in err
     assert main(cmd + ["--resume"]) == 1
-    (t2,), = con.execute("SELECT finished FROM episodes").fetchall()
+    ((t2,),) = con.execute("SELECT finished FROM episodes").fetchall()
     assert t2 > t1  # retried, the row replaced
-    assert [s for s, in con.execute("SELECT status FROM invocations")] == ["failed", "failed"]
+    assert [s for (s,) in con.execute("SELECT status FROM invocations")] == ["failed", "failed"]
 
 
 def test_unknown_names_fail_before_any_work(tmp_path, capsys):
@@ -251,7 +354,25 @@ def test_unknown_names_fail_before_any_work(tmp_path, capsys):
 
 def test_latency_sweep(tmp_path, capsys):
     out = tmp_path / "s"
-    assert main(["sweep", "--agent", "inactive", "--latency", "0,50", "--episodes", "4", "--workers", "1", "--out", str(out), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                "--agent",
+                "inactive",
+                "--latency",
+                "0,50",
+                "--episodes",
+                "4",
+                "--workers",
+                "1",
+                "--out",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert (out / "latency_sweep.png").stat().st_size > 0
     assert "| inactive |" in (out / "latency_sweep.md").read_text()
     # `report` on a sweep's directory says what the directory holds and how to rebuild its files

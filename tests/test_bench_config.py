@@ -24,12 +24,28 @@ FAST = ["--clock", "fixed:1", "--no-progress", "--workers", "1", "--no-figure"]
 def test_run_keys_and_stored_config_are_those_of_the_untyped_harness(capsys):
     # keys and configs as written by the dict-based harness (tests/data/bench_results_v0.db)
     con = sqlite3.connect(DATA / "bench_results_v0.db")
-    stored = {agent: (key, json.loads(cfg)) for key, agent, cfg in con.execute("SELECT run_key, agent, config FROM runs")}
+    stored = {
+        agent: (key, json.loads(cfg)) for key, agent, cfg in con.execute("SELECT run_key, agent, config FROM runs")
+    }
     con.close()
     assert stored["inactive"][0] == "3990ef051d980703" and stored["random"][0] == "c731fab8951b5132"
     par = parse_run(["--agent", "inactive,brakes", "--episodes", "3", "--out", "olddb", *FAST], "")
-    circ = parse_run(["--agent", "random", "--agent-opt", "random.p_active=0.5", "--env", "Dubins4DGuarded-v0", "--episodes", "2",
-                      "--out", "olddb", *FAST], "")
+    circ = parse_run(
+        [
+            "--agent",
+            "random",
+            "--agent-opt",
+            "random.p_active=0.5",
+            "--env",
+            "Dubins4DGuarded-v0",
+            "--episodes",
+            "2",
+            "--out",
+            "olddb",
+            *FAST,
+        ],
+        "",
+    )
     runs = par.agent_runs() | circ.agent_runs()
     assert set(runs) == set(stored)
     for agent, run in runs.items():
@@ -49,10 +65,12 @@ def test_old_database_reports_the_same_table_and_resume_runs_nothing(tmp_path, c
     con = sqlite3.connect(out / "results.db")
     before = con.execute("SELECT * FROM episodes ORDER BY run_key, episode").fetchall()
     assert main(["--agent", "inactive,brakes", "--episodes", "3", "--out", str(out), *FAST, "--resume"]) == 0
-    assert con.execute("SELECT * FROM episodes ORDER BY run_key, episode").fetchall() == before  # every episode was done
-    (args, keys, status), = con.execute("SELECT args, run_keys, status FROM invocations WHERE id = 3").fetchall()
+    assert (
+        con.execute("SELECT * FROM episodes ORDER BY run_key, episode").fetchall() == before
+    )  # every episode was done
+    ((args, keys, status),) = con.execute("SELECT args, run_keys, status FROM invocations WHERE id = 3").fetchall()
     assert json.loads(keys) == {"inactive": "3990ef051d980703", "brakes": "c70cfd4516eee295"} and status == "finished"
-    old_args, = con.execute("SELECT args FROM invocations WHERE id = 1").fetchone()
+    (old_args,) = con.execute("SELECT args FROM invocations WHERE id = 1").fetchone()
     # the invocation records the same arguments, and the options added since
     assert set(json.loads(args)) == set(json.loads(old_args)) | {"no_figure"}
     con.close()
@@ -68,18 +86,45 @@ def test_old_database_reports_the_same_table_and_resume_runs_nothing(tmp_path, c
 def test_episode_result_fields_are_the_store_columns():
     assert [f.name for f in dataclasses.fields(EpisodeResult)] == list(EPISODE_FIELDS)
     r = EpisodeResult(run_key="k", episode=1, agent="a", seed=2, outcome="goal", steps=3)
-    assert r.as_row() == {**dict.fromkeys(EPISODE_FIELDS), "run_key": "k", "episode": 1, "agent": "a", "seed": 2,
-                          "outcome": "goal", "steps": 3}
+    assert r.as_row() == {
+        **dict.fromkeys(EPISODE_FIELDS),
+        "run_key": "k",
+        "episode": 1,
+        "agent": "a",
+        "seed": 2,
+        "outcome": "goal",
+        "steps": 3,
+    }
     with pytest.raises(dataclasses.FrozenInstanceError):
         r.outcome = "error"
     # the schema derived from the dataclass is the one every results.db was written with
     assert EPISODE_FIELDS == {
-        "run_key": "TEXT NOT NULL", "episode": "INTEGER NOT NULL", "agent": "TEXT NOT NULL", "seed": "INTEGER NOT NULL",
-        "outcome": "TEXT NOT NULL", "steps": "INTEGER", "active_steps": "INTEGER", "sim_time": "REAL",
-        "active_sim_time": "REAL", "compute_time": "REAL", "avg_compute_time": "REAL", "decision_mean": "REAL",
-        "decision_std": "REAL", "decision_max": "REAL", "precompute_time": "REAL", "final_speed": "REAL",
-        "cum_reward": "REAL", "qp_fallbacks": "INTEGER", "nan_states": "INTEGER", "guardian_stats": "TEXT",
-        "error": "TEXT", "wall_time": "REAL", "finished": "REAL", "error_kind": "TEXT", "cost": "REAL"}
+        "run_key": "TEXT NOT NULL",
+        "episode": "INTEGER NOT NULL",
+        "agent": "TEXT NOT NULL",
+        "seed": "INTEGER NOT NULL",
+        "outcome": "TEXT NOT NULL",
+        "steps": "INTEGER",
+        "active_steps": "INTEGER",
+        "sim_time": "REAL",
+        "active_sim_time": "REAL",
+        "compute_time": "REAL",
+        "avg_compute_time": "REAL",
+        "decision_mean": "REAL",
+        "decision_std": "REAL",
+        "decision_max": "REAL",
+        "precompute_time": "REAL",
+        "final_speed": "REAL",
+        "cum_reward": "REAL",
+        "qp_fallbacks": "INTEGER",
+        "nan_states": "INTEGER",
+        "guardian_stats": "TEXT",
+        "error": "TEXT",
+        "wall_time": "REAL",
+        "finished": "REAL",
+        "error_kind": "TEXT",
+        "cost": "REAL",
+    }
 
 
 def test_configs_are_frozen_copies_and_refuse_what_cannot_be_stored():
@@ -109,16 +154,20 @@ def test_envs_without_the_parallel_autonomy_contract_are_refused_by_name(tmp_pat
     assert len(err.splitlines()) == 1
     assert "--env Dubins3DMaze-v0: rmm-bench runs guardians only on envs offering the parallel-autonomy contract" in err
     assert "takes no `clock`" in err and "its action space is Box(" in err and "'active_ctrl'" in err
-    assert err.endswith("; its system's guardian envs are Dubins3DMazeParallel-v0 (non-blocking) and "
-                        "Dubins3DMazeGuarded-v0 (blocking)")
+    assert err.endswith(
+        "; its system's guardian envs are Dubins3DMazeParallel-v0 (non-blocking) and Dubins3DMazeGuarded-v0 (blocking)"
+    )
     assert main(["--agent", "inactive", "--env", "CartPole-v1", "--out", str(tmp_path / "c"), *FAST]) == 2
     err = capsys.readouterr().err
     assert "CartPole-v1 does not: its constructor takes no `clock`" in err
-    assert err.endswith("; its system's guardian envs are CartPoleParallel-v0 (non-blocking) and CartPoleGuarded-v0 "
-                        "(blocking)\n")  # CartPole-v1 is the dynamics the table's CartPole system guards
+    assert err.endswith(
+        "; its system's guardian envs are CartPoleParallel-v0 (non-blocking) and CartPoleGuarded-v0 (blocking)\n"
+    )  # CartPole-v1 is the dynamics the table's CartPole system guards
     assert main(["--agent", "inactive", "--env", "Acrobot-v1", "--out", str(tmp_path / "a"), *FAST]) == 2
-    assert capsys.readouterr().err.endswith("; rmm_envs.envs.driven.parallel(env, driver, safe_default, success) makes "
-                                            "a guardian env of it (docs/tutorials/own-simulator.md, step 5)\n")
+    assert capsys.readouterr().err.endswith(
+        "; rmm_envs.envs.driven.parallel(env, driver, safe_default, success) makes "
+        "a guardian env of it (docs/tutorials/own-simulator.md, step 5)\n"
+    )
     assert not (tmp_path / "m").exists() and not (tmp_path / "c").exists()
 
 
@@ -127,7 +176,9 @@ def test_the_blocking_env_runs_through_the_same_contract(tmp_path, capsys):
     assert main(["--agent", "brakes", "--env", "Dubins4DGuarded-v0", "--episodes", "2", "--out", str(out), *FAST]) == 0
     con = sqlite3.connect(out / "results.db")
     rows = con.execute("SELECT outcome, steps, compute_time, final_speed FROM episodes").fetchall()
-    assert len(rows) == 2 and all(o != "error" and s > 0 and c == pytest.approx(s * 1e-3) and v is not None for o, s, c, v in rows)
+    assert len(rows) == 2 and all(
+        o != "error" and s > 0 and c == pytest.approx(s * 1e-3) and v is not None for o, s, c, v in rows
+    )
     capsys.readouterr()
 
 
@@ -136,10 +187,17 @@ def test_env_statistics_contract_is_checked_and_optional_keys_may_be_absent():
 
     ep = {k: i for i, k in enumerate(EPISODE_STATISTICS.values())}
     got = _statistics("E-v0", {"outcome": "goal", "episode_stats": ep})
-    assert got == {"outcome": "goal", "final_speed": None, "cost": None, **{c: ep[k] for c, k in EPISODE_STATISTICS.items()}}
+    assert got == {
+        "outcome": "goal",
+        "final_speed": None,
+        "cost": None,
+        **{c: ep[k] for c, k in EPISODE_STATISTICS.items()},
+    }
     assert _statistics("E-v0", {"outcome": "goal", "episode_stats": ep | {"final_speed": 1.5}})["final_speed"] == 1.5
     assert _statistics("E-v0", {"outcome": "goal", "episode_stats": ep | {"cum_cost": 1.0}})["cost"] == 1.0
-    with pytest.raises(EnvContractError, match=r"env E-v0 ended an episode without info\[\"episode_stats\"\] keys \['cum_reward'\]"):
+    with pytest.raises(
+        EnvContractError, match=r"env E-v0 ended an episode without info\[\"episode_stats\"\] keys \['cum_reward'\]"
+    ):
         _statistics("E-v0", {"outcome": "goal", "episode_stats": {k: v for k, v in ep.items() if k != "cum_reward"}})
     with pytest.raises(EnvContractError, match=r"without info keys \['outcome', 'episode_stats'\]"):
         _statistics("E-v0", {})
@@ -168,8 +226,10 @@ def test_accepts_argument_reads_signatures_and_follows_forwarded_kwargs():
     assert not accepts_argument(lambda threads_n=None: None, "threads") and not accepts_argument(len, "threads")
 
 
-@pytest.mark.parametrize("workers, backend, opts, expected", [
-    (2, "local", {}, 1), (1, "ray", {}, 1), (1, "local", {}, None), (4, "local", {"threads": 3}, None)])
+@pytest.mark.parametrize(
+    "workers, backend, opts, expected",
+    [(2, "local", {}, 1), (1, "ray", {}, 1), (1, "local", {}, None), (4, "local", {"threads": 3}, None)],
+)
 def test_threads_go_to_guardians_that_take_them_when_workers_share_the_machine(workers, backend, opts, expected):
     from rmm_bench.run import guardian_threads
 
@@ -183,8 +243,23 @@ def test_a_worker_builds_the_guardian_with_the_tasks_threads_and_sets_no_environ
     from rmm_bench.store import ResultsStore
 
     monkeypatch.delenv("RMM_HJ_THREADS", raising=False)
-    cfg = parse_run(["--agent", "tests.bench_helpers:Threaded,inactive", "--agent-opt", "tests.bench_helpers:Threaded.margin=0.5",
-                     "--episodes", "1", "--out", str(tmp_path), "--clock", "fixed:1", "--workers", "2"], "")
+    cfg = parse_run(
+        [
+            "--agent",
+            "tests.bench_helpers:Threaded,inactive",
+            "--agent-opt",
+            "tests.bench_helpers:Threaded.margin=0.5",
+            "--episodes",
+            "1",
+            "--out",
+            str(tmp_path),
+            "--clock",
+            "fixed:1",
+            "--workers",
+            "2",
+        ],
+        "",
+    )
     store = ResultsStore(tmp_path / "results.db")
     tasks = plan_tasks(store, cfg.agent_runs(), 1, workers=2, backend="local")
     store.close()
@@ -200,10 +275,33 @@ def test_a_worker_builds_the_guardian_with_the_tasks_threads_and_sets_no_environ
 
 
 def test_bench_config_is_what_the_command_line_said():
-    cfg = parse_run(["--agent", "lrmm,cbf", "--agent-opt", "cbf.p1=2", "--seed", "3", "--out", "o", "--workers", "2",
-                     "--clock", "cpu", "--time-accel", "5"], "")
+    cfg = parse_run(
+        [
+            "--agent",
+            "lrmm,cbf",
+            "--agent-opt",
+            "cbf.p1=2",
+            "--seed",
+            "3",
+            "--out",
+            "o",
+            "--workers",
+            "2",
+            "--clock",
+            "cpu",
+            "--time-accel",
+            "5",
+        ],
+        "",
+    )
     assert isinstance(cfg, BenchConfig)
-    assert (cfg.agents, cfg.agent_kwargs, cfg.seed, cfg.workers, cfg.clock) == (("lrmm", "cbf"), {"cbf": {"p1": 2}}, 3, 2, "cpu")
+    assert (cfg.agents, cfg.agent_kwargs, cfg.seed, cfg.workers, cfg.clock) == (
+        ("lrmm", "cbf"),
+        {"cbf": {"p1": 2}},
+        3,
+        2,
+        "cpu",
+    )
     assert cfg.env_kwargs == {"time_accel": 5.0, "base_step": 0.1, "clock": "cpu"} and cfg.progress
     assert cfg.parsed["agent_opt"] == ["cbf.p1=2"] and cfg.parsed["clock"] == "cpu"
     task = EpisodeTask(run=cfg.agent_runs()["cbf"], run_key="k", episode=0, seed=1)
@@ -220,8 +318,22 @@ def test_each_guardian_class_is_resolved_once_per_command(monkeypatch, tmp_path)
     calls = []
     resolve = registry.load_guardian_class
     monkeypatch.setattr(registry, "load_guardian_class", lambda name: calls.append(name) or resolve(name))
-    cfg = parse_run(["--agent", "tests.bench_helpers:Threaded,inactive", "--episodes", "1", "--out", str(tmp_path),
-                     "--clock", "fixed:1", "--no-progress", "--workers", "2"], "")
+    cfg = parse_run(
+        [
+            "--agent",
+            "tests.bench_helpers:Threaded,inactive",
+            "--episodes",
+            "1",
+            "--out",
+            str(tmp_path),
+            "--clock",
+            "fixed:1",
+            "--no-progress",
+            "--workers",
+            "2",
+        ],
+        "",
+    )
     assert calls == ["tests.bench_helpers:Threaded", "inactive"]
     assert cfg.agent_classes == {"tests.bench_helpers:Threaded": Threaded, "inactive": resolve("inactive")}
     cfg, meta = applicable(cfg)
@@ -260,8 +372,13 @@ def test_no_function_of_the_packages_writes_its_own_non_blocking_default():
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 args = node.args.posonlyargs + node.args.args
-                pairs = [*zip(args[len(args) - len(node.args.defaults):], node.args.defaults),
-                         *zip(node.args.kwonlyargs, node.args.kw_defaults)]
-                found += [f"{path.relative_to(root)}:{node.lineno} {node.name}({a.arg}={d.value!r})" for a, d in pairs
-                          if a.arg in ("time_accel", "base_step") and isinstance(d, ast.Constant) and d.value is not None]
+                pairs = [
+                    *zip(args[len(args) - len(node.args.defaults) :], node.args.defaults),
+                    *zip(node.args.kwonlyargs, node.args.kw_defaults),
+                ]
+                found += [
+                    f"{path.relative_to(root)}:{node.lineno} {node.name}({a.arg}={d.value!r})"
+                    for a, d in pairs
+                    if a.arg in ("time_accel", "base_step") and isinstance(d, ast.Constant) and d.value is not None
+                ]
     assert found == []

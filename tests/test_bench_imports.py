@@ -13,7 +13,7 @@ import pytest
 
 from rmm_bench.config import import_from
 
-GUARD = '''
+GUARD = """
 from rmm_guardians.base import Guardian
 
 
@@ -22,31 +22,49 @@ class Steady(Guardian):
 
     def act(self, observation, info):
         return self.action_space.inactive()
-'''
-ENV = '''
+"""
+ENV = """
 import gymnasium as gym
 
 gym.register(id="MyCircles-v0", entry_point="rmm_envs.envs.dubins4d:Dubins4DCirclesEnv")
-'''
+"""
 
 
 def _bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
     exe = Path(sys.executable).parent / "rmm-bench"
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    return subprocess.run([str(exe), *args, "--clock", "fixed:1", "--no-progress", "--no-figure", "--out", str(cwd / "res")],
-                          cwd=cwd, capture_output=True, text=True, timeout=600, env=env)
+    return subprocess.run(
+        [str(exe), *args, "--clock", "fixed:1", "--no-progress", "--no-figure", "--out", str(cwd / "res")],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
+    )
 
 
 @pytest.fixture(scope="module")
 def current_directory_run(once_per_run):
     """One two-worker run (once per test run) whose guardian and env both come from modules in the
     directory it runs in: the guardian counts its act() calls per process (``WARM`` below)."""
+
     def make(cwd):
         (cwd / "warm_guard.py").write_text(WARM)
         (cwd / "my_env.py").write_text(ENV)
-        res = _bench(cwd, "--agent", "warm_guard:CountsCalls", "--env", "my_env:MyCircles-v0", "--episodes", "4",
-                     "--workers", "2")
-        (cwd / "run.json").write_text(json.dumps({"returncode": res.returncode, "stdout": res.stdout, "stderr": res.stderr}))
+        res = _bench(
+            cwd,
+            "--agent",
+            "warm_guard:CountsCalls",
+            "--env",
+            "my_env:MyCircles-v0",
+            "--episodes",
+            "4",
+            "--workers",
+            "2",
+        )
+        (cwd / "run.json").write_text(
+            json.dumps({"returncode": res.returncode, "stdout": res.stdout, "stderr": res.stderr})
+        )
 
     cwd = once_per_run("current_directory_run", make)
     return cwd, subprocess.CompletedProcess([], **json.loads((cwd / "run.json").read_text()))
@@ -64,8 +82,9 @@ def test_agent_and_env_modules_are_found_in_the_current_directory_by_every_worke
 def test_ray_workers_find_the_current_directory_s_modules_too(tmp_path):
     (tmp_path / "my_guard.py").write_text(GUARD)
     (tmp_path / "my_env.py").write_text(ENV)
-    res = _bench(tmp_path, "--agent", "my_guard:Steady", "--env", "my_env:MyCircles-v0", "--episodes", "4",
-                 "--backend", "ray")
+    res = _bench(
+        tmp_path, "--agent", "my_guard:Steady", "--env", "my_env:MyCircles-v0", "--episodes", "4", "--backend", "ray"
+    )
     assert res.returncode == 0, res.stderr[-2000:]
     row = next(line for line in res.stdout.splitlines() if line.startswith("| my_guard:Steady"))
     assert "| 4 |" in row and "| 0 | 0 |" in row  # four episodes, no errors
@@ -91,7 +110,7 @@ def test_import_from_puts_each_folder_first_once(monkeypatch):
     assert sys.path == ["/a", "/d", "/b", "/c"]
 
 
-WARM = '''
+WARM = """
 from rmm_guardians.base import Guardian
 
 CALLS = 0  # act() calls in this worker process
@@ -111,7 +130,7 @@ class CountsCalls(Guardian):
 
     def stats(self):
         return {"calls_before": self.calls_before}
-'''
+"""
 
 
 def test_each_workers_first_timed_decision_comes_after_an_untimed_warm_up(current_directory_run):
@@ -138,8 +157,12 @@ def test_the_cbf_warm_up_reaches_the_qp_and_the_recovery_then_reset_forgets_it()
     env = gym.make("Dubins4DGuarded-v0")
     obs, info = env.reset(seed=0)
     g = make_guardian("cbf")
-    kw = dict(seed=0, observation_space=env.observation_space, action_space=env.action_space,
-              privileged=env.unwrapped.privileged)
+    kw = dict(
+        seed=0,
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        privileged=env.unwrapped.privileged,
+    )
     g.reset(**kw)
     g.act(obs, info)
     assert g.stats()["qp_solves"] == 0  # the first decision alone would leave the QP uncompiled

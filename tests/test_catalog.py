@@ -25,9 +25,12 @@ def test_the_users_id_is_todays_id_for_the_circles_world_and_keys_stay_stable():
 
 
 def test_former_ids_are_read_back_under_todays_id_and_are_not_registered():
-    assert FORMER_IDS == {"Dubins4DCircles-v0": "Dubins4DGuarded-v0", "Dubins4DMap-v0": "Dubins4DMapGuarded-v0",
-                          "Dubins4DCirclesGuarded-v0": "Dubins4DGuarded-v0",
-                          "Dubins4DCirclesParallel-v0": "Dubins4DParallel-v0"}
+    assert FORMER_IDS == {
+        "Dubins4DCircles-v0": "Dubins4DGuarded-v0",
+        "Dubins4DMap-v0": "Dubins4DMapGuarded-v0",
+        "Dubins4DCirclesGuarded-v0": "Dubins4DGuarded-v0",
+        "Dubins4DCirclesParallel-v0": "Dubins4DParallel-v0",
+    }
     for old, new in FORMER_IDS.items():
         assert old not in gym.registry and old not in rmm_envs.ENV_IDS and new in rmm_envs.ENV_IDS
         assert current_id(old) == current_id(new) == new
@@ -38,7 +41,9 @@ def test_former_ids_are_read_back_under_todays_id_and_are_not_registered():
 
 def test_making_the_users_id_never_warns_in_a_fresh_interpreter():
     code = "import gymnasium as gym, rmm_envs; gym.make('Dubins4DParallel-v0').reset(seed=0)"
-    done = subprocess.run([sys.executable, "-W", "error::DeprecationWarning", "-c", code], capture_output=True, text=True)
+    done = subprocess.run(
+        [sys.executable, "-W", "error::DeprecationWarning", "-c", code], capture_output=True, text=True
+    )
     assert done.returncode == 0, done.stderr
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -49,15 +54,31 @@ def test_making_the_users_id_never_warns_in_a_fresh_interpreter():
 def test_a_former_id_on_the_command_line_is_refused_naming_it(tmp_path, capsys):
     from rmm_bench.cli import main as bench
 
-    assert bench(["--agent", "inactive", "--env", "Dubins4DCirclesParallel-v0", "--episodes", "1", "--no-progress",
-                  "--out", str(tmp_path / "r")]) == 2
+    assert (
+        bench(
+            [
+                "--agent",
+                "inactive",
+                "--env",
+                "Dubins4DCirclesParallel-v0",
+                "--episodes",
+                "1",
+                "--no-progress",
+                "--out",
+                str(tmp_path / "r"),
+            ]
+        )
+        == 2
+    )
     assert "Dubins4DCirclesParallel-v0" in capsys.readouterr().err
 
 
 def test_a_dataset_made_under_a_former_id_is_the_same_dataset_under_todays():
     from rmm_envs.risk.dataset import identity
 
-    assert identity({"env_id": "Dubins4DCircles-v0", "seed": 1}) == identity({"env_id": "Dubins4DGuarded-v0", "seed": 1})
+    assert identity({"env_id": "Dubins4DCircles-v0", "seed": 1}) == identity(
+        {"env_id": "Dubins4DGuarded-v0", "seed": 1}
+    )
     assert identity({"env_id": "Dubins3DMaze-v0"}) != identity({"env_id": "Dubins3DMazeGuarded-v0"})
 
 
@@ -81,9 +102,9 @@ def test_ids_registration_and_twins_come_from_the_table():
 def test_every_reference_of_the_table_imports():
     from gymnasium.envs.registration import load_env_creator
 
+    from rmm_envs.adapters.base import SimulatorScene
     from rmm_envs.autonomy import SafeDefault
     from rmm_envs.catalog import SYSTEMS
-    from rmm_envs.adapters.base import SimulatorScene
     from rmm_envs.scenes.base import SceneBase
 
     for s in SYSTEMS:
@@ -93,8 +114,9 @@ def test_every_reference_of_the_table_imports():
         assert issubclass(load_env_creator(s.safe_default), SafeDefault)
 
 
-@pytest.mark.parametrize("name", ["Dubins4D", "Dubins4DMap", "Dubins3DMaze", "QuadrotorRoom", "CartPole",
-                                  "InvertedPendulum"])
+@pytest.mark.parametrize(
+    "name", ["Dubins4D", "Dubins4DMap", "Dubins3DMaze", "QuadrotorRoom", "CartPole", "InvertedPendulum"]
+)
 def test_the_driver_and_safe_default_the_table_names_are_those_its_guarded_env_uses(name):
     from gymnasium.envs.registration import load_env_creator
 
@@ -113,8 +135,9 @@ def test_the_driver_and_safe_default_the_table_names_are_those_its_guarded_env_u
 def test_system_of_finds_each_id_and_refuses_others():
     from rmm_envs.catalog import system_of
 
-    assert [(s.name, k) for s, k in map(system_of, ("Dubins4DParallel-v0", "QuadrotorRoom-v0", "Dubins4DMapGuarded-v0"))] == \
-        [("Dubins4D", "parallel"), ("QuadrotorRoom", "plain"), ("Dubins4DMap", "guarded")]
+    assert [
+        (s.name, k) for s, k in map(system_of, ("Dubins4DParallel-v0", "QuadrotorRoom-v0", "Dubins4DMapGuarded-v0"))
+    ] == [("Dubins4D", "parallel"), ("QuadrotorRoom", "plain"), ("Dubins4DMap", "guarded")]
     with pytest.raises(KeyError, match="'CartPole-v1' is not an env of this package's systems"):
         system_of("CartPole-v1")
 
@@ -127,10 +150,12 @@ def test_the_cli_help_and_the_docs_list_name_the_table_s_ids():
     from rmm_envs.catalog import FORMER_IDS, SYSTEMS, env_help
     from rmm_envs.cli import build_parser
 
-    assert env_help() == ("Dubins4DParallel-v0, Dubins4DMapParallel-v0, Dubins3DMazeParallel-v0, "
-                          "QuadrotorRoomParallel-v0, CartPoleParallel-v0, InvertedPendulumParallel-v0 (non-blocking) or "
-                          "Dubins4DGuarded-v0, Dubins4DMapGuarded-v0, Dubins3DMazeGuarded-v0, "
-                          "QuadrotorRoomGuarded-v0, CartPoleGuarded-v0, InvertedPendulumGuarded-v0 (blocking) in this package")
+    assert env_help() == (
+        "Dubins4DParallel-v0, Dubins4DMapParallel-v0, Dubins3DMazeParallel-v0, "
+        "QuadrotorRoomParallel-v0, CartPoleParallel-v0, InvertedPendulumParallel-v0 (non-blocking) or "
+        "Dubins4DGuarded-v0, Dubins4DMapGuarded-v0, Dubins3DMazeGuarded-v0, "
+        "QuadrotorRoomGuarded-v0, CartPoleGuarded-v0, InvertedPendulumGuarded-v0 (blocking) in this package"
+    )
     for parser in (run_parser(""), sweep_parser()):
         env = next(a for a in parser._actions if a.dest == "env")
         assert env_help() in env.help and env.default == "Dubins4DParallel-v0"
@@ -146,16 +171,22 @@ def test_the_cli_help_and_the_docs_list_name_the_table_s_ids():
     assert (docs / "environments" / "index.md").read_text() == page
     rows = [line for line in page.splitlines() if line.startswith("| ") and "`" in line]
     assert sum(f"`{i}`" in line for line in rows for i in rmm_envs.ENV_IDS) == len(rmm_envs.ENV_IDS) + len(FORMER_IDS)
-    assert sum(f"`{i}`" in line for line in rows for i in FORMER_IDS) == len(FORMER_IDS)  # a row each: record id, today's
+    assert sum(f"`{i}`" in line for line in rows for i in FORMER_IDS) == len(
+        FORMER_IDS
+    )  # a row each: record id, today's
     assert set(gen.env_pages()) == {p.path for s in SYSTEMS for p in s.pages}
 
 
 def test_a_new_table_entry_is_registered_listed_and_helped(monkeypatch):
     from rmm_envs import catalog
 
-    toy = catalog.SystemSpec(name="ToyCircles", blurb="a toy", dynamics="rmm_envs.systems.dubins4d:Dubins4D",
-                             scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
-                             envs={"guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv"})
+    toy = catalog.SystemSpec(
+        name="ToyCircles",
+        blurb="a toy",
+        dynamics="rmm_envs.systems.dubins4d:Dubins4D",
+        scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
+        envs={"guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv"},
+    )
     last = catalog.env_ids(("guarded",))[-1]  # the table's last blocking env so far
     monkeypatch.setattr(catalog, "SYSTEMS", (*catalog.SYSTEMS, toy))
     try:
@@ -169,8 +200,8 @@ def test_a_new_table_entry_is_registered_listed_and_helped(monkeypatch):
 
 
 def test_shipped_models_are_keyed_by_system_and_found_by_every_id():
-    from rmm_guardians.lrmm.model import SHIPPED, SHIPPED_BY_SYSTEM
     from rmm_envs.catalog import GUARDED_KINDS, SYSTEMS
+    from rmm_guardians.lrmm.model import SHIPPED, SHIPPED_BY_SYSTEM
 
     names = {s.name: s for s in SYSTEMS}
     assert set(SHIPPED_BY_SYSTEM) <= set(names)
@@ -187,11 +218,27 @@ def test_shipped_models_are_keyed_by_system_and_found_by_every_id():
 def test_the_guardians_the_table_lists_are_those_the_benchmark_accepts():
     from rmm_bench.args import parse_run
     from rmm_bench.checks import check_runs
-    from rmm_guardians.registry import BUILTIN
     from rmm_envs.catalog import SYSTEMS
+    from rmm_guardians.registry import BUILTIN
 
     for s in SYSTEMS:
-        cfg = parse_run(["--agent", ",".join(BUILTIN), "--env", s.env_id("guarded"), "--clock", "fixed:1", "--episodes", "1",
-                         "--no-progress", "--workers", "1"], "")
+        cfg = parse_run(
+            [
+                "--agent",
+                ",".join(BUILTIN),
+                "--env",
+                s.env_id("guarded"),
+                "--clock",
+                "fixed:1",
+                "--episodes",
+                "1",
+                "--no-progress",
+                "--workers",
+                "1",
+            ],
+            "",
+        )
         meta = check_runs(cfg.agent_runs(), skip_inapplicable=True)
-        assert tuple(a for a in BUILTIN if "skipped" not in meta[a]) == tuple(a for a in BUILTIN if a in s.guardians), s.name
+        assert tuple(a for a in BUILTIN if "skipped" not in meta[a]) == tuple(a for a in BUILTIN if a in s.guardians), (
+            s.name
+        )

@@ -7,12 +7,12 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from rmm_guardians import make_guardian
-from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.drivers.dubins4d import CLFDriver
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D
+from rmm_guardians import make_guardian
+from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from tests.qp_reference import solve_qp_dense
 
 SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")  # the Dubins4D envs' action space
@@ -21,8 +21,12 @@ INFO0 = {"nominal_control": np.zeros(2)}  # a step's info whose driver control i
 
 def make(state, obstacles, goal=(20.0, 0.0, 0.5), cls=CBFGuardian, **kw):
     g = cls(**kw)
-    box = {"state": np.asarray(state, float), "obstacles": np.asarray(obstacles, float),
-           "goal": np.asarray(goal, float), "sim_time": 0.0}
+    box = {
+        "state": np.asarray(state, float),
+        "obstacles": np.asarray(obstacles, float),
+        "goal": np.asarray(goal, float),
+        "sim_time": 0.0,
+    }
     g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
     return g, box
 
@@ -54,14 +58,14 @@ def test_default_decides_for_the_state_its_action_will_act_from():
     a = g.act(None, INFO0)
     r = ref.act(None, INFO0)
     # b = 2.89^2 - 1.1025, Lf b = -5.78: h = 2 + (p1+p2)(-5.78) + p1 p2 b, row 5.78 u2 <= -h
-    b = 2.89 ** 2 - 1.05 ** 2
+    b = 2.89**2 - 1.05**2
     h = 2.0 + (0.7535 + 0.6664) * -5.78 + 0.7535 * 0.6664 * b
     assert a["active_ctrl"] == r["active_ctrl"] == 1
     assert a["accel_ctrl"][0] == pytest.approx(r["accel_ctrl"][0], abs=1e-6)
     assert a["accel_ctrl"][0] == pytest.approx(h / 5.78, abs=1e-3)
     # when the guardian itself drives the coming lap, that control is used for the prediction
     s = g.predict([0, 0, 0, 1.0], [0.0, -0.5], 0.11)
-    np.testing.assert_allclose(s, [0.11 - 0.5 * 0.5 * 0.11 ** 2, 0, 0, 1.0 - 0.055], atol=1e-12)
+    np.testing.assert_allclose(s, [0.11 - 0.5 * 0.5 * 0.11**2, 0, 0, 1.0 - 0.055], atol=1e-12)
 
 
 def test_driver_keeps_control_far_from_obstacles():
@@ -112,7 +116,7 @@ def test_goal_aware_margin():
     # inside the 5% margin (2.1): the margin keeps half of the goal's protrusion, 2.025
     g, _ = make([5, 5, 0, 1.0], [[0.0, 0.0, 2.0], [10.0, 0.0, 2.0]], goal=(2.0, 0.0, 0.05))
     np.testing.assert_allclose(g.radii, [2.025, 2.1])
-    assert g.barriers([2.03, 0.0])[0] == pytest.approx(2.03 ** 2 - 2.025 ** 2)
+    assert g.barriers([2.03, 0.0])[0] == pytest.approx(2.03**2 - 2.025**2)
     p, _ = make([5, 5, 0, 1.0], [[0.0, 0.0, 2.0], [10.0, 0.0, 2.0]], goal=(2.0, 0.0, 0.05), cls=CBFPaperGuardian)
     np.testing.assert_allclose(p.radii, [2.1, 2.1])
 
@@ -153,13 +157,22 @@ def test_configuration_errors():
     with pytest.raises(ValueError, match="privileged"):
         CBFGuardian().reset(seed=0)
     bad = [
-        ({"p1": 0}, "p1"), ({"p2": float("nan")}, r"p2.*nan"), ({"p1": "x"}, "p1"),
-        ({"inflation": 0.9}, r"inflation.*0\.9"), ({"inflation": float("nan")}, "inflation.*nan"),
-        ({"gamma_vmin": -1}, "gamma_vmin"), ({"lambda_theta": float("inf")}, "lambda_theta"),
-        ({"u1_bounds": (0.25, -0.25)}, "u1_bounds"), ({"u2_bounds": (0.0, 0.5)}, "u2_bounds"),
-        ({"v_bounds": (2.0, 0.0)}, "v_bounds"), ({"u1_bounds": (1,)}, "u1_bounds"),
-        ({"active_atol": -1e-3}, "active_atol"), ({"eps": 0}, "eps"), ({"v_stuck": -0.1}, "v_stuck"),
-        ({"lap_guess": 0}, "lap_guess"), ({"max_obstacles": 2.5}, "max_obstacles"),
+        ({"p1": 0}, "p1"),
+        ({"p2": float("nan")}, r"p2.*nan"),
+        ({"p1": "x"}, "p1"),
+        ({"inflation": 0.9}, r"inflation.*0\.9"),
+        ({"inflation": float("nan")}, "inflation.*nan"),
+        ({"gamma_vmin": -1}, "gamma_vmin"),
+        ({"lambda_theta": float("inf")}, "lambda_theta"),
+        ({"u1_bounds": (0.25, -0.25)}, "u1_bounds"),
+        ({"u2_bounds": (0.0, 0.5)}, "u2_bounds"),
+        ({"v_bounds": (2.0, 0.0)}, "v_bounds"),
+        ({"u1_bounds": (1,)}, "u1_bounds"),
+        ({"active_atol": -1e-3}, "active_atol"),
+        ({"eps": 0}, "eps"),
+        ({"v_stuck": -0.1}, "v_stuck"),
+        ({"lap_guess": 0}, "lap_guess"),
+        ({"max_obstacles": 2.5}, "max_obstacles"),
     ]
     for kwargs, msg in bad:
         for cls in (CBFGuardian, CBFPaperGuardian):
@@ -193,8 +206,12 @@ def _run_env(guardian, state, obstacles, goal, seconds):
 
 
 @settings(max_examples=12, deadline=None)
-@given(depth=st.floats(0.02, 0.98), bearing=st.floats(-math.pi, math.pi), heading=st.floats(-math.pi, math.pi),
-       goal_side=st.floats(-1.0, 1.0))
+@given(
+    depth=st.floats(0.02, 0.98),
+    bearing=st.floats(-math.pi, math.pi),
+    heading=st.floats(-math.pi, math.pi),
+    goal_side=st.floats(-1.0, 1.0),
+)
 @example(depth=0.875, bearing=0.0, heading=1.59375, goal_side=0.0)  # nearly tangent, feasible: no recovery needed
 def test_a_stopped_car_inside_the_margin_leaves_it_in_bounded_time(depth, bearing, heading, goal_side):
     # obstacle r = 3 (margin 3.15); the car stopped at a depth of 2-98% into the margin, any
@@ -252,14 +269,19 @@ def _closed_loop_min_barrier(g, state, seconds=6.0, dt=0.02):
                 u = np.clip(z[:2], [-0.25, -0.5], [0.25, 0.5])
         path = sysm.states_at(s[None], u[None], np.linspace(dt / 4, dt, 4))[0]
         for p in path:
-            worst = min(worst, float(np.min(g.barriers(p) / g.radii ** 2)))
+            worst = min(worst, float(np.min(g.barriers(p) / g.radii**2)))
         s = path[-1]
     return worst
 
 
 @settings(max_examples=25, deadline=None)
-@given(dist=st.floats(4.0, 7.0), alpha=st.floats(0.25, 1.2), sign=st.sampled_from([-1.0, 1.0]),
-       v=st.floats(1.0, 2.0), cls=st.sampled_from([CBFGuardian, CBFPaperGuardian]))
+@given(
+    dist=st.floats(4.0, 7.0),
+    alpha=st.floats(0.25, 1.2),
+    sign=st.sampled_from([-1.0, 1.0]),
+    v=st.floats(1.0, 2.0),
+    cls=st.sampled_from([CBFGuardian, CBFPaperGuardian]),
+)
 def test_barrier_stays_non_negative_under_the_filter(dist, alpha, sign, v, cls):
     # Approach obstacle r = 3 at the origin from `dist` with the heading `alpha` rad off the
     # line to the centre (where the turn-rate term of the row matters), the goal straight
@@ -295,8 +317,13 @@ def test_flipping_the_turn_rate_term_breaks_the_closed_loop_property(cls):
 
 
 @settings(max_examples=60, deadline=None)
-@given(dist=st.floats(3.0, 3.3), bearing=st.floats(-math.pi, math.pi), heading=st.floats(-math.pi, math.pi),
-       v=st.floats(0.0, 2.0), lap=st.sampled_from([0.02, 0.11]))
+@given(
+    dist=st.floats(3.0, 3.3),
+    bearing=st.floats(-math.pi, math.pi),
+    heading=st.floats(-math.pi, math.pi),
+    v=st.floats(0.0, 2.0),
+    lap=st.sampled_from([0.02, 0.11]),
+)
 def test_recovery_strictly_improves_the_barrier(dist, bearing, heading, v, lap):
     # obstacle r = 3 (margin 3.15) at the origin; the recovery manoeuvre about it:
     #  * moving inward: b'' = 2 v^2 + LgLf b . u > 0 (b' strictly increases);
@@ -324,8 +351,12 @@ def test_recovery_strictly_improves_the_barrier(dist, bearing, heading, v, lap):
 
 # ---------------------------------------------------------------- bounds from the action space
 def test_control_box_comes_from_the_action_space_unless_given():
-    box = {"state": np.array([0, 0, 0, 1.0]), "obstacles": np.array([[3.0, 0.0, 1.0]]), "goal": np.array([20.0, 0, 0.5]),
-           "sim_time": 0.0}
+    box = {
+        "state": np.array([0, 0, 0, 1.0]),
+        "obstacles": np.array([[3.0, 0.0, 1.0]]),
+        "goal": np.array([20.0, 0, 0.5]),
+        "sim_time": 0.0,
+    }
     g = CBFPaperGuardian()
     g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
     assert (g.u1_min, g.u1_max, g.u2_min, g.u2_max, g.v_min, g.v_max) == (-0.25, 0.25, -0.5, 0.5, 0.0, 2.0)
@@ -340,7 +371,11 @@ def test_control_box_comes_from_the_action_space_unless_given():
     given.reset(seed=0, privileged=lambda: box, action_space=narrow)
     assert (given.u1_min, given.u2_min) == (-0.125, -0.5)
     with pytest.raises(ValueError, match="guardian 'cbf'.*control box"):
-        CBFGuardian().reset(seed=0, privileged=lambda: box, action_space=GuardianActionSpace(CONTROLS, [0.1, -1], [0.2, 1], kind="dubins4d"))
+        CBFGuardian().reset(
+            seed=0,
+            privileged=lambda: box,
+            action_space=GuardianActionSpace(CONTROLS, [0.1, -1], [0.2, 1], kind="dubins4d"),
+        )
     with pytest.raises(ValueError, match="guardian 'cbf'.*action space"):
         CBFGuardian().reset(seed=0, privileged=lambda: box)
 
@@ -371,14 +406,17 @@ def test_filter_predicts_the_lap_under_the_drivers_nominal_control():
     g.act(None, {"nominal_control": np.array([0.0, 0.5])})
     state, u_nom = seen[0]
     # 0.11 s at 1 m/s accelerating at 0.5: x = 0.11 + 0.25 * 0.11^2, v = 1.055
-    np.testing.assert_allclose(state, [0.11 + 0.25 * 0.11 ** 2, 0.0, 0.0, 1.055], atol=1e-12)
+    np.testing.assert_allclose(state, [0.11 + 0.25 * 0.11**2, 0.0, 0.0, 1.055], atol=1e-12)
     assert u_nom.tolist() == [0.0, 0.5]
 
 
 def test_filter_needs_the_nominal_control_and_names_the_key():
     g, _ = make([0, 0, 0, 1.0], [[3.0, 0.0, 1.0]])
-    with pytest.raises(ValueError, match=r"guardian 'cbf' filters the driver's control, info\['nominal_control'\].*"
-                                         r"keys: \['state'\].*reference='clf'"):
+    with pytest.raises(
+        ValueError,
+        match=r"guardian 'cbf' filters the driver's control, info\['nominal_control'\].*"
+        r"keys: \['state'\].*reference='clf'",
+    ):
         g.act(None, {"state": np.zeros(4)})
     with pytest.raises(ValueError, match=r"nominal_control'\] must be 2 finite numbers.*nan"):
         g.act(None, {"nominal_control": [np.nan, 0.0]})

@@ -13,8 +13,15 @@ from rmm_guardians.cbf.quiet import quietly
 def _unconstrained_solver():
     """min x^2 over -1 <= x <= 1 with polishing: the optimum 0 has no active row."""
     s = osqp.OSQP()
-    s.setup(sp.csc_matrix([[2.0]]), np.zeros(1), sp.csc_matrix([[1.0]]), np.array([-1.0]), np.array([1.0]),
-            verbose=False, polishing=True)
+    s.setup(
+        sp.csc_matrix([[2.0]]),
+        np.zeros(1),
+        sp.csc_matrix([[1.0]]),
+        np.array([-1.0]),
+        np.array([1.0]),
+        verbose=False,
+        polishing=True,
+    )
     return s
 
 

@@ -10,13 +10,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
-from tests.test_cbf import INFO0
-from rmm_guardians.cbf.barrier import HOCBFParams, barrier_rows
-from rmm_guardians.cbf.recovery import recovery_control, recovery_done
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D
+from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
+from rmm_guardians.cbf.barrier import HOCBFParams, barrier_rows
+from rmm_guardians.cbf.recovery import recovery_control, recovery_done
+from tests.test_cbf import INFO0
 
 SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")
 # the default gains; the Dubins4D control box and speed range
@@ -33,15 +33,22 @@ def rec(state, obstacles=OBST, radii=RADII, goal=FAR_GOAL, lap=0.1):
 def test_speed_clf_row_by_hand():
     # goal 1 m ahead: desired speed min((d/2)^2, d/2) = 0.25; at v = 1: e_v = 0.75, row 2 e_v u2 - d_v <= -e_v^2
     for d, v_d in ((1.0, 0.25), (4.0, 2.0)):
-        G, h = barrier_rows([0.0, 0.0, 0.0, 1.0], np.array([[9.0, 9.0, 1.0]]), np.array([1.0]), np.array([d, 0.0, 0.5]), PRM)
+        G, h = barrier_rows(
+            [0.0, 0.0, 0.0, 1.0], np.array([[9.0, 9.0, 1.0]]), np.array([1.0]), np.array([d, 0.0, 0.5]), PRM
+        )
         K = 1
         assert G[K + 5, 1] == pytest.approx(2 * (1.0 - v_d)) and G[K + 5, 3] == -1.0
         assert h[K + 5] == pytest.approx(-((1.0 - v_d) ** 2))
 
 
 @settings(max_examples=30, deadline=None)
-@given(th=st.floats(-math.pi + 1e-6, math.pi - 1e-6), turns=st.sampled_from([-2, -1, 1, 2]),
-       x=st.floats(-5, 5), y=st.floats(-5, 5), v=st.floats(0, 2))
+@given(
+    th=st.floats(-math.pi + 1e-6, math.pi - 1e-6),
+    turns=st.sampled_from([-2, -1, 1, 2]),
+    x=st.floats(-5, 5),
+    y=st.floats(-5, 5),
+    v=st.floats(0, 2),
+)
 def test_rows_are_periodic_in_the_heading(th, turns, x, y, v):
     obstacles = np.array([[6.0, 1.0, 1.0], [-4.0, -6.0, 2.0]])
     radii, goal = obstacles[:, 2] * 1.05, np.array([9.0, -3.0, 0.5])
@@ -54,8 +61,12 @@ def test_rows_are_periodic_in_the_heading(th, turns, x, y, v):
 @pytest.mark.parametrize("cls", [CBFGuardian, CBFPaperGuardian])
 def test_low_speed_stop_brakes_without_turning(cls):
     g = cls(low_speed_stop=True, predict_latency=False)
-    box = {"state": np.array([0.0, 0.0, 0.3, 0.01]), "obstacles": np.array([[30.0, 30.0, 1.0]]),
-           "goal": np.array([20.0, 0.0, 0.5]), "sim_time": 0.0}
+    box = {
+        "state": np.array([0.0, 0.0, 0.3, 0.01]),
+        "obstacles": np.array([[30.0, 30.0, 1.0]]),
+        "goal": np.array([20.0, 0.0, 0.5]),
+        "sim_time": 0.0,
+    }
     g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
     a = g.act(None, INFO0)
     assert a["active_ctrl"] == 1 and a["turnrate_ctrl"][0] == 0.0 and a["accel_ctrl"][0] == -0.5
@@ -88,7 +99,7 @@ def test_recovery_accelerates_only_as_far_as_an_obstacle_ahead_allows():
     # h_1 = 2 v^2 + p1 Lf b + p2 (Lf b + p1 b), Lf b = -5.6, b = 2.8^2 - 1.05^2
     obstacles = np.array([[0.0, 0.0, 3.0], [6.0, 0.0, 1.0]])
     radii = obstacles[:, 2] * 1.05
-    b, lfb = 2.8 ** 2 - 1.05 ** 2, -5.6
+    b, lfb = 2.8**2 - 1.05**2, -5.6
     h1 = 2.0 + 0.7535 * lfb + 0.6664 * (lfb + 0.7535 * b)
     u, side = rec([3.2, 0.0, 0.0, 1.0], obstacles, radii)
     assert u[0] == pytest.approx(0.25)  # a quarter turn left to the tangent: at the limit
@@ -99,7 +110,7 @@ def test_recovery_ends_only_when_the_straight_line_to_the_goal_clears_the_margin
     # outside the margin, heading away (north) from (-6, 3.2): the segment to (6, 3.0) passes
     # about 3.10 m from the centre, inside the 3.15 m margin; the one to (6, 3.4), about 3.30 m
     s = np.array([-6.0, 3.2, math.pi / 2, 1.0])
-    b = np.array([s[0] ** 2 + s[1] ** 2 - 3.15 ** 2])
+    b = np.array([s[0] ** 2 + s[1] ** 2 - 3.15**2])
     assert not recovery_done(s, b, 0, OBST, RADII, np.array([6.0, 3.0, 0.5]))
     assert recovery_done(s, b, 0, OBST, RADII, np.array([6.0, 3.4, 0.5]))
     # heading back toward the centre: not over

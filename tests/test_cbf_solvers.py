@@ -14,12 +14,13 @@ from rmm_guardians.cbf.maze import MazeCBFGuardian
 from rmm_guardians.cbf.qp import MAX_ITER
 
 PRIMAL_INFEASIBLE = 3  # OSQP's status value
+import qpsolvers  # noqa: E402,F401  (pinned in the test extra: a missing install fails here, it is not skipped)
+
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
 from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_envs.systems.dubins4d import Dubins4D
 
-import qpsolvers  # noqa: E402,F401  (pinned in the test extra: a missing install fails here, it is not skipped)
 # every solver the test extra pins (qpsolvers[clarabel,daqp]): one that is missing fails its tests, it is not left out
 OTHERS = [f"qpsolvers:{n}" for n in ("osqp", "clarabel", "daqp")]
 SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")
@@ -41,8 +42,14 @@ def dubins4d(solver):
 
 
 def test_bad_solver_names_list_the_installed_ones():
-    listed = "installed: " + str(["osqp"] + [f"qpsolvers:{n}" for n in installed_solvers()]).replace("[", r"\[").replace("]", r"\]")
-    for bad, why in (("gurobi", "must be 'osqp'"), ("qpsolvers:nope", "no installed solver 'nope'"), (3, "must be 'osqp'")):
+    listed = "installed: " + str(["osqp"] + [f"qpsolvers:{n}" for n in installed_solvers()]).replace(
+        "[", r"\["
+    ).replace("]", r"\]")
+    for bad, why in (
+        ("gurobi", "must be 'osqp'"),
+        ("qpsolvers:nope", "no installed solver 'nope'"),
+        (3, "must be 'osqp'"),
+    ):
         with pytest.raises(ValueError, match=why + ".*" + listed):
             CBFGuardian(solver=bad)
         with pytest.raises(ValueError, match=why):
@@ -54,7 +61,9 @@ def test_bad_solver_names_list_the_installed_ones():
 @settings(max_examples=40, deadline=None)
 @given(x=st.floats(-9.0, 9.0), y=st.floats(-9.0, 9.0), th=st.floats(-math.pi, math.pi), v=st.floats(0.0, 2.0))
 @example(x=0.0, y=1.625, th=1.578125, v=1.5625)  # direct OSQP stops at its iteration limit here (found by hypothesis)
-@example(x=0.5625, y=-8.2265625, th=0.5625, v=0.5625)  # OSQP calls this feasible QP primal infeasible (found by hypothesis)
+@example(
+    x=0.5625, y=-8.2265625, th=0.5625, v=0.5625
+)  # OSQP calls this feasible QP primal infeasible (found by hypothesis)
 @example(x=5.09375, y=8.15625, th=1.03125, v=1.34375)  # clarabel stops at its iteration limit on this feasible QP
 @example(x=-8.904070130177947, y=-8.761554916141465, th=0.07831726017930674, v=0.9406999930492526)  # CLF slack ~109
 @example(x=1.765625, y=0.8125, th=0.81640625, v=0.81640625)  # qpsolvers' OSQP stops at its iteration limit here
@@ -95,7 +104,9 @@ def test_dubins4d_decisions_agree_with_direct_osqp(solver, x, y, th, v):
 @pytest.mark.parametrize("solver", OTHERS)
 @settings(max_examples=40, deadline=None)
 @given(f=st.floats(0.0, 1.0), g=st.floats(0.0, 1.0), psi=st.floats(-math.pi, math.pi))
-@example(f=0.109375, g=0.9375, psi=0.015625)  # clarabel stops at its iteration limit on this feasible QP (found by hypothesis)
+@example(
+    f=0.109375, g=0.9375, psi=0.015625
+)  # clarabel stops at its iteration limit on this feasible QP (found by hypothesis)
 def test_maze_decisions_agree_with_direct_osqp(solver, f, g, psi):
     env = Dubins3DMazeGuardedEnv()
     env.reset(seed=3)
@@ -107,8 +118,9 @@ def test_maze_decisions_agree_with_direct_osqp(solver, f, g, psi):
     out = []
     for s in ("osqp", solver):
         guard = MazeCBFGuardian(solver=s)
-        guard.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space,
-                    privileged=lambda: priv)
+        guard.reset(
+            seed=0, observation_space=env.observation_space, action_space=env.action_space, privileged=lambda: priv
+        )
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             z, G, h = guard.solve(pose)

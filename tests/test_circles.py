@@ -57,9 +57,7 @@ def test_rays_from_inside_read_zero_and_cap():
     assert ray_cast(np.zeros((2, 2)), np.zeros(2), np.zeros((0, 3)), 4, 3.0).tolist() == [[3.0] * 4] * 2
 
 
-circles_st = st.lists(
-    st.tuples(st.floats(-8, 8), st.floats(-8, 8), st.floats(0.2, 3)), min_size=1, max_size=6
-)
+circles_st = st.lists(st.tuples(st.floats(-8, 8), st.floats(-8, 8), st.floats(0.2, 3)), min_size=1, max_size=6)
 
 
 @settings(max_examples=80, deadline=None)
@@ -127,8 +125,12 @@ def test_generation_is_seeded_and_in_range():
 
 
 @settings(max_examples=60, deadline=None)
-@given(circles=st.lists(st.tuples(st.floats(-8, 8), st.floats(-8, 8), st.floats(0.2, 4)), min_size=1, max_size=6),
-       x=st.floats(-10, 10), y=st.floats(-10, 10), th=st.floats(-7, 7))
+@given(
+    circles=st.lists(st.tuples(st.floats(-8, 8), st.floats(-8, 8), st.floats(0.2, 4)), min_size=1, max_size=6),
+    x=st.floats(-10, 10),
+    y=st.floats(-10, 10),
+    th=st.floats(-7, 7),
+)
 def test_compiled_rays_equal_the_numpy_rays(circles, x, y, th):
     # a single origin (an env step) uses the compiled loop, a batch numpy: same numbers
     circ = np.array(circles)

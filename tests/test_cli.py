@@ -24,7 +24,10 @@ def test_driver_only_action_is_read_off_the_action_space():
     plain = spaces.Dict({"active_ctrl": spaces.Discrete(2), "thrust": spaces.Box(-1.0, 1.0, (3,), dtype=np.float64)})
     with pytest.raises(ValueError, match="env Plain-v0 has no guardian action .* not a GuardianActionSpace"):
         driver_only_action(plain, "Plain-v0")
-    with pytest.raises(ValueError, match=r"env Box-v0 has no guardian action .* its action space is Box\(-1\.0, 1\.0, \(2,\), float32\)"):
+    with pytest.raises(
+        ValueError,
+        match=r"env Box-v0 has no guardian action .* its action space is Box\(-1\.0, 1\.0, \(2,\), float32\)",
+    ):
         driver_only_action(spaces.Box(-1.0, 1.0, (2,), dtype=np.float32), "Box-v0")
 
 
@@ -39,8 +42,10 @@ def test_demo_prints_what_the_driver_alone_does(capsys):
         if term or trunc:
             break
     st = info["episode_stats"]
-    assert line == (f"episode   0 seed     4: {info['outcome']:9s} after {st['n_env_steps']:4d} steps, "
-                    f"{st['cum_sim_time']:6.1f} s simulated, final speed {st['final_speed']:.2f} m/s")
+    assert line == (
+        f"episode   0 seed     4: {info['outcome']:9s} after {st['n_env_steps']:4d} steps, "
+        f"{st['cum_sim_time']:6.1f} s simulated, final speed {st['final_speed']:.2f} m/s"
+    )
 
 
 def test_demo_refuses_an_env_without_a_guardian_action_and_bad_counts(capsys):

@@ -21,8 +21,10 @@ def test_quadrisk_command(tmp_path):
     assert out.stat().st_size > 1000
 
 
-@pytest.mark.parametrize("argv, message", [(["riskmap", "--n", "0"], "--n must be >= 1, got 0"),
-                                           (["quadrisk", "--dpi", "0"], "--dpi must be >= 1, got 0")])
+@pytest.mark.parametrize(
+    "argv, message",
+    [(["riskmap", "--n", "0"], "--n must be >= 1, got 0"), (["quadrisk", "--dpi", "0"], "--dpi must be >= 1, got 0")],
+)
 def test_bad_counts_exit_2_naming_the_flag(tmp_path, capsys, argv, message):
     assert main([*argv, "--out", str(tmp_path / "x.png")]) == 2
     assert capsys.readouterr().err == f"rmm-bench: error: {message}\n" and not (tmp_path / "x.png").exists()
@@ -45,7 +47,19 @@ def test_no_figure_writes_the_tables_removes_a_stale_figure_and_report_draws_it(
     out = tmp_path / "r"
     out.mkdir()
     (out / "outcomes.png").write_bytes(b"a figure of an earlier run")
-    argv = ["--agent", "inactive", "--episodes", "2", "--workers", "1", "--clock", "fixed:1", "--no-progress", "--out", str(out)]
+    argv = [
+        "--agent",
+        "inactive",
+        "--episodes",
+        "2",
+        "--workers",
+        "1",
+        "--clock",
+        "fixed:1",
+        "--no-progress",
+        "--out",
+        str(out),
+    ]
     assert main([*argv, "--no-figure"]) == 0
     assert (out / "table_I.md").read_text().count("| inactive |") == 1
     assert not (out / "outcomes.png").exists()  # it would not have matched the table
@@ -57,7 +71,25 @@ def test_a_sweep_without_a_figure_writes_its_table_only(tmp_path):
     out = tmp_path / "s"
     out.mkdir()
     (out / "latency_sweep.png").write_bytes(b"stale")
-    assert main(["sweep", "--agent", "inactive", "--latency", "0,5", "--episodes", "2", "--workers", "1", "--no-progress",
-                 "--no-figure", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                "--agent",
+                "inactive",
+                "--latency",
+                "0,5",
+                "--episodes",
+                "2",
+                "--workers",
+                "1",
+                "--no-progress",
+                "--no-figure",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert "| inactive |" in (out / "latency_sweep.md").read_text()
     assert not (out / "latency_sweep.png").exists()

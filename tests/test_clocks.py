@@ -20,10 +20,25 @@ def test_clock_specs_by_name():
     assert isinstance(zero, FixedLatencyClock) and zero.elapsed() == 0.0
     assert make_clock("fixed:2.5").elapsed() == 0.0025 and make_clock(" FIXED:2 ").elapsed() == 0.002
     # mistyped forms are refused, naming the value and the accepted forms (none runs as 0 ms)
-    for bad in ("fixed", "fixed2", "fixed=2", "fixed:", "fixed:2:3", "fixed:-1", "fixed:nan", "fixed:inf",
-                "fixed:2ms", "wal", "cpu:1", ""):
-        with pytest.raises(ValueError, match=rf"unknown clock {re.escape(repr(bad))}; expected 'wall', 'cpu' or "
-                                             r"'fixed:MS' \(MS a number of milliseconds >= 0, e\.g\. 'fixed:2'\)"):
+    for bad in (
+        "fixed",
+        "fixed2",
+        "fixed=2",
+        "fixed:",
+        "fixed:2:3",
+        "fixed:-1",
+        "fixed:nan",
+        "fixed:inf",
+        "fixed:2ms",
+        "wal",
+        "cpu:1",
+        "",
+    ):
+        with pytest.raises(
+            ValueError,
+            match=rf"unknown clock {re.escape(repr(bad))}; expected 'wall', 'cpu' or "
+            r"'fixed:MS' \(MS a number of milliseconds >= 0, e\.g\. 'fixed:2'\)",
+        ):
             make_clock(bad)
     with pytest.raises(ValueError, match=r"unknown clock 'fixed2'"):
         gym.make("Dubins4DGuarded-v0", clock="fixed2")
@@ -65,8 +80,10 @@ def test_wrapper_accepts_the_papers_range_and_names_what_it_refuses():
         w.reset(options={"state": [0, 0, 0, 1.0], "goal": [9, 9, 0.5], "obstacles": [[-9, -9, 1.0]]})
         _, _, _, _, info = w.step(w.unwrapped.action_space.inactive())
         assert info["sim_time"] == pytest.approx(0.1)
-    with pytest.raises(TypeError, match="CartPoleEnv has no simulate.*NonBlockingStepping needs an env that can "
-                                        "advance by an arbitrary duration"):
+    with pytest.raises(
+        TypeError,
+        match="CartPoleEnv has no simulate.*NonBlockingStepping needs an env that can advance by an arbitrary duration",
+    ):
         NonBlockingStepping(gym.make("CartPole-v1"))
     with pytest.raises(TypeError, match=r"NoGuardianSpace\.action_space must be a GuardianActionSpace.*got Box"):
         NonBlockingStepping(NoGuardianSpace())
@@ -75,8 +92,12 @@ def test_wrapper_accepts_the_papers_range_and_names_what_it_refuses():
 @pytest.mark.parametrize("bad", ["fixed2", "fixed=2", "fixed"])
 def test_rmm_bench_refuses_a_mistyped_clock_with_exit_2(bad, tmp_path):
     exe = Path(sys.executable).parent / "rmm-bench"
-    res = subprocess.run([str(exe), "--agent", "inactive", "--episodes", "1", "--clock", bad, "--out", str(tmp_path)],
-                         capture_output=True, text=True, timeout=300)
+    res = subprocess.run(
+        [str(exe), "--agent", "inactive", "--episodes", "1", "--clock", bad, "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert res.returncode == 2
     assert f"--clock {bad}: unknown clock {bad!r}; expected 'wall', 'cpu' or 'fixed:MS'" in res.stderr
     assert not (tmp_path / "results.db").exists()  # refused before anything ran

@@ -4,7 +4,6 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -51,10 +50,19 @@ def test_to_pandas_round_trips_every_field(tmp_path):
         np.testing.assert_array_equal(df[name].to_numpy(), getattr(ds, name))
     assert df.attrs["sha256"] == ds.sha256 and df.attrs["meta"]["seed"] == 3
     # a groupby works as a user would write it: the mean risk per configuration
-    np.testing.assert_allclose(df.groupby("config_id")["risk"].mean().to_numpy(),
-                               [ds.risk[ds.config_id == c].mean() for c in (0, 1)])
+    np.testing.assert_allclose(
+        df.groupby("config_id")["risk"].mean().to_numpy(), [ds.risk[ds.config_id == c].mean() for c in (0, 1)]
+    )
     lists = ds.to_pandas(vectors="lists")
-    assert list(lists.columns) == ["config_id", "risk", "min_risk_ctrl_dur", "n_leaves", "obs", "state", "min_risk_ctrl"]
+    assert list(lists.columns) == [
+        "config_id",
+        "risk",
+        "min_risk_ctrl_dur",
+        "n_leaves",
+        "obs",
+        "state",
+        "min_risk_ctrl",
+    ]
     np.testing.assert_array_equal(np.stack(lists["obs"].to_list()), ds.obs)
     np.testing.assert_array_equal(np.stack(lists["state"].to_list()), ds.state)
     with pytest.raises(ValueError, match="vectors must be 'columns' or 'lists', got 'wide'"):
@@ -83,8 +91,26 @@ def test_rerun_is_a_no_op_and_other_parameters_are_refused(tmp_path):
 def test_resume_after_kill_minus_nine(tmp_path):
     out = tmp_path / "k"
     # a small tree (8 branches, not the default 32): the labels' cost is not what is tested
-    args = [sys.executable, "-m", "rmm_envs.risk.datagen", "--configs", "24", "--samples-per-config", "40", "--branches", "8",
-            "--configs-per-shard", "1", "--workers", "1", "--seed", "5", "--out", str(out), "--no-progress"]
+    args = [
+        sys.executable,
+        "-m",
+        "rmm_envs.risk.datagen",
+        "--configs",
+        "24",
+        "--samples-per-config",
+        "40",
+        "--branches",
+        "8",
+        "--configs-per-shard",
+        "1",
+        "--workers",
+        "1",
+        "--seed",
+        "5",
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
     proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 60
     while time.time() < deadline and len(list(out.glob("shard-*.parquet"))) < 3:
@@ -100,8 +126,12 @@ def test_resume_after_kill_minus_nine(tmp_path):
     resumed = load_dataset(out)
     pairs = set(zip(resumed.config_id.tolist(), resumed.obs[:, 0].tolist()))
     assert len(resumed) == 24 * 40 == len(pairs)  # nothing lost, nothing duplicated
-    generate(DatagenConfig(configs=24, samples_per_config=40, branches=8, configs_per_shard=1, seed=5), tmp_path / "ref", workers=2,
-             progress=False)
+    generate(
+        DatagenConfig(configs=24, samples_per_config=40, branches=8, configs_per_shard=1, seed=5),
+        tmp_path / "ref",
+        workers=2,
+        progress=False,
+    )
     np.testing.assert_array_equal(load_dataset(tmp_path / "ref").risk, resumed.risk)
 
 
@@ -161,8 +191,15 @@ def test_ray_backend_gives_the_same_data(tmp_path):
 
 @pytest.mark.parametrize(
     "kw, match",
-    [({"configs": 0}, "configs"), ({"depth": -1}, "depth"), ({"horizon": 0.0}, "horizon"), ({"n_steps": 1}, "n_steps"),
-     ({"metric": "cvar", "alpha": 1.5}, "alpha"), ({"env_id": "Nope-v0"}, "is not a registered Gymnasium env"), ({"branches": 0}, "branches")],
+    [
+        ({"configs": 0}, "configs"),
+        ({"depth": -1}, "depth"),
+        ({"horizon": 0.0}, "horizon"),
+        ({"n_steps": 1}, "n_steps"),
+        ({"metric": "cvar", "alpha": 1.5}, "alpha"),
+        ({"env_id": "Nope-v0"}, "is not a registered Gymnasium env"),
+        ({"branches": 0}, "branches"),
+    ],
 )
 def test_bad_configuration(tmp_path, kw, match):
     with pytest.raises(ValueError, match=match):
@@ -170,8 +207,24 @@ def test_bad_configuration(tmp_path, kw, match):
 
 
 def test_cli_errors_and_success(tmp_path, capsys):
-    assert main(["--out", str(tmp_path / "c"), "--configs", "2", "--samples-per-config", "4", "--branches", "4",
-                 "--workers", "1", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "--out",
+                str(tmp_path / "c"),
+                "--configs",
+                "2",
+                "--samples-per-config",
+                "4",
+                "--branches",
+                "4",
+                "--workers",
+                "1",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert "8 labelled samples" in capsys.readouterr().out
     assert main(["--out", str(tmp_path / "c"), "--configs", "3", "--samples-per-config", "4", "--no-progress"]) == 2
     assert "other parameters" in capsys.readouterr().err
@@ -206,8 +259,11 @@ def test_datagen_reaches_any_env_through_the_labelled_env_protocol_only(tmp_path
     generate(DatagenConfig(**tiny), tmp_path / "d4", workers=1, progress=False)
     d4 = json.loads((tmp_path / "d4" / "metadata.json").read_text())
     assert d4["obs_time_feature"] == "uniform over [0, max_episode_sim_time]" and d4["control_dim"] == 2
-    with pytest.raises(TypeError, match=r"MountainCar-v0 \(MountainCarEnv\) is not a LabelledEnv.*risk_scene is missing"
-                                        r".*no risk adapter serves it either"):
+    with pytest.raises(
+        TypeError,
+        match=r"MountainCar-v0 \(MountainCarEnv\) is not a LabelledEnv.*risk_scene is missing"
+        r".*no risk adapter serves it either",
+    ):
         generate(DatagenConfig(env_id="MountainCar-v0", **tiny), tmp_path / "mc", workers=1, progress=False)
     assert main(["--env", "MountainCar-v0", "--out", str(tmp_path / "mc2"), "--no-progress"]) == 2
     assert "is not a LabelledEnv" in capsys.readouterr().err and not (tmp_path / "mc2").exists()

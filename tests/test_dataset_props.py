@@ -114,20 +114,49 @@ def test_metadata_implying_other_shards_is_refused(made, tmp_path):
 
 # ------------------------------------------------------------------ other parameters are refused by name
 def test_identity_is_every_parameter_that_makes_the_data():
-    meta = {"format": "rmm-dataset", "format_version": 1, "env_id": "E", "env_kwargs": {"a": 1}, "configs": 3,
-            "samples_per_config": 4, "seed": 7, "configs_per_shard": 1, "estimator": {"branches": 4},
-            "package_version": "1", "created": "now", "obs_dim": 17}
+    meta = {
+        "format": "rmm-dataset",
+        "format_version": 1,
+        "env_id": "E",
+        "env_kwargs": {"a": 1},
+        "configs": 3,
+        "samples_per_config": 4,
+        "seed": 7,
+        "configs_per_shard": 1,
+        "estimator": {"branches": 4},
+        "package_version": "1",
+        "created": "now",
+        "obs_dim": 17,
+    }
     base = identity(meta)
-    for key in ("format", "format_version", "env_id", "env_kwargs", "configs", "samples_per_config", "seed",
-                "configs_per_shard", "estimator"):
+    for key in (
+        "format",
+        "format_version",
+        "env_id",
+        "env_kwargs",
+        "configs",
+        "samples_per_config",
+        "seed",
+        "configs_per_shard",
+        "estimator",
+    ):
         assert identity(meta | {key: "other"}) != base, key
     # what records the run rather than defines the data is not part of it
     assert identity(meta | {"package_version": "2", "created": "later"}) == base
 
 
-@pytest.mark.parametrize("key, value", [
-    ("env_kwargs", {"n_obstacles": 4}), ("env_id", "Dubins4DMapGuarded-v0"), ("seed", 8), ("configs", 2),
-    ("samples_per_config", 5), ("configs_per_shard", 3), ("estimator", {"branches": 5})])
+@pytest.mark.parametrize(
+    "key, value",
+    [
+        ("env_kwargs", {"n_obstacles": 4}),
+        ("env_id", "Dubins4DMapGuarded-v0"),
+        ("seed", 8),
+        ("configs", 2),
+        ("samples_per_config", 5),
+        ("configs_per_shard", 3),
+        ("estimator", {"branches": 5}),
+    ],
+)
 def test_a_rerun_into_a_dataset_made_with_other_parameters_is_refused_by_name(made, tmp_path, key, value):
     """The existing ``metadata.json`` records other parameters than the rerun's: refused, naming the
     parameter with both values, and no file of the dataset changes."""
@@ -153,21 +182,45 @@ def test_other_env_arguments_are_refused_before_any_work(made, tmp_path):
 def test_rerun_command_names_every_parameter_and_quotes_the_folder():
     from rmm_envs.risk.dataset import rerun_command
 
-    meta = {"env_id": "Dubins3DMaze-v0", "configs": 5, "samples_per_config": 6, "seed": 2, "configs_per_shard": 3,
-            "estimator": {"branches": 7, "depth": 2, "horizon": 1.5, "n_steps": 4, "metric": "cvar", "alpha": 0.1,
-                          "leaf": "heuristic", "policy": "uniform"},
-            "env_kwargs": {"maze_kind": "mixed", "a": 1}}
+    meta = {
+        "env_id": "Dubins3DMaze-v0",
+        "configs": 5,
+        "samples_per_config": 6,
+        "seed": 2,
+        "configs_per_shard": 3,
+        "estimator": {
+            "branches": 7,
+            "depth": 2,
+            "horizon": 1.5,
+            "n_steps": 4,
+            "metric": "cvar",
+            "alpha": 0.1,
+            "leaf": "heuristic",
+            "policy": "uniform",
+        },
+        "env_kwargs": {"maze_kind": "mixed", "a": 1},
+    }
     assert rerun_command(meta, "/data/my set") == (
         "rmm-datagen --env Dubins3DMaze-v0 --configs 5 --samples-per-config 6 --seed 2 --configs-per-shard 3 "
         "--branches 7 --depth 2 --horizon 1.5 --n-steps 4 --metric cvar --alpha 0.1 --leaf heuristic "
-        """--env-kwargs '{"a": 1, "maze_kind": "mixed"}' --out '/data/my set'""")
+        """--env-kwargs '{"a": 1, "maze_kind": "mixed"}' --out '/data/my set'"""
+    )
     # parameters that are not set are left out; no estimator or env arguments at all
-    meta = {"env_id": "E", "configs": 1, "samples_per_config": 2, "seed": 0, "configs_per_shard": 1,
-            "estimator": {"branches": 3, "alpha": None}, "env_kwargs": {}}
-    assert rerun_command(meta, "out") == ("rmm-datagen --env E --configs 1 --samples-per-config 2 --seed 0 "
-                                          "--configs-per-shard 1 --branches 3 --out out")
-    assert rerun_command({}, "o") == ("rmm-datagen --env None --configs None --samples-per-config None --seed None "
-                                      "--configs-per-shard None --out o")
+    meta = {
+        "env_id": "E",
+        "configs": 1,
+        "samples_per_config": 2,
+        "seed": 0,
+        "configs_per_shard": 1,
+        "estimator": {"branches": 3, "alpha": None},
+        "env_kwargs": {},
+    }
+    assert rerun_command(meta, "out") == (
+        "rmm-datagen --env E --configs 1 --samples-per-config 2 --seed 0 --configs-per-shard 1 --branches 3 --out out"
+    )
+    assert rerun_command({}, "o") == (
+        "rmm-datagen --env None --configs None --samples-per-config None --seed None --configs-per-shard None --out o"
+    )
 
 
 def test_checksums_are_written_beside_a_shard_and_read_back_only_when_well_formed(tmp_path):
@@ -204,8 +257,10 @@ def test_an_unreadable_manifest_is_a_problem_named_not_a_crash(tmp_path):
     (tmp_path / "manifest.json").write_text(json.dumps({"shards": {"shard-00000.parquet": "ab", 7: 1}}))
     assert read_manifest_shards(tmp_path) == ({"shard-00000.parquet": "ab", "7": "1"}, None)
     (tmp_path / "manifest.json").write_text('{"shards": []}')
-    assert read_manifest_shards(tmp_path)[1] == (f"{tmp_path / 'manifest.json'} is unreadable (TypeError: 'shards' is not "
-                                                 "a mapping); its checksums cannot be used")
+    assert read_manifest_shards(tmp_path)[1] == (
+        f"{tmp_path / 'manifest.json'} is unreadable (TypeError: 'shards' is not "
+        "a mapping); its checksums cannot be used"
+    )
     for text, kind in (("{", "JSONDecodeError"), ('{"shards": []}', "TypeError"), ("{}", "KeyError")):
         (tmp_path / "manifest.json").write_text(text)
         shards, problem = read_manifest_shards(tmp_path)
@@ -213,16 +268,33 @@ def test_an_unreadable_manifest_is_a_problem_named_not_a_crash(tmp_path):
         assert problem.endswith("its checksums cannot be used")
 
 
-@pytest.mark.parametrize("damage, message", [
-    (lambda d: (d / "manifest.json").unlink(), r"is incomplete \(no manifest.json\): rerun `rmm-datagen"),
-    (lambda d: (d / "manifest.json").write_text("[1]"), r"manifest.json is unreadable \(TypeError"),
-    (lambda d: (d / "manifest.json").write_text('{"shards": {}}'), r"manifest.json is unreadable \(KeyError: 'dataset_sha256'\)"),
-    (lambda d: (d / "metadata.json").write_text("[]"), r"metadata.json is unreadable or not valid JSON \(not a JSON object\)"),
-    (lambda d: (d / "metadata.json").write_text(json.dumps(json.loads((d / "metadata.json").read_text()) | {"format_version": 2})),
-     r"metadata.json: expected format rmm-dataset v1, got rmm-dataset v2"),
-    (lambda d: (d / "metadata.json").write_text(json.dumps(json.loads((d / "metadata.json").read_text()) | {"obs_dim": 5})),
-     r"observations have 17 features, metadata says 5"),
-])
+@pytest.mark.parametrize(
+    "damage, message",
+    [
+        (lambda d: (d / "manifest.json").unlink(), r"is incomplete \(no manifest.json\): rerun `rmm-datagen"),
+        (lambda d: (d / "manifest.json").write_text("[1]"), r"manifest.json is unreadable \(TypeError"),
+        (
+            lambda d: (d / "manifest.json").write_text('{"shards": {}}'),
+            r"manifest.json is unreadable \(KeyError: 'dataset_sha256'\)",
+        ),
+        (
+            lambda d: (d / "metadata.json").write_text("[]"),
+            r"metadata.json is unreadable or not valid JSON \(not a JSON object\)",
+        ),
+        (
+            lambda d: (d / "metadata.json").write_text(
+                json.dumps(json.loads((d / "metadata.json").read_text()) | {"format_version": 2})
+            ),
+            r"metadata.json: expected format rmm-dataset v1, got rmm-dataset v2",
+        ),
+        (
+            lambda d: (d / "metadata.json").write_text(
+                json.dumps(json.loads((d / "metadata.json").read_text()) | {"obs_dim": 5})
+            ),
+            r"observations have 17 features, metadata says 5",
+        ),
+    ],
+)
 def test_each_damaged_file_is_refused_naming_it(made, tmp_path, damage, message):
     d = _copy(made, tmp_path)
     damage(d)
@@ -256,8 +328,12 @@ def test_more_than_three_missing_shards_are_listed_three_and_an_ellipsis(made, t
     d = _copy(made, tmp_path)
     meta = json.loads((d / "metadata.json").read_text())
     (d / "metadata.json").write_text(json.dumps(meta | {"configs": 7}))  # 7 shards of 1 config: 4 missing
-    with pytest.raises(ValueError, match=re.escape(
-            "(missing ['shard-00003.parquet', 'shard-00004.parquet', 'shard-00005.parquet']..., unexpected [])")):
+    with pytest.raises(
+        ValueError,
+        match=re.escape(
+            "(missing ['shard-00003.parquet', 'shard-00004.parquet', 'shard-00005.parquet']..., unexpected [])"
+        ),
+    ):
         load_dataset(d)
 
 
@@ -282,8 +358,12 @@ def test_a_column_that_is_not_a_fixed_size_list_is_named(made, tmp_path, column)
 def test_candidate_labels_are_read_back(tmp_path):
     """A dataset made with ``candidates``: one risk per candidate control and row."""
     cands = [[-0.25, -0.5], [0.25, 0.5], [0.0, 0.0]]
-    generate(DatagenConfig(**(CFG | {"configs": 1, "samples_per_config": 3}), candidates=cands), tmp_path / "c",
-             workers=1, progress=False)
+    generate(
+        DatagenConfig(**(CFG | {"configs": 1, "samples_per_config": 3}), candidates=cands),
+        tmp_path / "c",
+        workers=1,
+        progress=False,
+    )
     ds = load_dataset(tmp_path / "c")
     assert ds.candidate_risk.shape == (3, 3) and np.all((ds.candidate_risk >= 0) & (ds.candidate_risk <= 1))
     assert load_dataset(tmp_path / "c").meta["estimator"]["candidates"] == cands
@@ -295,8 +375,10 @@ def test_candidate_labels_are_read_back(tmp_path):
     d, name = tmp_path / "c", SHARDS[0]
     t = pq.read_table(d / name)
     col = t["candidate_risk"]
-    pq.write_table(t.set_column(t.column_names.index("candidate_risk"), "candidate_risk",
-                                col.cast(pa.list_(col.type.value_type))), d / name)
+    pq.write_table(
+        t.set_column(t.column_names.index("candidate_risk"), "candidate_risk", col.cast(pa.list_(col.type.value_type))),
+        d / name,
+    )
     _edit_manifest(d, lambda shards: shards.update({name: hashlib.sha256((d / name).read_bytes()).hexdigest()}))
     with pytest.raises(ValueError, match=rf"^{re.escape(str(d))}: column 'candidate_risk' should be a fixed-size list"):
         load_dataset(d)
@@ -312,8 +394,12 @@ def test_shards_of_different_schemas_are_refused_in_one_line(made, tmp_path):
 
     d = _copy(made, tmp_path)
     t = pq.read_table(d / SHARDS[1])
-    pq.write_table(t.set_column(t.column_names.index("obs"), "obs", t["obs"].cast(pa.list_(pa.float32()))), d / SHARDS[1])
-    _edit_manifest(d, lambda shards: shards.update({SHARDS[1]: hashlib.sha256((d / SHARDS[1]).read_bytes()).hexdigest()}))
+    pq.write_table(
+        t.set_column(t.column_names.index("obs"), "obs", t["obs"].cast(pa.list_(pa.float32()))), d / SHARDS[1]
+    )
+    _edit_manifest(
+        d, lambda shards: shards.update({SHARDS[1]: hashlib.sha256((d / SHARDS[1]).read_bytes()).hexdigest()})
+    )
     with pytest.raises(ValueError) as e:
         load_dataset(d)
     assert "\n" not in str(e.value)

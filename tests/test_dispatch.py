@@ -10,21 +10,24 @@ import numpy as np
 import pytest
 
 import rmm_envs  # noqa: F401  (registers the ids)
+from rmm_envs.autonomy import GENERIC, GuardianActionSpace, SystemContract, contract
+from rmm_envs.systems import dubins3d, dubins4d, quadrotor_control
 from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from rmm_guardians.cbf.maze import MazeCBFGuardian
 from rmm_guardians.dispatch import SYSTEMS, require_system
 from rmm_guardians.hj.guardian import HJGuardian
-from rmm_envs.autonomy import GENERIC, GuardianActionSpace, SystemContract, contract
-from rmm_envs.systems import dubins3d, dubins4d, quadrotor_control
 
 
-@pytest.mark.parametrize("env_id, kind, controls", [
-    ("Dubins4DParallel-v0", "dubins4d", ("turnrate_ctrl", "accel_ctrl")),
-    ("Dubins4DGuarded-v0", "dubins4d", ("turnrate_ctrl", "accel_ctrl")),
-    ("Dubins3DMazeParallel-v0", "dubins3d", ("turnrate_ctrl",)),
-    ("QuadrotorRoomParallel-v0", "quadrotor", ("vforward_ctrl", "vleft_ctrl", "vup_ctrl", "yawrate_ctrl")),
-    ("CartPoleParallel-v0", "generic", ("force_ctrl",)),
-])
+@pytest.mark.parametrize(
+    "env_id, kind, controls",
+    [
+        ("Dubins4DParallel-v0", "dubins4d", ("turnrate_ctrl", "accel_ctrl")),
+        ("Dubins4DGuarded-v0", "dubins4d", ("turnrate_ctrl", "accel_ctrl")),
+        ("Dubins3DMazeParallel-v0", "dubins3d", ("turnrate_ctrl",)),
+        ("QuadrotorRoomParallel-v0", "quadrotor", ("vforward_ctrl", "vleft_ctrl", "vup_ctrl", "yawrate_ctrl")),
+        ("CartPoleParallel-v0", "generic", ("force_ctrl",)),
+    ],
+)
 def test_each_env_states_its_system_in_its_action_space(env_id, kind, controls):
     if env_id.startswith("Quadrotor"):
         pytest.importorskip("pybullet")
@@ -40,7 +43,12 @@ def test_each_env_states_its_system_in_its_action_space(env_id, kind, controls):
 
 
 def test_the_systems_own_their_kinds_and_the_default_is_generic():
-    assert (dubins4d.KIND, dubins3d.KIND, quadrotor_control.KIND, GENERIC) == ("dubins4d", "dubins3d", "quadrotor", "generic")
+    assert (dubins4d.KIND, dubins3d.KIND, quadrotor_control.KIND, GENERIC) == (
+        "dubins4d",
+        "dubins3d",
+        "quadrotor",
+        "generic",
+    )
     assert set(SYSTEMS) == {"dubins4d", "dubins3d", "quadrotor"}
     space = GuardianActionSpace(("a",), [-1.0], [2.0])
     assert space.contract == SystemContract("generic", ("a",), (-1.0,), (2.0,), None, None)
@@ -55,8 +63,11 @@ def test_the_kind_not_the_control_names_picks_the_guardian():
     # the maze car's control names under the generic kind: no guardian that models a system serves it
     lookalike = GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2])
     for g in (CBFGuardian(), HJGuardian()):
-        with pytest.raises(ValueError, match=f"guardian {g.name!r} applies to Dubins4D envs and the maze car .*and the "
-                                             r"quadrotor .*this env's system is 'generic'"):
+        with pytest.raises(
+            ValueError,
+            match=f"guardian {g.name!r} applies to Dubins4D envs and the maze car .*and the "
+            r"quadrotor .*this env's system is 'generic'",
+        ):
             g.check_spaces(None, lookalike)
     # the same names under the maze car's kind: the maze guardian
     maze = GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2], kind="dubins3d")
@@ -70,18 +81,27 @@ def test_the_kind_not_the_control_names_picks_the_guardian():
 
 def test_a_space_whose_controls_contradict_its_kind_is_refused_naming_both():
     wrong = GuardianActionSpace(("turn", "accel"), [-0.25, -0.5], [0.25, 0.5], kind="dubins4d")
-    with pytest.raises(ValueError, match=r"guardian 'cbf': this env states system 'dubins4d', whose controls are "
-                                         r"\('turnrate_ctrl', 'accel_ctrl'\), but its action space's controls are "
-                                         r"\('turn', 'accel'\)"):
+    with pytest.raises(
+        ValueError,
+        match=r"guardian 'cbf': this env states system 'dubins4d', whose controls are "
+        r"\('turnrate_ctrl', 'accel_ctrl'\), but its action space's controls are "
+        r"\('turn', 'accel'\)",
+    ):
         CBFGuardian().check_spaces(None, wrong)
 
 
 def test_require_system_returns_the_space_of_its_kind():
     space = GuardianActionSpace(quadrotor_control.CONTROLS, [-1.0] * 4, [1.0] * 4, kind="quadrotor")
     assert require_system(CBFGuardian(), space, "quadrotor", "models the quadrotor") is space
-    with pytest.raises(ValueError, match=r"guardian 'cbf' models the quadrotor \(system 'quadrotor'.*system is 'dubins3d'"):
-        require_system(CBFGuardian(), GuardianActionSpace(("turnrate_ctrl",), [-1.0], [1.0], kind="dubins3d"),
-                       "quadrotor", "models the quadrotor")
+    with pytest.raises(
+        ValueError, match=r"guardian 'cbf' models the quadrotor \(system 'quadrotor'.*system is 'dubins3d'"
+    ):
+        require_system(
+            CBFGuardian(),
+            GuardianActionSpace(("turnrate_ctrl",), [-1.0], [1.0], kind="dubins3d"),
+            "quadrotor",
+            "models the quadrotor",
+        )
 
 
 def test_a_third_party_env_is_served_by_the_model_free_guardians_only():
@@ -109,20 +129,25 @@ def test_the_refusals_say_exactly_what_each_guardian_serves():
         "guardian 'cbf' applies to Dubins4D envs and the maze car (controls ('turnrate_ctrl',)) and the quadrotor "
         "(controls ('vforward_ctrl', 'vleft_ctrl', 'vup_ctrl', 'yawrate_ctrl')): it models the Dubins4D car among "
         "circular obstacles (system 'dubins4d', controls ('turnrate_ctrl', 'accel_ctrl')); this env's system is "
-        "'generic' and its controls are ('turnrate_ctrl',)")
+        "'generic' and its controls are ('turnrate_ctrl',)"
+    )
     with pytest.raises(ValueError) as e:
         CBFPaperGuardian().check_spaces(None, lookalike)
     assert str(e.value).startswith("guardian 'cbf-paper' applies to Dubins4D envs only: it models the Dubins4D car")
     with pytest.raises(ValueError) as e:
         MazeCBFGuardian().check_spaces(None, lookalike)
-    assert str(e.value) == ("guardian 'cbf' (maze) models the constant-speed maze car among walls (system 'dubins3d', "
-                            "controls ('turnrate_ctrl',)); this env's system is 'generic' and its controls are "
-                            "('turnrate_ctrl',)")
+    assert str(e.value) == (
+        "guardian 'cbf' (maze) models the constant-speed maze car among walls (system 'dubins3d', "
+        "controls ('turnrate_ctrl',)); this env's system is 'generic' and its controls are "
+        "('turnrate_ctrl',)"
+    )
     lopsided = GuardianActionSpace(dubins3d.CONTROLS, [-0.1], [0.2], kind="dubins3d")
     with pytest.raises(ValueError) as e:
         MazeCBFGuardian().check_spaces(None, lopsided)
-    assert str(e.value) == ("guardian 'cbf' (maze) needs a turn-rate bound symmetric about 0 and wider than a point "
-                            "([-b, b] with b > 0), got [-0.1, 0.2]")
+    assert str(e.value) == (
+        "guardian 'cbf' (maze) needs a turn-rate bound symmetric about 0 and wider than a point "
+        "([-b, b] with b > 0), got [-0.1, 0.2]"
+    )
     MazeCBFGuardian().check_spaces(None, GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2], kind="dubins3d"))
 
 
@@ -134,16 +159,24 @@ def test_reset_hands_the_episode_to_the_delegate_of_the_space_s_kind_and_back():
     priv = maze_env.privileged()
     g = CBFGuardian()
     assert g.delegate is None
-    g.reset(seed=0, observation_space=maze_env.observation_space, action_space=maze_env.action_space,
-            privileged=lambda: priv)
+    g.reset(
+        seed=0,
+        observation_space=maze_env.observation_space,
+        action_space=maze_env.action_space,
+        privileged=lambda: priv,
+    )
     assert isinstance(g.delegate, MazeCBFGuardian) and g.delegate is g._delegate_for(maze_env.action_space)
     assert g.delegate.name == "cbf"
     a = g.act(obs, info)
     assert set(a) == {"active_ctrl", "turnrate_ctrl"}  # the maze car's control, decided by the delegate
     car = gym.make("Dubins4DGuarded-v0")
     car.reset(seed=0)
-    g.reset(seed=0, observation_space=car.observation_space, action_space=car.action_space,
-            privileged=car.unwrapped.privileged)
+    g.reset(
+        seed=0,
+        observation_space=car.observation_space,
+        action_space=car.action_space,
+        privileged=car.unwrapped.privileged,
+    )
     assert g.delegate is None  # the Dubins4D car: the class's own episode
     car.close()
     maze_env.close()
@@ -154,8 +187,10 @@ def test_delegate_arguments_merge_check_and_refuse():
 
     assert delegate_arguments(MazeCBFGuardian, "maze", False, {"solver": "osqp"}) is None
     assert delegate_arguments(MazeCBFGuardian, "maze", None, {"solver": "osqp"}) == {"solver": "osqp"}
-    assert delegate_arguments(MazeCBFGuardian, "maze", {"margin": 2.0}, {"margin": 1.0, "solver": "osqp"}) == \
-        {"margin": 2.0, "solver": "osqp"}
+    assert delegate_arguments(MazeCBFGuardian, "maze", {"margin": 2.0}, {"margin": 1.0, "solver": "osqp"}) == {
+        "margin": 2.0,
+        "solver": "osqp",
+    }
     with pytest.raises(ValueError) as e:
         delegate_arguments(MazeCBFGuardian, "maze", [1], {})
     assert str(e.value) == "maze must be a dict of rmm_guardians.cbf.maze.MazeCBFGuardian arguments (or False), got [1]"
@@ -172,9 +207,11 @@ def test_the_obstacle_shapes_and_the_quadrotor_s_command_box_are_checked_by_valu
     mixed = GuardianActionSpace(car, [-0.25, -0.5], [0.25, 0.5], kind="dubins4d", obstacle_shapes=("circle", "polygon"))
     with pytest.raises(ValueError) as e:
         CBFGuardian().check_spaces(None, mixed)
-    assert str(e.value) == ("guardian 'cbf' models circular obstacles only, and this env's world also has polygon "
-                            "obstacles (a map with shapes ['circle', 'polygon']); use a map of circles only, or a "
-                            "guardian that needs no obstacle geometry (lrmm, brakes)")
+    assert str(e.value) == (
+        "guardian 'cbf' models circular obstacles only, and this env's world also has polygon "
+        "obstacles (a map with shapes ['circle', 'polygon']); use a map of circles only, or a "
+        "guardian that needs no obstacle geometry (lrmm, brakes)"
+    )
     quad = quadrotor_control.CONTROLS
     box = GuardianActionSpace(quad, [-1.0] * 4, [1.0] * 4, kind="quadrotor")
     assert quadrotor_only(CBFGuardian(), box) is box
@@ -183,24 +220,32 @@ def test_the_obstacle_shapes_and_the_quadrotor_s_command_box_are_checked_by_valu
     no_hover = GuardianActionSpace(quad, [0.5, -1.0, -1.0, -1.0], [1.0, 1.0, 1.0, 1.0], kind="quadrotor")
     with pytest.raises(ValueError) as e:
         quadrotor_only(CBFGuardian(), no_hover)
-    assert str(e.value) == ("guardian 'cbf' (quadrotor) needs a command box that contains the zero command (hover) and "
-                            "is wider than a point in each of ('vforward_ctrl', 'vleft_ctrl', 'vup_ctrl', 'yawrate_ctrl') "
-                            "(low <= 0 <= high, low < high), got low [0.5, -1.0, -1.0, -1.0] and high [1.0, 1.0, 1.0, 1.0]")
-    with pytest.raises(ValueError, match=r"^guardian 'cbf' \(quadrotor\) models the quadrotor's velocity command in a "
-                                         r"room \(system 'quadrotor'.*this env's system is 'dubins4d'"):
+    assert str(e.value) == (
+        "guardian 'cbf' (quadrotor) needs a command box that contains the zero command (hover) and "
+        "is wider than a point in each of ('vforward_ctrl', 'vleft_ctrl', 'vup_ctrl', 'yawrate_ctrl') "
+        "(low <= 0 <= high, low < high), got low [0.5, -1.0, -1.0, -1.0] and high [1.0, 1.0, 1.0, 1.0]"
+    )
+    with pytest.raises(
+        ValueError,
+        match=r"^guardian 'cbf' \(quadrotor\) models the quadrotor's velocity command in a "
+        r"room \(system 'quadrotor'.*this env's system is 'dubins4d'",
+    ):
         quadrotor_only(CBFGuardian(), circles)
 
 
 def test_every_non_circle_shape_of_a_map_is_named_in_the_refusal():
     car = dubins4d.CONTROLS
-    space = GuardianActionSpace(car, [-0.25, -0.5], [0.25, 0.5], kind="dubins4d",
-                                obstacle_shapes=("circle", "polygon", "segment"))
+    space = GuardianActionSpace(
+        car, [-0.25, -0.5], [0.25, 0.5], kind="dubins4d", obstacle_shapes=("circle", "polygon", "segment")
+    )
     for g in (CBFGuardian(), HJGuardian()):
         with pytest.raises(ValueError) as e:
             g.check_spaces(None, space)
-        assert str(e.value) == (f"guardian {g.name!r} models circular obstacles only, and this env's world also has "
-                                "polygon, segment obstacles (a map with shapes ['circle', 'polygon', 'segment']); use a "
-                                "map of circles only, or a guardian that needs no obstacle geometry (lrmm, brakes)")
+        assert str(e.value) == (
+            f"guardian {g.name!r} models circular obstacles only, and this env's world also has "
+            "polygon, segment obstacles (a map with shapes ['circle', 'polygon', 'segment']); use a "
+            "map of circles only, or a guardian that needs no obstacle geometry (lrmm, brakes)"
+        )
 
 
 def test_a_turn_rate_or_command_axis_of_zero_width_is_refused():
@@ -213,8 +258,10 @@ def test_a_turn_rate_or_command_axis_of_zero_width_is_refused():
         for g in (MazeCBFGuardian(), MazeHJGuardian(), CBFGuardian(), HJGuardian()):
             with pytest.raises(ValueError) as e:
                 g.check_spaces(None, still)
-            assert str(e.value) == (f"guardian {g.name!r} (maze) needs a turn-rate bound symmetric about 0 and wider "
-                                    f"than a point ([-b, b] with b > 0), got [{lo}, {hi}]")
+            assert str(e.value) == (
+                f"guardian {g.name!r} (maze) needs a turn-rate bound symmetric about 0 and wider "
+                f"than a point ([-b, b] with b > 0), got [{lo}, {hi}]"
+            )
     tiny = GuardianActionSpace(dubins3d.CONTROLS, [-1e-9], [1e-9], kind="dubins3d")
     MazeCBFGuardian().check_spaces(None, tiny)
     quad = quadrotor_control.CONTROLS
@@ -224,9 +271,11 @@ def test_a_turn_rate_or_command_axis_of_zero_width_is_refused():
         flat = GuardianActionSpace(quad, lo, hi, kind="quadrotor")
         with pytest.raises(ValueError) as e:
             quadrotor_only(CBFGuardian(), flat)
-        assert str(e.value) == ("guardian 'cbf' (quadrotor) needs a command box that contains the zero command (hover) "
-                                f"and is wider than a point in each of {quad} (low <= 0 <= high, low < high), got low "
-                                f"{lo} and high {hi}")
+        assert str(e.value) == (
+            "guardian 'cbf' (quadrotor) needs a command box that contains the zero command (hover) "
+            f"and is wider than a point in each of {quad} (low <= 0 <= high, low < high), got low "
+            f"{lo} and high {hi}"
+        )
         with pytest.raises(ValueError, match=r"wider than a point"):
             HJGuardian().check_spaces(None, flat)
 
@@ -238,12 +287,17 @@ def test_a_space_that_is_not_a_guardian_action_space_is_refused_by_name(make):
     g = make()
     with pytest.raises(ValueError) as e:
         g.check_spaces(env.observation_space, plain)
-    assert str(e.value) == (f"guardian {g.name!r} builds its actions through the env's action space: pass "
-                            "reset(action_space=env.action_space) with a rmm_envs.autonomy.GuardianActionSpace, "
-                            f"got {plain!r}")
+    assert str(e.value) == (
+        f"guardian {g.name!r} builds its actions through the env's action space: pass "
+        "reset(action_space=env.action_space) with a rmm_envs.autonomy.GuardianActionSpace, "
+        f"got {plain!r}"
+    )
     # a reset without any action space: the same refusal, naming what was got (None)
-    with pytest.raises(ValueError, match=f"^guardian {g.name!r} builds its actions through the env's action space: "
-                                         r"pass reset\(action_space=env.action_space\) .*got None$"):
+    with pytest.raises(
+        ValueError,
+        match=f"^guardian {g.name!r} builds its actions through the env's action space: "
+        r"pass reset\(action_space=env.action_space\) .*got None$",
+    ):
         g.reset(seed=0, observation_space=env.observation_space, privileged=env.unwrapped.privileged)
     assert g.delegate is None
     env.close()

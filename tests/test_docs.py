@@ -2,38 +2,52 @@ import os
 import re
 import subprocess
 import sys
-import tomllib
 from importlib.metadata import entry_points
 from pathlib import Path
 
 import pytest
+import tomllib
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 sys.path.insert(0, str(DOCS))
 import gen  # noqa: E402
 
-
 _TRAINS = pytest.mark.slow  # label, train and benchmark end to end: 7-10 s of CPU, 25-45 s on a busy machine
 
 
-@pytest.mark.parametrize("script, args", [
-    ("third_party_guardian.py", []),
-    ("new_system.py", []),
-    pytest.param("label_and_train.py", ["--configs", "6", "--samples", "16", "--branches", "8", "--epochs", "3"],
-                 marks=_TRAINS),
-    pytest.param("own_simulator.py", ["--configs", "4", "--samples", "32", "--epochs", "3", "--episodes", "4"],
-                 marks=_TRAINS),
-    # PPO-Lagrangian on info["cost"], and plain PPO; the script asserts its table's rows and counts
-    pytest.param("rl_guardian.py", ["--timesteps", "2048", "--episodes", "2", "--cost-limit", "0.1"], marks=_TRAINS),
-    pytest.param("rl_guardian.py", ["--timesteps", "2048", "--episodes", "4"], marks=_TRAINS),
-])
+@pytest.mark.parametrize(
+    "script, args",
+    [
+        ("third_party_guardian.py", []),
+        ("new_system.py", []),
+        pytest.param(
+            "label_and_train.py",
+            ["--configs", "6", "--samples", "16", "--branches", "8", "--epochs", "3"],
+            marks=_TRAINS,
+        ),
+        pytest.param(
+            "own_simulator.py", ["--configs", "4", "--samples", "32", "--epochs", "3", "--episodes", "4"], marks=_TRAINS
+        ),
+        # PPO-Lagrangian on info["cost"], and plain PPO; the script asserts its table's rows and counts
+        pytest.param(
+            "rl_guardian.py", ["--timesteps", "2048", "--episodes", "2", "--cost-limit", "0.1"], marks=_TRAINS
+        ),
+        pytest.param("rl_guardian.py", ["--timesteps", "2048", "--episodes", "4"], marks=_TRAINS),
+    ],
+)
 def test_example_scripts_run(script, args, tmp_path):
     # TMPDIR: the scripts' scratch folders (and stable-baselines3's logger folder) land in the
     # test's own directory, which pytest prunes, not in the machine's /tmp
     env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(tmp_path))
-    res = subprocess.run([sys.executable, str(DOCS / "examples" / script), *args], capture_output=True, text=True,
-                         timeout=600, cwd=tmp_path, env=env)
+    res = subprocess.run(
+        [sys.executable, str(DOCS / "examples" / script), *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=tmp_path,
+        env=env,
+    )
     assert res.returncode == 0, res.stderr[-3000:]
     assert res.stdout.strip()
 
@@ -69,12 +83,16 @@ def test_every_console_script_help_matches_the_reference(monkeypatch, capsys):
     calls += [("rmm-bench", [f"rmm-bench {sub}"], [sub, "--help"]) for sub in ("report", "sweep")]
     calls += [("rmm-envs", ["rmm-envs demo"], ["demo", "--help"])]
     for name, (section,), argv in calls:
-        assert eps[name].value == scripts[name], f"{name} is installed as {eps[name].value}, pyproject says {scripts[name]}"
+        assert eps[name].value == scripts[name], (
+            f"{name} is installed as {eps[name].value}, pyproject says {scripts[name]}"
+        )
         monkeypatch.setattr(sys, "argv", [name, *argv])
         with pytest.raises(SystemExit) as stop:
             eps[name].load()(argv)
         assert stop.value.code in (0, None), f"`{section} --help` exited with {stop.value.code}"
-        assert capsys.readouterr().out.rstrip() == _section(page, section), f"`{section} --help` differs from docs/cli.md"
+        assert capsys.readouterr().out.rstrip() == _section(page, section), (
+            f"`{section} --help` differs from docs/cli.md"
+        )
 
 
 def test_links_between_pages_resolve():
@@ -112,7 +130,9 @@ def test_python_snippets_in_the_docs_run(where, code, tmp_path):
     """A reader pastes the snippet into a fresh interpreter: it must run, and an episode snippet
     must end with one of the three outcomes."""
     env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(tmp_path))  # scratch folders in the test's own directory
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env)
+    res = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env
+    )
     assert res.returncode == 0, f"{where} failed:\n{res.stderr[-3000:]}"
     if "env.step(" in code and "outcome" in code:
         first = res.stdout.split()[0] if res.stdout.split() else ""
@@ -123,7 +143,7 @@ def test_readme_dependencies_name_every_dependency_and_extra():
     """README "Dependencies": one line per runtime dependency and per extra of pyproject.toml."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     text = (ROOT / "README.md").read_text()
-    section = text[text.index("## Dependencies"):text.index("\n## ", text.index("## Dependencies") + 3)]
+    section = text[text.index("## Dependencies") : text.index("\n## ", text.index("## Dependencies") + 3)]
     lines = [ln for ln in section.splitlines() if ln.startswith("- ")]
     for dep in project["dependencies"]:
         name = re.split(r"[<>=!~\[ ;]", dep, maxsplit=1)[0]

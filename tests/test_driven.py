@@ -142,37 +142,69 @@ def test_the_safe_default_is_the_action_spaces_and_a_constant_is_served_as_is():
 
 
 def test_bad_input_is_named():
-    with pytest.raises(ValueError, match=r"the driver .* returned the action 2, outside the env's action space Discrete\(2\)"):
+    with pytest.raises(
+        ValueError, match=r"the driver .* returned the action 2, outside the env's action space Discrete\(2\)"
+    ):
         guarded("CartPole-v1", driver=lambda obs: 2, safe_default=0, success=never).reset(seed=0)
-    with pytest.raises(ValueError, match=r"returned the action array\(\[5.\], dtype=float32\), outside the env's action "
-                                         r"space Box\(-3.0, 3.0, \(1,\), float32\)"):
+    with pytest.raises(
+        ValueError,
+        match=r"returned the action array\(\[5.\], dtype=float32\), outside the env's action "
+        r"space Box\(-3.0, 3.0, \(1,\), float32\)",
+    ):
         pytest.importorskip("mujoco")
-        guarded("InvertedPendulum-v5", driver=lambda obs: np.array([5.0], np.float32), safe_default=np.zeros(1),
-                success=never).reset(seed=0)
-    with pytest.raises(TypeError, match=r"safe_default must be a callable obs -> action, an SB3-style policy or a "
-                                        r"constant action in the env's action space Discrete\(2\), got 'stop'"):
+        guarded(
+            "InvertedPendulum-v5",
+            driver=lambda obs: np.array([5.0], np.float32),
+            safe_default=np.zeros(1),
+            success=never,
+        ).reset(seed=0)
+    with pytest.raises(
+        TypeError,
+        match=r"safe_default must be a callable obs -> action, an SB3-style policy or a "
+        r"constant action in the env's action space Discrete\(2\), got 'stop'",
+    ):
         guarded("CartPole-v1", driver=balance, safe_default="stop", success=never)
     with pytest.raises(TypeError, match=r"driver must be a callable obs -> action or an object with predict"):
         guarded("CartPole-v1", driver=3, safe_default=0, success=never)
     with pytest.raises(TypeError, match=r"success must be a callable success\(obs\) -> bool, got True"):
         guarded("CartPole-v1", driver=balance, safe_default=0, success=True)
-    with pytest.raises(ValueError, match=r"Pendulum-v1 has no known failure notion .* give failure='terminated' if its "
-                                         r"termination is a failure, or failure=callable\(obs\) -> bool"):
-        guarded("Pendulum-v1", driver=lambda obs: np.zeros(1, np.float32), safe_default=np.zeros(1, np.float32),
-                success=never)
-    with pytest.raises(TypeError, match=r"failure must be None, 'terminated' or a callable failure\(obs\) -> bool, got 'x'"):
+    with pytest.raises(
+        ValueError,
+        match=r"Pendulum-v1 has no known failure notion .* give failure='terminated' if its "
+        r"termination is a failure, or failure=callable\(obs\) -> bool",
+    ):
+        guarded(
+            "Pendulum-v1",
+            driver=lambda obs: np.zeros(1, np.float32),
+            safe_default=np.zeros(1, np.float32),
+            success=never,
+        )
+    with pytest.raises(
+        TypeError, match=r"failure must be None, 'terminated' or a callable failure\(obs\) -> bool, got 'x'"
+    ):
         guarded("CartPole-v1", driver=balance, safe_default=0, success=never, failure="x")
-    with pytest.raises(ValueError, match=r"controls must name each control of CartPole-v1's action space Discrete\(2\) "
-                                         r"\(1 control\), got \('force', 'angle'\)"):
+    with pytest.raises(
+        ValueError,
+        match=r"controls must name each control of CartPole-v1's action space Discrete\(2\) "
+        r"\(1 control\), got \('force', 'angle'\)",
+    ):
         guarded("CartPole-v1", driver=balance, safe_default=0, success=never, controls=("force", "angle"))
-    with pytest.raises(ValueError, match=r"controls must name each control .* got 'force' \(a string; one name is "
-                                         r"\('force',\)\)"):  # not five controls 'f', 'o', 'r', 'c', 'e'
+    with pytest.raises(
+        ValueError,
+        match=r"controls must name each control .* got 'force' \(a string; one name is "
+        r"\('force',\)\)",
+    ):  # not five controls 'f', 'o', 'r', 'c', 'e'
         guarded("CartPole-v1", driver=balance, safe_default=0, success=never, controls="force")
 
 
 def test_a_failure_of_ones_own_ends_a_never_terminating_env():
-    env = guarded("Pendulum-v1", driver=lambda obs: np.array([2.0], np.float32), safe_default=np.zeros(1, np.float32),
-                  success=never, failure=lambda obs: abs(obs[2]) > 3.0)
+    env = guarded(
+        "Pendulum-v1",
+        driver=lambda obs: np.array([2.0], np.float32),
+        safe_default=np.zeros(1, np.float32),
+        success=never,
+        failure=lambda obs: abs(obs[2]) > 3.0,
+    )
     steps, term, _ = run(env, inactive)
     assert term and steps[-1][1]["outcome"] == "collision" and abs(steps[-1][0][2]) > 3.0
     assert all(abs(o[2]) <= 3.0 for o, _ in steps[:-1])
@@ -223,21 +255,27 @@ def test_rmm_bench_runs_every_applicable_guardian_and_names_cbf_and_hj_as_not_ap
     from rmm_bench.args import parse_run
     from rmm_bench.run import applicable
 
-    config = parse_run(["--env", "CartPoleParallel-v0", "--agent", "all", "--clock", "fixed:1", "--out",
-                        str(tmp_path)], "rmm-bench")
+    config = parse_run(
+        ["--env", "CartPoleParallel-v0", "--agent", "all", "--clock", "fixed:1", "--out", str(tmp_path)], "rmm-bench"
+    )
     config, _ = applicable(config)
     assert config.agents == ("lrmm", "random", "inactive", "brakes")
     err = capsys.readouterr().err
     for name in ("cbf", "hj"):
-        assert (f"--agent all: {name} does not apply to --env CartPoleParallel-v0, skipped: guardian {name!r} applies to "
-                "Dubins4D envs and the maze car") in err
+        assert (
+            f"--agent all: {name} does not apply to --env CartPoleParallel-v0, skipped: guardian {name!r} applies to "
+            "Dubins4D envs and the maze car"
+        ) in err
     assert config.env_kwargs == {"time_accel": 10.0, "base_step": 0.02, "clock": "fixed:1"}  # the env's own base step
 
 
-@pytest.mark.parametrize("env_id, upright, tipping", [
-    ("CartPoleParallel-v0", [0, 0, 0, 0], [0, 0, 0.19, 1.5]),
-    ("InvertedPendulumParallel-v0", [0, 0, 0, 0], [0, 0.18, 0, 1.0]),
-])
+@pytest.mark.parametrize(
+    "env_id, upright, tipping",
+    [
+        ("CartPoleParallel-v0", [0, 0, 0, 0], [0, 0, 0.19, 1.5]),
+        ("InvertedPendulumParallel-v0", [0, 0, 0, 0], [0, 0.18, 0, 1.0]),
+    ],
+)
 def test_the_shipped_lrmm_applies_the_safe_default_when_the_pole_is_about_to_fall(env_id, upright, tipping):
     if env_id.startswith("Inverted"):
         pytest.importorskip("mujoco")

@@ -22,11 +22,20 @@ def _reference(state, goal, u1b=(-0.25, 0.25), u2b=(-0.5, 0.5)):
     thd = desired_heading(th, math.atan2(yh, xh))
     e = th - thd
     lf = 2 * v * e * (xh * math.sin(th) - yh * math.cos(th)) / d2
-    G = np.array([
-        [0, 1, 0, 0], [0, -1, 0, 0], [1, 0, 0, 0], [-1, 0, 0, 0], [0, 1, 0, 0], [0, -1, 0, 0],
-        [2 * e, 0, -1, 0], [0, 2 * (v - vd), 0, -1],
-    ], float)
-    h = np.array([2 - v, v, u1b[1], -u1b[0], u2b[1], -u2b[0], -lf - e * e, -(v - vd) ** 2])
+    G = np.array(
+        [
+            [0, 1, 0, 0],
+            [0, -1, 0, 0],
+            [1, 0, 0, 0],
+            [-1, 0, 0, 0],
+            [0, 1, 0, 0],
+            [0, -1, 0, 0],
+            [2 * e, 0, -1, 0],
+            [0, 2 * (v - vd), 0, -1],
+        ],
+        float,
+    )
+    h = np.array([2 - v, v, u1b[1], -u1b[0], u2b[1], -u2b[0], -lf - e * e, -((v - vd) ** 2)])
     return solve_qp_dense(2 * np.eye(4), np.zeros(4), G, h)
 
 
@@ -70,9 +79,18 @@ _weight = st.floats(0.05, 5.0)
 
 
 @settings(max_examples=150, deadline=None)
-@given(x=_coord, y=_coord, th=st.floats(-4, 4), v=st.floats(-0.5, 2.5), gx=_coord, gy=_coord,
-       gains=st.tuples(_gain, _gain, _gain, _gain), weights=st.tuples(_weight, _weight),
-       u1=st.floats(0.01, 1.0), u2=st.floats(0.01, 1.0))
+@given(
+    x=_coord,
+    y=_coord,
+    th=st.floats(-4, 4),
+    v=st.floats(-0.5, 2.5),
+    gx=_coord,
+    gy=_coord,
+    gains=st.tuples(_gain, _gain, _gain, _gain),
+    weights=st.tuples(_weight, _weight),
+    u1=st.floats(0.01, 1.0),
+    u2=st.floats(0.01, 1.0),
+)
 @example(x=0.0, y=11.0, th=0.0, v=0.0, gx=0.0, gy=0.0, gains=(0.0, 0.0, 0.0, 1e-09), weights=(1.0, 1.0), u1=1.0, u2=1.0)
 def test_closed_form_matches_osqp_and_the_dense_reference(x, y, th, v, gx, gy, gains, weights, u1, u2):
     """Random instances, speeds outside the bounds included: the closed form is OSQP's solution
@@ -106,7 +124,9 @@ def test_closed_form_matches_osqp_and_the_dense_reference(x, y, th, v, gx, gy, g
 def test_closed_form_at_a_coincident_goal(eps):
     """A goal on top of the car (or 1e-44 m away, where the heading row reaches 1e42): the
     controls stay finite and in the box, only the CLF slack grows."""
-    z = CLFDriver(u1_bounds=(-1, 1), u2_bounds=(-1, 1)).solve(np.array([0.0, 0.0, 0.5, 1.0]), np.array([eps, 0.3 * eps]))
+    z = CLFDriver(u1_bounds=(-1, 1), u2_bounds=(-1, 1)).solve(
+        np.array([0.0, 0.0, 0.5, 1.0]), np.array([eps, 0.3 * eps])
+    )
     assert np.all(np.isfinite(z[:2])) and np.all(np.abs(z[:2]) <= 1.0) and z[2] >= 0 and z[3] >= 0
 
 

@@ -32,8 +32,18 @@ def _one(state, goal, lim, gain_vec):
 
 
 @settings(max_examples=150, deadline=None)
-@given(x=coord, y=coord, th=heading, v=speed, gx=coord, gy=coord, g=st.tuples(gain, gain, gain, gain),
-       w=st.tuples(weight, weight), b=st.tuples(bound, bound, bound, bound), v_hi=st.floats(0.5, 3.0, **finite))
+@given(
+    x=coord,
+    y=coord,
+    th=heading,
+    v=speed,
+    gx=coord,
+    gy=coord,
+    g=st.tuples(gain, gain, gain, gain),
+    w=st.tuples(weight, weight),
+    b=st.tuples(bound, bound, bound, bound),
+    v_hi=st.floats(0.5, 3.0, **finite),
+)
 def test_every_barrier_row_and_the_box_hold_at_the_solution(x, y, th, v, gx, gy, g, w, b, v_hi):
     """The speed barriers ``u2 <= gamma_vmax (v_max - v)``, ``-u2 <= gamma_vmin (v - v_min)`` and the
     control box hold at the closed form's solution whenever they can hold together; when they
@@ -112,7 +122,7 @@ def test_speed_barrier_hand_values():
     # d = 1: v_d = 0.01; at v = 0.3: a = 0.58, b = -0.0841: u* = -0.0487780 / 1.3364 = -0.03650;
     # the min-speed barrier allows -gamma_vmin v: -0.3 at gain 1 (u* stands), -0.03 at gain 0.1
     u = d.solve([0.0, 0.0, 0.0, 0.3], [1.0, 0.0])
-    assert u[1] == pytest.approx(0.58 * -0.0841 / (1 + 0.58 ** 2), rel=1e-12)
+    assert u[1] == pytest.approx(0.58 * -0.0841 / (1 + 0.58**2), rel=1e-12)
     u = CLFDriver(params=DriverParams(gamma_vmin=0.1)).solve([0.0, 0.0, 0.0, 0.3], [1.0, 0.0])
     assert u[1] == pytest.approx(-0.03, abs=1e-12)
     # the two barriers cannot hold together (v = 3 > v_max + 0.5): the documented point clip(0)
@@ -140,8 +150,12 @@ def test_pursuit_target_hand_values():
 
 
 @settings(max_examples=100, deadline=None)
-@given(psi=st.floats(-math.pi, math.pi, **finite), bearing=st.floats(-math.pi, math.pi, **finite),
-       k=st.integers(-2, 2), gain=st.floats(0.1, 5.0, **finite))
+@given(
+    psi=st.floats(-math.pi, math.pi, **finite),
+    bearing=st.floats(-math.pi, math.pi, **finite),
+    k=st.integers(-2, 2),
+    gain=st.floats(0.1, 5.0, **finite),
+)
 def test_pursuit_turns_by_the_wrapped_bearing_error(psi, bearing, k, gain):
     """``u = clip(gain * wrap(bearing - psi), -u_max, u_max)`` with the error wrapped to
     ``[-pi, pi)``: the car turns the short way, and a heading plus full turns is the same heading."""
@@ -195,10 +209,19 @@ def test_driver_parameter_bounds_and_layout():
         CLFDriver(solver="cvxpy")
 
 
-@pytest.mark.parametrize("states, goals", [(np.zeros((3, 3)), np.zeros((3, 2))), (np.zeros(4), np.zeros(2)),
-                                           (np.zeros((3, 4)), np.zeros((3, 1))), (np.zeros((3, 4)), np.zeros((2, 2)))])
+@pytest.mark.parametrize(
+    "states, goals",
+    [
+        (np.zeros((3, 3)), np.zeros((3, 2))),
+        (np.zeros(4), np.zeros(2)),
+        (np.zeros((3, 4)), np.zeros((3, 1))),
+        (np.zeros((3, 4)), np.zeros((2, 2))),
+    ],
+)
 def test_clf_qp_refuses_bad_shapes(states, goals):
-    with pytest.raises(ValueError, match=rf"states must be \(N, 4\) and goals \(N, 2\), got {re.escape(str(states.shape))}"):
+    with pytest.raises(
+        ValueError, match=rf"states must be \(N, 4\) and goals \(N, 2\), got {re.escape(str(states.shape))}"
+    ):
         clf_qp(states, goals, CLFDriver().lim, CLFDriver().gain)
 
 
@@ -213,8 +236,17 @@ def test_wider_rows_and_an_output_array_are_accepted():
     assert np.array_equal(d.control(s[0], g[0]), out[0, :2]) and np.array_equal(d.solve(s[0], g[0]), out[0])
 
 
-@pytest.mark.parametrize("kw, name", [({"u_max": 0.0}, "u_max"), ({"lookahead": -1.0}, "lookahead"), ({"gain": math.nan}, "gain"),
-                                      ({"u_max": True}, "u_max"), ({"lookahead": "190"}, "lookahead"), ({"gain": math.inf}, "gain")])
+@pytest.mark.parametrize(
+    "kw, name",
+    [
+        ({"u_max": 0.0}, "u_max"),
+        ({"lookahead": -1.0}, "lookahead"),
+        ({"gain": math.nan}, "gain"),
+        ({"u_max": True}, "u_max"),
+        ({"lookahead": "190"}, "lookahead"),
+        ({"gain": math.inf}, "gain"),
+    ],
+)
 def test_pursuit_arguments_are_checked_by_name(kw, name):
     args = {"u_max": 0.2} | kw
     with pytest.raises(ValueError, match=rf"^{name} must be a finite number > 0, got {kw[name]!r}$"):
@@ -224,7 +256,12 @@ def test_pursuit_arguments_are_checked_by_name(kw, name):
 def test_pursuit_waypoints_are_checked():
     d = PursuitDriver(u_max=0.2)
     assert d.waypoints.shape == (0, 2)
-    for bad in ([(0.0, 0.0)], [(0.0, 0.0, 0.0), (1.0, 1.0, 1.0)], [(0.0, 0.0), (math.inf, 1.0)], [[[0.0, 0.0], [1.0, 1.0]]]):
+    for bad in (
+        [(0.0, 0.0)],
+        [(0.0, 0.0, 0.0), (1.0, 1.0, 1.0)],
+        [(0.0, 0.0), (math.inf, 1.0)],
+        [[[0.0, 0.0], [1.0, 1.0]]],
+    ):
         with pytest.raises(ValueError, match=r"^waypoints must be \(K >= 2, 2\) finite points, got shape"):
             d.reset(bad)
 
@@ -239,8 +276,12 @@ def test_pursuit_defaults_and_projection_past_a_corner():
 
 
 @settings(max_examples=60, deadline=None)
-@given(dx=st.floats(-500.0, 500.0, **finite), dy=st.floats(-500.0, 500.0, **finite),
-       x=st.floats(-20.0, 120.0, **finite), y=st.floats(-20.0, 120.0, **finite))
+@given(
+    dx=st.floats(-500.0, 500.0, **finite),
+    dy=st.floats(-500.0, 500.0, **finite),
+    x=st.floats(-20.0, 120.0, **finite),
+    y=st.floats(-20.0, 120.0, **finite),
+)
 def test_pursuit_target_moves_with_the_path(dx, dy, x, y):
     """Translating the path and the car translates the target (segment lengths and projections
     depend on differences only)."""
@@ -256,8 +297,9 @@ def test_cell_path_reads_passages_as_indices_and_names_an_unreachable_cell():
 
     from rmm_envs.drivers.maze import cell_path
 
-    maze = SimpleNamespace(cells=np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]]),
-                           passages=[[0.0, 1.0], [2.0, 1.0]])  # numbers that are not ints, as JSON may give them
+    maze = SimpleNamespace(
+        cells=np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]]), passages=[[0.0, 1.0], [2.0, 1.0]]
+    )  # numbers that are not ints, as JSON may give them
     assert cell_path(maze, 0, 2) == [0, 1, 2] and cell_path(maze, 2, 0) == [2, 1, 0] and cell_path(maze, 1, 1) == [1]
     with pytest.raises(ValueError) as e:
         cell_path(maze, 0, 3)

@@ -9,6 +9,7 @@ import math
 
 import gymnasium as gym
 import numpy as np
+import pymunk  # noqa: E402,F401  (pinned in the test extra: a missing install fails here, it is not skipped)
 import pytest
 from gymnasium.utils.env_checker import check_env
 from hypothesis import given, settings
@@ -20,8 +21,6 @@ from rmm_envs.risk import RiskEstimator
 from rmm_envs.worlds.circles import contact_params_each, points_in_circles, ray_cast
 from rmm_envs.worlds.pymunk_world import PymunkWorld
 from rmm_envs.worlds.shape_map import MapError, load_map, triangulate
-
-import pymunk  # noqa: E402,F401  (pinned in the test extra: a missing install fails here, it is not skipped)
 
 
 def circle_map(rng, k):
@@ -49,7 +48,10 @@ def test_world_queries_agree_with_the_analytic_circles(seed, k):
     assert (w.points_inside(o) == points_in_circles(o, circles)).all()
     paths = o[:, None, :] + np.cumsum(rng.normal(0, 0.4, (64, 16, 2)), axis=1)
     want = contact_params_each(paths, np.repeat(circles[None], 64, axis=0)).min(axis=1)
-    for got in (w.first_contacts(paths), np.concatenate([w.first_contacts(p[None]) for p in paths])):  # batch and one path
+    for got in (
+        w.first_contacts(paths),
+        np.concatenate([w.first_contacts(p[None]) for p in paths]),
+    ):  # batch and one path
         assert (np.isfinite(got) == np.isfinite(want)).all()
         np.testing.assert_allclose(got[np.isfinite(want)], want[np.isfinite(want)], atol=1e-4)
 
@@ -91,12 +93,25 @@ def test_polygon_and_wall_rays_and_contacts_by_hand():
     o = np.array([[-1.0, 2.0], [6.0, 2.0], [1.0, 2.0], [3.0, 2.0], [6.0, 0.5]])
     r = w.rays(o, np.zeros(5), n_rays=4, max_range=10.0)  # rays at 0, 90, 180, 270 degrees
     assert r[0, 0] == pytest.approx(1.0)  # to the U's outer left side at x = 0
-    assert r[1, 0] == pytest.approx(10 - 0.2 - 6) and r[1, 2] == pytest.approx(4.0)  # the wall's face; the notch's back at x = 2
+    assert r[1, 0] == pytest.approx(10 - 0.2 - 6) and r[1, 2] == pytest.approx(
+        4.0
+    )  # the wall's face; the notch's back at x = 2
     assert r[2].tolist() == [0.0] * 4  # inside the U's left arm
-    assert r[3].tolist() == pytest.approx([10 - 0.2 - 3, 1.0, 1.0, 1.0])  # in the notch: out through its mouth to the wall
+    assert r[3].tolist() == pytest.approx(
+        [10 - 0.2 - 3, 1.0, 1.0, 1.0]
+    )  # in the notch: out through its mouth to the wall
     assert r[4, 2] == pytest.approx(2.0)  # along y = 0.5 into the lower arm's end at x = 4
-    assert w.points_inside(np.array([[1, 1], [3, 2], [3, 0.5], [0, 0], [10.19, 0], [10.21, 0], [10, 5.19]])).tolist() == \
-        [True, False, True, True, True, False, True]  # a corner counts; the wall is 0.2 m each side, its end rounded
+    assert w.points_inside(
+        np.array([[1, 1], [3, 2], [3, 0.5], [0, 0], [10.19, 0], [10.21, 0], [10, 5.19]])
+    ).tolist() == [
+        True,
+        False,
+        True,
+        True,
+        True,
+        False,
+        True,
+    ]  # a corner counts; the wall is 0.2 m each side, its end rounded
     # straight paths at y = 2, 5 points 1 m apart: from x = -1.5 east, entering the U at x = 0 (segment 1,
     # s = 0.5); from x = 5.5 west through the notch to its back at x = 2 (segment 3, s = 0.5); in free space
     p1 = np.column_stack([np.linspace(-1.5, 2.5, 5), np.full(5, 2.0)])
@@ -112,7 +127,10 @@ def test_polygon_and_wall_rays_and_contacts_by_hand():
 def test_triangulation_covers_random_simple_polygons_exactly(seed, n):
     rng = np.random.default_rng(seed)
     ang = np.sort(rng.uniform(0, 2 * np.pi, n))
-    if np.min(np.diff(np.r_[ang, ang[0] + 2 * np.pi])) < 1e-3 or np.max(np.diff(np.r_[ang, ang[0] + 2 * np.pi])) > np.pi - 1e-3:
+    if (
+        np.min(np.diff(np.r_[ang, ang[0] + 2 * np.pi])) < 1e-3
+        or np.max(np.diff(np.r_[ang, ang[0] + 2 * np.pi])) > np.pi - 1e-3
+    ):
         return  # nearly repeated directions, or a star whose centre is outside: not a simple star polygon
     rad = rng.uniform(0.5, 5.0, n)
     poly = np.column_stack([rad * np.cos(ang), rad * np.sin(ang)])
@@ -133,26 +151,37 @@ def test_triangulation_covers_random_simple_polygons_exactly(seed, n):
 
 
 # ------------------------------------------------------------------ the map format
-@pytest.mark.parametrize("entries, index, says", [
-    ([{"circle": [0, 0, 1]}, {"square": [0, 0, 1]}], 1, "unknown shape 'square'"),
-    ([{"polygon": [[0, 0], [2, 2], [2, 0], [0, 2]]}], 0, "edges 0 ([0.0, 0.0] to [2.0, 2.0]) and 2 ([2.0, 0.0] to [0.0, 2.0]) cross"),
-    ([{"circle": [0, 0, 1]}, {"polygon": [[0, 0], [4, 0], [4, 4], [2, 0], [0, 4]]}], 1, "cross or touch"),  # a vertex on an edge
-    ([{"polygon": [[0, 0], [2, 0], [1, 0], [1, 1]]}], 0, "fold"),
-    ([{"polygon": [[0, 0], [1, 1], [2, 2]]}], 0, "edges 0 and 2 overlap"),  # all on a line
-    ([{"polygon": [[0, 0], [1, 0], [1, 0], [0, 1]]}], 0, "vertices 1 and 2 are the same point"),
-    ([{"polygon": [[0, 0], [1, 0]]}], 0, "at least 3"),
-    ([{"circle": [0, 0, float("nan")]}], 0, "finite"),
-    ([{"segment": [[0, 0], [1, float("inf")], 0.2]}], 0, "finite"),
-    ([{"circle": [0, 0, 1]}, {"circle": [0, 1]}], 1, "expected [x, y, r]"),
-    ([{"segment": [[0, 0], [1, 1]]}], 0, "expected [[x0, y0], [x1, y1], thickness]"),
-    ([{"segment": [[0, 0], [1, 1], 0]}], 0, "thickness > 0"),
-    ([{"circle": [0, 0, -1]}], 0, "r > 0"),
-    ([{"circle": [0, 0, True]}], 0, "expected [x, y, r]"),
-    ([{"circle": [0, 0, 1], "polygon": [[0, 0], [1, 0], [0, 1]]}], 0, "exactly one key"),
-    ([{"circle": [0, 0, 1]}, {"goal": [5, 5, 1]}, {"goal": [6, 6, 1]}], 2, "at most one"),
-    ([{"circle": [0, 0, 1]}, {"start": [[1, 1], [0, 2]]}], 1, "x_min < x_max"),
-    ([{"circle": [0, 0, 1]}, 7], 1, "exactly one key"),
-])
+@pytest.mark.parametrize(
+    "entries, index, says",
+    [
+        ([{"circle": [0, 0, 1]}, {"square": [0, 0, 1]}], 1, "unknown shape 'square'"),
+        (
+            [{"polygon": [[0, 0], [2, 2], [2, 0], [0, 2]]}],
+            0,
+            "edges 0 ([0.0, 0.0] to [2.0, 2.0]) and 2 ([2.0, 0.0] to [0.0, 2.0]) cross",
+        ),
+        (
+            [{"circle": [0, 0, 1]}, {"polygon": [[0, 0], [4, 0], [4, 4], [2, 0], [0, 4]]}],
+            1,
+            "cross or touch",
+        ),  # a vertex on an edge
+        ([{"polygon": [[0, 0], [2, 0], [1, 0], [1, 1]]}], 0, "fold"),
+        ([{"polygon": [[0, 0], [1, 1], [2, 2]]}], 0, "edges 0 and 2 overlap"),  # all on a line
+        ([{"polygon": [[0, 0], [1, 0], [1, 0], [0, 1]]}], 0, "vertices 1 and 2 are the same point"),
+        ([{"polygon": [[0, 0], [1, 0]]}], 0, "at least 3"),
+        ([{"circle": [0, 0, float("nan")]}], 0, "finite"),
+        ([{"segment": [[0, 0], [1, float("inf")], 0.2]}], 0, "finite"),
+        ([{"circle": [0, 0, 1]}, {"circle": [0, 1]}], 1, "expected [x, y, r]"),
+        ([{"segment": [[0, 0], [1, 1]]}], 0, "expected [[x0, y0], [x1, y1], thickness]"),
+        ([{"segment": [[0, 0], [1, 1], 0]}], 0, "thickness > 0"),
+        ([{"circle": [0, 0, -1]}], 0, "r > 0"),
+        ([{"circle": [0, 0, True]}], 0, "expected [x, y, r]"),
+        ([{"circle": [0, 0, 1], "polygon": [[0, 0], [1, 0], [0, 1]]}], 0, "exactly one key"),
+        ([{"circle": [0, 0, 1]}, {"goal": [5, 5, 1]}, {"goal": [6, 6, 1]}], 2, "at most one"),
+        ([{"circle": [0, 0, 1]}, {"start": [[1, 1], [0, 2]]}], 1, "x_min < x_max"),
+        ([{"circle": [0, 0, 1]}, 7], 1, "exactly one key"),
+    ],
+)
 def test_bad_map_entries_are_named_by_index_and_content(entries, index, says):
     with pytest.raises(MapError) as e:
         load_map(entries)
@@ -189,7 +218,9 @@ def test_map_forms_round_trip(tmp_path):
     assert m.start_box.tolist() == [[-10, -10], [10, 10]] and m.goal is None
     again = load_map(m.to_json())
     assert again.to_json() == m.to_json()
-    obj = load_map({"shapes": [{"circle": [0, 0, 1]}, {"polygon": [[2, 0], [3, 0], [3, 1], [2, 0]]}], "goal": [5, 5, 0.5]})
+    obj = load_map(
+        {"shapes": [{"circle": [0, 0, 1]}, {"polygon": [[2, 0], [3, 0], [3, 1], [2, 0]]}], "goal": [5, 5, 0.5]}
+    )
     assert obj.polygons[0].tolist() == [[2, 0], [3, 0], [3, 1]]  # the closing vertex dropped
     assert obj.start_box.tolist() == [[-1, -1], [5.5, 5.5]]  # the bounding box, goal included
     cw = load_map([{"polygon": [[0, 0], [0, 1], [1, 0]]}])
@@ -226,15 +257,28 @@ def test_reset_options_defaults_and_determinism():
         assert not env.world.points_inside(np.array([st_[:2], g[:2]])).any()
         assert math.hypot(*(st_[:2] - g[:2])) > g[2] and (np.abs(st_[:2]) <= 10).all()
     env.reset(seed=0, options={"state": [-9, -9, 7.0, 1.0], "goal": [9, 9, 0.5]})
-    assert env.true_state.tolist() == pytest.approx([-9, -9, 7.0 - 2 * math.pi, 1.0]) and env.scene.goal.tolist() == [9, 9, 0.5]
+    assert env.true_state.tolist() == pytest.approx([-9, -9, 7.0 - 2 * math.pi, 1.0]) and env.scene.goal.tolist() == [
+        9,
+        9,
+        0.5,
+    ]
     fixed = Dubins4DMapEnv(map=[{"circle": [0, 0, 2]}, {"goal": [5, 5, 1]}, {"start": [[-6, -6], [-3, -3]]}])
     for seed in range(5):
         fixed.reset(seed=seed)
-        assert fixed.scene.goal.tolist() == [5, 5, 1] and (-6 <= fixed.true_state[:2]).all() and (fixed.true_state[:2] <= -3).all()
-    bad = [({"state": [0.5, -1.5, 0, 1]}, "inside an obstacle"), ({"goal": [0.5, -1.5, 1]}, "centre inside an obstacle"),
-           ({"state": [-9, -9, 0, 3]}, "speed must be in"), ({"goal": [1, 2]}, "option 'goal' must be 3 finite numbers"),
-           ({"state": [-9, -9, 0, 1], "goal": [-9, -9, 1]}, "already inside the goal"), ({"obstacles": []}, "unknown reset options"),
-           ({"goal": [9, 9, 0]}, "radius must be > 0")]
+        assert (
+            fixed.scene.goal.tolist() == [5, 5, 1]
+            and (-6 <= fixed.true_state[:2]).all()
+            and (fixed.true_state[:2] <= -3).all()
+        )
+    bad = [
+        ({"state": [0.5, -1.5, 0, 1]}, "inside an obstacle"),
+        ({"goal": [0.5, -1.5, 1]}, "centre inside an obstacle"),
+        ({"state": [-9, -9, 0, 3]}, "speed must be in"),
+        ({"goal": [1, 2]}, "option 'goal' must be 3 finite numbers"),
+        ({"state": [-9, -9, 0, 1], "goal": [-9, -9, 1]}, "already inside the goal"),
+        ({"obstacles": []}, "unknown reset options"),
+        ({"goal": [9, 9, 0]}, "radius must be > 0"),
+    ]
     for options, says in bad:
         with pytest.raises(ValueError, match=says):
             env.reset(seed=0, options=options)
@@ -278,8 +322,12 @@ def test_risk_labelling_through_the_protocol():
 def test_datagen_on_a_map(tmp_path):
     from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 
-    generate(DatagenConfig(env_id="Dubins4DMapGuarded-v0", configs=2, samples_per_config=6, branches=4, depth=2, seed=1),
-             tmp_path / "d", workers=1, progress=False)
+    generate(
+        DatagenConfig(env_id="Dubins4DMapGuarded-v0", configs=2, samples_per_config=6, branches=4, depth=2, seed=1),
+        tmp_path / "d",
+        workers=1,
+        progress=False,
+    )
     ds = load_dataset(tmp_path / "d")
     assert len(ds) == 12 and ds.obs.shape == (12, 17) and np.all((ds.risk >= 0) & (ds.risk <= 1))
 
@@ -293,15 +341,33 @@ def test_privileged_guardians_on_maps(tmp_path, capsys):
     for name in ("cbf", "hj"):
         with pytest.raises(ValueError, match=f"guardian '{name}' models circular obstacles only.*polygon, segment"):
             make_guardian(name).check_spaces(env.observation_space, env.action_space)
-    assert bench_main(["--env", "Dubins4DMapParallel-v0", "--agent", "cbf", "--episodes", "1", "--workers", "1",
-                       "--out", str(tmp_path), "--no-progress"]) == 2
+    assert (
+        bench_main(
+            [
+                "--env",
+                "Dubins4DMapParallel-v0",
+                "--agent",
+                "cbf",
+                "--episodes",
+                "1",
+                "--workers",
+                "1",
+                "--out",
+                str(tmp_path),
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
     assert "models circular obstacles only" in capsys.readouterr().err
     # a map of circles only: cbf runs, on the map's circles
     circ = Dubins4DMapEnv(map=[{"circle": [0, 0, 3]}, {"circle": [5, 5, 2]}, {"start": [[-10, -10], [10, 10]]}])
     g = make_guardian("cbf")
     g.check_spaces(circ.observation_space, circ.action_space)
     obs, info = circ.reset(seed=0)
-    g.reset(seed=0, observation_space=circ.observation_space, action_space=circ.action_space, privileged=circ.privileged)
+    g.reset(
+        seed=0, observation_space=circ.observation_space, action_space=circ.action_space, privileged=circ.privileged
+    )
     assert circ.privileged()["obstacles"].tolist() == [[0, 0, 3], [5, 5, 2]]
     for _ in range(30):  # cbf filters the map env's driver control, info["nominal_control"]
         obs, r, te, tr, info = circ.step(g.act(obs, info))
@@ -312,8 +378,27 @@ def test_privileged_guardians_on_maps(tmp_path, capsys):
 def test_rmm_bench_runs_on_the_example_map(tmp_path):
     from rmm_bench.cli import main as bench_main
 
-    assert bench_main(["--env", "Dubins4DMapParallel-v0", "--agent", "lrmm", "--episodes", "2", "--workers", "1",
-                       "--clock", "fixed:1", "--out", str(tmp_path), "--no-progress", "--no-figure"]) == 0
+    assert (
+        bench_main(
+            [
+                "--env",
+                "Dubins4DMapParallel-v0",
+                "--agent",
+                "lrmm",
+                "--episodes",
+                "2",
+                "--workers",
+                "1",
+                "--clock",
+                "fixed:1",
+                "--out",
+                str(tmp_path),
+                "--no-progress",
+                "--no-figure",
+            ]
+        )
+        == 0
+    )
 
 
 def test_render_draws_the_map():

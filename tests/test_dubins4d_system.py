@@ -17,7 +17,9 @@ def prop(state, control, duration, n=2):
 
 def test_straight_line_closed_form():
     end = prop([1.0, -2.0, math.pi / 3, 1.5], [0.0, 0.0], 2.0)[-1]
-    assert end == pytest.approx([1.0 + 3.0 * math.cos(math.pi / 3), -2.0 + 3.0 * math.sin(math.pi / 3), math.pi / 3, 1.5], abs=1e-12)
+    assert end == pytest.approx(
+        [1.0 + 3.0 * math.cos(math.pi / 3), -2.0 + 3.0 * math.sin(math.pi / 3), math.pi / 3, 1.5], abs=1e-12
+    )
 
 
 def test_constant_turn_is_a_circle():
@@ -64,7 +66,10 @@ def _rhs(t, z, u):
 
 @settings(max_examples=40, deadline=None)
 @given(
-    th=st.floats(-4, 4), v=st.floats(0, 2), u1=st.floats(-0.25, 0.25), u2=st.floats(-0.5, 0.5),
+    th=st.floats(-4, 4),
+    v=st.floats(0, 2),
+    u1=st.floats(-0.25, 0.25),
+    u2=st.floats(-0.5, 0.5),
     T=st.floats(0.01, 4.0),
 )
 def test_matches_an_independent_ode_solution(th, v, u1, u2, T):
@@ -120,7 +125,11 @@ def test_wrap_angle_range():
 
 @settings(max_examples=60, deadline=None)
 @given(
-    th=st.floats(-10, 10), v=st.floats(-1, 3), u1=st.floats(-0.5, 0.5), u2=st.floats(-1, 1), T=st.floats(0, 9.0),
+    th=st.floats(-10, 10),
+    v=st.floats(-1, 3),
+    u1=st.floats(-0.5, 0.5),
+    u2=st.floats(-1, 1),
+    T=st.floats(0, 9.0),
 )
 def test_compiled_single_path_equals_the_numpy_path(th, v, u1, u2, T):
     # one state (an env step) runs through the compiled loop, batches through numpy: same

@@ -13,7 +13,11 @@ INACTIVE = {"active_ctrl": 0, "turnrate_ctrl": np.zeros(1, np.float32), "accel_c
 
 
 def act(u1, u2, active=1):
-    return {"active_ctrl": active, "turnrate_ctrl": np.array([u1], np.float32), "accel_ctrl": np.array([u2], np.float32)}
+    return {
+        "active_ctrl": active,
+        "turnrate_ctrl": np.array([u1], np.float32),
+        "accel_ctrl": np.array([u2], np.float32),
+    }
 
 
 def run_episode(env, seed, policy=lambda obs: INACTIVE, options=None):
@@ -44,7 +48,11 @@ def test_make_with_module_prefix_and_vector():
     venv = gym.make_vec("Dubins4DGuarded-v0", num_envs=3)
     obs, info = venv.reset(seed=1)
     assert obs.shape == (3, 17)
-    acts = {"active_ctrl": np.zeros(3, int), "turnrate_ctrl": np.zeros((3, 1), np.float32), "accel_ctrl": np.zeros((3, 1), np.float32)}
+    acts = {
+        "active_ctrl": np.zeros(3, int),
+        "turnrate_ctrl": np.zeros((3, 1), np.float32),
+        "accel_ctrl": np.zeros((3, 1), np.float32),
+    }
     obs, r, te, tr, info = venv.step(acts)
     assert obs.shape == (3, 17) and r.shape == (3,)
     venv.close()
@@ -52,7 +60,9 @@ def test_make_with_module_prefix_and_vector():
 
 def test_observation_layout():
     env = Dubins4DCirclesEnv()
-    obs, info = env.reset(seed=0, options={"state": [1.0, 2.0, 0.0, 1.5], "goal": [4.0, 6.0, 0.5], "obstacles": [[6.0, 2.0, 1.0]]})
+    obs, info = env.reset(
+        seed=0, options={"state": [1.0, 2.0, 0.0, 1.5], "goal": [4.0, 6.0, 0.5], "obstacles": [[6.0, 2.0, 1.0]]}
+    )
     assert obs.dtype == np.float32 and obs.shape == (17,)
     assert obs[0] == 0.0
     assert obs[1:3].tolist() == [3.0, 4.0]
@@ -193,8 +203,13 @@ def test_bad_reset_options(options, match):
 
 @pytest.mark.parametrize(
     "kwargs, match",
-    [({"step_dt": 0}, "step_dt"), ({"n_rays": 0}, "n_rays"), ({"obstacle_min_rad": -1}, "obstacle radii"),
-     ({"render_mode": "ascii"}, "render_mode"), ({"n_path_points": 1}, "n_path_points")],
+    [
+        ({"step_dt": 0}, "step_dt"),
+        ({"n_rays": 0}, "n_rays"),
+        ({"obstacle_min_rad": -1}, "obstacle radii"),
+        ({"render_mode": "ascii"}, "render_mode"),
+        ({"n_path_points": 1}, "n_path_points"),
+    ],
 )
 def test_bad_constructor_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):

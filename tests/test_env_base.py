@@ -62,7 +62,8 @@ def test_the_checker_names_the_env_and_each_ill_formed_hook():
     assert str(e.value) == (
         "_Bad is not a LabelledEnv (see rmm_envs.risk.protocol): risk_scene(self, episode) cannot be called as "
         "risk_scene(); true_state must be a property or attribute, not a method; "
-        "sample_states must be a method taking (rng, n)")
+        "sample_states must be a method taking (rng, n)"
+    )
     check_labelled_env(_Bad(), needs=("observe_states", "privileged"))  # only what is asked for
 
 
@@ -71,8 +72,13 @@ def test_scene_protocol_asks_only_for_what_the_estimator_uses():
     import rmm_envs.risk as risk
     import rmm_envs.risk.protocol as protocol
 
-    for module, old in ((risk, "System"), (risk, "check_system"), (protocol, "System"), (protocol, "check_system"),
-                        (d4, "parse_guardian_action")):  # no former names kept alive
+    for module, old in (
+        (risk, "System"),
+        (risk, "check_system"),
+        (protocol, "System"),
+        (protocol, "check_system"),
+        (d4, "parse_guardian_action"),
+    ):  # no former names kept alive
         assert not hasattr(module, old)
 
     class Minimal:
@@ -114,7 +120,9 @@ def test_rejection_sample_is_seeded_ordered_and_bounded():
     kept = first[first[:, 0] >= 0.5]
     np.testing.assert_array_equal(a[: min(40, len(kept))], kept[:40])
     assert rejection_sample(np.random.default_rng(0), 0, 2, draw, rejected, "points").shape == (0, 2)
-    with pytest.raises(RuntimeError, match=r"could not draw 5 points: only 0 of 48 candidates were accepted in 3 rounds"):
+    with pytest.raises(
+        RuntimeError, match=r"could not draw 5 points: only 0 of 48 candidates were accepted in 3 rounds"
+    ):
         rejection_sample(np.random.default_rng(0), 5, 2, draw, lambda c: np.ones(len(c), bool), "points", max_rounds=3)
 
 
@@ -166,20 +174,23 @@ def test_maze_scene_is_the_env_scene_and_observations_are_named():
     q.close()
 
 
-@pytest.mark.parametrize("env_id", ["Dubins4DParallel-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoomParallel-v0",
-                                    "Dubins4DMapParallel-v0"])
+@pytest.mark.parametrize(
+    "env_id", ["Dubins4DParallel-v0", "Dubins3DMazeParallel-v0", "QuadrotorRoomParallel-v0", "Dubins4DMapParallel-v0"]
+)
 def test_parallel_envs_refuse_step_dt_which_non_blocking_stepping_would_ignore(env_id):
     import gymnasium as gym
 
-    import rmm_envs  # noqa: F401
 
     with pytest.raises(ValueError) as e:
         gym.make(env_id, step_dt=5.0)
-    assert str(e.value) == (f"{env_id} steps by elapsed * time_accel + base_step, so step_dt (the fixed step of the "
-                            "blocking env) does not apply; set base_step and time_accel instead, got step_dt=5.0")
+    assert str(e.value) == (
+        f"{env_id} steps by elapsed * time_accel + base_step, so step_dt (the fixed step of the "
+        "blocking env) does not apply; set base_step and time_accel instead, got step_dt=5.0"
+    )
     env = gym.make(env_id, base_step=0.2, clock="fixed:0")
     env.reset(seed=0)
-    _, _, _, _, info = env.step(env.action_space.inactive() if hasattr(env.action_space, "inactive")
-                                else env.unwrapped.action_space.inactive())
+    _, _, _, _, info = env.step(
+        env.action_space.inactive() if hasattr(env.action_space, "inactive") else env.unwrapped.action_space.inactive()
+    )
     assert abs(info["sim_time"] - 0.2) < 1e-9  # the first interval: base_step, the driver's
     env.close()

@@ -16,7 +16,7 @@ import pytest
 
 from rmm_envs.env_plugins import EnvUnavailable, resolve_env_id
 
-PLUGIN = '''
+PLUGIN = """
 import gymnasium as gym
 
 CALLS = []
@@ -26,14 +26,14 @@ def register():
     CALLS.append(1)
     if "PlugCircles-v0" not in gym.registry:
         gym.register(id="PlugCircles-v0", entry_point="rmm_envs.envs.dubins4d:Dubins4DCirclesEnv")
-'''
+"""
 
-BROKEN_PLUGIN = '''
+BROKEN_PLUGIN = """
 def register():
     raise RuntimeError("the plugin's simulator is not installed")
-'''
+"""
 
-WORKER_ONLY_FAILURE = '''
+WORKER_ONLY_FAILURE = """
 import multiprocessing
 
 import gymnasium as gym
@@ -41,7 +41,7 @@ import gymnasium as gym
 if multiprocessing.parent_process() is not None:  # a spawned worker
     raise ImportError("the licence server of MyEnv is not reachable from worker processes")
 gym.register(id="MyEnv-v0", entry_point="rmm_envs.envs.dubins4d:Dubins4DCirclesEnv")
-'''
+"""
 
 
 def _dist(root: Path, name: str, module: str, source: str) -> None:
@@ -58,8 +58,14 @@ def _bench(cwd: Path, *args: str, pythonpath: Path | None = None) -> subprocess.
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     if pythonpath is not None:
         env["PYTHONPATH"] = str(pythonpath)
-    return subprocess.run([str(exe), *args, "--clock", "fixed:1", "--no-progress", "--no-figure", "--out", str(cwd / "res")],
-                          cwd=cwd, capture_output=True, text=True, timeout=600, env=env)
+    return subprocess.run(
+        [str(exe), *args, "--clock", "fixed:1", "--no-progress", "--no-figure", "--out", str(cwd / "res")],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
+    )
 
 
 def test_an_entry_point_registers_its_env_when_the_id_is_asked_for(tmp_path, monkeypatch):
@@ -90,8 +96,11 @@ def test_a_failing_entry_point_is_named_in_the_error_of_the_id_it_left_unregiste
 
 
 def test_a_mistyped_id_is_answered_with_the_nearest_registered_one():
-    with pytest.raises(EnvUnavailable, match=r"^--env 'Dubins4DCirclesParalel-v0' is not a registered Gymnasium env "
-                                             r"\(did you mean 'Dubins4DParallel-v0'\?\); this package registers "):
+    with pytest.raises(
+        EnvUnavailable,
+        match=r"^--env 'Dubins4DCirclesParalel-v0' is not a registered Gymnasium env "
+        r"\(did you mean 'Dubins4DParallel-v0'\?\); this package registers ",
+    ):
         resolve_env_id("Dubins4DCirclesParalel-v0")
     with pytest.raises(EnvUnavailable, match=r"^--env 'Zzqx-v0' is not a registered Gymnasium env; this package"):
         resolve_env_id("Zzqx-v0")
@@ -99,11 +108,14 @@ def test_a_mistyped_id_is_answered_with_the_nearest_registered_one():
 
 def test_module_ids_are_resolved_to_the_id_the_module_registers(tmp_path, monkeypatch):
     (tmp_path / "regmod26.py").write_text(
-        'import gymnasium as gym\ngym.register(id="Reg26-v0", entry_point="rmm_envs.envs.dubins4d:Dubins4DCirclesEnv")\n')
+        'import gymnasium as gym\ngym.register(id="Reg26-v0", entry_point="rmm_envs.envs.dubins4d:Dubins4DCirclesEnv")\n'
+    )
     monkeypatch.syspath_prepend(str(tmp_path))
     try:
         assert resolve_env_id("regmod26:Reg26-v0") == "Reg26-v0"
-        with pytest.raises(EnvUnavailable, match=r"importing 'regmod26' \(from .*regmod26\.py\) registered no env 'Other-v0'"):
+        with pytest.raises(
+            EnvUnavailable, match=r"importing 'regmod26' \(from .*regmod26\.py\) registered no env 'Other-v0'"
+        ):
             resolve_env_id("regmod26:Other-v0")
         with pytest.raises(EnvUnavailable, match=r"an env id must be a non-empty string, got 3"):
             resolve_env_id(3)
@@ -117,8 +129,9 @@ def test_rmm_bench_runs_an_entry_point_env_in_every_worker(tmp_path):
     site = tmp_path / "site"
     site.mkdir()
     _dist(site, "plugdemo", "plugdemo_envs", PLUGIN)
-    res = _bench(tmp_path, "--env", "PlugCircles-v0", "--agent", "inactive", "--episodes", "4", "--workers", "2",
-                 pythonpath=site)
+    res = _bench(
+        tmp_path, "--env", "PlugCircles-v0", "--agent", "inactive", "--episodes", "4", "--workers", "2", pythonpath=site
+    )
     assert res.returncode == 0, res.stderr[-2000:]
     row = next(line for line in res.stdout.splitlines() if line.startswith("| inactive"))
     assert "| 4 |" in row
@@ -130,19 +143,25 @@ def test_an_env_a_worker_cannot_register_fails_the_run_naming_the_env_and_the_im
     res = _bench(tmp_path, "--env", "workerfail:MyEnv-v0", "--agent", "inactive", "--episodes", "4", "--workers", "2")
     assert res.returncode == 1, res.stdout[-2000:]
     line = next(x for x in res.stderr.splitlines() if "could not make the env in their worker" in x)
-    assert line.startswith("rmm-bench: --env workerfail:MyEnv-v0: 4 episodes could not make the env in their worker, "
-                           "a failure of the run, not of a guardian")
-    assert ("cannot import module 'workerfail' (from workerfail.py): "
-            "ImportError: the licence server of MyEnv is not reachable from worker processes") in line
+    assert line.startswith(
+        "rmm-bench: --env workerfail:MyEnv-v0: 4 episodes could not make the env in their worker, "
+        "a failure of the run, not of a guardian"
+    )
+    assert (
+        "cannot import module 'workerfail' (from workerfail.py): "
+        "ImportError: the licence server of MyEnv is not reachable from worker processes"
+    ) in line
     assert "guardian error" not in res.stderr
-    assert ("INCOMPLETE: episodes with a result: inactive 0 of 4 (4 stored over the time limit, lost with their worker, "
-            "not run as a file changed or unable to make the env in their worker;") in res.stdout
+    assert (
+        "INCOMPLETE: episodes with a result: inactive 0 of 4 (4 stored over the time limit, lost with their worker, "
+        "not run as a file changed or unable to make the env in their worker;"
+    ) in res.stdout
     with sqlite3.connect(tmp_path / "res" / "results.db") as db:
         kinds = db.execute("SELECT outcome, error_kind, COUNT(*) FROM episodes GROUP BY 1, 2").fetchall()
     assert kinds == [("error", "env", 4)]
 
 
-CARTPOLE_PLUGIN = '''
+CARTPOLE_PLUGIN = """
 import gymnasium as gym
 
 
@@ -150,7 +169,7 @@ def register():
     if "PlugCartPole-v0" not in gym.registry:
         gym.register(id="PlugCartPole-v0", entry_point="gymnasium.envs.classic_control:CartPoleEnv",
                      max_episode_steps=200)
-'''
+"""
 
 
 @pytest.mark.slow  # rmm-bench's entry-point drill above runs in the default suite
@@ -160,9 +179,30 @@ def test_rmm_datagen_labels_an_entry_point_env_in_every_worker(tmp_path):
     _dist(site, "plugcart", "plugcart_envs", CARTPOLE_PLUGIN)
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"} | {"PYTHONPATH": str(site)}
     exe = Path(sys.executable).parent / "rmm-datagen"
-    res = subprocess.run([str(exe), "--env", "PlugCartPole-v0", "--configs", "4", "--samples-per-config", "8",
-                          "--branches", "4", "--configs-per-shard", "2", "--workers", "2", "--no-progress",
-                          "--out", str(tmp_path / "data")], cwd=tmp_path, capture_output=True, text=True, timeout=600,
-                         env=env)
+    res = subprocess.run(
+        [
+            str(exe),
+            "--env",
+            "PlugCartPole-v0",
+            "--configs",
+            "4",
+            "--samples-per-config",
+            "8",
+            "--branches",
+            "4",
+            "--configs-per-shard",
+            "2",
+            "--workers",
+            "2",
+            "--no-progress",
+            "--out",
+            str(tmp_path / "data"),
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
+    )
     assert res.returncode == 0, res.stderr[-2000:]
     assert "32 labelled samples" in res.stdout

@@ -17,11 +17,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from rmm_envs.drivers.dubins4d import desired_heading
 from rmm_guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_rows
 from rmm_guardians.cbf.qp import BarrierQP
 from rmm_guardians.hj.grid import Grid
 from rmm_guardians.lrmm.model import ACTIVATIONS, LRMMModel
-from rmm_envs.drivers.dubins4d import desired_heading
 
 finite = st.floats(-50, 50, allow_nan=False)
 
@@ -75,8 +75,10 @@ def _model(activation, features=None, obs_dim=6, hidden=(9, 5), n_out=1, seed=0)
     rng = np.random.default_rng(seed)
     feats = list(range(obs_dim)) if features is None else features
     sizes = [len(feats), *hidden, n_out]
-    weights = [(rng.normal(size=(b, a)), rng.normal(size=b) if i < len(sizes) - 2 or seed % 2 else None)
-               for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:]))]
+    weights = [
+        (rng.normal(size=(b, a)), rng.normal(size=b) if i < len(sizes) - 2 or seed % 2 else None)
+        for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:]))
+    ]
     meta = {"features": feats, "obs_dim": obs_dim, "activation": activation}
     if n_out > 1:
         meta["candidates"] = rng.uniform(-1, 1, size=(n_out - 1, 2)).tolist()
@@ -86,8 +88,12 @@ def _model(activation, features=None, obs_dim=6, hidden=(9, 5), n_out=1, seed=0)
 def _reference_forward(m, x):
     """The network written out from its stored weights and scaler (no folding, no compilation)."""
     h = (np.asarray(x, float)[m.features] - m.scaler_min) * m.scaler_scale
-    act = {"sigmoid": lambda z: 1 / (1 + np.exp(-z)), "tanh": np.tanh, "relu": lambda z: np.maximum(z, 0),
-           "elu": lambda z: np.where(z > 0, z, np.expm1(np.minimum(z, 0)))}[m.meta["activation"]]
+    act = {
+        "sigmoid": lambda z: 1 / (1 + np.exp(-z)),
+        "tanh": np.tanh,
+        "relu": lambda z: np.maximum(z, 0),
+        "elu": lambda z: np.where(z > 0, z, np.expm1(np.minimum(z, 0))),
+    }[m.meta["activation"]]
     for i, (W, b) in enumerate(m.weights):
         z = W @ h + (0 if b is None else b)
         h = 1 / (1 + np.exp(-z)) if i == len(m.weights) - 1 else act(z)
@@ -133,8 +139,20 @@ def test_one_observation_inference_refuses_non_finite_and_misshapen_input():
 
 
 # ---------------------------------------------------------------------- CBF rows and QP
-PRM = HOCBFParams(p1=1.0, p2=2.0, gamma_vmin=1.0, gamma_vmax=1.0, lambda_theta=1.0, lambda_v=1.0,
-                  u1_min=-0.25, u1_max=0.25, u2_min=-0.5, u2_max=0.5, v_min=0.0, v_max=2.0)
+PRM = HOCBFParams(
+    p1=1.0,
+    p2=2.0,
+    gamma_vmin=1.0,
+    gamma_vmax=1.0,
+    lambda_theta=1.0,
+    lambda_v=1.0,
+    u1_min=-0.25,
+    u1_max=0.25,
+    u2_min=-0.5,
+    u2_max=0.5,
+    v_min=0.0,
+    v_max=2.0,
+)
 
 
 def _rows_by_hand(state, obstacles, radii, goal, p):
@@ -217,8 +235,15 @@ def test_direct_osqp_calls_give_what_the_wrapper_gives():
 
 # ---------------------------------------------------------------------- one-state prediction
 @settings(max_examples=150, deadline=None)
-@given(finite, finite, st.floats(-7, 7), st.floats(-1, 3), st.floats(-1, 1), st.floats(-1, 1),
-       st.one_of(st.just(0.0), st.floats(0, 6)))
+@given(
+    finite,
+    finite,
+    st.floats(-7, 7),
+    st.floats(-1, 3),
+    st.floats(-1, 1),
+    st.floats(-1, 1),
+    st.one_of(st.just(0.0), st.floats(0, 6)),
+)
 def test_state_after_is_states_at_for_one_state_bit_for_bit(x, y, th, v, w, a, t):
     from rmm_envs.systems.dubins4d import Dubins4D
 

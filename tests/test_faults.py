@@ -7,7 +7,6 @@ watchdog thread, so a regression fails instead of hanging.
 """
 
 import json
-import os
 import sqlite3
 import sys
 import threading
@@ -145,12 +144,29 @@ def test_bad_options_exit_2_naming_the_flag_before_any_episode(tmp_path, capsys,
 @pytest.mark.parametrize("flag, value", [("--time-accel", "5"), ("--base-step", "0.3")])
 def test_non_blocking_options_on_a_blocking_env_exit_2_instead_of_being_ignored(tmp_path, capsys, flag, value):
     out = tmp_path / "r"
-    argv = ["--agent", "inactive", "--episodes", "1", "--workers", "1", "--out", str(out), "--clock", "fixed:1",
-            "--no-progress", "--env", "Dubins4DGuarded-v0", flag, value]
+    argv = [
+        "--agent",
+        "inactive",
+        "--episodes",
+        "1",
+        "--workers",
+        "1",
+        "--out",
+        str(out),
+        "--clock",
+        "fixed:1",
+        "--no-progress",
+        "--env",
+        "Dubins4DGuarded-v0",
+        flag,
+        value,
+    ]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
-    assert err.endswith(f"{flag} {value}: Dubins4DGuarded-v0 steps by a fixed step per decision and takes no "
-                        f"{flag[2:].replace('-', '_')}; leave {flag} out, or run its non-blocking (Parallel) twin"), err
+    assert err.endswith(
+        f"{flag} {value}: Dubins4DGuarded-v0 steps by a fixed step per decision and takes no "
+        f"{flag[2:].replace('-', '_')}; leave {flag} out, or run its non-blocking (Parallel) twin"
+    ), err
     assert not out.exists()
     assert main(argv[:-2]) == 0  # the defaults are what a blocking env runs with
 
@@ -158,7 +174,17 @@ def test_non_blocking_options_on_a_blocking_env_exit_2_instead_of_being_ignored(
 # ------------------------------------------------------------------ rmm-bench: stats() and --retry-errors
 def test_stats_failure_is_the_guardians_error_and_retry_errors_reruns_it(tmp_path, capsys):
     out = tmp_path / "s"
-    cmd = ["--agent", "tests.bench_helpers:StatsBoom,inactive", "--episodes", "2", "--workers", "1", "--out", str(out), *FAST]
+    cmd = [
+        "--agent",
+        "tests.bench_helpers:StatsBoom,inactive",
+        "--episodes",
+        "2",
+        "--workers",
+        "1",
+        "--out",
+        str(out),
+        *FAST,
+    ]
     assert main(cmd) == 1  # guardian errors: counted as failures, and the command says so
     text = capsys.readouterr().out
     got = rows(out)
@@ -205,7 +231,10 @@ def test_damaged_database_is_one_line_naming_the_file(tmp_path, capsys, small_db
     db = out / "results.db"
     db.write_bytes(small_db.read_bytes())
     _damage(db, how)
-    for cmd in (["report", str(out)], ["--agent", "inactive", "--episodes", "2", "--workers", "1", "--resume", "--out", str(out), *FAST]):
+    for cmd in (
+        ["report", str(out)],
+        ["--agent", "inactive", "--episodes", "2", "--workers", "1", "--resume", "--out", str(out), *FAST],
+    ):
         assert main(cmd) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and "Traceback" not in err, err
@@ -223,10 +252,13 @@ def test_report_never_imports_modules_named_in_the_database(tmp_path, capsys, mo
         (probe / f"{mod}.py").write_text(f"open({str(tmp_path / mod)!r} + '.imported', 'w').close()\nclass G: pass\n")
     monkeypatch.syspath_prepend(str(probe))
     con = sqlite3.connect(out / "results.db")
-    (key, cfg, prov), = con.execute("SELECT run_key, config, provenance FROM runs").fetchall()
+    ((key, cfg, prov),) = con.execute("SELECT run_key, config, provenance FROM runs").fetchall()
     cfg = json.loads(cfg) | {"env_id": "rmm_probe_env:Probe-v0"}
     prov = {k: v for k, v in json.loads(prov).items() if k != "guardian"}  # as written before this was stored
-    con.execute("UPDATE runs SET agent = 'rmm_probe_guardian:G', config = ?, provenance = ?", (json.dumps(cfg), json.dumps(prov)))
+    con.execute(
+        "UPDATE runs SET agent = 'rmm_probe_guardian:G', config = ?, provenance = ?",
+        (json.dumps(cfg), json.dumps(prov)),
+    )
     con.execute("UPDATE episodes SET agent = 'rmm_probe_guardian:G'")
     con.execute("UPDATE invocations SET run_keys = ?", (json.dumps({"rmm_probe_guardian:G": key}),))
     con.commit()
@@ -264,8 +296,12 @@ def test_datagen_rejects_zero_workers(tmp_path):
     from rmm_envs.risk import datagen
 
     with pytest.raises(ValueError, match=r"workers \(--workers\) must be an integer >= 1 .*got 0"):
-        datagen.generate(datagen.DatagenConfig(configs=2, samples_per_config=2, branches=2, depth=1, configs_per_shard=1),
-                         tmp_path / "z", workers=0, progress=False)
+        datagen.generate(
+            datagen.DatagenConfig(configs=2, samples_per_config=2, branches=2, depth=1, configs_per_shard=1),
+            tmp_path / "z",
+            workers=0,
+            progress=False,
+        )
 
 
 @pytest.mark.slow  # a Ray cluster of its own: 10 s of wall and Ray's daemons' CPU besides
@@ -278,20 +314,30 @@ def test_ray_backend_same_results_and_a_lost_task_is_reported(tmp_path):
 
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
-        assert main(["--agent", "lrmm,brakes", "--episodes", "4", "--backend", "ray", "--out", str(tmp_path / "ray"), *FAST]) == 0
+        assert (
+            main(
+                ["--agent", "lrmm,brakes", "--episodes", "4", "--backend", "ray", "--out", str(tmp_path / "ray"), *FAST]
+            )
+            == 0
+        )
         out = within(120, lambda: list(run_ray(faulty_task, [("sq", 2), ("exit", 3), ("sq", 5)])))
     finally:
         ray.shutdown()
     assert sorted(r for r in out if not isinstance(r, TaskLost)) == [4, 25]
     (lost,) = [r for r in out if isinstance(r, TaskLost)]
     assert lost.task == ("exit", 3) and "Ray lost it" in lost.cause
-    assert main(["--agent", "lrmm,brakes", "--episodes", "4", "--workers", "1", "--out", str(tmp_path / "local"), *FAST]) == 0
+    assert (
+        main(["--agent", "lrmm,brakes", "--episodes", "4", "--workers", "1", "--out", str(tmp_path / "local"), *FAST])
+        == 0
+    )
     cols = "agent, episode, seed, outcome, steps, sim_time, active_sim_time"
     assert rows(tmp_path / "ray", cols) == rows(tmp_path / "local", cols)
 
 
 # ------------------------------------------------------------------ rmm-bench: how an invocation ends
-@pytest.mark.parametrize("exc, code, status", [(KeyboardInterrupt(), 130, "interrupted"), (ZeroDivisionError("bug"), None, "failed")])
+@pytest.mark.parametrize(
+    "exc, code, status", [(KeyboardInterrupt(), 130, "interrupted"), (ZeroDivisionError("bug"), None, "failed")]
+)
 def test_an_invocation_never_stays_running(tmp_path, monkeypatch, exc, code, status):
     import rmm_bench.run as run
 

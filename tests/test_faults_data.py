@@ -16,7 +16,8 @@ import pytest
 
 import rmm_envs  # noqa: F401
 from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
-from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset, main as datagen_main
+from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
+from rmm_envs.risk.datagen import main as datagen_main
 from rmm_envs.risk.estimator import MAX_TREE_NODES, RiskEstimator, tree_nodes
 
 TINY = dict(configs=4, samples_per_config=6, branches=4, depth=2, configs_per_shard=2, seed=11)
@@ -65,7 +66,10 @@ def test_load_refuses_flipped_bytes_in_one_line_naming_the_file_and_the_fix(tmp_
     msg = str(e.value)
     assert "\n" not in msg and str(out / "shard-00000.parquet") in msg
     # the exact command that repairs it
-    assert "rmm-datagen --env Dubins4DGuarded-v0 --configs 4 --samples-per-config 6 --seed 11 --configs-per-shard 2 --branches 4 --depth 2" in msg
+    assert (
+        "rmm-datagen --env Dubins4DGuarded-v0 --configs 4 --samples-per-config 6 --seed 11 --configs-per-shard 2 --branches 4 --depth 2"
+        in msg
+    )
     assert f"--out {out}" in msg
     # and that command does repair it
     cmd = shlex.split(msg.split("`")[1])[1:]
@@ -155,8 +159,24 @@ def test_tree_size_refused_before_allocation_naming_the_flags(tmp_path, capsys):
 
 @pytest.mark.parametrize("workers", [0, -1])
 def test_datagen_workers_zero_or_negative_refused(tmp_path, capsys, workers):
-    assert datagen_main(["--workers", str(workers), "--configs", "1", "--samples-per-config", "2", "--branches", "2",
-                         "--out", str(tmp_path / "w"), "--no-progress"]) == 2
+    assert (
+        datagen_main(
+            [
+                "--workers",
+                str(workers),
+                "--configs",
+                "1",
+                "--samples-per-config",
+                "2",
+                "--branches",
+                "2",
+                "--out",
+                str(tmp_path / "w"),
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert "--workers" in err and f"got {workers}" in err
     assert not list((tmp_path / "w").glob("shard-*"))
@@ -174,9 +194,15 @@ def _rules_hold(scene, state):
     assert not (np.hypot(*(obst[:, :2] - goal[:2]).T) + goal[2] < obst[:, 2]).any(), "goal entirely inside an obstacle"
 
 
-@pytest.mark.parametrize("options", [{"goal": GOAL_AT_ORIGIN}, {"state": STATE_AT_ORIGIN},
-                                     {"state": STATE_AT_ORIGIN, "goal": [6.0, -3.0, 0.5]},
-                                     {"obstacles": [[3.0, 3.0, 4.0]], "goal": [3.0, 3.0, 5.0]}])
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"goal": GOAL_AT_ORIGIN},
+        {"state": STATE_AT_ORIGIN},
+        {"state": STATE_AT_ORIGIN, "goal": [6.0, -3.0, 0.5]},
+        {"obstacles": [[3.0, 3.0, 4.0]], "goal": [3.0, 3.0, 5.0]},
+    ],
+)
 def test_dubins4d_partial_options_are_generated_around_for_every_seed(options):
     env = Dubins4DCirclesEnv()
     for seed in range(60):
@@ -221,7 +247,9 @@ def test_dubins4d_explicit_options_obey_generation_rules_and_errors_blame_only_g
         assert "option 'state'" not in msg and "initial position" not in msg
     env.reset(seed=0, options={"goal": [5.0, 5.0, 21.0]})  # (-10, -10) lies 21.21 from the centre: it stays free
     with pytest.raises(ValueError) as e:  # obstacles covering the given start in every draw
-        Dubins4DCirclesEnv(obstacle_min_rad=30.0, obstacle_max_rad=40.0).reset(seed=0, options={"state": STATE_AT_ORIGIN})
+        Dubins4DCirclesEnv(obstacle_min_rad=30.0, obstacle_max_rad=40.0).reset(
+            seed=0, options={"state": STATE_AT_ORIGIN}
+        )
     assert "option 'state'" in str(e.value) and "'obstacles' explicitly" in str(e.value)
 
 
@@ -235,7 +263,9 @@ def test_maze_state_option_gets_a_maze_clear_of_it():
         _, info = env.reset(seed=seed, options={"state": state})
         assert info["state"].tolist() == state and not env.scene.maze.state_failed(np.array([state[:2]]))[0]
     walled = generate_maze(np.random.default_rng(0))
-    bad = next(p for p in ([x, 437.5] for x in np.arange(250.0, 2500.0, 125.0)) if walled.state_failed(np.array([p]))[0])
+    bad = next(
+        p for p in ([x, 437.5] for x in np.arange(250.0, 2500.0, 125.0)) if walled.state_failed(np.array([p]))[0]
+    )
     with pytest.raises(ValueError, match="inside a wall of option 'maze'"):
         env.reset(seed=0, options={"state": [*bad, 0.0], "maze": walled})
 
@@ -255,11 +285,16 @@ def test_quadrotor_state_option_gets_a_room_clear_of_it():
 
 
 # ---------------------------------------------------------------------- parameters that disable what they configure
-@pytest.mark.parametrize("kwargs, name", [
-    ({"max_episode_sim_time": math.inf}, "max_episode_sim_time"),
-    ({"goal_max_rad": math.inf}, "goal radii"), ({"obstacle_max_rad": math.inf}, "obstacle radii"),
-    ({"n_obstacles": math.inf}, "n_obstacles"), ({"n_rays": math.inf}, "n_rays"),
-])
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        ({"max_episode_sim_time": math.inf}, "max_episode_sim_time"),
+        ({"goal_max_rad": math.inf}, "goal radii"),
+        ({"obstacle_max_rad": math.inf}, "obstacle radii"),
+        ({"n_obstacles": math.inf}, "n_obstacles"),
+        ({"n_rays": math.inf}, "n_rays"),
+    ],
+)
 def test_dubins4d_non_finite_parameters_refused(kwargs, name):
     with pytest.raises(ValueError, match=f"{name} must be"):
         Dubins4DCirclesEnv(**kwargs)
@@ -338,8 +373,20 @@ def _stored(db):
 def test_bench_rows_bit_identical_with_1_and_2_workers(tmp_path):
     from rmm_bench.cli import main as bench
 
-    common = ["--agent", "random", "--episodes", "4", "--clock", "fixed:1", "--no-progress", "--env", "Dubins4DParallel-v0",
-              "--agent-opt", "random.p_active=0.3", "--no-figure"]
+    common = [
+        "--agent",
+        "random",
+        "--episodes",
+        "4",
+        "--clock",
+        "fixed:1",
+        "--no-progress",
+        "--env",
+        "Dubins4DParallel-v0",
+        "--agent-opt",
+        "random.p_active=0.3",
+        "--no-figure",
+    ]
     assert bench([*common, "--workers", "1", "--out", str(tmp_path / "w1")]) == 0
     assert bench([*common, "--workers", "2", "--out", str(tmp_path / "w2")]) == 0
     cols, one = _stored(tmp_path / "w1" / "results.db")
@@ -349,14 +396,39 @@ def test_bench_rows_bit_identical_with_1_and_2_workers(tmp_path):
         assert a == b, {c: (x, y) for c, x, y in zip(cols, a, b) if x != y}
 
 
-@pytest.mark.parametrize("params, name", [({"lambda_v": math.inf}, "lambda_v"), ({"gamma_vmax": math.nan}, "gamma_vmax"),
-                                          ({"p_theta": 0.0}, "p_theta"), ({"speed_gain": 1.0}, "speed_gain")])
+@pytest.mark.parametrize(
+    "params, name",
+    [
+        ({"lambda_v": math.inf}, "lambda_v"),
+        ({"gamma_vmax": math.nan}, "gamma_vmax"),
+        ({"p_theta": 0.0}, "p_theta"),
+        ({"speed_gain": 1.0}, "speed_gain"),
+    ],
+)
 def test_driver_parameters_that_disable_a_constraint_refused(params, name):
     with pytest.raises(ValueError, match=name):
         Dubins4DCirclesEnv(driver_params=params)
 
 
 def test_datagen_negative_seed_names_the_flag(tmp_path, capsys):
-    assert datagen_main(["--seed", "-1", "--configs", "1", "--samples-per-config", "2", "--branches", "2", "--workers", "1",
-                         "--out", str(tmp_path / "s"), "--no-progress"]) == 2
+    assert (
+        datagen_main(
+            [
+                "--seed",
+                "-1",
+                "--configs",
+                "1",
+                "--samples-per-config",
+                "2",
+                "--branches",
+                "2",
+                "--workers",
+                "1",
+                "--out",
+                str(tmp_path / "s"),
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
     assert "--seed" in capsys.readouterr().err

@@ -43,7 +43,17 @@ def test_resume_after_the_model_file_changed_starts_a_new_run_naming_the_file(tm
     model = tmp_path / "model.npz"
     shutil.copy(first, model)
     out = tmp_path / "r"
-    cmd = ["--agent", "lrmm", "--agent-opt", f"lrmm.model={model}", "--out", str(out), "--env", "Dubins4DParallel-v0", *FAST]
+    cmd = [
+        "--agent",
+        "lrmm",
+        "--agent-opt",
+        f"lrmm.model={model}",
+        "--out",
+        str(out),
+        "--env",
+        "Dubins4DParallel-v0",
+        *FAST,
+    ]
     assert main(cmd + ["--episodes", "2"]) == 0
     (old_key,) = {r[0] for r in stored(out)}
     capsys.readouterr()
@@ -73,9 +83,8 @@ def test_resume_after_the_model_file_changed_starts_a_new_run_naming_the_file(tm
 
 
 def test_shipped_model_is_part_of_the_run_key(tmp_path):
-    from rmm_bench.config import file_sha256
     from rmm_bench.checks import check_runs
-    from rmm_bench.config import AgentRun
+    from rmm_bench.config import AgentRun, file_sha256
     from rmm_guardians.lrmm.model import default_model_path
 
     run = AgentRun("lrmm", {}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
@@ -96,11 +105,22 @@ def test_a_file_changed_while_the_run_runs_is_not_used(tmp_path):
     from rmm_bench.store import RETRIED_ERRORS
 
     first, second = _two_models(tmp_path)
-    run = AgentRun("lrmm", {"model": str(second)}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False,
-                   inputs={str(second): file_sha256(first)})  # keyed before the file was replaced
+    run = AgentRun(
+        "lrmm",
+        {"model": str(second)},
+        "Dubins4DParallel-v0",
+        {"clock": "fixed:1"},
+        0,
+        60.0,
+        False,
+        inputs={str(second): file_sha256(first)},
+    )  # keyed before the file was replaced
     res = run_episode(EpisodeTask(run=run, run_key=run.key, episode=0, seed=1))
     assert res.outcome == "error" and res.error_kind == "input_changed" and "input_changed" in RETRIED_ERRORS
-    assert f"{second} (sha256 {file_sha256(first)[:12]}... when the run was keyed, {file_sha256(second)[:12]}... now)" in res.error
+    assert (
+        f"{second} (sha256 {file_sha256(first)[:12]}... when the run was keyed, {file_sha256(second)[:12]}... now)"
+        in res.error
+    )
 
 
 # ------------------------------------------------------------------ 4. honest rates
@@ -129,8 +149,24 @@ def test_guardian_errors_count_as_failures_and_the_command_fails_naming_them(tmp
 
     n, agent = 8, "tests.test_faults_honest:ErrsOnEvenSeeds"
     out = tmp_path / "r"
-    assert main(["--agent", f"{agent},inactive", "--episodes", str(n), "--out", str(out), "--batch-size", str(n),
-                 "--env", "Dubins4DParallel-v0", *FAST]) == 1
+    assert (
+        main(
+            [
+                "--agent",
+                f"{agent},inactive",
+                "--episodes",
+                str(n),
+                "--out",
+                str(out),
+                "--batch-size",
+                str(n),
+                "--env",
+                "Dubins4DParallel-v0",
+                *FAST,
+            ]
+        )
+        == 1
+    )
     captured = capsys.readouterr()
     got = {(a, e): o for _, a, e, o, _ in stored(out)}
     even = [i for i in range(n) if episode_seed(0, i) % 2 == 0]
@@ -149,9 +185,13 @@ def test_guardian_errors_count_as_failures_and_the_command_fails_naming_them(tmp
     assert cells[5] == one_batch(goals) and cells[6] == one_batch(collisions)  # over all n
     assert cells[-3] == str(len(even))
     (line,) = [ln for ln in captured.err.splitlines() if agent in ln]
-    assert line.startswith(f"rmm-bench: {agent}: {len(even)} of {n} episodes ended in a guardian error, counted as failures "
-                           f"in the rates (first, episode {even[0]}: ValueError: turnrate_ctrl must be finite, got inf)")
-    assert "--retry-errors" in line and not [ln for ln in captured.err.splitlines() if ln.startswith("rmm-bench: inactive")]
+    assert line.startswith(
+        f"rmm-bench: {agent}: {len(even)} of {n} episodes ended in a guardian error, counted as failures "
+        f"in the rates (first, episode {even[0]}: ValueError: turnrate_ctrl must be finite, got inf)"
+    )
+    assert "--retry-errors" in line and not [
+        ln for ln in captured.err.splitlines() if ln.startswith("rmm-bench: inactive")
+    ]
 
 
 # ------------------------------------------------------------------ 2 and 8. storage errors told apart, one line each
@@ -175,24 +215,51 @@ def test_out_naming_a_file_is_bad_input_in_one_line(tmp_path, capsys):
     afile = tmp_path / "afile"
     afile.write_text("mine")
     assert main(["--agent", "inactive", "--episodes", "1", "--out", str(afile), *FAST]) == 2
-    assert _one_line(capsys.readouterr().err) == (f"rmm-bench: error: {afile} is a file, not a directory (File exists); "
-                                                  "choose another --out")
+    assert _one_line(capsys.readouterr().err) == (
+        f"rmm-bench: error: {afile} is a file, not a directory (File exists); choose another --out"
+    )
     assert main(["--agent", "inactive", "--episodes", "1", "--out", str(afile / "sub"), *FAST]) == 2
     assert "a part of this path is a file, not a directory" in _one_line(capsys.readouterr().err)
-    assert datagen(["--configs", "2", "--samples-per-config", "2", "--branches", "2", "--depth", "1", "--out", str(afile),
-                    "--no-progress", "--workers", "1"]) == 2
-    assert _one_line(capsys.readouterr().err) == (f"rmm-datagen: error: {afile} is a file, not a directory (File exists); "
-                                                  "choose another --out")
+    assert (
+        datagen(
+            [
+                "--configs",
+                "2",
+                "--samples-per-config",
+                "2",
+                "--branches",
+                "2",
+                "--depth",
+                "1",
+                "--out",
+                str(afile),
+                "--no-progress",
+                "--workers",
+                "1",
+            ]
+        )
+        == 2
+    )
+    assert _one_line(capsys.readouterr().err) == (
+        f"rmm-datagen: error: {afile} is a file, not a directory (File exists); choose another --out"
+    )
     assert afile.read_text() == "mine"
 
 
 def _bench(args, limit_bytes=None):
     """rmm-bench in a child process, under a file-size limit (``ulimit -f``) when given."""
+
     def limit():
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
 
-    return subprocess.run([sys.executable, "-m", "rmm_bench.cli", *map(str, args)], cwd=ROOT, capture_output=True,
-                          text=True, timeout=300, preexec_fn=limit if limit_bytes else None)
+    return subprocess.run(
+        [sys.executable, "-m", "rmm_bench.cli", *map(str, args)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        preexec_fn=limit if limit_bytes else None,
+    )
 
 
 @pytest.mark.heavy
@@ -208,8 +275,12 @@ def test_file_size_limit_mid_run_is_a_run_failure_that_keeps_every_episode(tmp_p
     res = _bench(cmd + ["--episodes", "40"], limit_bytes=db.stat().st_size + 16384)
     assert res.returncode == 1, res.stderr
     line = _one_line(res.stderr)
-    assert line.startswith(f"rmm-bench: error: cannot write {db} (disk I/O error): it reached the file-size limit (ulimit -f: ")
-    assert line.endswith("raise the limit (ulimit -f unlimited), then the stored episodes are kept: rerun the same command")
+    assert line.startswith(
+        f"rmm-bench: error: cannot write {db} (disk I/O error): it reached the file-size limit (ulimit -f: "
+    )
+    assert line.endswith(
+        "raise the limit (ulimit -f unlimited), then the stored episodes are kept: rerun the same command"
+    )
     assert "move it aside" not in line and "damaged" not in line
     con = sqlite3.connect(db)
     assert con.execute("PRAGMA integrity_check").fetchall() == [("ok",)]
@@ -228,8 +299,10 @@ def test_disk_full_while_writing_the_tables_is_one_line_naming_the_directory(tmp
     (out / "table_I.md").symlink_to("/dev/full")  # every write there fails with ENOSPC
     capsys.readouterr()
     assert main(["report", str(out)]) == 1
-    assert _one_line(capsys.readouterr().err) == (f"rmm-bench: error: no space left to write {out} (No space left on device); "
-                                                  "free disk space (or quota), then what is stored is kept: rerun the same command")
+    assert _one_line(capsys.readouterr().err) == (
+        f"rmm-bench: error: no space left to write {out} (No space left on device); "
+        "free disk space (or quota), then what is stored is kept: rerun the same command"
+    )
 
 
 def test_a_read_only_database_is_not_called_damaged(tmp_path, capsys):
@@ -249,8 +322,9 @@ def test_a_read_only_database_is_not_called_damaged(tmp_path, capsys):
         err = store._error(info.value)
     finally:
         store.close()
-    assert err.status == 2 and str(err).startswith(f"cannot write {db} (attempt to write a readonly database): the file, its "
-                                                   "directory")
+    assert err.status == 2 and str(err).startswith(
+        f"cannot write {db} (attempt to write a readonly database): the file, its directory"
+    )
     assert "damaged" not in str(err) and "move it aside" not in str(err) and "the database is intact" in str(err)
 
 
@@ -270,16 +344,20 @@ def test_a_damaged_database_says_what_moving_it_aside_loses_and_how_to_export(tm
 def _hj_guardian(cache_dir):
     import numpy as np
 
-    from rmm_guardians.hj.grid import Grid
-    from rmm_guardians.hj.guardian import HJGuardian
     from rmm_envs.autonomy import GuardianActionSpace
     from rmm_envs.envs.dubins4d import CONTROLS
     from rmm_envs.systems.dubins4d import Dubins4D
+    from rmm_guardians.hj.grid import Grid
+    from rmm_guardians.hj.guardian import HJGuardian
 
     grid = Grid([-8.0, -8.0, -np.pi, 0.0], [8.0, 8.0, np.pi, 2.0], [33, 33, 16, 9], periodic=[2])
     g = HJGuardian(grid=grid, horizon=2.0, cache_dir=cache_dir)
     space = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")
-    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-3.0, 0.0, 0.0, 2.0])}
+    box = {
+        "obstacles": np.array([[0.0, 0.0, 2.0]]),
+        "goal": np.array([7.0, 7.0, 0.5]),
+        "state": np.array([-3.0, 0.0, 0.0, 2.0]),
+    }
     return g, (lambda seed: g.reset(seed=seed, privileged=lambda: box, action_space=space))
 
 
@@ -301,7 +379,6 @@ def _raw_npy(entry, V):
 
 def _other_solve(entry, V):
     """A genuine entry of another solve (another horizon) renamed to this one's name."""
-    import numpy as np
 
     from rmm_guardians.hj.cache import ValueCache
 
@@ -310,9 +387,14 @@ def _other_solve(entry, V):
     os.replace(other.path("x"), entry)
 
 
-@pytest.mark.parametrize("edit, problem", [(_safe_everywhere, "does not match its recorded checksum"),
-                                           (_raw_npy, "is not a verified entry"),
-                                           (_other_solve, "was solved for other parameters")])
+@pytest.mark.parametrize(
+    "edit, problem",
+    [
+        (_safe_everywhere, "does not match its recorded checksum"),
+        (_raw_npy, "is not a verified entry"),
+        (_other_solve, "was solved for other parameters"),
+    ],
+)
 def test_an_edited_hj_cache_entry_is_recomputed_and_said_once(tmp_path, edit, problem):
     import warnings
 
@@ -326,7 +408,9 @@ def test_an_edited_hj_cache_entry_is_recomputed_and_said_once(tmp_path, edit, pr
     edit(entry, solved)
     with pytest.warns(RuntimeWarning) as said:
         reset(1)
-    assert [str(w.message) for w in said] == [f"HJ value cache entry {entry} {problem}" + str(said[0].message).split(problem)[1]]
+    assert [str(w.message) for w in said] == [
+        f"HJ value cache entry {entry} {problem}" + str(said[0].message).split(problem)[1]
+    ]
     assert str(said[0].message).endswith("; recomputing it")
     assert g.stats()["cache_rejected"] == 1 and g.stats()["solves"] == 1 and g.stats()["cache_hits"] == 0
     np.testing.assert_array_equal(g.V, solved)
@@ -343,28 +427,75 @@ def test_a_report_over_two_configurations_prints_one_header_each(tmp_path, capsy
     import csv
 
     out = tmp_path / "r"
-    assert main(["--agent", "inactive", "--episodes", "1", "--seed", "1", "--out", str(out), "--env", "Dubins4DParallel-v0",
-                 *FAST]) == 0
-    assert main(["--agent", "brakes", "--episodes", "1", "--seed", "2", "--out", str(out), "--env", "Dubins3DMazeParallel-v0",
-                 "--clock", "fixed:20", "--no-progress", "--workers", "1"]) == 0
+    assert (
+        main(
+            [
+                "--agent",
+                "inactive",
+                "--episodes",
+                "1",
+                "--seed",
+                "1",
+                "--out",
+                str(out),
+                "--env",
+                "Dubins4DParallel-v0",
+                *FAST,
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "--agent",
+                "brakes",
+                "--episodes",
+                "1",
+                "--seed",
+                "2",
+                "--out",
+                str(out),
+                "--env",
+                "Dubins3DMazeParallel-v0",
+                "--clock",
+                "fixed:20",
+                "--no-progress",
+                "--workers",
+                "1",
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     assert main(["report", str(out), "--invocation", "1", "--invocation", "2"]) == 0
     text = capsys.readouterr().out
     assert text.startswith("2 configurations, one table each (they differ in env, clock, seed):")
     first = "Table I [1]: Dubins4DParallel-v0, clock fixed:1, time accel 10.0, seed 1, 1 episodes requested per agent"
-    second = "Table I [2]: Dubins3DMazeParallel-v0, clock fixed:20, time accel 10.0, seed 2, 1 episodes requested per agent"
+    second = (
+        "Table I [2]: Dubins3DMazeParallel-v0, clock fixed:20, time accel 10.0, seed 2, 1 episodes requested per agent"
+    )
     assert first in text and second in text
     a, b = text.index(first), text.index(second)
     assert a < text.index("| inactive |") < b < text.index("| brakes |")  # each row under its own header
     md = (out / "table_I.md").read_text()
-    assert md.index("[1] Dubins4DParallel-v0, clock fixed:1") < md.index("| inactive |") \
-        < md.index("[2] Dubins3DMazeParallel-v0, clock fixed:20") < md.index("| brakes |")
+    assert (
+        md.index("[1] Dubins4DParallel-v0, clock fixed:1")
+        < md.index("| inactive |")
+        < md.index("[2] Dubins3DMazeParallel-v0, clock fixed:20")
+        < md.index("| brakes |")
+    )
     with open(out / "table_I.csv") as fh:
         got = [(r["agent"], r["env"], r["clock"], r["seed"]) for r in csv.DictReader(fh)]
-    assert got == [("inactive", "Dubins4DParallel-v0", "fixed:1", "1"), ("brakes", "Dubins3DMazeParallel-v0", "fixed:20", "2")]
+    assert got == [
+        ("inactive", "Dubins4DParallel-v0", "fixed:1", "1"),
+        ("brakes", "Dubins3DMazeParallel-v0", "fixed:20", "2"),
+    ]
     # one configuration: the table as it always was, no numbering
     assert main(["report", str(out), "--invocation", "2"]) == 0
-    assert capsys.readouterr().out.startswith("Table I: Dubins3DMazeParallel-v0, clock fixed:20, time accel 10.0, seed 2")
+    assert capsys.readouterr().out.startswith(
+        "Table I: Dubins3DMazeParallel-v0, clock fixed:20, time accel 10.0, seed 2"
+    )
     assert (out / "table_I.md").read_text().startswith("| Agent |")
 
 
@@ -398,19 +529,44 @@ def _W0():
         return z["W0"]
 
 
-@pytest.mark.parametrize("edit, message", [
-    (dict(arrays={"W0": _W0() * (1 + 1j)}), "LRMM model array 'W0' has dtype complex128; expected real numbers (float)"),
-    (dict(meta={"candidate_hold": -5}), "meta 'candidate_hold' must be a finite number of seconds > 0, got -5"),
-    (dict(meta={"candidate_hold": 1e999}), "meta 'candidate_hold' must be a finite number of seconds > 0, got inf"),
-    (dict(drop=("hidden",)), "metadata lacks ['hidden']: not a complete LRMM model file"),
-    (dict(meta={"candidates": [[1e308, 0.5]] * 6}),
-     "candidate controls [[1e+308, 0.5], [1e+308, 0.5], [1e+308, 0.5], [1e+308, 0.5], [1e+308, 0.5], [1e+308, 0.5]] of "),
-], ids=["complex", "negative-hold", "infinite-hold", "no-hidden", "huge-candidates"])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (
+            dict(arrays={"W0": _W0() * (1 + 1j)}),
+            "LRMM model array 'W0' has dtype complex128; expected real numbers (float)",
+        ),
+        (dict(meta={"candidate_hold": -5}), "meta 'candidate_hold' must be a finite number of seconds > 0, got -5"),
+        (dict(meta={"candidate_hold": 1e999}), "meta 'candidate_hold' must be a finite number of seconds > 0, got inf"),
+        (dict(drop=("hidden",)), "metadata lacks ['hidden']: not a complete LRMM model file"),
+        (
+            dict(meta={"candidates": [[1e308, 0.5]] * 6}),
+            "candidate controls [[1e+308, 0.5], [1e+308, 0.5], [1e+308, 0.5], [1e+308, 0.5], [1e+308, 0.5], [1e+308, 0.5]] of ",
+        ),
+    ],
+    ids=["complex", "negative-hold", "infinite-hold", "no-hidden", "huge-candidates"],
+)
 def test_a_bad_model_file_is_refused_before_any_episode_naming_the_value(tmp_path, capsys, edit, message):
     path = _edited_model(tmp_path, **edit)
     out = tmp_path / "r"
-    assert main(["--agent", "lrmm", "--agent-opt", f"lrmm.model={path}", "--episodes", "1", "--out", str(out),
-                 "--env", "Dubins4DParallel-v0", *FAST]) == 2
+    assert (
+        main(
+            [
+                "--agent",
+                "lrmm",
+                "--agent-opt",
+                f"lrmm.model={path}",
+                "--episodes",
+                "1",
+                "--out",
+                str(out),
+                "--env",
+                "Dubins4DParallel-v0",
+                *FAST,
+            ]
+        )
+        == 2
+    )
     line = _one_line(capsys.readouterr().err)
     assert str(path) in line and message in line and "KeyError" not in line
     assert not out.exists()
@@ -431,7 +587,9 @@ def test_a_map_number_too_large_for_the_geometry_is_refused(tmp_path, radius):
 
     path = tmp_path / "big.json"
     path.write_text(f'[{{"circle": [0, 0, {radius}]}}]')
-    with pytest.raises(MapError, match=r"entry 0 .*with numbers of magnitude at most 1e\+09 \(larger ones overflow the geometry\)"):
+    with pytest.raises(
+        MapError, match=r"entry 0 .*with numbers of magnitude at most 1e\+09 \(larger ones overflow the geometry\)"
+    ):
         _make_map_env(str(path))
 
 
@@ -468,12 +626,16 @@ def test_a_polygon_of_thousands_of_vertices_builds_in_seconds_and_larger_ones_ar
     from rmm_envs.worlds.shape_map import MapError
 
     t0 = time.perf_counter()
-    env = _make_map_env([{"polygon": _star(2000)}])  # the finding: 29 s, the simplicity check and ear clipping quadratic in Python
+    env = _make_map_env(
+        [{"polygon": _star(2000)}]
+    )  # the finding: 29 s, the simplicity check and ear clipping quadratic in Python
     took = time.perf_counter() - t0
     obs, _ = env.reset(seed=0)
     assert took < 10.0, f"gym.make took {took:.1f} s"
     env.close()
-    with pytest.raises(MapError, match=f"expected at most {MAX_POLYGON_VERTICES:,} vertices, got {MAX_POLYGON_VERTICES + 2:,}"):
+    with pytest.raises(
+        MapError, match=f"expected at most {MAX_POLYGON_VERTICES:,} vertices, got {MAX_POLYGON_VERTICES + 2:,}"
+    ):
         _make_map_env([{"polygon": _star(MAX_POLYGON_VERTICES + 2)}])
 
 
@@ -494,12 +656,15 @@ def test_the_vectorised_polygon_checks_agree_with_the_scalar_tests():
             assert got.tolist() == want
 
 
-@pytest.mark.parametrize("env_id, option, value", [
-    ("Dubins4DGuarded-v0", "state", [1e300, 1e300, 0, 1]),
-    ("Dubins4DGuarded-v0", "state", [2e9, 0, 0, 1]),
-    ("Dubins4DGuarded-v0", "goal", [0, 0, 1e200]),
-    ("Dubins4DGuarded-v0", "obstacles", [[0, 0, 1e150]]),
-])
+@pytest.mark.parametrize(
+    "env_id, option, value",
+    [
+        ("Dubins4DGuarded-v0", "state", [1e300, 1e300, 0, 1]),
+        ("Dubins4DGuarded-v0", "state", [2e9, 0, 0, 1]),
+        ("Dubins4DGuarded-v0", "goal", [0, 0, 1e200]),
+        ("Dubins4DGuarded-v0", "obstacles", [[0, 0, 1e150]]),
+    ],
+)
 def test_reset_options_too_large_for_the_geometry_are_refused(env_id, option, value):
     import gymnasium as gym
 
@@ -523,7 +688,9 @@ def test_quadrotor_velocity_too_large_is_refused():
 
     env = gym.make("QuadrotorRoom-v0")
     env.reset(seed=0)
-    state = np.array(env.unwrapped.privileged()["state"], dtype=float)  # position, quaternion xyzw, velocity, angular velocity
+    state = np.array(
+        env.unwrapped.privileged()["state"], dtype=float
+    )  # position, quaternion xyzw, velocity, angular velocity
     state[7] = 1e200  # the x velocity
     with pytest.raises(ValueError, match=r"option 'state' must be 13 numbers of magnitude at most 1e\+09"):
         env.reset(seed=0, options={"state": state.tolist()})
@@ -556,11 +723,15 @@ def test_a_file_size_limit_error_names_the_file_the_limit_and_the_fix(monkeypatc
 
     e = OSError(errno.EFBIG, "File too large", "d/shard_0001.npz")
     monkeypatch.setattr(failures, "file_size_limit", lambda: 4096)
-    assert failures.describe_os_error(e) == ("d/shard_0001.npz reached the file-size limit (ulimit -f: 4096 bytes); raise it "
-                                             "(ulimit -f unlimited), then what is stored is kept: rerun the same command", 1)
+    assert failures.describe_os_error(e) == (
+        "d/shard_0001.npz reached the file-size limit (ulimit -f: 4096 bytes); raise it "
+        "(ulimit -f unlimited), then what is stored is kept: rerun the same command",
+        1,
+    )
     monkeypatch.setattr(failures, "file_size_limit", lambda: None)
     assert failures.describe_os_error(OSError(errno.EFBIG, "File too large"), path="out")[0].startswith(
-        "out reached the file-size limit; raise it")
+        "out reached the file-size limit; raise it"
+    )
 
 
 @pytest.mark.slow
@@ -570,16 +741,36 @@ def test_datagen_under_a_file_size_limit_is_one_line_exit_1_and_a_rerun_finishes
     the slow tier: rmm-bench's drill above runs in the default suite, this one costs two
     commands with two workers each."""
     out = tmp_path / "d"
-    cmd = [sys.executable, "-m", "rmm_envs.risk.datagen", "--configs", "4", "--samples-per-config", "50", "--branches", "3",
-           "--depth", "1", "--configs-per-shard", "2", "--out", str(out), "--no-progress", "--workers", "2"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "rmm_envs.risk.datagen",
+        "--configs",
+        "4",
+        "--samples-per-config",
+        "50",
+        "--branches",
+        "3",
+        "--depth",
+        "1",
+        "--configs-per-shard",
+        "2",
+        "--out",
+        str(out),
+        "--no-progress",
+        "--workers",
+        "2",
+    ]
 
     def limit():
         resource.setrlimit(resource.RLIMIT_FSIZE, (4096, 4096))
 
     res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300, preexec_fn=limit)
     assert res.returncode == 1, res.stderr
-    assert _one_line(res.stderr) == (f"rmm-datagen: error: {out} reached the file-size limit (ulimit -f: 4096 bytes); raise "
-                                     "it (ulimit -f unlimited), then what is stored is kept: rerun the same command")
+    assert _one_line(res.stderr) == (
+        f"rmm-datagen: error: {out} reached the file-size limit (ulimit -f: 4096 bytes); raise "
+        "it (ulimit -f unlimited), then what is stored is kept: rerun the same command"
+    )
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert "200 labelled samples" in done.stdout
@@ -593,8 +784,11 @@ def test_a_closed_output_pipe_is_not_called_an_unreachable_ray_cluster():
     from rmm_envs.failures import describe_os_error
 
     line, status = describe_os_error(BrokenPipeError(errno.EPIPE, "Broken pipe"))
-    assert (line, status) == ("Broken pipe: the output was closed before the command finished writing it (a reader such "
-                              "as `| head` that stops early); what is stored is kept: rerun the same command", 1)
+    assert (line, status) == (
+        "Broken pipe: the output was closed before the command finished writing it (a reader such "
+        "as `| head` that stops early); what is stored is kept: rerun the same command",
+        1,
+    )
 
 
 def test_an_unreachable_ray_cluster_is_one_line_exit_1_within_seconds(tmp_path, capsys):
@@ -604,30 +798,78 @@ def test_an_unreachable_ray_cluster_is_one_line_exit_1_within_seconds(tmp_path, 
     from rmm_envs.risk.datagen import main as datagen
 
     t0 = time.perf_counter()
-    assert main(["--agent", "inactive", "--episodes", "1", "--backend", "ray", "--ray-address", "127.0.0.1:1",
-                 "--out", str(tmp_path / "r"), "--clock", "fixed:1", "--no-progress"]) == 1
+    assert (
+        main(
+            [
+                "--agent",
+                "inactive",
+                "--episodes",
+                "1",
+                "--backend",
+                "ray",
+                "--ray-address",
+                "127.0.0.1:1",
+                "--out",
+                str(tmp_path / "r"),
+                "--clock",
+                "fixed:1",
+                "--no-progress",
+            ]
+        )
+        == 1
+    )
     line = _one_line(capsys.readouterr().err)
     assert line.startswith("rmm-bench: error: cannot reach the Ray cluster at 127.0.0.1:1 (ConnectionRefusedError")
-    assert line.endswith("check the address (--ray-address) or leave it out to start a local Ray, then what is stored is "
-                         "kept: rerun the same command")
-    assert datagen(["--configs", "2", "--samples-per-config", "2", "--branches", "2", "--depth", "1", "--out",
-                    str(tmp_path / "d"), "--no-progress", "--backend", "ray", "--ray-address", "ray://127.0.0.1:1"]) == 1
-    assert _one_line(capsys.readouterr().err).startswith("rmm-datagen: error: cannot reach the Ray cluster at ray://127.0.0.1:1")
+    assert line.endswith(
+        "check the address (--ray-address) or leave it out to start a local Ray, then what is stored is "
+        "kept: rerun the same command"
+    )
+    assert (
+        datagen(
+            [
+                "--configs",
+                "2",
+                "--samples-per-config",
+                "2",
+                "--branches",
+                "2",
+                "--depth",
+                "1",
+                "--out",
+                str(tmp_path / "d"),
+                "--no-progress",
+                "--backend",
+                "ray",
+                "--ray-address",
+                "ray://127.0.0.1:1",
+            ]
+        )
+        == 1
+    )
+    assert _one_line(capsys.readouterr().err).startswith(
+        "rmm-datagen: error: cannot reach the Ray cluster at ray://127.0.0.1:1"
+    )
     assert time.perf_counter() - t0 < 60
 
 
-@pytest.mark.parametrize("env_id, kwargs, name", [
-    ("Dubins4DGuarded-v0", {"ray_length": 1e300}, "ray_length"),  # the finding: infinite observations
-    ("Dubins4DGuarded-v0", {"step_dt": 1e300}, "step_dt"),
-    ("Dubins4DGuarded-v0", {"n_rays": 10**400}, "n_rays"),  # an OverflowError traceback before
-    ("Dubins3DMazeParallel-v0", {"speed": 1e200}, "speed"),
-    ("QuadrotorRoomParallel-v0", {"cruise_speed": 1e200}, "cruise_speed"),
-])
+@pytest.mark.parametrize(
+    "env_id, kwargs, name",
+    [
+        ("Dubins4DGuarded-v0", {"ray_length": 1e300}, "ray_length"),  # the finding: infinite observations
+        ("Dubins4DGuarded-v0", {"step_dt": 1e300}, "step_dt"),
+        ("Dubins4DGuarded-v0", {"n_rays": 10**400}, "n_rays"),  # an OverflowError traceback before
+        ("Dubins3DMazeParallel-v0", {"speed": 1e200}, "speed"),
+        ("QuadrotorRoomParallel-v0", {"cruise_speed": 1e200}, "cruise_speed"),
+    ],
+)
 def test_constructor_arguments_too_large_for_the_arithmetic_are_refused_by_name(env_id, kwargs, name):
     import gymnasium as gym
 
     import rmm_envs  # noqa: F401
 
-    with pytest.raises(ValueError, match=rf"^{name} must be .* \(at most 1e\+09 in magnitude: larger values overflow "
-                                         r"the arithmetic\), got "):
+    with pytest.raises(
+        ValueError,
+        match=rf"^{name} must be .* \(at most 1e\+09 in magnitude: larger values overflow "
+        r"the arithmetic\), got ",
+    ):
         gym.make(env_id, **kwargs)

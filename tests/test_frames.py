@@ -11,24 +11,42 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rmm_bench import load_results, table_i
-from rmm_bench.metrics import aggregate
 from rmm_bench.cli import main as bench
+from rmm_bench.metrics import aggregate
 from rmm_bench.store import ResultsDatabaseError
 
 
 @pytest.fixture(scope="module")
 def results(tmp_path_factory):
     out = tmp_path_factory.mktemp("frames")
-    assert bench(["--agent", "inactive,cbf", "--episodes", "3", "--workers", "1", "--clock", "fixed:1",
-                  "--no-progress", "--no-figure", "--out", str(out)]) == 0
+    assert (
+        bench(
+            [
+                "--agent",
+                "inactive,cbf",
+                "--episodes",
+                "3",
+                "--workers",
+                "1",
+                "--clock",
+                "fixed:1",
+                "--no-progress",
+                "--no-figure",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     return out
 
 
 def test_one_row_per_stored_episode_with_every_field(results):
     df = load_results(results)
     con = sqlite3.connect(results / "results.db")
-    stored = con.execute("SELECT agent, episode, seed, outcome, steps, final_speed FROM episodes "
-                         "ORDER BY agent, episode").fetchall()
+    stored = con.execute(
+        "SELECT agent, episode, seed, outcome, steps, final_speed FROM episodes ORDER BY agent, episode"
+    ).fetchall()
     cols = [r[1] for r in con.execute("PRAGMA table_info(episodes)")]
     con.close()
     assert len(df) == len(stored) == 6
@@ -60,9 +78,14 @@ def _reference_row(episodes, batch_size):
     """Table I by hand, in plain Python: the paper's statistics, independent of the pandas code.
     The rates are over every episode with a result, a guardian error counted as a failure."""
     ok = sorted((e for e in episodes if e["outcome"] != "error"), key=lambda e: e["episode"])
-    rated = sorted((e for e in episodes if not (e["outcome"] == "error" and e.get("error_kind") in ("timeout", "lost_worker",
-                                                                                                  "input_changed"))),
-                   key=lambda e: e["episode"])
+    rated = sorted(
+        (
+            e
+            for e in episodes
+            if not (e["outcome"] == "error" and e.get("error_kind") in ("timeout", "lost_worker", "input_changed"))
+        ),
+        key=lambda e: e["episode"],
+    )
 
     def mean_std(x):
         if not x:
@@ -71,14 +94,16 @@ def _reference_row(episodes, batch_size):
         return m, math.sqrt(sum((v - m) ** 2 for v in x) / len(x))
 
     row = {"episodes": len(episodes), "errors": len(episodes) - len(ok)}
-    row["compute_ms"], row["compute_ms_std"] = mean_std([e["compute_time"] / e["steps"] * 1e3 for e in ok if e["steps"]])
+    row["compute_ms"], row["compute_ms_std"] = mean_std(
+        [e["compute_time"] / e["steps"] * 1e3 for e in ok if e["steps"]]
+    )
     for name in ("goal", "collision", "timeout"):
         if 0 < len(rated) <= batch_size:  # one batch: the 95% Wilson half-width over the episodes
             p, n, z = sum(e["outcome"] == name for e in rated) / len(rated), len(rated), 1.959963984540054
             row[name] = 100 * p
             row[f"{name}_std"] = 100 * z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
             continue
-        batches = [rated[i:i + batch_size] for i in range(0, len(rated), batch_size)]
+        batches = [rated[i : i + batch_size] for i in range(0, len(rated), batch_size)]
         rates = [sum(e["outcome"] == name for e in b) / len(b) for b in batches]
         w = [len(b) for b in batches]
         if not w:
@@ -87,18 +112,45 @@ def _reference_row(episodes, batch_size):
         m = sum(r * n for r, n in zip(rates, w)) / sum(w)
         row[name] = 100 * m
         row[f"{name}_std"] = 100 * math.sqrt(sum(n * (r - m) ** 2 for r, n in zip(rates, w)) / sum(w))
-    row["intervention"], row["intervention_std"] = (100 * v for v in mean_std([e["active_sim_time"] / e["sim_time"] for e in ok]))
+    row["intervention"], row["intervention_std"] = (
+        100 * v for v in mean_std([e["active_sim_time"] / e["sim_time"] for e in ok])
+    )
     return row
 
 
 @settings(max_examples=30, deadline=None)
-@given(st.lists(st.tuples(st.sampled_from(["a", "b"]), st.sampled_from(["goal", "collision", "timeout", "error"]),
-                          st.integers(1, 900), st.floats(0.0, 1.0), st.floats(0.0, 0.05)), min_size=1, max_size=150),
-       st.sampled_from([1, 4, 64]))
+@given(
+    st.lists(
+        st.tuples(
+            st.sampled_from(["a", "b"]),
+            st.sampled_from(["goal", "collision", "timeout", "error"]),
+            st.integers(1, 900),
+            st.floats(0.0, 1.0),
+            st.floats(0.0, 0.05),
+        ),
+        min_size=1,
+        max_size=150,
+    ),
+    st.sampled_from([1, 4, 64]),
+)
 def test_table_i_agrees_with_a_plain_python_reference(rows, batch_size):
-    episodes = [{"agent": a, "episode": i, "outcome": o, "steps": s, "sim_time": s * 0.1, "active_sim_time": s * 0.1 * f,
-                 "compute_time": s * c, "decision_mean": c, "precompute_time": None, "final_speed": 1.0,
-                 "qp_fallbacks": 0, "nan_states": 0} for i, (a, o, s, f, c) in enumerate(rows)]
+    episodes = [
+        {
+            "agent": a,
+            "episode": i,
+            "outcome": o,
+            "steps": s,
+            "sim_time": s * 0.1,
+            "active_sim_time": s * 0.1 * f,
+            "compute_time": s * c,
+            "decision_mean": c,
+            "precompute_time": None,
+            "final_speed": 1.0,
+            "qp_fallbacks": 0,
+            "nan_states": 0,
+        }
+        for i, (a, o, s, f, c) in enumerate(rows)
+    ]
     table = table_i(pd.DataFrame.from_records(episodes), batch_size)
     assert list(table.index) == list(dict.fromkeys(r[0] for r in rows))  # agents in order of appearance
     for agent in table.index:

@@ -6,31 +6,39 @@ import numpy as np
 import pytest
 
 import rmm_envs  # noqa: F401
-from rmm_guardians import CallableGuardian, SB3Guardian, available_guardians, make_guardian
-from rmm_guardians.adapters import to_guardian_action
-from rmm_guardians.baselines import BrakesGuardian, InactiveGuardian, RandomGuardian
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
 from rmm_envs.systems.dubins4d import Dubins4D, FullBraking
+from rmm_guardians import CallableGuardian, SB3Guardian, available_guardians, make_guardian
+from rmm_guardians.adapters import to_guardian_action
+from rmm_guardians.baselines import BrakesGuardian, InactiveGuardian, RandomGuardian
 
 SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, safe_default=FullBraking())
 
 
 def spaces(action_space=SPACE, n_rays=12):
     lay = observation_layout(n_rays)
-    return {"action_space": action_space,
-            "observation_space": ObservationBox(np.full(lay.size, -np.inf), np.full(lay.size, np.inf), lay)}
+    return {
+        "action_space": action_space,
+        "observation_space": ObservationBox(np.full(lay.size, -np.inf), np.full(lay.size, np.inf), lay),
+    }
 
 
 def run(guardian, seed=0, env_id="Dubins4DGuarded-v0", max_steps=2000):
     env = gym.make(env_id)
     obs, info = env.reset(seed=seed)
-    guardian.reset(seed=seed, observation_space=env.observation_space, action_space=env.action_space,
-                   privileged=env.unwrapped.privileged)
+    guardian.reset(
+        seed=seed,
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        privileged=env.unwrapped.privileged,
+    )
     actions, infos = [], []
     for _ in range(max_steps):
         a = guardian.act(obs, info)
-        assert env.action_space.contains({k: (np.asarray(v, np.float32) if k != "active_ctrl" else int(v)) for k, v in a.items()}), a
+        assert env.action_space.contains(
+            {k: (np.asarray(v, np.float32) if k != "active_ctrl" else int(v)) for k, v in a.items()}
+        ), a
         actions.append(a)
         obs, r, te, tr, info = env.step(a)
         infos.append(info)
@@ -136,13 +144,15 @@ def test_sb3_style_adapter():
 def test_module_class_spec_and_entry_point(tmp_path, monkeypatch):
     pkg = tmp_path / "myguard"
     pkg.mkdir()
-    (pkg / "__init__.py").write_text(textwrap.dedent("""
+    (pkg / "__init__.py").write_text(
+        textwrap.dedent("""
         from rmm_guardians.base import Guardian
         class Swerve(Guardian):
             name = "swerve"
             def act(self, obs, info):
                 return self.action_space.active([0.25, 0.0])
-    """))
+    """)
+    )
     dist = tmp_path / "myguard-0.1.dist-info"
     dist.mkdir()
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: myguard\nVersion: 0.1\n")

@@ -10,9 +10,9 @@ import pytest
 from gymnasium.wrappers import RecordEpisodeStatistics
 
 import rmm_envs
-from rmm_guardians import SB3Guardian
 from rmm_envs.envs.guarded import EPISODE_KEY
 from rmm_envs.wrappers import FlattenGuardianAction
+from rmm_guardians import SB3Guardian
 
 GUARDIAN_ENVS = [e for e in rmm_envs.ENV_IDS if e not in ("Dubins3DMaze-v0", "QuadrotorRoom-v0")]
 
@@ -49,8 +49,15 @@ def test_vector_record_episode_statistics_on_the_default_key():
     from gymnasium.wrappers.vector import RecordEpisodeStatistics as VectorRecord
 
     n = 3
-    env = VectorRecord(gym.make_vec("Dubins4DGuarded-v0", num_envs=n, vectorization_mode="vector_entry_point",
-                                    max_episode_sim_time=2.0, clock="fixed:1"))
+    env = VectorRecord(
+        gym.make_vec(
+            "Dubins4DGuarded-v0",
+            num_envs=n,
+            vectorization_mode="vector_entry_point",
+            max_episode_sim_time=2.0,
+            clock="fixed:1",
+        )
+    )
     env.reset(seed=0)
     zeros = {"active_ctrl": np.zeros(n, np.int64), "turnrate_ctrl": np.zeros(n), "accel_ctrl": np.zeros(n)}
     seen = 0

@@ -1,13 +1,13 @@
 import numpy as np
 import pytest
 
+from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.envs.dubins4d import CONTROLS
+from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_guardians.hj.dynamics import DoubleIntegrator1D, Dubins4DHJ, Translation
 from rmm_guardians.hj.grid import Grid
 from rmm_guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
 from rmm_guardians.hj.solver import solve_brt, spatial_derivatives
-from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.envs.dubins4d import CONTROLS
-from rmm_envs.systems.dubins4d import Dubins4D
 
 SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")  # the Dubins4D envs' action space
 
@@ -44,7 +44,14 @@ def test_double_integrator_value_matches_the_closed_form():
     def errors(n, order, rk):
         g = Grid([-10.0, -3.0], [2.0, 3.0], [n, n // 2 + 1])
         X, Vv = np.meshgrid(*g.axes, indexing="ij")
-        V, _ = solve_brt(g, DoubleIntegrator1D(1.0), np.broadcast_to(-g.coord(0), g.shape).astype(np.float32), 4.0, order=order, rk=rk)
+        V, _ = solve_brt(
+            g,
+            DoubleIntegrator1D(1.0),
+            np.broadcast_to(-g.coord(0), g.shape).astype(np.float32),
+            4.0,
+            order=order,
+            rk=rk,
+        )
         inner = (X > -8) & (X < 1) & (np.abs(Vv) < 2.5)  # away from the box's extrapolated edges
         return np.abs(V - (-X - np.maximum(Vv, 0.0) ** 2 / 2))[inner].mean()
 
@@ -84,7 +91,9 @@ def test_refining_the_grid_converges():
     def err(n):
         g = Grid([-10.0, -3.0], [2.0, 3.0], [n, n // 4 + 1])
         V, _ = solve_brt(g, DoubleIntegrator1D(1.0), np.broadcast_to(-g.coord(0), g.shape).astype(np.float32), 4.0)
-        return np.mean([abs(zero_crossing(g.axes[0], V[:, j]) + v * v / 2) for j, v in enumerate(g.axes[1]) if 0.5 <= v <= 2.5])
+        return np.mean(
+            [abs(zero_crossing(g.axes[0], V[:, j]) + v * v / 2) for j, v in enumerate(g.axes[1]) if 0.5 <= v <= 2.5]
+        )
 
     coarse, fine = err(61), err(241)
     assert fine < coarse
@@ -110,7 +119,9 @@ def test_dubins4d_tube_is_mirror_symmetric_for_a_centred_circle(order, tol):
     # ENO2 breaks a tie between equal second differences toward the left one, which is not
     # mirror symmetric: its values agree to a looser tolerance (still << the value's scale)
     g = small_grid()
-    V, _ = solve_brt(g, Dubins4DHJ(), obstacle_target(g, np.array([[0.0, 0.0, 2.0]])), horizon=2.0, order=order, rk=order + 1)
+    V, _ = solve_brt(
+        g, Dubins4DHJ(), obstacle_target(g, np.array([[0.0, 0.0, 2.0]])), horizon=2.0, order=order, rk=order + 1
+    )
     n = g.n[2]
     mirror_theta = (-np.arange(n)) % n
     W = V[:, ::-1, :, :][:, :, mirror_theta, :]  # (x, -y, -theta, v)
@@ -147,7 +158,11 @@ def hj(box, tmp_path, **kw):
 
 
 def test_guardian_takes_control_in_the_tube_with_bang_bang(tmp_path):
-    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-3.0, 0.0, 0.0, 2.0])}
+    box = {
+        "obstacles": np.array([[0.0, 0.0, 2.0]]),
+        "goal": np.array([7.0, 7.0, 0.5]),
+        "state": np.array([-3.0, 0.0, 0.0, 2.0]),
+    }
     g = hj(box, tmp_path)
     a = g.act(None, {})
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and abs(a["turnrate_ctrl"][0]) == 0.25
@@ -156,7 +171,11 @@ def test_guardian_takes_control_in_the_tube_with_bang_bang(tmp_path):
 
 
 def test_guardian_cache_and_edge_cases(tmp_path):
-    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([20.0, 0.0, 0.0, 1.0])}
+    box = {
+        "obstacles": np.array([[0.0, 0.0, 2.0]]),
+        "goal": np.array([7.0, 7.0, 0.5]),
+        "state": np.array([20.0, 0.0, 0.0, 1.0]),
+    }
     g = hj(box, tmp_path)
     assert g.stats()["solves"] == 1 and len(list(tmp_path.glob("*.npz"))) == 1
     g.reset(seed=1, privileged=lambda: box, action_space=SPACE)
@@ -188,13 +207,19 @@ def test_cache_tolerates_files_removed_by_another_process(tmp_path, monkeypatch)
     cache.save("k3", np.zeros((2, 2), np.float32))  # evicts, skipping the vanished file
     assert sorted(f.name for f in real_glob(tmp_path, "*.npz")) == ["k2.npz", "k3.npz"]
     monkeypatch.setattr("os.utime", lambda *a, **k: (_ for _ in ()).throw(FileNotFoundError("evicted")))
-    np.testing.assert_array_equal(cache.load("k2", (2, 2)), np.full((2, 2), 2, np.float32))  # loaded, then evicted: still a hit
+    np.testing.assert_array_equal(
+        cache.load("k2", (2, 2)), np.full((2, 2), 2, np.float32)
+    )  # loaded, then evicted: still a hit
 
 
 def test_an_unwritable_cache_warns_and_the_episode_goes_on(tmp_path):
     blocker = tmp_path / "not_a_dir"
     blocker.write_text("a file where the cache directory should be")
-    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-3.0, 0.0, 0.0, 2.0])}
+    box = {
+        "obstacles": np.array([[0.0, 0.0, 2.0]]),
+        "goal": np.array([7.0, 7.0, 0.5]),
+        "state": np.array([-3.0, 0.0, 0.0, 2.0]),
+    }
     g = HJGuardian(grid=small_grid(), horizon=2.0, cache_dir=blocker / "hj")
     with pytest.warns(RuntimeWarning, match="cache not written"):
         g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
@@ -212,7 +237,11 @@ def test_obstacle_outside_the_grid_is_refused_at_reset(tmp_path):
 def test_default_grid_is_the_papers():
     g = default_grid()
     assert g.shape == (64, 64, 32, 32) and g.periodic == (False, False, True, False)
-    assert g.dx[0] == pytest.approx(30 / 63) and g.dx[2] == pytest.approx(2 * np.pi / 32) and g.dx[3] == pytest.approx(4 / 31)
+    assert (
+        g.dx[0] == pytest.approx(30 / 63)
+        and g.dx[2] == pytest.approx(2 * np.pi / 32)
+        and g.dx[3] == pytest.approx(4 / 31)
+    )
 
 
 def test_reach_avoid_in_one_dimension():
@@ -235,11 +264,22 @@ def test_reach_avoid_guardian_steers_to_the_goal_at_the_edge(tmp_path):
     box = {"obstacles": np.array([[6.0, 6.0, 1.0]]), "goal": np.array([3.0, 0.0, 1.0]), "state": np.zeros(4)}
     # the first-order scheme, whose coarse-grid diffusion puts these states at the set's edge
     # (the exact reach-avoid value is -1 at both "near" and "far": both reach the goal's centre)
-    g = HJGuardian(grid=small_grid(), horizon=2.0, cache_dir=tmp_path, mode="reach_avoid", ra_horizon=4.0, ra_margin=0.2,
-                   order=1, rk=2, rule="value")
+    g = HJGuardian(
+        grid=small_grid(),
+        horizon=2.0,
+        cache_dir=tmp_path,
+        mode="reach_avoid",
+        ra_horizon=4.0,
+        ra_margin=0.2,
+        order=1,
+        rk=2,
+        rule="value",
+    )
     g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
     V_ra = g._ra_arrays[0]
-    near, far, away = (np.array(s, float) for s in ([0.0, 0.0, 0.0, 1.0], [-3.0, 0.0, 0.0, 1.0], [-3.0, 0.0, np.pi, 0.0]))
+    near, far, away = (
+        np.array(s, float) for s in ([0.0, 0.0, 0.0, 1.0], [-3.0, 0.0, 0.0, 1.0], [-3.0, 0.0, np.pi, 0.0])
+    )
     assert g.grid.interp(V_ra, near) < g.grid.interp(V_ra, far) < g.grid.interp(V_ra, away)
     # 2 m from the goal, driving at it: inside the reach-avoid set, at its (coarse-grid) edge:
     # the guardian steers with the reaching control (accelerate toward the goal)
@@ -307,7 +347,13 @@ def test_backends_agree_on_whole_solves(order, rk):
     target = obstacle_target(g, obstacles)
     Va, ia = solve_brt(g, Dubins4DHJ(), target, 2.0, order=order, rk=rk, backend="numpy")
     Vb, ib = solve_brt(g, Dubins4DHJ(), target, 2.0, order=order, rk=rk, backend="numba")
-    assert (ia["backend"], ib["backend"], ia["steps"], ia["order"], ib["order"]) == ("numpy", "numba", ib["steps"], order, order)
+    assert (ia["backend"], ib["backend"], ia["steps"], ia["order"], ib["order"]) == (
+        "numpy",
+        "numba",
+        ib["steps"],
+        order,
+        order,
+    )
     np.testing.assert_allclose(Vb, Va, atol=atol)
     goal = obstacle_target(g, np.array([[5.0, 5.0, 1.0]]))  # reach-avoid: min control and a state constraint
     Ra, _ = solve_brt(g, Dubins4DHJ(), goal, 3.0, order=order, rk=rk, constraint=target, backend="numpy")
@@ -363,7 +409,12 @@ from rmm_guardians.hj.guardian import HJPaperGuardian  # noqa: E402
 
 
 def _circle_box() -> dict:
-    return {"obstacles": np.array([[0.0, 0.0, 3.0]]), "goal": np.array([12.0, 12.0, 0.5]), "state": np.zeros(4), "sim_time": 0.0}
+    return {
+        "obstacles": np.array([[0.0, 0.0, 3.0]]),
+        "goal": np.array([12.0, 12.0, 0.5]),
+        "state": np.zeros(4),
+        "sim_time": 0.0,
+    }
 
 
 def _circle_guardians(cache, box) -> dict:
@@ -385,7 +436,9 @@ def circle_guardians(once_per_run):
     values once and not every time."""
     import os
 
-    cache = os.environ.get("RMM_TEST_HJ_CACHE") or once_per_run("hj_circle", lambda d: _circle_guardians(d, _circle_box()))
+    cache = os.environ.get("RMM_TEST_HJ_CACHE") or once_per_run(
+        "hj_circle", lambda d: _circle_guardians(d, _circle_box())
+    )
     box = _circle_box()
     return _circle_guardians(cache, box), box
 
@@ -428,7 +481,11 @@ def closed_loop(guard, box, s0, *, latency: int, flip_turn: bool = False, lap: f
     while t < horizon - 1e-9:
         box["state"], box["sim_time"] = s.copy(), t
         a = guard.act(None, {})
-        queue.append(np.array([a["turnrate_ctrl"][0] * (-1.0 if flip_turn else 1.0), a["accel_ctrl"][0]]) if a["active_ctrl"] else None)
+        queue.append(
+            np.array([a["turnrate_ctrl"][0] * (-1.0 if flip_turn else 1.0), a["accel_ctrl"][0]])
+            if a["active_ctrl"]
+            else None
+        )
         u = queue.pop(0)
         path = dyn.propagate(s[None], (np.zeros(2) if u is None else u)[None], lap, 16)[0]
         clearance = min(clearance, float((np.hypot(path[:, 0], path[:, 1]) - 3.0).min()))
@@ -491,13 +548,20 @@ def test_thresholds_of_the_rules_by_hand():
     assert gg.decrease_rate(np.array([0, 0, 0, 0.0]), np.array([0, 0, 0, -1.0])) == pytest.approx(0.5)
     assert gg.decrease_rate(np.array([0, 0, 0, 0.0]), np.array([0, 0, 0, 1.0])) == pytest.approx(0.0)
     # delay=0 (the blocking env) commits one lap; the value rule ignores the lap
-    assert HJGuardian(grid=small_grid(), lap=0.1, delay=0, margin=0.0).threshold(s, grad) == pytest.approx(0.15 + 0.25 * 0.01)
+    assert HJGuardian(grid=small_grid(), lap=0.1, delay=0, margin=0.0).threshold(s, grad) == pytest.approx(
+        0.15 + 0.25 * 0.01
+    )
     assert HJGuardian(grid=small_grid(), rule="value", margin=0.3).threshold(s, grad) == 0.3
     assert HJGuardian(grid=default_grid()).margin == pytest.approx(30 / 63 / 2)
 
 
 def test_the_lap_is_measured_from_the_sim_time(tmp_path):
-    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-6.0, 5.0, 0.0, 1.0]), "sim_time": 0.0}
+    box = {
+        "obstacles": np.array([[0.0, 0.0, 2.0]]),
+        "goal": np.array([7.0, 7.0, 0.5]),
+        "state": np.array([-6.0, 5.0, 0.0, 1.0]),
+        "sim_time": 0.0,
+    }
     g = hj(box, tmp_path)
     assert g.current_lap() == 0.1  # assumed before any lap
     g.act(None, {})
@@ -523,27 +587,32 @@ def test_hj_paper_is_the_papers_rule_and_both_are_registered():
     # the scheme is part of the cache key: the two never share a value
     obstacles = np.array([[0.0, 0.0, 2.0]])
     assert HJGuardian(grid=small_grid()).spec(obstacles) != p.spec(obstacles)
-    assert make_guardian("hj-paper", grid=small_grid(), order=2).spec(obstacles) != HJGuardian(grid=small_grid()).spec(obstacles)  # rk differs
+    assert make_guardian("hj-paper", grid=small_grid(), order=2).spec(obstacles) != HJGuardian(grid=small_grid()).spec(
+        obstacles
+    )  # rk differs
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"margin": float("nan")}, "margin must be a finite number, got nan"),
-    ({"margin": "big"}, "margin must be a number, got 'big'"),
-    ({"horizon": -1.0}, "horizon must be a finite number > 0.0, got -1.0"),
-    ({"horizon": float("inf")}, "horizon must be a finite number > 0.0, got inf"),
-    ({"lap": 0.0}, "lap must be a finite number > 0.0, got 0.0"),
-    ({"disturbance": -0.1}, "disturbance must be a finite number >= 0.0, got -0.1"),
-    ({"cfl": 1.5}, "cfl must be in"),
-    ({"cfl": float("nan")}, "cfl must be a finite number"),
-    ({"ra_horizon": 0}, "ra_horizon must be a finite number > 0.0, got 0"),
-    ({"ra_margin": -1}, "ra_margin must be a finite number >= 0.0, got -1"),
-    ({"delay": -1}, "delay must be an integer >= 0"),
-    ({"delay": 0.5}, "delay must be an integer >= 0"),
-    ({"order": 3}, "order must be 1 or 2, got 3"),
-    ({"rk": 4}, "rk must be one of [1, 2, 3], got 4"),
-    ({"rule": "eager"}, "rule must be one of"),
-    ({"cache_max_files": 0}, "cache_max_files must be an integer >= 1, got 0"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"margin": float("nan")}, "margin must be a finite number, got nan"),
+        ({"margin": "big"}, "margin must be a number, got 'big'"),
+        ({"horizon": -1.0}, "horizon must be a finite number > 0.0, got -1.0"),
+        ({"horizon": float("inf")}, "horizon must be a finite number > 0.0, got inf"),
+        ({"lap": 0.0}, "lap must be a finite number > 0.0, got 0.0"),
+        ({"disturbance": -0.1}, "disturbance must be a finite number >= 0.0, got -0.1"),
+        ({"cfl": 1.5}, "cfl must be in"),
+        ({"cfl": float("nan")}, "cfl must be a finite number"),
+        ({"ra_horizon": 0}, "ra_horizon must be a finite number > 0.0, got 0"),
+        ({"ra_margin": -1}, "ra_margin must be a finite number >= 0.0, got -1"),
+        ({"delay": -1}, "delay must be an integer >= 0"),
+        ({"delay": 0.5}, "delay must be an integer >= 0"),
+        ({"order": 3}, "order must be 1 or 2, got 3"),
+        ({"rk": 4}, "rk must be one of [1, 2, 3], got 4"),
+        ({"rule": "eager"}, "rule must be one of"),
+        ({"cache_max_files": 0}, "cache_max_files must be an integer >= 1, got 0"),
+    ],
+)
 def test_bad_arguments_are_refused_naming_the_value(kwargs, match):
     import re
 
@@ -555,7 +624,12 @@ def test_a_stopped_car_within_the_margin_is_turned_away_not_held(tmp_path):
     # stopped 0.2 m from a circle, facing it, a little left of its centre line: V <= margin, so
     # the guardian acts.  At v = 0, dV/dtheta vanishes and the plain bang-bang control only
     # brakes (held forever); read one speed cell up, the value turns the car left, away
-    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-2.2, 0.4, 0.0, 0.0]), "sim_time": 0.0}
+    box = {
+        "obstacles": np.array([[0.0, 0.0, 2.0]]),
+        "goal": np.array([7.0, 7.0, 0.5]),
+        "state": np.array([-2.2, 0.4, 0.0, 0.0]),
+        "sim_time": 0.0,
+    }
     g = hj(box, tmp_path)
     vals = g.evaluate(box["state"])
     assert 0 < vals[0] <= g.margin and abs(vals[3]) < 0.05  # acts; the heading hardly matters at v = 0
@@ -564,7 +638,9 @@ def test_a_stopped_car_within_the_margin_is_turned_away_not_held(tmp_path):
     plain = hj(box, tmp_path, standstill_lookup=False)
     a = plain.act(None, {})
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and "standstill_lookups" not in plain.stats()
-    paper = HJPaperGuardian(grid=small_grid(), horizon=2.0, cache_dir=tmp_path, margin=10.0)  # the paper's rule: no lookup
+    paper = HJPaperGuardian(
+        grid=small_grid(), horizon=2.0, cache_dir=tmp_path, margin=10.0
+    )  # the paper's rule: no lookup
     paper.reset(seed=0, privileged=lambda: box, action_space=SPACE)
     a = paper.act(None, {})
     assert a["active_ctrl"] == 1 and a["accel_ctrl"][0] == -0.5 and "standstill_lookups" not in paper.stats()
@@ -596,7 +672,14 @@ def test_hj_dynamics_take_their_bounds_from_the_system():
     assert Dubins4DHJ() == Dubins4DHJ.from_system(Dubins4D())
     assert (Dubins4DHJ().u1_max, Dubins4DHJ().u2_max, Dubins4DHJ().v_min, Dubins4DHJ().v_max) == (0.25, 0.5, 0.0, 2.0)
     # the cache key is what it was when the numbers were written in this module
-    assert Dubins4DHJ().key() == {"name": "dubins4d", "u1_max": 0.25, "u2_max": 0.5, "v_min": 0.0, "v_max": 2.0, "d_max": 0.0}
+    assert Dubins4DHJ().key() == {
+        "name": "dubins4d",
+        "u1_max": 0.25,
+        "u2_max": 0.5,
+        "v_min": 0.0,
+        "v_max": 2.0,
+        "d_max": 0.0,
+    }
     fast = Dubins4DHJ.from_system(Dubins4D(u1_min=-0.5, u1_max=0.5, v_max=3.0), d_max=0.1)
     assert (fast.u1_max, fast.u2_max, fast.v_max, fast.d_max) == (0.5, 0.5, 3.0, 0.1)
     with pytest.raises(ValueError, match="symmetric"):
@@ -606,7 +689,11 @@ def test_hj_dynamics_take_their_bounds_from_the_system():
 
 
 def test_guardian_reads_the_control_bounds_from_the_action_space(tmp_path):
-    box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.array([-3.0, 0.0, 0.0, 2.0])}
+    box = {
+        "obstacles": np.array([[0.0, 0.0, 2.0]]),
+        "goal": np.array([7.0, 7.0, 0.5]),
+        "state": np.array([-3.0, 0.0, 0.0, 2.0]),
+    }
     g = HJGuardian(grid=small_grid(), horizon=2.0, cache_dir=tmp_path)
     narrow = GuardianActionSpace(CONTROLS, [-0.125, -0.25], [0.125, 0.25], kind="dubins4d")
     g.reset(seed=0, privileged=lambda: box, action_space=narrow)
@@ -616,7 +703,11 @@ def test_guardian_reads_the_control_bounds_from_the_action_space(tmp_path):
     g.reset(seed=0, privileged=lambda: box, action_space=SPACE)  # another value: a second cache entry
     assert g.dynamics == Dubins4DHJ() and g.stats()["solves"] == 1 and len(list(tmp_path.glob("*.npz"))) == 2
     with pytest.raises(ValueError, match="guardian 'hj'.*symmetric"):
-        g.reset(seed=0, privileged=lambda: box, action_space=GuardianActionSpace(CONTROLS, [-0.25, -0.4], [0.25, 0.5], kind="dubins4d"))
+        g.reset(
+            seed=0,
+            privileged=lambda: box,
+            action_space=GuardianActionSpace(CONTROLS, [-0.25, -0.4], [0.25, 0.5], kind="dubins4d"),
+        )
     with pytest.raises(ValueError, match="guardian 'hj'.*action space"):
         g.reset(seed=0, privileged=lambda: box)
 
@@ -637,7 +728,9 @@ def test_threads_are_an_argument_with_a_documented_default(tmp_path, monkeypatch
         with pytest.raises(ValueError, match="threads"):
             HJGuardian(grid=small_grid(), threads=bad)
     seen = []
-    monkeypatch.setattr(hjg, "solve_brt", lambda *a, **k: (seen.append(k["threads"]), (_ for _ in ()).throw(KeyError("stop")))[1])
+    monkeypatch.setattr(
+        hjg, "solve_brt", lambda *a, **k: (seen.append(k["threads"]), (_ for _ in ()).throw(KeyError("stop")))[1]
+    )
     box = {"obstacles": np.array([[0.0, 0.0, 2.0]]), "goal": np.array([7.0, 7.0, 0.5]), "state": np.zeros(4)}
     with pytest.raises(KeyError, match="stop"):
         HJGuardian(grid=small_grid(), cache=False, threads=2).reset(seed=0, privileged=lambda: box, action_space=SPACE)

@@ -6,10 +6,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from rmm_guardians.hj.dynamics import (DoubleIntegrator1D, Dubins4DHJ, HJControlDynamics, HJDynamics, Integrator1D,
-                                   Translation, check_dynamics)
+from rmm_guardians.hj.dynamics import (
+    DoubleIntegrator1D,
+    Dubins4DHJ,
+    HJControlDynamics,
+    HJDynamics,
+    Integrator1D,
+    Translation,
+    check_dynamics,
+)
 from rmm_guardians.hj.grid import Grid
 from rmm_guardians.hj.solver import solve_brt
 
@@ -18,8 +26,13 @@ GRIDS = {
     "2d": Grid([-1.0, -2.0], [1.0, 2.0], [7, 9]),
     "1d": Grid([-1.0], [1.0], [11]),
 }
-DYNAMICS = [(Dubins4DHJ(), "dubins4d"), (Dubins4DHJ(u1_max=0.1, u2_max=0.3, d_max=0.2), "dubins4d"),
-            (DoubleIntegrator1D(a_max=0.5), "2d"), (Integrator1D(u_max=2.0), "1d"), (Translation((1.5, -0.5)), "2d")]
+DYNAMICS = [
+    (Dubins4DHJ(), "dubins4d"),
+    (Dubins4DHJ(u1_max=0.1, u2_max=0.3, d_max=0.2), "dubins4d"),
+    (DoubleIntegrator1D(a_max=0.5), "2d"),
+    (Integrator1D(u_max=2.0), "1d"),
+    (Translation((1.5, -0.5)), "2d"),
+]
 
 
 @pytest.mark.parametrize("dynamics, grid", DYNAMICS)
@@ -68,8 +81,11 @@ class NoAlphas:
 def test_the_solver_refuses_dynamics_without_the_contract_naming_what_is_missing():
     g = GRIDS["1d"]
     assert not isinstance(NoAlphas(), HJDynamics)
-    with pytest.raises(TypeError, match=r"HJ dynamics must offer key\(\), hamiltonian\(grid, p\) and alphas\(grid\).*"
-                                        r"lacks alphas"):
+    with pytest.raises(
+        TypeError,
+        match=r"HJ dynamics must offer key\(\), hamiltonian\(grid, p\) and alphas\(grid\).*"
+        r"lacks alphas",
+    ):
         solve_brt(g, NoAlphas(), np.zeros(g.shape, np.float32), 1.0)
     with pytest.raises(TypeError, match="lacks key, hamiltonian, alphas"):
         check_dynamics(object())

@@ -1,12 +1,14 @@
 """``hj`` on the quadrotor: the horizontal 4-D value at the route's altitude band (rmm_guardians.hj.quadrotor)."""
 
 import math
-import warnings
 
 import numpy as np
 import pytest
 
 import rmm_envs  # noqa: F401
+from rmm_envs.envs.quadrotor_room_parallel import QuadrotorRoomGuardedEnv
+from rmm_envs.worlds.room_collision import BOUND
+from rmm_envs.worlds.rooms import Room
 from rmm_guardians import make_guardian
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.grid import Grid
@@ -14,9 +16,6 @@ from rmm_guardians.hj.guardian import HJGuardian, HJPaperGuardian
 from rmm_guardians.hj.quadrotor import QuadrotorHJGuardian
 from rmm_guardians.hj.room import lag_prediction, room_target
 from rmm_guardians.hj.solver import solve_brt
-from rmm_envs.envs.quadrotor_room_parallel import QuadrotorRoomGuardedEnv
-from rmm_envs.worlds.room_collision import BOUND
-from rmm_envs.worlds.rooms import Room
 
 # one wall box 4 m high whose face is the plane x = 0 (x from 0 to 1, y from -5 to 5), a far wall
 # at x = -12 (the walls' extent bounds the grids), and a sphere
@@ -26,8 +25,14 @@ SPHERE = {"shape": "sphere", "pos": [-4.0, 3.0, 0.6], "quat": [0.0, 0.0, 0.0, 1.
 
 
 def room(objects=(SPHERE,), walls=(WALL, FAR)) -> Room:
-    return Room(footprint=np.ones((20, 20), bool), origin=np.array([-8.0, -5.0]), cell=0.5, wall_height=4.0,
-                walls=np.array(walls, float).reshape(-1, 6), objects=list(objects))
+    return Room(
+        footprint=np.ones((20, 20), bool),
+        origin=np.array([-8.0, -5.0]),
+        cell=0.5,
+        wall_height=4.0,
+        walls=np.array(walls, float).reshape(-1, 6),
+        objects=list(objects),
+    )
 
 
 def state(x, y, z=1.0, vx=0.0, vy=0.0):
@@ -42,8 +47,13 @@ def space():
 
 
 def reset(g, space, st, rm=None, waypoints=((-6.0, -3.0, 1.0),), t=0.0):
-    box = {"state": st, "room": rm or room(), "waypoints": np.array(waypoints, float), "goal": np.array(waypoints[-1]),
-           "sim_time": t}
+    box = {
+        "state": st,
+        "room": rm or room(),
+        "waypoints": np.array(waypoints, float),
+        "goal": np.array(waypoints[-1]),
+        "sim_time": t,
+    }
     g.reset(seed=0, action_space=space, privileged=lambda: box)
     return box
 
@@ -66,7 +76,9 @@ def test_room_target_hand_computed():
     assert at(-4.0, 1.0) == pytest.approx(2.0 - 0.6 - 0.05 - BOUND, abs=1e-6)
     assert T.dtype == np.float32 and at(-6.0, -2.0) > 2.0
     # a band above the sphere and the wall: nothing in it
-    high = room_target(grid, room(walls=[(0.5, 0.0, 0.25, 0.5, 5.0, 0.25), (-11.75, 0.0, 0.1, 0.25, 5.0, 0.1)]), 1.5, 2.0)
+    high = room_target(
+        grid, room(walls=[(0.5, 0.0, 0.25, 0.5, 5.0, 0.25), (-11.75, 0.0, 0.1, 0.25, 5.0, 0.1)]), 1.5, 2.0
+    )
     assert np.all(high == np.float32(1e3 - BOUND))
 
 
@@ -126,7 +138,7 @@ def test_rule_acts_one_lap_ahead(solved, space):
     box["state"], box["sim_time"] = state(-1.2, 0.0, vx=1.5), 0.0
     push = {"nominal_control": np.array([1.5, 0.0, 0.0, 0.0])}
     now = float(g.evaluate(*h0)[0])
-    assert now == pytest.approx(1.2 - BOUND - 1.5 ** 2 / 5.0, abs=0.06)
+    assert now == pytest.approx(1.2 - BOUND - 1.5**2 / 5.0, abs=0.06)
     h1 = g.predict(h0, push["nominal_control"], 1.0, 0.0, 0.1)  # the pending lap (0.1 s before any is measured)
     h2 = g.predict(h1, push["nominal_control"], 1.0, 0.0, 0.1)  # and the lap the decision governs
     assert now > float(g.evaluate(*h1)[0]) > g._margin >= float(g.evaluate(*h2)[0])  # only the latency makes it act
@@ -152,11 +164,18 @@ def test_bad_input_named(solved, space):
         g.act(None, {})
     with pytest.raises(ValueError, match="four finite numbers"):
         g.act(None, {"nominal_control": [1.0, np.nan, 0.0, 0.0]})
-    for kw, msg in (({"spacing": 0.0}, "spacing must be a finite number > 0"), ({"n_speed": 2}, "n_speed must be an integer >= 3"),
-                    ({"accel": -1.0}, "accel must be"), ({"cfl": 2.0}, "cfl must be in"), ({"order": 3}, "order must be 1 or 2"),
-                    ({"n_directions": 3}, "n_directions must be an integer >= 4"), ({"min_speed": 0.0}, "min_speed must be"),
-                    ({"clear_time": -0.1}, "clear_time must be"), ({"side_memory": float("nan")}, "side_memory must be"),
-                    ({"pad": -1.0}, "pad must be")):
+    for kw, msg in (
+        ({"spacing": 0.0}, "spacing must be a finite number > 0"),
+        ({"n_speed": 2}, "n_speed must be an integer >= 3"),
+        ({"accel": -1.0}, "accel must be"),
+        ({"cfl": 2.0}, "cfl must be in"),
+        ({"order": 3}, "order must be 1 or 2"),
+        ({"n_directions": 3}, "n_directions must be an integer >= 4"),
+        ({"min_speed": 0.0}, "min_speed must be"),
+        ({"clear_time": -0.1}, "clear_time must be"),
+        ({"side_memory": float("nan")}, "side_memory must be"),
+        ({"pad": -1.0}, "pad must be"),
+    ):
         with pytest.raises(ValueError, match=msg):
             QuadrotorHJGuardian(**kw)
     with pytest.raises(ValueError, match="quadrotor must be a dict"):
@@ -191,8 +210,12 @@ def test_fixed_clock_episode_the_pilot_crashes(tmp_path):
     def run(g, seed=2110268680):  # episode 10 of rmm-bench --seed 5 (a development seed)
         env = gym.make("QuadrotorRoomParallel-v0", clock="fixed:1")
         obs, info = env.reset(seed=seed)
-        g.reset(seed=seed, observation_space=env.observation_space, action_space=env.action_space,
-                privileged=env.unwrapped.privileged)
+        g.reset(
+            seed=seed,
+            observation_space=env.observation_space,
+            action_space=env.action_space,
+            privileged=env.unwrapped.privileged,
+        )
         while True:
             obs, r, te, tr, info = env.step(g.act(obs, info))
             if te or tr:
@@ -204,7 +227,9 @@ def test_fixed_clock_episode_the_pilot_crashes(tmp_path):
     assert outcome == "goal" and stats["n_active_ctrl_env_steps"] > 0
     # one value per leg, and one more over the arrival band of each leg climbing or descending more than 2 band_margin
     q = g.delegate
-    assert [len(v) for v in q._legs] == [1 + (v[0][0][1] - v[0][0][0] - 2 * q.band_margin > 2 * q.band_margin) for v in q._legs]
+    assert [len(v) for v in q._legs] == [
+        1 + (v[0][0][1] - v[0][0][0] - 2 * q.band_margin > 2 * q.band_margin) for v in q._legs
+    ]
     assert g.stats()["solves"] == sum(len(v) for v in q._legs) == 4
 
 
@@ -319,7 +344,9 @@ def test_follows_the_boundary_until_nearer_the_waypoint(solved):
     k = next(k for k in range(16) if safe(base - k * 2 * math.pi / 16))
     assert k > 0  # straight at the wall is unsafe
     ang = base - k * 2 * math.pi / 16
-    assert _world(g._choose(h1, nominal, 1.0, 0.0, 0.1)) == pytest.approx((1.5 * math.cos(ang), 1.5 * math.sin(ang)), abs=1e-9)
+    assert _world(g._choose(h1, nominal, 1.0, 0.0, 0.1)) == pytest.approx(
+        (1.5 * math.cos(ang), 1.5 * math.sin(ang)), abs=1e-9
+    )
     # nearer than at the takeover: the pilot's command itself, safe here
     g._turn, g._hit = 0, math.inf
     assert _world(g._choose(h1, nominal, 1.0, 0.0, 0.1)) == pytest.approx((-1.5, 0.0), abs=1e-12)

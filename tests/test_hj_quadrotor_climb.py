@@ -6,16 +6,17 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
+from rmm_envs.systems.rotations import quat_from_euler
+from rmm_envs.worlds.room_collision import BOUND
+from rmm_envs.worlds.rooms import Room
 from rmm_guardians import make_guardian
 from rmm_guardians.hj.quadrotor import QuadrotorHJGuardian
 from rmm_guardians.hj.quadrotor_climb import DESCEND, SETTLE, Climb, ClimbPlan
 from rmm_guardians.hj.room import object_top, room_distance
-from rmm_envs.systems.rotations import quat_from_euler
-from rmm_envs.worlds.room_collision import BOUND
-from rmm_envs.worlds.rooms import Room
 
 CLEAR = BOUND + 0.15  # the body's bounding radius and the default climb_margin
 
@@ -23,11 +24,21 @@ CLEAR = BOUND + 0.15  # the body's bounding radius and the default climb_margin
 def corridor(height=1.2, objects=()):
     """A room 21 m x 10.5 m (x from -8.5 to 12.5, y from -5.25 to 5.25) closed by walls 4 m high,
     cut across by a wall ``height`` m high at x from 0 to 1: no way round it."""
-    walls = [(0.5, 0.0, height / 2, 0.5, 5.0, height / 2),
-             (2.0, 5.25, 2.0, 10.5, 0.25, 2.0), (2.0, -5.25, 2.0, 10.5, 0.25, 2.0),
-             (-8.75, 0.0, 2.0, 0.25, 5.5, 2.0), (12.75, 0.0, 2.0, 0.25, 5.5, 2.0)]
-    return Room(footprint=np.ones((41, 21), bool), origin=np.array([-8.5, -5.25]), cell=0.5, wall_height=4.0,
-                walls=np.array(walls, float), objects=list(objects))
+    walls = [
+        (0.5, 0.0, height / 2, 0.5, 5.0, height / 2),
+        (2.0, 5.25, 2.0, 10.5, 0.25, 2.0),
+        (2.0, -5.25, 2.0, 10.5, 0.25, 2.0),
+        (-8.75, 0.0, 2.0, 0.25, 5.5, 2.0),
+        (12.75, 0.0, 2.0, 0.25, 5.5, 2.0),
+    ]
+    return Room(
+        footprint=np.ones((41, 21), bool),
+        origin=np.array([-8.5, -5.25]),
+        cell=0.5,
+        wall_height=4.0,
+        walls=np.array(walls, float),
+        objects=list(objects),
+    )
 
 
 def fly(room, opts, cache_dir, t_max=25.0):
@@ -39,8 +50,12 @@ def fly(room, opts, cache_dir, t_max=25.0):
     s0[:3], s0[6] = (-3.0, 0.0, 1.0), 1.0
     obs, info = env.reset(seed=0, options={"room": room, "state": s0, "waypoints": [[5.0, 0.0, 1.0]]})
     g = make_guardian("hj", env_id="QuadrotorRoomGuarded-v0", cache_dir=cache_dir, threads=1, quadrotor=opts)
-    g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space,
-            privileged=env.unwrapped.privileged)
+    g.reset(
+        seed=0,
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        privileged=env.unwrapped.privileged,
+    )
     path = []
     while True:
         obs, _, te, tr, info = env.step(g.act(obs, info))
@@ -95,7 +110,12 @@ def test_plan_height_is_the_highest_top_near_the_line():
 def test_never_descends_onto_an_obstacle():
     # a pole 2 m long (0.2 m thick) leaning 45 degrees over the waypoint (5, 0, 0.85): the waypoint
     # itself is clear (0.25 m round the body) but the column above it runs into the pole's top
-    pole = {"shape": "box", "pos": [6.0, 0.0, 0.78], "quat": quat_from_euler(0.0, -math.pi / 4, 0.0), "size": [0.1, 0.1, 1.0]}
+    pole = {
+        "shape": "box",
+        "pos": [6.0, 0.0, 0.78],
+        "quat": quat_from_euler(0.0, -math.pi / 4, 0.0),
+        "size": [0.1, 0.1, 1.0],
+    }
     room = corridor(1.2, [pole])
     assert room_distance(room, [[5.0, 0.0, 0.85]])[0] - BOUND == pytest.approx(0.658 - 0.1 - BOUND, abs=0.01)
     assert room_distance(room, [[5.0, 0.0, 1.5]])[0] < BOUND
@@ -110,13 +130,23 @@ def test_never_descends_onto_an_obstacle():
 
 
 @settings(max_examples=40, deadline=None)
-@given(x=st.floats(-7.0, 11.0), y=st.floats(-4.0, 4.0), z=st.floats(0.5, 2.0), wx=st.floats(-7.0, 11.0),
-       wy=st.floats(-4.0, 4.0), wz=st.floats(0.5, 2.0), yaw=st.floats(-3.0, 3.0), tilt=st.floats(-1.0, 1.0))
+@given(
+    x=st.floats(-7.0, 11.0),
+    y=st.floats(-4.0, 4.0),
+    z=st.floats(0.5, 2.0),
+    wx=st.floats(-7.0, 11.0),
+    wy=st.floats(-4.0, 4.0),
+    wz=st.floats(0.5, 2.0),
+    yaw=st.floats(-3.0, 3.0),
+    tilt=st.floats(-1.0, 1.0),
+)
 def test_every_plan_leaves_its_margin_along_its_whole_path(x, y, z, wx, wy, wz, yaw, tilt):
     # a room with a tilted box and a sphere beside the low wall: whatever the body and the
     # waypoint, a plan's path (rise column, line at z_c, descent column) stays clear
-    objects = [{"shape": "box", "pos": [3.0, 1.0, 0.7], "quat": quat_from_euler(tilt, 0.3, yaw), "size": [0.5, 0.2, 0.4]},
-               {"shape": "sphere", "pos": [-3.0, -1.0, 0.9], "quat": [0.0, 0.0, 0.0, 1.0], "size": [0.9]}]
+    objects = [
+        {"shape": "box", "pos": [3.0, 1.0, 0.7], "quat": quat_from_euler(tilt, 0.3, yaw), "size": [0.5, 0.2, 0.4]},
+        {"shape": "sphere", "pos": [-3.0, -1.0, 0.9], "quat": [0.0, 0.0, 0.0, 1.0], "size": [0.9]},
+    ]
     room = corridor(1.2, objects)
     plan = Climb(room, 0.15, 6.0, 1.0, 2.5).plan((x, y), (x, y), (0.0, 0.0), z, (wx, wy, wz))
     if plan is None:
@@ -150,24 +180,41 @@ def test_commands_of_each_phase():
 
 
 def test_room_distance_and_tops_hand_computed():
-    room = corridor(1.2, [{"shape": "cylinder", "pos": [-4.0, 2.0, 0.5], "quat": quat_from_euler(math.pi / 2, 0.0, 0.0),
-                           "size": [0.5, 1.0]}])
+    room = corridor(
+        1.2,
+        [
+            {
+                "shape": "cylinder",
+                "pos": [-4.0, 2.0, 0.5],
+                "quat": quat_from_euler(math.pi / 2, 0.0, 0.0),
+                "size": [0.5, 1.0],
+            }
+        ],
+    )
     d = room_distance(room, [[-0.7, 0.0, 1.0], [0.5, 0.0, 2.2], [-4.0, 2.0, 1.5], [-6.0, 0.0, 0.3]])
     # 0.7 m from the wall's face (the floor 1 m below); 1 m above its top; the lying cylinder (axis along y, radius 0.5,
     # centre 0.5 m up) 0.5 m below; the floor 0.3 m below
     assert d == pytest.approx([0.7, 1.0, 0.5, 0.3])
     assert object_top(room.objects[0]) == pytest.approx(1.0)
-    box = {"shape": "box", "pos": [0.0, 0.0, 1.0], "quat": quat_from_euler(0.0, math.pi / 4, 0.0), "size": [0.5, 0.5, 0.5]}
+    box = {
+        "shape": "box",
+        "pos": [0.0, 0.0, 1.0],
+        "quat": quat_from_euler(0.0, math.pi / 4, 0.0),
+        "size": [0.5, 0.5, 0.5],
+    }
     assert object_top(box) == pytest.approx(1.0 + 0.5 * math.sqrt(2.0))
 
 
-@pytest.mark.parametrize("kw, msg", [
-    ({"climb_after": -1.0}, "climb_after must be a finite number >= 0.0, got -1.0"),
-    ({"climb_after": "soon"}, "climb_after must be a number, got 'soon'"),
-    ({"climb_margin": 0.0}, "climb_margin must be a finite number > 0.0, got 0.0"),
-    ({"climb_ceiling": float("nan")}, "climb_ceiling must be a finite number > 0.0, got nan"),
-    ({"climb_speed": float("inf")}, "climb_speed must be a finite number > 0.0, got inf"),
-])
+@pytest.mark.parametrize(
+    "kw, msg",
+    [
+        ({"climb_after": -1.0}, "climb_after must be a finite number >= 0.0, got -1.0"),
+        ({"climb_after": "soon"}, "climb_after must be a number, got 'soon'"),
+        ({"climb_margin": 0.0}, "climb_margin must be a finite number > 0.0, got 0.0"),
+        ({"climb_ceiling": float("nan")}, "climb_ceiling must be a finite number > 0.0, got nan"),
+        ({"climb_speed": float("inf")}, "climb_speed must be a finite number > 0.0, got inf"),
+    ],
+)
 def test_bad_climb_options_named(kw, msg):
     with pytest.raises(ValueError, match=msg):
         QuadrotorHJGuardian(**kw)

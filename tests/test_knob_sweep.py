@@ -7,19 +7,39 @@ import pytest
 from benchmarks import knob_sweep
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--agent", "random", "--knob", "p_active", "--values", "0,x"], "--values must be comma-separated JSON"),
-    (["--agent", "random", "--knob", "p_active", "--values", ","], "--values is empty"),
-    (["--agent", "random", "--knob", "p_active", "--values", "0", "--episodes", "0"], "--episodes must be >= 1"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--agent", "random", "--knob", "p_active", "--values", "0,x"], "--values must be comma-separated JSON"),
+        (["--agent", "random", "--knob", "p_active", "--values", ","], "--values is empty"),
+        (["--agent", "random", "--knob", "p_active", "--values", "0", "--episodes", "0"], "--episodes must be >= 1"),
+    ],
+)
 def test_bad_arguments_exit_2_naming_the_flag(argv, message, tmp_path, capsys):
     assert knob_sweep.main(argv + ["--out", str(tmp_path)]) == 2
     assert message in capsys.readouterr().err
 
 
 def test_sweep_runs_each_value_and_marks_the_default(tmp_path):
-    rc = knob_sweep.main(["--agent", "random", "--knob", "p_active", "--values", "0,1", "--default", "1.0",
-                          "--episodes", "2", "--workers", "1", "--no-reference", "--out", str(tmp_path)])
+    rc = knob_sweep.main(
+        [
+            "--agent",
+            "random",
+            "--knob",
+            "p_active",
+            "--values",
+            "0,1",
+            "--default",
+            "1.0",
+            "--episodes",
+            "2",
+            "--workers",
+            "1",
+            "--no-reference",
+            "--out",
+            str(tmp_path),
+        ]
+    )
     assert rc == 0
     md = (tmp_path / "random_p_active.md").read_text().splitlines()
     rows = [line for line in md if line.startswith("| 0") or line.startswith("| 1")]

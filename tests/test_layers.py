@@ -51,13 +51,21 @@ def upward_imports(package: str) -> list[str]:
 
 
 def test_the_scanner_sees_imports_at_any_depth_and_resolves_relative_ones(tmp_path):
-    src = ("import os\nfrom . import sibling\nfrom ..up import thing\n"
-           "def f():\n    import rmm_bench\n    class C:\n        from rmm_guardians import make_guardian\n"
-           "try:\n    import rmm_guardians.hj as hj\nexcept ImportError:\n    pass\n")
+    src = (
+        "import os\nfrom . import sibling\nfrom ..up import thing\n"
+        "def f():\n    import rmm_bench\n    class C:\n        from rmm_guardians import make_guardian\n"
+        "try:\n    import rmm_guardians.hj as hj\nexcept ImportError:\n    pass\n"
+    )
     (tmp_path / "m.py").write_text(src)
     got = imported_modules(tmp_path / "m.py", "rmm_envs.envs")
-    assert sorted(got) == [(1, "os"), (2, "rmm_envs.envs"), (3, "rmm_envs.up"), (5, "rmm_bench"), (7, "rmm_guardians"),
-                           (9, "rmm_guardians.hj")]
+    assert sorted(got) == [
+        (1, "os"),
+        (2, "rmm_envs.envs"),
+        (3, "rmm_envs.up"),
+        (5, "rmm_bench"),
+        (7, "rmm_guardians"),
+        (9, "rmm_guardians.hj"),
+    ]
     assert _module_package(ROOT / "rmm_envs" / "envs" / "dubins4d.py") == "rmm_envs.envs"
     assert _module_package(ROOT / "rmm_envs" / "envs" / "__init__.py") == "rmm_envs.envs"
 
@@ -73,11 +81,18 @@ def _reads_environment(path: Path) -> list[int]:
     tree = ast.parse(path.read_text(), filename=str(path))
     lines = []
     for node in ast.walk(tree):
-        if isinstance(node, ast.Attribute) and node.attr in ("environ", "getenv", "environb") and \
-                isinstance(node.value, ast.Name) and node.value.id == "os":
+        if (
+            isinstance(node, ast.Attribute)
+            and node.attr in ("environ", "getenv", "environb")
+            and isinstance(node.value, ast.Name)
+            and node.value.id == "os"
+        ):
             lines.append(node.lineno)
-        elif isinstance(node, ast.ImportFrom) and node.module == "os" and \
-                any(a.name in ("environ", "getenv", "environb") for a in node.names):
+        elif (
+            isinstance(node, ast.ImportFrom)
+            and node.module == "os"
+            and any(a.name in ("environ", "getenv", "environb") for a in node.names)
+        ):
             lines.append(node.lineno)
     return lines
 
@@ -86,8 +101,12 @@ def test_environment_variables_are_read_in_one_configuration_module_only():
     """``rmm_envs/settings.py`` reads every setting taken from the environment; the one other
     reader, ``benchmarks/arith.py``, copies the environment for its child interpreters."""
     allowed = {ROOT / "rmm_envs" / "settings.py", ROOT / "benchmarks" / "arith.py"}
-    found = {str(p.relative_to(ROOT)): lines for pkg in ("rmm_envs", "guardians", "benchmarks")
-             for p in sorted((ROOT / pkg).rglob("*.py")) if p not in allowed and (lines := _reads_environment(p))}
+    found = {
+        str(p.relative_to(ROOT)): lines
+        for pkg in ("rmm_envs", "guardians", "benchmarks")
+        for p in sorted((ROOT / pkg).rglob("*.py"))
+        if p not in allowed and (lines := _reads_environment(p))
+    }
     assert found == {}
     assert _reads_environment(ROOT / "rmm_envs" / "settings.py")  # the check sees a real reader
 

@@ -5,19 +5,22 @@ import numpy as np
 import pytest
 
 import rmm_envs  # noqa: F401
-from rmm_guardians.lrmm.guardian import LRMMGuardian
-from rmm_guardians.lrmm.model import LRMMModel, default_model_path, load_model
-from rmm_guardians.lrmm.train import TrainConfig, main as train_main, split_by_config, train
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
 from rmm_envs.systems.dubins4d import Dubins4D
+from rmm_guardians.lrmm.guardian import LRMMGuardian
+from rmm_guardians.lrmm.model import LRMMModel, default_model_path, load_model
+from rmm_guardians.lrmm.train import TrainConfig, split_by_config, train
+from rmm_guardians.lrmm.train import main as train_main
 
 
 def env_spaces(n_rays=12, layout=None):
     """The spaces a Dubins4D env with ``n_rays`` rays gives its guardian at reset."""
     lay = layout or observation_layout(n_rays)
-    return {"observation_space": ObservationBox(np.full(lay.size, -np.inf), np.full(lay.size, np.inf), lay),
-            "action_space": GuardianActionSpace.for_system(Dubins4D(), CONTROLS)}
+    return {
+        "observation_space": ObservationBox(np.full(lay.size, -np.inf), np.full(lay.size, np.inf), lay),
+        "action_space": GuardianActionSpace.for_system(Dubins4D(), CONTROLS),
+    }
 
 
 SPACES = env_spaces()
@@ -56,7 +59,9 @@ def test_scaler_is_fitted_on_the_training_split_only(small_dataset, trained):
     np.testing.assert_array_equal(trained.scaler_min, obs[tr].min(axis=0))
     rng = obs[tr].max(axis=0) - obs[tr].min(axis=0)
     np.testing.assert_allclose(trained.scaler_scale, np.where(rng > 0, 1 / np.where(rng > 0, rng, 1), 1))
-    assert not np.array_equal(obs[tr].min(axis=0), obs.min(axis=0)) or not np.array_equal(obs[tr].max(axis=0), obs.max(axis=0))
+    assert not np.array_equal(obs[tr].min(axis=0), obs.min(axis=0)) or not np.array_equal(
+        obs[tr].max(axis=0), obs.max(axis=0)
+    )
     split = trained.meta["split"]
     assert set(split["test_configs"]).isdisjoint(split["train_configs"])
 
@@ -99,7 +104,9 @@ def test_training_is_deterministic(small_dataset):
 
 def test_configurable_architecture_and_features(small_dataset):
     ds, _ = small_dataset
-    m = train(ds, TrainConfig(hidden=(16, 8), activation="tanh", output_bias=True, epochs=1, features=[4, 5, 6]), log=quiet)
+    m = train(
+        ds, TrainConfig(hidden=(16, 8), activation="tanh", output_bias=True, epochs=1, features=[4, 5, 6]), log=quiet
+    )
     assert [W.shape for W, _ in m.weights] == [(16, 3), (8, 16), (1, 8)]
     assert m.weights[-1][1] is not None
     assert 0 < m.predict(ds.obs[0]) < 1
@@ -115,8 +122,16 @@ def test_training_refuses_empty_and_single_configuration(small_dataset):
         train(empty, TrainConfig(epochs=1), log=quiet)
 
 
-@pytest.mark.parametrize("kw, match", [({"hidden": ()}, "hidden"), ({"epochs": 0}, "epochs"), ({"lr": 0}, "lr"),
-                                       ({"val_frac": 0.6, "test_frac": 0.5}, "val_frac"), ({"activation": "gelu"}, "activation")])
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        ({"hidden": ()}, "hidden"),
+        ({"epochs": 0}, "epochs"),
+        ({"lr": 0}, "lr"),
+        ({"val_frac": 0.6, "test_frac": 0.5}, "val_frac"),
+        ({"activation": "gelu"}, "activation"),
+    ],
+)
 def test_bad_training_config(kw, match):
     with pytest.raises(ValueError, match=match):
         TrainConfig(**kw)
@@ -175,8 +190,14 @@ def forward_ray_model(obs_dim=17):
     b0 = np.array([8.0])  # hidden = sigmoid(8 - 4 ray0): ~1 when ray0 < 1.5, ~0 when ray0 > 2.5
     W1 = np.array([[10.0]])
     b1 = np.array([-5.0])  # risk = sigmoid(10 h - 5): ~0.99 or ~0.007
-    meta = {"env_id": "Dubins4DGuarded-v0", "obs_dim": obs_dim, "features": list(range(obs_dim)), "hidden": [1],
-            "activation": "sigmoid", "output_bias": True}
+    meta = {
+        "env_id": "Dubins4DGuarded-v0",
+        "obs_dim": obs_dim,
+        "features": list(range(obs_dim)),
+        "hidden": [1],
+        "activation": "sigmoid",
+        "output_bias": True,
+    }
     return LRMMModel([(W0, b0), (W1, b1)], np.zeros(obs_dim), np.ones(obs_dim), meta)
 
 
@@ -239,7 +260,9 @@ def test_lrmm_refuses_at_reset_spaces_that_lack_what_it_needs():
     with pytest.raises(ValueError, match=r"guardian 'lrmm'.*shape \(17,\).*None"):
         heur.reset(seed=0, action_space=SPACES["action_space"])
     head = LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5}))
-    head.reset(seed=0, observation_space=gym.spaces.Box(-1, 1, (17,)), action_space=SPACES["action_space"])  # no rays needed
+    head.reset(
+        seed=0, observation_space=gym.spaces.Box(-1, 1, (17,)), action_space=SPACES["action_space"]
+    )  # no rays needed
     three = GuardianActionSpace(("a", "b", "c"), [-1, -1, -1], [1, 1, 1])
     with pytest.raises(ValueError, match="guardian 'lrmm'.*2 controls"):
         head.reset(seed=0, observation_space=SPACES["observation_space"], action_space=three)
@@ -273,11 +296,17 @@ def test_lrmm_guardian_bad_input():
 
 
 def test_a_mistyped_env_id_is_named_as_such_not_answered_with_commands_to_train_for_it():
-    with pytest.raises(ValueError, match=r"^no env 'Dubins4DCirclesParalel-v0' is registered \(did you mean "
-                                         r"'Dubins4DParallel-v0'\?\); the shipped LRMM models are for \["):
+    with pytest.raises(
+        ValueError,
+        match=r"^no env 'Dubins4DCirclesParalel-v0' is registered \(did you mean "
+        r"'Dubins4DParallel-v0'\?\); the shipped LRMM models are for \[",
+    ):
         default_model_path("Dubins4DCirclesParalel-v0")
-    with pytest.raises(ValueError, match=r"^no shipped LRMM model for 'Dubins4DGuarded-v0' \(variant 'actt'\); "
-                                         r"its variants: \['act', 'paper'\]$"):
+    with pytest.raises(
+        ValueError,
+        match=r"^no shipped LRMM model for 'Dubins4DGuarded-v0' \(variant 'actt'\); "
+        r"its variants: \['act', 'paper'\]$",
+    ):
         default_model_path("Dubins4DGuarded-v0", variant="actt")
 
 
@@ -288,8 +317,9 @@ def test_shipped_model_loads_and_is_documented():
     # a model recorded under an old id is the model of its new id (and still of no other env)
     for env_id in ("Dubins4DGuarded-v0", "Dubins4DCircles-v0"):
         assert LRMMModel.load(default_model_path(), env_id=env_id).meta["weights_sha256"] == m.meta["weights_sha256"]
-    with pytest.raises(ValueError, match="trained for env 'Dubins4DCircles-v0' .now 'Dubins4DGuarded-v0'., "
-                                         "not 'Dubins4DParallel-v0'"):
+    with pytest.raises(
+        ValueError, match="trained for env 'Dubins4DCircles-v0' .now 'Dubins4DGuarded-v0'., not 'Dubins4DParallel-v0'"
+    ):
         LRMMModel.load(default_model_path(), env_id="Dubins4DParallel-v0")
     assert m.meta["data"]["n_rows"] >= 35072 and m.meta["data"]["configs"] >= 274
     assert m.meta["metrics"]["test"]["mae"] <= 0.030
@@ -303,8 +333,12 @@ def test_candidate_labels_exact_on_a_line():
     from tests.toy_systems import Line1D
 
     est = RiskEstimator(Line1D(), branches=4, depth=0, horizon=1.0, n_steps=5)
-    r = est.estimate_candidates(np.array([[0.0], [0.5], [1.5]]), [[0.0], [0.6], [2.0]], hold=1.0, rng=np.random.default_rng(0))
-    np.testing.assert_array_equal(r, [[0, 0, 1], [0, 1, 1], [1, 1, 1]])  # 0.6 < 1 but 0.5 + 0.6 >= 1; x=1.5 starts failed
+    r = est.estimate_candidates(
+        np.array([[0.0], [0.5], [1.5]]), [[0.0], [0.6], [2.0]], hold=1.0, rng=np.random.default_rng(0)
+    )
+    np.testing.assert_array_equal(
+        r, [[0, 0, 1], [0, 1, 1], [1, 1, 1]]
+    )  # 0.6 < 1 but 0.5 + 0.6 >= 1; x=1.5 starts failed
 
 
 def test_candidate_labels_then_random_tree_on_a_line():
@@ -317,19 +351,30 @@ def test_candidate_labels_then_random_tree_on_a_line():
     np.testing.assert_allclose(r[0], [2 / 3, 2.5 / 3], atol=0.03)
     a = est.estimate_candidates(np.zeros((3, 1)), [[0.0], [0.5]], hold=1.0, rng=np.random.default_rng(7))
     b = RiskEstimator(Line1D(), branches=4000, depth=1, horizon=1.0, n_steps=5, chunk_size=1).estimate_candidates(
-        np.zeros((3, 1)), [[0.0], [0.5]], hold=1.0, rng=np.random.default_rng(7))
+        np.zeros((3, 1)), [[0.0], [0.5]], hold=1.0, rng=np.random.default_rng(7)
+    )
     np.testing.assert_array_equal(a, b)  # independent of the chunk size
 
 
-@pytest.mark.parametrize("kw, match", [({"candidates": [[5.0]]}, "control box"), ({"candidates": [[np.nan]]}, "finite"),
-                                       ({"candidates": [0.0]}, "shape"), ({"hold": 0.0}, "hold"), ({"hold": np.inf}, "hold")])
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        ({"candidates": [[5.0]]}, "control box"),
+        ({"candidates": [[np.nan]]}, "finite"),
+        ({"candidates": [0.0]}, "shape"),
+        ({"hold": 0.0}, "hold"),
+        ({"hold": np.inf}, "hold"),
+    ],
+)
 def test_candidate_labels_bad_input(kw, match):
     from rmm_envs.risk.estimator import RiskEstimator
     from tests.toy_systems import Line1D
 
     args = {"candidates": [[0.0]], "hold": 1.0} | kw
     with pytest.raises(ValueError, match=match):
-        RiskEstimator(Line1D(), branches=2, depth=1).estimate_candidates(np.zeros((1, 1)), rng=np.random.default_rng(0), **args)
+        RiskEstimator(Line1D(), branches=2, depth=1).estimate_candidates(
+            np.zeros((1, 1)), rng=np.random.default_rng(0), **args
+        )
 
 
 @pytest.fixture(scope="module")
@@ -337,12 +382,24 @@ def cand_dataset(tmp_path_factory):
     from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 
     out = tmp_path_factory.mktemp("data") / "d4cand"
-    cfg = DatagenConfig(configs=6, samples_per_config=16, branches=4, depth=1, configs_per_shard=3, seed=11,
-                        candidates=[[-0.25, -0.5], [0.25, 0.5]], candidate_hold=0.5)
+    cfg = DatagenConfig(
+        configs=6,
+        samples_per_config=16,
+        branches=4,
+        depth=1,
+        configs_per_shard=3,
+        seed=11,
+        candidates=[[-0.25, -0.5], [0.25, 0.5]],
+        candidate_hold=0.5,
+    )
     generate(cfg, out, workers=1, progress=False)
     plain = tmp_path_factory.mktemp("data") / "d4plain"
-    generate(DatagenConfig(configs=6, samples_per_config=16, branches=4, depth=1, configs_per_shard=3, seed=11), plain,
-             workers=1, progress=False)
+    generate(
+        DatagenConfig(configs=6, samples_per_config=16, branches=4, depth=1, configs_per_shard=3, seed=11),
+        plain,
+        workers=1,
+        progress=False,
+    )
     return load_dataset(out), load_dataset(plain)
 
 
@@ -351,7 +408,10 @@ def test_datagen_candidates_add_a_column_and_leave_the_plain_labels_unchanged(ca
     assert ds.candidate_risk.shape == (96, 2) and plain.candidate_risk is None
     np.testing.assert_array_equal(ds.risk, plain.risk)
     np.testing.assert_array_equal(ds.obs, plain.obs)
-    assert ds.meta["estimator"]["candidates"] == [[-0.25, -0.5], [0.25, 0.5]] and ds.meta["estimator"]["candidate_hold"] == 0.5
+    assert (
+        ds.meta["estimator"]["candidates"] == [[-0.25, -0.5], [0.25, 0.5]]
+        and ds.meta["estimator"]["candidate_hold"] == 0.5
+    )
     assert "candidates" not in plain.meta["estimator"]
 
 
@@ -411,7 +471,9 @@ def test_set_decision_round_trip_and_bad_values(tmp_path, head_model, trained):
     assert LRMMGuardian(p).action == "heuristic" and LRMMGuardian(p, action="head").action == "head"
     with pytest.raises(ValueError, match="candidates"):
         set_decision(trained.save(tmp_path / "old.npz"), 0.5, 1, "x")
-    assert decision_main([str(tmp_path / "missing.npz"), "--threshold", "0.4", "--commit", "1", "--chosen-by", "x"]) == 2
+    assert (
+        decision_main([str(tmp_path / "missing.npz"), "--threshold", "0.4", "--commit", "1", "--chosen-by", "x"]) == 2
+    )
 
 
 def _rewrite(src, dst, edit_meta=None, edit_arrays=None):
@@ -477,7 +539,9 @@ def test_non_finite_weights_are_refused_everywhere(tmp_path, trained):
     with pytest.raises(ValueError, match="'b0'"):
         ok.save(tmp_path / "never.npz")
     assert not (tmp_path / "never.npz").exists()
-    p = _rewrite(tmp_path / "ok.npz", tmp_path / "nan.npz", edit_arrays=lambda a: a["scaler_scale"].__setitem__(2, np.nan))
+    p = _rewrite(
+        tmp_path / "ok.npz", tmp_path / "nan.npz", edit_arrays=lambda a: a["scaler_scale"].__setitem__(2, np.nan)
+    )
     with pytest.raises(ValueError, match="nan.npz.*'scaler_scale'"):
         LRMMModel.load(p)
 
@@ -486,10 +550,20 @@ def test_non_finite_risk_is_an_error_not_safe():
     """Finite weights can still overflow to inf - inf = NaN; the guardian must raise, not read it as 'safe'."""
     W0 = np.zeros((1, 17))
     W0[0, 5], W0[0, 6] = 1e308, -1e308
-    meta = {"env_id": "Dubins4DGuarded-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1],
-            "activation": "relu", "output_bias": False, "decision": {"threshold": 0.5}}
+    meta = {
+        "env_id": "Dubins4DGuarded-v0",
+        "obs_dim": 17,
+        "features": list(range(17)),
+        "hidden": [1],
+        "activation": "relu",
+        "output_bias": False,
+        "decision": {"threshold": 0.5},
+    }
     m = LRMMModel([(W0, np.zeros(1)), (np.ones((1, 1)), None)], np.zeros(17), np.ones(17), meta)
-    for g in (LRMMGuardian(m, action="heuristic"), __import__("rmm_guardians.lrmm.guardian", fromlist=["x"]).LRMMPaperGuardian(m)):
+    for g in (
+        LRMMGuardian(m, action="heuristic"),
+        __import__("rmm_guardians.lrmm.guardian", fromlist=["x"]).LRMMPaperGuardian(m),
+    ):
         g.reset(seed=0, **SPACES)
         with np.errstate(all="ignore"), pytest.raises(ValueError, match="non-finite risk"):
             g.act(obs_with(10.0, 10.0, 10.0), {})
@@ -503,7 +577,12 @@ def test_training_divergence_is_a_clear_error(small_dataset, tmp_path, capsys):
         train(ds, TrainConfig(epochs=2, lr=1e308, select="last"), log=quiet)
     for sel in ("last", "best"):
         out = tmp_path / f"m_{sel}.npz"
-        assert train_main(["--data", str(path), "--out", str(out), "--epochs", "2", "--lr", "1e308", "--select", sel, "--quiet"]) == 2
+        assert (
+            train_main(
+                ["--data", str(path), "--out", str(out), "--epochs", "2", "--lr", "1e308", "--select", sel, "--quiet"]
+            )
+            == 2
+        )
         assert "diverged" in capsys.readouterr().err and not out.exists()
     assert train_main(["--data", str(path), "--out", str(tmp_path / "i.npz"), "--lr", "inf", "--quiet"]) == 2
     assert "lr must be a finite number" in capsys.readouterr().err
@@ -519,10 +598,17 @@ def test_test_split_labels_never_reach_the_loss(small_dataset):
     b = train(poisoned, TrainConfig(epochs=3, seed=2), log=quiet)
     for (Wa, ba), (Wb, bb) in zip(a.weights, b.weights):
         np.testing.assert_array_equal(Wa, Wb)
-    assert a.meta["metrics"]["train"] == b.meta["metrics"]["train"] and a.meta["metrics"]["val"] == b.meta["metrics"]["val"]
-    assert b.meta["metrics"]["test"]["mae"] > a.meta["metrics"]["test"]["mae"] + 0.1  # scored on the poison, never fitted
+    assert (
+        a.meta["metrics"]["train"] == b.meta["metrics"]["train"]
+        and a.meta["metrics"]["val"] == b.meta["metrics"]["val"]
+    )
+    assert (
+        b.meta["metrics"]["test"]["mae"] > a.meta["metrics"]["test"]["mae"] + 0.1
+    )  # scored on the poison, never fitted
     # and poisoning the training labels does change the model (the test above can fail)
-    c = train(dataclasses.replace(ds, risk=np.where(tr, 1.0 - ds.risk, ds.risk)), TrainConfig(epochs=3, seed=2), log=quiet)
+    c = train(
+        dataclasses.replace(ds, risk=np.where(tr, 1.0 - ds.risk, ds.risk)), TrainConfig(epochs=3, seed=2), log=quiet
+    )
     assert not np.array_equal(a.weights[0][0], c.weights[0][0])
 
 
@@ -544,13 +630,25 @@ def head_model_by_hand(risks_bias=(0.0, 1.0, -1.0, 2.0), decision=None):
     W0 = np.zeros((1, 17))
     W0[0, 5] = -1.0
     W1 = np.array([[1.0], [0.0], [0.0], [0.0]])
-    meta = {"env_id": "Dubins4DGuarded-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1], "activation": "relu",
-            "output_bias": True, "candidates": [[-0.25, -0.5], [0.25, -0.5], [0.0, 0.5]], "candidate_hold": 1.0}
+    meta = {
+        "env_id": "Dubins4DGuarded-v0",
+        "obs_dim": 17,
+        "features": list(range(17)),
+        "hidden": [1],
+        "activation": "relu",
+        "output_bias": True,
+        "candidates": [[-0.25, -0.5], [0.25, -0.5], [0.0, 0.5]],
+        "candidate_hold": 1.0,
+    }
     if decision:
         meta["decision"] = decision
     # hidden = relu(10 - ray0) >= 0 for rays <= 10; risk = sigmoid(h + b0 - 8)
-    return LRMMModel([(W0, np.array([10.0])), (W1, np.array(risks_bias) + np.array([-8.0, 0, 0, 0]))],
-                     np.zeros(17), np.ones(17), meta)
+    return LRMMModel(
+        [(W0, np.array([10.0])), (W1, np.array(risks_bias) + np.array([-8.0, 0, 0, 0]))],
+        np.zeros(17),
+        np.ones(17),
+        meta,
+    )
 
 
 def test_rule_is_strictly_above_the_threshold():
@@ -593,12 +691,30 @@ def test_defaults_are_pinned():
 
     assert PAPER_THRESHOLD == 0.85
     sig = inspect.signature(LRMMGuardian.__init__).parameters
-    assert {k: sig[k].default for k in ("model", "threshold", "action", "hysteresis", "window", "commit", "u1_max", "u2_min")} == \
-        {"model": None, "threshold": None, "action": None, "hysteresis": False, "window": 20, "commit": None, "u1_max": None, "u2_min": None}
+    assert {
+        k: sig[k].default
+        for k in ("model", "threshold", "action", "hysteresis", "window", "commit", "u1_max", "u2_min")
+    } == {
+        "model": None,
+        "threshold": None,
+        "action": None,
+        "hysteresis": False,
+        "window": 20,
+        "commit": None,
+        "u1_max": None,
+        "u2_min": None,
+    }
     paper = LRMMPaperGuardian()
     paper.reset(seed=0, **SPACES)
     assert (paper.u1_max, paper.u2_min) == (0.25, -0.5)  # the Dubins4D control box, read from the action space
-    assert (paper.name, paper.threshold, paper.action, paper.commit, paper.hysteresis, paper.window) == ("lrmm-paper", 0.85, "heuristic", 0, False, 20)
+    assert (paper.name, paper.threshold, paper.action, paper.commit, paper.hysteresis, paper.window) == (
+        "lrmm-paper",
+        0.85,
+        "heuristic",
+        0,
+        False,
+        20,
+    )
     assert paper.model.path == default_model_path("Dubins4DGuarded-v0", variant="paper")
     g = LRMMGuardian()
     assert g.name == "lrmm" and g.model.path == default_model_path("Dubins4DGuarded-v0", variant="act")
@@ -622,8 +738,13 @@ def test_registry_names():
 
 def test_bad_guardian_arguments():
     m = head_model_by_hand(decision={"threshold": 0.5})
-    for kw, match in [({"commit": -1}, "commit"), ({"commit": 1.5}, "commit"), ({"action": "steer"}, "action"),
-                      ({"threshold": -0.1}, "threshold"), ({"window": 0}, "window")]:
+    for kw, match in [
+        ({"commit": -1}, "commit"),
+        ({"commit": 1.5}, "commit"),
+        ({"action": "steer"}, "action"),
+        ({"threshold": -0.1}, "threshold"),
+        ({"window": 0}, "window"),
+    ]:
         with pytest.raises(ValueError, match=match):
             LRMMGuardian(m, **kw)
     bad = head_model_by_hand(decision={"threshold": 1.5})
@@ -647,7 +768,10 @@ def test_heldout_sample_is_held_out(heldout):
     for variant in ("paper", "act"):
         m = load_model(default_model_path(variant=variant))
         assert m.meta["data"]["seed"] != params["seed"]  # other configurations than training/validation
-        assert m.meta["labeller"]["branches"] == params["estimator"]["branches"] and m.meta["labeller"]["depth"] == params["estimator"]["depth"]
+        assert (
+            m.meta["labeller"]["branches"] == params["estimator"]["branches"]
+            and m.meta["labeller"]["depth"] == params["estimator"]["depth"]
+        )
     act = load_model(default_model_path(variant="act"))
     np.testing.assert_array_equal(act.candidates, heldout["candidates"])
     assert act.candidate_hold == params["candidate_hold"]

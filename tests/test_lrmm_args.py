@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_guardians.lrmm.guardian import LRMMGuardian, LRMMPaperGuardian
 from rmm_guardians.lrmm.model import LRMMModel
-from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from tests.test_lrmm import SPACES, env_spaces, forward_ray_model, head_model_by_hand, obs_with
 from tests.test_lrmm_turn import TURN, U1, RaysModel, forward_risk, maze_obs, maze_spaces, nearest_wall_risk
 
@@ -37,7 +37,10 @@ def test_stored_decision_without_commit_commits_zero_steps_and_a_bad_stored_acti
     assert LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5})).commit == 0
     with pytest.raises(ValueError) as e:
         LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5, "action": "fly"}))
-    assert str(e.value) == "the model: stored decision action must be one of ('head', 'heuristic', 'turn', 'safe'), got 'fly'"
+    assert (
+        str(e.value)
+        == "the model: stored decision action must be one of ('head', 'heuristic', 'turn', 'safe'), got 'fly'"
+    )
     with pytest.raises(ValueError) as e:
         LRMMGuardian(forward_ray_model(), env_id=5)
     assert str(e.value) == "env_id must be a registered env id (str) or None, got 5"
@@ -124,29 +127,42 @@ def test_check_spaces_judges_the_spaces_it_is_given_before_any_reset():
     assert str(e.value) == "guardian 'lrmm' needs an action space with 2 controls, got 1 (('turnrate_ctrl',))"
     with pytest.raises(ValueError) as e:
         heur.check_spaces(no_rays_space, SPACES["action_space"])
-    assert str(e.value) == ("guardian 'lrmm' needs the observation field(s) ['rays']; the observation has "
-                            "['time', 'goal_offset', 'heading', 'speed', 'ranges']")
+    assert str(e.value) == (
+        "guardian 'lrmm' needs the observation field(s) ['rays']; the observation has "
+        "['time', 'goal_offset', 'heading', 'speed', 'ranges']"
+    )
     heur.check_spaces(SPACES["observation_space"], SPACES["action_space"])  # and what it needs passes
     turn = LRMMGuardian(RaysModel(forward_risk), threshold=0.3, action="turn", inputs="rays")
     with pytest.raises(ValueError) as e:
         turn.check_spaces(maze_spaces()["observation_space"], SPACES["action_space"])
-    assert str(e.value) == "guardian 'lrmm' needs an action space with 1 controls, got 2 (('turnrate_ctrl', 'accel_ctrl'))"
+    assert (
+        str(e.value) == "guardian 'lrmm' needs an action space with 1 controls, got 2 (('turnrate_ctrl', 'accel_ctrl'))"
+    )
     bare = ObservationLayout.of(("goal_offset", 2), ("heading", 1), ("ranges", 8))
     bare_space = ObservationBox(np.zeros(11, np.float32), np.ones(11, np.float32), bare)
     with pytest.raises(ValueError) as e:
         turn.check_spaces(bare_space, TURN)
-    assert str(e.value) == "guardian 'lrmm' needs the observation field(s) ['rays']; the observation has ['goal_offset', 'heading', 'ranges']"
+    assert (
+        str(e.value)
+        == "guardian 'lrmm' needs the observation field(s) ['rays']; the observation has ['goal_offset', 'heading', 'ranges']"
+    )
     turn.check_spaces(maze_spaces()["observation_space"], TURN)
     whole = LRMMGuardian(RaysModel(forward_risk, obs_dim=11), threshold=0.3, action="turn")  # reads all 11 numbers
     with pytest.raises(ValueError) as e:
         whole.check_spaces(bare_space, TURN)
-    assert str(e.value) == "guardian 'lrmm' needs the observation field(s) ['rays']; the observation has ['goal_offset', 'heading', 'ranges']"
+    assert (
+        str(e.value)
+        == "guardian 'lrmm' needs the observation field(s) ['rays']; the observation has ['goal_offset', 'heading', 'ranges']"
+    )
 
 
-@pytest.mark.parametrize("angles", [
-    [k * math.pi / 4 + (5e-9 if k == 1 else 0.0) for k in range(8)],  # one ray 5e-9 rad off
-    [k * math.pi / 4 + math.pi for k in range(8)],  # evenly spaced from straight behind
-])
+@pytest.mark.parametrize(
+    "angles",
+    [
+        [k * math.pi / 4 + (5e-9 if k == 1 else 0.0) for k in range(8)],  # one ray 5e-9 rad off
+        [k * math.pi / 4 + math.pi for k in range(8)],  # evenly spaced from straight behind
+    ],
+)
 def test_turn_needs_rays_from_the_heading_to_1e_9_rad(angles):
     lay = ObservationLayout.of(("rays", 8), ("goal_offset", 2), ("heading", 1), ray_angles=angles)
     g = LRMMGuardian(RaysModel(forward_risk), threshold=0.3, action="turn", inputs="rays")
@@ -158,8 +174,9 @@ def test_turn_needs_rays_from_the_heading_to_1e_9_rad(angles):
 
 @pytest.mark.parametrize("shift", [0.0, 2 * math.pi, -2 * math.pi])
 def test_the_sides_hold_for_angles_written_whole_turns_away(shift):
-    lay = ObservationLayout.of(("rays", 8), ("goal_offset", 2), ("heading", 1),
-                               ray_angles=[k * math.pi / 4 + shift for k in range(8)])
+    lay = ObservationLayout.of(
+        ("rays", 8), ("goal_offset", 2), ("heading", 1), ray_angles=[k * math.pi / 4 + shift for k in range(8)]
+    )
     g = LRMMGuardian(RaysModel(nearest_wall_risk), threshold=0.3, commit=0, action="turn", inputs="rays")
     g.reset(seed=0, **maze_spaces(lay))
     # the left side's nearest wall is ray 1 (45 degrees, 2), the right side's 3: turn right

@@ -13,11 +13,16 @@ from rmm_guardians.lrmm.shipped import Shipped
 SHIP = Shipped({"act": "x.npz"}, decision={"threshold": 0.6, "commit": 3, "chosen_by": "a test"})
 
 
-@pytest.mark.parametrize("bad, message", [
-    (True, "threshold must be a number in [0, 1], got True"), ("0.5", "threshold must be a number in [0, 1], got '0.5'"),
-    (1.5, "threshold must be in [0, 1], got 1.5"), (-0.1, "threshold must be in [0, 1], got -0.1"),
-    (math.nan, "threshold must be in [0, 1], got nan"),
-])
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        (True, "threshold must be a number in [0, 1], got True"),
+        ("0.5", "threshold must be a number in [0, 1], got '0.5'"),
+        (1.5, "threshold must be in [0, 1], got 1.5"),
+        (-0.1, "threshold must be in [0, 1], got -0.1"),
+        (math.nan, "threshold must be in [0, 1], got nan"),
+    ],
+)
 def test_a_bad_threshold_argument_is_refused_by_value(bad, message):
     with pytest.raises(ValueError) as e:
         check_threshold(bad)

@@ -8,18 +8,25 @@ import warnings
 import numpy as np
 import pytest
 
+from rmm_envs.autonomy import ObservationLayout
+from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel, set_decision
 from rmm_guardians.lrmm.nominal import PredictRater, make_rater
-from rmm_envs.autonomy import ObservationLayout
-from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
-from tests.test_lrmm import SPACES, env_spaces, head_model_by_hand, obs_with
+from tests.test_lrmm import SPACES, env_spaces, obs_with
 
 D4 = observation_layout(12)
 D4_LOW = np.array([0, -np.inf, -np.inf, -np.pi, 0] + [0] * 12, float)
 D4_HIGH = np.array([np.inf, np.inf, np.inf, np.pi, 2] + [10] * 12, float)
-QUAD = ObservationLayout.of(("rays", 8), ("rays_vertical", 2), ("orientation", 4), ("velocity", 3),
-                            ("angular_velocity", 3), ("goal_offset", 3), ray_angles=[k * math.pi / 4 for k in range(8)])
+QUAD = ObservationLayout.of(
+    ("rays", 8),
+    ("rays_vertical", 2),
+    ("orientation", 4),
+    ("velocity", 3),
+    ("angular_velocity", 3),
+    ("goal_offset", 3),
+    ray_angles=[k * math.pi / 4 for k in range(8)],
+)
 QUAD_CONTROLS = ("vforward_ctrl", "vleft_ctrl", "vup_ctrl", "yawrate_ctrl")
 
 
@@ -68,8 +75,16 @@ def speed_model(cand_bias=(0.0, -2.0, -1.0), decision=None):
     W0 = np.zeros((1, 17))
     W0[0, 4] = 4.0
     W1 = np.array([[1.0], [0.0], [0.0], [0.0]])
-    meta = {"env_id": "Dubins4DCircles-v0", "obs_dim": 17, "features": list(range(17)), "hidden": [1], "activation": "relu",
-            "output_bias": True, "candidates": [[-0.25, -0.5], [0.25, -0.5], [0.0, 0.5]], "candidate_hold": 1.0}
+    meta = {
+        "env_id": "Dubins4DCircles-v0",
+        "obs_dim": 17,
+        "features": list(range(17)),
+        "hidden": [1],
+        "activation": "relu",
+        "output_bias": True,
+        "candidates": [[-0.25, -0.5], [0.25, -0.5], [0.0, 0.5]],
+        "candidate_hold": 1.0,
+    }
     if decision:
         meta["decision"] = decision
     return LRMMModel([(W0, np.array([0.0])), (W1, np.array([-4.0, *cand_bias]))], np.zeros(17), np.ones(17), meta)
@@ -128,8 +143,14 @@ def test_restart_accelerates_a_slow_car_when_that_candidate_is_safe_enough():
     g.reset(seed=0, **SPACES)
     fast, slow = at(1.5), at(0.2)  # state risks 0.881 and 0.039
     steps = [g.act(o, {}) for o in (fast, fast, slow, slow, slow, slow)]
-    assert [(a["active_ctrl"], float(a["accel_ctrl"][0])) for a in steps] == \
-        [(1, -0.5), (1, -0.5), (1, 0.5), (1, 0.5), (1, 0.5), (0, 0.0)]  # brakes, then restarts, then hands back
+    assert [(a["active_ctrl"], float(a["accel_ctrl"][0])) for a in steps] == [
+        (1, -0.5),
+        (1, -0.5),
+        (1, 0.5),
+        (1, 0.5),
+        (1, 0.5),
+        (0, 0.0),
+    ]  # brakes, then restarts, then hands back
     strict = LRMMGuardian(speed_model(), threshold=0.25, commit=1, restart=0.3)  # accelerate (0.269) is above it
     strict.reset(seed=0, **SPACES)
     assert [float(strict.act(o, {})["accel_ctrl"][0]) for o in (fast, slow)] == [-0.5, -0.5]
@@ -149,8 +170,9 @@ def test_missing_nominal_control_falls_back_to_the_state_risk_with_one_warning()
         assert g.act(at(1.0), driver(-0.5))["active_ctrl"] == 0  # given again: the driver's control decides
 
 
-@pytest.mark.parametrize("bad", [np.array([0.1]), np.array([0.1, float("nan")]), np.zeros((2, 2)), "fast",
-                                 [0.0, float("inf")]])
+@pytest.mark.parametrize(
+    "bad", [np.array([0.1]), np.array([0.1, float("nan")]), np.zeros((2, 2)), "fast", [0.0, float("inf")]]
+)
 def test_malformed_nominal_control_is_named(bad):
     g = LRMMGuardian(speed_model(), threshold=0.5, trigger="driver")
     g.reset(seed=0, **SPACES)
@@ -160,11 +182,15 @@ def test_malformed_nominal_control_is_named(bad):
 
 def test_bad_hand_back_options_are_named():
     m = speed_model()
-    for kw, match in (({"trigger": "always"}, "trigger must be one of"), ({"margin": -0.1}, "margin"),
-                      ({"restart": float("nan")}, "restart"), ({"margin": True}, "margin"),
-                      ({"trigger": "driver", "action": "heuristic"}, "action='head'"),
-                      ({"trigger": "driver", "hysteresis": True}, "hysteresis"),
-                      ({"restart": 0.2, "action": "heuristic"}, "restart accelerates")):
+    for kw, match in (
+        ({"trigger": "always"}, "trigger must be one of"),
+        ({"margin": -0.1}, "margin"),
+        ({"restart": float("nan")}, "restart"),
+        ({"margin": True}, "margin"),
+        ({"trigger": "driver", "action": "heuristic"}, "action='head'"),
+        ({"trigger": "driver", "hysteresis": True}, "hysteresis"),
+        ({"restart": 0.2, "action": "heuristic"}, "restart accelerates"),
+    ):
         with pytest.raises(ValueError, match=match):
             LRMMGuardian(m, **kw)
     W = [(np.zeros((1, 12)), np.zeros(1)), (np.zeros((4, 1)), np.zeros(4))]
@@ -175,8 +201,14 @@ def test_bad_hand_back_options_are_named():
 
 
 def test_restart_needs_a_speed_and_an_acceleration():
-    lay = ObservationLayout.of(("time", 1), ("goal_offset", 2), ("heading", 1), ("v", 1), ("rays", 12),
-                               ray_angles=[2.0 * math.pi * i / 12 for i in range(12)])
+    lay = ObservationLayout.of(
+        ("time", 1),
+        ("goal_offset", 2),
+        ("heading", 1),
+        ("v", 1),
+        ("rays", 12),
+        ray_angles=[2.0 * math.pi * i / 12 for i in range(12)],
+    )
     g = LRMMGuardian(speed_model(), restart=0.3)
     with pytest.raises(ValueError, match="restart needs"):
         g.reset(seed=0, **env_spaces(layout=lay))
@@ -186,8 +218,14 @@ def test_stored_hand_back_defaults_round_trip(tmp_path):
     p = speed_model().save(tmp_path / "m.npz")
     set_decision(p, 0.4, 5, "a test", trigger="driver", margin=0.05)
     m = LRMMModel.load(p)
-    assert m.meta["decision"] == {"threshold": 0.4, "commit": 5, "action": "head", "trigger": "driver", "margin": 0.05,
-                                  "chosen_by": "a test"}
+    assert m.meta["decision"] == {
+        "threshold": 0.4,
+        "commit": 5,
+        "action": "head",
+        "trigger": "driver",
+        "margin": 0.05,
+        "chosen_by": "a test",
+    }
     g = LRMMGuardian(p)
     assert (g.trigger, g.margin, g.restart) == ("driver", 0.05, 0.0)
     assert LRMMGuardian(p, trigger="risk").trigger == "risk"  # an argument overrides the file
@@ -198,8 +236,13 @@ def test_stored_hand_back_defaults_round_trip(tmp_path):
     from rmm_guardians.lrmm.decision import main as decision_main
 
     assert decision_main([str(p), "--threshold", "0.3", "--commit", "18", "--restart", "0.3", "--chosen-by", "t"]) == 0
-    assert LRMMModel.load(p).meta["decision"] == {"threshold": 0.3, "commit": 18, "action": "head", "restart": 0.3,
-                                                  "chosen_by": "t"}
+    assert LRMMModel.load(p).meta["decision"] == {
+        "threshold": 0.3,
+        "commit": 18,
+        "action": "head",
+        "restart": 0.3,
+        "chosen_by": "t",
+    }
     assert decision_main([str(p), "--threshold", "0.3", "--commit", "1", "--margin", "-2", "--chosen-by", "t"]) == 2
 
 

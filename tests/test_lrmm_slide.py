@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox
+from rmm_envs.envs.dubins4d import CONTROLS
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel, set_decision
 from rmm_guardians.lrmm.nominal import SLIDE_MOVES, Slide, driver_at_risk
-from rmm_envs.autonomy import GuardianActionSpace, ObservationBox
-from rmm_envs.envs.dubins4d import CONTROLS
 from tests.test_lrmm_filter import QUAD, QUAD_CONTROLS
 
 LOW, HIGH = [-2.0, -2.0, -1.0, -1.0], [2.0, 2.0, 1.0, 1.0]  # the quadrotor's command box
@@ -32,26 +32,34 @@ def test_variants_by_hand_nearest_first_clipped_without_the_driver_control():
     # gaps 1.5, sqrt(0.36 + 0.04 + 2.25) and sqrt(1.44 + 0.16 + 2.25); the yaw rate stays the driver's
     assert s.variants(NOMINAL) == [[1.2, -0.4, 1.0, 0.3], [0.6, -0.2, 1.0, 0.3], [0.0, 0.0, 1.0, 0.3]]
     assert s.variants([0.0, 0.0, 1.0, -0.2]) == []  # already climbing in place: no variant differs
-    turn = Slide(QUAD_CONTROLS, LOW, HIGH, moves=(((0.0, 1.0), 1.0, 1.0), ((1.0, 0.0), 0.5, 1.0), ((1.0, 0.0), 2.0, 0.5)))
+    turn = Slide(
+        QUAD_CONTROLS, LOW, HIGH, moves=(((0.0, 1.0), 1.0, 1.0), ((1.0, 0.0), 0.5, 1.0), ((1.0, 0.0), 2.0, 0.5))
+    )
     # 90 degrees left (gap sqrt 2), half speed (gap 0.5), twice the speed clipped to 2 with half the climb (gap
     # sqrt(1 + 0.0625)): nearest first
     assert turn.variants([1.0, 0.0, 0.5, 0.0]) == [[0.5, 0.0, 0.5, 0.0], [2.0, 0.0, 0.25, 0.0], [0.0, 1.0, 0.5, 0.0]]
 
 
 def test_slide_needs_the_three_velocity_controls():
-    with pytest.raises(ValueError, match=r"slide bends a velocity command: it needs the controls .*vup_ctrl.*got "
-                                         r"\('turnrate_ctrl', 'accel_ctrl'\)"):
+    with pytest.raises(
+        ValueError,
+        match=r"slide bends a velocity command: it needs the controls .*vup_ctrl.*got "
+        r"\('turnrate_ctrl', 'accel_ctrl'\)",
+    ):
         Slide(CONTROLS, [-0.25, -0.5], [0.25, 0.5])
 
 
-@pytest.mark.parametrize("rated, still, holding, expected", [
-    ([0.30, 0.27, 0.20, 0.10], None, False, True),    # the best candidate saves 0.20 > 0.15
-    ([0.30, 0.27, 0.20, 0.16], None, False, False),   # it saves 0.14; no still test
-    ([0.30, 0.27, 0.20, 0.16], None, True, True),     # in control, staying while above the threshold
-    ([0.30, 0.24, 0.20, 0.16], 0.05, False, True),    # holding still saves 0.06 > 0.05
-    ([0.30, 0.27, 0.20, 0.16], 0.05, False, False),   # it saves 0.03
-    ([0.20, 0.00, 0.00, 0.00], 0.05, True, False),    # at the threshold: never
-])
+@pytest.mark.parametrize(
+    "rated, still, holding, expected",
+    [
+        ([0.30, 0.27, 0.20, 0.10], None, False, True),  # the best candidate saves 0.20 > 0.15
+        ([0.30, 0.27, 0.20, 0.16], None, False, False),  # it saves 0.14; no still test
+        ([0.30, 0.27, 0.20, 0.16], None, True, True),  # in control, staying while above the threshold
+        ([0.30, 0.24, 0.20, 0.16], 0.05, False, True),  # holding still saves 0.06 > 0.05
+        ([0.30, 0.27, 0.20, 0.16], 0.05, False, False),  # it saves 0.03
+        ([0.20, 0.00, 0.00, 0.00], 0.05, True, False),  # at the threshold: never
+    ],
+)
 def test_take_over_test_by_hand(rated, still, holding, expected):
     assert driver_at_risk(rated, 0.2, 0.15, still, holding) is expected
 
@@ -63,8 +71,16 @@ def quad_model(head=(0.3, 0.1, 0.5, 0.2), decision=None):
     W0[0, 14], W0[0, 16] = 2.0, -2.0
     W1 = np.array([[1.0], [0.0], [0.0], [0.0], [0.0]])
     b1 = np.array([-13.0] + [math.log(p / (1 - p)) for p in head])
-    meta = {"env_id": "QuadrotorRoomGuarded-v0", "obs_dim": 23, "features": list(range(23)), "hidden": [1],
-            "activation": "relu", "output_bias": True, "candidates": HEAD, "candidate_hold": 1.0}
+    meta = {
+        "env_id": "QuadrotorRoomGuarded-v0",
+        "obs_dim": 23,
+        "features": list(range(23)),
+        "hidden": [1],
+        "activation": "relu",
+        "output_bias": True,
+        "candidates": HEAD,
+        "candidate_hold": 1.0,
+    }
     if decision:
         meta["decision"] = decision
     return LRMMModel([(W0, np.array([10.0])), (W1, b1)], np.zeros(23), np.ones(23), meta)
@@ -74,14 +90,17 @@ def rating(vf, vup):
     return sig(max(2 * vf - 2 * vup + 10, 0.0) - 13)
 
 
-SPACES = {"observation_space": ObservationBox(np.full(23, -np.inf), np.full(23, np.inf), QUAD),
-          "action_space": GuardianActionSpace(QUAD_CONTROLS, LOW, HIGH)}
+SPACES = {
+    "observation_space": ObservationBox(np.full(23, -np.inf), np.full(23, np.inf), QUAD),
+    "action_space": GuardianActionSpace(QUAD_CONTROLS, LOW, HIGH),
+}
 OBS = np.zeros(23)
 
 
 def guard(**kw):
-    g = LRMMGuardian(quad_model(), **{"threshold": 0.2, "commit": 0, "trigger": "driver", "margin": 0.15, "slide": True,
-                                      **kw})
+    g = LRMMGuardian(
+        quad_model(), **{"threshold": 0.2, "commit": 0, "trigger": "driver", "margin": 0.15, "slide": True, **kw}
+    )
     g.reset(seed=0, **SPACES)
     return g
 
@@ -140,31 +159,65 @@ def test_without_stay_the_guardian_hands_back_once_the_take_over_test_fails():
 
 def test_bad_slide_still_and_stay_are_named():
     m = quad_model()
-    for kw, match in (({"slide": 1}, "slide must be True or False"), ({"stay": "no"}, "stay must be True or False"),
-                      ({"trigger": "driver", "still": -0.1}, "still must be a finite number >= 0"),
-                      ({"trigger": "driver", "still": math.inf}, "still must be"),
-                      ({"slide": True}, "need trigger='driver', got 'risk'"),
-                      ({"still": 0.1}, "need trigger='driver'"), ({"stay": False}, "need trigger='driver'")):
+    for kw, match in (
+        ({"slide": 1}, "slide must be True or False"),
+        ({"stay": "no"}, "stay must be True or False"),
+        ({"trigger": "driver", "still": -0.1}, "still must be a finite number >= 0"),
+        ({"trigger": "driver", "still": math.inf}, "still must be"),
+        ({"slide": True}, "need trigger='driver', got 'risk'"),
+        ({"still": 0.1}, "need trigger='driver'"),
+        ({"stay": False}, "need trigger='driver'"),
+    ):
         with pytest.raises(ValueError, match=match):
             LRMMGuardian(m, threshold=0.2, **kw)
     no_climb = LRMMGuardian(m, threshold=0.2, trigger="driver", slide=True)
     with pytest.raises(ValueError, match="slide bends a velocity command"):
-        no_climb.reset(seed=0, observation_space=SPACES["observation_space"],
-                     action_space=GuardianActionSpace(("vforward_ctrl", "vleft_ctrl", "yawrate_ctrl", "vz"), LOW, HIGH))
+        no_climb.reset(
+            seed=0,
+            observation_space=SPACES["observation_space"],
+            action_space=GuardianActionSpace(("vforward_ctrl", "vleft_ctrl", "yawrate_ctrl", "vz"), LOW, HIGH),
+        )
 
 
 def test_stored_slide_still_and_stay_round_trip(tmp_path):
     p = quad_model().save(tmp_path / "q.npz")
     set_decision(p, 0.2, 20, "a test", trigger="driver", margin=0.15, slide=True, still=0.05, stay=False)
-    assert LRMMModel.load(p).meta["decision"] == {"threshold": 0.2, "commit": 20, "action": "head", "trigger": "driver",
-                                                  "margin": 0.15, "slide": True, "still": 0.05, "stay": False,
-                                                  "chosen_by": "a test"}
+    assert LRMMModel.load(p).meta["decision"] == {
+        "threshold": 0.2,
+        "commit": 20,
+        "action": "head",
+        "trigger": "driver",
+        "margin": 0.15,
+        "slide": True,
+        "still": 0.05,
+        "stay": False,
+        "chosen_by": "a test",
+    }
     g = LRMMGuardian(p)
     assert (g.trigger, g.margin, g.slide, g.still, g.stay) == ("driver", 0.15, True, 0.05, False)
     assert LRMMGuardian(p, slide=False, stay=True).slide is False  # arguments override the file
     from rmm_guardians.lrmm.decision import main as decision_main
 
-    assert decision_main([str(p), "--threshold", "0.2", "--commit", "20", "--trigger", "driver", "--margin", "0.15",
-                          "--slide", "--still", "0.05", "--chosen-by", "t"]) == 0
+    assert (
+        decision_main(
+            [
+                str(p),
+                "--threshold",
+                "0.2",
+                "--commit",
+                "20",
+                "--trigger",
+                "driver",
+                "--margin",
+                "0.15",
+                "--slide",
+                "--still",
+                "0.05",
+                "--chosen-by",
+                "t",
+            ]
+        )
+        == 0
+    )
     assert LRMMModel.load(p).meta["decision"]["still"] == 0.05 and "stay" not in LRMMModel.load(p).meta["decision"]
     assert decision_main([str(p), "--threshold", "0.2", "--commit", "1", "--slide", "--chosen-by", "t"]) == 2  # risk

@@ -13,10 +13,10 @@ import math
 import numpy as np
 import pytest
 
-from rmm_guardians.lrmm.guardian import REMEDY, LRMMGuardian
-from rmm_guardians.lrmm.model import LRMMModel
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.envs.dubins3d_maze_parallel import observation_layout
+from rmm_guardians.lrmm.guardian import REMEDY, LRMMGuardian
+from rmm_guardians.lrmm.model import LRMMModel
 from tests.test_lrmm import SPACES, forward_ray_model
 
 TURN = GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2])
@@ -27,10 +27,20 @@ class RaysModel(LRMMModel):
     """An 8-ray model whose risk is ``fn(rays)`` (the network's weights are never read)."""
 
     def __init__(self, fn, obs_dim=8):
-        meta = {"env_id": "Dubins3DMaze-v0", "obs_dim": obs_dim, "features": list(range(obs_dim)), "hidden": [1],
-                "activation": "relu", "output_bias": True}
-        super().__init__([(np.zeros((1, obs_dim)), np.zeros(1)), (np.zeros((1, 1)), np.zeros(1))], np.zeros(obs_dim),
-                         np.ones(obs_dim), meta)
+        meta = {
+            "env_id": "Dubins3DMaze-v0",
+            "obs_dim": obs_dim,
+            "features": list(range(obs_dim)),
+            "hidden": [1],
+            "activation": "relu",
+            "output_bias": True,
+        }
+        super().__init__(
+            [(np.zeros((1, obs_dim)), np.zeros(1)), (np.zeros((1, 1)), np.zeros(1))],
+            np.zeros(obs_dim),
+            np.ones(obs_dim),
+            meta,
+        )
         self.fn = fn
 
     def predict_all(self, obs):
@@ -42,8 +52,12 @@ class RaysModel(LRMMModel):
 
 def maze_spaces(layout=None):
     lay = layout or observation_layout()
-    return {"observation_space": ObservationBox(np.full(lay.size, -np.inf, np.float32), np.full(lay.size, np.inf, np.float32), lay),
-            "action_space": TURN}
+    return {
+        "observation_space": ObservationBox(
+            np.full(lay.size, -np.inf, np.float32), np.full(lay.size, np.inf, np.float32), lay
+        ),
+        "action_space": TURN,
+    }
 
 
 def turner(fn, **kw):
@@ -60,12 +74,15 @@ def forward_risk(rays):  # short forward ray: high risk; the turned risks read t
     return math.exp(-rays[0])
 
 
-@pytest.mark.parametrize("rays, turn", [
-    # the model rates the left turn safer (ray 1 open, ray 7 short) while the nearest wall is on the left (ray 2)
-    ([1.0, 9.0, 0.5, 9.0, 9.0, 3.0, 3.0, 3.0], U1),
-    # the mirror: the model rates the right turn safer while the nearest wall is on the right (ray 6)
-    ([1.0, 3.0, 3.0, 3.0, 9.0, 9.0, 0.5, 9.0], -U1),
-])
+@pytest.mark.parametrize(
+    "rays, turn",
+    [
+        # the model rates the left turn safer (ray 1 open, ray 7 short) while the nearest wall is on the left (ray 2)
+        ([1.0, 9.0, 0.5, 9.0, 9.0, 3.0, 3.0, 3.0], U1),
+        # the mirror: the model rates the right turn safer while the nearest wall is on the right (ray 6)
+        ([1.0, 3.0, 3.0, 3.0, 9.0, 9.0, 0.5, 9.0], -U1),
+    ],
+)
 def test_turn_goes_where_the_model_rates_the_turned_rays_safer_even_against_the_nearest_wall(rays, turn):
     g = turner(forward_risk)
     a = g.act(maze_obs(rays), {})
@@ -83,14 +100,17 @@ def nearest_wall_risk(rays):  # the same for every rotation of the rays: the tur
     return math.exp(-min(rays))
 
 
-@pytest.mark.parametrize("rays, turn", [
-    ([1.0, 4.0, 4.0, 4.0, 9.0, 2.0, 2.0, 2.0], U1),  # left side's nearest wall (4) farther than the right's (2)
-    ([1.0, 2.0, 2.0, 2.0, 9.0, 4.0, 4.0, 4.0], -U1),  # the mirror
-    ([0.5, 2.0, 2.0, 2.0, 9.0, 4.0, 4.0, 4.0], -U1),  # ray 0 (ahead, nearest) belongs to neither side
-    ([0.5, 3.0, 3.0, 3.0, 9.0, 3.0, 3.0, 3.0], U1),  # sides equal, ray 0 on neither side: left on the second tie
-    ([1.0, 3.0, 3.0, 3.0, 0.5, 3.0, 3.0, 3.0], U1),  # ray 4 (behind, nearest) belongs to neither side: left
-    ([1.0, 3.0, 2.5, 3.0, 9.0, 3.0, 3.0, 2.6], -U1),  # the side's nearest of its three rays, not its first
-])
+@pytest.mark.parametrize(
+    "rays, turn",
+    [
+        ([1.0, 4.0, 4.0, 4.0, 9.0, 2.0, 2.0, 2.0], U1),  # left side's nearest wall (4) farther than the right's (2)
+        ([1.0, 2.0, 2.0, 2.0, 9.0, 4.0, 4.0, 4.0], -U1),  # the mirror
+        ([0.5, 2.0, 2.0, 2.0, 9.0, 4.0, 4.0, 4.0], -U1),  # ray 0 (ahead, nearest) belongs to neither side
+        ([0.5, 3.0, 3.0, 3.0, 9.0, 3.0, 3.0, 3.0], U1),  # sides equal, ray 0 on neither side: left on the second tie
+        ([1.0, 3.0, 3.0, 3.0, 0.5, 3.0, 3.0, 3.0], U1),  # ray 4 (behind, nearest) belongs to neither side: left
+        ([1.0, 3.0, 2.5, 3.0, 9.0, 3.0, 3.0, 2.6], -U1),  # the side's nearest of its three rays, not its first
+    ],
+)
 def test_a_tie_of_the_turned_risks_goes_to_the_side_whose_nearest_wall_is_farther(rays, turn):
     g = turner(nearest_wall_risk)
     a = g.act(maze_obs(rays), {})
@@ -114,7 +134,9 @@ def test_turn_rate_is_the_action_spaces_largest_or_the_given_one():
     g.reset(seed=0, **(maze_spaces() | {"action_space": narrow}))
     assert g.act(maze_obs([1.0, 9.0, 0.5, 9.0, 9.0, 3.0, 3.0, 3.0]), {})["turnrate_ctrl"].tolist() == [np.float32(0.15)]
     g = turner(forward_risk, u1_max=0.05)
-    assert g.act(maze_obs([1.0, 3.0, 3.0, 3.0, 9.0, 9.0, 0.5, 9.0]), {})["turnrate_ctrl"].tolist() == [np.float32(-0.05)]
+    assert g.act(maze_obs([1.0, 3.0, 3.0, 3.0, 9.0, 9.0, 0.5, 9.0]), {})["turnrate_ctrl"].tolist() == [
+        np.float32(-0.05)
+    ]
 
 
 @pytest.mark.parametrize("bad_ray, where", [(1, 0), (7, 1)])
@@ -132,16 +154,21 @@ def test_a_non_finite_turned_risk_is_an_error_not_a_turn(bad_ray, where):
 
 
 def _turn_refusal(inputs, angles):
-    return ("guardian 'lrmm': action 'turn' judges a turn by the model's risk of the rays rotated by one ray, so the model "
-            "must read the 'rays' field, rays evenly spaced over the full circle from the heading; "
-            f"got inputs={inputs!r}, ray angles {angles}")
+    return (
+        "guardian 'lrmm': action 'turn' judges a turn by the model's risk of the rays rotated by one ray, so the model "
+        "must read the 'rays' field, rays evenly spaced over the full circle from the heading; "
+        f"got inputs={inputs!r}, ray angles {angles}"
+    )
 
 
-@pytest.mark.parametrize("angles", [
-    tuple([0.0, 0.7] + [k * math.pi / 4 for k in range(2, 8)]),  # one ray off its place
-    tuple(k * math.pi / 4 + math.pi / 8 for k in range(8)),  # even, but not from the heading
-    tuple(k * math.pi / 4 for k in range(7, -1, -1)),  # the full circle clockwise
-])
+@pytest.mark.parametrize(
+    "angles",
+    [
+        tuple([0.0, 0.7] + [k * math.pi / 4 for k in range(2, 8)]),  # one ray off its place
+        tuple(k * math.pi / 4 + math.pi / 8 for k in range(8)),  # even, but not from the heading
+        tuple(k * math.pi / 4 for k in range(7, -1, -1)),  # the full circle clockwise
+    ],
+)
 def test_turn_refuses_rays_that_a_roll_does_not_rotate(angles):
     lay = ObservationLayout.of(("rays", 8), ("goal_offset", 2), ("heading", 1), ray_angles=angles)
     g = LRMMGuardian(RaysModel(forward_risk), threshold=0.3, action="turn", inputs="rays")
@@ -150,8 +177,9 @@ def test_turn_refuses_rays_that_a_roll_does_not_rotate(angles):
     assert str(e.value) == _turn_refusal("rays", lay.ray_angles)
     # the same rays at k * 45 degrees from the heading (angles that differ from those by whole turns too) serve
     for shift in (0.0, 2 * math.pi):
-        ok = ObservationLayout.of(("rays", 8), ("goal_offset", 2), ("heading", 1),
-                                  ray_angles=[k * math.pi / 4 + shift for k in range(8)])
+        ok = ObservationLayout.of(
+            ("rays", 8), ("goal_offset", 2), ("heading", 1), ray_angles=[k * math.pi / 4 + shift for k in range(8)]
+        )
         g.reset(seed=0, **maze_spaces(ok))
 
 
@@ -163,8 +191,9 @@ def test_turn_refuses_a_model_that_reads_more_than_the_rays_and_spaces_without_o
     g = LRMMGuardian(RaysModel(forward_risk), threshold=0.3, action="turn", inputs="rays")
     with pytest.raises(ValueError) as e:
         g.reset(seed=0, **(maze_spaces() | {"action_space": SPACES["action_space"]}))
-    assert str(e.value) == ("guardian 'lrmm' needs an action space with 1 controls, got 2 "
-                            "(('turnrate_ctrl', 'accel_ctrl'))")
+    assert str(e.value) == (
+        "guardian 'lrmm' needs an action space with 1 controls, got 2 (('turnrate_ctrl', 'accel_ctrl'))"
+    )
 
 
 # ----------------------------------------------------------------------------- refusal texts, exactly
@@ -178,24 +207,34 @@ def test_a_model_without_a_file_is_named_the_model_in_refusals_and_warnings():
         LRMMGuardian(m)
     assert [str(x.message) for x in w] == [
         "lrmm: the model has no 'candidates' head: using the paper's brake-and-turn heuristic",
-        "lrmm: the model has no 'decision' threshold: using the paper's 0.85"]
+        "lrmm: the model has no 'decision' threshold: using the paper's 0.85",
+    ]
 
 
 def test_a_wrong_observation_size_is_refused_showing_the_space_or_the_field():
     g = LRMMGuardian(forward_ray_model(), action="heuristic", threshold=0.85)
     with pytest.raises(ValueError) as e:
         g.check_spaces("a space without a shape", SPACES["action_space"])
-    assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins4DGuarded-v0) expects observations of "
-                            "shape (17,), the env's observation space is a space without a shape" + REMEDY)
+    assert str(e.value) == (
+        "guardian 'lrmm': the LRMM model (trained on Dubins4DGuarded-v0) expects observations of "
+        "shape (17,), the env's observation space is a space without a shape" + REMEDY
+    )
     with pytest.raises(ValueError) as e:
-        g.check_spaces(ObservationBox(np.zeros(11, np.float32), np.ones(11, np.float32), observation_layout()), SPACES["action_space"])
-    assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins4DGuarded-v0) expects observations of "
-                            "shape (17,), the env's observation space is (11,)" + REMEDY)
+        g.check_spaces(
+            ObservationBox(np.zeros(11, np.float32), np.ones(11, np.float32), observation_layout()),
+            SPACES["action_space"],
+        )
+    assert str(e.value) == (
+        "guardian 'lrmm': the LRMM model (trained on Dubins4DGuarded-v0) expects observations of "
+        "shape (17,), the env's observation space is (11,)" + REMEDY
+    )
     t = LRMMGuardian(RaysModel(forward_risk, obs_dim=12), threshold=0.3, action="turn", inputs="rays")
     with pytest.raises(ValueError) as e:
         t.reset(seed=0, **maze_spaces())
-    assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins3DMaze-v0) expects observations of "
-                            "shape (12,), the env's observation field 'rays' has 8 numbers" + REMEDY)
+    assert str(e.value) == (
+        "guardian 'lrmm': the LRMM model (trained on Dubins3DMaze-v0) expects observations of "
+        "shape (12,), the env's observation field 'rays' has 8 numbers" + REMEDY
+    )
 
 
 def test_the_sides_are_read_from_the_directions_however_the_angles_are_written():

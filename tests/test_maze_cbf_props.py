@@ -19,8 +19,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from rmm_guardians.cbf.maze import MazeCBFGuardian
 from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
+from rmm_guardians.cbf.maze import MazeCBFGuardian
 from tests.test_maze_guardians import reset_at
 
 U_MAX, R, MARGIN = 0.2, 50.0, 2.0  # the maze car's turn bound, its turning radius s / u_max, the guardian's margin
@@ -81,8 +81,12 @@ def test_hand_computed_full_turns_away():
     g = MazeCBFGuardian()
     reset_at(env, g, [250.0, 125.0, 0.0])
     q = math.pi / 4
-    for pose, u in (([250.0, 171.25, q], -U_MAX), ([250.0, 171.25, math.pi - q], U_MAX),
-                    ([250.0, 78.75, -q], U_MAX), ([250.0, 78.75, -math.pi + q], -U_MAX)):
+    for pose, u in (
+        ([250.0, 171.25, q], -U_MAX),
+        ([250.0, 171.25, math.pi - q], U_MAX),
+        ([250.0, 78.75, -q], U_MAX),
+        ([250.0, 78.75, -math.pi + q], -U_MAX),
+    ):
         a = g.decide(np.array(pose))
         assert a["active_ctrl"] == 1 and a["turnrate_ctrl"].dtype == np.float64 and a["turnrate_ctrl"][0] == u, pose
     assert g.stats()["qp_fallbacks"] == 4
@@ -90,17 +94,20 @@ def test_hand_computed_full_turns_away():
 
 
 # ------------------------------------------------------------------ arguments
-@pytest.mark.parametrize("kw, message", [
-    ({"barrier": "circle"}, "barrier must be one of ('turning', 'distance'), got 'circle'"),
-    ({"p1": 0.0}, "p1 (class-K gain) must be a finite number > 0.0, got 0.0"),
-    ({"p2": -1.0}, "p2 (class-K gain) must be a finite number > 0.0, got -1.0"),
-    ({"margin": -0.5}, "margin must be a finite number >= 0.0, got -0.5"),
-    ({"n_walls": 0}, "n_walls must be an integer >= 1, got 0"),
-    ({"active_atol": math.nan}, "active_atol must be a finite number >= 0.0, got nan"),
-    ({"lap_guess": 0.0}, "lap_guess must be a finite number > 0.0, got 0.0"),
-    ({"eps": math.inf}, "eps must be a finite number > 0.0, got inf"),
-    ({"solver": "nope"}, None),
-])
+@pytest.mark.parametrize(
+    "kw, message",
+    [
+        ({"barrier": "circle"}, "barrier must be one of ('turning', 'distance'), got 'circle'"),
+        ({"p1": 0.0}, "p1 (class-K gain) must be a finite number > 0.0, got 0.0"),
+        ({"p2": -1.0}, "p2 (class-K gain) must be a finite number > 0.0, got -1.0"),
+        ({"margin": -0.5}, "margin must be a finite number >= 0.0, got -0.5"),
+        ({"n_walls": 0}, "n_walls must be an integer >= 1, got 0"),
+        ({"active_atol": math.nan}, "active_atol must be a finite number >= 0.0, got nan"),
+        ({"lap_guess": 0.0}, "lap_guess must be a finite number > 0.0, got 0.0"),
+        ({"eps": math.inf}, "eps must be a finite number > 0.0, got inf"),
+        ({"solver": "nope"}, None),
+    ],
+)
 def test_arguments_are_refused_by_exact_message(kw, message):
     with pytest.raises(ValueError) as e:
         MazeCBFGuardian(**kw)
@@ -112,8 +119,18 @@ def test_arguments_are_refused_by_exact_message(kw, message):
 
 def test_defaults_and_the_barrier_dependent_gain():
     g = MazeCBFGuardian()
-    assert (g.barrier, g.p1, g.p2, g.margin, g.n_walls, g.active_atol, g.predict_latency, g.lap_guess, g.eps, g.solver) == \
-        ("turning", 1.0, 0.1, 2.0, 8, 1e-3, True, 0.1, 1e-6, "osqp")
+    assert (
+        g.barrier,
+        g.p1,
+        g.p2,
+        g.margin,
+        g.n_walls,
+        g.active_atol,
+        g.predict_latency,
+        g.lap_guess,
+        g.eps,
+        g.solver,
+    ) == ("turning", 1.0, 0.1, 2.0, 8, 1e-3, True, 0.1, 1e-6, "osqp")
     assert MazeCBFGuardian(barrier="distance").p1 == 0.1 and MazeCBFGuardian(barrier="distance", p1=0.5).p1 == 0.5
     assert MazeCBFGuardian(p1=3).p1 == 3.0 and MazeCBFGuardian(margin=0).margin == 0.0
     assert MazeCBFGuardian(predict_latency=0).predict_latency is False
@@ -158,10 +175,16 @@ def test_predict_is_the_exact_arc():
     ``10 / u``; straight for ``u = 0``; the heading wrapped to [-pi, pi)."""
     g = MazeCBFGuardian()
     g.speed = 10.0
-    np.testing.assert_allclose(g.predict(np.array([0.0, 0.0, 0.0]), 0.1, 1.0),
-                               [100.0 * math.sin(0.1), 100.0 * (1 - math.cos(0.1)), 0.1], atol=1e-12)
-    np.testing.assert_allclose(g.predict(np.array([5.0, 1.0, 0.5]), 0.0, 2.0),
-                               [5.0 + 20.0 * math.cos(0.5), 1.0 + 20.0 * math.sin(0.5), 0.5], atol=1e-12)
+    np.testing.assert_allclose(
+        g.predict(np.array([0.0, 0.0, 0.0]), 0.1, 1.0),
+        [100.0 * math.sin(0.1), 100.0 * (1 - math.cos(0.1)), 0.1],
+        atol=1e-12,
+    )
+    np.testing.assert_allclose(
+        g.predict(np.array([5.0, 1.0, 0.5]), 0.0, 2.0),
+        [5.0 + 20.0 * math.cos(0.5), 1.0 + 20.0 * math.sin(0.5), 0.5],
+        atol=1e-12,
+    )
     x, y, psi = g.predict(np.array([0.0, 0.0, 3.1]), 0.2, 1.0)
     assert psi == pytest.approx(3.3 - 2 * math.pi, abs=1e-12)
     assert x == pytest.approx(50.0 * (math.sin(3.3) - math.sin(3.1)), abs=1e-12)
@@ -188,7 +211,9 @@ def test_rows_keep_the_nearest_walls_smallest_barrier_first_for_either_barrier()
     env.close()
 
 
-@pytest.mark.filterwarnings("ignore:Converted matrix:UserWarning", "ignore:Clarabel.rs terminated with status:UserWarning")
+@pytest.mark.filterwarnings(
+    "ignore:Converted matrix:UserWarning", "ignore:Clarabel.rs terminated with status:UserWarning"
+)
 def test_a_qpsolvers_backend_decides_as_the_direct_osqp_path():
     """(The fallback poses are infeasible QPs: qpsolvers warns of each; the decision is the same.)"""
     from qpsolvers import available_solvers
@@ -207,16 +232,25 @@ def test_a_qpsolvers_backend_decides_as_the_direct_osqp_path():
 
 
 def test_without_a_safe_default_a_nan_pose_turns_left_at_full_rate():
-    from rmm_guardians.cbf.maze import MazeCBFGuardian as G
     from rmm_envs.autonomy import GuardianActionSpace
+    from rmm_guardians.cbf.maze import MazeCBFGuardian as G
     from tests.test_maze_guardians import corridor
 
     space = GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2], kind="dubins3d")
     g = G()
-    g.reset(seed=0, observation_space=None, action_space=space,
-            privileged=lambda: {"maze": corridor(), "speed": 10.0, "state": [math.nan, 1.0, 0.0], "sim_time": 0.0})
+    g.reset(
+        seed=0,
+        observation_space=None,
+        action_space=space,
+        privileged=lambda: {"maze": corridor(), "speed": 10.0, "state": [math.nan, 1.0, 0.0], "sim_time": 0.0},
+    )
     a = g.act(None)
-    assert a["active_ctrl"] == 1 and a["turnrate_ctrl"].dtype == np.float64 and a["turnrate_ctrl"][0] == 0.2 and g.stats()["nan_states"] == 1
+    assert (
+        a["active_ctrl"] == 1
+        and a["turnrate_ctrl"].dtype == np.float64
+        and a["turnrate_ctrl"][0] == 0.2
+        and g.stats()["nan_states"] == 1
+    )
 
 
 def _maze_privileged(**over):
@@ -232,8 +266,11 @@ def test_a_non_positive_speed_in_the_privileged_data_is_refused_by_name(speed):
 
     g = MazeCBFGuardian()
     with pytest.raises(ValueError) as e:
-        g.reset(seed=0, action_space=GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2], kind="dubins3d"),
-                privileged=_maze_privileged(speed=speed))
+        g.reset(
+            seed=0,
+            action_space=GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2], kind="dubins3d"),
+            privileged=_maze_privileged(speed=speed),
+        )
     assert str(e.value) == f"privileged speed must be a finite number > 0.0, got {speed!r}"
 
 
@@ -257,8 +294,7 @@ def test_the_next_decision_is_for_the_pose_after_the_turn_it_emitted():
 
 
 @settings(max_examples=60, deadline=None)
-@given(px=st.floats(5.0, 40.0), py=st.floats(-40.0, 40.0), psi=st.floats(-math.pi, math.pi),
-       u=st.floats(-0.2, 0.2))
+@given(px=st.floats(5.0, 40.0), py=st.floats(-40.0, 40.0), psi=st.floats(-math.pi, math.pi), u=st.floats(-0.2, 0.2))
 def test_at_a_walls_end_the_row_is_the_barriers_rate(px, py, psi, u):
     """Past the end of a wall (the segment from (-100, 0) to (0, 0), the car at x > 0, so the
     nearest point is the end): ``B' = (h - p1 B) - G u`` is the barrier's rate along the exact

@@ -8,14 +8,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
+from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
+from rmm_envs.worlds.mazes import Maze
 from rmm_guardians import make_guardian
 from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from rmm_guardians.cbf.maze import MazeCBFGuardian, wall_rows
 from rmm_guardians.hj.guardian import HJGuardian, HJPaperGuardian
 from rmm_guardians.hj.maze import MazeHJGuardian
-from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
-from rmm_envs.worlds.mazes import Maze
 
 WALL = np.array([[-1000.0, 0.0, 1000.0, 0.0]])  # one long flat wall along the x axis
 
@@ -23,22 +23,40 @@ WALL = np.array([[-1000.0, 0.0, 1000.0, 0.0]])  # one long flat wall along the x
 def corridor() -> Maze:
     """Three cells in a row (centres x = 125, 250, 375 at y = 125) inside a closed box: wall
     surfaces at y = 68.75 and 181.25, x = 68.75 and 431.25."""
-    walls = [(62.5, 62.5, 437.5, 62.5), (62.5, 187.5, 437.5, 187.5), (62.5, 62.5, 62.5, 187.5), (437.5, 62.5, 437.5, 187.5)]
-    return Maze(np.array(walls), width=500.0, height=250.0, cells=np.array([[125.0, 125.0], [250.0, 125.0], [375.0, 125.0]]),
-                passages=np.array([[0, 1], [1, 2]]))
+    walls = [
+        (62.5, 62.5, 437.5, 62.5),
+        (62.5, 187.5, 437.5, 187.5),
+        (62.5, 62.5, 62.5, 187.5),
+        (437.5, 62.5, 437.5, 187.5),
+    ]
+    return Maze(
+        np.array(walls),
+        width=500.0,
+        height=250.0,
+        cells=np.array([[125.0, 125.0], [250.0, 125.0], [375.0, 125.0]]),
+        passages=np.array([[0, 1], [1, 2]]),
+    )
 
 
 def reset_at(env, guardian, state, goal_cell=2):
     obs, info = env.reset(seed=0, options={"maze": corridor(), "state": state, "goal_cell": goal_cell})
-    guardian.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space,
-                   privileged=env.unwrapped.privileged)
+    guardian.reset(
+        seed=0,
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        privileged=env.unwrapped.privileged,
+    )
     return obs, info
 
 
 def episode(env, guardian, seed):
     obs, info = env.reset(seed=seed)
-    guardian.reset(seed=seed, observation_space=env.observation_space, action_space=env.action_space,
-                   privileged=env.unwrapped.privileged)
+    guardian.reset(
+        seed=seed,
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        privileged=env.unwrapped.privileged,
+    )
     while True:
         obs, r, te, tr, info = env.step(guardian.act(obs, info))
         if te or tr:
@@ -56,21 +74,29 @@ def test_wall_rows_hand_computed():
     B, G, h = (np.asarray(a).reshape(-1)[0] for a in wall_rows([0.0, 10.0, 0.0], 10.0, WALL, 1.0, 0.0, 1.0, 0.1))
     assert (B, G, h) == (pytest.approx(9.0), 0.0, pytest.approx(9.0))  # along the wall: B = b, nothing to do
     # 30 degrees toward the wall, heading right-down: n.e = -1/2, n.e_perp = cos 30; the turn away is left (+)
-    B, G, h = (np.asarray(a).reshape(-1)[0] for a in wall_rows([0.0, 40.0, -math.pi / 6], 10.0, WALL, 1.0, 2.0, 1.0, 0.1))
+    B, G, h = (
+        np.asarray(a).reshape(-1)[0] for a in wall_rows([0.0, 40.0, -math.pi / 6], 10.0, WALL, 1.0, 2.0, 1.0, 0.1)
+    )
     b = 40.0 - 1.0 - 2.0
     assert B == pytest.approx(b - 50.0 * (1 - math.cos(math.pi / 6)))
     assert G == pytest.approx(-50.0 * 0.5)  # -R sigma (-n.e) with sigma = +1
     assert h == pytest.approx(10.0 * -0.5 + B)
     # the distance (high-order) barrier of the same pose: b'' = s (n.e_perp) u, b' = s n.e
-    b2, G2, h2 = (np.asarray(a).reshape(-1)[0] for a in wall_rows([0.0, 40.0, -math.pi / 6], 10.0, WALL, 1.0, 2.0, 0.1, 0.2,
-                                                                   barrier="distance"))
+    b2, G2, h2 = (
+        np.asarray(a).reshape(-1)[0]
+        for a in wall_rows([0.0, 40.0, -math.pi / 6], 10.0, WALL, 1.0, 2.0, 0.1, 0.2, barrier="distance")
+    )
     assert b2 == pytest.approx(b) and G2 == pytest.approx(-10.0 * math.cos(math.pi / 6))
     assert h2 == pytest.approx(0.3 * 10.0 * -0.5 + 0.02 * b)
 
 
 @settings(max_examples=60, deadline=None)
-@given(y=st.floats(15.0, 200.0), psi=st.floats(-math.pi, math.pi), u=st.floats(-0.2, 0.2),
-       x0=st.floats(-1.0, 1.0).map(lambda f: 1100.0 * f))
+@given(
+    y=st.floats(15.0, 200.0),
+    psi=st.floats(-math.pi, math.pi),
+    u=st.floats(-0.2, 0.2),
+    x0=st.floats(-1.0, 1.0).map(lambda f: 1100.0 * f),
+)
 def test_barrier_rate_matches_the_flow(y, psi, u, x0):
     # the row says dB/dt = (h - p1 B) - G u; compare with B along the exact arc (side and cap regions)
     from rmm_envs.systems.dubins3d import Dubins3D
@@ -172,8 +198,11 @@ def test_cbf_maze_bad_arguments_and_dispatch():
 # ------------------------------------------------------------------ hj
 @pytest.fixture(scope="module")
 def hj_corridor(maze_hj_cache):
-    g = HJGuardian(maze={"spacing": 10.0, "n_heading": 16, "horizon": 12.0, "region": "maze", "rule": "distance"},
-                   cache_dir=maze_hj_cache, threads=1)
+    g = HJGuardian(
+        maze={"spacing": 10.0, "n_heading": 16, "horizon": 12.0, "region": "maze", "rule": "distance"},
+        cache_dir=maze_hj_cache,
+        threads=1,
+    )
     env = Dubins3DMazeGuardedEnv()
     return env, g
 
@@ -182,7 +211,9 @@ def test_hj_maze_value_and_decisions(hj_corridor):
     env, g = hj_corridor
     obs, info = reset_at(env, g, [125.0, 125.0, 0.0])
     m = g.delegate
-    assert isinstance(m, MazeHJGuardian) and m.stats()["solves"] + m.stats()["cache_hits"] == 1  # a cache shared by the session
+    assert (
+        isinstance(m, MazeHJGuardian) and m.stats()["solves"] + m.stats()["cache_hits"] == 1
+    )  # a cache shared by the session
     V = m.V[..., 0]
     from rmm_guardians.hj.maze import wall_target
 
@@ -250,10 +281,36 @@ def test_lookahead_manoeuvres_and_path_clearances():
     walls = np.asarray(m.walls, float)
     clear, ends = np.empty(2), np.empty((2, 3))
     # straight along the corridor's centre line from x = 125 for 6 s; a left loop from x = 250
-    path_clearances(125.0, 125.0, 0.0, 10.0, np.array([[0.0, 0.0, 0.0, 6.0]]), 0.2, walls, m.half, 500.0, 250.0, COEF,
-                    clear[:1], ends[:1])
-    path_clearances(250.0, 125.0, 0.0, 10.0, np.array([[0.2, 0.0, 0.2, loop]]), 0.2, walls, m.half, 500.0, 250.0, COEF,
-                    clear[1:], ends[1:])
+    path_clearances(
+        125.0,
+        125.0,
+        0.0,
+        10.0,
+        np.array([[0.0, 0.0, 0.0, 6.0]]),
+        0.2,
+        walls,
+        m.half,
+        500.0,
+        250.0,
+        COEF,
+        clear[:1],
+        ends[:1],
+    )
+    path_clearances(
+        250.0,
+        125.0,
+        0.0,
+        10.0,
+        np.array([[0.2, 0.0, 0.2, loop]]),
+        0.2,
+        walls,
+        m.half,
+        500.0,
+        250.0,
+        COEF,
+        clear[1:],
+        ends[1:],
+    )
     # 56.25 px to the side walls' surfaces all along, less half a sample's travel (1 px)
     assert clear[0] == pytest.approx(56.25 - 1.0) and ends[0].tolist() == pytest.approx([185.0, 125.0, 0.0])
     # the loop (radius 50 about (250, 175)) crosses the upper wall (centre line y = 187.5, 6.25 px
@@ -267,7 +324,11 @@ def test_hj_maze_lookahead_decisions(maze_hj_cache):
     obs, info = reset_at(env, g, [250.0, 125.0, 0.0])
     info = dict(info, nominal_control=np.array([0.0]))
     assert g.act(obs, info)["active_ctrl"] == 0  # mid-corridor along it, the driver straight on: passive
-    env.unwrapped._state[:] = [380.0, 125.0, 0.0]  # 51 px from the end wall, heading at it (a test reaches into the env)
+    env.unwrapped._state[:] = [
+        380.0,
+        125.0,
+        0.0,
+    ]  # 51 px from the end wall, heading at it (a test reaches into the env)
     a = g.act(obs, info)
     # no loop fits a 112.5-px corridor from its centre line; turning keeps the car off the wall longer
     assert a["active_ctrl"] == 1 and abs(float(a["turnrate_ctrl"][0])) == pytest.approx(0.2)

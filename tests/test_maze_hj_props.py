@@ -23,11 +23,11 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from rmm_guardians.hj.maze import MazeHJGuardian, maze_grid, wall_target
-from rmm_guardians.hj.maze_lookahead import COEF, manoeuvres, path_clearances
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
 from rmm_envs.worlds.mazes import Maze
+from rmm_guardians.hj.maze import MazeHJGuardian, maze_grid, wall_target
+from rmm_guardians.hj.maze_lookahead import COEF, manoeuvres, path_clearances
 from tests.test_maze_guardians import corridor
 from tests.test_maze_lookahead_props import clearance, exact_path
 
@@ -50,8 +50,13 @@ def cache_dir(maze_hj_cache):
 def make(space, cache_dir, state=(250.0, 125.0, 0.0), maze=None, goal=(375.0, 125.0), **kw):
     """A guardian reset on ``maze`` (the corridor) with the car at ``state``; returns it and
     the privileged dict it reads (change ``state`` / ``sim_time`` there to move the car)."""
-    priv = {"state": np.array(state, float), "maze": maze or corridor(), "goal": np.array([*goal, 10.0]),
-            "speed": SPEED, "sim_time": 0.0}
+    priv = {
+        "state": np.array(state, float),
+        "maze": maze or corridor(),
+        "goal": np.array([*goal, 10.0]),
+        "speed": SPEED,
+        "sim_time": 0.0,
+    }
     g = MazeHJGuardian(**{**SETTINGS, "cache_dir": cache_dir, **kw})
     g.reset(seed=0, action_space=space, privileged=lambda: priv)
     return g, priv
@@ -87,15 +92,24 @@ def test_wall_target_is_the_signed_distance_at_every_node():
     for k in range(4):
         for j in range(3):
             np.testing.assert_allclose(t[:, :, k, j], want, atol=1e-4)
-    assert t[0, 4, 0, 0] == pytest.approx(-6.25) and t[4, 3, 0, 0] == pytest.approx(56.25)  # (62.5, 150) on a wall's centre line; (162.5, 125)
+    assert t[0, 4, 0, 0] == pytest.approx(-6.25) and t[4, 3, 0, 0] == pytest.approx(
+        56.25
+    )  # (62.5, 150) on a wall's centre line; (162.5, 125)
 
 
 def square_maze() -> Maze:
     """Four cells (2 x 2, centres 125 and 250 px) in a closed box 62.5-312.5, a tree of passages 0-1, 1-3, 0-2."""
-    walls = [(62.5, 62.5, 312.5, 62.5), (62.5, 312.5, 312.5, 312.5), (62.5, 62.5, 62.5, 312.5),
-             (312.5, 62.5, 312.5, 312.5), (187.5, 187.5, 312.5, 187.5)]
+    walls = [
+        (62.5, 62.5, 312.5, 62.5),
+        (62.5, 312.5, 312.5, 312.5),
+        (62.5, 62.5, 62.5, 312.5),
+        (312.5, 62.5, 312.5, 312.5),
+        (187.5, 187.5, 312.5, 187.5),
+    ]
     cells = [[125.0, 125.0], [250.0, 125.0], [125.0, 250.0], [250.0, 250.0]]
-    return Maze(np.array(walls), width=400.0, height=400.0, cells=np.array(cells), passages=np.array([[0, 1], [1, 3], [0, 2]]))
+    return Maze(
+        np.array(walls), width=400.0, height=400.0, cells=np.array(cells), passages=np.array([[0, 1], [1, 3], [0, 2]])
+    )
 
 
 def test_region_box_hand_computed():
@@ -108,8 +122,9 @@ def test_region_box_hand_computed():
     lo, hi = g.region_box(m, np.array([125.0, 250.0, 0.0]), np.array([250.0, 250.0, 10.0]))
     assert lo.tolist() == [62.5, 62.5] and hi.tolist() == [312.5, 312.5]
     # cells 0 -> 2 with one cell of margin: 1.5 cells (187.5 px) round the column, clipped to the walls
-    lo, hi = MazeHJGuardian(route_margin=1, cache=False).region_box(m, np.array([125.0, 125.0, 0.0]),
-                                                                    np.array([125.0, 250.0, 10.0]))
+    lo, hi = MazeHJGuardian(route_margin=1, cache=False).region_box(
+        m, np.array([125.0, 125.0, 0.0]), np.array([125.0, 250.0, 10.0])
+    )
     assert lo.tolist() == [62.5, 62.5] and hi.tolist() == [312.5, 312.5]
     lo, hi = g.region_box(m, np.array([125.0, 125.0, 0.0]), np.array([125.0, 250.0, 10.0]))
     assert lo.tolist() == [62.5, 62.5] and hi.tolist() == [187.5, 312.5]
@@ -121,8 +136,10 @@ def test_region_box_hand_computed():
     lo, hi = MazeHJGuardian(region="maze", cache=False).region_box(rails, np.zeros(3), np.zeros(3))
     assert lo.tolist() == [0.0, 10.0] and hi.tolist() == [100.0, 50.0]
     # region "maze", and a maze of one cell: the walls' extent
-    for guardian, maze in ((MazeHJGuardian(region="maze", cache=False), m),
-                           (g, Maze(m.walls, width=400.0, height=400.0, cells=np.array([[125.0, 125.0]])))):
+    for guardian, maze in (
+        (MazeHJGuardian(region="maze", cache=False), m),
+        (g, Maze(m.walls, width=400.0, height=400.0, cells=np.array([[125.0, 125.0]]))),
+    ):
         lo, hi = guardian.region_box(maze, np.array([125.0, 125.0, 0.0]), np.array([250.0, 125.0, 10.0]))
         assert lo.tolist() == [62.5, 62.5] and hi.tolist() == [312.5, 312.5]
 
@@ -240,7 +257,9 @@ def test_lookahead_hand_built_cases(space, cache_dir):
     # a lap of 2 s: the lap under way starts 3.75 px from the wall (within the margin plus a
     # sample's slack), so the guardian is not passive though the car heads away from the wall
     g, priv = make(space, cache_dir, lap=2.0)
-    assert act(g, priv, (150.0, 171.25, -math.pi / 2), 0.0) == reference(g, 150.0, 171.25, -math.pi / 2, 0.0, None)[0] == U
+    assert (
+        act(g, priv, (150.0, 171.25, -math.pi / 2), 0.0) == reference(g, 150.0, 171.25, -math.pi / 2, 0.0, None)[0] == U
+    )
     # band 0: where the value is positive the guardian leaves the driver alone without a look-ahead
     # (V = 5.2 px 5.25 px under the wall, where the look-ahead would turn right), unless it holds control
     g, priv = make(space, cache_dir, band=0.0)
@@ -303,12 +322,19 @@ def lookahead_guardian(request, space, cache_dir):
 
 
 @settings(max_examples=30, deadline=None)
-@given(st.floats(75.0, 425.0), st.floats(72.0, 178.0), st.floats(-math.pi, math.pi), st.sampled_from([-U, 0.0, U, 0.07]),
-       st.sampled_from([None, -U, 0.0, U]))
+@given(
+    st.floats(75.0, 425.0),
+    st.floats(72.0, 178.0),
+    st.floats(-math.pi, math.pi),
+    st.sampled_from([-U, 0.0, U, 0.07]),
+    st.sampled_from([None, -U, 0.0, U]),
+)
 @example(150.0, 161.25, 0.0, U, None)
 @example(380.0, 125.0, 0.2, 0.0, U)
 @example(290.0, 120.0, 0.1, 0.0, None)  # straight manoeuvres end beyond the route's grid
-def test_lookahead_matches_the_rule_and_keeps_the_margin_on_the_exact_arcs(lookahead_guardian, x, y, psi, nominal, held):
+def test_lookahead_matches_the_rule_and_keeps_the_margin_on_the_exact_arcs(
+    lookahead_guardian, x, y, psi, nominal, held
+):
     g, priv = lookahead_guardian
     g._pending = held  # the turn rate commanded at the previous step (None: the guardian was passive)
     u = act(g, priv, (x, y, psi), nominal)
@@ -328,14 +354,26 @@ def test_lookahead_matches_the_rule_and_keeps_the_margin_on_the_exact_arcs(looka
     if sc.max() > margin:  # a certified manoeuvre exists: one that starts with the turn taken keeps the margin
         rows = manoeuvres(U, g.lookahead)
         first = np.where(rows[:, 1] > 0, rows[:, 0], rows[:, 2])
-        kept = [clearance(exact_path(*p1, rows[m], 0.05), g._maze_geom[0], g._maze_geom[1]).min()
-                for m in range(len(rows)) if sc[m] > margin and first[m] == u]
+        kept = [
+            clearance(exact_path(*p1, rows[m], 0.05), g._maze_geom[0], g._maze_geom[1]).min()
+            for m in range(len(rows))
+            if sc[m] > margin and first[m] == u
+        ]
         assert kept and min(kept) > margin
 
 
 def test_a_lopsided_or_foreign_action_space_is_refused(cache_dir):
     g = MazeHJGuardian(cache_dir=cache_dir)
-    priv = {"state": np.array([250.0, 125.0, 0.0]), "maze": corridor(), "goal": np.array([375.0, 125.0, 10.0]),
-            "speed": SPEED, "sim_time": 0.0}
+    priv = {
+        "state": np.array([250.0, 125.0, 0.0]),
+        "maze": corridor(),
+        "goal": np.array([375.0, 125.0, 10.0]),
+        "speed": SPEED,
+        "sim_time": 0.0,
+    }
     with pytest.raises(ValueError, match="symmetric about 0"):
-        g.reset(seed=0, action_space=GuardianActionSpace(("turnrate_ctrl",), [-0.1], [0.2], kind="dubins3d"), privileged=lambda: priv)
+        g.reset(
+            seed=0,
+            action_space=GuardianActionSpace(("turnrate_ctrl",), [-0.1], [0.2], kind="dubins3d"),
+            privileged=lambda: priv,
+        )

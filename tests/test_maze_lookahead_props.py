@@ -22,8 +22,15 @@ from rmm_guardians.hj.maze_lookahead import COEF, manoeuvres, near_walls, path_c
 
 SPEED, DT, HALF = 10.0, 0.2, 6.25
 # a closed box 500 x 250 px with one inner wall hanging from the top (capsules of half-width 6.25)
-BOX = np.array([[62.5, 62.5, 437.5, 62.5], [62.5, 187.5, 437.5, 187.5], [62.5, 62.5, 62.5, 187.5],
-                [437.5, 62.5, 437.5, 187.5], [250.0, 187.5, 250.0, 140.0]])
+BOX = np.array(
+    [
+        [62.5, 62.5, 437.5, 62.5],
+        [62.5, 187.5, 437.5, 187.5],
+        [62.5, 62.5, 62.5, 187.5],
+        [437.5, 62.5, 437.5, 187.5],
+        [250.0, 187.5, 250.0, 140.0],
+    ]
+)
 
 
 def exact_pose(x, y, psi, u, t):
@@ -39,7 +46,9 @@ def exact_path(x, y, psi, row, step):
     u1, t1, u2, t2 = row
     ts = np.append(np.arange(0.0, t1 + t2, step), t1 + t2)
     x1, y1, p1 = exact_pose(x, y, psi, u1, t1)
-    return np.array([exact_pose(x, y, psi, u1, t)[:2] if t <= t1 else exact_pose(x1, y1, p1, u2, t - t1)[:2] for t in ts])
+    return np.array(
+        [exact_pose(x, y, psi, u1, t)[:2] if t <= t1 else exact_pose(x1, y1, p1, u2, t - t1)[:2] for t in ts]
+    )
 
 
 def clearance(points, walls, half):
@@ -65,8 +74,14 @@ def test_manoeuvre_table_hand_listed():
     loop = 2 * math.pi / 0.5
     rows = [[-0.5, 0.0, -0.5, loop], [0.0, 0.0, 0.0, 3.0], [0.5, 0.0, 0.5, loop]]
     for t1 in (1.0, 2.0):
-        rows += [[-0.5, t1, 0.0, 3.0 - t1], [-0.5, t1, 0.5, loop], [0.0, t1, -0.5, loop], [0.0, t1, 0.5, loop],
-                 [0.5, t1, -0.5, loop], [0.5, t1, 0.0, 3.0 - t1]]
+        rows += [
+            [-0.5, t1, 0.0, 3.0 - t1],
+            [-0.5, t1, 0.5, loop],
+            [0.0, t1, -0.5, loop],
+            [0.0, t1, 0.5, loop],
+            [0.5, t1, -0.5, loop],
+            [0.5, t1, 0.0, 3.0 - t1],
+        ]
     got = manoeuvres(0.5, 3.0, steps=3)
     assert got.shape == (15, 4) and np.allclose(got, rows, rtol=0.0, atol=1e-12)
     six = manoeuvres(0.2, 6.0)  # the default: 3 + 5 x 6 rows, switches at whole seconds
@@ -76,10 +91,14 @@ def test_manoeuvre_table_hand_listed():
 
 # ------------------------------------------------------------------ the walls in reach
 def test_near_walls_hand_computed_boundary():
-    walls = np.array([[-10.0, 0.0, 10.0, 0.0],   # 7 px below (0, 7): exactly reach + half
-                      [20.0, 7.0, 30.0, 7.0],    # its nearest end 20 px away
-                      [0.0, 14.5, 0.0, 14.5],    # a point (zero length) 7.5 px above
-                      [-3.0, 9.0, -3.0, 30.0]])  # its lower end (-3, 9): sqrt(13) px
+    walls = np.array(
+        [
+            [-10.0, 0.0, 10.0, 0.0],  # 7 px below (0, 7): exactly reach + half
+            [20.0, 7.0, 30.0, 7.0],  # its nearest end 20 px away
+            [0.0, 14.5, 0.0, 14.5],  # a point (zero length) 7.5 px above
+            [-3.0, 9.0, -3.0, 30.0],
+        ]
+    )  # its lower end (-3, 9): sqrt(13) px
     got = near_walls(walls, 0.0, 7.0, 5.0, 2.0)
     assert got.tolist() == [walls[0].tolist(), walls[3].tolist()] and got.flags.c_contiguous
     assert near_walls(walls, 0.0, 7.0, 5.5, 2.0).tolist() == [walls[0].tolist(), walls[2].tolist(), walls[3].tolist()]
@@ -89,7 +108,10 @@ def test_near_walls_hand_computed_boundary():
     # a wall 1 px long (its squared length exactly 1): projected like any other; (1, 5) is 5 px
     # from its end (1, 0), sqrt(26) from its start
     short = np.array([[0.0, 0.0, 1.0, 0.0]])
-    assert near_walls(short, 1.0, 5.0, 5.02, 0.0).shape == (1, 4) and near_walls(short, 1.0, 5.0, 4.98, 0.0).shape == (0, 4)
+    assert near_walls(short, 1.0, 5.0, 5.02, 0.0).shape == (1, 4) and near_walls(short, 1.0, 5.0, 4.98, 0.0).shape == (
+        0,
+        4,
+    )
     # integer walls come back as floats; a zero-length wall (0 / 0 projected) warns of nothing
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -155,13 +177,19 @@ def test_leaving_the_image_is_minus_one_and_stops_there():
         assert score(*pose, [[0.0, 0.0, 0.0, 1.0]], walls=BOX[:1])[0][0] == -1.0
     # the image's far edges belong to it: samples exactly at x = width and at y = height
     assert score(490.0, 100.0, 0.0, [[0.0, 0.0, 0.0, 1.0]], walls=BOX[:1])[1][0].tolist() == [500.0, 100.0, 0.0]
-    assert score(490.0, 100.0, 0.0, [[0.0, 0.0, 0.0, 1.0]], walls=BOX[:1])[0][0] == pytest.approx(math.hypot(52.5, 37.5) - 7.25)  # nearest at the start
+    assert score(490.0, 100.0, 0.0, [[0.0, 0.0, 0.0, 1.0]], walls=BOX[:1])[0][0] == pytest.approx(
+        math.hypot(52.5, 37.5) - 7.25
+    )  # nearest at the start
     assert score(100.0, 240.0, math.pi / 2, [[0.0, 0.0, 0.0, 1.0]], walls=BOX[:1])[0][0] == pytest.approx(170.25)
     # leaving during the first turn (left at 0.2 rad/s from heading pi): the end is that sample's pose, heading included
     clear, ends = score(5.0, 100.0, math.pi, [[0.2, 5.0, 0.0, 1.0]], walls=BOX[:1])
-    assert clear[0] == -1.0 and ends[0].tolist() == pytest.approx(list(exact_pose(5.0, 100.0, math.pi, 0.2, 0.6)), abs=1e-9)
+    assert clear[0] == -1.0 and ends[0].tolist() == pytest.approx(
+        list(exact_pose(5.0, 100.0, math.pi, 0.2, 0.6)), abs=1e-9
+    )
     # a corner of the image is inside it; a manoeuvre of no duration is its one sample
-    assert score(0.0, 0.0, 0.0, [[0.0, 0.0, 0.0, 0.0]], walls=BOX[:1])[0][0] == pytest.approx(math.hypot(62.5, 62.5) - 7.25)
+    assert score(0.0, 0.0, 0.0, [[0.0, 0.0, 0.0, 0.0]], walls=BOX[:1])[0][0] == pytest.approx(
+        math.hypot(62.5, 62.5) - 7.25
+    )
 
 
 @settings(max_examples=40, deadline=None)
@@ -178,5 +206,6 @@ def test_a_certified_manoeuvre_keeps_its_clearance_on_the_exact_path(x, y, psi, 
     exact = float(clearance(fine, BOX, HALF).min())
     assert clear[0] <= exact + 1e-9  # never states more than the exact path keeps
     assert clear[0] >= exact - SPEED * DT / 2 - SPEED * DT / 80 - 1e-9  # and at most half a sample's travel less
-    assert ends[0].tolist() == pytest.approx(list(exact_pose(*exact_pose(x, y, psi, row[0], row[1]), row[2], row[3])),
-                                             abs=1e-6)
+    assert ends[0].tolist() == pytest.approx(
+        list(exact_pose(*exact_pose(x, y, psi, row[0], row[1]), row[2], row[3])), abs=1e-6
+    )

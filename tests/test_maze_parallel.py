@@ -9,26 +9,46 @@ from gymnasium.utils.env_checker import check_env
 
 import rmm_envs  # noqa: F401
 from rmm_bench.cli import main as bench_main
-from rmm_guardians import make_guardian
-from rmm_guardians.baselines import BrakesGuardian
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv, TurnFromNearerWall, observation_layout
 from rmm_envs.drivers.maze import PursuitDriver, cell_distances, cell_path
+from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv, TurnFromNearerWall, observation_layout
 from rmm_envs.systems.dubins3d import Dubins3D
 from rmm_envs.systems.dubins4d import SERIES_COEFFICIENTS
 from rmm_envs.worlds.maze_kernels import dubins_path, maze_path_hit, maze_rays
 from rmm_envs.worlds.mazes import Maze, generate_maze
+from rmm_guardians import make_guardian
+from rmm_guardians.baselines import BrakesGuardian
 
-EPISODE_KEYS = {"outcome", "n_env_steps", "n_active_ctrl_env_steps", "active_ctrl_sim_time", "cum_sim_time",
-                "cum_compute_time", "avg_compute_time", "cum_reward", "cum_cost", "final_speed"}
+EPISODE_KEYS = {
+    "outcome",
+    "n_env_steps",
+    "n_active_ctrl_env_steps",
+    "active_ctrl_sim_time",
+    "cum_sim_time",
+    "cum_compute_time",
+    "avg_compute_time",
+    "cum_reward",
+    "cum_cost",
+    "final_speed",
+}
 
 
 def corridor() -> Maze:
     """Three cells in a row (centres x = 125, 250, 375 at y = 125) inside a closed box: wall
     surfaces at y = 68.75 and 181.25, x = 68.75 and 431.25."""
-    walls = [(62.5, 62.5, 437.5, 62.5), (62.5, 187.5, 437.5, 187.5), (62.5, 62.5, 62.5, 187.5), (437.5, 62.5, 437.5, 187.5)]
-    return Maze(np.array(walls), width=500.0, height=250.0, cells=np.array([[125.0, 125.0], [250.0, 125.0], [375.0, 125.0]]),
-                passages=np.array([[0, 1], [1, 2]]))
+    walls = [
+        (62.5, 62.5, 437.5, 62.5),
+        (62.5, 187.5, 437.5, 187.5),
+        (62.5, 62.5, 62.5, 187.5),
+        (437.5, 62.5, 437.5, 187.5),
+    ]
+    return Maze(
+        np.array(walls),
+        width=500.0,
+        height=250.0,
+        cells=np.array([[125.0, 125.0], [250.0, 125.0], [375.0, 125.0]]),
+        passages=np.array([[0, 1], [1, 2]]),
+    )
 
 
 def run(env, actions, **reset):
@@ -70,8 +90,12 @@ def test_pure_pursuit_hand_checked():
 
 def test_driver_drives_straight_to_the_goal_hand_counted():
     env = Dubins3DMazeGuardedEnv()
-    obs, r, info = run(env, lambda o: env.action_space.inactive(), seed=0,
-                       options={"maze": corridor(), "state": [125.0, 125.0, 0.0], "goal_cell": 2})
+    obs, r, info = run(
+        env,
+        lambda o: env.action_space.inactive(),
+        seed=0,
+        options={"maze": corridor(), "state": [125.0, 125.0, 0.0], "goal_cell": 2},
+    )
     # 1 px per step along y = 125: the path's end reaches x = 345, 30 px from the goal, on step 220
     assert info["outcome"] == "goal" and r == 1.0 and info["episode_stats"]["n_env_steps"] == 220
     assert info["episode_stats"]["cum_sim_time"] == pytest.approx(22.0) and info["episode_stats"]["cum_reward"] == 1.0
@@ -89,11 +113,17 @@ def test_driver_turns_toward_its_path_and_guardian_overrides():
 
 def test_collision_hand_counted():
     env = Dubins3DMazeGuardedEnv()
-    _, r, info = run(env, lambda o: env.action_space.active([0.0]), seed=0,
-                     options={"maze": corridor(), "state": [125.0, 125.0, math.pi / 2], "goal_cell": 2})
+    _, r, info = run(
+        env,
+        lambda o: env.action_space.active([0.0]),
+        seed=0,
+        options={"maze": corridor(), "state": [125.0, 125.0, math.pi / 2], "goal_cell": 2},
+    )
     # straight up from y = 125 at 1 px per step: the wall's surface y = 181.25 is crossed on step 57
     assert info["outcome"] == "collision" and r == -1.0 and info["episode_stats"]["n_env_steps"] == 57
-    assert info["episode_stats"]["n_active_ctrl_env_steps"] == 57 and info["episode_stats"]["active_ctrl_sim_time"] == pytest.approx(5.7)
+    assert info["episode_stats"]["n_active_ctrl_env_steps"] == 57 and info["episode_stats"][
+        "active_ctrl_sim_time"
+    ] == pytest.approx(5.7)
     with pytest.raises(RuntimeError, match="reset"):
         env.step(env.action_space.inactive())
 
@@ -141,7 +171,9 @@ def test_kernels_equal_the_numpy_maze_queries():
     ref = m.rays(st, 8)
     out = np.empty(8)
     for i in range(st.shape[0]):
-        assert np.array_equal(maze_rays(m.walls, m.half, m.width, m.height, st[i, 0], st[i, 1], st[i, 2], 8, out), ref[i])
+        assert np.array_equal(
+            maze_rays(m.walls, m.half, m.width, m.height, st[i, 0], st[i, 1], st[i, 2], 8, out), ref[i]
+        )
     u = rng.uniform(-0.2, 0.2, 300)
     paths = Dubins3D().propagate(st, u, 3.0, 8)
     hits = np.array([maze_path_hit(m.walls, m.half, m.width, m.height, p) for p in paths])
@@ -162,19 +194,22 @@ def test_same_seed_same_episode():
 
 
 # ------------------------------------------------------------------ bad input
-@pytest.mark.parametrize("options, match", [
-    ({"goal": 1}, "unknown reset options"),
-    ({"maze": "big"}, "option 'maze' must be"),
-    ({"maze": {"kind": "round"}}, "unknown maze kind"),
-    ({"maze": "corridor", "state": [125.0, 65.0, 0.0]}, "inside a wall"),
-    ({"maze": "corridor", "state": [20.0, 20.0, 0.0]}, "outside the maze's cells"),
-    ({"maze": "corridor", "state": [125.0, 125.0]}, "option 'state' must be 3 finite numbers"),
-    ({"maze": "corridor", "state": [125.0, 125.0, math.nan]}, "option 'state'"),
-    ({"maze": "corridor", "state": [125.0, 125.0, 0.0], "goal_cell": 0}, "other than the start cell 0"),
-    ({"maze": "corridor", "goal_cell": 3}, r"goal_cell' must be an integer cell index in \[0, 3\)"),
-    ({"maze": "corridor", "goal_cell": 1.5}, "goal_cell"),
-    ({"maze": "corridor"}, "no cell of the maze is 4-8 passages"),
-])
+@pytest.mark.parametrize(
+    "options, match",
+    [
+        ({"goal": 1}, "unknown reset options"),
+        ({"maze": "big"}, "option 'maze' must be"),
+        ({"maze": {"kind": "round"}}, "unknown maze kind"),
+        ({"maze": "corridor", "state": [125.0, 65.0, 0.0]}, "inside a wall"),
+        ({"maze": "corridor", "state": [20.0, 20.0, 0.0]}, "outside the maze's cells"),
+        ({"maze": "corridor", "state": [125.0, 125.0]}, "option 'state' must be 3 finite numbers"),
+        ({"maze": "corridor", "state": [125.0, 125.0, math.nan]}, "option 'state'"),
+        ({"maze": "corridor", "state": [125.0, 125.0, 0.0], "goal_cell": 0}, "other than the start cell 0"),
+        ({"maze": "corridor", "goal_cell": 3}, r"goal_cell' must be an integer cell index in \[0, 3\)"),
+        ({"maze": "corridor", "goal_cell": 1.5}, "goal_cell"),
+        ({"maze": "corridor"}, "no cell of the maze is 4-8 passages"),
+    ],
+)
 def test_bad_reset_options(options, match):
     env = Dubins3DMazeGuardedEnv()
     if options.get("maze") == "corridor":
@@ -183,23 +218,34 @@ def test_bad_reset_options(options, match):
         env.reset(seed=0, options=options)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"goal_cells": (5, 3)}, "goal_cells"), ({"goal_cells": 4}, "goal_cells"), ({"step_dt": 0.0}, "step_dt"),
-    ({"heading_noise": 4.0}, "heading_noise"), ({"lookahead": -1.0}, "lookahead"), ({"maze_rows": 1}, "maze_rows"),
-    ({"max_episode_sim_time": math.inf}, "max_episode_sim_time"), ({"render_mode": "human"}, "render_mode"),
-    ({"clock": "sundial"}, "clock"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"goal_cells": (5, 3)}, "goal_cells"),
+        ({"goal_cells": 4}, "goal_cells"),
+        ({"step_dt": 0.0}, "step_dt"),
+        ({"heading_noise": 4.0}, "heading_noise"),
+        ({"lookahead": -1.0}, "lookahead"),
+        ({"maze_rows": 1}, "maze_rows"),
+        ({"max_episode_sim_time": math.inf}, "max_episode_sim_time"),
+        ({"render_mode": "human"}, "render_mode"),
+        ({"clock": "sundial"}, "clock"),
+    ],
+)
 def test_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):
         Dubins3DMazeGuardedEnv(**kwargs)
 
 
-@pytest.mark.parametrize("action, match", [
-    ({"active_ctrl": 1}, "missing field 'turnrate_ctrl'"),
-    ({"active_ctrl": 2, "turnrate_ctrl": [0.0]}, "0 or 1"),
-    ({"active_ctrl": 1, "turnrate_ctrl": [math.nan]}, "finite"),
-    ({"active_ctrl": 1, "turnrate_ctrl": [0.0], "accel_ctrl": [0.0]}, "unknown fields"),
-])
+@pytest.mark.parametrize(
+    "action, match",
+    [
+        ({"active_ctrl": 1}, "missing field 'turnrate_ctrl'"),
+        ({"active_ctrl": 2, "turnrate_ctrl": [0.0]}, "0 or 1"),
+        ({"active_ctrl": 1, "turnrate_ctrl": [math.nan]}, "finite"),
+        ({"active_ctrl": 1, "turnrate_ctrl": [0.0], "accel_ctrl": [0.0]}, "unknown fields"),
+    ],
+)
 def test_bad_actions_refused_before_the_world_moves(action, match):
     env = gym.make("Dubins3DMazeParallel-v0", clock="fixed:1")
     env.reset(seed=0)
@@ -250,8 +296,24 @@ def test_lrmm_reads_the_maze_model_on_the_rays_and_turns_to_the_lower_risk_side(
 
 def test_rmm_bench_refuses_a_named_guardian_that_does_not_apply(tmp_path, capsys):
     for agent in ("cbf-paper", "hj-paper"):  # the paper's rules are Dubins4D's only
-        assert bench_main(["--env", "Dubins3DMazeParallel-v0", "--agent", agent, "--episodes", "1", "--workers", "1",
-                           "--out", str(tmp_path), "--no-progress"]) == 2
+        assert (
+            bench_main(
+                [
+                    "--env",
+                    "Dubins3DMazeParallel-v0",
+                    "--agent",
+                    agent,
+                    "--episodes",
+                    "1",
+                    "--workers",
+                    "1",
+                    "--out",
+                    str(tmp_path),
+                    "--no-progress",
+                ]
+            )
+            == 2
+        )
         err = capsys.readouterr().err
         assert f"--agent {agent} does not apply to --env Dubins3DMazeParallel-v0" in err and "Dubins4D envs only" in err
 
@@ -259,12 +321,33 @@ def test_rmm_bench_refuses_a_named_guardian_that_does_not_apply(tmp_path, capsys
 def test_rmm_bench_set_runs_what_applies_and_lists_the_rest(tmp_path, capsys):
     import sqlite3
 
-    assert bench_main(["--env", "Dubins3DMazeParallel-v0", "--agent", "paper", "--episodes", "1", "--workers", "1",
-                       "--out", str(tmp_path), "--no-progress", "--no-figure", "--clock", "fixed:1"]) == 0
+    assert (
+        bench_main(
+            [
+                "--env",
+                "Dubins3DMazeParallel-v0",
+                "--agent",
+                "paper",
+                "--episodes",
+                "1",
+                "--workers",
+                "1",
+                "--out",
+                str(tmp_path),
+                "--no-progress",
+                "--no-figure",
+                "--clock",
+                "fixed:1",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     for agent in ("cbf-paper", "hj-paper"):
-        assert (f"--agent paper: {agent} does not apply to --env Dubins3DMazeParallel-v0, skipped: guardian {agent!r} "
-                "applies to Dubins4D envs only") in err
+        assert (
+            f"--agent paper: {agent} does not apply to --env Dubins3DMazeParallel-v0, skipped: guardian {agent!r} "
+            "applies to Dubins4D envs only"
+        ) in err
     con = sqlite3.connect(tmp_path / "results.db")
     ran = {r[0] for r in con.execute("select agent from runs")}
     con.close()

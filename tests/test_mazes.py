@@ -44,13 +44,15 @@ def test_exact_ray_lengths_in_a_hand_built_maze():
 
 def test_path_crossing_cases():
     m = hand_maze()
-    paths = np.array([
-        [[90.0, 100.0], [110.0, 100.0]],   # straight through the wall, both ends outside it
-        [[96.0, 157.0], [104.0, 157.0]],   # cuts the round cap (closest approach 7 > 5? no: 7 from centre)
-        [[96.0, 153.0], [104.0, 153.0]],   # cuts the cap: passes 3 px from its centre
-        [[50.0, 20.0], [150.0, 20.0]],     # below the wall: clear
-        [[150.0, 100.0], [250.0, 100.0]],  # leaves the image
-    ])
+    paths = np.array(
+        [
+            [[90.0, 100.0], [110.0, 100.0]],  # straight through the wall, both ends outside it
+            [[96.0, 157.0], [104.0, 157.0]],  # cuts the round cap (closest approach 7 > 5? no: 7 from centre)
+            [[96.0, 153.0], [104.0, 153.0]],  # cuts the cap: passes 3 px from its centre
+            [[50.0, 20.0], [150.0, 20.0]],  # below the wall: clear
+            [[150.0, 100.0], [250.0, 100.0]],  # leaves the image
+        ]
+    )
     assert m.paths_hit(paths).tolist() == [True, False, True, False, True]
 
 
@@ -64,7 +66,12 @@ def test_pruned_queries_equal_brute_force(walls, seed):
     rng = np.random.default_rng(seed)
     pts = rng.uniform(0, 400, (200, 2))
     w = m.walls
-    brute = np.sqrt(_seg_point_sq(w[None, :, 0], w[None, :, 1], w[None, :, 2], w[None, :, 3], pts[:, 0:1], pts[:, 1:2]).min(1)) - 3.0
+    brute = (
+        np.sqrt(
+            _seg_point_sq(w[None, :, 0], w[None, :, 1], w[None, :, 2], w[None, :, 3], pts[:, 0:1], pts[:, 1:2]).min(1)
+        )
+        - 3.0
+    )
     near = brute < m.reach
     np.testing.assert_allclose(m.point_clearance(pts)[near], brute[near], atol=1e-9)
     # paths of 8 points within 40 px: compare with dense sampling (exact ones may only add hits
@@ -73,7 +80,13 @@ def test_pruned_queries_equal_brute_force(walls, seed):
     steps = np.cumsum(rng.uniform(-2.8, 2.8, (100, 7, 2)), axis=1)
     paths = np.concatenate([start, start + steps], axis=1)
     exact = m.paths_hit(paths)
-    dense = np.concatenate([paths[:, i:i + 1] + np.linspace(0, 1, 50)[None, :, None] * (paths[:, i + 1:i + 2] - paths[:, i:i + 1]) for i in range(7)], axis=1)
+    dense = np.concatenate(
+        [
+            paths[:, i : i + 1] + np.linspace(0, 1, 50)[None, :, None] * (paths[:, i + 1 : i + 2] - paths[:, i : i + 1])
+            for i in range(7)
+        ],
+        axis=1,
+    )
     sampled = np.array([m.state_failed(p).any() for p in dense])
     assert np.all(exact[sampled])  # every sampled hit is found
     assert np.mean(exact != sampled) < 0.05
@@ -172,7 +185,9 @@ def test_shipped_maze_model():
     assert m.meta["metrics"]["test"]["mae"] <= 0.045
     # a state facing a wall 10 px away is risky; the middle of a long corridor is not
     env = Dubins3DMazeEnv()
-    maze = Maze(np.array([[0.0, 100.0, 1000.0, 100.0], [0.0, 300.0, 1000.0, 300.0]]), width=1000.0, height=400.0, thickness=12.5)
+    maze = Maze(
+        np.array([[0.0, 100.0, 1000.0, 100.0], [0.0, 300.0, 1000.0, 300.0]]), width=1000.0, height=400.0, thickness=12.5
+    )
     env.reset(seed=0, options={"maze": maze, "state": [500.0, 200.0, 0.0]})
     open_obs = env.observe_states(np.array([[500.0, 200.0, 0.0]]))
     wall_obs = env.observe_states(np.array([[500.0, 280.0, np.pi / 2]]))

@@ -12,8 +12,18 @@ NAN = float("nan")
 
 
 def E(i, outcome, steps, compute, sim, active, speed, decision, pre, **extra):
-    return {"episode": i, "outcome": outcome, "steps": steps, "compute_time": compute, "sim_time": sim,
-            "active_sim_time": active, "final_speed": speed, "decision_mean": decision, "precompute_time": pre, **extra}
+    return {
+        "episode": i,
+        "outcome": outcome,
+        "steps": steps,
+        "compute_time": compute,
+        "sim_time": sim,
+        "active_sim_time": active,
+        "final_speed": speed,
+        "decision_mean": decision,
+        "precompute_time": pre,
+        **extra,
+    }
 
 
 # stored out of order; one errored episode; one that never stepped and had no sim time
@@ -33,7 +43,7 @@ def test_every_statistic_by_hand():
     # weighted 2 2 1: mean 2/5, std sqrt((2 * 0.6^2 + 2 * 0.4^2 + 0.4^2) / 5); collisions 0 0 | 1 0 | 1
     # (stored order would give 0 1 | 0 1 for the goals)
     assert a["goal"] == pytest.approx((40.0, 100 * math.sqrt(0.24)))
-    assert a["collision"] == pytest.approx((40.0, 100 * math.sqrt((2 * 0.4 ** 2 + 2 * 0.1 ** 2 + 0.6 ** 2) / 5)))
+    assert a["collision"] == pytest.approx((40.0, 100 * math.sqrt((2 * 0.4**2 + 2 * 0.1**2 + 0.6**2) / 5)))
     assert a["timeout"] == (0.0, 0.0)
     assert (a["total_goal"], a["total_collision"], a["total_timeout"]) == pytest.approx((40.0, 40.0, 0.0))
     # ms per step of the episodes that stepped: 2, 4, 1
@@ -61,7 +71,9 @@ def test_empty_inputs_give_nan_not_zero():
     only_errors = aggregate([{"episode": 0, "outcome": "error"}])  # a guardian error: a failure, not a missing result
     assert only_errors["errors"] == 1 and only_errors["error_rate"] == 1.0
     assert only_errors["total_goal"] == 0.0 and only_errors["goal"][0] == 0.0
-    assert only_errors["goal"][1] == pytest.approx(100 * 1.959963984540054 ** 2 / 2 / (1 + 1.959963984540054 ** 2))  # Wilson, n = 1
+    assert only_errors["goal"][1] == pytest.approx(
+        100 * 1.959963984540054**2 / 2 / (1 + 1.959963984540054**2)
+    )  # Wilson, n = 1
     no_result = aggregate([{"episode": 0, "outcome": "error", "error_kind": "timeout"}])
     assert math.isnan(no_result["total_goal"]) and all(map(math.isnan, no_result["goal"]))
 
@@ -70,7 +82,7 @@ def test_batch_rate_batches_in_order_and_weights_by_size():
     # batches of 3: [1 1 0] [0 0]: rates 2/3 (3 episodes) and 0 (2)
     m, s = batch_rate([1, 1, 0, 0, 0], batch_size=3)
     assert m == pytest.approx(0.4)
-    assert s == pytest.approx(math.sqrt((3 * (2 / 3 - 0.4) ** 2 + 2 * 0.4 ** 2) / 5))
+    assert s == pytest.approx(math.sqrt((3 * (2 / 3 - 0.4) ** 2 + 2 * 0.4**2) / 5))
     assert weighted_mean_std([2.0, 4.0], [1, 3]) == pytest.approx((3.5, math.sqrt(0.75)))
 
 
@@ -87,12 +99,13 @@ def test_table_i_rows_per_agent_in_order_of_appearance():
 
 def test_table_i_batches_64_episodes_by_default():
     # 64 goals then one collision: batches of 64 and 1 (one batch of 65 would have no spread)
-    df = pd.DataFrame.from_records([dict(RUN[1], episode=i, agent="x", outcome="goal" if i < 64 else "collision")
-                                    for i in range(65)])
+    df = pd.DataFrame.from_records(
+        [dict(RUN[1], episode=i, agent="x", outcome="goal" if i < 64 else "collision") for i in range(65)]
+    )
     m = 64 / 65
     row = table_i(df).loc["x"]
     assert row["goal"] == pytest.approx(100 * m)
-    assert row["goal_std"] == pytest.approx(100 * math.sqrt((64 * (1 - m) ** 2 + m ** 2) / 65))
+    assert row["goal_std"] == pytest.approx(100 * math.sqrt((64 * (1 - m) ** 2 + m**2) / 65))
     assert aggregate(df.to_dict("records"))["goal"] == pytest.approx((row["goal"], row["goal_std"]))
 
 
@@ -104,9 +117,15 @@ def test_degenerate_inputs_give_nan_without_a_numpy_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert all(map(math.isnan, weighted_mean_std([1.0, 2.0], [0, 0])))
-        a = aggregate([{"episode": 0, "outcome": "error", "error_kind": "timeout"},
-                       {"episode": 1, "outcome": "error", "error_kind": "lost_worker"}])
-        t = table_i(pd.DataFrame.from_records([{"agent": "e", "episode": 0, "outcome": "error", "error_kind": "timeout"}]))
+        a = aggregate(
+            [
+                {"episode": 0, "outcome": "error", "error_kind": "timeout"},
+                {"episode": 1, "outcome": "error", "error_kind": "lost_worker"},
+            ]
+        )
+        t = table_i(
+            pd.DataFrame.from_records([{"agent": "e", "episode": 0, "outcome": "error", "error_kind": "timeout"}])
+        )
     assert [math.isnan(a[f"total_{k}"]) for k in ("goal", "collision", "timeout")] == [True] * 3
     assert (a["episodes"], a["errors"], a["error_rate"]) == (2, 2, 1.0)
     assert math.isnan(t.loc["e", "total_goal"]) and t.loc["e", "errors"] == 1
@@ -117,8 +136,9 @@ def test_episodes_with_equal_numbers_keep_their_stored_order():
     sorted by episode with a stable sort, the order is g c g c ... (8 pairs) then 8 g; batches of 3
     have goal rates 2/3 1/3 2/3 1/3 2/3 2/3 1 1, so mean 2/3 and population std sqrt(1/18).
     An unstable sort may swap the pairs and change the spread."""
-    rows = [dict(RUN[1], episode=i, outcome="goal") for i in range(16)] + \
-        [dict(RUN[1], episode=i, outcome="collision") for i in range(8)]
+    rows = [dict(RUN[1], episode=i, outcome="goal") for i in range(16)] + [
+        dict(RUN[1], episode=i, outcome="collision") for i in range(8)
+    ]
     a = aggregate(rows, batch_size=3)
     assert a["goal"] == pytest.approx((100 * 2 / 3, 100 * math.sqrt(1 / 18)), rel=1e-12)
     assert a["collision"] == pytest.approx((100 / 3, 100 * math.sqrt(1 / 18)), rel=1e-12)
@@ -143,8 +163,20 @@ def test_fewer_than_two_batches_give_the_wilson_interval_not_zero():
     assert rate_spread(64, 64) == "wilson95" and rate_spread(65, 64) == "batches"
     m2, s2 = batch_rate(flags + [1], 64)  # two batches (64 and 1): the batch std again
     assert s2 == pytest.approx(weighted_mean_std([35 / 64, 1.0], [64, 1])[1])
-    agg = aggregate([{"episode": i, "outcome": "goal" if f else "collision", "steps": 10, "compute_time": 0.01,
-                      "sim_time": 1.0, "active_sim_time": 0.0} for i, f in enumerate(flags)], batch_size=64)
+    agg = aggregate(
+        [
+            {
+                "episode": i,
+                "outcome": "goal" if f else "collision",
+                "steps": 10,
+                "compute_time": 0.01,
+                "sim_time": 1.0,
+                "active_sim_time": 0.0,
+            }
+            for i, f in enumerate(flags)
+        ],
+        batch_size=64,
+    )
     assert agg["rate_spread"] == "wilson95" and agg["goal"] == pytest.approx((100 * p, 100 * s))
     centre = (p + z * z / 128) / (1 + z * z / 64)  # the interval is centred here, not on p
     assert agg["goal_ci"] == pytest.approx((100 * (centre - s), 100 * (centre + s)))
@@ -156,8 +188,18 @@ def test_fewer_than_two_batches_give_the_wilson_interval_not_zero():
 def test_the_table_says_which_spread_and_shows_measured_decision_time_under_a_fixed_clock():
     from rmm_bench.report import format_tables
 
-    eps = [{"episode": i, "outcome": "goal" if i % 3 else "collision", "steps": 10, "compute_time": 0.01,
-            "decision_mean": 0.0004 * (1 + i % 2), "sim_time": 1.0, "active_sim_time": 0.0} for i in range(20)]
+    eps = [
+        {
+            "episode": i,
+            "outcome": "goal" if i % 3 else "collision",
+            "steps": 10,
+            "compute_time": 0.01,
+            "decision_mean": 0.0004 * (1 + i % 2),
+            "sim_time": 1.0,
+            "active_sim_time": 0.0,
+        }
+        for i in range(20)
+    ]
     row = {"agent": "a", "obs": "none", "n_obst": 5, **aggregate(eps, batch_size=16)}
     md = format_tables([row], batch_size=16, measured=True)["md"]
     header, _, line, _, note = md.splitlines()
@@ -172,15 +214,27 @@ def test_the_table_says_which_spread_and_shows_measured_decision_time_under_a_fi
     lo, hi = row1["goal_ci"]
     assert cells1[5] == f"{row1['goal'][0]:.1f} [{lo:.1f}, {hi:.1f}]†" and cells1[5].startswith("62.5 [")
     assert md1.splitlines()[2].count("†") == 3  # success, collision and timeout
-    assert md1.splitlines()[-1].endswith("†: fewer than two batches, so the rate is followed by its 95% Wilson "
-                                         "score interval over the episodes, [low, high].")
+    assert md1.splitlines()[-1].endswith(
+        "†: fewer than two batches, so the rate is followed by its 95% Wilson "
+        "score interval over the episodes, [low, high]."
+    )
 
 
 def test_table_i_names_the_wilson_interval_ends():
     import pandas as pd
 
-    eps = [{"agent": "a", "episode": i, "outcome": "goal" if i % 2 else "collision", "steps": 10, "compute_time": 0.01,
-            "sim_time": 1.0, "active_sim_time": 0.0} for i in range(8)]
+    eps = [
+        {
+            "agent": "a",
+            "episode": i,
+            "outcome": "goal" if i % 2 else "collision",
+            "steps": 10,
+            "compute_time": 0.01,
+            "sim_time": 1.0,
+            "active_sim_time": 0.0,
+        }
+        for i in range(8)
+    ]
     t = table_i(pd.DataFrame.from_records(eps), batch_size=64)
     row = t.loc["a"]
     assert row["rate_spread"] == "wilson95" and "goal_ci_std" not in t.columns

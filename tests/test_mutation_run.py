@@ -29,7 +29,7 @@ def run():
     return module
 
 
-PLANTED = '''\
+PLANTED = """\
 import os
 import subprocess
 import sys
@@ -52,7 +52,7 @@ def f():
     if which == "planted.x_f__mutmut_3":  # another value: killed
         return 3
     return 2
-'''
+"""
 
 
 @pytest.fixture
@@ -60,10 +60,17 @@ def work(tmp_path):
     mutants = tmp_path / "mutants"
     (mutants / "tests").mkdir(parents=True)
     (mutants / "planted.py").write_text(PLANTED)
-    (mutants / "tests" / "test_planted.py").write_text("from planted import f\n\n\ndef test_f():\n    assert f() == 2\n")
-    (mutants / "mutmut-stats.json").write_text(json.dumps({
-        "tests_by_mangled_function_name": {"planted.x_f": ["tests/test_planted.py::test_f"]},
-        "duration_by_test": {"tests/test_planted.py::test_f": 0.25}}))
+    (mutants / "tests" / "test_planted.py").write_text(
+        "from planted import f\n\n\ndef test_f():\n    assert f() == 2\n"
+    )
+    (mutants / "mutmut-stats.json").write_text(
+        json.dumps(
+            {
+                "tests_by_mangled_function_name": {"planted.x_f": ["tests/test_planted.py::test_f"]},
+                "duration_by_test": {"tests/test_planted.py::test_f": 0.25},
+            }
+        )
+    )
     return tmp_path
 
 
@@ -117,7 +124,9 @@ def test_the_limit_is_a_multiple_of_the_unmutated_time_plus_a_constant_or_the_op
     assert run.recorded_tests(work, "other.x_g__mutmut_1") == ([], 0)
     assert run.rejudge(work, "other.x_g__mutmut_1", sys.executable, _env(work))[0] == "no tests"
     (work / "mutants" / "mutmut-stats.json").write_text(json.dumps({"duration_by_test": {}}))
-    with pytest.raises(ValueError, match=r"mutmut-stats.json is not mutmut 3's stats file .*tests_by_mangled_function_name"):
+    with pytest.raises(
+        ValueError, match=r"mutmut-stats.json is not mutmut 3's stats file .*tests_by_mangled_function_name"
+    ):
         run.recorded_tests(work, "planted.x_f__mutmut_1")
 
 
@@ -130,18 +139,33 @@ def test_a_timeout_that_is_not_a_positive_number_of_seconds_is_refused(run, bad,
 
 
 def test_the_report_names_each_mutant_killed_by_a_time_out_and_its_limit(run):
-    res = {"target": "planted", "files": ["planted.py"], "mutants": 3, "of": 3, "equivalent": 0, "killed": 2,
-           "survived": ["planted.x_f__mutmut_2"], "status": {"planted.x_f__mutmut_2": "survived"},
-           "equivalent_mutants": [], "equivalent_but_killed": [], "score": 2 / 3, "seconds": 9,
-           "diffs": {"planted.x_f__mutmut_2": "-    return 2\n+    return 1 + 1"},
-           "timeouts": ["planted.x_f__mutmut_1", "planted.x_g__mutmut_4"],
-           "rejudged": {"planted.x_f__mutmut_1": {"tests_s": 0.25, "limit_s": 65.0, "seconds": 65.3, "option": False}}}
+    res = {
+        "target": "planted",
+        "files": ["planted.py"],
+        "mutants": 3,
+        "of": 3,
+        "equivalent": 0,
+        "killed": 2,
+        "survived": ["planted.x_f__mutmut_2"],
+        "status": {"planted.x_f__mutmut_2": "survived"},
+        "equivalent_mutants": [],
+        "equivalent_but_killed": [],
+        "score": 2 / 3,
+        "seconds": 9,
+        "diffs": {"planted.x_f__mutmut_2": "-    return 2\n+    return 1 + 1"},
+        "timeouts": ["planted.x_f__mutmut_1", "planted.x_g__mutmut_4"],
+        "rejudged": {"planted.x_f__mutmut_1": {"tests_s": 0.25, "limit_s": 65.0, "seconds": 65.3, "option": False}},
+    }
     text = run.report([res], {}, {})
     assert "| planted | planted.py | 3 | 0 | 2 | 1 | 66.7% | 9 |" in text
-    assert ("- `planted.x_f__mutmut_1` killed by a time-out: its tests ran past the re-judging's limit of 65 s "
-            "(20 x 0.25 s unmutated + 60 s) and their process group was killed") in text
+    assert (
+        "- `planted.x_f__mutmut_1` killed by a time-out: its tests ran past the re-judging's limit of 65 s "
+        "(20 x 0.25 s unmutated + 60 s) and their process group was killed"
+    ) in text
     assert "- `planted.x_g__mutmut_4` killed by a time-out: it ran past mutmut's own time limit" in text
     assert "- `planted.x_f__mutmut_2` (survived) UNCLASSIFIED" in text
     res["rejudged"]["planted.x_f__mutmut_1"] |= {"limit_s": 7.0, "option": True}
-    assert ("- `planted.x_f__mutmut_1` killed by a time-out: its tests ran past the re-judging's limit of 7 s "
-            "(--timeout) and their process group was killed") in run.report([res], {}, {})
+    assert (
+        "- `planted.x_f__mutmut_1` killed by a time-out: its tests ran past the re-judging's limit of 7 s "
+        "(--timeout) and their process group was killed"
+    ) in run.report([res], {}, {})

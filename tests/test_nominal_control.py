@@ -15,8 +15,12 @@ import pytest
 import rmm_envs  # noqa: F401
 from rmm_envs.envs.guarded import EPISODE_KEY
 
-BLOCKING = [("Dubins4DGuarded-v0", {}, 400), ("Dubins4DMapGuarded-v0", {}, 300), ("Dubins3DMazeGuarded-v0", {}, 600),
-            ("QuadrotorRoomGuarded-v0", {}, 80)]
+BLOCKING = [
+    ("Dubins4DGuarded-v0", {}, 400),
+    ("Dubins4DMapGuarded-v0", {}, 300),
+    ("Dubins3DMazeGuarded-v0", {}, 600),
+    ("QuadrotorRoomGuarded-v0", {}, 80),
+]
 
 
 def _episode(env, seed: int, policy, max_steps: int):
@@ -54,7 +58,9 @@ def test_handing_back_the_nominal_control_is_the_driver_bit_for_bit(env_id, kwar
             assert i1["state"].tobytes() == i2["state"].tobytes()
             assert i1["nominal_control"].tobytes() == i2["nominal_control"].tobytes()
             assert i1["nominal_control"].shape == (space.control_dim,)
-            assert np.all(i1["nominal_control"] >= space.control_low) and np.all(i1["nominal_control"] <= space.control_high)
+            assert np.all(i1["nominal_control"] >= space.control_low) and np.all(
+                i1["nominal_control"] <= space.control_high
+            )
             if k:
                 # the applied control is the nominal control the previous step reported
                 assert i1["control"].tobytes() == alone[k - 1][3]["nominal_control"].tobytes()
@@ -64,7 +70,15 @@ def test_handing_back_the_nominal_control_is_the_driver_bit_for_bit(env_id, kwar
         if EPISODE_KEY in alone[-1][3]:
             assert alone[-1][3][EPISODE_KEY] == s1 and filtered[-1][3][EPISODE_KEY] == s2
         assert s1["n_active_ctrl_env_steps"] == 0 and s2["n_active_ctrl_env_steps"] == s2["n_env_steps"]
-        for key in ("outcome", "n_env_steps", "cum_sim_time", "cum_reward", "cum_cost", "cum_compute_time", "final_speed"):
+        for key in (
+            "outcome",
+            "n_env_steps",
+            "cum_sim_time",
+            "cum_reward",
+            "cum_cost",
+            "cum_compute_time",
+            "final_speed",
+        ):
             assert s1[key] == s2[key], key
     env.close()
 
@@ -102,8 +116,9 @@ def test_the_maze_driver_follows_its_route_while_the_guardian_drives():
 
 def test_cost_is_one_on_the_collision_step_and_summed_per_episode():
     env = gym.make("Dubins4DGuarded-v0", clock="fixed:1")
-    obs, info = env.reset(seed=0, options={"state": [0.0, 0.0, 0.0, 2.0], "obstacles": [[3.0, 0.0, 1.0]],
-                                           "goal": [-8.0, 0.0, 0.5]})
+    obs, info = env.reset(
+        seed=0, options={"state": [0.0, 0.0, 0.0, 2.0], "obstacles": [[3.0, 0.0, 1.0]], "goal": [-8.0, 0.0, 0.5]}
+    )
     space = env.unwrapped.action_space
     costs = []
     while True:  # full speed straight into the obstacle 2 m ahead
@@ -128,11 +143,16 @@ def test_vector_env_reports_the_single_envs_nominal_control_and_cost():
         for i in range(n):
             assert vinfo["nominal_control"][i].tobytes() == infos[i]["nominal_control"].tobytes()
         # hand the nominal control back in sub-env 0, let the driver drive the others
-        act = {"active_ctrl": np.array([1, 0, 0]), "turnrate_ctrl": vinfo["nominal_control"][:, :1],
-               "accel_ctrl": vinfo["nominal_control"][:, 1:]}
+        act = {
+            "active_ctrl": np.array([1, 0, 0]),
+            "turnrate_ctrl": vinfo["nominal_control"][:, :1],
+            "accel_ctrl": vinfo["nominal_control"][:, 1:],
+        }
         _, _, term, trunc, vinfo = venv.step(act)
-        outs = [s.step(space.active(infos[0]["nominal_control"]) if i == 0 else space.inactive())
-                for i, s in enumerate(singles)]
+        outs = [
+            s.step(space.active(infos[0]["nominal_control"]) if i == 0 else space.inactive())
+            for i, s in enumerate(singles)
+        ]
         infos = [o[4] for o in outs]
         for i in range(n):
             assert vinfo["cost"][i] == infos[i]["cost"]

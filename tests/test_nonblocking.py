@@ -11,7 +11,11 @@ OPTS = {"state": [0, 0, 0, 1.0], "goal": [9, 9, 0.5], "obstacles": [[-9, -9, 1.0
 
 
 def act(u1, u2, active=1):
-    return {"active_ctrl": active, "turnrate_ctrl": np.array([u1], np.float32), "accel_ctrl": np.array([u2], np.float32)}
+    return {
+        "active_ctrl": active,
+        "turnrate_ctrl": np.array([u1], np.float32),
+        "accel_ctrl": np.array([u2], np.float32),
+    }
 
 
 def test_lap_is_elapsed_times_accel_plus_base():

@@ -54,8 +54,10 @@ def test_module_openings_are_short():
             n = opening_lines(path)
             if n > LIMIT:
                 long[rel] = n
-    assert not long, (f"module openings over {LIMIT} lines: {long}; say what the "
-                      "module is and offers, and move the rationale to docs/design-notes.md")
+    assert not long, (
+        f"module openings over {LIMIT} lines: {long}; say what the "
+        "module is and offers, and move the rationale to docs/design-notes.md"
+    )
     missing = sorted(p for p in SPEC_OPENINGS if not (ROOT / p).exists())
     assert not missing, f"exempt modules that no longer exist (remove them): {missing}"
 

@@ -9,11 +9,11 @@ import subprocess
 import sys
 import sysconfig
 import textwrap
-import tomllib
 import zipfile
 from pathlib import Path
 
 import pytest
+import tomllib
 
 from tests.layout import PACKAGE_DIRS, ROOT
 
@@ -37,18 +37,39 @@ def test_the_package_map_is_the_tests_layout_and_lists_every_package_folder():
 
 @pytest.mark.heavy
 def test_the_wheel_installs_only_names_of_this_project_and_no_development_script(tmp_path):
-    done = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",
-                           str(tmp_path), str(ROOT)], capture_output=True, text=True)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(tmp_path),
+            str(ROOT),
+        ],
+        capture_output=True,
+        text=True,
+    )
     if done.returncode != 0 and "No module named" in done.stderr:  # no setuptools in this interpreter: isolate
-        done = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(ROOT)],
-                              capture_output=True, text=True)
+        done = subprocess.run(
+            [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(ROOT)],
+            capture_output=True,
+            text=True,
+        )
     assert done.returncode == 0, done.stderr
-    wheel, = tmp_path.glob("rmm_envs-*.whl")
+    (wheel,) = tmp_path.glob("rmm_envs-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     top = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
     assert top == {"rmm_envs", "rmm_guardians", "rmm_bench"}
     assert not [n for n in names if "perf_" in n or "check_behaviour" in n or n.startswith(("benchmarks/", "tests/"))]
-    for data in ("rmm_guardians/lrmm/models/dubins4d.npz", "rmm_envs/assets/quadrotor.urdf", "rmm_envs/assets/maps/example.json"):
+    for data in (
+        "rmm_guardians/lrmm/models/dubins4d.npz",
+        "rmm_envs/assets/quadrotor.urdf",
+        "rmm_envs/assets/maps/example.json",
+    ):
         assert data in names
     meta = next(n for n in names if n.endswith(".dist-info/METADATA"))
     text = zipfile.ZipFile(wheel).read(meta).decode()
@@ -72,8 +93,9 @@ def research_repo(tmp_path):
     """A user's repository: packages of its own named like ours, and a module with a guardian."""
     for pkg in ("benchmarks", "guardians", "tests", "rmm"):
         (tmp_path / pkg).mkdir()
-        (tmp_path / pkg / "__init__.py").write_text("raise ImportError('the user package was imported')\n"
-                                                    if pkg != "tests" else "")
+        (tmp_path / pkg / "__init__.py").write_text(
+            "raise ImportError('the user package was imported')\n" if pkg != "tests" else ""
+        )
     (tmp_path / "mymod.py").write_text(GUARDIAN)
     (tmp_path / "broken.py").write_text("import a_module_nobody_has_26\n")
     (tmp_path / "shadowed").mkdir()
@@ -89,8 +111,24 @@ def _run(cmd, cwd):
 
 @pytest.mark.heavy
 def test_rmm_bench_with_two_workers_from_a_repository_with_same_named_packages(research_repo):
-    done = _run([str(BIN / "rmm-bench"), "--agent", "inactive,mymod:Never", "--episodes", "4", "--workers", "2",
-                 "--clock", "fixed:1", "--no-progress", "--no-figure", "--out", "res"], research_repo)
+    done = _run(
+        [
+            str(BIN / "rmm-bench"),
+            "--agent",
+            "inactive,mymod:Never",
+            "--episodes",
+            "4",
+            "--workers",
+            "2",
+            "--clock",
+            "fixed:1",
+            "--no-progress",
+            "--no-figure",
+            "--out",
+            "res",
+        ],
+        research_repo,
+    )
     assert done.returncode == 0, done.stderr
     table = (research_repo / "res" / "table_I.md").read_text()
     rows = {line.split(" | ")[0].strip("| "): line for line in table.splitlines() if line.startswith("| ")}
@@ -98,22 +136,37 @@ def test_rmm_bench_with_two_workers_from_a_repository_with_same_named_packages(r
     assert rows["mymod:Never"].split(" | ")[3] == "4"  # four episodes, none an error
     assert "error" not in done.stderr.lower()
     # the Python API and the other commands from the same directory
-    api = _run([sys.executable, "-c", "import rmm_bench, rmm_guardians, rmm_envs; "
-                "print(len(rmm_bench.load_results('res')))"], research_repo)
+    api = _run(
+        [sys.executable, "-c", "import rmm_bench, rmm_guardians, rmm_envs; print(len(rmm_bench.load_results('res')))"],
+        research_repo,
+    )
     assert api.returncode == 0 and api.stdout.strip() == "8", api.stderr
     for cmd in ("rmm-datagen", "rmm-train"):
         assert _run([str(BIN / cmd), "--help"], research_repo).returncode == 0
 
 
-@pytest.mark.parametrize(("agent", "says"), [
-    ("nomod26:X", "guardian 'nomod26:X': cannot import module 'nomod26': no module named 'nomod26' in the current "
-                  "directory ({cwd}) or the installed packages"),
-    ("broken:X", "guardian 'broken:X': cannot import module 'broken' (from broken.py): ModuleNotFoundError: No module "
-                 "named 'a_module_nobody_has_26'"),
-    ("shadowed:Never", "guardian 'shadowed:Never': module 'shadowed' (from shadowed/__init__.py) has no attribute 'Never'"),
-])
-def test_a_user_module_that_cannot_be_used_is_one_line_naming_it_and_its_file(research_repo, agent, says, monkeypatch,
-                                                                                capsys):
+@pytest.mark.parametrize(
+    ("agent", "says"),
+    [
+        (
+            "nomod26:X",
+            "guardian 'nomod26:X': cannot import module 'nomod26': no module named 'nomod26' in the current "
+            "directory ({cwd}) or the installed packages",
+        ),
+        (
+            "broken:X",
+            "guardian 'broken:X': cannot import module 'broken' (from broken.py): ModuleNotFoundError: No module "
+            "named 'a_module_nobody_has_26'",
+        ),
+        (
+            "shadowed:Never",
+            "guardian 'shadowed:Never': module 'shadowed' (from shadowed/__init__.py) has no attribute 'Never'",
+        ),
+    ],
+)
+def test_a_user_module_that_cannot_be_used_is_one_line_naming_it_and_its_file(
+    research_repo, agent, says, monkeypatch, capsys
+):
     from rmm_bench.cli import main
 
     monkeypatch.chdir(research_repo)
@@ -131,7 +184,11 @@ def test_an_env_module_that_fails_to_import_is_named_with_its_file(research_repo
     monkeypatch.chdir(research_repo)
     monkeypatch.setattr(sys, "path", list(sys.path))
     monkeypatch.delitem(sys.modules, "broken", raising=False)
-    assert main(["--agent", "inactive", "--env", "broken:Foo-v0", "--episodes", "1", "--no-progress", "--out", "r"]) == 2
-    assert capsys.readouterr().err.strip() == ("rmm-bench: error: --env 'broken:Foo-v0': cannot import module 'broken' "
-                                               "(from broken.py): ModuleNotFoundError: No module named "
-                                               "'a_module_nobody_has_26'")
+    assert (
+        main(["--agent", "inactive", "--env", "broken:Foo-v0", "--episodes", "1", "--no-progress", "--out", "r"]) == 2
+    )
+    assert capsys.readouterr().err.strip() == (
+        "rmm-bench: error: --env 'broken:Foo-v0': cannot import module 'broken' "
+        "(from broken.py): ModuleNotFoundError: No module named "
+        "'a_module_nobody_has_26'"
+    )

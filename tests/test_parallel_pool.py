@@ -16,17 +16,20 @@ from tests.bench_helpers import faulty_task
 from tests.test_faults import within  # fails a test that would hang (a pool that misses its end)
 
 
-@pytest.mark.parametrize("code, text", [
-    (None, "still running"),
-    (0, "exited with code 0 (os._exit or sys.exit inside the task?)"),
-    (3, "exited with code 3 (os._exit or sys.exit inside the task?)"),
-    (-signal.SIGKILL, "killed by SIGKILL (often the out-of-memory killer)"),
-    (-signal.SIGSEGV, "killed by SIGSEGV (a crash in compiled code)"),
-    (-signal.SIGBUS, "killed by SIGBUS (a crash in compiled code)"),
-    (-signal.SIGABRT, "killed by SIGABRT (an abort in compiled code)"),
-    (-signal.SIGTERM, "killed by SIGTERM"),
-    (-200, "killed by signal 200"),
-])
+@pytest.mark.parametrize(
+    "code, text",
+    [
+        (None, "still running"),
+        (0, "exited with code 0 (os._exit or sys.exit inside the task?)"),
+        (3, "exited with code 3 (os._exit or sys.exit inside the task?)"),
+        (-signal.SIGKILL, "killed by SIGKILL (often the out-of-memory killer)"),
+        (-signal.SIGSEGV, "killed by SIGSEGV (a crash in compiled code)"),
+        (-signal.SIGBUS, "killed by SIGBUS (a crash in compiled code)"),
+        (-signal.SIGABRT, "killed by SIGABRT (an abort in compiled code)"),
+        (-signal.SIGTERM, "killed by SIGTERM"),
+        (-200, "killed by signal 200"),
+    ],
+)
 def test_exit_causes_in_words(code, text):
     assert describe_exit(code) == text
 
@@ -79,7 +82,7 @@ def _generator(task):
 
 
 def _raise_unpicklable(task):
-    raise ValueError((x for x in range(task)))
+    raise ValueError(x for x in range(task))
 
 
 def test_a_result_or_exception_that_cannot_be_pickled_is_sent_as_an_error_saying_so():
@@ -87,10 +90,16 @@ def test_a_result_or_exception_that_cannot_be_pickled_is_sent_as_an_error_saying
     assert [m[:2] for m in out] == [("start", 7), ("err", 7)]
     exc, tb = out[1][2]
     assert isinstance(exc, RuntimeError) and tb == ""
-    assert str(exc) == "task 7: its result cannot be sent to the parent process (TypeError: cannot pickle 'generator' object)"
+    assert (
+        str(exc)
+        == "task 7: its result cannot be sent to the parent process (TypeError: cannot pickle 'generator' object)"
+    )
     out = _loop(_raise_unpicklable, [(8, 3), None])
     exc, tb = out[1][2]
-    assert str(exc) == "task 8: its exception cannot be sent to the parent process (TypeError: cannot pickle 'generator' object)"
+    assert (
+        str(exc)
+        == "task 8: its exception cannot be sent to the parent process (TypeError: cannot pickle 'generator' object)"
+    )
     assert "in _raise_unpicklable" in tb and "ValueError" in tb  # the original traceback, as text
 
 
@@ -161,12 +170,15 @@ def test_one_worker_or_one_task_runs_here_in_order():
     assert list(run_local(_pid, [], 4)) == []
 
 
-@pytest.mark.parametrize("kw, text", [
-    ({"workers": 0}, "workers must be an integer >= 1, got 0"),
-    ({"workers": 1.5}, "workers must be an integer >= 1, got 1.5"),
-    ({"workers": 2, "task_timeout": 0}, "task_timeout must be > 0 seconds or None, got 0"),
-    ({"workers": 2, "task_timeout": -1.0}, "task_timeout must be > 0 seconds or None, got -1.0"),
-])
+@pytest.mark.parametrize(
+    "kw, text",
+    [
+        ({"workers": 0}, "workers must be an integer >= 1, got 0"),
+        ({"workers": 1.5}, "workers must be an integer >= 1, got 1.5"),
+        ({"workers": 2, "task_timeout": 0}, "task_timeout must be > 0 seconds or None, got 0"),
+        ({"workers": 2, "task_timeout": -1.0}, "task_timeout must be > 0 seconds or None, got -1.0"),
+    ],
+)
 def test_bad_pool_arguments_are_refused_before_anything_runs(kw, text):
     ran = []
     with pytest.raises(ValueError) as e:

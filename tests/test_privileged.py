@@ -7,7 +7,8 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 
 from rmm_guardians.cbf.guardian import CBFGuardian
 from rmm_guardians.cbf.maze import MazeCBFGuardian
@@ -92,8 +93,12 @@ def test_a_nan_state_brakes_fully_and_is_counted(cls, tmp_path):
 
     space = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")
     g = cls(cache_dir=tmp_path, grid_n=(9, 9, 8, 5), horizon=0.5) if cls is HJGuardian else cls(reference="clf")
-    box = {"obstacles": np.array([[5.0, 0.0, 1.0]]), "goal": np.array([9.0, 9.0, 0.5]),
-           "state": np.array([0.0, 0.0, 0.0, 1.0]), "sim_time": 0.0}
+    box = {
+        "obstacles": np.array([[5.0, 0.0, 1.0]]),
+        "goal": np.array([9.0, 9.0, 0.5]),
+        "state": np.array([0.0, 0.0, 0.0, 1.0]),
+        "sim_time": 0.0,
+    }
     g.reset(seed=0, privileged=lambda: box, action_space=space)
     box["state"] = np.array([0.0, math.nan, 0.0, 1.0])
     a = g.act(None, {})

@@ -9,15 +9,26 @@ from hypothesis import strategies as st
 try:  # pybullet is pinned in the test extra: a missing install must fail loudly, not skip every test here
     import pybullet  # noqa: F401
 except ImportError as e:
-    raise ImportError("the quadrotor tests need pybullet==3.2.7, part of the test extra: pip install -e '.[test]'") from e
+    raise ImportError(
+        "the quadrotor tests need pybullet==3.2.7, part of the test extra: pip install -e '.[test]'"
+    ) from e
+
+from gymnasium.utils.env_checker import check_env
 
 import rmm_envs  # noqa: F401
-from gymnasium.utils.env_checker import check_env
 from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
 from rmm_envs.systems.quadrotor import QUADROTOR
 from rmm_envs.worlds.rooms import generate_room
 
-EMPTY = {"n_rectangles": 1, "x_range": 10.0, "y_range": 10.0, "wall_height": 3.0, "n_boxes": 0, "n_cylinders": 0, "n_spheres": 0}
+EMPTY = {
+    "n_rectangles": 1,
+    "x_range": 10.0,
+    "y_range": 10.0,
+    "wall_height": 3.0,
+    "n_boxes": 0,
+    "n_cylinders": 0,
+    "n_spheres": 0,
+}
 
 
 def open_spot(env):
@@ -165,8 +176,9 @@ def test_numpy_propagator_reproduces_pybullet():
         p.setGravity(0, 0, -QUADROTOR.gravity, physicsClientId=c)
         p.setTimeStep(QUADROTOR.dt, physicsClientId=c)
         b = p.loadURDF(_urdf_path(), [0, 0, 50], flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c)
-        p.changeDynamics(b, -1, linearDamping=QUADROTOR.linear_damping, angularDamping=QUADROTOR.angular_damping,
-                         physicsClientId=c)
+        p.changeDynamics(
+            b, -1, linearDamping=QUADROTOR.linear_damping, angularDamping=QUADROTOR.angular_damping, physicsClientId=c
+        )
         quad = Quadrotor()
         rng = np.random.default_rng(7)
         n = 24
@@ -187,7 +199,9 @@ def test_numpy_propagator_reproduces_pybullet():
                 pos, orn = p.getBasePositionAndOrientation(b, physicsClientId=c)
                 v, w = p.getBaseVelocity(b, physicsClientId=c)
                 np.testing.assert_allclose(paths[i, seg + 1, :3], pos, atol=1e-6)
-                np.testing.assert_allclose(np.abs(paths[i, seg + 1, 3:7] @ np.array(orn)), 1.0, atol=1e-9)  # same rotation
+                np.testing.assert_allclose(
+                    np.abs(paths[i, seg + 1, 3:7] @ np.array(orn)), 1.0, atol=1e-9
+                )  # same rotation
                 np.testing.assert_allclose(paths[i, seg + 1, 7:13], [*v, *w], atol=1e-5)
     finally:
         p.disconnect(physicsClientId=c)
@@ -210,8 +224,11 @@ def test_every_generated_shape_exists_in_pybullet():
     env = QuadrotorRoomEnv()
     for seed in range(3):
         env.reset(seed=seed)
-        n = sum(len(p.getCollisionShapeData(b, -1, physicsClientId=env.client))
-                for b in range(1, p.getNumBodies(physicsClientId=env.client)) if b != env.body)
+        n = sum(
+            len(p.getCollisionShapeData(b, -1, physicsClientId=env.client))
+            for b in range(1, p.getNumBodies(physicsClientId=env.client))
+            if b != env.body
+        )
         assert n == len(env.room.walls) + len(env.room.objects)
 
 
@@ -273,19 +290,25 @@ def test_shipped_quadrotor_model():
 
 
 @settings(max_examples=60, deadline=None)
-@given(shape=st.sampled_from(["box", "cylinder", "sphere"]),
-       size=st.lists(st.floats(0.05, 2.0), min_size=3, max_size=3),
-       direction=st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3).filter(lambda v: math.hypot(*v) > 1e-3))
+@given(
+    shape=st.sampled_from(["box", "cylinder", "sphere"]),
+    size=st.lists(st.floats(0.05, 2.0), min_size=3, max_size=3),
+    direction=st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3).filter(lambda v: math.hypot(*v) > 1e-3),
+)
 def test_the_bounding_sphere_holds_the_object_and_touches_it(shape, size, direction):
     """No point of the bounding sphere lies inside the object (in its own frame, so in any
     orientation), and the sphere touches the object at a corner (box) or on a rim (cylinder)."""
-    from rmm_guardians.hj.room import _object_sd
     from rmm_envs.worlds.rooms import bounding_radius
+    from rmm_guardians.hj.room import _object_sd
 
     size = np.array(size[: {"box": 3, "cylinder": 2, "sphere": 1}[shape]])
     r = bounding_radius(shape, size)
     u = np.array(direction) / math.hypot(*direction)
     assert _object_sd(shape, size, *(r * u)) >= -1e-12
-    corner = size if shape == "box" else np.array([size[0], 0.0, size[1] / 2] if shape == "cylinder" else [0.0, 0.0, size[0]])
+    corner = (
+        size
+        if shape == "box"
+        else np.array([size[0], 0.0, size[1] / 2] if shape == "cylinder" else [0.0, 0.0, size[0]])
+    )
     assert math.sqrt(float(np.sum(corner * corner))) == pytest.approx(r, rel=1e-12)
     assert abs(_object_sd(shape, size, *corner)) < 1e-12

@@ -10,14 +10,14 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_guardians import make_guardian
-from rmm_guardians.cbf.quadrotor import QuadrotorCBFGuardian
-from rmm_guardians.cbf.quadrotor_rows import BOX, CYLINDER, FLOOR, SPHERE, command_rows, room_shapes, shape_distances
 from rmm_envs.envs.quadrotor_room_parallel import CONTROLS, QuadrotorRoomGuardedEnv
 from rmm_envs.systems.quadrotor_control import ClosedLoopQuadrotor, CommandController
 from rmm_envs.systems.rotations import quat_from_euler
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_envs.worlds.rooms import Room
+from rmm_guardians import make_guardian
+from rmm_guardians.cbf.quadrotor import QuadrotorCBFGuardian
+from rmm_guardians.cbf.quadrotor_rows import BOX, CYLINDER, FLOOR, SPHERE, command_rows, room_shapes, shape_distances
 
 TAU_H, TAU_Z, P1, P2 = 0.42, 0.34, 2.0, 2.0
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
@@ -29,8 +29,14 @@ def level(x=0.0, y=0.0, z=1.5, yaw=0.0, v=(0.0, 0.0, 0.0)):
 
 def room(walls=(), objects=()):
     """A 20 m x 20 m footprint (origin -10, -10) with the given walls and objects."""
-    return Room(footprint=np.ones((40, 40), bool), origin=np.array([-10.0, -10.0]), cell=0.5, wall_height=3.0,
-                walls=np.array(walls, float).reshape(-1, 6), objects=list(objects))
+    return Room(
+        footprint=np.ones((40, 40), bool),
+        origin=np.array([-10.0, -10.0]),
+        cell=0.5,
+        wall_height=3.0,
+        walls=np.array(walls, float).reshape(-1, 6),
+        objects=list(objects),
+    )
 
 
 def obj(shape, pos, size, quat=IDENTITY):
@@ -109,16 +115,25 @@ def test_row_of_a_box_turned_by_45_degrees():
 
 
 def test_room_shapes_order_and_kinds():
-    r = room(walls=[[2.0, 0.0, 1.0, 0.25, 3.0, 1.0]],
-             objects=[obj("sphere", [0, 3, 1], [0.5]), obj("cylinder", [3, 3, 0.5], [0.2, 1.0]), obj("box", [-3, 0, 0.2], [0.2] * 3)])
+    r = room(
+        walls=[[2.0, 0.0, 1.0, 0.25, 3.0, 1.0]],
+        objects=[
+            obj("sphere", [0, 3, 1], [0.5]),
+            obj("cylinder", [3, 3, 0.5], [0.2, 1.0]),
+            obj("box", [-3, 0, 0.2], [0.2] * 3),
+        ],
+    )
     assert room_shapes(r).kind.tolist() == [FLOOR, BOX, SPHERE, CYLINDER, BOX]
     with pytest.raises(ValueError, match="room object 0 has shape 'cone'"):
         room_shapes(room(objects=[obj("cone", [0, 0, 0], [1.0])]))
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.floats(-3, 3), min_size=3, max_size=3), st.sampled_from(["box", "cylinder", "sphere"]),
-       st.lists(st.floats(-math.pi, math.pi), min_size=3, max_size=3))
+@given(
+    st.lists(st.floats(-3, 3), min_size=3, max_size=3),
+    st.sampled_from(["box", "cylinder", "sphere"]),
+    st.lists(st.floats(-math.pi, math.pi), min_size=3, max_size=3),
+)
 def test_the_gradient_is_the_distance_s_derivative(p, shape, angles):
     """Away from an edge, d changes along n at rate 1 and not across it (finite differences)."""
     size = {"box": [0.4, 0.3, 0.6], "cylinder": [0.5, 1.2], "sphere": [0.7]}[shape]
@@ -143,8 +158,12 @@ def env():
 
 def reset_at(env, g, r, state, goal=(8.0, 8.0, 1.5)):
     obs, info = env.reset(seed=0, options={"room": r, "state": state, "waypoints": [list(goal)]})
-    g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space,
-            privileged=env.unwrapped.privileged)
+    g.reset(
+        seed=0,
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        privileged=env.unwrapped.privileged,
+    )
     return obs, info
 
 
@@ -153,11 +172,15 @@ def test_cbf_dispatches_to_the_quadrotor_and_cbf_paper_does_not_apply(env):
     g.check_spaces(env.observation_space, env.action_space)
     reset_at(env, g, room(), level(z=2.0))
     assert isinstance(g.delegate, QuadrotorCBFGuardian) and g.delegate.name == "cbf"
-    with pytest.raises(ValueError, match=r"guardian 'cbf-paper' applies to Dubins4D envs only: it models the Dubins4D car"):
+    with pytest.raises(
+        ValueError, match=r"guardian 'cbf-paper' applies to Dubins4D envs only: it models the Dubins4D car"
+    ):
         make_guardian("cbf-paper").check_spaces(env.observation_space, env.action_space)
     with pytest.raises(ValueError, match="applies to Dubins4D envs and the maze car"):
         make_guardian("cbf", quadrotor=False).check_spaces(env.observation_space, env.action_space)
-    with pytest.raises(ValueError, match="quadrotor must be a dict of rmm_guardians.cbf.quadrotor.QuadrotorCBFGuardian"):
+    with pytest.raises(
+        ValueError, match="quadrotor must be a dict of rmm_guardians.cbf.quadrotor.QuadrotorCBFGuardian"
+    ):
         make_guardian("cbf", quadrotor="yes")
     with pytest.raises(ValueError, match=r"margin must be a finite number >= 0.0, got -1"):
         make_guardian("cbf", quadrotor={"margin": -1})
@@ -203,7 +226,9 @@ def test_qpsolvers_backends_agree_with_the_direct_osqp_path(relaxed):
     h = np.array([-0.2, -0.2]) if relaxed else np.array([1.0, 5.0])
     u_nom = np.array([1.5, 0.5, 0.2])
     want = CommandQP(2, lo, hi, 1e3, 1e-6).solve(G, h, u_nom, relaxed=relaxed)
-    assert want is not None and (want[0] == pytest.approx(0.0, abs=1e-5) if relaxed else want[0] == pytest.approx(TAU_H, abs=1e-5))
+    assert want is not None and (
+        want[0] == pytest.approx(0.0, abs=1e-5) if relaxed else want[0] == pytest.approx(TAU_H, abs=1e-5)
+    )
     for name in {"clarabel", "daqp"} & set(installed_solvers()):
         got = CommandQP(2, lo, hi, 1e3, 1e-6, name=name).solve(G, h, u_nom, relaxed=relaxed)
         np.testing.assert_allclose(got, want, atol=1e-4, err_msg=name)
@@ -221,16 +246,27 @@ def test_latency_prediction_is_the_closed_loop_flow(env):
 
 
 @settings(max_examples=25, deadline=None)
-@given(st.floats(-3.0, 3.0), st.floats(-3.0, 3.0), st.floats(0.6, 2.5), st.floats(-math.pi, math.pi),
-       st.lists(st.floats(-2.0, 2.0), min_size=2, max_size=2), st.floats(-1.0, 1.0),
-       st.lists(st.floats(-3.0, 3.0), min_size=4, max_size=4))
+@given(
+    st.floats(-3.0, 3.0),
+    st.floats(-3.0, 3.0),
+    st.floats(0.6, 2.5),
+    st.floats(-math.pi, math.pi),
+    st.lists(st.floats(-2.0, 2.0), min_size=2, max_size=2),
+    st.floats(-1.0, 1.0),
+    st.lists(st.floats(-3.0, 3.0), min_size=4, max_size=4),
+)
 def test_decisions_keep_their_rows_and_the_box(x, y, z, yaw, vh, vz, nominal):
     """Whatever the state and the nominal command (even outside the box): the guardian either
     leaves control with the pilot, and then the nominal (clipped to the box) satisfies every
     row, or commands within the box and, unless recovering, satisfies every row."""
-    r = room(walls=[[3.5, 0.0, 1.5, 0.25, 5.0, 1.5], [0.0, -3.5, 1.5, 5.0, 0.25, 1.5]],
-             objects=[obj("sphere", [-1.5, 1.5, 0.6], [0.6]), obj("cylinder", [1.5, 1.8, 0.5], [0.4, 1.0]),
-                      obj("box", [-1.5, -1.5, 0.4], [0.4, 0.3, 0.4], quat_from_euler(0.0, 0.0, 0.7))])
+    r = room(
+        walls=[[3.5, 0.0, 1.5, 0.25, 5.0, 1.5], [0.0, -3.5, 1.5, 5.0, 0.25, 1.5]],
+        objects=[
+            obj("sphere", [-1.5, 1.5, 0.6], [0.6]),
+            obj("cylinder", [1.5, 1.8, 0.5], [0.4, 1.0]),
+            obj("box", [-1.5, -1.5, 0.4], [0.4, 0.3, 0.4], quat_from_euler(0.0, 0.0, 0.7)),
+        ],
+    )
     g = QuadrotorCBFGuardian()
     g.reset(seed=0, action_space=SPACE, privileged=lambda: {"room": r, "state": level(), "sim_time": 0.0})
     state = level(x, y, z, yaw, (*vh, vz))
@@ -246,7 +282,9 @@ def test_decisions_keep_their_rows_and_the_box(x, y, z, yaw, vh, vz, nominal):
         assert np.all(G @ u[:3] <= h + 1e-4)
 
 
-SPACE = GuardianActionSpace.for_system(ClosedLoopQuadrotor(CommandController()), CONTROLS, kind="quadrotor")  # the env's
+SPACE = GuardianActionSpace.for_system(
+    ClosedLoopQuadrotor(CommandController()), CONTROLS, kind="quadrotor"
+)  # the env's
 
 
 def test_an_infeasible_qp_recovers_with_the_least_violation(env):
@@ -296,12 +334,18 @@ def test_a_deadlock_follows_the_wall_and_turns_at_a_concave_corner(env):
 def test_bad_input_is_named(env):
     g = QuadrotorCBFGuardian()
     obs, info = reset_at(env, g, room(), level(z=2.0))
-    with pytest.raises(ValueError, match=r"info\['nominal_control'\].*but the step's info has none \(keys: \['sim_time'"):
+    with pytest.raises(
+        ValueError, match=r"info\['nominal_control'\].*but the step's info has none \(keys: \['sim_time'"
+    ):
         g.act(obs, {"sim_time": 0.0})
     with pytest.raises(ValueError, match=r"must be 4 finite numbers .* got \[1.0, nan\]"):
         g.act(obs, {"nominal_control": [1.0, float("nan")]})
-    for kwargs, msg in (({"p1": 0}, "p1 .* > 0.0, got 0"), ({"tau_h": float("nan")}, "tau_h .* got nan"),
-                        ({"n_rows": 0}, "n_rows must be an integer >= 1"), ({"solver": "cplex"}, "solver must be 'osqp'")):
+    for kwargs, msg in (
+        ({"p1": 0}, "p1 .* > 0.0, got 0"),
+        ({"tau_h": float("nan")}, "tau_h .* got nan"),
+        ({"n_rows": 0}, "n_rows must be an integer >= 1"),
+        ({"solver": "cplex"}, "solver must be 'osqp'"),
+    ):
         with pytest.raises(ValueError, match=msg):
             QuadrotorCBFGuardian(**kwargs)
     from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
@@ -329,8 +373,12 @@ def test_a_fixed_clock_episode_it_saves():
         e = gym.make("QuadrotorRoomParallel-v0", clock="fixed:1")
         g = make_guardian(name, env_id="QuadrotorRoomParallel-v0")
         obs, info = e.reset(seed=SAVED_SEED)
-        g.reset(seed=0, observation_space=e.observation_space, action_space=e.action_space,
-                privileged=e.unwrapped.privileged)
+        g.reset(
+            seed=0,
+            observation_space=e.observation_space,
+            action_space=e.action_space,
+            privileged=e.unwrapped.privileged,
+        )
         while True:
             obs, _, te, tr, info = e.step(g.act(obs, info))
             if te or tr:

@@ -73,13 +73,16 @@ def test_each_rate_and_tilt_error_is_damped_about_its_own_axis(yaw):
     np.testing.assert_allclose(CTRL.wrench(hover(yaw=yaw + D), [0, 0, 0, 0]), [M * G, 0, 0, 0], atol=1e-12)
 
 
-@pytest.mark.parametrize("cmd, expect", [
-    ([0, 0, 0, 0.5], [M * G, 0, 0, IZ * 10.0 * 0.5]),  # yaw rate left: +Mz (k_wz = 10)
-    ([0, 0, 0, -0.5], [M * G, 0, 0, -IZ * 10.0 * 0.5]),
-    ([0, 0, -0.5, 0], [M * (G - 3.0 * 0.5), 0, 0, 0]),  # descend: k_vz = 3
-    ([0, 0.4, 0, 0], [M * G, -IX * 400.0 * math.sin(math.atan2(2.5 * 0.4, G)), 0, 0]),  # left: roll left
-    ([-0.4, 0, 0, 0], [M * G, 0, -IY * 400.0 * math.sin(math.atan2(2.5 * 0.4, G)), 0]),  # back: pitch back
-])
+@pytest.mark.parametrize(
+    "cmd, expect",
+    [
+        ([0, 0, 0, 0.5], [M * G, 0, 0, IZ * 10.0 * 0.5]),  # yaw rate left: +Mz (k_wz = 10)
+        ([0, 0, 0, -0.5], [M * G, 0, 0, -IZ * 10.0 * 0.5]),
+        ([0, 0, -0.5, 0], [M * (G - 3.0 * 0.5), 0, 0, 0]),  # descend: k_vz = 3
+        ([0, 0.4, 0, 0], [M * G, -IX * 400.0 * math.sin(math.atan2(2.5 * 0.4, G)), 0, 0]),  # left: roll left
+        ([-0.4, 0, 0, 0], [M * G, 0, -IY * 400.0 * math.sin(math.atan2(2.5 * 0.4, G)), 0]),  # back: pitch back
+    ],
+)
 def test_command_sign_conventions(cmd, expect):
     """The documented sign of each command at a level body at rest: ``yaw_rate > 0`` turns left
     (counter-clockwise seen from above), ``v_left > 0`` rolls the body toward +y (a negative
@@ -92,9 +95,12 @@ LOOP = ClosedLoopQuadrotor()
 
 
 @settings(max_examples=12, deadline=None)
-@given(tilt=st.tuples(st.floats(-0.4, 0.4, **finite), st.floats(-0.4, 0.4, **finite)),
-       yaw=st.floats(-math.pi, math.pi, **finite),
-       v=st.tuples(*[st.floats(-1.5, 1.5, **finite)] * 3), w=st.tuples(*[st.floats(-2.0, 2.0, **finite)] * 3))
+@given(
+    tilt=st.tuples(st.floats(-0.4, 0.4, **finite), st.floats(-0.4, 0.4, **finite)),
+    yaw=st.floats(-math.pi, math.pi, **finite),
+    v=st.tuples(*[st.floats(-1.5, 1.5, **finite)] * 3),
+    w=st.tuples(*[st.floats(-2.0, 2.0, **finite)] * 3),
+)
 def test_a_zero_command_brings_any_small_error_to_hover(tilt, yaw, v, w):
     """From a tilted, moving, spinning body, the zero command (hover and level) stops it and levels
     it within 4 s: every velocity and rate below 1 cm/s (rad/s), the body z axis vertical."""
@@ -161,8 +167,12 @@ def test_pilot_does_not_pass_a_waypoint_above_or_below_it():
 
 
 @settings(max_examples=100, deadline=None)
-@given(pos=point, wp=point, yaw=st.floats(-math.pi, math.pi, **finite),
-       tilt=st.tuples(st.floats(-0.5, 0.5, **finite), st.floats(-0.5, 0.5, **finite)))
+@given(
+    pos=point,
+    wp=point,
+    yaw=st.floats(-math.pi, math.pi, **finite),
+    tilt=st.tuples(st.floats(-0.5, 0.5, **finite), st.floats(-0.5, 0.5, **finite)),
+)
 def test_pilot_command_points_at_the_waypoint_in_the_heading_frame(pos, wp, yaw, tilt):
     """The command's horizontal velocity, turned back into the world by ``psi`` (the yaw of the
     body x axis, whatever the tilt), is ``gain (w - p)_xy`` limited to the cruise speed; the climb
@@ -248,14 +258,17 @@ def test_controller_gains_are_refused_by_exact_message(name, bad):
 BOUNDS = "CommandController: command bounds must be 4 finite numbers each with low <= 0 <= high (zero is hover), got "
 
 
-@pytest.mark.parametrize("kw, message", [
-    ({"a_max_z": 9.81}, "CommandController.a_max_z must be below gravity (9.81), got 9.81"),
-    ({"command_low": (-1, -1, -1)}, BOUNDS + "(-1, -1, -1) and (2.0, 2.0, 1.0, 1.0)"),
-    ({"command_high": (1, 1, 1, math.inf)}, BOUNDS + "(-2.0, -2.0, -1.0, -1.0) and (1, 1, 1, inf)"),
-    ({"command_low": (0.5, -1, -1, -1)}, BOUNDS + "(0.5, -1, -1, -1) and (2.0, 2.0, 1.0, 1.0)"),
-    ({"command_high": (1, 1, -0.1, 1)}, BOUNDS + "(-2.0, -2.0, -1.0, -1.0) and (1, 1, -0.1, 1)"),
-    ({"command_low": (-1, -1, -1, math.nan)}, BOUNDS + "(-1, -1, -1, nan) and (2.0, 2.0, 1.0, 1.0)"),
-])
+@pytest.mark.parametrize(
+    "kw, message",
+    [
+        ({"a_max_z": 9.81}, "CommandController.a_max_z must be below gravity (9.81), got 9.81"),
+        ({"command_low": (-1, -1, -1)}, BOUNDS + "(-1, -1, -1) and (2.0, 2.0, 1.0, 1.0)"),
+        ({"command_high": (1, 1, 1, math.inf)}, BOUNDS + "(-2.0, -2.0, -1.0, -1.0) and (1, 1, 1, inf)"),
+        ({"command_low": (0.5, -1, -1, -1)}, BOUNDS + "(0.5, -1, -1, -1) and (2.0, 2.0, 1.0, 1.0)"),
+        ({"command_high": (1, 1, -0.1, 1)}, BOUNDS + "(-2.0, -2.0, -1.0, -1.0) and (1, 1, -0.1, 1)"),
+        ({"command_low": (-1, -1, -1, math.nan)}, BOUNDS + "(-1, -1, -1, nan) and (2.0, 2.0, 1.0, 1.0)"),
+    ],
+)
 def test_controller_bounds_are_refused_by_exact_message(kw, message):
     with pytest.raises(ValueError) as e:
         CommandController(**kw)
@@ -263,12 +276,33 @@ def test_controller_bounds_are_refused_by_exact_message(kw, message):
 
 
 def test_controller_keeps_its_arguments_and_packs_the_gains_in_the_kernels_order():
-    c = CommandController(command_low=np.array([[-1, -2], [-3, 0]]), command_high=np.array([[0, 2], [3, 4]]), k_v=1.5,
-                          a_max_z=9.8)
+    c = CommandController(
+        command_low=np.array([[-1, -2], [-3, 0]]), command_high=np.array([[0, 2], [3, 4]]), k_v=1.5, a_max_z=9.8
+    )
     assert c.command_low == (-1.0, -2.0, -3.0, 0.0) and c.command_high == (0.0, 2.0, 3.0, 4.0)
     assert all(type(x) is float for x in c.command_low + c.command_high)
-    assert CommandController().packed.tolist() == [0.5, 9.81, 0.0023, 0.0023, 0.004, 2.5, 3.0, 5.0, 4.0, 400.0, 36.0,
-                                                   10.0, 0.0, 8.0, -2.0, -2.0, -1.0, 2.0, 2.0, 1.0]
+    assert CommandController().packed.tolist() == [
+        0.5,
+        9.81,
+        0.0023,
+        0.0023,
+        0.004,
+        2.5,
+        3.0,
+        5.0,
+        4.0,
+        400.0,
+        36.0,
+        10.0,
+        0.0,
+        8.0,
+        -2.0,
+        -2.0,
+        -1.0,
+        2.0,
+        2.0,
+        1.0,
+    ]
     assert c.packed[5] == 1.5 and c.packed[8] == 9.8 and not c.packed.flags.writeable
     with pytest.raises(TypeError) as e:
         CommandController(params="heavy")
@@ -279,7 +313,9 @@ def test_a_command_outside_the_box_is_clipped_to_it_and_hover_and_level_is_zero(
     from rmm_envs.autonomy import GuardianActionSpace
     from rmm_envs.systems.quadrotor_control import HoverAndLevel
 
-    np.testing.assert_array_equal(CTRL.wrench(hover(), [9.0, -9.0, 9.0, -9.0]), CTRL.wrench(hover(), [2.0, -2.0, 1.0, -1.0]))
+    np.testing.assert_array_equal(
+        CTRL.wrench(hover(), [9.0, -9.0, 9.0, -9.0]), CTRL.wrench(hover(), [2.0, -2.0, 1.0, -1.0])
+    )
     space = GuardianActionSpace(("a", "b", "c", "d"), [-2.0, 0.5, -1.0, -1.0], [2.0, 2.0, -0.5, 1.0])
     act = HoverAndLevel().policy(space, np.random.default_rng(0))
     assert act(None).tolist() == [0.0, 0.5, -0.5, 0.0]  # zero, within the box
@@ -329,13 +365,21 @@ def test_the_gyroscopic_term_and_the_moment_bounds_by_hand():
     for wb in ((0.0, 0.5, 2.0), (0.7, 0.0, -1.5), (1.0, -2.0, 0.0)):
         wx, wy, wz = wb
         u = CTRL.wrench(hover(w=wb), [0, 0, 0, 0])
-        expect = [IX * -36.0 * wx + wy * wz * (IZ - IY), IY * -36.0 * wy + wz * wx * (IX - IZ),
-                  IZ * -10.0 * wz + wx * wy * (IY - IX)]
+        expect = [
+            IX * -36.0 * wx + wy * wz * (IZ - IY),
+            IY * -36.0 * wy + wz * wx * (IX - IZ),
+            IZ * -10.0 * wz + wx * wy * (IY - IX),
+        ]
         np.testing.assert_allclose(u, [M * G, *expect], atol=1e-12)
-    np.testing.assert_allclose(CTRL.wrench(hover(w=(0.0, -20.0, 0.0)), [0, 0, 0, 0]), [M * G, 0.0, IY * 36.0 * 20.0, 0.0],
-                               atol=1e-12)
-    np.testing.assert_allclose(CTRL.wrench(hover(w=(30.0, 0.0, 0.0)), [0, 0, 0, 0]), [M * G, -2.0, 0.0, 0.0], atol=1e-12)
-    np.testing.assert_allclose(CTRL.wrench(hover(w=(0.0, 0.0, -30.0)), [0, 0, 0, 0]), [M * G, 0.0, 0.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(
+        CTRL.wrench(hover(w=(0.0, -20.0, 0.0)), [0, 0, 0, 0]), [M * G, 0.0, IY * 36.0 * 20.0, 0.0], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        CTRL.wrench(hover(w=(30.0, 0.0, 0.0)), [0, 0, 0, 0]), [M * G, -2.0, 0.0, 0.0], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        CTRL.wrench(hover(w=(0.0, 0.0, -30.0)), [0, 0, 0, 0]), [M * G, 0.0, 0.0, 1.0], atol=1e-12
+    )
 
 
 def test_with_the_body_x_axis_vertical_the_heading_is_zero():

@@ -11,12 +11,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from rmm_envs.envs.quadrotor_room_parallel import CONTROLS, HoverAndLevel, QuadrotorRoomGuardedEnv, observation_layout
 from rmm_envs.drivers.quadrotor import WaypointPilot
+from rmm_envs.envs.quadrotor_room_parallel import CONTROLS, HoverAndLevel, QuadrotorRoomGuardedEnv, observation_layout
 from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
 from rmm_envs.systems.quadrotor import QUADROTOR, Quadrotor
-from rmm_envs.systems.quadrotor_control import (ClosedLoopQuadrotor, CommandController, body_packed, body_step,
-                                                heading_of, yaw_of)
+from rmm_envs.systems.quadrotor_control import (
+    ClosedLoopQuadrotor,
+    CommandController,
+    body_packed,
+    body_step,
+    heading_of,
+    yaw_of,
+)
 from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
 from rmm_envs.worlds.room_collision import BOUND, RoomCollision
 from rmm_envs.worlds.rooms import Room
@@ -44,8 +50,9 @@ def test_forward_command_pitches_the_body_forward_by_the_velocity_gain():
 
 def test_the_command_is_in_the_heading_frame():
     # yawed by 90 degrees, "forward" is world +y: the same body-frame wrench as unyawed
-    np.testing.assert_allclose(CTRL.wrench(level(yaw=math.pi / 2), [1.0, 0, 0, 0]), CTRL.wrench(level(), [1.0, 0, 0, 0]),
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        CTRL.wrench(level(yaw=math.pi / 2), [1.0, 0, 0, 0]), CTRL.wrench(level(), [1.0, 0, 0, 0]), atol=1e-12
+    )
 
 
 def test_horizontal_acceleration_is_limited_and_climb_adds_thrust():
@@ -65,13 +72,19 @@ def test_yaw_rate_command_and_moment_bounds():
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.floats(-math.pi, math.pi), st.lists(st.floats(-2, 2), min_size=4, max_size=4),
-       st.lists(st.floats(-1.5, 1.5), min_size=3, max_size=3), st.floats(-0.3, 0.3), st.floats(-0.3, 0.3))
+@given(
+    st.floats(-math.pi, math.pi),
+    st.lists(st.floats(-2, 2), min_size=4, max_size=4),
+    st.lists(st.floats(-1.5, 1.5), min_size=3, max_size=3),
+    st.floats(-0.3, 0.3),
+    st.floats(-0.3, 0.3),
+)
 def test_wrench_is_invariant_under_a_yaw_of_the_whole_state(yaw, cmd, vel, roll, pitch):
     q0 = quat_from_euler(roll, pitch, 0.3)
     s0 = np.array([0, 0, 1, *q0, *vel, 0.1, -0.2, 0.3])
     Rz = quat_to_rot(quat_from_euler(0, 0, yaw))
     from rmm_envs.systems.rotations import quat_mul
+
     s1 = s0.copy()
     s1[3:7] = quat_mul(quat_from_euler(0, 0, yaw), q0)
     s1[7:10], s1[10:13] = Rz @ s0[7:10], Rz @ s0[10:13]
@@ -158,10 +171,21 @@ def test_pilot_bad_arguments():
 
 # ---------------------------------------------------------------- world geometry
 def test_clearance_of_one_wall_and_one_sphere():
-    room = Room(footprint=np.ones((2, 2), bool), origin=np.zeros(2), cell=1.0, wall_height=2.0,
-                walls=np.array([[5.0, 0.0, 1.0, 0.25, 3.0, 1.0]]),
-                objects=[{"shape": "sphere", "pos": np.array([0.0, 3.0, 0.5]), "quat": np.array([0, 0, 0, 1.0]),
-                          "size": np.array([0.5])}])
+    room = Room(
+        footprint=np.ones((2, 2), bool),
+        origin=np.zeros(2),
+        cell=1.0,
+        wall_height=2.0,
+        walls=np.array([[5.0, 0.0, 1.0, 0.25, 3.0, 1.0]]),
+        objects=[
+            {
+                "shape": "sphere",
+                "pos": np.array([0.0, 3.0, 0.5]),
+                "quat": np.array([0, 0, 0, 1.0]),
+                "size": np.array([0.5]),
+            }
+        ],
+    )
     col = RoomCollision(room)
     assert col.clearance([2.0, 0.0, 1.0]) == pytest.approx(1.0 - BOUND)  # the floor is nearest
     assert col.clearance([4.0, 0.0, 1.5]) == pytest.approx(0.75 - BOUND)  # the wall's face at x = 4.75
@@ -212,18 +236,31 @@ def test_observation_fields_match_the_state(env):
     np.testing.assert_allclose(obs[lay["orientation"]], s[3:7], atol=1e-6)
     psi = heading_of(s[3:7])
     off = env.goal - s[:3]
-    np.testing.assert_allclose(obs[lay["goal_offset"]], [math.cos(psi) * off[0] + math.sin(psi) * off[1],
-                                                         -math.sin(psi) * off[0] + math.cos(psi) * off[1], off[2]], atol=1e-5)
+    np.testing.assert_allclose(
+        obs[lay["goal_offset"]],
+        [math.cos(psi) * off[0] + math.sin(psi) * off[1], -math.sin(psi) * off[0] + math.cos(psi) * off[1], off[2]],
+        atol=1e-5,
+    )
     # the start is level, so the down ray meets the floor at the body's height, or something nearer
     assert 0 < obs[lay["rays_vertical"]][1] <= s[2] + 1e-5
     np.testing.assert_allclose(env.observe_states(s[None])[0], obs, atol=1e-6)
 
 
 def test_hover_and_level_keeps_the_body_in_place(env):
-    _, info = env.reset(seed=4, options={"state": level(x=0, y=0, z=1.5, v=(1.0, 0.5, 0)), "waypoints": [[5, 0, 1.5]],
-                                         "room": Room(footprint=np.ones((40, 40), bool), origin=np.array([-10.0, -10.0]),
-                                                      cell=0.5, wall_height=3.0,
-                                                      walls=np.array([[50.0, 50.0, 1.5, 0.25, 0.25, 1.5]]))})
+    _, info = env.reset(
+        seed=4,
+        options={
+            "state": level(x=0, y=0, z=1.5, v=(1.0, 0.5, 0)),
+            "waypoints": [[5, 0, 1.5]],
+            "room": Room(
+                footprint=np.ones((40, 40), bool),
+                origin=np.array([-10.0, -10.0]),
+                cell=0.5,
+                wall_height=3.0,
+                walls=np.array([[50.0, 50.0, 1.5, 0.25, 0.25, 1.5]]),
+            ),
+        },
+    )
     space = env.action_space
     hover = space.active(space.safe_default.policy(space, np.random.default_rng(0))(None))
     for _ in range(40):  # 4 s
@@ -235,8 +272,13 @@ def test_hover_and_level_keeps_the_body_in_place(env):
 
 
 def test_pilot_reaches_the_goal_in_an_empty_room(env):
-    room = Room(footprint=np.ones((40, 40), bool), origin=np.array([-10.0, -10.0]), cell=0.5, wall_height=3.0,
-                walls=np.array([[50.0, 50.0, 1.5, 0.25, 0.25, 1.5]]))
+    room = Room(
+        footprint=np.ones((40, 40), bool),
+        origin=np.array([-10.0, -10.0]),
+        cell=0.5,
+        wall_height=3.0,
+        walls=np.array([[50.0, 50.0, 1.5, 0.25, 0.25, 1.5]]),
+    )
     env.reset(seed=0, options={"room": room, "state": level(), "waypoints": [[3.0, 0.0, 1.5], [3.0, 3.0, 1.0]]})
     for _ in range(200):
         _, reward, term, trunc, info = env.step(env.action_space.inactive())
@@ -247,8 +289,13 @@ def test_pilot_reaches_the_goal_in_an_empty_room(env):
 
 
 def test_flying_into_a_wall_is_a_collision(env):
-    room = Room(footprint=np.ones((40, 40), bool), origin=np.array([-10.0, -10.0]), cell=0.5, wall_height=3.0,
-                walls=np.array([[3.0, 0.0, 1.5, 0.25, 3.0, 1.5]]))
+    room = Room(
+        footprint=np.ones((40, 40), bool),
+        origin=np.array([-10.0, -10.0]),
+        cell=0.5,
+        wall_height=3.0,
+        walls=np.array([[3.0, 0.0, 1.5, 0.25, 3.0, 1.5]]),
+    )
     env.reset(seed=0, options={"room": room, "state": level(), "waypoints": [[6.0, 0.0, 1.5]]})
     for _ in range(100):
         _, reward, term, trunc, info = env.step(env.action_space.inactive())
@@ -259,16 +306,29 @@ def test_flying_into_a_wall_is_a_collision(env):
 
 
 def test_given_waypoints_and_states_must_lie_over_the_room_and_clear_of_it(env):
-    room = Room(footprint=np.ones((20, 20), bool), origin=np.array([-5.0, -5.0]), cell=0.5, wall_height=3.0,
-                walls=np.array([[3.0, 0.0, 1.5, 0.25, 1.0, 1.5]]))
-    for w, bad in (([[2.0, 2.0, 1.0], [20.0, 0.0, 1.0]], 1),  # beyond the footprint
-                   ([[3.0, 0.0, 1.0]], 0)):                   # inside the wall
-        with pytest.raises(ValueError, match=rf"option 'waypoints': point {bad} .* must lie over the footprint of option 'room'"):
+    room = Room(
+        footprint=np.ones((20, 20), bool),
+        origin=np.array([-5.0, -5.0]),
+        cell=0.5,
+        wall_height=3.0,
+        walls=np.array([[3.0, 0.0, 1.5, 0.25, 1.0, 1.5]]),
+    )
+    for w, bad in (
+        ([[2.0, 2.0, 1.0], [20.0, 0.0, 1.0]], 1),  # beyond the footprint
+        ([[3.0, 0.0, 1.0]], 0),
+    ):  # inside the wall
+        with pytest.raises(
+            ValueError, match=rf"option 'waypoints': point {bad} .* must lie over the footprint of option 'room'"
+        ):
             env.reset(seed=0, options={"room": room, "waypoints": w})
     # the bounding sphere (0.304 m) in the floor: refused for any room, before one is looked at
-    with pytest.raises(ValueError, match=r"option 'waypoints': point 0 \[2.0, 2.0, 0.2\] must lie higher than the body's"):
+    with pytest.raises(
+        ValueError, match=r"option 'waypoints': point 0 \[2.0, 2.0, 0.2\] must lie higher than the body's"
+    ):
         env.reset(seed=0, options={"room": room, "waypoints": [[2.0, 2.0, 0.2]]})
-    with pytest.raises(ValueError, match=r"option 'state': the body at \[9.0, 0.0, 1.5\] is not over the footprint of option 'room'$"):
+    with pytest.raises(
+        ValueError, match=r"option 'state': the body at \[9.0, 0.0, 1.5\] is not over the footprint of option 'room'$"
+    ):
         env.reset(seed=0, options={"room": room, "state": list(level(x=9.0))})
     # a point just clear of the floor is accepted, and it becomes the goal
     env.reset(seed=0, options={"room": room, "state": list(level()), "waypoints": [[-3.0, 0.0, BOUND + 0.01]]})
@@ -296,46 +356,72 @@ def test_same_seed_same_episode():
     b.close()
 
 
-@pytest.mark.parametrize("options, match", [
-    ({"state": [0.0] * 12}, "option 'state' must be 13 finite numbers"),
-    ({"state": [0, 0, 1, 0, 0, 0, 2.0, 0, 0, 0, 0, 0, 0]}, "is not a unit quaternion"),
-    ({"state": list(level(z=0.01))}, "in contact with the room drawn from the seed"),
-    ({"state": list(level(x=1000.0, y=1000.0))}, r"the body at \[1000.0, 1000.0, 1.5\] is not over the footprint of the room"),
-    ({"waypoints": [[1000.0, 1000.0, 1.0]]}, r"option 'waypoints' \[\[1000.0, 1000.0, 1.0\]\]: in none of 100 rooms"),
-    ({"waypoints": [[0.0, 0.0, -5.0]]}, r"point 0 \[0.0, 0.0, -5.0\] must lie higher than the body's bounding radius \(0.304 m\)"),
-    ({"waypoints": [[1.0, 1.0, 2.0], [1.0, 1.0, 0.304]]}, r"point 1 \[1.0, 1.0, 0.304\] must lie higher than"),
-    ({"waypoints": [[1.0, 2.0]]}, "option 'waypoints' must be a list of K >= 1 finite"),
-    ({"waypoints": [[1.0, 2.0, np.nan]]}, "option 'waypoints' must be a list"),
-    ({"room": 3}, "option 'room' must be a Room or a dict"),
-    ({"wind": 1}, "unknown reset options"),
-])
+@pytest.mark.parametrize(
+    "options, match",
+    [
+        ({"state": [0.0] * 12}, "option 'state' must be 13 finite numbers"),
+        ({"state": [0, 0, 1, 0, 0, 0, 2.0, 0, 0, 0, 0, 0, 0]}, "is not a unit quaternion"),
+        ({"state": list(level(z=0.01))}, "in contact with the room drawn from the seed"),
+        (
+            {"state": list(level(x=1000.0, y=1000.0))},
+            r"the body at \[1000.0, 1000.0, 1.5\] is not over the footprint of the room",
+        ),
+        (
+            {"waypoints": [[1000.0, 1000.0, 1.0]]},
+            r"option 'waypoints' \[\[1000.0, 1000.0, 1.0\]\]: in none of 100 rooms",
+        ),
+        (
+            {"waypoints": [[0.0, 0.0, -5.0]]},
+            r"point 0 \[0.0, 0.0, -5.0\] must lie higher than the body's bounding radius \(0.304 m\)",
+        ),
+        ({"waypoints": [[1.0, 1.0, 2.0], [1.0, 1.0, 0.304]]}, r"point 1 \[1.0, 1.0, 0.304\] must lie higher than"),
+        ({"waypoints": [[1.0, 2.0]]}, "option 'waypoints' must be a list of K >= 1 finite"),
+        ({"waypoints": [[1.0, 2.0, np.nan]]}, "option 'waypoints' must be a list"),
+        ({"room": 3}, "option 'room' must be a Room or a dict"),
+        ({"wind": 1}, "unknown reset options"),
+    ],
+)
 def test_bad_reset_options(env, options, match):
     with pytest.raises(ValueError, match=match):
         env.reset(seed=0, options=options)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"step_dt": 0}, "step_dt must be a finite number of seconds > 0, got 0"),
-    ({"max_episode_sim_time": math.inf}, "max_episode_sim_time must be"),
-    ({"n_waypoints": 0}, "n_waypoints must be an integer >= 1"),
-    ({"altitude": (0.1, 2.0)}, r"altitude must be a pair \(min, max\)"),
-    ({"altitude": (0.4, 0.7)}, r"max > 0.804 \(a drawn waypoint keeps its bounding sphere 0.5 m above the floor\), got \(0.4, 0.7\)"),
-    ({"goal_radius": -1}, "goal_radius must be"),
-    ({"cruise_speed": math.nan}, "cruise_speed must be"),
-    ({"ray_range": 0}, "ray_range must be"),
-    ({"clock": "sundial"}, "clock"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"step_dt": 0}, "step_dt must be a finite number of seconds > 0, got 0"),
+        ({"max_episode_sim_time": math.inf}, "max_episode_sim_time must be"),
+        ({"n_waypoints": 0}, "n_waypoints must be an integer >= 1"),
+        ({"altitude": (0.1, 2.0)}, r"altitude must be a pair \(min, max\)"),
+        (
+            {"altitude": (0.4, 0.7)},
+            r"max > 0.804 \(a drawn waypoint keeps its bounding sphere 0.5 m above the floor\), got \(0.4, 0.7\)",
+        ),
+        ({"goal_radius": -1}, "goal_radius must be"),
+        ({"cruise_speed": math.nan}, "cruise_speed must be"),
+        ({"ray_range": 0}, "ray_range must be"),
+        ({"clock": "sundial"}, "clock"),
+    ],
+)
 def test_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):
         QuadrotorRoomGuardedEnv(**kwargs)
 
 
-@pytest.mark.parametrize("action, match", [
-    ({"active_ctrl": 1, "vforward_ctrl": [np.nan], "vleft_ctrl": [0], "vup_ctrl": [0], "yawrate_ctrl": [0]},
-     "'vforward_ctrl' must be finite"),
-    ({"active_ctrl": 2, "vforward_ctrl": [0], "vleft_ctrl": [0], "vup_ctrl": [0], "yawrate_ctrl": [0]}, "must be 0 or 1"),
-    ({"active_ctrl": 1, "vforward_ctrl": [0]}, "missing field 'vleft_ctrl'"),
-])
+@pytest.mark.parametrize(
+    "action, match",
+    [
+        (
+            {"active_ctrl": 1, "vforward_ctrl": [np.nan], "vleft_ctrl": [0], "vup_ctrl": [0], "yawrate_ctrl": [0]},
+            "'vforward_ctrl' must be finite",
+        ),
+        (
+            {"active_ctrl": 2, "vforward_ctrl": [0], "vleft_ctrl": [0], "vup_ctrl": [0], "yawrate_ctrl": [0]},
+            "must be 0 or 1",
+        ),
+        ({"active_ctrl": 1, "vforward_ctrl": [0]}, "missing field 'vleft_ctrl'"),
+    ],
+)
 def test_bad_actions_refused_before_the_world_moves(env, action, match):
     env.reset(seed=3)
     before = env.true_state
@@ -386,8 +472,8 @@ def test_lrmm_applies_hover_and_level_while_the_risk_is_high_then_commits(env):
 
 
 def test_lrmm_safe_action_needs_a_safe_default():
-    from rmm_guardians.lrmm.guardian import LRMMGuardian
     from rmm_envs.autonomy import GuardianActionSpace
+    from rmm_guardians.lrmm.guardian import LRMMGuardian
 
     g = LRMMGuardian(model=floor_model(), threshold=0.7, action="safe")
     from rmm_envs.autonomy import ObservationBox
@@ -425,7 +511,9 @@ def test_lrmm_reads_the_shipped_command_model_by_env_id(env):
     assert (g.action, g.threshold, g.commit) == ("head", decision["threshold"], decision["commit"]) == ("head", 0.2, 20)
     np.testing.assert_array_equal(g.model.candidates, [[0, 0, 0, 0], [0, 0, 1, 0], [-1.5, 0, 0, 0], [-1, 0, 1, 0]])
     assert g.model.meta["env_id"] == "QuadrotorRoomGuarded-v0" and g.model.obs_dim == 23
-    risk_only = make_guardian("lrmm", model=str(g.model.path.with_name(ship.files["risk"])), action="safe", threshold=0.5)
+    risk_only = make_guardian(
+        "lrmm", model=str(g.model.path.with_name(ship.files["risk"])), action="safe", threshold=0.5
+    )
     assert risk_only.model.candidates is None and risk_only.model.meta["env_id"] == "QuadrotorRoomGuarded-v0"
     lay = env.observation_space.layout
     # it reads the rays, the heading-frame velocity and the body rates: not the yaw-dependent
@@ -446,8 +534,27 @@ def test_rmm_bench_set_runs_every_default_guardian_on_the_quadrotor(tmp_path, ca
 
     from rmm_bench.cli import main as bench_main
 
-    assert bench_main(["--env", "QuadrotorRoomParallel-v0", "--agent", "all", "--episodes", "1", "--workers", "1",
-                       "--out", str(tmp_path), "--no-progress", "--no-figure", "--clock", "fixed:1"]) == 0
+    assert (
+        bench_main(
+            [
+                "--env",
+                "QuadrotorRoomParallel-v0",
+                "--agent",
+                "all",
+                "--episodes",
+                "1",
+                "--workers",
+                "1",
+                "--out",
+                str(tmp_path),
+                "--no-progress",
+                "--no-figure",
+                "--clock",
+                "fixed:1",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert "does not apply" not in err  # every default guardian applies to the quadrotor
     con = sqlite3.connect(tmp_path / "results.db")
@@ -460,10 +567,21 @@ def test_rmm_bench_set_runs_every_default_guardian_on_the_quadrotor(tmp_path, ca
 @given(st.lists(st.floats(-3, 3), min_size=3, max_size=3), st.lists(st.floats(-0.5, 0.5), min_size=3, max_size=3))
 def test_clearance_is_one_lipschitz(p, dp):
     """What lets the env skip contact queries: the gap cannot shrink faster than the body moves."""
-    room = Room(footprint=np.ones((2, 2), bool), origin=np.zeros(2), cell=1.0, wall_height=2.0,
-                walls=np.array([[1.0, 0.0, 1.0, 0.25, 3.0, 1.0], [-2.0, 1.0, 0.5, 1.0, 0.25, 0.5]]),
-                objects=[{"shape": "box", "pos": np.array([0.0, -2.0, 0.3]), "quat": np.array([0, 0, 0, 1.0]),
-                          "size": np.array([0.3, 0.3, 0.3])}])
+    room = Room(
+        footprint=np.ones((2, 2), bool),
+        origin=np.zeros(2),
+        cell=1.0,
+        wall_height=2.0,
+        walls=np.array([[1.0, 0.0, 1.0, 0.25, 3.0, 1.0], [-2.0, 1.0, 0.5, 1.0, 0.25, 0.5]]),
+        objects=[
+            {
+                "shape": "box",
+                "pos": np.array([0.0, -2.0, 0.3]),
+                "quat": np.array([0, 0, 0, 1.0]),
+                "size": np.array([0.3, 0.3, 0.3]),
+            }
+        ],
+    )
     col = RoomCollision(room)
     p0 = np.array(p) + [0, 0, 3.5]
     assert col.clearance(p0) - col.clearance(p0 + dp) <= np.linalg.norm(dp) + 1e-12
@@ -514,9 +632,17 @@ def test_lrmm_head_picks_the_lowest_risk_command_of_four_controls(env):
     from rmm_guardians.lrmm.guardian import LRMMGuardian
     from rmm_guardians.lrmm.model import LRMMModel
 
-    meta = {"features": [9], "obs_dim": 23, "env_id": "QuadrotorRoomGuarded-v0", "activation": "sigmoid",
-            "candidates": [[0, 0, 0, 0], [0, 0, 1, 0]], "candidate_hold": 1.0}
-    model = LRMMModel([(np.array([[-10.0]]), np.array([10.0])), (np.array([[3.0], [2.0], [-2.0]]), None)], [0.0], [1.0], meta)
+    meta = {
+        "features": [9],
+        "obs_dim": 23,
+        "env_id": "QuadrotorRoomGuarded-v0",
+        "activation": "sigmoid",
+        "candidates": [[0, 0, 0, 0], [0, 0, 1, 0]],
+        "candidate_hold": 1.0,
+    }
+    model = LRMMModel(
+        [(np.array([[-10.0]]), np.array([10.0])), (np.array([[3.0], [2.0], [-2.0]]), None)], [0.0], [1.0], meta
+    )
     g = LRMMGuardian(model=model, threshold=0.4, commit=0)
     g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
     obs = np.zeros(23, np.float32)
@@ -535,14 +661,20 @@ def test_lrmm_built_for_another_env_or_without_a_head_says_how_to_serve_the_quad
     spaces = {"observation_space": env.observation_space, "action_space": env.action_space}
     with pytest.raises(ValueError) as e:
         make_guardian("lrmm").reset(seed=0, **spaces)  # built for Dubins4D (no env_id)
-    assert str(e.value) == ("guardian 'lrmm': the LRMM model (trained on Dubins4DCircles-v0) expects observations "
-                            "of shape (17,), the env's observation space is (23,)" + REMEDY)
+    assert str(e.value) == (
+        "guardian 'lrmm': the LRMM model (trained on Dubins4DCircles-v0) expects observations "
+        "of shape (17,), the env's observation space is (23,)" + REMEDY
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the risk-only model stores no decision: the paper's fallback warns
-        risk_only = LRMMGuardian(env_id="QuadrotorRoomParallel-v0",
-                                 model=default_model_path("QuadrotorRoomParallel-v0", variant="risk"))
-    with pytest.raises(ValueError, match=r"needs the Dubins car's two controls, got 4 .*this env states a safe default "
-                                         r"\(hover and level.*\): action='safe' applies it"):
+        risk_only = LRMMGuardian(
+            env_id="QuadrotorRoomParallel-v0", model=default_model_path("QuadrotorRoomParallel-v0", variant="risk")
+        )
+    with pytest.raises(
+        ValueError,
+        match=r"needs the Dubins car's two controls, got 4 .*this env states a safe default "
+        r"\(hover and level.*\): action='safe' applies it",
+    ):
         risk_only.reset(seed=0, **spaces)
     for bad, shown in ((True, "True"), ("nan", "'nan'"), ("0.2", "'0.2'")):
         with pytest.raises(ValueError) as e:
@@ -555,11 +687,15 @@ def test_labelling_hooks_refuse_bad_states_and_counts_by_name(env_id):
     e = gym.make(env_id).unwrapped
     e.reset(seed=0)
     good = e.sample_states(np.random.default_rng(0), 2)
-    for states, text in ((np.zeros((3, 5)), r"states must have shape \(N, 13\), got shape \(3, 5\)"),
-                         (good[0], r"states must have shape \(N, 13\), got shape \(13,\)"),
-                         (np.vstack([good[0], np.full(13, np.nan)]), r"states must be finite: row 1 is \[nan"),
-                         (np.vstack([good[0], np.r_[good[0, :3], np.zeros(4), good[0, 7:]]]),
-                          r"states: row 1 has the quaternion \[0.0, 0.0, 0.0, 0.0\], not a unit quaternion")):
+    for states, text in (
+        (np.zeros((3, 5)), r"states must have shape \(N, 13\), got shape \(3, 5\)"),
+        (good[0], r"states must have shape \(N, 13\), got shape \(13,\)"),
+        (np.vstack([good[0], np.full(13, np.nan)]), r"states must be finite: row 1 is \[nan"),
+        (
+            np.vstack([good[0], np.r_[good[0, :3], np.zeros(4), good[0, 7:]]]),
+            r"states: row 1 has the quaternion \[0.0, 0.0, 0.0, 0.0\], not a unit quaternion",
+        ),
+    ):
         with pytest.raises(ValueError, match=text):
             e.observe_states(states)
     for n in (1.5, -1, True):
@@ -569,13 +705,16 @@ def test_labelling_hooks_refuse_bad_states_and_counts_by_name(env_id):
     e.close()
 
 
-@pytest.mark.parametrize("room, text", [
-    ({"x_range": math.nan}, "x_range must be a finite number of metres > 0, got nan"),
-    ({"wall_height": math.inf}, "wall_height must be a finite number of metres > 0, got inf"),
-    ({"n_rectangles": "a"}, "n_rectangles must be an integer >= 1, got 'a'"),
-    ({"n_boxes": 1.7}, "n_boxes must be an integer >= 0, got 1.7"),
-    ({"n_spheres": True}, "n_spheres must be an integer >= 0, got True"),
-])
+@pytest.mark.parametrize(
+    "room, text",
+    [
+        ({"x_range": math.nan}, "x_range must be a finite number of metres > 0, got nan"),
+        ({"wall_height": math.inf}, "wall_height must be a finite number of metres > 0, got inf"),
+        ({"n_rectangles": "a"}, "n_rectangles must be an integer >= 1, got 'a'"),
+        ({"n_boxes": 1.7}, "n_boxes must be an integer >= 0, got 1.7"),
+        ({"n_spheres": True}, "n_spheres must be an integer >= 0, got True"),
+    ],
+)
 def test_bad_generate_room_arguments_in_reset_options_are_named(env, room, text):
     with pytest.raises(ValueError, match=re.escape(f"generate_room: {text}")):
         env.reset(seed=0, options={"room": room})

@@ -34,7 +34,11 @@ def test_the_env_configures_pybullet_from_the_parameter_object():
         assert info[0] == QUADROTOR.mass and info[2] == QUADROTOR.inertia
         engine = p.getPhysicsEngineParameters(physicsClientId=c)
         assert engine["fixedTimeStep"] == QUADROTOR.dt
-        assert (engine["gravityAccelerationX"], engine["gravityAccelerationY"], engine["gravityAccelerationZ"]) == (0, 0, -QUADROTOR.gravity)
+        assert (engine["gravityAccelerationX"], engine["gravityAccelerationY"], engine["gravityAccelerationZ"]) == (
+            0,
+            0,
+            -QUADROTOR.gravity,
+        )
         np.testing.assert_array_equal(env.action_space.low, np.float32(QUADROTOR.control_low))
         np.testing.assert_array_equal(env.action_space.high, np.float32(QUADROTOR.control_high))
         # the env's damping arguments replace the defaults in its parameters, and the
@@ -76,21 +80,24 @@ def test_the_propagator_reads_its_parameters():
     assert wide.propagate(s, big, 1.0, 2)[0, -1, 9] > Quadrotor().propagate(s, big, 1.0, 2)[0, -1, 9]
 
 
-@pytest.mark.parametrize("field, value, match", [
-    ("mass", 0.0, "mass must be a finite number > 0"),
-    ("mass", float("nan"), "mass must be"),
-    ("mass", True, "mass must be"),
-    ("dt", -1 / 240, "dt must be a finite number > 0"),
-    ("collision_radius", float("inf"), "collision_radius"),
-    ("gravity", -9.81, "gravity must be a finite number >= 0"),
-    ("linear_damping", -0.1, "linear_damping must be a finite number >= 0"),
-    ("angular_damping", "0.04", "angular_damping"),
-    ("inertia", (0.1, 0.1), "inertia must be 3 finite numbers"),
-    ("inertia", (0.1, 0.0, 0.1), "inertia must be 3 principal moments > 0"),
-    ("inertia", "abc", "inertia must be 3 finite numbers"),
-    ("control_low", (0.0, -2.0, -2.0, float("nan")), "control_low must be 4 finite numbers"),
-    ("control_high", (8.0, 2.0, -3.0, 1.0), "must be <= control_high"),
-])
+@pytest.mark.parametrize(
+    "field, value, match",
+    [
+        ("mass", 0.0, "mass must be a finite number > 0"),
+        ("mass", float("nan"), "mass must be"),
+        ("mass", True, "mass must be"),
+        ("dt", -1 / 240, "dt must be a finite number > 0"),
+        ("collision_radius", float("inf"), "collision_radius"),
+        ("gravity", -9.81, "gravity must be a finite number >= 0"),
+        ("linear_damping", -0.1, "linear_damping must be a finite number >= 0"),
+        ("angular_damping", "0.04", "angular_damping"),
+        ("inertia", (0.1, 0.1), "inertia must be 3 finite numbers"),
+        ("inertia", (0.1, 0.0, 0.1), "inertia must be 3 principal moments > 0"),
+        ("inertia", "abc", "inertia must be 3 finite numbers"),
+        ("control_low", (0.0, -2.0, -2.0, float("nan")), "control_low must be 4 finite numbers"),
+        ("control_high", (8.0, 2.0, -3.0, 1.0), "must be <= control_high"),
+    ],
+)
 def test_bad_parameters_are_refused_by_name(field, value, match):
     with pytest.raises(ValueError, match=match):
         QuadrotorParams(**{field: value})

@@ -49,12 +49,14 @@ SETTINGS = arith_settings()
 #: ``fastmath``, the one way numba code comes to depend on the CPU it was compiled for.
 OLD_KERNEL = {**SETTINGS[0], "NUMBA_CPU_NAME": None}
 HOST = SETTINGS[-1]
-CASES = [pytest.param(OLD_KERNEL, id="old-kernel:" + describe(OLD_KERNEL).replace(" ", "")),
-         pytest.param(HOST, id="host:" + describe(HOST).replace(" ", ""))]
+CASES = [
+    pytest.param(OLD_KERNEL, id="old-kernel:" + describe(OLD_KERNEL).replace(" ", "")),
+    pytest.param(HOST, id="host:" + describe(HOST).replace(" ", "")),
+]
 CASES += [pytest.param(s, id=describe(s).replace(" ", ""), marks=pytest.mark.slow) for s in SETTINGS[:-1]]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _fingerprint_of(key: tuple) -> dict:
     return run_under(dict(key), "quick", timeout=900)
 
@@ -67,19 +69,23 @@ def _fingerprint(setting: dict) -> dict:
 def test_the_same_bits_under_each_machines_arithmetic(setting):
     record = json.loads(RECORD.read_text())
     fp = _fingerprint(setting)
-    assert set(SECTIONS) <= set(fp) and set(SECTIONS) <= set(record), \
+    assert set(SECTIONS) <= set(fp) and set(SECTIONS) <= set(record), (
         f"sections missing: fingerprint {set(SECTIONS) - set(fp)}, record {set(SECTIONS) - set(record)}"
+    )
     _check_applied(setting, fp["applied"])
     if fp["versions"] == record["versions"]:
         ref, what = record, f"the committed record {RECORD.relative_to(ROOT)}"
     elif setting == HOST:
-        pytest.skip(f"the record was made with {record['versions']}, this install has {fp['versions']}: "
-                    "the other settings are compared with the host's own")
+        pytest.skip(
+            f"the record was made with {record['versions']}, this install has {fp['versions']}: "
+            "the other settings are compared with the host's own"
+        )
     else:
         ref, what = _fingerprint(HOST), f"the host's own arithmetic ({describe(HOST)})"
     diffs = compare(ref, fp)
-    assert not diffs, (f"under {describe(setting)} the fingerprint differs from {what} in {len(diffs)} field(s); "
-                       f"first: {diffs[0]}")
+    assert not diffs, (
+        f"under {describe(setting)} the fingerprint differs from {what} in {len(diffs)} field(s); first: {diffs[0]}"
+    )
 
 
 def _check_applied(setting: dict, got: dict) -> None:
@@ -113,11 +119,48 @@ def test_compare_names_the_first_field_that_differs():
 
 # ---------------------------------------------------------------------------- static check
 # numpy calls whose result depends on the CPU: BLAS, or numpy's own SIMD code on some CPUs
-_BLAS = {"dot", "inner", "vdot", "matmul", "tensordot", "outer", "convolve", "correlate", "cov", "corrcoef", "vecdot",
-         "matvec", "vecmat", "kron"}
-_DISPATCHED = {"exp", "log", "expm1", "log1p", "arctan2", "arctan", "arcsin", "arccos", "tan", "tanh", "sinh", "cosh",
-               "arcsinh", "arccosh", "arctanh", "power", "float_power", "cbrt", "exp2", "log2", "log10", "angle",
-               "logaddexp", "logaddexp2"}
+_BLAS = {
+    "dot",
+    "inner",
+    "vdot",
+    "matmul",
+    "tensordot",
+    "outer",
+    "convolve",
+    "correlate",
+    "cov",
+    "corrcoef",
+    "vecdot",
+    "matvec",
+    "vecmat",
+    "kron",
+}
+_DISPATCHED = {
+    "exp",
+    "log",
+    "expm1",
+    "log1p",
+    "arctan2",
+    "arctan",
+    "arcsin",
+    "arccos",
+    "tan",
+    "tanh",
+    "sinh",
+    "cosh",
+    "arcsinh",
+    "arccosh",
+    "arctanh",
+    "power",
+    "float_power",
+    "cbrt",
+    "exp2",
+    "log2",
+    "log10",
+    "angle",
+    "logaddexp",
+    "logaddexp2",
+}
 # np.argpartition / np.partition, and argsort unless stable: the tie order is the SIMD sort code's
 _EXACT_POWERS = {0, 1, 2, -1, 0.5}  # numpy's fast paths: a product, a square, a reciprocal or sqrt
 # where a machine-dependent result is harmless: drawing figures
@@ -179,13 +222,24 @@ def machine_dependent_calls(path: Path) -> list[str]:
             in_compiled = in_compiled or node.name in compiled_names
         if isinstance(node, ast.Call) and "fastmath" in {k.arg for k in node.keywords}:
             flag(node, "fastmath (FMA contraction and reordering differ by CPU)")
-        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.MatMult) or \
-                isinstance(node, ast.AugAssign) and isinstance(node.op, ast.MatMult):
+        if (
+            isinstance(node, ast.BinOp)
+            and isinstance(node.op, ast.MatMult)
+            or isinstance(node, ast.AugAssign)
+            and isinstance(node.op, ast.MatMult)
+        ):
             flag(node, f"'@' ({ast.unparse(node)[:60]})")
         if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow) and not in_compiled:
             e = node.right
-            v = e.value if isinstance(e, ast.Constant) else (-e.operand.value if isinstance(e, ast.UnaryOp) and
-                                                             isinstance(e.op, ast.USub) and isinstance(e.operand, ast.Constant) else None)
+            v = (
+                e.value
+                if isinstance(e, ast.Constant)
+                else (
+                    -e.operand.value
+                    if isinstance(e, ast.UnaryOp) and isinstance(e.op, ast.USub) and isinstance(e.operand, ast.Constant)
+                    else None
+                )
+            )
             base = node.left.operand if isinstance(node.left, ast.UnaryOp) else node.left
             int_base = isinstance(base, ast.Constant) and isinstance(base.value, int)  # 2 ** 20, (-1) ** j: integers
             if v not in _EXACT_POWERS and not int_base:
@@ -198,8 +252,12 @@ def machine_dependent_calls(path: Path) -> list[str]:
             if parts[:1] == ["numpy"] and len(parts) == 2 and parts[1] in _BLAS:
                 flag(node, f"{name} (BLAS)")
             elif parts[:2] == ["numpy", "linalg"]:
-                exact_norm = parts[-1] == "norm" and "axis" in kinds and kinds.get("ord", "None") in ("None", "2") \
+                exact_norm = (
+                    parts[-1] == "norm"
+                    and "axis" in kinds
+                    and kinds.get("ord", "None") in ("None", "2")
                     and not in_compiled
+                )
                 if not exact_norm:
                     flag(node, f"{name} (BLAS or LAPACK)")
             elif parts[:1] == ["numpy"] and parts[-1] == "einsum" and kinds.get("optimize", "False") != "False":
@@ -208,9 +266,15 @@ def machine_dependent_calls(path: Path) -> list[str]:
                 flag(node, f"{name} (numpy's SIMD code on some CPUs)")
             elif not name and method == "dot" and not ast.unparse(node.func).startswith("portable."):
                 flag(node, f"{ast.unparse(node.func)} (BLAS)")
-            elif parts[-1:] == ["argpartition"] or method == "argpartition" or parts[-1:] == ["partition"] or \
-                    ((parts[-1:] == ["argsort"] or method == "argsort") and
-                     kinds.get("kind", "None").strip("'\"") not in ("stable", "mergesort")):
+            elif (
+                parts[-1:] == ["argpartition"]
+                or method == "argpartition"
+                or parts[-1:] == ["partition"]
+                or (
+                    (parts[-1:] == ["argsort"] or method == "argsort")
+                    and kinds.get("kind", "None").strip("'\"") not in ("stable", "mergesort")
+                )
+            ):
                 flag(node, f"{ast.unparse(node.func)} (tie order depends on the CPU's sort code)")
         for child in ast.iter_child_nodes(node):
             visit(child, in_compiled)
@@ -221,26 +285,45 @@ def machine_dependent_calls(path: Path) -> list[str]:
 
 def test_seeded_code_sends_nothing_to_blas_or_numpys_simd_transcendentals():
     files = sorted(p for pkg in ("rmm_envs", "guardians", "benchmarks/bench") for p in (ROOT / pkg).rglob("*.py"))
-    found = [hit for p in files if p.relative_to(ROOT).as_posix() not in _EXEMPT_FILES for hit in machine_dependent_calls(p)]
-    assert not found, ("machine-dependent arithmetic in seeded code (use rmm_envs.portable: dot, norm, norms, matvec, "
-                       f"arctan2, wrap_angle, a numba kernel, or say why it is exact with '{_PRAGMA} ...'):\n"
-                       + "\n".join(found))
+    found = [
+        hit for p in files if p.relative_to(ROOT).as_posix() not in _EXEMPT_FILES for hit in machine_dependent_calls(p)
+    ]
+    assert not found, (
+        "machine-dependent arithmetic in seeded code (use rmm_envs.portable: dot, norm, norms, matvec, "
+        f"arctan2, wrap_angle, a numba kernel, or say why it is exact with '{_PRAGMA} ...'):\n" + "\n".join(found)
+    )
 
 
 def test_the_static_check_finds_what_it_looks_for(tmp_path):
     src = tmp_path / "probe.py"  # not in the package: other tests walk it
-    src.write_text("import numpy as np\nimport numpy.linalg as la\nfrom numpy import exp as e\nfrom numba import njit\n\n"
-                   "def f(a, b):\n    a @= b\n"
-                   "    return (a @ b, np.dot(a, b), np.linalg.norm(a), np.exp(a), a.dot(b), np.linalg.norm(a, axis=1),\n"
-                   "            la.solve(a, b), e(a), a ** 3, a ** 2, a ** 0.5, np.argsort(a), np.argsort(a, kind='stable'),\n"
-                   "            np.convolve(a, b), np.arcsinh(a), np.einsum('ij,j', a, b, optimize=True),\n"
-                   "            a ** 3)  # exact: a pragma names why a flagged form is exact on its line\n\n"
-                   "@njit(cache=False)\ndef g(a):\n    return np.exp(a), a ** 3, a @ a\n\n"
-                   "@njit(cache=True, fastmath=True)\ndef h(a):\n    return a * a + a\n")
+    src.write_text(
+        "import numpy as np\nimport numpy.linalg as la\nfrom numpy import exp as e\nfrom numba import njit\n\n"
+        "def f(a, b):\n    a @= b\n"
+        "    return (a @ b, np.dot(a, b), np.linalg.norm(a), np.exp(a), a.dot(b), np.linalg.norm(a, axis=1),\n"
+        "            la.solve(a, b), e(a), a ** 3, a ** 2, a ** 0.5, np.argsort(a), np.argsort(a, kind='stable'),\n"
+        "            np.convolve(a, b), np.arcsinh(a), np.einsum('ij,j', a, b, optimize=True),\n"
+        "            a ** 3)  # exact: a pragma names why a flagged form is exact on its line\n\n"
+        "@njit(cache=False)\ndef g(a):\n    return np.exp(a), a ** 3, a @ a\n\n"
+        "@njit(cache=True, fastmath=True)\ndef h(a):\n    return a * a + a\n"
+    )
     hits = [h.split(": ", 1)[1].split(" ")[0] for h in machine_dependent_calls(src)]
-    assert hits == ["'@'", "'@'", "numpy.dot", "numpy.linalg.norm", "numpy.exp", "a.dot", "numpy.linalg.solve", "numpy.exp",
-                    "'**'", "np.argsort", "numpy.convolve", "numpy.arcsinh", "numpy.einsum(optimize=...)", "'@'",
-                    "fastmath"], hits
+    assert hits == [
+        "'@'",
+        "'@'",
+        "numpy.dot",
+        "numpy.linalg.norm",
+        "numpy.exp",
+        "a.dot",
+        "numpy.linalg.solve",
+        "numpy.exp",
+        "'**'",
+        "np.argsort",
+        "numpy.convolve",
+        "numpy.arcsinh",
+        "numpy.einsum(optimize=...)",
+        "'@'",
+        "fastmath",
+    ], hits
 
 
 # ---------------------------------------------------------------------------- the helpers

@@ -2,12 +2,12 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
-from rmm_envs.scenes import Dubins4DScene
 from rmm_envs.risk import RiskEstimator, check_scene, cvar, get_metric, worst_case
+from rmm_envs.scenes import Dubins4DScene
 from tests.toy_systems import Line1D
 
 
@@ -53,8 +53,12 @@ def test_worst_case_and_cvar_metrics_on_a_tree():
     kw = dict(branches=4, depth=1, horizon=1.0, n_steps=2)
     c = ctl([0.1, 2.0, 0.3, 0.4])  # one of four fails
     assert RiskEstimator(Line1D(), metric="worst", **kw).estimate(np.zeros((1, 1)), controls=c).risk[0] == 1.0
-    assert RiskEstimator(Line1D(), metric="cvar", alpha=0.25, **kw).estimate(np.zeros((1, 1)), controls=c).risk[0] == 1.0
-    assert RiskEstimator(Line1D(), metric="cvar", alpha=0.5, **kw).estimate(np.zeros((1, 1)), controls=c).risk[0] == pytest.approx(0.5)
+    assert (
+        RiskEstimator(Line1D(), metric="cvar", alpha=0.25, **kw).estimate(np.zeros((1, 1)), controls=c).risk[0] == 1.0
+    )
+    assert RiskEstimator(Line1D(), metric="cvar", alpha=0.5, **kw).estimate(np.zeros((1, 1)), controls=c).risk[
+        0
+    ] == pytest.approx(0.5)
 
 
 def test_metric_values():
@@ -134,10 +138,12 @@ def _recursive(system, state, ctrl_tree, n, m, t, n_steps, reduce, path=None):
 
 def _tree_from_levels(levels, root, n, m):
     """Nest the per-level control arrays (root-major) into a recursive tree for one root."""
+
     def build(lvl, idx):
         if lvl == m:
             return None
         return [(levels[lvl][root, idx * n + i], build(lvl + 1, idx * n + i)) for i in range(n)]
+
     return build(0, 0)
 
 
@@ -176,7 +182,9 @@ def test_custom_policy_is_called_with_parent_states():
         calls.append(states.shape)
         return np.zeros((states.shape[0], 1))
 
-    r = RiskEstimator(Line1D(), branches=4, depth=2, policy=always_stop).estimate(np.zeros((3, 1)), np.random.default_rng(0))
+    r = RiskEstimator(Line1D(), branches=4, depth=2, policy=always_stop).estimate(
+        np.zeros((3, 1)), np.random.default_rng(0)
+    )
     assert r.risk.tolist() == [0.0, 0.0, 0.0]
     assert calls == [(12, 1), (48, 1)]
 
@@ -191,10 +199,18 @@ def test_sampled_branches_obey_speed_limits():
 
 @pytest.mark.parametrize(
     "kwargs, match",
-    [({"branches": 0}, "branches"), ({"depth": -1}, "depth"), ({"horizon": 0}, "horizon"),
-     ({"horizon": float("nan")}, "horizon"), ({"n_steps": 1}, "n_steps"), ({"metric": "median"}, "metric"),
-     ({"metric": "cvar"}, "alpha"), ({"metric": "cvar", "alpha": 1.0}, "alpha"), ({"metric": "cvar", "alpha": 0.0}, "alpha"),
-     ({"leaf": "one"}, "leaf")],
+    [
+        ({"branches": 0}, "branches"),
+        ({"depth": -1}, "depth"),
+        ({"horizon": 0}, "horizon"),
+        ({"horizon": float("nan")}, "horizon"),
+        ({"n_steps": 1}, "n_steps"),
+        ({"metric": "median"}, "metric"),
+        ({"metric": "cvar"}, "alpha"),
+        ({"metric": "cvar", "alpha": 1.0}, "alpha"),
+        ({"metric": "cvar", "alpha": 0.0}, "alpha"),
+        ({"leaf": "one"}, "leaf"),
+    ],
 )
 def test_bad_parameters(kwargs, match):
     with pytest.raises(ValueError, match=match):
@@ -239,8 +255,10 @@ def test_failure_flags_given_as_integers_give_the_same_labels():
             np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
     c = [[0.0], [0.6], [2.0]]
     est = RiskEstimator(IntFlagsLine1D(), branches=2, depth=0, horizon=1.0, n_steps=5)
-    np.testing.assert_array_equal(est.estimate_candidates(states[:3], c, hold=1.0, rng=np.random.default_rng(0)),
-                                  [[0, 0, 1], [0, 1, 1], [1, 1, 1]])
+    np.testing.assert_array_equal(
+        est.estimate_candidates(states[:3], c, hold=1.0, rng=np.random.default_rng(0)),
+        [[0, 0, 1], [0, 1, 1], [1, 1, 1]],
+    )
 
 
 def test_candidates_by_hand_b_differs_from_k_and_the_tree_runs_from_the_branch_end():
@@ -265,20 +283,46 @@ def test_candidates_refused_with_their_messages():
         (dict(states=np.zeros((1, 2)), candidates=[[0.0]], hold=1.0), "states must have shape (B, 1), got (1, 2)"),
         (dict(states=np.zeros(1), candidates=[[0.0]], hold=1.0), "states must have shape (B, 1), got (1,)"),
         (dict(states=np.zeros((1, 1)), candidates=[0.0], hold=1.0), "candidates must have shape (K >= 1, 1), got (1,)"),
-        (dict(states=np.zeros((1, 1)), candidates=[[[0.0]]], hold=1.0), "candidates must have shape (K >= 1, 1), got (1, 1, 1)"),
-        (dict(states=np.zeros((1, 1)), candidates=np.zeros((0, 1)), hold=1.0), "candidates must have shape (K >= 1, 1), got (0, 1)"),
-        (dict(states=np.zeros((1, 1)), candidates=[[0.0, 1.0]], hold=1.0), "candidates must have shape (K >= 1, 1), got (1, 2)"),
+        (
+            dict(states=np.zeros((1, 1)), candidates=[[[0.0]]], hold=1.0),
+            "candidates must have shape (K >= 1, 1), got (1, 1, 1)",
+        ),
+        (
+            dict(states=np.zeros((1, 1)), candidates=np.zeros((0, 1)), hold=1.0),
+            "candidates must have shape (K >= 1, 1), got (0, 1)",
+        ),
+        (
+            dict(states=np.zeros((1, 1)), candidates=[[0.0, 1.0]], hold=1.0),
+            "candidates must have shape (K >= 1, 1), got (1, 2)",
+        ),
         (dict(states=np.zeros((1, 1)), candidates=[[np.inf]], hold=1.0), "candidates must be finite, got [[inf]]"),
-        (dict(states=np.zeros((1, 1)), candidates=[[3.5]], hold=1.0),
-         "candidates [[3.5]] fall outside the control box [[0.0], [3.0]]"),
-        (dict(states=np.zeros((1, 1)), candidates=[[-0.5]], hold=1.0),
-         "candidates [[-0.5]] fall outside the control box [[0.0], [3.0]]"),
-        (dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold=-1.0), "hold must be a finite number of seconds > 0, got -1.0"),
-        (dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold="1"), "hold must be a finite number of seconds > 0, got '1'"),
-        (dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold=np.nan), "hold must be a finite number of seconds > 0, got nan"),
+        (
+            dict(states=np.zeros((1, 1)), candidates=[[3.5]], hold=1.0),
+            "candidates [[3.5]] fall outside the control box [[0.0], [3.0]]",
+        ),
+        (
+            dict(states=np.zeros((1, 1)), candidates=[[-0.5]], hold=1.0),
+            "candidates [[-0.5]] fall outside the control box [[0.0], [3.0]]",
+        ),
+        (
+            dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold=-1.0),
+            "hold must be a finite number of seconds > 0, got -1.0",
+        ),
+        (
+            dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold="1"),
+            "hold must be a finite number of seconds > 0, got '1'",
+        ),
+        (
+            dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold=np.nan),
+            "hold must be a finite number of seconds > 0, got nan",
+        ),
     ]
-    cases.append((dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold=0.0),
-                  "hold must be a finite number of seconds > 0, got 0.0"))
+    cases.append(
+        (
+            dict(states=np.zeros((1, 1)), candidates=[[1.0]], hold=0.0),
+            "hold must be a finite number of seconds > 0, got 0.0",
+        )
+    )
     for kw, text in cases:
         with pytest.raises(ValueError) as e:
             est.estimate_candidates(rng=rng, **kw)
@@ -326,9 +370,11 @@ def test_default_chunk_keeps_a_chunk_at_about_32768_leaves():
 def test_tree_size_refusals_say_how_large():
     with pytest.raises(ValueError) as e:
         RiskEstimator(Line1D(), branches=1025, depth=2)
-    assert str(e.value) == ("branches (n, --branches) = 1025 and depth (m, --depth) = 2 make a tree of 1,051,650 nodes per "
-                            "state (n + n^2 + ... + n^m); at most 1,048,576 are supported (the paper uses n = 32, m = 2: "
-                            "1,056): lower --branches or --depth")
+    assert str(e.value) == (
+        "branches (n, --branches) = 1025 and depth (m, --depth) = 2 make a tree of 1,051,650 nodes per "
+        "state (n + n^2 + ... + n^m); at most 1,048,576 are supported (the paper uses n = 32, m = 2: "
+        "1,056): lower --branches or --depth"
+    )
     with pytest.raises(ValueError) as e:
         RiskEstimator(Line1D(), branches=2**40, depth=2)
     assert "make a tree of more than 2^64 nodes per state" in str(e.value)
@@ -368,21 +414,48 @@ class NoLeafLine1D:
 def test_defaults_and_params_are_pinned():
     from rmm_envs.risk.estimator import validate_tree_params
 
-    assert RiskEstimator(Line1D()).params() == {"branches": 32, "depth": 2, "horizon": 2.0, "n_steps": 8,
-                                                "metric": "expected", "alpha": None, "leaf": "zero", "policy": "uniform"}
+    assert RiskEstimator(Line1D()).params() == {
+        "branches": 32,
+        "depth": 2,
+        "horizon": 2.0,
+        "n_steps": 8,
+        "metric": "expected",
+        "alpha": None,
+        "leaf": "zero",
+        "policy": "uniform",
+    }
 
     def my_policy(states, rng):
         return np.zeros((states.shape[0], 1))
 
-    p = RiskEstimator(Line1D(), branches=3, depth=1, horizon=0.5, n_steps=4, metric="cvar", alpha=0.3, leaf="heuristic",
-                      policy=my_policy).params()
-    assert p == {"branches": 3, "depth": 1, "horizon": 0.5, "n_steps": 4, "metric": "cvar", "alpha": 0.3,
-                 "leaf": "heuristic", "policy": "my_policy"}
+    p = RiskEstimator(
+        Line1D(),
+        branches=3,
+        depth=1,
+        horizon=0.5,
+        n_steps=4,
+        metric="cvar",
+        alpha=0.3,
+        leaf="heuristic",
+        policy=my_policy,
+    ).params()
+    assert p == {
+        "branches": 3,
+        "depth": 1,
+        "horizon": 0.5,
+        "n_steps": 4,
+        "metric": "cvar",
+        "alpha": 0.3,
+        "leaf": "heuristic",
+        "policy": "my_policy",
+    }
     assert validate_tree_params(32, 2, 2.0, 8) is None  # the defaults of the check are valid ones
 
 
 def test_leaf_estimate_is_needed_only_for_the_heuristic_leaf():
-    r = RiskEstimator(NoLeafLine1D(), branches=2, depth=1, horizon=1.0, n_steps=2).estimate(np.zeros((1, 1)), controls=ctl([0.5, 2.0]))
+    r = RiskEstimator(NoLeafLine1D(), branches=2, depth=1, horizon=1.0, n_steps=2).estimate(
+        np.zeros((1, 1)), controls=ctl([0.5, 2.0])
+    )
     assert r.risk[0] == 0.5
     with pytest.raises(TypeError) as e:
         RiskEstimator(NoLeafLine1D(), leaf="heuristic")
@@ -395,10 +468,14 @@ def test_estimate_refusals_and_result_types_are_pinned():
         (dict(states=np.array([[np.inf]]), rng=np.random.default_rng(0)), "states must be finite"),
         (dict(states=np.zeros((1, 1))), "estimate() needs rng (a numpy Generator) or explicit controls"),
         (dict(states=np.zeros((1, 1)), controls=ctl([0.1] * 3)), "controls must have one array per level (2), got 1"),
-        (dict(states=np.zeros((1, 1)), controls=ctl([0.1] * 3, [0.1] * 6)),
-         "controls[1] must have shape (1, 9, c), got (1, 6, 1)"),
-        (dict(states=np.zeros((1, 1)), controls=ctl([0.1] * 2, [0.1] * 9)),
-         "controls[0] must have shape (1, 3, c), got (1, 2, 1)"),
+        (
+            dict(states=np.zeros((1, 1)), controls=ctl([0.1] * 3, [0.1] * 6)),
+            "controls[1] must have shape (1, 9, c), got (1, 6, 1)",
+        ),
+        (
+            dict(states=np.zeros((1, 1)), controls=ctl([0.1] * 2, [0.1] * 9)),
+            "controls[0] must have shape (1, 3, c), got (1, 2, 1)",
+        ),
     ]
     for kw, text in cases:
         with pytest.raises(ValueError) as e:
@@ -415,11 +492,14 @@ def test_object_arrays_of_numbers_are_read_as_floats():
     est = RiskEstimator(sc, branches=4, depth=1)
     states = np.array([[0.0, 0.0, 0.0, 1.0], [1.0, 0.5, 0.2, 2.0]])
     obj = states.astype(object)
-    np.testing.assert_array_equal(est.estimate(obj, np.random.default_rng(0)).risk,
-                                  est.estimate(states, np.random.default_rng(0)).risk)
+    np.testing.assert_array_equal(
+        est.estimate(obj, np.random.default_rng(0)).risk, est.estimate(states, np.random.default_rng(0)).risk
+    )
     cands = np.array([[0.0, -0.5], [0.25, 0.5]])
     ref = est.estimate_candidates(states, cands, hold=1.0, rng=np.random.default_rng(1))
-    np.testing.assert_array_equal(est.estimate_candidates(obj, cands.astype(object), hold=1.0, rng=np.random.default_rng(1)), ref)
+    np.testing.assert_array_equal(
+        est.estimate_candidates(obj, cands.astype(object), hold=1.0, rng=np.random.default_rng(1)), ref
+    )
 
 
 def test_the_tree_after_a_candidate_starts_where_the_held_branch_ends():
@@ -431,9 +511,13 @@ def test_the_tree_after_a_candidate_starts_where_the_held_branch_ends():
         return np.zeros((states.shape[0], 1))
 
     est = RiskEstimator(Line1D(), branches=2, depth=1, horizon=1.0, n_steps=5, policy=record)
-    r = est.estimate_candidates(np.array([[0.0], [0.25]]), [[0.2], [0.5], [2.0]], hold=1.5, rng=np.random.default_rng(0))
+    r = est.estimate_candidates(
+        np.array([[0.0], [0.25]]), [[0.2], [0.5], [2.0]], hold=1.5, rng=np.random.default_rng(0)
+    )
     assert seen == [[0.2 * 1.5, 0.5 * 1.5, 0.25 + 0.2 * 1.5]]  # 2.0 * 1.5 and 0.25 + 0.5 * 1.5 = 1 reach the wall
-    np.testing.assert_array_equal(r, [[0.0, 0.0, 1.0], [0.0, 1.0, 1.0]])  # u = 0 afterwards: only the held branches fail
+    np.testing.assert_array_equal(
+        r, [[0.0, 0.0, 1.0], [0.0, 1.0, 1.0]]
+    )  # u = 0 afterwards: only the held branches fail
 
 
 class Float64OnlyLine1D(Line1D):
@@ -455,5 +539,7 @@ def test_the_system_is_given_float64_states_whatever_the_caller_passes():
     for roots in (np.array([[0], [2]]), np.array([[0.0], [2.0]], np.float32), [[0], [2]]):
         assert est.estimate(roots, controls=[np.array([[[0.5], [0.9]]] * 2)]).risk.tolist() == [0.0, 1.0]
         held = RiskEstimator(Float64OnlyLine1D(), depth=0, n_steps=2)  # the held branch's failure only
-        np.testing.assert_array_equal(held.estimate_candidates(roots, [[0.0], [1.0]], hold=1.0, rng=np.random.default_rng(0)),
-                                      [[0.0, 1.0], [1.0, 1.0]])
+        np.testing.assert_array_equal(
+            held.estimate_candidates(roots, [[0.0], [1.0]], hold=1.0, rng=np.random.default_rng(0)),
+            [[0.0, 1.0], [1.0, 1.0]],
+        )

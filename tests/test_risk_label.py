@@ -40,14 +40,20 @@ def test_works_on_the_parallel_env_and_is_seeded():
 
 
 def test_needs_a_labelled_env_and_names_it_and_the_missing_hooks():
-    with pytest.raises(TypeError, match=r"^MountainCar-v0 \(MountainCarEnv\) is not a LabelledEnv.*risk_scene is missing; "
-                                        r"true_state is missing; no risk adapter serves it either \(adapters exist "
-                                        r"for CartPole-v1, Pendulum-v1 \(with failure=\), InvertedPendulum-v5, "
-                                        r".*SnapshotSimulator"):
+    with pytest.raises(
+        TypeError,
+        match=r"^MountainCar-v0 \(MountainCarEnv\) is not a LabelledEnv.*risk_scene is missing; "
+        r"true_state is missing; no risk adapter serves it either \(adapters exist "
+        r"for CartPole-v1, Pendulum-v1 \(with failure=\), InvertedPendulum-v5, "
+        r".*SnapshotSimulator",
+    ):
         RiskLabel(gym.make("MountainCar-v0"))
 
 
-@pytest.mark.parametrize("kwargs, match", [({"branches": 0}, "branches"), ({"metric": "cvar", "alpha": 2.0}, "alpha"), ({"metric": "nope"}, "metric")])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [({"branches": 0}, "branches"), ({"metric": "cvar", "alpha": 2.0}, "alpha"), ({"metric": "nope"}, "metric")],
+)
 def test_bad_parameters(kwargs, match):
     with pytest.raises(ValueError, match=match):
         RiskLabel(gym.make("Dubins4DGuarded-v0"), **kwargs)

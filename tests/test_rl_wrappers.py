@@ -28,8 +28,14 @@ def test_flat_action_maps_onto_the_bounds():
     assert u.tolist() == [0.25, -0.5]
 
 
-@pytest.mark.parametrize("action, msg", [([1.0, 0.0], "has 3 numbers"), ([1.0, np.nan, 0.0], "index 1 must be finite"),
-                                         ([np.inf, 0.0, 0.0], "index 0 must be finite")])
+@pytest.mark.parametrize(
+    "action, msg",
+    [
+        ([1.0, 0.0], "has 3 numbers"),
+        ([1.0, np.nan, 0.0], "index 1 must be finite"),
+        ([np.inf, 0.0, 0.0], "index 0 must be finite"),
+    ],
+)
 def test_flat_action_errors_name_the_problem(action, msg):
     env = FlattenGuardianAction(gym.make("Dubins4DGuarded-v0"))
     env.reset(seed=0)
@@ -74,16 +80,26 @@ def test_reward_on_goal_and_no_cost_for_the_driver():
 
 
 def test_non_blocking_steps_are_charged_by_their_length():
-    env = GuardianReward(FlattenGuardianAction(gym.make("Dubins4DParallel-v0", clock="fixed:20")), intervention_cost=1.0)
+    env = GuardianReward(
+        FlattenGuardianAction(gym.make("Dubins4DParallel-v0", clock="fixed:20")), intervention_cost=1.0
+    )
     env.reset(seed=0, options=STRAIGHT_AT)
-    _, r0, *_ , info0 = env.step(np.array([1.0, 0.0, 0.0], np.float32))  # the first interval is the driver's
+    _, r0, *_, info0 = env.step(np.array([1.0, 0.0, 0.0], np.float32))  # the first interval is the driver's
     assert not info0["active"] and r0 == 0.0
-    _, r1, *_ , info1 = env.step(np.array([1.0, 0.0, 0.0], np.float32))
+    _, r1, *_, info1 = env.step(np.array([1.0, 0.0, 0.0], np.float32))
     assert info1["active"] and r1 == pytest.approx(-(0.02 * 10 + 0.1))  # lap x time_accel + base_step
 
 
-@pytest.mark.parametrize("kw", [{"goal_bonus": -1.0}, {"collision_penalty": math.inf}, {"intervention_cost": float("nan")},
-                                {"goal_bonus": True}, {"collision_penalty": "10"}])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"goal_bonus": -1.0},
+        {"collision_penalty": math.inf},
+        {"intervention_cost": float("nan")},
+        {"goal_bonus": True},
+        {"collision_penalty": "10"},
+    ],
+)
 def test_reward_weights_are_checked(kw):
     with pytest.raises(ValueError, match=next(iter(kw))):
         GuardianReward(gym.make("Dubins4DGuarded-v0"), **kw)

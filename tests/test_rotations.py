@@ -48,7 +48,9 @@ def test_batched_forms_equal_the_single_forms_bit_for_bit():
     for i in range(50):
         np.testing.assert_array_equal(R[i], quat_to_rot(Q[i]))
         np.testing.assert_array_equal(M[i], quat_mul(Q[i], P[i]))
-        np.testing.assert_allclose(E[i], quat_from_euler(*angles[i]), rtol=0, atol=1e-15)  # numpy's sin/cos may vectorise
+        np.testing.assert_allclose(
+            E[i], quat_from_euler(*angles[i]), rtol=0, atol=1e-15
+        )  # numpy's sin/cos may vectorise
     # any leading shape
     np.testing.assert_array_equal(quat_to_rot(Q.reshape(5, 10, 4)), R.reshape(5, 10, 3, 3))
     assert quat_to_rot(np.zeros((0, 4))).shape == (0, 3, 3)
@@ -66,8 +68,11 @@ def test_quat_mul_hand_computed():
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.floats(-1, 1), min_size=8, max_size=8).filter(
-    lambda v: np.linalg.norm(v[:4]) > 0.1 and np.linalg.norm(v[4:]) > 0.1))
+@given(
+    st.lists(st.floats(-1, 1), min_size=8, max_size=8).filter(
+        lambda v: np.linalg.norm(v[:4]) > 0.1 and np.linalg.norm(v[4:]) > 0.1
+    )
+)
 def test_product_composes_rotations(v):
     a, b = np.array(v[:4]) / np.linalg.norm(v[:4]), np.array(v[4:]) / np.linalg.norm(v[4:])
     np.testing.assert_allclose(quat_to_rot(quat_mul(a, b)), quat_to_rot(a) @ quat_to_rot(b), atol=1e-13)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 
-from hypothesis import example, given, settings, strategies as st
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 from rmm_envs.systems import dubins4d
 
@@ -12,8 +13,8 @@ ANGLE = st.floats(-math.pi, math.pi, allow_nan=False)
 
 
 def test_desired_heading_is_compiled_once_and_used_by_the_driver_and_the_cbf_rows():
-    from rmm_guardians.cbf import barrier
     from rmm_envs.drivers import dubins4d as driver
+    from rmm_guardians.cbf import barrier
 
     assert barrier._desired_heading is driver._desired_heading is dubins4d.desired_heading_compiled
     assert driver.desired_heading is dubins4d.desired_heading  # the Python function, re-exported

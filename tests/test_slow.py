@@ -12,7 +12,9 @@ def test_paper_scale_dubins4d_dataset(tmp_path):
     from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 
     t0 = time.perf_counter()
-    man = generate(DatagenConfig(configs=274, samples_per_config=128, seed=0), tmp_path / "d4", workers=2, progress=False)
+    man = generate(
+        DatagenConfig(configs=274, samples_per_config=128, seed=0), tmp_path / "d4", workers=2, progress=False
+    )
     elapsed = time.perf_counter() - t0
     ds = load_dataset(tmp_path / "d4")
     assert man["n_rows"] == len(ds) == 35072

@@ -23,16 +23,35 @@ from rmm_bench.run import plan_tasks
 from rmm_bench.runner import episode_seed
 from rmm_bench.store import EPISODE_FIELDS, RETRIED_ERRORS, ResultsStore
 
-RUNS = {a: AgentRun(agent=a, agent_kwargs={}, env_id="Dubins4DGuarded-v0", env_kwargs={}, seed=s, episode_timeout=60.0,
-                    charge_precompute=False) for a, s in (("inactive", 0), ("brakes", 5))}
+RUNS = {
+    a: AgentRun(
+        agent=a,
+        agent_kwargs={},
+        env_id="Dubins4DGuarded-v0",
+        env_kwargs={},
+        seed=s,
+        episode_timeout=60.0,
+        charge_precompute=False,
+    )
+    for a, s in (("inactive", 0), ("brakes", 5))
+}
 KINDS = ("goal", "collision", "timeout", "error:guardian", "error:timeout", "error:lost_worker")
 
 
 def _result(run: AgentRun, episode: int, kind: str, tag: float = 0.0, finished: float = 0.0) -> EpisodeResult:
     outcome, _, err = kind.partition(":")
-    return EpisodeResult(run_key=run.key, episode=episode, agent=run.agent, seed=episode_seed(run.seed, episode),
-                         outcome=outcome, steps=episode + 1, sim_time=tag, error=f"failed ({err})" if err else None,
-                         error_kind=err or None, finished=finished)
+    return EpisodeResult(
+        run_key=run.key,
+        episode=episode,
+        agent=run.agent,
+        seed=episode_seed(run.seed, episode),
+        outcome=outcome,
+        steps=episode + 1,
+        sim_time=tag,
+        error=f"failed ({err})" if err else None,
+        error_kind=err or None,
+        finished=finished,
+    )
 
 
 stored = st.dictionaries(st.integers(0, 24), st.sampled_from(KINDS), max_size=20)
@@ -57,27 +76,37 @@ def test_reads_are_exactly_the_stored_episodes_below_n(tmp_path, a, b, n, retry)
             assert all(r["run_key"] == key and r["agent"] == agent for r in rows)
             assert [r["outcome"] for r in rows] == [eps[i].partition(":")[0] for i in sorted(eps) if i < n]
             assert [r["episode"] for r in store.episodes(key)] == sorted(eps)
-            skip = {i for i, k in eps.items()
-                    if not (k.startswith("error") and (retry or k.partition(":")[2] in RETRIED_ERRORS))}
+            skip = {
+                i
+                for i, k in eps.items()
+                if not (k.startswith("error") and (retry or k.partition(":")[2] in RETRIED_ERRORS))
+            }
             assert store.done_episodes(key, retry_errors=retry) == skip
         tasks = plan_tasks(store, RUNS, n, workers=1, backend="local", retry_errors=retry)
         for agent, eps in (("inactive", a), ("brakes", b)):
             mine = [t for t in tasks if t.run_key == RUNS[agent].key]
-            want = [i for i in range(n) if i not in eps
-                    or (eps[i].startswith("error") and (retry or eps[i].partition(":")[2] in RETRIED_ERRORS))]
+            want = [
+                i
+                for i in range(n)
+                if i not in eps
+                or (eps[i].startswith("error") and (retry or eps[i].partition(":")[2] in RETRIED_ERRORS))
+            ]
             assert [t.episode for t in mine] == want
             assert [t.seed for t in mine] == [episode_seed(RUNS[agent].seed, i) for i in want]
     finally:
         store.close()
 
 
-@pytest.mark.parametrize("first, second, kept", [
-    ("goal", "collision", "goal"),  # a result is never overwritten
-    ("error:guardian", "goal", "goal"),  # an error is (a retry)
-    ("error:timeout", "collision", "collision"),
-    ("error:lost_worker", "error:timeout", "error:timeout"),
-    ("timeout", "error:lost_worker", "timeout"),
-])
+@pytest.mark.parametrize(
+    "first, second, kept",
+    [
+        ("goal", "collision", "goal"),  # a result is never overwritten
+        ("error:guardian", "goal", "goal"),  # an error is (a retry)
+        ("error:timeout", "collision", "collision"),
+        ("error:lost_worker", "error:timeout", "error:timeout"),
+        ("timeout", "error:lost_worker", "timeout"),
+    ],
+)
 def test_a_stored_result_is_replaced_only_where_it_is_an_error(tmp_path, first, second, kept):
     store = ResultsStore(tmp_path / "results.db")
     run = RUNS["inactive"]
@@ -95,8 +124,16 @@ def test_a_stored_result_is_replaced_only_where_it_is_an_error(tmp_path, first, 
 def _sleeping_child():
     """A live process of this user that any signal but 0 would end (SIGHUP restored to its default
     first), running until the block ends."""
-    child = subprocess.Popen([sys.executable, "-c", "import signal, time; signal.signal(signal.SIGHUP, signal.SIG_DFL); "
-                              "print('ready', flush=True); time.sleep(60)"], stdout=subprocess.PIPE, text=True)
+    child = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import signal, time; signal.signal(signal.SIGHUP, signal.SIG_DFL); "
+            "print('ready', flush=True); time.sleep(60)",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert child.stdout.readline() == "ready\n"
         yield child
@@ -115,7 +152,19 @@ def test_opening_makes_the_folder_and_a_wal_database(tmp_path):
     assert cols == list(EPISODE_FIELDS)
     assert [r[1] for r in store.db.execute("PRAGMA table_info(episodes)") if r[5]] == ["run_key", "episode"]  # the key
     inv = [r[1] for r in store.db.execute("PRAGMA table_info(invocations)")]
-    assert inv == ["id", "created", "kind", "args", "run_keys", "episodes", "status", "pid", "host", "updated", "message"]
+    assert inv == [
+        "id",
+        "created",
+        "kind",
+        "args",
+        "run_keys",
+        "episodes",
+        "status",
+        "pid",
+        "host",
+        "updated",
+        "message",
+    ]
     store.close()
     ResultsStore(tmp_path / "a" / "b" / "results.db").close()  # opening again changes nothing
     with sqlite3.connect(tmp_path / "a" / "b" / "results.db") as db:
@@ -124,21 +173,38 @@ def test_opening_makes_the_folder_and_a_wal_database(tmp_path):
 
 def _damaged(p, text: str) -> str:
     """The one line for a damaged file: the episodes are lost to rmm-bench unless exported first, and how."""
-    return (f"{p} is damaged or not a results database ({text}); rmm-bench cannot read the episodes it holds. Export "
-            f"what is still readable first (sqlite3 {p} .recover > {p}.sql, with the sqlite3 shell), then move it "
-            f"aside (mv {p} {p}.damaged) and rerun: the run starts afresh in a new database, and the episodes of "
-            f"the old one are lost to rmm-bench")
+    return (
+        f"{p} is damaged or not a results database ({text}); rmm-bench cannot read the episodes it holds. Export "
+        f"what is still readable first (sqlite3 {p} .recover > {p}.sql, with the sqlite3 shell), then move it "
+        f"aside (mv {p} {p}.damaged) and rerun: the run starts afresh in a new database, and the episodes of "
+        f"the old one are lost to rmm-bench"
+    )
 
 
-@pytest.mark.parametrize("text, start, status", [
-    ("database or disk is full", "cannot write {p} (database or disk is full): the disk is full; free disk space, then "
-                                 "the stored episodes are kept: rerun the same command", 1),
-    ("database is locked", "{p} is locked by another process (database is locked); wait for the other rmm-bench command "
-                           "to finish, or use another --out; the database is intact", 1),
-    ("database is busy\nretry", "{p} is locked by another process (database is busy retry); wait for the other rmm-bench "
-                                "command to finish, or use another --out; the database is intact", 1),
-    ("file is not a database", None, 2),
-])
+@pytest.mark.parametrize(
+    "text, start, status",
+    [
+        (
+            "database or disk is full",
+            "cannot write {p} (database or disk is full): the disk is full; free disk space, then "
+            "the stored episodes are kept: rerun the same command",
+            1,
+        ),
+        (
+            "database is locked",
+            "{p} is locked by another process (database is locked); wait for the other rmm-bench command "
+            "to finish, or use another --out; the database is intact",
+            1,
+        ),
+        (
+            "database is busy\nretry",
+            "{p} is locked by another process (database is busy retry); wait for the other rmm-bench "
+            "command to finish, or use another --out; the database is intact",
+            1,
+        ),
+        ("file is not a database", None, 2),
+    ],
+)
 def test_each_database_error_is_one_line_saying_what_to_do(tmp_path, text, start, status):
     store = ResultsStore(tmp_path / "results.db")
     e = store._error(sqlite3.OperationalError(text))
@@ -173,9 +239,13 @@ def test_a_database_written_before_error_kinds_and_invocation_bookkeeping_is_bro
             INSERT INTO invocations (created, kind, args, run_keys, episodes, status) VALUES (1, 'run', '{{}}', '{{}}', 2, 'done');
             INSERT INTO invocations (created, kind, args, run_keys, episodes, status) VALUES (2, 'run', '{{}}', '{{}}', 2, 'failed');
         """)
-        for i, (outcome, error) in enumerate((("goal", None), ("error", "EpisodeTimeout: over 60 s"), ("error", "boom"))):
-            db.execute("INSERT INTO episodes (run_key, episode, agent, seed, outcome, error) VALUES (?, ?, ?, ?, ?, ?)",
-                       ("k", i, "a", i, outcome, error))
+        for i, (outcome, error) in enumerate(
+            (("goal", None), ("error", "EpisodeTimeout: over 60 s"), ("error", "boom"))
+        ):
+            db.execute(
+                "INSERT INTO episodes (run_key, episode, agent, seed, outcome, error) VALUES (?, ?, ?, ?, ?, ?)",
+                ("k", i, "a", i, outcome, error),
+            )
     store = ResultsStore(path)
     rows = store.episodes("k")
     assert [r["error_kind"] for r in rows] == [None, "timeout", "guardian"]
@@ -193,8 +263,13 @@ def test_only_a_running_invocation_of_a_dead_process_on_this_host_is_stale(tmp_p
     store = ResultsStore(tmp_path / "results.db")
     host = socket.gethostname()
     with _sleeping_child() as live:
-        rows = [("running", dead.pid, host), ("running", live.pid, host), ("running", dead.pid, host + "-elsewhere"),
-                ("finished", dead.pid, host), ("running", None, host)]
+        rows = [
+            ("running", dead.pid, host),
+            ("running", live.pid, host),
+            ("running", dead.pid, host + "-elsewhere"),
+            ("finished", dead.pid, host),
+            ("running", None, host),
+        ]
         ids = []
         for status, pid, h in rows:
             i = store.add_invocation("run", {}, {}, 1)
@@ -234,7 +309,8 @@ def test_a_folder_in_place_of_the_file_is_refused_by_name(tmp_path):
         ResultsStore(tmp_path / "results.db")
     path = tmp_path / "results.db"
     assert type(e.value).__name__ == "ResultsDatabaseError" and str(e.value) == (
-        f"cannot open {path} (unable to open database file): it is a directory; choose another --out")
+        f"cannot open {path} (unable to open database file): it is a directory; choose another --out"
+    )
     assert e.value.status == 2
 
 
@@ -251,7 +327,7 @@ def test_quick_check_problems_are_quoted_and_the_file_is_let_go(tmp_path):
     store.close()
     data = bytearray(path.read_bytes())
     for page in range(2, 7):  # the b-tree page headers of pages 3 to 7 (page 1 holds the schema)
-        data[4096 * page:4096 * page + 8] = b"\xff" * 8
+        data[4096 * page : 4096 * page + 8] = b"\xff" * 8
     path.write_bytes(bytes(data))
     db = sqlite3.connect(path)
     problems = [r[0] for r in db.execute("PRAGMA quick_check(5)")]
@@ -262,6 +338,9 @@ def test_quick_check_problems_are_quoted_and_the_file_is_let_go(tmp_path):
     text = "; ".join(problems)[:300].replace("\n", " ")
     assert str(e.value) == _damaged(path, text) and e.value.status == 2
     if os.path.isdir("/proc/self/fd"):
-        open_files = {os.path.realpath(f"/proc/self/fd/{fd}") for fd in os.listdir("/proc/self/fd")
-                      if os.path.exists(f"/proc/self/fd/{fd}")}
+        open_files = {
+            os.path.realpath(f"/proc/self/fd/{fd}")
+            for fd in os.listdir("/proc/self/fd")
+            if os.path.exists(f"/proc/self/fd/{fd}")
+        }
         assert str(path.resolve()) not in open_files

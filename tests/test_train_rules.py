@@ -47,7 +47,10 @@ def test_early_stopping_stops_after_patience_epochs_without_improvement(small_da
 def test_float32_training_runs_in_float32(small_dataset):
     ds, _ = small_dataset
     m = train(ds, TrainConfig(hidden=(4,), epochs=1, dtype="float32", seed=0), log=quiet)
-    assert next(m.torch_net.parameters()).dtype.is_floating_point and str(next(m.torch_net.parameters()).dtype) == "torch.float32"
+    assert (
+        next(m.torch_net.parameters()).dtype.is_floating_point
+        and str(next(m.torch_net.parameters()).dtype) == "torch.float32"
+    )
     assert np.isfinite(m.meta["metrics"]["val"]["mae"])
 
 

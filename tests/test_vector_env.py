@@ -13,9 +13,12 @@ ID = "Dubins4DGuarded-v0"
 
 
 def _pair(n, mode=AutoresetMode.NEXT_STEP, **kw):
-    vec = gym.make_vec(ID, num_envs=n, vectorization_mode="vector_entry_point", autoreset_mode=mode, clock="fixed:1", **kw)
-    ref = gym.make_vec(ID, num_envs=n, vectorization_mode="sync", vector_kwargs={"autoreset_mode": mode},
-                       clock="fixed:1", **kw)
+    vec = gym.make_vec(
+        ID, num_envs=n, vectorization_mode="vector_entry_point", autoreset_mode=mode, clock="fixed:1", **kw
+    )
+    ref = gym.make_vec(
+        ID, num_envs=n, vectorization_mode="sync", vector_kwargs={"autoreset_mode": mode}, clock="fixed:1", **kw
+    )
     return vec, ref
 
 
@@ -23,9 +26,11 @@ def _actions(vec, rng, p_active):
     """Seeded actions (all drawn from ``rng``, so a test is the same on every run); out-of-bounds
     values are clipped by both envs."""
     n = vec.num_envs
-    return {"active_ctrl": (rng.random(n) < p_active).astype(np.int64),
-            "turnrate_ctrl": rng.uniform(-0.4, 0.4, (n, 1)).astype(np.float32),
-            "accel_ctrl": rng.uniform(-0.5, 0.5, (n, 1)).astype(np.float32)}
+    return {
+        "active_ctrl": (rng.random(n) < p_active).astype(np.int64),
+        "turnrate_ctrl": rng.uniform(-0.4, 0.4, (n, 1)).astype(np.float32),
+        "accel_ctrl": rng.uniform(-0.5, 0.5, (n, 1)).astype(np.float32),
+    }
 
 
 def _assert_same(out_vec, out_ref, t):
@@ -59,8 +64,11 @@ def test_outcomes_include_goal_collision_and_timeout():
     n = 4
     vec, ref = _pair(n, max_episode_sim_time=15.0)
     _assert_same(vec.reset(seed=0), ref.reset(seed=0), "reset")
-    a = {"active_ctrl": np.zeros(n, np.int64), "turnrate_ctrl": np.zeros((n, 1), np.float32),
-         "accel_ctrl": np.zeros((n, 1), np.float32)}
+    a = {
+        "active_ctrl": np.zeros(n, np.int64),
+        "turnrate_ctrl": np.zeros((n, 1), np.float32),
+        "accel_ctrl": np.zeros((n, 1), np.float32),
+    }
     seen = set()
     for t in range(1500):
         out = vec.step(a)
@@ -88,7 +96,9 @@ def test_disabled_autoreset_with_reset_mask():
             resets += 1
             with pytest.raises(RuntimeError, match=f"sub-env {int(np.argmax(done))}'s episode has ended"):
                 vec.step(a)
-            _assert_same(vec.reset(options={"reset_mask": done.copy()}), ref.reset(options={"reset_mask": done.copy()}), t)
+            _assert_same(
+                vec.reset(options={"reset_mask": done.copy()}), ref.reset(options={"reset_mask": done.copy()}), t
+            )
     assert resets >= 3
 
 
@@ -127,13 +137,16 @@ def test_spaces_and_metadata():
     assert type(gym.make_vec(ID, num_envs=2).unwrapped) is Dubins4DCirclesVectorEnv
 
 
-@pytest.mark.parametrize("field, value, match", [
-    ("active_ctrl", np.array([0, 2]), "'active_ctrl' of sub-env 1 must be 0 or 1"),
-    ("active_ctrl", np.array([0.5, 0]), "'active_ctrl' of sub-env 0 must be 0 or 1"),
-    ("turnrate_ctrl", np.array([[0.0], [np.nan]]), "'turnrate_ctrl' of sub-env 1 must be finite"),
-    ("accel_ctrl", np.zeros(3), r"'accel_ctrl' must be 2 numbers, shape \(2,\) or \(2, 1\)"),
-    ("accel_ctrl", np.array(["a", "b"]), "'accel_ctrl' must be 2 numbers"),
-])
+@pytest.mark.parametrize(
+    "field, value, match",
+    [
+        ("active_ctrl", np.array([0, 2]), "'active_ctrl' of sub-env 1 must be 0 or 1"),
+        ("active_ctrl", np.array([0.5, 0]), "'active_ctrl' of sub-env 0 must be 0 or 1"),
+        ("turnrate_ctrl", np.array([[0.0], [np.nan]]), "'turnrate_ctrl' of sub-env 1 must be finite"),
+        ("accel_ctrl", np.zeros(3), r"'accel_ctrl' must be 2 numbers, shape \(2,\) or \(2, 1\)"),
+        ("accel_ctrl", np.array(["a", "b"]), "'accel_ctrl' must be 2 numbers"),
+    ],
+)
 def test_bad_actions_name_the_field_and_sub_env(field, value, match):
     vec = gym.make_vec(ID, num_envs=2, vectorization_mode="vector_entry_point")
     vec.reset(seed=0)

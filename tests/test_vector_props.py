@@ -50,8 +50,11 @@ class Keeper:
 
 
 def _actions(rng: np.random.Generator, active_p: float) -> dict:
-    return {"active_ctrl": (rng.random(N) < active_p).astype(np.int64),
-            "turnrate_ctrl": rng.uniform(-0.25, 0.25, (N, 1)), "accel_ctrl": rng.uniform(-0.5, 0.5, (N, 1))}
+    return {
+        "active_ctrl": (rng.random(N) < active_p).astype(np.int64),
+        "turnrate_ctrl": rng.uniform(-0.25, 0.25, (N, 1)),
+        "accel_ctrl": rng.uniform(-0.5, 0.5, (N, 1)),
+    }
 
 
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP, AutoresetMode.DISABLED])
@@ -82,7 +85,9 @@ def test_returned_arrays_are_never_written_to(mode):
 
 
 @settings(max_examples=8, deadline=None)
-@given(seed=st.integers(0, 2 ** 16), masks=st.lists(st.lists(st.booleans(), min_size=N, max_size=N), min_size=1, max_size=4))
+@given(
+    seed=st.integers(0, 2**16), masks=st.lists(st.lists(st.booleans(), min_size=N, max_size=N), min_size=1, max_size=4)
+)
 def test_partial_resets_leave_earlier_observations_alone(seed, masks):
     """A reset of some sub-envs returns fresh observations for them and leaves the array the
     previous call returned as it was (the rows it did not reset are equal in both)."""
@@ -109,17 +114,26 @@ def test_partial_resets_leave_earlier_observations_alone(seed, masks):
 
 
 # ------------------------------------------------------------------ arguments, refused by exact message
-@pytest.mark.parametrize("kw, message", [
-    ({"num_envs": 0}, "num_envs must be an integer >= 1, got 0"),
-    ({"num_envs": True}, "num_envs must be an integer >= 1, got True"),
-    ({"num_envs": 1.5}, "num_envs must be an integer >= 1, got 1.5"),
-    ({"num_envs": 2, "autoreset_mode": "sometimes"},
-     "autoreset_mode must be one of ['NextStep', 'SameStep', 'Disabled'], got 'sometimes'"),
-    ({"num_envs": 2, "render_mode": "human"},
-     "render_mode must be None for the vector env (render a single env instead), got 'human'"),
-    ({"num_envs": 2, "driver_solver": "osqp"},
-     "driver_solver must be 'closed_form' in the vector env (the batched exact solver), got 'osqp'"),
-])
+@pytest.mark.parametrize(
+    "kw, message",
+    [
+        ({"num_envs": 0}, "num_envs must be an integer >= 1, got 0"),
+        ({"num_envs": True}, "num_envs must be an integer >= 1, got True"),
+        ({"num_envs": 1.5}, "num_envs must be an integer >= 1, got 1.5"),
+        (
+            {"num_envs": 2, "autoreset_mode": "sometimes"},
+            "autoreset_mode must be one of ['NextStep', 'SameStep', 'Disabled'], got 'sometimes'",
+        ),
+        (
+            {"num_envs": 2, "render_mode": "human"},
+            "render_mode must be None for the vector env (render a single env instead), got 'human'",
+        ),
+        (
+            {"num_envs": 2, "driver_solver": "osqp"},
+            "driver_solver must be 'closed_form' in the vector env (the batched exact solver), got 'osqp'",
+        ),
+    ],
+)
 def test_constructor_arguments_are_refused_by_exact_message(kw, message):
     with pytest.raises(ValueError) as e:
         Dubins4DCirclesVectorEnv(**kw)
@@ -138,18 +152,30 @@ def test_accepted_arguments_are_kept():
     env.close()
 
 
-@pytest.mark.parametrize("call, message", [
-    ({"seed": [1, 2, 3]}, "seed must be None, an int or a list of 2 ints or None, got [1, 2, 3]"),
-    ({"seed": 1.5}, "seed must be None, an int or a list of 2 ints or None, got 1.5"),
-    ({"seed": True}, "seed must be None, an int or a list of 2 ints or None, got True"),
-    ({"options": {"reset_mask": np.array([1, 0])}},
-     "options['reset_mask'] must be a numpy bool array of shape (2,), got array([1, 0])"),
-    ({"options": {"reset_mask": np.zeros(2, bool)}}, "options['reset_mask'] must select at least one sub-env, got none"),
-    ({"options": {"reset_mask": np.array([True, False])}},
-     "the first reset must reset every sub-env; options['reset_mask'] selects only some"),
-    ({"seed": 0, "options": {"obstacles": [[0.0, 0.0, 1.0]], "state": [5.0, 5.0, 0.0, 1.0]}},
-     "option 'obstacles' must hold n_obstacles = 5 circles in the vector env (every world of a batch has as many), got 1"),
-])
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        ({"seed": [1, 2, 3]}, "seed must be None, an int or a list of 2 ints or None, got [1, 2, 3]"),
+        ({"seed": 1.5}, "seed must be None, an int or a list of 2 ints or None, got 1.5"),
+        ({"seed": True}, "seed must be None, an int or a list of 2 ints or None, got True"),
+        (
+            {"options": {"reset_mask": np.array([1, 0])}},
+            "options['reset_mask'] must be a numpy bool array of shape (2,), got array([1, 0])",
+        ),
+        (
+            {"options": {"reset_mask": np.zeros(2, bool)}},
+            "options['reset_mask'] must select at least one sub-env, got none",
+        ),
+        (
+            {"options": {"reset_mask": np.array([True, False])}},
+            "the first reset must reset every sub-env; options['reset_mask'] selects only some",
+        ),
+        (
+            {"seed": 0, "options": {"obstacles": [[0.0, 0.0, 1.0]], "state": [5.0, 5.0, 0.0, 1.0]}},
+            "option 'obstacles' must hold n_obstacles = 5 circles in the vector env (every world of a batch has as many), got 1",
+        ),
+    ],
+)
 def test_bad_resets_are_refused_by_exact_message(call, message):
     env = Dubins4DCirclesVectorEnv(2)
     with pytest.raises(ValueError) as e:
@@ -165,8 +191,10 @@ def test_stepping_an_ended_sub_env_without_autoreset_names_it():
     assert trunc.tolist() == [True, True] and info["outcome"].tolist() == ["timeout", "timeout"]
     with pytest.raises(RuntimeError) as e:
         env.step(a)
-    assert str(e.value) == ("sub-env 0's episode has ended and autoreset_mode is DISABLED: reset it first "
-                            "with reset(options={'reset_mask': mask})")
+    assert str(e.value) == (
+        "sub-env 0's episode has ended and autoreset_mode is DISABLED: reset it first "
+        "with reset(options={'reset_mask': mask})"
+    )
     env.reset(options={"reset_mask": np.array([True, False])})
     with pytest.raises(RuntimeError, match="^sub-env 1's episode has ended"):
         env.step(a)
@@ -201,11 +229,13 @@ def test_ended_info_masks_are_independent_arrays():
     a = {"active_ctrl": np.zeros(2, np.int64), "turnrate_ctrl": np.zeros((2, 1)), "accel_ctrl": np.zeros((2, 1))}
     _, _, _, trunc, info = env.step(a)
     assert trunc.all()
-    masks = [v for k, v in info.items() if k.startswith("_")] + [v for k, v in info[EPISODE_KEY].items() if k.startswith("_")]
+    masks = [v for k, v in info.items() if k.startswith("_")] + [
+        v for k, v in info[EPISODE_KEY].items() if k.startswith("_")
+    ]
     assert "episode" not in info  # Gymnasium's RecordEpisodeStatistics owns that key
     assert len(masks) >= 10 and all(m.all() for m in masks)
     for i, m in enumerate(masks):
-        for other in masks[i + 1:]:
+        for other in masks[i + 1 :]:
             assert not np.shares_memory(m, other)
 
 

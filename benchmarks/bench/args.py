@@ -18,8 +18,16 @@ from rmm_bench.config import BenchConfig
 from rmm_envs.catalog import env_help
 from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL
 
-__all__ = ["DEFAULT_ENV", "ReportRequest", "parse_report", "parse_run", "parse_sweep", "report_parser", "run_parser",
-           "sweep_parser"]
+__all__ = [
+    "DEFAULT_ENV",
+    "ReportRequest",
+    "parse_report",
+    "parse_run",
+    "parse_sweep",
+    "report_parser",
+    "run_parser",
+    "sweep_parser",
+]
 
 DEFAULT_ENV = "Dubins4DParallel-v0"
 #: the non-blocking stepping options and their defaults (what a blocking env must be left with)
@@ -27,57 +35,117 @@ NON_BLOCKING_DEFAULTS = {"time_accel": TIME_ACCEL, "base_step": BASE_STEP}
 
 
 def _common(p: argparse.ArgumentParser, default_agent: str) -> None:
-    p.add_argument("--agent", default=default_agent, help="guardian name, comma list, 'all' (defaults), 'paper' (the paper's rules), or module:Class (default: %(default)s)")
+    p.add_argument(
+        "--agent",
+        default=default_agent,
+        help="guardian name, comma list, 'all' (defaults), 'paper' (the paper's rules), or module:Class (default: %(default)s)",
+    )
     p.add_argument("--episodes", type=int, default=2048, help="episodes per agent (default: %(default)s)")
-    p.add_argument("--env", default=DEFAULT_ENV,
-                   help=f"a registered env id offering the parallel-autonomy contract: {env_help()}, or module:Id for an "
-                        "env that module registers (default: %(default)s)")
-    p.add_argument("--time-accel", type=float, default=NON_BLOCKING_DEFAULTS["time_accel"],
-                   help="sim seconds per clock second, for a non-blocking env (default: %(default)s)")
-    p.add_argument("--base-step", type=float, default=None,
-                   help="sim seconds added every step, for a non-blocking env (default: the env's own, 0.1 for the "
-                        "package's vehicles, one env step for CartPoleParallel-v0 and InvertedPendulumParallel-v0)")
-    p.add_argument("--seed", type=int, default=0, help="master seed; episode i's seed derives from it (default: %(default)s)")
+    p.add_argument(
+        "--env",
+        default=DEFAULT_ENV,
+        help=f"a registered env id offering the parallel-autonomy contract: {env_help()}, or module:Id for an "
+        "env that module registers (default: %(default)s)",
+    )
+    p.add_argument(
+        "--time-accel",
+        type=float,
+        default=NON_BLOCKING_DEFAULTS["time_accel"],
+        help="sim seconds per clock second, for a non-blocking env (default: %(default)s)",
+    )
+    p.add_argument(
+        "--base-step",
+        type=float,
+        default=None,
+        help="sim seconds added every step, for a non-blocking env (default: the env's own, 0.1 for the "
+        "package's vehicles, one env step for CartPoleParallel-v0 and InvertedPendulumParallel-v0)",
+    )
+    p.add_argument(
+        "--seed", type=int, default=0, help="master seed; episode i's seed derives from it (default: %(default)s)"
+    )
     p.add_argument("--out", default="results", help="output directory (default: %(default)s)")
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (default: the core count)")
-    p.add_argument("--backend", default="local", choices=["local", "ray"], help="local processes or Ray tasks (default: %(default)s)")
+    p.add_argument(
+        "--workers", type=int, default=os.cpu_count() or 1, help="worker processes (default: the core count)"
+    )
+    p.add_argument(
+        "--backend",
+        default="local",
+        choices=["local", "ray"],
+        help="local processes or Ray tasks (default: %(default)s)",
+    )
     p.add_argument("--ray-address", default=None, help="Ray cluster address (default: start a local Ray)")
-    p.add_argument("--agent-opt", action="append", metavar="AGENT.KEY=VALUE",
-                   help="a guardian constructor argument (VALUE as JSON), e.g. hj.margin=0.3 or lrmm.threshold=0.9; repeatable")
-    p.add_argument("--episode-timeout", type=float, default=600.0,
-                   help="wall seconds before an episode is stopped; it is stored as a failure that a rerun retries (default: %(default)s)")
-    p.add_argument("--charge-precompute", action="store_true", help="charge a guardian's reset (e.g. an HJ solve) to the first step's clock")
-    p.add_argument("--batch-size", type=int, default=64, help="episodes per batch for the rate statistics (default: %(default)s)")
-    p.add_argument("--resume", action="store_true",
-                   help="finish an interrupted run: runs missing episodes and retries those over the time limit or lost with their worker "
-                        "(rerunning the same command does the same)")
-    p.add_argument("--retry-errors", action="store_true",
-                   help="also run again the episodes stored as guardian errors (after fixing the guardian or its options)")
+    p.add_argument(
+        "--agent-opt",
+        action="append",
+        metavar="AGENT.KEY=VALUE",
+        help="a guardian constructor argument (VALUE as JSON), e.g. hj.margin=0.3 or lrmm.threshold=0.9; repeatable",
+    )
+    p.add_argument(
+        "--episode-timeout",
+        type=float,
+        default=600.0,
+        help="wall seconds before an episode is stopped; it is stored as a failure that a rerun retries (default: %(default)s)",
+    )
+    p.add_argument(
+        "--charge-precompute",
+        action="store_true",
+        help="charge a guardian's reset (e.g. an HJ solve) to the first step's clock",
+    )
+    p.add_argument(
+        "--batch-size", type=int, default=64, help="episodes per batch for the rate statistics (default: %(default)s)"
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="finish an interrupted run: runs missing episodes and retries those over the time limit or lost with their worker "
+        "(rerunning the same command does the same)",
+    )
+    p.add_argument(
+        "--retry-errors",
+        action="store_true",
+        help="also run again the episodes stored as guardian errors (after fixing the guardian or its options)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--no-figure", action="store_true",
-                   help="write the tables, not the figure (one left from an earlier run is removed, as it would not match)")
+    p.add_argument(
+        "--no-figure",
+        action="store_true",
+        help="write the tables, not the figure (one left from an earlier run is removed, as it would not match)",
+    )
 
 
 def run_parser(description: str) -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="rmm-bench", description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        prog="rmm-bench", description=description, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     _common(p, "lrmm")
     p.add_argument("--clock", default="wall", help="wall (default), cpu, or fixed:MS")
     return p
 
 
 def report_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="rmm-bench report", description="Rebuild Table I and the figures from a results database.")
+    p = argparse.ArgumentParser(
+        prog="rmm-bench report", description="Rebuild Table I and the figures from a results database."
+    )
     p.add_argument("dir", help="results directory holding results.db")
-    p.add_argument("--invocation", type=int, action="append", default=None,
-                   help="which recorded run (default: the last); repeat to merge several (one table per configuration)")
+    p.add_argument(
+        "--invocation",
+        type=int,
+        action="append",
+        default=None,
+        help="which recorded run (default: the last); repeat to merge several (one table per configuration)",
+    )
     p.add_argument("--batch-size", type=int, default=64)
     return p
 
 
 def sweep_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="rmm-bench sweep", description="Collision rate against added decision latency (fixed-latency clock).")
+    p = argparse.ArgumentParser(
+        prog="rmm-bench sweep", description="Collision rate against added decision latency (fixed-latency clock)."
+    )
     _common(p, "lrmm,cbf")
-    p.add_argument("--latency", default="0,1,5,20,50", help="comma list of decision latencies in ms (default: %(default)s)")
+    p.add_argument(
+        "--latency", default="0,1,5,20,50", help="comma list of decision latencies in ms (default: %(default)s)"
+    )
     p.set_defaults(episodes=256)
     return p
 
@@ -93,7 +161,9 @@ def _check_counts(args) -> None:
     if args.seed < 0:
         raise ValueError(f"--seed must be a non-negative integer, got {args.seed}")
     if not (math.isfinite(args.episode_timeout) and args.episode_timeout > 0):
-        raise ValueError(f"--episode-timeout must be a positive, finite number of seconds, got {args.episode_timeout:g}")
+        raise ValueError(
+            f"--episode-timeout must be a positive, finite number of seconds, got {args.episode_timeout:g}"
+        )
 
 
 def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
@@ -111,16 +181,33 @@ def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
     for name, default in NON_BLOCKING_DEFAULTS.items():
         if name not in takes and options[name] != default:  # a blocking env would silently ignore it
             flag = "--" + name.replace("_", "-")
-            raise ValueError(f"{flag} {options[name]:g}: {env_id} steps by a fixed step per decision and takes no "
-                             f"{name}; leave {flag} out, or run its non-blocking (Parallel) twin")
+            raise ValueError(
+                f"{flag} {options[name]:g}: {env_id} steps by a fixed step per decision and takes no "
+                f"{name}; leave {flag} out, or run its non-blocking (Parallel) twin"
+            )
     return BenchConfig(
-        agents=tuple(agents), agent_kwargs=agent_kwargs, env_id=env_id, agent_classes=classes,
-        env_kwargs={k: v for k, v in options.items() if k in takes}, clock=clock, seed=args.seed, episodes=args.episodes,
-        out=args.out, workers=args.workers, backend=args.backend, ray_address=args.ray_address,
-        episode_timeout=args.episode_timeout, charge_precompute=args.charge_precompute, batch_size=args.batch_size,
-        retry_errors=args.retry_errors, progress=not args.no_progress, figure=not args.no_figure, parsed=vars(args),
+        agents=tuple(agents),
+        agent_kwargs=agent_kwargs,
+        env_id=env_id,
+        agent_classes=classes,
+        env_kwargs={k: v for k, v in options.items() if k in takes},
+        clock=clock,
+        seed=args.seed,
+        episodes=args.episodes,
+        out=args.out,
+        workers=args.workers,
+        backend=args.backend,
+        ray_address=args.ray_address,
+        episode_timeout=args.episode_timeout,
+        charge_precompute=args.charge_precompute,
+        batch_size=args.batch_size,
+        retry_errors=args.retry_errors,
+        progress=not args.no_progress,
+        figure=not args.no_figure,
+        parsed=vars(args),
         latencies=latencies,
-        agent_set=args.agent.strip() if guardian_set(args.agent) is not None else None)
+        agent_set=args.agent.strip() if guardian_set(args.agent) is not None else None,
+    )
 
 
 def parse_run(argv: list[str], description: str) -> BenchConfig:
@@ -162,5 +249,6 @@ def parse_report(argv: list[str]) -> ReportRequest:
     args = report_parser().parse_args(argv)
     if args.batch_size < 1:
         raise ValueError(f"--batch-size must be >= 1, got {args.batch_size}")
-    return ReportRequest(dir=Path(args.dir), invocations=tuple(args.invocation) if args.invocation else None,
-                         batch_size=args.batch_size)
+    return ReportRequest(
+        dir=Path(args.dir), invocations=tuple(args.invocation) if args.invocation else None, batch_size=args.batch_size
+    )

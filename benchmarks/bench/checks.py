@@ -20,12 +20,11 @@ ends: an env that breaks it gets an error naming the missing key in every episod
 
 from __future__ import annotations
 
-from rmm_envs.autonomy import ACTIVE
-
 import json
 from typing import Any
 
 from rmm_bench.config import AgentRun, accepts_argument, input_digests
+from rmm_envs.autonomy import ACTIVE
 
 __all__ = ["check_env_contract", "check_runs", "env_arguments", "parse_agent_opts", "resolve_agents"]
 
@@ -59,8 +58,10 @@ def parse_agent_opts(items: list[str], agents: list[str]) -> dict[str, dict]:
         if agent not in agents:
             raise ValueError(f"--agent-opt {item!r}: agent {agent!r} is not in this run ({agents})")
         if key == "env_id":
-            raise ValueError(f"--agent-opt {item!r}: every guardian is built for the run's env (--env); "
-                             "run another --env instead of setting env_id")
+            raise ValueError(
+                f"--agent-opt {item!r}: every guardian is built for the run's env (--env); "
+                "run another --env instead of setting env_id"
+            )
         try:
             parsed = json.loads(value)
         except json.JSONDecodeError:
@@ -80,7 +81,9 @@ def _env_creator(env_id: str):
     try:
         return load_env_creator(entry) if isinstance(entry, str) else entry
     except Exception as e:
-        raise ValueError(f"--env {env_id}: its entry point {entry!r} cannot be loaded: {type(e).__name__}: {e}") from None
+        raise ValueError(
+            f"--env {env_id}: its entry point {entry!r} cannot be loaded: {type(e).__name__}: {e}"
+        ) from None
 
 
 def env_arguments(env_id: str) -> set[str]:
@@ -105,8 +108,10 @@ def _action_space_lacks(space) -> str | None:
     from rmm_envs.autonomy import GuardianActionSpace
 
     if not isinstance(space, GuardianActionSpace):
-        return (f"its action space is {space}, not a GuardianActionSpace (rmm_envs.autonomy: {ACTIVE!r} to take "
-                "control or not, and the control)")
+        return (
+            f"its action space is {space}, not a GuardianActionSpace (rmm_envs.autonomy: {ACTIVE!r} to take "
+            "control or not, and the control)"
+        )
     return None
 
 
@@ -138,11 +143,16 @@ def check_env_contract(env_id: str, env=None) -> None:
         from rmm_envs.catalog import guardian_envs_of
 
         twins = [f"{i} ({'non-blocking' if 'Parallel' in i else 'blocking'})" for i in guardian_envs_of(env_id)]
-        lacks.append(f"its system's guardian envs are {' and '.join(twins)}" if twins
-                     else "rmm_envs.envs.driven.parallel(env, driver, safe_default, success) makes a guardian env of it "
-                          "(docs/tutorials/own-simulator.md, step 5)")
-        raise ValueError(f"--env {env_id}: rmm-bench runs guardians only on envs offering the parallel-autonomy contract, "
-                         f"and {env_id} does not: {'; '.join(lacks)}")
+        lacks.append(
+            f"its system's guardian envs are {' and '.join(twins)}"
+            if twins
+            else "rmm_envs.envs.driven.parallel(env, driver, safe_default, success) makes a guardian env of it "
+            "(docs/tutorials/own-simulator.md, step 5)"
+        )
+        raise ValueError(
+            f"--env {env_id}: rmm-bench runs guardians only on envs offering the parallel-autonomy contract, "
+            f"and {env_id} does not: {'; '.join(lacks)}"
+        )
 
 
 def _flag_for(message: str, env_kwargs: dict) -> str:
@@ -152,7 +162,9 @@ def _flag_for(message: str, env_kwargs: dict) -> str:
     return f"--env {env_kwargs}"
 
 
-def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False, classes: dict | None = None) -> dict[str, dict]:
+def check_runs(
+    runs: dict[str, AgentRun], skip_inapplicable: bool = False, classes: dict | None = None
+) -> dict[str, dict]:
     """Build the env and every guardian as the workers will, before any episode runs.
 
     Raises ValueError naming the flag and value at fault; returns, per agent, what ``report``
@@ -192,9 +204,13 @@ def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False, class
             if skip_inapplicable and not run.agent_kwargs:  # a set's member that cannot serve this env (no model)
                 meta[agent] = {"skipped": f"cannot be built for it: {type(e).__name__}: {e}"}
                 continue
-            opts = " ".join(f"{agent}.{k}={v if isinstance(v, str) else json.dumps(v)}" for k, v in run.agent_kwargs.items())
+            opts = " ".join(
+                f"{agent}.{k}={v if isinstance(v, str) else json.dumps(v)}" for k, v in run.agent_kwargs.items()
+            )
             where = f"--agent-opt {opts}" if opts else f"--agent {agent}"
-            raise ValueError(f"{where}: the guardian cannot be built for --env {run.env_id}: {type(e).__name__}: {e}") from None
+            raise ValueError(
+                f"{where}: the guardian cannot be built for --env {run.env_id}: {type(e).__name__}: {e}"
+            ) from None
         check = getattr(guardian, "check_spaces", None)
         if check is not None:  # what the guardian needs of the env's spaces, before any episode
             try:
@@ -204,6 +220,9 @@ def check_runs(runs: dict[str, AgentRun], skip_inapplicable: bool = False, class
                     meta[agent] = {"skipped": str(e)}
                     continue
                 raise ValueError(f"--agent {agent} does not apply to --env {run.env_id}: {e}") from None
-        meta[agent] = {"observation": str(getattr(guardian, "observation_type", "?")), "n_obstacles": envs[ekey],
-                       "inputs": input_digests(guardian, run.agent_kwargs, run.env_kwargs)}
+        meta[agent] = {
+            "observation": str(getattr(guardian, "observation_type", "?")),
+            "n_obstacles": envs[ekey],
+            "inputs": input_digests(guardian, run.agent_kwargs, run.env_kwargs),
+        }
     return meta

@@ -28,14 +28,22 @@ import json
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
-from rmm_guardians.registry import accepts_argument  # noqa: F401  (re-exported: the runner and the checks use it from here)
 from rmm_envs.catalog import stored_id
+from rmm_guardians.registry import accepts_argument  # noqa: F401  (re-exported: the runner and the checks use it from here)
 
-__all__ = ["AgentRun", "BenchConfig", "EpisodeResult", "EpisodeTask", "InputChanged", "accepts_argument", "changed_inputs",
-           "file_sha256",
-           "input_digests", "run_key"]
+__all__ = [
+    "AgentRun",
+    "BenchConfig",
+    "EpisodeResult",
+    "EpisodeTask",
+    "InputChanged",
+    "accepts_argument",
+    "changed_inputs",
+    "file_sha256",
+    "input_digests",
+    "run_key",
+]
 
 
 def import_from(paths) -> None:
@@ -96,9 +104,12 @@ class InputChanged(RuntimeError):
 
 def changed_inputs(recorded: dict[str, str], now: dict[str, str]) -> str:
     """'' if every file of ``recorded`` still has its digest in ``now``, else one clause per changed file."""
-    return "; ".join(f"{path} (sha256 {digest[:12]}... when the run was keyed, "
-                     f"{now[path][:12] + '...' if now.get(path) else 'unreadable'} now)"
-                     for path, digest in recorded.items() if now.get(path) != digest)
+    return "; ".join(
+        f"{path} (sha256 {digest[:12]}... when the run was keyed, "
+        f"{now[path][:12] + '...' if now.get(path) else 'unreadable'} now)"
+        for path, digest in recorded.items()
+        if now.get(path) != digest
+    )
 
 
 def _json_copy(name: str, value: dict) -> dict:
@@ -132,8 +143,15 @@ class AgentRun:
         ``inputs`` for a run that reads files.  The env is stored under the id its results were
         first recorded under (:func:`rmm_envs.catalog.stored_id`), so runs stored before an id
         changed keep their keys."""
-        out = {"agent": self.agent, "agent_kwargs": self.agent_kwargs, "env_id": stored_id(self.env_id), "env_kwargs": self.env_kwargs,
-               "seed": self.seed, "episode_timeout": self.episode_timeout, "charge_precompute": self.charge_precompute}
+        out = {
+            "agent": self.agent,
+            "agent_kwargs": self.agent_kwargs,
+            "env_id": stored_id(self.env_id),
+            "env_kwargs": self.env_kwargs,
+            "seed": self.seed,
+            "episode_timeout": self.episode_timeout,
+            "charge_precompute": self.charge_precompute,
+        }
         return out | ({"inputs": self.inputs} if self.inputs else {})
 
     @property
@@ -195,7 +213,9 @@ class EpisodeResult:
     error: str | None = None
     wall_time: float | None = None
     finished: float | None = None
-    error_kind: str | None = None  # guardian / timeout / lost_worker / input_changed / env (None unless outcome is error)
+    error_kind: str | None = (
+        None  # guardian / timeout / lost_worker / input_changed / env (None unless outcome is error)
+    )
     cost: float | None = None  # the episode's summed info["cost"] (None: the env reports none)
 
     def as_row(self) -> dict:
@@ -232,13 +252,19 @@ class BenchConfig:
     parsed: dict = field(default_factory=dict)
     latencies: tuple[float, ...] = ()  # a sweep's decision latencies, ms
     agent_set: str | None = None  # the named set --agent gave ("all", "paper"), or None for named agents
-    agent_inputs: dict = field(default_factory=dict)  # agent -> the files its run reads (input_digests), set once checked
+    agent_inputs: dict = field(
+        default_factory=dict
+    )  # agent -> the files its run reads (input_digests), set once checked
     #: agent -> its guardian class, resolved once when the command is parsed (neither stored nor hashed)
     agent_classes: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "agent_kwargs", {a: _json_copy(f"--agent-opt {a}", kw) for a, kw in self.agent_kwargs.items()})
-        object.__setattr__(self, "agent_inputs", {a: _json_copy(f"{a} inputs", kw) for a, kw in self.agent_inputs.items()})
+        object.__setattr__(
+            self, "agent_kwargs", {a: _json_copy(f"--agent-opt {a}", kw) for a, kw in self.agent_kwargs.items()}
+        )
+        object.__setattr__(
+            self, "agent_inputs", {a: _json_copy(f"{a} inputs", kw) for a, kw in self.agent_inputs.items()}
+        )
         object.__setattr__(self, "env_kwargs", _json_copy("env_kwargs", self.env_kwargs))
         object.__setattr__(self, "parsed", _json_copy("arguments", self.parsed))
 
@@ -251,17 +277,29 @@ class BenchConfig:
     def without(self, agents) -> BenchConfig:
         """The same command without ``agents`` (those of a named set that do not apply to the env)."""
         drop = set(agents)
-        return dataclasses.replace(self, agents=tuple(a for a in self.agents if a not in drop),
-                                   agent_kwargs={a: kw for a, kw in self.agent_kwargs.items() if a not in drop},
-                                   agent_inputs={a: d for a, d in self.agent_inputs.items() if a not in drop},
-                                   agent_classes={a: c for a, c in self.agent_classes.items() if a not in drop})
+        return dataclasses.replace(
+            self,
+            agents=tuple(a for a in self.agents if a not in drop),
+            agent_kwargs={a: kw for a, kw in self.agent_kwargs.items() if a not in drop},
+            agent_inputs={a: d for a, d in self.agent_inputs.items() if a not in drop},
+            agent_classes={a: c for a, c in self.agent_classes.items() if a not in drop},
+        )
 
     def with_inputs(self, inputs: dict[str, dict]) -> BenchConfig:
         """The same command with the files each agent's run reads (agent -> path -> SHA-256)."""
         return dataclasses.replace(self, agent_inputs=dict(inputs))
 
     def agent_runs(self) -> dict[str, AgentRun]:
-        return {a: AgentRun(agent=a, agent_kwargs=self.agent_kwargs.get(a, {}), env_id=self.env_id, env_kwargs=self.env_kwargs,
-                            seed=self.seed, episode_timeout=self.episode_timeout, charge_precompute=self.charge_precompute,
-                            inputs=self.agent_inputs.get(a, {}))
-                for a in self.agents}
+        return {
+            a: AgentRun(
+                agent=a,
+                agent_kwargs=self.agent_kwargs.get(a, {}),
+                env_id=self.env_id,
+                env_kwargs=self.env_kwargs,
+                seed=self.seed,
+                episode_timeout=self.episode_timeout,
+                charge_precompute=self.charge_precompute,
+                inputs=self.agent_inputs.get(a, {}),
+            )
+            for a in self.agents
+        }

@@ -24,7 +24,6 @@ without reinstalling.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import gymnasium as gym
@@ -72,8 +71,19 @@ def riskmap(args: argparse.Namespace) -> int:
     fig, ax = plt.subplots(figsize=(9, 8))
     ax.imshow(occ, cmap="gray_r", origin="lower", extent=(0, maze.width, 0, maze.height), alpha=0.9)
     L = 45.0
-    q = ax.quiver(states[:, 0], states[:, 1], L * np.cos(states[:, 2]), L * np.sin(states[:, 2]), risk, cmap="RdYlGn_r",
-                  angles="xy", scale_units="xy", scale=1.0, width=0.0025, clim=(0, 1))
+    q = ax.quiver(
+        states[:, 0],
+        states[:, 1],
+        L * np.cos(states[:, 2]),
+        L * np.sin(states[:, 2]),
+        risk,
+        cmap="RdYlGn_r",
+        angles="xy",
+        scale_units="xy",
+        scale=1.0,
+        width=0.0025,
+        clim=(0, 1),
+    )
     fig.colorbar(q, ax=ax, label=what)
     ax.set_title(f"{len(states)} sampled states in a {args.kind} maze (seed {args.seed}); arrow base = position")
     ax.set_xlim(0, maze.width)
@@ -116,9 +126,13 @@ def quadrisk(args: argparse.Namespace) -> int:
     for ax, (name, _), st, r in zip(axes, cases, states, risk):
         env.set_state(st)
         p.changeVisualShape(env.body, -1, rgbaColor=[float(r), 1.0 - float(r), 0.0, 1.0], physicsClientId=env.client)
-        view = p.computeViewMatrixFromYawPitchRoll(st[:3].tolist(), 3.0, 45.0, -60.0, 0.0, 2, physicsClientId=env.client)
+        view = p.computeViewMatrixFromYawPitchRoll(
+            st[:3].tolist(), 3.0, 45.0, -60.0, 0.0, 2, physicsClientId=env.client
+        )
         proj = p.computeProjectionMatrixFOV(60.0, 4 / 3, 0.05, 100.0, physicsClientId=env.client)
-        _, _, rgba, _, _ = p.getCameraImage(320, 240, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=env.client)
+        _, _, rgba, _, _ = p.getCameraImage(
+            320, 240, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=env.client
+        )
         ax.imshow(np.asarray(rgba, dtype=np.uint8).reshape(240, 320, 4)[..., :3])
         ax.set_title(f"{name}\ninferred risk {float(r):.3f}", fontsize=9)
         ax.axis("off")
@@ -131,9 +145,14 @@ def quadrisk(args: argparse.Namespace) -> int:
 
 
 def riskmap_parser() -> argparse.ArgumentParser:
-    rm = argparse.ArgumentParser(prog="rmm-bench riskmap", description="The paper's Fig. 1: states in a maze coloured by inferred risk, as a PNG.")
+    rm = argparse.ArgumentParser(
+        prog="rmm-bench riskmap",
+        description="The paper's Fig. 1: states in a maze coloured by inferred risk, as a PNG.",
+    )
     rm.add_argument("--model", default=None, help="LRMM model file (default: the shipped maze model)")
-    rm.add_argument("--kind", default="rectangular", choices=["rectangular", "honeycomb"], help="maze kind (default: %(default)s)")
+    rm.add_argument(
+        "--kind", default="rectangular", choices=["rectangular", "honeycomb"], help="maze kind (default: %(default)s)"
+    )
     rm.add_argument("--seed", type=int, default=0, help="maze and sampling seed (default: %(default)s)")
     rm.add_argument("--n", type=int, default=1000, help="number of sampled states (default: %(default)s)")
     rm.add_argument("--labels", action="store_true", help="colour by the sampling tree's risk instead of the model")
@@ -143,7 +162,9 @@ def riskmap_parser() -> argparse.ArgumentParser:
 
 
 def quadrisk_parser() -> argparse.ArgumentParser:
-    qr = argparse.ArgumentParser(prog="rmm-bench quadrisk", description="The paper's Fig. 3: the quadrotor coloured by inferred risk, as a PNG.")
+    qr = argparse.ArgumentParser(
+        prog="rmm-bench quadrisk", description="The paper's Fig. 3: the quadrotor coloured by inferred risk, as a PNG."
+    )
     qr.add_argument("--model", default=None, help="LRMM model file (default: the shipped quadrotor model)")
     qr.add_argument("--seed", type=int, default=0, help="room and sampling seed (default: %(default)s)")
     qr.add_argument("--out", default="quadrisk.png", help="output PNG (default: %(default)s)")

@@ -27,11 +27,16 @@ def load_results(path, *, expand_stats: bool = False):
     p = Path(path)
     db = p / "results.db" if p.is_dir() else p
     if not db.is_file():
-        raise FileNotFoundError(f"no results database at {db} (expected a directory written by rmm-bench, or its results.db)")
+        raise FileNotFoundError(
+            f"no results database at {db} (expected a directory written by rmm-bench, or its results.db)"
+        )
     store = ResultsStore(db)
     try:
-        df = pd.read_sql_query("SELECT e.*, r.config AS config FROM episodes e JOIN runs r ON r.run_key = e.run_key "
-                               "ORDER BY e.agent, e.episode, e.run_key", store.db)
+        df = pd.read_sql_query(
+            "SELECT e.*, r.config AS config FROM episodes e JOIN runs r ON r.run_key = e.run_key "
+            "ORDER BY e.agent, e.episode, e.run_key",
+            store.db,
+        )
     finally:
         store.close()
     df["config"] = [json.loads(c) for c in df["config"]]

@@ -30,12 +30,29 @@ import numpy as np
 
 from rmm_bench.store import RETRIED_ERRORS
 
-__all__ = ["aggregate", "batch_rate", "rate_spread", "table_i", "weighted_mean_std", "wilson_half_width", "wilson_interval"]
+__all__ = [
+    "aggregate",
+    "batch_rate",
+    "rate_spread",
+    "table_i",
+    "weighted_mean_std",
+    "wilson_half_width",
+    "wilson_interval",
+]
 
 _NAN2 = (float("nan"), float("nan"))
 _OUTCOMES = ("goal", "collision", "timeout")
-_COLUMNS = ("steps", "compute_time", "decision_mean", "sim_time", "active_sim_time", "precompute_time", "final_speed",
-            "qp_fallbacks", "nan_states")
+_COLUMNS = (
+    "steps",
+    "compute_time",
+    "decision_mean",
+    "sim_time",
+    "active_sim_time",
+    "precompute_time",
+    "final_speed",
+    "qp_fallbacks",
+    "nan_states",
+)
 
 
 def weighted_mean_std(values, weights) -> tuple[float, float]:
@@ -133,10 +150,23 @@ def aggregate(episodes: list[dict], batch_size: int = 64) -> dict:
 
     episodes = list(episodes)
     if not episodes:
-        return {"episodes": 0, "errors": 0, "error_rate": float("nan"), "compute_ms": _NAN2, "decision_ms": _NAN2,
-                **{k: _NAN2 for k in _OUTCOMES}, **{f"total_{k}": float("nan") for k in _OUTCOMES},
-                "intervention": _NAN2, "steps": _NAN2, "precompute_s": _NAN2, "qp_fallbacks": 0, "nan_states": 0,
-                "collision_speed": _NAN2, "rate_spread": "batches", **{f"{k}_ci": _NAN2 for k in _OUTCOMES}}
+        return {
+            "episodes": 0,
+            "errors": 0,
+            "error_rate": float("nan"),
+            "compute_ms": _NAN2,
+            "decision_ms": _NAN2,
+            **{k: _NAN2 for k in _OUTCOMES},
+            **{f"total_{k}": float("nan") for k in _OUTCOMES},
+            "intervention": _NAN2,
+            "steps": _NAN2,
+            "precompute_s": _NAN2,
+            "qp_fallbacks": 0,
+            "nan_states": 0,
+            "collision_speed": _NAN2,
+            "rate_spread": "batches",
+            **{f"{k}_ci": _NAN2 for k in _OUTCOMES},
+        }
     return _aggregate_frame(pd.DataFrame.from_records(episodes), batch_size)
 
 

@@ -17,23 +17,84 @@ from rmm_bench.metrics import aggregate
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore
 from rmm_envs.catalog import current_id
 
-__all__ = ["PAPER_TABLE_I", "cmd_report", "format_tables", "plot_latency", "plot_outcomes", "table_rows", "write_report"]
+__all__ = [
+    "PAPER_TABLE_I",
+    "cmd_report",
+    "format_tables",
+    "plot_latency",
+    "plot_outcomes",
+    "table_rows",
+    "write_report",
+]
 
 # The paper's Table I (2048 episodes per agent; its HJ row used single-obstacle envs)
 #: The envs the paper's Table I describes (it evaluated guardians on Dubins4D only); the report
 #: prints the paper's rows next to a run on one of them.
 PAPER_ENVS = ("Dubins4DParallel-v0", "Dubins4DGuarded-v0")
 PAPER_TABLE_I = {
-    "lrmm": {"obs": "local", "n_obst": 5, "compute_ms": (2.4, 5.0), "goal": (45.3, 7.3), "collision": (29.7, 5.6), "timeout": (25.0, 4.8), "intervention": (30.7, 32.5)},
-    "cbf": {"obs": "global", "n_obst": 5, "compute_ms": (52.9, 41.2), "goal": (46.2, 5.9), "collision": (35.1, 5.2), "timeout": (18.8, 3.8), "intervention": (32.8, 39.4)},
-    "random": {"obs": "none", "n_obst": 5, "compute_ms": (1.4, 2.7), "goal": (27.1, 6.9), "collision": (68.4, 5.9), "timeout": (4.5, 2.9), "intervention": (50.0, float("nan"))},
-    "inactive": {"obs": "none", "n_obst": 5, "compute_ms": (1.0, 2.3), "goal": (44.4, 7.4), "collision": (55.4, 7.3), "timeout": (0.1, 0.5), "intervention": (0.0, 0.0)},
-    "brakes": {"obs": "none", "n_obst": 5, "compute_ms": (0.3, 0.7), "goal": (0.6, 0.9), "collision": (9.0, 3.8), "timeout": (90.4, 3.7), "intervention": (100.0, 0.0)},
-    "hj": {"obs": "global", "n_obst": 1, "compute_ms": (344.0, 850.0), "goal": (54.0, 5.2), "collision": (46.0, 5.3), "timeout": (0.0, 0.3), "intervention": (1.0, float("nan"))},
+    "lrmm": {
+        "obs": "local",
+        "n_obst": 5,
+        "compute_ms": (2.4, 5.0),
+        "goal": (45.3, 7.3),
+        "collision": (29.7, 5.6),
+        "timeout": (25.0, 4.8),
+        "intervention": (30.7, 32.5),
+    },
+    "cbf": {
+        "obs": "global",
+        "n_obst": 5,
+        "compute_ms": (52.9, 41.2),
+        "goal": (46.2, 5.9),
+        "collision": (35.1, 5.2),
+        "timeout": (18.8, 3.8),
+        "intervention": (32.8, 39.4),
+    },
+    "random": {
+        "obs": "none",
+        "n_obst": 5,
+        "compute_ms": (1.4, 2.7),
+        "goal": (27.1, 6.9),
+        "collision": (68.4, 5.9),
+        "timeout": (4.5, 2.9),
+        "intervention": (50.0, float("nan")),
+    },
+    "inactive": {
+        "obs": "none",
+        "n_obst": 5,
+        "compute_ms": (1.0, 2.3),
+        "goal": (44.4, 7.4),
+        "collision": (55.4, 7.3),
+        "timeout": (0.1, 0.5),
+        "intervention": (0.0, 0.0),
+    },
+    "brakes": {
+        "obs": "none",
+        "n_obst": 5,
+        "compute_ms": (0.3, 0.7),
+        "goal": (0.6, 0.9),
+        "collision": (9.0, 3.8),
+        "timeout": (90.4, 3.7),
+        "intervention": (100.0, 0.0),
+    },
+    "hj": {
+        "obs": "global",
+        "n_obst": 1,
+        "compute_ms": (344.0, 850.0),
+        "goal": (54.0, 5.2),
+        "collision": (46.0, 5.3),
+        "timeout": (0.0, 0.3),
+        "intervention": (1.0, float("nan")),
+    },
 }
 
-COLUMNS = [("compute_ms", "Policy compute time [ms]"), ("goal", "Success rate [% eps]"), ("collision", "Collision rate [% eps]"),
-           ("timeout", "Timeout rate [% eps]"), ("intervention", "Intervention rate [% sim time]")]
+COLUMNS = [
+    ("compute_ms", "Policy compute time [ms]"),
+    ("goal", "Success rate [% eps]"),
+    ("collision", "Collision rate [% eps]"),
+    ("timeout", "Timeout rate [% eps]"),
+    ("intervention", "Intervention rate [% sim time]"),
+]
 
 
 def _pm(v, digits=1) -> str:
@@ -57,8 +118,10 @@ def spread_note(rows: list[dict], batch_size: int) -> str:
     """What the ± of the rates means in these rows (a line under the table)."""
     note = f"Rates: mean ± std over batches of {batch_size} episodes (the paper's)"
     if any(r.get("rate_spread") == "wilson95" for r in rows):
-        note += (f"; {WILSON_MARK}: fewer than two batches, so the rate is followed by its 95% Wilson score "
-                 "interval over the episodes, [low, high]")
+        note += (
+            f"; {WILSON_MARK}: fewer than two batches, so the rate is followed by its 95% Wilson score "
+            "interval over the episodes, [low, high]"
+        )
     return note + "."
 
 
@@ -79,7 +142,9 @@ def format_tables(rows: list[dict], batch_size: int = 64, measured: bool = False
         header.insert(5, "Measured decision time [ms]")
     body = []
     for r in rows:
-        n_obst = "-" if isinstance(r["n_obst"], int) and r["n_obst"] < 0 else str(r["n_obst"])  # -1: the env counts none
+        n_obst = (
+            "-" if isinstance(r["n_obst"], int) and r["n_obst"] < 0 else str(r["n_obst"])
+        )  # -1: the env counts none
         cells = [r["agent"], r["obs"], n_obst, str(r["episodes"]), _pm(r["compute_ms"], _digits(r["compute_ms"][0]))]
         if measured:
             dec = r.get("decision_ms", (float("nan"), float("nan")))
@@ -91,17 +156,58 @@ def format_tables(rows: list[dict], batch_size: int = 64, measured: bool = False
     md += "\n" + spread_note(rows, batch_size) + "\n"
     buf = io.StringIO()
     w = csv.writer(buf)
-    w.writerow(["agent", "observation", "obstacles", "episodes", "compute_ms_mean", "compute_ms_std", "success_mean", "success_std",
-                "collision_mean", "collision_std", "timeout_mean", "timeout_std", "intervention_mean", "intervention_std",
-                "errors", "qp_fallbacks", "precompute_s_mean", "decision_ms_mean", "decision_ms_std", "rate_spread"])
+    w.writerow(
+        [
+            "agent",
+            "observation",
+            "obstacles",
+            "episodes",
+            "compute_ms_mean",
+            "compute_ms_std",
+            "success_mean",
+            "success_std",
+            "collision_mean",
+            "collision_std",
+            "timeout_mean",
+            "timeout_std",
+            "intervention_mean",
+            "intervention_std",
+            "errors",
+            "qp_fallbacks",
+            "precompute_s_mean",
+            "decision_ms_mean",
+            "decision_ms_std",
+            "rate_spread",
+        ]
+    )
     for r in rows:
-        w.writerow([r["agent"], r["obs"], r["n_obst"], r["episodes"], *r["compute_ms"], *r["goal"], *r["collision"], *r["timeout"],
-                    *r["intervention"], r["errors"], r["qp_fallbacks"], r["precompute_s"][0],
-                    *r.get("decision_ms", (float("nan"), float("nan"))), r.get("rate_spread", "batches")])
+        w.writerow(
+            [
+                r["agent"],
+                r["obs"],
+                r["n_obst"],
+                r["episodes"],
+                *r["compute_ms"],
+                *r["goal"],
+                *r["collision"],
+                *r["timeout"],
+                *r["intervention"],
+                r["errors"],
+                r["qp_fallbacks"],
+                r["precompute_s"][0],
+                *r.get("decision_ms", (float("nan"), float("nan"))),
+                r.get("rate_spread", "batches"),
+            ]
+        )
     cols = "llcr" + "r" * (len(header) - 6)
     tex = f"\\begin{{tabular}}{{{cols}}}\n" + " & ".join(h.replace("%", "\\%") for h in header[:-2]) + " \\\\ \\hline\n"
-    tex += "".join(" & ".join(c.replace("±", "$\\pm$").replace(WILSON_MARK, "$^\\dagger$") for c in b[:-2]) + " \\\\\n"
-                   for b in body) + "\\end{tabular}\n"
+    tex += (
+        "".join(
+            " & ".join(c.replace("±", "$\\pm$").replace(WILSON_MARK, "$^\\dagger$") for c in b[:-2]) + " \\\\\n"
+            for b in body
+        )
+        + "\\end{tabular}\n"
+    )
     return {"md": md, "csv": buf.getvalue(), "tex": tex}
 
 
@@ -124,13 +230,22 @@ def plot_outcomes(rows: list[dict], path: Path, batch_size: int = 64, measured: 
     x = range(len(rows))
     width = 0.26
     for i, (key, colour) in enumerate([("goal", "tab:green"), ("collision", "tab:red"), ("timeout", "tab:gray")]):
-        axes[0].bar([j + (i - 1) * width for j in x], [r[key][0] for r in rows], width,
-                    yerr=[0 if math.isnan(r[key][1]) else r[key][1] for r in rows], color=colour, capsize=3, label=key)
+        axes[0].bar(
+            [j + (i - 1) * width for j in x],
+            [r[key][0] for r in rows],
+            width,
+            yerr=[0 if math.isnan(r[key][1]) else r[key][1] for r in rows],
+            color=colour,
+            capsize=3,
+            label=key,
+        )
     # long names (``lrmm-paper``, ``cbf-paper``) run into each other when set level
     axes[0].set_xticks(list(x), names, rotation=30, ha="right")
     wilson = any(r.get("rate_spread") == "wilson95" for r in rows)
-    axes[0].set_ylabel(f"% of episodes (mean ± std over batches of {batch_size}"
-                       + ("; 95% Wilson where < 2 batches)" if wilson else ")"))
+    axes[0].set_ylabel(
+        f"% of episodes (mean ± std over batches of {batch_size}"
+        + ("; 95% Wilson where < 2 batches)" if wilson else ")")
+    )
     axes[0].set_ylim(0, 118)  # headroom above 100 % so the legend covers no bar
     axes[0].legend(loc="upper center", ncols=3, fontsize="small")
     axes[0].set_title("Outcomes")
@@ -141,15 +256,19 @@ def plot_outcomes(rows: list[dict], path: Path, batch_size: int = 64, measured: 
             continue
         axes[1].errorbar(max(x_ms, 1e-4), r["collision"][0], yerr=r["collision"][1], fmt="o", capsize=3)
         # labels of nearby points are staggered vertically so that they do not overlap
-        axes[1].annotate(r["agent"], (max(x_ms, 1e-4), r["collision"][0]), textcoords="offset points",
-                         xytext=(5, 5 + 11 * (i % 3)))
+        axes[1].annotate(
+            r["agent"], (max(x_ms, 1e-4), r["collision"][0]), textcoords="offset points", xytext=(5, 5 + 11 * (i % 3))
+        )
     axes[1].set_xscale("log")
     axes[1].margins(x=0.2)  # room for the rightmost point's label inside the axes
     from matplotlib.ticker import NullFormatter
 
     axes[1].xaxis.set_minor_formatter(NullFormatter())  # minor labels collide on short decades
-    axes[1].set_xlabel("measured decision time [ms] (log)\n(the fixed clock charged every agent the same)"
-                       if measured else "policy compute time per step [ms] (log)")
+    axes[1].set_xlabel(
+        "measured decision time [ms] (log)\n(the fixed clock charged every agent the same)"
+        if measured
+        else "policy compute time per step [ms] (log)"
+    )
     axes[1].set_ylabel("collision rate [% episodes]")
     axes[1].set_title("Compute time vs collisions")
     fig.tight_layout()
@@ -163,7 +282,9 @@ def plot_latency(series: dict[str, list[tuple[float, float, float]]], path: Path
     fig, ax = plt.subplots(figsize=(6, 4))
     for agent, pts in series.items():
         pts = sorted(pts)
-        ax.errorbar([p[0] for p in pts], [p[1] for p in pts], yerr=[p[2] for p in pts], marker="o", capsize=3, label=agent)
+        ax.errorbar(
+            [p[0] for p in pts], [p[1] for p in pts], yerr=[p[2] for p in pts], marker="o", capsize=3, label=agent
+        )
     ax.set_xlabel("added decision latency [ms of wall time]")
     ax.set_ylabel("collision rate [% episodes]")
     ax.set_title("Compute time costs safety")
@@ -179,8 +300,8 @@ def _legacy_meta(agent: str, config: dict) -> dict:
     """Observation type and obstacle count for runs stored before they were recorded: only
     built-in guardian names and this package's envs are looked up (our own modules); a name
     from the database is never imported."""
-    from rmm_guardians.registry import BUILTIN, load_guardian_class
     from rmm_envs import ENV_IDS
+    from rmm_guardians.registry import BUILTIN, load_guardian_class
 
     meta = {"observation": "?", "n_obstacles": "?"}
     if agent in BUILTIN:
@@ -210,8 +331,16 @@ def table_rows(store: ResultsStore, run_keys: dict[str, str], episodes, batch_si
         meta = run["provenance"].get("guardian") or _legacy_meta(agent, run["config"])
         agg = aggregate(eps, batch_size)
         with_result = sum(1 for e in eps if not (e["outcome"] == "error" and e.get("error_kind") in RETRIED_ERRORS))
-        rows.append({"agent": agent, "obs": meta.get("observation", "?"), "n_obst": meta.get("n_obstacles", "?"),
-                     "requested": n, "with_result": with_result, **agg})
+        rows.append(
+            {
+                "agent": agent,
+                "obs": meta.get("observation", "?"),
+                "n_obst": meta.get("n_obstacles", "?"),
+                "requested": n,
+                "with_result": with_result,
+                **agg,
+            }
+        )
     return rows
 
 
@@ -224,8 +353,10 @@ def _completeness(rows: list[dict], invs: list[dict]) -> str:
     why = []
     lost = sum(r["episodes"] - r["with_result"] for r in short)
     if lost:
-        why.append(f"{lost} stored over the time limit, lost with their worker, not run as a file changed or unable "
-                   "to make the env in their worker")
+        why.append(
+            f"{lost} stored over the time limit, lost with their worker, not run as a file changed or unable "
+            "to make the env in their worker"
+        )
     for inv in invs:
         state = inv.get("state", inv["status"])
         if state == "stale":
@@ -236,8 +367,11 @@ def _completeness(rows: list[dict], invs: list[dict]) -> str:
             msg = inv.get("message") or ""
             detail = f": {msg}" if msg and "ended without a result" not in msg else ""
             why.append(f"invocation {inv['id']} {state}{detail}")
-    return (f"INCOMPLETE: episodes with a result: {have}" + (f" ({'; '.join(why)})" if why else "")
-            + ". Rerun the same command to finish; the table covers the stored episodes only.\n")
+    return (
+        f"INCOMPLETE: episodes with a result: {have}"
+        + (f" ({'; '.join(why)})" if why else "")
+        + ". Rerun the same command to finish; the table covers the stored episodes only.\n"
+    )
 
 
 #: What a table's header names: runs that differ in any of these are never merged under one header.
@@ -265,8 +399,14 @@ def _merge_csv(parts: list[tuple[dict, str]]) -> str:
     return buf.getvalue()
 
 
-def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_size: int = 64, quiet: bool = False,
-                 figure: bool = True) -> str:
+def write_report(
+    store: ResultsStore,
+    out: Path,
+    invs: list[dict] | dict,
+    batch_size: int = 64,
+    quiet: bool = False,
+    figure: bool = True,
+) -> str:
     """Tables and figures for one recorded command, or several merged (later ones win per agent);
     ``figure=False`` writes the tables only and removes an ``outcomes.png`` left from an earlier
     run, which would not match them.
@@ -277,8 +417,12 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
     columns, and the figure labels each agent with its table's number."""
     invs = [invs] if isinstance(invs, dict) else list(invs)
     # a former env id is today's id: a run recorded under it and its rerun are one configuration
-    invs = [inv | {"args": inv["args"] | {"env": current_id(inv["args"]["env"])}}
-            if isinstance(inv["args"].get("env"), str) else inv for inv in invs]
+    invs = [
+        inv | {"args": inv["args"] | {"env": current_id(inv["args"]["env"])}}
+        if isinstance(inv["args"].get("env"), str)
+        else inv
+        for inv in invs
+    ]
     groups: dict[tuple, list[dict]] = {}
     for inv in invs:
         groups.setdefault(_configuration(inv), []).append(inv)
@@ -298,12 +442,27 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
         tex.append(f"% {label}{_header(args)}\n{tables['tex']}" if mixed else tables["tex"])
         csv_parts.append((args, tables["csv"]))
         figure_rows += [r | {"agent": f"{r['agent']} [{number}]"} for r in rows] if mixed else rows
-        paper = format_tables([{"agent": a, "episodes": 2048, "errors": 0, "qp_fallbacks": 0, "precompute_s": (0, 0),
-                                "obs": p["obs"], "n_obst": p["n_obst"], **{k: p[k] for k in ("compute_ms", "goal", "collision", "timeout", "intervention")}}
-                               for a, p in PAPER_TABLE_I.items() if a in run_keys or f"{a}-paper" in run_keys])["md"]
+        paper = format_tables(
+            [
+                {
+                    "agent": a,
+                    "episodes": 2048,
+                    "errors": 0,
+                    "qp_fallbacks": 0,
+                    "precompute_s": (0, 0),
+                    "obs": p["obs"],
+                    "n_obst": p["n_obst"],
+                    **{k: p[k] for k in ("compute_ms", "goal", "collision", "timeout", "intervention")},
+                }
+                for a, p in PAPER_TABLE_I.items()
+                if a in run_keys or f"{a}-paper" in run_keys
+            ]
+        )["md"]
         counts = sorted(set(episodes.values()))
-        text = (f"Table I{' ' + label.strip() if mixed else ''}: {_header(args)}, {'/'.join(map(str, counts))} episodes "
-                f"requested per agent (results in {out})\n{_completeness(rows, group)}\n{tables['md']}")
+        text = (
+            f"Table I{' ' + label.strip() if mixed else ''}: {_header(args)}, {'/'.join(map(str, counts))} episodes "
+            f"requested per agent (results in {out})\n{_completeness(rows, group)}\n{tables['md']}"
+        )
         if args.get("env") in PAPER_ENVS:  # the paper evaluated guardians on Dubins4D only
             text += f"\nThe paper's Table I for the same agents:\n\n{paper}"
         texts.append(text)
@@ -312,8 +471,12 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
         (out / "table_I.csv").write_text(_merge_csv(csv_parts) if mixed else csv_parts[0][1])
         (out / "table_I.tex").write_text("\n".join(tex))
         if figure:
-            plot_outcomes(figure_rows, out / "outcomes.png", batch_size,
-                          any(str(g[-1]["args"].get("clock", "")).strip().lower().startswith("fixed") for g in groups.values()))
+            plot_outcomes(
+                figure_rows,
+                out / "outcomes.png",
+                batch_size,
+                any(str(g[-1]["args"].get("clock", "")).strip().lower().startswith("fixed") for g in groups.values()),
+            )
         else:
             (out / "outcomes.png").unlink(missing_ok=True)
     except OSError as e:  # a full disk names no file: name the directory (the CLI prints one line)
@@ -322,8 +485,10 @@ def write_report(store: ResultsStore, out: Path, invs: list[dict] | dict, batch_
         raise
     text = "\n".join(texts)
     if mixed:
-        text = (f"{len(groups)} configurations, one table each (they differ in "
-                f"{', '.join(c for i, c in enumerate(CONFIGURATION) if len({g[i] for g in groups}) > 1)}):\n\n{text}")
+        text = (
+            f"{len(groups)} configurations, one table each (they differ in "
+            f"{', '.join(c for i, c in enumerate(CONFIGURATION) if len({g[i] for g in groups}) > 1)}):\n\n{text}"
+        )
     if not quiet:
         print(text)
     return text
@@ -348,10 +513,12 @@ def cmd_report(request) -> int:
                     store.invocation(None, kind="sweep")
                 except LookupError:
                     raise LookupError(f"no benchmark run recorded in {store.path}") from None
-                raise LookupError(f"{request.dir} holds a latency sweep, not a benchmark run: rerun its "
-                                  "`rmm-bench sweep` command with the same --out, which reads the stored "
-                                  "episodes back and rewrites latency_sweep.md and .png (the .png not with "
-                                  "--no-figure)") from None
+                raise LookupError(
+                    f"{request.dir} holds a latency sweep, not a benchmark run: rerun its "
+                    "`rmm-bench sweep` command with the same --out, which reads the stored "
+                    "episodes back and rewrites latency_sweep.md and .png (the .png not with "
+                    "--no-figure)"
+                ) from None
         write_report(store, request.dir, invs, request.batch_size)
     finally:
         store.close()

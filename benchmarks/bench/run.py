@@ -40,12 +40,26 @@ def _provenance(argv) -> dict:
 
     rev = None
     try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=5,
-                             cwd=Path(__file__).resolve().parent).stdout.strip() or None
+        rev = (
+            subprocess.run(
+                ["git", "rev-parse", "--short", "HEAD"],
+                capture_output=True,
+                text=True,
+                timeout=5,
+                cwd=Path(__file__).resolve().parent,
+            ).stdout.strip()
+            or None
+        )
     except Exception:
         pass
-    return {"package_version": rmm_envs.__version__, "git_revision": rev, "argv": list(argv),
-            "python": platform.python_version(), "platform": platform.platform(), "cpus": os.cpu_count()}
+    return {
+        "package_version": rmm_envs.__version__,
+        "git_revision": rev,
+        "argv": list(argv),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "cpus": os.cpu_count(),
+    }
 
 
 def guardian_threads(agent, agent_kwargs: dict, workers: int, backend: str) -> int | None:
@@ -58,8 +72,15 @@ def guardian_threads(agent, agent_kwargs: dict, workers: int, backend: str) -> i
     return 1 if accepts_argument(load_guardian_class(agent) if isinstance(agent, str) else agent, "threads") else None
 
 
-def plan_tasks(store: ResultsStore, runs: dict[str, AgentRun], episodes: int, workers: int, backend: str,
-               retry_errors: bool = False, classes: dict | None = None) -> list[EpisodeTask]:
+def plan_tasks(
+    store: ResultsStore,
+    runs: dict[str, AgentRun],
+    episodes: int,
+    workers: int,
+    backend: str,
+    retry_errors: bool = False,
+    classes: dict | None = None,
+) -> list[EpisodeTask]:
     """The episodes ``0 .. episodes-1`` of each run that the store lacks (or holds as a retried
     failure); ``classes``: each agent's class as the command resolved it (else resolved by name)."""
     tasks = []
@@ -67,9 +88,18 @@ def plan_tasks(store: ResultsStore, runs: dict[str, AgentRun], episodes: int, wo
         key = run.key
         threads = guardian_threads((classes or {}).get(agent, agent), run.agent_kwargs, workers, backend)
         done = store.done_episodes(key, retry_errors)
-        tasks += [EpisodeTask(run=run, run_key=key, episode=i, seed=episode_seed(run.seed, i), threads=threads,
-                              import_path=(os.getcwd(),))
-                  for i in range(episodes) if i not in done]
+        tasks += [
+            EpisodeTask(
+                run=run,
+                run_key=key,
+                episode=i,
+                seed=episode_seed(run.seed, i),
+                threads=threads,
+                import_path=(os.getcwd(),),
+            )
+            for i in range(episodes)
+            if i not in done
+        ]
     return tasks
 
 
@@ -83,17 +113,28 @@ def _announce_new_runs(store: ResultsStore, runs: dict[str, AgentRun]) -> None:
                 continue
             if old["inputs"]:
                 paths = sorted(set(old["inputs"]) | set(run.inputs))
-                what = ", ".join(f"{p} (sha256 {old['inputs'].get(p, 'none')[:12]} then, {run.inputs.get(p, 'none')[:12]} now)"
-                                 for p in paths if old["inputs"].get(p) != run.inputs.get(p))
+                what = ", ".join(
+                    f"{p} (sha256 {old['inputs'].get(p, 'none')[:12]} then, {run.inputs.get(p, 'none')[:12]} now)"
+                    for p in paths
+                    if old["inputs"].get(p) != run.inputs.get(p)
+                )
             else:
                 what = f"{', '.join(run.inputs)} (not recorded by the version that stored them)"
-            print(f"rmm-bench: {agent}: {old['episodes']} episodes in {store.path} were run with other files: {what}; "
-                  f"this command starts a new run (run {run.key}) instead of mixing them; the old episodes stay under "
-                  f"run {old['run_key']}", file=sys.stderr)
+            print(
+                f"rmm-bench: {agent}: {old['episodes']} episodes in {store.path} were run with other files: {what}; "
+                f"this command starts a new run (run {run.key}) instead of mixing them; the old episodes stay under "
+                f"run {old['run_key']}",
+                file=sys.stderr,
+            )
 
 
-def execute(store: ResultsStore, config: BenchConfig, provenance: dict, meta: dict[str, dict] | None = None,
-            invocation: int | None = None) -> dict[str, int]:
+def execute(
+    store: ResultsStore,
+    config: BenchConfig,
+    provenance: dict,
+    meta: dict[str, dict] | None = None,
+    invocation: int | None = None,
+) -> dict[str, int]:
     """Run every episode of ``config`` not stored yet; returns, per agent, how many of this
     call's episodes ended without a result (time limit, lost worker).  Raises
     :class:`RunFailed` if too many episodes in a row lost their worker."""
@@ -103,7 +144,9 @@ def execute(store: ResultsStore, config: BenchConfig, provenance: dict, meta: di
     _announce_new_runs(store, runs)
     for agent, run in runs.items():
         store.ensure_run(run.key, agent, run.as_dict(), provenance | {"guardian": (meta or {}).get(agent, {})})
-    tasks = plan_tasks(store, runs, config.episodes, config.workers, config.backend, config.retry_errors, config.agent_classes)
+    tasks = plan_tasks(
+        store, runs, config.episodes, config.workers, config.backend, config.retry_errors, config.agent_classes
+    )
     unfinished = {a: 0 for a in runs}
     if not tasks:
         return unfinished
@@ -119,7 +162,9 @@ def execute(store: ResultsStore, config: BenchConfig, provenance: dict, meta: di
         c = counts.setdefault(result.agent, {})
         label = "lost" if result.error_kind == "lost_worker" else result.outcome
         c[label] = c.get(label, 0) + 1
-        bar.set_postfix_str("; ".join(f"{a}: " + " ".join(f"{k[0]}{v}" for k, v in sorted(c.items())) for a, c in counts.items())[-120:])
+        bar.set_postfix_str(
+            "; ".join(f"{a}: " + " ".join(f"{k[0]}{v}" for k, v in sorted(c.items())) for a, c in counts.items())[-120:]
+        )
         bar.update(1)
 
     max_lost = max(4, 2 * config.workers)
@@ -127,13 +172,20 @@ def execute(store: ResultsStore, config: BenchConfig, provenance: dict, meta: di
         if config.backend == "ray":
             results = run_ray(run_episode, tasks, config.ray_address, max_lost_in_a_row=max_lost)
         else:
-            results = run_local(run_episode, tasks, config.workers, task_timeout=hard_timeout(config.episode_timeout),
-                                max_lost_in_a_row=max_lost)
+            results = run_local(
+                run_episode,
+                tasks,
+                config.workers,
+                task_timeout=hard_timeout(config.episode_timeout),
+                max_lost_in_a_row=max_lost,
+            )
         for res in results:
             record(lost_episode(res.task, res.cause) if isinstance(res, TaskLost) else res)
     except WorkersLost as e:
-        raise RunFailed(f"{e}: {sum(unfinished.values())} episodes lost their worker (see the error column of "
-                        f"{store.path}); fix the cause (fewer --workers if memory ran out) and rerun the same command") from None
+        raise RunFailed(
+            f"{e}: {sum(unfinished.values())} episodes lost their worker (see the error column of "
+            f"{store.path}); fix the cause (fewer --workers if memory ran out) and rerun the same command"
+        ) from None
     finally:
         bar.close()
     return unfinished
@@ -143,10 +195,12 @@ def _unfinished_message(unfinished: dict[str, int], store: ResultsStore) -> str:
     lacking = {a: n for a, n in unfinished.items() if n}
     if not lacking:
         return ""
-    return (f"{sum(lacking.values())} episodes ended without a result ({', '.join(f'{a}: {n}' for a, n in lacking.items())}): "
-            f"over --episode-timeout, their worker died, a file they read changed or their worker could not make the env "
-            f"(causes in the error column of {store.path}); "
-            "the table counts them as errors; rerun the same command to retry them")
+    return (
+        f"{sum(lacking.values())} episodes ended without a result ({', '.join(f'{a}: {n}' for a, n in lacking.items())}): "
+        f"over --episode-timeout, their worker died, a file they read changed or their worker could not make the env "
+        f"(causes in the error column of {store.path}); "
+        "the table counts them as errors; rerun the same command to retry them"
+    )
 
 
 def guardian_error_lines(store: ResultsStore, run_keys: dict[str, str], episodes: int) -> list[str]:
@@ -155,12 +209,18 @@ def guardian_error_lines(store: ResultsStore, run_keys: dict[str, str], episodes
     :mod:`rmm_bench.metrics`); the command exits with status 1 so they are never missed."""
     lines = []
     for agent, key in run_keys.items():
-        errs = [e for e in store.episodes(key, episodes) if e["outcome"] == "error" and (e["error_kind"] or "guardian") == "guardian"]
+        errs = [
+            e
+            for e in store.episodes(key, episodes)
+            if e["outcome"] == "error" and (e["error_kind"] or "guardian") == "guardian"
+        ]
         if errs:
             first = (errs[0]["error"] or "").splitlines()[0][:300] if errs[0]["error"] else "no message"
-            lines.append(f"{agent}: {len(errs)} of {episodes} episodes ended in a guardian error, counted as failures in the "
-                         f"rates (first, episode {errs[0]['episode']}: {first}); fix the guardian or its --agent-opt values "
-                         "and rerun with --retry-errors")
+            lines.append(
+                f"{agent}: {len(errs)} of {episodes} episodes ended in a guardian error, counted as failures in the "
+                f"rates (first, episode {errs[0]['episode']}: {first}); fix the guardian or its --agent-opt values "
+                "and rerun with --retry-errors"
+            )
     return lines
 
 
@@ -168,16 +228,24 @@ def env_error_lines(store: ResultsStore, run_keys: dict[str, str], episodes: int
     """One line when episodes of this command could not make ``env_id`` in their worker (error
     kind ``env``): a failure of the run, named with the env id and the first cause, never a
     guardian error."""
-    errs = [e for key in run_keys.values() for e in store.episodes(key, episodes)
-            if e["outcome"] == "error" and e["error_kind"] == "env"]
+    errs = [
+        e
+        for key in run_keys.values()
+        for e in store.episodes(key, episodes)
+        if e["outcome"] == "error" and e["error_kind"] == "env"
+    ]
     if not errs:
         return []
     first = (errs[0]["error"] or "no message").splitlines()[0][:400]
-    return [f"--env {env_id}: {len(errs)} episodes could not make the env in their worker, a failure of the run, not of "
-            f"a guardian (first: {first}); make the env importable in every worker and rerun the same command"]
+    return [
+        f"--env {env_id}: {len(errs)} episodes could not make the env in their worker, a failure of the run, not of "
+        f"a guardian (first: {first}); make the env importable in every worker and rerun the same command"
+    ]
 
 
-def _invoke(store: ResultsStore, kind: str, config: BenchConfig, argv, meta: dict, record_args: dict) -> tuple[int, str]:
+def _invoke(
+    store: ResultsStore, kind: str, config: BenchConfig, argv, meta: dict, record_args: dict
+) -> tuple[int, str]:
     """Record an invocation, run it, and end it as finished, interrupted or failed."""
     keys = {a: r.key for a, r in config.agent_runs().items()}
     inv = store.add_invocation(kind, record_args, keys, config.episodes)
@@ -195,7 +263,10 @@ def _invoke(store: ResultsStore, kind: str, config: BenchConfig, argv, meta: dic
 
 
 def _interrupted(out: Path) -> int:
-    print(f"\ninterrupted: finished episodes are saved in {out / 'results.db'}; rerun the same command to finish", file=sys.stderr)
+    print(
+        f"\ninterrupted: finished episodes are saved in {out / 'results.db'}; rerun the same command to finish",
+        file=sys.stderr,
+    )
     return 130
 
 
@@ -210,11 +281,16 @@ def applicable(config: BenchConfig) -> tuple[BenchConfig, dict]:
     skipped = {a: m["skipped"] for a, m in meta.items() if "skipped" in m}
     if skipped:
         if len(skipped) == len(config.agents):
-            raise ValueError(f"--agent {config.agent_set}: no guardian of the set applies to --env {config.env_id}: "
-                             + "; ".join(f"{a}: {r}" for a, r in skipped.items()))
+            raise ValueError(
+                f"--agent {config.agent_set}: no guardian of the set applies to --env {config.env_id}: "
+                + "; ".join(f"{a}: {r}" for a, r in skipped.items())
+            )
         for agent, reason in skipped.items():
-            print(f"rmm-bench: --agent {config.agent_set}: {agent} does not apply to --env {config.env_id}, "
-                  f"skipped: {reason}", file=sys.stderr)
+            print(
+                f"rmm-bench: --agent {config.agent_set}: {agent} does not apply to --env {config.env_id}, "
+                f"skipped: {reason}",
+                file=sys.stderr,
+            )
         config = config.without(skipped)
         meta = {a: m for a, m in meta.items() if a not in skipped}
     config = config.with_inputs({a: m.pop("inputs", {}) for a, m in meta.items()})
@@ -235,8 +311,9 @@ def cmd_run(config: BenchConfig, argv) -> int:
         print(f"finished in {time.perf_counter() - t0:.1f} s")
         record = store.invocation(inv)
         write_report(store, out, record, config.batch_size, figure=config.figure)
-        errors = (env_error_lines(store, record["run_keys"], config.episodes, config.env_id)
-                  + guardian_error_lines(store, record["run_keys"], config.episodes))
+        errors = env_error_lines(store, record["run_keys"], config.episodes, config.env_id) + guardian_error_lines(
+            store, record["run_keys"], config.episodes
+        )
         for line in ([msg] if msg else []) + errors:
             print(f"rmm-bench: {line}", file=sys.stderr)
         return 1 if msg or errors else 0
@@ -262,8 +339,12 @@ def cmd_sweep(config: BenchConfig, argv) -> int:
             except KeyboardInterrupt:
                 return _interrupted(out)
             keys = {a: r.key for a, r in at.agent_runs().items()}
-            failed += [f"{lat:g} ms: {line}" for line in ([msg] if msg else [])
-                       + env_error_lines(store, keys, at.episodes, at.env_id) + guardian_error_lines(store, keys, at.episodes)]
+            failed += [
+                f"{lat:g} ms: {line}"
+                for line in ([msg] if msg else [])
+                + env_error_lines(store, keys, at.episodes, at.env_id)
+                + guardian_error_lines(store, keys, at.episodes)
+            ]
             for agent, run in at.agent_runs().items():
                 agg = aggregate(store.episodes(run.key, at.episodes), at.batch_size)
                 series[agent].append((lat, agg["collision"][0], agg["collision"][1]))
@@ -271,8 +352,10 @@ def cmd_sweep(config: BenchConfig, argv) -> int:
     finally:
         store.close()
     lines += [f"| {a} | " + " | ".join(table[a]) + " |" for a in agents]
-    md = (f"Collision rate [% episodes] against added decision latency (fixed clock, time accel {config.parsed['time_accel']}, "
-          f"{config.episodes} episodes, seed {config.seed})\n\n" + "\n".join(lines) + "\n")
+    md = (
+        f"Collision rate [% episodes] against added decision latency (fixed clock, time accel {config.parsed['time_accel']}, "
+        f"{config.episodes} episodes, seed {config.seed})\n\n" + "\n".join(lines) + "\n"
+    )
     (out / "latency_sweep.md").write_text(md)
     if config.figure:
         plot_latency(series, out / "latency_sweep.png")

@@ -33,19 +33,38 @@ import traceback
 
 import numpy as np
 
-from rmm_bench.config import (EpisodeResult, EpisodeTask, InputChanged, changed_inputs, import_from, input_digests,
-                                     run_key)
+from rmm_bench.config import (
+    EpisodeResult,
+    EpisodeTask,
+    InputChanged,
+    changed_inputs,
+    import_from,
+    input_digests,
+    run_key,
+)
 from rmm_envs.envs.guarded import EPISODE_KEY
 
-__all__ = ["EPISODE_STATISTICS", "EpisodeTimeout", "episode_seed", "hard_timeout", "lost_episode", "run_episode", "run_key"]
+__all__ = [
+    "EPISODE_STATISTICS",
+    "EpisodeTimeout",
+    "episode_seed",
+    "hard_timeout",
+    "lost_episode",
+    "run_episode",
+    "run_key",
+]
 
 _SEED_DOMAIN = 0xBE7C  # keeps episode seeds apart from rmm-datagen's configuration seeds
 
 #: The store's columns read from ``info["episode_stats"]`` on the step that ends an episode (the
 #: parallel-autonomy contract), column -> statistic.  Every env offering the contract reports these.
 EPISODE_STATISTICS = {
-    "steps": "n_env_steps", "active_steps": "n_active_ctrl_env_steps", "sim_time": "cum_sim_time",
-    "active_sim_time": "active_ctrl_sim_time", "compute_time": "cum_compute_time", "avg_compute_time": "avg_compute_time",
+    "steps": "n_env_steps",
+    "active_steps": "n_active_ctrl_env_steps",
+    "sim_time": "cum_sim_time",
+    "active_sim_time": "active_ctrl_sim_time",
+    "compute_time": "cum_compute_time",
+    "avg_compute_time": "avg_compute_time",
     "cum_reward": "cum_reward",
 }
 #: Statistics an env may report (NULL in the store when it does not): ``final_speed`` (a vehicle's
@@ -74,8 +93,16 @@ def hard_timeout(episode_timeout: float) -> float:
 
 def lost_episode(task: EpisodeTask, cause: str) -> EpisodeResult:
     """The store's row for an episode whose worker died: an ``error`` of kind ``lost_worker``."""
-    return EpisodeResult(run_key=task.run_key, episode=task.episode, agent=task.agent, seed=task.seed, outcome="error",
-                         error_kind="lost_worker", error=f"lost: {cause}"[:2000], finished=time.time())
+    return EpisodeResult(
+        run_key=task.run_key,
+        episode=task.episode,
+        agent=task.agent,
+        seed=task.seed,
+        outcome="error",
+        error_kind="lost_worker",
+        error=f"lost: {cause}"[:2000],
+        finished=time.time(),
+    )
 
 
 def _alarm(signum, frame):
@@ -104,7 +131,12 @@ def _env(env_id: str, env_kwargs: dict):
 
 
 def _guardian_key(task: EpisodeTask) -> tuple:
-    return ("guardian", task.agent, json.dumps(task.guardian_kwargs(), sort_keys=True), json.dumps(task.run.inputs, sort_keys=True))
+    return (
+        "guardian",
+        task.agent,
+        json.dumps(task.guardian_kwargs(), sort_keys=True),
+        json.dumps(task.run.inputs, sort_keys=True),
+    )
 
 
 def _guardian(task: EpisodeTask):
@@ -116,10 +148,14 @@ def _guardian(task: EpisodeTask):
 
         guardian = make_guardian(task.agent, env_id=task.run.env_id, **task.guardian_kwargs())
         if task.run.inputs:
-            changed = changed_inputs(task.run.inputs, input_digests(guardian, task.run.agent_kwargs, task.run.env_kwargs))
+            changed = changed_inputs(
+                task.run.inputs, input_digests(guardian, task.run.agent_kwargs, task.run.env_kwargs)
+            )
             if changed:
-                raise InputChanged(f"{changed}: a file changed after the run started, so this episode was not run; "
-                                   "rerun the command: it starts a new run with the file as it is now")
+                raise InputChanged(
+                    f"{changed}: a file changed after the run started, so this episode was not run; "
+                    "rerun the command: it starts a new run with the file as it is now"
+                )
         _CACHE[key] = guardian
     return _CACHE[key]
 
@@ -135,27 +171,37 @@ def _warm_up(task: EpisodeTask, guardian, obs, info, env) -> None:
         return
     warm = getattr(guardian, "warm_up", None)
     (warm or guardian.act)(obs, info)
-    guardian.reset(seed=task.seed, observation_space=env.observation_space, action_space=env.action_space,
-                   privileged=env.unwrapped.privileged if getattr(guardian, "privileged", False) else None)
+    guardian.reset(
+        seed=task.seed,
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        privileged=env.unwrapped.privileged if getattr(guardian, "privileged", False) else None,
+    )
     _CACHE[key] = True
 
 
 def _statistics(env_id: str, info: dict) -> dict:
     """The store's columns from the last step's ``info`` (the contract's ``outcome`` and ``episode_stats``)."""
     ep = info.get(EPISODE_KEY)
-    missing = [k for k in ("outcome", EPISODE_KEY) if k not in info] or [k for k in EPISODE_STATISTICS.values() if k not in ep]
+    missing = [k for k in ("outcome", EPISODE_KEY) if k not in info] or [
+        k for k in EPISODE_STATISTICS.values() if k not in ep
+    ]
     if missing:
         where = "info" if EPISODE_KEY not in info or "outcome" not in info else f'info["{EPISODE_KEY}"]'
-        raise EnvContractError(f"env {env_id} ended an episode without {where} keys {missing} (the parallel-autonomy "
-                               f"contract: info['outcome'] and info['{EPISODE_KEY}'] with "
-                               f"{sorted(EPISODE_STATISTICS.values())})")
+        raise EnvContractError(
+            f"env {env_id} ended an episode without {where} keys {missing} (the parallel-autonomy "
+            f"contract: info['outcome'] and info['{EPISODE_KEY}'] with "
+            f"{sorted(EPISODE_STATISTICS.values())})"
+        )
     out = {col: ep[k] for col, k in EPISODE_STATISTICS.items()}
     out.update({col: ep.get(k) for col, k in OPTIONAL_STATISTICS.items()})
     return {"outcome": info["outcome"], **out}
 
 
 def _error_text(e: BaseException) -> str:
-    return f"{type(e).__name__}: {e}"[:500] + ("" if isinstance(e, EpisodeTimeout) else "\n" + traceback.format_exc(limit=3)[-1500:])
+    return f"{type(e).__name__}: {e}"[:500] + (
+        "" if isinstance(e, EpisodeTimeout) else "\n" + traceback.format_exc(limit=3)[-1500:]
+    )
 
 
 def run_episode(task: EpisodeTask) -> EpisodeResult:
@@ -180,10 +226,16 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
         guardian = _guardian(task)
         obs, info = env.reset(seed=task.seed)
         t0 = time.perf_counter()
-        guardian.reset(seed=task.seed, observation_space=env.observation_space, action_space=env.action_space,
-                       privileged=env.unwrapped.privileged if getattr(guardian, "privileged", False) else None)
+        guardian.reset(
+            seed=task.seed,
+            observation_space=env.observation_space,
+            action_space=env.action_space,
+            privileged=env.unwrapped.privileged if getattr(guardian, "privileged", False) else None,
+        )
         fields["precompute_time"] = time.perf_counter() - t0
-        if not run.charge_precompute:  # else the clock keeps running: the solve counts as thinking time on the first step
+        if (
+            not run.charge_precompute
+        ):  # else the clock keeps running: the solve counts as thinking time on the first step
             _warm_up(task, guardian, obs, info, env)
             env.get_wrapper_attr("clock").start()
         while True:
@@ -199,8 +251,15 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
     except (Exception, SystemExit) as e:  # recorded, the run goes on
         from rmm_envs.env_plugins import EnvUnavailable
 
-        kind = ("timeout" if isinstance(e, EpisodeTimeout) else "input_changed" if isinstance(e, InputChanged)
-                else "env" if isinstance(e, EnvUnavailable) else "guardian")
+        kind = (
+            "timeout"
+            if isinstance(e, EpisodeTimeout)
+            else "input_changed"
+            if isinstance(e, InputChanged)
+            else "env"
+            if isinstance(e, EnvUnavailable)
+            else "guardian"
+        )
         fields.update(outcome="error", error_kind=kind, error=_error_text(e))
         _CACHE.pop(_guardian_key(task), None)
     finally:
@@ -209,17 +268,39 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
             if old is not None:
                 signal.signal(signal.SIGALRM, old)
     if decisions:
-        fields.update(decision_mean=statistics.fmean(decisions), decision_std=statistics.pstdev(decisions) if len(decisions) > 1 else 0.0,
-                      decision_max=max(decisions))
+        fields.update(
+            decision_mean=statistics.fmean(decisions),
+            decision_std=statistics.pstdev(decisions) if len(decisions) > 1 else 0.0,
+            decision_max=max(decisions),
+        )
     try:  # a guardian's stats() failing is its error, like act() failing
         stats = guardian.stats() if guardian is not None and hasattr(guardian, "stats") else {}
-        fields.update(qp_fallbacks=int(stats.get("qp_fallbacks", 0)), nan_states=int(stats.get("nan_states", 0)),
-                      guardian_stats=json.dumps({k: v for k, v in stats.items() if isinstance(v, (int, float)) and math.isfinite(v)}))
+        fields.update(
+            qp_fallbacks=int(stats.get("qp_fallbacks", 0)),
+            nan_states=int(stats.get("nan_states", 0)),
+            guardian_stats=json.dumps(
+                {k: v for k, v in stats.items() if isinstance(v, (int, float)) and math.isfinite(v)}
+            ),
+        )
     except (Exception, SystemExit) as e:
         earlier = fields.get("error") if fields.get("outcome") == "error" else None
-        fields.update(outcome="error", error_kind=fields.get("error_kind") or "guardian",
-                      error=(f"{task.agent}.stats() raised {type(e).__name__}: {e}"[:500] + "\n" + traceback.format_exc(limit=3)[-1500:]
-                             + ("\n" + earlier if earlier else "")))
+        fields.update(
+            outcome="error",
+            error_kind=fields.get("error_kind") or "guardian",
+            error=(
+                f"{task.agent}.stats() raised {type(e).__name__}: {e}"[:500]
+                + "\n"
+                + traceback.format_exc(limit=3)[-1500:]
+                + ("\n" + earlier if earlier else "")
+            ),
+        )
         _CACHE.pop(_guardian_key(task), None)
-    return EpisodeResult(run_key=task.run_key, episode=task.episode, agent=task.agent, seed=task.seed,
-                         wall_time=time.perf_counter() - t_start, finished=time.time(), **fields)
+    return EpisodeResult(
+        run_key=task.run_key,
+        episode=task.episode,
+        agent=task.agent,
+        seed=task.seed,
+        wall_time=time.perf_counter() - t_start,
+        finished=time.time(),
+        **fields,
+    )

@@ -64,6 +64,7 @@ from rmm_envs.failures import BAD_INPUT, RUN_FAILED, describe_os_error, file_siz
 
 __all__ = ["EPISODE_FIELDS", "RETRIED_ERRORS", "ResultsDatabaseError", "ResultsStore"]
 
+
 def _column(annotation) -> str:
     """The SQL column of an :class:`EpisodeResult` field's type: ``X`` -> ``... NOT NULL``,
     ``X | None`` -> nullable (``str`` TEXT, ``int`` INTEGER, ``float`` REAL)."""
@@ -147,7 +148,9 @@ class ResultsStore:
         limit = file_size_limit()
         if limit is None:
             return False
-        sizes = [f.stat().st_size for f in (self.path, Path(f"{self.path}-wal"), Path(f"{self.path}-journal")) if f.exists()]
+        sizes = [
+            f.stat().st_size for f in (self.path, Path(f"{self.path}-wal"), Path(f"{self.path}-journal")) if f.exists()
+        ]
         return max(sizes, default=0) + (1 << 20) >= limit
 
     def _disk_full(self) -> bool:
@@ -165,36 +168,53 @@ class ResultsStore:
         path = self.path
         kept = "the stored episodes are kept: rerun the same command"
         if name.startswith("SQLITE_READONLY") or "readonly" in text:
-            return ResultsDatabaseError(f"cannot write {path} ({text}): the file, its directory (which holds its -wal and -shm "
-                                        f"files) or its file system is read-only for this user; make them writable or choose "
-                                        f"another --out; the database is intact", BAD_INPUT)
+            return ResultsDatabaseError(
+                f"cannot write {path} ({text}): the file, its directory (which holds its -wal and -shm "
+                f"files) or its file system is read-only for this user; make them writable or choose "
+                f"another --out; the database is intact",
+                BAD_INPUT,
+            )
         if name.startswith("SQLITE_CANTOPEN") or "unable to open" in text:
             what = "is a directory" if path.is_dir() else "cannot be created or opened in its directory (not writable?)"
             return ResultsDatabaseError(f"cannot open {path} ({text}): it {what}; choose another --out", BAD_INPUT)
         if name.startswith(("SQLITE_BUSY", "SQLITE_LOCKED")) or "locked" in text or "busy" in text:
-            return ResultsDatabaseError(f"{path} is locked by another process ({text}); wait for the other rmm-bench "
-                                        "command to finish, or use another --out; the database is intact", RUN_FAILED)
+            return ResultsDatabaseError(
+                f"{path} is locked by another process ({text}); wait for the other rmm-bench "
+                "command to finish, or use another --out; the database is intact",
+                RUN_FAILED,
+            )
         if name == "SQLITE_FULL" or "full" in text:
-            return ResultsDatabaseError(f"cannot write {path} ({text}): the disk is full; free disk space, then {kept}",
-                                        RUN_FAILED)
-        damaged = name.startswith(("SQLITE_NOTADB", "SQLITE_CORRUPT")) or "not a database" in text or "malformed" in text
+            return ResultsDatabaseError(
+                f"cannot write {path} ({text}): the disk is full; free disk space, then {kept}", RUN_FAILED
+            )
+        damaged = (
+            name.startswith(("SQLITE_NOTADB", "SQLITE_CORRUPT")) or "not a database" in text or "malformed" in text
+        )
         if not damaged and (name.startswith("SQLITE_IOERR") or "I/O error" in text):
             if self._at_size_limit():
-                return ResultsDatabaseError(f"cannot write {path} ({text}): it reached the file-size limit (ulimit -f: "
-                                            f"{file_size_limit()} bytes); raise the limit (ulimit -f unlimited), then {kept}",
-                                            RUN_FAILED)
+                return ResultsDatabaseError(
+                    f"cannot write {path} ({text}): it reached the file-size limit (ulimit -f: "
+                    f"{file_size_limit()} bytes); raise the limit (ulimit -f unlimited), then {kept}",
+                    RUN_FAILED,
+                )
             if self._disk_full():
-                return ResultsDatabaseError(f"cannot write {path} ({text}): the disk is full; free disk space, then {kept}",
-                                            RUN_FAILED)
+                return ResultsDatabaseError(
+                    f"cannot write {path} ({text}): the disk is full; free disk space, then {kept}", RUN_FAILED
+                )
         if not damaged and self._intact():
-            return ResultsDatabaseError(f"cannot use {path} ({text}), though its integrity check passes: the stored "
-                                        f"episodes are intact; check the disk and the file's permissions, then rerun the "
-                                        f"same command", RUN_FAILED)
+            return ResultsDatabaseError(
+                f"cannot use {path} ({text}), though its integrity check passes: the stored "
+                f"episodes are intact; check the disk and the file's permissions, then rerun the "
+                f"same command",
+                RUN_FAILED,
+            )
         return ResultsDatabaseError(
             f"{path} is damaged or not a results database ({text}); rmm-bench cannot read the episodes it holds. Export "
             f"what is still readable first (sqlite3 {path} .recover > {path}.sql, with the sqlite3 shell), then move it "
             f"aside (mv {path} {path}.damaged) and rerun: the run starts afresh in a new database, and the episodes of "
-            f"the old one are lost to rmm-bench", BAD_INPUT)
+            f"the old one are lost to rmm-bench",
+            BAD_INPUT,
+        )
 
     def _create(self) -> None:
         cols = ", ".join(f"{k} {v}" for k, v in EPISODE_FIELDS.items())
@@ -209,8 +229,10 @@ class ResultsStore:
         have = {r[1] for r in self.db.execute("PRAGMA table_info(episodes)")}
         if "error_kind" not in have:
             self.db.execute("ALTER TABLE episodes ADD COLUMN error_kind TEXT")
-            self.db.execute("UPDATE episodes SET error_kind = CASE WHEN error LIKE 'EpisodeTimeout%' THEN 'timeout' "
-                            "ELSE 'guardian' END WHERE outcome = 'error'")
+            self.db.execute(
+                "UPDATE episodes SET error_kind = CASE WHEN error LIKE 'EpisodeTimeout%' THEN 'timeout' "
+                "ELSE 'guardian' END WHERE outcome = 'error'"
+            )
         if "cost" not in have:  # databases written before the safety cost was stored
             self.db.execute("ALTER TABLE episodes ADD COLUMN cost REAL")
         have = {r[1] for r in self.db.execute("PRAGMA table_info(invocations)")}
@@ -226,8 +248,10 @@ class ResultsStore:
     # runs
     @_guarded
     def ensure_run(self, run_key: str, agent: str, config: dict, provenance: dict) -> None:
-        self.db.execute("INSERT OR IGNORE INTO runs VALUES (?, ?, ?, ?, ?)",
-                        (run_key, agent, time.time(), json.dumps(config, sort_keys=True), json.dumps(provenance, sort_keys=True)))
+        self.db.execute(
+            "INSERT OR IGNORE INTO runs VALUES (?, ?, ?, ?, ?)",
+            (run_key, agent, time.time(), json.dumps(config, sort_keys=True), json.dumps(provenance, sort_keys=True)),
+        )
         self.db.commit()
 
     @_guarded
@@ -245,7 +269,9 @@ class ResultsStore:
             return []
         base = {k: v for k, v in config.items() if k != "inputs"}
         out = []
-        for key, stored in self.db.execute("SELECT run_key, config FROM runs WHERE agent = ?", (config["agent"],)).fetchall():
+        for key, stored in self.db.execute(
+            "SELECT run_key, config FROM runs WHERE agent = ?", (config["agent"],)
+        ).fetchall():
             stored = json.loads(stored)
             if {k: v for k, v in stored.items() if k != "inputs"} == base:
                 n = self.db.execute("SELECT COUNT(*) FROM episodes WHERE run_key = ?", (key,)).fetchone()[0]
@@ -270,15 +296,22 @@ class ResultsStore:
         keys = list(EPISODE_FIELDS)
         vals = [row[k] for k in keys]
         update = ", ".join(f"{k} = excluded.{k}" for k in keys if k not in ("run_key", "episode"))
-        self.db.execute(f"INSERT INTO episodes ({', '.join(keys)}) VALUES ({', '.join('?' * len(keys))}) "
-                        f"ON CONFLICT (run_key, episode) DO UPDATE SET {update} WHERE episodes.outcome = 'error'", vals)
+        self.db.execute(
+            f"INSERT INTO episodes ({', '.join(keys)}) VALUES ({', '.join('?' * len(keys))}) "
+            f"ON CONFLICT (run_key, episode) DO UPDATE SET {update} WHERE episodes.outcome = 'error'",
+            vals,
+        )
         if invocation is not None:
             self.db.execute("UPDATE invocations SET updated = ? WHERE id = ?", (time.time(), invocation))
         self.db.commit()
 
     @_guarded
     def episodes(self, run_key: str, n: int | None = None) -> list[dict]:
-        q = "SELECT * FROM episodes WHERE run_key = ?" + (" AND episode < ?" if n is not None else "") + " ORDER BY episode"
+        q = (
+            "SELECT * FROM episodes WHERE run_key = ?"
+            + (" AND episode < ?" if n is not None else "")
+            + " ORDER BY episode"
+        )
         cur = self.db.execute(q, (run_key, n) if n is not None else (run_key,))
         names = [d[0] for d in cur.description]
         return [dict(zip(names, r)) for r in cur.fetchall()]
@@ -287,10 +320,21 @@ class ResultsStore:
     @_guarded
     def add_invocation(self, kind: str, args: dict, run_keys: dict, episodes: int) -> int:
         now = time.time()
-        cur = self.db.execute("INSERT INTO invocations (created, kind, args, run_keys, episodes, status, pid, host, updated) "
-                              "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                              (now, kind, json.dumps(args, sort_keys=True), json.dumps(run_keys), episodes, "running",
-                               os.getpid(), socket.gethostname(), now))
+        cur = self.db.execute(
+            "INSERT INTO invocations (created, kind, args, run_keys, episodes, status, pid, host, updated) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            (
+                now,
+                kind,
+                json.dumps(args, sort_keys=True),
+                json.dumps(run_keys),
+                episodes,
+                "running",
+                os.getpid(),
+                socket.gethostname(),
+                now,
+            ),
+        )
         self.db.commit()
         return int(cur.lastrowid)
 
@@ -298,8 +342,10 @@ class ResultsStore:
     def finish_invocation(self, inv_id: int, status: str = "finished", message: str | None = None) -> None:
         if status not in ("finished", "interrupted", "failed"):
             raise ValueError(f"invocation status must be finished, interrupted or failed, got {status!r}")
-        self.db.execute("UPDATE invocations SET status = ?, message = ?, updated = ? WHERE id = ?",
-                        (status, message, time.time(), inv_id))
+        self.db.execute(
+            "UPDATE invocations SET status = ?, message = ?, updated = ? WHERE id = ?",
+            (status, message, time.time(), inv_id),
+        )
         self.db.commit()
 
     def _stale(self, status: str, pid, host) -> bool:
@@ -311,8 +357,10 @@ class ResultsStore:
         rows = self.db.execute("SELECT id, pid, host, status FROM invocations WHERE status = 'running'").fetchall()
         stale = [r for r in rows if self._stale(r[3], r[1], r[2])]
         for inv_id, pid, _, _ in stale:
-            self.db.execute("UPDATE invocations SET status = 'interrupted', message = ? WHERE id = ?",
-                            (f"its process {pid} ended without recording an end (killed)", inv_id))
+            self.db.execute(
+                "UPDATE invocations SET status = 'interrupted', message = ? WHERE id = ?",
+                (f"its process {pid} ended without recording an end (killed)", inv_id),
+            )
         self.db.commit()
         return len(stale)
 
@@ -330,11 +378,24 @@ class ResultsStore:
         q += " ORDER BY id DESC LIMIT 1"
         row = self.db.execute(q, params).fetchone()
         if row is None:
-            what = (f"invocation {inv_id}" if inv_id is not None
-                    else {"run": "benchmark run", "sweep": "latency sweep"}.get(kind, f"{kind or 'benchmark'} invocation"))
+            what = (
+                f"invocation {inv_id}"
+                if inv_id is not None
+                else {"run": "benchmark run", "sweep": "latency sweep"}.get(kind, f"{kind or 'benchmark'} invocation")
+            )
             raise LookupError(f"no {what} recorded in {self.path}")
-        inv = {"id": row[0], "created": row[1], "kind": row[2], "args": json.loads(row[3]),
-               "run_keys": json.loads(row[4]), "episodes": row[5], "status": row[6], "pid": row[7], "host": row[8],
-               "updated": row[9], "message": row[10]}
+        inv = {
+            "id": row[0],
+            "created": row[1],
+            "kind": row[2],
+            "args": json.loads(row[3]),
+            "run_keys": json.loads(row[4]),
+            "episodes": row[5],
+            "status": row[6],
+            "pid": row[7],
+            "host": row[8],
+            "updated": row[9],
+            "message": row[10],
+        }
         inv["state"] = "stale" if self._stale(inv["status"], inv["pid"], inv["host"]) else inv["status"]
         return inv

@@ -15,9 +15,9 @@ from pathlib import Path
 import gymnasium as gym
 
 import rmm_envs  # noqa: F401  (registers the environments)
+from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.train import TrainConfig, train
-from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 
 
 def main(argv=None):
@@ -31,8 +31,16 @@ def main(argv=None):
     work = Path(args.out or tempfile.mkdtemp(prefix="lrmm-tutorial-"))
 
     # 1. Algorithm 2: configurations -> valid states -> observations -> risk labels
-    cfg = DatagenConfig(env_id="Dubins4DGuarded-v0", configs=args.configs, samples_per_config=args.samples,
-                        branches=args.branches, depth=2, horizon=2.0, n_steps=8, seed=0)
+    cfg = DatagenConfig(
+        env_id="Dubins4DGuarded-v0",
+        configs=args.configs,
+        samples_per_config=args.samples,
+        branches=args.branches,
+        depth=2,
+        horizon=2.0,
+        n_steps=8,
+        seed=0,
+    )
     manifest = generate(cfg, work / "data", workers=2, progress=False)
     data = load_dataset(work / "data")
     print(f"labelled {len(data)} states from {args.configs} configurations; mean risk {data.risk.mean():.3f}")
@@ -60,8 +68,10 @@ def main(argv=None):
         done = terminated or truncated
     ep = info["episode_stats"]
     assert info["outcome"] in ("goal", "collision", "timeout")
-    print(f"episode: {info['outcome']} after {ep['n_env_steps']} steps, guardian in control "
-          f"{100 * ep['active_ctrl_sim_time'] / ep['cum_sim_time']:.0f}% of the time; dataset {manifest['dataset_sha256'][:12]}")
+    print(
+        f"episode: {info['outcome']} after {ep['n_env_steps']} steps, guardian in control "
+        f"{100 * ep['active_ctrl_sim_time'] / ep['cum_sim_time']:.0f}% of the time; dataset {manifest['dataset_sha256'][:12]}"
+    )
     return 0
 
 

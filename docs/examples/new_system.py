@@ -40,17 +40,21 @@ def main():
     system = CorridorDoubleIntegrator()
     check_scene(system)  # raises TypeError naming anything missing
     est = RiskEstimator(system, branches=32, depth=2, horizon=1.0, n_steps=8)
-    states = np.array([
-        [0.0, 0.0, 1.0, 0.0],    # centred, moving along the corridor
-        [0.0, 0.8, 1.0, 0.0],    # near the upper wall
-        [0.0, 0.8, 1.0, 1.0],    # near the wall and heading into it
-        [0.0, -0.5, 0.0, -2.0],  # fast toward the lower wall
-    ])
+    states = np.array(
+        [
+            [0.0, 0.0, 1.0, 0.0],  # centred, moving along the corridor
+            [0.0, 0.8, 1.0, 0.0],  # near the upper wall
+            [0.0, 0.8, 1.0, 1.0],  # near the wall and heading into it
+            [0.0, -0.5, 0.0, -2.0],  # fast toward the lower wall
+        ]
+    )
     res = est.estimate(states, np.random.default_rng(0))
     for s, r, u in zip(states, res.risk, res.min_risk_ctrl):
         print(f"state {s}: risk {r:.3f}, safest first control {np.round(u, 2)}")
     assert res.risk[0] < res.risk[1] < res.risk[2]
-    cvar = RiskEstimator(system, branches=32, depth=2, horizon=1.0, metric="cvar", alpha=0.1).estimate(states, np.random.default_rng(0))
+    cvar = RiskEstimator(system, branches=32, depth=2, horizon=1.0, metric="cvar", alpha=0.1).estimate(
+        states, np.random.default_rng(0)
+    )
     print("CVaR(0.1) risks:", np.round(cvar.risk, 3))
     return 0
 

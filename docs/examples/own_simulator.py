@@ -19,12 +19,12 @@ import gymnasium as gym
 import numpy as np
 
 from rmm_bench.cli import main as rmm_bench
-from rmm_guardians.lrmm.train import TrainConfig, train
 from rmm_envs.adapters import SnapshotScene
 from rmm_envs.envs.driven import parallel
 from rmm_envs.risk import RiskEstimator
 from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 from rmm_envs.wrappers import RiskLabel
+from rmm_guardians.lrmm.train import TrainConfig, train
 
 
 class Cliff:
@@ -78,9 +78,17 @@ class RushToTheMark:
 def make_rush_cartpole(time_accel=10.0, base_step=0.02, clock=None):
     """The non-blocking guarded env (rmm-bench passes the clock, time_accel and base_step)."""
     driver = RushToTheMark()
-    return parallel("CartPole-v1", driver=driver, safe_default=push, success=driver.arrived,
-                    controls=("force_ctrl",), max_episode_sim_time=6.0, time_accel=time_accel, base_step=base_step,
-                    clock=clock)
+    return parallel(
+        "CartPole-v1",
+        driver=driver,
+        safe_default=push,
+        success=driver.arrived,
+        controls=("force_ctrl",),
+        max_episode_sim_time=6.0,
+        time_accel=time_accel,
+        base_step=base_step,
+        clock=clock,
+    )
 
 
 def main(argv=None):
@@ -123,16 +131,20 @@ def main(argv=None):
     cfg = DatagenConfig(env_id="CartPole-v1", configs=args.configs, samples_per_config=args.samples, seed=0)
     manifest = generate(cfg, work / "data", workers=1, progress=False)
     data = load_dataset(work / "data")
-    print(f"labelled {len(data)} CartPole states; mean risk {data.risk.mean():.3f}, horizon "
-          f"{data.meta['estimator']['horizon']} s; dataset {manifest['dataset_sha256'][:12]}")
+    print(
+        f"labelled {len(data)} CartPole states; mean risk {data.risk.mean():.3f}, horizon "
+        f"{data.meta['estimator']['horizon']} s; dataset {manifest['dataset_sha256'][:12]}"
+    )
     assert data.obs.shape == (args.configs * args.samples, 4) and data.meta["estimator"]["horizon"] == 0.08
 
     # 4. a risk map from the env's own observation (rmm-train --data ... --out ...)
     model = train(data, TrainConfig(epochs=args.epochs, seed=0), log=lambda *a: None)
     model.save(work / "cartpole_model.npz")
     upright, tipping = np.array([[0, 0, 0, 0]], np.float32), np.array([[0, 0, 0.19, 1.5]], np.float32)
-    print(f"model: test MAE {model.meta['metrics']['test']['mae']:.3f}; predicted risk upright at rest "
-          f"{float(model.predict(upright)[0]):.2f}, tipping over {float(model.predict(tipping)[0]):.2f}")
+    print(
+        f"model: test MAE {model.meta['metrics']['test']['mae']:.3f}; predicted risk upright at rest "
+        f"{float(model.predict(upright)[0]):.2f}, tipping over {float(model.predict(tipping)[0]):.2f}"
+    )
 
     # 5. parallel autonomy: CartPole-v1 with a reckless driver, the balancing LQR at the centre as
     #    the safe default and "at the mark" as success (rmm_envs.envs.driven.parallel); its
@@ -142,16 +154,41 @@ def main(argv=None):
         gym.register("RushCartPole-v0", entry_point=make_rush_cartpole)
     gcfg = DatagenConfig(env_id="RushCartPole-v0", configs=args.configs, samples_per_config=args.samples, seed=1)
     generate(gcfg, work / "rush_data", workers=1, progress=False)  # labels at the adapter's horizon, 0.08 s
-    rush = train(load_dataset(work / "rush_data"), TrainConfig(epochs=args.epochs, seed=0, hidden=(64, 64),
-                                                                activation="tanh", output_bias=True, lr=0.003),
-                 log=lambda *a: None)
+    rush = train(
+        load_dataset(work / "rush_data"),
+        TrainConfig(epochs=args.epochs, seed=0, hidden=(64, 64), activation="tanh", output_bias=True, lr=0.003),
+        log=lambda *a: None,
+    )
     rush.save(work / "rush_model.npz")
     # Table I: the driver alone (inactive), lrmm applying the safe default while the risk is
     # above 0.2, and the safe default throughout (brakes); fixed 1 ms clock, one worker
-    status = rmm_bench(["--env", "RushCartPole-v0", "--agent", "inactive,lrmm,brakes", "--episodes", str(args.episodes),
-                        "--agent-opt", f'lrmm.model="{work / "rush_model.npz"}"', "--agent-opt", 'lrmm.action="safe"',
-                        "--agent-opt", "lrmm.threshold=0.2", "--agent-opt", "lrmm.commit=0", "--seed", "0",
-                        "--clock", "fixed:1", "--workers", "1", "--no-progress", "--out", str(work / "bench")])
+    status = rmm_bench(
+        [
+            "--env",
+            "RushCartPole-v0",
+            "--agent",
+            "inactive,lrmm,brakes",
+            "--episodes",
+            str(args.episodes),
+            "--agent-opt",
+            f'lrmm.model="{work / "rush_model.npz"}"',
+            "--agent-opt",
+            'lrmm.action="safe"',
+            "--agent-opt",
+            "lrmm.threshold=0.2",
+            "--agent-opt",
+            "lrmm.commit=0",
+            "--seed",
+            "0",
+            "--clock",
+            "fixed:1",
+            "--workers",
+            "1",
+            "--no-progress",
+            "--out",
+            str(work / "bench"),
+        ]
+    )
     assert status == 0
     return 0
 

@@ -41,8 +41,8 @@ import gymnasium as gym
 import numpy as np
 
 import rmm_envs  # noqa: F401  (registers the environments)
-from rmm_guardians import SB3Guardian
 from rmm_envs.wrappers import FlattenGuardianAction, GuardianReward
+from rmm_guardians import SB3Guardian
 
 
 def make_training_env(seed: int = 0) -> gym.Env:
@@ -68,8 +68,9 @@ class LagrangianPenalty(gym.Wrapper):
 def make_constrained_env(lam: np.ndarray, seed: int = 0) -> gym.Env:
     """The constrained problem: goal bonus and intervention cost as the reward, no collision
     penalty; collisions enter through ``info["cost"]`` at the multiplier ``lam``."""
-    env = LagrangianPenalty(GuardianReward(FlattenGuardianAction(gym.make("Dubins4DGuarded-v0")),
-                                           collision_penalty=0.0), lam)
+    env = LagrangianPenalty(
+        GuardianReward(FlattenGuardianAction(gym.make("Dubins4DGuarded-v0")), collision_penalty=0.0), lam
+    )
     env.reset(seed=seed)
     return env
 
@@ -119,12 +120,20 @@ class PPOGuardian(SB3Guardian):
 
         path = Path(model)
         if not path.is_file():
-            raise FileNotFoundError(f"PPOGuardian: no model file at {path} (train one with docs/examples/rl_guardian.py)")
+            raise FileNotFoundError(
+                f"PPOGuardian: no model file at {path} (train one with docs/examples/rl_guardian.py)"
+            )
         super().__init__(PPO.load(str(path), device="cpu"), name="ppo", deterministic=bool(deterministic))
 
 
-def train(timesteps: int, model_path: Path, n_envs: int = 8, seed: int = 0, cost_limit: float | None = None,
-          lam_lr: float = 0.5) -> Path:
+def train(
+    timesteps: int,
+    model_path: Path,
+    n_envs: int = 8,
+    seed: int = 0,
+    cost_limit: float | None = None,
+    lam_lr: float = 0.5,
+) -> Path:
     """Train PPO for ``timesteps`` environment steps on ``n_envs`` copies; save to ``model_path``.
     With ``cost_limit``, PPO-Lagrangian (module docstring), the multiplier's step ``lam_lr``."""
     import torch
@@ -139,8 +148,17 @@ def train(timesteps: int, model_path: Path, n_envs: int = 8, seed: int = 0, cost
         lam = np.zeros(1)  # shared by the envs of the (in-process) vector env and the callback
         venv = make_vec_env(make_constrained_env, n_envs=n_envs, seed=seed, env_kwargs={"lam": lam})
         callback = make_lagrange_update(lam, cost_limit, lam_lr)
-    model = PPO("MlpPolicy", venv, n_steps=256, batch_size=256, learning_rate=3e-4, gamma=0.995, seed=seed,
-                device="cpu", verbose=0)
+    model = PPO(
+        "MlpPolicy",
+        venv,
+        n_steps=256,
+        batch_size=256,
+        learning_rate=3e-4,
+        gamma=0.995,
+        seed=seed,
+        device="cpu",
+        verbose=0,
+    )
     model.learn(total_timesteps=timesteps, callback=callback)
     model.save(str(model_path))
     venv.close()
@@ -158,8 +176,12 @@ def main(argv=None) -> int:
     p.add_argument("--model", type=Path, default=None, help="model file (default: a temporary folder)")
     p.add_argument("--out", type=Path, default=None, help="benchmark results folder (default: a temporary folder)")
     p.add_argument("--workers", type=int, default=1, help="benchmark worker processes (default: %(default)s)")
-    p.add_argument("--cost-limit", type=float, default=None,
-                   help="train PPO-Lagrangian with this limit on the mean episode cost (default: plain PPO)")
+    p.add_argument(
+        "--cost-limit",
+        type=float,
+        default=None,
+        help="train PPO-Lagrangian with this limit on the mean episode cost (default: plain PPO)",
+    )
     args = p.parse_args(argv)
     if args.timesteps < 1 or args.episodes < 1:
         p.error(f"--timesteps and --episodes must be >= 1, got {args.timesteps} and {args.episodes}")
@@ -174,9 +196,23 @@ def main(argv=None) -> int:
 
     out = args.out or tmp / "bench"
     agent = "rl_guardian:PPOGuardian"  # this file's folder is on sys.path when it runs as a script
-    rc = rmm_bench(["--agent", f"{agent},lrmm,cbf,inactive", "--agent-opt", f"{agent}.model={model_path}",
-                    "--episodes", str(args.episodes), "--workers", str(args.workers), "--clock", args.clock,
-                    "--out", str(out), "--no-progress"])
+    rc = rmm_bench(
+        [
+            "--agent",
+            f"{agent},lrmm,cbf,inactive",
+            "--agent-opt",
+            f"{agent}.model={model_path}",
+            "--episodes",
+            str(args.episodes),
+            "--workers",
+            str(args.workers),
+            "--clock",
+            args.clock,
+            "--out",
+            str(out),
+            "--no-progress",
+        ]
+    )
     print((out / "table_I.md").read_text())
     assert rc == 0, f"rmm-bench exited with {rc}"
     # every agent ran every episode (the trained guardian included), without an error
@@ -187,8 +223,10 @@ def main(argv=None) -> int:
     assert counts == {a: args.episodes for a in (agent, "lrmm", "cbf", "inactive")}, counts
     assert set(df.outcome) <= {"goal", "collision", "timeout"} and df.error.isna().all()
     ppo = df[df.agent == agent]
-    print(f"PPO guardian: {ppo.outcome.eq('collision').mean():.1%} collisions, "
-          f"in control {ppo.active_sim_time.sum() / ppo.sim_time.sum():.1%} of the simulated time")
+    print(
+        f"PPO guardian: {ppo.outcome.eq('collision').mean():.1%} collisions, "
+        f"in control {ppo.active_sim_time.sum() / ppo.sim_time.sum():.1%} of the simulated time"
+    )
     return rc
 
 

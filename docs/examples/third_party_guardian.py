@@ -18,8 +18,6 @@ Three ways in:
 
 import tempfile
 
-import numpy as np
-
 from rmm_bench.cli import main as rmm_bench
 from rmm_guardians import CallableGuardian, Guardian
 
@@ -80,8 +78,21 @@ def main():
     # 2. the benchmark with a module:Class guardian next to a built-in one
     out = tempfile.mkdtemp(prefix="rmm-bench-tutorial-")
     # (this file's folder is on sys.path when it runs as a script, so it imports as a module)
-    rc = rmm_bench(["--agent", "third_party_guardian:Cautious,inactive", "--episodes", "6", "--workers", "1",
-                    "--clock", "fixed:1", "--out", out, "--no-progress"])
+    rc = rmm_bench(
+        [
+            "--agent",
+            "third_party_guardian:Cautious,inactive",
+            "--episodes",
+            "6",
+            "--workers",
+            "1",
+            "--clock",
+            "fixed:1",
+            "--out",
+            out,
+            "--no-progress",
+        ]
+    )
     assert rc == 0, f"rmm-bench exited with {rc}"
     table = open(f"{out}/table_I.csv").read()
     assert "third_party_guardian:Cautious," in table and "\ninactive," in table  # one row per agent

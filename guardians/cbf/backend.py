@@ -40,10 +40,12 @@ def parse_solver(solver) -> str | None:
     choices = [DEFAULT_SOLVER] + [PREFIX + n for n in installed_solvers()]
     if not isinstance(solver, str) or not solver.startswith(PREFIX):
         raise ValueError(f"solver must be 'osqp' (direct) or 'qpsolvers:<name>', got {solver!r}; installed: {choices}")
-    name = solver[len(PREFIX):]
+    name = solver[len(PREFIX) :]
     installed = installed_solvers()
     if not installed:
-        raise ValueError(f"solver {solver!r} needs qpsolvers (the qp extra: pip install -e '.[qp]' in a clone); installed: {choices}")
+        raise ValueError(
+            f"solver {solver!r} needs qpsolvers (the qp extra: pip install -e '.[qp]' in a clone); installed: {choices}"
+        )
     if name not in installed:
         raise ValueError(f"solver {solver!r}: qpsolvers has no installed solver {name!r}; installed: {choices}")
     return name
@@ -91,8 +93,17 @@ class QpsolversQP:
             return None
         keep = np.isfinite(h) & ~empty
         try:
-            z = quietly(self._solve_qp, self.P, self.q, G[keep], h[keep], lb=self.lb,
-                            ub=self.ub, solver=self.name, **self.options)
+            z = quietly(
+                self._solve_qp,
+                self.P,
+                self.q,
+                G[keep],
+                h[keep],
+                lb=self.lb,
+                ub=self.ub,
+                solver=self.name,
+                **self.options,
+            )
         except self._errors:  # a solver that raises on an infeasible problem: no solution, as OSQP's status says
             return None
         if z is None or not np.all(np.isfinite(z)):

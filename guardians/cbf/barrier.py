@@ -19,7 +19,15 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency; the Python loop still works
     njit = None
 
-__all__ = ["BarrierRows", "HOCBFParams", "any_row_active", "barrier_rows", "barrier_values", "critical_obstacle", "inflated_radii"]
+__all__ = [
+    "BarrierRows",
+    "HOCBFParams",
+    "any_row_active",
+    "barrier_rows",
+    "barrier_values",
+    "critical_obstacle",
+    "inflated_radii",
+]
 
 
 @dataclass(frozen=True)
@@ -56,7 +64,7 @@ def barrier_values(state, obstacles: np.ndarray, radii: np.ndarray) -> np.ndarra
     """``b_i`` at ``state`` for every obstacle (``>= 0``: outside the inflated circle)."""
     x, y = float(state[0]), float(state[1])
     o = obstacles
-    return (x - o[:, 0]) ** 2 + (y - o[:, 1]) ** 2 - radii ** 2
+    return (x - o[:, 0]) ** 2 + (y - o[:, 1]) ** 2 - radii**2
 
 
 def barrier_rows(state, obstacles: np.ndarray, radii: np.ndarray, goal: np.ndarray, prm: HOCBFParams):
@@ -79,14 +87,31 @@ class BarrierRows:
         self._centres = np.array(obstacles[:, :2], dtype=float, order="C")
         self._radii = np.array(radii, dtype=float, order="C")
         self._gx, self._gy = float(goal[0]), float(goal[1])
-        self._q = np.array([prm.p1, prm.p2, prm.gamma_vmin, prm.gamma_vmax, prm.lambda_theta, prm.lambda_v,
-                            prm.u1_min, prm.u1_max, prm.u2_min, prm.u2_max, prm.v_min, prm.v_max], dtype=float)
+        self._q = np.array(
+            [
+                prm.p1,
+                prm.p2,
+                prm.gamma_vmin,
+                prm.gamma_vmax,
+                prm.lambda_theta,
+                prm.lambda_v,
+                prm.u1_min,
+                prm.u1_max,
+                prm.u2_min,
+                prm.u2_max,
+                prm.v_min,
+                prm.v_max,
+            ],
+            dtype=float,
+        )
 
     def __call__(self, state):
         x, y, th, v = state[0], state[1], state[2], state[3]
         G = np.zeros((self.K + 6, 4))
         h = np.zeros(self.K + 6)
-        _rows_into(G, h, float(x), float(y), float(th), float(v), self._centres, self._radii, self._gx, self._gy, self._q)
+        _rows_into(
+            G, h, float(x), float(y), float(th), float(v), self._centres, self._radii, self._gx, self._gy, self._q
+        )
         return G, h
 
 
@@ -144,6 +169,9 @@ def critical_obstacle(G: np.ndarray, h: np.ndarray, prm: HOCBFParams) -> int:
     control satisfies row ``i``)."""
     K = G.shape[0] - 6
     u2_hi, u2_lo = h[K + 2], -h[K + 3]
-    best = h[:K] - np.minimum(G[:K, 0] * prm.u1_min, G[:K, 0] * prm.u1_max) \
+    best = (
+        h[:K]
+        - np.minimum(G[:K, 0] * prm.u1_min, G[:K, 0] * prm.u1_max)
         - np.minimum(G[:K, 1] * u2_lo, G[:K, 1] * u2_hi)
+    )
     return int(np.argmin(best))

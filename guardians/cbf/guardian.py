@@ -9,20 +9,28 @@ import math
 
 import numpy as np
 
+from rmm_envs.portable import matvec
+from rmm_envs.systems import dubins3d, quadrotor_control
+from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_guardians._checks import settings_signature
-from rmm_guardians.privileged import PrivilegedGuardian
 from rmm_guardians.cbf.backend import dubins4d_qp
-from rmm_guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_values, critical_obstacle, inflated_radii
+from rmm_guardians.cbf.barrier import (
+    BarrierRows,
+    HOCBFParams,
+    any_row_active,
+    barrier_values,
+    critical_obstacle,
+    inflated_radii,
+)
 from rmm_guardians.cbf.maze import MazeCBFGuardian
 from rmm_guardians.cbf.quadrotor import QuadrotorCBFGuardian
 from rmm_guardians.cbf.recovery import recovery_control, recovery_done
 from rmm_guardians.cbf.settings import CBF_PRESETS, REFERENCES, CBFSettings, box_problem
 from rmm_guardians.dispatch import SystemDispatch, delegate_arguments
-from rmm_envs.portable import matvec
-from rmm_envs.systems import dubins3d, quadrotor_control
-from rmm_envs.systems.dubins4d import Dubins4D
+from rmm_guardians.privileged import PrivilegedGuardian
 
 __all__ = ["CBFGuardian", "CBFPaperGuardian", "REFERENCES"]
+
 
 class CBFGuardian(SystemDispatch, PrivilegedGuardian):
     """HOCBF safety filter with one-step latency prediction and recovery (see `docs/design-notes.md`).
@@ -44,10 +52,17 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         s = self.settings = (settings if settings is not None else CBF_PRESETS[self.preset]).replace(**options)
         self.reference, self.solver = s.reference, s.solver
         shared = {"solver": s.solver, "eps": s.eps, "predict_latency": s.predict_latency, "lap_guess": s.lap_guess}
-        self._system_args = {dubins3d.KIND: delegate_arguments(MazeCBFGuardian, "maze", s.maze, shared),
-                             quadrotor_control.KIND: delegate_arguments(QuadrotorCBFGuardian, "quadrotor", s.quadrotor, shared)}
+        self._system_args = {
+            dubins3d.KIND: delegate_arguments(MazeCBFGuardian, "maze", s.maze, shared),
+            quadrotor_control.KIND: delegate_arguments(QuadrotorCBFGuardian, "quadrotor", s.quadrotor, shared),
+        }
         self.p1, self.p2, self.k = s.p1, s.p2, s.inflation
-        self.gamma_vmin, self.gamma_vmax, self.lambda_theta, self.lambda_v = s.gamma_vmin, s.gamma_vmax, s.lambda_theta, s.lambda_v
+        self.gamma_vmin, self.gamma_vmax, self.lambda_theta, self.lambda_v = (
+            s.gamma_vmin,
+            s.gamma_vmax,
+            s.lambda_theta,
+            s.lambda_v,
+        )
         self.p_theta, self.p_v = s.p_theta, s.p_v
         self._u1_arg, self._u2_arg = s.u1_bounds, s.u2_bounds
         self.v_min, self.v_max = s.speed_bounds
@@ -71,13 +86,33 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         u2 = self._u2_arg or (float(lo[1]), float(hi[1]))
         problem = box_problem(u1, u2)
         if problem:
-            raise ValueError(f"guardian {self.name!r}: {problem}, got u1 in {list(u1)} and u2 in {list(u2)} "
-                             f"(from the action space {space} unless given)")
+            raise ValueError(
+                f"guardian {self.name!r}: {problem}, got u1 in {list(u1)} and u2 in {list(u2)} "
+                f"(from the action space {space} unless given)"
+            )
         (self.u1_min, self.u1_max), (self.u2_min, self.u2_max) = u1, u2
-        self.params = HOCBFParams(self.p1, self.p2, self.gamma_vmin, self.gamma_vmax, self.lambda_theta, self.lambda_v,
-                                  self.u1_min, self.u1_max, self.u2_min, self.u2_max, self.v_min, self.v_max)
-        self._system = Dubins4D(v_min=self.v_min, v_max=self.v_max, u1_min=self.u1_min, u1_max=self.u1_max,
-                                u2_min=self.u2_min, u2_max=self.u2_max)
+        self.params = HOCBFParams(
+            self.p1,
+            self.p2,
+            self.gamma_vmin,
+            self.gamma_vmax,
+            self.lambda_theta,
+            self.lambda_v,
+            self.u1_min,
+            self.u1_max,
+            self.u2_min,
+            self.u2_max,
+            self.v_min,
+            self.v_max,
+        )
+        self._system = Dubins4D(
+            v_min=self.v_min,
+            v_max=self.v_max,
+            u1_min=self.u1_min,
+            u1_max=self.u1_max,
+            u2_min=self.u2_min,
+            u2_max=self.u2_max,
+        )
 
     def reset(self, **kwargs) -> None:
         if self._dispatch_reset(kwargs):
@@ -88,7 +123,9 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         priv = self._privileged()
         obstacles = np.asarray(priv["obstacles"], float).reshape(-1, 3)
         if obstacles.shape[0] > self.max_obstacles:
-            raise ValueError(f"{obstacles.shape[0]} obstacles exceed this CBF guardian's QP limit of {self.max_obstacles}")
+            raise ValueError(
+                f"{obstacles.shape[0]} obstacles exceed this CBF guardian's QP limit of {self.max_obstacles}"
+            )
         self.obstacles = obstacles
         self.goal = np.asarray(priv["goal"], float)
         self.radii = inflated_radii(obstacles, self.goal, self.k, self.goal_aware_margin)
@@ -136,8 +173,18 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
     def recovery_control(self, state, i: int, lap: float | None = None, side: float | None = None) -> np.ndarray:
         """The backup manoeuvre about obstacle ``i`` at ``state`` (:mod:`rmm_guardians.cbf`): ``(u1, u2)``.
         ``side`` (+1: counter-clockwise tangent, -1: clockwise) overrides the choice of tangent."""
-        u, self._last_side = recovery_control(state, i, self.obstacles, self.radii, self.goal, self.params,
-                                              self._measured_lap if lap is None else lap, self.v_stuck, side, rows=self._rows)
+        u, self._last_side = recovery_control(
+            state,
+            i,
+            self.obstacles,
+            self.radii,
+            self.goal,
+            self.params,
+            self._measured_lap if lap is None else lap,
+            self.v_stuck,
+            side,
+            rows=self._rows,
+        )
         return u
 
     def _recover(self, state):
@@ -184,13 +231,17 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
             return None
         u = None if not isinstance(info, dict) else info.get("nominal_control")
         if u is None:
-            raise ValueError(f"guardian {self.name!r} filters the driver's control, info['nominal_control'] (the "
-                             f"parallel-autonomy contract), but the step's info has none (keys: "
-                             f"{sorted(info) if isinstance(info, dict) else info!r}); use reference='clf' for an env "
-                             "without it")
+            raise ValueError(
+                f"guardian {self.name!r} filters the driver's control, info['nominal_control'] (the "
+                f"parallel-autonomy contract), but the step's info has none (keys: "
+                f"{sorted(info) if isinstance(info, dict) else info!r}); use reference='clf' for an env "
+                "without it"
+            )
         u = np.asarray(u, dtype=float).reshape(-1)
         if u.shape != (2,) or not all(map(math.isfinite, u.tolist())):
-            raise ValueError(f"info['nominal_control'] must be 2 finite numbers (u1, u2), got {info['nominal_control']!r}")
+            raise ValueError(
+                f"info['nominal_control'] must be 2 finite numbers (u1, u2), got {info['nominal_control']!r}"
+            )
         return u
 
     def act(self, observation, info=None):

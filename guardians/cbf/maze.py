@@ -20,9 +20,9 @@ import osqp
 import scipy.sparse as sp
 
 from rmm_guardians._checks import finite, integer
+from rmm_guardians.cbf.backend import QpsolversQP, parse_solver
 from rmm_guardians.dispatch import maze_car_only
 from rmm_guardians.privileged import PrivilegedGuardian
-from rmm_guardians.cbf.backend import QpsolversQP, parse_solver
 
 __all__ = ["MazeCBFGuardian", "WallQP", "wall_rows"]
 
@@ -32,8 +32,17 @@ BARRIERS = ("turning", "distance")
 MAZE_REFERENCES = ("hold", "nominal")
 
 
-def wall_rows(state, speed: float, walls: np.ndarray, half: float, margin: float, p1: float, p2: float,
-              barrier: str = "turning", u_max: float = 0.2):
+def wall_rows(
+    state,
+    speed: float,
+    walls: np.ndarray,
+    half: float,
+    margin: float,
+    p1: float,
+    p2: float,
+    barrier: str = "turning",
+    u_max: float = 0.2,
+):
     """The barrier values and the rows ``G u <= h`` (``G`` of shape ``(W, 1)``) of every wall
     ``(W, 4)`` at pose ``state``: ``barrier="turning"`` (the default, first order, gain ``p1``)
     or ``"distance"`` (the high-order distance barrier, gains ``p1, p2``).  The module docstring
@@ -86,8 +95,19 @@ class WallQP:
         self._solver = osqp.OSQP()
         # no polishing: a one-variable problem reaches eps without it, and OSQP writes a line to
         # stderr for every solution with no active row when polishing is on
-        self._solver.setup(sp.csc_matrix([[2.0]]), np.zeros(1), A, self._l, self._u, verbose=False, eps_abs=eps,
-                           eps_rel=eps, polishing=False, warm_starting=True, max_iter=4000)
+        self._solver.setup(
+            sp.csc_matrix([[2.0]]),
+            np.zeros(1),
+            A,
+            self._l,
+            self._u,
+            verbose=False,
+            eps_abs=eps,
+            eps_rel=eps,
+            polishing=False,
+            warm_starting=True,
+            max_iter=4000,
+        )
 
     def solve(self, G, h, u_ref: float = 0.0) -> np.ndarray | None:
         """The solution ``u*`` (shape ``(1,)``) closest to ``u_ref``; ``None`` if infeasible or the
@@ -110,13 +130,26 @@ class MazeCBFGuardian(PrivilegedGuardian):
 
     name = "cbf"
 
-    def __init__(self, barrier: str = "turning", p1: float | None = None, p2: float = 0.1, margin: float = 2.0, n_walls: int = 8,
-                 active_atol: float = 1e-3, predict_latency: bool = True, lap_guess: float = 0.1,
-                 eps: float = 1e-6, solver: str = "osqp", reference: str = "hold") -> None:
+    def __init__(
+        self,
+        barrier: str = "turning",
+        p1: float | None = None,
+        p2: float = 0.1,
+        margin: float = 2.0,
+        n_walls: int = 8,
+        active_atol: float = 1e-3,
+        predict_latency: bool = True,
+        lap_guess: float = 0.1,
+        eps: float = 1e-6,
+        solver: str = "osqp",
+        reference: str = "hold",
+    ) -> None:
         super().__init__()
         if reference not in MAZE_REFERENCES:
-            raise ValueError(f"reference must be one of {MAZE_REFERENCES} (filter the driver's "
-                             f"info['nominal_control'], or hold the heading), got {reference!r}")
+            raise ValueError(
+                f"reference must be one of {MAZE_REFERENCES} (filter the driver's "
+                f"info['nominal_control'], or hold the heading), got {reference!r}"
+            )
         self.reference = reference
         if barrier not in BARRIERS:
             raise ValueError(f"barrier must be one of {BARRIERS}, got {barrier!r}")
@@ -147,8 +180,10 @@ class MazeCBFGuardian(PrivilegedGuardian):
         space = self.action_space
         priv = self._privileged()
         if "speed" not in priv:
-            raise ValueError(f"guardian {self.name!r} (maze) needs the car's speed in the env's privileged data "
-                             f"(keys: {sorted(priv)})")
+            raise ValueError(
+                f"guardian {self.name!r} (maze) needs the car's speed in the env's privileged data "
+                f"(keys: {sorted(priv)})"
+            )
         self.speed = finite("privileged speed", priv["speed"], 0.0, lo_open=True)
         maze = priv["maze"]
         self.walls = np.asarray(maze.walls, float)
@@ -166,9 +201,12 @@ class MazeCBFGuardian(PrivilegedGuardian):
     # ------------------------------------------------------------------ the maths
     def rows(self, state):
         """``(b, G, h)`` of the ``n_walls`` walls nearest ``state`` (smallest ``b`` first)."""
-        b, G, h = wall_rows(state, self.speed, self.walls, self.half, self.margin, self.p1, self.p2, self.barrier,
-                            self.u_max)
-        idx = np.argsort(b, kind="stable")[: self.K]  # stable: ties keep wall order on every CPU (argpartition's do not)
+        b, G, h = wall_rows(
+            state, self.speed, self.walls, self.half, self.margin, self.p1, self.p2, self.barrier, self.u_max
+        )
+        idx = np.argsort(b, kind="stable")[
+            : self.K
+        ]  # stable: ties keep wall order on every CPU (argpartition's do not)
         return b[idx], G[idx], h[idx]
 
     def solve(self, state, u_ref: float = 0.0):
@@ -202,9 +240,11 @@ class MazeCBFGuardian(PrivilegedGuardian):
             return 0.0
         u = None if not isinstance(info, dict) else info.get("nominal_control")
         if u is None:
-            raise ValueError(f"guardian {self.name!r} (maze) filters the driver's control, info['nominal_control'], "
-                             f"but the step's info has none (keys: {sorted(info) if isinstance(info, dict) else info!r}); "
-                             "use reference='hold' for an env without it")
+            raise ValueError(
+                f"guardian {self.name!r} (maze) filters the driver's control, info['nominal_control'], "
+                f"but the step's info has none (keys: {sorted(info) if isinstance(info, dict) else info!r}); "
+                "use reference='hold' for an env without it"
+            )
         u = np.asarray(u, dtype=float).reshape(-1)
         if u.shape != (1,) or not math.isfinite(u[0]):
             raise ValueError(f"info['nominal_control'] must be one finite turn rate, got {info['nominal_control']!r}")

@@ -18,8 +18,8 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from rmm_guardians.cbf.quiet import quietly
 from rmm_guardians.cbf.barrier import HOCBFParams
+from rmm_guardians.cbf.quiet import quietly
 
 __all__ = ["BarrierQP"]
 
@@ -66,8 +66,19 @@ class BarrierQP:
         self._u[K + 2] = self._u[K + 3] = 0.0
         self._q = np.zeros(4)
         self._solver = osqp.OSQP()
-        self._solver.setup(P, self._q.copy(), A, self._l, self._u, verbose=False, eps_abs=eps, eps_rel=eps,
-                           polishing=True, warm_starting=True, max_iter=4000)
+        self._solver.setup(
+            P,
+            self._q.copy(),
+            A,
+            self._l,
+            self._u,
+            verbose=False,
+            eps_abs=eps,
+            eps_rel=eps,
+            polishing=True,
+            warm_starting=True,
+            max_iter=4000,
+        )
         # Per step, talk to the compiled solver object directly when the wrapper exposes it:
         # the Python wrapper's ``update``/``solve`` spend longer on bookkeeping (bound
         # clipping, derivative caches, a namespace of every info field) than OSQP spends

@@ -18,13 +18,13 @@ import math
 
 import numpy as np
 
-from rmm_guardians._checks import finite, integer
-from rmm_guardians.dispatch import quadrotor_only
-from rmm_guardians.privileged import PrivilegedGuardian
-from rmm_guardians.cbf.backend import parse_solver
-from rmm_guardians.cbf.quadrotor_rows import CommandQP, command_rows, room_shapes
 from rmm_envs.systems.quadrotor_control import CommandController, body_packed, body_step, command_wrench
 from rmm_envs.worlds.room_collision import BOUND
+from rmm_guardians._checks import finite, integer
+from rmm_guardians.cbf.backend import parse_solver
+from rmm_guardians.cbf.quadrotor_rows import CommandQP, command_rows, room_shapes
+from rmm_guardians.dispatch import quadrotor_only
+from rmm_guardians.privileged import PrivilegedGuardian
 
 __all__ = ["QuadrotorCBFGuardian"]
 
@@ -56,10 +56,25 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
 
     name = "cbf"
 
-    def __init__(self, p1: float = 3.0, p2: float = 3.0, margin: float = 0.05, tau_h: float = 0.42, tau_z: float = 0.34,
-                 body_radius: float = BOUND, n_rows: int = 8, slack_weight: float = 1e3, active_atol: float = 1e-3,
-                 predict_latency: bool = True, lap_guess: float = 0.1, eps: float = 1e-6, solver: str = "osqp",
-                 v_stuck: float = 0.25, v_slide: float = 1.5, slide_memory: float = 3.0) -> None:
+    def __init__(
+        self,
+        p1: float = 3.0,
+        p2: float = 3.0,
+        margin: float = 0.05,
+        tau_h: float = 0.42,
+        tau_z: float = 0.34,
+        body_radius: float = BOUND,
+        n_rows: int = 8,
+        slack_weight: float = 1e3,
+        active_atol: float = 1e-3,
+        predict_latency: bool = True,
+        lap_guess: float = 0.1,
+        eps: float = 1e-6,
+        solver: str = "osqp",
+        v_stuck: float = 0.25,
+        v_slide: float = 1.5,
+        slide_memory: float = 3.0,
+    ) -> None:
         super().__init__()
         self.p1 = finite("p1 (class-K gain)", p1, 0.0, lo_open=True)
         self.p2 = finite("p2 (class-K gain)", p2, 0.0, lo_open=True)
@@ -99,8 +114,9 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
         space = quadrotor_only(self, self.action_space)
         priv = self._privileged()
         if "room" not in priv:
-            raise ValueError(f"guardian {self.name!r} (quadrotor) needs the room in the env's privileged data "
-                             f"(keys: {sorted(priv)})")
+            raise ValueError(
+                f"guardian {self.name!r} (quadrotor) needs the room in the env's privileged data (keys: {sorted(priv)})"
+            )
         self.shapes = room_shapes(priv["room"])
         self.lo = np.asarray(space.control_low, float)
         self.hi = np.asarray(space.control_high, float)
@@ -125,8 +141,16 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
         from ``state``, through the controller and the body (whole physics steps)."""
         cmd = np.minimum(np.maximum(np.asarray(command, float), self.lo), self.hi)
         steps = math.ceil(lap / self._dt - 1e-9)
-        return _flow(np.ascontiguousarray(state, dtype=float)[:13], cmd, self._gains, self._body, steps, np.empty(13),
-                     np.empty(13), np.empty(4))
+        return _flow(
+            np.ascontiguousarray(state, dtype=float)[:13],
+            cmd,
+            self._gains,
+            self._body,
+            steps,
+            np.empty(13),
+            np.empty(13),
+            np.empty(4),
+        )
 
     # ------------------------------------------------------------------ the decision
     def _emit(self, u) -> dict:
@@ -142,13 +166,16 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
         ``ValueError`` naming the key otherwise)."""
         u = None if not isinstance(info, dict) else info.get("nominal_control")
         if u is None:
-            raise ValueError(f"guardian {self.name!r} (quadrotor) filters the pilot's command, info['nominal_control'] "
-                             f"(the parallel-autonomy contract), but the step's info has none (keys: "
-                             f"{sorted(info) if isinstance(info, dict) else info!r})")
+            raise ValueError(
+                f"guardian {self.name!r} (quadrotor) filters the pilot's command, info['nominal_control'] "
+                f"(the parallel-autonomy contract), but the step's info has none (keys: "
+                f"{sorted(info) if isinstance(info, dict) else info!r})"
+            )
         arr = np.asarray(u, dtype=float).reshape(-1)
         if arr.shape != (4,) or not all(map(math.isfinite, arr.tolist())):
-            raise ValueError(f"info['nominal_control'] must be 4 finite numbers (v_forward, v_left, v_up, yaw_rate), "
-                             f"got {u!r}")
+            raise ValueError(
+                f"info['nominal_control'] must be 4 finite numbers (v_forward, v_left, v_up, yaw_rate), got {u!r}"
+            )
         return arr
 
     def act(self, observation, info=None):
@@ -199,15 +226,20 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
 
     def _satisfies(self, G, h, u) -> bool:
         """Whether the command ``u`` satisfies every row ``G u <= h`` (within the QP's tolerance)."""
-        return all(g0 * u[0] + g1 * u[1] + g2 * u[2] <= hi + self.eps for (g0, g1, g2), hi in zip(G.tolist(), h.tolist()))
+        return all(
+            g0 * u[0] + g1 * u[1] + g2 * u[2] <= hi + self.eps for (g0, g1, g2), hi in zip(G.tolist(), h.tolist())
+        )
 
     def decide(self, state, u_nom) -> dict:
         """The decision for the state the command will act from (already predicted)."""
         b, G, h = self.rows(state)
         u = np.minimum(np.maximum(np.asarray(u_nom, float)[:3], self.lo[:3]), self.hi[:3])
         free = self._satisfies(G, h, u)
-        if free and self._side != 0 and (self.slide_reference(b, G, u) is None
-                                         or self._normal[0] * u[0] + self._normal[1] * u[1] >= 0.0):
+        if (
+            free
+            and self._side != 0
+            and (self.slide_reference(b, G, u) is None or self._normal[0] * u[0] + self._normal[1] * u[1] >= 0.0)
+        ):
             self._side = 0  # free, and no longer pushing into the shape it follows: the escape is over
         if free and self._side == 0:
             self._pending = None  # the nominal satisfies every row: it is the solution, the pilot keeps control

@@ -21,16 +21,26 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
+from rmm_envs.systems.rotations import quat_to_rot
 from rmm_guardians.cbf.backend import QpsolversQP
 from rmm_guardians.cbf.quiet import quietly
-from rmm_envs.systems.rotations import quat_to_rot
 
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; the Python loops still work
     njit = None
 
-__all__ = ["FLOOR", "BOX", "CYLINDER", "SPHERE", "CommandQP", "RoomShapes", "command_rows", "room_shapes", "shape_distances"]
+__all__ = [
+    "FLOOR",
+    "BOX",
+    "CYLINDER",
+    "SPHERE",
+    "CommandQP",
+    "RoomShapes",
+    "command_rows",
+    "room_shapes",
+    "shape_distances",
+]
 
 #: OSQP's status values for "solved" and "solved inaccurate".
 _SOLVED = (1, 2)
@@ -63,13 +73,15 @@ def room_shapes(room) -> RoomShapes:
     kind = np.empty(n, dtype=np.int64)
     centre, rot, size = np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3))
     kind[0], rot[0] = FLOOR, np.eye(3)
-    kind[1:1 + walls.shape[0]] = BOX
-    centre[1:1 + walls.shape[0]], size[1:1 + walls.shape[0]] = walls[:, :3], walls[:, 3:]
-    rot[1:1 + walls.shape[0]] = np.eye(3)
+    kind[1 : 1 + walls.shape[0]] = BOX
+    centre[1 : 1 + walls.shape[0]], size[1 : 1 + walls.shape[0]] = walls[:, :3], walls[:, 3:]
+    rot[1 : 1 + walls.shape[0]] = np.eye(3)
     for i, o in enumerate(room.objects, start=1 + walls.shape[0]):
         if o.get("shape") not in _KINDS:
-            raise ValueError(f"room object {i - 1 - walls.shape[0]} has shape {o.get('shape')!r}; the quadrotor cbf "
-                             f"models {sorted(_KINDS)}")
+            raise ValueError(
+                f"room object {i - 1 - walls.shape[0]} has shape {o.get('shape')!r}; the quadrotor cbf "
+                f"models {sorted(_KINDS)}"
+            )
         s = np.asarray(o["size"], float).reshape(-1)
         kind[i] = _KINDS[o["shape"]]
         centre[i], size[i, : s.size] = o["pos"], s
@@ -185,13 +197,31 @@ def command_rows(state, shapes: RoomShapes, n_rows: int, rho: float, tau_h: floa
     the controller reads it (the body x axis projected on the ground)."""
     s = np.ascontiguousarray(state, dtype=float).reshape(-1)
     if s.shape != (13,):
-        raise ValueError(f"state must be 13 numbers (position, quaternion xyzw, velocity, angular velocity), got shape {s.shape}")
+        raise ValueError(
+            f"state must be 13 numbers (position, quaternion xyzw, velocity, angular velocity), got shape {s.shape}"
+        )
     N = len(shapes)
     K = min(int(n_rows), N)
     order = np.empty(K, dtype=np.int64)
     G, h, b = np.empty((K, 3)), np.empty(K), np.empty(K)
-    _command_rows(s, shapes.kind, shapes.centre, shapes.rot, shapes.size, float(rho), float(tau_h), float(tau_z),
-                  float(p1), float(p2), np.empty(N), np.empty((N, 3)), order, G, h, b)
+    _command_rows(
+        s,
+        shapes.kind,
+        shapes.centre,
+        shapes.rot,
+        shapes.size,
+        float(rho),
+        float(tau_h),
+        float(tau_z),
+        float(p1),
+        float(p2),
+        np.empty(N),
+        np.empty((N, 3)),
+        order,
+        G,
+        h,
+        b,
+    )
     return b, G, h, order
 
 
@@ -215,8 +245,19 @@ class CommandQP:
         self._l = np.r_[np.full(K, -np.inf), lo, 0.0]
         self._u = np.r_[np.zeros(K), hi, 0.0]
         self._solver = osqp.OSQP()
-        self._solver.setup(sp.csc_matrix(P), np.zeros(4), A, self._l, self._u, verbose=False, eps_abs=eps, eps_rel=eps,
-                           polishing=True, warm_starting=True, max_iter=4000)
+        self._solver.setup(
+            sp.csc_matrix(P),
+            np.zeros(4),
+            A,
+            self._l,
+            self._u,
+            verbose=False,
+            eps_abs=eps,
+            eps_rel=eps,
+            polishing=True,
+            warm_starting=True,
+            max_iter=4000,
+        )
 
     def solve(self, G, h, u_nom, relaxed: bool = False) -> np.ndarray | None:
         """``(u_forward, u_left, u_up, s)`` or ``None`` (infeasible, or the solver failed)."""
@@ -227,7 +268,7 @@ class CommandQP:
             self._qp.ub[3] = s_max
             return self._qp.solve(np.hstack([G, -np.ones((self.K, 1))]), h)
         for j in range(3):  # column j holds rows 0..K-1 then its box row
-            self._Ax[self._col[j]: self._col[j] + self.K] = G[:, j]
+            self._Ax[self._col[j] : self._col[j] + self.K] = G[:, j]
         self._u[: self.K] = h
         self._u[-1] = 1e30 if relaxed else 0.0  # OSQP's infinity
         self._solver.update(q=q, Ax=self._Ax, u=self._u)

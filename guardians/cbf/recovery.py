@@ -15,9 +15,18 @@ from rmm_guardians.cbf.barrier import BarrierRows, HOCBFParams
 __all__ = ["recovery_control", "recovery_done"]
 
 
-def recovery_control(state, i: int, obstacles: np.ndarray, radii: np.ndarray, goal: np.ndarray, prm: HOCBFParams,
-                     lap: float, v_stuck: float, side: float | None = None,
-                     rows: BarrierRows | None = None) -> tuple[np.ndarray, float]:
+def recovery_control(
+    state,
+    i: int,
+    obstacles: np.ndarray,
+    radii: np.ndarray,
+    goal: np.ndarray,
+    prm: HOCBFParams,
+    lap: float,
+    v_stuck: float,
+    side: float | None = None,
+    rows: BarrierRows | None = None,
+) -> tuple[np.ndarray, float]:
     """The backup manoeuvre about obstacle ``i`` at ``state``: ``((u1, u2), side)``.  ``side``
     (+1: counter-clockwise tangent, -1: clockwise) overrides the choice of tangent; the side
     used is returned so that a recovery keeps going round the same way.  ``rows``: the

@@ -12,9 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_guardians._checks import Settings, finite, integer, number_pair
 from rmm_guardians.cbf.backend import parse_solver
-from rmm_envs.systems.dubins4d import Dubins4D
 
 __all__ = ["CBFSettings", "CBF_PRESETS", "REFERENCES", "box_problem"]
 
@@ -65,8 +65,10 @@ class CBFSettings(Settings):
 
     def __post_init__(self) -> None:
         if self.reference not in REFERENCES:
-            raise ValueError(f"reference must be one of {REFERENCES} (filter the driver's info['nominal_control'], "
-                             f"or the paper's CLF rows), got {self.reference!r}")
+            raise ValueError(
+                f"reference must be one of {REFERENCES} (filter the driver's info['nominal_control'], "
+                f"or the paper's CLF rows), got {self.reference!r}"
+            )
         parse_solver(self.solver)  # a bad name fails here, listing the installed solvers
         for name in ("p1", "p2"):
             self._set(name, finite(f"{name} (class-K gain)", getattr(self, name), 0.0, lo_open=True))
@@ -100,7 +102,8 @@ class CBFSettings(Settings):
 #: rule: the CBF-CLF QP at the observed state, maximum braking when infeasible, Dubins4D only).
 CBF_PRESETS = {
     "cbf": CBFSettings(),
-    "cbf-paper": CBFSettings(predict_latency=False, recovery=False, goal_aware_margin=False, maze=False, reference="clf",
-                             quadrotor=False),
+    "cbf-paper": CBFSettings(
+        predict_latency=False, recovery=False, goal_aware_margin=False, maze=False, reference="clf", quadrotor=False
+    ),
 }
 CBFSettings.PRESETS = CBF_PRESETS

@@ -64,8 +64,8 @@ if HAVE_NUMBA:
         KD0, KD1 = sign * d_max * k0, sign * d_max * k1  # disturbance
         q_lo = ghosts * n3 + ghosts  # the first interior entry of a (theta, v) plane
         count = plane - 2 * ghosts * n3 - 2 * ghosts  # up to the last interior entry
-        Cq, Sq = C[q_lo:q_lo + count] * k0, S[q_lo:q_lo + count] * k1
-        Aq, Bq = sign * up[q_lo:q_lo + count], -sign * down[q_lo:q_lo + count]
+        Cq, Sq = C[q_lo : q_lo + count] * k0, S[q_lo : q_lo + count] * k1
+        Aq, Bq = sign * up[q_lo : q_lo + count], -sign * down[q_lo : q_lo + count]
         flat = (W.reshape(-1), out.reshape(-1), V0.reshape(-1), floor.reshape(-1))
         return flat, plane, n1 * plane, plane, n3, g, K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq, b * dt
 
@@ -96,8 +96,9 @@ if HAVE_NUMBA:
         n0, n1, n2, n3 = W.shape
         zero = np.float32(0.0)
         two = np.float32(2.0)
-        (Wf, Of, Vf, Ff), plane, sx, sy, st, (g0, g1, g2, g3), K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq, bdt = _setup(
-            V0, W, out, floor, b, dt, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, 1)
+        (Wf, Of, Vf, Ff), plane, sx, sy, st, (g0, g1, g2, g3), K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq, bdt = (
+            _setup(V0, W, out, floor, b, dt, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, 1)
+        )
         gw = two * (g0 + g1 + g2 + g3)
         for i in prange(1, n0 - 1):
             for j in range(1, n1 - 1):
@@ -105,22 +106,49 @@ if HAVE_NUMBA:
                 # shifted views starting at the first interior entry, so that every load below
                 # is indexed by a counter from 0 (numba then knows it is non-negative, skips the
                 # negative-index wrap-around and the loop vectorises)
-                wc = Wf[base:base + count]
-                wxm, wxp = Wf[base - sx:base - sx + count], Wf[base + sx:base + sx + count]
-                wym, wyp = Wf[base - sy:base - sy + count], Wf[base + sy:base + sy + count]
-                wtm, wtp = Wf[base - st:base - st + count], Wf[base + st:base + st + count]
-                wvm, wvp = Wf[base - 1:base - 1 + count], Wf[base + 1:base + 1 + count]
-                o = Of[base:base + count]
-                v0 = Vf[base:base + count] if a != zero else wc  # a = 0: no second stream to read
-                fr = Ff[base:base + count] if has_floor else Ff[0:count]
+                wc = Wf[base : base + count]
+                wxm, wxp = Wf[base - sx : base - sx + count], Wf[base + sx : base + sx + count]
+                wym, wyp = Wf[base - sy : base - sy + count], Wf[base + sy : base + sy + count]
+                wtm, wtp = Wf[base - st : base - st + count], Wf[base + st : base + st + count]
+                wvm, wvp = Wf[base - 1 : base - 1 + count], Wf[base + 1 : base + 1 + count]
+                o = Of[base : base + count]
+                v0 = Vf[base : base + count] if a != zero else wc  # a = 0: no second stream to read
+                fr = Ff[base : base + count] if has_floor else Ff[0:count]
                 for q in range(count):
                     w = wc[q]
                     dx_, dy_, dv_ = wxp[q] - wxm[q], wyp[q] - wym[q], wvp[q] - wvm[q]
-                    diss = g0 * (wxp[q] + wxm[q]) + g1 * (wyp[q] + wym[q]) + g2 * (wtp[q] + wtm[q]) + g3 * (wvp[q] + wvm[q]) - gw * w
-                    o[q] = _point(q, dx_, dy_, wtp[q] - wtm[q], dv_, diss, w, v0, fr, has_floor, a, b, bdt,
-                                  Cq, Sq, Aq, Bq, K1, K3, KD0, KD1)
+                    diss = (
+                        g0 * (wxp[q] + wxm[q])
+                        + g1 * (wyp[q] + wym[q])
+                        + g2 * (wtp[q] + wtm[q])
+                        + g3 * (wvp[q] + wvm[q])
+                        - gw * w
+                    )
+                    o[q] = _point(
+                        q,
+                        dx_,
+                        dy_,
+                        wtp[q] - wtm[q],
+                        dv_,
+                        diss,
+                        w,
+                        v0,
+                        fr,
+                        has_floor,
+                        a,
+                        b,
+                        bdt,
+                        Cq,
+                        Sq,
+                        Aq,
+                        Bq,
+                        K1,
+                        K3,
+                        KD0,
+                        KD1,
+                    )
                 # this plane's own ghosts, while it is in cache: heading periodic, speed extrapolated
-                _fill_plane_ghosts(Of[i * sx + j * sy:i * sx + j * sy + plane], n2, n3)
+                _fill_plane_ghosts(Of[i * sx + j * sy : i * sx + j * sy + plane], n2, n3)
         _fill_xy_ghosts(out)
 
     @njit(cache=True, parallel=True, boundscheck=False)
@@ -139,23 +167,40 @@ if HAVE_NUMBA:
         half = np.float32(0.5)
         zero = np.float32(0.0)
         two = np.float32(2.0)
-        (Wf, Of, Vf, Ff), plane, sx, sy, st, (g0, g1, g2, g3), K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq, bdt = _setup(
-            V0, W, out, floor, b, dt, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, 2)
+        (Wf, Of, Vf, Ff), plane, sx, sy, st, (g0, g1, g2, g3), K1, K3, KD0, KD1, q_lo, count, Cq, Sq, Aq, Bq, bdt = (
+            _setup(V0, W, out, floor, b, dt, inv_dx, alpha, C, S, up, down, sign, u1max, u2max, d_max, 2)
+        )
         for i in prange(2, n0 - 2):
             for j in range(2, n1 - 2):
                 base = i * sx + j * sy + q_lo
-                wc = Wf[base:base + count]
-                xm2, xm, xp, xp2 = (Wf[base - 2 * sx:base - 2 * sx + count], Wf[base - sx:base - sx + count],
-                                    Wf[base + sx:base + sx + count], Wf[base + 2 * sx:base + 2 * sx + count])
-                ym2, ym, yp, yp2 = (Wf[base - 2 * sy:base - 2 * sy + count], Wf[base - sy:base - sy + count],
-                                    Wf[base + sy:base + sy + count], Wf[base + 2 * sy:base + 2 * sy + count])
-                tm2, tm, tp, tp2 = (Wf[base - 2 * st:base - 2 * st + count], Wf[base - st:base - st + count],
-                                    Wf[base + st:base + st + count], Wf[base + 2 * st:base + 2 * st + count])
-                vm2, vm, vp, vp2 = (Wf[base - 2:base - 2 + count], Wf[base - 1:base - 1 + count],
-                                    Wf[base + 1:base + 1 + count], Wf[base + 2:base + 2 + count])
-                o = Of[base:base + count]
-                v0 = Vf[base:base + count] if a != zero else wc
-                fr = Ff[base:base + count] if has_floor else Ff[0:count]
+                wc = Wf[base : base + count]
+                xm2, xm, xp, xp2 = (
+                    Wf[base - 2 * sx : base - 2 * sx + count],
+                    Wf[base - sx : base - sx + count],
+                    Wf[base + sx : base + sx + count],
+                    Wf[base + 2 * sx : base + 2 * sx + count],
+                )
+                ym2, ym, yp, yp2 = (
+                    Wf[base - 2 * sy : base - 2 * sy + count],
+                    Wf[base - sy : base - sy + count],
+                    Wf[base + sy : base + sy + count],
+                    Wf[base + 2 * sy : base + 2 * sy + count],
+                )
+                tm2, tm, tp, tp2 = (
+                    Wf[base - 2 * st : base - 2 * st + count],
+                    Wf[base - st : base - st + count],
+                    Wf[base + st : base + st + count],
+                    Wf[base + 2 * st : base + 2 * st + count],
+                )
+                vm2, vm, vp, vp2 = (
+                    Wf[base - 2 : base - 2 + count],
+                    Wf[base - 1 : base - 1 + count],
+                    Wf[base + 1 : base + 1 + count],
+                    Wf[base + 2 : base + 2 + count],
+                )
+                o = Of[base : base + count]
+                v0 = Vf[base : base + count] if a != zero else wc
+                fr = Ff[base : base + count] if has_floor else Ff[0:count]
                 for q in range(count):
                     w = wc[q]
                     w2 = two * w
@@ -183,9 +228,30 @@ if HAVE_NUMBA:
                     rm = c0 if abs(c0) <= abs(cp) else cp
                     dv_ = vp[q] - vm[q] + half * (lm - rm)
                     jv = c0 - half * (lm + rm)
-                    o[q] = _point(q, dx_, dy_, dt_, dv_, g0 * jx + g1 * jy + g2 * jt + g3 * jv, w, v0, fr, has_floor, a, b,
-                                  bdt, Cq, Sq, Aq, Bq, K1, K3, KD0, KD1)
-                _fill_plane_ghosts2(Of[i * sx + j * sy:i * sx + j * sy + plane], n2, n3)
+                    o[q] = _point(
+                        q,
+                        dx_,
+                        dy_,
+                        dt_,
+                        dv_,
+                        g0 * jx + g1 * jy + g2 * jt + g3 * jv,
+                        w,
+                        v0,
+                        fr,
+                        has_floor,
+                        a,
+                        b,
+                        bdt,
+                        Cq,
+                        Sq,
+                        Aq,
+                        Bq,
+                        K1,
+                        K3,
+                        KD0,
+                        KD1,
+                    )
+                _fill_plane_ghosts2(Of[i * sx + j * sy : i * sx + j * sy + plane], n2, n3)
         _fill_xy_ghosts2(out)
 
     @njit(cache=True, boundscheck=False)
@@ -272,7 +338,7 @@ if HAVE_NUMBA:
         Pf = P.reshape(-1)
         for i in range(n0):
             for j in range(n1):
-                pl = Pf[(i * n1 + j) * plane:(i * n1 + j + 1) * plane]
+                pl = Pf[(i * n1 + j) * plane : (i * n1 + j + 1) * plane]
                 if ghosts == 1:
                     _fill_plane_ghosts(pl, n2, n3)
                 else:
@@ -291,7 +357,9 @@ class Dubins4DStepper:
     ghosts); ``interior(P)`` is a view of the unpadded values.
     """
 
-    def __init__(self, grid, dynamics, alphas, control: str = "max", floor: np.ndarray | None = None, order: int = 1) -> None:
+    def __init__(
+        self, grid, dynamics, alphas, control: str = "max", floor: np.ndarray | None = None, order: int = 1
+    ) -> None:
         if not HAVE_NUMBA:
             raise RuntimeError("the compiled HJ kernel needs numba (pip install numba)")
         problem = kernel_mismatch(grid, dynamics, order)
@@ -315,7 +383,12 @@ class Dubins4DStepper:
         self.inv_dx = (1.0 / np.asarray(grid.dx)).astype(np.float32)
         self.alpha = np.asarray(alphas, dtype=np.float32)
         f32 = np.float32
-        self.consts = (f32(1.0 if control == "max" else -1.0), f32(dynamics.u1_max), f32(dynamics.u2_max), f32(dynamics.d_max))
+        self.consts = (
+            f32(1.0 if control == "max" else -1.0),
+            f32(dynamics.u1_max),
+            f32(dynamics.u2_max),
+            f32(dynamics.d_max),
+        )
         self.floor = None if floor is None else self.padded(np.asarray(floor, dtype=np.float32))
         self._dummy_floor = np.zeros((1, 1, 1, 1), np.float32)
 
@@ -332,5 +405,20 @@ class Dubins4DStepper:
     def stage(self, V0, W, out, a: float, b: float, dt: float) -> None:
         f32 = np.float32
         has_floor = self.floor is not None
-        self._kernel(V0, W, out, self.floor if has_floor else self._dummy_floor, has_floor, f32(a), f32(b), f32(dt),
-                     self.inv_dx, self.alpha, self.C, self.S, self.up, self.down, *self.consts)
+        self._kernel(
+            V0,
+            W,
+            out,
+            self.floor if has_floor else self._dummy_floor,
+            has_floor,
+            f32(a),
+            f32(b),
+            f32(dt),
+            self.inv_dx,
+            self.alpha,
+            self.C,
+            self.S,
+            self.up,
+            self.down,
+            *self.consts,
+        )

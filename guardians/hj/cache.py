@@ -19,8 +19,8 @@ import json
 import os
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -39,8 +39,9 @@ def _digest(V: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(V, dtype=np.float32).tobytes()).hexdigest()
 
 
-def load_or_solve(cache: "ValueCache | None", spec: dict, shape, solve: Callable[[], np.ndarray],
-                  counts: dict) -> tuple[np.ndarray, float | None]:
+def load_or_solve(
+    cache: ValueCache | None, spec: dict, shape, solve: Callable[[], np.ndarray], counts: dict
+) -> tuple[np.ndarray, float | None]:
     """The value function that ``spec`` determines: read from ``cache`` when it holds it
     (``counts["cache_hits"]`` += 1), else ``solve()`` (``counts["solves"]`` += 1) and saved there.
     A cache that cannot be written is an optimisation lost, not an error: it is counted

@@ -13,15 +13,23 @@ for accuracy tests, :class:`DoubleIntegrator1D`, :class:`Integrator1D`, :class:`
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol, Sequence, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from rmm_envs.systems.dubins4d import Dubins4D
 
-__all__ = ["DoubleIntegrator1D", "Dubins4DHJ", "HJControlDynamics", "HJDynamics", "Integrator1D", "Translation",
-           "check_dynamics"]
+__all__ = [
+    "DoubleIntegrator1D",
+    "Dubins4DHJ",
+    "HJControlDynamics",
+    "HJDynamics",
+    "Integrator1D",
+    "Translation",
+    "check_dynamics",
+]
 
 
 @runtime_checkable
@@ -55,8 +63,10 @@ def check_dynamics(dynamics) -> HJDynamics:
     """``dynamics`` if it satisfies :class:`HJDynamics`; a ``TypeError`` naming what it lacks otherwise."""
     missing = [m for m in ("key", "hamiltonian", "alphas") if not callable(getattr(dynamics, m, None))]
     if missing:
-        raise TypeError(f"HJ dynamics must offer key(), hamiltonian(grid, p) and alphas(grid) "
-                        f"(rmm_guardians.hj.dynamics.HJDynamics); {dynamics!r} lacks {', '.join(missing)}")
+        raise TypeError(
+            f"HJ dynamics must offer key(), hamiltonian(grid, p) and alphas(grid) "
+            f"(rmm_guardians.hj.dynamics.HJDynamics); {dynamics!r} lacks {', '.join(missing)}"
+        )
     return dynamics
 
 
@@ -80,19 +90,22 @@ class Dubins4DHJ:
     d_max: float = 0.0
 
     @classmethod
-    def from_bounds(cls, control_low, control_high, v_min: float = Dubins4D.v_min, v_max: float = Dubins4D.v_max,
-                    d_max: float = 0.0) -> "Dubins4DHJ":
+    def from_bounds(
+        cls, control_low, control_high, v_min: float = Dubins4D.v_min, v_max: float = Dubins4D.v_max, d_max: float = 0.0
+    ) -> Dubins4DHJ:
         """From control bounds ``(u1, u2)`` (an action space's ``control_low``/``control_high``),
         which must be symmetric about 0, and the speed bounds (default: Dubins4D's)."""
         lo = np.asarray(control_low, float).reshape(-1)
         hi = np.asarray(control_high, float).reshape(-1)
         if lo.shape != (2,) or hi.shape != (2,) or not np.all(hi > 0) or not np.array_equal(lo, -hi):
-            raise ValueError(f"the HJ Dubins4D dynamics need two control bounds (u1, u2) symmetric about 0, "
-                             f"got low={lo.tolist()} high={hi.tolist()}")
+            raise ValueError(
+                f"the HJ Dubins4D dynamics need two control bounds (u1, u2) symmetric about 0, "
+                f"got low={lo.tolist()} high={hi.tolist()}"
+            )
         return cls(u1_max=float(hi[0]), u2_max=float(hi[1]), v_min=float(v_min), v_max=float(v_max), d_max=float(d_max))
 
     @classmethod
-    def from_system(cls, system: Dubins4D, d_max: float = 0.0) -> "Dubins4DHJ":
+    def from_system(cls, system: Dubins4D, d_max: float = 0.0) -> Dubins4DHJ:
         """From a :class:`Dubins4D` dynamics object: its control and speed bounds."""
         return cls.from_bounds(system.control_low, system.control_high, system.v_min, system.v_max, d_max)
 

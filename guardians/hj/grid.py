@@ -29,14 +29,18 @@ class Grid:
         if self.lo.shape != (self.ndim,) or self.hi.shape != (self.ndim,):
             raise ValueError(f"lo and hi must have {self.ndim} entries, got {self.lo.shape}, {self.hi.shape}")
         if np.any(self.hi <= self.lo) or min(self.n) < 3:
-            raise ValueError(f"each axis needs hi > lo and at least 3 points, got lo={self.lo}, hi={self.hi}, n={self.n}")
+            raise ValueError(
+                f"each axis needs hi > lo and at least 3 points, got lo={self.lo}, hi={self.hi}, n={self.n}"
+            )
         self.periodic = tuple(bool(i in set(periodic)) for i in range(self.ndim))
-        self.dx = np.array([(h - l) / (k if p else k - 1) for l, h, k, p in zip(self.lo, self.hi, self.n, self.periodic)])
+        self.dx = np.array(
+            [(h - l) / (k if p else k - 1) for l, h, k, p in zip(self.lo, self.hi, self.n, self.periodic)]
+        )
         self.axes = [l + d * np.arange(k) for l, d, k in zip(self.lo, self.dx, self.n)]
         self.shape = self.n
         # for interpolation: the 2^d cell corners and the flat-index strides, computed once
         self._corners = np.array(np.meshgrid(*[[0, 1]] * self.ndim, indexing="ij")).reshape(self.ndim, -1).astype(bool)
-        self._strides = np.array([int(np.prod(self.n[a + 1:])) for a in range(self.ndim)], dtype=np.int64)
+        self._strides = np.array([int(np.prod(self.n[a + 1 :])) for a in range(self.ndim)], dtype=np.int64)
 
     def coord(self, axis: int) -> np.ndarray:
         """Axis coordinates shaped to broadcast against the grid."""
@@ -109,7 +113,7 @@ class Grid:
         return float(self.interp_many([array], x)[0])
 
 
-def central_gradient(V: np.ndarray, grid: "Grid") -> list[np.ndarray]:
+def central_gradient(V: np.ndarray, grid: Grid) -> list[np.ndarray]:
     """``V``'s gradient on ``grid``, one array per axis: central differences in float32 (one-sided
     at non-periodic edges, as ``np.gradient``; periodic axes wrap)."""
     out = []

@@ -19,20 +19,20 @@ import math
 
 import numpy as np
 
+from rmm_envs.systems import dubins3d, quadrotor_control
 from rmm_guardians._checks import settings_signature
-from rmm_guardians.privileged import PrivilegedGuardian
 from rmm_guardians.dispatch import SystemDispatch, delegate_arguments
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ
-from rmm_guardians.hj.grid import Grid
-from rmm_guardians.hj.grid import central_gradient
+from rmm_guardians.hj.grid import Grid, central_gradient
 from rmm_guardians.hj.maze import MazeHJGuardian
 from rmm_guardians.hj.quadrotor import QuadrotorHJGuardian
 from rmm_guardians.hj.settings import HJ_PRESETS, HJSettings
 from rmm_guardians.hj.solver import THREADS_VARIABLE, default_threads, select_backend, solve_brt  # noqa: F401
-from rmm_envs.systems import dubins3d, quadrotor_control
+from rmm_guardians.privileged import PrivilegedGuardian
 
 __all__ = ["HJGuardian", "HJPaperGuardian", "default_grid", "default_threads", "obstacle_target"]
+
 
 def default_grid(n=(64, 64, 32, 32), half_width: float = 15.0, v_max: float = 4.0) -> Grid:
     return Grid([-half_width, -half_width, -np.pi, 0.0], [half_width, half_width, np.pi, v_max], n, periodic=[2])
@@ -58,10 +58,19 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
         :class:`~rmm_guardians.hj.settings.HJSettings`' fields, changed."""
         super().__init__()
         s = self.settings = (settings if settings is not None else HJ_PRESETS[self.preset]).replace(**options)
-        shared = {"cache_dir": s.cache_dir, "cache": s.cache, "cache_max_files": s.cache_max_files, "backend": s.backend,
-                  "threads": s.threads, "delay": s.delay, "lap": s.lap}
-        self._system_args = {dubins3d.KIND: delegate_arguments(MazeHJGuardian, "maze", s.maze, shared),
-                             quadrotor_control.KIND: delegate_arguments(QuadrotorHJGuardian, "quadrotor", s.quadrotor, shared)}
+        shared = {
+            "cache_dir": s.cache_dir,
+            "cache": s.cache,
+            "cache_max_files": s.cache_max_files,
+            "backend": s.backend,
+            "threads": s.threads,
+            "delay": s.delay,
+            "lap": s.lap,
+        }
+        self._system_args = {
+            dubins3d.KIND: delegate_arguments(MazeHJGuardian, "maze", s.maze, shared),
+            quadrotor_control.KIND: delegate_arguments(QuadrotorHJGuardian, "quadrotor", s.quadrotor, shared),
+        }
         self.standstill_lookup, self.horizon, self.mode, self.rule = s.standstill_lookup, s.horizon, s.mode, s.rule
         self.order, self.rk, self.cfl = s.order, s.rk, s.cfl
         self.threads = default_threads() if s.threads is None else s.threads
@@ -80,10 +89,22 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
         self.V = None
 
     def spec(self, obstacles, goal=None) -> dict:
-        spec = {"dynamics": self.dynamics.key(), "grid": self.grid.key(), "horizon": self.horizon, "order": self.order,
-                "rk": self.rk, "cfl": self.cfl, "obstacles": np.round(np.asarray(obstacles, float), 9).tolist(), "version": 1}
+        spec = {
+            "dynamics": self.dynamics.key(),
+            "grid": self.grid.key(),
+            "horizon": self.horizon,
+            "order": self.order,
+            "rk": self.rk,
+            "cfl": self.cfl,
+            "obstacles": np.round(np.asarray(obstacles, float), 9).tolist(),
+            "version": 1,
+        }
         if goal is not None:  # the reach-avoid value: goal and its own horizon
-            spec |= {"mode": "reach_avoid", "goal": np.round(np.asarray(goal, float), 9).tolist(), "horizon": self.ra_horizon}
+            spec |= {
+                "mode": "reach_avoid",
+                "goal": np.round(np.asarray(goal, float), 9).tolist(),
+                "horizon": self.ra_horizon,
+            }
         return spec
 
     def value_function(self, obstacles, goal=None) -> np.ndarray:
@@ -98,12 +119,29 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
 
         def solve():
             if goal is None:
-                return solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, obstacles), self.horizon,
-                                 order=self.order, rk=self.rk, cfl=self.cfl, backend=self.backend, threads=self.threads)[0]
-            return solve_brt(self.grid, self.dynamics, obstacle_target(self.grid, np.asarray(goal, float).reshape(1, 3)),
-                             self.ra_horizon, order=self.order, rk=self.rk, cfl=self.cfl,
-                             constraint=obstacle_target(self.grid, obstacles), backend=self.backend,
-                             threads=self.threads)[0]
+                return solve_brt(
+                    self.grid,
+                    self.dynamics,
+                    obstacle_target(self.grid, obstacles),
+                    self.horizon,
+                    order=self.order,
+                    rk=self.rk,
+                    cfl=self.cfl,
+                    backend=self.backend,
+                    threads=self.threads,
+                )[0]
+            return solve_brt(
+                self.grid,
+                self.dynamics,
+                obstacle_target(self.grid, np.asarray(goal, float).reshape(1, 3)),
+                self.ra_horizon,
+                order=self.order,
+                rk=self.rk,
+                cfl=self.cfl,
+                constraint=obstacle_target(self.grid, obstacles),
+                backend=self.backend,
+                threads=self.threads,
+            )[0]
 
         V, seconds = load_or_solve(self.cache or None, self.spec(obstacles, goal), self.grid.shape, solve, self._counts)
         if seconds is not None:

@@ -20,12 +20,12 @@ import numpy as np
 
 from rmm_guardians._checks import finite, integer
 from rmm_guardians.dispatch import maze_car_only
-from rmm_guardians.privileged import PrivilegedGuardian
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.grid import Grid, central_gradient
 from rmm_guardians.hj.maze_lookahead import COEF, manoeuvres, near_walls, path_clearances
 from rmm_guardians.hj.solver import check_scheme, select_backend, solve_brt
+from rmm_guardians.privileged import PrivilegedGuardian
 
 __all__ = ["MazeHJGuardian", "maze_grid", "wall_target"]
 
@@ -40,8 +40,12 @@ def maze_grid(lo, hi, spacing: float, n_heading: int, speed: float) -> Grid:
     at ``speed`` (see the module docstring)."""
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     n = [max(3, int(math.ceil((hi[k] - lo[k]) / spacing)) + 1) for k in range(2)]
-    return Grid([lo[0], lo[1], -math.pi, speed], [hi[0], hi[1], math.pi, speed * (1.0 + 1e-6)],
-                [n[0], n[1], n_heading, 3], periodic=[2])
+    return Grid(
+        [lo[0], lo[1], -math.pi, speed],
+        [hi[0], hi[1], math.pi, speed * (1.0 + 1e-6)],
+        [n[0], n[1], n_heading, 3],
+        periodic=[2],
+    )
 
 
 def wall_target(grid: Grid, maze) -> np.ndarray:
@@ -57,11 +61,29 @@ class MazeHJGuardian(PrivilegedGuardian):
 
     name = "hj"
 
-    def __init__(self, spacing: float = 8.0, n_heading: int = 32, horizon: float = 20.0, region: str = "route",
-                 route_margin: int = 1, order: int = 2, rk: int = 3, cfl: float = 0.8, margin: float | None = None,
-                 delay: int = 1, lap: float | None = None, cache_dir=None, cache: bool = True,
-                 cache_max_files: int = 64, backend: str = "auto", threads: int | None = None,
-                 rule: str = "lookahead", lookahead: float = 6.0, band: float = 20.0, value_error: float = 6.0) -> None:
+    def __init__(
+        self,
+        spacing: float = 8.0,
+        n_heading: int = 32,
+        horizon: float = 20.0,
+        region: str = "route",
+        route_margin: int = 1,
+        order: int = 2,
+        rk: int = 3,
+        cfl: float = 0.8,
+        margin: float | None = None,
+        delay: int = 1,
+        lap: float | None = None,
+        cache_dir=None,
+        cache: bool = True,
+        cache_max_files: int = 64,
+        backend: str = "auto",
+        threads: int | None = None,
+        rule: str = "lookahead",
+        lookahead: float = 6.0,
+        band: float = 20.0,
+        value_error: float = 6.0,
+    ) -> None:
         super().__init__()
         if rule not in MAZE_RULES:
             raise ValueError(f"rule must be one of {MAZE_RULES}, got {rule!r}")
@@ -116,15 +138,34 @@ class MazeHJGuardian(PrivilegedGuardian):
         return np.maximum(lo, pts.min(0) - pad), np.minimum(hi, pts.max(0) + pad)
 
     def spec(self, maze, grid: Grid) -> dict:
-        return {"system": "maze-car", "dynamics": self.dynamics.key(), "grid": grid.key(), "horizon": self.horizon,
-                "order": self.order, "rk": self.rk, "cfl": self.cfl, "thickness": float(maze.thickness),
-                "walls": np.round(np.asarray(maze.walls, float), 6).tolist(), "version": 1}
+        return {
+            "system": "maze-car",
+            "dynamics": self.dynamics.key(),
+            "grid": grid.key(),
+            "horizon": self.horizon,
+            "order": self.order,
+            "rk": self.rk,
+            "cfl": self.cfl,
+            "thickness": float(maze.thickness),
+            "walls": np.round(np.asarray(maze.walls, float), 6).tolist(),
+            "version": 1,
+        }
 
     def value_function(self, maze, grid: Grid) -> np.ndarray:
         """The avoid value of the maze's walls on ``grid`` (from the cache when there)."""
+
         def solve():
-            return solve_brt(grid, self.dynamics, wall_target(grid, maze), self.horizon, order=self.order, rk=self.rk,
-                             cfl=self.cfl, backend=self.backend, threads=self.threads)[0]
+            return solve_brt(
+                grid,
+                self.dynamics,
+                wall_target(grid, maze),
+                self.horizon,
+                order=self.order,
+                rk=self.rk,
+                cfl=self.cfl,
+                backend=self.backend,
+                threads=self.threads,
+            )[0]
 
         V, seconds = load_or_solve(self.cache or None, self.spec(maze, grid), grid.shape, solve, self._counts)
         if seconds is not None:
@@ -141,8 +182,10 @@ class MazeHJGuardian(PrivilegedGuardian):
             raise ValueError(f"guardian {self.name!r} (maze) needs a maze with walls, got none")
         state = np.asarray(priv["state"], float)
         if "speed" not in priv:
-            raise ValueError(f"guardian {self.name!r} (maze) needs the car's speed in the env's privileged data "
-                             f"(keys: {sorted(priv)})")
+            raise ValueError(
+                f"guardian {self.name!r} (maze) needs the car's speed in the env's privileged data "
+                f"(keys: {sorted(priv)})"
+            )
         self.speed = finite("privileged speed", priv["speed"], 0.0, lo_open=True)
         self.u_max = float(space.control_high[0])
         self.dynamics = Dubins4DHJ(u1_max=self.u_max, u2_max=0.0, v_min=self.speed, v_max=self.speed)
@@ -156,8 +199,12 @@ class MazeHJGuardian(PrivilegedGuardian):
         self._margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if self.margin is None else self.margin
         self._safe = space.safe_default.policy(space, self.rng) if space.safe_default is not None else None
         self.start_laps()
-        self._maze_geom = (np.ascontiguousarray(np.asarray(maze.walls, float)), float(maze.half), float(maze.width),
-                           float(maze.height))
+        self._maze_geom = (
+            np.ascontiguousarray(np.asarray(maze.walls, float)),
+            float(maze.half),
+            float(maze.width),
+            float(maze.height),
+        )
         self._manoeuvres = manoeuvres(self.u_max, self.lookahead)
         self._pending = None  # the turn rate the guardian commanded last step (None: it was inactive)
 
@@ -219,7 +266,9 @@ class MazeHJGuardian(PrivilegedGuardian):
         walls, half, width, height = self._maze_geom
         near = near_walls(walls, x, y, self.speed * duration + 2 * self.spacing, half)
         clear, ends = np.empty(1), np.empty((1, 3))
-        path_clearances(x, y, psi, self.speed, man, min(SAMPLE_DT, duration), near, half, width, height, COEF, clear, ends)
+        path_clearances(
+            x, y, psi, self.speed, man, min(SAMPLE_DT, duration), near, half, width, height, COEF, clear, ends
+        )
         return float(clear[0]), ends[0]
 
     def _lookahead_decision(self, x, y, psi, nominal, held):
@@ -250,8 +299,10 @@ def _turn_rate(info, key: str) -> float:
     """The turn rate ``info[key]`` (the env's documented ``nominal_control``), refused (naming
     it) when missing or not one finite number."""
     if not isinstance(info, dict) or key not in info:
-        raise ValueError(f"guardian 'hj' (maze, rule='lookahead') needs info[{key!r}] from the env "
-                         f"(got keys {sorted(info) if isinstance(info, dict) else type(info).__name__})")
+        raise ValueError(
+            f"guardian 'hj' (maze, rule='lookahead') needs info[{key!r}] from the env "
+            f"(got keys {sorted(info) if isinstance(info, dict) else type(info).__name__})"
+        )
     u = np.asarray(info[key], float).reshape(-1)
     if u.shape != (1,) or not math.isfinite(float(u[0])):
         raise ValueError(f"info[{key!r}] must be one finite turn rate, got {info[key]!r}")

@@ -21,17 +21,17 @@ import math
 
 import numpy as np
 
+from rmm_envs.systems.quadrotor_control import CommandController, yaw_of
+from rmm_envs.worlds.room_collision import BOUND
 from rmm_guardians._checks import finite, integer
 from rmm_guardians.dispatch import quadrotor_only
-from rmm_guardians.privileged import PrivilegedGuardian
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.grid import Grid, central_gradient
 from rmm_guardians.hj.quadrotor_climb import Climb
-from rmm_guardians.hj.solver import check_scheme, select_backend, solve_brt
 from rmm_guardians.hj.room import angle, lag_prediction, nominal_command, optimal_command, room_target
-from rmm_envs.systems.quadrotor_control import CommandController, yaw_of
-from rmm_envs.worlds.room_collision import BOUND
+from rmm_guardians.hj.solver import check_scheme, select_backend, solve_brt
+from rmm_guardians.privileged import PrivilegedGuardian
 
 __all__ = ["QuadrotorHJGuardian"]
 
@@ -43,15 +43,40 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
     observation_type = "global"
     privileged = True
 
-    def __init__(self, spacing: float = 0.3, n_heading: int = 16, n_speed: int = 5, v_max: float = 2.0,
-                 accel: float = 2.5, turn_rate: float = 1.0, horizon: float = 1.2, pad: float | None = None,
-                 band_margin: float = 0.1, reach: float = 0.5, order: int = 2, rk: int = 3, cfl: float = 0.8, margin: float | None = None,
-                 tracking: float = 0.1, hysteresis: float = 0.15, delay: int = 1, lap: float | None = None,
-                 n_directions: int = 16, min_speed: float = 0.5, clear_time: float = 1.0, side_memory: float = 3.0,
-                 climb_after: float | None = 2.0, climb_margin: float = 0.15, climb_ceiling: float = 6.0,
-                 climb_speed: float = 1.0,
-                 cache_dir=None, cache: bool = True, cache_max_files: int = 64, backend: str = "auto",
-                 threads: int | None = None) -> None:
+    def __init__(
+        self,
+        spacing: float = 0.3,
+        n_heading: int = 16,
+        n_speed: int = 5,
+        v_max: float = 2.0,
+        accel: float = 2.5,
+        turn_rate: float = 1.0,
+        horizon: float = 1.2,
+        pad: float | None = None,
+        band_margin: float = 0.1,
+        reach: float = 0.5,
+        order: int = 2,
+        rk: int = 3,
+        cfl: float = 0.8,
+        margin: float | None = None,
+        tracking: float = 0.1,
+        hysteresis: float = 0.15,
+        delay: int = 1,
+        lap: float | None = None,
+        n_directions: int = 16,
+        min_speed: float = 0.5,
+        clear_time: float = 1.0,
+        side_memory: float = 3.0,
+        climb_after: float | None = 2.0,
+        climb_margin: float = 0.15,
+        climb_ceiling: float = 6.0,
+        climb_speed: float = 1.0,
+        cache_dir=None,
+        cache: bool = True,
+        cache_max_files: int = 64,
+        backend: str = "auto",
+        threads: int | None = None,
+    ) -> None:
         super().__init__()
         self.spacing = finite("spacing", spacing, 0.0, lo_open=True)
         self.n_heading = integer("n_heading", n_heading, 3)
@@ -89,9 +114,19 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
 
     @staticmethod
     def _zero() -> dict:
-        return {"outside_grid": 0, "outside_band": 0, "nan_states": 0, "cache_hits": 0, "solves": 0, "nominal": 0,
-                "turns": 0, "optimal": 0, "takeovers": 0,
-                "climbs": 0, "climb_steps": 0}
+        return {
+            "outside_grid": 0,
+            "outside_band": 0,
+            "nan_states": 0,
+            "cache_hits": 0,
+            "solves": 0,
+            "nominal": 0,
+            "turns": 0,
+            "optimal": 0,
+            "takeovers": 0,
+            "climbs": 0,
+            "climb_steps": 0,
+        }
 
     def check_spaces(self, observation_space, action_space) -> None:
         quadrotor_only(self, action_space)
@@ -112,24 +147,53 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
             lo = np.maximum(pts.min(0) - self.pad, np.minimum(lo_w[:2], pts.min(0) - self.spacing))
             hi = np.minimum(pts.max(0) + self.pad, np.maximum(hi_w[:2], pts.max(0) + self.spacing))
         n = [max(3, int(math.ceil((hi[k] - lo[k]) / self.spacing)) + 1) for k in range(2)]
-        return Grid([lo[0], lo[1], -math.pi, 0.0], [hi[0], hi[1], math.pi, self.v_max],
-                    [n[0], n[1], self.n_heading, self.n_speed], periodic=[2])
+        return Grid(
+            [lo[0], lo[1], -math.pi, 0.0],
+            [hi[0], hi[1], math.pi, self.v_max],
+            [n[0], n[1], self.n_heading, self.n_speed],
+            periodic=[2],
+        )
 
     def spec(self, room, grid: Grid, z_lo: float, z_hi: float) -> dict:
         walls = np.asarray(room.walls, float).reshape(-1, 6)
-        objects = [[o["shape"], *(np.round(np.asarray(o[k], float), 9).tolist() for k in ("pos", "quat", "size"))]
-                   for o in room.objects]
-        return {"system": "quadrotor-horizontal", "dynamics": self.dynamics.key(), "grid": grid.key(),
-                "horizon": self.horizon, "order": self.order, "rk": self.rk, "cfl": self.cfl, "band": [round(z_lo, 9), round(z_hi, 9)],
-                "radius": BOUND, "walls": np.round(walls, 9).tolist(), "objects": objects, "version": 2}
+        objects = [
+            [o["shape"], *(np.round(np.asarray(o[k], float), 9).tolist() for k in ("pos", "quat", "size"))]
+            for o in room.objects
+        ]
+        return {
+            "system": "quadrotor-horizontal",
+            "dynamics": self.dynamics.key(),
+            "grid": grid.key(),
+            "horizon": self.horizon,
+            "order": self.order,
+            "rk": self.rk,
+            "cfl": self.cfl,
+            "band": [round(z_lo, 9), round(z_hi, 9)],
+            "radius": BOUND,
+            "walls": np.round(walls, 9).tolist(),
+            "objects": objects,
+            "version": 2,
+        }
 
     def value_function(self, room, grid: Grid, z_lo: float, z_hi: float) -> np.ndarray:
         """The avoid value of the room's cross-sections at the band on ``grid`` (cached)."""
-        def solve():
-            return solve_brt(grid, self.dynamics, room_target(grid, room, z_lo, z_hi), self.horizon, order=self.order,
-                             rk=self.rk, cfl=self.cfl, backend=self.backend, threads=self.threads)[0]
 
-        V, seconds = load_or_solve(self.cache or None, self.spec(room, grid, z_lo, z_hi), grid.shape, solve, self._counts)
+        def solve():
+            return solve_brt(
+                grid,
+                self.dynamics,
+                room_target(grid, room, z_lo, z_hi),
+                self.horizon,
+                order=self.order,
+                rk=self.rk,
+                cfl=self.cfl,
+                backend=self.backend,
+                threads=self.threads,
+            )[0]
+
+        V, seconds = load_or_solve(
+            self.cache or None, self.spec(room, grid, z_lo, z_hi), grid.shape, solve, self._counts
+        )
         if seconds is not None:
             self.solve_seconds += seconds
         return V
@@ -151,7 +215,9 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
             grid = self.region_grid(room, a, b)
             select_backend(grid, self.dynamics, self.order, self.backend)
             bands = [self.band(a, b)]
-            if abs(float(b[2]) - float(a[2])) > 2.0 * self.band_margin:  # the arrival band is narrower: a value of its own
+            if (
+                abs(float(b[2]) - float(a[2])) > 2.0 * self.band_margin
+            ):  # the arrival band is narrower: a value of its own
                 bands.append((float(b[2]) - 1.5 * self.band_margin, float(b[2]) + 1.5 * self.band_margin))
             values = []
             for band in bands:
@@ -160,8 +226,9 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
             self._legs.append(values)
         self.leg = -1
         self._next_leg(state)
-        self._margin = (0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) + self.tracking if self.margin is None
-                        else self.margin)
+        self._margin = (
+            0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) + self.tracking if self.margin is None else self.margin
+        )
         ctrl = CommandController()
         self.k_v = float(ctrl.k_v)
         space = self.action_space
@@ -174,8 +241,11 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         self._last_turn = None  # (x, y, side) where it last turned the pilot's command
         self._hit = math.inf  # distance to the pilot's waypoint where the guardian took over
         self._turn = 0  # the turn (in steps of 2 pi / n_directions) of its last command from the pilot's
-        self._climb = None if self.climb_after is None else Climb(room, self.climb_margin, self.climb_ceiling,
-                                                                   self.climb_speed, self.k_v)
+        self._climb = (
+            None
+            if self.climb_after is None
+            else Climb(room, self.climb_margin, self.climb_ceiling, self.climb_speed, self.k_v)
+        )
         self._plan = None  # the climb in progress (rmm_guardians.hj.quadrotor_climb)
         self._in_control = 0.0  # the simulated time (s) it has been in control since it took over
 
@@ -324,7 +394,9 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         k, hc = first_safe(self._side, max(0, self._turn - 1))
         if k is None:
             self._counts["optimal"] += 1
-            return self._full(self._clip(optimal_command(h1, vals, c, s, self.turn_rate, self.accel, self.k_v, self.v_max)), nominal)
+            return self._full(
+                self._clip(optimal_command(h1, vals, c, s, self.turn_rate, self.accel, self.k_v, self.v_max)), nominal
+            )
         self._counts["nominal" if k == 0 and not follow else "turns"] += 1
         self._turn = k
         if k:

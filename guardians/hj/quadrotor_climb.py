@@ -20,9 +20,9 @@ import math
 
 import numpy as np
 
-from rmm_guardians.hj.room import object_top, room_distance
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_envs.worlds.rooms import bounding_radius
+from rmm_guardians.hj.room import object_top, room_distance
 
 __all__ = ["Climb", "ClimbPlan"]
 
@@ -53,7 +53,15 @@ class Climb:
         walls = np.asarray(room.walls, float).reshape(-1, 6)
         self._walls = walls
         self._wall_tops = walls[:, 2] + walls[:, 5]
-        self._objects = [(float(o["pos"][0]), float(o["pos"][1]), bounding_radius(o["shape"], np.asarray(o["size"], float)), object_top(o)) for o in room.objects]
+        self._objects = [
+            (
+                float(o["pos"][0]),
+                float(o["pos"][1]),
+                bounding_radius(o["shape"], np.asarray(o["size"], float)),
+                object_top(o),
+            )
+            for o in room.objects
+        ]
 
     def top_near(self, a, b, reach: float) -> float:
         """The highest top of the walls and objects within ``reach`` (horizontally) of the segment
@@ -96,7 +104,9 @@ class Climb:
             return None
         return ClimbPlan(stop, z_c, w)
 
-    def command(self, plan: ClimbPlan, x: float, y: float, z: float, vx: float, vy: float) -> tuple[float, float, float] | None:
+    def command(
+        self, plan: ClimbPlan, x: float, y: float, z: float, vx: float, vy: float
+    ) -> tuple[float, float, float] | None:
         """The world-frame velocity command ``(vx, vy, vz)`` of ``plan`` at ``(x, y, z)`` with
         horizontal velocity ``(vx, vy)``, moving it to its next phase when due; ``None`` once it is
         over (within ``SETTLE`` of the waypoint's height at the end of the descent)."""
@@ -127,7 +137,9 @@ def _count(length: float) -> int:
 def _segment(a, b) -> np.ndarray:
     """Points at most ``SAMPLE`` apart from ``a`` to ``b`` (x, y), both ends included."""
     t = np.linspace(0.0, 1.0, _count(math.hypot(float(b[0]) - float(a[0]), float(b[1]) - float(a[1]))))
-    return np.column_stack([float(a[0]) + t * (float(b[0]) - float(a[0])), float(a[1]) + t * (float(b[1]) - float(a[1]))])
+    return np.column_stack(
+        [float(a[0]) + t * (float(b[0]) - float(a[0])), float(a[1]) + t * (float(b[1]) - float(a[1]))]
+    )
 
 
 def _to_segment(x: float, y: float, a, b) -> float:
@@ -137,4 +149,3 @@ def _to_segment(x: float, y: float, a, b) -> float:
     n2 = dx * dx + dy * dy
     t = 0.0 if n2 == 0.0 else min(max(((x - ax) * dx + (y - ay) * dy) / n2, 0.0), 1.0)
     return math.hypot(x - ax - t * dx, y - ay - t * dy)
-

@@ -8,13 +8,21 @@ import math
 
 import numpy as np
 
-from rmm_guardians.hj.grid import Grid
 from rmm_envs.portable import arctan2
 from rmm_envs.systems.rotations import quat_to_rot
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_envs.worlds.rooms import bounding_radius
+from rmm_guardians.hj.grid import Grid
 
-__all__ = ["angle", "lag_prediction", "nominal_command", "object_top", "optimal_command", "room_distance", "room_target"]
+__all__ = [
+    "angle",
+    "lag_prediction",
+    "nominal_command",
+    "object_top",
+    "optimal_command",
+    "room_distance",
+    "room_target",
+]
 
 
 def room_target(grid: Grid, room, z_lo: float, z_hi: float, radius: float = BOUND, dz: float = 0.1) -> np.ndarray:
@@ -68,8 +76,16 @@ def room_distance(room, points) -> np.ndarray:
     d = z.copy()
     walls = np.asarray(room.walls, float).reshape(-1, 6)
     if walls.size:
-        d = np.minimum(d, _object_sd("box", walls[:, 3:].T[:, None, :], x[:, None] - walls[:, 0], y[:, None] - walls[:, 1],
-                                     z[:, None] - walls[:, 2]).min(axis=1))
+        d = np.minimum(
+            d,
+            _object_sd(
+                "box",
+                walls[:, 3:].T[:, None, :],
+                x[:, None] - walls[:, 0],
+                y[:, None] - walls[:, 1],
+                z[:, None] - walls[:, 2],
+            ).min(axis=1),
+        )
     for o in room.objects:
         c, R = np.asarray(o["pos"], float), quat_to_rot(np.asarray(o["quat"], float))
         px, py, pz = x - c[0], y - c[1], z - c[2]
@@ -142,10 +158,14 @@ def angle(y: float, x: float) -> float:
 def nominal_command(info) -> np.ndarray:
     """``info["nominal_control"]`` as four finite numbers, refused (naming it) otherwise."""
     if not isinstance(info, dict) or "nominal_control" not in info:
-        raise ValueError("guardian 'hj' (quadrotor) needs info['nominal_control'] from the env (the pilot's command), "
-                         f"got {sorted(info) if isinstance(info, dict) else type(info).__name__}")
+        raise ValueError(
+            "guardian 'hj' (quadrotor) needs info['nominal_control'] from the env (the pilot's command), "
+            f"got {sorted(info) if isinstance(info, dict) else type(info).__name__}"
+        )
     u = np.asarray(info["nominal_control"], float).reshape(-1)
     if u.shape != (4,) or not np.all(np.isfinite(u)):
-        raise ValueError(f"info['nominal_control'] must be four finite numbers (forward, left, up, yaw rate), "
-                         f"got {info['nominal_control']!r}")
+        raise ValueError(
+            f"info['nominal_control'] must be four finite numbers (forward, left, up, yaw rate), "
+            f"got {info['nominal_control']!r}"
+        )
     return u

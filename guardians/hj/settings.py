@@ -86,6 +86,8 @@ class HJSettings(Settings):
 #: control at ``V <= 0`` with the bang-bang control, no latency allowance, Dubins4D only).
 HJ_PRESETS = {
     "hj": HJSettings(),
-    "hj-paper": HJSettings(order=1, rk=2, rule="value", margin=0.0, standstill_lookup=False, maze=False, quadrotor=False),
+    "hj-paper": HJSettings(
+        order=1, rk=2, rule="value", margin=0.0, standstill_lookup=False, maze=False, quadrotor=False
+    ),
 }
 HJSettings.PRESETS = HJ_PRESETS

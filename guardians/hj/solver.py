@@ -21,11 +21,11 @@ from fractions import Fraction
 
 import numpy as np
 
+from rmm_envs.settings import HJ_THREADS, hj_threads
 from rmm_guardians._checks import finite, integer
 from rmm_guardians.hj import _kernels
 from rmm_guardians.hj.dynamics import HJDynamics, check_dynamics
 from rmm_guardians.hj.grid import Grid
-from rmm_envs.settings import HJ_THREADS, hj_threads
 
 __all__ = ["BACKENDS", "TVD_RK", "default_threads", "select_backend", "solve_brt", "spatial_derivatives"]
 
@@ -101,7 +101,10 @@ def _pad(V: np.ndarray, axis: int, periodic: bool, g: int) -> np.ndarray:
         return np.concatenate([V.take(range(-g, 0), axis=axis), V, V.take(range(g), axis=axis)], axis=axis)
     n = V.shape[axis]
     lo = [V.take([0], axis=axis) + (V.take([0], axis=axis) - V.take([1], axis=axis)) * k for k in range(g, 0, -1)]
-    hi = [V.take([n - 1], axis=axis) + (V.take([n - 1], axis=axis) - V.take([n - 2], axis=axis)) * k for k in range(1, g + 1)]
+    hi = [
+        V.take([n - 1], axis=axis) + (V.take([n - 1], axis=axis) - V.take([n - 2], axis=axis)) * k
+        for k in range(1, g + 1)
+    ]
     return np.concatenate(lo + [V] + hi, axis=axis)
 
 
@@ -149,9 +152,19 @@ def _rate(V: np.ndarray, grid: Grid, dynamics: HJDynamics, alphas, order: int, c
     return np.minimum(H, 0.0, out=H)
 
 
-def solve_brt(grid: Grid, dynamics: HJDynamics, target: np.ndarray, horizon: float, order: int = 2, rk: int = 3,
-              cfl: float = 0.8, progress=None, constraint: np.ndarray | None = None,
-              backend: str = "auto", threads: int | None = None) -> tuple[np.ndarray, dict]:
+def solve_brt(
+    grid: Grid,
+    dynamics: HJDynamics,
+    target: np.ndarray,
+    horizon: float,
+    order: int = 2,
+    rk: int = 3,
+    cfl: float = 0.8,
+    progress=None,
+    constraint: np.ndarray | None = None,
+    backend: str = "auto",
+    threads: int | None = None,
+) -> tuple[np.ndarray, dict]:
     """Backward reachable tube of ``target`` (``l``: <= 0 inside) over ``horizon`` seconds.
 
     Avoid mode (``constraint=None``): the control *avoids* the target (maximises); ``V <= 0``
@@ -187,8 +200,21 @@ def solve_brt(grid: Grid, dynamics: HJDynamics, target: np.ndarray, horizon: flo
         V = np.maximum(V, floor)
 
     if impl == "numba":
-        return _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control,
-                               None if constraint is None else floor, progress, cfl, order, threads)
+        return _solve_compiled(
+            grid,
+            dynamics,
+            alphas,
+            V,
+            dt_max,
+            horizon,
+            rk,
+            control,
+            None if constraint is None else floor,
+            progress,
+            cfl,
+            order,
+            threads,
+        )
 
     def L(W):
         return _rate(W, grid, dynamics, alphas, order, control)
@@ -208,8 +234,16 @@ def solve_brt(grid: Grid, dynamics: HJDynamics, target: np.ndarray, horizon: flo
         steps += 1
         if progress is not None:
             progress(t, horizon)
-    return V, {"steps": steps, "dt": dt_max, "seconds": time.perf_counter() - t0, "order": order, "rk": rk, "cfl": cfl,
-               "mode": "avoid" if constraint is None else "reach_avoid", "backend": "numpy"}
+    return V, {
+        "steps": steps,
+        "dt": dt_max,
+        "seconds": time.perf_counter() - t0,
+        "order": order,
+        "rk": rk,
+        "cfl": cfl,
+        "mode": "avoid" if constraint is None else "reach_avoid",
+        "backend": "numpy",
+    }
 
 
 def _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control, floor, progress, cfl, order, threads):
@@ -234,5 +268,13 @@ def _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control, flo
         if progress is not None:
             progress(t, horizon)
     V = np.ascontiguousarray(stepper.interior(P))
-    return V, {"steps": steps, "dt": dt_max, "seconds": time.perf_counter() - t0, "order": order, "rk": rk, "cfl": cfl,
-               "mode": "avoid" if floor is None else "reach_avoid", "backend": "numba"}
+    return V, {
+        "steps": steps,
+        "dt": dt_max,
+        "seconds": time.perf_counter() - t0,
+        "order": order,
+        "rk": rk,
+        "cfl": cfl,
+        "mode": "avoid" if floor is None else "reach_avoid",
+        "backend": "numba",
+    }

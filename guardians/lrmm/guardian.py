@@ -22,47 +22,49 @@ from pathlib import Path
 
 import numpy as np
 
+from rmm_envs.portable import wrap_angle
 from rmm_guardians._checks import integer
 from rmm_guardians.base import Guardian
 from rmm_guardians.lrmm.defaults import PAPER_THRESHOLD, check_threshold, decision_threshold, stored_decision
 from rmm_guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, load_model
 from rmm_guardians.lrmm.nominal import TRIGGERS, Slide, driver_at_risk, driver_control, hand_back_options, make_rater
-from rmm_envs.portable import wrap_angle
 
 __all__ = ["PAPER_THRESHOLD", "TRIGGERS", "LRMMGuardian", "LRMMPaperGuardian"]
 
 ACTIONS = ("head", "heuristic", "turn", "safe")
 DEFAULT_ENV = "Dubins4DGuarded-v0"  # whose shipped model a guardian built without env_id or model reads
 #: how to get the model of another env: the guardian picks its model when it is built, not at reset
-REMEDY = ("; the shipped model is chosen when the guardian is built: make_guardian('lrmm', env_id=<this env's id>) "
-          "(as rmm-bench does), or model=<a model trained on this env>")
+REMEDY = (
+    "; the shipped model is chosen when the guardian is built: make_guardian('lrmm', env_id=<this env's id>) "
+    "(as rmm-bench does), or model=<a model trained on this env>"
+)
 _SIDE_RAY = math.pi / 6  # the heuristic compares the rays 30 degrees left and right of the heading
 
 
 class LRMMGuardian(Guardian):
     """Args:
-        model: an :class:`LRMMModel`, a model file path, or ``None`` for the shipped model
-            (``dubins4d_act.npz`` for ``lrmm``, ``dubins4d.npz`` for ``lrmm-paper``).
-        threshold: take control while the risk is strictly above it; ``None`` (default) uses
-            the model's stored threshold (the paper's 0.85 if it has none, with a warning).
-        action: ``"head"`` (the safest candidate of the model's head), ``"heuristic"`` (brake
-            and turn to the more open +-30 degree ray), ``"turn"`` (turn toward the lower-risk
-            side; one-control systems whose model reads the rays), ``"safe"`` (the env's safe default,
-            ``action_space.safe_default``: hover and level for the quadrotor) or ``None`` (default: ``"head"`` when
-            the model has one, else ``"heuristic"`` with a warning).
-        hysteresis: use the original's moving-average release rule (default False).
-        window: moving-average length with ``hysteresis`` (default 20).
-        commit: steps to stay in control after the risk is back at or below the threshold;
-            ``None`` (default) uses the model's stored value (0 if it has none).
-        u1_max, u2_min: turn rate and braking of the heuristic (``u1_max`` also of ``"turn"``);
-            ``None`` (default): the action space's largest turn rate and strongest braking
-            (0.25, -0.5 for Dubins4D).
-        env_id: the env served (default ``None``: Dubins4D): picks the shipped model, its
-            input field and decision defaults from :data:`rmm_guardians.lrmm.shipped.SHIPPED`.
-        inputs: the observation field the model reads (default ``None``: the table's for
-            ``env_id``, else the whole observation).
-        trigger, margin, restart, slide, still, stay: the hand-back rule (module docstring);
-            ``None`` (default): the model's stored values, else ``"risk"``, 0, 0, False, None, True.
+    model: an :class:`LRMMModel`, a model file path, or ``None`` for the shipped model
+        (``dubins4d_act.npz`` for ``lrmm``, ``dubins4d.npz`` for ``lrmm-paper``).
+    threshold: take control while the risk is strictly above it; ``None`` (default) uses
+        the model's stored threshold (the paper's 0.85 if it has none, with a warning).
+    action: ``"head"`` (the safest candidate of the model's head), ``"heuristic"`` (brake
+        and turn to the more open +-30 degree ray), ``"turn"`` (turn toward the lower-risk
+        side; one-control systems whose model reads the rays), ``"safe"`` (the env's safe default,
+        ``action_space.safe_default``: hover and level for the quadrotor) or ``None`` (default: ``"head"`` when
+        the model has one, else ``"heuristic"`` with a warning).
+    hysteresis: use the original's moving-average release rule (default False).
+    window: moving-average length with ``hysteresis`` (default 20).
+    commit: steps to stay in control after the risk is back at or below the threshold;
+        ``None`` (default) uses the model's stored value (0 if it has none).
+    u1_max, u2_min: turn rate and braking of the heuristic (``u1_max`` also of ``"turn"``);
+        ``None`` (default): the action space's largest turn rate and strongest braking
+        (0.25, -0.5 for Dubins4D).
+    env_id: the env served (default ``None``: Dubins4D): picks the shipped model, its
+        input field and decision defaults from :data:`rmm_guardians.lrmm.shipped.SHIPPED`.
+    inputs: the observation field the model reads (default ``None``: the table's for
+        ``env_id``, else the whole observation).
+    trigger, margin, restart, slide, still, stay: the hand-back rule (module docstring);
+        ``None`` (default): the model's stored values, else ``"risk"``, 0, 0, False, None, True.
     """
 
     name = "lrmm"
@@ -70,12 +72,25 @@ class LRMMGuardian(Guardian):
     privileged = False
     default_model = "act"
 
-    def __init__(self, model: LRMMModel | str | Path | None = None, threshold: float | None = None,
-                 action: str | None = None, hysteresis: bool = False, window: int = 20, commit: int | None = None,
-                 u1_max: float | None = None, u2_min: float | None = None, env_id: str | None = None,
-                 inputs: str | None = None, trigger: str | None = None, margin: float | None = None,
-                 restart: float | None = None, slide: bool | None = None, still: float | None = None,
-                 stay: bool | None = None) -> None:
+    def __init__(
+        self,
+        model: LRMMModel | str | Path | None = None,
+        threshold: float | None = None,
+        action: str | None = None,
+        hysteresis: bool = False,
+        window: int = 20,
+        commit: int | None = None,
+        u1_max: float | None = None,
+        u2_min: float | None = None,
+        env_id: str | None = None,
+        inputs: str | None = None,
+        trigger: str | None = None,
+        margin: float | None = None,
+        restart: float | None = None,
+        slide: bool | None = None,
+        still: float | None = None,
+        stay: bool | None = None,
+    ) -> None:
         super().__init__()
         check_threshold(threshold)  # refused before any file is read
         integer("window", window, 1)
@@ -90,7 +105,9 @@ class LRMMGuardian(Guardian):
         if isinstance(model, LRMMModel):
             self.model = model
         else:
-            self.model = load_model(model if model is not None else default_model_path(self.env_id, variant=self.default_model))
+            self.model = load_model(
+                model if model is not None else default_model_path(self.env_id, variant=self.default_model)
+            )
         where = str(getattr(self.model, "path", "the model"))
         # the observation field the model reads: given, else the env's entry in the table, else all of it
         self.inputs = inputs if inputs is not None else (ship.inputs if ship is not None else None)
@@ -114,7 +131,8 @@ class LRMMGuardian(Guardian):
         if self.threshold_source == "paper":
             self._fallback_warning(f"{where} has no 'decision' threshold: using the paper's {PAPER_THRESHOLD}")
         self.trigger, self.margin, self.restart, self.slide, self.still, self.stay = hand_back_options(
-            trigger, margin, restart, decision, action, hysteresis, slide, still, stay)
+            trigger, margin, restart, decision, action, hysteresis, slide, still, stay
+        )
         self._warned = False
         self.action = action
         self.hysteresis = bool(hysteresis)
@@ -153,48 +171,69 @@ class LRMMGuardian(Guardian):
         else:
             size = (getattr(observation_space, "shape", None) or (None,))[0]
         if size != self.model.obs_dim:
-            what = f"observation field {self.inputs!r} has {size} numbers" if self.inputs else \
-                f"observation space is {getattr(observation_space, 'shape', observation_space)}"
-            raise ValueError(f"guardian {self.name!r}: the LRMM model (trained on {self.model.env_id}) expects observations "
-                             f"of shape ({self.model.obs_dim},), the env's {what}{REMEDY}")
+            what = (
+                f"observation field {self.inputs!r} has {size} numbers"
+                if self.inputs
+                else f"observation space is {getattr(observation_space, 'shape', observation_space)}"
+            )
+            raise ValueError(
+                f"guardian {self.name!r}: the LRMM model (trained on {self.model.env_id}) expects observations "
+                f"of shape ({self.model.obs_dim},), the env's {what}{REMEDY}"
+            )
         if self.action == "head" and self.model.candidates.shape[1] != actions.control_dim:
             k = self.model.candidates.shape[1]
-            raise ValueError(f"guardian {self.name!r} needs an action space with {k} controls (the model's candidate "
-                             f"controls have {k} components), got {actions.control_dim} ({actions.controls})")
+            raise ValueError(
+                f"guardian {self.name!r} needs an action space with {k} controls (the model's candidate "
+                f"controls have {k} components), got {actions.control_dim} ({actions.controls})"
+            )
         if self.action == "head":
             low, high = np.asarray(actions.control_low, float), np.asarray(actions.control_high, float)
             outside = [c.tolist() for c in self.model.candidates if np.any(c < low) or np.any(c > high)]
             if outside:
-                raise ValueError(f"guardian {self.name!r}: candidate controls {outside} of "
-                                 f"{getattr(self.model, 'path', 'the model')} lie outside the env's control bounds "
-                                 f"[{low.tolist()}, {high.tolist()}] ({actions.controls})")
+                raise ValueError(
+                    f"guardian {self.name!r}: candidate controls {outside} of "
+                    f"{getattr(self.model, 'path', 'the model')} lie outside the env's control bounds "
+                    f"[{low.tolist()}, {high.tolist()}] ({actions.controls})"
+                )
         if self.trigger == "driver" and self._rater_for(observation_space, actions) is None:
-            raise ValueError(f"guardian {self.name!r}: trigger 'driver' needs the model reading the whole observation and a "
-                             "field the controls move ('velocity', 'speed', or 'heading' with evenly spaced rays; "
-                             f"rmm_guardians.lrmm.nominal); got controls {actions.controls}, inputs={self.inputs!r}")
-        if self.restart > 0 and ("accel_ctrl" not in actions.controls or "speed" not in getattr(observation_space, "layout", ())):
-            raise ValueError(f"guardian {self.name!r}: restart needs an 'accel_ctrl' control and a 'speed' observation "
-                             f"field, got controls {actions.controls}")
+            raise ValueError(
+                f"guardian {self.name!r}: trigger 'driver' needs the model reading the whole observation and a "
+                "field the controls move ('velocity', 'speed', or 'heading' with evenly spaced rays; "
+                f"rmm_guardians.lrmm.nominal); got controls {actions.controls}, inputs={self.inputs!r}"
+            )
+        if self.restart > 0 and (
+            "accel_ctrl" not in actions.controls or "speed" not in getattr(observation_space, "layout", ())
+        ):
+            raise ValueError(
+                f"guardian {self.name!r}: restart needs an 'accel_ctrl' control and a 'speed' observation "
+                f"field, got controls {actions.controls}"
+            )
         if self.action == "heuristic":
             if actions.control_dim != 2 and actions.safe_default is not None:
-                raise ValueError(f"guardian {self.name!r}: the brake-and-turn heuristic (the action of a model without "
-                                 f"a head) needs the Dubins car's two controls, got {actions.control_dim} "
-                                 f"({actions.controls}); this env states a safe default ({actions.safe_default.description}): "
-                                 "action='safe' applies it")
+                raise ValueError(
+                    f"guardian {self.name!r}: the brake-and-turn heuristic (the action of a model without "
+                    f"a head) needs the Dubins car's two controls, got {actions.control_dim} "
+                    f"({actions.controls}); this env states a safe default ({actions.safe_default.description}): "
+                    "action='safe' applies it"
+                )
             self.require_action_space(controls=2, space=action_space)  # (turn rate, acceleration)
             self.require_layout("rays", observation_space=observation_space)
         if self.action == "safe" and actions.safe_default is None:
-            raise ValueError(f"guardian {self.name!r}: action 'safe' applies the env's safe default, and this env's "
-                             "action space states none (GuardianActionSpace(safe_default=...))")
+            raise ValueError(
+                f"guardian {self.name!r}: action 'safe' applies the env's safe default, and this env's "
+                "action space states none (GuardianActionSpace(safe_default=...))"
+            )
         if self.action == "turn":
             self.require_action_space(controls=1, space=action_space)  # the turn rate
             lay = self.require_layout("rays", observation_space=observation_space)
             n = lay.size_of("rays")
             even = np.allclose(wrap_angle(np.asarray(lay.ray_angles) - 2 * np.pi * np.arange(n) / n), 0, atol=1e-9)
             if self.inputs != "rays" or not even:
-                raise ValueError(f"guardian {self.name!r}: action 'turn' judges a turn by the model's risk of the rays "
-                                 "rotated by one ray, so the model must read the 'rays' field, rays evenly spaced over the "
-                                 f"full circle from the heading; got inputs={self.inputs!r}, ray angles {lay.ray_angles}")
+                raise ValueError(
+                    f"guardian {self.name!r}: action 'turn' judges a turn by the model's risk of the rays "
+                    "rotated by one ray, so the model must read the 'rays' field, rays evenly spaced over the "
+                    f"full circle from the heading; got inputs={self.inputs!r}, ray angles {lay.ray_angles}"
+                )
 
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)
@@ -211,8 +250,12 @@ class LRMMGuardian(Guardian):
             self._safe = actions.safe_default.policy(actions, self.rng)
         if self.action == "turn":
             rays = lay["rays"]
-            self._lside = [rays.start + i for i, a in enumerate(lay.ray_angles) if 0 < math.remainder(a, 2 * math.pi) < math.pi]
-            self._rside = [rays.start + i for i, a in enumerate(lay.ray_angles) if -math.pi < math.remainder(a, 2 * math.pi) < 0]
+            self._lside = [
+                rays.start + i for i, a in enumerate(lay.ray_angles) if 0 < math.remainder(a, 2 * math.pi) < math.pi
+            ]
+            self._rside = [
+                rays.start + i for i, a in enumerate(lay.ray_angles) if -math.pi < math.remainder(a, 2 * math.pi) < 0
+            ]
         if self.trigger == "driver":
             self._rater = self._rater_for(self.observation_space, actions)
         self._slide = Slide(actions.controls, actions.control_low, actions.control_high) if self.slide else None
@@ -249,7 +292,11 @@ class LRMMGuardian(Guardian):
             cand = out[1:].tolist()
             if not all(map(math.isfinite, cand)):
                 raise ValueError(f"the LRMM model returned non-finite candidate risks {cand}")
-            bent = self._slide.choose(self._rater, self.model, x, nominal, self.threshold) if self._slide and nominal else None
+            bent = (
+                self._slide.choose(self._rater, self.model, x, nominal, self.threshold)
+                if self._slide and nominal
+                else None
+            )
             if bent is not None:
                 return self.action_space.active(bent)
             k = cand.index(min(cand))  # the first of the lowest
@@ -268,8 +315,13 @@ class LRMMGuardian(Guardian):
     def _rater_for(self, observation_space, actions):
         if self.inputs is not None:  # the model reads one field; the prediction moves others
             return None
-        return make_rater(actions.controls, getattr(observation_space, "layout", None), self.model.candidate_hold,
-                          observation_space.low, observation_space.high)
+        return make_rater(
+            actions.controls,
+            getattr(observation_space, "layout", None),
+            self.model.candidate_hold,
+            observation_space.low,
+            observation_space.high,
+        )
 
     def _nominal(self, info) -> list | None:  # None (one warning per guardian): this step uses "risk"
         u = driver_control(info, self.action_space, warn=not self._warned)
@@ -306,6 +358,11 @@ class LRMMPaperGuardian(LRMMGuardian):
     name = "lrmm-paper"
     default_model = "paper"
 
-    def __init__(self, model: LRMMModel | str | Path | None = None, threshold: float | None = PAPER_THRESHOLD,
-                 action: str | None = "heuristic", **kwargs) -> None:
+    def __init__(
+        self,
+        model: LRMMModel | str | Path | None = None,
+        threshold: float | None = PAPER_THRESHOLD,
+        action: str | None = "heuristic",
+        **kwargs,
+    ) -> None:
         super().__init__(model=model, threshold=threshold, action=action, **kwargs)

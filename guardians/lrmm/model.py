@@ -17,19 +17,19 @@ The head, the artifact's fields and why: docs/design-notes.md#rmm_guardianslrmmm
 from __future__ import annotations
 
 import hashlib
-import math
 import io
 import json
+import math
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
+from rmm_envs.catalog import FORMER_IDS, current_id
+from rmm_envs.portable import matvec
 from rmm_guardians.lrmm.inference import forward_one as _forward_one
 from rmm_guardians.lrmm.inference import forward_rows as _forward_rows
 from rmm_guardians.lrmm.shipped import SHIPPED, SHIPPED_BY_SYSTEM, Shipped, default_model_path
-from rmm_envs.catalog import FORMER_IDS, current_id
-from rmm_envs.portable import matvec
 
 __all__ = ["FORMAT", "SHIPPED", "SHIPPED_BY_SYSTEM", "LRMMModel", "Shipped", "default_model_path", "load_model"]
 
@@ -69,7 +69,9 @@ class LRMMModel:
     """
 
     def __init__(self, weights, scaler_min, scaler_scale, meta: dict) -> None:
-        self.weights = [(_real(f"W{i}", W), None if b is None else _real(f"b{i}", b)) for i, (W, b) in enumerate(weights)]
+        self.weights = [
+            (_real(f"W{i}", W), None if b is None else _real(f"b{i}", b)) for i, (W, b) in enumerate(weights)
+        ]
         self.scaler_min = _real("scaler_min", scaler_min)
         self.scaler_scale = _real("scaler_scale", scaler_scale)
         self.meta = dict(meta)
@@ -86,7 +88,9 @@ class LRMMModel:
         self.candidates = None if cands is None else np.asarray(cands, dtype=float)
         self.candidate_hold = self.meta.get("candidate_hold")
         hold = self.candidate_hold
-        if hold is not None and (isinstance(hold, bool) or not isinstance(hold, (int, float)) or not 0 < hold < math.inf):
+        if hold is not None and (
+            isinstance(hold, bool) or not isinstance(hold, (int, float)) or not 0 < hold < math.inf
+        ):
             raise ValueError(f"meta 'candidate_hold' must be a finite number of seconds > 0, got {hold!r}")
         self._check_shapes()
         self._check_finite()
@@ -94,10 +98,13 @@ class LRMMModel:
         W0, b0 = self.weights[0]
         self._W0 = W0 * self.scaler_scale[None, :]
         self._b0 = (b0 if b0 is not None else 0.0) - matvec(self._W0, self.scaler_min)
-        self._all_features = self.features.shape[0] == self.obs_dim and np.array_equal(self.features, np.arange(self.obs_dim))
+        self._all_features = self.features.shape[0] == self.obs_dim and np.array_equal(
+            self.features, np.arange(self.obs_dim)
+        )
         # the compiled one-observation path: the layers as tuples (a missing bias as zeros)
         layers = [(self._W0, np.broadcast_to(self._b0, (self._W0.shape[0],)))] + [
-            (W, b if b is not None else np.zeros(W.shape[0])) for W, b in self.weights[1:]]
+            (W, b if b is not None else np.zeros(W.shape[0])) for W, b in self.weights[1:]
+        ]
         self._Ws = tuple(np.array(W.T, dtype=float, order="C") for W, _ in layers)  # transposed
         self._bs = tuple(np.array(b, dtype=float, order="C") for _, b in layers)
         self._act_code = ACTIVATIONS.index(act)
@@ -128,9 +135,13 @@ class LRMMModel:
     def _check_finite(self) -> None:
         for name, a in self.arrays().items():
             if not np.all(np.isfinite(a)):
-                raise ValueError(f"LRMM model array {name!r} holds {int(np.sum(~np.isfinite(a)))} non-finite value(s) (NaN or inf); "
-                                 "the training diverged or the file is damaged")
-        if self.candidates is not None and (self.candidates.dtype.kind not in "fiu" or not np.all(np.isfinite(self.candidates))):
+                raise ValueError(
+                    f"LRMM model array {name!r} holds {int(np.sum(~np.isfinite(a)))} non-finite value(s) (NaN or inf); "
+                    "the training diverged or the file is damaged"
+                )
+        if self.candidates is not None and (
+            self.candidates.dtype.kind not in "fiu" or not np.all(np.isfinite(self.candidates))
+        ):
             raise ValueError(f"meta 'candidates' holds non-finite controls: {self.candidates.tolist()}")
 
     # ------------------------------------------------------------------ inference
@@ -159,8 +170,10 @@ class LRMMModel:
             x = x[..., self.features]  # as the one-observation path: only the model's inputs must be finite
         bad = np.flatnonzero(~np.isfinite(x).all(axis=1))
         if bad.size:
-            raise ValueError(f"observation {int(bad[0])} of the batch contains NaN or inf ({bad.size} rows do): "
-                             f"{np.asarray(obs, dtype=float)[bad[0]].tolist()}")
+            raise ValueError(
+                f"observation {int(bad[0])} of the batch contains NaN or inf ({bad.size} rows do): "
+                f"{np.asarray(obs, dtype=float)[bad[0]].tolist()}"
+            )
         # the same compiled sums row by row: the bits of a batch equal those of its rows, and
         # neither depends on the CPU (numpy's ``@`` goes to BLAS, ``np.exp`` to SIMD code)
         return _forward_rows(np.ascontiguousarray(x), self._Ws, self._bs, self._act_code)
@@ -192,7 +205,7 @@ class LRMMModel:
         return path
 
     @classmethod
-    def load(cls, path, env_id: str | None = None, obs_dim: int | None = None) -> "LRMMModel":
+    def load(cls, path, env_id: str | None = None, obs_dim: int | None = None) -> LRMMModel:
         """Load and verify an artifact; ``env_id``/``obs_dim`` (optional) must match it."""
         path = Path(path)
         if not path.exists():
@@ -210,8 +223,10 @@ class LRMMModel:
         except (UnicodeDecodeError, json.JSONDecodeError) as e:
             raise ValueError(f"{path}: metadata is not valid JSON ({e})") from None
         if meta.get("format") != FORMAT or meta.get("format_version") not in READABLE_VERSIONS:
-            raise ValueError(f"{path}: expected format {FORMAT} v{'/'.join(map(str, READABLE_VERSIONS))}, "
-                             f"got {meta.get('format')} v{meta.get('format_version')}")
+            raise ValueError(
+                f"{path}: expected format {FORMAT} v{'/'.join(map(str, READABLE_VERSIONS))}, "
+                f"got {meta.get('format')} v{meta.get('format_version')}"
+            )
         if meta["format_version"] == 1:
             for key in ("candidates", "decision"):
                 if key in meta:
@@ -271,11 +286,16 @@ def set_decision(path, threshold: float, commit: int, chosen_by: str, action: st
     if unknown:
         raise ValueError(f"unknown decision field(s) {unknown}; expected {', '.join(fields)}")
     hand_back = {k: v for k, v in hand_back.items() if v is not None}
-    checked = hand_back_options(*(hand_back.get(k) for k in fields[:3]), None, action, False,
-                                *(hand_back.get(k) for k in fields[3:]))
+    checked = hand_back_options(
+        *(hand_back.get(k) for k in fields[:3]), None, action, False, *(hand_back.get(k) for k in fields[3:])
+    )
     extra = dict(zip(fields, checked))
-    model.meta["decision"] = {"threshold": float(threshold), "commit": int(commit), "action": action,
-                              **{k: extra[k] for k in hand_back}, "chosen_by": chosen_by.strip()}
+    model.meta["decision"] = {
+        "threshold": float(threshold),
+        "commit": int(commit),
+        "action": action,
+        **{k: extra[k] for k in hand_back},
+        "chosen_by": chosen_by.strip(),
+    }
     model.save(path)
     return model
-

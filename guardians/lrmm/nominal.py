@@ -19,14 +19,23 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
 from rmm_envs.portable import wrap_angle
 
-__all__ = ["SLIDE_MOVES", "TRIGGERS", "VELOCITY_CONTROLS", "PredictRater", "Slide", "driver_at_risk", "driver_control", "hand_back_options",
-           "make_rater"]
+__all__ = [
+    "SLIDE_MOVES",
+    "TRIGGERS",
+    "VELOCITY_CONTROLS",
+    "PredictRater",
+    "Slide",
+    "driver_at_risk",
+    "driver_control",
+    "hand_back_options",
+    "make_rater",
+]
 
 TRIGGERS = ("risk", "driver")  # when lrmm takes control: the state risk, or the driver's control rated
 
@@ -46,14 +55,19 @@ class PredictRater:
 
     def __init__(self, layout, controls: Sequence[str], hold: float, low, high) -> None:
         self.hold = float(hold)
-        self.velocity = [(j, layout["velocity"].start + VELOCITY_CONTROLS[c]) for j, c in enumerate(controls)
-                         if c in VELOCITY_CONTROLS and "velocity" in layout]
+        self.velocity = [
+            (j, layout["velocity"].start + VELOCITY_CONTROLS[c])
+            for j, c in enumerate(controls)
+            if c in VELOCITY_CONTROLS and "velocity" in layout
+        ]
         self.accel = self.turn = None
         if "accel_ctrl" in controls and "speed" in layout:
             i = layout.index("speed")
             self.accel = (controls.index("accel_ctrl"), i, float(low[i]), float(high[i]))
         n = layout.size_of("rays") if "rays" in layout else 0
-        even = n > 0 and all(abs(float(wrap_angle(a - 2.0 * math.pi * k / n))) < 1e-9 for k, a in enumerate(layout.ray_angles))
+        even = n > 0 and all(
+            abs(float(wrap_angle(a - 2.0 * math.pi * k / n))) < 1e-9 for k, a in enumerate(layout.ray_angles)
+        )
         if "turnrate_ctrl" in controls and "heading" in layout and even:
             self.turn = (controls.index("turnrate_ctrl"), layout.index("heading"), layout["rays"].start, n)
 
@@ -75,7 +89,7 @@ class PredictRater:
             y[h] = float(wrap_angle(y[h] + delta))
             # the ray at angle a after the turn reads what the ray at a + delta read before it
             shift = delta * n / (2.0 * math.pi)
-            old = [float(v) for v in x[r0:r0 + n]]
+            old = [float(v) for v in x[r0 : r0 + n]]
             for k in range(n):
                 f = k + shift
                 lo_k = math.floor(f)
@@ -89,7 +103,9 @@ class PredictRater:
         rows = np.stack([self.predict(x, u) for u in controls])
         rated = [float(v) for v in model.predict_all(rows)[:, 0]]
         if not all(map(math.isfinite, rated)):
-            raise ValueError(f"the LRMM model rated the controls {[list(u) for u in controls]} with non-finite risks {rated}")
+            raise ValueError(
+                f"the LRMM model rated the controls {[list(u) for u in controls]} with non-finite risks {rated}"
+            )
         return rated
 
 
@@ -119,8 +135,9 @@ class Slide:
     def __init__(self, controls, low, high, moves=None) -> None:
         controls = tuple(controls)
         if any(c not in controls for c in VELOCITY_CONTROLS):
-            raise ValueError(f"slide bends a velocity command: it needs the controls {tuple(VELOCITY_CONTROLS)}, "
-                             f"got {controls}")
+            raise ValueError(
+                f"slide bends a velocity command: it needs the controls {tuple(VELOCITY_CONTROLS)}, got {controls}"
+            )
         self.f, self.l, self.up = (controls.index(c) for c in VELOCITY_CONTROLS)
         self.low, self.high = [float(v) for v in low], [float(v) for v in high]
         self.moves = SLIDE_MOVES if moves is None else moves
@@ -140,7 +157,7 @@ class Slide:
         gap = [math.sqrt(sum((v[j] - u[j]) ** 2 for j in (self.f, self.l, self.up))) for v in out]
         return [out[i] for i in sorted(range(len(out)), key=lambda i: gap[i])]
 
-    def choose(self, rater: "PredictRater", model, x, u, threshold: float) -> list | None:
+    def choose(self, rater: PredictRater, model, x, u, threshold: float) -> list | None:
         """The nearest variant of ``u`` rated at or below ``threshold``; ``None`` if none is."""
         options = self.variants(u)
         if not options:
@@ -149,7 +166,7 @@ class Slide:
         return next((v for v, r in zip(options, rated) if r <= threshold), None)
 
 
-def make_rater(controls: Sequence[str], layout, hold, low, high) -> "PredictRater | None":
+def make_rater(controls: Sequence[str], layout, hold, low, high) -> PredictRater | None:
     """The rater for this env, or ``None`` when the observation measures none of the controls'
     effects (no ``layout``, or none of the fields :class:`PredictRater` predicts)."""
     if layout is None or hold is None:
@@ -166,22 +183,28 @@ def driver_control(info, action_space, warn: bool = True) -> list | None:
     if u is None:
         if warn:
             keys = sorted(info) if isinstance(info, dict) else info
-            warnings.warn(f"lrmm: trigger 'driver' rates the driver's control, info['nominal_control'], and this env "
-                          f"gives none (info: {keys!r}); using the state risk (trigger 'risk') instead", UserWarning,
-                          stacklevel=4)
+            warnings.warn(
+                f"lrmm: trigger 'driver' rates the driver's control, info['nominal_control'], and this env "
+                f"gives none (info: {keys!r}); using the state risk (trigger 'risk') instead",
+                UserWarning,
+                stacklevel=4,
+            )
         return None
     try:
         n = np.asarray(u, dtype=float).reshape(-1) if np.ndim(u) <= 1 else np.empty(0)
     except (TypeError, ValueError):  # not numbers
         n = np.empty(0)
     if n.shape[0] != action_space.control_dim or not np.all(np.isfinite(n)):
-        raise ValueError(f"info['nominal_control'] must be {action_space.control_dim} finite numbers "
-                         f"{action_space.controls}, got {u!r}")
+        raise ValueError(
+            f"info['nominal_control'] must be {action_space.control_dim} finite numbers "
+            f"{action_space.controls}, got {u!r}"
+        )
     return n.tolist()
 
 
-def hand_back_options(trigger, margin, restart, stored: dict | None, action: str, hysteresis: bool,
-                      slide=None, still=None, stay=None) -> tuple:
+def hand_back_options(
+    trigger, margin, restart, stored: dict | None, action: str, hysteresis: bool, slide=None, still=None, stay=None
+) -> tuple:
     """``lrmm``'s ``(trigger, margin, restart, slide, still, stay)``: each given one, else the model
     file's stored decision (used only with ``action="head"`` and, for the trigger, without
     hysteresis: a file's defaults are for its own rule), else ``"risk"``, 0, 0, False, None, True;
@@ -195,8 +218,10 @@ def hand_back_options(trigger, margin, restart, stored: dict | None, action: str
     if trigger not in TRIGGERS:
         raise ValueError(f"trigger must be one of {TRIGGERS}, got {trigger!r}")
     if trigger == "driver" and (action != "head" or hysteresis):
-        raise ValueError(f"trigger='driver' compares the driver's control with the head's candidates: it needs "
-                         f"action='head' without hysteresis, got action={action!r}, hysteresis={hysteresis!r}")
+        raise ValueError(
+            f"trigger='driver' compares the driver's control with the head's candidates: it needs "
+            f"action='head' without hysteresis, got action={action!r}, hysteresis={hysteresis!r}"
+        )
     values = []
     for name, given, default in (("margin", margin, 0.0), ("restart", restart, 0.0), ("still", still, None)):
         value = given if given is not None else stored.get(name, default)
@@ -215,8 +240,10 @@ def hand_back_options(trigger, margin, restart, stored: dict | None, action: str
             raise ValueError(f"{name} must be True or False, got {value!r}")
         flags.append(bool(value))
     if trigger != "driver" and (flags[0] or values[2] is not None or not flags[1]):
-        raise ValueError(f"slide, still and stay=False judge the driver's control, info['nominal_control']: they need "
-                         f"trigger='driver', got {trigger!r}")
+        raise ValueError(
+            f"slide, still and stay=False judge the driver's control, info['nominal_control']: they need "
+            f"trigger='driver', got {trigger!r}"
+        )
     margin, restart, still = values
     return trigger, margin, restart, flags[0], still, flags[1]
 

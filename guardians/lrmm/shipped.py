@@ -34,11 +34,18 @@ _DUBINS4D = Shipped({"paper": "dubins4d.npz", "act": "dubins4d_act.npz"})
 #: rays) on its observation's ``"rays"`` field.  Its decision defaults were chosen on development
 #: seeds (env seeds 5000-5063 of ``Dubins3DMazeParallel-v0``, 1 ms fixed clock), never on the
 #: seeds that reported results use; see :mod:`rmm_guardians.lrmm.guardian`.
-_MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays", decision={
-    "threshold": 0.7, "commit": 5, "action": "turn",
-    "chosen_by": "fewest collisions, then most goals, then least time in control, over thresholds 0.3/0.5/0.7/0.85 x "
-                 "commit 5/10/20 steps on 64 development episodes (env seeds 5000-5063 of Dubins3DMazeParallel-v0, "
-                 "fixed 1 ms clock): 0 collisions and 64 goals with 1.3% of the steps in control"})
+_MAZE_PARALLEL = Shipped(
+    {"act": "dubins3d_maze.npz"},
+    inputs="rays",
+    decision={
+        "threshold": 0.7,
+        "commit": 5,
+        "action": "turn",
+        "chosen_by": "fewest collisions, then most goals, then least time in control, over thresholds 0.3/0.5/0.7/0.85 x "
+        "commit 5/10/20 steps on 64 development episodes (env seeds 5000-5063 of Dubins3DMazeParallel-v0, "
+        "fixed 1 ms clock): 0 collisions and 64 goals with 1.3% of the steps in control",
+    },
+)
 
 #: The quadrotor under parallel autonomy: ``lrmm`` reads the command model with the
 #: action-conditioned head (``quadrotor_cmd_act.npz``: ``QuadrotorRoomGuarded-v0``'s labels under
@@ -55,16 +62,28 @@ _QUAD_PARALLEL = Shipped({"act": "quadrotor_cmd_act.npz", "risk": "quadrotor_cmd
 #: applying the env's safe default (the balancing LQR) while the risk is above the threshold.
 #: Decision defaults chosen on development episodes only (env seeds 500000-500099 and
 #: 600000-600099, fixed 1 ms clock), never on those of the reported ``rmm-bench --seed 11``.
-_CARTPOLE = Shipped({"act": "cartpole_guarded.npz"}, decision={
-    "threshold": 0.2, "commit": 0, "action": "safe",
-    "chosen_by": "fewest collisions, then most goals, over thresholds 0.1/0.15/0.2/0.3/0.5 x commit 0/3/10/25 steps on "
-                 "100 development episodes each of env seeds 500000-500099 and 600000-600099 of CartPoleParallel-v0 "
-                 "(fixed 1 ms clock): 2 and 0 collisions, 60 and 53 goals"})
-_PENDULUM = Shipped({"act": "inverted_pendulum_guarded.npz"}, decision={
-    "threshold": 0.05, "commit": 0, "action": "safe",
-    "chosen_by": "fewest collisions while keeping the goals, over thresholds 0.02/0.05/0.1/0.3/0.5 x commit 0/2/5 steps "
-                 "on 100 development episodes each of env seeds 500000-500099 and 600000-600099 of "
-                 "InvertedPendulumParallel-v0 (fixed 1 ms clock): 32 and 31 collisions, 62 and 64 goals"})
+_CARTPOLE = Shipped(
+    {"act": "cartpole_guarded.npz"},
+    decision={
+        "threshold": 0.2,
+        "commit": 0,
+        "action": "safe",
+        "chosen_by": "fewest collisions, then most goals, over thresholds 0.1/0.15/0.2/0.3/0.5 x commit 0/3/10/25 steps on "
+        "100 development episodes each of env seeds 500000-500099 and 600000-600099 of CartPoleParallel-v0 "
+        "(fixed 1 ms clock): 2 and 0 collisions, 60 and 53 goals",
+    },
+)
+_PENDULUM = Shipped(
+    {"act": "inverted_pendulum_guarded.npz"},
+    decision={
+        "threshold": 0.05,
+        "commit": 0,
+        "action": "safe",
+        "chosen_by": "fewest collisions while keeping the goals, over thresholds 0.02/0.05/0.1/0.3/0.5 x commit 0/2/5 steps "
+        "on 100 development episodes each of env seeds 500000-500099 and 600000-600099 of "
+        "InvertedPendulumParallel-v0 (fixed 1 ms clock): 32 and 31 collisions, 62 and 64 goals",
+    },
+)
 
 #: The shipped models, per system of :data:`rmm_envs.catalog.SYSTEMS` (its ``name``) and kind of
 #: env: ``"plain"`` (plain control) and ``"guarded"`` (its blocking and non-blocking guardian envs,
@@ -94,7 +113,9 @@ class ShippedById(dict):
         return self[new]
 
     def __contains__(self, env_id) -> bool:
-        return dict.__contains__(self, env_id) or (isinstance(env_id, str) and dict.__contains__(self, current_id(env_id)))
+        return dict.__contains__(self, env_id) or (
+            isinstance(env_id, str) and dict.__contains__(self, current_id(env_id))
+        )
 
     def get(self, env_id, default=None):
         return self[env_id] if env_id in self else default
@@ -124,15 +145,21 @@ def default_model_path(env_id: str = "Dubins4DGuarded-v0", variant: str = "paper
     ship = SHIPPED.get(env_id)
     if ship is None and ":" not in env_id and env_id not in gym.registry:  # a module:Id registers when imported
         near = difflib.get_close_matches(env_id, list(gym.registry), n=1)
-        raise ValueError(f"no env {env_id!r} is registered" + (f" (did you mean {near[0]!r}?)" if near else "")
-                         + f"; the shipped LRMM models are for {sorted(SHIPPED)}")
+        raise ValueError(
+            f"no env {env_id!r} is registered"
+            + (f" (did you mean {near[0]!r}?)" if near else "")
+            + f"; the shipped LRMM models are for {sorted(SHIPPED)}"
+        )
     if ship is None:
         stem = env_id.rpartition(":")[2].lower().replace("-", "_")
         raise ValueError(
             f"no shipped LRMM model for {env_id!r} (shipped for {sorted(SHIPPED)}); make one from this env's "
             f"labelled states with two commands: rmm-datagen --env {env_id} --out data_{stem} and "
             f"rmm-train --data data_{stem} --out {stem}.npz; then give it: --agent-opt lrmm.model='\"{stem}.npz\"' "
-            f"(in Python, model=\"{stem}.npz\")")
+            f'(in Python, model="{stem}.npz")'
+        )
     if variant not in ship.files:
-        raise ValueError(f"no shipped LRMM model for {env_id!r} (variant {variant!r}); its variants: {sorted(ship.files)}")
+        raise ValueError(
+            f"no shipped LRMM model for {env_id!r} (variant {variant!r}); its variants: {sorted(ship.files)}"
+        )
     return Path(str(resources.files("rmm_guardians.lrmm") / "models" / ship.files[variant]))

@@ -29,9 +29,23 @@ __all__ = ["TrainConfig", "main", "split_by_config", "train"]
 
 
 class TrainConfig:
-    def __init__(self, hidden=(64,), activation="sigmoid", output_bias=False, epochs=300, batch_size=64,
-                 lr=1e-3, seed=0, val_frac=0.15, test_frac=0.15, features=None, select="best",
-                 dtype="float64", patience=None, head="auto"):
+    def __init__(
+        self,
+        hidden=(64,),
+        activation="sigmoid",
+        output_bias=False,
+        epochs=300,
+        batch_size=64,
+        lr=1e-3,
+        seed=0,
+        val_frac=0.15,
+        test_frac=0.15,
+        features=None,
+        select="best",
+        dtype="float64",
+        patience=None,
+        head="auto",
+    ):
         if not hidden or any(int(h) != h or h < 1 for h in hidden):
             raise ValueError(f"hidden must be one or more positive layer sizes, got {hidden!r}")
         if activation not in ACTIVATIONS:
@@ -45,7 +59,9 @@ class TrainConfig:
         if head not in ("auto", "none"):
             raise ValueError(f"head must be 'auto' or 'none', got {head!r}")
         if not (0 < val_frac < 1 and 0 < test_frac < 1 and val_frac + test_frac < 1):
-            raise ValueError(f"val_frac and test_frac must be in (0, 1) with a sum below 1, got {val_frac}, {test_frac}")
+            raise ValueError(
+                f"val_frac and test_frac must be in (0, 1) with a sum below 1, got {val_frac}, {test_frac}"
+            )
         if select not in ("best", "last"):
             raise ValueError(f"select must be 'best' or 'last', got {select!r}")
         if dtype not in ("float32", "float64"):
@@ -80,7 +96,7 @@ def split_by_config(config_ids: np.ndarray, val_frac: float, test_frac: float, s
     perm = np.random.default_rng(seed).permutation(configs)
     n_test = max(1, int(round(test_frac * configs.shape[0])))
     n_val = max(1, int(round(val_frac * configs.shape[0])))
-    test_c, val_c = perm[:n_test], perm[n_test:n_test + n_val]
+    test_c, val_c = perm[:n_test], perm[n_test : n_test + n_val]
     test = np.isin(config_ids, test_c)
     val = np.isin(config_ids, val_c)
     return ~(test | val), val, test
@@ -98,13 +114,22 @@ def _metrics(model: LRMMModel, obs, y, cand=None) -> dict:
         return {"mse": None, "mae": None, "max_abs_err": None, "n": 0}
     out = model.predict_all(obs)
     e = out[:, 0] - y
-    m = {"mse": float(np.mean(e * e)), "mae": float(np.mean(np.abs(e))), "max_abs_err": float(np.max(np.abs(e))), "n": int(len(y))}
+    m = {
+        "mse": float(np.mean(e * e)),
+        "mae": float(np.mean(np.abs(e))),
+        "max_abs_err": float(np.max(np.abs(e))),
+        "n": int(len(y)),
+    }
     if cand is not None and model.candidates is not None:
         pc = out[:, 1:]
         picked = cand[np.arange(len(y)), np.argmin(pc, axis=1)]
-        m["candidates"] = {"mse": float(np.mean((pc - cand) ** 2)), "mae": float(np.mean(np.abs(pc - cand))),
-                           "regret": float(np.mean(picked - cand.min(axis=1))),
-                           "picked_risk": float(np.mean(picked)), "best_risk": float(np.mean(cand.min(axis=1)))}
+        m["candidates"] = {
+            "mse": float(np.mean((pc - cand) ** 2)),
+            "mae": float(np.mean(np.abs(pc - cand))),
+            "regret": float(np.mean(picked - cand.min(axis=1))),
+            "picked_risk": float(np.mean(picked)),
+            "best_risk": float(np.mean(cand.min(axis=1))),
+        }
     return m
 
 
@@ -125,8 +150,10 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
         cand_all = np.asarray(dataset.candidate_risk, dtype=np.float64)
         cands = dataset.meta.get("estimator", {}).get("candidates")
         if cands is None or len(cands) != cand_all.shape[1]:
-            raise ValueError(f"the dataset has {cand_all.shape[1]} candidate_risk columns but its metadata lists "
-                             f"candidates {cands!r}")
+            raise ValueError(
+                f"the dataset has {cand_all.shape[1]} candidate_risk columns but its metadata lists "
+                f"candidates {cands!r}"
+            )
     targets = y_all[:, None] if cand_all is None else np.column_stack([y_all, cand_all])
     if not np.all(np.isfinite(obs_all)) or not np.all(np.isfinite(targets)):
         raise ValueError("the dataset holds non-finite observations or labels")
@@ -145,7 +172,11 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
     n_in = len(feats)
     for h in cfg.hidden:
         layers.append(torch.nn.Linear(n_in, h, dtype=dt))
-        layers.append({"sigmoid": torch.nn.Sigmoid(), "tanh": torch.nn.Tanh(), "relu": torch.nn.ReLU(), "elu": torch.nn.ELU()}[cfg.activation])
+        layers.append(
+            {"sigmoid": torch.nn.Sigmoid(), "tanh": torch.nn.Tanh(), "relu": torch.nn.ReLU(), "elu": torch.nn.ELU()}[
+                cfg.activation
+            ]
+        )
         n_in = h
     layers.append(torch.nn.Linear(n_in, targets.shape[1], bias=cfg.output_bias, dtype=dt))
     layers.append(torch.nn.Sigmoid())
@@ -166,20 +197,24 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
         net.train()
         perm = torch.randperm(n, generator=gen)
         for i in range(0, n, cfg.batch_size):
-            idx = perm[i:i + cfg.batch_size]
+            idx = perm[i : i + cfg.batch_size]
             opt.zero_grad(set_to_none=True)
             loss = torch.nn.functional.mse_loss(net(xt[idx]), yt[idx])
             if not torch.isfinite(loss):
-                raise TrainingDiverged(f"training diverged: the loss became {loss.item()} at epoch {epoch + 1}, batch "
-                                       f"{i // cfg.batch_size + 1} (lr {cfg.lr}); lower --lr.  No model was written")
+                raise TrainingDiverged(
+                    f"training diverged: the loss became {loss.item()} at epoch {epoch + 1}, batch "
+                    f"{i // cfg.batch_size + 1} (lr {cfg.lr}); lower --lr.  No model was written"
+                )
             loss.backward()
             opt.step()
         net.eval()
         with torch.no_grad():
             val_mse = float(torch.nn.functional.mse_loss(net(xv), yv))
         if not np.isfinite(val_mse):
-            raise TrainingDiverged(f"training diverged: the validation loss became {val_mse} after epoch {epoch + 1} "
-                                   f"(lr {cfg.lr}); lower --lr.  No model was written")
+            raise TrainingDiverged(
+                f"training diverged: the validation loss became {val_mse} after epoch {epoch + 1} "
+                f"(lr {cfg.lr}); lower --lr.  No model was written"
+            )
         history.append(val_mse)
         if val_mse < best[0]:
             best = (val_mse, {k: v.detach().clone() for k, v in net.state_dict().items()}, epoch)
@@ -187,7 +222,9 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
         else:
             stale += 1
         if epoch % max(1, cfg.epochs // 20) == 0 or epoch == cfg.epochs - 1:
-            log(f"epoch {epoch + 1:5d}/{cfg.epochs}  val mse {val_mse:.5f}  (best {best[0]:.5f} at {best[2] + 1})  {time.perf_counter() - t0:6.1f} s")
+            log(
+                f"epoch {epoch + 1:5d}/{cfg.epochs}  val mse {val_mse:.5f}  (best {best[0]:.5f} at {best[2] + 1})  {time.perf_counter() - t0:6.1f} s"
+            )
         if cfg.patience and stale >= cfg.patience:
             log(f"stopping: no validation improvement in {cfg.patience} epochs")
             break
@@ -195,7 +232,10 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
     if cfg.select == "best":
         net.load_state_dict(best[1])
     linears = [m for m in net if isinstance(m, torch.nn.Linear)]
-    weights = [(m.weight.detach().double().numpy().copy(), None if m.bias is None else m.bias.detach().double().numpy().copy()) for m in linears]
+    weights = [
+        (m.weight.detach().double().numpy().copy(), None if m.bias is None else m.bias.detach().double().numpy().copy())
+        for m in linears
+    ]
 
     names = dataset.meta.get("feature_names") or [f"obs[{i}]" for i in range(obs_dim)]
     meta = {
@@ -208,15 +248,29 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
         "output_bias": cfg.output_bias,
         "labeller": dataset.meta.get("estimator"),
         "data_sha256": dataset.sha256,
-        "data": {"n_rows": len(dataset), "configs": int(np.unique(dataset.config_id).shape[0]),
-                 "seed": dataset.meta.get("seed"), "samples_per_config": dataset.meta.get("samples_per_config")},
-        "training": cfg.as_dict() | {"wall_seconds": wall, "best_epoch": best[2] + 1, "epochs_run": epoch + 1,
-                                     "selected_epoch": best[2] + 1 if cfg.select == "best" else epoch + 1,
-                                     "val_mse_history": history,
-                                     "torch": torch.__version__, "numpy": np.__version__, "python": platform.python_version()},
-        "split": {"by": "configuration", "train_configs": sorted(np.unique(dataset.config_id[tr]).tolist()),
-                  "val_configs": sorted(np.unique(dataset.config_id[va]).tolist()),
-                  "test_configs": sorted(np.unique(dataset.config_id[te]).tolist())},
+        "data": {
+            "n_rows": len(dataset),
+            "configs": int(np.unique(dataset.config_id).shape[0]),
+            "seed": dataset.meta.get("seed"),
+            "samples_per_config": dataset.meta.get("samples_per_config"),
+        },
+        "training": cfg.as_dict()
+        | {
+            "wall_seconds": wall,
+            "best_epoch": best[2] + 1,
+            "epochs_run": epoch + 1,
+            "selected_epoch": best[2] + 1 if cfg.select == "best" else epoch + 1,
+            "val_mse_history": history,
+            "torch": torch.__version__,
+            "numpy": np.__version__,
+            "python": platform.python_version(),
+        },
+        "split": {
+            "by": "configuration",
+            "train_configs": sorted(np.unique(dataset.config_id[tr]).tolist()),
+            "val_configs": sorted(np.unique(dataset.config_id[va]).tolist()),
+            "test_configs": sorted(np.unique(dataset.config_id[te]).tolist()),
+        },
     }
     if cand_all is not None:
         meta["candidates"] = [[float(v) for v in c] for c in dataset.meta["estimator"]["candidates"]]
@@ -233,25 +287,49 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="rmm-train", description="Train a learned risk metric map on an rmm-datagen dataset "
-                                "(split by obstacle configuration) and save it as an LRMM model file.")
+    p = argparse.ArgumentParser(
+        prog="rmm-train",
+        description="Train a learned risk metric map on an rmm-datagen dataset "
+        "(split by obstacle configuration) and save it as an LRMM model file.",
+    )
     p.add_argument("--data", required=True, help="dataset directory written by rmm-datagen")
     p.add_argument("--out", required=True, help="model file to write (.npz)")
     p.add_argument("--hidden", type=int, nargs="+", default=[64], help="hidden layer sizes (default: 64)")
-    p.add_argument("--activation", default="sigmoid", choices=list(ACTIVATIONS), help="hidden activation (default: %(default)s)")
+    p.add_argument(
+        "--activation", default="sigmoid", choices=list(ACTIVATIONS), help="hidden activation (default: %(default)s)"
+    )
     p.add_argument("--output-bias", action="store_true", help="give the output layer a bias (the paper's has none)")
     p.add_argument("--epochs", type=int, default=300, help="training epochs (default: %(default)s)")
-    p.add_argument("--patience", type=int, default=None, help="stop after this many epochs without validation improvement")
+    p.add_argument(
+        "--patience", type=int, default=None, help="stop after this many epochs without validation improvement"
+    )
     p.add_argument("--batch-size", type=int, default=64, help="mini-batch size (default: %(default)s)")
     p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="seed for the split, initialisation and shuffling (default: %(default)s)")
-    p.add_argument("--val-frac", type=float, default=0.15, help="fraction of configurations for validation (default: %(default)s)")
-    p.add_argument("--test-frac", type=float, default=0.15, help="fraction of configurations for test (default: %(default)s)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed for the split, initialisation and shuffling (default: %(default)s)"
+    )
+    p.add_argument(
+        "--val-frac", type=float, default=0.15, help="fraction of configurations for validation (default: %(default)s)"
+    )
+    p.add_argument(
+        "--test-frac", type=float, default=0.15, help="fraction of configurations for test (default: %(default)s)"
+    )
     p.add_argument("--features", type=int, nargs="+", default=None, help="observation indices to use (default: all)")
-    p.add_argument("--select", default="best", choices=["best", "last"], help="keep the best-validation or the last epoch (default: %(default)s)")
-    p.add_argument("--dtype", default="float64", choices=["float64", "float32"], help="training precision (default: %(default)s)")
-    p.add_argument("--head", default="auto", choices=["auto", "none"],
-                   help="auto: add one output per candidate control when the dataset has candidate labels; none: risk only (default: %(default)s)")
+    p.add_argument(
+        "--select",
+        default="best",
+        choices=["best", "last"],
+        help="keep the best-validation or the last epoch (default: %(default)s)",
+    )
+    p.add_argument(
+        "--dtype", default="float64", choices=["float64", "float32"], help="training precision (default: %(default)s)"
+    )
+    p.add_argument(
+        "--head",
+        default="auto",
+        choices=["auto", "none"],
+        help="auto: add one output per candidate control when the dataset has candidate labels; none: risk only (default: %(default)s)",
+    )
     p.add_argument("--quiet", action="store_true", help="no per-epoch log")
     return p
 
@@ -261,10 +339,22 @@ def main(argv: list[str] | None = None) -> int:
 
     args = build_parser().parse_args(argv)
     try:
-        cfg = TrainConfig(hidden=args.hidden, activation=args.activation, output_bias=args.output_bias,
-                          epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
-                          val_frac=args.val_frac, test_frac=args.test_frac, features=args.features,
-                          select=args.select, dtype=args.dtype, patience=args.patience, head=args.head)
+        cfg = TrainConfig(
+            hidden=args.hidden,
+            activation=args.activation,
+            output_bias=args.output_bias,
+            epochs=args.epochs,
+            batch_size=args.batch_size,
+            lr=args.lr,
+            seed=args.seed,
+            val_frac=args.val_frac,
+            test_frac=args.test_frac,
+            features=args.features,
+            select=args.select,
+            dtype=args.dtype,
+            patience=args.patience,
+            head=args.head,
+        )
         ds = load_dataset(args.data)
         model = train(ds, cfg, log=(lambda *a: None) if args.quiet else print)
     except (ValueError, FileNotFoundError) as e:
@@ -273,14 +363,18 @@ def main(argv: list[str] | None = None) -> int:
     model.meta["training"]["command"] = "rmm-train " + " ".join(sys.argv[1:] if argv is None else argv)
     model.save(args.out)
     m = model.meta["metrics"]
-    print(f"saved {args.out} (trained in {model.meta['training']['wall_seconds']:.1f} s, best epoch {model.meta['training']['best_epoch']})")
+    print(
+        f"saved {args.out} (trained in {model.meta['training']['wall_seconds']:.1f} s, best epoch {model.meta['training']['best_epoch']})"
+    )
     for split in ("train", "val", "test"):
         s = m[split]
         print(f"  {split:5s}: n={s['n']:6d}  MSE {s['mse']:.3e}  MAE {s['mae']:.3e}  max |err| {s['max_abs_err']:.3f}")
         if "candidates" in s:
             cs = s["candidates"]
-            print(f"         candidates: MSE {cs['mse']:.3e}  MAE {cs['mae']:.3e}  regret {cs['regret']:.4f} "
-                  f"(picked {cs['picked_risk']:.4f}, best {cs['best_risk']:.4f})")
+            print(
+                f"         candidates: MSE {cs['mse']:.3e}  MAE {cs['mae']:.3e}  regret {cs['regret']:.4f} "
+                f"(picked {cs['picked_risk']:.4f}, best {cs['best_risk']:.4f})"
+            )
     print(json.dumps({k: {"mse": v["mse"], "mae": v["mae"]} for k, v in m.items()}))
     return 0
 

@@ -27,12 +27,30 @@ from rmm_envs.adapters.classic_control import (
     PendulumScene,
 )
 
-__all__ = ["AdaptedEnv", "CartPoleAdapter", "CartPoleScene", "ClassicControlSnapshot", "PendulumAdapter",
-           "PendulumScene", "SimulatorScene", "SnapshotScene", "SnapshotSimulator", "adapt", "control_box",
-           "snapshot_of", "termination_is_failure"]
+__all__ = [
+    "AdaptedEnv",
+    "CartPoleAdapter",
+    "CartPoleScene",
+    "ClassicControlSnapshot",
+    "PendulumAdapter",
+    "PendulumScene",
+    "SimulatorScene",
+    "SnapshotScene",
+    "SnapshotSimulator",
+    "adapt",
+    "control_box",
+    "snapshot_of",
+    "termination_is_failure",
+]
 
-SERVED = ("CartPole-v1", "Pendulum-v1 (with failure=)", "InvertedPendulum-v5", "InvertedDoublePendulum-v5",
-          "Hopper-v5", "any other MuJoCo env (with failure=)")
+SERVED = (
+    "CartPole-v1",
+    "Pendulum-v1 (with failure=)",
+    "InvertedPendulum-v5",
+    "InvertedDoublePendulum-v5",
+    "Hopper-v5",
+    "any other MuJoCo env (with failure=)",
+)
 
 
 def _env_name(env) -> str:
@@ -41,7 +59,9 @@ def _env_name(env) -> str:
 
 
 def _is_mujoco(base) -> bool:
-    return any(c.__name__ == "MujocoEnv" and c.__module__.startswith("gymnasium.envs.mujoco") for c in type(base).__mro__)
+    return any(
+        c.__name__ == "MujocoEnv" and c.__module__.startswith("gymnasium.envs.mujoco") for c in type(base).__mro__
+    )
 
 
 def adapt(env: gym.Env, failure=None) -> AdaptedEnv:
@@ -69,7 +89,8 @@ def adapt(env: gym.Env, failure=None) -> AdaptedEnv:
     raise TypeError(
         f"{lacks}; no risk adapter serves it either (adapters exist for {', '.join(SERVED)}); for a simulator of your own, "
         f"implement rmm_envs.adapters.SnapshotSimulator (get_state, set_state, step, state_failed, dt, action_space) "
-        f"and label it through rmm_envs.adapters.SnapshotScene")
+        f"and label it through rmm_envs.adapters.SnapshotScene"
+    )
 
 
 def termination_is_failure(env: gym.Env) -> bool:

@@ -68,8 +68,10 @@ def control_box(space, name: str) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = np.asarray(space.low, float), np.asarray(space.high, float)
         if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)):
             return lo, hi
-    raise TypeError(f"{name}: its action space {space} cannot be sampled uniformly; the risk adapters need "
-                    f"a bounded 1-D Box or a Discrete action space")
+    raise TypeError(
+        f"{name}: its action space {space} cannot be sampled uniformly; the risk adapters need "
+        f"a bounded 1-D Box or a Discrete action space"
+    )
 
 
 def env_actions(space, controls, low, high) -> np.ndarray:
@@ -103,8 +105,9 @@ class SimulatorScene:
         default_horizon: the horizon ``t`` (s) a label uses unless told otherwise.
     """
 
-    def __init__(self, name: str, state_dim: int, dt: float, action_space, failure=None,
-                 default_horizon: float = 1.0) -> None:
+    def __init__(
+        self, name: str, state_dim: int, dt: float, action_space, failure=None, default_horizon: float = 1.0
+    ) -> None:
         self.name = name
         self.state_dim = int(state_dim)
         self.dt = float(dt)
@@ -135,8 +138,10 @@ class SimulatorScene:
         """The whole number of env steps in ``duration`` seconds (``ValueError`` otherwise)."""
         k = round(float(duration) / self.dt)
         if k < 1 or abs(k * self.dt - duration) > 1e-9 * max(1.0, abs(duration)):
-            raise ValueError(f"{self.name}: the horizon t = {duration!r} s must be a whole number >= 1 of the env's "
-                             f"steps of dt = {self.dt!r} s (for example {max(k, 1) * self.dt:g})")
+            raise ValueError(
+                f"{self.name}: the horizon t = {duration!r} s must be a whole number >= 1 of the env's "
+                f"steps of dt = {self.dt!r} s (for example {max(k, 1) * self.dt:g})"
+            )
         return k
 
     # -- RiskScene -----------------------------------------------------------------------------
@@ -151,8 +156,10 @@ class SimulatorScene:
             if self.failure is not None:
                 user = np.asarray(self.failure(good))
                 if user.shape != (good.shape[0],):
-                    raise ValueError(f"{self.name}: failure(states) must return shape ({good.shape[0]},) for "
-                                     f"{good.shape[0]} states, got {user.shape}")
+                    raise ValueError(
+                        f"{self.name}: failure(states) must return shape ({good.shape[0]},) for "
+                        f"{good.shape[0]} states, got {user.shape}"
+                    )
                 f = f | user.astype(bool)
             out[ok] = f
         return out
@@ -184,13 +191,13 @@ class SnapshotScene(SimulatorScene):
 
     def __init__(self, sim, name: str | None = None, failure=None, default_horizon: float = 1.0) -> None:
         name = name or type(sim).__name__
-        missing = [m for m in ("dt", "action_space", "get_state", "set_state", "step", "state_failed")
-                   if not hasattr(sim, m)]
+        missing = [
+            m for m in ("dt", "action_space", "get_state", "set_state", "step", "state_failed") if not hasattr(sim, m)
+        ]
         if missing:
             raise TypeError(f"{name} is not a SnapshotSimulator (see rmm_envs.adapters.base): it lacks {missing}")
         self.sim = sim
-        super().__init__(name, np.asarray(sim.get_state()).shape[0], sim.dt, sim.action_space, failure,
-                         default_horizon)
+        super().__init__(name, np.asarray(sim.get_state()).shape[0], sim.dt, sim.action_space, failure, default_horizon)
 
     def env_failed(self, states):
         return np.asarray(self.sim.state_failed(states), dtype=bool)
@@ -263,8 +270,14 @@ class AdaptedEnv:
         """``n`` states that do not fail, drawn from ``rng`` only (see the adapter's sampler)."""
         from rmm_envs.envs.base import rejection_sample
 
-        return rejection_sample(rng, n, self.scene.state_dim, self.draw_states, self.scene.state_failed,
-                                f"non-failed states of {self.scene.name}")
+        return rejection_sample(
+            rng,
+            n,
+            self.scene.state_dim,
+            self.draw_states,
+            self.scene.state_failed,
+            f"non-failed states of {self.scene.name}",
+        )
 
     def observe_states(self, states, rng=None) -> np.ndarray:
         raise NotImplementedError
@@ -274,4 +287,3 @@ class AdaptedEnv:
 
     def dataset_notes(self) -> dict:
         return {"obs_time_feature": None}
-

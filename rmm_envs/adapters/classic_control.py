@@ -46,14 +46,27 @@ class CartPoleScene(SimulatorScene):
 
     def __init__(self, env, failure=None, default_horizon: float = 0.08) -> None:
         u = env.unwrapped
-        self.p = {k: float(getattr(u, k)) for k in ("gravity", "masspole", "total_mass", "length",
-                                                     "polemass_length", "force_mag", "tau",
-                                                     "x_threshold", "theta_threshold_radians")}
+        self.p = {
+            k: float(getattr(u, k))
+            for k in (
+                "gravity",
+                "masspole",
+                "total_mass",
+                "length",
+                "polemass_length",
+                "force_mag",
+                "tau",
+                "x_threshold",
+                "theta_threshold_radians",
+            )
+        }
         self.euler = u.kinematics_integrator == "euler"
         super().__init__(_name(env), 4, self.p["tau"], u.action_space, failure, default_horizon)
 
     def env_failed(self, states):
-        return (np.abs(states[:, 0]) > self.p["x_threshold"]) | (np.abs(states[:, 2]) > self.p["theta_threshold_radians"])
+        return (np.abs(states[:, 0]) > self.p["x_threshold"]) | (
+            np.abs(states[:, 2]) > self.p["theta_threshold_radians"]
+        )
 
     def step(self, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """One env step of ``(N, 4)`` states under ``(N, 1)`` actions in {0, 1}."""
@@ -63,7 +76,8 @@ class CartPoleScene(SimulatorScene):
         cos, sin = np.cos(th), np.sin(th)
         temp = (force + p["polemass_length"] * np.square(th_dot) * sin) / p["total_mass"]
         th_acc = (p["gravity"] * sin - cos * temp) / (
-            p["length"] * (4.0 / 3.0 - p["masspole"] * np.square(cos) / p["total_mass"]))
+            p["length"] * (4.0 / 3.0 - p["masspole"] * np.square(cos) / p["total_mass"])
+        )
         x_acc = temp - p["polemass_length"] * th_acc * cos / p["total_mass"]
         tau = p["tau"]
         if self.euler:
@@ -163,10 +177,12 @@ class PendulumAdapter(_ClassicAdapter):
 
     def __init__(self, env, failure=None) -> None:
         if failure is None:
-            raise TypeError(f"{_name(env)} never terminates, so the risk adapter needs failure=callable(states "
-                            f"(N, 2) of (theta, theta_dot)) -> (N,) bool, for example "
-                            f"lambda s: np.abs(s[:, 1]) > 6.0 (angular speed beyond 6 rad/s); "
-                            f"rmm-datagen takes it as --failure module:callable")
+            raise TypeError(
+                f"{_name(env)} never terminates, so the risk adapter needs failure=callable(states "
+                f"(N, 2) of (theta, theta_dot)) -> (N,) bool, for example "
+                f"lambda s: np.abs(s[:, 1]) > 6.0 (angular speed beyond 6 rad/s); "
+                f"rmm-datagen takes it as --failure module:callable"
+            )
         super().__init__(env, PendulumScene(env, failure))
 
     def draw_states(self, rng, n):

@@ -82,8 +82,10 @@ class MujocoScene(SimulatorScene):
         _require_mujoco(name)
         self.kind, steps = self.KINDS.get(type(u).__name__, (None, 2))
         if self.kind is None and failure is None:
-            raise TypeError(f"{name}: no failure test is known for this MuJoCo env (the adapters know "
-                            f"{sorted(self.KINDS)}); give failure=callable(full states (N, d)) -> (N,) bool")
+            raise TypeError(
+                f"{name}: no failure test is known for this MuJoCo env (the adapters know "
+                f"{sorted(self.KINDS)}); give failure=callable(full states (N, d)) -> (N,) bool"
+            )
         self.env = u
         self.model = u.model
         self.frame_skip = int(u.frame_skip)
@@ -92,14 +94,20 @@ class MujocoScene(SimulatorScene):
         self.qvel0 = _offset(self.model, mujoco.mjtState.mjSTATE_QVEL)
         self.nq, self.nv = self.model.nq, self.model.nv
         self._data = mujoco.MjData(self.model)  # scratch data: kinematics, rollouts
-        super().__init__(name, mujoco.mj_stateSize(self.model, self.spec_bits), float(u.dt), u.action_space,
-                         failure, default_horizon if default_horizon is not None else steps * float(u.dt))
+        super().__init__(
+            name,
+            mujoco.mj_stateSize(self.model, self.spec_bits),
+            float(u.dt),
+            u.action_space,
+            failure,
+            default_horizon if default_horizon is not None else steps * float(u.dt),
+        )
 
     def qpos(self, states):
-        return states[:, self.qpos0:self.qpos0 + self.nq]
+        return states[:, self.qpos0 : self.qpos0 + self.nq]
 
     def qvel(self, states):
-        return states[:, self.qvel0:self.qvel0 + self.nv]
+        return states[:, self.qvel0 : self.qvel0 + self.nv]
 
     def env_failed(self, states):
         if self.kind == "inverted_pendulum":
@@ -111,8 +119,13 @@ class MujocoScene(SimulatorScene):
             lo_s, hi_s = u._healthy_state_range
             lo_z, hi_z = u._healthy_z_range
             lo_a, hi_a = u._healthy_angle_range
-            healthy = (np.all((lo_s < rest) & (rest < hi_s), axis=1) & (lo_z < qpos[:, 1]) & (qpos[:, 1] < hi_z)
-                       & (lo_a < qpos[:, 2]) & (qpos[:, 2] < hi_a))
+            healthy = (
+                np.all((lo_s < rest) & (rest < hi_s), axis=1)
+                & (lo_z < qpos[:, 1])
+                & (qpos[:, 1] < hi_z)
+                & (lo_a < qpos[:, 2])
+                & (qpos[:, 2] < hi_a)
+            )
             return ~healthy
         if self.kind == "inverted_double_pendulum":
             out = np.empty(states.shape[0], dtype=bool)
@@ -131,14 +144,20 @@ class MujocoScene(SimulatorScene):
         block = max(1, _BLOCK_BYTES // (8 * steps * self.state_dim))
         for lo in range(0, n, block):
             hi = min(n, lo + block)
-            _rollout.rollout(self.model, self._data, np.ascontiguousarray(states[lo:hi]),
-                             np.ascontiguousarray(controls[lo:hi]), nstep=steps, state=out[lo:hi])
+            _rollout.rollout(
+                self.model,
+                self._data,
+                np.ascontiguousarray(states[lo:hi]),
+                np.ascontiguousarray(controls[lo:hi]),
+                nstep=steps,
+                state=out[lo:hi],
+            )
         return out
 
     def advance(self, states, actions, k):
         held = np.broadcast_to(actions[:, None, :], (actions.shape[0], k * self.frame_skip, actions.shape[1]))
         out = self.physics(states, held)
-        return out[:, self.frame_skip - 1::self.frame_skip], None
+        return out[:, self.frame_skip - 1 :: self.frame_skip], None
 
 
 class MujocoSnapshot:
@@ -196,7 +215,7 @@ class MujocoAdapter(AdaptedEnv):
         acts = rng.uniform(sc.control_low, sc.control_high, size=(n, kmax, len(sc.control_low)))
         acts = acts.astype(sc.action_space.dtype).astype(float)
         phys = sc.physics(starts, np.repeat(acts, sc.frame_skip, axis=1))
-        traj = np.concatenate([starts[:, None], phys[:, sc.frame_skip - 1::sc.frame_skip]], axis=1)
+        traj = np.concatenate([starts[:, None], phys[:, sc.frame_skip - 1 :: sc.frame_skip]], axis=1)
         failed = sc.state_failed(traj.reshape(-1, sc.state_dim)).reshape(n, kmax + 1)
         first = np.where(failed.any(axis=1), failed.argmax(axis=1), kmax + 1)
         pick = np.clip(np.minimum(k, first - 1), 0, kmax)

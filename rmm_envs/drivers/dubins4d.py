@@ -49,7 +49,9 @@ class DriverParams:
             v = getattr(self, name)
             positive = name.startswith("p_")
             if not (isinstance(v, (int, float)) and math.isfinite(v) and (v > 0 if positive else v >= 0)):
-                raise ValueError(f"driver parameter {name} must be a finite number {'> 0' if positive else '>= 0'}, got {v!r}")
+                raise ValueError(
+                    f"driver parameter {name} must be a finite number {'> 0' if positive else '>= 0'}, got {v!r}"
+                )
 
     def as_array(self) -> np.ndarray:
         return np.array([self.gamma_vmin, self.gamma_vmax, self.lambda_theta, self.lambda_v, self.p_theta, self.p_v])
@@ -85,8 +87,9 @@ def _min_box_slack(a, b, p, lo, hi):
 
 def _clf_qp_loop(states, goals, lim, gain, out):
     for n in range(states.shape[0]):
-        a1, b1, a2, b2, l2, h2 = _clf_rows(states[n, 0], states[n, 1], states[n, 2], states[n, 3],
-                                           goals[n, 0], goals[n, 1], lim, gain)
+        a1, b1, a2, b2, l2, h2 = _clf_rows(
+            states[n, 0], states[n, 1], states[n, 2], states[n, 3], goals[n, 0], goals[n, 1], lim, gain
+        )
         out[n, 0], out[n, 2] = _min_box_slack(a1, b1, gain[4], lim[0], lim[1])
         out[n, 1], out[n, 3] = _min_box_slack(a2, b2, gain[5], l2, h2)
     return out
@@ -112,7 +115,12 @@ def clf_qp(states, goals, lim, gain, out=None) -> np.ndarray:
     """
     states = np.ascontiguousarray(states, dtype=float)
     goals = np.ascontiguousarray(goals, dtype=float)
-    if states.ndim != 2 or states.shape[1] < 4 or goals.shape != (states.shape[0], goals.shape[1]) or goals.shape[1] < 2:
+    if (
+        states.ndim != 2
+        or states.shape[1] < 4
+        or goals.shape != (states.shape[0], goals.shape[1])
+        or goals.shape[1] < 2
+    ):
         raise ValueError(f"states must be (N, 4) and goals (N, 2), got {states.shape} and {goals.shape}")
     if out is None:
         out = np.empty((states.shape[0], 4))
@@ -172,17 +180,38 @@ class CLFDriver:
         # Rows: 0 u1 box; 1 u2 interval; 2 heading CLF; 3 speed CLF.  Fixed pattern
         # (column-major): col0 rows (0, 2); col1 rows (1, 3); col2 row 2; col3 row 3.
         self._Ax = np.array([1.0, 1.0, 1.0, 1.0, -1.0, -1.0])
-        A = sp.csc_matrix((self._Ax.copy(), np.array([0, 2, 1, 3, 2, 3], dtype=np.int32),
-                           np.array([0, 2, 4, 5, 6], dtype=np.int32)), shape=(4, 4))
+        A = sp.csc_matrix(
+            (self._Ax.copy(), np.array([0, 2, 1, 3, 2, 3], dtype=np.int32), np.array([0, 2, 4, 5, 6], dtype=np.int32)),
+            shape=(4, 4),
+        )
         self._l = np.array([self.u1_min, self.u2_min, -np.inf, -np.inf])
         self._u = np.array([self.u1_max, self.u2_max, 0.0, 0.0])
         self._solver = osqp.OSQP()
-        self._solver.setup(P, np.zeros(4), A, self._l, self._u, verbose=False, eps_abs=self._eps,
-                           eps_rel=self._eps, polishing=True, warm_starting=True, max_iter=4000)
+        self._solver.setup(
+            P,
+            np.zeros(4),
+            A,
+            self._l,
+            self._u,
+            verbose=False,
+            eps_abs=self._eps,
+            eps_rel=self._eps,
+            polishing=True,
+            warm_starting=True,
+            max_iter=4000,
+        )
 
     def _solve_osqp(self, state, goal_xy) -> np.ndarray:
-        a1, b1, a2, b2, l2, h2 = _clf_rows(float(state[0]), float(state[1]), float(state[2]), float(state[3]),
-                                           float(goal_xy[0]), float(goal_xy[1]), self.lim, self.gain)
+        a1, b1, a2, b2, l2, h2 = _clf_rows(
+            float(state[0]),
+            float(state[1]),
+            float(state[2]),
+            float(state[3]),
+            float(goal_xy[0]),
+            float(goal_xy[1]),
+            self.lim,
+            self.gain,
+        )
         self._Ax[1], self._Ax[3] = a1, a2
         self._l[1], self._u[1], self._u[2], self._u[3] = l2, h2, b1, b2
         self._solver.update(Ax=self._Ax, l=self._l, u=self._u)

@@ -24,11 +24,11 @@ __all__ = ["PursuitDriver", "cell_distances", "cell_of", "cell_path"]
 
 class PursuitDriver:
     """Args:
-        u_max: the largest turn rate, rad/s (the system's bound).
-        lookahead: how far along the path ahead of the car it aims, px (default 190, the
-            env's: a corner is cut from more than a cell away).
-        gain: turn rate per radian of bearing error, 1/s (default 1.0: saturates beyond
-            ``u_max`` rad of error, 0.2 rad at the maze's defaults).
+    u_max: the largest turn rate, rad/s (the system's bound).
+    lookahead: how far along the path ahead of the car it aims, px (default 190, the
+        env's: a corner is cut from more than a cell away).
+    gain: turn rate per radian of bearing error, 1/s (default 1.0: saturates beyond
+        ``u_max`` rad of error, 0.2 rad at the maze's defaults).
     """
 
     def __init__(self, u_max: float, lookahead: float = 190.0, gain: float = 1.0) -> None:

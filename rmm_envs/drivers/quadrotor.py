@@ -25,18 +25,31 @@ __all__ = ["WaypointPilot"]
 
 class WaypointPilot:
     """Args:
-        command_low, command_high: the command box (4 numbers each), the controller's.
-        cruise_speed: horizontal speed limit, m/s (default 1.5).
-        climb_speed: vertical speed limit, m/s (default 0.5).
-        gain: velocity per metre of distance, 1/s (default 1.0: full speed from 1.5 m away).
-        yaw_gain: yaw rate per radian of bearing error, 1/s (default 2.0).
-        reach: distance at which a waypoint is passed, m (default 0.5).
+    command_low, command_high: the command box (4 numbers each), the controller's.
+    cruise_speed: horizontal speed limit, m/s (default 1.5).
+    climb_speed: vertical speed limit, m/s (default 0.5).
+    gain: velocity per metre of distance, 1/s (default 1.0: full speed from 1.5 m away).
+    yaw_gain: yaw rate per radian of bearing error, 1/s (default 2.0).
+    reach: distance at which a waypoint is passed, m (default 0.5).
     """
 
-    def __init__(self, command_low, command_high, cruise_speed: float = 1.5, climb_speed: float = 0.5,
-                 gain: float = 1.0, yaw_gain: float = 2.0, reach: float = 0.5) -> None:
-        for name, v in (("cruise_speed", cruise_speed), ("climb_speed", climb_speed), ("gain", gain),
-                        ("yaw_gain", yaw_gain), ("reach", reach)):
+    def __init__(
+        self,
+        command_low,
+        command_high,
+        cruise_speed: float = 1.5,
+        climb_speed: float = 0.5,
+        gain: float = 1.0,
+        yaw_gain: float = 2.0,
+        reach: float = 0.5,
+    ) -> None:
+        for name, v in (
+            ("cruise_speed", cruise_speed),
+            ("climb_speed", climb_speed),
+            ("gain", gain),
+            ("yaw_gain", yaw_gain),
+            ("reach", reach),
+        ):
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
         self.low = np.asarray(command_low, dtype=float).reshape(4)

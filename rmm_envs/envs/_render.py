@@ -21,7 +21,7 @@ class Canvas:
         self.x0, self.y0 = x0, y0
         self.sx = size / (x1 - x0)
         self.sy = size / (y1 - y0)
-        c = (np.arange(size) + 0.5)
+        c = np.arange(size) + 0.5
         self.wx = x0 + c / self.sx  # world x of each column
         self.wy = y1 - c / self.sy  # world y of each row (row 0 is the top)
 
@@ -70,8 +70,12 @@ def dubins4d_frame(scene, state, guardian_active: bool, half: float, size: int =
     from rmm_envs.worlds.circles import ray_cast
 
     cv = Canvas(size, -15, 15, -15, 15)
-    for a, b in (((-half, -half), (half, -half)), ((half, -half), (half, half)),
-                 ((half, half), (-half, half)), ((-half, half), (-half, -half))):
+    for a, b in (
+        ((-half, -half), (half, -half)),
+        ((half, -half), (half, half)),
+        ((half, half), (-half, half)),
+        ((-half, half), (-half, -half)),
+    ):
         cv.line(a[0], a[1], b[0], b[1], (225, 225, 225))  # the arena used for generation
     g = scene.goal
     cv.disc(g[0], g[1], g[2], GREEN)
@@ -99,7 +103,12 @@ def map_frame(scene, state, guardian_active: bool, start_box, size: int = 512) -
     c, half = (lo + hi) / 2, 0.525 * float(np.max(hi - lo))
     cv = Canvas(size, c[0] - half, c[0] + half, c[1] - half, c[1] + half)
     (bx0, by0), (bx1, by1) = start_box
-    for a, b in (((bx0, by0), (bx1, by0)), ((bx1, by0), (bx1, by1)), ((bx1, by1), (bx0, by1)), ((bx0, by1), (bx0, by0))):
+    for a, b in (
+        ((bx0, by0), (bx1, by0)),
+        ((bx1, by0), (bx1, by1)),
+        ((bx1, by1), (bx0, by1)),
+        ((bx0, by1), (bx0, by0)),
+    ):
         cv.line(a[0], a[1], b[0], b[1], (225, 225, 225))
     g = scene.goal
     cv.disc(g[0], g[1], g[2], GREEN)

@@ -17,15 +17,25 @@ Each piece in detail: docs/design-notes.md#rmm_envsenvsbase.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Iterable, TypeVar
+from collections.abc import Callable, Iterable
+from typing import Any, TypeVar
 
 import gymnasium as gym
 import numpy as np
 
 from rmm_envs.worlds.bounds import MAX_MAGNITUDE, within_bounds
 
-__all__ = ["MAX_ROUNDS", "LabelledEnvBase", "check_arguments", "draw_until", "finite", "option_vector",
-           "rejection_sample", "state_rows", "whole"]
+__all__ = [
+    "MAX_ROUNDS",
+    "LabelledEnvBase",
+    "check_arguments",
+    "draw_until",
+    "finite",
+    "option_vector",
+    "rejection_sample",
+    "state_rows",
+    "whole",
+]
 
 T = TypeVar("T")
 
@@ -59,8 +69,14 @@ def check_arguments(checks: Iterable[tuple[bool, str, Any, str]]) -> None:
     for ok, name, value, expected in checks:
         if not ok:
             numbers = list(value) if isinstance(value, (list, tuple)) else [value]
-            huge = [v for v in numbers if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
-                    and not within_bounds(v) and not (isinstance(v, (float, np.floating)) and not math.isfinite(v))]
+            huge = [
+                v
+                for v in numbers
+                if isinstance(v, (int, float, np.integer, np.floating))
+                and not isinstance(v, bool)
+                and not within_bounds(v)
+                and not (isinstance(v, (float, np.floating)) and not math.isfinite(v))
+            ]
             why = f" (at most {MAX_MAGNITUDE:g} in magnitude: larger values overflow the arithmetic)" if huge else ""
             raise ValueError(f"{name} must be {expected}{why}, got {str(value)[:200] if huge else repr(value)}")
 
@@ -75,8 +91,10 @@ def option_vector(value, n: int, name: str, what: str = "") -> np.ndarray:
     if arr is None or arr.shape != (n,) or not np.all(np.isfinite(arr)):
         raise ValueError(f"option {name!r} must be {n} finite numbers{what}, got {_short(value)}")
     if not within_bounds(arr):
-        raise ValueError(f"option {name!r} must be {n} numbers of magnitude at most {MAX_MAGNITUDE:g}{what} (larger ones "
-                         f"overflow the geometry), got {_short(value)}")
+        raise ValueError(
+            f"option {name!r} must be {n} numbers of magnitude at most {MAX_MAGNITUDE:g}{what} (larger ones "
+            f"overflow the geometry), got {_short(value)}"
+        )
     return arr
 
 
@@ -91,7 +109,9 @@ def state_rows(states, dim: int, what: str = "states") -> np.ndarray:
     try:
         s = np.asarray(states, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{what} must be an array of shape (N, {dim}) of numbers, got {type(states).__name__}") from None
+        raise ValueError(
+            f"{what} must be an array of shape (N, {dim}) of numbers, got {type(states).__name__}"
+        ) from None
     if s.ndim != 2 or s.shape[1] != dim:
         raise ValueError(f"{what} must have shape (N, {dim}), got shape {s.shape}")
     bad = np.flatnonzero(~np.isfinite(s).all(axis=1))
@@ -110,10 +130,15 @@ def draw_until(draw: Callable[[], T], accept: Callable[[T], bool], max_draws: in
     return None
 
 
-def rejection_sample(rng: np.random.Generator, n: int, dim: int,
-                     draw: Callable[[np.random.Generator, int], np.ndarray],
-                     rejected: Callable[[np.ndarray], np.ndarray], what: str,
-                     max_rounds: int = MAX_ROUNDS) -> np.ndarray:
+def rejection_sample(
+    rng: np.random.Generator,
+    n: int,
+    dim: int,
+    draw: Callable[[np.random.Generator, int], np.ndarray],
+    rejected: Callable[[np.ndarray], np.ndarray],
+    what: str,
+    max_rounds: int = MAX_ROUNDS,
+) -> np.ndarray:
     """``(n, dim)`` rows of ``draw(rng, k) -> (k, dim)`` that ``rejected(rows) -> (k,) bool``
     does not reject, in the order drawn; rounds of ``max(2 * missing, 16)`` candidates, at most
     ``max_rounds`` of them, then ``RuntimeError`` naming ``what`` and the acceptance seen."""
@@ -130,8 +155,10 @@ def rejection_sample(rng: np.random.Generator, n: int, dim: int,
         out = np.vstack([out, cand[~np.asarray(rejected(cand), dtype=bool)]])
     if out.shape[0] >= n:
         return out[:n]
-    raise RuntimeError(f"could not draw {n} {what}: only {out.shape[0]} of {drawn} candidates were accepted in "
-                       f"{max_rounds} rounds of rejection sampling; the scene leaves (almost) no free space")
+    raise RuntimeError(
+        f"could not draw {n} {what}: only {out.shape[0]} of {drawn} candidates were accepted in "
+        f"{max_rounds} rounds of rejection sampling; the scene leaves (almost) no free space"
+    )
 
 
 class LabelledEnvBase(gym.Env):
@@ -155,8 +182,10 @@ class LabelledEnvBase(gym.Env):
         options = dict(options or {})
         unknown = set(options) - set(self.reset_options)
         if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; expected any of "
-                             f"{', '.join(repr(k) for k in self.reset_options)}")
+            raise ValueError(
+                f"unknown reset options {sorted(unknown)}; expected any of "
+                f"{', '.join(repr(k) for k in self.reset_options)}"
+            )
         return options
 
     # ------------------------------------------------------------------ running state
@@ -206,7 +235,9 @@ class LabelledEnvBase(gym.Env):
         try:
             import pygame
         except ImportError as e:  # pragma: no cover - optional extra
-            raise gym.error.DependencyNotInstalled("render_mode='human' needs pygame: the human extra, pip install -e '.[human]' in a clone") from e
+            raise gym.error.DependencyNotInstalled(
+                "render_mode='human' needs pygame: the human extra, pip install -e '.[human]' in a clone"
+            ) from e
         if self._window is None:  # pragma: no cover - needs a display
             pygame.init()
             self._window = pygame.display.set_mode(frame.shape[:2])

@@ -106,8 +106,12 @@ class _Actions:
             if ok:
                 return int(arr.reshape(-1)[0])
         else:
-            ok = (arr.dtype.kind in "fiu" and arr.size == self.space.shape[0] and bool(np.all(np.isfinite(arr)))
-                  and bool(np.all((arr.reshape(-1) >= self.space.low) & (arr.reshape(-1) <= self.space.high))))
+            ok = (
+                arr.dtype.kind in "fiu"
+                and arr.size == self.space.shape[0]
+                and bool(np.all(np.isfinite(arr)))
+                and bool(np.all((arr.reshape(-1) >= self.space.low) & (arr.reshape(-1) <= self.space.high)))
+            )
             if ok:
                 return arr.reshape(self.space.shape).astype(self.space.dtype)
         raise ValueError(f"{who} returned the action {action!r}, outside the env's action space {self.space}")
@@ -131,8 +135,10 @@ def _policy(obj, what: str):
         return lambda obs: predict(obs, deterministic=True)[0]
     if callable(obj):
         return obj
-    raise TypeError(f"{what} must be a callable obs -> action or an object with predict(obs, deterministic=True) "
-                    f"(an SB3-style policy), got {obj!r}")
+    raise TypeError(
+        f"{what} must be a callable obs -> action or an object with predict(obs, deterministic=True) "
+        f"(an SB3-style policy), got {obj!r}"
+    )
 
 
 class GivenSafeDefault(SafeDefault):
@@ -140,7 +146,7 @@ class GivenSafeDefault(SafeDefault):
 
     def __init__(self, fn, actions: _Actions, constant=None) -> None:
         self._fn, self._actions, self._constant = fn, actions, constant
-        self.description = (f"the constant action {constant!r}" if fn is None else f"the policy {_name(fn)}")
+        self.description = f"the constant action {constant!r}" if fn is None else f"the policy {_name(fn)}"
 
     def policy(self, space, rng, **options):
         self.check_options(options)
@@ -157,8 +163,18 @@ class DrivenGuardedEnv(GuardedEnv):
     metadata = {"render_modes": []}
     render_mode = None
 
-    def __init__(self, env, driver, safe_default, success, failure=None, controls=None, step_dt: float | None = None,
-                 max_episode_sim_time: float | None = None, clock=None) -> None:
+    def __init__(
+        self,
+        env,
+        driver,
+        safe_default,
+        success,
+        failure=None,
+        controls=None,
+        step_dt: float | None = None,
+        max_episode_sim_time: float | None = None,
+        clock=None,
+    ) -> None:
         from rmm_envs.adapters import termination_is_failure
         from rmm_envs.clocks import make_clock
 
@@ -174,9 +190,11 @@ class DrivenGuardedEnv(GuardedEnv):
             raise TypeError(f"success must be a callable success(obs) -> bool, got {success!r}")
         self._success = success
         if failure is None and not termination_is_failure(self.env):
-            raise ValueError(f"{self.env_name} has no known failure notion (its termination means failure only for "
-                             "CartPole and the MuJoCo envs with an unhealthy state); give failure='terminated' if its "
-                             "termination is a failure, or failure=callable(obs) -> bool")
+            raise ValueError(
+                f"{self.env_name} has no known failure notion (its termination means failure only for "
+                "CartPole and the MuJoCo envs with an unhealthy state); give failure='terminated' if its "
+                "termination is a failure, or failure=callable(obs) -> bool"
+            )
         if not (failure is None or failure == "terminated" or callable(failure)):
             raise TypeError(f"failure must be None, 'terminated' or a callable failure(obs) -> bool, got {failure!r}")
         self._failure = None if failure in (None, "terminated") else failure
@@ -187,15 +205,25 @@ class DrivenGuardedEnv(GuardedEnv):
             try:
                 constant = self._acts.check(safe_default, "safe_default")
             except ValueError:
-                raise TypeError(f"safe_default must be a callable obs -> action, an SB3-style policy or a constant "
-                                f"action in the env's action space {self.env.action_space}, got {safe_default!r}") from None
+                raise TypeError(
+                    f"safe_default must be a callable obs -> action, an SB3-style policy or a constant "
+                    f"action in the env's action space {self.env.action_space}, got {safe_default!r}"
+                ) from None
             safe = GivenSafeDefault(None, self._acts, constant)
         k = len(self._acts.low)
-        names = tuple(f"u{i}" for i in range(k)) if controls is None else () if isinstance(controls, str) else tuple(controls)
+        names = (
+            tuple(f"u{i}" for i in range(k))
+            if controls is None
+            else ()
+            if isinstance(controls, str)
+            else tuple(controls)
+        )
         if len(names) != k:  # a string would be one name per letter
             hint = f" (a string; one name is {(controls,)!r})" if isinstance(controls, str) else ""
-            raise ValueError(f"controls must name each control of {self.env_name}'s action space {self.env.action_space} "
-                             f"({k} control{'s' if k > 1 else ''}), got {controls!r}{hint}")
+            raise ValueError(
+                f"controls must name each control of {self.env_name}'s action space {self.env.action_space} "
+                f"({k} control{'s' if k > 1 else ''}), got {controls!r}{hint}"
+            )
         self.action_space = GuardianActionSpace(names, self._acts.low, self._acts.high, safe_default=safe, kind=GENERIC)
         self.observation_space = self.env.observation_space
         self.dt = self._env_dt()
@@ -354,11 +382,21 @@ def guarded(env, driver, safe_default, success, failure=None, **kwargs) -> Drive
     return DrivenGuardedEnv(env, driver, safe_default, success, failure=failure, **kwargs)
 
 
-def parallel(env, driver, safe_default, success, failure=None, time_accel: float = TIME_ACCEL,
-             base_step: float | None = None, clock=None, **kwargs):
+def parallel(
+    env,
+    driver,
+    safe_default,
+    success,
+    failure=None,
+    time_accel: float = TIME_ACCEL,
+    base_step: float | None = None,
+    clock=None,
+    **kwargs,
+):
     """The non-blocking twin of :func:`guarded`: the same env under
     :class:`rmm_envs.wrappers.NonBlockingStepping` (``base_step`` defaults to the env's own step)."""
 
     inner = DrivenGuardedEnv(env, driver, safe_default, success, failure=failure, **kwargs)
-    return NonBlockingStepping(inner, time_accel=time_accel, base_step=inner.dt if base_step is None else base_step,
-                               clock=clock)
+    return NonBlockingStepping(
+        inner, time_accel=time_accel, base_step=inner.dt if base_step is None else base_step, clock=clock
+    )

@@ -51,7 +51,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["TargetTask", "cartpole_guarded", "cartpole_parallel", "inverted_pendulum_guarded", "inverted_pendulum_parallel"]
+__all__ = [
+    "TargetTask",
+    "cartpole_guarded",
+    "cartpole_parallel",
+    "inverted_pendulum_guarded",
+    "inverted_pendulum_parallel",
+]
 
 #: CartPole's balancing gains: ``u = -K s`` of the continuous-time LQR (see the module docstring)
 CARTPOLE_K = (-3.16227766, -5.91549435, -49.50716842, -12.84439629)
@@ -113,18 +119,21 @@ class TargetTask:
 
 def _task(env_id: str) -> tuple[TargetTask, dict]:
     if env_id == "CartPole-v1":
-        return TargetTask(CARTPOLE_K, pos=0, ang=2, dt=0.02, near=0.6, far=1.8, g_lo=1.0, g_hi=4.0, tol_x=0.2,
-                          hold=1.0, discrete=True), {"controls": ("force_ctrl",), "max_episode_sim_time": 10.0}
-    return TargetTask(PENDULUM_K, pos=0, ang=1, dt=0.04, near=0.3, far=0.8, g_lo=1.0, g_hi=4.0, tol_x=0.1,
-                      hold=1.0, discrete=False), {"controls": ("force_ctrl",), "max_episode_sim_time": 10.0}
+        return TargetTask(
+            CARTPOLE_K, pos=0, ang=2, dt=0.02, near=0.6, far=1.8, g_lo=1.0, g_hi=4.0, tol_x=0.2, hold=1.0, discrete=True
+        ), {"controls": ("force_ctrl",), "max_episode_sim_time": 10.0}
+    return TargetTask(
+        PENDULUM_K, pos=0, ang=1, dt=0.04, near=0.3, far=0.8, g_lo=1.0, g_hi=4.0, tol_x=0.1, hold=1.0, discrete=False
+    ), {"controls": ("force_ctrl",), "max_episode_sim_time": 10.0}
 
 
 def _guarded(env_id: str, clock=None, **kwargs):
     from rmm_envs.envs.driven import guarded
 
     task, defaults = _task(env_id)
-    return guarded(env_id, driver=task, safe_default=task.balance, success=task.reached, clock=clock,
-                   **(defaults | kwargs))
+    return guarded(
+        env_id, driver=task, safe_default=task.balance, success=task.reached, clock=clock, **(defaults | kwargs)
+    )
 
 
 def cartpole_guarded(clock=None, **kwargs):

@@ -77,7 +77,15 @@ from gymnasium import spaces
 
 from rmm_envs.autonomy import ObservationBox, ObservationLayout
 from rmm_envs.envs import _render
-from rmm_envs.envs.base import LabelledEnvBase, check_arguments, draw_until, finite, option_vector, rejection_sample, whole
+from rmm_envs.envs.base import (
+    LabelledEnvBase,
+    check_arguments,
+    draw_until,
+    finite,
+    option_vector,
+    rejection_sample,
+    whole,
+)
 from rmm_envs.scenes.maze import MazeScene
 from rmm_envs.systems.dubins3d import Dubins3D
 from rmm_envs.worlds.mazes import MAZE_KINDS, Maze, generate_maze
@@ -111,17 +119,32 @@ class Dubins3DMazeEnv(LabelledEnvBase):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
     reset_options = ("state", "maze")
 
-    def __init__(self, maze_kind: str = "rectangular", step_dt: float = 1.0, n_path_points: int = 8,
-                 max_episode_steps: int = 1000, speed: float = 10.0, r_min: float = 50.0, render_mode: str | None = None):
-        check_arguments([
-            (maze_kind in MAZE_KINDS + ("mixed",), "maze_kind", maze_kind, f"one of {MAZE_KINDS + ('mixed',)}"),
-            (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number > 0"),
-            (whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
-            (whole(max_episode_steps) and max_episode_steps >= 1, "max_episode_steps", max_episode_steps, "an integer >= 1"),
-            (finite(speed) and speed > 0, "speed", speed, "a finite number > 0"),
-            (finite(r_min) and r_min > 0, "r_min", r_min, "a finite number > 0"),
-            self.check_render_mode(render_mode),
-        ])
+    def __init__(
+        self,
+        maze_kind: str = "rectangular",
+        step_dt: float = 1.0,
+        n_path_points: int = 8,
+        max_episode_steps: int = 1000,
+        speed: float = 10.0,
+        r_min: float = 50.0,
+        render_mode: str | None = None,
+    ):
+        check_arguments(
+            [
+                (maze_kind in MAZE_KINDS + ("mixed",), "maze_kind", maze_kind, f"one of {MAZE_KINDS + ('mixed',)}"),
+                (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number > 0"),
+                (whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
+                (
+                    whole(max_episode_steps) and max_episode_steps >= 1,
+                    "max_episode_steps",
+                    max_episode_steps,
+                    "an integer >= 1",
+                ),
+                (finite(speed) and speed > 0, "speed", speed, "a finite number > 0"),
+                (finite(r_min) and r_min > 0, "r_min", r_min, "a finite number > 0"),
+                self.check_render_mode(render_mode),
+            ]
+        )
         self.maze_kind = maze_kind
         self.step_dt = float(step_dt)
         self.n_path_points = int(n_path_points)
@@ -130,7 +153,9 @@ class Dubins3DMazeEnv(LabelledEnvBase):
         self.render_mode = render_mode
         u = np.float32(self.system.u_max)
         self.action_space = spaces.Box(-u, u, shape=(1,), dtype=np.float32)
-        self.observation_space = ObservationBox(np.zeros(N_RAYS, np.float32), np.full(N_RAYS, np.inf, np.float32), observation_layout())
+        self.observation_space = ObservationBox(
+            np.zeros(N_RAYS, np.float32), np.full(N_RAYS, np.inf, np.float32), observation_layout()
+        )
         self.scene: MazeScene | None = None
         self._state = np.zeros(3)
         self._steps = 0
@@ -144,9 +169,15 @@ class Dubins3DMazeEnv(LabelledEnvBase):
         self.require_episode()
         m = self.scene.maze
         return rejection_sample(
-            rng, n, 3,
-            lambda r, k: np.column_stack([r.uniform(0, m.width, k), r.uniform(0, m.height, k), r.uniform(-np.pi, np.pi, k)]),
-            lambda cand: m.state_failed(cand[:, :2]), "maze poses clear of the walls")
+            rng,
+            n,
+            3,
+            lambda r, k: np.column_stack(
+                [r.uniform(0, m.width, k), r.uniform(0, m.height, k), r.uniform(-np.pi, np.pi, k)]
+            ),
+            lambda cand: m.state_failed(cand[:, :2]),
+            "maze poses clear of the walls",
+        )
 
     def observe_states(self, states, rng=None) -> np.ndarray:
         """The ray observation of arbitrary poses ``(N, 3)``; ``rng`` is unused (no random feature)."""
@@ -166,7 +197,11 @@ class Dubins3DMazeEnv(LabelledEnvBase):
 
     def _draw_maze(self, spec) -> Maze:
         if spec is None:
-            kind = self.maze_kind if self.maze_kind != "mixed" else MAZE_KINDS[int(self.np_random.integers(len(MAZE_KINDS)))]
+            kind = (
+                self.maze_kind
+                if self.maze_kind != "mixed"
+                else MAZE_KINDS[int(self.np_random.integers(len(MAZE_KINDS)))]
+            )
             return generate_maze(self.np_random, kind)
         return self._maze_from_option(spec)
 
@@ -179,18 +214,23 @@ class Dubins3DMazeEnv(LabelledEnvBase):
             self._maze_from_option(spec)  # raises, naming the option
         if st is not None and isinstance(spec, Maze):
             if spec.state_failed(st[None, :2])[0]:
-                raise ValueError(f"option 'state': {st[:2].tolist()} is inside a wall of option 'maze' or outside its "
-                                 f"{spec.width:g} x {spec.height:g} px image")
+                raise ValueError(
+                    f"option 'state': {st[:2].tolist()} is inside a wall of option 'maze' or outside its "
+                    f"{spec.width:g} x {spec.height:g} px image"
+                )
             maze = spec
         elif st is not None:
             # a generated maze (from the seed, or from the given generate_maze arguments) is
             # redrawn until the given state is clear of its walls, as generation keeps states clear
-            maze = draw_until(lambda: self._draw_maze(spec), lambda mz: not mz.state_failed(st[None, :2])[0],
-                              self._MAX_MAZE_DRAWS)
+            maze = draw_until(
+                lambda: self._draw_maze(spec), lambda mz: not mz.state_failed(st[None, :2])[0], self._MAX_MAZE_DRAWS
+            )
             if maze is None:
-                raise ValueError(f"option 'state': {st[:2].tolist()} is inside a wall or outside the image of each of "
-                                 f"{self._MAX_MAZE_DRAWS} mazes drawn from the seed; choose a point inside a cell, "
-                                 "away from its sides")
+                raise ValueError(
+                    f"option 'state': {st[:2].tolist()} is inside a wall or outside the image of each of "
+                    f"{self._MAX_MAZE_DRAWS} mazes drawn from the seed; choose a point inside a cell, "
+                    "away from its sides"
+                )
         else:
             maze = self._draw_maze(spec)
         self.scene = MazeScene(maze, self.system)

@@ -124,29 +124,31 @@ import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout, SafeDefault
 from rmm_envs.clocks import Clock, make_clock
+from rmm_envs.drivers.maze import PursuitDriver, cell_distances, cell_of, cell_path
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, option_vector, whole
-from rmm_envs.worlds.bounds import MAX_MAZE_SIDE
 from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv, maze_from_option
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.portable import wrap_angle
-from rmm_envs.drivers.maze import PursuitDriver, cell_distances, cell_of, cell_path
 from rmm_envs.scenes.maze import MazeScene
 from rmm_envs.systems.dubins3d import Dubins3D
 from rmm_envs.systems.dubins4d import SERIES_COEFFICIENTS
+from rmm_envs.worlds.bounds import MAX_MAZE_SIDE
 from rmm_envs.worlds.maze_kernels import dubins_path, maze_path_hit, maze_rays, path_reaches_disc
 from rmm_envs.worlds.mazes import Maze, generate_maze
 
 __all__ = ["CONTROLS", "Dubins3DMazeGuardedEnv", "TurnFromNearerWall", "make_parallel_env", "observation_layout"]
 
 from rmm_envs.systems.dubins3d import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
+
 N_RAYS = 8
 
 
 def observation_layout() -> ObservationLayout:
     """The named slices of the observation table above."""
-    return ObservationLayout.of(("rays", N_RAYS), ("goal_offset", 2), ("heading", 1),
-                                ray_angles=[k * math.pi / 4 for k in range(N_RAYS)])
+    return ObservationLayout.of(
+        ("rays", N_RAYS), ("goal_offset", 2), ("heading", 1), ray_angles=[k * math.pi / 4 for k in range(N_RAYS)]
+    )
 
 
 class TurnFromNearerWall(SafeDefault):
@@ -186,30 +188,68 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
     length_unit = "px"
     metres_per_unit = 0.01
 
-    def __init__(self, step_dt: float = 0.1, n_path_points: int = 8, max_episode_sim_time: float = 300.0,
-                 goal_cells=(4, 8), goal_radius: float = 30.0, start_jitter: float = 15.0,
-                 heading_noise: float = math.pi / 4, lookahead: float = 190.0, driver_gain: float = 1.0,
-                 maze_rows: int = 10, maze_cols: int = 10, speed: float = 10.0, r_min: float = 50.0,
-                 clock: Clock | str | None = None, render_mode: str | None = None) -> None:
+    def __init__(
+        self,
+        step_dt: float = 0.1,
+        n_path_points: int = 8,
+        max_episode_sim_time: float = 300.0,
+        goal_cells=(4, 8),
+        goal_radius: float = 30.0,
+        start_jitter: float = 15.0,
+        heading_noise: float = math.pi / 4,
+        lookahead: float = 190.0,
+        driver_gain: float = 1.0,
+        maze_rows: int = 10,
+        maze_cols: int = 10,
+        speed: float = 10.0,
+        r_min: float = 50.0,
+        clock: Clock | str | None = None,
+        render_mode: str | None = None,
+    ) -> None:
         gc = tuple(goal_cells) if isinstance(goal_cells, (tuple, list)) else ()
-        check_arguments([
-            (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number > 0"),
-            (whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
-            (finite(max_episode_sim_time) and max_episode_sim_time > 0, "max_episode_sim_time", max_episode_sim_time,
-             "a finite number of seconds > 0 (episodes need a time limit)"),
-            (len(gc) == 2 and all(whole(g) for g in gc) and 1 <= gc[0] <= gc[1], "goal_cells", goal_cells,
-             "a pair (min, max) of integers with 1 <= min <= max"),
-            (finite(goal_radius) and goal_radius > 0, "goal_radius", goal_radius, "a finite number > 0"),
-            (finite(start_jitter) and start_jitter >= 0, "start_jitter", start_jitter, "a finite number >= 0"),
-            (finite(heading_noise) and 0 <= heading_noise <= math.pi, "heading_noise", heading_noise, "a number in [0, pi]"),
-            (finite(lookahead) and lookahead > 0, "lookahead", lookahead, "a finite number > 0"),
-            (finite(driver_gain) and driver_gain > 0, "driver_gain", driver_gain, "a finite number > 0"),
-            (whole(maze_rows) and 2 <= maze_rows <= MAX_MAZE_SIDE, "maze_rows", maze_rows, f"an integer in [2, {MAX_MAZE_SIDE}]"),
-            (whole(maze_cols) and 2 <= maze_cols <= MAX_MAZE_SIDE, "maze_cols", maze_cols, f"an integer in [2, {MAX_MAZE_SIDE}]"),
-            (finite(speed) and speed > 0, "speed", speed, "a finite number > 0"),
-            (finite(r_min) and r_min > 0, "r_min", r_min, "a finite number > 0"),
-            self.check_render_mode(render_mode),
-        ])
+        check_arguments(
+            [
+                (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number > 0"),
+                (whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
+                (
+                    finite(max_episode_sim_time) and max_episode_sim_time > 0,
+                    "max_episode_sim_time",
+                    max_episode_sim_time,
+                    "a finite number of seconds > 0 (episodes need a time limit)",
+                ),
+                (
+                    len(gc) == 2 and all(whole(g) for g in gc) and 1 <= gc[0] <= gc[1],
+                    "goal_cells",
+                    goal_cells,
+                    "a pair (min, max) of integers with 1 <= min <= max",
+                ),
+                (finite(goal_radius) and goal_radius > 0, "goal_radius", goal_radius, "a finite number > 0"),
+                (finite(start_jitter) and start_jitter >= 0, "start_jitter", start_jitter, "a finite number >= 0"),
+                (
+                    finite(heading_noise) and 0 <= heading_noise <= math.pi,
+                    "heading_noise",
+                    heading_noise,
+                    "a number in [0, pi]",
+                ),
+                (finite(lookahead) and lookahead > 0, "lookahead", lookahead, "a finite number > 0"),
+                (finite(driver_gain) and driver_gain > 0, "driver_gain", driver_gain, "a finite number > 0"),
+                (
+                    whole(maze_rows) and 2 <= maze_rows <= MAX_MAZE_SIDE,
+                    "maze_rows",
+                    maze_rows,
+                    f"an integer in [2, {MAX_MAZE_SIDE}]",
+                ),
+                (
+                    whole(maze_cols) and 2 <= maze_cols <= MAX_MAZE_SIDE,
+                    "maze_cols",
+                    maze_cols,
+                    f"an integer in [2, {MAX_MAZE_SIDE}]",
+                ),
+                (finite(speed) and speed > 0, "speed", speed, "a finite number > 0"),
+                (finite(r_min) and r_min > 0, "r_min", r_min, "a finite number > 0"),
+                self.check_render_mode(render_mode),
+            ]
+        )
         self.step_dt = float(step_dt)
         self.n_path_points = int(n_path_points)
         self.max_episode_sim_time = float(max_episode_sim_time)
@@ -223,7 +263,9 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         self.driver = PursuitDriver(self.system.u_max, float(lookahead), float(driver_gain))
         self.clock = make_clock(clock)
         lay = observation_layout()
-        self.action_space = GuardianActionSpace.for_system(self.system, CONTROLS, safe_default=TurnFromNearerWall(lay), kind=KIND)
+        self.action_space = GuardianActionSpace.for_system(
+            self.system, CONTROLS, safe_default=TurnFromNearerWall(lay), kind=KIND
+        )
         low = np.array([0.0] * N_RAYS + [-np.inf, -np.inf, -np.pi], dtype=np.float32)
         high = np.array([np.inf] * N_RAYS + [np.inf, np.inf, np.pi], dtype=np.float32)
         self.observation_space = ObservationBox(low, high, lay)
@@ -248,7 +290,9 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
             start = cell_of(maze, state)
             a, b = np.asarray(maze.passages[0], dtype=int)
             spacing = float(np.hypot(*(maze.cells[a] - maze.cells[b])))  # between neighbouring cell centres
-            if maze.state_failed(state[None, :2])[0] or np.hypot(*(state[:2] - maze.cells[start])) > spacing / math.sqrt(2):
+            if maze.state_failed(state[None, :2])[0] or np.hypot(
+                *(state[:2] - maze.cells[start])
+            ) > spacing / math.sqrt(2):
                 raise ValueError(f"option 'state': {state[:2].tolist()} is inside a wall or outside the maze's cells")
         else:
             state, start = None, int(rng.integers(n))
@@ -256,14 +300,18 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         if "goal_cell" in options:
             goal = options["goal_cell"]
             if not whole(goal) or not 0 <= goal < n or int(goal) == start:
-                raise ValueError(f"option 'goal_cell' must be an integer cell index in [0, {n}) other than the start "
-                                 f"cell {start}, got {goal!r}")
+                raise ValueError(
+                    f"option 'goal_cell' must be an integer cell index in [0, {n}) other than the start "
+                    f"cell {start}, got {goal!r}"
+                )
             goal = int(goal)
         else:
             band = np.flatnonzero((dist >= self.goal_cells[0]) & (dist <= self.goal_cells[1]))
             if band.size == 0:
-                raise ValueError(f"no cell of the maze is {self.goal_cells[0]}-{self.goal_cells[1]} passages from start cell "
-                                 f"{start} (goal_cells); give a larger maze or 'goal_cell'")
+                raise ValueError(
+                    f"no cell of the maze is {self.goal_cells[0]}-{self.goal_cells[1]} passages from start cell "
+                    f"{start} (goal_cells); give a larger maze or 'goal_cell'"
+                )
             goal = int(band[rng.integers(band.size)])
         cells = cell_path(maze, start, goal)
         waypoints = maze.cells[cells]
@@ -314,8 +362,16 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
             u = min(max(u, -self.system.u_max), self.system.u_max)
         else:
             u = float(self._nominal[0])
-        path = dubins_path(self._state[0], self._state[1], self._state[2], self.system.speed, u, float(duration),
-                           np.empty((self.n_path_points, 3)), SERIES_COEFFICIENTS)
+        path = dubins_path(
+            self._state[0],
+            self._state[1],
+            self._state[2],
+            self.system.speed,
+            u,
+            float(duration),
+            np.empty((self.n_path_points, 3)),
+            SERIES_COEFFICIENTS,
+        )
         hit = maze_path_hit(*self._geom, path)
         reached = not hit and path_reaches_disc(path, self.goal[0], self.goal[1], self.goal[2])
         self.count_interval(duration, active, compute_time)
@@ -324,8 +380,12 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         self._last_active = bool(active)
         self._last_control = np.array([u])
         outcome, reward = ("collision", -1.0) if hit else ("goal", 1.0) if reached else (None, 0.0)
-        info = {"sim_time": self._sim_time, "state": self._state.copy(), "active": bool(active),
-                "control": self._last_control.copy()}
+        info = {
+            "sim_time": self._sim_time,
+            "state": self._state.copy(),
+            "active": bool(active),
+            "control": self._last_control.copy(),
+        }
         terminated, truncated = self.end_interval(outcome, reward, info)
         return self._observe(), reward, terminated, truncated, info
 
@@ -340,8 +400,13 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         """The true pose, the maze, the goal ``[x, y, r]``, the car's (constant) speed and the
         simulated time. **Privileged**."""
         self.require_episode()
-        return {"state": self._state.copy(), "maze": self.scene.maze, "goal": self.goal.copy(),
-                "speed": self.system.speed, "sim_time": self._sim_time}
+        return {
+            "state": self._state.copy(),
+            "maze": self.scene.maze,
+            "goal": self.goal.copy(),
+            "speed": self.system.speed,
+            "sim_time": self._sim_time,
+        }
 
     true_state = property(lambda self: self._state.copy(), doc="The true pose (a copy). **Privileged**.")
     sim_time = property(lambda self: self._sim_time, doc="Simulated seconds since reset.")
@@ -355,7 +420,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         st = np.asarray(states, dtype=float)
         out = np.empty((st.shape[0], N_RAYS + 3), dtype=np.float32)
         out[:, :N_RAYS] = self.scene.observe(st)
-        out[:, N_RAYS:N_RAYS + 2] = self.goal[:2] - st[:, :2]
+        out[:, N_RAYS : N_RAYS + 2] = self.goal[:2] - st[:, :2]
         out[:, N_RAYS + 2] = (st[:, 2] + np.pi) % (2 * np.pi) - np.pi
         return out
 

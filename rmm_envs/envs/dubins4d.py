@@ -141,7 +141,8 @@ from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.drivers.dubins4d import CLFDriver, DriverParams
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, rejection_sample, whole
-from rmm_envs.envs.dubins4d_start import HALF as _HALF, Dubins4DStarts
+from rmm_envs.envs.dubins4d_start import HALF as _HALF
+from rmm_envs.envs.dubins4d_start import Dubins4DStarts
 from rmm_envs.envs.dubins4d_step import advance, nominal_controls
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.scenes.dubins4d import Dubins4DScene, observation
@@ -154,9 +155,14 @@ from rmm_envs.systems.dubins4d import CONTROLS, KIND  # noqa: E402  (the action 
 
 def observation_layout(n_rays: int = 12) -> ObservationLayout:
     """The named slices of the observation table above; ray ``i`` points ``2 pi i / n_rays`` left of the heading."""
-    return ObservationLayout.of(("time", 1), ("goal_offset", 2), ("heading", 1), ("speed", 1), ("rays", n_rays),
-                                ray_angles=[2.0 * math.pi * i / n_rays for i in range(n_rays)])
-
+    return ObservationLayout.of(
+        ("time", 1),
+        ("goal_offset", 2),
+        ("heading", 1),
+        ("speed", 1),
+        ("rays", n_rays),
+        ray_angles=[2.0 * math.pi * i / n_rays for i in range(n_rays)],
+    )
 
 
 class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
@@ -191,20 +197,34 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
     ) -> None:
         # Every bound is finite: an infinite episode length, ray length or radius would silently
         # disable what it configures (no timeout, rays that never end, a goal covering everything).
-        check_arguments([
-            (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number > 0"),
-            (whole(n_rays) and n_rays >= 1, "n_rays", n_rays, "an integer >= 1"),
-            (finite(ray_length) and ray_length > 0, "ray_length", ray_length, "a finite number > 0"),
-            (finite(max_episode_sim_time) and max_episode_sim_time > 0, "max_episode_sim_time", max_episode_sim_time,
-             "a finite number of seconds > 0 (episodes need a time limit)"),
-            (whole(n_obstacles) and n_obstacles >= 0, "n_obstacles", n_obstacles, "an integer >= 0"),
-            (finite(obstacle_min_rad) and finite(obstacle_max_rad) and 0 < obstacle_min_rad <= obstacle_max_rad,
-             "obstacle radii", (obstacle_min_rad, obstacle_max_rad), "finite with 0 < min <= max"),
-            (finite(goal_min_rad) and finite(goal_max_rad) and 0 < goal_min_rad <= goal_max_rad,
-             "goal radii", (goal_min_rad, goal_max_rad), "finite with 0 < min <= max"),
-            (whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
-            self.check_render_mode(render_mode),
-        ])
+        check_arguments(
+            [
+                (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number > 0"),
+                (whole(n_rays) and n_rays >= 1, "n_rays", n_rays, "an integer >= 1"),
+                (finite(ray_length) and ray_length > 0, "ray_length", ray_length, "a finite number > 0"),
+                (
+                    finite(max_episode_sim_time) and max_episode_sim_time > 0,
+                    "max_episode_sim_time",
+                    max_episode_sim_time,
+                    "a finite number of seconds > 0 (episodes need a time limit)",
+                ),
+                (whole(n_obstacles) and n_obstacles >= 0, "n_obstacles", n_obstacles, "an integer >= 0"),
+                (
+                    finite(obstacle_min_rad) and finite(obstacle_max_rad) and 0 < obstacle_min_rad <= obstacle_max_rad,
+                    "obstacle radii",
+                    (obstacle_min_rad, obstacle_max_rad),
+                    "finite with 0 < min <= max",
+                ),
+                (
+                    finite(goal_min_rad) and finite(goal_max_rad) and 0 < goal_min_rad <= goal_max_rad,
+                    "goal radii",
+                    (goal_min_rad, goal_max_rad),
+                    "finite with 0 < min <= max",
+                ),
+                (whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
+                self.check_render_mode(render_mode),
+            ]
+        )
         self.step_dt = float(step_dt)
         self.n_rays = int(n_rays)
         self.ray_length = float(ray_length)
@@ -222,8 +242,13 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
             except TypeError as e:
                 raise ValueError(f"driver_params: {e}; expected keys of DriverParams") from None
         s = self.system
-        self.driver = CLFDriver((s.u1_min, s.u1_max), (s.u2_min, s.u2_max), (s.v_min, s.v_max),
-                                driver_params or DriverParams(), solver=driver_solver)
+        self.driver = CLFDriver(
+            (s.u1_min, s.u1_max),
+            (s.u2_min, s.u2_max),
+            (s.v_min, s.v_max),
+            driver_params or DriverParams(),
+            solver=driver_solver,
+        )
         self.clock = make_clock(clock)
         self.action_space = GuardianActionSpace.for_system(s, CONTROLS, safe_default=FullBraking(), kind=KIND)
         low = np.array([0.0, -np.inf, -np.inf, -np.pi, s.v_min] + [0.0] * self.n_rays, dtype=np.float32)
@@ -272,9 +297,16 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
             times = self._step_times
         else:
             times = np.linspace(0.0, float(duration), self.n_path_points)
-        nxt, u, hit_obst, hit_goal = advance(self.system, self._nominal[None, :], self._state[None, :], self._circles[None],
-                                             np.array([bool(active)]), np.zeros((1, 2)) if control is None else np.asarray(control, dtype=float).reshape(1, 2),
-                                             times, self._obstacle_contact)
+        nxt, u, hit_obst, hit_goal = advance(
+            self.system,
+            self._nominal[None, :],
+            self._state[None, :],
+            self._circles[None],
+            np.array([bool(active)]),
+            np.zeros((1, 2)) if control is None else np.asarray(control, dtype=float).reshape(1, 2),
+            times,
+            self._obstacle_contact,
+        )
         hit_obst, hit_goal = float(hit_obst[0]), float(hit_goal[0])
         u = u[0]
 
@@ -326,10 +358,20 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         self.require_episode()
         s = self.system
         return rejection_sample(
-            rng, n, 4,
-            lambda r, m: np.column_stack([r.uniform(-_HALF, _HALF, m), r.uniform(-_HALF, _HALF, m),
-                                          r.uniform(-np.pi, np.pi, m), r.uniform(s.v_min, s.v_max, m)]),
-            self.scene.state_failed, "states outside the obstacles")
+            rng,
+            n,
+            4,
+            lambda r, m: np.column_stack(
+                [
+                    r.uniform(-_HALF, _HALF, m),
+                    r.uniform(-_HALF, _HALF, m),
+                    r.uniform(-np.pi, np.pi, m),
+                    r.uniform(s.v_min, s.v_max, m),
+                ]
+            ),
+            self.scene.state_failed,
+            "states outside the obstacles",
+        )
 
     def observe_states(self, states: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
         """Observations of arbitrary states for a dataset.  The simulated-time feature is drawn
@@ -338,7 +380,9 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         (docs/original-code.md, item 8)."""
         self.require_episode()
         if not isinstance(rng, np.random.Generator):
-            raise ValueError(f"observe_states needs rng, a numpy.random.Generator to draw the simulated-time feature, got {rng!r}")
+            raise ValueError(
+                f"observe_states needs rng, a numpy.random.Generator to draw the simulated-time feature, got {rng!r}"
+            )
         t = rng.uniform(0.0, self.max_episode_sim_time, size=np.asarray(states).shape[0])
         return self.scene.observe(states, t)
 

@@ -168,49 +168,83 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
     #: outside the obstacles about half the time on the example map)
     _MAX_DRAWS = 100_000
 
-    def __init__(self, map: str | list | dict | ShapeMap | None = None, step_dt: float = 0.1, n_rays: int = 12,
-                 ray_length: float = 10.0, max_episode_sim_time: float = 100.0, goal_min_rad: float = 0.1,
-                 goal_max_rad: float = 1.0, n_path_points: int = 16, driver_params=None, clock=None,
-                 render_mode: str | None = None, driver_solver: str = "closed_form") -> None:
-        super().__init__(step_dt=step_dt, n_rays=n_rays, ray_length=ray_length, max_episode_sim_time=max_episode_sim_time,
-                         n_obstacles=0, goal_min_rad=goal_min_rad, goal_max_rad=goal_max_rad, n_path_points=n_path_points,
-                         driver_params=driver_params, clock=clock, render_mode=render_mode, driver_solver=driver_solver)
+    def __init__(
+        self,
+        map: str | list | dict | ShapeMap | None = None,
+        step_dt: float = 0.1,
+        n_rays: int = 12,
+        ray_length: float = 10.0,
+        max_episode_sim_time: float = 100.0,
+        goal_min_rad: float = 0.1,
+        goal_max_rad: float = 1.0,
+        n_path_points: int = 16,
+        driver_params=None,
+        clock=None,
+        render_mode: str | None = None,
+        driver_solver: str = "closed_form",
+    ) -> None:
+        super().__init__(
+            step_dt=step_dt,
+            n_rays=n_rays,
+            ray_length=ray_length,
+            max_episode_sim_time=max_episode_sim_time,
+            n_obstacles=0,
+            goal_min_rad=goal_min_rad,
+            goal_max_rad=goal_max_rad,
+            n_path_points=n_path_points,
+            driver_params=driver_params,
+            clock=clock,
+            render_mode=render_mode,
+            driver_solver=driver_solver,
+        )
         self.map = load_map(example_map_path() if map is None else map)
         self.world = PymunkWorld(self.map)
         self.n_obstacles = len(self.map.entries)
         if self.map.goal is not None:
             self._check_goal(self.map.goal, f"map {self.map.source}: its goal")
         self._obstacle_contact = self.world.first_contacts
-        self.action_space = GuardianActionSpace.for_system(self.system, CONTROLS, safe_default=FullBraking(),
-                                                           obstacle_shapes=self.map.kinds, kind=KIND)
+        self.action_space = GuardianActionSpace.for_system(
+            self.system, CONTROLS, safe_default=FullBraking(), obstacle_shapes=self.map.kinds, kind=KIND
+        )
 
     # ------------------------------------------------------------------ starts
     def _check_goal(self, goal: np.ndarray, what: str) -> None:
         if self.world.points_inside(goal[None, :2])[0]:
             raise (MapError if what.startswith("map") else ValueError)(
                 f"{what} {goal.tolist()} has its centre inside an obstacle of the map; the driver steers to the "
-                "centre, so it must be free")
+                "centre, so it must be free"
+            )
 
     def _draw_state(self, rng: np.random.Generator, goal: np.ndarray | None) -> np.ndarray:
         (x0, y0), (x1, y1) = self.map.start_box
         s = self.system
         st = draw_until(
-            lambda: np.array([rng.uniform(x0, x1), rng.uniform(y0, y1), rng.uniform(-np.pi, np.pi), rng.uniform(s.v_min, s.v_max)]),
+            lambda: np.array(
+                [rng.uniform(x0, x1), rng.uniform(y0, y1), rng.uniform(-np.pi, np.pi), rng.uniform(s.v_min, s.v_max)]
+            ),
             lambda st: not (self.world.points_inside(st[None, :2])[0] or (goal is not None and in_goal(st, goal))),
-            self._MAX_DRAWS)
+            self._MAX_DRAWS,
+        )
         if st is None:
-            raise ValueError(f"could not draw a start in the start box {self.map.start_box.tolist()} outside the obstacles"
-                             f"{' and the goal' if goal is not None else ''} in {self._MAX_DRAWS} draws: the box leaves "
-                             "too little free room; give a larger 'start' box or reset option 'state'")
+            raise ValueError(
+                f"could not draw a start in the start box {self.map.start_box.tolist()} outside the obstacles"
+                f"{' and the goal' if goal is not None else ''} in {self._MAX_DRAWS} draws: the box leaves "
+                "too little free room; give a larger 'start' box or reset option 'state'"
+            )
         return st
 
     def _draw_goal(self, rng: np.random.Generator, state: np.ndarray) -> np.ndarray:
         (x0, y0), (x1, y1) = self.map.start_box
-        g = draw_until(lambda: np.array([rng.uniform(x0, x1), rng.uniform(y0, y1), rng.uniform(*self.goal_rad)]),
-                       lambda g: not in_goal(state, g) and not self.world.points_inside(g[None, :2])[0], self._MAX_DRAWS)
+        g = draw_until(
+            lambda: np.array([rng.uniform(x0, x1), rng.uniform(y0, y1), rng.uniform(*self.goal_rad)]),
+            lambda g: not in_goal(state, g) and not self.world.points_inside(g[None, :2])[0],
+            self._MAX_DRAWS,
+        )
         if g is None:
-            raise ValueError(f"could not place a goal in the start box {self.map.start_box.tolist()} in {self._MAX_DRAWS} draws; "
-                             "give one in the map or as reset option 'goal'")
+            raise ValueError(
+                f"could not place a goal in the start box {self.map.start_box.tolist()} in {self._MAX_DRAWS} draws; "
+                "give one in the map or as reset option 'goal'"
+            )
         return g
 
     def generate_start(self, rng: np.random.Generator, options: dict | None = None):
@@ -227,12 +261,16 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
         if "state" in options:
             state = option_vector(options["state"], 4, "state", " [x, y, theta, v]")
             if not (self.system.v_min <= state[3] <= self.system.v_max):
-                raise ValueError(f"option 'state': speed must be in [{self.system.v_min}, {self.system.v_max}], got {state[3]}")
+                raise ValueError(
+                    f"option 'state': speed must be in [{self.system.v_min}, {self.system.v_max}], got {state[3]}"
+                )
             state[2] = wrap_angle(state[2])
             if self.world.points_inside(state[None, :2])[0]:
                 raise ValueError(f"option 'state': position {state[:2].tolist()} is inside an obstacle of the map")
             if goal is not None and in_goal(state, goal):
-                raise ValueError(f"option 'state': position {state[:2].tolist()} is already inside the goal {goal.tolist()}")
+                raise ValueError(
+                    f"option 'state': position {state[:2].tolist()} is already inside the goal {goal.tolist()}"
+                )
         if state is None:
             state = self._draw_state(rng, goal)
         if goal is None:
@@ -258,10 +296,20 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
         (x0, y0), (x1, y1) = self.map.start_box
         s = self.system
         return rejection_sample(
-            rng, n, 4,
-            lambda r, m: np.column_stack([r.uniform(x0, x1, m), r.uniform(y0, y1, m), r.uniform(-np.pi, np.pi, m),
-                                          r.uniform(s.v_min, s.v_max, m)]),
-            self.scene.state_failed, "states outside the map's obstacles")
+            rng,
+            n,
+            4,
+            lambda r, m: np.column_stack(
+                [
+                    r.uniform(x0, x1, m),
+                    r.uniform(y0, y1, m),
+                    r.uniform(-np.pi, np.pi, m),
+                    r.uniform(s.v_min, s.v_max, m),
+                ]
+            ),
+            self.scene.state_failed,
+            "states outside the map's obstacles",
+        )
 
     def render_frame(self, size: int = 512) -> np.ndarray:
         """The ``rgb_array`` frame described under "Rendering" above."""

@@ -52,50 +52,82 @@ class Dubins4DStarts:
     _MAX_DRAWS = 100_000
     _MAX_OBSTACLE_DRAWS = 1_000  # a state at the arena's centre is left free by ~1 draw in 8
 
-    def _generate_obstacles(self, rng: np.random.Generator, state: np.ndarray | None, goal: np.ndarray | None) -> np.ndarray:
+    def _generate_obstacles(
+        self, rng: np.random.Generator, state: np.ndarray | None, goal: np.ndarray | None
+    ) -> np.ndarray:
         obstacles = draw_until(
             lambda: CircleWorld.generate(rng, self.n_obstacles, *self.obstacle_rad, half_width=HALF),
-            lambda obs: not ((state is not None and points_in_circles(state[None, :2], obs)[0])
-                             or (goal is not None and goal_inside_obstacle(goal, obs) is not None)),
-            self._MAX_OBSTACLE_DRAWS)
+            lambda obs: (
+                not (
+                    (state is not None and points_in_circles(state[None, :2], obs)[0])
+                    or (goal is not None and goal_inside_obstacle(goal, obs) is not None)
+                )
+            ),
+            self._MAX_OBSTACLE_DRAWS,
+        )
         if obstacles is not None:
             return obstacles
-        given = " and ".join(f"option {k!r} {v[:2 if k == 'state' else 3].tolist()}" for k, v in (("state", state), ("goal", goal)) if v is not None)
-        raise ValueError(f"could not generate {self.n_obstacles} obstacles clear of {given} in {self._MAX_OBSTACLE_DRAWS} draws; "
-                         "give 'obstacles' explicitly too")
+        given = " and ".join(
+            f"option {k!r} {v[: 2 if k == 'state' else 3].tolist()}"
+            for k, v in (("state", state), ("goal", goal))
+            if v is not None
+        )
+        raise ValueError(
+            f"could not generate {self.n_obstacles} obstacles clear of {given} in {self._MAX_OBSTACLE_DRAWS} draws; "
+            "give 'obstacles' explicitly too"
+        )
 
-    def _generate_state(self, rng: np.random.Generator, obstacles: np.ndarray, goal: np.ndarray | None = None,
-                        given: tuple[str, ...] = ()) -> np.ndarray:
+    def _generate_state(
+        self,
+        rng: np.random.Generator,
+        obstacles: np.ndarray,
+        goal: np.ndarray | None = None,
+        given: tuple[str, ...] = (),
+    ) -> np.ndarray:
         if goal is not None:
             corners = np.array([[-HALF, -HALF], [-HALF, HALF], [HALF, -HALF], [HALF, HALF]])
             if np.all(np.hypot(*(corners - goal[:2]).T) <= goal[2]):  # a disc is convex: it holds the square
-                raise ValueError(f"option 'goal' {goal.tolist()} covers the whole arena [-{HALF}, {HALF}]^2 where "
-                                 "initial states are drawn, so no start outside it exists; give a smaller goal")
+                raise ValueError(
+                    f"option 'goal' {goal.tolist()} covers the whole arena [-{HALF}, {HALF}]^2 where "
+                    "initial states are drawn, so no start outside it exists; give a smaller goal"
+                )
         s = self.system
         st = draw_until(
-            lambda: np.array([rng.uniform(-HALF, HALF), rng.uniform(-HALF, HALF),
-                              rng.uniform(-np.pi, np.pi), rng.uniform(s.v_min, s.v_max)]),
+            lambda: np.array(
+                [
+                    rng.uniform(-HALF, HALF),
+                    rng.uniform(-HALF, HALF),
+                    rng.uniform(-np.pi, np.pi),
+                    rng.uniform(s.v_min, s.v_max),
+                ]
+            ),
             lambda st: not (points_in_circles(st[None, :2], obstacles)[0] or (goal is not None and in_goal(st, goal))),
-            self._MAX_DRAWS)
+            self._MAX_DRAWS,
+        )
         if st is not None:
             return st
         if given:
-            raise ValueError(f"could not draw an initial state on the arena [-{HALF}, {HALF}]^2 outside "
-                             f"{_parts(given)} in {self._MAX_DRAWS} draws: they leave "
-                             "too little free space; give 'state' explicitly too")
+            raise ValueError(
+                f"could not draw an initial state on the arena [-{HALF}, {HALF}]^2 outside "
+                f"{_parts(given)} in {self._MAX_DRAWS} draws: they leave "
+                "too little free space; give 'state' explicitly too"
+            )
         raise RuntimeError(f"could not find a collision-free initial state in {self._MAX_DRAWS} draws")
 
-    def _generate_goal(self, rng: np.random.Generator, state: np.ndarray, obstacles: np.ndarray,
-                       given: tuple[str, ...] = ()) -> np.ndarray:
+    def _generate_goal(
+        self, rng: np.random.Generator, state: np.ndarray, obstacles: np.ndarray, given: tuple[str, ...] = ()
+    ) -> np.ndarray:
         g = draw_until(
             lambda: np.array([rng.uniform(-HALF, HALF), rng.uniform(-HALF, HALF), rng.uniform(*self.goal_rad)]),
             lambda g: not in_goal(state, g) and goal_inside_obstacle(g, obstacles) is None,
-            self._MAX_DRAWS)
+            self._MAX_DRAWS,
+        )
         if g is not None:
             return g
         if given:
-            raise ValueError(f"could not place a goal around {_parts(given)} "
-                             f"in {self._MAX_DRAWS} draws; give 'goal' explicitly too")
+            raise ValueError(
+                f"could not place a goal around {_parts(given)} in {self._MAX_DRAWS} draws; give 'goal' explicitly too"
+            )
         raise RuntimeError(f"could not place a goal in {self._MAX_DRAWS} draws")
 
     def _given_options(self, options: dict) -> dict:
@@ -106,7 +138,9 @@ class Dubins4DStarts:
         if "state" in options:
             state = option_vector(options["state"], 4, "state")
             if not (self.system.v_min <= state[3] <= self.system.v_max):
-                raise ValueError(f"option 'state': speed must be in [{self.system.v_min}, {self.system.v_max}], got {state[3]}")
+                raise ValueError(
+                    f"option 'state': speed must be in [{self.system.v_min}, {self.system.v_max}], got {state[3]}"
+                )
             state[2] = wrap_angle(state[2])
             given["state"] = state
         if "goal" in options:
@@ -119,15 +153,21 @@ class Dubins4DStarts:
             hits = [points_in_circles(state[None, :2], o[None, :])[0] for o in obstacles]
             if any(hits):
                 k = hits.index(True)
-                raise ValueError(f"option 'state': position {state[:2].tolist()} is inside obstacle {k} "
-                                 f"{obstacles[k].tolist()} of option 'obstacles'")
+                raise ValueError(
+                    f"option 'state': position {state[:2].tolist()} is inside obstacle {k} "
+                    f"{obstacles[k].tolist()} of option 'obstacles'"
+                )
         if goal is not None and obstacles is not None:
             k = goal_inside_obstacle(goal, obstacles)
             if k is not None:
-                raise ValueError(f"option 'goal' {goal.tolist()} lies entirely inside obstacle {k} {obstacles[k].tolist()} "
-                                 "of option 'obstacles', so it can never be reached (generation never places a goal there)")
+                raise ValueError(
+                    f"option 'goal' {goal.tolist()} lies entirely inside obstacle {k} {obstacles[k].tolist()} "
+                    "of option 'obstacles', so it can never be reached (generation never places a goal there)"
+                )
         if state is not None and goal is not None and in_goal(state, goal):
-            raise ValueError(f"option 'state': position {state[:2].tolist()} is already inside option 'goal' {goal.tolist()}")
+            raise ValueError(
+                f"option 'state': position {state[:2].tolist()} is already inside option 'goal' {goal.tolist()}"
+            )
         return given
 
     def generate_start(self, rng: np.random.Generator, options: dict[str, Any] | None = None):
@@ -141,7 +181,9 @@ class Dubins4DStarts:
             obstacles = self._generate_obstacles(rng, given.get("state"), given.get("goal"))
         state = given.get("state")
         if state is None:
-            state = self._generate_state(rng, obstacles, given.get("goal"), tuple(k for k in ("obstacles", "goal") if k in given))
+            state = self._generate_state(
+                rng, obstacles, given.get("goal"), tuple(k for k in ("obstacles", "goal") if k in given)
+            )
         goal = given.get("goal")
         if goal is None:
             goal = self._generate_goal(rng, state, obstacles, tuple(k for k in ("state", "obstacles") if k in given))

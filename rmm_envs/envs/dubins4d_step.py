@@ -28,8 +28,16 @@ def nominal_controls(driver: CLFDriver, states: np.ndarray, circles: np.ndarray)
     return driver.controls(states, circles[:, -1, :2])
 
 
-def advance(system: Dubins4D, nominal: np.ndarray, states: np.ndarray, circles: np.ndarray, active: np.ndarray,
-            controls: np.ndarray, times: np.ndarray, obstacle_contact=None):
+def advance(
+    system: Dubins4D,
+    nominal: np.ndarray,
+    states: np.ndarray,
+    circles: np.ndarray,
+    active: np.ndarray,
+    controls: np.ndarray,
+    times: np.ndarray,
+    obstacle_contact=None,
+):
     """Advance ``N`` worlds by one held control each.
 
     Args:

@@ -87,31 +87,44 @@ from gymnasium.vector.utils import batch_space
 
 from rmm_envs.clocks import make_clock
 from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
-from rmm_envs.scenes.dubins4d import observation
 from rmm_envs.envs.dubins4d_step import advance, nominal_controls
 from rmm_envs.envs.guarded import EPISODE_KEY
+from rmm_envs.scenes.dubins4d import observation
 from rmm_envs.worlds.circles import ray_cast_each
 
 __all__ = ["Dubins4DCirclesVectorEnv"]
+
 
 class Dubins4DCirclesVectorEnv(VectorEnv):
     """``num_envs`` Dubins4D parallel-autonomy worlds as arrays; see the module docstring."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
-    def __init__(self, num_envs: int, autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-                 clock=None, render_mode: str | None = None, **kwargs: Any) -> None:
+    def __init__(
+        self,
+        num_envs: int,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        clock=None,
+        render_mode: str | None = None,
+        **kwargs: Any,
+    ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         try:
             autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError:
-            raise ValueError(f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, got {autoreset_mode!r}") from None
+            raise ValueError(
+                f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, got {autoreset_mode!r}"
+            ) from None
         if render_mode is not None:
-            raise ValueError(f"render_mode must be None for the vector env (render a single env instead), got {render_mode!r}")
+            raise ValueError(
+                f"render_mode must be None for the vector env (render a single env instead), got {render_mode!r}"
+            )
         if kwargs.get("driver_solver", "closed_form") != "closed_form":
-            raise ValueError(f"driver_solver must be 'closed_form' in the vector env (the batched exact solver), "
-                             f"got {kwargs['driver_solver']!r}")
+            raise ValueError(
+                f"driver_solver must be 'closed_form' in the vector env (the batched exact solver), "
+                f"got {kwargs['driver_solver']!r}"
+            )
         self.num_envs = int(num_envs)
         self.autoreset_mode = autoreset_mode
         self.metadata = {**self.metadata, "autoreset_mode": autoreset_mode}
@@ -170,8 +183,10 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
     def _check_start(self, obstacles, state, goal) -> None:
         k = self._single.n_obstacles
         if obstacles.shape[0] != k:
-            raise ValueError(f"option 'obstacles' must hold n_obstacles = {k} circles in the vector env "
-                             f"(every world of a batch has as many), got {obstacles.shape[0]}")
+            raise ValueError(
+                f"option 'obstacles' must hold n_obstacles = {k} circles in the vector env "
+                f"(every world of a batch has as many), got {obstacles.shape[0]}"
+            )
 
     def _reset_info(self, idx: np.ndarray) -> dict:
         mask = np.zeros(self.num_envs, dtype=bool)
@@ -181,8 +196,14 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         state[idx] = self._states[idx]
         nominal = np.zeros((self.num_envs, 2))
         nominal[idx] = self._nominal[idx]
-        return {"sim_time": sim_time, "_sim_time": mask, "state": state, "_state": mask.copy(),
-                "nominal_control": nominal, "_nominal_control": mask.copy()}
+        return {
+            "sim_time": sim_time,
+            "_sim_time": mask,
+            "state": state,
+            "_state": mask.copy(),
+            "nominal_control": nominal,
+            "_nominal_control": mask.copy(),
+        }
 
     def reset(self, *, seed: int | list | None = None, options: dict[str, Any] | None = None):
         """Reset every sub-env (or those of ``options["reset_mask"]``); see the module docstring."""
@@ -237,15 +258,18 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         mode = self.autoreset_mode
         if mode == AutoresetMode.DISABLED and self._ended.any():
             i = int(np.argmax(self._ended))
-            raise RuntimeError(f"sub-env {i}'s episode has ended and autoreset_mode is DISABLED: reset it first "
-                               "with reset(options={'reset_mask': mask})")
+            raise RuntimeError(
+                f"sub-env {i}'s episode has ended and autoreset_mode is DISABLED: reset it first "
+                "with reset(options={'reset_mask': mask})"
+            )
         # Every world is advanced, those about to be reset too (NEXT_STEP: their episode ended at
         # the last step): one pass over whole arrays, no gathers; what the resetting ones
         # computed is discarded and their bookkeeping restarts in _reset_one.
         resetting = self._ended if mode == AutoresetMode.NEXT_STEP else np.zeros(n, dtype=bool)
         any_resetting = bool(resetting.any())
-        nxt, u, hit_obst, hit_goal = advance(e.system, self._nominal, self._states, self._circles, active, ctrl,
-                                             e._step_times)
+        nxt, u, hit_obst, hit_goal = advance(
+            e.system, self._nominal, self._states, self._circles, active, ctrl, e._step_times
+        )
         dt = e.step_dt
         self._n_steps += 1
         self._n_active += active
@@ -275,10 +299,18 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         truncated &= ~terminated
         ended = terminated | truncated
         control, act_all, coll_all, goal_all = u, active, collision, goal
-        infos = {"sim_time": self._sim_time.copy(), "_sim_time": np.ones(n, dtype=bool),
-                 "state": self._states.copy(), "_state": np.ones(n, dtype=bool),
-                 "active": act_all, "_active": stepping.copy(), "control": control, "_control": stepping.copy(),
-                 "cost": cost, "_cost": stepping.copy()}
+        infos = {
+            "sim_time": self._sim_time.copy(),
+            "_sim_time": np.ones(n, dtype=bool),
+            "state": self._states.copy(),
+            "_state": np.ones(n, dtype=bool),
+            "active": act_all,
+            "_active": stepping.copy(),
+            "control": control,
+            "_control": stepping.copy(),
+            "cost": cost,
+            "_cost": stepping.copy(),
+        }
         any_ended = bool(ended.any())
         if any_ended:
             ended_info = self._ended_info(ended, coll_all, goal_all)
@@ -298,8 +330,9 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
                 final_obs = np.full(n, None, dtype=object)
                 for i in ended_idx:
                     final_obs[i] = obs[i].copy()
-                final_info = {k: (_masked(v, ended) if not k.startswith("_") else v & ended)
-                              for k, v in infos.items()} | ended_info
+                final_info = {
+                    k: (_masked(v, ended) if not k.startswith("_") else v & ended) for k, v in infos.items()
+                } | ended_info
                 for key in ("active", "control", "cost"):  # now in final_info: absent (zero, unmasked) at the top
                     infos[f"_{key}"] = infos[f"_{key}"] & ~ended
                     infos[key] = _masked(infos[key], ~ended)
@@ -310,8 +343,14 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
                 obs[ended_idx] = self._observe(ended_idx)
                 self._update_nominal(ended_idx)
                 infos["nominal_control"][ended_idx] = self._nominal[ended_idx]
-                infos.update({"final_obs": final_obs, "_final_obs": ended.copy(),
-                              "final_info": final_info, "_final_info": ended.copy()})
+                infos.update(
+                    {
+                        "final_obs": final_obs,
+                        "_final_obs": ended.copy(),
+                        "final_info": final_info,
+                        "_final_info": ended.copy(),
+                    }
+                )
             self._ended[:] = False
         else:
             if any_ended:
@@ -340,11 +379,20 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
             outcome[i] = "collision" if collision[i] else "goal" if goal[i] else "timeout"
         masks = np.repeat(ended[None], 12, axis=0)  # one independent mask row per key
         episode = {"outcome": outcome.copy(), "_outcome": masks[0]}
-        for j, (key, value) in enumerate((
-                ("n_env_steps", n_steps), ("n_active_ctrl_env_steps", self._n_active),
-                ("active_ctrl_sim_time", self._active_time), ("cum_sim_time", self._sim_time),
-                ("cum_compute_time", self._cum_compute), ("avg_compute_time", avg),
-                ("cum_reward", self._cum_reward), ("cum_cost", self._cum_cost), ("final_speed", self._states[:, 3])), start=1):
+        for j, (key, value) in enumerate(
+            (
+                ("n_env_steps", n_steps),
+                ("n_active_ctrl_env_steps", self._n_active),
+                ("active_ctrl_sim_time", self._active_time),
+                ("cum_sim_time", self._sim_time),
+                ("cum_compute_time", self._cum_compute),
+                ("avg_compute_time", avg),
+                ("cum_reward", self._cum_reward),
+                ("cum_cost", self._cum_cost),
+                ("final_speed", self._states[:, 3]),
+            ),
+            start=1,
+        ):
             episode[key] = np.where(ended, value, value.dtype.type(0))
             episode[f"_{key}"] = masks[j]
         return {"outcome": outcome, "_outcome": masks[10], EPISODE_KEY: episode, f"_{EPISODE_KEY}": masks[11]}

@@ -141,13 +141,17 @@ def parallel_entry_point(env_cls, env_id: str, base_step: float = BASE_STEP):
 
     def make_parallel_env(time_accel: float = TIME_ACCEL, base_step: float = default_base_step, clock=None, **kwargs):
         if "step_dt" in kwargs:
-            raise ValueError(f"{env_id} steps by elapsed * time_accel + base_step, so step_dt (the fixed step of the "
-                             f"blocking env) does not apply; set base_step and time_accel instead, got "
-                             f"step_dt={kwargs['step_dt']!r}")
+            raise ValueError(
+                f"{env_id} steps by elapsed * time_accel + base_step, so step_dt (the fixed step of the "
+                f"blocking env) does not apply; set base_step and time_accel instead, got "
+                f"step_dt={kwargs['step_dt']!r}"
+            )
         from rmm_envs.wrappers.nonblocking import NonBlockingStepping
 
         return NonBlockingStepping(env_cls(**kwargs), time_accel=time_accel, base_step=base_step, clock=clock)
 
-    make_parallel_env.__doc__ = (f"Entry point of ``{env_id}``: :obj:`{env_cls.__name__}` under non-blocking "
-                                 "stepping (see :func:`rmm_envs.envs.guarded.parallel_entry_point`).")
+    make_parallel_env.__doc__ = (
+        f"Entry point of ``{env_id}``: :obj:`{env_cls.__name__}` under non-blocking "
+        "stepping (see :func:`rmm_envs.envs.guarded.parallel_entry_point`)."
+    )
     return make_parallel_env

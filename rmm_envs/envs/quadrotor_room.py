@@ -90,8 +90,15 @@ import numpy as np
 from gymnasium import spaces
 
 from rmm_envs.autonomy import ObservationBox, ObservationLayout
-from rmm_envs.envs.base import (LabelledEnvBase, check_arguments, draw_until, finite, option_vector, rejection_sample,
-                                state_rows)
+from rmm_envs.envs.base import (
+    LabelledEnvBase,
+    check_arguments,
+    draw_until,
+    finite,
+    option_vector,
+    rejection_sample,
+    state_rows,
+)
 from rmm_envs.portable import norm, norms
 from rmm_envs.scenes.quadrotor import QuadrotorScene
 from rmm_envs.systems.quadrotor import QUADROTOR
@@ -105,8 +112,14 @@ _RAY_DIRS = np.array([[1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, 1], [
 
 def observation_layout() -> ObservationLayout:
     """The observation table's named slices (see the module docstring)."""
-    return ObservationLayout.of(("rays", 4), ("rays_vertical", 2), ("orientation", 4), ("velocity", 3),
-                                ("angular_velocity", 3), ray_angles=[0.0, math.pi / 2, math.pi, 3 * math.pi / 2])
+    return ObservationLayout.of(
+        ("rays", 4),
+        ("rays_vertical", 2),
+        ("orientation", 4),
+        ("velocity", 3),
+        ("angular_velocity", 3),
+        ray_angles=[0.0, math.pi / 2, math.pi, 3 * math.pi / 2],
+    )
 
 
 def _urdf_path() -> str:
@@ -140,7 +153,9 @@ def unit_quaternion_rows(states: np.ndarray) -> np.ndarray:
     quaternion (columns 3-6) is a unit quaternion to 1e-6."""
     bad = np.flatnonzero(np.abs(norms(states[:, 3:7]) - 1.0) > 1e-6)
     if bad.size:
-        raise ValueError(f"states: row {bad[0]} has the quaternion {states[bad[0], 3:7].tolist()}, not a unit quaternion")
+        raise ValueError(
+            f"states: row {bad[0]} has the quaternion {states[bad[0], 3:7].tolist()}, not a unit quaternion"
+        )
     return states
 
 
@@ -150,9 +165,14 @@ class QuadrotorRoomEnv(LabelledEnvBase):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 24}
     reset_options = ("state", "room")
 
-    def __init__(self, control_dt: float = 1.0 / 24.0, max_episode_time: float = 20.0,
-                 linear_damping: float = QUADROTOR.linear_damping, angular_damping: float = QUADROTOR.angular_damping,
-                 render_mode: str | None = None):
+    def __init__(
+        self,
+        control_dt: float = 1.0 / 24.0,
+        max_episode_time: float = 20.0,
+        linear_damping: float = QUADROTOR.linear_damping,
+        angular_damping: float = QUADROTOR.angular_damping,
+        render_mode: str | None = None,
+    ):
         try:
             import pybullet as p
         except ImportError as e:
@@ -161,15 +181,30 @@ class QuadrotorRoomEnv(LabelledEnvBase):
             ) from e
 
         n_sub = control_dt / QUADROTOR.dt if finite(control_dt) else math.nan
-        check_arguments([
-            (control_dt > 0 and abs(n_sub - round(n_sub)) < 1e-9 and round(n_sub) >= 1, "control_dt", control_dt,
-             "a positive multiple of 1/240 s"),
-            (finite(max_episode_time) and max_episode_time > 0, "max_episode_time", max_episode_time,
-             "a finite number of seconds > 0 (episodes need a time limit)"),
-            (finite(linear_damping) and linear_damping >= 0, "linear_damping", linear_damping, "finite and >= 0"),
-            (finite(angular_damping) and angular_damping >= 0, "angular_damping", angular_damping, "finite and >= 0"),
-            self.check_render_mode(render_mode),
-        ])
+        check_arguments(
+            [
+                (
+                    control_dt > 0 and abs(n_sub - round(n_sub)) < 1e-9 and round(n_sub) >= 1,
+                    "control_dt",
+                    control_dt,
+                    "a positive multiple of 1/240 s",
+                ),
+                (
+                    finite(max_episode_time) and max_episode_time > 0,
+                    "max_episode_time",
+                    max_episode_time,
+                    "a finite number of seconds > 0 (episodes need a time limit)",
+                ),
+                (finite(linear_damping) and linear_damping >= 0, "linear_damping", linear_damping, "finite and >= 0"),
+                (
+                    finite(angular_damping) and angular_damping >= 0,
+                    "angular_damping",
+                    angular_damping,
+                    "finite and >= 0",
+                ),
+                self.check_render_mode(render_mode),
+            ]
+        )
         self.p = p
         self.n_sub = int(round(n_sub))
         self.control_dt = float(control_dt)
@@ -177,7 +212,11 @@ class QuadrotorRoomEnv(LabelledEnvBase):
         self.damping = (float(linear_damping), float(angular_damping))
         self.params = replace(QUADROTOR, linear_damping=self.damping[0], angular_damping=self.damping[1])
         self.render_mode = render_mode
-        self.action_space = spaces.Box(np.array(self.params.control_low, np.float32), np.array(self.params.control_high, np.float32), dtype=np.float32)
+        self.action_space = spaces.Box(
+            np.array(self.params.control_low, np.float32),
+            np.array(self.params.control_high, np.float32),
+            dtype=np.float32,
+        )
         low = np.array([0] * 6 + [-1] * 4 + [-np.inf] * 6, np.float32)
         high = np.array([RAY_RANGE] * 6 + [1] * 4 + [np.inf] * 6, np.float32)
         self.observation_space = ObservationBox(low, high, observation_layout())
@@ -195,7 +234,9 @@ class QuadrotorRoomEnv(LabelledEnvBase):
         p.setTimeStep(self.params.dt, physicsClientId=c)
         build_room(c, room, visual=self.render_mode is not None)  # visual shapes only for rendering
         self.body = p.loadURDF(_urdf_path(), [0, 0, 1], physicsClientId=c, flags=p.URDF_USE_INERTIA_FROM_FILE)
-        p.changeDynamics(self.body, -1, linearDamping=self.damping[0], angularDamping=self.damping[1], physicsClientId=c)
+        p.changeDynamics(
+            self.body, -1, linearDamping=self.damping[0], angularDamping=self.damping[1], physicsClientId=c
+        )
         self.room = room
 
     def set_state(self, state) -> None:
@@ -264,7 +305,9 @@ class QuadrotorRoomEnv(LabelledEnvBase):
                 raise ValueError(f"option 'state': the quaternion {s[3:7].tolist()} is not a unit quaternion")
         spec = options.get("room")
         if spec is not None and not isinstance(spec, (Room, dict)):
-            raise ValueError(f"option 'room' must be a Room or a dict of generate_room arguments, got {type(spec).__name__}")
+            raise ValueError(
+                f"option 'room' must be a Room or a dict of generate_room arguments, got {type(spec).__name__}"
+            )
         if s is None:
             self._build(self._draw_room(spec))
             self._random_state(self.np_random)
@@ -272,12 +315,18 @@ class QuadrotorRoomEnv(LabelledEnvBase):
             self._build(spec)
             if not self._placed_clear(s):
                 raise ValueError(f"option 'state': the body at {s[:3].tolist()} is in contact with option 'room'")
-        elif draw_until(lambda: self._built(self._draw_room(spec)), lambda _: self._placed_clear(s),
-                        self._MAX_ROOM_DRAWS) is None:
+        elif (
+            draw_until(
+                lambda: self._built(self._draw_room(spec)), lambda _: self._placed_clear(s), self._MAX_ROOM_DRAWS
+            )
+            is None
+        ):
             # a generated room (from the seed, or from the given generate_room arguments) is
             # redrawn until the given state is clear of it, as generation keeps states clear
-            raise ValueError(f"option 'state': the body at {s[:3].tolist()} is in contact with each of "
-                             f"{self._MAX_ROOM_DRAWS} rooms drawn from the seed; give 'room' too or move the state")
+            raise ValueError(
+                f"option 'state': the body at {s[:3].tolist()} is in contact with each of "
+                f"{self._MAX_ROOM_DRAWS} rooms drawn from the seed; give 'room' too or move the state"
+            )
         self.scene = QuadrotorScene(self.room, self.params)
         self._t = 0.0
         self.begin_episode()
@@ -285,8 +334,13 @@ class QuadrotorRoomEnv(LabelledEnvBase):
 
     def rays(self) -> np.ndarray:
         p = self.p
-        res = p.rayTestBatch([[0, 0, 0]] * 6, (RAY_RANGE * _RAY_DIRS).tolist(), parentObjectUniqueId=self.body,
-                             parentLinkIndex=-1, physicsClientId=self.client)
+        res = p.rayTestBatch(
+            [[0, 0, 0]] * 6,
+            (RAY_RANGE * _RAY_DIRS).tolist(),
+            parentObjectUniqueId=self.body,
+            parentLinkIndex=-1,
+            physicsClientId=self.client,
+        )
         return np.array([RAY_RANGE * r[2] if r[0] >= 0 else RAY_RANGE for r in res])
 
     def _obs(self) -> np.ndarray:
@@ -326,11 +380,13 @@ class QuadrotorRoomEnv(LabelledEnvBase):
         def draw(r, k):
             q = r.normal(size=(k, 4))
             q /= norms(q, keepdims=True)
-            return np.column_stack([r.uniform(lo, hi, (k, 3)), q, r.uniform(-10, 10, (k, 3)),
-                                    r.uniform(-4 * np.pi, 4 * np.pi, (k, 3))])
+            return np.column_stack(
+                [r.uniform(lo, hi, (k, 3)), q, r.uniform(-10, 10, (k, 3)), r.uniform(-4 * np.pi, 4 * np.pi, (k, 3))]
+            )
 
-        return rejection_sample(rng, n, 13, draw, self.risk_scene().collision.states_failed,
-                                "quadrotor states clear of the room")
+        return rejection_sample(
+            rng, n, 13, draw, self.risk_scene().collision.states_failed, "quadrotor states clear of the room"
+        )
 
     def observe_states(self, states, rng=None) -> np.ndarray:
         """The 16-dim observation of arbitrary states (PyBullet rays; the env's state is restored);
@@ -352,9 +408,13 @@ class QuadrotorRoomEnv(LabelledEnvBase):
     def render_frame(self) -> np.ndarray:
         p = self.p
         s = self.get_state()
-        view = p.computeViewMatrixFromYawPitchRoll(s[:3].tolist(), 4.0, 30.0, -35.0, 0.0, 2, physicsClientId=self.client)
+        view = p.computeViewMatrixFromYawPitchRoll(
+            s[:3].tolist(), 4.0, 30.0, -35.0, 0.0, 2, physicsClientId=self.client
+        )
         proj = p.computeProjectionMatrixFOV(60.0, 320 / 240, 0.05, 100.0, physicsClientId=self.client)
-        _, _, rgba, _, _ = p.getCameraImage(320, 240, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=self.client)
+        _, _, rgba, _, _ = p.getCameraImage(
+            320, 240, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=self.client
+        )
         return np.asarray(rgba, dtype=np.uint8).reshape(240, 320, 4)[..., :3]
 
     def close(self):

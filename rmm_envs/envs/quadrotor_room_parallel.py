@@ -127,30 +127,43 @@ import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.clocks import make_clock
+from rmm_envs.drivers.quadrotor import WaypointPilot
 from rmm_envs.envs.base import check_arguments, finite, rejection_sample, state_rows, whole
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv, unit_quaternion_rows
 from rmm_envs.envs.quadrotor_room_start import WAYPOINT_CLEARANCE, QuadrotorRoomStarts
 from rmm_envs.portable import matvec, norm
-from rmm_envs.drivers.quadrotor import WaypointPilot
 from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
-from rmm_envs.systems.quadrotor_control import (ClosedLoopQuadrotor, CommandController, HoverAndLevel, command_wrench,
-                                                heading_of, yaw_of)
+from rmm_envs.systems.quadrotor_control import (
+    ClosedLoopQuadrotor,
+    CommandController,
+    HoverAndLevel,
+    command_wrench,
+    heading_of,
+    yaw_of,
+)
 from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
 from rmm_envs.worlds.room_collision import BOUND
 
 __all__ = ["CONTROLS", "HoverAndLevel", "QuadrotorRoomGuardedEnv", "make_parallel_env", "observation_layout"]
 
 from rmm_envs.systems.quadrotor_control import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
+
 N_RAYS = 8
 _CONTACT_MARGIN = 0.05  # m added to the travel bound before contact queries are skipped
 
 
 def observation_layout() -> ObservationLayout:
     """The named slices of the observation table above."""
-    return ObservationLayout.of(("rays", N_RAYS), ("rays_vertical", 2), ("orientation", 4), ("velocity", 3),
-                                ("angular_velocity", 3), ("goal_offset", 3),
-                                ray_angles=[k * math.pi / 4 for k in range(N_RAYS)])
+    return ObservationLayout.of(
+        ("rays", N_RAYS),
+        ("rays_vertical", 2),
+        ("orientation", 4),
+        ("velocity", 3),
+        ("angular_velocity", 3),
+        ("goal_offset", 3),
+        ray_angles=[k * math.pi / 4 for k in range(N_RAYS)],
+    )
 
 
 _LAYOUT = observation_layout()
@@ -158,8 +171,10 @@ _RANGES = slice(_LAYOUT["rays"].start, _LAYOUT["rays_vertical"].stop)  # every r
 _QUAT, _VEL, _RATES, _GOAL = (_LAYOUT[f] for f in ("orientation", "velocity", "angular_velocity", "goal_offset"))
 
 
-_DIRS = np.array([[math.cos(k * math.pi / 4), math.sin(k * math.pi / 4), 0.0] for k in range(N_RAYS)]
-                 + [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+_DIRS = np.array(
+    [[math.cos(k * math.pi / 4), math.sin(k * math.pi / 4), 0.0] for k in range(N_RAYS)]
+    + [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]
+)
 
 
 def _heading_frame(q, vectors) -> np.ndarray:
@@ -176,25 +191,53 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
     reset_options = ("room", "state", "waypoints")
 
-    def __init__(self, step_dt: float = 0.1, max_episode_sim_time: float = 60.0, n_waypoints: int = 3,
-                 altitude=(0.5, 2.0), min_leg: float = 3.0, goal_radius: float = 0.5, cruise_speed: float = 1.5,
-                 climb_speed: float = 0.5, ray_range: float = 10.0, clock=None, render_mode: str | None = None) -> None:
+    def __init__(
+        self,
+        step_dt: float = 0.1,
+        max_episode_sim_time: float = 60.0,
+        n_waypoints: int = 3,
+        altitude=(0.5, 2.0),
+        min_leg: float = 3.0,
+        goal_radius: float = 0.5,
+        cruise_speed: float = 1.5,
+        climb_speed: float = 0.5,
+        ray_range: float = 10.0,
+        clock=None,
+        render_mode: str | None = None,
+    ) -> None:
         alt = tuple(altitude) if isinstance(altitude, (tuple, list, np.ndarray)) else ()
-        check_arguments([
-            (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number of seconds > 0"),
-            (finite(max_episode_sim_time) and max_episode_sim_time > 0, "max_episode_sim_time", max_episode_sim_time,
-             "a finite number of seconds > 0 (episodes need a time limit)"),
-            (whole(n_waypoints) and n_waypoints >= 1, "n_waypoints", n_waypoints, "an integer >= 1 (the last is the goal)"),
-            (len(alt) == 2 and all(finite(a) for a in alt) and 0.35 <= alt[0] <= alt[1]
-             and alt[1] > WAYPOINT_CLEARANCE + BOUND, "altitude", altitude,
-             f"a pair (min, max) of heights in m with 0.35 <= min <= max and max > {WAYPOINT_CLEARANCE + BOUND:.3f} "
-             f"(a drawn waypoint keeps its bounding sphere {WAYPOINT_CLEARANCE} m above the floor)"),
-            (finite(min_leg) and min_leg >= 0, "min_leg", min_leg, "a finite number of metres >= 0"),
-            (finite(goal_radius) and goal_radius > 0, "goal_radius", goal_radius, "a finite number of metres > 0"),
-            (finite(cruise_speed) and cruise_speed > 0, "cruise_speed", cruise_speed, "a finite speed > 0 (m/s)"),
-            (finite(climb_speed) and climb_speed > 0, "climb_speed", climb_speed, "a finite speed > 0 (m/s)"),
-            (finite(ray_range) and ray_range > 0, "ray_range", ray_range, "a finite number of metres > 0"),
-        ])
+        check_arguments(
+            [
+                (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number of seconds > 0"),
+                (
+                    finite(max_episode_sim_time) and max_episode_sim_time > 0,
+                    "max_episode_sim_time",
+                    max_episode_sim_time,
+                    "a finite number of seconds > 0 (episodes need a time limit)",
+                ),
+                (
+                    whole(n_waypoints) and n_waypoints >= 1,
+                    "n_waypoints",
+                    n_waypoints,
+                    "an integer >= 1 (the last is the goal)",
+                ),
+                (
+                    len(alt) == 2
+                    and all(finite(a) for a in alt)
+                    and 0.35 <= alt[0] <= alt[1]
+                    and alt[1] > WAYPOINT_CLEARANCE + BOUND,
+                    "altitude",
+                    altitude,
+                    f"a pair (min, max) of heights in m with 0.35 <= min <= max and max > {WAYPOINT_CLEARANCE + BOUND:.3f} "
+                    f"(a drawn waypoint keeps its bounding sphere {WAYPOINT_CLEARANCE} m above the floor)",
+                ),
+                (finite(min_leg) and min_leg >= 0, "min_leg", min_leg, "a finite number of metres >= 0"),
+                (finite(goal_radius) and goal_radius > 0, "goal_radius", goal_radius, "a finite number of metres > 0"),
+                (finite(cruise_speed) and cruise_speed > 0, "cruise_speed", cruise_speed, "a finite speed > 0 (m/s)"),
+                (finite(climb_speed) and climb_speed > 0, "climb_speed", climb_speed, "a finite speed > 0 (m/s)"),
+                (finite(ray_range) and ray_range > 0, "ray_range", ray_range, "a finite number of metres > 0"),
+            ]
+        )
         QuadrotorRoomEnv.__init__(self, render_mode=render_mode)
         self.step_dt = float(step_dt)
         self.max_episode_sim_time = float(max_episode_sim_time)
@@ -205,7 +248,9 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         self.system = ClosedLoopQuadrotor(self.controller)
         self.pilot = WaypointPilot(self.system.control_low, self.system.control_high, cruise_speed, climb_speed)
         self.clock = make_clock(clock)
-        self.action_space = GuardianActionSpace.for_system(self.system, CONTROLS, safe_default=HoverAndLevel(), kind=KIND)
+        self.action_space = GuardianActionSpace.for_system(
+            self.system, CONTROLS, safe_default=HoverAndLevel(), kind=KIND
+        )
         low, high = np.full(_LAYOUT.size, -np.inf, np.float32), np.full(_LAYOUT.size, np.inf, np.float32)
         low[_RANGES], high[_RANGES] = 0.0, self.ray_range
         low[_QUAT], high[_QUAT] = -1.0, 1.0
@@ -235,8 +280,13 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
 
     # ------------------------------------------------------------------ stepping
     def rays(self) -> np.ndarray:
-        res = self.p.rayTestBatch([[0.0, 0.0, 0.0]] * len(_DIRS), self._ray_to, parentObjectUniqueId=self.body,
-                                  parentLinkIndex=-1, physicsClientId=self.client)
+        res = self.p.rayTestBatch(
+            [[0.0, 0.0, 0.0]] * len(_DIRS),
+            self._ray_to,
+            parentObjectUniqueId=self.body,
+            parentLinkIndex=-1,
+            physicsClientId=self.client,
+        )
         return np.array([self.ray_range * r[2] if r[0] >= 0 else self.ray_range for r in res])
 
     def _features(self, states, rays) -> np.ndarray:
@@ -273,8 +323,10 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         p, c, body, par = self.p, self.client, self.body, self.params
         s = self.get_state()
         if active:
-            cmd = np.minimum(np.maximum(np.asarray(control, dtype=float).reshape(4), self.system.control_low),
-                             self.system.control_high)
+            cmd = np.minimum(
+                np.maximum(np.asarray(control, dtype=float).reshape(4), self.system.control_low),
+                self.system.control_high,
+            )
         else:
             cmd = self._nominal.copy()
         target = math.floor((self._sim_time + duration) / par.dt + 1e-9)
@@ -289,10 +341,15 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
             self._gap, self._gap_at = self.scene.collision.clearance(s[:3]), s[:3].copy()
             query = self._gap <= reach
         k, w, gx, gy, gz = self.controller.packed, self._wrench, *self.goal
-        r2 = self.goal_radius ** 2
+        r2 = self.goal_radius**2
         hit = reached = False
         frame, force, torque, step = p.LINK_FRAME, p.applyExternalForce, p.applyExternalTorque, p.stepSimulation
-        pose, vel, contacts, origin = p.getBasePositionAndOrientation, p.getBaseVelocity, p.getContactPoints, (0.0, 0.0, 0.0)
+        pose, vel, contacts, origin = (
+            p.getBasePositionAndOrientation,
+            p.getBaseVelocity,
+            p.getContactPoints,
+            (0.0, 0.0, 0.0),
+        )
         for _ in range(n):
             command_wrench(s, cmd, k, w)
             force(body, -1, (0.0, 0.0, w[0]), origin, frame, physicsClientId=c)
@@ -324,8 +381,13 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
     def privileged(self) -> dict:
         """The true state, the room, the goal, the waypoints and the simulated time. **Privileged**."""
         self.require_episode()
-        return {"state": self.get_state(), "room": self.room, "goal": self.goal.copy(),
-                "waypoints": self.pilot.waypoints.copy(), "sim_time": self._sim_time}
+        return {
+            "state": self.get_state(),
+            "room": self.room,
+            "goal": self.goal.copy(),
+            "waypoints": self.pilot.waypoints.copy(),
+            "sim_time": self._sim_time,
+        }
 
     true_state = property(lambda self: self.get_state(), doc="The true state (a copy). **Privileged**.")
     sim_time = property(lambda self: self._sim_time, doc="Simulated seconds since reset.")
@@ -342,11 +404,14 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
             q = quat_from_euler(r.uniform(-0.3, 0.3, k), r.uniform(-0.3, 0.3, k), r.uniform(-np.pi, np.pi, k))
             psi = heading_of(q)
             vf, vl = r.uniform(-2, 2, k), r.uniform(-2, 2, k)
-            v = np.column_stack([np.cos(psi) * vf - np.sin(psi) * vl, np.sin(psi) * vf + np.cos(psi) * vl,
-                                 r.uniform(-1, 1, k)])
+            v = np.column_stack(
+                [np.cos(psi) * vf - np.sin(psi) * vl, np.sin(psi) * vf + np.cos(psi) * vl, r.uniform(-1, 1, k)]
+            )
             return np.column_stack([xy, r.uniform(0.2, 3.0, k), q, v, r.uniform(-1, 1, (k, 3))])
 
-        return rejection_sample(rng, n, 13, draw, self.scene.collision.states_failed, "quadrotor flight states clear of the room")
+        return rejection_sample(
+            rng, n, 13, draw, self.scene.collision.states_failed, "quadrotor flight states clear of the room"
+        )
 
     def observe_states(self, states, rng=None) -> np.ndarray:
         """This env's observation of states ``(N, 13)`` in the current episode (PyBullet rays; the

@@ -82,38 +82,60 @@ class QuadrotorRoomStarts:
         cannot be met, ``RuntimeError`` if the env's own arguments leave no start placeable."""
         state = waypoints = None
         if "state" in options:
-            state = option_vector(options["state"], 13, "state", " (position, quaternion xyzw, velocity, angular velocity)")
+            state = option_vector(
+                options["state"], 13, "state", " (position, quaternion xyzw, velocity, angular velocity)"
+            )
             if abs(norm(state[3:7]) - 1) > 1e-6:
                 raise ValueError(f"option 'state': the quaternion {state[3:7].tolist()} is not a unit quaternion")
         if "waypoints" in options:
-            w = np.asarray(options["waypoints"], dtype=float) if isinstance(options["waypoints"], (list, tuple, np.ndarray)) else None
+            w = (
+                np.asarray(options["waypoints"], dtype=float)
+                if isinstance(options["waypoints"], (list, tuple, np.ndarray))
+                else None
+            )
             if w is None or w.ndim != 2 or w.shape[0] < 1 or w.shape[1] != 3 or not np.isfinite(w).all():
-                raise ValueError(f"option 'waypoints' must be a list of K >= 1 finite [x, y, z] points, got {options['waypoints']!r}")
+                raise ValueError(
+                    f"option 'waypoints' must be a list of K >= 1 finite [x, y, z] points, got {options['waypoints']!r}"
+                )
             low = np.nonzero(w[:, 2] <= BOUND)[0]
             if low.size:  # every room's floor is z = 0: no room to draw could hold it
-                raise ValueError(f"option 'waypoints': point {int(low[0])} {w[low[0]].tolist()} must lie higher than the "
-                                 f"body's bounding radius ({BOUND:.3f} m) above the floor, z = 0, in every room")
+                raise ValueError(
+                    f"option 'waypoints': point {int(low[0])} {w[low[0]].tolist()} must lie higher than the "
+                    f"body's bounding radius ({BOUND:.3f} m) above the floor, z = 0, in every room"
+                )
             waypoints = w.copy()
         spec = options.get("room")
         if spec is not None and not isinstance(spec, (Room, dict)):
-            raise ValueError(f"option 'room' must be a Room or a dict of generate_room arguments, got {type(spec).__name__}")
+            raise ValueError(
+                f"option 'room' must be a Room or a dict of generate_room arguments, got {type(spec).__name__}"
+            )
         if isinstance(spec, Room) or state is not None:
             room = self._draw_room(spec)
-            which = "option 'room'" if isinstance(spec, Room) else "the room drawn from the seed (give 'room' too, or move it)"
+            which = (
+                "option 'room'"
+                if isinstance(spec, Room)
+                else "the room drawn from the seed (give 'room' too, or move it)"
+            )
             if state is not None and not room.in_footprint(state[None, :2])[0]:
-                raise ValueError(f"option 'state': the body at {state[:3].tolist()} is not over the footprint of {which}")
+                raise ValueError(
+                    f"option 'state': the body at {state[:3].tolist()} is not over the footprint of {which}"
+                )
             if state is not None and RoomCollision(room).states_failed(state[None])[0]:
                 raise ValueError(f"option 'state': the body at {state[:3].tolist()} is in contact with {which}")
             bad = None if waypoints is None else self._bad_waypoint(room, RoomCollision(room), waypoints)
             if bad is not None:
-                raise ValueError(f"option 'waypoints': point {bad} {waypoints[bad].tolist()} must lie over the "
-                                 f"footprint of {which} with the body's bounding sphere clear of it")
+                raise ValueError(
+                    f"option 'waypoints': point {bad} {waypoints[bad].tolist()} must lie over the "
+                    f"footprint of {which} with the body's bounding sphere clear of it"
+                )
             plan = self._plan(room, state, waypoints)
             if plan is None:
                 given = " and ".join(f"'{k}'" for k in ("room", "state", "waypoints") if k in options)
                 missing = [f"'{k}'" for k in ("state", "waypoints") if k not in options]
-                raise ValueError(f"could not place the {' and '.join(missing)} around option(s) {given} "
-                                 f"(200 draws each, min_leg={self.min_leg} m, altitude={self.altitude})")
+                raise ValueError(
+                    f"could not place the {' and '.join(missing)} around option(s) {given} "
+                    f"(200 draws each, min_leg={self.min_leg} m, altitude={self.altitude})"
+                )
         else:
             plan = None
             for _ in range(self._MAX_ROOM_DRAWS):
@@ -122,12 +144,16 @@ class QuadrotorRoomStarts:
                 if plan is not None:
                     break
             if plan is None and waypoints is not None:
-                raise ValueError(f"option 'waypoints' {waypoints.tolist()}: in none of {self._MAX_ROOM_DRAWS} rooms drawn "
-                                 "from the seed does every point lie over the footprint, clear of the room, with a start "
-                                 "placeable; give 'room' too or move them")
+                raise ValueError(
+                    f"option 'waypoints' {waypoints.tolist()}: in none of {self._MAX_ROOM_DRAWS} rooms drawn "
+                    "from the seed does every point lie over the footprint, clear of the room, with a start "
+                    "placeable; give 'room' too or move them"
+                )
             if plan is None:
-                raise RuntimeError(f"could not place a start and {self.n_waypoints} waypoints in "
-                                   f"{self._MAX_ROOM_DRAWS} rooms drawn (min_leg={self.min_leg} m, "
-                                   f"altitude={self.altitude}); lower min_leg or widen altitude")
+                raise RuntimeError(
+                    f"could not place a start and {self.n_waypoints} waypoints in "
+                    f"{self._MAX_ROOM_DRAWS} rooms drawn (min_leg={self.min_leg} m, "
+                    f"altitude={self.altitude}); lower min_leg or widen altitude"
+                )
         state, waypoints = plan
         return room, state, waypoints

@@ -60,8 +60,14 @@ def _shard_task(cfg_dict: dict, out: str | None, shard: int):
     return shard, table.num_rows, time.perf_counter() - t0, sink.getvalue().to_pybytes()
 
 
-def generate(cfg: DatagenConfig, out: str | os.PathLike, workers: int | None = None,
-             backend: str = "local", ray_address: str | None = None, progress: bool = True) -> dict:
+def generate(
+    cfg: DatagenConfig,
+    out: str | os.PathLike,
+    workers: int | None = None,
+    backend: str = "local",
+    ray_address: str | None = None,
+    progress: bool = True,
+) -> dict:
     """Generate (or finish) the dataset in ``out``; returns the manifest.
 
     Existing shards are kept only if they match the checksum recorded when they were written;
@@ -70,7 +76,9 @@ def generate(cfg: DatagenConfig, out: str | os.PathLike, workers: int | None = N
     cfg.validate()
     labelled_env(cfg)  # refuses an env that is not a LabelledEnv before anything is written
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
-        raise ValueError(f"workers (--workers) must be an integer >= 1 (leave it out for one per core), got {workers!r}")
+        raise ValueError(
+            f"workers (--workers) must be an integer >= 1 (leave it out for one per core), got {workers!r}"
+        )
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     meta = dataset_metadata(cfg)
@@ -119,8 +127,14 @@ def generate(cfg: DatagenConfig, out: str | os.PathLike, workers: int | None = N
 
     from tqdm import tqdm
 
-    bar = tqdm(total=cfg.configs, initial=done_configs, unit="config", disable=not progress,
-               desc=f"labelling {cfg.env_id}", dynamic_ncols=True)
+    bar = tqdm(
+        total=cfg.configs,
+        initial=done_configs,
+        unit="config",
+        disable=not progress,
+        desc=f"labelling {cfg.env_id}",
+        dynamic_ncols=True,
+    )
     t0 = time.perf_counter()
     new_rows = 0
     try:
@@ -134,8 +148,11 @@ def generate(cfg: DatagenConfig, out: str | os.PathLike, workers: int | None = N
     except KeyboardInterrupt:
         bar.close()
         left = sum(1 for s in range(cfg.n_shards) if not shard_path(out, s).exists())
-        print(f"\ninterrupted: {cfg.n_shards - left} of {cfg.n_shards} shards are saved in {out}; "
-              "rerun the same command to finish", file=sys.stderr)
+        print(
+            f"\ninterrupted: {cfg.n_shards - left} of {cfg.n_shards} shards are saved in {out}; "
+            "rerun the same command to finish",
+            file=sys.stderr,
+        )
         raise
     bar.close()
     elapsed = time.perf_counter() - t0
@@ -154,9 +171,13 @@ def generate(cfg: DatagenConfig, out: str | os.PathLike, workers: int | None = N
         "n_shards": cfg.n_shards,
         "shards": hashes,
         "dataset_sha256": hashlib.sha256("".join(hashes[k] for k in sorted(hashes)).encode()).hexdigest(),
-        "last_run": {"new_rows": new_rows, "seconds": elapsed, "backend": backend,
-                     "labels_per_second": new_rows / elapsed if elapsed > 0 and new_rows else None,
-                     "regenerated": regenerated},
+        "last_run": {
+            "new_rows": new_rows,
+            "seconds": elapsed,
+            "backend": backend,
+            "labels_per_second": new_rows / elapsed if elapsed > 0 and new_rows else None,
+            "regenerated": regenerated,
+        },
     }
     atomic_write_bytes(out / "manifest.json", json.dumps(manifest, indent=2).encode())
     for s in range(cfg.n_shards):  # the manifest holds the checksums now
@@ -176,10 +197,14 @@ _MAX_LOST_IN_A_ROW = 3
 
 
 def _lost_shards_error(lost: list, todo: list[int], out: Path, stopped: str | None = None) -> RuntimeError:
-    what = "; ".join(f"shard {shard} ({cause})" for shard, cause in lost[:5]) + (f"; and {len(lost) - 5} more" if len(lost) > 5 else "")
+    what = "; ".join(f"shard {shard} ({cause})" for shard, cause in lost[:5]) + (
+        f"; and {len(lost) - 5} more" if len(lost) > 5 else ""
+    )
     head = f"{stopped}; " if stopped else ""
-    return RuntimeError(f"{head}{len(lost)} of {len(todo)} shards to compute were lost: {what}. The finished shards are saved "
-                        f"in {out}; rerun the same command to compute the missing ones (fewer --workers if memory ran out)")
+    return RuntimeError(
+        f"{head}{len(lost)} of {len(todo)} shards to compute were lost: {what}. The finished shards are saved "
+        f"in {out}; rerun the same command to compute the missing ones (fewer --workers if memory ran out)"
+    )
 
 
 def _collect(cfg: DatagenConfig, out: Path, todo: list[int], results, bar) -> int:
@@ -231,33 +256,65 @@ def build_parser() -> argparse.ArgumentParser:
         "valid states, their observations and sampling-tree risk labels, written as Parquet shards. "
         "Rerun the same command to resume an interrupted run.",
     )
-    p.add_argument("--env", default="Dubins4DGuarded-v0",
-                   help="environment id, or module:Id to import the module that registers it first "
-                   "(from the current directory first) (default: %(default)s)")
+    p.add_argument(
+        "--env",
+        default="Dubins4DGuarded-v0",
+        help="environment id, or module:Id to import the module that registers it first "
+        "(from the current directory first) (default: %(default)s)",
+    )
     p.add_argument("--configs", type=int, default=274, help="number of obstacle configurations (default: %(default)s)")
-    p.add_argument("--samples-per-config", type=int, default=128, help="labelled states per configuration (default: %(default)s)")
+    p.add_argument(
+        "--samples-per-config", type=int, default=128, help="labelled states per configuration (default: %(default)s)"
+    )
     p.add_argument("--seed", type=int, default=0, help="master seed (default: %(default)s)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--branches", type=int, default=32, help="tree branching factor n (default: %(default)s)")
     p.add_argument("--depth", type=int, default=2, help="tree depth m (default: %(default)s)")
-    p.add_argument("--horizon", type=float, default=None,
-                   help="seconds per tree level t (default: 2 for the package's envs, the risk adapter's own for "
-                   "an adapted env such as CartPole-v1, see rmm_envs.adapters)")
-    p.add_argument("--failure", default=None,
-                   help="'module:callable', failure(states) -> (N,) bool, for an env served by a risk adapter "
-                   "(required for Pendulum-v1; added to the adapter's own test elsewhere)")
+    p.add_argument(
+        "--horizon",
+        type=float,
+        default=None,
+        help="seconds per tree level t (default: 2 for the package's envs, the risk adapter's own for "
+        "an adapted env such as CartPole-v1, see rmm_envs.adapters)",
+    )
+    p.add_argument(
+        "--failure",
+        default=None,
+        help="'module:callable', failure(states) -> (N,) bool, for an env served by a risk adapter "
+        "(required for Pendulum-v1; added to the adapter's own test elsewhere)",
+    )
     p.add_argument("--n-steps", type=int, default=8, help="path points per branch (default: %(default)s)")
-    p.add_argument("--metric", default="expected", choices=list(METRICS), help="coherent risk metric (default: %(default)s)")
+    p.add_argument(
+        "--metric", default="expected", choices=list(METRICS), help="coherent risk metric (default: %(default)s)"
+    )
     p.add_argument("--alpha", type=float, default=None, help="CVaR level in (0, 1) (with --metric cvar)")
-    p.add_argument("--leaf", default="zero", choices=["zero", "heuristic"], help="leaf value: 0 (Algorithm 1) or the system's heuristic (default: %(default)s)")
-    p.add_argument("--env-kwargs", default="{}", help='environment arguments as JSON, e.g. \'{"maze_kind": "mixed"}\' (default: {})')
-    p.add_argument("--candidates", default=None,
-                   help="also label the risk of holding each of these controls for --candidate-hold s, then the tree, "
-                   "as JSON, e.g. '[[-0.25, -0.5], [0.25, -0.5]]' (default: none)")
-    p.add_argument("--candidate-hold", type=float, default=1.0, help="seconds each candidate is held (default: %(default)s)")
-    p.add_argument("--configs-per-shard", type=int, default=8, help="configurations per output shard (default: %(default)s)")
+    p.add_argument(
+        "--leaf",
+        default="zero",
+        choices=["zero", "heuristic"],
+        help="leaf value: 0 (Algorithm 1) or the system's heuristic (default: %(default)s)",
+    )
+    p.add_argument(
+        "--env-kwargs",
+        default="{}",
+        help='environment arguments as JSON, e.g. \'{"maze_kind": "mixed"}\' (default: {})',
+    )
+    p.add_argument(
+        "--candidates",
+        default=None,
+        help="also label the risk of holding each of these controls for --candidate-hold s, then the tree, "
+        "as JSON, e.g. '[[-0.25, -0.5], [0.25, -0.5]]' (default: none)",
+    )
+    p.add_argument(
+        "--candidate-hold", type=float, default=1.0, help="seconds each candidate is held (default: %(default)s)"
+    )
+    p.add_argument(
+        "--configs-per-shard", type=int, default=8, help="configurations per output shard (default: %(default)s)"
+    )
     p.add_argument("--workers", type=int, default=None, help="worker processes, >= 1 (default: the core count)")
-    p.add_argument("--backend", default="local", choices=["local", "ray"], help="where the work runs (default: %(default)s)")
+    p.add_argument(
+        "--backend", default="local", choices=["local", "ray"], help="where the work runs (default: %(default)s)"
+    )
     p.add_argument("--ray-address", default=None, help="Ray cluster address (with --backend ray; default: a local Ray)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
@@ -276,22 +333,45 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         candidates = None if args.candidates is None else json.loads(args.candidates)
-        if candidates is not None and not (isinstance(candidates, list) and all(isinstance(c, list) for c in candidates)):
+        if candidates is not None and not (
+            isinstance(candidates, list) and all(isinstance(c, list) for c in candidates)
+        ):
             raise ValueError
     except ValueError:
-        print(f"rmm-datagen: error: --candidates must be a JSON list of controls, got {args.candidates!r}", file=sys.stderr)
+        print(
+            f"rmm-datagen: error: --candidates must be a JSON list of controls, got {args.candidates!r}",
+            file=sys.stderr,
+        )
         return 2
     from rmm_envs.failures import describe_os_error
 
     cfg = DatagenConfig(
-        env_id=args.env, configs=args.configs, samples_per_config=args.samples_per_config, seed=args.seed,
-        branches=args.branches, depth=args.depth, horizon=args.horizon, n_steps=args.n_steps,
-        metric=args.metric, alpha=args.alpha, leaf=args.leaf, configs_per_shard=args.configs_per_shard,
-        env_kwargs=env_kwargs, candidates=candidates, candidate_hold=args.candidate_hold, failure=args.failure,
+        env_id=args.env,
+        configs=args.configs,
+        samples_per_config=args.samples_per_config,
+        seed=args.seed,
+        branches=args.branches,
+        depth=args.depth,
+        horizon=args.horizon,
+        n_steps=args.n_steps,
+        metric=args.metric,
+        alpha=args.alpha,
+        leaf=args.leaf,
+        configs_per_shard=args.configs_per_shard,
+        env_kwargs=env_kwargs,
+        candidates=candidates,
+        candidate_hold=args.candidate_hold,
+        failure=args.failure,
     )
     try:
-        manifest = generate(cfg, args.out, workers=args.workers, backend=args.backend,
-                            ray_address=args.ray_address, progress=not args.no_progress)
+        manifest = generate(
+            cfg,
+            args.out,
+            workers=args.workers,
+            backend=args.backend,
+            ray_address=args.ray_address,
+            progress=not args.no_progress,
+        )
     except KeyboardInterrupt:
         return 130
     except (ValueError, TypeError, RuntimeError, FileNotFoundError) as e:  # TypeError: an env that is not a LabelledEnv
@@ -303,8 +383,10 @@ def main(argv: list[str] | None = None) -> int:
         return status
     run = manifest["last_run"]
     rate = f", {run['labels_per_second']:.0f} labels/s" if run["labels_per_second"] else ""
-    print(f"{manifest['n_rows']} labelled samples in {args.out} ({manifest['n_shards']} shards); "
-          f"this run: {run['new_rows']} new in {run['seconds']:.1f} s{rate}; dataset sha256 {manifest['dataset_sha256'][:16]}")
+    print(
+        f"{manifest['n_rows']} labelled samples in {args.out} ({manifest['n_shards']} shards); "
+        f"this run: {run['new_rows']} new in {run['seconds']:.1f} s{rate}; dataset sha256 {manifest['dataset_sha256'][:16]}"
+    )
     return 0
 
 

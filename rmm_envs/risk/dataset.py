@@ -85,11 +85,28 @@ def read_manifest_shards(out: Path) -> tuple[dict, str | None]:
 def rerun_command(meta: dict, out) -> str:
     """The ``rmm-datagen`` command that (re)generates the dataset described by ``meta`` in ``out``."""
     est = meta.get("estimator") or {}
-    parts = ["rmm-datagen", "--env", str(meta.get("env_id")), "--configs", str(meta.get("configs")),
-             "--samples-per-config", str(meta.get("samples_per_config")), "--seed", str(meta.get("seed")),
-             "--configs-per-shard", str(meta.get("configs_per_shard"))]
-    for key, flag in (("branches", "--branches"), ("depth", "--depth"), ("horizon", "--horizon"),
-                      ("n_steps", "--n-steps"), ("metric", "--metric"), ("alpha", "--alpha"), ("leaf", "--leaf")):
+    parts = [
+        "rmm-datagen",
+        "--env",
+        str(meta.get("env_id")),
+        "--configs",
+        str(meta.get("configs")),
+        "--samples-per-config",
+        str(meta.get("samples_per_config")),
+        "--seed",
+        str(meta.get("seed")),
+        "--configs-per-shard",
+        str(meta.get("configs_per_shard")),
+    ]
+    for key, flag in (
+        ("branches", "--branches"),
+        ("depth", "--depth"),
+        ("horizon", "--horizon"),
+        ("n_steps", "--n-steps"),
+        ("metric", "--metric"),
+        ("alpha", "--alpha"),
+        ("leaf", "--leaf"),
+    ):
         if est.get(key) is not None:
             parts += [flag, str(est[key])]
     if meta.get("env_kwargs"):
@@ -109,8 +126,18 @@ def identity(meta: dict) -> dict:
     made under a former id (:data:`rmm_envs.catalog.FORMER_IDS`) is resumed under today's."""
     from rmm_envs.catalog import current_id
 
-    keys = ("format", "format_version", "env_id", "env_kwargs", "configs", "samples_per_config",
-            "seed", "configs_per_shard", "estimator", "failure")
+    keys = (
+        "format",
+        "format_version",
+        "env_id",
+        "env_kwargs",
+        "configs",
+        "samples_per_config",
+        "seed",
+        "configs_per_shard",
+        "estimator",
+        "failure",
+    )
     out = {k: meta.get(k) for k in keys}
     if isinstance(out["env_id"], str):
         out["env_id"] = current_id(out["env_id"])
@@ -151,8 +178,12 @@ class Dataset:
 
         if vectors not in ("columns", "lists"):
             raise ValueError(f"vectors must be 'columns' or 'lists', got {vectors!r}")
-        data: dict = {"config_id": self.config_id, "risk": self.risk, "min_risk_ctrl_dur": self.min_risk_ctrl_dur,
-                      "n_leaves": self.n_leaves}
+        data: dict = {
+            "config_id": self.config_id,
+            "risk": self.risk,
+            "min_risk_ctrl_dur": self.min_risk_ctrl_dur,
+            "n_leaves": self.n_leaves,
+        }
         for name in ("obs", "state", "min_risk_ctrl"):
             arr = getattr(self, name)
             if vectors == "columns":
@@ -187,10 +218,14 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
         if not isinstance(meta, dict):
             raise ValueError("not a JSON object")
     except (OSError, UnicodeDecodeError, ValueError) as e:
-        raise ValueError(f"{meta_path} is unreadable or not valid JSON ({e}): the dataset cannot be identified; "
-                         f"move {path} aside and generate it again with rmm-datagen") from None
+        raise ValueError(
+            f"{meta_path} is unreadable or not valid JSON ({e}): the dataset cannot be identified; "
+            f"move {path} aside and generate it again with rmm-datagen"
+        ) from None
     if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
-        raise ValueError(f"{meta_path}: expected format {FORMAT} v{FORMAT_VERSION}, got {meta.get('format')} v{meta.get('format_version')}")
+        raise ValueError(
+            f"{meta_path}: expected format {FORMAT} v{FORMAT_VERSION}, got {meta.get('format')} v{meta.get('format_version')}"
+        )
     repair = f"rerun `{rerun_command(meta, path)}` to regenerate what is damaged or missing"
     manifest_path = path / "manifest.json"
     if not manifest_path.exists():
@@ -204,14 +239,18 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
     except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as e:
         raise ValueError(f"{manifest_path} is unreadable ({type(e).__name__}: {e}): {repair}") from None
     try:
-        expected_names = {shard_path(path, s).name for s in range(-(-int(meta["configs"]) // int(meta["configs_per_shard"])))}
+        expected_names = {
+            shard_path(path, s).name for s in range(-(-int(meta["configs"]) // int(meta["configs_per_shard"])))
+        }
     except (KeyError, TypeError, ValueError, ZeroDivisionError):
         expected_names = None
     if expected_names is not None and set(shards) != expected_names:
         missing = sorted(expected_names - set(shards))
-        raise ValueError(f"{manifest_path} does not list the shards {meta_path.name} implies "
-                         f"(missing {missing[:3]}{'...' if len(missing) > 3 else ''}, "
-                         f"unexpected {sorted(set(shards) - expected_names)[:3]}): {repair}")
+        raise ValueError(
+            f"{manifest_path} does not list the shards {meta_path.name} implies "
+            f"(missing {missing[:3]}{'...' if len(missing) > 3 else ''}, "
+            f"unexpected {sorted(set(shards) - expected_names)[:3]}): {repair}"
+        )
     parts = []
     for name in sorted(shards):
         p = path / name
@@ -219,7 +258,9 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
             raise ValueError(f"{p} is listed in the manifest but missing: {repair}")
         data = p.read_bytes()
         if hashlib.sha256(data).hexdigest() != shards[name]:
-            raise ValueError(f"{p} does not match its checksum in the manifest (damaged or changed after generation): {repair}")
+            raise ValueError(
+                f"{p} does not match its checksum in the manifest (damaged or changed after generation): {repair}"
+            )
         try:
             parts.append(pq.read_table(pa.BufferReader(data)))
         except (pa.ArrowException, OSError, ValueError) as e:
@@ -229,8 +270,9 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
     try:
         t = pa.concat_tables(parts)
     except pa.ArrowInvalid as e:  # shards written by different versions: pyarrow's message is many lines
-        raise ValueError(f"{path}: the shards do not share one schema ({str(e).splitlines()[0].strip()}): "
-                         f"{repair}") from None
+        raise ValueError(
+            f"{path}: the shards do not share one schema ({str(e).splitlines()[0].strip()}): {repair}"
+        ) from None
     obs = _fixed_list(t["obs"], "obs", path).astype(np.float32)
     if obs.shape[1] != meta["obs_dim"]:
         raise ValueError(f"{path}: observations have {obs.shape[1]} features, metadata says {meta['obs_dim']}")
@@ -244,5 +286,7 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
         config_id=t["config_id"].to_numpy(),
         meta=meta,
         sha256=dataset_sha,
-        candidate_risk=_fixed_list(t["candidate_risk"], "candidate_risk", path) if "candidate_risk" in t.column_names else None,
+        candidate_risk=_fixed_list(t["candidate_risk"], "candidate_risk", path)
+        if "candidate_risk" in t.column_names
+        else None,
     )

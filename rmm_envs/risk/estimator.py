@@ -15,8 +15,8 @@ Batching, the tree-size limit, randomness and the candidates: docs/design-notes.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -122,17 +122,27 @@ class RiskEstimator:
         self.chunk_size = int(chunk_size) if chunk_size else max(1, 32768 // max(nodes, 1))
 
     def params(self) -> dict:
-        return {"branches": self.n, "depth": self.m, "horizon": self.t, "n_steps": self.n_steps,
-                "metric": self.metric, "alpha": self.alpha, "leaf": self.leaf,
-                "policy": "uniform" if self.policy is None else getattr(self.policy, "__name__", repr(self.policy))}
+        return {
+            "branches": self.n,
+            "depth": self.m,
+            "horizon": self.t,
+            "n_steps": self.n_steps,
+            "metric": self.metric,
+            "alpha": self.alpha,
+            "leaf": self.leaf,
+            "policy": "uniform" if self.policy is None else getattr(self.policy, "__name__", repr(self.policy)),
+        }
 
     # ------------------------------------------------------------------
     def draw_controls(self, rng: np.random.Generator, n_roots: int) -> list[np.ndarray]:
         """Uniform controls for every level: level ``l`` has shape ``(n_roots, n^l, c)``."""
         lo, hi = np.asarray(self.system.control_low, float), np.asarray(self.system.control_high, float)
-        return [rng.uniform(lo, hi, size=(n_roots, self.n ** (lvl + 1), lo.shape[0])) for lvl in range(self.m)]  # exact: integers
+        widths = [self.n ** (lvl + 1) for lvl in range(self.m)]  # exact: integers
+        return [rng.uniform(lo, hi, size=(n_roots, w, lo.shape[0])) for w in widths]
 
-    def estimate(self, states, rng: np.random.Generator | None = None, controls: list[np.ndarray] | None = None) -> RiskResult:
+    def estimate(
+        self, states, rng: np.random.Generator | None = None, controls: list[np.ndarray] | None = None
+    ) -> RiskResult:
         """Estimate the risk of each root state ``(B, d)``.
 
         ``controls`` (optional) gives every control of the tree, as :meth:`draw_controls`
@@ -153,7 +163,8 @@ class RiskEstimator:
                 raise ValueError(f"controls must have one array per level ({self.m}), got {len(controls)}")
             for lvl, c in enumerate(controls):
                 if c.shape[:2] != (B, self.n ** (lvl + 1)):  # exact: integers
-                    raise ValueError(f"controls[{lvl}] must have shape ({B}, {self.n ** (lvl + 1)}, c), got {c.shape}")  # exact: ints
+                    width = self.n ** (lvl + 1)  # exact: integers
+                    raise ValueError(f"controls[{lvl}] must have shape ({B}, {width}, c), got {c.shape}")
         elif self.m > 0 and rng is None:
             raise ValueError("estimate() needs rng (a numpy Generator) for a custom policy")
 

@@ -86,8 +86,15 @@ class DatagenConfig:
         return env.scene.default_horizon if isinstance(env, AdaptedEnv) else getattr(env, "default_horizon", 2.0)
 
     def estimator_params(self) -> dict:
-        return {"branches": self.branches, "depth": self.depth, "horizon": self.resolved_horizon(),
-                "n_steps": self.n_steps, "metric": self.metric, "alpha": self.alpha, "leaf": self.leaf}
+        return {
+            "branches": self.branches,
+            "depth": self.depth,
+            "horizon": self.resolved_horizon(),
+            "n_steps": self.n_steps,
+            "metric": self.metric,
+            "alpha": self.alpha,
+            "leaf": self.leaf,
+        }
 
 
 _ENV_CACHE: dict = {}  # one env per (id, arguments) and process, reused by every configuration (reset re-seeds it)
@@ -130,7 +137,9 @@ def labelled_env(cfg: DatagenConfig):
             check_labelled_env(env.unwrapped)
             hooks = env.unwrapped
             if cfg.failure is not None:
-                raise ValueError(f"failure (--failure) is for envs served by a risk adapter; {cfg.env_id} defines its own failures")
+                raise ValueError(
+                    f"failure (--failure) is for envs served by a risk adapter; {cfg.env_id} defines its own failures"
+                )
         except TypeError:
             from rmm_envs.adapters import adapt
 
@@ -151,7 +160,9 @@ def label_configs(cfg: DatagenConfig, config_ids) -> pa.Table:
     from rmm_envs.risk.estimator import RiskEstimator
 
     env = labelled_env(cfg)
-    cols: dict[str, list] = {k: [] for k in ("config_id", "sample", "obs", "state", "risk", "min_risk_ctrl", "min_risk_ctrl_dur", "n_leaves")}
+    cols: dict[str, list] = {
+        k: [] for k in ("config_id", "sample", "obs", "state", "risk", "min_risk_ctrl", "min_risk_ctrl_dur", "n_leaves")
+    }
     for c in config_ids:
         env_seed, rng = config_seeds(cfg.seed, c)
         env.reset(seed=env_seed)
@@ -169,7 +180,9 @@ def label_configs(cfg: DatagenConfig, config_ids) -> pa.Table:
         cols["min_risk_ctrl_dur"].append(res.min_risk_ctrl_dur)
         cols["n_leaves"].append(res.n_leaves.astype(np.int32))
         if cfg.candidates is not None:
-            cols.setdefault("candidate_risk", []).append(est.estimate_candidates(states, cfg.candidates, cfg.candidate_hold, rng))
+            cols.setdefault("candidate_risk", []).append(
+                est.estimate_candidates(states, cfg.candidates, cfg.candidate_hold, rng)
+            )
     arrays = {}
     for k, parts in cols.items():
         a = np.concatenate(parts)
@@ -201,7 +214,8 @@ def dataset_metadata(cfg: DatagenConfig) -> dict:
         "seed": cfg.seed,
         "configs_per_shard": cfg.configs_per_shard,
         "failure": cfg.failure,
-        "estimator": cfg.estimator_params() | {"policy": "uniform"}
+        "estimator": cfg.estimator_params()
+        | {"policy": "uniform"}
         | ({} if cfg.candidates is None else {"candidates": cfg.candidates, "candidate_hold": cfg.candidate_hold}),
         "obs_dim": int(env.observation_space.shape[0]),
         "state_dim": int(scene.state_dim),

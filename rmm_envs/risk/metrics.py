@@ -37,7 +37,9 @@ def _cvar_weights(n: int, alpha: float) -> np.ndarray:
 def cvar(values: np.ndarray, alpha: float) -> np.ndarray:
     n = values.shape[-1]
     desc = -np.sort(-values, axis=-1)
-    return np.add.reduce(desc * _cvar_weights(n, alpha), axis=-1)  # an ordered sum, not BLAS: the same bits on every CPU
+    return np.add.reduce(
+        desc * _cvar_weights(n, alpha), axis=-1
+    )  # an ordered sum, not BLAS: the same bits on every CPU
 
 
 METRICS = ("expected", "cvar", "worst")

@@ -63,7 +63,6 @@ def check_scene(scene) -> None:
         )
 
 
-
 @runtime_checkable
 class LabelledEnv(Protocol):
     """An environment whose states can be risk-labelled, on its unwrapped env (every env of this
@@ -71,7 +70,7 @@ class LabelledEnv(Protocol):
 
     ``risk_scene() -> RiskScene``
         The :class:`rmm_envs.risk.RiskScene` of the current episode (its dynamics in its obstacle
-        configuration); ``RuntimeError`` before the first ``reset``. 
+        configuration); ``RuntimeError`` before the first ``reset``.
     ``true_state``
         Property: the current true state, a ``(state_dim,)`` float array (a copy).
     ``sample_states(rng, n) -> (n, state_dim)``
@@ -148,5 +147,4 @@ def check_labelled_env(env, needs: tuple[str, ...] = tuple(HOOKS)) -> None:
             except ValueError:  # no signature (a builtin): assume it fits
                 pass
     if problems:
-        raise TypeError(f"{_env_name(base)} is not a LabelledEnv (see rmm_envs.risk.protocol): "
-                        + "; ".join(problems))
+        raise TypeError(f"{_env_name(base)} is not a LabelledEnv (see rmm_envs.risk.protocol): " + "; ".join(problems))

@@ -23,8 +23,14 @@ class Dubins4DMapScene(Dubins4DScene):
     episode's goal disc ``(3,)``.  The env uses this very object for its own observations and
     collision checks, so labels and the env agree by construction."""
 
-    def __init__(self, world: PymunkWorld, goal: np.ndarray, system: Dubins4D | None = None, n_rays: int = 12,
-                 ray_length: float = 10.0) -> None:
+    def __init__(
+        self,
+        world: PymunkWorld,
+        goal: np.ndarray,
+        system: Dubins4D | None = None,
+        n_rays: int = 12,
+        ray_length: float = 10.0,
+    ) -> None:
         self.system = system or Dubins4D()
         self.world = world
         self._goal = np.asarray(goal, dtype=float).reshape(3)

@@ -28,7 +28,17 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency; numpy alone still works
     njit = None
 
-__all__ = ["CONTROLS", "KIND", "SERIES_COEFFICIENTS", "Dubins4D", "FullBraking", "desired_heading", "desired_heading_compiled", "segment_position", "wrap_angle"]
+__all__ = [
+    "CONTROLS",
+    "KIND",
+    "SERIES_COEFFICIENTS",
+    "Dubins4D",
+    "FullBraking",
+    "desired_heading",
+    "desired_heading_compiled",
+    "segment_position",
+    "wrap_angle",
+]
 
 _COMPILED_MAX_N = 8  # up to this many states per call, the compiled scalar path is faster
 
@@ -162,7 +172,8 @@ def _states_at_loop(states, controls, times, lo, hi, coef, out):
         v0, w, a, sat, t_sat = _clamped_start(states[n, 3], controls[n, 0], controls[n, 1], t_end, lo, hi)
         for k in range(times.shape[0]):
             out[n, k, 0], out[n, k, 1], out[n, k, 2], out[n, k, 3] = _state_at_1(
-                states[n, 0], states[n, 1], states[n, 2], v0, w, a, times[k], sat, t_sat, lo, hi, coef)
+                states[n, 0], states[n, 1], states[n, 2], v0, w, a, times[k], sat, t_sat, lo, hi, coef
+            )
     return out
 
 
@@ -237,7 +248,10 @@ class Dubins4D:
                 f" and u2 in [{self.u2_min}, {self.u2_max}]"
             )
         # the compiled loop's (v, u1, u2) bounds, built once: it runs at every guardian decision
-        for name, arr in (("_lo", [self.v_min, self.u1_min, self.u2_min]), ("_hi", [self.v_max, self.u1_max, self.u2_max])):
+        for name, arr in (
+            ("_lo", [self.v_min, self.u1_min, self.u2_min]),
+            ("_hi", [self.v_max, self.u1_max, self.u2_max]),
+        ):
             object.__setattr__(self, name, np.array(arr, dtype=float))
 
     @property
@@ -255,9 +269,7 @@ class Dubins4D:
         """``n`` controls uniform over the control box, shape ``(n, 2)``."""
         return rng.uniform(self.control_low, self.control_high, size=(n, 2))
 
-    def propagate(
-        self, states: np.ndarray, controls: np.ndarray, duration: float, n_steps: int
-    ) -> np.ndarray:
+    def propagate(self, states: np.ndarray, controls: np.ndarray, duration: float, n_steps: int) -> np.ndarray:
         """Exact path under a zero-order-hold control.
 
         Args:
@@ -275,9 +287,7 @@ class Dubins4D:
         if states.ndim != 2 or states.shape[1] != 4:
             raise ValueError(f"states must have shape (N, 4), got {states.shape}")
         if controls.shape != (states.shape[0], 2):
-            raise ValueError(
-                f"controls must have shape ({states.shape[0]}, 2) to match states, got {controls.shape}"
-            )
+            raise ValueError(f"controls must have shape ({states.shape[0]}, 2) to match states, got {controls.shape}")
         if not np.isfinite(duration) or duration < 0:
             raise ValueError(f"duration must be a finite number >= 0, got {duration}")
         if int(n_steps) != n_steps or n_steps < 2:
@@ -285,7 +295,9 @@ class Dubins4D:
         times = np.linspace(0.0, float(duration), int(n_steps))
         return self.states_at(states, controls, times)
 
-    def states_at(self, states: np.ndarray, controls: np.ndarray, times: np.ndarray, compiled: bool | None = None) -> np.ndarray:
+    def states_at(
+        self, states: np.ndarray, controls: np.ndarray, times: np.ndarray, compiled: bool | None = None
+    ) -> np.ndarray:
         """States at each of ``times`` (shape ``(T,)``, all ``>= 0``): ``(N, T, 4)``.
 
         ``compiled``: ``None`` picks the faster path for ``N``; ``True`` always runs the compiled
@@ -294,8 +306,15 @@ class Dubins4D:
         """
         if (compiled or (compiled is None and states.shape[0] <= _COMPILED_MAX_N)) and _states_at_compiled is not None:
             out = np.empty((states.shape[0], len(times), 4))
-            return _states_at_compiled(np.ascontiguousarray(states, dtype=float), np.ascontiguousarray(controls, dtype=float),
-                                       np.asarray(times, dtype=float), self._lo, self._hi, SERIES_COEFFICIENTS, out)
+            return _states_at_compiled(
+                np.ascontiguousarray(states, dtype=float),
+                np.ascontiguousarray(controls, dtype=float),
+                np.asarray(times, dtype=float),
+                self._lo,
+                self._hi,
+                SERIES_COEFFICIENTS,
+                out,
+            )
         return self._states_at_numpy(states, controls, times)
 
     def state_after(self, state, control, t: float) -> np.ndarray:
@@ -304,8 +323,9 @@ class Dubins4D:
         floats as ``states_at(state[None], control[None], [t], compiled=True)[0, 0]``), with
         the least per-call work: a guardian predicts one state per decision."""
         if _state_after_compiled is None:  # pragma: no cover - numba is a dependency
-            return self._states_at_numpy(np.asarray(state, float).reshape(1, 4), np.asarray(control, float).reshape(1, 2),
-                                         np.array([float(t)]))[0, 0]
+            return self._states_at_numpy(
+                np.asarray(state, float).reshape(1, 4), np.asarray(control, float).reshape(1, 2), np.array([float(t)])
+            )[0, 0]
         x, y, th, v = np.asarray(state, dtype=float).tolist()
         w, a = np.asarray(control, dtype=float).tolist()
         return np.array(_state_after_compiled(x, y, th, v, w, a, float(t), self._lo, self._hi, SERIES_COEFFICIENTS))

@@ -68,15 +68,34 @@ class QuadrotorParams:
     max_angular_speed: float = 100.0
 
     def __post_init__(self) -> None:
-        for name in ("mass", "collision_radius", "collision_length", "dt", "max_angular_speed",
-                     "gravity", "linear_damping", "angular_damping"):
+        for name in (
+            "mass",
+            "collision_radius",
+            "collision_length",
+            "dt",
+            "max_angular_speed",
+            "gravity",
+            "linear_damping",
+            "angular_damping",
+        ):
             v, positive = getattr(self, name), name not in ("gravity", "linear_damping", "angular_damping")
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0 or (positive and v == 0):
-                raise ValueError(f"QuadrotorParams.{name} must be a finite number {'>' if positive else '>='} 0, got {v!r}")
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, (int, float))
+                or not math.isfinite(v)
+                or v < 0
+                or (positive and v == 0)
+            ):
+                raise ValueError(
+                    f"QuadrotorParams.{name} must be a finite number {'>' if positive else '>='} 0, got {v!r}"
+                )
         inertia = _finite_tuple("inertia", self.inertia, 3)
         if min(inertia) <= 0:
             raise ValueError(f"QuadrotorParams.inertia must be 3 principal moments > 0, got {self.inertia!r}")
-        low, high = _finite_tuple("control_low", self.control_low, 4), _finite_tuple("control_high", self.control_high, 4)
+        low, high = (
+            _finite_tuple("control_low", self.control_low, 4),
+            _finite_tuple("control_high", self.control_high, 4),
+        )
         if any(lo > hi for lo, hi in zip(low, high)):
             raise ValueError(f"QuadrotorParams: control_low {low} must be <= control_high {high} componentwise")
         object.__setattr__(self, "inertia", inertia)
@@ -123,6 +142,7 @@ class Quadrotor:
         pos, q, v, w = s[:, 0:3], s[:, 3:7], s[:, 7:10], s[:, 10:13]
         R = quat_to_rot(q)
         I_b = np.asarray(par.inertia)
+
         # world-frame inertia I_w = R diag(I) R^T, applied to vectors without forming it
         def I_w(x):
             return np.einsum("nij,nj->ni", R, I_b * np.einsum("nji,nj->ni", R, x))

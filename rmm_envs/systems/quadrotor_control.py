@@ -30,8 +30,19 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency
     njit = None
 
-__all__ = ["CONTROLS", "KIND", "yaw_of", "ClosedLoopQuadrotor", "CommandController", "HoverAndLevel", "body_packed", "body_step", "command_wrench", "command_wrenches",
-           "heading_of"]
+__all__ = [
+    "CONTROLS",
+    "KIND",
+    "yaw_of",
+    "ClosedLoopQuadrotor",
+    "CommandController",
+    "HoverAndLevel",
+    "body_packed",
+    "body_step",
+    "command_wrench",
+    "command_wrenches",
+    "heading_of",
+]
 
 #: the guardian action's control fields: the commanded velocity in the heading frame and the yaw rate
 CONTROLS = ("vforward_ctrl", "vleft_ctrl", "vup_ctrl", "yawrate_ctrl")
@@ -40,16 +51,40 @@ KIND = "quadrotor"
 
 # the layout of the packed gain vector the compiled kernel reads
 _MASS, _G, _IX, _IY, _IZ, _KV, _KVZ, _AH, _AZ, _KR, _KW, _KWZ, _FLO, _FHI, _MLO, _MHI = (
-    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 17)
+    0,
+    1,
+    2,
+    3,
+    4,
+    5,
+    6,
+    7,
+    8,
+    9,
+    10,
+    11,
+    12,
+    13,
+    14,
+    17,
+)
 _N_GAINS = 20
 
 
 def _rotation(qx, qy, qz, qw):
     """The rotation matrix of the unit quaternion ``(x, y, z, w)``, row by row (9 numbers): the
     scalar form of :func:`rmm_envs.systems.rotations.quat_to_rot`, for the compiled kernels."""
-    return (1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw),
-            2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw),
-            2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy))
+    return (
+        1 - 2 * (qy * qy + qz * qz),
+        2 * (qx * qy - qz * qw),
+        2 * (qx * qz + qy * qw),
+        2 * (qx * qy + qz * qw),
+        1 - 2 * (qx * qx + qz * qz),
+        2 * (qy * qz - qx * qw),
+        2 * (qx * qz - qy * qw),
+        2 * (qy * qz + qx * qw),
+        1 - 2 * (qx * qx + qy * qy),
+    )
 
 
 def command_wrench(s, cmd, k, out):
@@ -249,21 +284,37 @@ class CommandController:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise ValueError(f"CommandController.{name} must be a finite number > 0, got {v!r}")
         if self.a_max_z >= self.params.gravity:
-            raise ValueError(f"CommandController.a_max_z must be below gravity ({self.params.gravity}), got {self.a_max_z!r}")
+            raise ValueError(
+                f"CommandController.a_max_z must be below gravity ({self.params.gravity}), got {self.a_max_z!r}"
+            )
         lo = tuple(float(x) for x in np.asarray(self.command_low, float).reshape(-1))
         hi = tuple(float(x) for x in np.asarray(self.command_high, float).reshape(-1))
-        if len(lo) != 4 or len(hi) != 4 or not all(math.isfinite(x) for x in lo + hi) \
-                or not all(a <= 0.0 <= b for a, b in zip(lo, hi)):
-            raise ValueError(f"CommandController: command bounds must be 4 finite numbers each with low <= 0 <= high "
-                             f"(zero is hover), got {self.command_low!r} and {self.command_high!r}")
+        if (
+            len(lo) != 4
+            or len(hi) != 4
+            or not all(math.isfinite(x) for x in lo + hi)
+            or not all(a <= 0.0 <= b for a, b in zip(lo, hi))
+        ):
+            raise ValueError(
+                f"CommandController: command bounds must be 4 finite numbers each with low <= 0 <= high "
+                f"(zero is hover), got {self.command_low!r} and {self.command_high!r}"
+            )
         object.__setattr__(self, "command_low", lo)
         object.__setattr__(self, "command_high", hi)
         p = self.params
         k = np.empty(_N_GAINS)
         k[[_MASS, _G, _IX, _IY, _IZ]] = (p.mass, p.gravity, *p.inertia)
-        k[[_KV, _KVZ, _AH, _AZ, _KR, _KW, _KWZ]] = (self.k_v, self.k_vz, self.a_max_h, self.a_max_z, self.k_R, self.k_w, self.k_wz)
+        k[[_KV, _KVZ, _AH, _AZ, _KR, _KW, _KWZ]] = (
+            self.k_v,
+            self.k_vz,
+            self.a_max_h,
+            self.a_max_z,
+            self.k_R,
+            self.k_w,
+            self.k_wz,
+        )
         k[_FLO], k[_FHI] = p.control_low[0], p.control_high[0]
-        k[_MLO:_MLO + 3], k[_MHI:_MHI + 3] = p.control_low[1:], p.control_high[1:]
+        k[_MLO : _MLO + 3], k[_MHI : _MHI + 3] = p.control_low[1:], p.control_high[1:]
         k.setflags(write=False)
         object.__setattr__(self, "packed", k)
 
@@ -307,8 +358,14 @@ class ClosedLoopQuadrotor:
         states, cmds = body.check_propagate(states, commands, duration, n_steps, self.control_low, self.control_high)
         per_segment = body.segment_steps(duration, n_steps)
         out = np.empty((states.shape[0], int(n_steps), 13))
-        return _closed_loop_paths(np.ascontiguousarray(states), np.ascontiguousarray(cmds), self.controller.packed,
-                                  body_packed(self.controller.params), per_segment, out)
+        return _closed_loop_paths(
+            np.ascontiguousarray(states),
+            np.ascontiguousarray(cmds),
+            self.controller.packed,
+            body_packed(self.controller.params),
+            per_segment,
+            out,
+        )
 
     def propagate_numpy(self, states, commands, duration: float, n_steps: int) -> np.ndarray:
         """The same paths through the numpy :meth:`Quadrotor.step

@@ -48,7 +48,9 @@ def as_circles(circles, name: str = "circles") -> np.ndarray:
     try:
         arr = np.asarray(circles, dtype=float)
     except OverflowError:  # an integer beyond a float (10**400)
-        raise ValueError(f"{name} must be numbers of magnitude at most {MAX_MAGNITUDE:g}, got {str(circles)[:200]}") from None
+        raise ValueError(
+            f"{name} must be numbers of magnitude at most {MAX_MAGNITUDE:g}, got {str(circles)[:200]}"
+        ) from None
     if arr.size == 0:
         return np.zeros((0, 3))
     if arr.ndim == 1 and arr.shape[0] == 3:
@@ -58,8 +60,10 @@ def as_circles(circles, name: str = "circles") -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {arr.tolist()}")
     if not within_bounds(arr):
-        raise ValueError(f"{name} must be numbers of magnitude at most {MAX_MAGNITUDE:g} (larger ones overflow the "
-                         f"geometry), got {arr.tolist()}")
+        raise ValueError(
+            f"{name} must be numbers of magnitude at most {MAX_MAGNITUDE:g} (larger ones overflow the "
+            f"geometry), got {arr.tolist()}"
+        )
     if np.any(arr[:, 2] <= 0):
         raise ValueError(f"{name} radii must be > 0, got {arr[:, 2].tolist()}")
     return arr
@@ -236,9 +240,14 @@ def ray_cast(
     if circles.shape[0] == 0:
         return np.full((n, n_rays), float(max_range))
     if n <= _COMPILED_MAX_N and _ray_cast_compiled is not None:
-        return _ray_cast_compiled(np.ascontiguousarray(origins), np.ascontiguousarray(headings.reshape(n)),
-                                  np.ascontiguousarray(circles, dtype=float), int(n_rays), float(max_range),
-                                  np.empty((n, int(n_rays))))
+        return _ray_cast_compiled(
+            np.ascontiguousarray(origins),
+            np.ascontiguousarray(headings.reshape(n)),
+            np.ascontiguousarray(circles, dtype=float),
+            int(n_rays),
+            float(max_range),
+            np.empty((n, int(n_rays))),
+        )
     return ray_cast_numpy(origins, headings, circles, n_rays, max_range)
 
 
@@ -308,8 +317,9 @@ else:  # pragma: no cover
     _ray_cast_compiled = None
 
 
-def ray_cast_each(origins: np.ndarray, headings: np.ndarray, circles: np.ndarray, n_rays: int = 12,
-                  max_range: float = 10.0) -> np.ndarray:
+def ray_cast_each(
+    origins: np.ndarray, headings: np.ndarray, circles: np.ndarray, n_rays: int = 12, max_range: float = 10.0
+) -> np.ndarray:
     """:func:`ray_cast` for ``N`` origins each among its own circles ``(N, K, 3)``: ``(N, n_rays)``.
 
     Always the compiled loop (the same per-origin function as :func:`ray_cast`'s for a few
@@ -371,8 +381,9 @@ class CircleWorld:
         obs[0, 2] = rng.uniform(r_min, r_max)
         if n_obstacles > 1:
             k = n_obstacles - 1
-            obs[1:] = rng.uniform(np.array([-half_width, -half_width, r_min] * k),
-                                  np.array([half_width, half_width, r_max] * k)).reshape(k, 3)
+            obs[1:] = rng.uniform(
+                np.array([-half_width, -half_width, r_min] * k), np.array([half_width, half_width, r_max] * k)
+            ).reshape(k, 3)
         return obs
 
     def in_collision(self, points: np.ndarray) -> np.ndarray:

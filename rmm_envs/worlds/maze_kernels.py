@@ -40,8 +40,10 @@ def _seg_point_sq(ax, ay, bx, by, px, py):
 
 
 def _seg_seg_sq(p0x, p0y, p1x, p1y, q0x, q0y, q1x, q1y):
-    d = min(min(_seg_point_sq(q0x, q0y, q1x, q1y, p0x, p0y), _seg_point_sq(q0x, q0y, q1x, q1y, p1x, p1y)),
-            min(_seg_point_sq(p0x, p0y, p1x, p1y, q0x, q0y), _seg_point_sq(p0x, p0y, p1x, p1y, q1x, q1y)))
+    d = min(
+        min(_seg_point_sq(q0x, q0y, q1x, q1y, p0x, p0y), _seg_point_sq(q0x, q0y, q1x, q1y, p1x, p1y)),
+        min(_seg_point_sq(p0x, p0y, p1x, p1y, q0x, q0y), _seg_point_sq(p0x, p0y, p1x, p1y, q1x, q1y)),
+    )
     o1 = (p1x - p0x) * (q0y - p0y) - (p1y - p0y) * (q0x - p0x)
     o2 = (p1x - p0x) * (q1y - p0y) - (p1y - p0y) * (q1x - p0x)
     o3 = (q1x - q0x) * (p0y - q0y) - (q1y - q0y) * (p0x - q0x)

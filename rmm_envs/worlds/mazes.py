@@ -95,7 +95,9 @@ class Maze:
         if w.ndim != 2 or w.shape[1] != 4 or not np.all(np.isfinite(w)):
             raise ValueError(f"walls must be finite (W, 4) segments [x0, y0, x1, y1], got shape {w.shape}")
         if not (self.thickness > 0 and self.width > 0 and self.height > 0):
-            raise ValueError(f"thickness, width and height must be > 0, got {self.thickness}, {self.width}, {self.height}")
+            raise ValueError(
+                f"thickness, width and height must be > 0, got {self.thickness}, {self.width}, {self.height}"
+            )
         self.walls = w
         self.half = self.thickness / 2.0
         self._build_buckets()
@@ -176,7 +178,9 @@ class Maze:
             if amb.any():
                 i, j, k = np.nonzero(amb)
                 q = w[i, k]
-                dd = _seg_seg_sq(xy[i, j, 0], xy[i, j, 1], xy[i, j + 1, 0], xy[i, j + 1, 1], q[:, 0], q[:, 1], q[:, 2], q[:, 3])
+                dd = _seg_seg_sq(
+                    xy[i, j, 0], xy[i, j, 1], xy[i, j + 1, 0], xy[i, j + 1, 1], q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+                )
                 hit = dd <= h2
                 out[i[hit]] = True
         return out
@@ -196,9 +200,18 @@ class Maze:
         w = self.walls
         # all walls (rays have no range limit); chunked to bound memory
         for lo in range(0, w.shape[0], 256):
-            ww = w[lo:lo + 256]
-            t = _ray_capsule(ox[..., None], oy[..., None], dx[..., None], dy[..., None],
-                             ww[:, 0], ww[:, 1], ww[:, 2], ww[:, 3], self.half)  # (N, R, K)
+            ww = w[lo : lo + 256]
+            t = _ray_capsule(
+                ox[..., None],
+                oy[..., None],
+                dx[..., None],
+                dy[..., None],
+                ww[:, 0],
+                ww[:, 1],
+                ww[:, 2],
+                ww[:, 3],
+                self.half,
+            )  # (N, R, K)
             best = np.minimum(best, t.min(axis=2))
         dead = self.state_failed(st[:, :2])
         return np.where(dead[:, None], 0.0, np.maximum(best, 0.0))
@@ -269,7 +282,9 @@ def _hex_maze(rng, rows, cols, cell, margin):
     index = {k: i for i, k in enumerate(keys)}
 
     def corners(x, y):
-        return [(x + R * np.cos(np.pi / 6 + k * np.pi / 3), y + R * np.sin(np.pi / 6 + k * np.pi / 3)) for k in range(6)]
+        return [
+            (x + R * np.cos(np.pi / 6 + k * np.pi / 3), y + R * np.sin(np.pi / 6 + k * np.pi / 3)) for k in range(6)
+        ]
 
     def edge_key(p, q):
         a = (round(p[0], 6), round(p[1], 6))
@@ -294,20 +309,35 @@ def _hex_maze(rng, rows, cols, cell, margin):
     return np.array(walls), np.array([centres[k] for k in keys]), np.array([edges[k] for k in sorted(tree)])
 
 
-def generate_maze(rng: np.random.Generator, kind: str = "rectangular", rows: int = 20, cols: int = 20,
-                  cell: float = 125.0, thickness: float = 12.5) -> Maze:
+def generate_maze(
+    rng: np.random.Generator,
+    kind: str = "rectangular",
+    rows: int = 20,
+    cols: int = 20,
+    cell: float = 125.0,
+    thickness: float = 12.5,
+) -> Maze:
     """A seeded perfect maze of ``kind`` with a one-cell margin around it (pixel units)."""
     if kind not in MAZE_KINDS:
         raise ValueError(f"unknown maze kind {kind!r}; expected one of {MAZE_KINDS}")
     from rmm_envs.worlds.bounds import MAX_MAGNITUDE, MAX_MAZE_SIDE, within_bounds
 
-    sides_ok = all(isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool) and within_bounds(x)
-                   and int(x) == x for x in (rows, cols))
+    sides_ok = all(
+        isinstance(x, (int, float, np.integer, np.floating))
+        and not isinstance(x, bool)
+        and within_bounds(x)
+        and int(x) == x
+        for x in (rows, cols)
+    )
     if not sides_ok or not (2 <= rows <= MAX_MAZE_SIDE and 2 <= cols <= MAX_MAZE_SIDE):  # checked before any allocation
-        raise ValueError(f"rows and cols must be integers in [2, {MAX_MAZE_SIDE}], got {str(rows)[:40]}, {str(cols)[:40]}")
+        raise ValueError(
+            f"rows and cols must be integers in [2, {MAX_MAZE_SIDE}], got {str(rows)[:40]}, {str(cols)[:40]}"
+        )
     if not (within_bounds([cell, thickness]) and cell > thickness > 0):
-        raise ValueError(f"need finite cell > thickness > 0 of at most {MAX_MAGNITUDE:g}, got cell={str(cell)[:40]}, "
-                         f"thickness={str(thickness)[:40]}")
+        raise ValueError(
+            f"need finite cell > thickness > 0 of at most {MAX_MAGNITUDE:g}, got cell={str(cell)[:40]}, "
+            f"thickness={str(thickness)[:40]}"
+        )
     rows, cols = int(rows), int(cols)
     margin = cell
     if kind == "rectangular":
@@ -317,7 +347,9 @@ def generate_maze(rng: np.random.Generator, kind: str = "rectangular", rows: int
         walls, cells, passages = _hex_maze(rng, rows, cols, cell, margin)
         width = 2 * margin + (cols + 0.5) * cell
         height = 2 * margin + (1.5 * (rows - 1) + 2) * cell / np.sqrt(3.0)
-    return Maze(walls, width=float(width), height=float(height), thickness=thickness, kind=kind, cells=cells, passages=passages)
+    return Maze(
+        walls, width=float(width), height=float(height), thickness=thickness, kind=kind, cells=cells, passages=passages
+    )
 
 
 def render_occupancy(maze: Maze, resolution: float = 1.0) -> np.ndarray:

@@ -34,7 +34,9 @@ def require_pymunk():
     except ImportError as e:
         import gymnasium as gym
 
-        raise gym.error.DependencyNotInstalled("maps of your own need pymunk: the map extra, pip install -e '.[map]' in a clone") from e
+        raise gym.error.DependencyNotInstalled(
+            "maps of your own need pymunk: the map extra, pip install -e '.[map]' in a clone"
+        ) from e
     return pymunk
 
 
@@ -55,7 +57,9 @@ class PymunkWorld:
                 a, b, t = shape_map.segments[k]
                 shapes.append(pymunk.Segment(body, tuple(map(float, a)), tuple(map(float, b)), t / 2.0))
             else:
-                shapes += [pymunk.Poly(body, [tuple(map(float, p)) for p in tri]) for tri in triangulate(shape_map.polygons[k])]
+                shapes += [
+                    pymunk.Poly(body, [tuple(map(float, p)) for p in tri]) for tri in triangulate(shape_map.polygons[k])
+                ]
         self.space.add(*shapes)
         self.shapes = shapes
         self._filter = pymunk.ShapeFilter()
@@ -67,8 +71,13 @@ class PymunkWorld:
     def _near(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """``(N,)`` bool: box ``[lo, hi]`` (``(N, 2)`` each) meets some shape's bounding box."""
         b = self.bbs
-        return np.any((lo[:, None, 0] <= b[None, :, 2]) & (hi[:, None, 0] >= b[None, :, 0])
-                      & (lo[:, None, 1] <= b[None, :, 3]) & (hi[:, None, 1] >= b[None, :, 1]), axis=1)
+        return np.any(
+            (lo[:, None, 0] <= b[None, :, 2])
+            & (hi[:, None, 0] >= b[None, :, 0])
+            & (lo[:, None, 1] <= b[None, :, 3])
+            & (hi[:, None, 1] >= b[None, :, 1]),
+            axis=1,
+        )
 
     def _inside(self, x: float, y: float) -> bool:
         info = self.space.point_query_nearest((x, y), _REACH, self._filter)

@@ -81,21 +81,38 @@ def bounding_radius(shape: str, size) -> float:
     return float(size[0])
 
 
-def generate_room(rng: np.random.Generator, n_rectangles: int | None = None, x_range: float | None = None,
-                  y_range: float | None = None, wall_height: float | None = None, n_boxes: int | None = None,
-                  n_cylinders: int | None = None, n_spheres: int | None = None, wall_thickness: float = 0.5) -> Room:
+def generate_room(
+    rng: np.random.Generator,
+    n_rectangles: int | None = None,
+    x_range: float | None = None,
+    y_range: float | None = None,
+    wall_height: float | None = None,
+    n_boxes: int | None = None,
+    n_cylinders: int | None = None,
+    n_spheres: int | None = None,
+    wall_thickness: float = 0.5,
+) -> Room:
     """A seeded random room; any argument left ``None`` is drawn as described in the module.  A
     given argument must be an integer (the counts: ``n_rectangles >= 1``, the object counts
     ``>= 0``) or a finite length in metres ``> 0``; anything else is refused (``ValueError``
     naming it) before anything is drawn."""
-    for name, v, lo in (("n_rectangles", n_rectangles, 1), ("n_boxes", n_boxes, 0), ("n_cylinders", n_cylinders, 0),
-                        ("n_spheres", n_spheres, 0)):
+    for name, v, lo in (
+        ("n_rectangles", n_rectangles, 1),
+        ("n_boxes", n_boxes, 0),
+        ("n_cylinders", n_cylinders, 0),
+        ("n_spheres", n_spheres, 0),
+    ):
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo):
             raise ValueError(f"generate_room: {name} must be an integer >= {lo}, got {v!r}")
-    for name, v in (("x_range", x_range), ("y_range", y_range), ("wall_height", wall_height),
-                    ("wall_thickness", wall_thickness)):
-        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not math.isfinite(v)
-                              or v <= 0):
+    for name, v in (
+        ("x_range", x_range),
+        ("y_range", y_range),
+        ("wall_height", wall_height),
+        ("wall_thickness", wall_thickness),
+    ):
+        if v is not None and (
+            isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not math.isfinite(v) or v <= 0
+        ):
             raise ValueError(f"generate_room: {name} must be a finite number of metres > 0, got {v!r}")
     n = int(rng.integers(1, 33)) if n_rectangles is None else int(n_rectangles)
     X = float(rng.uniform(5, 50)) if x_range is None else float(x_range)
@@ -158,7 +175,9 @@ def generate_room(rng: np.random.Generator, n_rectangles: int | None = None, x_r
                 cell_ij = free_cells[rng.integers(len(free_cells))]
                 xy = lo + (cell_ij + rng.uniform(0, 1, 2)) * c
                 if placed:  # exact norms only where the per-axis gaps allow an overlap
-                    near = np.flatnonzero((np.abs(placed_xy[:len(placed)] - xy) < (radius + placed_r[:len(placed), None])).all(axis=1))
+                    near = np.flatnonzero(
+                        (np.abs(placed_xy[: len(placed)] - xy) < (radius + placed_r[: len(placed), None])).all(axis=1)
+                    )
                     if any(norm(xy - placed[i][0][:2]) < radius + placed[i][1] for i in near):
                         continue
                 if not room.in_footprint(xy[None, :] + radius * np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])).all():
@@ -201,7 +220,7 @@ def build_room(client: int, room: Room, visual: bool = True) -> list[int]:
     shapes = [("box", w[3:], w[:3], (0.0, 0.0, 0.0, 1.0), (0.6, 0.6, 0.6, 1)) for w in room.walls]
     shapes += [(o["shape"], o["size"], o["pos"], o["quat"], (0.8, 0.5, 0.2, 1)) for o in room.objects]
     for lo in range(0, len(shapes), _MAX_CHILDREN):
-        group = shapes[lo:lo + _MAX_CHILDREN]
+        group = shapes[lo : lo + _MAX_CHILDREN]
         types, he, radii, lengths, pos, orn = [], [], [], [], [], []
         for kind, size, position, quat, _ in group:
             size = np.asarray(size, float)
@@ -211,14 +230,28 @@ def build_room(client: int, room: Room, visual: bool = True) -> list[int]:
             lengths.append(float(size[1]) if kind == "cylinder" else 0.0)
             pos.append([float(x) for x in position])
             orn.append([float(x) for x in quat])
-        col = p.createCollisionShapeArray(types, radii=radii, halfExtents=he, lengths=lengths, collisionFramePositions=pos,
-                                          collisionFrameOrientations=orn, physicsClientId=client)
+        col = p.createCollisionShapeArray(
+            types,
+            radii=radii,
+            halfExtents=he,
+            lengths=lengths,
+            collisionFramePositions=pos,
+            collisionFrameOrientations=orn,
+            physicsClientId=client,
+        )
         # (createVisualShapeArray crashes PyBullet 3.2.7 when given rgbaColors: colour the body instead)
         if not visual:
             ids.append(p.createMultiBody(0, col, -1, [0, 0, 0], physicsClientId=client))
             continue
-        vis = p.createVisualShapeArray(types, radii=radii, halfExtents=he, lengths=lengths, visualFramePositions=pos,
-                                       visualFrameOrientations=orn, physicsClientId=client)
+        vis = p.createVisualShapeArray(
+            types,
+            radii=radii,
+            halfExtents=he,
+            lengths=lengths,
+            visualFramePositions=pos,
+            visualFrameOrientations=orn,
+            physicsClientId=client,
+        )
         ids.append(p.createMultiBody(0, col, vis, [0, 0, 0], physicsClientId=client))
         p.changeVisualShape(ids[-1], -1, rgbaColor=list(group[0][4]), physicsClientId=client)
     return ids

@@ -18,7 +18,6 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -55,8 +54,9 @@ def _numbers(value, n: int, what: str) -> np.ndarray:
     if not all(isinstance(v, (int, np.integer)) or math.isfinite(v) for v in value):
         raise ValueError(f"expected {what} with finite numbers (no NaN or infinity)")
     if not within_bounds(list(value)):  # before converting: 10**400 would overflow
-        raise ValueError(f"expected {what} with numbers of magnitude at most {MAX_MAGNITUDE:g} (larger ones overflow "
-                         "the geometry)")
+        raise ValueError(
+            f"expected {what} with numbers of magnitude at most {MAX_MAGNITUDE:g} (larger ones overflow the geometry)"
+        )
     return np.array(value, dtype=float)
 
 
@@ -79,8 +79,12 @@ def _segments_meet(p1, p2, q1, q2) -> bool:
     d3, d4 = _cross(p1, p2, q1), _cross(p1, p2, q2)
     if ((d1 > 0 > d2) or (d1 < 0 < d2)) and ((d3 > 0 > d4) or (d3 < 0 < d4)):
         return True
-    return ((d1 == 0 and _on_segment(q1, p1, q2)) or (d2 == 0 and _on_segment(q1, p2, q2))
-            or (d3 == 0 and _on_segment(p1, q1, p2)) or (d4 == 0 and _on_segment(p1, q2, p2)))
+    return (
+        (d1 == 0 and _on_segment(q1, p1, q2))
+        or (d2 == 0 and _on_segment(q1, p2, q2))
+        or (d3 == 0 and _on_segment(p1, q1, p2))
+        or (d4 == 0 and _on_segment(p1, q2, p2))
+    )
 
 
 def _cross_many(o, a, b) -> np.ndarray:
@@ -90,8 +94,12 @@ def _cross_many(o, a, b) -> np.ndarray:
 
 
 def _on_segment_many(p, q, r) -> np.ndarray:
-    return ((np.minimum(p[..., 0], r[..., 0]) <= q[..., 0]) & (q[..., 0] <= np.maximum(p[..., 0], r[..., 0]))
-            & (np.minimum(p[..., 1], r[..., 1]) <= q[..., 1]) & (q[..., 1] <= np.maximum(p[..., 1], r[..., 1])))
+    return (
+        (np.minimum(p[..., 0], r[..., 0]) <= q[..., 0])
+        & (q[..., 0] <= np.maximum(p[..., 0], r[..., 0]))
+        & (np.minimum(p[..., 1], r[..., 1]) <= q[..., 1])
+        & (q[..., 1] <= np.maximum(p[..., 1], r[..., 1]))
+    )
 
 
 def _segments_meet_many(p1, p2, q1, q2) -> np.ndarray:
@@ -101,8 +109,13 @@ def _segments_meet_many(p1, p2, q1, q2) -> np.ndarray:
     d1, d2 = _cross_many(q1, q2, p1b), _cross_many(q1, q2, p2b)
     d3, d4 = _cross_many(p1b, p2b, q1), _cross_many(p1b, p2b, q2)
     proper = (((d1 > 0) & (0 > d2)) | ((d1 < 0) & (0 < d2))) & (((d3 > 0) & (0 > d4)) | ((d3 < 0) & (0 < d4)))
-    return proper | ((d1 == 0) & _on_segment_many(q1, p1b, q2)) | ((d2 == 0) & _on_segment_many(q1, p2b, q2)) \
-        | ((d3 == 0) & _on_segment_many(p1b, q1, p2b)) | ((d4 == 0) & _on_segment_many(p1b, q2, p2b))
+    return (
+        proper
+        | ((d1 == 0) & _on_segment_many(q1, p1b, q2))
+        | ((d2 == 0) & _on_segment_many(q1, p2b, q2))
+        | ((d3 == 0) & _on_segment_many(p1b, q1, p2b))
+        | ((d4 == 0) & _on_segment_many(p1b, q2, p2b))
+    )
 
 
 def _polygon(value) -> np.ndarray:
@@ -110,8 +123,10 @@ def _polygon(value) -> np.ndarray:
     if not isinstance(value, (list, tuple)):
         raise ValueError(f"expected {what}")
     if len(value) > MAX_POLYGON_VERTICES + 1:  # + 1: a closed ring repeats its first vertex
-        raise ValueError(f"expected at most {MAX_POLYGON_VERTICES:,} vertices, got {len(value):,}; split the outline "
-                         "into several polygons")
+        raise ValueError(
+            f"expected at most {MAX_POLYGON_VERTICES:,} vertices, got {len(value):,}; split the outline "
+            "into several polygons"
+        )
     pts = [_point(v, f"{what}; vertex {i} is not [x, y]") for i, v in enumerate(value)]
     if len(pts) >= 2 and np.array_equal(pts[0], pts[-1]):
         pts = pts[:-1]  # a closed ring: the repeated first vertex is dropped
@@ -128,8 +143,10 @@ def _polygon(value) -> np.ndarray:
         a, b, c, d = v[i], ends[i], v[j], ends[j]
         shared, p, q = (b, a, d) if j == i + 1 else (a, b, c)
         if _cross(shared, p, q) == 0 and dot(p - shared, q - shared) > 0:
-            raise ValueError(f"edges {i} and {j} overlap (the outline folds back at vertex "
-                             f"{(i + 1) % n if j == i + 1 else 0}); a polygon must be simple")
+            raise ValueError(
+                f"edges {i} and {j} overlap (the outline folds back at vertex "
+                f"{(i + 1) % n if j == i + 1 else 0}); a polygon must be simple"
+            )
 
     for i in range(n):  # pairs in the order (i, j > i), each edge against all later ones at once
         if i + 1 < n:
@@ -141,8 +158,10 @@ def _polygon(value) -> np.ndarray:
             if meet.any():
                 j = int(js[np.argmax(meet)])
                 a, b, c, d = v[i], ends[i], v[j], ends[j]
-                raise ValueError(f"edges {i} ({a.tolist()} to {b.tolist()}) and {j} ({c.tolist()} to {d.tolist()}) "
-                                 "cross or touch; a polygon must be simple (non-self-intersecting)")
+                raise ValueError(
+                    f"edges {i} ({a.tolist()} to {b.tolist()}) and {j} ({c.tolist()} to {d.tolist()}) "
+                    "cross or touch; a polygon must be simple (non-self-intersecting)"
+                )
         if i == 0 and n - 1 > 1:
             fold(0, n - 1)
     area = 0.5 * float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
@@ -155,10 +174,15 @@ def _segment(value) -> tuple[np.ndarray, np.ndarray, float]:
     what = "[[x0, y0], [x1, y1], thickness]"
     if not isinstance(value, (list, tuple)) or len(value) != 3:
         raise ValueError(f"expected {what}")
-    a, b = _point(value[0], f"{what}; the first end is not [x, y]"), _point(value[1], f"{what}; the second end is not [x, y]")
+    a, b = (
+        _point(value[0], f"{what}; the first end is not [x, y]"),
+        _point(value[1], f"{what}; the second end is not [x, y]"),
+    )
     if not _number(value[2]) or not within_bounds(value[2]) or value[2] <= 0:
-        raise ValueError(f"expected {what} with a finite thickness > 0 of at most {MAX_MAGNITUDE:g}, got thickness "
-                         f"{str(value[2])[:40]}")
+        raise ValueError(
+            f"expected {what} with a finite thickness > 0 of at most {MAX_MAGNITUDE:g}, got thickness "
+            f"{str(value[2])[:40]}"
+        )
     if np.array_equal(a, b):
         raise ValueError("the segment's ends are the same point; use a circle for a disc")
     return a, b, float(value[2])
@@ -242,8 +266,10 @@ def _entries(data, source: str) -> list[tuple[str, Any]]:
     if isinstance(data, dict):
         unknown = sorted(set(data) - {"shapes", "goal", "start"})
         if unknown or "shapes" not in data:
-            raise MapError(f"map {source}: an object map needs the key 'shapes' (a list of entries) and may have "
-                           f"'goal' and 'start'; got keys {sorted(data)}")
+            raise MapError(
+                f"map {source}: an object map needs the key 'shapes' (a list of entries) and may have "
+                f"'goal' and 'start'; got keys {sorted(data)}"
+            )
         shapes = data["shapes"]
         if not isinstance(shapes, (list, tuple)):
             raise MapError(f"map {source}: 'shapes' must be a list of entries, got {_show(shapes)}")
@@ -252,8 +278,10 @@ def _entries(data, source: str) -> list[tuple[str, Any]]:
         return out
     if isinstance(data, (list, tuple)):
         return [(f"entry {i}", e) for i, e in enumerate(data)]
-    raise MapError(f"map {source}: expected a list of entries (or an object with 'shapes'), got {type(data).__name__} "
-                   f"{_show(data)}")
+    raise MapError(
+        f"map {source}: expected a list of entries (or an object with 'shapes'), got {type(data).__name__} "
+        f"{_show(data)}"
+    )
 
 
 def load_map(map_spec) -> ShapeMap:
@@ -267,8 +295,10 @@ def load_map(map_spec) -> ShapeMap:
             with open(map_spec, "rb") as fh:
                 raw = fh.read(MAX_MAP_BYTES + 1)  # never more: a device such as /dev/zero has no end
             if len(raw) > MAX_MAP_BYTES:
-                raise MapError(f"map file {source} holds more than {MAX_MAP_BYTES // 2**20} MiB; a map is a short JSON "
-                               "list of shapes")
+                raise MapError(
+                    f"map file {source} holds more than {MAX_MAP_BYTES // 2**20} MiB; a map is a short JSON "
+                    "list of shapes"
+                )
             text = raw.decode("utf-8")
         except (OSError, UnicodeDecodeError) as e:
             raise MapError(f"map file {source} cannot be read: {type(e).__name__}: {e}") from None
@@ -277,8 +307,9 @@ def load_map(map_spec) -> ShapeMap:
         except json.JSONDecodeError as e:
             raise MapError(f"map file {source} is not valid JSON: {e}") from None
         except RecursionError:
-            raise MapError(f"map file {source} nests its JSON too deeply; a map is a list of shapes, "
-                           "each a few levels deep") from None
+            raise MapError(
+                f"map file {source} nests its JSON too deeply; a map is a list of shapes, each a few levels deep"
+            ) from None
         except ValueError as e:  # an integer literal of thousands of digits
             raise MapError(f"map file {source} holds a number that cannot be read: {e}") from None
     else:
@@ -289,7 +320,7 @@ def load_map(map_spec) -> ShapeMap:
         where = f"map {source}, {name} {_show(entry)}"
         if not isinstance(entry, dict) or len(entry) != 1:
             raise MapError(f"{where}: an entry must be an object with exactly one key, one of {list(_KINDS)}")
-        (kind, value), = entry.items()
+        ((kind, value),) = entry.items()
         if kind not in _KINDS:
             raise MapError(f"{where}: unknown shape {kind!r}; expected one of {list(_KINDS)}")
         try:

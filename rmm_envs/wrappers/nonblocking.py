@@ -44,8 +44,13 @@ class NonBlockingStepping(gym.Wrapper):
         clock: a :class:`rmm_envs.clocks.Clock`, or ``"wall"``, ``"cpu"``, ``"fixed:MS"``.
     """
 
-    def __init__(self, env: gym.Env, time_accel: float = TIME_ACCEL, base_step: float = BASE_STEP,
-                 clock: Clock | str | None = None):
+    def __init__(
+        self,
+        env: gym.Env,
+        time_accel: float = TIME_ACCEL,
+        base_step: float = BASE_STEP,
+        clock: Clock | str | None = None,
+    ):
         super().__init__(env)
         if not hasattr(env.unwrapped, "simulate"):
             raise TypeError(
@@ -61,8 +66,10 @@ class NonBlockingStepping(gym.Wrapper):
         self.clock = make_clock(clock)
         self._space = env.unwrapped.action_space
         if not isinstance(self._space, GuardianActionSpace):
-            raise TypeError(f"{type(env.unwrapped).__name__}.action_space must be a GuardianActionSpace (the "
-                            f"parallel-autonomy contract, rmm_envs.autonomy), got {self._space!r}")
+            raise TypeError(
+                f"{type(env.unwrapped).__name__}.action_space must be a GuardianActionSpace (the "
+                f"parallel-autonomy contract, rmm_envs.autonomy), got {self._space!r}"
+            )
         self._pending = self._space.parse(self._space.inactive())
 
     def reset(self, *, seed=None, options=None):

@@ -32,9 +32,19 @@ class RiskLabel(gym.Wrapper):
     ``horizon=None`` (default) is 2 s for the package's envs and the adapter's own default for
     an adapted env (a whole number of its steps, see :mod:`rmm_envs.adapters`)."""
 
-    def __init__(self, env: gym.Env, branches: int = 32, depth: int = 2, horizon: float | None = None,
-                 n_steps: int = 8, metric: str = "expected", alpha: float | None = None,
-                 leaf: str = "zero", seed: int | None = None, failure=None):
+    def __init__(
+        self,
+        env: gym.Env,
+        branches: int = 32,
+        depth: int = 2,
+        horizon: float | None = None,
+        n_steps: int = 8,
+        metric: str = "expected",
+        alpha: float | None = None,
+        leaf: str = "zero",
+        seed: int | None = None,
+        failure=None,
+    ):
         super().__init__(env)
         adapted = None
         try:
@@ -46,12 +56,15 @@ class RiskLabel(gym.Wrapper):
             self._hooks = adapted = adapt(env, failure)
         else:
             if failure is not None:
-                raise TypeError(f"failure= is for envs served by a risk adapter (rmm_envs.adapters); "
-                                f"{type(self._hooks).__name__} defines its own failures in its risk_scene()")
+                raise TypeError(
+                    f"failure= is for envs served by a risk adapter (rmm_envs.adapters); "
+                    f"{type(self._hooks).__name__} defines its own failures in its risk_scene()"
+                )
         if horizon is None:
             horizon = 2.0 if adapted is None else adapted.scene.default_horizon
-        self._kw = dict(branches=branches, depth=depth, horizon=horizon, n_steps=n_steps,
-                        metric=metric, alpha=alpha, leaf=leaf)
+        self._kw = dict(
+            branches=branches, depth=depth, horizon=horizon, n_steps=n_steps, metric=metric, alpha=alpha, leaf=leaf
+        )
         validate_tree_params(**self._kw)  # now, not at the first reset
         if adapted is not None:  # its horizon must be whole env steps
             adapted.scene.env_steps(self._kw["horizon"])

@@ -30,8 +30,10 @@ __all__ = ["FlattenGuardianAction", "GuardianReward"]
 def _guardian_space(env: gym.Env, wrapper: str) -> GuardianActionSpace:
     space = env.action_space
     if not isinstance(space, GuardianActionSpace):
-        raise TypeError(f"{wrapper} needs a parallel-autonomy env (action space rmm_envs.autonomy.GuardianActionSpace); "
-                        f"{env.unwrapped.spec.id if env.unwrapped.spec else type(env.unwrapped).__name__} has {space}")
+        raise TypeError(
+            f"{wrapper} needs a parallel-autonomy env (action space rmm_envs.autonomy.GuardianActionSpace); "
+            f"{env.unwrapped.spec.id if env.unwrapped.spec else type(env.unwrapped).__name__} has {space}"
+        )
     return space
 
 
@@ -59,15 +61,24 @@ class FlattenGuardianAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
 class GuardianReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Shaped reward for training guardians; see the module docstring."""
 
-    def __init__(self, env: gym.Env, goal_bonus: float = 1.0, collision_penalty: float = 10.0,
-                 intervention_cost: float = 0.05) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, goal_bonus=goal_bonus, collision_penalty=collision_penalty,
-                                                 intervention_cost=intervention_cost)
+    def __init__(
+        self, env: gym.Env, goal_bonus: float = 1.0, collision_penalty: float = 10.0, intervention_cost: float = 0.05
+    ) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self, goal_bonus=goal_bonus, collision_penalty=collision_penalty, intervention_cost=intervention_cost
+        )
         gym.Wrapper.__init__(self, env)
         _guardian_space(env.unwrapped, "GuardianReward")
-        for name, v in (("goal_bonus", goal_bonus), ("collision_penalty", collision_penalty),
-                        ("intervention_cost", intervention_cost)):
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not (math.isfinite(v) and v >= 0):
+        for name, v in (
+            ("goal_bonus", goal_bonus),
+            ("collision_penalty", collision_penalty),
+            ("intervention_cost", intervention_cost),
+        ):
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, (int, float, np.integer, np.floating))
+                or not (math.isfinite(v) and v >= 0)
+            ):
                 raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
         self.goal_bonus = float(goal_bonus)
         self.collision_penalty = float(collision_penalty)

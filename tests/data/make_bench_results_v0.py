@@ -16,9 +16,26 @@ import subprocess
 import sys
 
 COMMON = ["--clock", "fixed:1", "--workers", "1", "--out", "olddb", "--no-progress"]
-subprocess.run([sys.executable, "-m", "rmm_bench.cli", "--agent", "inactive,brakes", "--episodes", "3", *COMMON], check=True)
-subprocess.run([sys.executable, "-m", "rmm_bench.cli", "--agent", "random", "--agent-opt", "random.p_active=0.5",
-                "--env", "Dubins4DCircles-v0", "--episodes", "2", *COMMON], check=True)
+subprocess.run(
+    [sys.executable, "-m", "rmm_bench.cli", "--agent", "inactive,brakes", "--episodes", "3", *COMMON], check=True
+)
+subprocess.run(
+    [
+        sys.executable,
+        "-m",
+        "rmm_bench.cli",
+        "--agent",
+        "random",
+        "--agent-opt",
+        "random.p_active=0.5",
+        "--env",
+        "Dubins4DCircles-v0",
+        "--episodes",
+        "2",
+        *COMMON,
+    ],
+    check=True,
+)
 con = sqlite3.connect("olddb/results.db")
 con.execute("UPDATE invocations SET host = 'recorded-host', pid = 1")
 for key, prov in con.execute("SELECT run_key, provenance FROM runs").fetchall():
@@ -30,6 +47,9 @@ con.execute("PRAGMA journal_mode=DELETE")
 con.execute("VACUUM")
 con.close()
 shutil.copy("olddb/results.db", "bench_results_v0.db")
-subprocess.run([sys.executable, "-m", "rmm_bench.cli", "report", "olddb", "--invocation", "1", "--invocation", "2"],
-               check=True, stdout=subprocess.DEVNULL)
+subprocess.run(
+    [sys.executable, "-m", "rmm_bench.cli", "report", "olddb", "--invocation", "1", "--invocation", "2"],
+    check=True,
+    stdout=subprocess.DEVNULL,
+)
 shutil.copy("olddb/table_I.md", "bench_results_v0_table.md")

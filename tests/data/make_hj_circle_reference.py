@@ -31,7 +31,12 @@ def circle_case(refine: int = 1):
     from rmm_guardians.hj.guardian import obstacle_target
 
     k = int(refine)
-    grid = Grid([-15.0, -15.0, -np.pi, 0.0], [15.0, 15.0, np.pi, 4.0], [40 * k + 1, 40 * k + 1, 21 * k, 20 * k + 1], periodic=[2])
+    grid = Grid(
+        [-15.0, -15.0, -np.pi, 0.0],
+        [15.0, 15.0, np.pi, 4.0],
+        [40 * k + 1, 40 * k + 1, 21 * k, 20 * k + 1],
+        periodic=[2],
+    )
     return grid, Dubins4DHJ(v_max=4.0), obstacle_target(grid, np.array([[0.0, 0.0, 3.0]]))
 
 
@@ -39,8 +44,13 @@ def save_reference(V_fine: np.ndarray, refine: int, path: Path = OUT) -> None:
     k = int(refine)
     unsafe = V_fine[::k, ::k, ::k, ::k] <= 0
     assert unsafe.shape == (41, 41, 21, 21), unsafe.shape
-    np.savez_compressed(path, unsafe_bits=np.packbits(unsafe.reshape(-1)), shape=np.array(unsafe.shape), refine=k,
-                        unsafe_fraction=unsafe.mean())
+    np.savez_compressed(
+        path,
+        unsafe_bits=np.packbits(unsafe.reshape(-1)),
+        shape=np.array(unsafe.shape),
+        refine=k,
+        unsafe_fraction=unsafe.mean(),
+    )
 
 
 def load_reference(path: Path = OUT) -> np.ndarray:
@@ -58,7 +68,9 @@ def main(argv=None) -> None:
     grid, dyn, target = circle_case(args.refine)
     V, info = solve_brt(grid, dyn, target, 4.0, order=2, rk=3)
     save_reference(V, args.refine)
-    print(f"refine {args.refine}: {info['steps']} steps, {info['seconds']:.1f} s; unsafe fraction {np.mean(load_reference()):.5f}")
+    print(
+        f"refine {args.refine}: {info['steps']} steps, {info['seconds']:.1f} s; unsafe fraction {np.mean(load_reference()):.5f}"
+    )
 
 
 if __name__ == "__main__":
