@@ -5,7 +5,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test test-slow lint bench install clean mutate
+.PHONY: run test test-slow lint typecheck-tree bench install clean mutate
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,7 +29,14 @@ $(LINT_STAMP): $(STAMP)
 	$(BIN)/python -m pip install -q -e ".[test,lint]"
 	touch $(LINT_STAMP)
 
-lint: $(LINT_STAMP)
+# mypy does not read pyproject's package-dir mapping: build/typecheck/ links the mapped folders
+# under their import names (pyproject's [tool.mypy] mypy_path)
+typecheck-tree:
+	@mkdir -p build/typecheck
+	@ln -sfn ../../guardians build/typecheck/rmm_guardians
+	@ln -sfn ../../benchmarks/bench build/typecheck/rmm_bench
+
+lint: $(LINT_STAMP) typecheck-tree
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
