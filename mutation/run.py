@@ -88,20 +88,40 @@ def load_survivors(path: Path = SURVIVORS) -> tuple[dict[str, str], dict[str, st
 
 #: Written at the top of the scratch copy's tests/conftest.py.  The wheel installs guardians/ and
 #: benchmarks/bench/ as rmm_guardians and rmm_bench (pyproject's package-dir); the editable install
-#: maps those names to the repository, not to the scratch copy that mutmut mutates, so the tests
-#: must import the copy's folders under the installed names before anything imports them.
-IMPORT_ALIASES = """# added by mutation/run.py: the installed import names read this copy's (mutated) folders
+#: maps those names to the repository, not to the scratch copy that mutmut mutates.  mutmut names a
+#: mutant by its file's path (guardians.baselines.x_f__mutmut_1) and matches it against the
+#: ``__module__`` of the function it runs, so the tests must import the copy's modules under the
+#: folder names: ``rmm_guardians.X`` is made the very module ``guardians.X``.  (Child processes a
+#: test starts import the installed names, as before the rename they imported the folders.)
+IMPORT_ALIASES = """# added by mutation/run.py: rmm_guardians.X is guardians.X of this copy, rmm_bench.X is benchmarks.bench.X
+import importlib as _il
+import importlib.abc as _ila
 import importlib.util as _ilu
-import pathlib as _pl
 import sys as _sys
 
-for _name, _rel in (("rmm_guardians", "guardians"), ("rmm_bench", "benchmarks/bench")):
-    _dir = _pl.Path(__file__).resolve().parents[1] / _rel
-    if _name not in _sys.modules and (_dir / "__init__.py").is_file():
-        _spec = _ilu.spec_from_file_location(_name, _dir / "__init__.py", submodule_search_locations=[str(_dir)])
-        _mod = _ilu.module_from_spec(_spec)
-        _sys.modules[_name] = _mod
-        _spec.loader.exec_module(_mod)
+
+class _FolderNames(_ila.MetaPathFinder, _ila.Loader):
+    names = {"rmm_guardians": "guardians", "rmm_bench": "benchmarks.bench"}
+    specs = {}
+
+    def find_spec(self, fullname, path=None, target=None):
+        top, dot, rest = fullname.partition(".")
+        if top not in self.names:
+            return None
+        real = _il.import_module(self.names[top] + dot + rest)
+        return _ilu.spec_from_loader(fullname, self, is_package=hasattr(real, "__path__"))
+
+    def create_module(self, spec):
+        top, dot, rest = spec.name.partition(".")
+        real = _il.import_module(self.names[top] + dot + rest)
+        self.specs[spec.name] = real.__spec__  # the import machinery sets __spec__ to the alias's next
+        return real
+
+    def exec_module(self, module):  # already executed under its folder name: give its own spec back
+        module.__spec__ = self.specs.pop(module.__spec__.name)
+
+
+_sys.meta_path.insert(0, _FolderNames())
 """
 
 

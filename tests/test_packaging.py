@@ -13,7 +13,11 @@ import zipfile
 from pathlib import Path
 
 import pytest
-import tomllib
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
 
 from tests.layout import PACKAGE_DIRS, ROOT
 
@@ -141,8 +145,57 @@ def test_rmm_bench_with_two_workers_from_a_repository_with_same_named_packages(r
         research_repo,
     )
     assert api.returncode == 0 and api.stdout.strip() == "8", api.stderr
-    for cmd in ("rmm-datagen", "rmm-train"):
-        assert _run([str(BIN / cmd), "--help"], research_repo).returncode == 0
+    data = _run(
+        [
+            str(BIN / "rmm-datagen"),
+            "--env",
+            "Dubins4DGuarded-v0",
+            "--configs",
+            "1",
+            "--samples-per-config",
+            "2",
+            "--branches",
+            "2",
+            "--depth",
+            "1",
+            "--no-progress",
+            "--out",
+            "d",
+        ],
+        research_repo,
+    )
+    assert data.returncode == 0 and (research_repo / "d" / "metadata.json").is_file(), data.stderr
+    assert _run([str(BIN / "rmm-train"), "--help"], research_repo).returncode == 0
+
+
+@pytest.mark.slow
+def test_ray_workers_from_a_repository_with_same_named_packages(research_repo):
+    pytest.importorskip("ray")
+    done = _run(
+        [
+            str(BIN / "rmm-bench"),
+            "--agent",
+            "inactive,mymod:Never",
+            "--episodes",
+            "4",
+            "--workers",
+            "2",
+            "--backend",
+            "ray",
+            "--clock",
+            "fixed:1",
+            "--no-progress",
+            "--no-figure",
+            "--out",
+            "res",
+        ],
+        research_repo,
+    )
+    assert done.returncode == 0, done.stderr
+    rows = [
+        line for line in (research_repo / "res" / "table_I.md").read_text().splitlines() if line.startswith("| mymod")
+    ]
+    assert len(rows) == 1 and rows[0].split(" | ")[3] == "4" and rows[0].split(" | ")[-2] == "0"  # 4 episodes, 0 errors
 
 
 @pytest.mark.parametrize(

@@ -15,6 +15,8 @@ be charged as the agent's thinking time.
 
 from __future__ import annotations
 
+from typing import Any
+
 import gymnasium as gym
 import numpy as np
 
@@ -47,6 +49,8 @@ class RiskLabel(gym.Wrapper):
     ):
         super().__init__(env)
         adapted = None
+        # the labelling hooks: the unwrapped env (a LabelledEnv) or the adapter serving it
+        self._hooks: Any
         try:
             check_labelled_env(env, needs=("risk_scene", "true_state"))
             self._hooks = self.env.unwrapped
@@ -62,23 +66,24 @@ class RiskLabel(gym.Wrapper):
                 )
         if horizon is None:
             horizon = 2.0 if adapted is None else adapted.scene.default_horizon
-        self._kw = dict(
+        self._kw: dict[str, Any] = dict(
             branches=branches, depth=depth, horizon=horizon, n_steps=n_steps, metric=metric, alpha=alpha, leaf=leaf
         )
         validate_tree_params(**self._kw)  # now, not at the first reset
         if adapted is not None:  # its horizon must be whole env steps
             adapted.scene.env_steps(self._kw["horizon"])
         self.rng = np.random.default_rng(seed)
-        self._estimator = None
-        self._scene = None
+        self._estimator: RiskEstimator | None = None
+        self._scene: object | None = None
 
     def _label(self, info: dict) -> dict:
         base = self._hooks
         scene = base.risk_scene()
-        if scene is not self._scene:
+        estimator = self._estimator
+        if estimator is None or scene is not self._scene:
             self._scene = scene
-            self._estimator = RiskEstimator(scene, **self._kw)
-        res = self._estimator.estimate(np.asarray(base.true_state, dtype=float)[None, :], self.rng)
+            self._estimator = estimator = RiskEstimator(scene, **self._kw)
+        res = estimator.estimate(np.asarray(base.true_state, dtype=np.float64)[None, :], self.rng)
         info = dict(info)
         info["risk"] = float(res.risk[0])
         info["risk_min_ctrl"] = res.min_risk_ctrl[0]
