@@ -69,7 +69,7 @@ def torch_lrmm_time(model, obs, repeats=3000) -> float:
 
     torch.set_num_threads(1)
     layers = []
-    for i, (W, b) in enumerate(model.weights):
+    for W, b in model.weights:
         lin = torch.nn.Linear(W.shape[1], W.shape[0], bias=b is not None, dtype=torch.float64)
         with torch.no_grad():
             lin.weight.copy_(torch.as_tensor(W))

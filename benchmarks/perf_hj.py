@@ -169,7 +169,8 @@ def main(argv=None) -> None:
         g.act(None, {})
         times.append(time.perf_counter() - t)
     print(
-        f"online decision: median {statistics.median(times) * 1e6:.1f} us, p90 {np.quantile(times, 0.9) * 1e6:.1f} us (target <= 50 us)"
+        f"online decision: median {statistics.median(times) * 1e6:.1f} us, "
+        f"p90 {np.quantile(times, 0.9) * 1e6:.1f} us (target <= 50 us)"
     )
 
     print("convergence of the unsafe set (fraction of 20,000 probe states with V <= 0):")
@@ -227,7 +228,7 @@ def quadrotor(n: int) -> None:
         g.act(obs, info)
         decisions.append(time.perf_counter() - t)
         route = [g._privileged()["state"][:3], *g.waypoints]
-        for a, b in zip(route[:-1], route[1:]):
+        for a, b in zip(route[:-1], route[1:], strict=True):  # consecutive waypoints
             c0 = time.process_time()
             found += g._climb.plan(a[:2], a[:2], (0.0, 0.0), float(a[2]), b) is not None
             plans.append(time.process_time() - c0)

@@ -57,7 +57,7 @@ def main(argv=None) -> None:
     }
     envs = {name: gym.make(env_id, **kw) for name, (env_id, kw) in runs.items()}
     rates: dict[str, list[float]] = {name: [] for name in runs}
-    for name, env in envs.items():  # compile and warm every env before timing
+    for env in envs.values():  # compile and warm every env before timing
         env.reset(seed=0)
         env.step(env.unwrapped.action_space.inactive())
     for _ in range(args.repeats):
@@ -70,7 +70,7 @@ def main(argv=None) -> None:
         )
     base = rates["Dubins4DGuarded-v0"]
     for name in list(runs)[1:]:
-        ratio = statistics.median(b / r for b, r in zip(base, rates[name]))
+        ratio = statistics.median(b / r for b, r in zip(base, rates[name], strict=True))  # one rate per repeat
         print(f"step time ratio {name} / Dubins4DGuarded-v0 (same run): {ratio:.2f}x")
 
     m = Dubins4DMapEnv(map=circle_map)
@@ -80,7 +80,7 @@ def main(argv=None) -> None:
     t = {}
     for name, scene in (("circles (analytic)", circles_env.risk_scene()), ("circle map (pymunk)", m.risk_scene())):
         est = RiskEstimator(scene, branches=32, depth=2)
-        t[name] = median_time(lambda: est.estimate(states, np.random.default_rng(1)), repeats=3)
+        t[name] = median_time(lambda est=est: est.estimate(states, np.random.default_rng(1)), repeats=3)
         print(f"risk labels of 64 states, {name:20s} {fmt_us(t[name])}")
     print(
         f"labelling time ratio pymunk / analytic (same run): {t['circle map (pymunk)'] / t['circles (analytic)']:.1f}x"

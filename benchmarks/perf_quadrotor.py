@@ -30,7 +30,7 @@ def compare(env, states, controls):
     pb8 = np.zeros_like(ours)
     pb_any = np.zeros(len(states), dtype=bool)
     max_err = np.zeros(len(states))
-    for i, (s, u) in enumerate(zip(states, controls)):
+    for i, (s, u) in enumerate(zip(states, controls, strict=True)):  # one control per state
         env.set_state(s)
         touched = False
         for seg in range(7):

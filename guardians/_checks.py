@@ -8,8 +8,12 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import math
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from typing import Self  # Python 3.11; only the type checker reads it (annotations are strings)
 
 __all__ = ["Settings", "finite", "integer", "number_pair", "settings_signature"]
 
@@ -18,16 +22,19 @@ class Settings:
     """Base of a frozen dataclass of a guardian's settings: subclasses check and normalise every
     value in ``__post_init__`` (through ``_set``) and list named presets in ``PRESETS``."""
 
-    PRESETS: dict = {}
+    PRESETS: ClassVar[dict[str, Any]] = {}
+    # set by @dataclass on every subclass (an annotation only: the base itself is no dataclass);
+    # declared so the type checker knows a Settings is a dataclass instance
+    __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
 
-    def _set(self, name: str, value) -> None:
+    def _set(self, name: str, value: Any) -> None:
         object.__setattr__(self, name, value)
 
     @classmethod
     def names(cls) -> tuple[str, ...]:
         return tuple(f.name for f in dataclasses.fields(cls))
 
-    def replace(self, **changes) -> Settings:
+    def replace(self, **changes: Any) -> Self:
         """These settings with ``changes`` (checked again); an unknown name is a ``TypeError``
         naming it and the settings there are."""
         unknown = sorted(set(changes) - set(self.names()))
@@ -38,14 +45,14 @@ class Settings:
         return dataclasses.replace(self, **changes) if changes else self
 
     @classmethod
-    def preset(cls, name: str, **changes) -> Settings:
+    def preset(cls, name: str, **changes: Any) -> Self:
         """The preset ``name`` (a key of ``PRESETS``) with ``changes``."""
         if name not in cls.PRESETS:
             raise ValueError(f"unknown {cls.__name__} preset {name!r}; the presets are: {sorted(cls.PRESETS)}")
         return cls.PRESETS[name].replace(**changes)
 
 
-def settings_signature(cls, default: Settings) -> inspect.Signature:
+def settings_signature(cls: type[Settings], default: Settings) -> inspect.Signature:
     """The signature of a constructor ``(self, settings=None, **options)`` that builds ``cls``
     settings from ``default`` and ``options``: one keyword parameter per setting, with
     ``default``'s values, so introspection (``rmm-bench``'s ``threads``, ``help()``) sees them."""

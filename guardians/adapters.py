@@ -59,7 +59,7 @@ class CallableGuardian(Guardian):
         if not callable(fn):
             raise TypeError(f"CallableGuardian needs a callable, got {fn!r}")
         self.fn = fn
-        self.name = name or getattr(fn, "__name__", "callable")
+        self.name = name if name else getattr(fn, "__name__", "callable")
         self.observation_type = observation_type
 
     def act(self, observation, info):

@@ -17,11 +17,14 @@ episode.  Guardians never read an env's private attributes.  The protocol in ful
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace, ObservationLayout
+
+if TYPE_CHECKING:
+    import gymnasium as gym
 
 __all__ = ["Guardian"]
 
@@ -34,10 +37,11 @@ class Guardian:
     privileged: bool = False
 
     def __init__(self) -> None:
-        self.observation_space = None
-        self.action_space = None
+        # the spaces given at reset (None before): a guardian checks them (check_spaces) before use
+        self.observation_space: gym.Space[Any] | None = None
+        self.action_space: GuardianActionSpace | None = None
         self.rng = np.random.default_rng()
-        self._privileged: Callable[[], dict] | None = None
+        self._privileged: Callable[[], dict[str, Any]] | None = None
 
     def reset(
         self,
@@ -45,7 +49,7 @@ class Guardian:
         seed: int | None = None,
         observation_space=None,
         action_space=None,
-        privileged: Callable[[], dict] | None = None,
+        privileged: Callable[[], dict[str, Any]] | None = None,
     ) -> None:
         self.observation_space = observation_space
         self.action_space = action_space

@@ -96,6 +96,8 @@ class BrakesGuardian(Guardian):
         super().reset(**kwargs)
         self.check_spaces(self.observation_space, self.action_space)
         space = self.action_space
+        # check_spaces refused a space that is not a GuardianActionSpace or states no safe default
+        assert space is not None and space.safe_default is not None
         options = {} if self.turn is None else {"turn": self.turn}
         try:
             self._policy = space.safe_default.policy(space, self.rng, **options)

@@ -13,6 +13,8 @@ data (``observation_type = "global"``, ``privileged = True``) and owns:
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from rmm_guardians.base import Guardian
@@ -32,6 +34,7 @@ class PrivilegedGuardian(Guardian):
     lap: float | None = None
     _last_time: float | None = None  # the sim time of the previous measurement (None: none yet)
     _measured_lap: float | None = None  # the last lap measured, or the guess before one
+    _counts: dict[str, int]  # set by each subclass's constructor and reset (``"nan_states"`` among them)
 
     def start_laps(self, guess: float | None = None, since: float | None = None) -> None:
         """Start measuring laps (at reset): ``since`` is the sim time the first lap counts from
@@ -40,7 +43,7 @@ class PrivilegedGuardian(Guardian):
         self._last_time = None if since is None else float(since)
         self._measured_lap = guess
 
-    def measure_lap(self, priv: dict) -> None:
+    def measure_lap(self, priv: dict[str, Any]) -> None:
         """Measure the lap from ``priv["sim_time"]``: the time since the previous measurement,
         kept only when time advanced; nothing moves when the env reports no time."""
         t = priv.get("sim_time")
@@ -52,6 +55,7 @@ class PrivilegedGuardian(Guardian):
 
     def _state_and_lap(self) -> np.ndarray:
         """The env's privileged ``state`` as floats, after measuring the lap (:meth:`measure_lap`)."""
+        assert self._privileged is not None  # reset refuses a privileged guardian without it
         priv = self._privileged()
         self.measure_lap(priv)
         return np.asarray(priv["state"], float)

@@ -140,8 +140,9 @@ class GuardianActionSpace(spaces.Dict):
                 f"control bounds must be finite with low <= high, got low={lo.tolist()} high={hi.tolist()}"
             )
         fields: dict[str, spaces.Space] = {ACTIVE: spaces.Discrete(2)}
-        for name, a, b in zip(controls, lo, hi):
-            fields[name] = spaces.Box(a, b, shape=(1,), dtype=np.float64)
+        boxes: dict[str, spaces.Box] = {}
+        for name, a, b in zip(controls, lo, hi, strict=True):
+            fields[name] = boxes[name] = spaces.Box(a, b, shape=(1,), dtype=np.float64)
         super().__init__(fields, seed=seed)
         if safe_default is not None and not isinstance(safe_default, SafeDefault):
             raise TypeError(f"safe_default must be a rmm_envs.autonomy.SafeDefault, got {safe_default!r}")
@@ -150,8 +151,8 @@ class GuardianActionSpace(spaces.Dict):
         self.safe_default = safe_default
         self.obstacle_shapes = None if obstacle_shapes is None else tuple(obstacle_shapes)
         # the bounds actions are clipped to: those of the boxes
-        self.control_low = np.array([float(self.spaces[c].low[0]) for c in controls])
-        self.control_high = np.array([float(self.spaces[c].high[0]) for c in controls])
+        self.control_low = np.array([float(boxes[c].low[0]) for c in controls])
+        self.control_high = np.array([float(boxes[c].high[0]) for c in controls])
 
     @classmethod
     def for_system(
@@ -316,7 +317,7 @@ class GuardianActionSpace(spaces.Dict):
         return act, ctrl
 
 
-def _bounded_scalar(value, field: str, space: spaces.Box, low: float, high: float) -> float:
+def _bounded_scalar(value, field: str, space: spaces.Space, low: float, high: float) -> float:
     arr = np.asarray(value)
     if arr.dtype.kind not in "fiu" or arr.size != 1 or arr.ndim > 1:
         raise ValueError(f"action field {field!r} must be a number or a shape-(1,) array in {space}, got {value!r}")

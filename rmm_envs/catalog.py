@@ -252,6 +252,7 @@ def system_of(env_id: str) -> tuple[SystemSpec, str]:
 def guardian_envs_of(env_id: str) -> tuple[str, ...]:
     """The guardian envs (non-blocking first) of the system that ``env_id`` belongs to, or whose
     dynamics it is (``CartPole-v1`` for ``CartPole``); ``()`` for an env of no system."""
+    system: SystemSpec | None
     try:
         system = system_of(env_id)[0]
     except KeyError:

@@ -208,6 +208,7 @@ def run_local(
                     lost_cause = f"no result after {task_timeout:g} s: its worker process (pid {w.proc.pid}) was killed"
                 if lost_cause is None:
                     continue
+                assert w.job is not None  # w is busy: only a finished job clears it, and that continued above
                 _, task = w.job
                 w.job = None
                 w.stop(graceful=False)
@@ -288,7 +289,7 @@ def run_ray(
                         raise WorkersLost(
                             f"{len(lost_in_a_row)} Ray tasks in a row were lost with none finishing "
                             f"(last: {cause}); stopped"
-                        )
+                        ) from e
                 else:
                     lost_in_a_row.clear()
                     yield out

@@ -40,7 +40,8 @@ def norm(v) -> float:
 def norms(a, axis: int = -1, keepdims: bool = False) -> np.ndarray:
     """Euclidean norms along ``axis`` (numpy's ordered sum of squares, never BLAS)."""
     a = np.asarray(a, dtype=float)
-    return np.sqrt(np.add.reduce(a * a, axis=axis, keepdims=keepdims))
+    sq = a * a
+    return np.sqrt(np.add.reduce(sq, axis=axis, keepdims=True) if keepdims else np.add.reduce(sq, axis=axis))
 
 
 def matvec(A, x) -> np.ndarray:

@@ -288,7 +288,12 @@ def test_an_env_no_adapter_serves_is_refused_listing_what_is_missing():
 
 def test_a_mujoco_env_without_a_known_failure_needs_one():
     needs_mujoco("Swimmer-v5")
-    with pytest.raises(TypeError, match=r"^Swimmer-v5: no failure test is known.*give failure=callable"):
+    with pytest.raises(
+        TypeError,
+        match=r"^Swimmer-v5: no failure test is known.*give one: failure=callable in Python, --failure "
+        r"module:callable for rmm-datagen, called as failure\(states\) -> \(N,\) bool on \(N, 11\) full states "
+        r"\(column 0 the time, columns 1-5 qpos, columns 6-10 qvel\)$",
+    ):
         adapt(gym.make("Swimmer-v5"))
     ad = adapt(gym.make("Swimmer-v5"), failure=lambda s: np.abs(s[:, 3]) > 1.0)
     assert ad.scene.default_horizon == pytest.approx(2 * ad.scene.dt)
@@ -319,7 +324,9 @@ def test_bad_adapter_arguments_are_refused_by_name(kwargs, error, match):
 def test_a_failure_of_the_wrong_shape_is_refused_by_name():
     env = RiskLabel(gym.make("Pendulum-v1"), failure=lambda s: np.abs(s) > 1, seed=0)
     with pytest.raises(
-        ValueError, match=r"Pendulum-v1: failure\(states\) must return shape \(1,\) for 1 states, got \(1, 2\)"
+        ValueError,
+        match=r"Pendulum-v1: failure\(states\) must return shape \(1,\) for 1 states, got \(1, 2\) "
+        r"from failure = tests.test_adapters:test_a_failure_of_the_wrong_shape_is_refused_by_name.<locals>.<lambda>",
     ):
         env.reset(seed=0)
 
@@ -393,12 +400,16 @@ def test_datagen_failure_is_imported_by_name_and_recorded(tmp_path, monkeypatch)
     "extra, match",
     [
         ([], r"Pendulum-v1 never terminates.*--failure module:callable"),
-        (["--failure", "no_colon"], r"failure \(--failure\) must be 'module:callable', got 'no_colon'"),
+        (["--failure", "no_colon"], r"failure \(--failure\) must be 'module:callable'.*, got 'no_colon': not of"),
         (
             ["--failure", "no_such_module_26:f"],
-            r"failure \(--failure\) 'no_such_module_26:f' cannot be imported: No module named",
+            r"failure \(--failure\) must be 'module:callable'.*, got 'no_such_module_26:f': it cannot be imported "
+            r"\(No module named",
         ),
-        (["--failure", "numpy:pi"], r"failure \(--failure\) 'numpy:pi' is not callable: 3.14"),
+        (
+            ["--failure", "numpy:pi"],
+            r"failure \(--failure\) must be 'module:callable'.*, got 'numpy:pi': numpy.pi is 3.14",
+        ),
     ],
 )
 def test_datagen_refuses_a_missing_or_bad_failure_by_name(extra, match, tmp_path, capsys):
@@ -454,7 +465,7 @@ def test_adapted_envs_follow_the_labelled_env_protocol_and_sampling_leaves_the_e
 
 def test_true_state_before_reset_is_refused():
     with pytest.raises(RuntimeError, match=r"CartPole-v1 has no state before its first reset"):
-        adapt(gym.make("CartPole-v1")).true_state
+        _ = adapt(gym.make("CartPole-v1")).true_state
 
 
 MY_MODULE = """import gymnasium as gym

@@ -388,3 +388,41 @@ def test_latency_sweep(tmp_path, capsys):
     ResultsStore(empty / "results.db").close()
     assert main(["report", str(empty)]) == 2
     assert "no benchmark run recorded in" in capsys.readouterr().err
+
+
+def test_a_run_says_which_episodes_it_ran_and_which_it_reused(tmp_path, capsys):
+    from rmm_bench.run import done_line
+
+    assert done_line(12, 0, 0.01) == "reused 12 stored episodes: none left to run"
+    assert done_line(1, 0, 0.0) == "reused 1 stored episode: none left to run"
+    assert done_line(0, 4, 2.345) == "finished in 2.3 s: ran 4 episodes"
+    assert done_line(8, 1, 1.0) == "finished in 1.0 s: ran 1 episode, reused 8 stored"
+    out = tmp_path / "u"
+    cmd = ["--agent", "inactive,brakes", "--workers", "1", "--out", str(out), *FAST]
+    assert main([*cmd, "--episodes", "2"]) == 0
+    first = capsys.readouterr().out.splitlines()
+    assert [ln for ln in first if ln.startswith("finished in ")][0].endswith(" s: ran 4 episodes")
+    assert main([*cmd, "--episodes", "2"]) == 0  # answered from the store alone: no time to give
+    again = capsys.readouterr().out
+    assert "reused 4 stored episodes: none left to run" in again.splitlines() and "finished in" not in again
+    assert main([*cmd, "--episodes", "3"]) == 0  # part reused, part run
+    more = capsys.readouterr().out.splitlines()
+    assert [ln for ln in more if ln.startswith("finished in ")][0].endswith(" s: ran 2 episodes, reused 4 stored")
+
+
+@pytest.mark.heavy
+def test_a_guardians_warning_is_said_once_per_run_with_two_workers(tmp_path):
+    """The parent builds every guardian before dispatch and shows its warnings; the workers build
+    theirs silently (each worker process would repeat them)."""
+    from rmm_guardians.lrmm.guardian import LRMMGuardian
+    from rmm_guardians.lrmm.model import load_model
+
+    bare = load_model(LRMMGuardian(env_id="Dubins4DParallel-v0").model.path)
+    bare.meta.pop("decision", None)  # a model of one's own without a stored decision threshold
+    path = bare.save(tmp_path / "bare.npz")
+    cmd = [sys.executable, "-m", "rmm_bench.cli", "--agent", "lrmm", "--agent-opt", f"lrmm.model={path}"]
+    cmd += ["--episodes", "4", "--workers", "2", "--out", str(tmp_path / "w"), *FAST]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=os.environ | {"PYTHONWARNINGS": ""})
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.count(f"lrmm: {path} has no 'decision' threshold: using the paper's 0.85") == 1, proc.stderr
+    assert "ran 4 episodes" in proc.stdout

@@ -373,8 +373,9 @@ def test_no_function_of_the_packages_writes_its_own_non_blocking_default():
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 args = node.args.posonlyargs + node.args.args
                 pairs = [
-                    *zip(args[len(args) - len(node.args.defaults) :], node.args.defaults),
-                    *zip(node.args.kwonlyargs, node.args.kw_defaults),
+                    # defaults belong to the last positional arguments; kw_defaults has one entry (or None) per kw-only one
+                    *zip(args[len(args) - len(node.args.defaults) :], node.args.defaults, strict=True),
+                    *zip(node.args.kwonlyargs, node.args.kw_defaults, strict=True),
                 ]
                 found += [
                     f"{path.relative_to(root)}:{node.lineno} {node.name}({a.arg}={d.value!r})"

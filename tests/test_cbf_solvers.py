@@ -5,21 +5,20 @@ import warnings
 
 import numpy as np
 import pytest
+import qpsolvers  # noqa: F401  (pinned in the test extra: a missing install fails here, it is not skipped)
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
+from rmm_envs.envs.dubins4d import CONTROLS
+from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_guardians.cbf import CBFGuardian
 from rmm_guardians.cbf.backend import installed_solvers, parse_solver
 from rmm_guardians.cbf.maze import MazeCBFGuardian
 from rmm_guardians.cbf.qp import MAX_ITER
 
 PRIMAL_INFEASIBLE = 3  # OSQP's status value
-import qpsolvers  # noqa: E402,F401  (pinned in the test extra: a missing install fails here, it is not skipped)
-
-from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
-from rmm_envs.envs.dubins4d import CONTROLS
-from rmm_envs.systems.dubins4d import Dubins4D
 
 # every solver the test extra pins (qpsolvers[clarabel,daqp]): one that is missing fails its tests, it is not left out
 OTHERS = [f"qpsolvers:{n}" for n in ("osqp", "clarabel", "daqp")]

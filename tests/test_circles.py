@@ -66,7 +66,7 @@ def test_ray_never_reports_farther_than_the_nearest_obstacle(circles, x, y, th):
     c = np.array(circles)
     rays = ray_cast(np.array([[x, y]]), np.array([th]), c, 12, 10.0)[0]
     ang = th + 2 * np.pi * np.arange(12) / 12
-    for d, a in zip(rays, ang):
+    for d, a in zip(rays, ang, strict=True):  # 12 rays, 12 angles
         # sample the ray densely up to the reported distance: no point strictly before it is inside
         s = np.linspace(0, d, 200)[:-1]
         pts = np.c_[x + s * np.cos(a), y + s * np.sin(a)]

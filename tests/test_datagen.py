@@ -124,7 +124,7 @@ def test_resume_after_kill_minus_nine(tmp_path):
         load_dataset(out)
     assert subprocess.run(args, capture_output=True).returncode == 0
     resumed = load_dataset(out)
-    pairs = set(zip(resumed.config_id.tolist(), resumed.obs[:, 0].tolist()))
+    pairs = set(zip(resumed.config_id.tolist(), resumed.obs[:, 0].tolist(), strict=True))  # one pair per row
     assert len(resumed) == 24 * 40 == len(pairs)  # nothing lost, nothing duplicated
     generate(
         DatagenConfig(configs=24, samples_per_config=40, branches=8, configs_per_shard=1, seed=5),

@@ -349,7 +349,9 @@ def test_a_column_that_is_not_a_fixed_size_list_is_named(made, tmp_path, column)
         t = pq.read_table(d / name)
         t = t.set_column(t.column_names.index(column), column, t[column].cast(pa.list_(t[column].type.value_type)))
         pq.write_table(t, d / name)
-        _edit_manifest(d, lambda shards: shards.update({name: hashlib.sha256((d / name).read_bytes()).hexdigest()}))
+        _edit_manifest(
+            d, lambda shards, name=name: shards.update({name: hashlib.sha256((d / name).read_bytes()).hexdigest()})
+        )
     with pytest.raises(ValueError) as e:
         load_dataset(d)
     assert str(e.value).startswith(f"{d}: column '{column}' should be a fixed-size list, got list<")

@@ -166,7 +166,7 @@ def test_batch_equals_one_at_a_time_bit_for_bit():
     g = rng.uniform(-10, 10, (64, 2))
     d = CLFDriver()
     batch = d.solve_batch(s, g)
-    one = np.array([d.solve(a, b) for a, b in zip(s, g)])
+    one = np.array([d.solve(a, b) for a, b in zip(s, g, strict=True)])  # 64 states, 64 goals
     assert np.array_equal(batch, one)
     assert np.array_equal(d.controls(s, g), batch[:, :2])
     assert np.array_equal(clf_qp(s, g, d.lim, d.gain), batch)

@@ -74,7 +74,7 @@ def test_circle_map_episode_equals_the_circle_env(seed, k):
     oc, _ = c.reset(seed=0, options={"state": state, "goal": goal, "obstacles": circles})
     np.testing.assert_allclose(om, oc, atol=1e-4)
     space = m.action_space
-    for t in range(60):
+    for _ in range(60):
         a = space.inactive() if rng.random() < 0.5 else space.active(rng.uniform(space.control_low, space.control_high))
         om, rm, tm, trm, im = m.step(a)
         oc, rc, tc, trc, ic = c.step(a)

@@ -132,7 +132,7 @@ def test_tie_is_a_collision():
 def test_timeout_truncates():
     env = Dubins4DCirclesEnv(max_episode_sim_time=1.0)
     env.reset(options={"state": [0, 0, 0, 0.0], "goal": [9, 9, 0.5], "obstacles": [[-9, -9, 1]]})
-    for k in range(10):
+    for _ in range(10):
         obs, r, te, tr, info = env.step(act(0, -0.5))
     assert tr and not te and info["outcome"] == "timeout"
     ep = info["episode_stats"]

@@ -180,7 +180,6 @@ def test_maze_scene_is_the_env_scene_and_observations_are_named():
 def test_parallel_envs_refuse_step_dt_which_non_blocking_stepping_would_ignore(env_id):
     import gymnasium as gym
 
-
     with pytest.raises(ValueError) as e:
         gym.make(env_id, step_dt=5.0)
     assert str(e.value) == (

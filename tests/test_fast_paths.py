@@ -77,7 +77,7 @@ def _model(activation, features=None, obs_dim=6, hidden=(9, 5), n_out=1, seed=0)
     sizes = [len(feats), *hidden, n_out]
     weights = [
         (rng.normal(size=(b, a)), rng.normal(size=b) if i < len(sizes) - 2 or seed % 2 else None)
-        for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:]))
+        for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:], strict=True))  # consecutive layer sizes
     ]
     meta = {"features": feats, "obs_dim": obs_dim, "activation": activation}
     if n_out > 1:
@@ -106,7 +106,7 @@ def test_one_observation_inference_matches_the_written_out_network(activation, f
     m = _model(activation, features=features, n_out=n_out, seed=seed)
     X = np.random.default_rng(7).uniform(-3, 3, size=(50, m.obs_dim))
     batch = m.predict_all(X)
-    for x, row in zip(X, batch):
+    for x, row in zip(X, batch, strict=True):  # one output row per observation
         one = m.predict_all(x)
         assert one.shape == (n_out,)
         np.testing.assert_allclose(one, _reference_forward(m, x), rtol=0, atol=1e-12)

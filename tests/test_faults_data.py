@@ -67,8 +67,8 @@ def test_load_refuses_flipped_bytes_in_one_line_naming_the_file_and_the_fix(tmp_
     assert "\n" not in msg and str(out / "shard-00000.parquet") in msg
     # the exact command that repairs it
     assert (
-        "rmm-datagen --env Dubins4DGuarded-v0 --configs 4 --samples-per-config 6 --seed 11 --configs-per-shard 2 --branches 4 --depth 2"
-        in msg
+        "rmm-datagen --env Dubins4DGuarded-v0 --configs 4 --samples-per-config 6 --seed 11 "
+        "--configs-per-shard 2 --branches 4 --depth 2" in msg
     )
     assert f"--out {out}" in msg
     # and that command does repair it
@@ -392,8 +392,8 @@ def test_bench_rows_bit_identical_with_1_and_2_workers(tmp_path):
     cols, one = _stored(tmp_path / "w1" / "results.db")
     _, two = _stored(tmp_path / "w2" / "results.db")
     assert "final_speed" in cols and "sim_time" in cols and len(one) == 4
-    for a, b in zip(one, two):
-        assert a == b, {c: (x, y) for c, x, y in zip(cols, a, b) if x != y}
+    for a, b in zip(one, two, strict=True):  # both runs finished (status 0): the same 4 episodes
+        assert a == b, {c: (x, y) for c, x, y in zip(cols, a, b, strict=True) if x != y}  # one value per column
 
 
 @pytest.mark.parametrize(

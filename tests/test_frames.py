@@ -109,9 +109,9 @@ def _reference_row(episodes, batch_size):
         if not w:
             row[name] = row[f"{name}_std"] = math.nan
             continue
-        m = sum(r * n for r, n in zip(rates, w)) / sum(w)
+        m = sum(r * n for r, n in zip(rates, w, strict=True)) / sum(w)  # one rate and size per batch
         row[name] = 100 * m
-        row[f"{name}_std"] = 100 * math.sqrt(sum(n * (r - m) ** 2 for r, n in zip(rates, w)) / sum(w))
+        row[f"{name}_std"] = 100 * math.sqrt(sum(n * (r - m) ** 2 for r, n in zip(rates, w, strict=True)) / sum(w))
     row["intervention"], row["intervention_std"] = (
         100 * v for v in mean_std([e["active_sim_time"] / e["sim_time"] for e in ok])
     )
@@ -169,7 +169,7 @@ def test_table_i_of_a_stored_run_matches_the_report(results):
     assert list(table.index) == ["cbf", "inactive"] and table.loc["inactive", "episodes"] == 3
     header = csv[0].split(",")
     for line in csv[1:]:
-        row = dict(zip(header, line.split(",")))
+        row = dict(zip(header, line.split(","), strict=True))  # a row has one field per column
         agent = row[header[0]]
         stored = [float(v) for k, v in row.items() if k != header[0] and v.replace(".", "").replace("-", "").isdigit()]
         for col in ("goal", "collision", "timeout", "intervention"):

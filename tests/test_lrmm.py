@@ -81,7 +81,7 @@ def test_numpy_inference_equals_torch(small_dataset, trained):
 def test_save_load_round_trip_is_bit_exact(tmp_path, small_dataset, trained):
     p = trained.save(tmp_path / "m.npz")
     m = LRMMModel.load(p, env_id="Dubins4DGuarded-v0", obs_dim=17)
-    for (Wa, ba), (Wb, bb) in zip(trained.weights, m.weights):
+    for (Wa, ba), (Wb, bb) in zip(trained.weights, m.weights, strict=True):  # the same layers
         np.testing.assert_array_equal(Wa, Wb)
         assert (ba is None and bb is None) or np.array_equal(ba, bb)
     x = small_dataset[0].obs
@@ -97,7 +97,7 @@ def test_training_is_deterministic(small_dataset):
     a = train(ds, TrainConfig(epochs=2, seed=5), log=quiet)
     b = train(ds, TrainConfig(epochs=2, seed=5), log=quiet)
     c = train(ds, TrainConfig(epochs=2, seed=6), log=quiet)
-    for (Wa, _), (Wb, _) in zip(a.weights, b.weights):
+    for (Wa, _), (Wb, _) in zip(a.weights, b.weights, strict=True):  # the same architecture
         np.testing.assert_array_equal(Wa, Wb)
     assert not np.array_equal(a.weights[0][0], c.weights[0][0])
 
@@ -596,7 +596,7 @@ def test_test_split_labels_never_reach_the_loss(small_dataset):
     poisoned = dataclasses.replace(ds, risk=np.where(te, 1.0 - ds.risk, ds.risk))
     a = train(ds, TrainConfig(epochs=3, seed=2), log=quiet)
     b = train(poisoned, TrainConfig(epochs=3, seed=2), log=quiet)
-    for (Wa, ba), (Wb, bb) in zip(a.weights, b.weights):
+    for (Wa, _), (Wb, _) in zip(a.weights, b.weights, strict=True):  # the same architecture
         np.testing.assert_array_equal(Wa, Wb)
     assert (
         a.meta["metrics"]["train"] == b.meta["metrics"]["train"]

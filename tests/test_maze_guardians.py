@@ -137,7 +137,7 @@ def test_cbf_on_the_maze_turns_only_when_holding_the_heading_is_unsafe():
     # toward the upper wall (surface y = 181.25) at 1 rad, b = 31.25 - 2: B = 29.25 - 50 (1 - cos 1) = 6.26;
     # dB/dt + B >= 0 needs -10 sin 1 - 50 sin(1) u + B >= 0 (sigma = -1: the turn away is right), u <= -0.0511
     lap = 0.1  # the decision is for the pose one lap ahead (the driver's turn taken as 0): recompute there
-    x, y, psi = 300.0 + 10 * lap * math.cos(1.0), 150.0 + 10 * lap * math.sin(1.0), 1.0
+    _x, y, psi = 300.0 + 10 * lap * math.cos(1.0), 150.0 + 10 * lap * math.sin(1.0), 1.0  # B needs y only
     B = (181.25 - y - 2.0) - 50.0 * (1 - math.cos(psi))
     obs, info = reset_at(env, g, [300.0, 150.0, 1.0])
     a = g.act(obs, info)

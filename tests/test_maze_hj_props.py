@@ -290,7 +290,7 @@ def reference(g, x, y, psi, nominal, held):
     def scores(pose):
         rows = manoeuvres(g.u_max, g.lookahead)
         clear, ends = run(pose, rows, 0.2)
-        for m, (u1, t1, u2, t2) in enumerate(rows):
+        for m, (_u1, _t1, u2, _t2) in enumerate(rows):
             end = ends[m].copy()
             end[2] = (end[2] + math.pi) % (2 * math.pi) - math.pi
             if u2 == 0.0 and clear[m] > 0 and g.grid.contains([*end, s]):

@@ -125,7 +125,7 @@ def test_near_walls_are_exactly_those_within_reach(x, y, reach, half):
     walls = np.vstack([BOX, [[300.0, 100.0, 300.0, 100.0]]])  # with a zero-length wall
     dist = np.array([_seg_dist(x, y, *w) for w in walls])
     got = {tuple(w) for w in near_walls(walls, x, y, reach, half)}
-    for w, d in zip(walls, dist):
+    for w, d in zip(walls, dist, strict=True):  # one distance per wall
         if abs(d - (reach + half)) > 1e-6:  # on the boundary either answer is rounding
             assert (tuple(w) in got) == (d <= reach + half)
 

@@ -153,8 +153,9 @@ def test_collision_terminates_and_is_seeded():
     for k in range(10):
         obs, r, te, tr, info = env.step(np.zeros(1, np.float32))
         if te:
+            collided_at = k
             break
-    assert te and r == -1.0 and info["outcome"] == "collision" and k == 4  # 45 px at 10 px/s
+    assert te and r == -1.0 and info["outcome"] == "collision" and collided_at == 4  # 45 px at 10 px/s
     a = Dubins3DMazeEnv().reset(seed=3)[0]
     b = Dubins3DMazeEnv().reset(seed=3)[0]
     np.testing.assert_array_equal(a, b)

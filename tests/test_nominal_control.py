@@ -52,7 +52,7 @@ def test_handing_back_the_nominal_control_is_the_driver_bit_for_bit(env_id, kwar
         alone, s1 = _episode(env, seed, _drive, max_steps)
         filtered, s2 = _episode(env, seed, _hand_back, max_steps)
         assert len(alone) == len(filtered) > 1
-        for k, ((o1, r1, e1, i1), (o2, r2, e2, i2)) in enumerate(zip(alone, filtered)):
+        for k, ((o1, r1, e1, i1), (o2, r2, e2, i2)) in enumerate(zip(alone, filtered, strict=True)):
             assert o1.tobytes() == o2.tobytes(), (env_id, seed, k)
             assert (r1, e1) == (r2, e2)
             assert i1["state"].tobytes() == i2["state"].tobytes()

@@ -15,9 +15,9 @@ def test_urdf_agrees_with_the_parameter_object_exactly():
     link = ET.parse(_urdf_path()).getroot().find("link")
     inertial = link.find("inertial")
     assert float(inertial.find("mass").get("value")) == QUADROTOR.mass
-    I = {k: float(v) for k, v in inertial.find("inertia").attrib.items()}
-    assert (I["ixx"], I["iyy"], I["izz"]) == QUADROTOR.inertia
-    assert I["ixy"] == I["ixz"] == I["iyz"] == 0.0  # principal axes = body axes
+    inertia = {k: float(v) for k, v in inertial.find("inertia").attrib.items()}
+    assert (inertia["ixx"], inertia["iyy"], inertia["izz"]) == QUADROTOR.inertia
+    assert inertia["ixy"] == inertia["ixz"] == inertia["iyz"] == 0.0  # principal axes = body axes
     assert inertial.find("origin").get("xyz").split() == ["0", "0", "0"]  # centre of mass at the body origin
     for part in ("collision", "visual"):
         cyl = link.find(part).find("geometry").find("cylinder")

@@ -114,7 +114,8 @@ def test_fast_into_a_close_obstacle_gives_one():
 
 
 def test_dubins4d_leaf_heuristic_values():
-    # the leaf heuristic's hand-computed examples (docs/original-code.md item 24): v=1, forward ray 4 -> 0.25; v=2, ray 10 -> 0.4; v=0.5, ray 1 -> 0.25
+    # the leaf heuristic's hand-computed examples (docs/original-code.md item 24):
+    # v=1, forward ray 4 -> 0.25; v=2, ray 10 -> 0.4; v=0.5, ray 1 -> 0.25
     sc = scene([[5.0, 0.0, 1.0], [20.0, 20.0, 1.0]])
     np.testing.assert_allclose(sc.leaf_estimate(np.array([[0.0, 0.0, 0.0, 1.0]])), [0.25])
     np.testing.assert_allclose(sc.leaf_estimate(np.array([[-6.0, 0.0, 0.0, 2.0]])), [0.4])

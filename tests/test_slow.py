@@ -23,4 +23,5 @@ def test_paper_scale_dubins4d_dataset(tmp_path):
     print(f"35,072 labels in {elapsed:.1f} s")
 
 
-# the default-grid HJ check that was here runs by default now: tests/test_hj.py::test_default_grid_value_against_the_exact_propagator
+# the default-grid HJ check that was here runs by default now:
+# tests/test_hj.py::test_default_grid_value_against_the_exact_propagator

@@ -236,8 +236,10 @@ def test_a_database_written_before_error_kinds_and_invocation_bookkeeping_is_bro
             CREATE TABLE episodes ({", ".join(f"{k} {v}" for k, v in old_fields.items())}, PRIMARY KEY (run_key, episode));
             CREATE TABLE invocations (id INTEGER PRIMARY KEY AUTOINCREMENT, created REAL, kind TEXT, args TEXT,
                 run_keys TEXT, episodes INTEGER, status TEXT);
-            INSERT INTO invocations (created, kind, args, run_keys, episodes, status) VALUES (1, 'run', '{{}}', '{{}}', 2, 'done');
-            INSERT INTO invocations (created, kind, args, run_keys, episodes, status) VALUES (2, 'run', '{{}}', '{{}}', 2, 'failed');
+            INSERT INTO invocations (created, kind, args, run_keys, episodes, status)
+                VALUES (1, 'run', '{{}}', '{{}}', 2, 'done');
+            INSERT INTO invocations (created, kind, args, run_keys, episodes, status)
+                VALUES (2, 'run', '{{}}', '{{}}', 2, 'failed');
         """)
         for i, (outcome, error) in enumerate(
             (("goal", None), ("error", "EpisodeTimeout: over 60 s"), ("error", "boom"))

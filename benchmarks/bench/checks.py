@@ -21,6 +21,7 @@ ends: an env that breaks it gets an error naming the missing key in every episod
 from __future__ import annotations
 
 import json
+import re
 from typing import Any
 
 from rmm_bench.config import AgentRun, accepts_argument, input_digests
@@ -155,11 +156,18 @@ def check_env_contract(env_id: str, env=None) -> None:
         )
 
 
-def _flag_for(message: str, env_kwargs: dict) -> str:
+#: what Gymnasium's ``make`` appends to an error raised by an env's constructor
+_CREATOR_SUFFIX = re.compile(r" was raised from the environment creator for \S+ with kwargs \(.*\)$", re.DOTALL)
+
+
+def _env_error(e: Exception, env_id: str, env_kwargs: dict) -> str:
+    """``"<flag>: <the constructor's own message>"``: the option whose name the message states (an
+    env argument such as ``clock``), else ``--env <id>`` (the env itself cannot be built)."""
+    message = _CREATOR_SUFFIX.sub("", str(e))
     for k in env_kwargs:
-        if k in message:
-            return f"--{k.replace('_', '-')} {env_kwargs[k]}"
-    return f"--env {env_kwargs}"
+        if re.search(rf"\b{re.escape(k)}\b", message):
+            return f"--{k.replace('_', '-')} {env_kwargs[k]}: {message}"
+    return f"--env {env_id}: {type(e).__name__}: {message}"
 
 
 def check_runs(
@@ -191,7 +199,7 @@ def check_runs(
             try:
                 env = gym.make(run.env_id, **run.env_kwargs)
             except Exception as e:
-                raise ValueError(f"{_flag_for(str(e), run.env_kwargs)}: {e}") from None
+                raise ValueError(_env_error(e, run.env_id, run.env_kwargs)) from None
             try:
                 check_env_contract(run.env_id, env)
                 envs[ekey] = int(getattr(env.unwrapped, "n_obstacles", -1))  # optional: the table's Obstacles column

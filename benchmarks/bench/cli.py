@@ -67,9 +67,9 @@ that is a file or cannot be written, or a read-only ``results.db``, exit 2 (chan
 a full disk, a file-size limit (``ulimit -f``) or a database locked by another command exit 1
 and keep every stored episode (rerun the same command once fixed); only a truly damaged
 ``results.db`` (its integrity check fails) is to be moved aside, after exporting what is
-readable, as its message says.  In short: 2 is bad input, 1 a run that could not finish.  ``rmm-bench report`` prints how many episodes each agent
-actually has and flags a run that was killed (its invocation still says ``running`` but its
-process is gone).
+readable, as its message says.  In short: 2 is bad input, 1 a run that could not finish.
+``rmm-bench report`` prints how many episodes each agent actually has and flags a run that was
+killed (its invocation still says ``running`` but its process is gone).
 """
 
 from __future__ import annotations

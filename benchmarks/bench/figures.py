@@ -48,9 +48,12 @@ def riskmap(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
     from rmm_envs.worlds.mazes import render_occupancy
 
     env = gym.make("Dubins3DMaze-v0", maze_kind=args.kind).unwrapped
+    if not isinstance(env, Dubins3DMazeEnv):
+        raise TypeError(f"Dubins3DMaze-v0 made a {type(env).__name__}, not the Dubins3DMazeEnv this figure draws")
     env.reset(seed=args.seed)
     rng = np.random.default_rng(args.seed)
     states = env.sample_states(rng, args.n)
@@ -64,9 +67,9 @@ def riskmap(args: argparse.Namespace) -> int:
         from rmm_guardians.lrmm.model import LRMMModel, default_model_path
 
         model = LRMMModel.load(args.model or default_model_path("Dubins3DMaze-v0"), env_id="Dubins3DMaze-v0")
-        risk = model.predict(obs)
+        risk = np.asarray(model.predict(obs))  # a batch: an array (a float only for one observation)
         what = "inferred risk (LRMM)"
-    maze = env.scene.maze
+    maze = env.risk_scene().maze
     occ = render_occupancy(maze, resolution=maze.thickness / 3)
     fig, ax = plt.subplots(figsize=(9, 8))
     ax.imshow(occ, cmap="gray_r", origin="lower", extent=(0, maze.width, 0, maze.height), alpha=0.9)
@@ -104,12 +107,17 @@ def quadrisk(args: argparse.Namespace) -> int:
     import matplotlib.pyplot as plt
     import pybullet as p
 
+    from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
     from rmm_guardians.lrmm.model import LRMMModel, default_model_path
 
     env = gym.make("QuadrotorRoom-v0", render_mode="rgb_array").unwrapped
+    if not isinstance(env, QuadrotorRoomEnv):
+        raise TypeError(f"QuadrotorRoom-v0 made a {type(env).__name__}, not the QuadrotorRoomEnv this figure draws")
     env.reset(seed=args.seed, options={"room": {"wall_height": 3.0}})
     model = LRMMModel.load(args.model or default_model_path("QuadrotorRoom-v0"), env_id="QuadrotorRoom-v0")
     room = env.room
+    if room is None:  # reset builds the room
+        raise RuntimeError("QuadrotorRoom-v0 has no room after reset")
     cells = np.argwhere(room.footprint)
     centre = room.origin + (cells[np.argmin(np.linalg.norm(cells - cells.mean(axis=0), axis=1))] + 0.5) * room.cell
     edge = room.origin + (cells[np.argmin(cells[:, 0])] + 0.5) * room.cell  # a cell at the footprint's -x edge
@@ -121,9 +129,9 @@ def quadrisk(args: argparse.Namespace) -> int:
         ("upside down, falling near the floor", [centre[0], centre[1], 0.6, *flip, 0, 0, -2.0, 1.0, 0, 0]),
     ]
     states = np.array([c[1] for c in cases], dtype=float)
-    risk = model.predict(env.observe_states(states))
+    risk = np.asarray(model.predict(env.observe_states(states)))  # a batch: an array
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
-    for ax, (name, _), st, r in zip(axes, cases, states, risk):
+    for ax, (name, _), st, r in zip(axes, cases, states, risk, strict=True):  # three cases, three panels
         env.set_state(st)
         p.changeVisualShape(env.body, -1, rgbaColor=[float(r), 1.0 - float(r), 0.0, 1.0], physicsClientId=env.client)
         view = p.computeViewMatrixFromYawPitchRoll(

@@ -26,6 +26,8 @@ report and sweep use.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from rmm_bench.store import RETRIED_ERRORS
@@ -118,7 +120,7 @@ def _aggregate_frame(df, batch_size: int) -> dict:
         df = df.assign(**{c: np.nan for c in missing})
     n = len(df)
     ok = df[df["outcome"] != "error"].sort_values("episode", kind="stable")
-    out = {"episodes": n, "errors": n - len(ok), "error_rate": (n - len(ok)) / n if n else float("nan")}
+    out: dict[str, Any] = {"episodes": n, "errors": n - len(ok), "error_rate": (n - len(ok)) / n if n else float("nan")}
     kind = df["error_kind"] if "error_kind" in df.columns else None  # NULL: a guardian error (rows stored before kinds)
     no_result = (df["outcome"] == "error") & (kind.isin(RETRIED_ERRORS) if kind is not None else False)
     resulted = df[~no_result].sort_values("episode", kind="stable")  # guardian errors included: failures

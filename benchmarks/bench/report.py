@@ -18,8 +18,10 @@ from rmm_bench.store import RETRIED_ERRORS, ResultsStore
 from rmm_envs.catalog import current_id
 
 __all__ = [
+    "PAPER_LABEL",
     "PAPER_TABLE_I",
     "cmd_report",
+    "format_paper_table",
     "format_tables",
     "plot_latency",
     "plot_outcomes",
@@ -27,11 +29,17 @@ __all__ = [
     "write_report",
 ]
 
-# The paper's Table I (2048 episodes per agent; its HJ row used single-obstacle envs)
 #: The envs the paper's Table I describes (it evaluated guardians on Dubins4D only); the report
 #: prints the paper's rows next to a run on one of them.
 PAPER_ENVS = ("Dubins4DParallel-v0", "Dubins4DGuarded-v0")
-PAPER_TABLE_I = {
+#: How the report labels the paper's rows, after the agent's name: the paper's own implementations
+#: and model, which a run here does not reproduce exactly (our ``lrmm`` is not the paper's LRMM).
+PAPER_LABEL = "paper, ICRA 2023"
+#: The paper's Table I figures (2048 episodes per agent; its HJ row used single-obstacle envs), per
+#: agent: ``(mean, std)``, ``std`` None where the paper printed the mean alone, or the paper's text
+#: where it printed a bound or an approximation.  The paper reported no errors, QP fallbacks or
+#: measured decision times: the report shows ``—`` for those.
+PAPER_TABLE_I: dict[str, dict] = {
     "lrmm": {
         "obs": "local",
         "n_obst": 5,
@@ -57,7 +65,7 @@ PAPER_TABLE_I = {
         "goal": (27.1, 6.9),
         "collision": (68.4, 5.9),
         "timeout": (4.5, 2.9),
-        "intervention": (50.0, float("nan")),
+        "intervention": "~50",
     },
     "inactive": {
         "obs": "none",
@@ -66,7 +74,7 @@ PAPER_TABLE_I = {
         "goal": (44.4, 7.4),
         "collision": (55.4, 7.3),
         "timeout": (0.1, 0.5),
-        "intervention": (0.0, 0.0),
+        "intervention": (0.0, None),
     },
     "brakes": {
         "obs": "none",
@@ -75,7 +83,7 @@ PAPER_TABLE_I = {
         "goal": (0.6, 0.9),
         "collision": (9.0, 3.8),
         "timeout": (90.4, 3.7),
-        "intervention": (100.0, 0.0),
+        "intervention": (100.0, None),
     },
     "hj": {
         "obs": "global",
@@ -84,9 +92,13 @@ PAPER_TABLE_I = {
         "goal": (54.0, 5.2),
         "collision": (46.0, 5.3),
         "timeout": (0.0, 0.3),
-        "intervention": (1.0, float("nan")),
+        "intervention": "<1.0",
     },
 }
+#: The paper's episodes per agent.
+PAPER_EPISODES = 2048
+#: What the paper reported nothing for.
+NOT_REPORTED = "—"
 
 COLUMNS = [
     ("compute_ms", "Policy compute time [ms]"),
@@ -209,6 +221,45 @@ def format_tables(rows: list[dict], batch_size: int = 64, measured: bool = False
         + "\\end{tabular}\n"
     )
     return {"md": md, "csv": buf.getvalue(), "tex": tex}
+
+
+def _paper_cell(v) -> str:
+    """A figure of the paper's table as the paper printed it: ``mean ± std`` (one decimal), the
+    mean alone (``0``, ``100``), or its text (a bound, an approximation)."""
+    if isinstance(v, str):
+        return v
+    m, s = v
+    return f"{m:g}" if s is None else f"{m:.1f} ± {s:.1f}"
+
+
+def paper_agent(agent: str) -> str | None:
+    """The paper's row for our ``agent`` (itself, or the ``-paper`` preset of one), else None."""
+    base = agent.removesuffix("-paper")
+    return base if base in PAPER_TABLE_I else None
+
+
+def format_paper_table(agents) -> str:
+    """The paper's Table I rows for ``agents`` (names of ours: each built-in, or its ``-paper``
+    preset, maps to the paper's row of that name), in Markdown with the columns of our table.
+    Each row is labelled as the paper's (:data:`PAPER_LABEL`): the paper's implementations and
+    model, not ours.  ``—`` where the paper reported nothing (errors, QP fallbacks).  ``""`` when
+    no agent has a paper row."""
+    names = list(dict.fromkeys(a for a in map(paper_agent, agents) if a is not None))
+    if not names:
+        return ""
+    columns = [c[1] for c in COLUMNS[:-1]] + ["Intervention rate [% steps]"]  # the paper's unit
+    header = ["Agent", "Observation", "Obstacles", "Episodes"] + columns + ["Errors", "QP fallbacks"]
+    md = "| " + " | ".join(header) + " |\n|" + "|".join("---" for _ in header) + "|\n"
+    for a in names:
+        p = PAPER_TABLE_I[a]
+        cells = [f"{a} ({PAPER_LABEL})", p["obs"], str(p["n_obst"]), str(PAPER_EPISODES)]
+        cells += [_paper_cell(p[k]) for k, _ in COLUMNS] + [NOT_REPORTED, NOT_REPORTED]
+        md += "| " + " | ".join(cells) + " |\n"
+    return md + (
+        f"\nThe paper's figures as it printed them: {PAPER_EPISODES} episodes per agent, its HJ row on "
+        "single-obstacle envs, its intervention rate in % of steps (ours: % of simulated time); "
+        f"{NOT_REPORTED}: the paper gave no figure.\n"
+    )
 
 
 def _plt():
@@ -442,29 +493,17 @@ def write_report(
         tex.append(f"% {label}{_header(args)}\n{tables['tex']}" if mixed else tables["tex"])
         csv_parts.append((args, tables["csv"]))
         figure_rows += [r | {"agent": f"{r['agent']} [{number}]"} for r in rows] if mixed else rows
-        paper = format_tables(
-            [
-                {
-                    "agent": a,
-                    "episodes": 2048,
-                    "errors": 0,
-                    "qp_fallbacks": 0,
-                    "precompute_s": (0, 0),
-                    "obs": p["obs"],
-                    "n_obst": p["n_obst"],
-                    **{k: p[k] for k in ("compute_ms", "goal", "collision", "timeout", "intervention")},
-                }
-                for a, p in PAPER_TABLE_I.items()
-                if a in run_keys or f"{a}-paper" in run_keys
-            ]
-        )["md"]
         counts = sorted(set(episodes.values()))
         text = (
             f"Table I{' ' + label.strip() if mixed else ''}: {_header(args)}, {'/'.join(map(str, counts))} episodes "
             f"requested per agent (results in {out})\n{_completeness(rows, group)}\n{tables['md']}"
         )
-        if args.get("env") in PAPER_ENVS:  # the paper evaluated guardians on Dubins4D only
-            text += f"\nThe paper's Table I for the same agents:\n\n{paper}"
+        paper = format_paper_table(run_keys)
+        if paper and args.get("env") in PAPER_ENVS:  # the paper evaluated guardians on Dubins4D only
+            text += (
+                "\nFor comparison, the paper's Table I rows for these agents: the paper's own implementations "
+                f"and LRMM model, not the guardians run here:\n\n{paper}"
+            )
         texts.append(text)
     try:
         (out / "table_I.md").write_text("\n".join(md))

@@ -28,7 +28,16 @@ from rmm_bench.report import plot_latency, write_report
 from rmm_bench.runner import episode_seed, hard_timeout, lost_episode, run_episode
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore
 
-__all__ = ["RunFailed", "cmd_run", "cmd_sweep", "env_error_lines", "execute", "guardian_error_lines", "plan_tasks"]
+__all__ = [
+    "RunFailed",
+    "cmd_run",
+    "cmd_sweep",
+    "done_line",
+    "env_error_lines",
+    "execute",
+    "guardian_error_lines",
+    "plan_tasks",
+]
 
 
 class RunFailed(RuntimeError):
@@ -134,10 +143,12 @@ def execute(
     provenance: dict,
     meta: dict[str, dict] | None = None,
     invocation: int | None = None,
+    tally: dict[str, int] | None = None,
 ) -> dict[str, int]:
     """Run every episode of ``config`` not stored yet; returns, per agent, how many of this
-    call's episodes ended without a result (time limit, lost worker).  Raises
-    :class:`RunFailed` if too many episodes in a row lost their worker."""
+    call's episodes ended without a result (time limit, lost worker).  ``tally``, when given,
+    receives ``reused`` (the requested episodes answered from the store) and ``ran`` (those this
+    call runs).  Raises :class:`RunFailed` if too many episodes in a row lost their worker."""
     from rmm_envs.pool import TaskLost, WorkersLost, run_local, run_ray
 
     runs = config.agent_runs()
@@ -148,6 +159,8 @@ def execute(
         store, runs, config.episodes, config.workers, config.backend, config.retry_errors, config.agent_classes
     )
     unfinished = {a: 0 for a in runs}
+    if tally is not None:
+        tally.update(reused=len(runs) * config.episodes - len(tasks), ran=len(tasks))
     if not tasks:
         return unfinished
     from tqdm import tqdm
@@ -244,13 +257,20 @@ def env_error_lines(store: ResultsStore, run_keys: dict[str, str], episodes: int
 
 
 def _invoke(
-    store: ResultsStore, kind: str, config: BenchConfig, argv, meta: dict, record_args: dict
+    store: ResultsStore,
+    kind: str,
+    config: BenchConfig,
+    argv,
+    meta: dict,
+    record_args: dict,
+    tally: dict[str, int] | None = None,
 ) -> tuple[int, str]:
-    """Record an invocation, run it, and end it as finished, interrupted or failed."""
+    """Record an invocation, run it, and end it as finished, interrupted or failed (``tally``:
+    :func:`execute`'s)."""
     keys = {a: r.key for a, r in config.agent_runs().items()}
     inv = store.add_invocation(kind, record_args, keys, config.episodes)
     try:
-        unfinished = execute(store, config, _provenance(argv), meta, inv)
+        unfinished = execute(store, config, _provenance(argv), meta, inv, tally)
     except KeyboardInterrupt:
         store.finish_invocation(inv, "interrupted", "Ctrl-C")
         raise
@@ -260,6 +280,19 @@ def _invoke(
     msg = _unfinished_message(unfinished, store)
     store.finish_invocation(inv, "failed" if msg else "finished", msg or None)
     return inv, msg
+
+
+def _episodes(n: int) -> str:
+    return f"{n} episode{'' if n == 1 else 's'}"
+
+
+def done_line(reused: int, ran: int, seconds: float) -> str:
+    """What a run says when it ends: the episodes it ran and how long they took, and the stored
+    episodes it reused (all of them: it ran nothing, so no time is worth giving)."""
+    if not ran:
+        return f"reused {reused} stored episode{'' if reused == 1 else 's'}: none left to run"
+    line = f"finished in {seconds:.1f} s: ran {_episodes(ran)}"
+    return line + (f", reused {reused} stored" if reused else "")
 
 
 def _interrupted(out: Path) -> int:
@@ -304,11 +337,12 @@ def cmd_run(config: BenchConfig, argv) -> int:
     try:
         store.mark_stale_invocations()
         t0 = time.perf_counter()
+        tally: dict[str, int] = {}
         try:
-            inv, msg = _invoke(store, "run", config, argv, meta, config.parsed)
+            inv, msg = _invoke(store, "run", config, argv, meta, config.parsed, tally)
         except KeyboardInterrupt:
             return _interrupted(out)
-        print(f"finished in {time.perf_counter() - t0:.1f} s")
+        print(done_line(tally.get("reused", 0), tally.get("ran", 0), time.perf_counter() - t0))
         record = store.invocation(inv)
         write_report(store, out, record, config.batch_size, figure=config.figure)
         errors = env_error_lines(store, record["run_keys"], config.episodes, config.env_id) + guardian_error_lines(

@@ -12,9 +12,10 @@ A guardian that raises (in ``reset``, ``act`` or ``stats``, or with ``sys.exit``
 episode exceeding ``episode_timeout`` seconds of wall time, ends that episode with outcome
 ``error``, the message and its kind (``guardian`` or ``timeout``, see the store); the run goes
 on.  A worker whose guardian's files (a model) no longer hash to the run's ``inputs`` runs no
-episode: each is stored as ``input_changed``, a failure of the run that any rerun retries.  The time limit is a ``SIGALRM`` timer in the worker, so it interrupts Python code; a
-call stuck in compiled code is ended by the parent, which kills the worker after
-:func:`hard_timeout` seconds and records the episode as ``lost_worker``.
+episode: each is stored as ``input_changed``, a failure of the run that any rerun retries.  The
+time limit is a ``SIGALRM`` timer in the worker, so it interrupts Python code; a call stuck in
+compiled code is ended by the parent, which kills the worker after :func:`hard_timeout` seconds
+and records the episode as ``lost_worker``.
 
 The env is driven only through the parallel-autonomy contract (:mod:`rmm_bench.checks`):
 the result's columns come from the last step's ``info["outcome"]`` and ``info["episode_stats"]``
@@ -30,6 +31,8 @@ import signal
 import statistics
 import time
 import traceback
+import warnings
+from typing import Any
 
 import numpy as np
 
@@ -141,12 +144,18 @@ def _guardian_key(task: EpisodeTask) -> tuple:
 
 def _guardian(task: EpisodeTask):
     """The worker's guardian for ``task``, built once; its files must still be those the run was
-    keyed with (:class:`InputChanged` otherwise: the episode would mix two models in one run)."""
+    keyed with (:class:`InputChanged` otherwise: the episode would mix two models in one run).
+
+    Built without its warnings (e.g. ``lrmm``'s fallback to the paper's threshold): the parent
+    built the same guardian before dispatching any episode (:func:`rmm_bench.checks.check_runs`)
+    and showed them there, once per run; every worker process would repeat them."""
     key = _guardian_key(task)
     if key not in _CACHE:
         from rmm_guardians import make_guardian
 
-        guardian = make_guardian(task.agent, env_id=task.run.env_id, **task.guardian_kwargs())
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            guardian = make_guardian(task.agent, env_id=task.run.env_id, **task.guardian_kwargs())
         if task.run.inputs:
             changed = changed_inputs(
                 task.run.inputs, input_digests(guardian, task.run.agent_kwargs, task.run.env_kwargs)
@@ -182,7 +191,7 @@ def _warm_up(task: EpisodeTask, guardian, obs, info, env) -> None:
 
 def _statistics(env_id: str, info: dict) -> dict:
     """The store's columns from the last step's ``info`` (the contract's ``outcome`` and ``episode_stats``)."""
-    ep = info.get(EPISODE_KEY)
+    ep: dict[str, Any] = info.get(EPISODE_KEY, {})  # read only when info holds it
     missing = [k for k in ("outcome", EPISODE_KEY) if k not in info] or [
         k for k in EPISODE_STATISTICS.values() if k not in ep
     ]

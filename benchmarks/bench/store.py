@@ -79,6 +79,9 @@ EPISODE_FIELDS = {name: _column(tp) for name, tp in typing.get_type_hints(Episod
 # error kinds that are failures of the run rather than results: every rerun retries them
 RETRIED_ERRORS = ("timeout", "lost_worker", "input_changed", "env")
 
+# what an invocation of each kind is called in messages (any other kind, or none: "... invocation")
+_INVOCATION_KINDS: dict[str | None, str] = {"run": "benchmark run", "sweep": "latency sweep"}
+
 _INVOCATION_COLUMNS = {"pid": "INTEGER", "host": "TEXT", "updated": "REAL", "message": "TEXT"}
 
 
@@ -119,9 +122,9 @@ class ResultsStore:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as e:
             raise ResultsDatabaseError(*describe_os_error(e, self.path.parent)) from None
-        self.db = None
+        connection: sqlite3.Connection | None = None
         try:
-            self.db = sqlite3.connect(str(self.path), timeout=30)
+            self.db = connection = sqlite3.connect(str(self.path), timeout=30)
             self.db.execute("PRAGMA journal_mode=WAL")
             self.db.execute("PRAGMA synchronous=NORMAL")
             problems = [r[0] for r in self.db.execute("PRAGMA quick_check(5)")]
@@ -129,8 +132,8 @@ class ResultsStore:
                 raise sqlite3.DatabaseError("; ".join(problems)[:300])
             self._create()
         except sqlite3.DatabaseError as e:
-            if self.db is not None:
-                self.db.close()
+            if connection is not None:
+                connection.close()
             raise self._error(e) from None
 
     def _intact(self) -> bool:
@@ -314,7 +317,7 @@ class ResultsStore:
         )
         cur = self.db.execute(q, (run_key, n) if n is not None else (run_key,))
         names = [d[0] for d in cur.description]
-        return [dict(zip(names, r)) for r in cur.fetchall()]
+        return [dict(zip(names, r, strict=True)) for r in cur.fetchall()]  # a row has one value per column
 
     # invocations
     @_guarded
@@ -336,6 +339,8 @@ class ResultsStore:
             ),
         )
         self.db.commit()
+        if cur.lastrowid is None:  # sqlite3 sets it after every INSERT
+            raise TypeError("SQLite reported no row id for the new invocation")
         return int(cur.lastrowid)
 
     @_guarded
@@ -381,7 +386,7 @@ class ResultsStore:
             what = (
                 f"invocation {inv_id}"
                 if inv_id is not None
-                else {"run": "benchmark run", "sweep": "latency sweep"}.get(kind, f"{kind or 'benchmark'} invocation")
+                else _INVOCATION_KINDS.get(kind, f"{kind or 'benchmark'} invocation")
             )
             raise LookupError(f"no {what} recorded in {self.path}")
         inv = {

@@ -49,7 +49,7 @@ def main():
         ]
     )
     res = est.estimate(states, np.random.default_rng(0))
-    for s, r, u in zip(states, res.risk, res.min_risk_ctrl):
+    for s, r, u in zip(states, res.risk, res.min_risk_ctrl, strict=True):  # one row per state
         print(f"state {s}: risk {r:.3f}, safest first control {np.round(u, 2)}")
     assert res.risk[0] < res.risk[1] < res.risk[2]
     cvar = RiskEstimator(system, branches=32, depth=2, horizon=1.0, metric="cvar", alpha=0.1).estimate(

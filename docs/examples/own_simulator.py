@@ -57,7 +57,7 @@ K = (-3.16, -5.92, -49.5, -12.8)
 
 def push(obs, mark=0.0, gain=1.0):
     """CartPole's action (1: push right) of the LQR steering to ``mark``, its position gain times ``gain``."""
-    u = -K[0] * gain * (float(obs[0]) - mark) - sum(k * float(x) for k, x in zip(K[1:], obs[1:]))
+    u = -K[0] * gain * (float(obs[0]) - mark) - sum(k * float(x) for k, x in zip(K[1:], obs[1:], strict=True))
     return int(u > 0)
 
 

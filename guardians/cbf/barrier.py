@@ -8,12 +8,15 @@ keeps state; the guardian, the QP and the recovery manoeuvre all call these func
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from rmm_envs.systems.dubins4d import desired_heading_compiled as _desired_heading
 
+njit: Callable[..., Any] | None  # numba's, or None where numba is missing
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; the Python loop still works

@@ -45,6 +45,12 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
 
     preset = "cbf"  #: the CBFSettings preset the keyword arguments change
 
+    # the control box, set by _bounds at reset
+    u1_min: float
+    u1_max: float
+    u2_min: float
+    u2_max: float
+
     def __init__(self, settings: CBFSettings | None = None, **options) -> None:
         """``settings`` (default: the class's :attr:`preset`) with ``options``, any of
         :class:`~rmm_guardians.cbf.settings.CBFSettings`' fields, changed."""
@@ -120,6 +126,7 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         super().reset(**kwargs)
         self.check_spaces(self.observation_space, self.action_space)
         self._bounds()
+        assert self._privileged is not None  # Guardian.reset refuses a privileged guardian without it
         priv = self._privileged()
         obstacles = np.asarray(priv["obstacles"], float).reshape(-1, 3)
         if obstacles.shape[0] > self.max_obstacles:
@@ -173,6 +180,9 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
     def recovery_control(self, state, i: int, lap: float | None = None, side: float | None = None) -> np.ndarray:
         """The backup manoeuvre about obstacle ``i`` at ``state`` (:mod:`rmm_guardians.cbf`): ``(u1, u2)``.
         ``side`` (+1: counter-clockwise tangent, -1: clockwise) overrides the choice of tangent."""
+        if lap is None:
+            lap = self._measured_lap
+            assert lap is not None  # reset's start_laps set the guess
         u, self._last_side = recovery_control(
             state,
             i,
@@ -180,7 +190,7 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
             self.radii,
             self.goal,
             self.params,
-            self._measured_lap if lap is None else lap,
+            lap,
             self.v_stuck,
             side,
             rows=self._rows,
@@ -267,6 +277,7 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         self.act(observation, info)
         if self.delegate is not None or self.K == 0:
             return
+        assert self._privileged is not None  # Guardian.reset refuses a privileged guardian without it
         state = np.asarray(self._privileged()["state"], float)
         if all(map(math.isfinite, state.tolist())):
             self.solve(state)
@@ -311,7 +322,8 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         return dict(self._counts)
 
 
-CBFGuardian.__init__.__signature__ = settings_signature(CBFSettings, CBF_PRESETS["cbf"])
+# a function's attributes live in its __dict__ (the type checker knows no __signature__ on a method)
+CBFGuardian.__init__.__dict__["__signature__"] = settings_signature(CBFSettings, CBF_PRESETS["cbf"])
 
 
 class CBFPaperGuardian(CBFGuardian):

@@ -178,6 +178,8 @@ class MazeCBFGuardian(PrivilegedGuardian):
         super().reset(**kwargs)
         self.check_spaces(self.observation_space, self.action_space)
         space = self.action_space
+        assert space is not None  # check_spaces refused anything but the maze car's GuardianActionSpace
+        assert self._privileged is not None  # Guardian.reset refuses a privileged guardian without it
         priv = self._privileged()
         if "speed" not in priv:
             raise ValueError(
@@ -195,7 +197,8 @@ class MazeCBFGuardian(PrivilegedGuardian):
         self._qp = WallQP(self.K, self.u_max, self.eps, self._solver_name)
         self._safe = space.safe_default.policy(space, self.rng) if space.safe_default is not None else None
         self._counts = self._zero()
-        self._pending = None  # the guardian's turn rate acting during the coming lap; None: the driver's
+        # the guardian's turn rate acting during the coming lap; None: the driver's
+        self._pending: float | None = None
         self.start_laps(self.lap_guess, since=priv.get("sim_time", 0.0))
 
     # ------------------------------------------------------------------ the maths
@@ -231,6 +234,7 @@ class MazeCBFGuardian(PrivilegedGuardian):
     def _emit(self, u: float):
         u = min(max(float(u), -self.u_max), self.u_max)
         self._pending = u
+        assert self.action_space is not None  # checked at reset (maze_car_only)
         return self.action_space.active(np.array([u]))
 
     def nominal(self, info) -> float:
@@ -268,7 +272,8 @@ class MazeCBFGuardian(PrivilegedGuardian):
         closest to ``u_ref`` (the driver's, or 0) that the barriers allow."""
         _, G, h = self.rows(state)
         if np.all(G[:, 0] * u_ref <= h + self.eps) and abs(u_ref) <= self.u_max:
-            z = np.array([u_ref])  # the reference satisfies every row: it is the solution, no solve
+            # the reference satisfies every row: it is the solution, no solve
+            z: np.ndarray | None = np.array([u_ref])
         else:
             self._counts["qp_solves"] += 1
             z = self._qp.solve(G, h, u_ref)
@@ -280,6 +285,7 @@ class MazeCBFGuardian(PrivilegedGuardian):
         if np.any(np.abs(h - G[:, 0] * z[0]) <= self.active_atol):
             return self._emit(z[0])
         self._pending = None
+        assert self.action_space is not None  # checked at reset (maze_car_only)
         return self.action_space.inactive()
 
     def stats(self) -> dict:

@@ -95,23 +95,23 @@ class BarrierQP:
         """The solution ``z*`` for the dense rows ``(G, h)`` of the current state; ``None`` if the
         problem is infeasible or the solver failed.  ``u_ref``: filter this control (module
         docstring); ``None``: the CBF-CLF problem."""
-        Ax, l, u = self._Ax, self._l, self._u
-        _fill(Ax, l, u, G, h, self.K, self._p0, self._p1)
+        Ax, lower, upper = self._Ax, self._l, self._u
+        _fill(Ax, lower, upper, G, h, self.K, self._p0, self._p1)
         q = None
         if u_ref is not None:
             K = self.K
             Ax[self._p0 + K + 1] = Ax[self._p1 + K + 1] = 0.0  # no CLF rows: the reference leads
-            u[K + 2] = u[K + 3] = self._inf
+            upper[K + 2] = upper[K + 3] = self._inf
             q = self._q
             q[0], q[1] = -2.0 * float(u_ref[0]), -2.0 * float(u_ref[1])
         native = self._native
         if native is not None:
-            native.update_data_vec(q=q, l=l, u=u)
+            native.update_data_vec(q=q, l=lower, u=upper)
             native.update_data_mat(P_x=None, P_i=None, A_x=Ax, A_i=None)
             quietly(native.solve)
             status, x = native.info.status_val, native.solution.x
         else:
-            self._solver.update(Ax=Ax, l=l, u=u, **({} if q is None else {"q": q}))
+            self._solver.update(Ax=Ax, l=lower, u=upper, **({} if q is None else {"q": q}))
             res = quietly(self._solver.solve, raise_error=False)
             status, x = res.info.status_val, res.x
         self.last_status = status
@@ -123,19 +123,19 @@ class BarrierQP:
         return x
 
 
-def _fill(Ax, l, u, G, h, K, p0, p1):
+def _fill(Ax, lower, upper, G, h, K, p0, p1):
     """Copy the dense rows ``(G, h)`` into the sparse problem's values ``Ax`` (columns ``u1``
-    from ``p0``, ``u2`` from ``p1``) and bounds ``l, u`` (rows as in :class:`BarrierQP`)."""
+    from ``p0``, ``u2`` from ``p1``) and bounds ``lower, upper`` (rows as in :class:`BarrierQP`)."""
     for i in range(K):
         Ax[p0 + i] = G[i, 0]
         Ax[p1 + i] = G[i, 1]
-        u[i] = h[i]
+        upper[i] = h[i]
     Ax[p0 + K + 1] = G[K + 4, 0]  # heading CLF coefficient of u1
     Ax[p1 + K + 1] = G[K + 5, 1]  # speed CLF coefficient of u2
-    l[K + 1], u[K + 1] = -h[K + 3], h[K + 2]  # u2 box merged with the speed barriers
-    if l[K + 1] > u[K + 1]:
-        l[K + 1] = u[K + 1]
-    u[K + 2], u[K + 3] = h[K + 4], h[K + 5]
+    lower[K + 1], upper[K + 1] = -h[K + 3], h[K + 2]  # u2 box merged with the speed barriers
+    if lower[K + 1] > upper[K + 1]:
+        lower[K + 1] = upper[K + 1]
+    upper[K + 2], upper[K + 3] = h[K + 4], h[K + 5]
 
 
 try:

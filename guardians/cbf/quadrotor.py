@@ -15,6 +15,8 @@ Offers :class:`QuadrotorCBFGuardian`.  The model, the rows, the defaults and why
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -28,6 +30,7 @@ from rmm_guardians.privileged import PrivilegedGuardian
 
 __all__ = ["QuadrotorCBFGuardian"]
 
+njit: Callable[..., Any] | None  # numba's, or None where numba is missing
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; the Python loop still works
@@ -112,6 +115,7 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)
         space = quadrotor_only(self, self.action_space)
+        assert self._privileged is not None  # Guardian.reset refuses a privileged guardian without it
         priv = self._privileged()
         if "room" not in priv:
             raise ValueError(
@@ -126,7 +130,8 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
         self._pending = None  # the guardian's command acting during the coming lap; None: the pilot's
         self.start_laps(self.lap_guess, since=priv.get("sim_time", 0.0))
         self._side = 0  # 0: filtering the nominal; +-1: following a shape (the deadlock escape), on that side
-        self._followed = None  # (x, y, side) of the last step spent following a shape
+        # (x, y, side) of the last step spent following a shape
+        self._followed: tuple[float, float, int] | None = None
         self._normal = (0.0, 0.0)  # the horizontal normal of the shape followed (heading frame)
 
     # ------------------------------------------------------------------ the maths
@@ -156,6 +161,7 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
     def _emit(self, u) -> dict:
         cmd = np.minimum(np.maximum(np.r_[np.asarray(u, float)[:3], 0.0], self.lo), self.hi)
         self._pending = cmd
+        assert self.action_space is not None  # checked at reset (quadrotor_only)
         return self.action_space.active(cmd)
 
     def _hover(self) -> dict:
@@ -195,8 +201,9 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
         tangent ``side (-n_y, n_x)`` (heading frame) of the shape being followed, the nominal's
         climb rate ``u[2]``; ``None`` when no row (barrier values ``b``, rows ``G``, nearest
         first) has a mostly horizontal normal (``|n_h| >= 0.5``)."""
-        near = []  # unit horizontal normals of the shapes within 0.5 m of the nearest such one
-        for bj, (g0, g1, _) in zip(b.tolist(), G.tolist()):
+        # unit horizontal normals of the shapes within 0.5 m of the nearest such one
+        near: list[tuple[float, float, float]] = []
+        for bj, (g0, g1, _) in zip(b.tolist(), G.tolist(), strict=True):
             nx, ny = -g0 * self.tau_h, -g1 * self.tau_h  # n_h in the heading frame (G = -n_h / tau_h)
             r = math.hypot(nx, ny)
             if r >= 0.5 and (not near or bj <= near[0][0] + 0.5):
@@ -227,7 +234,8 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
     def _satisfies(self, G, h, u) -> bool:
         """Whether the command ``u`` satisfies every row ``G u <= h`` (within the QP's tolerance)."""
         return all(
-            g0 * u[0] + g1 * u[1] + g2 * u[2] <= hi + self.eps for (g0, g1, g2), hi in zip(G.tolist(), h.tolist())
+            g0 * u[0] + g1 * u[1] + g2 * u[2] <= hi + self.eps
+            for (g0, g1, g2), hi in zip(G.tolist(), h.tolist(), strict=True)
         )
 
     def decide(self, state, u_nom) -> dict:
@@ -243,6 +251,7 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
             self._side = 0  # free, and no longer pushing into the shape it follows: the escape is over
         if free and self._side == 0:
             self._pending = None  # the nominal satisfies every row: it is the solution, the pilot keeps control
+            assert self.action_space is not None  # checked at reset (quadrotor_only)
             return self.action_space.inactive()
         if self._side == 0:
             z, active = self._solve(G, h, u)
@@ -251,6 +260,7 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
                 return self._hover()
             if not active:
                 self._pending = None
+                assert self.action_space is not None  # checked at reset (quadrotor_only)
                 return self.action_space.inactive()
             if self.v_slide == 0 or math.hypot(z[0], z[1]) >= self.v_stuck or math.hypot(u[0], u[1]) < 2 * self.v_stuck:
                 return self._emit(z)

@@ -15,7 +15,9 @@ The rows' derivation: docs/design-notes.md#rmm_guardianscbfquadrotor_rows.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import osqp
@@ -25,6 +27,7 @@ from rmm_envs.systems.rotations import quat_to_rot
 from rmm_guardians.cbf.backend import QpsolversQP
 from rmm_guardians.cbf.quiet import quietly
 
+njit: Callable[..., Any] | None  # numba's, or None where numba is missing
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; the Python loops still work
@@ -265,6 +268,7 @@ class CommandQP:
         s_max = math.inf if relaxed else 0.0
         if self.name is not None:
             self._qp.q[:] = q
+            assert self._qp.ub is not None  # built with the box bounds (the constructor)
             self._qp.ub[3] = s_max
             return self._qp.solve(np.hstack([G, -np.ones((self.K, 1))]), h)
         for j in range(3):  # column j holds rows 0..K-1 then its box row

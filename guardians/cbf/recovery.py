@@ -69,7 +69,7 @@ def recovery_control(
         G, h = (rows if rows is not None else BarrierRows(obstacles, radii, goal, prm))(state)
         K = obstacles.shape[0]
         cap = math.inf
-        for g1, g2, hj in zip(G[:K, 0].tolist(), G[:K, 1].tolist(), h[:K].tolist()):
+        for g1, g2, hj in zip(G[:K, 0].tolist(), G[:K, 1].tolist(), h[:K].tolist(), strict=True):
             if g2 > 0:
                 cap = min(cap, (hj - g1 * u1) / g2)
         if cap < u2:

@@ -44,7 +44,9 @@ def kernel_mismatch(grid, dynamics, order: int = 1) -> str | None:
 def set_threads(n: int | None) -> None:
     """Limit the kernel's threads (``None``: numba's default, the core count)."""
     if HAVE_NUMBA:
-        numba.set_num_threads(int(n) if n else numba.config.NUMBA_NUM_THREADS)
+        numba.set_num_threads(
+            int(n) if n else numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]  # set at import via globals()
+        )
 
 
 if HAVE_NUMBA:

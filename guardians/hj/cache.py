@@ -47,9 +47,9 @@ def load_or_solve(
     A cache that cannot be written is an optimisation lost, not an error: it is counted
     (``counts["cache_errors"]``) and warned about.  ``cache=None``: always solve.  Returns
     ``(V, seconds the solve took)``, the seconds ``None`` on a cache hit."""
-    key = ValueCache.key(spec) if cache is not None else None
     V = None
     if cache is not None:
+        key = ValueCache.key(spec)  # the entry's name (the save below uses it too)
         try:
             V = cache.load(key, shape, spec)
         except CacheEntryRejected as e:

@@ -184,7 +184,7 @@ class Translation:
 
     def hamiltonian(self, grid, p):
         H = np.zeros_like(p[0])
-        for pi, ci in zip(p, self.c):
+        for pi, ci in zip(p, self.c, strict=True):
             H += ci * pi
         return H
 

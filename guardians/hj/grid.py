@@ -9,9 +9,12 @@ a period of 2 pi + 0.2).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
+njit: Callable[..., Any] | None  # numba's, or None where numba is missing
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; interpolation falls back to numpy
@@ -34,9 +37,12 @@ class Grid:
             )
         self.periodic = tuple(bool(i in set(periodic)) for i in range(self.ndim))
         self.dx = np.array(
-            [(h - l) / (k if p else k - 1) for l, h, k, p in zip(self.lo, self.hi, self.n, self.periodic)]
+            [
+                (hi - lo) / (k if p else k - 1)
+                for lo, hi, k, p in zip(self.lo, self.hi, self.n, self.periodic, strict=True)
+            ]
         )
-        self.axes = [l + d * np.arange(k) for l, d, k in zip(self.lo, self.dx, self.n)]
+        self.axes = [lo + d * np.arange(k) for lo, d, k in zip(self.lo, self.dx, self.n, strict=True)]
         self.shape = self.n
         # for interpolation: the 2^d cell corners and the flat-index strides, computed once
         self._corners = np.array(np.meshgrid(*[[0, 1]] * self.ndim, indexing="ij")).reshape(self.ndim, -1).astype(bool)
@@ -54,7 +60,7 @@ class Grid:
     def contains(self, x) -> bool:
         """Whether a point lies inside the grid's box (periodic axes always do)."""
         x = np.asarray(x, dtype=float)
-        return all(p or (l <= xi <= h) for xi, l, h, p in zip(x, self.lo, self.hi, self.periodic))
+        return all(p or (lo <= xi <= hi) for xi, lo, hi, p in zip(x, self.lo, self.hi, self.periodic, strict=True))
 
     def _cell(self, x):
         """Lower corner indices, fractions and upper indices of the cell holding ``x``."""
@@ -64,7 +70,7 @@ class Grid:
         frac = t - i0
         i0 = i0.astype(int)
         i1 = i0 + 1
-        for a, (k, p) in enumerate(zip(self.n, self.periodic)):
+        for a, (k, p) in enumerate(zip(self.n, self.periodic, strict=True)):
             if p:
                 i0[a] %= k
                 i1[a] %= k
@@ -120,7 +126,7 @@ def central_gradient(V: np.ndarray, grid: Grid) -> list[np.ndarray]:
     for ax in range(grid.ndim):
         n = V.shape[ax]
 
-        def sl(a, b):
+        def sl(a, b, ax=ax):
             s = [slice(None)] * V.ndim
             s[ax] = slice(a, b)
             return tuple(s)

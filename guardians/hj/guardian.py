@@ -41,10 +41,10 @@ def default_grid(n=(64, 64, 32, 32), half_width: float = 15.0, v_max: float = 4.
 def obstacle_target(grid: Grid, obstacles: np.ndarray) -> np.ndarray:
     """Signed distance to the union of circles, broadcast over heading and speed (float32)."""
     X, Y = grid.coord(0), grid.coord(1)
-    l = np.full((grid.n[0], grid.n[1], 1, 1), np.inf)
+    dist = np.full((grid.n[0], grid.n[1], 1, 1), np.inf)
     for ox, oy, r in obstacles:
-        l = np.minimum(l, np.sqrt((X - ox) ** 2 + (Y - oy) ** 2) - r)
-    return np.broadcast_to(l, grid.shape).astype(np.float32)
+        dist = np.minimum(dist, np.sqrt((X - ox) ** 2 + (Y - oy) ** 2) - r)
+    return np.broadcast_to(dist, grid.shape).astype(np.float32)
 
 
 class HJGuardian(SystemDispatch, PrivilegedGuardian):
@@ -86,7 +86,7 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
         self.cache = ValueCache(s.cache_dir, s.cache_max_files) if s.cache else None
         self._counts = {"outside_grid": 0, "nan_states": 0, "cache_hits": 0, "solves": 0}
         self.solve_seconds = 0.0
-        self.V = None
+        self.V: np.ndarray | None = None
 
     def spec(self, obstacles, goal=None) -> dict:
         spec = {
@@ -110,7 +110,7 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
     def value_function(self, obstacles, goal=None) -> np.ndarray:
         """The avoid value of the obstacles (``goal=None``) or the reach-avoid value of the goal."""
         obstacles = np.asarray(obstacles, float).reshape(-1, 3)
-        for ox, oy, r in obstacles:
+        for ox, oy, _r in obstacles:
             if not (self.grid.lo[0] <= ox <= self.grid.hi[0] and self.grid.lo[1] <= oy <= self.grid.hi[1]):
                 raise ValueError(
                     f"obstacle centred at ({ox:.2f}, {oy:.2f}) lies outside the HJ grid "
@@ -162,6 +162,7 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
         if dyn != d:
             self.dynamics = dyn
         self._counts = {"outside_grid": 0, "nan_states": 0, "cache_hits": 0, "solves": 0}
+        assert self._privileged is not None  # Guardian.reset refuses a privileged guardian without it
         priv = self._privileged()
         self.V = self.value_function(priv["obstacles"])
         self.grads = central_gradient(self.V, self.grid)
@@ -237,7 +238,8 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
         return dict(self._counts, solve_seconds=self.solve_seconds)
 
 
-HJGuardian.__init__.__signature__ = settings_signature(HJSettings, HJ_PRESETS["hj"])
+# a function's attributes live in its __dict__ (the type checker knows no __signature__ on a method)
+HJGuardian.__init__.__dict__["__signature__"] = settings_signature(HJSettings, HJ_PRESETS["hj"])
 
 
 class HJPaperGuardian(HJGuardian):

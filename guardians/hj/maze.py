@@ -109,7 +109,7 @@ class MazeHJGuardian(PrivilegedGuardian):
         self.cache = ValueCache(cache_dir, integer("cache_max_files", cache_max_files, 1)) if cache else None
         self._counts = self._zero()
         self.solve_seconds = 0.0
-        self.V = None
+        self.V: np.ndarray | None = None
 
     @staticmethod
     def _zero() -> dict:
@@ -176,6 +176,8 @@ class MazeHJGuardian(PrivilegedGuardian):
         super().reset(**kwargs)
         self.check_spaces(self.observation_space, self.action_space)
         space = self.action_space
+        assert space is not None  # check_spaces refused anything but the maze car's GuardianActionSpace
+        assert self._privileged is not None  # Guardian.reset refuses a privileged guardian without it
         priv = self._privileged()
         maze = priv["maze"]
         if np.asarray(maze.walls).shape[0] == 0:

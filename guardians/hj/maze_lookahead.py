@@ -16,12 +16,15 @@ car's path), so it gives the same bits on every machine.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from rmm_envs.systems.dubins4d import SERIES_COEFFICIENTS, segment_position
 from rmm_envs.worlds.maze_kernels import _seg_point_sq
 
+njit: Callable[..., Any] | None  # numba's, or None where numba is missing
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency

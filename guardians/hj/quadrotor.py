@@ -110,7 +110,7 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         self.dynamics = Dubins4DHJ(u1_max=self.turn_rate, u2_max=self.accel, v_min=0.0, v_max=self.v_max)
         self._counts = self._zero()
         self.solve_seconds = 0.0
-        self.V = None
+        self.V: np.ndarray | None = None
 
     @staticmethod
     def _zero() -> dict:
@@ -201,6 +201,7 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)
         self.check_spaces(self.observation_space, self.action_space)
+        assert self._privileged is not None  # Guardian.reset refuses a privileged guardian without it
         priv = self._privileged()
         room = priv["room"]
         if np.asarray(room.walls).size == 0:
@@ -211,7 +212,7 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         self.waypoints = np.asarray(priv["waypoints"], float).reshape(-1, 3)
         points = [state[:3], *self.waypoints]
         self._legs = []  # per leg: the values (band, grid, V, interpolator of V and its gradient), the whole band's first
-        for a, b in zip(points[:-1], points[1:]):
+        for a, b in zip(points[:-1], points[1:], strict=True):
             grid = self.region_grid(room, a, b)
             select_backend(grid, self.dynamics, self.order, self.backend)
             bands = [self.band(a, b)]
@@ -232,13 +233,16 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         ctrl = CommandController()
         self.k_v = float(ctrl.k_v)
         space = self.action_space
+        assert space is not None  # check_spaces refused anything but the quadrotor's GuardianActionSpace
         self._lo, self._hi = np.asarray(space.control_low, float), np.asarray(space.control_high, float)
         self._safe = space.safe_default.policy(space, self.rng) if space.safe_default is not None else None
         self._last_time = None
         self._measured_lap = None
         self._held = None  # the command the guardian returned last step (None: it was inactive)
-        self._side = None  # the side it turns the pilot's command to while in control (+1: counter-clockwise)
-        self._last_turn = None  # (x, y, side) where it last turned the pilot's command
+        # the side it turns the pilot's command to while in control (+1: counter-clockwise)
+        self._side: float | None = None
+        # (x, y, side) where it last turned the pilot's command
+        self._last_turn: tuple[float, float, float] | None = None
         self._hit = math.inf  # distance to the pilot's waypoint where the guardian took over
         self._turn = 0  # the turn (in steps of 2 pi / n_directions) of its last command from the pilot's
         self._climb = (

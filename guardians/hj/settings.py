@@ -59,7 +59,7 @@ class HJSettings(Settings):
             raise ValueError(f"mode must be 'avoid' or 'reach_avoid', got {self.mode!r}")
         if self.rule not in RULES:
             raise ValueError(f"rule must be one of {RULES}, got {self.rule!r}")
-        for name, value in zip(("order", "rk", "cfl"), check_scheme(self.order, self.rk, self.cfl)):
+        for name, value in zip(("order", "rk", "cfl"), check_scheme(self.order, self.rk, self.cfl), strict=True):
             self._set(name, value)
         if self.threads is not None:
             self._set("threads", integer("threads", self.threads, 1, "or None"))

@@ -17,7 +17,9 @@ The numerics, the defaults and why: docs/design-notes.md#rmm_guardianshjsolver.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from fractions import Fraction
+from typing import Protocol, cast
 
 import numpy as np
 
@@ -115,11 +117,11 @@ def spatial_derivatives(V: np.ndarray, grid: Grid, axis: int, order: int = 1):
     if order == 1:
         P = _pad(V, axis, grid.periodic[axis], 1)
         D = np.diff(P, axis=axis) / dx  # n + 1 differences; D[i] = (V_i - V_{i-1}) / dx
-        sl = [slice(None)] * V.ndim
-        sl[axis] = slice(0, n)
-        left = D[tuple(sl)]
-        sl[axis] = slice(1, n + 1)
-        return left, D[tuple(sl)]
+        index = [slice(None)] * V.ndim
+        index[axis] = slice(0, n)
+        left = D[tuple(index)]
+        index[axis] = slice(1, n + 1)
+        return left, D[tuple(index)]
     if order == 2:
         P = _pad(V, axis, grid.periodic[axis], 2)
         D1 = np.diff(P, axis=axis) / dx  # n + 3
@@ -139,6 +141,12 @@ def spatial_derivatives(V: np.ndarray, grid: Grid, axis: int, order: int = 1):
     raise ValueError(f"order must be 1 or 2, got {order}")
 
 
+class _ReachDynamics(HJDynamics, Protocol):
+    """Dynamics used for reach-avoid: their Hamiltonian also takes ``control="min"``."""
+
+    def hamiltonian(self, grid, p: Sequence[np.ndarray], control: str = "max") -> np.ndarray: ...
+
+
 def _rate(V: np.ndarray, grid: Grid, dynamics: HJDynamics, alphas, order: int, control: str = "max") -> np.ndarray:
     p_mean, diss = [], None
     for ax in range(grid.ndim):
@@ -147,7 +155,10 @@ def _rate(V: np.ndarray, grid: Grid, dynamics: HJDynamics, alphas, order: int, c
         term = (0.5 * np.float32(alphas[ax])) * (right - left)
         diss = term if diss is None else diss + term
         del left, right
-    H = dynamics.hamiltonian(grid, p_mean) if control == "max" else dynamics.hamiltonian(grid, p_mean, control="min")
+    if control == "max":
+        H = dynamics.hamiltonian(grid, p_mean)
+    else:  # reach-avoid (solve_brt with a constraint): the caller's dynamics take control="min"
+        H = cast(_ReachDynamics, dynamics).hamiltonian(grid, p_mean, control="min")
     H += diss
     return np.minimum(H, 0.0, out=H)
 
@@ -193,7 +204,7 @@ def solve_brt(
             raise ValueError(f"constraint has shape {constraint.shape}, the grid {grid.shape}")
         floor = (-constraint).astype(np.float32)
     alphas = [float(np.max(a)) for a in dynamics.alphas(grid)]
-    rate_bound = sum(a / d for a, d in zip(alphas, grid.dx))
+    rate_bound = sum(a / d for a, d in zip(alphas, grid.dx, strict=True))
     dt_max = cfl / rate_bound if rate_bound > 0 else horizon
     V = target.astype(np.float32, copy=True)
     if constraint is not None:
@@ -259,7 +270,7 @@ def _solve_compiled(grid, dynamics, alphas, V, dt_max, horizon, rk, control, flo
     while t < horizon - 1e-12:
         dt = float(np.float32(min(dt_max, horizon - t)))
         W = P
-        for (a, b), out in zip(tableau, bufs):
+        for (a, b), out in zip(tableau, bufs, strict=True):
             stepper.stage(P, W, out, a, b, dt)
             W = out
         P, bufs[-1] = bufs[-1], P

@@ -145,6 +145,7 @@ class LRMMGuardian(Guardian):
         self._history: deque = deque(maxlen=self.window)
         self.last_risk = float("nan")
         if action == "head":
+            assert self.model.candidates is not None  # action 'head' without a 'candidates' head was refused above
             self._cands = [tuple(float(x) for x in c) for c in self.model.candidates]  # any control count
 
     def input_files(self) -> dict[str, str]:
@@ -180,15 +181,17 @@ class LRMMGuardian(Guardian):
                 f"guardian {self.name!r}: the LRMM model (trained on {self.model.env_id}) expects observations "
                 f"of shape ({self.model.obs_dim},), the env's {what}{REMEDY}"
             )
-        if self.action == "head" and self.model.candidates.shape[1] != actions.control_dim:
-            k = self.model.candidates.shape[1]
-            raise ValueError(
-                f"guardian {self.name!r} needs an action space with {k} controls (the model's candidate "
-                f"controls have {k} components), got {actions.control_dim} ({actions.controls})"
-            )
         if self.action == "head":
+            candidates = self.model.candidates
+            assert candidates is not None  # the constructor refused action 'head' without a 'candidates' head
+            if candidates.shape[1] != actions.control_dim:
+                k = candidates.shape[1]
+                raise ValueError(
+                    f"guardian {self.name!r} needs an action space with {k} controls (the model's candidate "
+                    f"controls have {k} components), got {actions.control_dim} ({actions.controls})"
+                )
             low, high = np.asarray(actions.control_low, float), np.asarray(actions.control_high, float)
-            outside = [c.tolist() for c in self.model.candidates if np.any(c < low) or np.any(c > high)]
+            outside = [c.tolist() for c in candidates if np.any(c < low) or np.any(c > high)]
             if outside:
                 raise ValueError(
                     f"guardian {self.name!r}: candidate controls {outside} of "
@@ -239,16 +242,25 @@ class LRMMGuardian(Guardian):
         super().reset(**kwargs)
         self.check_spaces(self.observation_space, self.action_space)
         actions = self.action_space
+        assert actions is not None  # check_spaces refused anything but a GuardianActionSpace
+        # the observation's layout; check_spaces required one wherever it is read below
         lay = getattr(self.observation_space, "layout", None)
-        self._in = lay[self.inputs] if self.inputs is not None else slice(None)
+        if self.inputs is not None:
+            assert lay is not None
+            self._in = lay[self.inputs]
+        else:
+            self._in = slice(None)
         if self.action == "heuristic":
+            assert lay is not None
             self._left, self._right = lay.ray_index(_SIDE_RAY), lay.ray_index(-_SIDE_RAY)
         self.u1_max = float(actions.control_high[0]) if self._u1_max_arg is None else self._u1_max_arg
         if self.action == "heuristic":
             self.u2_min = float(actions.control_low[1]) if self._u2_min_arg is None else self._u2_min_arg
         if self.action == "safe":
+            assert actions.safe_default is not None  # check_spaces refused an env without one
             self._safe = actions.safe_default.policy(actions, self.rng)
         if self.action == "turn":
+            assert lay is not None
             rays = lay["rays"]
             self._lside = [
                 rays.start + i for i, a in enumerate(lay.ray_angles) if 0 < math.remainder(a, 2 * math.pi) < math.pi
@@ -260,12 +272,13 @@ class LRMMGuardian(Guardian):
             self._rater = self._rater_for(self.observation_space, actions)
         self._slide = Slide(actions.controls, actions.control_low, actions.control_high) if self.slide else None
         if self.restart > 0:
+            assert lay is not None
             self._speed, self._accel = lay.index("speed"), actions.controls.index("accel_ctrl")
         self._history = deque([self.threshold] * self.window, maxlen=self.window)
         self.last_risk = self.last_driver_risk = float("nan")
         self._committed, self._active = 0, False
 
-    def risk(self, observation) -> float:
+    def risk(self, observation) -> np.ndarray | float:
         return self.model.predict(observation)
 
     def act(self, observation, info=None):
@@ -345,6 +358,7 @@ class LRMMGuardian(Guardian):
             left = min(observation[i] for i in self._lside) >= min(observation[i] for i in self._rside)
         else:
             left = r_left < r_right
+        assert self.u1_max is not None  # set at reset
         return self.u1_max if left else -self.u1_max
 
 

@@ -22,6 +22,7 @@ import json
 import math
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -67,6 +68,12 @@ class LRMMModel:
             for the output).  scaler_min, scaler_scale: per selected feature.
         meta: the metadata dictionary (see the module docstring).
     """
+
+    # set on some models only (absent otherwise; read with getattr): ``load`` sets the file and the
+    # SHA-256 of its bytes, ``rmm_guardians.lrmm.train.train`` the torch network (for tests)
+    path: Path
+    file_sha256: str
+    torch_net: Any
 
     def __init__(self, weights, scaler_min, scaler_scale, meta: dict) -> None:
         self.weights = [
@@ -196,7 +203,11 @@ class LRMMModel:
         meta["format"], meta["format_version"] = FORMAT, FORMAT_VERSION
         meta["weights_sha256"] = _checksum(arrs)
         buf = io.BytesIO()
-        np.savez(buf, meta=np.frombuffer(json.dumps(meta, indent=1, sort_keys=True).encode(), dtype=np.uint8), **arrs)
+        np.savez(
+            buf,
+            meta=np.frombuffer(json.dumps(meta, indent=1, sort_keys=True).encode(), dtype=np.uint8),
+            **arrs,  # type: ignore[arg-type]  # numpy's stub lets **arrays reach allow_pickle; none is so named
+        )
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.name}.tmp")
         tmp.write_bytes(buf.getvalue())
@@ -287,9 +298,17 @@ def set_decision(path, threshold: float, commit: int, chosen_by: str, action: st
         raise ValueError(f"unknown decision field(s) {unknown}; expected {', '.join(fields)}")
     hand_back = {k: v for k, v in hand_back.items() if v is not None}
     checked = hand_back_options(
-        *(hand_back.get(k) for k in fields[:3]), None, action, False, *(hand_back.get(k) for k in fields[3:])
+        trigger=hand_back.get("trigger"),
+        margin=hand_back.get("margin"),
+        restart=hand_back.get("restart"),
+        stored=None,
+        action=action,
+        hysteresis=False,
+        slide=hand_back.get("slide"),
+        still=hand_back.get("still"),
+        stay=hand_back.get("stay"),
     )
-    extra = dict(zip(fields, checked))
+    extra = dict(zip(fields, checked, strict=True))
     model.meta["decision"] = {
         "threshold": float(threshold),
         "commit": int(commit),

@@ -151,7 +151,7 @@ class Slide:
             v[self.f] = k * (c * u[self.f] - s * u[self.l])
             v[self.l] = k * (s * u[self.f] + c * u[self.l])
             v[self.up] = self.high[self.up] if z == "climb" else z * u[self.up]
-            v = [min(max(a, lo), hi) for a, lo, hi in zip(v, self.low, self.high)]
+            v = [min(max(a, lo), hi) for a, lo, hi in zip(v, self.low, self.high, strict=True)]
             if v != u and v not in out:
                 out.append(v)
         gap = [math.sqrt(sum((v[j] - u[j]) ** 2 for j in (self.f, self.l, self.up))) for v in out]
@@ -163,7 +163,7 @@ class Slide:
         if not options:
             return None
         rated = rater.rate_many(options, model, x)
-        return next((v for v, r in zip(options, rated) if r <= threshold), None)
+        return next((v for v, r in zip(options, rated, strict=True) if r <= threshold), None)
 
 
 def make_rater(controls: Sequence[str], layout, hold, low, high) -> PredictRater | None:
@@ -222,7 +222,7 @@ def hand_back_options(
             f"trigger='driver' compares the driver's control with the head's candidates: it needs "
             f"action='head' without hysteresis, got action={action!r}, hysteresis={hysteresis!r}"
         )
-    values = []
+    values: list[float | None] = []
     for name, given, default in (("margin", margin, 0.0), ("restart", restart, 0.0), ("still", still, None)):
         value = given if given is not None else stored.get(name, default)
         if value is None:
@@ -231,6 +231,7 @@ def hand_back_options(
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value < math.inf:
             raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
         values.append(float(value))
+    assert values[1] is not None  # restart defaults to 0.0 (set_decision stores no None)
     if values[1] > 0 and action != "head":
         raise ValueError(f"restart accelerates with the head's candidates: it needs action='head', got {action!r}")
     flags = []

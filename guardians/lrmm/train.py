@@ -20,10 +20,14 @@ import json
 import platform
 import sys
 import time
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from rmm_guardians.lrmm.model import ACTIVATIONS, LRMMModel
+
+if TYPE_CHECKING:
+    import torch
 
 __all__ = ["TrainConfig", "main", "split_by_config", "train"]
 
@@ -114,7 +118,7 @@ def _metrics(model: LRMMModel, obs, y, cand=None) -> dict:
         return {"mse": None, "mae": None, "max_abs_err": None, "n": 0}
     out = model.predict_all(obs)
     e = out[:, 0] - y
-    m = {
+    m: dict[str, Any] = {
         "mse": float(np.mean(e * e)),
         "mae": float(np.mean(np.abs(e))),
         "max_abs_err": float(np.max(np.abs(e))),
@@ -168,7 +172,7 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
     torch.set_num_threads(1)
     torch.manual_seed(cfg.seed)
     dt = torch.float64 if cfg.dtype == "float64" else torch.float32
-    layers = []
+    layers: list[torch.nn.Module] = []
     n_in = len(feats)
     for h in cfg.hidden:
         layers.append(torch.nn.Linear(n_in, h, dtype=dt))
@@ -188,7 +192,7 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
     xv = torch.as_tensor((x[va] - lo) * scale, dtype=dt)
     yv = torch.as_tensor(targets[va], dtype=dt)
     gen = torch.Generator().manual_seed(cfg.seed)
-    best = (float("inf"), None, -1)
+    best: tuple[float, dict[str, torch.Tensor] | None, int] = (float("inf"), None, -1)
     t0 = time.perf_counter()
     n = xt.shape[0]
     stale = 0
@@ -223,13 +227,15 @@ def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
             stale += 1
         if epoch % max(1, cfg.epochs // 20) == 0 or epoch == cfg.epochs - 1:
             log(
-                f"epoch {epoch + 1:5d}/{cfg.epochs}  val mse {val_mse:.5f}  (best {best[0]:.5f} at {best[2] + 1})  {time.perf_counter() - t0:6.1f} s"
+                f"epoch {epoch + 1:5d}/{cfg.epochs}  val mse {val_mse:.5f}  (best {best[0]:.5f} at {best[2] + 1})  "
+                f"{time.perf_counter() - t0:6.1f} s"
             )
         if cfg.patience and stale >= cfg.patience:
             log(f"stopping: no validation improvement in {cfg.patience} epochs")
             break
     wall = time.perf_counter() - t0
     if cfg.select == "best":
+        assert best[1] is not None  # epochs >= 1, and the first epoch's finite loss beats inf
         net.load_state_dict(best[1])
     linears = [m for m in net if isinstance(m, torch.nn.Linear)]
     weights = [
@@ -328,7 +334,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--head",
         default="auto",
         choices=["auto", "none"],
-        help="auto: add one output per candidate control when the dataset has candidate labels; none: risk only (default: %(default)s)",
+        help="auto: add one output per candidate control when the dataset has candidate labels; "
+        "none: risk only (default: %(default)s)",
     )
     p.add_argument("--quiet", action="store_true", help="no per-epoch log")
     return p
@@ -364,7 +371,8 @@ def main(argv: list[str] | None = None) -> int:
     model.save(args.out)
     m = model.meta["metrics"]
     print(
-        f"saved {args.out} (trained in {model.meta['training']['wall_seconds']:.1f} s, best epoch {model.meta['training']['best_epoch']})"
+        f"saved {args.out} (trained in {model.meta['training']['wall_seconds']:.1f} s, "
+        f"best epoch {model.meta['training']['best_epoch']})"
     )
     for split in ("train", "val", "test"):
         s = m[split]

@@ -7,7 +7,8 @@ snapshot protocol, and the tutorial ``docs/tutorials/own-simulator.md``).
 * ``CartPole-v1``: :class:`CartPoleAdapter` (numpy), failure: its termination;
 * ``Pendulum-v1``: :class:`PendulumAdapter` (numpy), failure: ``failure=`` (required);
 * ``InvertedPendulum-v5``, ``InvertedDoublePendulum-v5``, ``Hopper-v5``: :class:`MujocoAdapter`
-  (rollout), failure: the unhealthy termination; any other MuJoCo env: ``failure=`` (required).
+  (rollout), failure: the unhealthy termination; any other MuJoCo env: ``failure=`` (required),
+  a test of full states, column 0 the time (:mod:`rmm_envs.adapters.mujoco_envs`; Walker2d's ships).
 
 The MuJoCo adapters need the optional extra ``rmm-envs[mujoco]``.  Any other env is refused
 with a ``TypeError`` naming it and what it lacks; a simulator of your own is served by
@@ -54,8 +55,8 @@ SERVED = (
 
 
 def _env_name(env) -> str:
-    spec = getattr(env, "spec", None)
-    return f"{spec.id} ({type(env.unwrapped).__name__})" if getattr(spec, "id", None) else type(env.unwrapped).__name__
+    env_id = getattr(getattr(env, "spec", None), "id", None)
+    return f"{env_id} ({type(env.unwrapped).__name__})" if env_id else type(env.unwrapped).__name__
 
 
 def _is_mujoco(base) -> bool:

@@ -62,8 +62,8 @@ def control_box(space, name: str) -> tuple[np.ndarray, np.ndarray]:
     """The control box the estimator samples for ``space`` (see :class:`SnapshotSimulator`);
     ``TypeError`` naming ``name`` and the space for any other kind of action space."""
     if isinstance(space, gym.spaces.Discrete):
-        lo = float(space.start)
-        return np.array([lo]), np.array([lo + float(space.n)])
+        start = float(space.start)
+        return np.array([start]), np.array([start + float(space.n)])
     if isinstance(space, gym.spaces.Box) and len(space.shape) == 1:
         lo, hi = np.asarray(space.low, float), np.asarray(space.high, float)
         if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)):
@@ -83,6 +83,15 @@ def env_actions(space, controls, low, high) -> np.ndarray:
         a = np.floor(controls[:, :1]) - space.start
         return np.clip(a, 0, space.n - 1).astype(np.int64) + space.start
     return np.clip(controls, low, high).astype(space.dtype).astype(float)
+
+
+def _callable_name(fn) -> str:
+    """``module:name`` of a function (as ``--failure`` names it), else its repr."""
+    module, qualname = (
+        getattr(fn, "__module__", None),
+        getattr(fn, "__qualname__", None) or getattr(fn, "__name__", None),
+    )
+    return f"{module}:{qualname}" if module and qualname else repr(fn)
 
 
 def _checked_failure(failure, name: str):
@@ -158,7 +167,7 @@ class SimulatorScene:
                 if user.shape != (good.shape[0],):
                     raise ValueError(
                         f"{self.name}: failure(states) must return shape ({good.shape[0]},) for "
-                        f"{good.shape[0]} states, got {user.shape}"
+                        f"{good.shape[0]} states, got {user.shape} from failure = {_callable_name(self.failure)}"
                     )
                 f = f | user.astype(bool)
             out[ok] = f

@@ -37,8 +37,8 @@ __all__ = ["CartPoleAdapter", "CartPoleScene", "ClassicControlSnapshot", "Pendul
 
 
 def _name(env) -> str:
-    spec = getattr(env, "spec", None)
-    return spec.id if getattr(spec, "id", None) else type(env.unwrapped).__name__
+    env_id = getattr(getattr(env, "spec", None), "id", None)
+    return str(env_id) if env_id else type(env.unwrapped).__name__
 
 
 class CartPoleScene(SimulatorScene):

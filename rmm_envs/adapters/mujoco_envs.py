@@ -25,15 +25,23 @@ to terminate on it), and the default horizon ``t``:
     ``(qpos, qvel)[2:]`` outside ``healthy_state_range`` (all open intervals, as the env's).
     ``t`` = 0.04 s (5 steps of 0.008 s).
 any other MuJoCo env
-    Only the user's ``failure(states)`` (required), on the full-state vectors; ``t`` = 2 steps.
+    Only the user's failure test (required): ``failure=`` in Python, ``--failure
+    module:callable`` for ``rmm-datagen``, called as ``failure(states) -> (N,) bool`` on
+    ``(N, d)`` full states whose **column 0 is the simulated time**, columns ``1 .. nq`` are
+    ``qpos`` and the next ``nv`` are ``qvel`` (then ``act`` and the rest, if the model has them;
+    :func:`state_columns` names every column of a model).  ``t`` = 2 steps.
+    ``Walker2d-v5``: :func:`walker2d_unhealthy` is Gymnasium's unhealthy termination of the
+    walker with its default ranges (``--failure rmm_envs.adapters.mujoco_envs:walker2d_unhealthy``;
+    its dataset and model: docs/reproduction.md, "Risk labels and a model for Walker2d-v5").
 
 Every state that is not finite fails as well, and a user's ``failure`` adds to the env's.  Why
 these horizons: docs/design-notes.md#rmm_envsadaptersmujoco_envs.
 
 Sampler (``sample_states``, for datasets): *visited states*: the env is reset (seeded from the
-generator; the env's state and generator are restored afterwards) and then stepped with uniform random actions, a fresh one each env step, for a
-number of steps drawn uniformly from 0 to 1 s of simulated time; a branch that fails stops at
-its last healthy state.  Observation: the env's own ``_get_obs`` in that state.
+generator; the env's state and generator are restored afterwards) and then stepped with uniform
+random actions, a fresh one each env step, for a number of steps drawn uniformly from 0 to 1 s of
+simulated time; a branch that fails stops at its last healthy state.  Observation: the env's own
+``_get_obs`` in that state.
 """
 
 from __future__ import annotations
@@ -50,7 +58,7 @@ try:
 except ImportError:  # pragma: no cover - the extra is missing
     mujoco = None
 
-__all__ = ["MujocoAdapter", "MujocoScene", "MujocoSnapshot"]
+__all__ = ["MujocoAdapter", "MujocoScene", "MujocoSnapshot", "state_columns", "walker2d_unhealthy"]
 
 _BLOCK_BYTES = 32 * 2**20
 
@@ -64,7 +72,63 @@ def _offset(model, bit) -> int:
     """Where component ``bit`` starts in a FULLPHYSICS state vector (components are in bit order)."""
     full = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
     below = full & (int(bit) - 1)
-    return mujoco.mj_stateSize(model, below) if below else 0
+    return int(mujoco.mj_stateSize(model, below)) if below else 0
+
+
+def state_columns(model) -> list[tuple[str, int, int]]:
+    """The components of ``model``'s full state vector (what a ``failure(states)`` receives) as
+    ``(name, first column, end column)``, in order, empty ones left out: ``("time", 0, 1)``,
+    ``("qpos", 1, 1 + nq)``, ``("qvel", 1 + nq, 1 + nq + nv)``, then ``act`` and the rest."""
+    full = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    out = []
+    for name, bit in mujoco.mjtState.__members__.items():
+        b = int(bit)
+        if b & full and b & (b - 1) == 0:  # one component of the full state
+            size = int(mujoco.mj_stateSize(model, b))
+            if size:
+                lo = _offset(model, b)
+                out.append((name.removeprefix("mjSTATE_").lower(), lo, lo + size))
+    return sorted(out, key=lambda c: c[1])
+
+
+def _describe_columns(model) -> str:
+    """``column 0 the time, columns 1-9 qpos, columns 10-18 qvel`` (for messages)."""
+    parts = []
+    for name, lo, hi in state_columns(model):
+        what = "the time" if name == "time" else name
+        parts.append(f"column {lo} {what}" if hi == lo + 1 else f"columns {lo}-{hi - 1} {what}")
+    return ", ".join(parts)
+
+
+#: Gymnasium's ``Walker2d-v5`` defaults: ``healthy_z_range`` and ``healthy_angle_range``
+WALKER2D_HEALTHY_Z = (0.8, 2.0)
+WALKER2D_HEALTHY_ANGLE = (-1.0, 1.0)
+WALKER2D_STATE_DIM = 19  # time, qpos (9), qvel (9)
+
+
+def walker2d_unhealthy(states) -> np.ndarray:
+    """The failure test of ``Walker2d-v5`` for ``--failure rmm_envs.adapters.mujoco_envs:walker2d_unhealthy``:
+    Gymnasium's unhealthy termination of the walker with the env's default ranges, i.e. the
+    torso's height ``qpos[1]`` (column 2) outside the open interval ``(0.8, 2.0)`` m or its angle
+    ``qpos[2]`` (column 3) outside ``(-1, 1)`` rad.
+
+    ``states``: ``(N, 19)`` full states of ``Walker2d-v5`` (column 0 the time, columns 1-9
+    ``qpos``, columns 10-18 ``qvel``); ``ValueError`` naming the shape for any other.  An env
+    made with other ``healthy_z_range`` / ``healthy_angle_range`` needs a test of its own.
+    """
+    s = np.asarray(states, dtype=float)
+    if s.ndim != 2 or s.shape[1] != WALKER2D_STATE_DIM:
+        raise ValueError(
+            f"walker2d_unhealthy: states must be (N, {WALKER2D_STATE_DIM}) full states of Walker2d-v5 "
+            f"(column 0 the time, columns 1-9 qpos, columns 10-18 qvel), got shape {s.shape}"
+        )
+    z, angle = s[:, 2], s[:, 3]
+    (lo_z, hi_z), (lo_a, hi_a) = WALKER2D_HEALTHY_Z, WALKER2D_HEALTHY_ANGLE
+    return ~((lo_z < z) & (z < hi_z) & (lo_a < angle) & (angle < hi_a))
+
+
+#: failure tests the package ships for MuJoCo envs without a known one (unwrapped class name -> --failure value)
+SHIPPED_FAILURES = {"Walker2dEnv": "rmm_envs.adapters.mujoco_envs:walker2d_unhealthy"}
 
 
 class MujocoScene(SimulatorScene):
@@ -80,11 +144,17 @@ class MujocoScene(SimulatorScene):
         u = env.unwrapped
         name = env.spec.id if getattr(env.spec, "id", None) else type(u).__name__
         _require_mujoco(name)
-        self.kind, steps = self.KINDS.get(type(u).__name__, (None, 2))
+        known: tuple[str | None, int] = self.KINDS.get(type(u).__name__, (None, 2))
+        self.kind, steps = known
         if self.kind is None and failure is None:
+            d = int(mujoco.mj_stateSize(u.model, int(mujoco.mjtState.mjSTATE_FULLPHYSICS)))
+            shipped = SHIPPED_FAILURES.get(type(u).__name__)
+            example = f"; for {name} the package ships one: --failure {shipped}" if shipped else ""
             raise TypeError(
                 f"{name}: no failure test is known for this MuJoCo env (the adapters know "
-                f"{sorted(self.KINDS)}); give failure=callable(full states (N, d)) -> (N,) bool"
+                f"{', '.join(MujocoAdapter.env_ids)}); give one: failure=callable in Python, "
+                f"--failure module:callable for rmm-datagen, called as failure(states) -> (N,) bool on (N, {d}) "
+                f"full states ({_describe_columns(u.model)}){example}"
             )
         self.env = u
         self.model = u.model
@@ -190,9 +260,14 @@ class MujocoSnapshot:
 class MujocoAdapter(AdaptedEnv):
     env_ids = ("InvertedPendulum-v5", "InvertedDoublePendulum-v5", "Hopper-v5")
 
+    scene: MujocoScene
+
     def __init__(self, env, failure=None) -> None:
-        super().__init__(env, MujocoScene(env, failure))
-        self._snap = MujocoSnapshot(env, self.scene)
+        scene = MujocoScene(env, failure)
+        super().__init__(env, scene)
+        self._snap = MujocoSnapshot(env, scene)
+        if failure is not None:  # a failure test of the wrong shape is refused here, before any labelling
+            scene.state_failed(self._snap.get_state()[None])
 
     @property
     def true_state(self):

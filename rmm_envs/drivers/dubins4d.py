@@ -16,13 +16,19 @@ The QP in full: docs/design-notes.md#rmm_envsdriversdubins4d.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from rmm_envs.systems.dubins4d import desired_heading  # the CLF's target heading, shared with the cbf guardian
 from rmm_envs.systems.dubins4d import desired_heading_compiled as _desired_heading
 
+if TYPE_CHECKING:
+    import osqp
+
+njit: Callable[..., Any] | None
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; the Python loop still works
@@ -159,7 +165,7 @@ class CLFDriver:
         self.lim = np.array([self.u1_min, self.u1_max, self.u2_min, self.u2_max, self.v_min, self.v_max])
         self.gain = params.as_array()
         self._eps = float(eps)
-        self._solver = None
+        self._solver: osqp.OSQP | None = None  # set up by reset() for the "osqp" solver
         self.reset()
 
     def reset(self) -> None:
@@ -214,6 +220,7 @@ class CLFDriver:
         )
         self._Ax[1], self._Ax[3] = a1, a2
         self._l[1], self._u[1], self._u[2], self._u[3] = l2, h2, b1, b2
+        assert self._solver is not None  # reset() set it up: this is the "osqp" solver
         self._solver.update(Ax=self._Ax, l=self._l, u=self._u)
         res = self._solver.solve(raise_error=False)
         z = res.x
@@ -230,7 +237,7 @@ class CLFDriver:
     def solve_batch(self, states, goals) -> np.ndarray:
         """Solutions ``(N, 4)`` at ``N`` states ``(N, 4)`` with goals ``(N, 2+)``."""
         if self.solver == "osqp":
-            return np.array([self._solve_osqp(s, g) for s, g in zip(states, goals)]).reshape(-1, 4)
+            return np.array([self._solve_osqp(s, g) for s, g in zip(states, goals, strict=True)]).reshape(-1, 4)
         return clf_qp(states, goals, self.lim, self.gain)
 
     def control(self, state, goal_xy) -> np.ndarray:

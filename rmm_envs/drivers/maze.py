@@ -48,7 +48,7 @@ class PursuitDriver:
             raise ValueError(f"waypoints must be (K >= 2, 2) finite points, got shape {w.shape}")
         self.waypoints = w
         self._pts = [(float(x), float(y)) for x, y in w]
-        self._len = [math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(self._pts[:-1], self._pts[1:])]
+        self._len = [math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(self._pts[:-1], self._pts[1:], strict=True)]
         self._seg = 0
 
     def target(self, x: float, y: float) -> tuple[float, float]:

@@ -38,7 +38,7 @@ class Canvas:
         v = np.asarray(vertices, dtype=float)
         X, Y = self.wx[None, :], self.wy[:, None]
         inside = np.zeros((self.size, self.size), dtype=bool)
-        for (xa, ya), (xb, yb) in zip(v, np.roll(v, -1, axis=0)):
+        for (xa, ya), (xb, yb) in zip(v, np.roll(v, -1, axis=0), strict=True):
             if ya == yb:
                 continue
             crosses = (ya > Y) != (yb > Y)

@@ -18,12 +18,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import gymnasium as gym
 import numpy as np
 
 from rmm_envs.worlds.bounds import MAX_MAGNITUDE, within_bounds
+
+if TYPE_CHECKING:
+    from rmm_envs.risk.protocol import RiskScene
 
 __all__ = [
     "MAX_ROUNDS",
@@ -167,7 +170,7 @@ class LabelledEnvBase(gym.Env):
     #: the keys ``reset(options=...)`` accepts, in the order error messages list them
     reset_options: tuple[str, ...] = ()
     #: the :class:`rmm_envs.risk.RiskScene` of the current episode (``None`` before ``reset``)
-    scene = None
+    scene: RiskScene | None = None
     _done = False
     _window = None
 

@@ -37,8 +37,9 @@ after ``max_episode_steps`` (default 1000) steps.
 ## Starting state
 
 A maze from the seed (kind ``"rectangular"`` by default, ``"honeycomb"`` with
-``maze_kind="honeycomb"``, or either at random per episode with ``"mixed"``), then a uniform state in the image, rejected until it is clear of
-the walls.  ``reset(seed, options={"state": [x, y, psi], "maze": Maze or {"kind": ...}})``
+``maze_kind="honeycomb"``, or either at random per episode with ``"mixed"``), then a uniform
+state in the image, rejected until it is clear of the walls.
+``reset(seed, options={"state": [x, y, psi], "maze": Maze or {"kind": ...}})``
 sets either explicitly.  With a given state and a generated maze (from the seed, or from the
 given ``generate_maze`` arguments) the maze is redrawn until the state is clear of its walls,
 as generation keeps states clear; a state inside a wall of a given ``Maze`` or outside its
@@ -117,7 +118,7 @@ class Dubins3DMazeEnv(LabelledEnvBase):
     """See the module docstring for the full specification."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
-    reset_options = ("state", "maze")
+    reset_options: tuple[str, ...] = ("state", "maze")
 
     def __init__(
         self,
@@ -167,6 +168,7 @@ class Dubins3DMazeEnv(LabelledEnvBase):
     def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """``n`` poses uniform over the image x [-pi, pi), clear of the walls (rejection sampling)."""
         self.require_episode()
+        assert self.scene is not None  # require_episode raised otherwise
         m = self.scene.maze
         return rejection_sample(
             rng,
@@ -182,6 +184,7 @@ class Dubins3DMazeEnv(LabelledEnvBase):
     def observe_states(self, states, rng=None) -> np.ndarray:
         """The ray observation of arbitrary poses ``(N, 3)``; ``rng`` is unused (no random feature)."""
         self.require_episode()
+        assert self.scene is not None  # require_episode raised otherwise
         return self.scene.observe(states)
 
     @property
@@ -190,6 +193,7 @@ class Dubins3DMazeEnv(LabelledEnvBase):
 
     def privileged(self) -> dict:
         self.require_episode()
+        assert self.scene is not None  # require_episode raised otherwise
         return {"state": self._state.copy(), "maze": self.scene.maze}
 
     # ------------------------------------------------------------------ episodes
@@ -242,6 +246,7 @@ class Dubins3DMazeEnv(LabelledEnvBase):
         return self._obs(), {"state": self._state.copy(), "steps": 0}
 
     def _obs(self) -> np.ndarray:
+        assert self.scene is not None  # set by reset, before any observation
         return self.scene.observe(self._state[None])[0]
 
     def step(self, action):
@@ -268,13 +273,14 @@ class Dubins3DMazeEnv(LabelledEnvBase):
 
     def render_frame(self) -> np.ndarray:
         size = 512
+        assert self.scene is not None, "call reset() before rendering"
         m = self.scene.maze
         cv = _render.Canvas(size, 0, max(m.width, m.height), 0, max(m.width, m.height))
         X, Y = np.meshgrid(cv.wx, cv.wy)
         walls = m.point_clearance(np.column_stack([X.ravel(), Y.ravel()])) <= 2.0
         cv.img[walls.reshape(size, size)] = (0, 0, 0)
         x, y, psi = self._state
-        for d, k in zip(self._obs(), range(N_RAYS)):
+        for d, k in zip(self._obs(), range(N_RAYS), strict=True):
             a = psi + k * np.pi / 4
             cv.line(x, y, x + d * np.cos(a), y + d * np.sin(a), _render.GREY)
         cv.disc(x, y, 25.0, _render.BLUE)

@@ -187,6 +187,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
     #: "Units" paragraph of the module docstring)
     length_unit = "px"
     metres_per_unit = 0.01
+    scene: MazeScene | None
 
     def __init__(
         self,
@@ -400,6 +401,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         """The true pose, the maze, the goal ``[x, y, r]``, the car's (constant) speed and the
         simulated time. **Privileged**."""
         self.require_episode()
+        assert self.scene is not None  # require_episode raised otherwise
         return {
             "state": self._state.copy(),
             "maze": self.scene.maze,
@@ -417,6 +419,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
     def observe_states(self, states, rng=None) -> np.ndarray:
         """This env's observation of poses ``(N, 3)`` in the current episode; ``rng`` is unused."""
         self.require_episode()
+        assert self.scene is not None  # require_episode raised otherwise
         st = np.asarray(states, dtype=float)
         out = np.empty((st.shape[0], N_RAYS + 3), dtype=np.float32)
         out[:, :N_RAYS] = self.scene.observe(st)
@@ -434,7 +437,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         X, Y = np.meshgrid(cv.wx, cv.wy)
         cv.img[(m.point_clearance(np.column_stack([X.ravel(), Y.ravel()])) <= 2.0).reshape(size, size)] = (0, 0, 0)
         w = self.driver.waypoints
-        for a, b in zip(w[:-1], w[1:]):
+        for a, b in zip(w[:-1], w[1:], strict=True):
             cv.line(a[0], a[1], b[0], b[1], _render.GREY)
         cv.disc(self.goal[0], self.goal[1], self.goal[2], _render.GREEN)
         cv.disc(self._state[0], self._state[1], 25.0, _render.ORANGE if self._last_active else _render.BLUE)

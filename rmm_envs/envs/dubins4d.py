@@ -133,6 +133,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -173,10 +174,10 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         "render_modes": ["rgb_array"] + (["human"] if importlib.util.find_spec("pygame") else []),
         "render_fps": 15,
     }
-    reset_options = ("state", "goal", "obstacles")
+    reset_options: tuple[str, ...] = ("state", "goal", "obstacles")
     #: ``None``: contacts with the circles of ``_circles``; a subclass on another world sets a
     #: function ``paths -> first obstacle contacts`` (see :func:`~rmm_envs.envs.dubins4d_step.advance`)
-    _obstacle_contact = None
+    _obstacle_contact: Callable[[np.ndarray], np.ndarray] | None = None
 
     def __init__(
         self,
@@ -282,6 +283,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
 
     # ------------------------------------------------------------------ stepping
     def _observe(self) -> np.ndarray:
+        assert self.scene is not None  # set by reset, before any observation
         return self.scene.observe(self._state[None, :], self._sim_time)[0]
 
     def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
@@ -344,6 +346,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         """The true state and the world's geometry (copies).  **Privileged**: for guardians
         that declare they need it (CBF, HJ) and for analysis, never for local-observation ones."""
         self.require_episode()
+        assert self.scene is not None  # require_episode raised otherwise
         return {
             "state": self._state.copy(),
             "obstacles": self.scene.obstacles.copy(),
@@ -356,6 +359,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         """``n`` states uniform over the arena x [-pi, pi) x [0, 2], outside every obstacle
         (rejection sampling, as the original's datagen since 2022-09-13)."""
         self.require_episode()
+        assert self.scene is not None  # require_episode raised otherwise
         s = self.system
         return rejection_sample(
             rng,
@@ -384,6 +388,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
                 f"observe_states needs rng, a numpy.random.Generator to draw the simulated-time feature, got {rng!r}"
             )
         t = rng.uniform(0.0, self.max_episode_sim_time, size=np.asarray(states).shape[0])
+        assert self.scene is not None  # require_episode raised otherwise
         return self.scene.observe(states, t)
 
     def dataset_notes(self) -> dict:

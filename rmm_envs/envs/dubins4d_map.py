@@ -23,10 +23,15 @@ A JSON list of entries, each an object with one key:
 | entry | meaning |
 |-------|---------|
 | ``{"circle": [x, y, r]}`` | a disc, ``r > 0`` |
-| ``{"polygon": [[x, y], ...]}`` | a simple polygon: >= 3 vertices, either orientation, convex or not; edges may not cross or touch (except neighbours at their shared vertex); a closing vertex equal to the first is dropped |
-| ``{"segment": [[x0, y0], [x1, y1], thickness]}`` | a wall: every point within ``thickness / 2`` (``> 0``) of the segment (rounded ends) |
+| ``{"polygon": [[x, y], ...]}`` | a simple polygon (below) |
+| ``{"segment": [[x0, y0], [x1, y1], thickness]}`` | a wall (below) |
 | ``{"goal": [x, y, r]}`` | optional, at most one: a fixed goal disc (else drawn each episode) |
-| ``{"start": [[x_min, y_min], [x_max, y_max]]}`` | optional, at most one: where starts (and drawn goals) are drawn; default the bounding box of every other entry |
+| ``{"start": [[x_min, y_min], [x_max, y_max]]}`` | optional, at most one: where starts (and drawn goals) are drawn |
+
+A polygon has >= 3 vertices, either orientation, convex or not; its edges may not cross or touch
+(except neighbours at their shared vertex); a closing vertex equal to the first is dropped.  A
+wall is every point within ``thickness / 2`` (``> 0``) of its segment (rounded ends).  The start
+box defaults to the bounding box of every other entry.
 
 Or an object ``{"shapes": [...obstacle entries...], "goal": [...], "start": [...]}`` meaning the
 same.  At least one obstacle is required, every number must be finite and at most 1e9 in
@@ -216,6 +221,7 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
             )
 
     def _draw_state(self, rng: np.random.Generator, goal: np.ndarray | None) -> np.ndarray:
+        assert self.map.start_box is not None  # load_map sets it (the bounding box when the map gives none)
         (x0, y0), (x1, y1) = self.map.start_box
         s = self.system
         st = draw_until(
@@ -234,6 +240,7 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
         return st
 
     def _draw_goal(self, rng: np.random.Generator, state: np.ndarray) -> np.ndarray:
+        assert self.map.start_box is not None  # load_map sets it (the bounding box when the map gives none)
         (x0, y0), (x1, y1) = self.map.start_box
         g = draw_until(
             lambda: np.array([rng.uniform(x0, x1), rng.uniform(y0, y1), rng.uniform(*self.goal_rad)]),
@@ -293,6 +300,8 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
     def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """``n`` states uniform over the start box x [-pi, pi) x [0, 2], outside every obstacle."""
         self.require_episode()
+        assert self.scene is not None  # require_episode raised otherwise
+        assert self.map.start_box is not None  # load_map sets it (the bounding box when the map gives none)
         (x0, y0), (x1, y1) = self.map.start_box
         s = self.system
         return rejection_sample(

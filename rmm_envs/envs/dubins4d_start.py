@@ -13,12 +13,13 @@ Generated parts are rejection-sampled until they obey them against every given p
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from rmm_envs.envs.base import draw_until, option_vector
-from rmm_envs.systems.dubins4d import wrap_angle
+from rmm_envs.systems.dubins4d import Dubins4D, wrap_angle
 from rmm_envs.worlds.circles import CircleWorld, as_circles, points_in_circles
 
 __all__ = ["HALF", "Dubins4DStarts"]
@@ -46,6 +47,13 @@ def _parts(given: tuple[str, ...]) -> str:
 class Dubins4DStarts:
     """Start generation for an env with ``system`` (a Dubins4D), ``n_obstacles``,
     ``obstacle_rad`` and ``goal_rad`` (``(min, max)`` pairs) and ``check_options``."""
+
+    # declared only (no class attributes): the env this mixes into provides them
+    system: Dubins4D
+    n_obstacles: int
+    obstacle_rad: tuple[float, float]
+    goal_rad: tuple[float, float]
+    check_options: Callable[[dict | None], dict]
 
     # a vehicle draw lands outside the obstacles about half the time (the arena's free area:
     # 45-62% over 20 seeds), so 100,000 failed draws mean the given parts leave no room
@@ -132,7 +140,9 @@ class Dubins4DStarts:
 
     def _given_options(self, options: dict) -> dict:
         """Validate the given parts of a start on their own and against each other (R1-R3)."""
-        given = {}
+        given: dict[str, np.ndarray] = {}
+        state: np.ndarray | None
+        goal: np.ndarray | None
         if "obstacles" in options:
             given["obstacles"] = as_circles(options["obstacles"], "option 'obstacles'")
         if "state" in options:
@@ -152,10 +162,10 @@ class Dubins4DStarts:
         if state is not None and obstacles is not None:
             hits = [points_in_circles(state[None, :2], o[None, :])[0] for o in obstacles]
             if any(hits):
-                k = hits.index(True)
+                i = hits.index(True)
                 raise ValueError(
-                    f"option 'state': position {state[:2].tolist()} is inside obstacle {k} "
-                    f"{obstacles[k].tolist()} of option 'obstacles'"
+                    f"option 'state': position {state[:2].tolist()} is inside obstacle {i} "
+                    f"{obstacles[i].tolist()} of option 'obstacles'"
                 )
         if goal is not None and obstacles is not None:
             k = goal_inside_obstacle(goal, obstacles)

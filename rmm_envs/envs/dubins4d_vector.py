@@ -85,6 +85,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.clocks import make_clock
 from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
 from rmm_envs.envs.dubins4d_step import advance, nominal_controls
@@ -151,7 +152,9 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         self._cum_cost = np.zeros(n)
         self._nominal = np.zeros((n, 2))  # the driver's control at each state (info["nominal_control"])
         self._ended = np.zeros(n, dtype=bool)  # the episode ended at the last step
-        self._obs = np.zeros((n, self._single.observation_space.shape[0]), dtype=np.float32)
+        obs_shape = self._single.observation_space.shape
+        assert obs_shape is not None  # the single env's observation space is a Box
+        self._obs = np.zeros((n, obs_shape[0]), dtype=np.float32)
         self._started = False
 
     # ------------------------------------------------------------------ observations
@@ -166,7 +169,9 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
     # ------------------------------------------------------------------ reset
     def _reset_one(self, i: int, options: dict | None) -> None:
         e = self._single
-        obstacles, state, goal = e.generate_start(self._rngs[i], options)
+        rng = self._rngs[i]
+        assert rng is not None  # reset seeds sub-env i before resetting it
+        obstacles, state, goal = e.generate_start(rng, options)
         self._check_start(obstacles, state, goal)
         self._states[i] = state
         self._circles[i, :-1] = obstacles
@@ -208,6 +213,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
     def reset(self, *, seed: int | list | None = None, options: dict[str, Any] | None = None):
         """Reset every sub-env (or those of ``options["reset_mask"]``); see the module docstring."""
         n = self.num_envs
+        seeds: list[int | None]
         if seed is None:
             seeds = [None] * n
         elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
@@ -245,7 +251,9 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
     # ------------------------------------------------------------------ actions
     def _parse_actions(self, actions) -> tuple[np.ndarray, np.ndarray]:
         """Validate a batched guardian action; ``(active (N,) bool, controls (N, 2) clipped)``."""
-        return self.single_action_space.parse_batch(actions, self.num_envs, self.action_space)
+        space = self.single_action_space
+        assert isinstance(space, GuardianActionSpace)  # the single env's action space
+        return space.parse_batch(actions, self.num_envs, self.action_space)
 
     # ------------------------------------------------------------------ step
     def step(self, actions):

@@ -17,10 +17,11 @@ in ``simulate``, :meth:`~GuardedEnv.check_interval`, :meth:`~GuardedEnv.count_in
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 
-from rmm_envs.autonomy import parse
+from rmm_envs.autonomy import GuardianActionSpace, parse
 from rmm_envs.envs.base import LabelledEnvBase
 from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL
 
@@ -70,7 +71,7 @@ class GuardedEnv(LabelledEnvBase):
         interval the driver controls applies); return a copy for ``info["nominal_control"]``.
         Call it once the state is the one the returned observation shows."""
         u = np.array(self.driver_control(), dtype=float).reshape(-1)
-        space = self.action_space
+        space = cast(GuardianActionSpace, self.action_space)  # the contract's (a subclass sets it)
         np.minimum(np.maximum(u, space.control_low, out=u), space.control_high, out=u)
         self._nominal = u
         return u.copy()
@@ -133,9 +134,10 @@ class GuardedEnv(LabelledEnvBase):
 def parallel_entry_point(env_cls, env_id: str, base_step: float = BASE_STEP):
     """The Gymnasium entry point of ``env_id``: the blocking ``env_cls`` (a class or any callable
     returning the env) under :class:`rmm_envs.wrappers.NonBlockingStepping` (``time_accel``,
-    ``base_step``, default ``base_step``; ``clock``; every other keyword goes to ``env_cls``).  ``step_dt``, the blocking env's fixed step, is refused
-    by name: under non-blocking stepping each interval is ``elapsed * time_accel + base_step``,
-    so a given ``step_dt`` would be silently ignored."""
+    ``base_step``, default ``base_step``; ``clock``; every other keyword goes to ``env_cls``).
+    ``step_dt``, the blocking env's fixed step, is refused by name: under non-blocking stepping
+    each interval is ``elapsed * time_accel + base_step``, so a given ``step_dt`` would be
+    silently ignored."""
 
     default_base_step = base_step
 

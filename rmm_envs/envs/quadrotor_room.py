@@ -163,7 +163,7 @@ class QuadrotorRoomEnv(LabelledEnvBase):
     """See the module docstring for the full specification."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 24}
-    reset_options = ("state", "room")
+    reset_options: tuple[str, ...] = ("state", "room")
 
     def __init__(
         self,
@@ -258,6 +258,7 @@ class QuadrotorRoomEnv(LabelledEnvBase):
     _MAX_STATE_DRAWS = 1000
 
     def _random_state(self, rng) -> np.ndarray:
+        assert self.room is not None  # reset builds the room before drawing a state in it
         cells = np.argwhere(self.room.footprint)
 
         def draw():
@@ -373,6 +374,7 @@ class QuadrotorRoomEnv(LabelledEnvBase):
     def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """States as the original's datagen drew them (see "Risk labelling" above)."""
         self.require_episode()
+        assert self.room is not None  # require_episode raised otherwise
         lo, hi = self.room.bounds()
         span = hi - lo
         lo, hi = lo - 0.15 * span, hi + 0.15 * span

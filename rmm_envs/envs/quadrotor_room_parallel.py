@@ -189,7 +189,7 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
     """Blocking quadrotor parallel-autonomy env; see the module docstring for the full spec."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
-    reset_options = ("room", "state", "waypoints")
+    reset_options: tuple[str, ...] = ("room", "state", "waypoints")
 
     def __init__(
         self,
@@ -338,6 +338,7 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         # moved since, is a lower bound; compute it afresh only when that bound is not enough
         query = self._gap - math.dist(s[:3], self._gap_at) <= reach
         if query:
+            assert self.scene is not None  # set by reset; simulate runs within an episode
             self._gap, self._gap_at = self.scene.collision.clearance(s[:3]), s[:3].copy()
             query = self._gap <= reach
         k, w, gx, gy, gz = self.controller.packed, self._wrench, *self.goal
@@ -396,6 +397,7 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         """Flight states of the current room (see "Risk labelling" above)."""
         self.require_episode()
         room = self.room
+        assert room is not None and self.scene is not None  # require_episode raised otherwise
         cells = np.argwhere(room.footprint)
 
         def draw(r, k):

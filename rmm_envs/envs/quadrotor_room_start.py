@@ -11,6 +11,7 @@ state or waypoint must lie over the room's footprint, clear of it.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -29,6 +30,14 @@ WAYPOINT_CLEARANCE = 0.5  # m between the bounding sphere and the room at a draw
 class QuadrotorRoomStarts:
     """Start drawing for an env with ``np_random``, ``n_waypoints``, ``altitude``, ``min_leg``,
     ``_draw_room`` and ``_MAX_ROOM_DRAWS`` (those of the guarded quadrotor env)."""
+
+    # declared only (no class attributes): the env this mixes into provides them
+    np_random: np.random.Generator
+    n_waypoints: int
+    altitude: tuple[float, float]
+    min_leg: float
+    _MAX_ROOM_DRAWS: int
+    _draw_room: Callable[[Room | dict | None], Room]
 
     def _point(self, rng, collision: RoomCollision, room: Room, clearance: float, after=None):
         cells = np.argwhere(room.footprint)
@@ -124,6 +133,7 @@ class QuadrotorRoomStarts:
                 raise ValueError(f"option 'state': the body at {state[:3].tolist()} is in contact with {which}")
             bad = None if waypoints is None else self._bad_waypoint(room, RoomCollision(room), waypoints)
             if bad is not None:
+                assert waypoints is not None  # bad is only found among given waypoints
                 raise ValueError(
                     f"option 'waypoints': point {bad} {waypoints[bad].tolist()} must lie over the "
                     f"footprint of {which} with the body's bounding sphere clear of it"

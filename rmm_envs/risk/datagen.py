@@ -281,7 +281,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--failure",
         default=None,
         help="'module:callable', failure(states) -> (N,) bool, for an env served by a risk adapter "
-        "(required for Pendulum-v1; added to the adapter's own test elsewhere)",
+        "(required for Pendulum-v1 and for a MuJoCo env with no failure test of its own, such as Walker2d-v5; "
+        "added to the adapter's own test elsewhere)",
     )
     p.add_argument("--n-steps", type=int, default=8, help="path points per branch (default: %(default)s)")
     p.add_argument(

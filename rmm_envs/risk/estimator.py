@@ -56,7 +56,8 @@ def validate_tree_params(branches, depth, horizon, n_steps, metric="expected", a
     if nodes > MAX_TREE_NODES:
         raise ValueError(
             f"branches (n, --branches) = {int(branches)} and depth (m, --depth) = {int(depth)} make a tree of "
-            f"{'more than 2^64' if nodes == math.inf else f'{nodes:,}'} nodes per state (n + n^2 + ... + n^m); at most {MAX_TREE_NODES:,} are supported "
+            f"{'more than 2^64' if nodes == math.inf else f'{nodes:,}'} nodes per state (n + n^2 + ... + n^m); "
+            f"at most {MAX_TREE_NODES:,} are supported "
             f"(the paper uses n = 32, m = 2: 1,056): lower --branches or --depth"
         )
     if not (isinstance(horizon, (int, float)) and horizon > 0 and math.isfinite(horizon)):
@@ -229,7 +230,8 @@ class RiskEstimator:
         # Expand level by level; only the children of live (non-failed) nodes are propagated.
         # live[l] flags which nodes of level l (B * n^(l+1) of them, root-major) were expanded.
         parents, parent_idx = roots[~root_fail], np.nonzero(~root_fail)[0]
-        fails, live, finals, first_ctrls = [], [], [], None
+        fails, live, finals = [], [], []
+        first_ctrls: np.ndarray | None = None
         for lvl in range(m):
             n_nodes = B * n ** (lvl + 1)  # exact: integers
             child_idx = (parent_idx[:, None] * n + np.arange(n)[None, :]).reshape(-1)
@@ -237,6 +239,7 @@ class RiskEstimator:
             if controls is not None:
                 u = controls[lvl].reshape(-1, controls[lvl].shape[-1])[child_idx]
             else:
+                assert self.policy is not None  # estimate() draws the controls up front for a uniform policy
                 u = np.asarray(self.policy(rep, rng), dtype=float)
                 if u.shape != (rep.shape[0], c_dim):
                     raise ValueError(f"policy returned shape {u.shape}, expected {(rep.shape[0], c_dim)}")
@@ -271,6 +274,7 @@ class RiskEstimator:
         risk = np.where(root_fail, 1.0, self.reduce(child_values))
 
         best = np.argmin(child_values, axis=1)
+        assert first_ctrls is not None  # set at level 0, and m >= 1 here
         min_ctrl = first_ctrls.reshape(B, n, -1)[np.arange(B), best]
         min_ctrl = np.where(root_fail[:, None], 0.0, min_ctrl)
         dur = np.where(root_fail, 0.0, self.t)

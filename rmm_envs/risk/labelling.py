@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -51,8 +52,10 @@ class DatagenConfig:
         # a module:Id or an entry point's env registers here (and in each worker, which builds its env from env_id);
         # an id that cannot is EnvUnavailable, a ValueError naming the id, the cause and the nearest registered id
         resolve_env_id(self.env_id)
-        if self.failure is not None and not (isinstance(self.failure, str) and self.failure.count(":") == 1):
-            raise ValueError(f"failure (--failure) must be 'module:callable', got {self.failure!r}")
+        if self.failure is not None and not (
+            isinstance(self.failure, str) and self.failure.count(":") == 1 and all(self.failure.split(":"))
+        ):
+            raise bad_failure(self.failure, "not of the form module:callable")
         for name in ("configs", "samples_per_config", "configs_per_shard"):
             v = getattr(self, name)
             if not isinstance(v, int) or v < 1:
@@ -100,9 +103,17 @@ class DatagenConfig:
 _ENV_CACHE: dict = {}  # one env per (id, arguments) and process, reused by every configuration (reset re-seeds it)
 
 
+def bad_failure(spec, why: str) -> ValueError:
+    """The one refusal of a bad ``failure`` (``--failure``): the value, what was expected and why."""
+    return ValueError(
+        f"failure (--failure) must be 'module:callable' naming a function failure(states) -> (N,) bool, "
+        f"got {spec!r}: {why}"
+    )
+
+
 def load_failure(spec: str | None):
-    """The callable ``"module:callable"`` names (``None`` for ``None``); ``ValueError`` naming
-    what cannot be imported."""
+    """The callable ``"module:callable"`` names (``None`` for ``None``); ``ValueError``
+    (:func:`bad_failure`) naming what cannot be imported."""
     if spec is None:
         return None
     import importlib
@@ -110,10 +121,10 @@ def load_failure(spec: str | None):
     module, _, attr = spec.partition(":")
     try:
         fn = getattr(importlib.import_module(module), attr)
-    except (ImportError, AttributeError) as e:
-        raise ValueError(f"failure (--failure) {spec!r} cannot be imported: {e}") from None
+    except (ImportError, AttributeError, ValueError) as e:
+        raise bad_failure(spec, f"it cannot be imported ({e})") from None
     if not callable(fn):
-        raise ValueError(f"failure (--failure) {spec!r} is not callable: {fn!r}")
+        raise bad_failure(spec, f"{module}.{attr} is {fn!r}, not callable")
     return fn
 
 
@@ -133,6 +144,7 @@ def labelled_env(cfg: DatagenConfig):
 
             load_env_plugins()
         env = gym.make(cfg.env_id, **cfg.env_kwargs)
+        hooks: Any
         try:
             check_labelled_env(env.unwrapped)
             hooks = env.unwrapped
@@ -144,6 +156,9 @@ def labelled_env(cfg: DatagenConfig):
             from rmm_envs.adapters import adapt
 
             hooks = adapt(env, load_failure(cfg.failure))
+        require = getattr(hooks, "require_labelling", None)
+        if callable(require):  # an env built on a simulator of one's own names the hook it lacks, and the command
+            require("rmm-datagen")
         _ENV_CACHE[key] = hooks
     return _ENV_CACHE[key]
 

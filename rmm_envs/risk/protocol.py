@@ -43,8 +43,12 @@ class RiskScene(Protocol):
     """
 
     state_dim: int
-    control_low: np.ndarray
-    control_high: np.ndarray
+
+    @property
+    def control_low(self) -> np.ndarray: ...
+
+    @property
+    def control_high(self) -> np.ndarray: ...
 
     def propagate(self, states: np.ndarray, controls: np.ndarray, duration: float, n_steps: int) -> np.ndarray: ...
 
@@ -117,9 +121,9 @@ HOOKS: dict[str, tuple[str, ...] | None] = {
 
 
 def _env_name(env) -> str:
-    spec = getattr(env, "spec", None)
+    spec_id = getattr(getattr(env, "spec", None), "id", None)
     name = type(env).__name__
-    return f"{spec.id} ({name})" if getattr(spec, "id", None) else name
+    return f"{spec_id} ({name})" if spec_id else name
 
 
 def check_labelled_env(env, needs: tuple[str, ...] = tuple(HOOKS)) -> None:

@@ -2,9 +2,25 @@
 
 from __future__ import annotations
 
+from typing import Protocol
+
 import numpy as np
 
-__all__ = ["SceneBase"]
+__all__ = ["Dynamics", "SceneBase"]
+
+
+class Dynamics(Protocol):
+    """What a scene reads of its dynamics object (every class of :mod:`rmm_envs.systems` has it)."""
+
+    @property
+    def control_low(self) -> np.ndarray: ...
+
+    @property
+    def control_high(self) -> np.ndarray: ...
+
+    def sample_controls(self, rng: np.random.Generator, n: int, /) -> np.ndarray: ...
+
+    def propagate(self, states: np.ndarray, controls: np.ndarray, duration: float, n_steps: int, /) -> np.ndarray: ...
 
 
 class SceneBase:
@@ -15,7 +31,7 @@ class SceneBase:
     and implement ``state_failed`` and ``path_failed``.
     """
 
-    system = None
+    system: Dynamics
 
     @property
     def control_low(self) -> np.ndarray:

@@ -35,6 +35,7 @@ class Dubins4DScene(SceneBase):
     """
 
     state_dim = 4
+    system: Dubins4D
 
     def __init__(
         self,

@@ -23,6 +23,9 @@ class Dubins4DMapScene(Dubins4DScene):
     episode's goal disc ``(3,)``.  The env uses this very object for its own observations and
     collision checks, so labels and the env agree by construction."""
 
+    # every member of Dubins4DScene that reads a CircleWorld is overridden below to ask the PymunkWorld
+    world: PymunkWorld  # type: ignore[assignment]  # replaces the base's CircleWorld, see the comment above
+
     def __init__(
         self,
         world: PymunkWorld,

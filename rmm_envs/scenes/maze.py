@@ -20,6 +20,7 @@ class MazeScene(SceneBase):
     """
 
     state_dim = 3
+    system: Dubins3D
 
     def __init__(self, maze: Maze, system: Dubins3D | None = None, n_rays: int = 8) -> None:
         self.maze = maze

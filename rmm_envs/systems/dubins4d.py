@@ -16,13 +16,16 @@ The speed clamp, the exact propagation and its two code paths: docs/design-notes
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from rmm_envs.autonomy import SafeDefault
 from rmm_envs.portable import wrap_angle
 
+njit: Callable[..., Any] | None
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; numpy alone still works
@@ -83,7 +86,7 @@ def _turn_integrals(phi: np.ndarray):
     out = list(_closed_turn_integrals(np.where(small, 1.0, phi)))
     if small.any():
         ser = _turn_integrals(phi[small])
-        for o, v in zip(out, ser):
+        for o, v in zip(out, ser, strict=True):
             o[small] = v
     return tuple(out)
 
@@ -238,6 +241,9 @@ class Dubins4D:
 
     state_dim: int = 4
     control_dim: int = 2
+    # the compiled loop's (v, u1, u2) bounds, set by __post_init__ (not arguments, not compared)
+    _lo: np.ndarray = field(init=False, repr=False, compare=False)
+    _hi: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not (self.v_min < self.v_max):

@@ -96,7 +96,7 @@ class QuadrotorParams:
             _finite_tuple("control_low", self.control_low, 4),
             _finite_tuple("control_high", self.control_high, 4),
         )
-        if any(lo > hi for lo, hi in zip(low, high)):
+        if any(lo > hi for lo, hi in zip(low, high, strict=True)):
             raise ValueError(f"QuadrotorParams: control_low {low} must be <= control_high {high} componentwise")
         object.__setattr__(self, "inertia", inertia)
         object.__setattr__(self, "control_low", low)

@@ -16,8 +16,9 @@ The loops in full and the gains' reasons: docs/design-notes.md#rmm_envssystemsqu
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -25,6 +26,7 @@ from rmm_envs.autonomy import SafeDefault
 from rmm_envs.portable import arctan2
 from rmm_envs.systems.quadrotor import QUADROTOR, Quadrotor, QuadrotorParams
 
+njit: Callable[..., Any] | None
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency
@@ -293,7 +295,7 @@ class CommandController:
             len(lo) != 4
             or len(hi) != 4
             or not all(math.isfinite(x) for x in lo + hi)
-            or not all(a <= 0.0 <= b for a, b in zip(lo, hi))
+            or not all(a <= 0.0 <= b for a, b in zip(lo, hi, strict=True))
         ):
             raise ValueError(
                 f"CommandController: command bounds must be 4 finite numbers each with low <= 0 <= high "

@@ -15,10 +15,13 @@ Where this differs from the original, and why: docs/design-notes.md#rmm_envsworl
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+njit: Callable[..., Any] | None
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; numpy alone still works

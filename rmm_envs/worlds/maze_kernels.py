@@ -17,11 +17,14 @@ they differ from the numpy versions: docs/design-notes.md#rmm_envsworldsmaze_ker
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from rmm_envs.systems.dubins4d import segment_position
 
+njit: Callable[..., Any] | None
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; plain Python still works

@@ -269,7 +269,9 @@ def _rect_maze(rng, rows, cols, cell, margin):
     return np.array(walls), np.array(cells), np.array([edges[k] for k in sorted(tree)])
 
 
-def _hex_maze(rng, rows, cols, cell, margin):
+def _hex_maze(
+    rng: np.random.Generator, rows: int, cols: int, cell: float, margin: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pointy-top hexagons of circumradius R in offset rows (odd rows shifted right)."""
     R = cell / np.sqrt(3.0)  # width of a hexagon = cell
     centres = {}

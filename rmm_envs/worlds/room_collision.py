@@ -78,7 +78,6 @@ class RoomCollision:
     def states_failed(self, states: np.ndarray) -> np.ndarray:
         """``(N,)`` bool for body states ``(N, 13)`` (position and quaternion are used)."""
         s = np.asarray(states, float)
-        n = s.shape[0]
         centre = s[:, :3]
         R = quat_to_rot(s[:, 3:7])
         # floor: exact lowest point of the cylinder

@@ -104,16 +104,19 @@ def generate_room(
     ):
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo):
             raise ValueError(f"generate_room: {name} must be an integer >= {lo}, got {v!r}")
-    for name, v in (
+    for name, length in (
         ("x_range", x_range),
         ("y_range", y_range),
         ("wall_height", wall_height),
         ("wall_thickness", wall_thickness),
     ):
-        if v is not None and (
-            isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not math.isfinite(v) or v <= 0
+        if length is not None and (
+            isinstance(length, bool)
+            or not isinstance(length, (int, float, np.number))
+            or not math.isfinite(length)
+            or length <= 0
         ):
-            raise ValueError(f"generate_room: {name} must be a finite number of metres > 0, got {v!r}")
+            raise ValueError(f"generate_room: {name} must be a finite number of metres > 0, got {length!r}")
     n = int(rng.integers(1, 33)) if n_rectangles is None else int(n_rectangles)
     X = float(rng.uniform(5, 50)) if x_range is None else float(x_range)
     Y = float(rng.uniform(5, 50)) if y_range is None else float(y_range)
@@ -158,7 +161,7 @@ def generate_room(
         for dy in (-1, 0, 1):
             inner &= np.roll(np.roll(foot, dx, axis=0), dy, axis=1)
     free_cells = np.argwhere(inner)
-    for shape, count in zip(("box", "cylinder", "sphere"), counts):
+    for shape, count in zip(("box", "cylinder", "sphere"), counts, strict=True):
         for _ in range(count):
             for _try in range(50):
                 if shape == "box":

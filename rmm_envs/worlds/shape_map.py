@@ -257,6 +257,7 @@ class ShapeMap:
                 out.append({"segment": [a.tolist(), b.tolist(), t]})
         if self.goal is not None:
             out.append({"goal": self.goal.tolist()})
+        assert self.start_box is not None  # load_map sets it (the bounding box when the map gives none)
         out.append({"start": self.start_box.tolist()})
         return out
 
@@ -314,7 +315,10 @@ def load_map(map_spec) -> ShapeMap:
             raise MapError(f"map file {source} holds a number that cannot be read: {e}") from None
     else:
         source, data = "(given as data)", map_spec
-    circles, polygons, segments, entries = [], [], [], []
+    circles: list[np.ndarray] = []
+    polygons: list[np.ndarray] = []
+    segments: list[tuple[np.ndarray, np.ndarray, float]] = []
+    entries: list[tuple[str, int, int]] = []
     goal = start = None
     for index, (name, entry) in enumerate(_entries(data, source)):
         where = f"map {source}, {name} {_show(entry)}"
