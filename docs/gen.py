@@ -111,6 +111,7 @@ def cli_parsers():
         ("rmm-bench", bench.build_parser()),
         ("rmm-bench report", bench.build_report_parser()),
         ("rmm-bench sweep", bench.build_sweep_parser()),
+        ("rmm-bench replay", bench.build_replay_parser()),
         ("rmm-bench riskmap", figures.riskmap_parser()),
         ("rmm-bench quadrisk", figures.quadrisk_parser()),
         ("rmm-datagen", datagen.build_parser()),

@@ -5,7 +5,8 @@ control.  :class:`Guardian` is the base class: ``name``, ``observation_type`` (`
 ``"global"`` or ``"none"``), ``privileged``; :meth:`~Guardian.reset` each episode with the
 seed, the env's spaces and, for privileged guardians, the env's ``privileged()`` accessor;
 :meth:`~Guardian.act` ``(observation, info) -> action``, built through the env's
-:class:`rmm_envs.autonomy.GuardianActionSpace`; :meth:`~Guardian.stats`,
+:class:`rmm_envs.autonomy.GuardianActionSpace`; :meth:`~Guardian.stats`, :meth:`~Guardian.signals`
+(what the last decision saw, for frames: :mod:`rmm_envs.views`),
 :meth:`~Guardian.warm_up` (run once, untimed, by ``rmm-bench``) and :meth:`~Guardian.input_files`
 (files whose digests join the run's identity).  :meth:`~Guardian.check_spaces`,
 :meth:`~Guardian.require_action_space` and :meth:`~Guardian.require_layout` refuse an env that
@@ -122,6 +123,19 @@ class Guardian:
         self.act(observation, info)
 
     def stats(self) -> dict[str, float]:
+        return {}
+
+    def signals(self) -> dict[str, float]:
+        """The guardian's own signal at its last decision, for pictures of an episode
+        (:class:`rmm_envs.views.EpisodeRecorder` draws each in the strip under the frame): names
+        -> plain floats (``nan`` where a value is not known at this decision).  Keys sharing the
+        part of their name before the first ``_`` are drawn on one scale (``risk`` and
+        ``risk_threshold``); a key containing ``threshold`` is drawn as the line to compare with.
+
+        Read only from what the last :meth:`act` computed anyway: calling it never changes a
+        decision and costs next to nothing, so it may be called after every step.  Default: none
+        (``{}``).  Built-in: ``lrmm`` ``risk``, ``risk_threshold``; ``cbf`` ``barrier_min``,
+        ``qp_fallbacks``; ``hj`` ``value``, ``value_threshold`` (docs/guardians.md)."""
         return {}
 
     def __repr__(self) -> str:

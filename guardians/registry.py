@@ -137,7 +137,31 @@ def make_guardian(name, env_id: str | None = None, **kwargs) -> Guardian:
     cls = load_guardian_class(name) if isinstance(name, str) else name
     if env_id is not None and "env_id" not in kwargs and accepts_argument(cls, "env_id"):
         kwargs["env_id"] = env_id
+    if inspect.isfunction(cls) or inspect.ismethod(cls):
+        _check_factory(cls, kwargs)
     obj = cls(**kwargs) if isinstance(cls, type) else cls(**kwargs) if callable(cls) else cls
     if not hasattr(obj, "act") or not hasattr(obj, "reset"):
         raise TypeError(f"{name!r} did not produce a guardian (needs reset() and act()); got {type(obj).__name__}")
     return obj
+
+
+def _check_factory(fn, kwargs: dict) -> None:
+    """``TypeError`` saying what a ``module:attr`` naming a function must be when ``fn`` cannot be
+    called with the guardian's options ``kwargs`` (a policy function ``fn(obs)``, most often)."""
+    try:
+        sig = inspect.signature(fn)
+    except (TypeError, ValueError):  # no signature to check: the call says what is wrong
+        return
+    try:
+        sig.bind(**kwargs)
+    except TypeError as e:
+        module = getattr(fn, "__module__", None) or "its module"
+        label = f"{module}:{getattr(fn, '__qualname__', fn)}{sig}"
+        options = ", ".join(f"{k}={v!r}" for k, v in kwargs.items()) or "none"
+        raise TypeError(
+            f"{label} is a function, not a Guardian class, and calling it with the guardian's options ({options}) "
+            f"fails: {e}; a module:Class must name a Guardian subclass (or a factory taking the guardian's options "
+            "as keywords and returning a guardian), and a policy function fn(obs) -> action is wrapped with "
+            f"rmm_guardians.CallableGuardian, e.g. `def guardian(): return CallableGuardian({fn.__name__})` in "
+            f"{module}, named {module}:guardian"
+        ) from None

@@ -11,6 +11,9 @@ arrives.  The environment turns that into simulated time (``elapsed * time_accel
 * :class:`FixedLatencyClock`: every decision takes exactly ``latency`` seconds; reproducible
   bit for bit, for tests and latency studies.
 * :class:`ManualClock`: a test double whose time only moves when told to.
+* :class:`ReplayClock`: plays back the laps a run's clock returned (a stored clock trace),
+  one per ``elapsed()``, so a clocked episode re-simulates bit for bit; refuses, naming the
+  episode, when asked for more than the trace holds (:class:`TraceExhausted`).
 
 ``make_clock("wall" | "cpu" | "fixed:MS")`` builds one from a string (``MS`` in milliseconds).
 """
@@ -20,7 +23,17 @@ from __future__ import annotations
 import math
 import time
 
-__all__ = ["CLOCK_FORMS", "CPUClock", "Clock", "FixedLatencyClock", "ManualClock", "WallClock", "make_clock"]
+__all__ = [
+    "CLOCK_FORMS",
+    "CPUClock",
+    "Clock",
+    "FixedLatencyClock",
+    "ManualClock",
+    "ReplayClock",
+    "TraceExhausted",
+    "WallClock",
+    "make_clock",
+]
 
 
 class Clock:
@@ -96,6 +109,54 @@ class ManualClock(Clock):
         if dt < 0:
             raise ValueError(f"time cannot go backwards (dt={dt})")
         self.t += float(dt)
+
+
+class TraceExhausted(RuntimeError):
+    """A :class:`ReplayClock` was asked for more laps than its trace holds: the replay went on
+    longer than the run it plays back (it diverged from it)."""
+
+
+class ReplayClock(Clock):
+    """Plays back a clock trace: the ``i``-th :meth:`elapsed` returns ``laps[i]`` exactly (the
+    float64 a run's clock returned), whatever really happened; :meth:`start` marks nothing.
+
+    Args:
+        laps: the values, in the order the run read them.
+        episode: what the trace belongs to, for messages (e.g. ``"episode 17 of run 3f2a..."``).
+
+    Asked for a value past the end, it raises :class:`TraceExhausted` naming ``episode``.
+    ``used`` counts the values returned so far (a replay that ends early leaves some unused)."""
+
+    mode = "replay"
+
+    def __init__(self, laps, episode: str = "the episode") -> None:
+        self.load(laps, episode)
+        super().__init__()
+
+    def load(self, laps, episode: str = "the episode") -> None:
+        """Play ``laps`` (of ``episode``) from their first on: one clock serves episode after episode."""
+        self.laps = tuple(float(x) for x in laps)
+        self.episode = str(episode)
+        self.used = 0
+
+    def now(self) -> float:
+        return 0.0
+
+    def start(self) -> None:
+        pass
+
+    def elapsed(self) -> float:
+        if self.used >= len(self.laps):
+            raise TraceExhausted(
+                f"the clock trace of {self.episode} ran out: it holds {len(self.laps)} laps and the replay asked "
+                f"for lap {self.used + 1}, so the replay went on longer than the run it plays back"
+            )
+        lap = self.laps[self.used]
+        self.used += 1
+        return lap
+
+    def __repr__(self) -> str:
+        return f"ReplayClock({len(self.laps)} laps, {self.episode})"
 
 
 #: The forms :func:`make_clock` accepts, for error messages.

@@ -17,11 +17,14 @@ Why entry points, and an example declaration: docs/design-notes.md#rmm_envsenv_p
 from __future__ import annotations
 
 import difflib
+import re
+from collections.abc import Callable
 from importlib.metadata import entry_points
+from typing import Any
 
 from rmm_envs.user_modules import UserModuleError, import_user_module, where
 
-__all__ = ["ENTRY_POINT_GROUP", "EnvUnavailable", "load_env_plugins", "resolve_env_id"]
+__all__ = ["ENTRY_POINT_GROUP", "EnvUnavailable", "describe_env_error", "load_env_plugins", "resolve_env_id"]
 
 ENTRY_POINT_GROUP = "gymnasium.envs"
 
@@ -82,3 +85,32 @@ def resolve_env_id(env_id: str) -> str:
                 "entry point" + (f"; {plugins}" if plugins else "")
             )
     return env_id
+
+
+#: what Gymnasium's ``make`` appends to an error raised by an env's constructor
+_CREATOR_SUFFIX = re.compile(r" was raised from the environment creator for \S+ with kwargs \(.*\)$", re.DOTALL)
+
+
+def _bench_option(key: str, value: Any) -> str:
+    return f"--{key.replace('_', '-')} {value}"
+
+
+def describe_env_error(
+    e: BaseException, env_id: str, env_kwargs: dict, option: Callable[[str, Any], str] = _bench_option
+) -> str:
+    """One line for any exception ``e`` raised by building the env ``env_id`` with ``env_kwargs``
+    (``gym.make(env_id, **env_kwargs)``), as the commands print it after their name:
+
+    * ``"<option>: <the constructor's own message>"`` when the message names one of ``env_kwargs``
+      (an argument such as ``clock``): ``option(key, value)`` says how the command's user gave it
+      (default: ``--time-accel 2``, as ``rmm-bench`` takes it);
+    * else ``"--env <id>: <ExceptionType>: <message>"`` (the env itself cannot be built).
+
+    Gymnasium's suffix ``"... was raised from the environment creator for <id> with kwargs (...)"``
+    is left out, and a message spread over several lines is joined into one."""
+    message = _CREATOR_SUFFIX.sub("", str(e)).strip()
+    message = " ".join(line.strip() for line in message.splitlines() if line.strip()) or "(no message)"
+    for k in env_kwargs:
+        if re.search(rf"\b{re.escape(k)}\b", message):
+            return f"{option(k, env_kwargs[k])}: {message}"
+    return f"--env {env_id}: {type(e).__name__}: {message}"

@@ -21,9 +21,11 @@ from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL
 __all__ = [
     "DEFAULT_ENV",
     "ReportRequest",
+    "parse_replay",
     "parse_report",
     "parse_run",
     "parse_sweep",
+    "replay_parser",
     "report_parser",
     "run_parser",
     "sweep_parser",
@@ -251,4 +253,100 @@ def parse_report(argv: list[str]) -> ReportRequest:
         raise ValueError(f"--batch-size must be >= 1, got {args.batch_size}")
     return ReportRequest(
         dir=Path(args.dir), invocations=tuple(args.invocation) if args.invocation else None, batch_size=args.batch_size
+    )
+
+
+def replay_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="rmm-bench replay",
+        description="Re-simulate stored episodes exactly and verify them against their rows "
+        "(prints 'verified' or the first differing column; exit 1 on a difference, 2 on bad input). "
+        "The database is opened read-only.",
+    )
+    p.add_argument("dir", help="results directory holding results.db (a run's --out)")
+    p.add_argument(
+        "--agent", required=True, help="the stored agent whose run to replay, as the run named it (e.g. lrmm)"
+    )
+    p.add_argument("--episode", default=None, help="episode index, or a comma list (e.g. 3,17,40)")
+    p.add_argument(
+        "--where",
+        default=None,
+        help="an SQL condition on the agent's stored rows selecting episodes, e.g. \"outcome='collision'\"",
+    )
+    p.add_argument("--limit", type=int, default=None, help="replay at most this many of the selected episodes")
+    p.add_argument(
+        "--allow-errors",
+        action="store_true",
+        help="also replay episodes stored as errors, showing where the replay raised (a lost worker's cannot be)",
+    )
+    p.add_argument(
+        "--trust-modules",
+        action="store_true",
+        help="import a module:Class agent or module:Id env that the database names without naming it here",
+    )
+    p.add_argument(
+        "--env",
+        default=None,
+        help="the run's env id; for a module:Id env, naming it here allows importing its module",
+    )
+    p.add_argument(
+        "--invocation", type=int, default=None, help="replay the agent's run of this recorded command (default: newest)"
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--video",
+        default=None,
+        help="write the replayed episode as a video: FILE.mp4 (imageio-ffmpeg, the video extra) or FILE.gif "
+        "(Pillow); several episodes write FILE-epI.mp4 each",
+    )
+    p.add_argument("--frames", default=None, help="write one PNG per frame into this folder (DIR/epI for several)")
+    p.add_argument("--every", type=int, default=1, help="keep every K-th frame, and the last (default 1)")
+    p.add_argument(
+        "--fps", type=float, default=None, help="video frames per second (default: the episode's simulated pace)"
+    )
+    p.add_argument("--size", type=int, default=512, help="the picture's side in pixels (default 512; 64 to 2048)")
+    return p
+
+
+def _episode_list(text: str) -> tuple[int, ...]:
+    try:
+        out = tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        out = ()
+    if not out or any(i < 0 for i in out):
+        raise ValueError(f"--episode {text!r}: expected an episode index >= 0 or a comma list of them, e.g. 3,17,40")
+    return tuple(dict.fromkeys(out))
+
+
+def parse_replay(argv: list[str]):
+    """``rmm-bench replay``'s arguments as a :class:`rmm_bench.replay.ReplayRequest`."""
+    from rmm_bench.replay import ReplayRequest
+
+    args = replay_parser().parse_args(argv)
+    if args.episode is None and args.where is None:
+        raise ValueError("replay: no episode chosen; expected --episode I (or a comma list) or --where CONDITION")
+    if args.limit is not None and args.limit < 1:
+        raise ValueError(f"--limit must be >= 1, got {args.limit}")
+    if args.every < 1:
+        raise ValueError(f"--every must be an integer >= 1, got {args.every}")
+    if not 64 <= args.size <= 2048:
+        raise ValueError(f"--size must be an integer from 64 to 2048 pixels, got {args.size}")
+    if args.fps is not None and not 0 < args.fps <= 240:
+        raise ValueError(f"--fps must be in (0, 240], got {args.fps}")
+    return ReplayRequest(
+        dir=Path(args.dir),
+        agent=args.agent.strip(),
+        episodes=None if args.episode is None else _episode_list(args.episode),
+        where=args.where,
+        limit=args.limit,
+        allow_errors=args.allow_errors,
+        trust_modules=args.trust_modules,
+        env=args.env,
+        invocation=args.invocation,
+        progress=not args.no_progress,
+        video=None if args.video is None else Path(args.video),
+        frames=None if args.frames is None else Path(args.frames),
+        every=args.every,
+        fps=args.fps,
+        size=args.size,
     )

@@ -21,7 +21,6 @@ ends: an env that breaks it gets an error naming the missing key in every episod
 from __future__ import annotations
 
 import json
-import re
 from typing import Any
 
 from rmm_bench.config import AgentRun, accepts_argument, input_digests
@@ -156,20 +155,6 @@ def check_env_contract(env_id: str, env=None) -> None:
         )
 
 
-#: what Gymnasium's ``make`` appends to an error raised by an env's constructor
-_CREATOR_SUFFIX = re.compile(r" was raised from the environment creator for \S+ with kwargs \(.*\)$", re.DOTALL)
-
-
-def _env_error(e: Exception, env_id: str, env_kwargs: dict) -> str:
-    """``"<flag>: <the constructor's own message>"``: the option whose name the message states (an
-    env argument such as ``clock``), else ``--env <id>`` (the env itself cannot be built)."""
-    message = _CREATOR_SUFFIX.sub("", str(e))
-    for k in env_kwargs:
-        if re.search(rf"\b{re.escape(k)}\b", message):
-            return f"--{k.replace('_', '-')} {env_kwargs[k]}: {message}"
-    return f"--env {env_id}: {type(e).__name__}: {message}"
-
-
 def check_runs(
     runs: dict[str, AgentRun], skip_inapplicable: bool = False, classes: dict | None = None
 ) -> dict[str, dict]:
@@ -186,6 +171,7 @@ def check_runs(
     import gymnasium as gym
 
     import rmm_envs  # noqa: F401
+    from rmm_envs.env_plugins import describe_env_error
     from rmm_guardians import make_guardian
 
     meta: dict[str, dict] = {}
@@ -199,7 +185,7 @@ def check_runs(
             try:
                 env = gym.make(run.env_id, **run.env_kwargs)
             except Exception as e:
-                raise ValueError(_env_error(e, run.env_id, run.env_kwargs)) from None
+                raise ValueError(describe_env_error(e, run.env_id, run.env_kwargs)) from None
             try:
                 check_env_contract(run.env_id, env)
                 envs[ekey] = int(getattr(env.unwrapped, "n_obstacles", -1))  # optional: the table's Obstacles column

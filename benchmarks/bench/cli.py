@@ -6,6 +6,7 @@
     rmm-bench --agent lrmm,cbf --clock fixed:2             # reproducible: every decision takes 2 ms
     rmm-bench --agent mypkg.guard:MyGuardian               # a third-party guardian
     rmm-bench report results/                              # rebuild the last run's table from the database
+    rmm-bench replay results/ --agent lrmm --episode 17    # re-simulate a stored episode and verify its row
     rmm-bench --agent lrmm --episodes 2048 --retry-errors  # after fixing a guardian: rerun its error episodes
     rmm-bench sweep --agent lrmm,cbf --latency 0,1,5,20,50 # collision rate against decision latency
     rmm-bench riskmap --seed 3                             # the paper's Fig. 1 (a maze, by inferred risk)
@@ -51,12 +52,18 @@ guardian's error, a result: it counts in the success, collision and timeout rate
 (none of the three, so they add up to 100% less the errors' share: a guardian failing exactly
 when it would intervene must not look perfect), the Errors column counts it, and the command
 exits with status 1 with one line per agent naming the count and the first error;
-``--retry-errors`` runs them again after a fix.  A run is keyed on its options and on the
-SHA-256 of every file it reads (a model file, given or shipped): the same command after a
-model file changed starts a new run, said in one line, instead of appending to the old one.  An
-episode over ``--episode-timeout`` (default 600 s: generous, as a worker's first episode also
-pays for imports and, for ``hj``, a value-function solve of tens of seconds before it is
-cached) or whose worker process died (out of memory, a crash, a guardian
+``--retry-errors`` runs them again after a fix.  An exception the env itself raises (in its
+``reset`` or ``step``, e.g. its driver) is the env's error, not the guardian's: stored as kind
+``env`` with the innermost frames of its traceback (where your code raised), it has no result,
+the command exits 1 with one line naming the env, and a rerun retries it.  A run is keyed on
+its options and on the SHA-256 of every file it reads (a model file, given or shipped, and the
+source file of a ``module:Class`` agent's or a ``module:Id`` env's module: its own ``.py``, a
+package's ``__init__.py``): the same command after such a file changed starts a new run, said
+in one line, instead of appending to the old one.  Files that module imports are not covered:
+after editing one, run with another ``--out`` (the same seeds in a fresh database) or another
+``--seed``, or change the module's own file.  An episode over ``--episode-timeout`` (default
+600 s: generous, as a worker's first episode also pays for imports and, for ``hj``, a
+value-function solve of tens of seconds before it is cached) or whose worker process died (out of memory, a crash, a guardian
 calling ``os._exit``) is a failure of the run, not a result: it is stored with its cause, a
 fresh worker takes over, and any rerun retries it.  After ``max(4, 2 x workers)`` episodes in
 a row lost their worker the run stops (a cause that kills every worker, such as too little
@@ -83,7 +90,7 @@ from rmm_bench.run import RunFailed, cmd_run, cmd_sweep
 from rmm_bench.store import ResultsDatabaseError
 from rmm_envs.failures import describe_os_error
 
-__all__ = ["build_parser", "build_report_parser", "build_sweep_parser", "main"]
+__all__ = ["build_parser", "build_replay_parser", "build_report_parser", "build_sweep_parser", "main"]
 
 
 def build_parser():
@@ -92,6 +99,10 @@ def build_parser():
 
 def build_report_parser():
     return _args.report_parser()
+
+
+def build_replay_parser():
+    return _args.replay_parser()
 
 
 def build_sweep_parser():
@@ -106,6 +117,10 @@ def main(argv: list[str] | None = None) -> int:
             from rmm_bench.report import cmd_report
 
             return cmd_report(_args.parse_report(argv[1:]))
+        if argv and argv[0] == "replay":
+            from rmm_bench.replay import cmd_replay
+
+            return cmd_replay(_args.parse_replay(argv[1:]))
         if argv and argv[0] in ("riskmap", "quadrisk"):
             from rmm_bench.figures import main as figure
 

@@ -9,7 +9,9 @@
   same keys and values as databases written before these classes existed, so ``report`` and
   ``--resume`` read them unchanged, plus ``inputs`` when the run reads files: the SHA-256 of
   the bytes of every file the guardian or the env reads (:func:`input_digests`), so a model
-  file replaced between two commands makes a new run instead of one row mixing two models.
+  file replaced between two commands makes a new run instead of one row mixing two models,
+  and the source file of the module of a ``module:Class`` agent or a ``module:Id`` env
+  (:func:`source_digests`), so editing one's own guardian or simulator makes a new run too.
 * :class:`EpisodeTask`: what a worker receives: the run, the episode index, its derived seed,
   and the guardian's compute threads (not part of the run: results do not depend on them).
 * :class:`EpisodeResult`: what a worker returns and the store writes: one row of the
@@ -24,7 +26,9 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import importlib.util
 import json
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,7 +46,10 @@ __all__ = [
     "changed_inputs",
     "file_sha256",
     "input_digests",
+    "module_name",
+    "run_input_digests",
     "run_key",
+    "source_digests",
 ]
 
 
@@ -95,6 +102,66 @@ def input_digests(guardian, *options: dict) -> dict[str, str]:
     reported = getattr(guardian, "input_files", None)
     if callable(reported):
         out.update({str(k): str(v) for k, v in reported().items()})
+    return dict(sorted(out.items()))
+
+
+def module_name(spec: str, env: bool = False) -> str | None:
+    """The module of a ``module:Class`` agent (``env=False``) or a ``module:Id`` env id, as the
+    registry and :func:`rmm_envs.env_plugins.resolve_env_id` split them; None for a bare name
+    (a built-in guardian or env, an entry point)."""
+    module, colon, rest = spec.rpartition(":") if env else spec.partition(":")
+    return module if colon and module and rest else None
+
+
+def _module_file(name: str) -> str | None:
+    """The file module ``name`` is (or would be) loaded from: its own ``.py`` file, a package's
+    ``__init__.py``; None for a namespace package, a built-in module or one not found."""
+    mod = sys.modules.get(name)
+    origin = getattr(mod, "__file__", None) if mod is not None else None
+    if origin is None and mod is None:
+        try:
+            spec = importlib.util.find_spec(name)
+        except (ImportError, ValueError):  # a parent package missing or failing: the import reports it
+            spec = None
+        origin = spec.origin if spec is not None and spec.has_location else None
+    return origin if isinstance(origin, str) and os.path.isfile(origin) else None
+
+
+def _path_key(path: str, base: str | None) -> str:
+    """``path`` relative to ``base`` (default: the current directory) when it lies under it, so a
+    project moved or cloned elsewhere keeps its run keys; else absolute."""
+    full = os.path.abspath(path)
+    try:
+        rel = os.path.relpath(full, base or os.getcwd())
+    except ValueError:  # another drive
+        return full
+    return full if rel == os.pardir or rel.startswith(os.pardir + os.sep) else rel
+
+
+def source_digests(agent: str, env_id: str, base: str | None = None) -> dict[str, str]:
+    """The source files of the user's own code a run imports, path -> SHA-256: the module of a
+    ``module:Class`` agent and of a ``module:Id`` env (its own ``.py`` file; a package's
+    ``__init__.py``), so editing it starts a new run.  Files that module imports are not
+    covered.  Built-in guardians and envs (bare names) have none: their run keys are unchanged.
+    The module must be imported already (or importable); one that is not gives no entry (the
+    import reports it).  ``base``: the folder paths are relative to (the directory
+    ``rmm-bench`` ran in; default, the current one)."""
+    out: dict[str, str] = {}
+    for name in (module_name(agent), module_name(env_id, env=True)):
+        path = _module_file(name) if name else None
+        if path is not None:
+            try:
+                out[_path_key(path, base)] = file_sha256(path)
+            except OSError:  # unreadable now: the run's check names it as unreadable
+                continue
+    return out
+
+
+def run_input_digests(guardian, run: AgentRun, base: str | None = None) -> dict[str, str]:
+    """Every file ``run`` reads as this process sees it now (what its ``inputs`` recorded when it
+    was keyed): :func:`input_digests` of the guardian and the options, and
+    :func:`source_digests` of the agent's and the env's modules."""
+    out = input_digests(guardian, run.agent_kwargs, run.env_kwargs) | source_digests(run.agent, run.env_id, base)
     return dict(sorted(out.items()))
 
 

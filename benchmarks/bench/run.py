@@ -22,10 +22,10 @@ import sys
 import time
 from pathlib import Path
 
-from rmm_bench.config import AgentRun, BenchConfig, EpisodeResult, EpisodeTask, accepts_argument
+from rmm_bench.config import AgentRun, BenchConfig, EpisodeResult, EpisodeTask, accepts_argument, source_digests
 from rmm_bench.metrics import aggregate
 from rmm_bench.report import plot_latency, write_report
-from rmm_bench.runner import episode_seed, hard_timeout, lost_episode, run_episode
+from rmm_bench.runner import EpisodeRecord, episode_seed, hard_timeout, lost_episode, run_traced_episode
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore
 
 __all__ = [
@@ -168,8 +168,8 @@ def execute(
     bar = tqdm(total=len(tasks), unit="ep", disable=not config.progress, dynamic_ncols=True, desc="episodes")
     counts: dict[str, dict[str, int]] = {}
 
-    def record(result: EpisodeResult):
-        store.add_episode(result, invocation)
+    def record(result: EpisodeResult, clock_trace: tuple[float, ...] | None = None):
+        store.add_episode(result, invocation, clock_trace)
         if result.error_kind in RETRIED_ERRORS:
             unfinished[result.agent] += 1
         c = counts.setdefault(result.agent, {})
@@ -183,17 +183,22 @@ def execute(
     max_lost = max(4, 2 * config.workers)
     try:
         if config.backend == "ray":
-            results = run_ray(run_episode, tasks, config.ray_address, max_lost_in_a_row=max_lost)
+            results = run_ray(run_traced_episode, tasks, config.ray_address, max_lost_in_a_row=max_lost)
         else:
             results = run_local(
-                run_episode,
+                run_traced_episode,
                 tasks,
                 config.workers,
                 task_timeout=hard_timeout(config.episode_timeout),
                 max_lost_in_a_row=max_lost,
             )
         for res in results:
-            record(lost_episode(res.task, res.cause) if isinstance(res, TaskLost) else res)
+            if isinstance(res, TaskLost):
+                record(lost_episode(res.task, res.cause))
+            elif isinstance(res, EpisodeRecord):
+                record(res.result, res.clock_trace)
+            else:  # pragma: no cover - the pools yield what the task function returns
+                raise TypeError(f"a worker returned {type(res).__name__}, expected an EpisodeRecord")
     except WorkersLost as e:
         raise RunFailed(
             f"{e}: {sum(unfinished.values())} episodes lost their worker (see the error column of "
@@ -210,7 +215,8 @@ def _unfinished_message(unfinished: dict[str, int], store: ResultsStore) -> str:
         return ""
     return (
         f"{sum(lacking.values())} episodes ended without a result ({', '.join(f'{a}: {n}' for a, n in lacking.items())}): "
-        f"over --episode-timeout, their worker died, a file they read changed or their worker could not make the env "
+        f"over --episode-timeout, their worker died, a file they read changed, their worker could not make the env "
+        f"or the env raised "
         f"(causes in the error column of {store.path}); "
         "the table counts them as errors; rerun the same command to retry them"
     )
@@ -238,22 +244,35 @@ def guardian_error_lines(store: ResultsStore, run_keys: dict[str, str], episodes
 
 
 def env_error_lines(store: ResultsStore, run_keys: dict[str, str], episodes: int, env_id: str) -> list[str]:
-    """One line when episodes of this command could not make ``env_id`` in their worker (error
-    kind ``env``): a failure of the run, named with the env id and the first cause, never a
-    guardian error."""
+    """Up to two lines naming ``env_id`` for episodes of this command that ended in an error of
+    kind ``env``: those whose worker could not make the env, and those in which the env itself
+    raised (its ``reset`` or ``step``, e.g. its driver; or it ended an episode without the
+    contract's statistics), each with the count and the first cause.  Failures of the run (a
+    rerun retries them), never guardian errors."""
     errs = [
         e
         for key in run_keys.values()
         for e in store.episodes(key, episodes)
         if e["outcome"] == "error" and e["error_kind"] == "env"
     ]
-    if not errs:
-        return []
-    first = (errs[0]["error"] or "no message").splitlines()[0][:400]
-    return [
-        f"--env {env_id}: {len(errs)} episodes could not make the env in their worker, a failure of the run, not of "
-        f"a guardian (first: {first}); make the env importable in every worker and rerun the same command"
-    ]
+    unmade = [e for e in errs if (e["error"] or "").startswith("EnvUnavailable")]
+    raised = [e for e in errs if not (e["error"] or "").startswith("EnvUnavailable")]
+    lines = []
+    if unmade:
+        first = (unmade[0]["error"] or "no message").splitlines()[0][:400]
+        lines.append(
+            f"--env {env_id}: {len(unmade)} episodes could not make the env in their worker, a failure of the run, "
+            f"not of a guardian (first: {first}); make the env importable in every worker and rerun the same command"
+        )
+    if raised:
+        first = (raised[0]["error"] or "no message").splitlines()[0][:400]
+        lines.append(
+            f"--env {env_id}: {len(raised)} episodes ended in an error of the env itself (its reset or step, "
+            f"e.g. its driver), not of a guardian, and have no result (first, episode {raised[0]['episode']}: "
+            f"{first}); fix the env (the traceback in the error column of {store.path} ends where it raised) "
+            "and rerun the same command"
+        )
+    return lines
 
 
 def _invoke(
@@ -326,7 +345,12 @@ def applicable(config: BenchConfig) -> tuple[BenchConfig, dict]:
             )
         config = config.without(skipped)
         meta = {a: m for a, m in meta.items() if a not in skipped}
-    config = config.with_inputs({a: m.pop("inputs", {}) for a, m in meta.items()})
+    runs = config.agent_runs()
+    config = config.with_inputs(
+        {  # the files each guardian and option read, and the source of a module:Class agent's or module:Id env's module
+            a: dict(sorted((m.pop("inputs", {}) | source_digests(a, runs[a].env_id)).items())) for a, m in meta.items()
+        }
+    )
     return config, meta
 
 

@@ -11,8 +11,14 @@ Before a guardian's first timed decision in a worker, one untimed ``act`` and a 
 A guardian that raises (in ``reset``, ``act`` or ``stats``, or with ``sys.exit``), or an
 episode exceeding ``episode_timeout`` seconds of wall time, ends that episode with outcome
 ``error``, the message and its kind (``guardian`` or ``timeout``, see the store); the run goes
-on.  A worker whose guardian's files (a model) no longer hash to the run's ``inputs`` runs no
-episode: each is stored as ``input_changed``, a failure of the run that any rerun retries.  The
+on.  What the env raises in its ``reset`` or ``step`` (its own code, e.g. a driver) is the env's
+error, kind ``env`` (as is an env a worker cannot make, or one ending an episode without the
+contract's statistics), never the guardian's; an action of the guardian that the env's action
+space refuses stays the guardian's.  A stored traceback keeps its innermost frames, where the
+code raised (:func:`_traceback_text`).  A worker whose files (a model, the source of a
+``module:Class`` agent's or ``module:Id`` env's module) no longer hash to the run's ``inputs``
+runs no episode: each is stored as ``input_changed``, a failure of the run that any rerun
+retries.  The
 time limit is a ``SIGALRM`` timer in the worker, so it interrupts Python code; a call stuck in
 compiled code is ended by the parent, which kills the worker after :func:`hard_timeout` seconds
 and records the episode as ``lost_worker``.
@@ -21,6 +27,15 @@ The env is driven only through the parallel-autonomy contract (:mod:`rmm_bench.c
 the result's columns come from the last step's ``info["outcome"]`` and ``info["episode_stats"]``
 (:data:`EPISODE_STATISTICS`; ``final_speed`` and ``cum_cost`` are optional).  The guardian is built with the
 run's options, plus ``threads`` when the task carries it (see :func:`rmm_bench.run.plan_tasks`).
+
+Clock traces.  For a clocked run (a non-blocking env whose clock is not reproducible: ``wall``
+or ``cpu``), :func:`play_episode` also returns every lap the non-blocking wrapper's clock
+returned in the episode (read at its end through
+:meth:`rmm_envs.wrappers.nonblocking.NonBlockingStepping.episode_laps`); the store keeps them
+beside the row.  ``rmm-bench replay`` runs the very same :func:`play_episode` on an env whose
+clock plays them back (:class:`rmm_envs.clocks.ReplayClock`).  Columns and guardian
+statistics that measure time on this machine are declared in :data:`TIMING_COLUMNS`,
+:data:`CLOCK_COLUMNS` and :func:`is_timing_stat`: a replay does not compare them.
 """
 
 from __future__ import annotations
@@ -32,6 +47,7 @@ import statistics
 import time
 import traceback
 import warnings
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -42,19 +58,27 @@ from rmm_bench.config import (
     InputChanged,
     changed_inputs,
     import_from,
-    input_digests,
+    run_input_digests,
     run_key,
 )
 from rmm_envs.envs.guarded import EPISODE_KEY
 
 __all__ = [
+    "CACHE_STATS",
+    "CLOCK_COLUMNS",
     "EPISODE_STATISTICS",
+    "REPRODUCIBLE_CLOCKS",
+    "TIMING_COLUMNS",
+    "EpisodeRecord",
     "EpisodeTimeout",
     "episode_seed",
     "hard_timeout",
+    "is_timing_stat",
     "lost_episode",
+    "play_episode",
     "run_episode",
     "run_key",
+    "run_traced_episode",
 ]
 
 _SEED_DOMAIN = 0xBE7C  # keeps episode seeds apart from rmm-datagen's configuration seeds
@@ -73,6 +97,41 @@ EPISODE_STATISTICS = {
 #: Statistics an env may report (NULL in the store when it does not): ``final_speed`` (a vehicle's
 #: speed) and ``cum_cost`` (the episode's summed ``info["cost"]``, Safety-Gymnasium's safety cost).
 OPTIONAL_STATISTICS = {"final_speed": "final_speed", "cost": "cum_cost"}
+
+
+#: Columns that measure time on the machine that ran the episode (wall time, the guardian's
+#: decision and setup times, when it finished): never results, never compared by a replay.
+TIMING_COLUMNS = frozenset(
+    {"decision_mean", "decision_std", "decision_max", "precompute_time", "wall_time", "finished"}
+)
+#: Columns that sum the env clock's laps: results when the clock is reproduced (a fixed clock, or
+#: a clocked run replayed from its trace), timings otherwise (a blocking env under a wall clock).
+CLOCK_COLUMNS = frozenset({"compute_time", "avg_compute_time"})
+#: Clock modes (:attr:`rmm_envs.clocks.Clock.mode`) whose laps need no trace: the run's options give them.
+REPRODUCIBLE_CLOCKS = frozenset({"fixed", "replay", "manual"})
+
+
+#: Guardian statistics that count this machine's state rather than the episode: whether a value
+#: function came from the on-disk cache or was solved (``hj``'s ``cache_hits``, ``solves``).  A
+#: replay on a warm cache hits where the run solved, deciding the same.
+CACHE_STATS = frozenset({"cache_hits", "solves"})
+
+
+def is_timing_stat(key: str) -> bool:
+    """Whether a guardian statistic (a key of ``guardian_stats``) is a timing column, not a result:
+    its name ends in ``_seconds`` (``hj``'s ``solve_seconds``), or it is one of :data:`CACHE_STATS`.
+    The one rule for every guardian: a third-party guardian names a timing statistic so, and
+    replay leaves it out of the comparison."""
+    return key.endswith("_seconds") or key in CACHE_STATS
+
+
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """What :func:`play_episode` returns: the store's row and, for a clocked run, the laps its
+    clock returned (``None``: the run's options reproduce them, or the episode never started)."""
+
+    result: EpisodeResult
+    clock_trace: tuple[float, ...] | None = None
 
 
 def episode_seed(seed: int, episode: int) -> int:
@@ -142,6 +201,12 @@ def _guardian_key(task: EpisodeTask) -> tuple:
     )
 
 
+def guardian_for(task: EpisodeTask):
+    """The guardian :func:`play_episode` will use for ``task`` in this process (built once, as
+    :func:`_guardian`): :class:`~rmm_bench.config.InputChanged` if its files are not the run's."""
+    return _guardian(task)
+
+
 def _guardian(task: EpisodeTask):
     """The worker's guardian for ``task``, built once; its files must still be those the run was
     keyed with (:class:`InputChanged` otherwise: the episode would mix two models in one run).
@@ -157,9 +222,8 @@ def _guardian(task: EpisodeTask):
             warnings.simplefilter("ignore")
             guardian = make_guardian(task.agent, env_id=task.run.env_id, **task.guardian_kwargs())
         if task.run.inputs:
-            changed = changed_inputs(
-                task.run.inputs, input_digests(guardian, task.run.agent_kwargs, task.run.env_kwargs)
-            )
+            base = task.import_path[0] if task.import_path else None  # module paths are relative to rmm-bench's folder
+            changed = changed_inputs(task.run.inputs, run_input_digests(guardian, task.run, base))
             if changed:
                 raise InputChanged(
                     f"{changed}: a file changed after the run started, so this episode was not run; "
@@ -207,14 +271,84 @@ def _statistics(env_id: str, info: dict) -> dict:
     return {"outcome": info["outcome"], **out}
 
 
-def _error_text(e: BaseException) -> str:
-    return f"{type(e).__name__}: {e}"[:500] + (
-        "" if isinstance(e, EpisodeTimeout) else "\n" + traceback.format_exc(limit=3)[-1500:]
+#: characters of an error's traceback kept in the store (after its one-line message, at most 500)
+TRACEBACK_CHARS = 1500
+
+
+def _traceback_text(e: BaseException, budget: int = TRACEBACK_CHARS) -> str:
+    """``e``'s traceback in at most ``budget`` characters, keeping its innermost frames (where the
+    code that raised is: a guardian's, or an env's driver deep under Gymnasium's wrappers) and
+    leaving out the outermost ones that do not fit, said in one line."""
+    header = "Traceback (most recent call last):\n"
+    last = "".join(traceback.format_exception_only(type(e), e))[-300:]
+    frames = traceback.format_tb(e.__traceback__)
+    kept: list[str] = []
+    room = budget - len(header) - len(last) - 60  # 60: the line saying how many frames were left out
+    for frame in reversed(frames):
+        if len(frame) > room:
+            if not kept:  # the innermost frame always shows, its end (the line that raised) first
+                kept.append("  ..." + frame[-max(room - 6, 0) :])
+            break
+        kept.append(frame)
+        room -= len(frame)
+    kept.reverse()
+    skipped = len(frames) - len(kept)
+    left_out = f"  ... {skipped} outer frame{'' if skipped == 1 else 's'} left out\n" if skipped else ""
+    return (header + left_out + "".join(kept) + last)[-budget:]
+
+
+def _error_text(e: BaseException, where: str = "") -> str:
+    """The store's ``error``: ``Type: message`` on the first line (what reports and replays
+    compare), then ``where`` (e.g. which env call raised), then the traceback's innermost frames."""
+    return (
+        f"{type(e).__name__}: {e}"[:500]
+        + (f"\n{where}" if where else "")
+        + ("" if isinstance(e, EpisodeTimeout) else "\n" + _traceback_text(e))
     )
+
+
+def _refused_action(env, action) -> bool:
+    """Whether the env's action space refuses ``action`` (a guardian's bad action, which the env
+    raises on in ``step``: the guardian's error, not the env's)."""
+    parse = getattr(getattr(env, "action_space", None), "parse", None)
+    if not callable(parse):
+        return False
+    try:
+        parse(action)
+    except Exception:  # noqa: BLE001 - any refusal of the action is the guardian's
+        return True
+    return False
 
 
 def run_episode(task: EpisodeTask) -> EpisodeResult:
     """Run one episode of ``task`` in this process; returns the store's episode row."""
+    return play_episode(task).result
+
+
+def run_traced_episode(task: EpisodeTask) -> EpisodeRecord:
+    """Run one episode of ``task`` in this process; returns its row and clock trace (what ``rmm-bench`` stores)."""
+    return play_episode(task)
+
+
+def _laps(env) -> tuple[float, ...] | None:
+    """The episode's clock trace from the non-blocking wrapper, if the env has one and its clock
+    is not reproducible from the run's options."""
+    try:
+        laps = env.get_wrapper_attr("episode_laps")
+        clock = env.get_wrapper_attr("clock")
+    except AttributeError:  # a blocking env: its clock only times, no trace to keep
+        return None
+    return None if getattr(clock, "mode", None) in REPRODUCIBLE_CLOCKS else tuple(laps())
+
+
+def play_episode(task: EpisodeTask, env=None, observer=None) -> EpisodeRecord:
+    """Run one episode of ``task`` in this process: the store's episode row and its clock trace.
+
+    ``env``: the env to run it on (``rmm-bench replay`` passes one built with the run's options
+    and a :class:`~rmm_envs.clocks.ReplayClock`); default, this worker's env for the run.
+    ``observer``: an object with ``begin(env)`` (called after the reset) and ``step(info,
+    guardian)`` (after every step), for a replay that draws the episode; it must not act on the
+    env.  A run passes none: drawing would cost a clocked run's time."""
     t_start = time.perf_counter()
     run = task.run
     timeout = run.episode_timeout
@@ -222,7 +356,10 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
     old = None
     decisions: list[float] = []
     guardian = None
+    started = None  # the env, once this episode's reset returned (its laps are this episode's)
     fields: dict = {}
+    env_call = None  # "reset" or "step" while the env runs: what it raises is the env's error, not the guardian's
+    action = None
     try:
         if use_alarm:
             try:
@@ -231,9 +368,15 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
             except ValueError:  # not the main thread (e.g. some Ray setups): check in the loop only
                 use_alarm = False
         import_from(task.import_path)
-        env = _env(run.env_id, run.env_kwargs)
+        if env is None:
+            env = _env(run.env_id, run.env_kwargs)
         guardian = _guardian(task)
+        env_call = "reset"
         obs, info = env.reset(seed=task.seed)
+        env_call = None
+        started = env
+        if observer is not None:
+            observer.begin(env)
         t0 = time.perf_counter()
         guardian.reset(
             seed=task.seed,
@@ -251,7 +394,11 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
             t0 = time.perf_counter()
             action = guardian.act(obs, info)
             decisions.append(time.perf_counter() - t0)
+            env_call = "step"
             obs, reward, terminated, truncated, info = env.step(action)
+            env_call = None
+            if observer is not None:
+                observer.step(info, guardian)
             if terminated or truncated:
                 break
             if timeout and time.perf_counter() - t_start > timeout:
@@ -260,16 +407,22 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
     except (Exception, SystemExit) as e:  # recorded, the run goes on
         from rmm_envs.env_plugins import EnvUnavailable
 
+        env_raised = (  # the env's own code (its reset, step, driver) raised; a bad action it refuses is the guardian's
+            env_call is not None
+            and not isinstance(e, EpisodeTimeout)
+            and not (env_call == "step" and _refused_action(env, action))
+        )
         kind = (
             "timeout"
             if isinstance(e, EpisodeTimeout)
             else "input_changed"
             if isinstance(e, InputChanged)
             else "env"
-            if isinstance(e, EnvUnavailable)
+            if env_raised or isinstance(e, (EnvUnavailable, EnvContractError))
             else "guardian"
         )
-        fields.update(outcome="error", error_kind=kind, error=_error_text(e))
+        where = f"raised by the env {run.env_id} in its {env_call}(), not by the guardian" if env_raised else ""
+        fields.update(outcome="error", error_kind=kind, error=_error_text(e, where))
         _CACHE.pop(_guardian_key(task), None)
     finally:
         if use_alarm:
@@ -299,12 +452,12 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
             error=(
                 f"{task.agent}.stats() raised {type(e).__name__}: {e}"[:500]
                 + "\n"
-                + traceback.format_exc(limit=3)[-1500:]
+                + _traceback_text(e)
                 + ("\n" + earlier if earlier else "")
             ),
         )
         _CACHE.pop(_guardian_key(task), None)
-    return EpisodeResult(
+    result = EpisodeResult(
         run_key=task.run_key,
         episode=task.episode,
         agent=task.agent,
@@ -313,3 +466,4 @@ def run_episode(task: EpisodeTask) -> EpisodeResult:
         finished=time.time(),
         **fields,
     )
+    return EpisodeRecord(result, None if started is None else _laps(started))

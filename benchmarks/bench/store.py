@@ -21,6 +21,12 @@ Tables:
     ``module:Id`` import or an entry point that fails there): failures of the run, not
     results.  Every rerun retries them, replacing the row.
 
+* ``clock_traces`` (schema version 2): for an episode of a clocked run (a non-blocking env
+  under a ``wall`` or ``cpu`` clock), every lap the non-blocking wrapper's clock returned, in
+  order, keyed by ``(run_key, episode)`` like its row: float64 values, little-endian, their
+  bytes shuffled (all first bytes, then all second bytes, ...) and zlib-compressed
+  (``codec`` names this), ``n`` the count.  What ``rmm-bench replay`` plays back to
+  re-simulate the episode bit for bit; stored beside the row, never part of a run's key.
 * ``invocations``: each ``rmm-bench`` command: its arguments, run keys, episode count, the
   process id and host that ran it, and its status: ``running`` while it runs, then
   ``finished`` (every requested episode has a result), ``interrupted`` (Ctrl-C, or found
@@ -46,6 +52,17 @@ means the stored episodes are gone:
 
 The whole file is checked (``PRAGMA quick_check``, milliseconds for a full Table I run) when
 it is opened.
+
+Schema versions.  The layout's version is SQLite's ``PRAGMA user_version``; :data:`MIGRATIONS`
+lists, in order, what brings a database from each version to the next (version 0 is a new
+file or one written before versions existed, whose columns were added by probing).  Opening a
+store for writing applies the missing migrations in one transaction, so a database is at a
+version or at the one before, never in between; a database of a newer version than
+:data:`SCHEMA_VERSION` is refused, one line naming the file, its version and the newest this
+code knows (it may hold columns this code would drop).  ``ResultsStore(path, read_only=True)``
+opens the file through a read-only URI (``file:...?mode=ro``): it never migrates nor commits,
+and reads an older layout as it is (a column it lacks is absent from the rows, an episode of a
+database without ``clock_traces`` has no trace).
 """
 
 from __future__ import annotations
@@ -57,12 +74,26 @@ import socket
 import sqlite3
 import time
 import typing
+import zlib
+from collections.abc import Callable, Sequence
 from pathlib import Path
+
+import numpy as np
 
 from rmm_bench.config import EpisodeResult
 from rmm_envs.failures import BAD_INPUT, RUN_FAILED, describe_os_error, file_size_limit
 
-__all__ = ["EPISODE_FIELDS", "RETRIED_ERRORS", "ResultsDatabaseError", "ResultsStore"]
+__all__ = [
+    "EPISODE_FIELDS",
+    "MIGRATIONS",
+    "RETRIED_ERRORS",
+    "SCHEMA_VERSION",
+    "TRACE_CODEC",
+    "ResultsDatabaseError",
+    "ResultsStore",
+    "decode_laps",
+    "encode_laps",
+]
 
 
 def _column(annotation) -> str:
@@ -76,6 +107,9 @@ def _column(annotation) -> str:
 #: The ``episodes`` table's columns, in order: :class:`EpisodeResult`'s fields (its owner).
 EPISODE_FIELDS = {name: _column(tp) for name, tp in typing.get_type_hints(EpisodeResult).items()}
 
+# the episodes table as version 1 creates it (a later migration adding a column adds it itself)
+_V1_EPISODE_FIELDS = dict(EPISODE_FIELDS)
+
 # error kinds that are failures of the run rather than results: every rerun retries them
 RETRIED_ERRORS = ("timeout", "lost_worker", "input_changed", "env")
 
@@ -83,6 +117,73 @@ RETRIED_ERRORS = ("timeout", "lost_worker", "input_changed", "env")
 _INVOCATION_KINDS: dict[str | None, str] = {"run": "benchmark run", "sweep": "latency sweep"}
 
 _INVOCATION_COLUMNS = {"pid": "INTEGER", "host": "TEXT", "updated": "REAL", "message": "TEXT"}
+
+
+#: How ``clock_traces.laps`` holds the values (see the module docstring).
+TRACE_CODEC = "f8le-shuffle-zlib"
+
+
+def encode_laps(laps: Sequence[float]) -> bytes:
+    """A clock trace as stored: the float64 values, little-endian, byte-shuffled, zlib-compressed
+    (:data:`TRACE_CODEC`); :func:`decode_laps` returns exactly the same floats."""
+    raw = np.asarray(laps, dtype="<f8").view(np.uint8).reshape(-1, 8)
+    return zlib.compress(np.ascontiguousarray(raw.T).tobytes(), 6)
+
+
+def decode_laps(blob: bytes, n: int, codec: str = TRACE_CODEC) -> list[float]:
+    """The ``n`` laps of a stored trace (ValueError naming the codec or the count when they do not fit)."""
+    if codec != TRACE_CODEC:
+        raise ValueError(f"clock trace codec {codec!r} is not known to this version (expected {TRACE_CODEC!r})")
+    raw = np.frombuffer(zlib.decompress(blob), dtype=np.uint8)
+    if raw.size != 8 * n:
+        raise ValueError(f"clock trace holds {raw.size} bytes, expected {8 * n} for {n} laps")
+    return np.ascontiguousarray(raw.reshape(8, n).T).view("<f8").reshape(-1).tolist()
+
+
+def _legacy_layout(db: sqlite3.Connection) -> None:
+    """Version 0 -> 1: the tables, created if missing, and the columns added by probing before
+    versions existed (error kinds, invocation bookkeeping, the safety cost)."""
+    cols = ", ".join(f"{k} {v}" for k, v in _V1_EPISODE_FIELDS.items())
+    for statement in (
+        """CREATE TABLE IF NOT EXISTS runs (run_key TEXT PRIMARY KEY, agent TEXT NOT NULL, created REAL,
+            config TEXT NOT NULL, provenance TEXT NOT NULL)""",
+        f"CREATE TABLE IF NOT EXISTS episodes ({cols}, PRIMARY KEY (run_key, episode))",
+        """CREATE TABLE IF NOT EXISTS invocations (id INTEGER PRIMARY KEY AUTOINCREMENT, created REAL,
+            kind TEXT, args TEXT, run_keys TEXT, episodes INTEGER, status TEXT)""",
+    ):
+        db.execute(statement)
+    have = {r[1] for r in db.execute("PRAGMA table_info(episodes)")}
+    if "error_kind" not in have:
+        db.execute("ALTER TABLE episodes ADD COLUMN error_kind TEXT")
+        db.execute(
+            "UPDATE episodes SET error_kind = CASE WHEN error LIKE 'EpisodeTimeout%' THEN 'timeout' "
+            "ELSE 'guardian' END WHERE outcome = 'error'"
+        )
+    if "cost" not in have:  # databases written before the safety cost was stored
+        db.execute("ALTER TABLE episodes ADD COLUMN cost REAL")
+    have = {r[1] for r in db.execute("PRAGMA table_info(invocations)")}
+    for name, kind in _INVOCATION_COLUMNS.items():
+        if name not in have:
+            db.execute(f"ALTER TABLE invocations ADD COLUMN {name} {kind}")
+    db.execute("UPDATE invocations SET status = 'finished' WHERE status = 'done'")
+
+
+def _clock_traces(db: sqlite3.Connection) -> None:
+    """Version 1 -> 2: the ``clock_traces`` side table (see the module docstring)."""
+    db.execute(
+        "CREATE TABLE IF NOT EXISTS clock_traces (run_key TEXT NOT NULL, episode INTEGER NOT NULL, "
+        "codec TEXT NOT NULL, n INTEGER NOT NULL, laps BLOB NOT NULL, PRIMARY KEY (run_key, episode))"
+    )
+
+
+#: The schema's migrations in order: entry ``i`` brings a database from version ``i`` to ``i + 1``.
+#: Every later change of the layout is appended here (never edit a released one).
+MIGRATIONS: tuple[tuple[str, Callable[[sqlite3.Connection], None]], ...] = (
+    ("the layout of databases written before schema versions (columns added by probing)", _legacy_layout),
+    ("clock_traces: the laps of a clocked episode's clock, for replay", _clock_traces),
+)
+#: The newest schema version this code reads and writes.
+SCHEMA_VERSION = len(MIGRATIONS)
 
 
 class ResultsDatabaseError(RuntimeError):
@@ -116,25 +217,82 @@ def _pid_alive(pid: int) -> bool:
 
 
 class ResultsStore:
-    def __init__(self, path: str | Path) -> None:
+    """The results database at ``path``; ``read_only``: opened through a read-only URI, never
+    migrated nor written (what ``rmm-bench replay`` uses).  ``version``: its schema version as
+    found when opened (before any migration)."""
+
+    def __init__(self, path: str | Path, read_only: bool = False) -> None:
         self.path = Path(path)
-        try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise ResultsDatabaseError(*describe_os_error(e, self.path.parent)) from None
+        self.read_only = read_only
+        if read_only:
+            if not self.path.is_file():
+                what = "is a directory" if self.path.is_dir() else "does not exist"
+                raise ResultsDatabaseError(f"{self.path} {what}: expected a results database (results.db)", BAD_INPUT)
+        else:
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as e:
+                raise ResultsDatabaseError(*describe_os_error(e, self.path.parent)) from None
         connection: sqlite3.Connection | None = None
         try:
-            self.db = connection = sqlite3.connect(str(self.path), timeout=30)
-            self.db.execute("PRAGMA journal_mode=WAL")
-            self.db.execute("PRAGMA synchronous=NORMAL")
+            if read_only:
+                uri = self.path.resolve().as_uri() + "?mode=ro"
+                self.db = connection = sqlite3.connect(uri, uri=True, timeout=30)
+            else:
+                self.db = connection = sqlite3.connect(str(self.path), timeout=30)
+            self.version = self._user_version()
+            self._refuse_newer(self.version)
+            if not read_only:
+                self.db.execute("PRAGMA journal_mode=WAL")
+                self.db.execute("PRAGMA synchronous=NORMAL")
             problems = [r[0] for r in self.db.execute("PRAGMA quick_check(5)")]
             if problems != ["ok"]:
                 raise sqlite3.DatabaseError("; ".join(problems)[:300])
-            self._create()
+            if not read_only:
+                self._migrate()
         except sqlite3.DatabaseError as e:
             if connection is not None:
                 connection.close()
             raise self._error(e) from None
+        except ResultsDatabaseError:
+            if connection is not None:
+                connection.close()
+            raise
+
+    def _user_version(self) -> int:
+        return int(self.db.execute("PRAGMA user_version").fetchone()[0])
+
+    def _refuse_newer(self, version: int) -> None:
+        if version > SCHEMA_VERSION:
+            import rmm_envs
+
+            raise ResultsDatabaseError(
+                f"{self.path} has results-store schema version {version}, newer than this rmm-bench "
+                f"({rmm_envs.__version__}) knows (versions up to {SCHEMA_VERSION}); open it with the newer "
+                f"rmm-bench that wrote it, or upgrade",
+                BAD_INPUT,
+            )
+
+    def _migrate(self) -> None:
+        """Apply the missing :data:`MIGRATIONS` in one transaction (the version re-read inside it,
+        so two commands opening one old file migrate it once)."""
+        if self.version == SCHEMA_VERSION:
+            return
+        self.db.execute("BEGIN IMMEDIATE")
+        try:
+            version = self._user_version()
+            self._refuse_newer(version)
+            for _, migration in MIGRATIONS[version:]:
+                migration(self.db)
+            self.db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+            self.db.commit()
+        except BaseException:
+            self.db.rollback()
+            raise
+
+    def _writable(self) -> None:
+        if self.read_only:
+            raise ResultsDatabaseError(f"{self.path} was opened read-only: nothing is written to it", BAD_INPUT)
 
     def _intact(self) -> bool:
         """Whether the file passes SQLite's integrity check, read through a separate read-only connection."""
@@ -219,38 +377,13 @@ class ResultsStore:
             BAD_INPUT,
         )
 
-    def _create(self) -> None:
-        cols = ", ".join(f"{k} {v}" for k, v in EPISODE_FIELDS.items())
-        self.db.executescript(f"""
-            CREATE TABLE IF NOT EXISTS runs (run_key TEXT PRIMARY KEY, agent TEXT NOT NULL, created REAL,
-                config TEXT NOT NULL, provenance TEXT NOT NULL);
-            CREATE TABLE IF NOT EXISTS episodes ({cols}, PRIMARY KEY (run_key, episode));
-            CREATE TABLE IF NOT EXISTS invocations (id INTEGER PRIMARY KEY AUTOINCREMENT, created REAL,
-                kind TEXT, args TEXT, run_keys TEXT, episodes INTEGER, status TEXT);
-        """)
-        # databases written before error kinds and invocation bookkeeping existed
-        have = {r[1] for r in self.db.execute("PRAGMA table_info(episodes)")}
-        if "error_kind" not in have:
-            self.db.execute("ALTER TABLE episodes ADD COLUMN error_kind TEXT")
-            self.db.execute(
-                "UPDATE episodes SET error_kind = CASE WHEN error LIKE 'EpisodeTimeout%' THEN 'timeout' "
-                "ELSE 'guardian' END WHERE outcome = 'error'"
-            )
-        if "cost" not in have:  # databases written before the safety cost was stored
-            self.db.execute("ALTER TABLE episodes ADD COLUMN cost REAL")
-        have = {r[1] for r in self.db.execute("PRAGMA table_info(invocations)")}
-        for name, kind in _INVOCATION_COLUMNS.items():
-            if name not in have:
-                self.db.execute(f"ALTER TABLE invocations ADD COLUMN {name} {kind}")
-        self.db.execute("UPDATE invocations SET status = 'finished' WHERE status = 'done'")
-        self.db.commit()
-
     def close(self) -> None:
         self.db.close()
 
     # runs
     @_guarded
     def ensure_run(self, run_key: str, agent: str, config: dict, provenance: dict) -> None:
+        self._writable()
         self.db.execute(
             "INSERT OR IGNORE INTO runs VALUES (?, ?, ?, ?, ?)",
             (run_key, agent, time.time(), json.dumps(config, sort_keys=True), json.dumps(provenance, sort_keys=True)),
@@ -263,6 +396,17 @@ class ResultsStore:
         if row is None:
             raise LookupError(f"run {run_key} is not recorded in {self.path}")
         return {"config": json.loads(row[0]), "provenance": json.loads(row[1]), "agent": row[2]}
+
+    @_guarded
+    def runs_of(self, agent: str) -> list[dict]:
+        """The stored runs of ``agent``, newest first: ``run_key``, ``config``, ``provenance``, ``created``."""
+        rows = self.db.execute(
+            "SELECT run_key, config, provenance, created FROM runs WHERE agent = ? ORDER BY created DESC, rowid DESC",
+            (agent,),
+        ).fetchall()
+        return [
+            {"run_key": k, "config": json.loads(c), "provenance": json.loads(p), "created": t} for k, c, p, t in rows
+        ]
 
     @_guarded
     def superseded_runs(self, run_key: str, config: dict) -> list[dict]:
@@ -293,20 +437,62 @@ class ResultsStore:
         return {r[0] for r in self.db.execute(q, (run_key,) + (() if retry_errors else RETRIED_ERRORS))}
 
     @_guarded
-    def add_episode(self, result: EpisodeResult, invocation: int | None = None) -> None:
-        """Store an episode; it replaces a stored row only if that row is an error (a retry)."""
+    def add_episode(
+        self, result: EpisodeResult, invocation: int | None = None, clock_trace: Sequence[float] | None = None
+    ) -> None:
+        """Store an episode; it replaces a stored row only if that row is an error (a retry).
+        ``clock_trace``: the laps of its clock (a clocked run), stored with the row in one
+        transaction; a replaced row's old trace goes with it."""
+        self._writable()
         row = result.as_row()
         keys = list(EPISODE_FIELDS)
         vals = [row[k] for k in keys]
         update = ", ".join(f"{k} = excluded.{k}" for k in keys if k not in ("run_key", "episode"))
-        self.db.execute(
+        cur = self.db.execute(
             f"INSERT INTO episodes ({', '.join(keys)}) VALUES ({', '.join('?' * len(keys))}) "
             f"ON CONFLICT (run_key, episode) DO UPDATE SET {update} WHERE episodes.outcome = 'error'",
             vals,
         )
+        if cur.rowcount:  # the row was written (new, or a retried error): its trace with it
+            if clock_trace is None:
+                self.db.execute(
+                    "DELETE FROM clock_traces WHERE run_key = ? AND episode = ?", (result.run_key, result.episode)
+                )
+            else:
+                self.db.execute(
+                    "INSERT OR REPLACE INTO clock_traces (run_key, episode, codec, n, laps) VALUES (?, ?, ?, ?, ?)",
+                    (result.run_key, result.episode, TRACE_CODEC, len(clock_trace), encode_laps(clock_trace)),
+                )
         if invocation is not None:
             self.db.execute("UPDATE invocations SET updated = ? WHERE id = ?", (time.time(), invocation))
         self.db.commit()
+
+    def has_traces(self) -> bool:
+        """Whether this database has the ``clock_traces`` table (schema version 2 on)."""
+        return self._table_exists("clock_traces")
+
+    def _table_exists(self, name: str) -> bool:
+        return (
+            self.db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (name,)).fetchone()
+            is not None
+        )
+
+    @_guarded
+    def clock_trace(self, run_key: str, episode: int) -> list[float] | None:
+        """The stored laps of an episode's clock, exactly as its run read them (None: none stored)."""
+        if not self.has_traces():
+            return None
+        row = self.db.execute(
+            "SELECT codec, n, laps FROM clock_traces WHERE run_key = ? AND episode = ?", (run_key, episode)
+        ).fetchone()
+        if row is None:
+            return None
+        try:
+            return decode_laps(row[2], int(row[1]), row[0])
+        except (ValueError, zlib.error) as e:
+            raise ResultsDatabaseError(
+                f"{self.path}: the clock trace of episode {episode} of run {run_key} cannot be read: {e}", BAD_INPUT
+            ) from None
 
     @_guarded
     def episodes(self, run_key: str, n: int | None = None) -> list[dict]:
@@ -322,6 +508,7 @@ class ResultsStore:
     # invocations
     @_guarded
     def add_invocation(self, kind: str, args: dict, run_keys: dict, episodes: int) -> int:
+        self._writable()
         now = time.time()
         cur = self.db.execute(
             "INSERT INTO invocations (created, kind, args, run_keys, episodes, status, pid, host, updated) "
@@ -345,6 +532,7 @@ class ResultsStore:
 
     @_guarded
     def finish_invocation(self, inv_id: int, status: str = "finished", message: str | None = None) -> None:
+        self._writable()
         if status not in ("finished", "interrupted", "failed"):
             raise ValueError(f"invocation status must be finished, interrupted or failed, got {status!r}")
         self.db.execute(
@@ -359,6 +547,7 @@ class ResultsStore:
     @_guarded
     def mark_stale_invocations(self) -> int:
         """Mark ``running`` invocations whose process is gone from this host as ``interrupted``; returns how many."""
+        self._writable()
         rows = self.db.execute("SELECT id, pid, host, status FROM invocations WHERE status = 'running'").fetchall()
         stale = [r for r in rows if self._stale(r[3], r[1], r[2])]
         for inv_id, pid, _, _ in stale:

@@ -77,6 +77,7 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         self.predict_latency, self.recovery, self.goal_aware_margin = s.predict_latency, s.recovery, s.goal_aware_margin
         self._qp = None
         self._counts = self._zero_counts()
+        self._decided: np.ndarray | None = None  # the state the last decision acted from (signals())
 
     @staticmethod
     def _zero_counts():
@@ -141,6 +142,7 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         self._pending = None  # the guardian's control acting during the coming lap; None: the driver's
         self.start_laps(self.lap_guess, since=priv.get("sim_time", 0.0))
         self._recovering = None  # index of the obstacle being recovered from
+        self._decided = None
         self.K = obstacles.shape[0]
         self._qp = dubins4d_qp(self.solver, self.K, self.params, self.p_theta, self.p_v, self.eps)
 
@@ -261,6 +263,7 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         priv = self._privileged()
         state = np.asarray(priv["state"], float)
         if not self.finite_state(state):
+            self._decided = None
             return self._emit(0.0, self.u2_min)
         if self.predict_latency:
             self.measure_lap(priv)
@@ -286,6 +289,7 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
 
     def _decide(self, state, u_nom=None):
         """The decision for the state the action will act from (already predicted)."""
+        self._decided = state  # kept for signals() only
         if self.low_speed_stop and state[3] < 0.05:
             return self._emit(0.0, self.u2_min)
         if self.K == 0:
@@ -320,6 +324,17 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         if self.delegate is not None:
             return self.delegate.stats()
         return dict(self._counts)
+
+    def signals(self) -> dict[str, float]:
+        """``barrier_min``: the smallest obstacle barrier ``b_i`` (m^2; below 0: inside an inflated
+        circle) at the state the last decision acted from (the latency-predicted one), ``nan``
+        before a decision or without obstacles; ``qp_fallbacks``: the episode's infeasible QPs so far."""
+        if self.delegate is not None:
+            return self.delegate.signals()
+        b = math.nan
+        if self._decided is not None and self.K > 0:
+            b = float(np.min(self.barriers(self._decided)))
+        return {"barrier_min": b, "qp_fallbacks": float(self._counts["qp_fallbacks"])}
 
 
 # a function's attributes live in its __dict__ (the type checker knows no __signature__ on a method)

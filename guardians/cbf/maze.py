@@ -166,6 +166,7 @@ class MazeCBFGuardian(PrivilegedGuardian):
         self._solver_name = parse_solver(solver)
         self.solver = solver
         self._counts = self._zero()
+        self._barrier_min = math.nan  # the last decision's smallest barrier value (signals())
 
     @staticmethod
     def _zero() -> dict:
@@ -197,6 +198,7 @@ class MazeCBFGuardian(PrivilegedGuardian):
         self._qp = WallQP(self.K, self.u_max, self.eps, self._solver_name)
         self._safe = space.safe_default.policy(space, self.rng) if space.safe_default is not None else None
         self._counts = self._zero()
+        self._barrier_min = math.nan  # the last decision's smallest barrier value (signals())
         # the guardian's turn rate acting during the coming lap; None: the driver's
         self._pending: float | None = None
         self.start_laps(self.lap_guess, since=priv.get("sim_time", 0.0))
@@ -270,7 +272,8 @@ class MazeCBFGuardian(PrivilegedGuardian):
     def decide(self, state, u_ref: float = 0.0):
         """The decision for the pose the action will act from (already predicted): the turn rate
         closest to ``u_ref`` (the driver's, or 0) that the barriers allow."""
-        _, G, h = self.rows(state)
+        b, G, h = self.rows(state)
+        self._barrier_min = float(b[0]) if b.size else math.nan
         if np.all(G[:, 0] * u_ref <= h + self.eps) and abs(u_ref) <= self.u_max:
             # the reference satisfies every row: it is the solution, no solve
             z: np.ndarray | None = np.array([u_ref])
@@ -290,3 +293,8 @@ class MazeCBFGuardian(PrivilegedGuardian):
 
     def stats(self) -> dict:
         return dict(self._counts)
+
+    def signals(self) -> dict[str, float]:
+        """``barrier_min``: the smallest barrier value of the last decision's rows (nearest shape
+        first; ``nan`` before one); ``qp_fallbacks``: the episode's infeasible QPs so far."""
+        return {"barrier_min": self._barrier_min, "qp_fallbacks": float(self._counts["qp_fallbacks"])}

@@ -99,6 +99,7 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
         controller = CommandController()
         self._gains, self._body, self._dt = controller.packed, body_packed(controller.params), controller.params.dt
         self._counts = self._zero()
+        self._barrier_min = math.nan  # the last decision's smallest barrier value (signals())
 
     @staticmethod
     def _zero() -> dict:
@@ -127,6 +128,7 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
         self.K = min(self.n_rows, len(self.shapes))
         self._qp = CommandQP(self.K, self.lo[:3], self.hi[:3], self.slack_weight, self.eps, self._solver_name)
         self._counts = self._zero()
+        self._barrier_min = math.nan  # the last decision's smallest barrier value (signals())
         self._pending = None  # the guardian's command acting during the coming lap; None: the pilot's
         self.start_laps(self.lap_guess, since=priv.get("sim_time", 0.0))
         self._side = 0  # 0: filtering the nominal; +-1: following a shape (the deadlock escape), on that side
@@ -241,6 +243,7 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
     def decide(self, state, u_nom) -> dict:
         """The decision for the state the command will act from (already predicted)."""
         b, G, h = self.rows(state)
+        self._barrier_min = float(b[0]) if len(b) else math.nan
         u = np.minimum(np.maximum(np.asarray(u_nom, float)[:3], self.lo[:3]), self.hi[:3])
         free = self._satisfies(G, h, u)
         if (
@@ -290,3 +293,8 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
 
     def stats(self) -> dict:
         return dict(self._counts)
+
+    def signals(self) -> dict[str, float]:
+        """``barrier_min``: the smallest barrier value of the last decision's rows (nearest shape
+        first; ``nan`` before one); ``qp_fallbacks``: the episode's infeasible QPs so far."""
+        return {"barrier_min": self._barrier_min, "qp_fallbacks": float(self._counts["qp_fallbacks"])}

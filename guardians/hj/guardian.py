@@ -87,6 +87,7 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
         self._counts = {"outside_grid": 0, "nan_states": 0, "cache_hits": 0, "solves": 0}
         self.solve_seconds = 0.0
         self.V: np.ndarray | None = None
+        self._value = self._value_threshold = math.nan  # the last decision's (signals())
 
     def spec(self, obstacles, goal=None) -> dict:
         spec = {
@@ -170,6 +171,7 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
         self._interp = self.grid.interpolator(self._arrays)
         self._ra_arrays = None
         self._ra_interp = None
+        self._value = self._value_threshold = math.nan
         self.start_laps()
         if self.mode == "reach_avoid":
             V_ra = self.value_function(priv["obstacles"], goal=priv["goal"])
@@ -209,13 +211,15 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
         return self._decide(s)
 
     def _decide(self, s):
+        self._value = self._value_threshold = math.nan  # what signals() reports of this decision
         if not self.finite_state(s):
             return self.action_space.active((0.0, -self.dynamics.u2_max))
         if not self.grid.contains(s):
             self._counts["outside_grid"] += 1
             return self.action_space.inactive()
         vals = self.evaluate(s).tolist()  # Python floats: the rule below is scalar arithmetic
-        if vals[0] <= self.threshold(s.tolist(), vals[1:]):  # safety first: the avoid value
+        self._value, self._value_threshold = vals[0], self.threshold(s.tolist(), vals[1:])
+        if self._value <= self._value_threshold:  # safety first: the avoid value
             grad = vals[1:]
             cell = self.grid.dx[3]
             if self.standstill_lookup and s[3] < cell:
@@ -236,6 +240,15 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
         if self.delegate is not None:
             return self.delegate.stats()
         return dict(self._counts, solve_seconds=self.solve_seconds)
+
+    def signals(self) -> dict[str, float]:
+        """``value``: the avoid value ``V`` (m, interpolated) at the state the last decision read;
+        ``value_threshold``: the value at or below which it takes control there; both ``nan``
+        when the state was off the grid or not finite (or before a decision).  On the maze car
+        and the quadrotor, their guardian's signals (none yet)."""
+        if self.delegate is not None:
+            return self.delegate.signals()
+        return {"value": float(self._value), "value_threshold": float(self._value_threshold)}
 
 
 # a function's attributes live in its __dict__ (the type checker knows no __signature__ on a method)

@@ -16,9 +16,12 @@ it needs from an env: ``docs/design-notes.md``.
 from __future__ import annotations
 
 import math
+import os
+import sys
 import warnings
 from collections import deque
 from pathlib import Path
+from types import FrameType
 
 import numpy as np
 
@@ -38,6 +41,21 @@ REMEDY = (
     "; the shipped model is chosen when the guardian is built: make_guardian('lrmm', env_id=<this env's id>) "
     "(as rmm-bench does), or model=<a model trained on this env>"
 )
+#: this package's folder: a warning points past its frames, at the code that built the guardian
+_PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
+
+
+def _caller_level() -> int:
+    """The ``stacklevel`` of the first frame, outward from the one calling ``warnings.warn``,
+    outside this package (the user's line that built the guardian, directly or by
+    ``make_guardian``), for a warning raised by this package's code."""
+    level = 1  # the frame calling warnings.warn
+    frame: FrameType | None = sys._getframe(1)
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE_DIR):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
 _SIDE_RAY = math.pi / 6  # the heuristic compares the rays 30 degrees left and right of the heading
 
 
@@ -156,7 +174,7 @@ class LRMMGuardian(Guardian):
 
     def _fallback_warning(self, text: str) -> None:
         if type(self) is LRMMGuardian:  # the paper preset expects the paper's rule: nothing to warn about
-            warnings.warn(f"lrmm: {text}", UserWarning, stacklevel=3)
+            warnings.warn(f"lrmm: {text}", UserWarning, stacklevel=_caller_level())
 
     def check_spaces(self, observation_space, action_space) -> None:
         """Refuse (``ValueError`` naming what is missing) an env this guardian cannot serve: the
@@ -217,9 +235,15 @@ class LRMMGuardian(Guardian):
                     f"guardian {self.name!r}: the brake-and-turn heuristic (the action of a model without "
                     f"a head) needs the Dubins car's two controls, got {actions.control_dim} "
                     f"({actions.controls}); this env states a safe default ({actions.safe_default.description}): "
-                    "action='safe' applies it"
+                    f"action='safe' applies it (rmm-bench --agent-opt {self.name}.action='\"safe\"')"
                 )
             self.require_action_space(controls=2, space=action_space)  # (turn rate, acceleration)
+            self._require_named(
+                "rays",
+                observation_space,
+                actions,
+                "the brake-and-turn heuristic (the action of a model without a 'candidates' head)",
+            )
             self.require_layout("rays", observation_space=observation_space)
         if self.action == "safe" and actions.safe_default is None:
             raise ValueError(
@@ -228,6 +252,7 @@ class LRMMGuardian(Guardian):
             )
         if self.action == "turn":
             self.require_action_space(controls=1, space=action_space)  # the turn rate
+            self._require_named("rays", observation_space, actions, "action 'turn'")
             lay = self.require_layout("rays", observation_space=observation_space)
             n = lay.size_of("rays")
             even = np.allclose(wrap_angle(np.asarray(lay.ray_angles) - 2 * np.pi * np.arange(n) / n), 0, atol=1e-9)
@@ -237,6 +262,21 @@ class LRMMGuardian(Guardian):
                     "rotated by one ray, so the model must read the 'rays' field, rays evenly spaced over the "
                     f"full circle from the heading; got inputs={self.inputs!r}, ray angles {lay.ray_angles}"
                 )
+
+    def _require_named(self, field: str, observation_space, actions, what: str) -> None:
+        """A ``ValueError`` saying what to do instead (from the command line too) when ``what``
+        needs the observation field ``field`` by name and the env's observation names no field
+        (an env of one's own, e.g. made by rmm_envs.envs.driven.guarded/parallel); the layout's
+        other refusals are :meth:`require_layout`'s."""
+        if getattr(observation_space, "layout", None) is not None or actions.safe_default is None:
+            return
+        raise ValueError(
+            f"guardian {self.name!r}: {what} reads the observation field {field!r} by name, and this env's "
+            f"observation names no fields (an env of your own, e.g. made by rmm_envs.envs.driven.guarded or "
+            f"parallel); to take the env's safe default ({actions.safe_default.description}) while the risk is "
+            f"above the threshold, give rmm-bench --agent-opt {self.name}.action='\"safe\"' "
+            f"(in Python: action='safe')"
+        )
 
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)
@@ -277,6 +317,15 @@ class LRMMGuardian(Guardian):
         self._history = deque([self.threshold] * self.window, maxlen=self.window)
         self.last_risk = self.last_driver_risk = float("nan")
         self._committed, self._active = 0, False
+
+    def signals(self) -> dict[str, float]:
+        """``risk``: the model's risk of the last observation decided on; ``risk_threshold``: the
+        threshold it is compared with; with ``trigger="driver"`` also ``risk_driver``, the risk
+        rated for the driver's control (``nan`` until a decision computes them)."""
+        out = {"risk": float(self.last_risk), "risk_threshold": float(self.threshold)}
+        if self.trigger == "driver":
+            out["risk_driver"] = float(getattr(self, "last_driver_risk", float("nan")))
+        return out
 
     def risk(self, observation) -> np.ndarray | float:
         return self.model.predict(observation)

@@ -283,6 +283,11 @@ def require_hooks(sim, names, command: str | None = None, sim_name: str | None =
             raise TypeError(SIMULATOR_HOOKS[name].missing(sim_name or type(sim).__name__, command))
 
 
+def can_render(sim) -> bool:
+    """Whether the simulator ``sim`` has the hook ``render(state)``."""
+    return getattr(sim, "render", None) is not None  # as require_hooks sees a hook
+
+
 def _float_state(state, what: str, name: str) -> np.ndarray:
     s = np.array(state, dtype=float)
     if s.ndim != 1 or s.size == 0:
@@ -314,6 +319,8 @@ class SnapshotEnv(gym.Env):
         if render_mode is not None:
             require_hooks(sim, ("render",), f"render_mode={render_mode!r}", self.name)
         self.render_mode = render_mode
+        # what this env can render: both modes with the simulator's render hook, none without it
+        self.metadata = {"render_modes": list(self.metadata["render_modes"]) if can_render(sim) else []}
         self.action_space = sim.action_space
         self._start = _float_state(sim.get_state(), "get_state()", self.name)
         self.observation_space = getattr(sim, "observation_space", None) or gym.spaces.Box(
@@ -589,9 +596,9 @@ class DrivenGuardedEnv(GuardedEnv):
             raise ValueError(
                 f"max_episode_sim_time must be a finite number of seconds > 0, got {self.max_episode_sim_time!r}"
             )
+        self.metadata = {"render_modes": self._render_modes()}  # what it can render, as check_env reads it
         if render_mode is not None:
-            fps = round(1.0 / self.step_dt)
-            self.metadata = {"render_modes": ["rgb_array", "human"], "render_fps": max(fps, 1)}
+            self.metadata["render_fps"] = max(round(1.0 / self.step_dt), 1)
         self.clock = make_clock(clock)
         self._adapter: AdaptedEnv | None = None
         self._sampler: tuple[gym.Env, AdaptedEnv] | None = None
@@ -613,6 +620,13 @@ class DrivenGuardedEnv(GuardedEnv):
             self._own_window = True
             return gym.make(env_id, render_mode="rgb_array")
         raise ValueError(f"render_mode={render_mode!r}: {env_id} renders only {list(modes)}")
+
+    def _render_modes(self) -> list[str]:
+        """The render modes this env offers: ``rgb_array`` where the base env renders it (a
+        simulator of your own: where it has the hook ``render``), ``human`` where the base env has a
+        window of its own or an ``rgb_array`` frame to show."""
+        base = list(self.env.metadata.get("render_modes") or [])  # a SnapshotEnv's: none without the hook
+        return [m for m in ("rgb_array", "human") if m in base or (m == "human" and "rgb_array" in base)]
 
     def _env_dt(self, step_dt: float | None) -> float:
         """The env's step: its ``dt`` (``tau`` for CartPole), else ``step_dt``."""

@@ -23,7 +23,50 @@ import pyarrow as pa
 from rmm_envs.risk.dataset import FORMAT, FORMAT_VERSION
 from rmm_envs.risk.protocol import check_labelled_env
 
-__all__ = ["DatagenConfig", "config_seeds", "dataset_metadata", "label_configs", "labelled_env"]
+__all__ = ["DatagenConfig", "LabellingError", "config_seeds", "dataset_metadata", "label_configs", "labelled_env"]
+
+
+class LabellingError(RuntimeError):
+    """An exception raised by the env (its hooks, its simulator or its driver) while a dataset is
+    made; its message is one line naming the env, what was being done, the exception's type and
+    message, and where it was raised (see :func:`env_failure`)."""
+
+
+def _raised_at(e: BaseException) -> str:
+    """``path:line in function`` of the innermost frame of ``e``'s traceback outside the standard
+    library and the installed packages (the code of the env, its simulator or driver), else of the
+    innermost frame; ``""`` without a traceback."""
+    import os
+    import sysconfig
+    import traceback
+
+    frames = traceback.extract_tb(e.__traceback__)
+    if not frames:
+        return ""
+    libs = tuple(
+        os.path.realpath(p) + os.sep
+        for p in {sysconfig.get_path(k) for k in ("stdlib", "platstdlib", "purelib", "platlib")}
+        if p
+    )
+    ours = [f for f in frames if not os.path.realpath(f.filename).startswith(libs) and not f.filename.startswith("<")]
+    frame = (ours or frames)[-1]
+    path = frame.filename
+    try:
+        rel = os.path.relpath(path)
+        path = rel if not rel.startswith(os.pardir) else path
+    except ValueError:  # another drive (Windows)
+        pass
+    return f"{path}:{frame.lineno} in {frame.name}"
+
+
+def env_failure(e: BaseException, env_id: str, during: str) -> LabellingError:
+    """The one-line :class:`LabellingError` of ``e``, raised by the env ``env_id`` while ``during``:
+    ``"--env <id>: <during> raised <Type>: <message> (at <path:line in function>)"``."""
+    message = " ".join(line.strip() for line in str(e).splitlines() if line.strip()) or "(no message)"
+    at = _raised_at(e)
+    return LabellingError(
+        f"--env {env_id}: {during} raised {type(e).__name__}: {message}" + (f" (at {at})" if at else "")
+    )
 
 
 @dataclass
@@ -143,7 +186,12 @@ def labelled_env(cfg: DatagenConfig):
             from rmm_envs.env_plugins import load_env_plugins
 
             load_env_plugins()
-        env = gym.make(cfg.env_id, **cfg.env_kwargs)
+        try:
+            env = gym.make(cfg.env_id, **cfg.env_kwargs)
+        except Exception as e:  # noqa: BLE001 - any exception of the env's constructor: one line naming it
+            from rmm_envs.env_plugins import describe_env_error
+
+            raise ValueError(describe_env_error(e, cfg.env_id, cfg.env_kwargs, _env_kwargs_option)) from None
         hooks: Any
         try:
             check_labelled_env(env.unwrapped)
@@ -163,6 +211,14 @@ def labelled_env(cfg: DatagenConfig):
     return _ENV_CACHE[key]
 
 
+def _env_kwargs_option(key: str, value: Any) -> str:
+    """How ``rmm-datagen``'s user gave the env argument ``key``: ``--env-kwargs {"key": value}``."""
+    try:
+        return f"--env-kwargs {json.dumps({key: value})}"
+    except (TypeError, ValueError):
+        return f"--env-kwargs {{{key!r}: {value!r}}}"
+
+
 def config_seeds(seed: int, config_id: int) -> tuple[int, np.random.Generator]:
     """The env's reset seed and the sampling/labelling generator of one configuration."""
     env_seed = int(np.random.SeedSequence(seed, spawn_key=(config_id, 0)).generate_state(1)[0])
@@ -180,11 +236,19 @@ def label_configs(cfg: DatagenConfig, config_ids) -> pa.Table:
     }
     for c in config_ids:
         env_seed, rng = config_seeds(cfg.seed, c)
-        env.reset(seed=env_seed)
-        states = env.sample_states(rng, cfg.samples_per_config)
-        obs = env.observe_states(states, rng)
-        est = RiskEstimator(env.risk_scene(), **cfg.estimator_params())
-        res = est.estimate(states, rng)
+        try:
+            env.reset(seed=env_seed)
+            states = env.sample_states(rng, cfg.samples_per_config)
+            obs = env.observe_states(states, rng)
+            est = RiskEstimator(env.risk_scene(), **cfg.estimator_params())
+            res = est.estimate(states, rng)
+            candidate_risk = (
+                None
+                if cfg.candidates is None
+                else est.estimate_candidates(states, cfg.candidates, cfg.candidate_hold, rng)
+            )
+        except Exception as e:  # noqa: BLE001 - the env's, its simulator's or its driver's: one line naming it
+            raise env_failure(e, cfg.env_id, f"labelling configuration {c} (--seed {cfg.seed})") from e
         n = states.shape[0]
         cols["config_id"].append(np.full(n, c, dtype=np.int32))
         cols["sample"].append(np.arange(n, dtype=np.int32))
@@ -194,10 +258,8 @@ def label_configs(cfg: DatagenConfig, config_ids) -> pa.Table:
         cols["min_risk_ctrl"].append(res.min_risk_ctrl)
         cols["min_risk_ctrl_dur"].append(res.min_risk_ctrl_dur)
         cols["n_leaves"].append(res.n_leaves.astype(np.int32))
-        if cfg.candidates is not None:
-            cols.setdefault("candidate_risk", []).append(
-                est.estimate_candidates(states, cfg.candidates, cfg.candidate_hold, rng)
-            )
+        if candidate_risk is not None:
+            cols.setdefault("candidate_risk", []).append(candidate_risk)
     arrays = {}
     for k, parts in cols.items():
         a = np.concatenate(parts)
@@ -217,8 +279,11 @@ def dataset_metadata(cfg: DatagenConfig) -> dict:
     try:
         scene = env.risk_scene()
     except RuntimeError:  # the protocol's answer before the first reset
-        env.reset(seed=0)
-        scene = env.risk_scene()
+        try:
+            env.reset(seed=0)
+            scene = env.risk_scene()
+        except Exception as e:  # noqa: BLE001 - the env's own: one line naming it
+            raise env_failure(e, cfg.env_id, "reset(seed=0), to read its scene,") from e
     return {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,

@@ -9,6 +9,11 @@ first interval after ``reset`` belongs to the built-in driver.  The clock is inj
 reproducible runs, the process CPU clock for runs that share cores.  A bad action raises
 ``ValueError`` *before* the world advances, so a caller can recover.
 
+Every lap the clock returned since the last ``reset`` is kept, in order, and read through
+:meth:`NonBlockingStepping.episode_laps`: the episode's clock trace, which
+:class:`rmm_envs.clocks.ReplayClock` plays back to re-simulate a wall-clock episode exactly
+(``rmm-bench`` stores it beside the episode's row).
+
 What is charged as the agent's time, and how it differs from the original:
 docs/design-notes.md#rmm_envswrappersnonblocking.
 """
@@ -71,15 +76,23 @@ class NonBlockingStepping(gym.Wrapper):
                 f"parallel-autonomy contract, rmm_envs.autonomy), got {self._space!r}"
             )
         self._pending = self._space.parse(self._space.inactive())
+        self._laps: list[float] = []
+
+    def episode_laps(self) -> list[float]:
+        """Every value the clock returned (``lap``, seconds) since the last ``reset``, in the order
+        ``step`` read them: one per ``step`` call, a refused action's included.  A copy."""
+        return list(self._laps)
 
     def reset(self, *, seed=None, options=None):
         obs, info = self.env.reset(seed=seed, options=options)
         self._pending = self._space.parse(self._space.inactive())
+        self._laps = []
         self.clock.start()
         return obs, info
 
     def step(self, action):
         lap = self.clock.elapsed()
+        self._laps.append(lap)
         parsed = self._space.parse(action)
         active, control = self._pending
         out = self.env.unwrapped.simulate(lap * self.time_accel + self.base_step, active, control, lap)

@@ -1,0 +1,48 @@
+"""Frames that explain an episode: the world, the path coloured by who controlled it, the goal,
+the collision point, and a strip over the episode with the guardian's intervals and signals.
+
+Drawn with Pillow's ``ImageDraw``; what does not move is drawn once per episode.  Two parts:
+
+* a **view** per system (:class:`~rmm_envs.views.base.View`): reads the env's world and state
+  through public accessors (``privileged()``, ``true_state``) and draws them;
+  :func:`view_for` picks the view of an env;
+* the **recorder** (:class:`EpisodeRecorder`): collects per step the state, who controlled
+  (driver or guardian) and the guardian's signals (a plain ``dict[str, float]``, e.g.
+  ``rmm_guardians``' ``Guardian.signals()``), and composes frames.
+
+Views of the table's systems: Dubins4D among circles (:class:`Dubins4DView`) and on a map
+(:class:`MapView`), the maze car (:class:`MazeView`), the quadrotor from above and from the side
+(:class:`QuadrotorView`), CartPole and InvertedPendulum (:class:`CartPoleView`); any other env
+built with :func:`rmm_envs.envs.driven.guarded` / ``parallel`` (or any env) that renders
+``rgb_array`` is shown through its own frame (:class:`EnvFrameView`).  :func:`register_view`
+adds a view for an env class of one's own.
+"""
+
+from __future__ import annotations
+
+from rmm_envs.views.base import View, Window
+from rmm_envs.views.planar import Dubins4DView, MapView, MazeView
+from rmm_envs.views.pole import CARTPOLE, PENDULUM, CartPoleView, EnvFrameView, PoleGeometry
+from rmm_envs.views.quadrotor import QuadrotorView
+from rmm_envs.views.recorder import STRIP_HEIGHT, EpisodeRecorder, signal_groups
+from rmm_envs.views.select import VIEWS, register_view, view_for
+
+__all__ = [
+    "CARTPOLE",
+    "PENDULUM",
+    "STRIP_HEIGHT",
+    "VIEWS",
+    "CartPoleView",
+    "Dubins4DView",
+    "EnvFrameView",
+    "EpisodeRecorder",
+    "MapView",
+    "MazeView",
+    "PoleGeometry",
+    "QuadrotorView",
+    "View",
+    "Window",
+    "register_view",
+    "signal_groups",
+    "view_for",
+]

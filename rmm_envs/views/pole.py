@@ -1,0 +1,119 @@
+"""Cart and pole seen from the front (CartPole, MuJoCo's InvertedPendulum), and the fallback
+view of any other guarded env: its own ``render()`` frame."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from rmm_envs.views.base import BODY_OUTLINE, DRIVER, GUARDIAN, LIGHT, OBSTACLE, View, Window
+
+__all__ = ["CartPoleView", "EnvFrameView"]
+
+
+@dataclass(frozen=True)
+class PoleGeometry:
+    """Where the cart position and pole angle sit in the true state, the pole's length (m), the
+    track's ends ``|x| <= x_limit`` (CartPole fails beyond them; InvertedPendulum's rail stops
+    the cart there) and the pole's failing angle ``|theta| > angle_limit``."""
+
+    pos: int
+    ang: int
+    length: float
+    x_limit: float
+    angle_limit: float
+
+
+#: CartPole-v1: true state ``(x, x_dot, theta, theta_dot)``, fails at 2.4 m or 12 degrees
+CARTPOLE = PoleGeometry(0, 2, 1.0, 2.4, 12 * 2 * np.pi / 360)
+#: InvertedPendulum-v5: the MuJoCo snapshot ``(time, x, theta, x_dot, theta_dot)``, the rail's joint range +-1 m
+#: (a stop, not a failure), the pole 0.6 m, fails beyond 0.2 rad
+PENDULUM = PoleGeometry(1, 2, 0.6, 1.0, 0.2)
+
+
+class CartPoleView(View):
+    """A cart on a track and its pole; the path is the pole's tip.  The track's ends (red) and
+    the pole's failing angles (lines from the cart, drawn with the body) are the limits; no goal
+    is drawn unless ``target`` (a callable returning the target's ``x``) is given."""
+
+    def __init__(self, geometry: PoleGeometry = CARTPOLE, size: int = 512, target=None) -> None:
+        self.g = geometry
+        self.width = self.height = int(size)
+        half = 1.2 * geometry.x_limit
+        self.window = Window(-half, half, -0.6 * half, 1.4 * half, self.width, self.height)
+        self.target = target
+
+    def world(self, env) -> Any:
+        return None if self.target is None else float(self.target())
+
+    def draw_static(self, draw: ImageDraw.ImageDraw, world: Any) -> None:
+        w, g = self.window, self.g
+        draw.line([w.px(-g.x_limit, 0.0), w.px(g.x_limit, 0.0)], fill=LIGHT, width=4)
+        for s in (-1, 1):
+            w.rectangle(draw, (s * g.x_limit - 0.03, -0.15), (s * g.x_limit + 0.03, 0.15), fill=OBSTACLE)
+        if world is not None:
+            from rmm_envs.views.base import GOAL
+
+            draw.line([w.px(world, -0.25), w.px(world, 0.0)], fill=GOAL, width=5)
+
+    def _tips(self, st: np.ndarray) -> np.ndarray:
+        x, th = st[:, self.g.pos], st[:, self.g.ang]
+        return np.column_stack([x + self.g.length * np.sin(th), self.g.length * np.cos(th)])
+
+    def path_pixels(self, states: np.ndarray) -> np.ndarray:
+        st = np.atleast_2d(np.asarray(states, dtype=float))
+        return self.window.pixels(self._tips(st))[:, None, :]
+
+    def draw_body(self, draw: ImageDraw.ImageDraw, state: np.ndarray, active: bool, world: Any) -> None:
+        w, g = self.window, self.g
+        s = np.asarray(state, float)
+        x = float(s[g.pos])
+        colour = GUARDIAN if active else DRIVER
+        for a in (-g.angle_limit, g.angle_limit):  # the failing angles
+            end = w.px(x + g.length * np.sin(a), g.length * np.cos(a))
+            draw.line([w.px(x, 0.0), end], fill=OBSTACLE, width=1)
+        w.rectangle(draw, (x - 0.25, -0.08), (x + 0.25, 0.08), fill=colour, outline=BODY_OUTLINE)
+        tip = self._tips(s[None, :])[0]
+        draw.line([w.px(x, 0.0), w.px(tip[0], tip[1])], fill=BODY_OUTLINE, width=5)
+        w.disc(draw, tip[0], tip[1], 0.04, fill=colour, outline=BODY_OUTLINE)
+
+
+class EnvFrameView(View):
+    """Any guarded env whose simulator renders (``render_mode="rgb_array"``): its own frame,
+    captured at every step and scaled to ``size`` wide, framed in the colour of who controls.
+    No path (the view knows no coordinates)."""
+
+    captures = True
+
+    def __init__(self, env, size: int = 512) -> None:
+        u = env.unwrapped
+        if getattr(u, "render_mode", None) != "rgb_array":
+            raise ValueError(
+                f"{type(u).__name__} has no view of its own, so its frames are its render() frames: make it with "
+                f"render_mode='rgb_array', got render_mode={getattr(u, 'render_mode', None)!r}"
+            )
+        self.width = self.height = int(size)  # the height follows the env's frame, read at each episode's start
+
+    def world(self, env) -> Any:
+        h, w = np.asarray(env.unwrapped.render_frame()).shape[:2]
+        self.height = max(int(round(h * self.width / w)), 1)
+        return None
+
+    def state(self, env) -> np.ndarray:
+        """Nothing: the picture is the env's (a simulator of one's own need not offer a state's labels)."""
+        return np.zeros(0)
+
+    def capture(self, env) -> np.ndarray:
+        return np.asarray(env.unwrapped.render_frame(), dtype=np.uint8)
+
+    def paste(self, picture: Image.Image, frame: np.ndarray, active: bool) -> None:
+        img = Image.fromarray(np.ascontiguousarray(frame[..., :3]))
+        if img.size != (self.width, self.height):
+            img = img.resize((self.width, self.height))
+        picture.paste(img, (0, 0))
+        ImageDraw.Draw(picture).rectangle(
+            (0, 0, self.width - 1, self.height - 1), outline=GUARDIAN if active else DRIVER, width=6
+        )
