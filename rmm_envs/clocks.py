@@ -4,16 +4,10 @@ A clock here is a stopwatch: ``start()`` marks the moment the environment hands 
 observation to the agent, ``elapsed()`` reads the seconds since, when the agent's next action
 arrives.  The environment turns that into simulated time (``elapsed * time_accel + base_step``).
 
-* :class:`WallClock` (default): real monotonic time, ``time.perf_counter`` (the paper's mode).
-  Results depend on the machine and on other processes sharing its cores.
-* :class:`CPUClock`: the process's own CPU time, ``time.process_time``; insensitive to other
-  processes competing for the cores, but blind to waiting (I/O, sleeps).
-* :class:`FixedLatencyClock`: every decision takes exactly ``latency`` seconds; reproducible
-  bit for bit, for tests and latency studies.
-* :class:`ManualClock`: a test double whose time only moves when told to.
-* :class:`ReplayClock`: plays back the laps a run's clock returned (a stored clock trace),
-  one per ``elapsed()``, so a clocked episode re-simulates bit for bit; refuses, naming the
-  episode, when asked for more than the trace holds (:class:`TraceExhausted`).
+* :class:`WallClock` (default): real monotonic time (the paper's mode); :class:`CPUClock`: the
+  process's CPU time; :class:`FixedLatencyClock`: every decision takes ``latency`` seconds
+  (reproducible); :class:`ManualClock`: a test double; :class:`ReplayClock`: plays back a
+  stored clock trace, one lap per ``elapsed()`` (:class:`TraceExhausted` past its end).
 
 ``make_clock("wall" | "cpu" | "fixed:MS")`` builds one from a string (``MS`` in milliseconds).
 """

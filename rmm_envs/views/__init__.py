@@ -10,12 +10,8 @@ Drawn with Pillow's ``ImageDraw``; what does not move is drawn once per episode.
   (driver or guardian) and the guardian's signals (a plain ``dict[str, float]``, e.g.
   ``rmm_guardians``' ``Guardian.signals()``), and composes frames.
 
-Views of the table's systems: Dubins4D among circles (:class:`Dubins4DView`) and on a map
-(:class:`MapView`), the maze car (:class:`MazeView`), the quadrotor from above and from the side
-(:class:`QuadrotorView`), CartPole and InvertedPendulum (:class:`CartPoleView`); any other env
-built with :func:`rmm_envs.envs.driven.guarded` / ``parallel`` (or any env) that renders
-``rgb_array`` is shown through its own frame (:class:`EnvFrameView`).  :func:`register_view`
-adds a view for an env class of one's own.
+Every system of the table has a view; any other env that renders ``rgb_array`` is shown
+through its own frame (:class:`EnvFrameView`); :func:`register_view` adds one of your own.
 """
 
 from __future__ import annotations

@@ -1,26 +1,11 @@
 """The episode recorder: per-step state, who controlled and the guardian's signals, composed into frames.
 
-::
-
-    rec = EpisodeRecorder(env)                 # the system's view (view_for), 512 px
-    obs, info = env.reset(seed=3)
-    rec.begin()                                # reads the world, draws the static layer once
-    while True:
-        action = guardian.act(obs, info)
-        signals = guardian.signals()           # rmm_guardians: {} for a guardian without any
-        obs, r, term, trunc, info = env.step(action)
-        rec.record(info, signals)
-        if term or trunc:
-            break
-    for frame in rec.frames(every=2):         # (H, W, 3) uint8, the strip spanning the whole episode
-        ...
-
-A frame is the view's picture (the world drawn once per episode, the path so far coloured by
-who controlled each interval: blue the driver, orange the guardian; the body; the collision
-point on the last frame of a collided episode) over a strip spanning the episode: the
-intervals the guardian controlled, then one lane per group of signals, and a cursor at the
-frame's time.  Frames may be asked in any order; in order (``frames()``) each costs only the
-path drawn since the previous one.
+``rec = EpisodeRecorder(env)``; after ``env.reset``: ``rec.begin()`` (reads the world, draws the
+static layer once); after every ``env.step``: ``rec.record(info, guardian.signals())``; then
+``rec.frames(every=K)`` yields ``(H, W, 3)`` uint8 frames.  A frame is the view's picture (the
+path so far, blue the driver, orange the guardian; the body; the collision point) over a strip
+spanning the episode: the guardian's intervals, one lane per group of signals, a cursor at the
+frame's time.  Frames may be asked in any order; in order each costs only the new path.
 """
 
 from __future__ import annotations

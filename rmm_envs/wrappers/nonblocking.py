@@ -7,12 +7,8 @@ under the action set by the *previous* call; then it stores ``a`` for the next i
 first interval after ``reset`` belongs to the built-in driver.  The clock is injectable
 (:mod:`rmm_envs.clocks`): the real monotonic clock by default, a fixed-latency clock for
 reproducible runs, the process CPU clock for runs that share cores.  A bad action raises
-``ValueError`` *before* the world advances, so a caller can recover.
-
-Every lap the clock returned since the last ``reset`` is kept, in order, and read through
-:meth:`NonBlockingStepping.episode_laps`: the episode's clock trace, which
-:class:`rmm_envs.clocks.ReplayClock` plays back to re-simulate a wall-clock episode exactly
-(``rmm-bench`` stores it beside the episode's row).
+``ValueError`` *before* the world advances.  :meth:`NonBlockingStepping.episode_laps` gives the
+episode's clock trace (every lap, in order), which :class:`rmm_envs.clocks.ReplayClock` replays.
 
 What is charged as the agent's time, and how it differs from the original:
 docs/design-notes.md#rmm_envswrappersnonblocking.
