@@ -153,8 +153,7 @@ def test_an_env_a_worker_cannot_register_fails_the_run_naming_the_env_and_the_im
     ) in line
     assert "guardian error" not in res.stderr
     assert (
-        "INCOMPLETE: episodes with a result: inactive 0 of 4 (4 stored over the time limit, lost with their worker, "
-        "not run as a file changed or unable to make the env in their worker;"
+        "INCOMPLETE: episodes with a result: inactive 0 of 4 (4 unable to make the env in their worker;"
     ) in res.stdout
     with sqlite3.connect(tmp_path / "res" / "results.db") as db:
         kinds = db.execute("SELECT outcome, error_kind, COUNT(*) FROM episodes GROUP BY 1, 2").fetchall()

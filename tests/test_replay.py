@@ -289,11 +289,21 @@ def test_legacy_wall_clock_episode_says_why_it_cannot_replay(runs, tmp_path, cap
 
 
 @pytest.mark.slow
-def test_hj_and_more_episodes_verify(tmp_path, capsys):
+@pytest.mark.parametrize(
+    ("env", "agents"),
+    [
+        ("Dubins4DParallel-v0", "lrmm,cbf,hj"),
+        ("Dubins3DMazeParallel-v0", "lrmm,cbf"),
+        ("QuadrotorRoomParallel-v0", "lrmm,cbf"),
+        ("CartPoleParallel-v0", "lrmm"),
+    ],
+)
+def test_sixteen_episodes_of_every_system_verify_on_both_clocks(env, agents, tmp_path, capsys):
+    """The issue's acceptance run: 16 fresh episodes per agent, fixed and wall clock, each verified."""
     for clock in ("fixed:2", "wall"):
         out = tmp_path / clock.replace(":", "")
-        _run(out, "lrmm,cbf,hj", clock, 16)
-        for agent in ("lrmm", "cbf", "hj"):
+        _run(out, agents, clock, 16, env)
+        for agent in agents.split(","):
             code, text, err = _replay(capsys, out, "--agent", agent, "--where", "1")
-            assert code == 0, (clock, agent, text, err)
-            assert text.count(": verified") == 16
+            assert code == 0, (env, clock, agent, text, err)
+            assert text.count(": verified") == 16, text

@@ -123,3 +123,57 @@ def test_outputs_of_several_episodes_are_named_by_episode_and_an_empty_video_is_
     with pytest.raises(ValueError, match="the episode has no frame to write"):
         write_video(iter(()), tmp_path / "empty.gif", 10.0)
     assert list(tmp_path.iterdir()) == []  # the temporary file is gone too
+
+
+@pytest.mark.parametrize(
+    ("env_id", "agent"),
+    [
+        ("Dubins3DMazeParallel-v0", "lrmm"),
+        ("Dubins4DMapParallel-v0", "lrmm"),
+        ("QuadrotorRoomParallel-v0", "cbf"),
+        ("CartPoleParallel-v0", "lrmm"),
+        ("InvertedPendulumParallel-v0", "lrmm"),
+    ],
+)
+def test_every_system_writes_an_mp4_and_a_gif_that_read_back_with_its_strip_matching_the_row(
+    env_id, agent, tmp_path, capsys
+):
+    """Each guardian env of the system table (Dubins4D above): one stored episode, replayed to an
+    MP4 and a GIF, both read back (frame count and size as the command printed them), and the
+    recorder's intervention strip holding the stored ``active_steps``."""
+    pytest.importorskip("imageio_ffmpeg")
+    if env_id.startswith("InvertedPendulum"):
+        pytest.importorskip("mujoco")
+    from rmm_bench.replay import ReplayRequest, build_env, plan_replay, replay_episode
+    from rmm_bench.store import ResultsStore
+    from rmm_bench.video import EpisodeDrawing
+
+    out = tmp_path / "res"
+    argv = ["--agent", agent, "--env", env_id, "--clock", "fixed:1", "--episodes", "1", "--out", str(out)]
+    assert main([*argv, *FAST]) == 0
+    capsys.readouterr()
+    row = _rows(out, agent)[0]
+    steps = int(row["steps"])
+    replay = ["replay", str(out), "--agent", agent, "--episode", "0", "--size", "160", "--no-progress"]
+    assert main([*replay, "--video", str(tmp_path / "a.mp4")]) == 0
+    wrote = capsys.readouterr().out.splitlines()
+    assert wrote[0] == "episode 0: verified"
+    n, size = _mp4_frames(tmp_path / "a.mp4")
+    assert wrote[1] == f"wrote {tmp_path / 'a.mp4'} ({steps + 1} frames, {size[0]} x {size[1]})" and n == steps + 1
+    assert main([*replay, "--video", str(tmp_path / "a.gif"), "--every", "10"]) == 0
+    gif = Image.open(tmp_path / "a.gif")
+    assert gif.n_frames == len(range(0, steps + 1, 10)) + (steps % 10 != 0) and gif.size == size
+
+    store = ResultsStore(out / "results.db", read_only=True)
+    req = ReplayRequest(dir=out, agent=agent, episodes=(0,), where=None, limit=None, allow_errors=False,
+                        trust_modules=False, env=None, invocation=None, progress=False)  # fmt: skip
+    (target,) = plan_replay(store, req)
+    store.close()
+    env = build_env(target)
+    drawing = EpisodeDrawing(size=96)
+    message, ok = replay_episode(target, env, drawing)
+    env.close()
+    assert ok, message
+    rec = drawing.recorder
+    assert (rec.n_steps, rec.active_steps) == (steps, row["active_steps"])
+    assert int(np.count_nonzero(rec.active[1:])) == row["active_steps"]  # the strip's intervals are these steps

@@ -274,6 +274,8 @@ def _decisions(name: str, env_id: str, call_signals: bool, steps: int = 40):
         ("cbf", "Dubins4DGuarded-v0", {"barrier_min", "qp_fallbacks"}),
         ("hj", "Dubins4DGuarded-v0", {"value", "value_threshold"}),
         ("cbf", "Dubins3DMazeGuarded-v0", {"barrier_min", "qp_fallbacks"}),
+        ("hj", "Dubins3DMazeGuarded-v0", {"value", "value_threshold"}),
+        ("hj", "QuadrotorRoomGuarded-v0", {"value", "value_threshold"}),
     ],
 )
 def test_signals_have_the_documented_keys_and_never_change_a_decision(name, env_id, keys):
@@ -284,6 +286,27 @@ def test_signals_have_the_documented_keys_and_never_change_a_decision(name, env_
         assert a1 == a2 and np.array_equal(u1, u2)
     assert signals and all(set(s) == keys for s in signals)
     assert all(isinstance(v, float) and math.isfinite(v) for s in signals for v in s.values())
+
+
+def test_the_maze_hj_value_is_the_grid_value_at_the_pose_decided_on():
+    """Hand check of the maze ``hj`` signal: the value interpolated at the car's pose (read
+    from the env's own state), the look-ahead rule's band as the line."""
+    from rmm_guardians import make_guardian
+
+    env = gym.make("Dubins3DMazeGuarded-v0", clock="fixed:5")
+    g = make_guardian("hj", env_id="Dubins3DMazeGuarded-v0")
+    before = g.signals()
+    assert set(before) == {"value", "value_threshold"} and all(math.isnan(v) for v in before.values())  # nothing known
+    obs, info = env.reset(seed=3)
+    u = env.unwrapped
+    g.reset(seed=3, observation_space=env.observation_space, action_space=env.action_space, privileged=u.privileged)
+    g.act(obs, info)
+    d = g.delegate
+    x, y, psi = (float(v) for v in u.privileged()["state"][:3])
+    psi = (psi + math.pi) % (2 * math.pi) - math.pi
+    expected = float(d.grid.interp_many([d.V], np.array([x, y, psi, d.speed]))[0])
+    assert g.signals() == {"value": expected, "value_threshold": float(d.band)}
+    env.close()
 
 
 def test_a_guardian_without_signals_gives_none():

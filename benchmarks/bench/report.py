@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+from collections import Counter
 from pathlib import Path
 
 from rmm_bench.metrics import aggregate
@@ -381,7 +382,10 @@ def table_rows(store: ResultsStore, run_keys: dict[str, str], episodes, batch_si
         run = store.run_config(key)
         meta = run["provenance"].get("guardian") or _legacy_meta(agent, run["config"])
         agg = aggregate(eps, batch_size)
-        with_result = sum(1 for e in eps if not (e["outcome"] == "error" and e.get("error_kind") in RETRIED_ERRORS))
+        missing = Counter(
+            _missing_reason(e) for e in eps if e["outcome"] == "error" and e.get("error_kind") in RETRIED_ERRORS
+        )
+        with_result = len(eps) - sum(missing.values())
         rows.append(
             {
                 "agent": agent,
@@ -389,10 +393,27 @@ def table_rows(store: ResultsStore, run_keys: dict[str, str], episodes, batch_si
                 "n_obst": meta.get("n_obstacles", "?"),
                 "requested": n,
                 "with_result": with_result,
+                "missing": dict(missing),
                 **agg,
             }
         )
     return rows
+
+
+#: why an episode of a kind in RETRIED_ERRORS has no result, as the INCOMPLETE line says it
+_MISSING = {
+    "timeout": "stored over the time limit",
+    "lost_worker": "lost with their worker",
+    "input_changed": "not run as a file they read changed",
+}
+
+
+def _missing_reason(e: dict) -> str:
+    kind = e.get("error_kind")
+    if kind == "env":
+        unmade = (e.get("error") or "").startswith("EnvUnavailable")
+        return "unable to make the env in their worker" if unmade else "ended by an error the env raised"
+    return _MISSING.get(kind or "", f"ended in an error of kind {kind}")
 
 
 def _completeness(rows: list[dict], invs: list[dict]) -> str:
@@ -402,12 +423,11 @@ def _completeness(rows: list[dict], invs: list[dict]) -> str:
         return ""
     have = ", ".join(f"{r['agent']} {r['with_result']} of {r['requested']}" for r in short)
     why = []
-    lost = sum(r["episodes"] - r["with_result"] for r in short)
-    if lost:
-        why.append(
-            f"{lost} stored over the time limit, lost with their worker, not run as a file changed or unable "
-            "to make the env in their worker"
-        )
+    missing: Counter[str] = Counter()
+    for r in short:
+        missing.update(r.get("missing", {}))
+    if missing:
+        why.append(", ".join(f"{n} {reason}" for reason, n in sorted(missing.items(), key=lambda kv: -kv[1])))
     for inv in invs:
         state = inv.get("state", inv["status"])
         if state == "stale":

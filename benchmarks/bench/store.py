@@ -17,9 +17,10 @@ Tables:
     ``--retry-errors``.
   - ``timeout`` (over ``--episode-timeout``), ``lost_worker`` (the worker process died or
     was killed), ``input_changed`` (a file the run reads, such as a model, changed while it
-    ran) and ``env`` (the worker could not register or make the env the parent made: a
-    ``module:Id`` import or an entry point that fails there): failures of the run, not
-    results.  Every rerun retries them, replacing the row.
+    ran) and ``env`` (the worker could not register or make the env the parent made, a
+    ``module:Id`` import or an entry point that fails there; or the env itself raised in its
+    ``reset`` or ``step``, its driver for example): failures of the run, not results.  Every
+    rerun retries them, replacing the row.
 
 * ``clock_traces`` (schema version 2): for an episode of a clocked run (a non-blocking env
   under a ``wall`` or ``cpu`` clock), every lap the non-blocking wrapper's clock returned, in

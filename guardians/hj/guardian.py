@@ -245,7 +245,8 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
         """``value``: the avoid value ``V`` (m, interpolated) at the state the last decision read;
         ``value_threshold``: the value at or below which it takes control there; both ``nan``
         when the state was off the grid or not finite (or before a decision).  On the maze car
-        and the quadrotor, their guardian's signals (none yet)."""
+        and the quadrotor, the same two names from their guardian (:class:`MazeHJGuardian`,
+        :class:`QuadrotorHJGuardian`)."""
         if self.delegate is not None:
             return self.delegate.signals()
         return {"value": float(self._value), "value_threshold": float(self._value_threshold)}

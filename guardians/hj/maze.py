@@ -110,6 +110,7 @@ class MazeHJGuardian(PrivilegedGuardian):
         self._counts = self._zero()
         self.solve_seconds = 0.0
         self.V: np.ndarray | None = None
+        self._pose: tuple[float, float, float] | None = None  # the last decision's pose on the grid (signals())
 
     @staticmethod
     def _zero() -> dict:
@@ -223,6 +224,7 @@ class MazeHJGuardian(PrivilegedGuardian):
     def act(self, observation, info=None):
         s = self._state_and_lap()
         self._pending, pending = None, self._pending
+        self._pose = None
         if not self.finite_state(s):
             u = self._safe(observation) if self._safe is not None else self.action_space.control_high
             return self.action_space.active(u)
@@ -230,6 +232,7 @@ class MazeHJGuardian(PrivilegedGuardian):
         if not self.grid.contains(np.array([s[0], s[1], psi, self.speed])):
             self._counts["outside_grid"] += 1
             return self.action_space.inactive()
+        self._pose = (float(s[0]), float(s[1]), float(psi))
         if self.rule == "distance":
             vals = self.evaluate((s[0], s[1], psi))
             if vals[0] <= self.threshold():
@@ -295,6 +298,18 @@ class MazeHJGuardian(PrivilegedGuardian):
 
     def stats(self) -> dict:
         return dict(self._counts, solve_seconds=self.solve_seconds)
+
+    def signals(self) -> dict[str, float]:
+        """``value``: the avoid value ``V`` of the walls (px, the maze's unit) at the pose the last decision read
+        (``nan`` off the grid, for a non-finite state, or before a decision); ``value_threshold``:
+        under ``rule="distance"`` the value at or below which it takes control, under the
+        look-ahead rule the value above which it does not look ahead (below it the look-ahead
+        decides, so a value under this line is not by itself a takeover).  Interpolated here
+        from the stored pose: never changes a decision."""
+        line = self.threshold() if self.rule == "distance" else self.band
+        if self._pose is None or self.V is None:
+            return {"value": math.nan, "value_threshold": float(line) if self.V is not None else math.nan}
+        return {"value": float(self.evaluate(self._pose)[0]), "value_threshold": float(line)}
 
 
 def _turn_rate(info, key: str) -> float:

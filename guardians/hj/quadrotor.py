@@ -111,6 +111,7 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         self._counts = self._zero()
         self.solve_seconds = 0.0
         self.V: np.ndarray | None = None
+        self._probe: tuple | None = None  # the last decision's predicted horizontal state (signals())
 
     @staticmethod
     def _zero() -> dict:
@@ -286,6 +287,7 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
     def act(self, observation, info=None):
         s = self._state_and_lap()
         held, self._held = self._held, None
+        self._probe = None
         if not np.all(np.isfinite(s)):
             self._counts["nan_states"] += 1
             u = self._safe(observation) if self._safe is not None else np.zeros(4)
@@ -308,6 +310,7 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         if not (self.inside(*h0) and self.inside(*h2)):
             self._counts["outside_grid"] += 1
             return self.action_space.inactive()
+        self._probe = h2
         if held is None:
             if float(self.evaluate(*h2)[0]) > self._margin:
                 return self.action_space.inactive()
@@ -428,3 +431,15 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
 
     def stats(self) -> dict:
         return dict(self._counts, solve_seconds=self.solve_seconds)
+
+    def signals(self) -> dict[str, float]:
+        """``value``: the avoid value ``V`` of the current leg's walls (m) at the horizontal state
+        predicted one lap after the pending command (the state the takeover rule reads; 1000 where
+        the band holds nothing), ``nan``
+        where the last decision read none (outside the height band or the grid, climbing, a
+        non-finite state, before a decision); ``value_threshold``: the value at or below which
+        it takes over.  Interpolated here from the stored prediction: never changes a decision."""
+        line = float(self._margin) if self.V is not None else math.nan
+        if self._probe is None:
+            return {"value": math.nan, "value_threshold": line}
+        return {"value": float(self.evaluate(*self._probe)[0]), "value_threshold": line}

@@ -642,6 +642,11 @@ class DrivenGuardedEnv(GuardedEnv):
             "give step_dt (the seconds one env step advances)"
         )
 
+    @property
+    def driver(self):
+        """The driver as it was given (its own attributes, e.g. an episode's ``target``, are read by views)."""
+        return self._driver_obj
+
     def render_frame(self) -> np.ndarray:
         return np.asarray(self.env.render())
 

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from PIL import Image, ImageDraw
 
-from rmm_envs.views.base import BODY_OUTLINE, DRIVER, GUARDIAN, LIGHT, OBSTACLE, View, Window
+from rmm_envs.views.base import BODY_OUTLINE, DRIVER, GOAL, GUARDIAN, LIGHT, OBSTACLE, View, Window
 
 __all__ = ["CartPoleView", "EnvFrameView"]
 
@@ -37,7 +37,8 @@ PENDULUM = PoleGeometry(1, 2, 0.6, 1.0, 0.2)
 class CartPoleView(View):
     """A cart on a track and its pole; the path is the pole's tip.  The track's ends (red) and
     the pole's failing angles (lines from the cart, drawn with the body) are the limits; no goal
-    is drawn unless ``target`` (a callable returning the target's ``x``) is given."""
+    is drawn unless ``target`` (a callable returning the target's ``x``, asked at each episode's
+    start) is given: :func:`rmm_envs.views.select.driver_target` gives the built-in drivers' one."""
 
     def __init__(self, geometry: PoleGeometry = CARTPOLE, size: int = 512, target=None) -> None:
         self.g = geometry
@@ -55,8 +56,6 @@ class CartPoleView(View):
         for s in (-1, 1):
             w.rectangle(draw, (s * g.x_limit - 0.03, -0.15), (s * g.x_limit + 0.03, 0.15), fill=OBSTACLE)
         if world is not None:
-            from rmm_envs.views.base import GOAL
-
             draw.line([w.px(world, -0.25), w.px(world, 0.0)], fill=GOAL, width=5)
 
     def _tips(self, st: np.ndarray) -> np.ndarray:

@@ -9,7 +9,7 @@ from rmm_envs.views.planar import Dubins4DView, MapView, MazeView
 from rmm_envs.views.pole import CARTPOLE, PENDULUM, CartPoleView, EnvFrameView
 from rmm_envs.views.quadrotor import QuadrotorView
 
-__all__ = ["VIEWS", "register_view", "view_for"]
+__all__ = ["VIEWS", "driver_target", "register_view", "view_for"]
 
 #: env class name (of ``env.unwrapped`` or of a guarded env's simulator, any class in its MRO)
 #: -> ``factory(env, size) -> View``; matched by name so that listing them imports no simulator
@@ -18,9 +18,19 @@ VIEWS: dict[str, Callable[..., View]] = {
     "Dubins4DCirclesEnv": lambda env, size: Dubins4DView(size),
     "Dubins3DMazeGuardedEnv": lambda env, size: MazeView(size),
     "QuadrotorRoomGuardedEnv": lambda env, size: QuadrotorView(size),
-    "CartPoleEnv": lambda env, size: CartPoleView(CARTPOLE, size),
-    "InvertedPendulumEnv": lambda env, size: CartPoleView(PENDULUM, size),
+    "CartPoleEnv": lambda env, size: CartPoleView(CARTPOLE, size, driver_target(env)),
+    "InvertedPendulumEnv": lambda env, size: CartPoleView(PENDULUM, size, driver_target(env)),
 }
+
+
+def driver_target(env) -> Callable[[], float] | None:
+    """The goal a pole view draws: the guarded env's driver's ``target`` (a number, read at each
+    episode's start, as the built-in ``CartPoleGuarded-v0`` / ``InvertedPendulumGuarded-v0``
+    drivers pick a cart position per episode); ``None`` when the driver has none."""
+    driver = getattr(env.unwrapped, "driver", None)
+    if driver is None or not isinstance(getattr(driver, "target", None), int | float):
+        return None
+    return lambda: float(driver.target)
 
 
 def register_view(class_name: str, factory: Callable[..., View]) -> None:
