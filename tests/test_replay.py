@@ -16,6 +16,7 @@ import pytest
 
 from rmm_bench import runner
 from rmm_bench.cli import main
+from rmm_bench.store import SCHEMA_VERSION
 from rmm_envs.clocks import ReplayClock, TraceExhausted
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -221,7 +222,7 @@ def test_newer_schema_is_refused(runs, tmp_path, capsys):
     code, _, err = _replay(capsys, tmp_path / "newer", "--agent", "lrmm", "--episode", "0")
     assert code == 2
     line = _one_line(err)
-    assert str(db) in line and "schema version 42" in line and "versions up to 2" in line
+    assert str(db) in line and "schema version 42" in line and f"versions up to {SCHEMA_VERSION}" in line
 
 
 def test_an_env_module_named_only_by_the_database_is_not_imported(runs, tmp_path, capsys):

@@ -51,7 +51,7 @@ def _version(path: Path) -> int:
 
 
 def test_schema_version_counts_the_migrations():
-    assert SCHEMA_VERSION == len(MIGRATIONS) == 2
+    assert SCHEMA_VERSION == len(MIGRATIONS) == 3
 
 
 def test_a_new_database_is_created_at_the_newest_version(tmp_path):
@@ -170,3 +170,33 @@ def test_a_trace_is_stored_exactly_beside_its_row_and_replaced_with_it(tmp_path)
         assert store.clock_trace("k", 2) is None
     finally:
         store.close()
+
+
+def test_a_version_2_database_gets_start_fingerprints_and_the_starts_table(tmp_path):
+    """Migration 3 on a database written at version 2: its rows keep every value, ``start`` NULL."""
+    path = tmp_path / "results.db"
+    store = ResultsStore(path)
+    store.add_episode(EpisodeResult(run_key="k", episode=0, agent="a", seed=1, outcome="goal", steps=7))
+    store.close()
+    con = sqlite3.connect(path)  # back to version 2's layout
+    con.execute("DROP TABLE starts")
+    con.execute("ALTER TABLE episodes DROP COLUMN start")
+    con.execute("PRAGMA user_version = 2")
+    con.commit()
+    con.close()
+    read = ResultsStore(path, read_only=True)
+    assert read.starts("w") == {} and "start" not in read.episodes("k")[0]
+    read.close()
+    store = ResultsStore(path)
+    try:
+        assert store.version == 2 and store.episodes("k")[0]["start"] is None
+        store.add_starts("w", [(0, 11, "abc", True, "brake", 0.5), (1, 12, "def", None, "", 0.0)])
+        store.add_starts("w", [(0, 11, "changed", False, "other", 9.0)])  # a stored start is kept
+        assert store.starts("w") == {
+            0: {"seed": 11, "fingerprint": "abc", "doomed": True, "method": "brake", "seconds": 0.5},
+            1: {"seed": 12, "fingerprint": "def", "doomed": None, "method": "", "seconds": 0.0},
+        }
+        assert store.starts("other") == {}
+    finally:
+        store.close()
+    assert _version(path) == SCHEMA_VERSION

@@ -284,6 +284,7 @@ class EpisodeResult:
         None  # guardian / timeout / lost_worker / input_changed / env (None unless outcome is error)
     )
     cost: float | None = None  # the episode's summed info["cost"] (None: the env reports none)
+    start: str | None = None  # rmm_envs.starts.start_fingerprint of the episode's start (schema version 3)
 
     def as_row(self) -> dict:
         return dataclasses.asdict(self)

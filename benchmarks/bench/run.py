@@ -30,6 +30,7 @@ from rmm_bench.store import RETRIED_ERRORS, ResultsStore
 
 __all__ = [
     "RunFailed",
+    "assess_starts",
     "cmd_run",
     "cmd_sweep",
     "done_line",
@@ -137,6 +138,50 @@ def _announce_new_runs(store: ResultsStore, runs: dict[str, AgentRun]) -> None:
             )
 
 
+def assess_starts(store: ResultsStore, runs: dict[str, AgentRun], episodes, progress: bool = False) -> int:
+    """Store the start (fingerprint, doomed flag) of each of ``episodes`` (indices) of every world
+    the ``runs`` meet (:func:`rmm_envs.starts.world_key`) that is not stored yet: once per world
+    and episode, in this process, before the agents run, whatever the number of agents.  Envs
+    without a doomed test (:data:`rmm_envs.starts.DOOMED_TESTS`) are skipped (their rows keep
+    their own fingerprints); an env this process cannot make is left to the workers, which
+    report it.  Returns how many starts it stored."""
+    from rmm_bench.runner import _env
+    from rmm_envs.catalog import stored_id
+    from rmm_envs.starts import assess_start, has_doomed_test, start_fingerprint, world_key
+
+    worlds: dict[str, AgentRun] = {}
+    for run in runs.values():
+        worlds.setdefault(world_key(stored_id(run.env_id), run.env_kwargs, run.seed), run)
+    stored = 0
+    for key, run in worlds.items():
+        missing = [i for i in episodes if i not in store.starts(key)]
+        if not missing:
+            continue
+        try:
+            env = _env(run.env_id, run.env_kwargs)
+        except Exception:  # the workers report it, as an env error of each episode
+            continue
+        if not has_doomed_test(env):
+            continue
+        from tqdm import tqdm
+
+        rows = []
+        for i in tqdm(missing, unit="start", disable=not progress, dynamic_ncols=True, desc="starts", leave=False):
+            seed = episode_seed(run.seed, i)
+            obs, _ = env.reset(seed=seed)
+            t0 = time.perf_counter()
+            verdict = assess_start(env)
+            rows.append(
+                (i, seed, start_fingerprint(env, obs), verdict.doomed, verdict.method, time.perf_counter() - t0)
+            )
+            if len(rows) >= 256:  # a long assessment keeps what it did if interrupted
+                store.add_starts(key, rows)
+                stored, rows = stored + len(rows), []
+        store.add_starts(key, rows)
+        stored += len(rows)
+    return stored
+
+
 def execute(
     store: ResultsStore,
     config: BenchConfig,
@@ -155,6 +200,7 @@ def execute(
     _announce_new_runs(store, runs)
     for agent, run in runs.items():
         store.ensure_run(run.key, agent, run.as_dict(), provenance | {"guardian": (meta or {}).get(agent, {})})
+    assess_starts(store, runs, range(config.episodes), config.progress)
     tasks = plan_tasks(
         store, runs, config.episodes, config.workers, config.backend, config.retry_errors, config.agent_classes
     )

@@ -62,6 +62,7 @@ from rmm_bench.config import (
     run_key,
 )
 from rmm_envs.envs.guarded import EPISODE_KEY
+from rmm_envs.starts import start_fingerprint
 
 __all__ = [
     "CACHE_STATS",
@@ -375,6 +376,7 @@ def play_episode(task: EpisodeTask, env=None, observer=None) -> EpisodeRecord:
         obs, info = env.reset(seed=task.seed)
         env_call = None
         started = env
+        fields["start"] = start_fingerprint(env, obs)
         if observer is not None:
             observer.begin(env)
         t0 = time.perf_counter()

@@ -28,6 +28,12 @@ Tables:
   bytes shuffled (all first bytes, then all second bytes, ...) and zlib-compressed
   (``codec`` names this), ``n`` the count.  What ``rmm-bench replay`` plays back to
   re-simulate the episode bit for bit; stored beside the row, never part of a run's key.
+* ``starts`` (schema version 3): per world (:func:`rmm_envs.starts.world_key`: the env, its
+  options but the clock's, the run's seed) and episode, the episode seed, the start's
+  fingerprint, and whether the start was doomed (1), avoidable (0) or not assessed (NULL), by
+  which test (``method``) in how many seconds.  Computed once per episode by the command that
+  first runs the world, shared by every agent's row; each row also keeps its own start's
+  fingerprint in ``episodes.start`` (NULL in rows stored before version 3).
 * ``invocations``: each ``rmm-bench`` command: its arguments, run keys, episode count, the
   process id and host that ran it, and its status: ``running`` while it runs, then
   ``finished`` (every requested episode has a result), ``interrupted`` (Ctrl-C, or found
@@ -108,8 +114,10 @@ def _column(annotation) -> str:
 #: The ``episodes`` table's columns, in order: :class:`EpisodeResult`'s fields (its owner).
 EPISODE_FIELDS = {name: _column(tp) for name, tp in typing.get_type_hints(EpisodeResult).items()}
 
+#: columns of ``episodes`` added by a later migration than version 1, with the version that adds each
+_LATER_EPISODE_FIELDS = {"start": 3}
 # the episodes table as version 1 creates it (a later migration adding a column adds it itself)
-_V1_EPISODE_FIELDS = dict(EPISODE_FIELDS)
+_V1_EPISODE_FIELDS = {k: v for k, v in EPISODE_FIELDS.items() if k not in _LATER_EPISODE_FIELDS}
 
 # error kinds that are failures of the run rather than results: every rerun retries them
 RETRIED_ERRORS = ("timeout", "lost_worker", "input_changed", "env")
@@ -177,11 +185,25 @@ def _clock_traces(db: sqlite3.Connection) -> None:
     )
 
 
+def _starts(db: sqlite3.Connection) -> None:
+    """Version 2 -> 3: each episode's start fingerprint (``episodes.start``) and the ``starts``
+    table of doomed flags, one per world and episode (see the module docstring)."""
+    have = {r[1] for r in db.execute("PRAGMA table_info(episodes)")}
+    if "start" not in have:
+        db.execute("ALTER TABLE episodes ADD COLUMN start TEXT")
+    db.execute(
+        "CREATE TABLE IF NOT EXISTS starts (world_key TEXT NOT NULL, episode INTEGER NOT NULL, seed INTEGER NOT NULL, "
+        "fingerprint TEXT NOT NULL, doomed INTEGER, method TEXT NOT NULL, seconds REAL, "
+        "PRIMARY KEY (world_key, episode))"
+    )
+
+
 #: The schema's migrations in order: entry ``i`` brings a database from version ``i`` to ``i + 1``.
 #: Every later change of the layout is appended here (never edit a released one).
 MIGRATIONS: tuple[tuple[str, Callable[[sqlite3.Connection], None]], ...] = (
     ("the layout of databases written before schema versions (columns added by probing)", _legacy_layout),
     ("clock_traces: the laps of a clocked episode's clock, for replay", _clock_traces),
+    ("episodes.start and starts: each episode's start fingerprint and whether it was doomed", _starts),
 )
 #: The newest schema version this code reads and writes.
 SCHEMA_VERSION = len(MIGRATIONS)
@@ -494,6 +516,35 @@ class ResultsStore:
             raise ResultsDatabaseError(
                 f"{self.path}: the clock trace of episode {episode} of run {run_key} cannot be read: {e}", BAD_INPUT
             ) from None
+
+    @_guarded
+    def starts(self, world_key: str) -> dict[int, dict]:
+        """The stored starts of ``world_key`` (:func:`rmm_envs.starts.world_key`): episode ->
+        ``{"seed", "fingerprint", "doomed" (True / False / None), "method", "seconds"}``; empty
+        for a database from before starts were stored."""
+        if not self._table_exists("starts"):
+            return {}
+        rows = self.db.execute(
+            "SELECT episode, seed, fingerprint, doomed, method, seconds FROM starts WHERE world_key = ?", (world_key,)
+        ).fetchall()
+        return {
+            int(e): {"seed": int(sd), "fingerprint": fp, "doomed": None if d is None else bool(d), "method": m,
+                     "seconds": sec}
+            for e, sd, fp, d, m, sec in rows
+        }  # fmt: skip
+
+    @_guarded
+    def add_starts(self, world_key: str, starts: Sequence[tuple[int, int, str, bool | None, str, float]]) -> None:
+        """Store ``(episode, seed, fingerprint, doomed, method, seconds)`` of ``world_key``'s starts
+        (one transaction; a start stored already is kept: starts never change for a world)."""
+        self._writable()
+        with self.db:
+            self.db.executemany(
+                "INSERT OR IGNORE INTO starts (world_key, episode, seed, fingerprint, doomed, method, seconds) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?)",
+                [(world_key, int(e), int(sd), fp, None if d is None else int(bool(d)), m, float(sec))
+                 for e, sd, fp, d, m, sec in starts],
+            )  # fmt: skip
 
     @_guarded
     def episodes(self, run_key: str, n: int | None = None) -> list[dict]:
