@@ -124,6 +124,7 @@ def test_episode_result_fields_are_the_store_columns():
         "finished": "REAL",
         "error_kind": "TEXT",
         "cost": "REAL",
+        "start": "TEXT",
     }
 
 
