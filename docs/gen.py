@@ -7,6 +7,7 @@ Run ``python docs/gen.py``; ``tests/test_docs.py`` fails when a generated page i
 from __future__ import annotations
 
 import contextlib
+import importlib
 import io
 import sys
 from pathlib import Path
@@ -112,6 +113,10 @@ def cli_parsers():
         ("rmm-bench report", bench.build_report_parser()),
         ("rmm-bench sweep", bench.build_sweep_parser()),
         ("rmm-bench replay", bench.build_replay_parser()),
+        *(
+            (f"rmm-bench {name}", importlib.import_module(module).build_parser())
+            for name, module in bench.SUBCOMMANDS.items()
+        ),
         ("rmm-bench riskmap", figures.riskmap_parser()),
         ("rmm-bench quadrisk", figures.quadrisk_parser()),
         ("rmm-datagen", datagen.build_parser()),

@@ -51,7 +51,7 @@ def _version(path: Path) -> int:
 
 
 def test_schema_version_counts_the_migrations():
-    assert SCHEMA_VERSION == len(MIGRATIONS) == 3
+    assert SCHEMA_VERSION == len(MIGRATIONS) == 4
 
 
 def test_a_new_database_is_created_at_the_newest_version(tmp_path):
@@ -197,6 +197,30 @@ def test_a_version_2_database_gets_start_fingerprints_and_the_starts_table(tmp_p
             1: {"seed": 12, "fingerprint": "def", "doomed": None, "method": "", "seconds": 0.0},
         }
         assert store.starts("other") == {}
+    finally:
+        store.close()
+    assert _version(path) == SCHEMA_VERSION
+
+
+def test_a_version_3_database_gets_the_parts_table(tmp_path):
+    """Migration 4 on a database written at version 3: an empty ``parts`` table, rows untouched."""
+    path = tmp_path / "results.db"
+    store = ResultsStore(path)
+    store.add_episode(EpisodeResult(run_key="k", episode=0, agent="a", seed=1, outcome="goal", steps=7, start="s"))
+    store.close()
+    con = sqlite3.connect(path)
+    con.execute("DROP TABLE parts")
+    con.execute("PRAGMA user_version = 3")
+    con.commit()
+    con.close()
+    read = ResultsStore(path, read_only=True)  # read as it is: no parts table
+    assert not read._table_exists("parts") and read.episodes("k")[0]["start"] == "s"
+    read.close()
+    store = ResultsStore(path)
+    try:
+        assert store.version == 3 and store._table_exists("parts")
+        assert store.db.execute("SELECT COUNT(*) FROM parts").fetchone()[0] == 0
+        assert store.episodes("k")[0]["steps"] == 7
     finally:
         store.close()
     assert _version(path) == SCHEMA_VERSION

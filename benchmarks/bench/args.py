@@ -121,6 +121,13 @@ def run_parser(description: str) -> argparse.ArgumentParser:
     )
     _common(p, "lrmm")
     p.add_argument("--clock", default="wall", help="wall (default), cpu, or fixed:MS")
+    p.add_argument(
+        "--shard",
+        default=None,
+        metavar="K/N",
+        help="run only share K of N of the episodes (episode i when i mod N = K - 1; the same on every "
+        "machine), to merge later with rmm-bench merge (docs/machines.md)",
+    )
     return p
 
 
@@ -137,6 +144,14 @@ def report_parser() -> argparse.ArgumentParser:
         help="which recorded run (default: the last); repeat to merge several (one table per configuration)",
     )
     p.add_argument("--batch-size", type=int, default=64)
+    p.add_argument(
+        "--html",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="FILE",
+        help="also write the results page: one self-contained HTML file (default FILE: DIR/results.html)",
+    )
     return p
 
 
@@ -170,6 +185,7 @@ def _check_counts(args) -> None:
 
 def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
     from rmm_bench.checks import env_arguments, env_default, parse_agent_opts, resolve_agents
+    from rmm_bench.config import parse_shard
     from rmm_guardians.registry import guardian_set
 
     classes = resolve_agents(args.agent)
@@ -209,6 +225,7 @@ def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
         parsed=vars(args),
         latencies=latencies,
         agent_set=args.agent.strip() if guardian_set(args.agent) is not None else None,
+        shard=None if getattr(args, "shard", None) is None else parse_shard(args.shard),
     )
 
 
@@ -221,6 +238,9 @@ def parse_run(argv: list[str], description: str) -> BenchConfig:
         make_clock(args.clock)
     except ValueError as e:
         raise ValueError(f"--clock {args.clock}: {e}") from None
+    from rmm_bench.config import parse_shard
+
+    args.shard = None if args.shard is None else "/".join(map(str, parse_shard(args.shard)))
     return _config(args, args.clock)
 
 
@@ -245,14 +265,19 @@ class ReportRequest:
     dir: Path
     invocations: tuple[int, ...] | None
     batch_size: int
+    html: Path | None = None  # the results page to write (None: none)
 
 
 def parse_report(argv: list[str]) -> ReportRequest:
     args = report_parser().parse_args(argv)
     if args.batch_size < 1:
         raise ValueError(f"--batch-size must be >= 1, got {args.batch_size}")
+    html = None if args.html is None else (Path(args.html) if args.html else Path(args.dir) / "results.html")
     return ReportRequest(
-        dir=Path(args.dir), invocations=tuple(args.invocation) if args.invocation else None, batch_size=args.batch_size
+        dir=Path(args.dir),
+        invocations=tuple(args.invocation) if args.invocation else None,
+        batch_size=args.batch_size,
+        html=html,
     )
 
 

@@ -7,6 +7,9 @@
     rmm-bench --agent mypkg.guard:MyGuardian               # a third-party guardian
     rmm-bench report results/                              # rebuild the last run's table from the database
     rmm-bench replay results/ --agent lrmm --episode 17    # re-simulate a stored episode and verify its row
+    rmm-bench compare results/ --agents lrmm,cbf           # paired comparison on the episodes both ran
+    rmm-bench --agent lrmm --shard 1/2 --out part1         # one machine's share; then: rmm-bench merge all part1 part2
+    rmm-bench export results/ --format parquet             # the episodes in a documented, versioned schema
     rmm-bench --agent lrmm --episodes 2048 --retry-errors  # after fixing a guardian: rerun its error episodes
     rmm-bench sweep --agent lrmm,cbf --latency 0,1,5,20,50 # collision rate against decision latency
     rmm-bench riskmap --seed 3                             # the paper's Fig. 1 (a maze, by inferred risk)
@@ -90,7 +93,15 @@ from rmm_bench.run import RunFailed, cmd_run, cmd_sweep
 from rmm_bench.store import ResultsDatabaseError
 from rmm_envs.failures import describe_os_error
 
-__all__ = ["build_parser", "build_replay_parser", "build_report_parser", "build_sweep_parser", "main"]
+__all__ = ["SUBCOMMANDS", "build_parser", "build_replay_parser", "build_report_parser", "build_sweep_parser", "main"]
+
+#: Subcommands that live in a module of their own: name -> module, which offers ``build_parser()``
+#: (its ``argparse`` parser, for ``--help`` and docs/cli.md) and ``cmd(argv) -> int`` (the exit status).
+SUBCOMMANDS = {
+    "compare": "rmm_bench.compare",
+    "merge": "rmm_bench.merge",
+    "export": "rmm_bench.export",
+}
 
 
 def build_parser():
@@ -121,6 +132,10 @@ def main(argv: list[str] | None = None) -> int:
             from rmm_bench.replay import cmd_replay
 
             return cmd_replay(_args.parse_replay(argv[1:]))
+        if argv and argv[0] in SUBCOMMANDS:
+            import importlib
+
+            return int(importlib.import_module(SUBCOMMANDS[argv[0]]).cmd(argv[1:]))
         if argv and argv[0] in ("riskmap", "quadrisk"):
             from rmm_bench.figures import main as figure
 

@@ -187,6 +187,29 @@ def _json_copy(name: str, value: dict) -> dict:
         raise ValueError(f"{name} must hold JSON values (it is stored and hashed), got {value!r}: {e}") from None
 
 
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"K/N"`` -> ``(K, N)`` with ``1 <= K <= N``; anything else is a ``ValueError`` naming it."""
+    k, slash, n = str(text).strip().partition("/")
+    try:
+        if not slash:
+            raise ValueError
+        kk, nn = int(k), int(n)
+    except ValueError:
+        raise ValueError(f"--shard {text!r}: expected K/N, two whole numbers with 1 <= K <= N (e.g. 1/2)") from None
+    if not 1 <= kk <= nn:
+        raise ValueError(f"--shard {text}: expected 1 <= K <= N (share K of N shares), got K={kk}, N={nn}")
+    return kk, nn
+
+
+def shard_episodes(episodes: int, shard: tuple[int, int] | None) -> list[int]:
+    """The episode indices of ``0 .. episodes-1`` in ``shard`` ``(K, N)``: those with ``i mod N
+    == K - 1`` (balanced shares, the same on every machine); all of them when ``shard`` is None."""
+    if shard is None:
+        return list(range(episodes))
+    k, n = shard
+    return list(range(k - 1, episodes, n))
+
+
 @dataclass(frozen=True)
 class AgentRun:
     """One agent on one env configuration; ``agent_kwargs`` are its constructor arguments."""
@@ -325,6 +348,11 @@ class BenchConfig:
     )  # agent -> the files its run reads (input_digests), set once checked
     #: agent -> its guardian class, resolved once when the command is parsed (neither stored nor hashed)
     agent_classes: dict = field(default_factory=dict, compare=False, repr=False)
+    shard: tuple[int, int] | None = None  # (K, N): run only share K of N of the episodes (--shard K/N)
+
+    def episode_indices(self) -> list[int]:
+        """The episodes this command owes: ``0 .. episodes-1``, or its shard's share of them."""
+        return shard_episodes(self.episodes, self.shard)
 
     def __post_init__(self) -> None:
         object.__setattr__(

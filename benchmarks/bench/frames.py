@@ -30,7 +30,7 @@ def load_results(path, *, expand_stats: bool = False):
         raise FileNotFoundError(
             f"no results database at {db} (expected a directory written by rmm-bench, or its results.db)"
         )
-    store = ResultsStore(db)
+    store = ResultsStore(db, read_only=True)
     try:
         df = pd.read_sql_query(
             "SELECT e.*, r.config AS config FROM episodes e JOIN runs r ON r.run_key = e.run_key "

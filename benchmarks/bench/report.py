@@ -14,6 +14,7 @@ import math
 from collections import Counter
 from pathlib import Path
 
+from rmm_bench.config import parse_shard, shard_episodes
 from rmm_bench.metrics import aggregate
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore
 from rmm_envs.catalog import current_id
@@ -371,10 +372,13 @@ def _legacy_meta(agent: str, config: dict) -> dict:
     return meta
 
 
-def table_rows(store: ResultsStore, run_keys: dict[str, str], episodes, batch_size: int = 64) -> list[dict]:
+def table_rows(
+    store: ResultsStore, run_keys: dict[str, str], episodes, batch_size: int = 64, requested: dict | None = None
+) -> list[dict]:
     """Aggregate rows from the stored rows alone; ``episodes`` is one count for every agent or a
-    dict per agent.  Each row also says how many episodes have a result (``with_result``: all
-    stored but those over the time limit or lost with their worker)."""
+    dict per agent; ``requested``: per agent, how many of them the command owed when fewer (a
+    ``--shard``'s share).  Each row also says how many episodes have a result (``with_result``:
+    all stored but those over the time limit or lost with their worker)."""
     rows = []
     for agent, key in run_keys.items():
         n = episodes[agent] if isinstance(episodes, dict) else episodes
@@ -391,7 +395,7 @@ def table_rows(store: ResultsStore, run_keys: dict[str, str], episodes, batch_si
                 "agent": agent,
                 "obs": meta.get("observation", "?"),
                 "n_obst": meta.get("n_obstacles", "?"),
-                "requested": n,
+                "requested": (requested or {}).get(agent, n),
                 "with_result": with_result,
                 "missing": dict(missing),
                 **agg,
@@ -470,6 +474,14 @@ def _merge_csv(parts: list[tuple[dict, str]]) -> str:
     return buf.getvalue()
 
 
+def _shard_note(shards: set[str], requested: dict[str, int]) -> str:
+    """', shard K/N: M of them' for a sharded command (``rmm-bench merge`` joins the shards)."""
+    if not shards:
+        return ""
+    counts = "/".join(map(str, sorted(set(requested.values()))))
+    return f", shard {', '.join(sorted(shards))}: {counts} of them (rmm-bench merge joins the shards)"
+
+
 def write_report(
     store: ResultsStore,
     out: Path,
@@ -500,11 +512,16 @@ def write_report(
     mixed = len(groups) > 1
     texts, md, tex, csv_parts, figure_rows = [], [], [], [], []
     for number, group in enumerate(groups.values(), 1):
-        run_keys, episodes = {}, {}
+        run_keys, episodes, requested = {}, {}, {}
+        shards = set()
         for inv in group:
+            shard = inv["args"].get("shard")
+            if shard:
+                shards.add(shard)
             for agent, key in inv["run_keys"].items():
                 run_keys[agent], episodes[agent] = key, inv["episodes"]
-        rows = table_rows(store, run_keys, episodes, batch_size)
+                requested[agent] = len(shard_episodes(inv["episodes"], parse_shard(shard) if shard else None))
+        rows = table_rows(store, run_keys, episodes, batch_size, requested)
         measured = str(group[-1]["args"].get("clock", "")).strip().lower().startswith("fixed")
         tables = format_tables(rows, batch_size, measured)
         args = group[-1]["args"]
@@ -516,7 +533,8 @@ def write_report(
         counts = sorted(set(episodes.values()))
         text = (
             f"Table I{' ' + label.strip() if mixed else ''}: {_header(args)}, {'/'.join(map(str, counts))} episodes "
-            f"requested per agent (results in {out})\n{_completeness(rows, group)}\n{tables['md']}"
+            f"requested per agent{_shard_note(shards, requested)} (results in {out})\n"
+            f"{_completeness(rows, group)}\n{tables['md']}"
         )
         paper = format_paper_table(run_keys)
         if paper and args.get("env") in PAPER_ENVS:  # the paper evaluated guardians on Dubins4D only
@@ -560,7 +578,7 @@ def cmd_report(request) -> int:
     if not (request.dir / "results.db").is_file():
         print(f"rmm-bench report: error: no results.db in {request.dir}", file=sys.stderr)
         return 2
-    store = ResultsStore(request.dir / "results.db")
+    store = ResultsStore(request.dir / "results.db", read_only=True)  # a report never changes the database
     try:
         if request.invocations:
             invs = [store.invocation(i) for i in request.invocations]

@@ -90,9 +90,11 @@ def plan_tasks(
     backend: str,
     retry_errors: bool = False,
     classes: dict | None = None,
+    indices: list[int] | None = None,
 ) -> list[EpisodeTask]:
-    """The episodes ``0 .. episodes-1`` of each run that the store lacks (or holds as a retried
-    failure); ``classes``: each agent's class as the command resolved it (else resolved by name)."""
+    """The episodes ``0 .. episodes-1`` (or ``indices``, a shard's) of each run that the store
+    lacks (or holds as a retried failure); ``classes``: each agent's class as the command
+    resolved it (else resolved by name)."""
     tasks = []
     for agent, run in runs.items():
         key = run.key
@@ -107,7 +109,7 @@ def plan_tasks(
                 threads=threads,
                 import_path=(os.getcwd(),),
             )
-            for i in range(episodes)
+            for i in (range(episodes) if indices is None else indices)
             if i not in done
         ]
     return tasks
@@ -200,13 +202,14 @@ def execute(
     _announce_new_runs(store, runs)
     for agent, run in runs.items():
         store.ensure_run(run.key, agent, run.as_dict(), provenance | {"guardian": (meta or {}).get(agent, {})})
-    assess_starts(store, runs, range(config.episodes), config.progress)
+    indices = config.episode_indices()
+    assess_starts(store, runs, indices, config.progress)
     tasks = plan_tasks(
-        store, runs, config.episodes, config.workers, config.backend, config.retry_errors, config.agent_classes
+        store, runs, config.episodes, config.workers, config.backend, config.retry_errors, config.agent_classes, indices
     )
     unfinished = {a: 0 for a in runs}
     if tally is not None:
-        tally.update(reused=len(runs) * config.episodes - len(tasks), ran=len(tasks))
+        tally.update(reused=len(runs) * len(indices) - len(tasks), ran=len(tasks))
     if not tasks:
         return unfinished
     from tqdm import tqdm

@@ -34,6 +34,11 @@ Tables:
   which test (``method``) in how many seconds.  Computed once per episode by the command that
   first runs the world, shared by every agent's row; each row also keeps its own start's
   fingerprint in ``episodes.start`` (NULL in rows stored before version 3).
+* ``parts`` (schema version 4): in a database written by ``rmm-bench merge``, one row per
+  input it joined (``source``: the file as named on the command line): the host, package
+  version, git revision, command line and shard of the command that ran its episodes, when it
+  started and finished, how many episodes it brought and its run keys, and when it was merged.
+  Empty in a database written by runs alone (their provenance is in ``runs``).
 * ``invocations``: each ``rmm-bench`` command: its arguments, run keys, episode count, the
   process id and host that ran it, and its status: ``running`` while it runs, then
   ``finished`` (every requested episode has a result), ``interrupted`` (Ctrl-C, or found
@@ -198,12 +203,23 @@ def _starts(db: sqlite3.Connection) -> None:
     )
 
 
+def _parts(db: sqlite3.Connection) -> None:
+    """Version 3 -> 4: the ``parts`` table, the provenance of each database ``rmm-bench merge``
+    joined into this one (see the module docstring)."""
+    db.execute(
+        "CREATE TABLE IF NOT EXISTS parts (part INTEGER PRIMARY KEY, source TEXT NOT NULL, host TEXT, "
+        "package_version TEXT, git_revision TEXT, argv TEXT, shard TEXT, started REAL, finished REAL, "
+        "episodes INTEGER NOT NULL, run_keys TEXT NOT NULL, merged REAL NOT NULL)"
+    )
+
+
 #: The schema's migrations in order: entry ``i`` brings a database from version ``i`` to ``i + 1``.
 #: Every later change of the layout is appended here (never edit a released one).
 MIGRATIONS: tuple[tuple[str, Callable[[sqlite3.Connection], None]], ...] = (
     ("the layout of databases written before schema versions (columns added by probing)", _legacy_layout),
     ("clock_traces: the laps of a clocked episode's clock, for replay", _clock_traces),
     ("episodes.start and starts: each episode's start fingerprint and whether it was doomed", _starts),
+    ("parts: the provenance of each database rmm-bench merge joined", _parts),
 )
 #: The newest schema version this code reads and writes.
 SCHEMA_VERSION = len(MIGRATIONS)
