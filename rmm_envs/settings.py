@@ -4,6 +4,8 @@
 ``RMM_HJ_THREADS``  threads of the HJ guardians' compiled solve when none is given
                     (an integer >= 1; unset: numba's default, the core count)
 ``RMM_HJ_CACHE``    folder of the HJ value-function cache (unset: ``~/.cache/rmm-envs/hj``)
+``RMM_REFERENCE_DIR`` folder of reference results for ``rmm-bench compare --reference``
+                    (unset: the ones shipped in ``rmm_bench/reference``)
 =================== =====================================================================
 
 Everything else is an argument.  ``tests/test_layers.py`` fails if another module of the
@@ -16,12 +18,17 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["HJ_CACHE", "HJ_THREADS", "VARIABLES", "hj_cache_dir", "hj_threads"]
+__all__ = ["HJ_CACHE", "HJ_THREADS", "REFERENCE_DIR", "VARIABLES", "hj_cache_dir", "hj_threads", "reference_dir"]
 
 HJ_THREADS = "RMM_HJ_THREADS"
 HJ_CACHE = "RMM_HJ_CACHE"
+REFERENCE_DIR = "RMM_REFERENCE_DIR"
 #: every variable read here, with what it sets
-VARIABLES = {HJ_THREADS: "threads of the HJ guardians' compiled solve", HJ_CACHE: "folder of the HJ value cache"}
+VARIABLES = {
+    HJ_THREADS: "threads of the HJ guardians' compiled solve",
+    HJ_CACHE: "folder of the HJ value cache",
+    REFERENCE_DIR: "folder of the reference results rmm-bench compare --reference reads",
+}
 
 
 def hj_threads() -> int | None:
@@ -42,3 +49,9 @@ def hj_threads() -> int | None:
 def hj_cache_dir() -> Path:
     """``$RMM_HJ_CACHE`` if set and not empty, else ``~/.cache/rmm-envs/hj``."""
     return Path(os.environ.get(HJ_CACHE) or Path.home() / ".cache" / "rmm-envs" / "hj")
+
+
+def reference_dir() -> Path | None:
+    """``$RMM_REFERENCE_DIR`` as a path, or ``None`` when unset or empty (the shipped results)."""
+    raw = os.environ.get(REFERENCE_DIR)
+    return Path(raw) if raw else None

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from rmm_bench.cli import main
-from rmm_bench.metrics import aggregate, batch_rate, weighted_mean_std
+from rmm_bench.metrics import aggregate, avoidable_collisions, batch_rate, weighted_mean_std
+from rmm_bench.report import AVOIDABLE_HEADER, _doomed_flags
 from rmm_bench.runner import episode_seed
 
 RUN = ["--clock", "fixed:1", "--no-progress", "--env", "Dubins4DParallel-v0"]
@@ -126,6 +127,12 @@ def _check_rendered_numbers(out, aggs: dict) -> None:
             lo, hi = agg[f"{k}_ci"]
             wilson = agg["rate_spread"] == "wilson95" and not np.isnan(agg[k][0])
             expected.append(f"{agg[k][0]:.1f} [{lo:.1f}, {hi:.1f}]†" if wilson else _pm_text(agg[k]))
+            if k == "collision" and AVOIDABLE_HEADER in md.splitlines()[0]:  # the starts were assessed
+                m = agg["avoidable_collision"][0]
+                lo, hi = agg["avoidable_collision_ci"]
+                wilson = agg["avoidable_collision_spread"] == "wilson95" and not np.isnan(m)
+                expected.append(f"{m:.1f} [{lo:.1f}, {hi:.1f}]†" if wilson else _pm_text(agg["avoidable_collision"]))
+                expected.append(str(agg["doomed_starts"]))
         assert cells[3:] == expected + [_pm_text(agg["intervention"]), str(agg["errors"]), str(agg["qp_fallbacks"])]
         tex_line = [ln for ln in tex.splitlines() if ln.startswith(f"{agent} &")][0]
         assert (
@@ -189,6 +196,9 @@ def test_every_agent_end_to_end_and_report(tmp_path, capsys):
     store = ResultsStore(out / "results.db")
     inv = store.invocation()
     aggs = {a: aggregate(store.episodes(inv["run_keys"][a])) for a in agents}
+    for a in agents:  # the starts' doomed flags, where the env has a test
+        config = store.run_config(inv["run_keys"][a])["config"]
+        aggs[a] |= avoidable_collisions(store.episodes(inv["run_keys"][a]), _doomed_flags(store, config))
     store.close()
     _check_rendered_numbers(out, aggs)
     assert (out / "outcomes.png").stat().st_size > 0

@@ -144,24 +144,40 @@ def _by_hand(df, a, b, outcome):
     return int((ea & eb).sum()), int((ea & ~eb).sum()), int((~ea & eb).sum()), int((~ea & ~eb).sum())
 
 
+def _doomed(run) -> dict[int, bool]:
+    from rmm_envs.starts import world_key
+
+    cfg = load_results(run).config.iloc[0]
+    store = ResultsStore(run / "results.db", read_only=True)
+    try:
+        return {
+            e: s["doomed"] for e, s in store.starts(world_key(cfg["env_id"], cfg["env_kwargs"], cfg["seed"])).items()
+        }
+    finally:
+        store.close()
+
+
 def test_counts_match_the_stored_rows(runs):
     df = load_results(runs / "all")
+    doomed = _doomed(runs / "all")
     c = compare_runs([runs / "all"], ["lrmm", "cbf", "inactive"], resamples=200)
     assert c.paired and list(c.agents) == ["lrmm", "cbf", "inactive"]
     assert set(zip(c.pairs.a, c.pairs.b, strict=True)) == {("lrmm", "cbf"), ("lrmm", "inactive"), ("cbf", "inactive")}
     for r in c.pairs.itertuples():
-        assert (r.both, r.a_only, r.b_only, r.neither) == _by_hand(df, r.a, r.b, r.outcome)
-        assert r.n == EPISODES and r.p_value == mcnemar_exact(r.a_only, r.b_only)
+        rows = df if r.outcome != "avoidable collision" else df[~df.episode.map(doomed)]
+        outcome = "collision" if r.outcome == "avoidable collision" else r.outcome
+        assert (r.both, r.a_only, r.b_only, r.neither) == _by_hand(rows, r.a, r.b, outcome)
+        assert r.n == rows.episode.nunique() and r.p_value == mcnemar_exact(r.a_only, r.b_only)
         assert len(r.a_only_episodes) == min(5, r.a_only)
         for e in r.a_only_episodes:  # ready for replay: A had the outcome there, B did not
-            assert df[(df.agent == r.a) & (df.episode == e)].outcome.item() == r.outcome
-            assert df[(df.agent == r.b) & (df.episode == e)].outcome.item() != r.outcome
+            assert df[(df.agent == r.a) & (df.episode == e)].outcome.item() == outcome
+            assert df[(df.agent == r.b) & (df.episode == e)].outcome.item() != outcome
+    assert set(c.pairs.outcome) == {"goal", "collision", "timeout", "avoidable collision"}
     # the floor: every agent failed there
-    for e in c.floor.episode:
-        assert "goal" not in set(df[df.episode == e].outcome)
     failed = df.groupby("episode").outcome.apply(lambda s: "goal" not in set(s))
     assert sorted(c.floor.episode) == sorted(failed[failed].index)
-    assert "starts not assessed" in " ".join(c.notes)
+    assert list(c.floor.doomed) == [doomed[e] for e in c.floor.episode]
+    assert not any("not assessed" in n for n in c.notes)
 
 
 def test_agents_in_two_directories_pair_as_in_one(runs):
@@ -204,27 +220,14 @@ def test_rows_without_fingerprints_pair_only_within_one_database(runs, tmp_path,
     assert "no start fingerprint" in capsys.readouterr().err
 
 
-def test_avoidable_collisions_over_the_avoidable_starts(runs, tmp_path):
+def test_starts_not_assessed_give_no_avoidable_row(runs, tmp_path):
     copy = tmp_path / "all"
     shutil.copytree(runs / "all", copy)
-    df = load_results(copy)
-    # flag as doomed every episode where all three collided, and episode 0
-    per = df.groupby("episode").outcome.apply(lambda s: set(s) == {"collision"})
-    doomed = set(per[per].index) | {0}
-    from rmm_envs.starts import world_key
-
-    store = ResultsStore(copy / "results.db")
-    cfg = df.config.iloc[0]
-    key = world_key(cfg["env_id"], cfg["env_kwargs"], cfg["seed"])
-    store.add_starts(key, [(e, 0, "x", e in doomed, "test", 0.0) for e in range(EPISODES)])
-    store.close()
+    with sqlite3.connect(copy / "results.db") as db:
+        db.execute("UPDATE starts SET doomed = NULL WHERE episode = 3")
     c = compare_runs([copy], ["lrmm", "cbf"], resamples=10)
-    row = c.pairs[c.pairs.outcome == "avoidable collision"].iloc[0]
-    keep = df[~df.episode.isin(doomed)]
-    assert row.n == EPISODES - len(doomed)
-    assert (row.both, row.a_only, row.b_only, row.neither) == _by_hand(keep, "lrmm", "cbf", "collision")
-    assert not any("not assessed" in n for n in c.notes)
-    assert set(c.floor[c.floor.doomed == True].episode) <= doomed  # noqa: E712
+    assert "avoidable collision" not in set(c.pairs.outcome)
+    assert any("starts not assessed" in n for n in c.notes)
 
 
 def test_csv_and_markdown_outputs(runs, tmp_path, capsys):
@@ -233,7 +236,7 @@ def test_csv_and_markdown_outputs(runs, tmp_path, capsys):
     import pandas as pd
 
     table = pd.read_csv(out)
-    assert list(table.outcome) == ["goal", "collision", "timeout"] and set(table.a) == {"lrmm"}
+    assert list(table.outcome) == ["goal", "collision", "timeout", "avoidable collision"] and set(table.a) == {"lrmm"}
     assert main(["compare", str(runs / "all"), "--agents", "lrmm,cbf", "--resamples", "50", "--seed", "3"]) == 0
     text = capsys.readouterr().out
     assert "| lrmm | cbf | collision |" in text and "seed 3, 50 resamples" in text and "Floor:" in text

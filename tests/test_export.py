@@ -76,13 +76,17 @@ def test_doomed_flags_come_from_the_starts_table(run, tmp_path):
 
     store = ResultsStore(copy / "results.db")
     config = store.runs_of("lrmm")[0]["config"]
-    store.add_starts(world_key(config["env_id"], config["env_kwargs"], config["seed"]), [(3, 0, "x", True, "t", 0.0)])
+    key = world_key(config["env_id"], config["env_kwargs"], config["seed"])
+    with store.db:
+        store.db.execute("UPDATE starts SET doomed = (episode = 3) WHERE world_key = ?", (key,))
+        store.db.execute("UPDATE starts SET doomed = NULL WHERE world_key = ? AND episode = 5", (key,))
     store.close()
     from rmm_bench.export import export_frame
 
     df = export_frame(copy)
     assert df[df.episode == 3].doomed.tolist() == [True, True]
-    assert df[df.episode != 3].doomed.isna().all()
+    assert df[df.episode == 5].doomed.isna().all()
+    assert not df[~df.episode.isin([3, 5])].doomed.any()
 
 
 @pytest.mark.parametrize(

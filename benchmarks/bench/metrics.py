@@ -34,6 +34,7 @@ from rmm_bench.store import RETRIED_ERRORS
 
 __all__ = [
     "aggregate",
+    "avoidable_collisions",
     "batch_rate",
     "rate_spread",
     "table_i",
@@ -170,6 +171,35 @@ def aggregate(episodes: list[dict], batch_size: int = 64) -> dict:
             **{f"{k}_ci": _NAN2 for k in _OUTCOMES},
         }
     return _aggregate_frame(pd.DataFrame.from_records(episodes), batch_size)
+
+
+def avoidable_collisions(episodes: list[dict], doomed: dict[int, bool | None], batch_size: int = 64) -> dict:
+    """The collision rate over the avoidable starts (the paper's collision rate with the starts no
+    control could save left out), in %, as mean and spread over batches of ``batch_size`` of
+    those episodes (or the Wilson half-width below two batches, as :func:`batch_rate`), and how
+    many starts were doomed: ``{"avoidable_collision": (m, s), "avoidable_collision_ci",
+    "avoidable_collision_spread", "doomed_starts": n, "avoidable_starts": n}``, or ``{}`` when a start among ``episodes`` was not assessed
+    (``doomed``: episode -> the starts table's flag).  Episodes without a result are left out,
+    as in the other rates."""
+    resulted = [
+        e
+        for e in sorted(episodes, key=lambda e: e["episode"])
+        if not (e["outcome"] == "error" and (e.get("error_kind") or "guardian") in RETRIED_ERRORS)
+    ]
+    flags = [doomed.get(int(e["episode"])) for e in resulted]
+    if not resulted or any(f is None for f in flags):
+        return {}
+    avoidable = [e for e, f in zip(resulted, flags, strict=True) if not f]
+    m, s = batch_rate([e["outcome"] == "collision" for e in avoidable], batch_size) if avoidable else _NAN2
+    spread = rate_spread(len(avoidable), batch_size)
+    lo, hi = wilson_interval(m, len(avoidable)) if spread == "wilson95" and avoidable else _NAN2
+    return {
+        "avoidable_collision": (100 * m, 100 * s),
+        "avoidable_collision_ci": (100 * lo, 100 * hi),
+        "avoidable_collision_spread": spread,
+        "doomed_starts": int(sum(bool(f) for f in flags)),
+        "avoidable_starts": len(avoidable),
+    }
 
 
 def table_i(df, batch_size: int = 64):

@@ -15,7 +15,7 @@ from collections import Counter
 from pathlib import Path
 
 from rmm_bench.config import parse_shard, shard_episodes
-from rmm_bench.metrics import aggregate
+from rmm_bench.metrics import aggregate, avoidable_collisions
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore
 from rmm_envs.catalog import current_id
 
@@ -120,6 +120,9 @@ def _pm(v, digits=1) -> str:
     return f"{m:.{digits}f} ± {s:.{digits}f}"
 
 
+#: Table I's column of collisions from avoidable starts (shown where every start was assessed)
+AVOIDABLE_HEADER = "Collision rate, avoidable starts [% of them]"
+
 #: The mark on rates whose spread is the Wilson interval (fewer than two batches).
 WILSON_MARK = "†"
 
@@ -142,7 +145,8 @@ def spread_note(rows: list[dict], batch_size: int) -> str:
 def _rate(r: dict, key: str) -> str:
     """A rate's cell: ``mean ± std`` over batches, or ``mean [low, high]†`` (the Wilson interval)."""
     ci = r.get(f"{key}_ci")
-    if r.get("rate_spread") != "wilson95" or ci is None or math.isnan(ci[0]) or math.isnan(r[key][0]):
+    spread = r.get(f"{key}_spread", r.get("rate_spread"))
+    if spread != "wilson95" or ci is None or math.isnan(ci[0]) or math.isnan(r[key][0]):
         return _pm(r[key])
     return f"{r[key][0]:.1f} [{ci[0]:.1f}, {ci[1]:.1f}]{WILSON_MARK}"
 
@@ -154,6 +158,10 @@ def format_tables(rows: list[dict], batch_size: int = 64, measured: bool = False
     header = ["Agent", "Observation", "Obstacles", "Episodes"] + [c[1] for c in COLUMNS] + ["Errors", "QP fallbacks"]
     if measured:
         header.insert(5, "Measured decision time [ms]")
+    assessed = bool(rows) and all("avoidable_collision" in r for r in rows)  # every start's doomed flag stored
+    if assessed:
+        at = header.index("Collision rate [% eps]") + 1
+        header[at:at] = [AVOIDABLE_HEADER, "Doomed starts"]
     body = []
     for r in rows:
         n_obst = (
@@ -163,7 +171,10 @@ def format_tables(rows: list[dict], batch_size: int = 64, measured: bool = False
         if measured:
             dec = r.get("decision_ms", (float("nan"), float("nan")))
             cells.append(_pm(dec, _digits(dec[0])) if not math.isnan(dec[0]) else "n/a")
-        cells += [_rate(r, k) for k, _ in COLUMNS[1:]]
+        rates = [_rate(r, k) for k, _ in COLUMNS[1:]]
+        if assessed:
+            rates[2:2] = [_rate(r, "avoidable_collision"), str(r["doomed_starts"])]
+        cells += rates
         body.append(cells + [str(r["errors"]), str(r["qp_fallbacks"])])
     md = "| " + " | ".join(header) + " |\n|" + "|".join("---" for _ in header) + "|\n"
     md += "".join("| " + " | ".join(b) + " |\n" for b in body)
@@ -193,6 +204,7 @@ def format_tables(rows: list[dict], batch_size: int = 64, measured: bool = False
             "decision_ms_std",
             "rate_spread",
         ]
+        + (["avoidable_collision_mean", "avoidable_collision_std", "doomed_starts"] if assessed else [])
     )
     for r in rows:
         w.writerow(
@@ -212,6 +224,7 @@ def format_tables(rows: list[dict], batch_size: int = 64, measured: bool = False
                 *r.get("decision_ms", (float("nan"), float("nan"))),
                 r.get("rate_spread", "batches"),
             ]
+            + ([*r["avoidable_collision"], r["doomed_starts"]] if assessed else [])
         )
     cols = "llcr" + "r" * (len(header) - 6)
     tex = f"\\begin{{tabular}}{{{cols}}}\n" + " & ".join(h.replace("%", "\\%") for h in header[:-2]) + " \\\\ \\hline\n"
@@ -385,7 +398,7 @@ def table_rows(
         eps = store.episodes(key, n)
         run = store.run_config(key)
         meta = run["provenance"].get("guardian") or _legacy_meta(agent, run["config"])
-        agg = aggregate(eps, batch_size)
+        agg = aggregate(eps, batch_size) | avoidable_collisions(eps, _doomed_flags(store, run["config"]), batch_size)
         missing = Counter(
             _missing_reason(e) for e in eps if e["outcome"] == "error" and e.get("error_kind") in RETRIED_ERRORS
         )
@@ -402,6 +415,14 @@ def table_rows(
             }
         )
     return rows
+
+
+def _doomed_flags(store: ResultsStore, config: dict) -> dict[int, bool | None]:
+    """Episode -> doomed flag of the starts of a run's world (empty before starts were stored)."""
+    from rmm_envs.starts import world_key
+
+    key = world_key(config["env_id"], config.get("env_kwargs", {}), int(config.get("seed", 0)))
+    return {e: s["doomed"] for e, s in store.starts(key).items()}
 
 
 #: why an episode of a kind in RETRIED_ERRORS has no result, as the INCOMPLETE line says it

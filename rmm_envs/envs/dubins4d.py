@@ -105,7 +105,10 @@ Privileged information is also available through :meth:`Dubins4DCirclesEnv.privi
 ``gym.make("Dubins4DGuarded-v0", step_dt=0.1, n_rays=12, ray_length=10.0,
 max_episode_sim_time=100.0, n_obstacles=5, obstacle_min_rad=2.0, obstacle_max_rad=5.0,
 goal_min_rad=0.1, goal_max_rad=1.0, n_path_points=16, driver_params=None, clock=None,
-render_mode=None, driver_solver="closed_form")``.  ``clock`` ("wall", "cpu", "fixed:MS" or a
+render_mode=None, driver_solver="closed_form", starts="any")``.  ``starts="avoidable"`` redraws
+a start (from the episode's seed) until some control avoids every obstacle, by the doomed test
+of :mod:`rmm_envs.doomed` (off by default: the paper's sampling keeps doomed starts; see
+docs/concepts.md, Doomed starts).  ``clock`` ("wall", "cpu", "fixed:MS" or a
 :class:`rmm_envs.clocks.Clock`) only measures the agent's compute time for the statistics in the
 blocking env.  ``driver_solver``: how the driver's QP is solved, ``"closed_form"`` (exact, the
 default) or ``"osqp"`` (the earlier solver, kept for checking; equal to about 1e-7).
@@ -137,6 +140,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+import rmm_envs.doomed  # noqa: F401  (registers this env's doomed test)
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.drivers.dubins4d import CLFDriver, DriverParams
@@ -164,6 +168,12 @@ def observation_layout(n_rays: int = 12) -> ObservationLayout:
         ("rays", n_rays),
         ray_angles=[2.0 * math.pi * i / n_rays for i in range(n_rays)],
     )
+
+
+#: the values of the ``starts`` argument: the paper's sampling, or only starts some control saves
+STARTS = ("any", "avoidable")
+#: draws ``starts="avoidable"`` makes before it gives up
+AVOIDABLE_ATTEMPTS = 100
 
 
 class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
@@ -195,6 +205,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         clock: Clock | str | None = None,
         render_mode: str | None = None,
         driver_solver: str = "closed_form",
+        starts: str = "any",
     ) -> None:
         # Every bound is finite: an infinite episode length, ray length or radius would silently
         # disable what it configures (no timeout, rays that never end, a goal covering everything).
@@ -224,8 +235,10 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
                 ),
                 (whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
                 self.check_render_mode(render_mode),
+                (starts in STARTS, "starts", starts, f"one of {', '.join(map(repr, STARTS))}"),
             ]
         )
+        self.starts = starts
         self.step_dt = float(step_dt)
         self.n_rays = int(n_rays)
         self.ray_length = float(ray_length)
@@ -263,6 +276,8 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         obstacles, state, goal = self.generate_start(self.np_random, options)
+        if self.starts == "avoidable":
+            obstacles, state, goal = self._avoidable_start(obstacles, state, goal, options)
         self._start_episode(obstacles, state, goal)
         obs = self._observe()
         info = {"sim_time": 0.0, "state": self._state.copy(), "nominal_control": self.update_nominal()}
@@ -270,6 +285,20 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
             self.render()
         self.clock.start()
         return obs, info
+
+    def _avoidable_start(self, obstacles, state, goal, options):
+        """With ``starts="avoidable"``: the start redrawn from the episode's generator (so still a
+        function of the seed) until the doomed test (:mod:`rmm_envs.doomed`) finds it avoidable."""
+        from rmm_envs.doomed import dubins4d_escapes
+
+        for _ in range(AVOIDABLE_ATTEMPTS):
+            if dubins4d_escapes(self.system, state, obstacles, goal):
+                return obstacles, state, goal
+            obstacles, state, goal = self.generate_start(self.np_random, options)
+        raise RuntimeError(
+            f"starts='avoidable': no avoidable start in {AVOIDABLE_ATTEMPTS} draws (reset options "
+            f"{sorted(options or {})}); the given parts leave no start that any control saves"
+        )
 
     def _start_episode(self, obstacles: np.ndarray, state: np.ndarray, goal: np.ndarray) -> None:
         self.scene = Dubins4DScene(obstacles, goal, self.system, self.n_rays, self.ray_length)
