@@ -178,9 +178,9 @@ def avoidable_collisions(episodes: list[dict], doomed: dict[int, bool | None], b
     control could save left out), in %, as mean and spread over batches of ``batch_size`` of
     those episodes (or the Wilson half-width below two batches, as :func:`batch_rate`), and how
     many starts were doomed: ``{"avoidable_collision": (m, s), "avoidable_collision_ci",
-    "avoidable_collision_spread", "doomed_starts": n, "avoidable_starts": n}``, or ``{}`` when a start among ``episodes`` was not assessed
-    (``doomed``: episode -> the starts table's flag).  Episodes without a result are left out,
-    as in the other rates."""
+    "avoidable_collision_spread", "doomed_starts": n, "avoidable_starts": n}``, or ``{}`` when
+    a start among ``episodes`` was not assessed (``doomed``: episode -> the starts table's flag).
+    Episodes without a result are left out, as in the other rates."""
     resulted = [
         e
         for e in sorted(episodes, key=lambda e: e["episode"])
