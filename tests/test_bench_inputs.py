@@ -10,6 +10,7 @@ import itertools
 import json
 import sqlite3
 import sys
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -309,3 +310,18 @@ def test_a_stored_traceback_keeps_its_innermost_frames_within_the_limit():
     except OSError as e:
         assert len(_traceback_text(e)) <= TRACEBACK_CHARS
     assert np.isfinite(TRACEBACK_CHARS)
+
+
+def test_shipped_files_are_named_by_their_place_in_the_package(tmp_path):
+    """A shipped model is recorded as package/relative/path, so the same run has the same key on
+    every machine and checkout (what merge and compare across machines rest on)."""
+    import rmm_guardians.lrmm
+    from rmm_bench.config import portable_path, resolve_input
+
+    model = Path(rmm_guardians.lrmm.__file__).parent / "models" / "dubins4d_act.npz"
+    key = portable_path(str(model))
+    assert key == "rmm_guardians/lrmm/models/dubins4d_act.npz"
+    assert resolve_input(key) == model.resolve()
+    outside = tmp_path / "mine.npz"
+    outside.write_bytes(b"x")
+    assert portable_path(str(outside)) == str(outside) and resolve_input(str(outside)) == outside

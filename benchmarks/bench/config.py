@@ -102,7 +102,42 @@ def input_digests(guardian, *options: dict) -> dict[str, str]:
     reported = getattr(guardian, "input_files", None)
     if callable(reported):
         out.update({str(k): str(v) for k, v in reported().items()})
-    return dict(sorted(out.items()))
+    return dict(sorted((portable_path(k), v) for k, v in out.items()))
+
+
+#: the project's packages: a file inside one is named by its place in the package
+PROJECT_PACKAGES = ("rmm_envs", "rmm_guardians", "rmm_bench")
+
+
+def _package_dir(name: str) -> Path | None:
+    spec = importlib.util.find_spec(name)
+    origin = spec.origin if spec is not None else None
+    return Path(origin).resolve().parent if origin else None
+
+
+def portable_path(path: str) -> str:
+    """A file inside one of the project's installed packages (a shipped model) as
+    ``package/relative/path``, the same on every machine and checkout, so the same run has the
+    same key wherever it runs; any other path as given."""
+    try:
+        full = Path(path).resolve()
+    except (OSError, RuntimeError):
+        return path
+    for name in PROJECT_PACKAGES:
+        root = _package_dir(name)
+        if root is not None and full.is_relative_to(root):
+            return f"{name}/{full.relative_to(root).as_posix()}"
+    return path
+
+
+def resolve_input(key: str) -> Path:
+    """The file an ``inputs`` key names on this machine: the inverse of :func:`portable_path`."""
+    head, _, rest = key.partition("/")
+    if head in PROJECT_PACKAGES and rest and not Path(key).is_absolute():
+        root = _package_dir(head)
+        if root is not None:
+            return root / rest
+    return Path(key)
 
 
 def module_name(spec: str, env: bool = False) -> str | None:

@@ -50,7 +50,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from rmm_bench.config import AgentRun, EpisodeTask, changed_inputs, file_sha256, module_name
+from rmm_bench.config import AgentRun, EpisodeTask, changed_inputs, file_sha256, module_name, resolve_input
 from rmm_bench.runner import CLOCK_COLUMNS, REPRODUCIBLE_CLOCKS, TIMING_COLUMNS, is_timing_stat
 from rmm_bench.store import EPISODE_FIELDS, ResultsStore
 
@@ -156,11 +156,11 @@ def _check_inputs(config: dict) -> None:
     file that is gone is left to its import, which names the module and why it cannot be imported."""
     sources = _module_sources(config)
     for path, digest in (config.get("inputs") or {}).items():
-        if not Path(path).is_file():
+        if not resolve_input(path).is_file():
             if any(path == s or path.endswith(os.sep + s) for s in sources):
                 continue
             raise ValueError(f"{path}: the run read this file (sha256 {digest[:12]}...) and it no longer exists")
-        now = file_sha256(path)
+        now = file_sha256(resolve_input(path))
         if now != digest:
             raise ValueError(
                 f"{path}: its sha256 is {now[:12]}..., expected {digest[:12]}... (the file the run read); "
