@@ -510,10 +510,13 @@ def write_report(
     batch_size: int = 64,
     quiet: bool = False,
     figure: bool = True,
+    sections: list[dict] | None = None,
 ) -> str:
     """Tables and figures for one recorded command, or several merged (later ones win per agent);
     ``figure=False`` writes the tables only and removes an ``outcomes.png`` left from an earlier
-    run, which would not match them.
+    run, which would not match them.  ``sections``, when given, receives one dict per
+    configuration (``title``, ``args``, ``run_keys``, ``rows``, ``md``, ``notes``: the
+    completeness line), what the results page (:mod:`rmm_bench.html`) lays out.
 
     Commands run under different configurations (env, clock, time acceleration, base step,
     seed) are never put under one header: each configuration gets its own header and table,
@@ -552,6 +555,18 @@ def write_report(
         csv_parts.append((args, tables["csv"]))
         figure_rows += [r | {"agent": f"{r['agent']} [{number}]"} for r in rows] if mixed else rows
         counts = sorted(set(episodes.values()))
+        if sections is not None:
+            sections.append(
+                {
+                    "title": f"Table I{' ' + label.strip() if mixed else ''}: {_header(args)}, "
+                    f"{'/'.join(map(str, counts))} episodes requested per agent{_shard_note(shards, requested)}",
+                    "args": args,
+                    "run_keys": dict(run_keys),
+                    "rows": rows,
+                    "md": tables["md"],
+                    "notes": _completeness(rows, group),
+                }
+            )
         text = (
             f"Table I{' ' + label.strip() if mixed else ''}: {_header(args)}, {'/'.join(map(str, counts))} episodes "
             f"requested per agent{_shard_note(shards, requested)} (results in {out})\n"
@@ -617,7 +632,13 @@ def cmd_report(request) -> int:
                     "episodes back and rewrites latency_sweep.md and .png (the .png not with "
                     "--no-figure)"
                 ) from None
-        write_report(store, request.dir, invs, request.batch_size)
+        sections: list[dict] = []
+        write_report(store, request.dir, invs, request.batch_size, sections=sections)
+        if request.html is not None:
+            from rmm_bench.html import write_page
+
+            path = write_page(request.html, request.dir, store, sections)
+            print(f"wrote {path}")
     finally:
         store.close()
     return 0
