@@ -10,6 +10,7 @@
     rmm-bench compare results/ --agents lrmm,cbf           # paired comparison on the episodes both ran
     rmm-bench --agent lrmm --shard 1/2 --out part1         # one machine's share; then: rmm-bench merge all part1 part2
     rmm-bench export results/ --format parquet             # the episodes in a documented, versioned schema
+    rmm-bench reproduce --quick --check                    # rerun small versions of the published tables
     rmm-bench --agent lrmm --episodes 2048 --retry-errors  # after fixing a guardian: rerun its error episodes
     rmm-bench sweep --agent lrmm,cbf --latency 0,1,5,20,50 # collision rate against decision latency
     rmm-bench riskmap --seed 3                             # the paper's Fig. 1 (a maze, by inferred risk)
@@ -101,6 +102,7 @@ SUBCOMMANDS = {
     "compare": "rmm_bench.compare",
     "merge": "rmm_bench.merge",
     "export": "rmm_bench.export",
+    "reproduce": "rmm_bench.reproduce",
 }
 
 
