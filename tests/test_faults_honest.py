@@ -90,9 +90,11 @@ def test_shipped_model_is_part_of_the_run_key(tmp_path):
     run = AgentRun("lrmm", {}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
     meta = check_runs({"lrmm": run})
     shipped = default_model_path("Dubins4DParallel-v0", variant="act")
-    assert meta["lrmm"]["inputs"] == {str(shipped): file_sha256(shipped)}
+    # named by its place in the package: the same key on every machine and checkout
+    name = "rmm_guardians/lrmm/models/dubins4d_act.npz"
+    assert meta["lrmm"]["inputs"] == {name: file_sha256(shipped)}
     keyed = AgentRun(**{**run.__dict__, "inputs": meta["lrmm"]["inputs"]})
-    other = AgentRun(**{**run.__dict__, "inputs": {str(shipped): "0" * 64}})
+    other = AgentRun(**{**run.__dict__, "inputs": {name: "0" * 64}})
     assert len({run.key, keyed.key, other.key}) == 3
     inactive = AgentRun("inactive", {}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
     assert check_runs({"inactive": inactive})["inactive"]["inputs"] == {}
