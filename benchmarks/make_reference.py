@@ -20,10 +20,12 @@ import sqlite3
 import tempfile
 from pathlib import Path
 
+import rmm_bench.reference
 from rmm_bench.config import PROJECT_PACKAGES, AgentRun, file_sha256, run_key
 from rmm_bench.store import ResultsStore
 
-REFERENCE = Path(__file__).resolve().parent / "bench" / "reference"
+#: where the package keeps its reference results (rmm_bench.reference's folder)
+REFERENCE = Path(rmm_bench.reference.__file__).parent
 
 
 def _shipped_files() -> dict[str, str]:

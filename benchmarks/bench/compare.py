@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from rmm_bench.metrics import wilson_interval
-from rmm_bench.store import RETRIED_ERRORS, ResultsStore
+from rmm_bench.store import RETRIED_ERRORS, ResultsStore, results_database
 
 __all__ = [
     "OUTCOMES",
@@ -162,18 +162,6 @@ _COLUMNS = "episode, seed, outcome, error_kind, steps, sim_time, active_sim_time
 
 def _clock(config: dict) -> str:
     return str(config.get("env_kwargs", {}).get("clock", "wall"))
-
-
-def _database(path: Path) -> Path:
-    p = Path(path)
-    if p.is_file():
-        return p
-    if not p.exists():
-        raise ValueError(f"compare {p}: it does not exist; expected the --out directory of an rmm-bench run")
-    db = p / "results.db"
-    if not db.is_file():
-        raise ValueError(f"compare {p}: it holds no results.db; expected the --out directory of an rmm-bench run")
-    return db
 
 
 def _read_runs(db: Path, prefix: str = "") -> list[_Run]:
@@ -459,7 +447,7 @@ def compare_runs(
         raise ValueError("compare: no results directory given (expected DIR [DIR2 ...])")
     runs: list[_Run] = []
     for d in dirs:
-        runs.extend(_read_runs(_database(Path(d))))
+        runs.extend(_read_runs(results_database(d, "compare")))
     notes: list[str] = []
     if reference:
         ref_runs = _reference_runs({r.group for r in runs}, reference_dir)

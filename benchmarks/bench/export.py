@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from rmm_bench.store import ResultsStore
+from rmm_bench.store import ResultsStore, results_database
 
 __all__ = ["OUTCOME_CODES", "SCHEMA", "SCHEMA_NAME", "build_parser", "cmd", "export_frame", "write_export"]
 
@@ -82,18 +82,6 @@ _FROM_EPISODES = {
 }  # fmt: skip
 
 
-def _database(path: Path) -> Path:
-    p = Path(path)
-    if p.is_file():
-        return p
-    if not p.exists():
-        raise ValueError(f"export {p}: it does not exist; expected the --out directory of an rmm-bench run")
-    db = p / "results.db"
-    if not db.is_file():
-        raise ValueError(f"export {p}: it holds no results.db; expected the --out directory of an rmm-bench run")
-    return db
-
-
 def export_frame(path: str | Path, agents: list[str] | None = None) -> Any:
     """The episodes of the results at ``path`` (a results directory or ``results.db``, opened
     read-only) as a pandas DataFrame of :data:`SCHEMA`'s columns and types, ordered by agent,
@@ -102,7 +90,7 @@ def export_frame(path: str | Path, agents: list[str] | None = None) -> Any:
 
     from rmm_envs.starts import world_key
 
-    store = ResultsStore(_database(Path(path)), read_only=True)
+    store = ResultsStore(results_database(path, "export"), read_only=True)
     try:
         stored = [r[0] for r in store.db.execute("SELECT DISTINCT agent FROM runs ORDER BY agent")]
         for a in agents or []:

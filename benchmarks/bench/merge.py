@@ -25,7 +25,7 @@ from pathlib import Path
 
 from rmm_bench.report import CONFIGURATION, write_report
 from rmm_bench.runner import REPRODUCIBLE_CLOCKS
-from rmm_bench.store import EPISODE_FIELDS, RETRIED_ERRORS, ResultsStore
+from rmm_bench.store import EPISODE_FIELDS, RETRIED_ERRORS, ResultsStore, results_database
 
 __all__ = ["MergeConflict", "MergeSummary", "build_parser", "cmd", "merge"]
 
@@ -45,18 +45,6 @@ class MergeSummary:
     episodes: int = 0
     overlaps: int = 0
     agents: list[str] = field(default_factory=list)
-
-
-def _database(path: Path) -> Path:
-    p = Path(path)
-    if p.is_file():
-        return p
-    if not p.exists():
-        raise ValueError(f"merge {p}: it does not exist; expected the --out directory of an rmm-bench run")
-    db = p / "results.db"
-    if not db.is_file():
-        raise ValueError(f"merge {p}: it holds no results.db; expected the --out directory of an rmm-bench run")
-    return db
 
 
 def _reproducible(config: dict) -> bool:
@@ -104,7 +92,7 @@ def merge(out: str | Path, inputs: list[str | Path], write_tables: bool = True) 
     out = Path(out)
     if len(inputs) < 1:
         raise ValueError("merge: no input given (expected OUT DIR1 DIR2 ...)")
-    dbs = [_database(Path(p)) for p in inputs]
+    dbs = [results_database(p, "merge") for p in inputs]
     target = out / "results.db"
     for given, db in zip(inputs, dbs, strict=True):
         if db.resolve() == target.resolve():

@@ -105,6 +105,7 @@ __all__ = [
     "ResultsStore",
     "decode_laps",
     "encode_laps",
+    "results_database",
 ]
 
 
@@ -223,6 +224,20 @@ MIGRATIONS: tuple[tuple[str, Callable[[sqlite3.Connection], None]], ...] = (
 )
 #: The newest schema version this code reads and writes.
 SCHEMA_VERSION = len(MIGRATIONS)
+
+
+def results_database(path: str | Path, command: str) -> Path:
+    """The results database a command was given: ``path`` itself when it is a file, else
+    ``path/results.db``; ``ValueError`` naming ``command`` and the path when there is none."""
+    p = Path(path)
+    if p.is_file():
+        return p
+    if not p.exists():
+        raise ValueError(f"{command} {p}: it does not exist; expected the --out directory of an rmm-bench run")
+    db = p / "results.db"
+    if not db.is_file():
+        raise ValueError(f"{command} {p}: it holds no results.db; expected the --out directory of an rmm-bench run")
+    return db
 
 
 class ResultsDatabaseError(RuntimeError):
