@@ -1,0 +1,207 @@
+"""The manifests of the published tables: one TOML file per table, read and validated here.
+
+Offers :class:`Manifest`, :func:`read_manifest`, :func:`load_manifests`, :func:`figures` and
+:data:`MANIFESTS` (the shipped folder).  ``rmm-bench reproduce`` (:mod:`rmm_bench.reproduce`)
+reruns and checks them and writes the docs' tables from them.
+
+Two kinds.  A ``reference`` manifest names shipped results (``rmm_bench/reference/NAME.db``)
+and the rates expected of them; its table is printed from those results.  A ``table`` manifest
+holds its table as published (``header``, ``rows`` of printed cells, a ``note`` under it) with
+the shell commands that made it and when they ran (``measured``); its optional ``[check]`` maps
+rows to agents and columns to rates, so that a rerun of its ``rmm-bench`` commands is compared
+with the printed rates.  Either kind may hold a ``[quick]`` version (``rmm-bench`` arguments on a
+few fixed-clock episodes) with the fingerprint of every agent's rows.
+"""
+
+from __future__ import annotations
+
+import re
+import shlex
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = ["COLUMNS", "MANIFESTS", "Manifest", "figures", "load_manifests", "read_manifest"]
+
+#: the folder of the shipped manifests
+MANIFESTS = Path(__file__).resolve().parent / "manifests"
+#: the rates a manifest can state, as Table I's aggregation names them
+COLUMNS = ("goal", "collision", "timeout")
+_COMMON = {"name", "kind", "title", "section", "quick"}
+_KEYS = {
+    "reference": _COMMON | {"reference", "commands", "expect"},
+    "table": _COMMON | {"commands", "measured", "header", "rows", "note", "check"},
+}
+_QUICK_KEYS = {"commands", "fingerprints"}
+_EXPECT_KEYS = {"agent", "column", "value"}
+_CHECK_KEYS = {"agents", "rates"}
+#: what counts as a figure in a page: a decimal, a percentage, a ratio (``12x``), a count with
+#: thousands separators, or a number with a unit of time (what the guard test looks for)
+_NUM = r"(?:\d{1,3}(?:,\d{3})+|\d+)(?:\.\d+)?"
+_UNIT = r"(?:%|x\b|ms\b|µs\b|s\b|min\b|h\b|MB\b|GB\b)"
+FIGURE = re.compile(
+    rf"(?<![\w.])-?{_NUM}(?:\s?(?:-|to)\s?{_NUM})?\s?{_UNIT}"  # with a unit, or a range with one
+    r"|(?<![\w.])-?\d+\.\d+(?![\w.])"  # a decimal
+    r"|(?<![\w.])\d{1,3}(?:,\d{3})+(?![\w])"  # a count with thousands separators
+)
+
+
+@dataclass
+class Manifest:
+    """One published table.  ``kind`` ``"reference"``: ``reference`` names the shipped results,
+    ``commands`` are ``rmm-bench`` argument lists and ``expect`` the rates (agent, column, value
+    in %).  ``kind`` ``"table"``: ``shell`` holds the commands as printed, ``header``/``rows`` the
+    table, ``note`` the text under it, ``measured`` when and where it ran, ``check`` the rows'
+    agents and the rate columns.  Both: the ``section`` of ``docs/reproduction.md`` it belongs to,
+    and the quick version's ``quick_commands`` and per-agent ``fingerprints``."""
+
+    name: str
+    title: str
+    path: Path
+    section: str
+    kind: str = "reference"
+    reference: str = ""
+    commands: list[list[str]] = field(default_factory=list)
+    quick_commands: list[list[str]] = field(default_factory=list)
+    fingerprints: dict[str, str] = field(default_factory=dict)
+    expect: list[dict] = field(default_factory=list)
+    shell: list[str] = field(default_factory=list)
+    measured: str = ""
+    header: list[str] = field(default_factory=list)
+    rows: list[list[str]] = field(default_factory=list)
+    note: str = ""
+    check: dict = field(default_factory=dict)
+
+
+def _bad(path: Path, what: str) -> ValueError:
+    return ValueError(f"manifest {path.name}: {what}")
+
+
+def _check_keys(path: Path, table: dict, allowed: set[str], where: str) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise _bad(path, f"unknown key {unknown[0]!r} in {where} (expected {', '.join(sorted(allowed))})")
+
+
+def _arg_lists(path: Path, value, where: str) -> list[list[str]]:
+    if not (
+        isinstance(value, list)
+        and value
+        and all(isinstance(c, list) and all(isinstance(a, str) for a in c) for c in value)
+    ):
+        raise _bad(path, f"{where} must be a list of commands, each a list of rmm-bench arguments (strings)")
+    for c in value:
+        if "--out" in c:
+            raise _bad(path, f"{where}: leave --out out (reproduce chooses the folder)")
+    return value
+
+
+def _strings(path: Path, value, where: str) -> list[str]:
+    if not (isinstance(value, list) and value and all(isinstance(s, str) and s.strip() for s in value)):
+        raise _bad(path, f"{where} must be a non-empty list of strings")
+    return value
+
+
+def _read_table(path: Path, data: dict) -> dict:
+    header = data.get("header")
+    if not (isinstance(header, list) and header and all(isinstance(s, str) for s in header)):
+        raise _bad(path, "header must be a non-empty list of column names (strings)")
+    rows = data.get("rows")
+    if not isinstance(rows, list) or not rows:
+        raise _bad(path, "rows must be a non-empty list of rows, each a list of cells (strings)")
+    for i, row in enumerate(rows):
+        if not (isinstance(row, list) and all(isinstance(c, str) for c in row)) or len(row) != len(header):
+            raise _bad(path, f"row {i + 1} must be {len(header)} cells (strings), one per header column")
+    shell = _strings(path, data.get("commands"), "commands")
+    check = data.get("check", {})
+    if not isinstance(check, dict):
+        raise _bad(path, "[check] must be a table")
+    if check:
+        _check_keys(path, check, _CHECK_KEYS, "[check]")
+        agents = check.get("agents")
+        if not (isinstance(agents, list) and len(agents) == len(rows) and all(isinstance(a, str) for a in agents)):
+            raise _bad(path, f"[check] agents must be {len(rows)} names, one per row ('' for a row not ours)")
+        rates = check.get("rates")
+        if not isinstance(rates, dict) or not rates:
+            raise _bad(path, "[check] rates must map header columns to rates (goal, collision, timeout)")
+        for col, rate in rates.items():
+            if col not in header:
+                raise _bad(path, f"[check] rates: column {col!r} is not in the header ({', '.join(header)})")
+            if rate not in COLUMNS:
+                raise _bad(path, f"[check] rates: {col!r} = {rate!r}, expected one of {', '.join(COLUMNS)}")
+        if not any(c.startswith("rmm-bench ") for c in shell):
+            raise _bad(path, "[check] needs rmm-bench commands to rerun")
+    return {
+        "shell": shell,
+        "header": header,
+        "rows": rows,
+        "note": str(data.get("note", "")).strip(),
+        "measured": str(data.get("measured", "")).strip(),
+        "check": check,
+    }
+
+
+def read_manifest(path: Path) -> Manifest:
+    """Read and validate one manifest file; ``ValueError`` naming the file and the bad key or value."""
+    import tomllib
+
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise _bad(path, f"not valid TOML ({e})") from None
+    kind = data.get("kind", "reference")
+    if kind not in _KEYS:
+        raise _bad(path, f"kind {kind!r}, expected one of {', '.join(_KEYS)}")
+    _check_keys(path, data, _KEYS[kind], "the manifest")
+    required = ("name", "title", "section", "commands") + (("reference", "quick") if kind == "reference" else ())
+    for key in required:
+        if key not in data:
+            raise _bad(path, f"missing key {key!r}")
+    if data["name"] != path.stem:
+        raise _bad(path, f"name {data['name']!r} must be the file's name {path.stem!r}")
+    quick = data.get("quick", {})
+    if not isinstance(quick, dict):
+        raise _bad(path, "quick must be a table")
+    _check_keys(path, quick, _QUICK_KEYS, "[quick]")
+    m = Manifest(name=data["name"], title=data["title"], path=path, section=data["section"], kind=kind)
+    if quick:
+        m.quick_commands = _arg_lists(path, quick.get("commands"), "[quick] commands")
+        m.fingerprints = dict(quick.get("fingerprints", {}))
+    if kind == "table":
+        for key, value in _read_table(path, data).items():
+            setattr(m, key, value)
+        m.commands = [shlex.split(c)[1:] for c in m.shell if c.startswith("rmm-bench ")]
+        for c in m.commands:
+            if "--out" in c:
+                i = c.index("--out")
+                del c[i : i + 2]
+        return m
+    m.reference = data["reference"]
+    m.commands = _arg_lists(path, data["commands"], "commands")
+    expect = data.get("expect", [])
+    for i, entry in enumerate(expect):
+        _check_keys(path, entry, _EXPECT_KEYS, f"[[expect]] {i + 1}")
+        if entry.get("column") not in COLUMNS:
+            raise _bad(
+                path, f"[[expect]] {i + 1}: column {entry.get('column')!r}, expected one of {', '.join(COLUMNS)}"
+            )
+        value = entry.get("value")
+        if not isinstance(value, (int, float)) or not 0 <= value <= 100:
+            raise _bad(path, f"[[expect]] {i + 1}: value {value!r}, expected a rate in % (0 to 100)")
+    m.expect = list(expect)
+    return m
+
+
+def load_manifests(names: list[str] | None = None, folder: Path = MANIFESTS) -> list[Manifest]:
+    """The manifests of ``folder`` (all, or ``names``: each must exist)."""
+    found = {p.stem: p for p in sorted(folder.glob("*.toml"))}
+    for n in names or []:
+        if n not in found:
+            raise ValueError(f"reproduce {n}: no such manifest (expected one of: {', '.join(found) or 'none'})")
+    return [read_manifest(found[n]) for n in (names or list(found))]
+
+
+def figures(text: str) -> list[str]:
+    """The figures of ``text`` (see :data:`FIGURE`), as printed, code spans and fenced code left out."""
+    text = re.sub(r"```.*?```", "", text, flags=re.S)
+    text = re.sub(r"`[^`]+`", "", text)
+    return [re.sub(r"\s", "", m.group(0)) for m in FIGURE.finditer(text)]
