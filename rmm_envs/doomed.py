@@ -1,12 +1,12 @@
 """The built-in doomed tests: whether an episode's start could be saved by any control at all.
 
-Offers :func:`dubins4d_escapes` (the search, see its docstring for the method and what it can
-miss), :func:`dubins4d_test` and :data:`DUBINS4D_SEGMENTS`; importing the module registers the
-tests in :data:`rmm_envs.starts.DOOMED_TESTS` (the env modules import it).  Dubins4D among
-circles has a test; the maze car cannot stop (a constant speed), so a finite search proves
-nothing there, the quadrotor can hover, and the map env's polygons need their own contact
-test: their starts are reported as not assessed.  ``docs/concepts.md`` (Doomed starts) gives
-the measured counts and cost.
+Offers :func:`dubins4d_escapes` and :func:`maze_escapes` (the searches; their docstrings give
+the method and what it can miss), the env tests :func:`dubins4d_test`, :func:`maze_test` and
+:func:`quadrotor_test`, and their settings; importing the module registers the tests in
+:data:`rmm_envs.starts.DOOMED_TESTS` (the env modules import it).  Dubins4D among circles and
+the maze car are searched; a quadrotor start (level and still) is avoidable by hovering; the map
+env's polygons need their own contact test, so its starts are reported as not assessed.
+``docs/concepts.md`` (Doomed starts) gives the measured counts and cost.
 """
 
 from __future__ import annotations
@@ -15,7 +15,20 @@ import numpy as np
 
 from rmm_envs.starts import StartAssessment, register_doomed_test
 
-__all__ = ["DUBINS4D_DT", "DUBINS4D_METHOD", "DUBINS4D_SEGMENTS", "dubins4d_escapes", "dubins4d_test"]
+__all__ = [
+    "DUBINS4D_DT",
+    "DUBINS4D_METHOD",
+    "DUBINS4D_SEGMENTS",
+    "MAZE_DT",
+    "MAZE_METHOD",
+    "MAZE_SEGMENTS",
+    "QUADROTOR_METHOD",
+    "dubins4d_escapes",
+    "dubins4d_test",
+    "maze_escapes",
+    "maze_test",
+    "quadrotor_test",
+]
 
 #: the control segments' durations, s: together the longest stop (top speed 2 m/s at 0.5 m/s^2)
 DUBINS4D_SEGMENTS = (0.5, 1.0, 2.5)
@@ -82,6 +95,99 @@ def dubins4d_test(env) -> StartAssessment:
     return StartAssessment(doomed, DUBINS4D_METHOD)
 
 
+#: the maze search's control segments, s (20, 40 and 80 px at the default 10 px/s)
+MAZE_SEGMENTS = (2.0, 4.0, 8.0)
+#: the maze search's sampling interval, s (1 px at the default speed); walls are checked exactly
+#: on the segments between samples
+MAZE_DT = 0.1
+#: the method name stored with each maze assessment
+MAZE_METHOD = "search:turns+loop/3x3/14s"
+#: the method name stored with each quadrotor assessment
+QUADROTOR_METHOD = "at-rest:hover"
+
+
+def _maze_hits(maze, paths: np.ndarray, chunk: int) -> np.ndarray:
+    """``(N,)`` index of the first sample after which a path ``(N, T, 2+)`` has touched a wall
+    (``T`` when it never does), exactly on the segments between samples, checked ``chunk``
+    samples at a time (each piece within the walls' look-up reach of its first point)."""
+    n, steps = paths.shape[:2]
+    first = np.full(n, steps)
+    for start in range(0, steps - 1, chunk):
+        piece = paths[:, start : min(start + chunk, steps - 1) + 1]
+        hit = maze.paths_hit(piece) & (first == steps)
+        first[hit] = start + 1
+    return first
+
+
+def maze_escapes(system, maze, state, goal, segments=MAZE_SEGMENTS, dt: float = MAZE_DT) -> bool:
+    """Whether the maze car at ``state`` ``(x, y, psi)`` can avoid the walls of ``maze`` for ever
+    or reach ``goal`` (x, y, r) first; the start is doomed when it cannot.
+
+    The car never stops, so a finite search cannot end in a stop; it ends in a **loop** instead:
+    a full-rate turn held for a whole turn is a circle the car can drive for ever, so a pose whose
+    left or right loop touches no wall is safe for ever.  The search holds one of the three
+    extreme turn rates ``{min, 0, max}`` over each of ``segments`` (by default 2, 4 and 8 s: 27
+    sequences), checks every piece exactly against the walls (samples every ``dt``, the segments
+    between them exact) and the goal disc (a sample within its radius plus one sample's travel),
+    and tries both loops from the start and from the end of every piece that stays clear.  One
+    clear loop, or the goal reached before a wall, makes the start avoidable; it is doomed when
+    every sequence touches a wall first.  A sequence still clear at the end without a clear loop
+    counts as an escape, so, like :func:`dubins4d_escapes`, the test errs towards *avoidable*:
+    what it can miss is a turn rate between the extremes threading a gap they miss."""
+    speed, u = float(system.speed), float(system.u_max)
+    chunk = max(1, int(0.5 * maze.reach / (speed * dt)))  # a piece stays well within the reach
+    goal = np.asarray(goal, float)
+    reach_goal = (goal[2] + speed * dt) ** 2
+    loop_steps = int(np.ceil(2 * np.pi / u / dt)) + 1
+    loop_time = (loop_steps - 1) * dt
+
+    def any_loop_clear(poses: np.ndarray) -> bool:
+        starts = np.repeat(poses, 2, axis=0)
+        turns = np.tile([-u, u], len(poses))
+        loops = system.propagate(starts, turns, loop_time, loop_steps)
+        return bool((_maze_hits(maze, loops, chunk) == loop_steps).any())
+
+    branches = np.asarray(state, float).reshape(1, 3)
+    if any_loop_clear(branches):
+        return True
+    for duration in segments:
+        n = max(2, int(round(duration / dt)) + 1)
+        starts = np.repeat(branches, 3, axis=0)
+        turns = np.tile([-u, 0.0, u], len(branches))
+        paths = system.propagate(starts, turns, duration, n)  # (B, n, 3), the start first
+        first_hit = _maze_hits(maze, paths, chunk)
+        at_goal = ((paths[..., :2] - goal[:2]) ** 2).sum(-1) <= reach_goal
+        first_goal = np.where(at_goal.any(axis=1), at_goal.argmax(axis=1), n)
+        if np.any(first_goal < first_hit):  # the goal before any wall: saved
+            return True
+        alive = first_hit == n
+        if not alive.any():
+            return False
+        branches = paths[alive, -1, :]
+        if any_loop_clear(branches):
+            return True
+    return True  # a sequence still clear at the end of the search: not provably doomed
+
+
+def maze_test(env) -> StartAssessment:
+    """The doomed test of a maze-car guardian env right after ``reset``."""
+    inner = env.unwrapped
+    doomed = not maze_escapes(inner.system, inner.scene.maze, inner.true_state, inner.goal)
+    return StartAssessment(doomed, MAZE_METHOD)
+
+
+def quadrotor_test(env) -> StartAssessment:
+    """The doomed test of a quadrotor guardian env right after ``reset``: a start at rest (every
+    generated start is level and still, clear of the room by 0.2 m) is avoidable, since holding
+    the hover-and-level command keeps the body where it is (the safe default, which never
+    collided in the 2,048 episodes of the quadrotor's Table I); a given start that moves is not
+    assessed."""
+    state = np.asarray(env.unwrapped.true_state, float)
+    if np.abs(state[7:13]).max() > 1e-9:
+        return StartAssessment(None, "")
+    return StartAssessment(False, QUADROTOR_METHOD)
+
+
 def _not_assessed(env) -> StartAssessment:
     """The map env draws polygons and walls the circles test does not model."""
     return StartAssessment(None, "")
@@ -89,3 +195,5 @@ def _not_assessed(env) -> StartAssessment:
 
 register_doomed_test("Dubins4DCirclesEnv", dubins4d_test)
 register_doomed_test("Dubins4DMapEnv", _not_assessed)
+register_doomed_test("Dubins3DMazeGuardedEnv", maze_test)
+register_doomed_test("QuadrotorRoomGuardedEnv", quadrotor_test)

@@ -16,6 +16,7 @@ from rmm_bench.reproduce import (
     MANIFESTS,
     _check_rates,
     _rates,
+    check_ratio,
     expected_rates,
     fingerprint,
     generated_tables,
@@ -216,6 +217,48 @@ def test_a_table_manifest_checks_its_rates_against_a_rerun():
 
 
 def test_manifests_that_cannot_be_rerun_are_listed_not_failed(capsys):
-    assert main(["reproduce", "performance", "table2-maze", "--check"]) == 0
+    assert main(["reproduce", "walker2d", "table2-maze", "--check"]) == 0
     out = capsys.readouterr().out
-    assert "performance: not rerun" in out and "0 of 0 manifests reproduced; 2 not rerun" in out
+    assert "walker2d: not rerun" in out and "0 of 0 manifests reproduced; 2 not rerun" in out
+
+
+def test_a_speed_ratio_is_measured_by_its_command_and_compared_within_its_factor(tmp_path):
+    """A ``[[ratio]]`` runs its command (a real interpreter here) and reads the ratio it prints."""
+    m = load_manifests(["performance"])[0]
+    say = "python -c \"print('vector / single: 13.1x')\""
+    ok = {"name": "vector", "command": say, "pattern": r"vector / single: ([0-9.]+)x", "value": 24.5, "factor": 2.5}
+    assert check_ratio(m, ok, root=tmp_path) == []  # 13.1x is within 2.5x of 24.5x either way
+    (problem,) = check_ratio(m, {**ok, "factor": 1.5}, root=tmp_path)
+    assert problem == "performance: vector: 13.1x measured, the published 24.5x allows 16.3x to 36.8x"
+    (problem,) = check_ratio(m, {**ok, "pattern": r"nothing: ([0-9.]+)x"}, root=tmp_path)
+    assert "exited 0 without a ratio" in problem
+    outputs: dict = {}
+    check_ratio(m, ok, root=tmp_path, outputs=outputs)
+    check_ratio(m, {**ok, "name": "again"}, root=tmp_path, outputs=outputs)
+    assert list(outputs) == [say]  # one run for the ratios of one command
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "expected"),
+    [
+        ("value = 24.5", "value = 25.5", "value 25.5 is not printed in the table"),
+        ("factor = 2.5", "factor = 0.5", "factor 0.5, expected a number >= 1"),
+        ("pattern = 'vector / single: ([0-9.]+)x'", "pattern = 'vector / single'", "must capture the ratio"),
+        (
+            'command = "python -m benchmarks.perf_vector"\npattern = \'vector',
+            'command = "make perf"\npattern = \'vector',
+            "expected a 'python ...' command line",
+        ),
+    ],
+)
+def test_a_bad_ratio_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys, old, new, expected):
+    folder = tmp_path / "manifests"
+    shutil.copytree(MANIFESTS, folder)
+    target = folder / "performance.toml"
+    text = target.read_text()
+    assert old in text
+    target.write_text(text.replace(old, new, 1))
+    monkeypatch.setattr("rmm_bench.reproduce.load_manifests.__defaults__", (None, folder))
+    assert main(["reproduce", "--list"]) == 2
+    err = capsys.readouterr().err
+    assert "performance.toml" in err and expected in err and err.count("\n") == 1

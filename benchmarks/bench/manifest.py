@@ -29,11 +29,12 @@ COLUMNS = ("goal", "collision", "timeout")
 _COMMON = {"name", "kind", "title", "section", "quick"}
 _KEYS = {
     "reference": _COMMON | {"reference", "commands", "expect"},
-    "table": _COMMON | {"commands", "measured", "header", "rows", "note", "check"},
+    "table": _COMMON | {"commands", "measured", "header", "rows", "note", "check", "ratio"},
 }
 _QUICK_KEYS = {"commands", "fingerprints"}
 _EXPECT_KEYS = {"agent", "column", "value"}
 _CHECK_KEYS = {"agents", "rates"}
+_RATIO_KEYS = {"name", "command", "pattern", "value", "factor"}
 #: what counts as a figure in a page: a decimal, a percentage, a ratio (``12x``), a count with
 #: thousands separators, or a number with a unit of time (what the guard test looks for)
 _NUM = r"(?:\d{1,3}(?:,\d{3})+|\d+)(?:\.\d+)?"
@@ -70,6 +71,7 @@ class Manifest:
     rows: list[list[str]] = field(default_factory=list)
     note: str = ""
     check: dict = field(default_factory=dict)
+    ratios: list[dict] = field(default_factory=list)
 
 
 def _bad(path: Path, what: str) -> ValueError:
@@ -130,7 +132,35 @@ def _read_table(path: Path, data: dict) -> dict:
                 raise _bad(path, f"[check] rates: {col!r} = {rate!r}, expected one of {', '.join(COLUMNS)}")
         if not any(c.startswith("rmm-bench ") for c in shell):
             raise _bad(path, "[check] needs rmm-bench commands to rerun")
+    ratios = data.get("ratio", [])
+    if not isinstance(ratios, list):
+        raise _bad(path, "[[ratio]] must be an array of tables")
+    printed = " ".join(" ".join(r) for r in rows) + " " + str(data.get("note", ""))
+    for i, r in enumerate(ratios):
+        where = f"[[ratio]] {i + 1}"
+        if not isinstance(r, dict):
+            raise _bad(path, f"{where} must be a table")
+        _check_keys(path, r, _RATIO_KEYS, where)
+        missing = sorted(_RATIO_KEYS - set(r))
+        if missing:
+            raise _bad(path, f"{where}: missing key {missing[0]!r}")
+        if not (isinstance(r["command"], str) and r["command"].startswith("python ")):
+            raise _bad(path, f"{where}: command {r['command']!r}, expected a 'python ...' command line")
+        try:
+            groups = re.compile(r["pattern"]).groups
+        except (re.error, TypeError) as e:
+            raise _bad(path, f"{where}: pattern {r['pattern']!r} is not a regular expression ({e})") from None
+        if groups != 1:
+            raise _bad(path, f"{where}: pattern {r['pattern']!r} must capture the ratio in one group")
+        value, factor = r["value"], r["factor"]
+        if not (isinstance(value, (int, float)) and value > 0):
+            raise _bad(path, f"{where}: value {value!r}, expected the published ratio (a number > 0)")
+        if not (isinstance(factor, (int, float)) and factor >= 1):
+            raise _bad(path, f"{where}: factor {factor!r}, expected a number >= 1 (the spread allowed either way)")
+        if f"{value:g}" not in printed:
+            raise _bad(path, f"{where}: value {value:g} is not printed in the table or its note")
     return {
+        "ratios": list(ratios),
         "shell": shell,
         "header": header,
         "rows": rows,

@@ -123,9 +123,46 @@ def check_quick(m: Manifest, out: Path) -> list[str]:
 
 def check_full(m: Manifest, out: Path) -> list[str]:
     """Rerun ``m``'s commands into ``out``; the published rates outside the 95% Wilson interval of
-    the rate measured over the same episodes (none: it reproduces)."""
-    _run(m.commands, out)
-    return _check_rates(m, out / "results.db")
+    the rate measured over the same episodes, and the speed ratios outside their allowed spread
+    (none: it reproduces)."""
+    problems = []
+    if m.commands and (m.kind != "table" or m.check):
+        _run(m.commands, out)
+        problems += _check_rates(m, out / "results.db")
+    outputs: dict[str, tuple[int, str, str]] = {}  # a command that states two ratios runs once
+    return problems + [p for r in m.ratios for p in check_ratio(m, r, outputs=outputs)]
+
+
+def check_ratio(m: Manifest, ratio: dict, root: Path | None = None, outputs: dict | None = None) -> list[str]:
+    """Run a ``[[ratio]]`` entry's command (a ``python ...`` line, run by this interpreter from the
+    repository's root, where the ``benchmarks`` scripts live) and compare the ratio its output
+    states with the published one: it must lie within ``factor`` of it either way, since a
+    ratio measured in one run moves much less than the speeds themselves between machines."""
+    import shlex
+    import subprocess
+
+    root = root or Path(__file__).resolve().parents[2]
+    argv = shlex.split(ratio["command"])
+    if argv[1:3] == ["-m", argv[2]] and argv[2].startswith("benchmarks.") and not (root / "benchmarks").is_dir():
+        return [f"{m.name}: {ratio['name']}: {ratio['command']} needs a clone of the repository (benchmarks/)"]
+    outputs = {} if outputs is None else outputs
+    if ratio["command"] not in outputs:
+        print(f"{m.name}: running {ratio['command']}", file=sys.stderr)
+        done = subprocess.run([sys.executable, *argv[1:]], cwd=root, capture_output=True, text=True, check=False)
+        outputs[ratio["command"]] = (done.returncode, done.stdout, done.stderr)
+    code, stdout, stderr = outputs[ratio["command"]]
+    found = re.search(ratio["pattern"], stdout)
+    if code != 0 or found is None:
+        tail = (stderr or stdout).strip().splitlines()[-1:] or ["no output"]
+        return [f"{m.name}: {ratio['name']}: {ratio['command']} exited {code} without a ratio ({tail[0]})"]
+    got, value, factor = float(found.group(1)), float(ratio["value"]), float(ratio["factor"])
+    if not value / factor <= got <= value * factor:
+        return [
+            f"{m.name}: {ratio['name']}: {got:g}x measured, the published {value:g}x allows "
+            f"{value / factor:.3g}x to {value * factor:.3g}x"
+        ]
+    print(f"{m.name}: {ratio['name']}: {got:g}x (published {value:g}x)")
+    return []
 
 
 def expected_rates(m: Manifest) -> list[dict]:
@@ -220,7 +257,13 @@ def _table_block(m: Manifest) -> str:
     if m.note:
         parts.append(m.note + "\n")
     how = "`--quick` a small fixed-clock version" if m.quick_commands else "no quick version"
-    check = f"`rmm-bench reproduce {m.name} --check` reruns it" if m.check else "rerun the commands to check it"
+    if m.check:
+        check = f"`rmm-bench reproduce {m.name} --check` reruns it"
+    elif m.ratios:
+        names = ", ".join(r["name"] for r in m.ratios)
+        check = f"`rmm-bench reproduce {m.name} --check` measures its ratios again ({names}), each within its factor"
+    else:
+        check = "rerun the commands to check it"
     parts.append(f"Measured {m.measured}. Manifest `{m.name}` ({check}; {how}).\n")
     return "\n".join(parts)
 
@@ -307,8 +350,8 @@ def cmd(argv: list[str]) -> int:
     if args.list:
         for m in manifests:
             print(
-                f"{m.name}: {m.title} ({len(expected_rates(m))} checked rates, "
-                f"{len(m.fingerprints)} quick fingerprints)"
+                f"{m.name}: {m.title} ({len(expected_rates(m))} checked rates, {len(m.ratios)} checked "
+                f"ratios, {len(m.fingerprints)} quick fingerprints)"
             )
         return 0
     if args.write_docs is not None:
@@ -323,7 +366,7 @@ def cmd(argv: list[str]) -> int:
         root = args.out or Path(tmp)
         for m in manifests:
             if not _checkable(m, args.quick):
-                why = "no quick version" if args.quick else "its commands are not rmm-bench runs of rated agents"
+                why = "no quick version" if args.quick else "no rmm-bench runs of rated agents and no ratios"
                 unchecked.append(m.name)
                 print(f"{m.name}: not rerun ({why}; run its commands as printed in the docs to check it)")
                 continue
@@ -357,7 +400,7 @@ def _checkable(m: Manifest, quick: bool) -> bool:
     """Whether ``reproduce`` can rerun ``m`` (its quick version, or its whole commands and rates)."""
     if quick:
         return bool(m.quick_commands)
-    return bool(m.commands) and (m.kind != "table" or bool(m.check))
+    return (bool(m.commands) and (m.kind != "table" or bool(m.check))) or bool(m.ratios)
 
 
 if __name__ == "__main__":

@@ -122,6 +122,7 @@ import math
 
 import numpy as np
 
+import rmm_envs.doomed  # noqa: F401  (registers this env's doomed test)
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout, SafeDefault
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.drivers.maze import PursuitDriver, cell_distances, cell_of, cell_path
