@@ -31,7 +31,7 @@ _KEYS = {
     "reference": _COMMON | {"reference", "commands", "expect"},
     "table": _COMMON | {"commands", "measured", "header", "rows", "note", "check", "ratio"},
 }
-_QUICK_KEYS = {"commands", "fingerprints"}
+_QUICK_KEYS = {"commands", "datagen", "fingerprints"}
 _EXPECT_KEYS = {"agent", "column", "value"}
 _CHECK_KEYS = {"agents", "rates"}
 _RATIO_KEYS = {"name", "command", "pattern", "value", "factor"}
@@ -53,7 +53,8 @@ class Manifest:
     in %).  ``kind`` ``"table"``: ``shell`` holds the commands as printed, ``header``/``rows`` the
     table, ``note`` the text under it, ``measured`` when and where it ran, ``check`` the rows'
     agents and the rate columns.  Both: the ``section`` of ``docs/reproduction.md`` it belongs to,
-    and the quick version's ``quick_commands`` and per-agent ``fingerprints``."""
+    and the quick version: ``quick_commands`` (``rmm-bench`` arguments) and ``quick_datagen``
+    (``rmm-datagen`` arguments), with ``fingerprints`` per agent and ``"dataset"``."""
 
     name: str
     title: str
@@ -63,6 +64,7 @@ class Manifest:
     reference: str = ""
     commands: list[list[str]] = field(default_factory=list)
     quick_commands: list[list[str]] = field(default_factory=list)
+    quick_datagen: list[str] = field(default_factory=list)
     fingerprints: dict[str, str] = field(default_factory=dict)
     expect: list[dict] = field(default_factory=list)
     shell: list[str] = field(default_factory=list)
@@ -194,7 +196,15 @@ def read_manifest(path: Path) -> Manifest:
     _check_keys(path, quick, _QUICK_KEYS, "[quick]")
     m = Manifest(name=data["name"], title=data["title"], path=path, section=data["section"], kind=kind)
     if quick:
-        m.quick_commands = _arg_lists(path, quick.get("commands"), "[quick] commands")
+        if "commands" in quick or "datagen" not in quick:
+            m.quick_commands = _arg_lists(path, quick.get("commands"), "[quick] commands")
+        if "datagen" in quick:
+            datagen = quick["datagen"]
+            if not (isinstance(datagen, list) and datagen and all(isinstance(a, str) for a in datagen)):
+                raise _bad(path, "[quick] datagen must be one rmm-datagen command, a list of arguments (strings)")
+            if "--out" in datagen:
+                raise _bad(path, "[quick] datagen: leave --out out (reproduce chooses the folder)")
+            m.quick_datagen = list(datagen)
         m.fingerprints = dict(quick.get("fingerprints", {}))
     if kind == "table":
         for key, value in _read_table(path, data).items():

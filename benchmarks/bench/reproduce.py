@@ -105,20 +105,44 @@ def _run(commands: list[list[str]], out: Path) -> None:
 
 
 def check_quick(m: Manifest, out: Path) -> list[str]:
-    """Rerun ``m``'s quick commands into ``out``; the mismatches with its fingerprints (none: it
+    """Rerun ``m``'s quick version into ``out``; the mismatches with its fingerprints (none: it
     reproduces)."""
-    if not m.quick_commands:
-        return []
-    _run(m.quick_commands, out)
-    got = fingerprint(out / "results.db")
+    got = _quick_fingerprints(m, out)
     problems = []
     for agent in sorted(set(got) | set(m.fingerprints)):
         if got.get(agent) != m.fingerprints.get(agent):
+            where = (
+                f"the dataset in {out / 'data'}" if agent == "dataset" else _first_difference(out / "results.db", agent)
+            )
             problems.append(
-                f"{m.name}: {agent}: fingerprint {got.get(agent)} (expected {m.fingerprints.get(agent)}), "
-                f"{_first_difference(out / 'results.db', agent)}"
+                f"{m.name}: {agent}: fingerprint {got.get(agent)} (expected {m.fingerprints.get(agent)}), {where}"
             )
     return problems
+
+
+def _quick_fingerprints(m: Manifest, out: Path) -> dict[str, str]:
+    """Run the quick version: each agent's fingerprint of the ``rmm-bench`` runs, and the
+    ``"dataset"``'s (the first 16 hex digits of its SHA-256, as ``rmm-datagen`` records it)."""
+    got: dict[str, str] = {}
+    if m.quick_commands:
+        _run(m.quick_commands, out)
+        got.update(fingerprint(out / "results.db"))
+    if m.quick_datagen:
+        got["dataset"] = _datagen_fingerprint(m.quick_datagen, out / "data")
+    return got
+
+
+def _datagen_fingerprint(args: list[str], out: Path) -> str:
+    import shutil
+
+    from rmm_envs.risk.datagen import main as datagen
+
+    if out.exists():
+        shutil.rmtree(out)
+    code = datagen([*args, "--out", str(out), "--no-progress"])
+    if code != 0:
+        raise RuntimeError(f"rmm-datagen {' '.join(args)} exited with {code}")
+    return str(json.loads((out / "manifest.json").read_text())["dataset_sha256"])[:16]
 
 
 def check_full(m: Manifest, out: Path) -> list[str]:
@@ -216,10 +240,9 @@ def _check_rates(m: Manifest, db: Path) -> list[str]:
 
 
 def update(m: Manifest, out: Path) -> None:
-    """Rerun the quick commands and store their fingerprints in the manifest (after a change meant
+    """Rerun the quick version and store its fingerprints in the manifest (after a change meant
     to move them)."""
-    _run(m.quick_commands, out)
-    fps = fingerprint(out / "results.db")
+    fps = _quick_fingerprints(m, out)
     text = m.path.read_text()
     block = "[quick.fingerprints]\n" + "".join(f'"{a}" = "{fp}"\n' for a, fp in sorted(fps.items()))
     if "[quick.fingerprints]" in text:
@@ -256,7 +279,13 @@ def _table_block(m: Manifest) -> str:
     parts = [f"**{m.title}**\n\n```bash\n{commands}\n```\n\n{_markdown_table(m.header, m.rows)}"]
     if m.note:
         parts.append(m.note + "\n")
-    how = "`--quick` a small fixed-clock version" if m.quick_commands else "no quick version"
+    how = (
+        "`--quick` a small fixed-clock version"
+        if m.quick_commands
+        else "`--quick` a small dataset, bit for bit"
+        if m.quick_datagen
+        else "no quick version"
+    )
     if m.check:
         check = f"`rmm-bench reproduce {m.name} --check` reruns it"
     elif m.ratios:
@@ -399,7 +428,7 @@ def cmd(argv: list[str]) -> int:
 def _checkable(m: Manifest, quick: bool) -> bool:
     """Whether ``reproduce`` can rerun ``m`` (its quick version, or its whole commands and rates)."""
     if quick:
-        return bool(m.quick_commands)
+        return bool(m.quick_commands or m.quick_datagen)
     return (bool(m.commands) and (m.kind != "table" or bool(m.check))) or bool(m.ratios)
 
 
