@@ -4,8 +4,8 @@ Offers :func:`dubins4d_escapes` and :func:`maze_escapes` (the searches; their do
 the method and what it can miss), the env tests :func:`dubins4d_test`, :func:`maze_test` and
 :func:`quadrotor_test`, and their settings; importing the module registers the tests in
 :data:`rmm_envs.starts.DOOMED_TESTS` (the env modules import it).  Dubins4D among circles and
-the maze car are searched; a quadrotor start (level and still) is avoidable by hovering; the map
-env's polygons need their own contact test, so its starts are reported as not assessed.
+the maze car are searched (a map's circles, polygons and walls with the map's exact contact
+test); a quadrotor start (level and still) is avoidable by hovering.
 ``docs/concepts.md`` (Doomed starts) gives the measured counts and cost.
 """
 
@@ -24,6 +24,7 @@ __all__ = [
     "MAZE_SEGMENTS",
     "QUADROTOR_METHOD",
     "dubins4d_escapes",
+    "dubins4d_map_test",
     "dubins4d_test",
     "maze_escapes",
     "maze_test",
@@ -43,7 +44,9 @@ def _first(hit: np.ndarray) -> np.ndarray:
     return np.where(hit.any(axis=-1), hit.argmax(axis=-1), hit.shape[-1])
 
 
-def dubins4d_escapes(system, state, obstacles, goal, segments=DUBINS4D_SEGMENTS, dt: float = DUBINS4D_DT) -> bool:
+def dubins4d_escapes(
+    system, state, obstacles, goal, segments=DUBINS4D_SEGMENTS, dt: float = DUBINS4D_DT, first_hit=None
+) -> bool:
     """Whether some sequence of extreme controls from ``state`` ``(x, y, theta, v)`` avoids every
     circle of ``obstacles`` ``(K, 3)`` (x, y, r) until it reaches ``goal`` (x, y, r) or the
     segments end; the start is doomed when none does.
@@ -58,7 +61,11 @@ def dubins4d_escapes(system, state, obstacles, goal, segments=DUBINS4D_SEGMENTS,
     direction that matters: it assumes a guardian in control from the first instant and counts
     any sequence it cannot prove to collide as an escape, so a doomed start is one that no
     control of the family saves.  What it can miss: a control between the extremes threading a
-    gap the extremes miss (such a start is reported avoidable, never the other way round)."""
+    gap the extremes miss (such a start is reported avoidable, never the other way round).
+
+    ``first_hit(paths) -> (B,)``, when given, replaces the circles: the index of the first sample
+    of each path ``(B, T, 4)`` at or after its first contact (``T``: none), as a map's exact
+    contact test gives it (:func:`dubins4d_map_test`)."""
     obstacles = np.asarray(obstacles, float).reshape(-1, 3)
     goal = np.asarray(goal, float)
     lo, hi = system.control_low, system.control_high
@@ -71,16 +78,18 @@ def dubins4d_escapes(system, state, obstacles, goal, segments=DUBINS4D_SEGMENTS,
         controls = np.tile(options, (len(branches), 1))
         paths = system.states_at(starts, controls, times, compiled=False)  # (B, T, 4)
         xy = paths[..., :2]
-        if len(obstacles):
+        if first_hit is not None:
+            hits = np.asarray(first_hit(paths))
+        elif len(obstacles):
             d2 = ((xy[:, :, None, :] - obstacles[None, None, :, :2]) ** 2).sum(-1)
-            hit = (d2 <= obstacles[None, None, :, 2] ** 2).any(-1)
+            hits = _first((d2 <= obstacles[None, None, :, 2] ** 2).any(-1))
         else:
-            hit = np.zeros(xy.shape[:2], bool)
+            hits = np.full(xy.shape[0], xy.shape[1])
         at_goal = ((xy - goal[:2]) ** 2).sum(-1) <= goal[2] ** 2
-        first_hit, first_goal = _first(hit), _first(at_goal)
-        if np.any(first_goal < first_hit):  # reached the goal before any contact: saved
+        first_goal = _first(at_goal)
+        if np.any(first_goal < hits):  # reached the goal before any contact: saved
             return True
-        alive = first_hit == times.size
+        alive = hits == times.size
         if not alive.any():
             return False
         branches = paths[alive, -1, :]
@@ -188,12 +197,21 @@ def quadrotor_test(env) -> StartAssessment:
     return StartAssessment(False, QUADROTOR_METHOD)
 
 
-def _not_assessed(env) -> StartAssessment:
-    """The map env draws polygons and walls the circles test does not model."""
-    return StartAssessment(None, "")
+def dubins4d_map_test(env) -> StartAssessment:
+    """The doomed test of a Dubins4D map env right after ``reset``: the same search as among
+    circles, with the map's exact contact test (circles, polygons and walls, by pymunk)."""
+    inner = env.unwrapped
+    scene = inner.scene
+
+    def first_hit(paths: np.ndarray) -> np.ndarray:
+        contact = scene.world.first_contacts(paths)  # j + alpha along segment j; inf: none
+        return np.where(np.isfinite(contact), np.ceil(np.nan_to_num(contact, posinf=0.0)), paths.shape[1]).astype(int)
+
+    doomed = not dubins4d_escapes(inner.system, inner.true_state, np.zeros((0, 3)), scene.goal, first_hit=first_hit)
+    return StartAssessment(doomed, DUBINS4D_METHOD)
 
 
 register_doomed_test("Dubins4DCirclesEnv", dubins4d_test)
-register_doomed_test("Dubins4DMapEnv", _not_assessed)
+register_doomed_test("Dubins4DMapEnv", dubins4d_map_test)
 register_doomed_test("Dubins3DMazeGuardedEnv", maze_test)
 register_doomed_test("QuadrotorRoomGuardedEnv", quadrotor_test)

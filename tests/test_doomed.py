@@ -98,10 +98,26 @@ def test_the_env_test_reads_the_start_alone():
             assert verdict.method == DUBINS4D_METHOD
             verdicts.add(verdict.doomed)
         assert len(verdicts) == 1  # the same start under any clock and stepping
-    # the map env's polygons are not modelled: not assessed
+    # the map env: the same search against the map's own contact test
     m = gym.make("Dubins4DMapGuarded-v0")
     m.reset(seed=0)
-    assert assess_start(m).doomed is None
+    assert assess_start(m).method == DUBINS4D_METHOD and assess_start(m).doomed in (True, False)
+
+
+@pytest.mark.heavy
+def test_a_doomed_start_on_a_map_collides_under_every_agent(tmp_path):
+    """The example map (circles, polygons, walls): 5 of its first 32 starts are doomed, and every
+    agent collides in each of them, while the others' outcomes vary."""
+    out = tmp_path / "map"
+    argv = ["--env", "Dubins4DMapParallel-v0", "--agent", "inactive,brakes,lrmm,random", "--episodes", "32"]
+    assert main([*argv, "--clock", "fixed:1", "--workers", "2", "--no-progress", "--no-figure", "--out", str(out)]) == 0
+    with sqlite3.connect(out / "results.db") as db:
+        doomed = {e for (e,) in db.execute("SELECT episode FROM starts WHERE doomed = 1")}
+        outcomes = db.execute("SELECT episode, agent, outcome FROM episodes").fetchall()
+        assessed = db.execute("SELECT COUNT(*) FROM starts WHERE doomed IS NOT NULL").fetchone()[0]
+    assert assessed == 32 and doomed == {4, 6, 18, 24, 25}
+    assert all(o == "collision" for e, _, o in outcomes if e in doomed)
+    assert any(o == "goal" for e, _, o in outcomes if e not in doomed)
 
 
 @pytest.mark.heavy
