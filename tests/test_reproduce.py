@@ -262,3 +262,27 @@ def test_a_bad_ratio_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys, old, 
     assert main(["reproduce", "--list"]) == 2
     err = capsys.readouterr().err
     assert "performance.toml" in err and expected in err and err.count("\n") == 1
+
+
+def test_a_sweep_checks_each_row_with_its_own_command(tmp_path, monkeypatch, capsys):
+    """A knob sweep's rows are runs of one agent with different options: each row names its own
+    rmm-bench command, and only that row's rates are compared with that run."""
+    m = load_manifests(["knob-lrmm-threshold"])[0]
+    assert len(m.check["commands"]) == len(m.rows) == 8
+    assert "lrmm.threshold=0.25 " in m.check["commands"][2] and m.rows[2][0] == "0.25 (default)"
+    assert expected_rates(m, {7}) == [
+        {"agent": "inactive", "column": "goal", "value": 45.3},
+        {"agent": "inactive", "column": "collision", "value": 54.3},
+        {"agent": "inactive", "column": "timeout", "value": 0.4},
+    ]
+    folder = tmp_path / "manifests"
+    shutil.copytree(MANIFESTS, folder)
+    target = folder / "knob-lrmm-threshold.toml"
+    text = target.read_text()
+    target.write_text(
+        text.replace('    "rmm-bench --agent inactive --episodes 256 --seed 0 --clock fixed:1",\n', "", 1)
+    )
+    monkeypatch.setattr("rmm_bench.reproduce.load_manifests.__defaults__", (None, folder))
+    assert main(["reproduce", "--list"]) == 2
+    err = capsys.readouterr().err
+    assert "knob-lrmm-threshold.toml: [check] commands must be 8 rmm-bench command lines" in err

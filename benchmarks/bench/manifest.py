@@ -33,7 +33,7 @@ _KEYS = {
 }
 _QUICK_KEYS = {"commands", "datagen", "fingerprints"}
 _EXPECT_KEYS = {"agent", "column", "value"}
-_CHECK_KEYS = {"agents", "rates"}
+_CHECK_KEYS = {"agents", "rates", "commands"}
 _RATIO_KEYS = {"name", "command", "pattern", "value", "factor"}
 #: what counts as a figure in a page: a decimal, a percentage, a ratio (``12x``), a count with
 #: thousands separators, or a number with a unit of time (what the guard test looks for)
@@ -132,8 +132,18 @@ def _read_table(path: Path, data: dict) -> dict:
                 raise _bad(path, f"[check] rates: column {col!r} is not in the header ({', '.join(header)})")
             if rate not in COLUMNS:
                 raise _bad(path, f"[check] rates: {col!r} = {rate!r}, expected one of {', '.join(COLUMNS)}")
-        if not any(c.startswith("rmm-bench ") for c in shell):
-            raise _bad(path, "[check] needs rmm-bench commands to rerun")
+        per_row = check.get("commands")
+        if per_row is not None:
+            if not (
+                isinstance(per_row, list)
+                and len(per_row) == len(rows)
+                and all(isinstance(c, str) and (not c or c.startswith("rmm-bench ")) for c in per_row)
+            ):
+                raise _bad(
+                    path, f"[check] commands must be {len(rows)} rmm-bench command lines, one per row ('' for none)"
+                )
+        elif not any(c.startswith("rmm-bench ") for c in shell):
+            raise _bad(path, "[check] needs rmm-bench commands to rerun (the manifest's, or one per row)")
     ratios = data.get("ratio", [])
     if not isinstance(ratios, list):
         raise _bad(path, "[[ratio]] must be an array of tables")

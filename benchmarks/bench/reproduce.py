@@ -19,6 +19,7 @@ import argparse
 import hashlib
 import json
 import re
+import shlex
 import sqlite3
 import sys
 import tempfile
@@ -150,7 +151,13 @@ def check_full(m: Manifest, out: Path) -> list[str]:
     the rate measured over the same episodes, and the speed ratios outside their allowed spread
     (none: it reproduces)."""
     problems = []
-    if m.commands and (m.kind != "table" or m.check):
+    if m.kind == "table" and m.check.get("commands"):
+        for k, line in enumerate(m.check["commands"]):
+            if line and m.check["agents"][k]:
+                row_out = out / f"row-{k + 1}"
+                _run([_without_out(shlex.split(line)[1:])], row_out)
+                problems += _check_rates(m, row_out / "results.db", rows={k})
+    elif m.commands and (m.kind != "table" or m.check):
         _run(m.commands, out)
         problems += _check_rates(m, out / "results.db")
     outputs: dict[str, tuple[int, str, str]] = {}  # a command that states two ratios runs once
@@ -162,7 +169,6 @@ def check_ratio(m: Manifest, ratio: dict, root: Path | None = None, outputs: dic
     repository's root, where the ``benchmarks`` scripts live) and compare the ratio its output
     states with the published one: it must lie within ``factor`` of it either way, since a
     ratio measured in one run moves much less than the speeds themselves between machines."""
-    import shlex
     import subprocess
 
     root = root or Path(__file__).resolve().parents[2]
@@ -189,14 +195,24 @@ def check_ratio(m: Manifest, ratio: dict, root: Path | None = None, outputs: dic
     return []
 
 
-def expected_rates(m: Manifest) -> list[dict]:
+def _without_out(args: list[str]) -> list[str]:
+    if "--out" in args:
+        i = args.index("--out")
+        return args[:i] + args[i + 2 :]
+    return args
+
+
+def expected_rates(m: Manifest, rows: set[int] | None = None) -> list[dict]:
     """``m``'s published rates as ``expect`` entries (agent, column, value in %): a reference
     manifest's ``[[expect]]``; a table manifest's cells of its ``[check]`` rate columns (the
-    leading number of a cell such as ``75.1 ± 4.1``), rows of agent ``""`` left out."""
+    leading number of a cell such as ``75.1 ± 4.1``), rows of agent ``""`` left out (and, given
+    ``rows``, the rows not in it)."""
     if m.kind != "table":
         return m.expect
     out = []
-    for agent, row in zip(m.check.get("agents", []), m.rows, strict=False):
+    for k, (agent, row) in enumerate(zip(m.check.get("agents", []), m.rows, strict=False)):
+        if rows is not None and k not in rows:
+            continue
         for col, rate in m.check.get("rates", {}).items():
             match = re.search(r"-?\d+(?:\.\d+)?", row[m.header.index(col)].replace("*", ""))
             if agent and match:
@@ -219,12 +235,12 @@ def _rates(db: Path) -> dict[str, dict[str, tuple[float, int]]]:
         store.close()
 
 
-def _check_rates(m: Manifest, db: Path) -> list[str]:
+def _check_rates(m: Manifest, db: Path, rows: set[int] | None = None) -> list[str]:
     from rmm_bench.metrics import wilson_interval
 
     rates = _rates(db)
     problems = []
-    for e in expected_rates(m):
+    for e in expected_rates(m, rows):
         got = rates.get(e["agent"], {}).get(e["column"])
         if got is None:
             problems.append(f"{m.name}: {e['agent']}: no {e['column']} rate measured")
@@ -429,7 +445,8 @@ def _checkable(m: Manifest, quick: bool) -> bool:
     """Whether ``reproduce`` can rerun ``m`` (its quick version, or its whole commands and rates)."""
     if quick:
         return bool(m.quick_commands or m.quick_datagen)
-    return (bool(m.commands) and (m.kind != "table" or bool(m.check))) or bool(m.ratios)
+    rerun = bool(m.commands) or bool(m.check.get("commands"))
+    return (rerun and (m.kind != "table" or bool(m.check))) or bool(m.ratios)
 
 
 if __name__ == "__main__":
