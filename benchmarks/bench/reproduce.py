@@ -374,9 +374,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="rmm-bench reproduce",
         description="Rerun the commands behind the published tables (manifests in rmm_bench/manifests) and "
-        "check their numbers: --quick reruns small fixed-clock versions that must match stored fingerprints "
-        "bit for bit; without it the whole commands run and each published rate must lie in the 95%% "
-        "interval of the rate measured.",
+        "check their numbers: --quick reruns small fixed-clock versions (or small datasets) that must match "
+        "stored fingerprints bit for bit; without it the whole commands run, each published rate must lie in "
+        "the 95%% interval of the rate measured and each published speed ratio within its stated factor. "
+        "Manifests of training runs and absolute timings are listed as not rerun.",
     )
     p.add_argument("names", nargs="*", metavar="NAME", help="manifests to run (default: all); --list names them")
     p.add_argument("--quick", action="store_true", help="the small fixed-clock versions (seconds to minutes)")
