@@ -15,13 +15,8 @@ from scipy.stats import binomtest
 
 from rmm_bench import load_results
 from rmm_bench.cli import main
-from rmm_bench.compare import (
-    compare_runs,
-    mcnemar_exact,
-    newcombe_paired,
-    newcombe_unpaired,
-    paired_bootstrap,
-)
+from rmm_bench.compare import compare_runs
+from rmm_bench.paired import mcnemar_exact, newcombe_paired, newcombe_unpaired, paired_bootstrap
 from rmm_bench.store import ResultsStore
 
 Z = 1.959963984540054
