@@ -286,3 +286,21 @@ def test_a_sweep_checks_each_row_with_its_own_command(tmp_path, monkeypatch, cap
     assert main(["reproduce", "--list"]) == 2
     err = capsys.readouterr().err
     assert "knob-lrmm-threshold.toml: [check] commands must be 8 rmm-bench command lines" in err
+
+
+def test_a_table_whose_columns_are_runs_checks_each_column_with_its_command(tmp_path, monkeypatch, capsys):
+    """The latency sweep's columns are runs under other clocks: each column names its command, and
+    only that column's cells are compared with it."""
+    m = load_manifests(["latency-sweep"])[0]
+    assert m.check["columns"]["20 ms"] == "rmm-bench --agent lrmm,cbf --clock fixed:20 --episodes 256 --seed 0"
+    assert expected_rates(m, columns={"20 ms"}) == [
+        {"agent": "lrmm", "column": "collision", "value": 16.4},
+        {"agent": "cbf", "column": "collision", "value": 7.0},
+    ]
+    folder = tmp_path / "manifests"
+    shutil.copytree(MANIFESTS, folder)
+    target = folder / "latency-sweep.toml"
+    target.write_text(target.read_text().replace('"350 ms" = "rmm-bench', '"400 ms" = "rmm-bench', 1))
+    monkeypatch.setattr("rmm_bench.reproduce.load_manifests.__defaults__", (None, folder))
+    assert main(["reproduce", "--list"]) == 2
+    assert "[check] columns: '400 ms' must be a column of [check] rates" in capsys.readouterr().err

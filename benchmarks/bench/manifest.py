@@ -33,7 +33,7 @@ _KEYS = {
 }
 _QUICK_KEYS = {"commands", "datagen", "fingerprints"}
 _EXPECT_KEYS = {"agent", "column", "value"}
-_CHECK_KEYS = {"agents", "rates", "commands"}
+_CHECK_KEYS = {"agents", "rates", "commands", "columns"}
 _RATIO_KEYS = {"name", "command", "pattern", "value", "factor"}
 #: what counts as a figure in a page: a decimal, a percentage, a ratio (``12x``), a count with
 #: thousands separators, or a number with a unit of time (what the guard test looks for)
@@ -132,7 +132,19 @@ def _read_table(path: Path, data: dict) -> dict:
                 raise _bad(path, f"[check] rates: column {col!r} is not in the header ({', '.join(header)})")
             if rate not in COLUMNS:
                 raise _bad(path, f"[check] rates: {col!r} = {rate!r}, expected one of {', '.join(COLUMNS)}")
+        per_column = check.get("columns")
+        if per_column is not None:
+            if not (isinstance(per_column, dict) and per_column):
+                raise _bad(path, "[check] columns must map rate columns to rmm-bench command lines")
+            for col, line in per_column.items():
+                if col not in rates or not (isinstance(line, str) and line.startswith("rmm-bench ")):
+                    raise _bad(
+                        path,
+                        f"[check] columns: {col!r} must be a column of [check] rates with an rmm-bench command line",
+                    )
         per_row = check.get("commands")
+        if per_row is not None and per_column is not None:
+            raise _bad(path, "[check] takes commands per row or per column, not both")
         if per_row is not None:
             if not (
                 isinstance(per_row, list)
@@ -142,7 +154,7 @@ def _read_table(path: Path, data: dict) -> dict:
                 raise _bad(
                     path, f"[check] commands must be {len(rows)} rmm-bench command lines, one per row ('' for none)"
                 )
-        elif not any(c.startswith("rmm-bench ") for c in shell):
+        elif per_column is None and not any(c.startswith("rmm-bench ") for c in shell):
             raise _bad(path, "[check] needs rmm-bench commands to rerun (the manifest's, or one per row)")
     ratios = data.get("ratio", [])
     if not isinstance(ratios, list):

@@ -157,6 +157,11 @@ def check_full(m: Manifest, out: Path) -> list[str]:
                 row_out = out / f"row-{k + 1}"
                 _run([_without_out(shlex.split(line)[1:])], row_out)
                 problems += _check_rates(m, row_out / "results.db", rows={k})
+    elif m.kind == "table" and m.check.get("columns"):
+        for k, (col, line) in enumerate(m.check["columns"].items()):
+            col_out = out / f"column-{k + 1}"
+            _run([_without_out(shlex.split(line)[1:])], col_out)
+            problems += _check_rates(m, col_out / "results.db", columns={col})
     elif m.commands and (m.kind != "table" or m.check):
         _run(m.commands, out)
         problems += _check_rates(m, out / "results.db")
@@ -202,11 +207,11 @@ def _without_out(args: list[str]) -> list[str]:
     return args
 
 
-def expected_rates(m: Manifest, rows: set[int] | None = None) -> list[dict]:
+def expected_rates(m: Manifest, rows: set[int] | None = None, columns: set[str] | None = None) -> list[dict]:
     """``m``'s published rates as ``expect`` entries (agent, column, value in %): a reference
     manifest's ``[[expect]]``; a table manifest's cells of its ``[check]`` rate columns (the
     leading number of a cell such as ``75.1 ± 4.1``), rows of agent ``""`` left out (and, given
-    ``rows``, the rows not in it)."""
+    ``rows`` or ``columns``, the cells outside them)."""
     if m.kind != "table":
         return m.expect
     out = []
@@ -214,6 +219,8 @@ def expected_rates(m: Manifest, rows: set[int] | None = None) -> list[dict]:
         if rows is not None and k not in rows:
             continue
         for col, rate in m.check.get("rates", {}).items():
+            if columns is not None and col not in columns:
+                continue
             match = re.search(r"-?\d+(?:\.\d+)?", row[m.header.index(col)].replace("*", ""))
             if agent and match:
                 out.append({"agent": agent, "column": rate, "value": float(match.group(0))})
@@ -235,12 +242,12 @@ def _rates(db: Path) -> dict[str, dict[str, tuple[float, int]]]:
         store.close()
 
 
-def _check_rates(m: Manifest, db: Path, rows: set[int] | None = None) -> list[str]:
+def _check_rates(m: Manifest, db: Path, rows: set[int] | None = None, columns: set[str] | None = None) -> list[str]:
     from rmm_bench.metrics import wilson_interval
 
     rates = _rates(db)
     problems = []
-    for e in expected_rates(m, rows):
+    for e in expected_rates(m, rows, columns):
         got = rates.get(e["agent"], {}).get(e["column"])
         if got is None:
             problems.append(f"{m.name}: {e['agent']}: no {e['column']} rate measured")
@@ -446,7 +453,7 @@ def _checkable(m: Manifest, quick: bool) -> bool:
     """Whether ``reproduce`` can rerun ``m`` (its quick version, or its whole commands and rates)."""
     if quick:
         return bool(m.quick_commands or m.quick_datagen)
-    rerun = bool(m.commands) or bool(m.check.get("commands"))
+    rerun = bool(m.commands) or bool(m.check.get("commands")) or bool(m.check.get("columns"))
     return (rerun and (m.kind != "table" or bool(m.check))) or bool(m.ratios)
 
 
