@@ -16,6 +16,7 @@ from rmm_bench.reproduce import (
     MANIFESTS,
     _check_rates,
     _rates,
+    _with_expects,
     check_ratio,
     expected_rates,
     fingerprint,
@@ -304,3 +305,13 @@ def test_a_table_whose_columns_are_runs_checks_each_column_with_its_command(tmp_
     monkeypatch.setattr("rmm_bench.reproduce.load_manifests.__defaults__", (None, folder))
     assert main(["reproduce", "--list"]) == 2
     assert "[check] columns: '400 ms' must be a column of [check] rates" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("m", REFERENCE_MANIFESTS, ids=lambda m: m.name)
+def test_update_writes_the_expected_rates_of_the_shipped_results(m):
+    """``--quick --update`` rewrites a reference manifest's rates from its shipped results: on the
+    current files it changes nothing, and from a manifest without rates it restores them."""
+    text = m.path.read_text()
+    assert _with_expects(m, text) == text
+    stripped = re.sub(r"\[\[expect\]\]\n(?:[a-z]+ = [^\n]*\n)*\n*", "", text)
+    assert "[[expect]]" not in stripped and _with_expects(m, stripped) == text

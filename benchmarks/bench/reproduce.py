@@ -264,9 +264,12 @@ def _check_rates(m: Manifest, db: Path, rows: set[int] | None = None, columns: s
 
 def update(m: Manifest, out: Path) -> None:
     """Rerun the quick version and store its fingerprints in the manifest (after a change meant
-    to move them)."""
+    to move them); a reference manifest's ``[[expect]]`` rates are rewritten from its shipped
+    results too (after they were regenerated)."""
     fps = _quick_fingerprints(m, out)
     text = m.path.read_text()
+    if m.kind == "reference":
+        text = _with_expects(m, text)
     block = "[quick.fingerprints]\n" + "".join(f'"{a}" = "{fp}"\n' for a, fp in sorted(fps.items()))
     if "[quick.fingerprints]" in text:
         text = re.sub(r"\[quick\.fingerprints\]\n(?:\"[^\n]*\n)*", block, text)
@@ -274,6 +277,21 @@ def update(m: Manifest, out: Path) -> None:
         text = text.rstrip() + "\n\n" + block
     m.path.write_text(text)
     m.fingerprints = fps
+
+
+def _with_expects(m: Manifest, text: str) -> str:
+    """``text`` (a reference manifest) with its ``[[expect]]`` entries the shipped results' rates."""
+    from rmm_bench.reference import reference_dbs
+
+    dbs = {db.stem: db for db in reference_dbs()}
+    rates = _rates(dbs[m.reference])
+    entries = "".join(
+        f'[[expect]]\nagent = "{agent}"\ncolumn = "{col}"\nvalue = {round(rates[agent][col][0], 1)}\n\n'
+        for agent in sorted(rates)
+        for col in COLUMNS
+    )
+    text = re.sub(r"\[\[expect\]\]\n(?:[a-z]+ = [^\n]*\n)*\n*", "", text)
+    return text.replace("[quick]", entries + "[quick]", 1)
 
 
 # ---------------------------------------------------------------- docs
