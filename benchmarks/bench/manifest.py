@@ -20,7 +20,7 @@ import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["COLUMNS", "MANIFESTS", "Manifest", "figures", "load_manifests", "read_manifest"]
+__all__ = ["COLUMNS", "MANIFESTS", "Manifest", "figures", "load_manifests", "read_manifest", "rmm_bench_args"]
 
 #: the folder of the shipped manifests
 MANIFESTS = Path(__file__).resolve().parent / "manifests"
@@ -38,11 +38,11 @@ _RATIO_KEYS = {"name", "command", "pattern", "value", "factor"}
 #: what counts as a figure in a page: a decimal, a percentage, a ratio (``12x``), a count with
 #: thousands separators, or a number with a unit of time (what the guard test looks for)
 _NUM = r"(?:\d{1,3}(?:,\d{3})+|\d+)(?:\.\d+)?"
-_UNIT = r"(?:%|x\b|ms\b|µs\b|s\b|min\b|h\b|MB\b|GB\b)"
+_UNIT = r"(?:%|x\b|×|ns\b|ms\b|µs\b|μs\b|us\b|s\b|min\b|minutes\b|h\b|hours\b|MB\b|GB\b)"
 FIGURE = re.compile(
-    rf"(?<![\w.])-?{_NUM}(?:\s?(?:-|to)\s?{_NUM})?\s?{_UNIT}"  # with a unit, or a range with one
-    r"|(?<![\w.])-?\d+\.\d+(?![\w.])"  # a decimal
-    r"|(?<![\w.])\d{1,3}(?:,\d{3})+(?![\w])"  # a count with thousands separators
+    rf"(?<![\w.])-?{_NUM}(?:\s?(?:-|–|to)\s?{_NUM})?\s?{_UNIT}"  # with a unit, or a range with one
+    r"|(?<![\w.])-?\d+(?:\.\d+)?e-?\d+(?!\w)"  # scientific notation
+    r"|(?<![\w.])-?(?:\d{1,3}(?:,\d{3})+(?:\.\d+)?|\d+\.\d+)(?!\w|\.\d)"  # a decimal, a count with separators
 )
 
 
@@ -94,9 +94,35 @@ def _arg_lists(path: Path, value, where: str) -> list[list[str]]:
     ):
         raise _bad(path, f"{where} must be a list of commands, each a list of rmm-bench arguments (strings)")
     for c in value:
-        if "--out" in c:
+        if not c:
+            raise _bad(path, f"{where}: an empty command")
+        if any(a == "--out" or a.startswith("--out=") for a in c):
             raise _bad(path, f"{where}: leave --out out (reproduce chooses the folder)")
     return value
+
+
+def rmm_bench_args(path: Path, line: str, where: str) -> list[str] | None:
+    """The ``rmm-bench`` arguments of a shell command line (leading ``VAR=value`` settings and
+    ``--out DIR`` left out), or ``None`` when it runs something else."""
+    try:
+        words = shlex.split(line)
+    except ValueError as e:
+        raise _bad(path, f"{where}: {line!r} is not a shell command line ({e})") from None
+    while words and re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*=.*", words[0]):
+        words = words[1:]
+    if not words or words[0] != "rmm-bench":
+        return None
+    args = words[1:]
+    for i, a in enumerate(args):
+        if a.startswith("--out="):
+            return args[:i] + args[i + 1 :]
+        if a == "--out":
+            return args[:i] + args[i + 2 :]
+    return args
+
+
+def _numbers(text: str) -> set[float]:
+    return {float(m.replace(",", "")) for m in re.findall(r"\d{1,3}(?:,\d{3})+(?:\.\d+)?|\d+(?:\.\d+)?", text)}
 
 
 def _strings(path: Path, value, where: str) -> list[str]:
@@ -124,6 +150,8 @@ def _read_table(path: Path, data: dict) -> dict:
         agents = check.get("agents")
         if not (isinstance(agents, list) and len(agents) == len(rows) and all(isinstance(a, str) for a in agents)):
             raise _bad(path, f"[check] agents must be {len(rows)} names, one per row ('' for a row not ours)")
+        if not any(agents):
+            raise _bad(path, "[check] agents names no agent: the check would compare nothing")
         rates = check.get("rates")
         if not isinstance(rates, dict) or not rates:
             raise _bad(path, "[check] rates must map header columns to rates (goal, collision, timeout)")
@@ -132,30 +160,37 @@ def _read_table(path: Path, data: dict) -> dict:
                 raise _bad(path, f"[check] rates: column {col!r} is not in the header ({', '.join(header)})")
             if rate not in COLUMNS:
                 raise _bad(path, f"[check] rates: {col!r} = {rate!r}, expected one of {', '.join(COLUMNS)}")
-        per_column = check.get("columns")
-        if per_column is not None:
-            if not (isinstance(per_column, dict) and per_column):
-                raise _bad(path, "[check] columns must map rate columns to rmm-bench command lines")
-            for col, line in per_column.items():
-                if col not in rates or not (isinstance(line, str) and line.startswith("rmm-bench ")):
+            for i, (agent, row) in enumerate(zip(agents, rows, strict=True)):
+                if agent and not re.search(r"\d", row[header.index(col)]):
                     raise _bad(
-                        path,
-                        f"[check] columns: {col!r} must be a column of [check] rates with an rmm-bench command line",
+                        path, f"[check] row {i + 1} ({agent}), column {col!r}: {row[header.index(col)]!r} holds no rate"
                     )
+        per_column = check.get("columns")
         per_row = check.get("commands")
         if per_row is not None and per_column is not None:
             raise _bad(path, "[check] takes commands per row or per column, not both")
-        if per_row is not None:
+        if per_column is not None:
+            if not isinstance(per_column, dict) or set(per_column) != set(rates):
+                raise _bad(
+                    path, f"[check] columns must give an rmm-bench command for each rate column ({', '.join(rates)})"
+                )
+            for col, line in per_column.items():
+                if not isinstance(line, str) or rmm_bench_args(path, line, f"[check] columns {col!r}") is None:
+                    raise _bad(path, f"[check] columns: {col!r} must be an rmm-bench command line")
+        elif per_row is not None:
             if not (
-                isinstance(per_row, list)
-                and len(per_row) == len(rows)
-                and all(isinstance(c, str) and (not c or c.startswith("rmm-bench ")) for c in per_row)
+                isinstance(per_row, list) and len(per_row) == len(rows) and all(isinstance(c, str) for c in per_row)
             ):
                 raise _bad(
                     path, f"[check] commands must be {len(rows)} rmm-bench command lines, one per row ('' for none)"
                 )
-        elif per_column is None and not any(c.startswith("rmm-bench ") for c in shell):
-            raise _bad(path, "[check] needs rmm-bench commands to rerun (the manifest's, or one per row)")
+            for i, (agent, line) in enumerate(zip(agents, per_row, strict=True)):
+                if bool(agent) != bool(line) or (line and rmm_bench_args(path, line, f"[check] row {i + 1}") is None):
+                    raise _bad(
+                        path, f"[check] row {i + 1}: an rmm-bench command for a row with an agent, '' for one without"
+                    )
+        elif not any(rmm_bench_args(path, c, "commands") is not None for c in shell):
+            raise _bad(path, "[check] needs rmm-bench commands to rerun (the manifest's, or per row or per column)")
     ratios = data.get("ratio", [])
     if not isinstance(ratios, list):
         raise _bad(path, "[[ratio]] must be an array of tables")
@@ -168,8 +203,9 @@ def _read_table(path: Path, data: dict) -> dict:
         missing = sorted(_RATIO_KEYS - set(r))
         if missing:
             raise _bad(path, f"{where}: missing key {missing[0]!r}")
-        if not (isinstance(r["command"], str) and r["command"].startswith("python ")):
-            raise _bad(path, f"{where}: command {r['command']!r}, expected a 'python ...' command line")
+        command = r["command"]
+        if not (isinstance(command, str) and command.startswith("python ") and len(shlex.split(command)) >= 2):
+            raise _bad(path, f"{where}: command {command!r}, expected a 'python ...' command line")
         try:
             groups = re.compile(r["pattern"]).groups
         except (re.error, TypeError) as e:
@@ -181,7 +217,7 @@ def _read_table(path: Path, data: dict) -> dict:
             raise _bad(path, f"{where}: value {value!r}, expected the published ratio (a number > 0)")
         if not (isinstance(factor, (int, float)) and factor >= 1):
             raise _bad(path, f"{where}: factor {factor!r}, expected a number >= 1 (the spread allowed either way)")
-        if f"{value:g}" not in printed:
+        if float(value) not in _numbers(printed):
             raise _bad(path, f"{where}: value {value:g} is not printed in the table or its note")
     return {
         "ratios": list(ratios),
@@ -203,13 +239,16 @@ def read_manifest(path: Path) -> Manifest:
     except tomllib.TOMLDecodeError as e:
         raise _bad(path, f"not valid TOML ({e})") from None
     kind = data.get("kind", "reference")
-    if kind not in _KEYS:
+    if not isinstance(kind, str) or kind not in _KEYS:
         raise _bad(path, f"kind {kind!r}, expected one of {', '.join(_KEYS)}")
     _check_keys(path, data, _KEYS[kind], "the manifest")
     required = ("name", "title", "section", "commands") + (("reference", "quick") if kind == "reference" else ())
     for key in required:
         if key not in data:
             raise _bad(path, f"missing key {key!r}")
+    for key in ("name", "title", "section") + (("reference",) if kind == "reference" else ()):
+        if not isinstance(data[key], str):
+            raise _bad(path, f"{key} must be a string, got {data[key]!r}")
     if data["name"] != path.stem:
         raise _bad(path, f"name {data['name']!r} must be the file's name {path.stem!r}")
     quick = data.get("quick", {})
@@ -220,6 +259,8 @@ def read_manifest(path: Path) -> Manifest:
     if quick:
         if "commands" in quick or "datagen" not in quick:
             m.quick_commands = _arg_lists(path, quick.get("commands"), "[quick] commands")
+            if not any("--episodes" in c for c in m.quick_commands):
+                raise _bad(path, "[quick] commands must say --episodes (a quick version runs a few)")
         if "datagen" in quick:
             datagen = quick["datagen"]
             if not (isinstance(datagen, list) and datagen and all(isinstance(a, str) for a in datagen)):
@@ -227,21 +268,27 @@ def read_manifest(path: Path) -> Manifest:
             if "--out" in datagen:
                 raise _bad(path, "[quick] datagen: leave --out out (reproduce chooses the folder)")
             m.quick_datagen = list(datagen)
-        m.fingerprints = dict(quick.get("fingerprints", {}))
+        fingerprints = quick.get("fingerprints", {})
+        if not (isinstance(fingerprints, dict) and all(isinstance(v, str) for v in fingerprints.values())):
+            raise _bad(path, "[quick.fingerprints] must map agents (and 'dataset') to fingerprints (strings)")
+        m.fingerprints = dict(fingerprints)
     if kind == "table":
         for key, value in _read_table(path, data).items():
             setattr(m, key, value)
-        m.commands = [shlex.split(c)[1:] for c in m.shell if c.startswith("rmm-bench ")]
-        for c in m.commands:
-            if "--out" in c:
-                i = c.index("--out")
-                del c[i : i + 2]
+        parsed = [rmm_bench_args(path, c, "commands") for c in m.shell]
+        m.commands = [c for c in parsed if c is not None]
         return m
     m.reference = data["reference"]
     m.commands = _arg_lists(path, data["commands"], "commands")
     expect = data.get("expect", [])
+    if not isinstance(expect, list):
+        raise _bad(path, "expect must be an array of tables ([[expect]] with agent, column, value)")
     for i, entry in enumerate(expect):
+        if not isinstance(entry, dict):
+            raise _bad(path, f"[[expect]] {i + 1} must be a table with agent, column, value")
         _check_keys(path, entry, _EXPECT_KEYS, f"[[expect]] {i + 1}")
+        if not isinstance(entry.get("agent"), str) or not entry["agent"]:
+            raise _bad(path, f"[[expect]] {i + 1}: agent {entry.get('agent')!r}, expected an agent's name")
         if entry.get("column") not in COLUMNS:
             raise _bad(
                 path, f"[[expect]] {i + 1}: column {entry.get('column')!r}, expected one of {', '.join(COLUMNS)}"
