@@ -20,12 +20,12 @@ import sqlite3
 import tempfile
 from pathlib import Path
 
-import rmm_bench.reference
 from rmm_bench.config import PROJECT_PACKAGES, AgentRun, file_sha256, run_key
 from rmm_bench.store import ResultsStore
 
-#: where the package keeps its reference results (rmm_bench.reference's folder)
-REFERENCE = Path(rmm_bench.reference.__file__).parent
+#: the repository's folder of the reference results (the rmm_bench.reference package's source):
+#: a maintainer's tool writes into the clone, never into an installed copy of the package
+REFERENCE = Path(__file__).resolve().parent / "bench" / "reference"
 
 
 def _shipped_files() -> dict[str, str]:
