@@ -118,6 +118,20 @@ def test_a_bad_manifest_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys, ed
     assert "maze-fixed.toml" in err and expected in err and err.count("\n") == 1
 
 
+def _list_edited(tmp_path, monkeypatch, capsys, name: str, old: str, new: str) -> str:
+    """``rmm-bench reproduce --list`` over a copy of the manifests where ``old`` in ``name``.toml
+    became ``new``: it must exit 2; returns what it wrote to stderr."""
+    folder = tmp_path / "manifests"
+    shutil.copytree(MANIFESTS, folder)
+    target = folder / f"{name}.toml"
+    text = target.read_text()
+    assert old in text
+    target.write_text(text.replace(old, new, 1))
+    monkeypatch.setattr("rmm_bench.reproduce.load_manifests.__defaults__", (None, folder))
+    assert main(["reproduce", "--list"]) == 2
+    return capsys.readouterr().err
+
+
 def test_an_unknown_name_lists_the_manifests(capsys):
     assert main(["reproduce", "nope", "--quick"]) == 2
     err = capsys.readouterr().err
@@ -199,15 +213,7 @@ def test_figures_are_found_as_printed():
     ],
 )
 def test_a_bad_table_manifest_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys, old, new, expected):
-    folder = tmp_path / "manifests"
-    shutil.copytree(MANIFESTS, folder)
-    target = folder / "map-env.toml"
-    text = target.read_text()
-    assert old in text
-    target.write_text(text.replace(old, new, 1))
-    monkeypatch.setattr("rmm_bench.reproduce.load_manifests.__defaults__", (None, folder))
-    assert main(["reproduce", "--list"]) == 2
-    err = capsys.readouterr().err
+    err = _list_edited(tmp_path, monkeypatch, capsys, "map-env", old, new)
     assert "map-env.toml" in err and expected in err and err.count("\n") == 1
 
 
@@ -260,15 +266,7 @@ def test_a_speed_ratio_is_measured_by_its_command_and_compared_within_its_factor
     ],
 )
 def test_a_bad_ratio_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys, old, new, expected):
-    folder = tmp_path / "manifests"
-    shutil.copytree(MANIFESTS, folder)
-    target = folder / "performance.toml"
-    text = target.read_text()
-    assert old in text
-    target.write_text(text.replace(old, new, 1))
-    monkeypatch.setattr("rmm_bench.reproduce.load_manifests.__defaults__", (None, folder))
-    assert main(["reproduce", "--list"]) == 2
-    err = capsys.readouterr().err
+    err = _list_edited(tmp_path, monkeypatch, capsys, "performance", old, new)
     assert "performance.toml" in err and expected in err and err.count("\n") == 1
 
 
@@ -283,16 +281,8 @@ def test_a_sweep_checks_each_row_with_its_own_command(tmp_path, monkeypatch, cap
         {"agent": "inactive", "column": "collision", "value": 54.3},
         {"agent": "inactive", "column": "timeout", "value": 0.4},
     ]
-    folder = tmp_path / "manifests"
-    shutil.copytree(MANIFESTS, folder)
-    target = folder / "knob-lrmm-threshold.toml"
-    text = target.read_text()
-    target.write_text(
-        text.replace('    "rmm-bench --agent inactive --episodes 256 --seed 0 --clock fixed:1",\n', "", 1)
-    )
-    monkeypatch.setattr("rmm_bench.reproduce.load_manifests.__defaults__", (None, folder))
-    assert main(["reproduce", "--list"]) == 2
-    err = capsys.readouterr().err
+    old = '    "rmm-bench --agent inactive --episodes 256 --seed 0 --clock fixed:1",\n'
+    err = _list_edited(tmp_path, monkeypatch, capsys, "knob-lrmm-threshold", old, "")
     assert "knob-lrmm-threshold.toml: [check] commands must be 8 rmm-bench command lines" in err
 
 
@@ -305,13 +295,8 @@ def test_a_table_whose_columns_are_runs_checks_each_column_with_its_command(tmp_
         {"agent": "lrmm", "column": "collision", "value": 16.4},
         {"agent": "cbf", "column": "collision", "value": 7.0},
     ]
-    folder = tmp_path / "manifests"
-    shutil.copytree(MANIFESTS, folder)
-    target = folder / "latency-sweep.toml"
-    target.write_text(target.read_text().replace('"350 ms" = "rmm-bench', '"400 ms" = "rmm-bench', 1))
-    monkeypatch.setattr("rmm_bench.reproduce.load_manifests.__defaults__", (None, folder))
-    assert main(["reproduce", "--list"]) == 2
-    assert "[check] columns must give an rmm-bench command for each rate column (0 ms" in capsys.readouterr().err
+    err = _list_edited(tmp_path, monkeypatch, capsys, "latency-sweep", '"350 ms" = "rmm-bench', '"400 ms" = "rmm-bench')
+    assert "[check] columns must give an rmm-bench command for each rate column (0 ms" in err
 
 
 @pytest.mark.parametrize("m", REFERENCE_MANIFESTS, ids=lambda m: m.name)
@@ -351,15 +336,7 @@ def test_update_writes_the_expected_rates_of_the_shipped_results(m):
     ],
 )
 def test_a_malformed_manifest_is_one_line_not_a_traceback(tmp_path, monkeypatch, capsys, name, old, new, expected):
-    folder = tmp_path / "manifests"
-    shutil.copytree(MANIFESTS, folder)
-    target = folder / f"{name}.toml"
-    text = target.read_text()
-    assert old in text
-    target.write_text(text.replace(old, new, 1))
-    monkeypatch.setattr("rmm_bench.reproduce.load_manifests.__defaults__", (None, folder))
-    assert main(["reproduce", "--list"]) == 2
-    err = capsys.readouterr().err
+    err = _list_edited(tmp_path, monkeypatch, capsys, name, old, new)
     assert f"{name}.toml" in err and expected in err and err.count("\n") == 1, err
 
 
