@@ -20,11 +20,10 @@ from rmm_bench.reproduce import (
     check_ratio,
     expected_rates,
     fingerprint,
-    generated_tables,
     load_manifests,
     quick_episodes,
-    render_docs,
 )
+from rmm_bench.reproduce_docs import generated_tables, render_docs
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "reproduction.md"
