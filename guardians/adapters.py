@@ -7,11 +7,10 @@
 Actions may be the env's dict, or a flat array ``[active, ...]`` (``active > 0.5`` means take
 control), converted through the action space given at ``reset``: :class:`SB3Guardian` reads
 ``[active, z...]`` in the unit box exactly as :class:`rmm_envs.wrappers.FlattenGuardianAction`
-does (``flat="raw"``: unscaled); :class:`CallableGuardian` reads ``[active, u...]`` with ``u``
-the control vector in the order of the action space's ``controls``
-(:func:`to_guardian_action`).
-
-Why one mapping serves the wrapper and the guardian: docs/design-notes.md#rmm_guardiansadapters.
+does, through the same mapping (:meth:`rmm_envs.autonomy.GuardianActionSpace.from_unit`), so a
+model trained through the wrapper applies the same controls here (``flat="raw"``: unscaled);
+:class:`CallableGuardian` reads ``[active, u...]`` with ``u`` the control vector in the order of
+the action space's ``controls`` (:func:`to_guardian_action`).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ A package's entry point in the group ``gymnasium.envs``
     ``module:function`` value is then called, a bare ``module`` value registers on import).  An
     entry point that raises is named in the error of an id that stays unregistered.
 
-Why entry points, and an example declaration: docs/design-notes.md#rmm_envsenv_plugins.
+An example declaration: :func:`resolve_env_id`.
 """
 
 from __future__ import annotations
@@ -54,7 +54,11 @@ def load_env_plugins() -> dict[str, str | None]:
 def resolve_env_id(env_id: str) -> str:
     """Register ``env_id`` in this process if it can be (see the module docstring) and return the
     id ``gym.make`` takes without importing anything (``Id`` of ``module:Id``).  Raises
-    :class:`EnvUnavailable` naming the id and the cause otherwise."""
+    :class:`EnvUnavailable` naming the id and the cause otherwise.
+
+    Entry points are how Gymnasium before 1.0 loaded other packages' envs: a package declaring
+    ``[project.entry-points."gymnasium.envs"] my_envs = "my_envs.registration:register"`` works
+    with a plain ``--env MyEnv-v0``."""
     import gymnasium as gym
 
     import rmm_envs  # noqa: F401  (the package's own envs)

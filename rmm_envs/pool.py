@@ -8,7 +8,8 @@ workers terminated, pending Ray tasks cancelled).  A task whose worker dies (or,
 by ``fn`` itself is re-raised in the parent and stops the run, as with ``multiprocessing.Pool``.
 ``workers == 1`` (or a single task) runs in this process, without isolation.
 
-Supervision, time limits and Ray's retries in detail: docs/design-notes.md#rmm_envspool.
+Supervision, time limits and Ray's retries: :func:`run_local`, :func:`run_ray`; why:
+docs/decisions/0022-worker-pool.md.
 """
 
 from __future__ import annotations
@@ -149,6 +150,15 @@ def run_local(
     Yields each result, or a :class:`TaskLost` for a task whose worker died or overran
     ``task_timeout`` seconds; raises :class:`WorkersLost` after ``max_lost_in_a_row`` lost
     tasks with no result in between (None: never).
+
+    Supervised: each worker runs one task at a time over its own pipe, and the parent watches
+    every worker's process handle, so a worker that disappears (the out-of-memory killer, a
+    segfault in compiled code, ``os._exit`` or ``sys.exit`` inside a task) is noticed at once; a
+    fresh worker takes its place.  ``task_timeout`` is counted from when the worker starts the
+    task (a worker's start-up is not charged): the last resort for a task stuck where no
+    in-process limit reaches.  An exception raised by ``fn`` is not a lost task: it is re-raised
+    here with the worker's traceback as its cause, and the run stops.  With one worker (or one
+    task) nothing is isolated: a task that kills its process kills the caller too.
     """
     if int(workers) != workers or workers < 1:
         raise ValueError(f"workers must be an integer >= 1, got {workers}")
@@ -255,6 +265,9 @@ def run_ray(
 
     Yields each result, or a :class:`TaskLost` for a task Ray lost twice (worker or node
     death, Ray's memory monitor); raises :class:`WorkersLost` as :func:`run_local` does.
+    Ray retries a lost task once (``max_retries=1``); application errors are re-raised.  There is
+    no parent-side time limit on Ray tasks: a limit inside the task (``rmm-bench``'s episode
+    timer) is the only one.
     """
     try:
         import ray

@@ -8,7 +8,7 @@ products written out in a fixed order, numpy's ordered reductions, and the C lib
 with the same C library; ``tests/test_reproducibility.py`` checks it.
 
 What makes a result machine-dependent, and why these helpers avoid it:
-docs/design-notes.md#rmm_envsportable.
+docs/decisions/0005-machine-independent-arithmetic.md.
 """
 
 from __future__ import annotations

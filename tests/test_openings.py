@@ -1,7 +1,9 @@
 """Module openings stay short: each module of ``guardians`` and ``rmm_envs`` opens with what it is
-and offers in at most 15 lines of docstring; rationale lives in ``docs/design-notes.md`` (or the
-docs pages).  Exempt: the env modules whose docstring is the env's spec (the catalog renders
-them as the docs' environment pages) and the few other Gymnasium-style specs of SPEC_OPENINGS."""
+and offers in at most 15 lines of docstring; longer reference goes into the class and function
+docstrings, and the rationale into a decision record, ``docs/decisions/NNNN-title.md``.  Exempt:
+the env modules whose docstring is the env's spec (the catalog renders them as the docs'
+environment pages) and the few other Gymnasium-style specs of SPEC_OPENINGS.  Every pointer to a
+decision record names one that exists, and the records' index lists every record."""
 
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 LIMIT = 15
 
 #: modules whose docstring is a user-facing spec in the Gymnasium style, exempt as the env pages are:
-#: path -> why (their rationale is in docs/design-notes.md all the same)
+#: path -> why (their rationale is in docs/decisions/ all the same)
 SPEC_OPENINGS = {
     "rmm_envs/adapters/classic_control.py": "each adapter's spec: state, failure, controls, horizon, sampler, observation",
     "rmm_envs/adapters/mujoco_envs.py": "each adapter's spec: state, failure, controls, horizon, sampler, observation",
@@ -56,34 +58,74 @@ def test_module_openings_are_short():
                 long[rel] = n
     assert not long, (
         f"module openings over {LIMIT} lines: {long}; say what the "
-        "module is and offers, and move the rationale to docs/design-notes.md"
+        "module is and offers, move longer reference into the class and function docstrings and the "
+        "rationale into a decision record (docs/decisions/)"
     )
     missing = sorted(p for p in SPEC_OPENINGS if not (ROOT / p).exists())
     assert not missing, f"exempt modules that no longer exist (remove them): {missing}"
 
 
-def heading_anchors(page: Path) -> set[str]:
-    """The anchors GitHub gives the page's headings: lower case, punctuation dropped, spaces as '-'."""
-    heads = [line.lstrip("#").strip() for line in page.read_text().splitlines() if line.startswith("#")]
-    return {re.sub(r"[^\w\- ]", "", h.lower()).replace(" ", "-") for h in heads}
+DECISIONS = ROOT / "docs" / "decisions"
+#: a pointer to a decision record: ``docs/decisions/0004-clocks.md`` in the code, ``decisions/...``
+#: or ``../decisions/...`` in the docs
+POINTER = re.compile(r"decisions/(\d{4}-[\w\-]+\.md)")
 
 
-def test_heading_anchors_follow_github():
-    page = ROOT / "docs" / "design-notes.md"
-    anchors = heading_anchors(page)
-    assert "rmm_envspool" in anchors and "cbf-on-the-quadrotor-rmm_guardianscbfquadrotor" in anchors
-    assert "design-notes" in anchors
+def decision_records() -> set[str]:
+    """The records' file names, ``NNNN-title.md``."""
+    return {p.name for p in DECISIONS.glob("*.md") if re.fullmatch(r"\d{4}-[\w\-]+\.md", p.name)}
 
 
-def test_every_pointer_to_the_design_notes_names_a_section():
-    """A "design-notes.md#..." in the code (the openings' pointers) or in the docs names a heading there."""
-    anchors = heading_anchors(ROOT / "docs" / "design-notes.md")
-    dangling = {}
-    for pkg, pattern in (("guardians", "*.py"), ("rmm_envs", "*.py"), ("benchmarks", "*.py"), ("docs", "*.md")):
-        for path in sorted((ROOT / pkg).rglob(pattern)):
-            for anchor in re.findall(r"design-notes\.md#([\w\-]+)", path.read_text()):
-                if anchor not in anchors:
-                    dangling.setdefault(path.relative_to(ROOT).as_posix(), []).append(anchor)
-    assert not dangling, f"pointers to sections docs/design-notes.md does not have: {dangling}"
-    pointed = sum(len(re.findall(r"design-notes\.md#", p.read_text())) for p in (ROOT / "rmm_envs").rglob("*.py"))
-    assert pointed >= 20  # the openings shortened for issue 29 point at their sections
+def test_a_pointer_is_found_as_written():
+    text = "why: docs/decisions/0014-cbf-safety-filter.md (0015, 0016); [0001](../decisions/0001-import-names.md)."
+    assert POINTER.findall(text) == ["0014-cbf-safety-filter.md", "0001-import-names.md"]
+
+
+def test_every_pointer_to_a_decision_record_names_one():
+    """A ``docs/decisions/NNNN-*.md`` in the code (the openings' and docstrings' pointers), in the
+    tests, in the docs or in the README names a record that exists."""
+    records = decision_records()
+    assert "0001-import-names.md" in records and len(records) >= 20
+    dangling, pointed = {}, 0
+    sources = [ROOT / "README.md", ROOT / "CHANGELOG.md", ROOT / "Makefile", ROOT / "pyproject.toml"]
+    for pkg, pattern in (("guardians", "*.py"), ("rmm_envs", "*.py"), ("benchmarks", "*.py"), ("tests", "*.py")):
+        sources += sorted((ROOT / pkg).rglob(pattern))
+    sources += sorted((ROOT / "docs").rglob("*.md")) + sorted((ROOT / "mutation").glob("*"))
+    for path in sources:
+        if not path.is_file():
+            continue
+        for name in POINTER.findall(path.read_text(errors="replace")):
+            pointed += path.suffix == ".py" and path.relative_to(ROOT).parts[0] in ("guardians", "rmm_envs")
+            if name not in records:
+                dangling.setdefault(path.relative_to(ROOT).as_posix(), []).append(name)
+    assert not dangling, f"pointers to decision records docs/decisions/ does not have: {dangling}"
+    assert pointed >= 20  # the module openings point at the records of their decisions
+
+
+def test_the_index_lists_every_record_once_and_nothing_else():
+    index = (DECISIONS / "README.md").read_text()
+    listed = re.findall(r"\]\((\d{4}-[\w\-]+\.md)\)", index)
+    records = decision_records()
+    assert sorted(set(listed)) == sorted(listed), "a record is listed twice in docs/decisions/README.md"
+    assert set(listed) == records, (
+        f"docs/decisions/README.md lists {sorted(set(listed) - records)} (no such record) and misses "
+        f"{sorted(records - set(listed))}: one line per record"
+    )
+    numbers = sorted(name[:4] for name in records)
+    assert numbers == [f"{i:04d}" for i in range(1, len(numbers) + 1)], (
+        f"records are numbered 0001, 0002, ...: {numbers}"
+    )
+
+
+def test_every_record_states_its_context_decision_and_consequences():
+    bad = {}
+    for name in sorted(decision_records()):
+        text = (DECISIONS / name).read_text()
+        lines = text.splitlines()
+        heads = {line.lstrip("#").strip() for line in lines if line.startswith("## ")}
+        missing = {"Context", "Decision", "Consequences"} - heads
+        if missing or not lines[0].startswith(f"# {name[:4]}: "):
+            bad[name] = sorted(missing) or "the title must read '# NNNN: ...'"
+        elif len(lines) > 70:
+            bad[name] = f"{len(lines)} lines: a record is at most about a page"
+    assert not bad, bad

@@ -11,7 +11,7 @@ Offers :class:`CBFGuardian` and :class:`CBFPaperGuardian`; their settings and pr
 :mod:`rmm_guardians.cbf.settings`, the rows in :mod:`~rmm_guardians.cbf.barrier`, the QP in
 :mod:`~rmm_guardians.cbf.qp` and :mod:`~rmm_guardians.cbf.backend`, the backup manoeuvre in
 :mod:`~rmm_guardians.cbf.recovery`, the other systems in :mod:`~rmm_guardians.cbf.maze` and
-:mod:`~rmm_guardians.cbf.quadrotor`.  The maths, the defaults and why: ``docs/design-notes.md``.
+:mod:`~rmm_guardians.cbf.quadrotor`.  Why: docs/decisions/0014-cbf-safety-filter.md (0015, 0016).
 """
 
 from rmm_guardians.cbf.guardian import CBFGuardian, CBFPaperGuardian

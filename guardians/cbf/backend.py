@@ -8,7 +8,8 @@ same QP, as dense rows ``G z <= h`` and box bounds, to ``qpsolvers.solve_qp(...,
 for any solver qpsolvers has installed (the optional extra ``rmm-envs[qp]``).  Any other name
 is refused at the guardian's construction, with the installed solvers listed.
 
-Why the direct path is the default, and the tolerances: docs/design-notes.md#rmm_guardianscbfbackend.
+The direct path is the default because qpsolvers' front end rebuilds the problem on every call;
+the tolerances: :class:`QpsolversQP`.
 """
 
 from __future__ import annotations
@@ -63,7 +64,11 @@ class QpsolversQP:
     Args:
         P: the (fixed) dense cost matrix.
         name: an installed qpsolvers solver (see :func:`parse_solver`).
-        eps: the tolerance passed to the solvers whose options are known (module docstring).
+        eps: the guardian's ``eps`` (``1e-6``), passed on as OSQP's absolute and relative
+            tolerance (solutions polished, as on the direct path); the other solvers run at their
+            own defaults, tighter than ``1e-6`` (``clarabel``'s interior point 1e-8; ``daqp`` is a
+            dense active-set method, exact up to rounding).  The decisions agree with the direct
+            path to the solvers' tolerance (``tests/test_cbf_solvers.py``).
         lb, ub: fixed box bounds on ``z`` (``None``: none).
         polish: whether OSQP polishes its solutions (as the direct path it mirrors does).
     """

@@ -1,6 +1,6 @@
 """The barrier maths of the HOCBF guardians: pure functions of a state and the episode's scene.
 
-The rows of ``G z <= h`` over ``z = (u1, u2, d_th, d_v)`` (`docs/design-notes.md` derives them),
+The rows of ``G z <= h`` over ``z = (u1, u2, d_th, d_v)`` (:func:`barrier_rows` derives them),
 the inflated radii, the barrier values and the obstacle hardest to satisfy.  Nothing here
 keeps state; the guardian, the QP and the recovery manoeuvre all call these functions.
 """
@@ -74,7 +74,18 @@ def barrier_rows(state, obstacles: np.ndarray, radii: np.ndarray, goal: np.ndarr
     """Dense ``(G, h)`` of ``G z <= h`` at ``state``: ``K`` barrier rows, the ``u1`` box (two
     rows), the ``u2`` box merged with the speed barriers (two rows), the heading CLF and the
     speed CLF (``K + 6`` rows in all).  :class:`BarrierRows` does the same for one scene at
-    many states (the guardian's per-decision path)."""
+    many states (the guardian's per-decision path).
+
+    For each circular obstacle ``i`` a relative-degree-2 barrier with inflated radius ``R_i``::
+
+        b_i = (x - x_i)^2 + (y - y_i)^2 - R_i^2
+        Lf b = 2 v ((x - x_i) cos th + (y - y_i) sin th),   Lf^2 b = 2 v^2
+        LgLf b = [2 v ((y - y_i) cos th - (x - x_i) sin th),  2 ((x - x_i) cos th + (y - y_i) sin th)]
+        Lf^2 b + LgLf b . u + p1 Lf b + p2 (Lf b + p1 b) >= 0        (linear class-K, p1, p2)
+
+    The heading CLF is the driver's (:func:`rmm_envs.drivers.dubins4d.clf_qp`); the speed CLF
+    steers toward ``v_d = min((d/2)^2, d/2)`` with ``V_v = (v - v_d)^2`` (the original wrote
+    ``(v - v_d) * 82``, a typo for the square; docs/original-code.md, item 13)."""
     return BarrierRows(obstacles, radii, goal, prm)(state)
 
 

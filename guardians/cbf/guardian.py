@@ -1,6 +1,7 @@
 """The HOCBF guardians ``cbf`` and ``cbf-paper``: configuration, latency prediction and the decision.
 
-Their defaults, the rule and the reasons are in `docs/design-notes.md` (cbf); the settings in :mod:`rmm_guardians.cbf.settings`.
+The rule and the defaults: :class:`CBFGuardian`; the settings in :mod:`rmm_guardians.cbf.settings`;
+why: docs/decisions/0014-cbf-safety-filter.md.
 """
 
 from __future__ import annotations
@@ -33,12 +34,44 @@ __all__ = ["CBFGuardian", "CBFPaperGuardian", "REFERENCES"]
 
 
 class CBFGuardian(SystemDispatch, PrivilegedGuardian):
-    """HOCBF safety filter with one-step latency prediction and recovery (see `docs/design-notes.md`).
+    """HOCBF safety filter with one-step latency prediction and recovery.
 
-    ``u1_bounds``/``u2_bounds`` (default ``None``: the action space's, read at ``reset``) and
-    ``v_bounds`` (default ``None``: the Dubins4D system's speed range) override the bounds.
-    ``reference``: ``"nominal"`` (default) filters the driver's control, ``info["nominal_control"]``;
-    ``"clf"`` re-derives a goal-seeking control from CLF rows, as the paper did."""
+    ``reference="nominal"`` (default) minimises ``|u - u_nom|^2``, ``u_nom`` the driver's
+    ``info["nominal_control"]`` (a ``ValueError`` naming the key when an env gives none), under
+    the barrier rows of :func:`rmm_guardians.cbf.barrier.barrier_rows`; a nominal control that
+    satisfies every row passes without a solve.  ``"clf"`` re-derives a goal-seeking control as
+    the paper did (``minimise u1^2 + u2^2 + p_theta d_th^2 + p_v d_v^2`` with the heading and
+    speed CLFs).  The guardian takes control, applying the QP's ``(u1, u2)``, when a barrier row is
+    active at the solution, ``|G_i z* - h_i| <= active_atol + active_rtol |h_i|``; otherwise the
+    driver keeps control.
+
+    * ``predict_latency``: the QP is solved at the state predicted one lap ahead under the
+      control acting during the lap (its own last action, or ``u_nom``; ``clf`` takes zero); the lap
+      is measured from the simulated times, ``lap_guess`` (0.1 s) before the first.
+    * ``recovery``: when the QP is infeasible or fails, or a barrier row is active and the speed is
+      left below ``v_stuck`` (0.05 m/s) after the lap, a backup manoeuvre about the obstacle whose
+      row is hardest to satisfy (:mod:`rmm_guardians.cbf.recovery`), until the car is outside every
+      margin, its heading not into that obstacle, and the straight line to the goal clears it.
+      Without it (``cbf-paper``) an infeasible QP brakes at maximum with no turn.
+    * ``goal_aware_margin``: each inflated radius is ``max(r, min(k r, (r + F) / 2))``, ``F`` the
+      goal point farthest from the centre, so a margin never covers the goal.
+
+    Defaults: ``p1 = 0.7535, p2 = 0.6664`` and ``inflation = 1.05`` (the paper's);
+    ``gamma_vmin = gamma_vmax = lambda_theta = lambda_v = p_theta = p_v = 1`` (the paper's, the
+    driver's too); ``active_atol = 1e-3``, ``active_rtol = 0``; ``eps = 1e-6`` (OSQP's tolerance,
+    solutions polished); ``max_obstacles = 64`` (the QP is sized once per episode);
+    ``low_speed_stop=True`` restores the original's full stop below 0.05 m/s.  ``u1_bounds`` /
+    ``u2_bounds`` (default ``None``: the action space's, read at ``reset``) and ``v_bounds``
+    (default ``None``: the Dubins4D system's speed range) override the bounds.  ``solver``:
+    ``"osqp"`` or ``"qpsolvers:<name>"`` (:mod:`rmm_guardians.cbf.backend`).  ``maze`` /
+    ``quadrotor``: the arguments of the maze car's and the quadrotor's guardian (``False``
+    refuses those envs); ``solver``, ``eps``, ``predict_latency`` and ``lap_guess`` are shared.
+
+    ``stats()``: ``qp_fallbacks`` (every QP that failed or was infeasible), ``recoveries`` (steps
+    spent recovering), ``recovery_entries``, ``nan_states`` (a state with NaN brakes at maximum),
+    ``qp_solves``.  Bad arguments are refused at construction naming the value; an action space
+    without two controls, or whose box does not contain ``u1 = 0`` and both signs of ``u2``, is
+    refused at ``reset``."""
 
     name = "cbf"
     others = {dubins3d.KIND: MazeCBFGuardian, quadrotor_control.KIND: QuadrotorCBFGuardian}

@@ -8,7 +8,8 @@ on the nearest walls allow, for the pose one lap ahead; the barriers include the
 constant-speed car needs to keep off a wall.
 
 Offers :class:`MazeCBFGuardian`, :func:`wall_rows` (the barrier rows of a pose) and
-:class:`WallQP`.  The barriers, the defaults and why: ``docs/design-notes.md``.
+:class:`WallQP`.  The barriers: :func:`wall_rows`; the defaults: :class:`MazeCBFGuardian`; why:
+docs/decisions/0015-cbf-maze-turning-barrier.md.
 """
 
 from __future__ import annotations
@@ -45,8 +46,24 @@ def wall_rows(
 ):
     """The barrier values and the rows ``G u <= h`` (``G`` of shape ``(W, 1)``) of every wall
     ``(W, 4)`` at pose ``state``: ``barrier="turning"`` (the default, first order, gain ``p1``)
-    or ``"distance"`` (the high-order distance barrier, gains ``p1, p2``).  The module docstring
-    derives both."""
+    or ``"distance"`` (the high-order distance barrier, gains ``p1, p2``).
+
+    The car ``x' = s cos psi, y' = s sin psi, psi' = u``; a wall is the capsule of points within
+    ``half`` of a segment.  With ``c`` the segment's point nearest the car, ``d = |p - c|``,
+    ``n = (p - c) / d``, ``e = (cos psi, sin psi)`` and ``e_perp = (-sin psi, cos psi)``::
+
+        b   = d - half - margin          (px; >= 0: clear of the wall and the margin)
+        b'  = s n . e
+        b'' = s^2 kappa + s (n . e_perp) u     kappa = (1 - (n . e)^2) / d at a wall's end, 0 along its side
+
+    ``"distance"``: the high-order row ``-s (n . e_perp) u <= s^2 kappa + (p1 + p2) b' + p1 p2 b``.
+    ``"turning"``: ``B = b - R (1 - |n . e_perp|)`` while approaching (``n . e < 0``), ``B = b``
+    otherwise, ``R = s / u_max``: the closest a car turning away at full rate comes.  ``B`` is
+    ``C^1`` except head-on and of relative degree 1: with ``sigma = sign(n . e_perp)`` (left on a
+    tie), ``B' = s n . e + R sigma ((dn/dt) . e_perp - u n . e)`` while approaching, ``(dn/dt) .
+    e_perp = -s (n . e_perp)(n . e) / d`` at a wall's end, 0 along its side.  Along a flat wall the
+    full turn away gives ``B' = 0``, so ``B' + p1 B >= 0`` is feasible wherever ``B >= 0`` (tested).
+    Each wall gives ``-(coefficient of u in B') u <= (the rest of B') + p1 B``."""
     x, y, psi = float(state[0]), float(state[1]), float(state[2])
     ax, ay = walls[:, 0], walls[:, 1]
     abx, aby = walls[:, 2] - ax, walls[:, 3] - ay
@@ -126,7 +143,24 @@ class WallQP:
 
 
 class MazeCBFGuardian(PrivilegedGuardian):
-    """HOCBF safety filter for the maze car; see the module docstring."""
+    """HOCBF safety filter for the maze car; see the module docstring.
+
+    The QP over the turn rate: minimise ``(u - u_ref)^2`` under the rows of the ``n_walls``
+    nearest walls (:func:`wall_rows`) and ``|u| <= u_max`` (from the action space), ``u_ref``
+    ``0`` (``reference="hold"``, the default: keep the heading) or the driver's turn rate,
+    ``info["nominal_control"]`` (``"nominal"``).  A reference that satisfies every row is the
+    solution (no solve).  It takes control, applying ``u*``, when a row is active at the solution
+    (``|G_i u* - h_i| <= active_atol``); an infeasible or failed QP turns at full rate the way that
+    best satisfies the hardest row (the largest ``h_i - G_i u`` over ``|u| <= u_max``), counted in
+    ``stats()["qp_fallbacks"]``.  A pose with NaN applies the env's safe default (the maximum turn
+    away from the nearer wall), counted as ``nan_states``.
+
+    Defaults: ``p1 = 1`` /s for the turning barrier (``0.1`` for the distance barrier, whose
+    ``p2 = 0.1``); ``margin = 2`` px (about two 0.11-s laps of travel at 10 px/s); ``n_walls = 8``
+    (farther walls are more than a corridor away, their rows slack); ``predict_latency``: the
+    pose one lap ahead under the control acting during the lap (``hold`` takes 0 for the driver's,
+    at most ``u_max lap`` = 0.022 rad of heading error at 0.11 s), ``lap_guess = 0.1`` s before the
+    first measured lap; ``eps = 1e-6``, ``solver = "osqp"``, ``active_atol = 1e-3``."""
 
     name = "cbf"
 

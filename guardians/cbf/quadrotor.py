@@ -8,8 +8,8 @@ quadrotor's kind (``"quadrotor"``) to :class:`QuadrotorCBFGuardian`, also usable
 first-order model of the velocity loop, :mod:`rmm_guardians.cbf.quadrotor_rows`), for the state
 one lap ahead, sliding along a shape when the filter deadlocks.
 
-Offers :class:`QuadrotorCBFGuardian`.  The model, the rows, the defaults and why:
-``docs/design-notes.md``.
+Offers :class:`QuadrotorCBFGuardian` (the model, the QP and the defaults in its docstring); why:
+docs/decisions/0016-cbf-quadrotor.md.
 """
 
 from __future__ import annotations
@@ -55,7 +55,42 @@ if njit is not None:
 
 
 class QuadrotorCBFGuardian(PrivilegedGuardian):
-    """HOCBF safety filter of the quadrotor's velocity command; see the module docstring."""
+    """HOCBF safety filter of the quadrotor's velocity command; see the module docstring.
+
+    **Model**: the guardian issues what the pilot issues, a velocity command
+    ``u = (u_forward, u_left, u_up)`` in the heading frame (and a yaw rate), and the body's world
+    velocity tracks the commanded one, ``w``, as a first-order lag ``v' = (w - v) / tau``:
+    ``tau_h = 0.42`` s, ``tau_z = 0.34`` s, measured on the controller and body
+    (``ClosedLoopQuadrotor`` from hover, steps of 1 and 2 m/s forward and 0.5 and 1 m/s up: 63% of
+    the step after 0.42-0.43 s and 0.34 s, settling 3-5% short).  Each part of the room is a
+    convex shape with signed distance ``d``; its barrier ``b = d - rho``, ``rho = body_radius``
+    (0.304 m: the collision cylinder in any attitude) ``+ margin``, gives one HOCBF row per shape
+    (:func:`rmm_guardians.cbf.quadrotor_rows.command_rows`), for the ``n_rows`` nearest shapes.
+
+    **QP** over ``(u, s)``: minimise ``|u - u_nom|^2 + slack_weight s^2`` under ``G u - s <= h``,
+    the command box and ``s = 0``.  A nominal command that satisfies every row passes unsolved.
+    It takes control when a row is active at the solution (``|h_i - G_i u*| <= active_atol``).
+    Infeasible or failed: the same QP with ``s >= 0`` (the command violating the worst row least,
+    ``qp_fallbacks``); should that fail too, hover (``hover_fallbacks``).  In control it commands
+    a zero yaw rate (a yaw rate would turn the held command in the world during the lap).
+
+    **Deadlock escape**: when the strict QP leaves the pilot's command (at least ``2 v_stuck``
+    horizontally) under ``v_stuck`` of horizontal speed, its reference becomes ``v_slide`` along
+    the horizontal tangent of the nearest shape with a mostly horizontal normal (``|n_h| >= 0.5``),
+    on the side the pilot's command leans to (kept while it follows), with the pilot's climb
+    rate; it hands back once the pilot's command satisfies every row and no longer points into
+    that shape.  Blocked again within ``slide_memory`` of where it last followed, it goes on the
+    same way.  Entries are counted in ``slides``.
+
+    **Latency**: the rows are written at the state predicted one lap ahead under the command
+    acting during the lap, through the compiled controller and body steps (whole physics steps,
+    ``ceil(lap / dt)``); the lap from the simulated times, ``lap_guess`` before the first.
+
+    Defaults: ``p1 = p2 = 3`` /s, ``margin = 0.05`` m, ``v_slide = 1.5`` m/s (the pilot's
+    cruise speed), ``v_stuck = 0.25`` m/s, ``slide_memory = 3`` m, ``n_rows = 8``,
+    ``slack_weight = 1e3`` (1e4 leaves OSQP at its iteration limit on a plain two-wall case,
+    tested), ``eps = 1e-6``, ``active_atol = 1e-3``.  NaN states hover (``nan_states``); bad
+    arguments are refused naming the value; a command box without 0 is refused at ``reset``."""
 
     name = "cbf"
 

@@ -7,9 +7,7 @@ of the room (floor, walls, boxes, cylinders, spheres) is one convex shape of a f
 gradient at a point, and :func:`command_rows` the HOCBF rows ``G u <= h`` over the command
 ``u = (u_forward, u_left, u_up)`` of the ``n_rows`` shapes nearest the body (smallest barrier
 first).  The loops are plain Python compiled by numba, scalar arithmetic only (the same bits on
-every CPU).
-
-The rows' derivation: docs/design-notes.md#rmm_guardianscbfquadrotor_rows.
+every CPU).  The rows' derivation: :func:`command_rows`.
 """
 
 from __future__ import annotations
@@ -197,7 +195,24 @@ def command_rows(state, shapes: RoomShapes, n_rows: int, rho: float, tau_h: floa
     command ``u = (u_forward, u_left, u_up)`` and the shape indices of the ``n_rows`` shapes
     nearest the body at ``state`` (13 numbers: position, quaternion xyzw, world velocity, ...),
     smallest ``b`` first (on a tie, the shape listed first).  The heading is the body's, read as
-    the controller reads it (the body x axis projected on the ground)."""
+    the controller reads it (the body x axis projected on the ground).
+
+    A shape's barrier is ``b = d - rho`` (``d`` its signed distance, ``n = grad d`` the outward
+    normal at the nearest point; inside, the nearest face's).  With the body's world velocity
+    ``v`` and the commanded world velocity ``w`` tracked with first-order lags ``tau_h``
+    (horizontal) and ``tau_z`` (vertical)::
+
+        b'  = n . v
+        b'' = n_h . (w_h - v_h) / tau_h + n_z (w_z - v_z) / tau_z + v' (Hess d) v
+        b'' + (p1 + p2) b' + p1 p2 b >= 0                                       (HOCBF, Xiao & Belta)
+
+    The Hessian term is dropped: the distance to a convex set is convex outside it, so the term
+    is ``>= 0`` and leaving it out only tightens the row (it is 0 along a face).  With
+    ``w_h = Rot(psi) (u_forward, u_left)`` and ``w_z = u_up``, each shape gives the row::
+
+        G = -(Rot(-psi) n_h / tau_h, n_z / tau_z)
+        h = (p1 + p2) n . v - n_h . v_h / tau_h - n_z v_z / tau_z + p1 p2 b
+    """
     s = np.ascontiguousarray(state, dtype=float).reshape(-1)
     if s.shape != (13,):
         raise ValueError(

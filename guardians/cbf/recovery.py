@@ -1,7 +1,8 @@
 """The ``cbf`` guardian's recovery: a backup manoeuvre about one obstacle, and when it ends.
 
-Pure functions of the state and the scene (`docs/design-notes.md`, cbf item 2, explains the
-manoeuvre); the guardian keeps the state of a recovery (which obstacle, which way round).
+Pure functions of the state and the scene (:func:`recovery_control` states the manoeuvre; why:
+docs/decisions/0014-cbf-safety-filter.md); the guardian keeps the state of a recovery (which
+obstacle, which way round).
 """
 
 from __future__ import annotations
@@ -30,7 +31,23 @@ def recovery_control(
     """The backup manoeuvre about obstacle ``i`` at ``state``: ``((u1, u2), side)``.  ``side``
     (+1: counter-clockwise tangent, -1: clockwise) overrides the choice of tangent; the side
     used is returned so that a recovery keeps going round the same way.  ``rows``: the
-    scene's :class:`BarrierRows` when the caller has one (else built here)."""
+    scene's :class:`BarrierRows` when the caller has one (else built here).
+
+    With ``n`` the outward normal at the car and ``t`` one of the two tangents:
+
+    * the tangent: while the car moves (``v > v_stuck``) the one with ``t . heading >= 0``
+      (turning toward it turns the heading away from the centre); when stopped, the one on the
+      goal's side;
+    * target heading: along ``t``, tilted 45 degrees outward (``t + n``) while inside the margin
+      (``b < 0``), so that the car leaves it;
+    * ``u1`` turns to the target heading at full rate, proportionally within one lap
+      (``err / lap``) so that it does not overshoot while the command is held; while the heading
+      points inward it turns the way that rotates it away from the centre (never through it);
+    * ``u2``: full braking while the heading points inward (``heading . n < 0``), which with the
+      turn makes ``d^2 b/dt^2 > 0`` strictly; full acceleration (up to the speed barrier) once it
+      does not, capped by every obstacle's barrier row.  A stopped car facing inward turns in
+      place.  Blocked (stopped, on target, the cap forbids moving: where two obstacles overlap),
+      it goes round the other way."""
     x, y, th, v = (float(s) for s in state[:4])
     ox, oy = obstacles[i, :2]
     R = float(radii[i])

@@ -9,7 +9,7 @@ verified; anything else is recomputed and replaced, with a ``RuntimeWarning`` na
 guardian's ``cache_dir`` argument; without one, :func:`default_cache_dir`: ``$RMM_HJ_CACHE`` if
 set (read by :mod:`rmm_envs.settings`), else ``~/.cache/rmm-envs/hj``.
 
-What is verified and what sharing a directory means: docs/design-notes.md#rmm_guardianshjcache.
+What is verified and what sharing a directory means: :class:`ValueCache`.
 """
 
 from __future__ import annotations
@@ -77,6 +77,17 @@ def default_cache_dir() -> Path:
 
 
 class ValueCache:
+    """The cache in ``directory`` (``None``: :func:`default_cache_dir`), at most ``max_files``.
+
+    An entry is used only if it is verified: its stored ``spec`` equals the one asked for and its
+    array has the recorded shape and SHA-256.  Anything else (a damaged or edited file, an array
+    overwritten with another of the same shape, an entry of another solve, a file of the older raw
+    ``.npy`` format) is recomputed and replaced, said once with a ``RuntimeWarning`` naming the
+    file and counted (``counts["cache_rejected"]``, which the HJ guardians report in their stats).
+    Entries are written atomically, and the oldest files beyond ``max_files`` removed.  Several
+    processes may share a directory (the benchmark's workers do): a file another process removes
+    at any moment is a cache miss, never an error."""
+
     def __init__(self, directory: str | Path | None = None, max_files: int = 64) -> None:
         self.dir = Path(directory) if directory is not None else default_cache_dir()
         self.max_files = int(max_files)

@@ -10,7 +10,7 @@ and the quadrotor (dispatched on the action space's kind).
 
 Offers :class:`HJGuardian`, :class:`HJPaperGuardian`, :func:`default_grid` and
 :func:`obstacle_target`; the settings and presets are in :mod:`rmm_guardians.hj.settings`.  The
-rule, the scheme, every argument and why: ``docs/design-notes.md``.
+rule and every argument: :class:`HJGuardian`; why: docs/decisions/0011-hj-rule.md, 0010 (scheme).
 """
 
 from __future__ import annotations
@@ -48,6 +48,43 @@ def obstacle_target(grid: Grid, obstacles: np.ndarray) -> np.ndarray:
 
 
 class HJGuardian(SystemDispatch, PrivilegedGuardian):
+    """Grid HJ reachability guardian for Dubins4D (``hj``); the maze car and the quadrotor are
+    handed to :class:`MazeHJGuardian` and :class:`QuadrotorHJGuardian` by the action space's kind.
+
+    **Value**: at reset, the backward reachable tube of all the episode's obstacles over
+    ``horizon`` (4 s) on the default grid ``x, y in [-15, 15]`` (64 points each), heading periodic
+    (32), speed ``[0, 4]`` (32; the paper's grid, although the env holds ``v <= 2``).  The target
+    is the exact signed distance to the union of the circles, so ``V`` is in metres; its gradient
+    is precomputed (central differences).  The reset time is the episode's ``precompute_time``,
+    not charged to the episode's clock.
+
+    **Rule** (``rule="distance"``): take control when ``V <= margin + v T + u2_max T^2 / 2``,
+    ``T = (1 + delay) * lap``, ``lap`` measured from the simulated times (``lap=None``; 0.1 s
+    before the first), with the bang-bang maximiser of ``grad V . f`` (``u1 = +-u1_max`` by the
+    sign of ``dV/dtheta``, ``u2 = +-u2_max`` by that of ``dV/dv``).  ``rule="gradient"``: act when
+    ``V <= margin + T rho + T^2 kappa / 2``, ``rho = max(0, -min_u grad V . f)``,
+    ``kappa = |grad_xy V| sqrt((v u1_max)^2 + u2_max^2)``; ``rule="value"``: when ``V <= margin``.
+    Below one speed cell the gradient is read one speed cell up (``standstill_lookup``, counted
+    in ``standstill_lookups``): at standstill ``dV/dtheta = 0`` and the control would only brake.
+
+    **Arguments** (:class:`~rmm_guardians.hj.settings.HJSettings`): ``grid`` or ``grid_n``,
+    ``horizon``, ``order`` (1 upwind, 2 ENO2), ``rk`` (TVD RK order), ``cfl`` (0.8), ``rule``,
+    ``margin`` (m; ``None``: half a position cell, 0.238 m on the default grid), ``delay`` (laps;
+    0 in the blocking ``Dubins4DGuarded-v0``), ``lap``, ``disturbance`` (0, as the paper ran),
+    ``cache_dir`` (``None``: ``$RMM_HJ_CACHE`` if set, else ``~/.cache/rmm-envs/hj``), ``cache``,
+    ``cache_max_files`` (64 files of 17 MB), ``backend`` (``"auto"``: the compiled kernel;
+    ``"numpy"``/``"numba"``: both give the same value to float32 rounding and share cache
+    entries), ``threads`` (``None``: ``$RMM_HJ_THREADS``, else numba's; never changes the value),
+    ``mode="reach_avoid"`` (also the goal's reach-avoid value over ``ra_horizon``, 10 s: while
+    ``-ra_margin <= V_ra <= 0`` it steers to keep it; a second, 2.5x longer solve), ``maze`` and
+    ``quadrotor`` (the other systems' arguments; ``False`` refuses them; ``cache_dir``, ``cache``,
+    ``cache_max_files``, ``backend``, ``threads``, ``delay`` and ``lap`` are shared).
+
+    It needs privileged data and an action space with the two Dubins4D controls, symmetric about 0
+    (the dynamics' bounds are read from it and enter the cache key).  A state outside the grid's
+    position/speed box leaves control to the driver (``outside_grid``); a state with NaN brakes at
+    maximum (``nan_states``); an obstacle centre off the grid is refused at reset."""
+
     name = "hj"
     others = {dubins3d.KIND: MazeHJGuardian, quadrotor_control.KIND: QuadrotorHJGuardian}
 

@@ -8,8 +8,9 @@ for the constant-speed car with the Dubins4D solver (a speed axis of three equal
 step its look-ahead rule (:mod:`rmm_guardians.hj.maze_lookahead`) checks the driver's next laps and
 the best two-turn recovery against the walls and the value.
 
-Offers :class:`MazeHJGuardian`, :func:`maze_grid` and :func:`wall_target`.  The value, the
-rule, the alternatives tried, the defaults and why: ``docs/design-notes.md``.
+Offers :class:`MazeHJGuardian` (the value, the rule and the defaults in its docstring),
+:func:`maze_grid` and :func:`wall_target`.  Why, and the alternatives tried:
+docs/decisions/0012-hj-maze-lookahead.md.
 """
 
 from __future__ import annotations
@@ -57,7 +58,39 @@ def wall_target(grid: Grid, maze) -> np.ndarray:
 
 
 class MazeHJGuardian(PrivilegedGuardian):
-    """Grid HJ reachability guardian for the maze car; see the module docstring."""
+    """Grid HJ reachability guardian for the maze car; see the module docstring.
+
+    **Value**: the car (speed ``s``, turn rate ``|u| <= u_max``, read at ``reset`` from the
+    action space) gets the backward reachable tube of the walls over ``horizon`` on a grid
+    ``(x, y, psi)``, heading periodic; the target is the exact signed distance to the walls'
+    surfaces (capped at 60 px), so ``V`` is in pixels.  It is solved as the Dubins4D car at one
+    speed (``Dubins4DHJ(u1_max=u_max, u2_max=0, v_min=v_max=s)``, a speed axis of three nodes),
+    cached on disk like the Dubins4D value; the solve time is ``stats()["solve_seconds"]`` and the
+    episode's precompute time.
+
+    **Rule** (``rule="lookahead"``, :mod:`rmm_guardians.hj.maze_lookahead`): two-turn manoeuvres
+    (``u1`` for ``t1`` in ``lookahead / 6`` steps up to ``lookahead``, then ``u2``) are scored by
+    their least exact clearance; one whose second turn is a full-rate turn is followed for a whole
+    loop (a clear loop is safe for ever), one ending straight also counts ``V - value_error`` at
+    its end.  It stays passive while the pending lap (under its last turn rate or the driver's
+    ``info["nominal_control"]``), one more lap of the driver's turn rate and the best manoeuvre
+    keep more than ``margin`` of clearance; otherwise it commands, from the pose one lap ahead,
+    the manoeuvre keeping ``margin`` whose first turn rate is nearest the driver's (ties: the
+    larger score), else the best-scoring one.  Where ``V`` exceeds ``band`` nothing is scored.
+    ``rule="distance"``: take control when ``V <= margin + s T`` (``T = (1 + delay) lap``) with
+    ``u = u_max sign(dV/dpsi)``.
+
+    Defaults: ``spacing = 8`` px (under a wall's 12.5 px, so every wall has a node inside it);
+    ``n_heading = 32`` (11.25 degrees); ``horizon = 20`` s (a half turn takes
+    ``pi / u_max`` = 15.7 s; on a 10 x 10 maze the unsafe share of the grid is 22.9, 26.4, 28.2,
+    29.3, 29.9 and 30.0% at 5, 10, 15, 20, 30 and 40 s, and 20 s costs half of 40);
+    ``region = "route"`` (the cells of the maze path from the car to the goal plus
+    ``route_margin`` cell around their bounding box, about a third of a 10 x 10 maze; outside it
+    control is left to the driver, counted in ``outside_grid``; ``"maze"``: the whole maze);
+    ``order = 2, rk = 3, cfl = 0.8``; ``margin`` ``None``: half a position cell (4 px);
+    ``lookahead = 6`` s, ``band = 20`` px and ``value_error = 6`` px (the value's over-statement
+    seen at wall ends, 6-8 px).  A pose with NaN applies the env's safe default (``nan_states``);
+    a maze with no walls is refused at reset."""
 
     name = "hj"
 

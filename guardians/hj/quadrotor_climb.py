@@ -11,7 +11,7 @@ the rise (the braking run, at every height to ``z_c``), the line and the descent
 ``margin`` round the body (the descent column: ``margin`` plus ``DESCEND``, the distance from the
 waypoint it starts at): it never descends onto an obstacle.  Privileged: it reads the room.
 
-The reasoning and the figures: docs/design-notes.md#rmm_guardianshjquadrotor_climb.
+The plan's phases: :class:`Climb`; the reasoning and the figures: docs/decisions/0013-hj-quadrotor.md.
 """
 
 from __future__ import annotations
@@ -46,7 +46,20 @@ class ClimbPlan:
 class Climb:
     """Plans and flies climbs in ``room`` (the module docstring); ``speed``: the vertical speed it
     commands (m/s; horizontally it flies at most ``CRUISE``, the pilot's speed); ``k_v`` (1/s): the
-    horizontal velocity loop's gain (a zero command stops the body ``v / k_v`` further on)."""
+    horizontal velocity loop's gain (a zero command stops the body ``v / k_v`` further on).
+
+    A plan's phases: **rise** at the braking point (the horizontal command zero, so the lag stops
+    the body ``v / k_v`` further on; the command holds that point, ``1 /s`` of position error at
+    most 0.5 m/s, and climbs, ``1.5 /s`` of height error at most ``speed``, to ``z_c``); **line**
+    (within ``SETTLE`` of the point and of ``z_c``: straight to the waypoint as the pilot flies,
+    ``1 /s`` of distance at most its 1.5 m/s, holding ``z_c``); **descend** (within ``DESCEND``
+    of the waypoint horizontally: down to its height at most ``speed``, still moving onto it;
+    within ``SETTLE`` of it the climb is over and control goes back to the pilot).  Tops are exact
+    (a rotated box: its centre's height plus the world-z extent of its half axes; a cylinder:
+    ``|R_zz| L / 2 + r sqrt(1 - R_zz^2)``).  The braking point's *error* is commanded (its rate is
+    the command under the lag): holding the point by its distance overshot it by 0.17 m after the
+    pending lap.  Samples 0.1 m apart can miss 0.05 m between them and the loop tracks the line to
+    a few centimetres, which ``margin`` covers."""
 
     def __init__(self, room, margin: float, ceiling: float, speed: float, k_v: float) -> None:
         self.room, self.margin, self.ceiling, self.speed, self.k_v = room, margin, ceiling, speed, k_v

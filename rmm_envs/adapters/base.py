@@ -10,7 +10,7 @@ unchanged; :class:`AdaptedEnv` offers the :class:`rmm_envs.risk.LabelledEnv` hoo
 it wraps, so :class:`rmm_envs.wrappers.RiskLabel` and ``rmm-datagen`` use it in place of a
 package env.  :func:`rmm_envs.adapters.adapt` picks the adapter for an env.
 
-What "risk" means for an adapted simulator, in full: docs/design-notes.md#rmm_envsadaptersbase.
+What a label means here is :class:`SimulatorScene`'s docstring; why: docs/decisions/0009-simulator-adapters.md.
 """
 
 from __future__ import annotations
@@ -101,8 +101,20 @@ def _checked_failure(failure, name: str):
 
 
 class SimulatorScene:
-    """The :class:`rmm_envs.risk.RiskScene` of a simulator stepped every ``dt`` seconds (what its risk
-    means: docs/design-notes.md#rmm_envsadaptersbase).
+    """The :class:`rmm_envs.risk.RiskScene` of a simulator stepped every ``dt`` seconds.
+
+    What "risk" means here: each branch holds one control, drawn uniformly from the action space,
+    for the horizon ``t`` (a whole number of env steps: ``t / dt`` must be an integer up to 1e-9,
+    else ``ValueError`` naming both); the env is stepped every ``dt`` and a branch **fails** if any
+    env step fails (the step reports it, or the state after it fails by the adapter's failure
+    test or the user's ``failure`` callable, or is not finite).  The path the scene returns holds
+    ``n_steps`` of the ``t / dt + 1`` env-step states, equally spaced (rounded to env steps), and
+    is ``NaN`` from the first failed env step on: failure is absorbing, so ``path_failed`` reads
+    the path's last point.  A label is then the tree's risk metric over ``depth`` levels: the
+    chance (expected value, CVaR or worst case) that random held controls reach a failure within
+    ``depth * t`` seconds.  Failure: the adapter's own test (CartPole's termination, the MuJoCo
+    envs' unhealthy states) and/or the user's vectorised ``failure(states (N, d)) -> (N,) bool``;
+    where both exist a state fails if either says so.
 
     Subclasses implement :meth:`advance` (the env steps, batched where the simulator allows) and
     may implement :meth:`env_failed` (their env's own failure test of states).

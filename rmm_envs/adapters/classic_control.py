@@ -13,7 +13,7 @@ CartPole-v1 (:class:`CartPoleAdapter`)
     or ``|theta| > 12 deg`` (the env's ``x_threshold`` and ``theta_threshold_radians``).
     Controls: ``Discrete(2)`` as the box ``[0, 2)``, each branch pushing left or right (10 N)
     with probability 1/2 for its whole ``t``.  Default ``t`` = 0.08 s (4 steps of 0.02 s; why:
-    docs/design-notes.md#rmm_envsadaptersclassic_control).  Sampler: uniform on the non-failed box
+    docs/decisions/0009-simulator-adapters.md).  Sampler: uniform on the non-failed box
     ``|x| < 2.4``, ``|x_dot| < 2`` m/s, ``|theta| < 12 deg``, ``|theta_dot| < 2`` rad/s.
     Observation: the state (float32), as the env returns it.
 

@@ -35,7 +35,7 @@ any other MuJoCo env
     its dataset and model: docs/reproduction.md, "Risk labels and a model for Walker2d-v5").
 
 Every state that is not finite fails as well, and a user's ``failure`` adds to the env's.  Why
-these horizons: docs/design-notes.md#rmm_envsadaptersmujoco_envs.
+these horizons: docs/decisions/0009-simulator-adapters.md.
 
 Sampler (``sample_states``, for datasets): *visited states*: the env is reset (seeded from the
 generator; the env's state and generator are restored afterwards) and then stepped with uniform

@@ -8,9 +8,8 @@ heading CLF toward the goal and a speed CLF toward ``v_d = (d / 10)^2``.
 :func:`clf_qp` solves it exactly for ``N`` states in one compiled loop (the default,
 ``solver="closed_form"``); ``solver="osqp"`` hands the same rows to OSQP, to check it.
 :class:`CLFDriver` is the env's driver, :class:`DriverParams` its gains, :func:`desired_heading`
-the heading it steers to.  How the closed form is derived: "Design notes" at the end.
-
-The QP in full: docs/design-notes.md#rmm_envsdriversdubins4d.
+the heading it steers to.  The QP in full: :func:`clf_qp`; how the closed form is derived: "Design
+notes" at the end.  Why a closed form: docs/decisions/0020-reckless-drivers.md.
 """
 
 from __future__ import annotations
@@ -108,7 +107,22 @@ if njit is not None:  # one source: the compiled loop runs these very functions
 
 
 def clf_qp(states, goals, lim, gain, out=None) -> np.ndarray:
-    """Exact solutions ``z = (u1, u2, d_theta, d_v)`` of the driver's QP at ``N`` states.
+    """Exact solutions ``z = (u1, u2, d_theta, d_v)`` of the driver's QP at ``N`` states::
+
+        minimise   u1^2 + u2^2 + p_theta d_theta^2 + p_v d_v^2
+        subject to u2 <= gamma_vmax (v_max - v)                    (speed-max barrier)
+                   -u2 <= gamma_vmin (v - v_min)                   (speed-min barrier)
+                   u1_min <= u1 <= u1_max,  u2_min <= u2 <= u2_max (control box)
+                   2 (theta - theta_d) u1 - d_theta <= -LfV_theta - lambda_theta V_theta   (heading CLF)
+                   2 (v - v_d) u2 - d_v <= -lambda_v V_v                                (speed CLF)
+
+    with ``V_theta = (theta - theta_d)^2``, ``theta_d`` the bearing of the goal
+    (:func:`desired_heading`, with the original's literal +-1.5 pi rule near the branch cut),
+    ``LfV_theta = 2 v (theta - theta_d) (xh sin theta - yh cos theta) / d^2``, ``v_d = (d / 10)^2``
+    (unclipped) and ``V_v = (v - v_d)^2``.  The speed barriers and the ``u2`` box are one interval
+    ``[l2, h2]`` for ``u2`` (the tighter bounds); when the speed is outside its bounds the interval
+    is empty and is replaced by the single point ``clip(0, u2_min, u2_max)`` (the problem stays
+    feasible, favouring the barrier).
 
     Args:
         states: ``(N, 4+)`` states ``(x, y, theta, v)``.

@@ -7,9 +7,7 @@ body's heading frame, proportional to the offset to the current waypoint (limite
 ``cruise_speed`` and ``climb_speed``), turning to look where it flies, each number clipped to
 the command box.  A waypoint other than the last is passed within ``reach`` of it.  It is
 deliberately careless (straight lines cross walls and meet objects); it is deterministic: all
-the randomness of an episode is in its waypoints.
-
-The command law in full: docs/design-notes.md#rmm_envsdriversquadrotor.
+the randomness of an episode is in its waypoints.  The command law in full: :class:`WaypointPilot`.
 """
 
 from __future__ import annotations
@@ -24,7 +22,20 @@ __all__ = ["WaypointPilot"]
 
 
 class WaypointPilot:
-    """Args:
+    """The command law.  From position ``p`` and yaw ``psi``, toward the current waypoint ``w``:
+
+    * horizontal velocity ``gain * (w - p)_xy`` in the world frame, its norm limited to
+      ``cruise_speed``, turned into the heading frame (by ``-psi``);
+    * vertical velocity ``gain * (w - p)_z``, limited to ``climb_speed``;
+    * yaw rate ``yaw_gain * wrap(bearing - psi)`` (limited by the command box), ``bearing`` the
+      direction of ``(w - p)_xy``, so the body's forward ray looks where it flies; no turn within
+      ``reach`` of the waypoint horizontally;
+    * each number clipped to the command box.
+
+    A waypoint other than the last is passed once the body is within ``reach`` of it (3-D
+    distance), and the pilot turns to the next.
+
+    Args:
     command_low, command_high: the command box (4 numbers each), the controller's.
     cruise_speed: horizontal speed limit, m/s (default 1.5).
     climb_speed: vertical speed limit, m/s (default 0.5).

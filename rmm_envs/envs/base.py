@@ -9,9 +9,8 @@ the episode ended raises ``RuntimeError``), seeded rejection sampling (:func:`dr
 
 Subclasses set ``self.scene`` at every ``reset`` (to the :class:`rmm_envs.risk.RiskScene` of the
 new episode) and call :meth:`~LabelledEnvBase.begin_episode` there, and
-:meth:`~LabelledEnvBase.end_episode` on the step that ends it.
-
-Each piece in detail: docs/design-notes.md#rmm_envsenvsbase.
+:meth:`~LabelledEnvBase.end_episode` on the step that ends it.  Each piece in detail: the
+docstrings of :class:`LabelledEnvBase` and of the functions.
 """
 
 from __future__ import annotations
@@ -165,7 +164,20 @@ def rejection_sample(
 
 
 class LabelledEnvBase(gym.Env):
-    """A Gymnasium env with the shared skeleton above; see the module docstring."""
+    """A Gymnasium env with the shared skeleton of the module docstring.
+
+    * **Running-state guards**: :meth:`check_can_step` (``step`` before ``reset`` or after the
+      episode ended raises ``RuntimeError``) and :meth:`require_episode` (accessors that need a
+      ``reset`` first); :meth:`check_options` refuses unknown reset options.
+    * **Rendering**: :meth:`render` warns and returns ``None`` without a ``render_mode``, returns
+      :meth:`render_frame` for ``"rgb_array"`` and shows it with pygame for ``"human"`` (offered
+      by an env only where pygame is installed).
+    * **The labelling hooks** of :class:`rmm_envs.risk.LabelledEnv`: :meth:`risk_scene` (the
+      current episode's ``self.scene``) and :meth:`dataset_notes` (none by default); each env adds
+      ``true_state``, ``sample_states``, ``observe_states`` and ``privileged``.
+
+    Every draw of :func:`draw_until` and :func:`rejection_sample` takes the caller's
+    ``numpy.random.Generator``, so the same seed gives the same samples."""
 
     #: the keys ``reset(options=...)`` accepts, in the order error messages list them
     reset_options: tuple[str, ...] = ()

@@ -11,7 +11,11 @@ Gymnasium's vector API (``gymnasium.vector.VectorEnv``, gymnasium >= 1.0).
 After ``reset(seed=s)``, sub-env ``i`` is exactly the single env after ``reset(seed=s + i)``,
 step for step and bit for bit, across autoresets (tested against Gymnasium's
 ``SyncVectorEnv`` of single envs: observations, rewards, ``terminated``, ``truncated`` and every
-info entry; why it holds: docs/design-notes.md#rmm_envsenvsdubins4d_vector).
+info entry).  It holds by construction: each sub-env has its own random generator, seeded as the
+single env's, and draws its starts with the single env's own generation code; a step runs the
+single env's batched functions (:func:`rmm_envs.envs.dubins4d_step.advance`: the driver's
+closed-form QP, the exact path, the contact test; and the ray caster), each a compiled loop whose
+result for one world does not depend on the rest of the batch.
 
 ## Spaces
 

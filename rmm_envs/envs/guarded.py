@@ -11,7 +11,7 @@ A subclass sets ``step_dt``, ``max_episode_sim_time``, ``clock`` and ``action_sp
 :meth:`~GuardedEnv.begin_statistics` and :meth:`~GuardedEnv.update_nominal` at ``reset`` and,
 in ``simulate``, :meth:`~GuardedEnv.check_interval`, :meth:`~GuardedEnv.count_interval` and
 :meth:`~GuardedEnv.end_interval`; it reports :meth:`~GuardedEnv.final_speed` and
-:meth:`~GuardedEnv.driver_control`.  Each piece in detail: docs/design-notes.md#rmm_envsenvsguarded.
+:meth:`~GuardedEnv.driver_control`.  Each piece in detail: :class:`GuardedEnv`.
 """
 
 from __future__ import annotations
@@ -34,7 +34,28 @@ EPISODE_KEY = "episode_stats"
 
 
 class GuardedEnv(LabelledEnvBase):
-    """See the module docstring."""
+    """The shared parallel-autonomy step (see the module docstring).
+
+    * :meth:`step`: read the agent's compute time off ``self.clock``, parse the action with the
+      action space (:class:`rmm_envs.autonomy.GuardianActionSpace`), advance by ``step_dt`` with
+      the env's ``simulate(duration, active, control, compute_time)`` (which the non-blocking
+      wrapper calls directly with its own durations), restart the clock.
+    * The driver's intended control, ``info["nominal_control"]`` on ``reset`` and every step
+      (:meth:`update_nominal`): computed from the state the returned observation shows, in the
+      action space's control order and bounds, and kept, so that an interval the driver controls
+      applies exactly these numbers.  A safety filter reads it as its ``u_nom``; a guardian
+      returning ``action_space.active(info["nominal_control"])`` drives exactly as the driver does
+      (tested bit for bit).
+    * The per-step safety cost of Safety-Gymnasium's convention, ``info["cost"]``: 1.0 on a step
+      that ends in a collision, 0.0 otherwise; its episode sum is ``cum_cost`` in the statistics.
+    * The statistics of the paper's Table I (:meth:`episode_statistics`, ``info["episode_stats"]``:
+      a key of its own, so that Gymnasium's ``RecordEpisodeStatistics`` and SB3's ``Monitor`` can
+      write their ``info["episode"]``) and the end of a step: :meth:`end_interval` ends the episode
+      on an outcome (``"goal"``, ``"collision"``) or at ``max_episode_sim_time`` (``"timeout"``,
+      truncated) and adds ``outcome`` and ``episode_stats`` to the last step's ``info``.
+
+    ``simulate`` applies ``self._nominal`` on an interval the driver controls, and calls
+    :meth:`end_interval` after the state has advanced."""
 
     step_dt: float
     max_episode_sim_time: float

@@ -11,7 +11,7 @@ gives identical data whatever the worker count or backend (``--backend local`` o
 rerun of the same command resumes, verifying and regenerating any damaged shard;
 :func:`load_dataset` verifies every shard.
 
-The columns, determinism, crash safety and integrity: docs/design-notes.md#rmm_envsriskdatagen.
+The files and the columns: :func:`generate`; why: docs/decisions/0007-datasets-and-models.md.
 """
 
 from __future__ import annotations
@@ -72,6 +72,26 @@ def generate(
 
     Existing shards are kept only if they match the checksum recorded when they were written;
     the others are regenerated and listed in ``manifest["last_run"]["regenerated"]``.
+
+    The folder ``out``:
+
+    * ``metadata.json``: env id and arguments, estimator parameters, seed, sizes, package version;
+    * ``shard-NNNNN.parquet``: the rows of a fixed block of configurations
+      (``cfg.configs_per_shard``), grouped by configuration so that train/test can be split by
+      configuration.  Columns ``config_id``, ``sample``, ``obs`` (float32 list), ``state``
+      (float64 list), ``risk``, ``min_risk_ctrl`` (list), ``min_risk_ctrl_dur``, ``n_leaves``;
+      with candidates also ``candidate_risk`` (a list, one action-conditioned label per candidate,
+      :meth:`rmm_envs.risk.RiskEstimator.estimate_candidates`; drawn after the plain labels, so
+      ``risk`` is the same with or without them);
+    * ``shard-NNNNN.sha256`` (only while a run is unfinished): a shard's SHA-256, written right
+      after the shard (``sha256sum -c`` format), folded into the manifest at the end;
+    * ``manifest.json`` (written last): row count, per-shard SHA-256 and the dataset hash, built
+      from the recorded checksums, never from what the files hold now.
+
+    Configuration ``c`` draws everything from ``SeedSequence(seed, spawn_key=(c, ...))``.  Each
+    shard is written to a temporary file and renamed into place.  A folder made with other
+    parameters is refused rather than mixed.  Ray tasks return their rows to this process, which
+    writes the shards, so no shared file system is needed.
     """
     cfg.validate()
     labelled_env(cfg)  # refuses an env that is not a LabelledEnv before anything is written

@@ -9,7 +9,8 @@ metric of its children.  A root that already fails is worth 1.  Also returned pe
 minimum-risk child's first control, its hold time and the number of terminal nodes;
 :meth:`RiskEstimator.estimate_candidates` labels given controls (action-conditioned labels).
 
-Batching, the tree-size limit, randomness and the candidates: docs/design-notes.md#rmm_envsriskestimator.
+Batching, the tree-size limit and randomness: :class:`RiskEstimator`; why:
+docs/decisions/0008-risk-labels.md.
 """
 
 from __future__ import annotations
@@ -79,6 +80,17 @@ class RiskResult:
 
 class RiskEstimator:
     """Batched Algorithm 1.
+
+    All ``B * n`` branches of level 1 are one ``propagate`` and one ``path_failed`` call, all
+    ``B * n^2`` of level 2 the next, and so on; roots are processed in chunks to bound memory.
+    Only the children of live nodes are propagated (a failed node is not expanded), so the value
+    is exactly Algorithm 1's and cluttered states cost less.  A tree of more than
+    ``MAX_TREE_NODES`` (2^20) nodes per root is refused before anything is allocated.
+    Randomness: the default policy (uniform over the control box) draws every control of the tree
+    for all roots up front, level by level in root-major order, so results do not depend on the
+    chunk size; a custom ``policy`` is called per chunk and level.  The minimum-risk child's
+    control is held for ``t`` (the original stored one path segment's duration, ``t / (n_steps -
+    1)``, of the same constant control).
 
     Args:
         system: a :class:`rmm_envs.risk.RiskScene` (the dynamics in one obstacle configuration).

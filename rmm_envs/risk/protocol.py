@@ -10,7 +10,7 @@ member's contract is in its class's docstring; :func:`check_scene` and
 :func:`check_labelled_env` check an object against them, naming each missing or ill-formed
 member.
 
-Why a scene and an env are two protocols: docs/design-notes.md#rmm_envsriskprotocol.
+Two protocols because observing states for datasets is the env's concern, not the scene's.
 """
 
 from __future__ import annotations

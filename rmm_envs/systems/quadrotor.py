@@ -9,7 +9,8 @@ collision cylinder) is written once, in :class:`QuadrotorParams`; ``QUADROTOR`` 
 quadrotor, which both ``QuadrotorRoom-v0`` (PyBullet) and :class:`Quadrotor` (this propagator)
 read.
 
-The forces, the torques, the step and a branch's timing: docs/design-notes.md#rmm_envssystemsquadrotor.
+The forces, the torques, the step and a branch's timing: :class:`Quadrotor`; why a propagator of
+our own: docs/decisions/0021-exact-models.md.
 """
 
 from __future__ import annotations
@@ -114,7 +115,21 @@ QUADROTOR = QuadrotorParams()
 
 @dataclass(frozen=True)
 class Quadrotor:
-    """The batched numpy propagator of the body described by ``params``."""
+    """The batched numpy propagator of the body described by ``params``.
+
+    One physics step of ``dt = 1/240`` s, as PyBullet's multibody integrator does it:
+
+    * forces: gravity, the thrust ``R e_z F``, and damping ``-m (d + d |v|) v`` (PyBullet's
+      multibody damping, linear in and proportional to the speed, default ``d = 0.04``);
+    * torques: ``R M``, the gyroscopic term ``-w x (I_w w)`` with ``I_w = R I R^T``, and damping
+      ``-I_w (d + d |w|) w``;
+    * velocities first (``v += a dt``, ``w += alpha dt``), then the position with the new velocity
+      and the orientation by the exact rotation ``exp(w dt)``.
+
+    A branch of the risk tree holds one control for ``duration`` split into ``n_steps - 1`` equal
+    segments; each segment runs ``ceil(segment / dt)`` physics steps (the original's overshoot to
+    whole steps is kept, so a 2 s branch with 8 points lasts 7 x 69 steps).  Quaternion arithmetic
+    comes from :mod:`rmm_envs.systems.rotations`."""
 
     params: QuadrotorParams = QUADROTOR
     state_dim: ClassVar[int] = 13

@@ -9,7 +9,8 @@ segment collides when it comes within ``r`` of a centre (the boundary counts); a
 environment: the first obstacle's centre drawn from ``N(0, 2^2)`` per axis, the others uniform
 on the arena square, radii uniform in ``[r_min, r_max]``; obstacles may overlap.
 
-Where this differs from the original, and why: docs/design-notes.md#rmm_envsworldscircles.
+Where this differs from the original (exact circles where it used 64-gons, contacts ordered within
+a step): docs/original-code.md, items 2, 3 and 21; why: docs/decisions/0021-exact-models.md.
 """
 
 from __future__ import annotations

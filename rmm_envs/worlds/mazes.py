@@ -8,7 +8,8 @@ caps).  Generators (seeded, both perfect mazes built with Kruskal's algorithm):
 :meth:`Maze.paths_hit` (a path touches a wall or leaves the image) and :meth:`Maze.rays`
 (distance to the first wall surface or the image border).
 
-The units, the generators and the queries in detail: docs/design-notes.md#rmm_envsworldsmazes.
+The units (docs/original-code.md, item 25), the generators and the queries in detail:
+:class:`Maze` and :func:`generate_maze`.
 """
 
 from __future__ import annotations
@@ -75,6 +76,13 @@ def _seg_seg_sq(p0x, p0y, p1x, p1y, q0x, q0y, q1x, q1y):
 @dataclass
 class Maze:
     """Walls ``(W, 4)`` as segments ``(x0, y0, x1, y1)`` in px, with their thickness.
+
+    A wall is the set of points within ``thickness / 2`` of its segment (a capsule).  Queries are
+    batched and exact: :meth:`point_clearance` (distance to the nearest wall surface, negative
+    inside a wall; points outside the image are invalid), :meth:`paths_hit` (a path ``(N, S, 2+)``
+    fails if a point is inside a wall or outside the image, or a segment between points touches
+    a wall) and :meth:`rays`.  Per-root candidate walls come from a bucket grid, so a query tests
+    only the few walls near it.
 
     ``cells`` (``(C, 2)`` centres) and ``passages`` (``(P, 2)`` pairs of cells joined by an
     opening) describe the maze's graph for connectivity checks.
@@ -319,7 +327,13 @@ def generate_maze(
     cell: float = 125.0,
     thickness: float = 12.5,
 ) -> Maze:
-    """A seeded perfect maze of ``kind`` with a one-cell margin around it (pixel units)."""
+    """A seeded perfect maze of ``kind`` with a one-cell margin around it (pixel units).
+
+    Both kinds are perfect mazes (every cell reachable from every other by exactly one path), a
+    random spanning tree built with Kruskal's algorithm: ``"rectangular"`` a rows x cols grid of
+    square cells, ``"honeycomb"`` pointy-top hexagons in offset rows.  The defaults are the
+    paper's: 20 x 20 cells of 125 px, walls 12.5 px thick (mazegen's 3-unit round-capped stroke
+    at 300 dpi), a 2750 x 2750 px image."""
     if kind not in MAZE_KINDS:
         raise ValueError(f"unknown maze kind {kind!r}; expected one of {MAZE_KINDS}")
     from rmm_envs.worlds.bounds import MAX_MAGNITUDE, MAX_MAZE_SIDE, within_bounds

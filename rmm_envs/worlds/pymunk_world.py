@@ -9,7 +9,7 @@ obstacle); a path's **contact parameter** is ``0`` when its first point is insid
 never touches one.  On a map of circles only the answers agree with the analytic circle
 functions to rounding (tested to 1e-4).
 
-The queries in detail and the bounding-box shortcut: docs/design-notes.md#rmm_envsworldspymunk_world.
+The queries in detail and the bounding-box shortcut: :class:`PymunkWorld`.
 """
 
 from __future__ import annotations
@@ -41,7 +41,16 @@ def require_pymunk():
 
 
 class PymunkWorld:
-    """The obstacles of ``shape_map`` in a static pymunk space (see the module docstring)."""
+    """The obstacles of ``shape_map`` in a static pymunk space (see the module docstring).
+
+    A circle becomes a ``pymunk.Circle``, a segment a ``pymunk.Segment`` of radius
+    ``thickness / 2`` (a capsule), a polygon its ear-clipping triangles (``pymunk.Poly``: pymunk's
+    polygons are convex).  A point is inside when ``point_query_nearest`` finds a shape at
+    distance ``<= 0``; a ray is ``segment_query_first`` from the origin to ``max_range``; a
+    path's contact parameter needs no point query beyond its first point (a path becomes inside
+    only by crossing a boundary, which ``segment_query_first`` finds).  Before any pymunk call a
+    query is skipped when its bounding box meets no obstacle's (numpy for batches, pymunk's
+    ``bb_query`` for one path), so free space costs almost nothing."""
 
     def __init__(self, shape_map: ShapeMap) -> None:
         pymunk = require_pymunk()

@@ -7,7 +7,7 @@ floor inside the footprint and not overlapping one another.  No Blender, no conv
 decomposition: every shape is a PyBullet primitive.  :func:`build_room` creates the bodies in a
 PyBullet client; the arrays here are the geometry for everything else.
 
-The distributions of every part: docs/design-notes.md#rmm_envsworldsrooms.
+The distributions of every part: :func:`generate_room`.
 """
 
 from __future__ import annotations
@@ -92,10 +92,22 @@ def generate_room(
     n_spheres: int | None = None,
     wall_thickness: float = 0.5,
 ) -> Room:
-    """A seeded random room; any argument left ``None`` is drawn as described in the module.  A
-    given argument must be an integer (the counts: ``n_rectangles >= 1``, the object counts
-    ``>= 0``) or a finite length in metres ``> 0``; anything else is refused (``ValueError``
-    naming it) before anything is drawn."""
+    """A seeded random room; any argument left ``None`` is drawn as below.  A given argument must
+    be an integer (the counts: ``n_rectangles >= 1``, the object counts ``>= 0``) or a finite
+    length in metres ``> 0``; anything else is refused (``ValueError`` naming it) before anything
+    is drawn.
+
+    * **footprint**: the union of ``n_rectangles`` (1-32) axis-aligned rectangles with centres
+      uniform on ``[-X/2, X/2] x [-Y/2, Y/2]`` (``X, Y ~ U(5, 50)`` m), sides ``max(2, U(0, 10))``
+      m, each new rectangle kept only if it overlaps the union so far (as pcg_gazebo did);
+    * **walls** of thickness 0.5 m and height ``U(0.1, 5)`` m around it, built on a grid of
+      wall-thickness cells: every cell outside the footprint that touches it (8-neighbourhood) is
+      wall, merged row by row into boxes;
+    * a **floor** (the plane z = 0, which counts as an obstacle);
+    * 0-50 each of **boxes** (sides ``U(0.1, 1)`` m), **cylinders** (radius and length
+      ``U(0.1, 1)`` m) and **spheres** (radius ``U(0.1, 1)`` m), with random roll, pitch and yaw,
+      resting on the floor inside the footprint and not overlapping one another (their bounding
+      spheres are kept apart)."""
     for name, v, lo in (
         ("n_rectangles", n_rectangles, 1),
         ("n_boxes", n_boxes, 0),

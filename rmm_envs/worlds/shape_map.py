@@ -7,9 +7,8 @@ module checks it and builds :class:`ShapeMap`: a JSON list of ``circle``, ``poly
 file of at most 16 MiB.  A bad map raises :class:`MapError` (a ``ValueError``) naming the entry
 by its index and content and saying what was expected; an unreadable or non-JSON file raises it
 naming the file.  Shapes are kept exactly as given; :func:`triangulate` splits a polygon into
-triangles for engines that need convex pieces.
-
-Each entry's rules and the limits: docs/design-notes.md#rmm_envsworldsshape_map.
+triangles for engines that need convex pieces.  Each entry's rules and the limits (a polygon of
+at most 5,000 vertices, checked before the rest is read): the ``Map format`` section above.
 """
 
 from __future__ import annotations

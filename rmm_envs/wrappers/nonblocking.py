@@ -11,7 +11,7 @@ reproducible runs, the process CPU clock for runs that share cores.  A bad actio
 episode's clock trace (every lap, in order), which :class:`rmm_envs.clocks.ReplayClock` replays.
 
 What is charged as the agent's time, and how it differs from the original:
-docs/design-notes.md#rmm_envswrappersnonblocking.
+docs/decisions/0004-clocks.md.
 """
 
 from __future__ import annotations
@@ -36,7 +36,10 @@ class NonBlockingStepping(gym.Wrapper):
     """Wrap a parallel-autonomy env that offers ``simulate(duration, active, control, compute_time)``.
 
     The env's action space is a :class:`rmm_envs.autonomy.GuardianActionSpace`; actions are
-    parsed by it.
+    parsed by it.  The reset action is inactive, so an action takes effect one step late, as in the
+    original.  The clock is restarted just before ``step`` returns, so only the agent's time
+    between steps is charged, never the env's own physics and driver (the original started its
+    stopwatch at the end of propagation, which leaked some post-processing into the lap).
 
     Args:
         env: the blocking environment (e.g. ``Dubins4DGuarded-v0``).

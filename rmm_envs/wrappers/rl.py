@@ -11,7 +11,7 @@ For every env whose action space is an :class:`rmm_envs.autonomy.GuardianActionS
     - intervention_cost * (simulated seconds under guardian control this step)``, defaults
     1, 10 and 0.05 per second; the env's own reward is kept in ``info["env_reward"]``.
 
-Why these conventions and these weights: docs/design-notes.md#rmm_envswrappersrl.
+Why these conventions and these weights: :class:`FlattenGuardianAction`, :class:`GuardianReward`.
 """
 
 from __future__ import annotations
@@ -38,7 +38,15 @@ def _guardian_space(env: gym.Env, wrapper: str) -> GuardianActionSpace:
 
 
 class FlattenGuardianAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
-    """The guardian action as ``Box(-1, 1, (1 + c,))``; see the module docstring."""
+    """The guardian action as ``Box(-1, 1, (1 + c,))``; see the module docstring.
+
+    Most RL libraries train on ``Box`` or ``Discrete`` actions, not on a ``Dict``.  A symmetric
+    unit box is what Stable-Baselines3's PPO and SAC expect; ``a[0] > 0.5`` takes control, so a
+    policy that outputs zeros (a fresh Gaussian policy, on average) leaves the driver in charge;
+    ``-1`` is each control's lower and ``+1`` its upper bound (values outside ``[-1, 1]`` are
+    clipped first).  The mapping is :meth:`rmm_envs.autonomy.GuardianActionSpace.from_unit`, which
+    :class:`rmm_guardians.SB3Guardian` also reads, so a policy trained through this wrapper applies
+    the same controls when benchmarked.  Non-finite values raise ``ValueError`` naming the index."""
 
     def __init__(self, env: gym.Env) -> None:
         gym.utils.RecordConstructorArgs.__init__(self)
@@ -59,7 +67,15 @@ class FlattenGuardianAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
 
 
 class GuardianReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
-    """Shaped reward for training guardians; see the module docstring."""
+    """Shaped reward for training guardians; see the module docstring.
+
+    The env's own reward (+1 goal, -1 collision) says nothing about the cost of taking control.
+    The penalty is ten times the bonus because a guardian's purpose is to prevent crashes; a
+    guardian that takes control for a whole 100 s episode pays 5, half a crash, so holding the
+    brakes for ever is worse than intervening briefly but still better than crashing.  The
+    intervention cost is charged per simulated second, not per step, because non-blocking steps
+    have different lengths.  ``info["episode_stats"]`` is unchanged; the three weights must be
+    finite and ``>= 0``."""
 
     def __init__(
         self, env: gym.Env, goal_bonus: float = 1.0, collision_penalty: float = 10.0, intervention_cost: float = 0.05
