@@ -123,7 +123,11 @@ BAD_OPTIONS = [
     (["--agent-opt", "lrmm.windw=3"], "--agent-opt lrmm.windw=3"),
     (["--agent-opt", "lrmm.threshold=true"], "threshold must be a number in [0, 1], got True"),
     (["--agent-opt", "lrmm.threshold=nan"], "threshold must be a number in [0, 1], got 'nan'"),
-    (["--agent-opt", "lrmm.commit=abc"], "commit must be an integer >= 0"),
+    (["--agent-opt", "lrmm.strategies=Nope"], "unknown strategy 'Nope'; the strategies are: SafestCandidate"),
+    (
+        ["--agent-opt", "lrmm.commit=5"],
+        "unexpected keyword argument 'commit'; lrmm takes model, settings, env_id, threshold",
+    ),
     (["--agent-opt", "lrmm.env_id=Dubins3DMazeParallel-v0"], "every guardian is built for the run's env (--env)"),
 ]
 

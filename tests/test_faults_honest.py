@@ -33,7 +33,7 @@ def _two_models(tmp_path):
     second = tmp_path / "second.npz"
     shutil.copy(default_model_path("Dubins4DParallel-v0", variant="act"), first)
     shutil.copy(first, second)
-    set_decision(second, threshold=0.05, commit=0, chosen_by="a drill: a different model file", action="head")
+    set_decision(second, threshold=0.05, strategies="SafestCandidate", chosen_by="a drill: a different model file")
     assert first.read_bytes() != second.read_bytes()
     return first, second
 

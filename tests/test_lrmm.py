@@ -10,6 +10,7 @@ from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
 from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel, default_model_path, load_model
+from rmm_guardians.lrmm.strategies import BrakeTurn, Commit, MovingAverage, Restart, SafestCandidate
 from rmm_guardians.lrmm.train import TrainConfig, split_by_config, train
 from rmm_guardians.lrmm.train import main as train_main
 
@@ -26,8 +27,8 @@ def env_spaces(n_rays=12, layout=None):
 SPACES = env_spaces()
 
 
-# The shipped lrmm model's stored defaults (threshold, commit, action): changing them must fail a test.
-SHIPPED_DECISION = (0.25, 18, "head", "risk", 0.0, 0.3)  # threshold, commit, action, trigger, margin, restart
+# The shipped lrmm model's stored decision (threshold, strategies): changing it must fail a test.
+SHIPPED_DECISION = (0.25, (SafestCandidate(), Commit(steps=18), Restart(speed=0.3)))
 # The shipped act model on tests/fixtures/lrmm_heldout_d4.npz measured risk MAE 0.035, candidate
 # MAE 0.040, regret 0.005 (the picked candidate's labelled risk 0.133, the best 0.128, the best
 # fixed manoeuvre 0.174); bounds leave room for a retrained model of the same quality, not more.
@@ -209,7 +210,8 @@ def obs_with(ray0, left, right):
 
 
 def test_lrmm_takes_control_above_threshold_and_turns_to_the_open_side():
-    g = LRMMGuardian(forward_ray_model())
+    with pytest.warns(UserWarning, match="no 'decision' threshold: using the paper's 0.85"):
+        g = LRMMGuardian(forward_ray_model(), strategies=(BrakeTurn(),))
     g.reset(seed=0, **SPACES)
     a = g.act(obs_with(1.0, left=8.0, right=2.0), {})
     assert g.last_risk > 0.85
@@ -225,7 +227,7 @@ def test_lrmm_takes_control_above_threshold_and_turns_to_the_open_side():
 def test_heuristic_finds_the_side_rays_by_direction_for_any_ray_count():
     """24 rays 15 degrees apart: the +-30 degree rays are rays 2 and 22 (observation 7 and 27),
     found through the layout; the 12-ray indices (6 and 16) are ignored."""
-    g = LRMMGuardian(forward_ray_model(29), action="heuristic", threshold=0.85)
+    g = LRMMGuardian(forward_ray_model(29), strategies="BrakeTurn", threshold=0.85)
     g.reset(seed=0, **env_spaces(24))
     o = np.full(29, 10.0)
     o[:5] = 0.0
@@ -237,19 +239,19 @@ def test_heuristic_finds_the_side_rays_by_direction_for_any_ray_count():
 
 
 def test_heuristic_bounds_come_from_the_action_space():
-    g = LRMMGuardian(forward_ray_model(), action="heuristic", threshold=0.85)
+    g = LRMMGuardian(forward_ray_model(), strategies=(BrakeTurn(),), threshold=0.85)
     narrow = GuardianActionSpace(CONTROLS, [-0.1, -0.3], [0.125, 0.5])
     g.reset(seed=0, observation_space=SPACES["observation_space"], action_space=narrow)
     a = g.act(obs_with(1.0, left=8.0, right=2.0), {})
     assert (a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (0.125, -0.3)
-    override = LRMMGuardian(forward_ray_model(), action="heuristic", threshold=0.85, u1_max=0.2, u2_min=-0.4)
+    override = LRMMGuardian(forward_ray_model(), strategies=(BrakeTurn(turn=0.2, brake=-0.4),), threshold=0.85)
     override.reset(seed=0, **SPACES)
     a = override.act(obs_with(1.0, left=8.0, right=2.0), {})
     assert (a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (0.2, -0.4)
 
 
 def test_lrmm_refuses_at_reset_spaces_that_lack_what_it_needs():
-    heur = LRMMGuardian(forward_ray_model(), action="heuristic", threshold=0.85)
+    heur = LRMMGuardian(forward_ray_model(), strategies="BrakeTurn", threshold=0.85)
     no_rays = ObservationLayout.of(("time", 1), ("goal_offset", 2), ("heading", 1), ("speed", 1), ("ranges", 12))
     with pytest.raises(ValueError, match=r"guardian 'lrmm'.*\['rays'\]"):
         heur.reset(seed=0, **env_spaces(layout=no_rays))
@@ -259,31 +261,35 @@ def test_lrmm_refuses_at_reset_spaces_that_lack_what_it_needs():
         heur.reset(seed=0, observation_space=SPACES["observation_space"])
     with pytest.raises(ValueError, match=r"guardian 'lrmm'.*shape \(17,\).*None"):
         heur.reset(seed=0, action_space=SPACES["action_space"])
-    head = LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5}))
+    head = LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5, "strategies": ["SafestCandidate()"]}))
     head.reset(
         seed=0, observation_space=gym.spaces.Box(-1, 1, (17,)), action_space=SPACES["action_space"]
     )  # no rays needed
     three = GuardianActionSpace(("a", "b", "c"), [-1, -1, -1], [1, 1, 1])
     with pytest.raises(ValueError, match="guardian 'lrmm'.*2 controls"):
         head.reset(seed=0, observation_space=SPACES["observation_space"], action_space=three)
+    # the core alone applies the env's safe default: an action space stating none is refused by name
+    core = LRMMGuardian(forward_ray_model(), threshold=0.85, strategies="")
+    with pytest.raises(ValueError, match=r"guardian 'lrmm': in control, the core applies the env's safe default.*none"):
+        core.reset(seed=0, **SPACES)
 
 
 def test_lrmm_hysteresis_holds_control_while_the_average_is_high():
-    g = LRMMGuardian(forward_ray_model(), hysteresis=True, window=8)
+    g = LRMMGuardian(forward_ray_model(), threshold=0.85, strategies=(MovingAverage(window=8), BrakeTurn()))
     g.reset(seed=0, **SPACES)
     for _ in range(8):
         g.act(obs_with(1.0, 8, 2), {})
     # risk drops to ~0.007 but the 8-sample mean stays above 0.85 for one more step
     acts = [g.act(obs_with(9.0, 8, 2), {})["active_ctrl"] for _ in range(4)]
     assert acts[0] == 1 and acts[-1] == 0
-    plain = LRMMGuardian(forward_ray_model())
+    plain = LRMMGuardian(forward_ray_model(), threshold=0.85, strategies=(BrakeTurn(),))
     plain.reset(seed=0, **SPACES)
     plain.act(obs_with(1.0, 8, 2), {})
     assert plain.act(obs_with(9.0, 8, 2), {})["active_ctrl"] == 0
 
 
 def test_lrmm_guardian_bad_input():
-    g = LRMMGuardian(forward_ray_model())
+    g = LRMMGuardian(forward_ray_model(), threshold=0.85, strategies="BrakeTurn")
     with pytest.raises(ValueError, match="shape"):
         g.reset(seed=0, **env_spaces(11))
     g.reset(seed=0, **SPACES)
@@ -453,27 +459,38 @@ def test_set_decision_round_trip_and_bad_values(tmp_path, head_model, trained):
     from rmm_guardians.lrmm.model import set_decision
 
     p = head_model.save(tmp_path / "h.npz")
-    assert decision_main([str(p), "--threshold", "0.4", "--commit", "7", "--chosen-by", "a test"]) == 0
+    spec = "SafestCandidate, Commit(steps=7)"
+    assert decision_main([str(p), "--threshold", "0.4", "--strategies", spec, "--chosen-by", "a test"]) == 0
     m = LRMMModel.load(p)
-    assert m.meta["decision"] == {"threshold": 0.4, "commit": 7, "action": "head", "chosen_by": "a test"}
+    assert m.meta["decision"] == {
+        "threshold": 0.4,
+        "strategies": ["SafestCandidate()", "Commit(steps=7)"],
+        "chosen_by": "a test",
+    }
     np.testing.assert_array_equal(m.weights[0][0], head_model.weights[0][0])
     g = LRMMGuardian(p)
-    assert (g.threshold, g.commit, g.action) == (0.4, 7, "head")
-    with pytest.raises(ValueError, match="threshold"):
-        set_decision(p, 1.5, 0, "x")
-    with pytest.raises(ValueError, match="commit"):
-        set_decision(p, 0.5, -1, "x")
+    assert (g.threshold, g.threshold_source, g.strategies) == (0.4, "stored decision", (SafestCandidate(), Commit(7)))
+    with pytest.raises(ValueError, match=r"threshold must be in \[0, 1\], got 1.5"):
+        set_decision(p, 1.5, "", "x")
+    with pytest.raises(ValueError, match=r"Commit steps must be an integer >= 0.*got -1"):
+        set_decision(p, 0.5, "Commit(steps=-1)", "x")
     with pytest.raises(ValueError, match="chosen_by"):
-        set_decision(p, 0.5, 1, " ")
-    with pytest.raises(ValueError, match="action"):
-        set_decision(p, 0.5, 1, "x", action="steer")
-    set_decision(p, 0.6, 3, "another test", action="heuristic")
-    assert LRMMGuardian(p).action == "heuristic" and LRMMGuardian(p, action="head").action == "head"
-    with pytest.raises(ValueError, match="candidates"):
-        set_decision(trained.save(tmp_path / "old.npz"), 0.5, 1, "x")
-    assert (
-        decision_main([str(tmp_path / "missing.npz"), "--threshold", "0.4", "--commit", "1", "--chosen-by", "x"]) == 2
-    )
+        set_decision(p, 0.5, "Commit(steps=1)", " ")
+    with pytest.raises(ValueError, match="unknown strategy 'Steer'.*SafestCandidate"):
+        set_decision(p, 0.5, "Steer", "x")
+    assert LRMMModel.load(p).meta["decision"]["threshold"] == 0.4  # every refusal left the file as it was
+    set_decision(p, 0.6, (BrakeTurn(), Commit(steps=3)), "another test")
+    assert LRMMGuardian(p).strategies == (BrakeTurn(), Commit(steps=3))
+    assert LRMMGuardian(p, strategies="SafestCandidate").strategies == (SafestCandidate(),)  # the argument wins
+    old = trained.save(tmp_path / "old.npz")  # no head
+    with pytest.raises(
+        ValueError, match=r"strategy SafestCandidate reads the model's .*'candidates'.*old.npz has none"
+    ):
+        set_decision(old, 0.5, "SafestCandidate, Commit(steps=1)", "x")
+    set_decision(old, 0.5, "BrakeTurn", "x")  # a rule that needs no head may be stored on a model without one
+    assert LRMMModel.load(old).meta["decision"]["strategies"] == ["BrakeTurn(turn=None, brake=None)"]
+    missing = [str(tmp_path / "missing.npz"), "--threshold", "0.4", "--strategies", "", "--chosen-by", "x"]
+    assert decision_main(missing) == 2
 
 
 def _rewrite(src, dst, edit_meta=None, edit_arrays=None):
@@ -494,18 +511,18 @@ def _rewrite(src, dst, edit_meta=None, edit_arrays=None):
     return dst
 
 
-def test_old_format_model_loads_as_the_paper_preset_with_a_warning(tmp_path, trained):
-    """A version-1 file (no head, no decision): lrmm warns once per missing field and runs the paper's rule."""
+def test_old_format_model_loads_as_the_core_with_a_warning(tmp_path, trained):
+    """A version-1 file (no head, no decision): lrmm warns of the paper's threshold and runs the core alone."""
     p = _rewrite(trained.save(tmp_path / "m.npz"), tmp_path / "v1.npz", edit_meta=lambda m: m.update(format_version=1))
     with pytest.warns(UserWarning) as rec:
         g = LRMMGuardian(p)
     text = " ".join(str(w.message) for w in rec)
-    assert "'candidates'" in text and "'decision'" in text and "v1.npz" in text
-    assert (g.threshold, g.action, g.commit, g.hysteresis) == (0.85, "heuristic", 0, False)
+    assert len(rec) == 1 and "'decision'" in text and "v1.npz" in text and "0.85" in text
+    assert (g.threshold, g.threshold_source, g.strategies) == (0.85, "paper", ())
     with pytest.warns(UserWarning, match="decision"):
-        assert LRMMGuardian(p, action="heuristic").threshold == 0.85
-    with pytest.raises(ValueError, match="candidates"):
-        LRMMGuardian(p, action="head", threshold=0.5)
+        assert LRMMGuardian(p, strategies="BrakeTurn").threshold == 0.85
+    with pytest.raises(ValueError, match="SafestCandidate.*'candidates'.*v1.npz has none"):
+        LRMMGuardian(p, strategies="SafestCandidate", threshold=0.5)
     import warnings
 
     from rmm_guardians.lrmm.guardian import LRMMPaperGuardian
@@ -561,7 +578,7 @@ def test_non_finite_risk_is_an_error_not_safe():
     }
     m = LRMMModel([(W0, np.zeros(1)), (np.ones((1, 1)), None)], np.zeros(17), np.ones(17), meta)
     for g in (
-        LRMMGuardian(m, action="heuristic"),
+        LRMMGuardian(m, strategies="BrakeTurn"),
         __import__("rmm_guardians.lrmm.guardian", fromlist=["x"]).LRMMPaperGuardian(m),
     ):
         g.reset(seed=0, **SPACES)
@@ -652,7 +669,7 @@ def head_model_by_hand(risks_bias=(0.0, 1.0, -1.0, 2.0), decision=None):
 
 
 def test_rule_is_strictly_above_the_threshold():
-    m = head_model_by_hand(decision={"threshold": 0.5, "commit": 0})
+    m = head_model_by_hand(decision={"threshold": 0.5, "strategies": ["SafestCandidate()"]})
     o = obs_with(2.0, 5.0, 5.0)  # hidden 8, risk = sigmoid(0) = 0.5 exactly
     assert m.predict(o) == 0.5
     g = LRMMGuardian(m)
@@ -670,7 +687,10 @@ def test_rule_is_strictly_above_the_threshold():
 
 
 def test_head_applies_the_lowest_risk_candidate_and_commits():
-    m = head_model_by_hand(risks_bias=(0.0, 1.0, -1.0, 2.0), decision={"threshold": 0.5, "commit": 2})
+    m = head_model_by_hand(
+        risks_bias=(0.0, 1.0, -1.0, 2.0),
+        decision={"threshold": 0.5, "strategies": ["SafestCandidate()", "Commit(steps=2)"]},
+    )
     g = LRMMGuardian(m)
     g.reset(seed=0, **SPACES)
     a = g.act(obs_with(1.0, 5.0, 5.0), {})  # risk sigmoid(1) > 0.5; candidate risks sigmoid(1, -1, 2): the second
@@ -679,7 +699,11 @@ def test_head_applies_the_lowest_risk_candidate_and_commits():
     assert [g.act(low, {})["active_ctrl"] for _ in range(4)] == [1, 1, 0, 0]
     g.reset(seed=0, **SPACES)  # reset clears the commitment
     assert g.act(low, {})["active_ctrl"] == 0
-    tie = LRMMGuardian(head_model_by_hand(risks_bias=(5.0, 0.0, 0.0, 0.0), decision={"threshold": 0.5}))
+    tie = LRMMGuardian(
+        head_model_by_hand(
+            risks_bias=(5.0, 0.0, 0.0, 0.0), decision={"threshold": 0.5, "strategies": ["SafestCandidate"]}
+        )
+    )
     tie.reset(seed=0, **SPACES)
     assert tie.act(obs_with(1.0, 5.0, 5.0), {})["turnrate_ctrl"][0] == -0.25  # ties: the first candidate
 
@@ -690,37 +714,52 @@ def test_defaults_are_pinned():
     from rmm_guardians.lrmm.guardian import PAPER_THRESHOLD, LRMMPaperGuardian
 
     assert PAPER_THRESHOLD == 0.85
+    from rmm_guardians.lrmm.settings import LRMMSettings
+    from rmm_guardians.lrmm.strategies import RatedDriver, RayTurn, Slide
+
     sig = inspect.signature(LRMMGuardian.__init__).parameters
-    assert {
-        k: sig[k].default
-        for k in ("model", "threshold", "action", "hysteresis", "window", "commit", "u1_max", "u2_min")
-    } == {
-        "model": None,
-        "threshold": None,
-        "action": None,
-        "hysteresis": False,
-        "window": 20,
-        "commit": None,
-        "u1_max": None,
-        "u2_min": None,
+    assert {k: (sig[k].default, sig[k].kind.name) for k in list(sig)[1:]} == {
+        "model": (None, "POSITIONAL_OR_KEYWORD"),
+        "settings": (None, "POSITIONAL_OR_KEYWORD"),
+        "env_id": (None, "POSITIONAL_OR_KEYWORD"),
+        "threshold": (None, "KEYWORD_ONLY"),
+        "strategies": (None, "KEYWORD_ONLY"),
+        "inputs": (None, "KEYWORD_ONLY"),
     }
-    paper = LRMMPaperGuardian()
-    paper.reset(seed=0, **SPACES)
-    assert (paper.u1_max, paper.u2_min) == (0.25, -0.5)  # the Dubins4D control box, read from the action space
-    assert (paper.name, paper.threshold, paper.action, paper.commit, paper.hysteresis, paper.window) == (
-        "lrmm-paper",
-        0.85,
-        "heuristic",
+    # each strategy's defaults
+    assert (BrakeTurn().turn, BrakeTurn().brake, Restart().speed, Commit().steps, MovingAverage().window) == (
+        None,
+        None,
+        0.3,
         0,
-        False,
         20,
     )
+    assert (RatedDriver().margin, RatedDriver().still, RatedDriver().stay, RayTurn().rate) == (0.0, None, True, None)
+    assert Slide().params() == {} and SafestCandidate().params() == {}
+    fields = {f.name: f.default for f in dataclasses.fields(LRMMSettings)}
+    assert fields == {"threshold": None, "strategies": None, "inputs": None}
+    paper = LRMMPaperGuardian()
+    assert paper.settings == LRMMSettings(threshold=0.85, strategies=(BrakeTurn(),))
+    assert (paper.name, paper.threshold, paper.threshold_source, paper.strategies) == (
+        "lrmm-paper",
+        0.85,
+        "argument",
+        (BrakeTurn(turn=None, brake=None),),
+    )
+    paper.reset(seed=0, **SPACES)
+    o = obs_with(0.3, left=8.0, right=2.0)  # the shipped paper model rates a forward ray of 0.3 m at 0.96
+    a = paper.act(o, {})
+    assert paper.last_risk > 0.85  # so: full braking and the largest turn, the Dubins4D box read from the space
+    assert (a["active_ctrl"], a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (1, 0.25, -0.5)
     assert paper.model.path == default_model_path("Dubins4DGuarded-v0", variant="paper")
     g = LRMMGuardian()
     assert g.name == "lrmm" and g.model.path == default_model_path("Dubins4DGuarded-v0", variant="act")
+    assert g.settings == LRMMSettings()
     d = g.model.meta["decision"]
-    assert (g.threshold, g.commit, g.action) == (d["threshold"], d["commit"], d.get("action", "head"))
-    assert (g.threshold, g.commit, g.action, g.trigger, g.margin, g.restart) == SHIPPED_DECISION
+    assert set(d) == {"threshold", "strategies", "chosen_by"}
+    assert d["strategies"] == ["SafestCandidate()", "Commit(steps=18)", "Restart(speed=0.3)"]
+    assert (g.threshold, g.threshold_source) == (d["threshold"], "stored decision")
+    assert (g.threshold, g.strategies) == SHIPPED_DECISION
     assert "seed" in d["chosen_by"]
 
 
@@ -737,16 +776,25 @@ def test_registry_names():
 
 
 def test_bad_guardian_arguments():
-    m = head_model_by_hand(decision={"threshold": 0.5})
+    m = head_model_by_hand(decision={"threshold": 0.5, "strategies": ["SafestCandidate()"]})
     for kw, match in [
-        ({"commit": -1}, "commit"),
-        ({"commit": 1.5}, "commit"),
-        ({"action": "steer"}, "action"),
-        ({"threshold": -0.1}, "threshold"),
-        ({"window": 0}, "window"),
+        ({"strategies": "Commit(steps=-1)"}, r"Commit steps must be an integer >= 0 .*got -1"),
+        ({"strategies": "Commit(steps=1.5)"}, r"Commit steps must be an integer >= 0 .*got 1.5"),
+        ({"strategies": "Steer"}, r"unknown strategy 'Steer'; the strategies are: SafestCandidate, .*Commit"),
+        ({"threshold": -0.1}, r"threshold must be in \[0, 1\], got -0.1"),
+        ({"strategies": "MovingAverage(window=0)"}, "MovingAverage window must be an integer >= 1, got 0"),
+        (
+            {"settings": "steer"},
+            r"unknown LRMMSettings preset 'steer'; the presets are: \['core', 'lrmm', 'lrmm-paper'\]",
+        ),
+        ({"settings": {"threshold": 0.5}}, "settings must be an LRMMSettings or a preset name"),
+        ({"strategies": 3}, "strategies must be a spec string, a sequence of Strategy objects or None, got 3"),
+        ({"inputs": 3}, "inputs must be an observation field name"),
     ]:
         with pytest.raises(ValueError, match=match):
             LRMMGuardian(m, **kw)
+    with pytest.raises(ValueError, match="Commit steps"):
+        LRMMGuardian(m, strategies=(Commit(steps=-1),))  # an object is checked when made
     bad = head_model_by_hand(decision={"threshold": 1.5})
     with pytest.raises(ValueError, match="stored decision threshold"):
         LRMMGuardian(bad)

@@ -1,5 +1,5 @@
 """lrmm's hand-back rule: the one-step prediction that rates the driver's control, the
-``trigger="driver"`` and ``restart`` rules on hand-built risk sequences, the driver's control
+``RatedDriver`` and ``Restart`` strategies on hand-built risk sequences, the driver's control
 read from ``info`` and every bad-input path."""
 
 import math
@@ -13,7 +13,8 @@ from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel, set_decision
 from rmm_guardians.lrmm.nominal import PredictRater, make_rater
-from tests.test_lrmm import SPACES, env_spaces, obs_with
+from rmm_guardians.lrmm.strategies import BrakeTurn, Commit, MovingAverage, RatedDriver, Restart, SafestCandidate
+from tests.test_lrmm import SPACES, env_spaces, forward_ray_model, obs_with
 
 D4 = observation_layout(12)
 D4_LOW = np.array([0, -np.inf, -np.inf, -np.pi, 0] + [0] * 12, float)
@@ -100,46 +101,61 @@ def driver(a, turn=0.0):
     return {"nominal_control": np.array([turn, a])}
 
 
-def test_driver_trigger_keeps_the_driver_while_its_own_control_is_rated_safe():
-    g = LRMMGuardian(speed_model(), threshold=0.5, commit=0, trigger="driver", margin=0.1)
+def rated(threshold, margin=0.0, commit=0, **kw):
+    """The former ``trigger="driver"`` rule: RatedDriver, then Commit, then the head's safest candidate."""
+    g = LRMMGuardian(
+        speed_model(),
+        threshold=threshold,
+        strategies=(RatedDriver(margin=margin, **kw), Commit(commit), SafestCandidate()),
+    )
     g.reset(seed=0, **SPACES)
+    return g
+
+
+def test_driver_trigger_keeps_the_driver_while_its_own_control_is_rated_safe():
+    g = rated(0.5, margin=0.1)
+    assert math.isnan(g.signals()["risk_driver"])  # nothing rated yet
     # at 1 m/s the state risk is 0.5; braking predicts 0.5 m/s (rated 0.119): the driver's control is kept
     assert g.act(at(1.0), driver(-0.5))["active_ctrl"] == 0
-    assert g.last_driver_risk == pytest.approx(1 / (1 + math.exp(2)))
+    assert g.signals()["risk_driver"] == pytest.approx(1 / (1 + math.exp(2)))
+    assert g.signals()["risk"] == pytest.approx(0.5) and g.signals()["risk_threshold"] == 0.5
     # accelerating predicts 1.5 m/s, rated 0.881, 0.76 above the best candidate rated alike: the guardian
     # takes control with the safest candidate of the head (brake-right, 0.119)
     a = g.act(at(1.0), driver(0.5))
     assert (a["active_ctrl"], a["turnrate_ctrl"][0], a["accel_ctrl"][0]) == (1, 0.25, -0.5)
-    # the same state under trigger="risk" acts on the state risk alone (0.5 is not above 0.5; 0.45 is)
-    r = LRMMGuardian(speed_model(), threshold=0.45, commit=0)
+    # the same state without RatedDriver acts on the state risk alone (0.5 is not above 0.5; 0.45 is)
+    r = LRMMGuardian(speed_model(), threshold=0.45, strategies="SafestCandidate")
     r.reset(seed=0, **SPACES)
     assert r.act(at(1.0), driver(-0.5))["active_ctrl"] == 1
+    assert "risk_driver" not in r.signals()
 
 
 def test_driver_trigger_hand_back_sequence_with_commit_and_margin():
-    g = LRMMGuardian(speed_model(), threshold=0.5, commit=2, trigger="driver", margin=0.1)
-    g.reset(seed=0, **SPACES)
+    g = rated(0.5, margin=0.1, commit=2)
     accels = [0.5, -0.5, -0.5, -0.5, -0.5, 0.5, -0.5]
     assert [g.act(at(1.0), driver(u))["active_ctrl"] for u in accels] == [1, 1, 1, 0, 0, 1, 1]
     # a margin larger than the risk the best candidate saves (0.881 - 0.119): the guardian never acts
-    lazy = LRMMGuardian(speed_model(), threshold=0.5, commit=2, trigger="driver", margin=0.77)
-    lazy.reset(seed=0, **SPACES)
+    lazy = rated(0.5, margin=0.77, commit=2)
     assert [lazy.act(at(1.0), driver(u))["active_ctrl"] for u in accels] == [0] * 7
     # the margin decides when to take control, not when to hand back: at 1 m/s holding the speed is rated
     # 0.5, above the threshold 0.15 but only 0.38 above the best candidate
-    hold = LRMMGuardian(speed_model(), threshold=0.15, commit=0, trigger="driver", margin=0.5)
-    hold.reset(seed=0, **SPACES)
+    hold = rated(0.15, margin=0.5)
     assert [hold.act(at(1.0), driver(u))["active_ctrl"] for u in (0.0, 0.5, 0.0, 0.0, -0.5, 0.0)] == [0, 1, 1, 1, 0, 0]
     # at the threshold is safe: 1.0 m/s predicted exactly (0.5 m/s + 0.5), rated 0.5
-    edge = LRMMGuardian(speed_model(), threshold=0.5, commit=0, trigger="driver")
-    edge.reset(seed=0, **SPACES)
+    edge = rated(0.5)
     assert edge.act(at(0.5), driver(0.5))["active_ctrl"] == 0
-    assert edge.last_driver_risk == 0.5
+    assert edge.signals()["risk_driver"] == 0.5
+    # the composition order of the former rule matters: a Commit before RatedDriver is overruled by it
+    late = LRMMGuardian(
+        speed_model(), threshold=0.5, strategies=(Commit(2), RatedDriver(margin=0.1), SafestCandidate())
+    )
+    late.reset(seed=0, **SPACES)
+    assert [late.act(at(1.0), driver(u))["active_ctrl"] for u in accels] == [1, 0, 0, 0, 0, 1, 0]
 
 
 def test_restart_accelerates_a_slow_car_when_that_candidate_is_safe_enough():
     # candidates: brake-left 0.5, brake-right 0.119 (the safest), accelerate 0.269
-    g = LRMMGuardian(speed_model(), threshold=0.3, commit=3, restart=0.3)
+    g = LRMMGuardian(speed_model(), threshold=0.3, strategies="SafestCandidate, Commit(steps=3), Restart(speed=0.3)")
     g.reset(seed=0, **SPACES)
     fast, slow = at(1.5), at(0.2)  # state risks 0.881 and 0.039
     steps = [g.act(o, {}) for o in (fast, fast, slow, slow, slow, slow)]
@@ -151,17 +167,23 @@ def test_restart_accelerates_a_slow_car_when_that_candidate_is_safe_enough():
         (1, 0.5),
         (0, 0.0),
     ]  # brakes, then restarts, then hands back
-    strict = LRMMGuardian(speed_model(), threshold=0.25, commit=1, restart=0.3)  # accelerate (0.269) is above it
+    # accelerate (0.269) is above the threshold 0.25
+    strict = LRMMGuardian(
+        speed_model(), threshold=0.25, strategies="SafestCandidate, Commit(steps=1), Restart(speed=0.3)"
+    )
     strict.reset(seed=0, **SPACES)
     assert [float(strict.act(o, {})["accel_ctrl"][0]) for o in (fast, slow)] == [-0.5, -0.5]
-    off = LRMMGuardian(speed_model(), threshold=0.3, commit=1)  # restart 0: the rule before it
+    off = LRMMGuardian(speed_model(), threshold=0.3, strategies="SafestCandidate, Commit(steps=1)")  # no Restart
     off.reset(seed=0, **SPACES)
     assert [float(off.act(o, {})["accel_ctrl"][0]) for o in (fast, slow)] == [-0.5, -0.5]
+    # the car must be slower than the speed: Restart(speed=0.2) leaves a car at 0.2 m/s braking
+    edge = LRMMGuardian(speed_model(), threshold=0.3, strategies="SafestCandidate, Commit(steps=1), Restart(speed=0.2)")
+    edge.reset(seed=0, **SPACES)
+    assert [float(edge.act(o, {})["accel_ctrl"][0]) for o in (fast, slow)] == [-0.5, -0.5]
 
 
 def test_missing_nominal_control_falls_back_to_the_state_risk_with_one_warning():
-    g = LRMMGuardian(speed_model(), threshold=0.45, commit=0, trigger="driver")
-    g.reset(seed=0, **SPACES)
+    g = rated(0.45)
     with pytest.warns(UserWarning, match=r"info\['nominal_control'\].*state risk"):
         assert g.act(at(1.0), {})["active_ctrl"] == 1  # state risk 0.5 > 0.45
     with warnings.catch_warnings():
@@ -174,30 +196,55 @@ def test_missing_nominal_control_falls_back_to_the_state_risk_with_one_warning()
     "bad", [np.array([0.1]), np.array([0.1, float("nan")]), np.zeros((2, 2)), "fast", [0.0, float("inf")]]
 )
 def test_malformed_nominal_control_is_named(bad):
-    g = LRMMGuardian(speed_model(), threshold=0.5, trigger="driver")
-    g.reset(seed=0, **SPACES)
+    g = rated(0.5)
     with pytest.raises(ValueError, match=r"info\['nominal_control'\] must be 2 finite numbers"):
         g.act(at(1.0), {"nominal_control": bad})
 
 
 def test_bad_hand_back_options_are_named():
     m = speed_model()
-    for kw, match in (
-        ({"trigger": "always"}, "trigger must be one of"),
-        ({"margin": -0.1}, "margin"),
-        ({"restart": float("nan")}, "restart"),
-        ({"margin": True}, "margin"),
-        ({"trigger": "driver", "action": "heuristic"}, "action='head'"),
-        ({"trigger": "driver", "hysteresis": True}, "hysteresis"),
-        ({"restart": 0.2, "action": "heuristic"}, "restart accelerates"),
+    for strategies, match in (
+        (
+            "RatedDriver(trigger='always')",
+            r"unexpected keyword argument 'trigger'.*its parameters: margin, still, stay",
+        ),
+        ("RatedDriver(margin=-0.1)", r"RatedDriver margin must be a finite number >= 0.0, got -0.1"),
+        ("Restart(speed=float('nan'))", r"arguments must be literals"),
+        ((Restart,), "strategies must be Strategy objects or spec strings"),  # the class, not an object
     ):
         with pytest.raises(ValueError, match=match):
-            LRMMGuardian(m, **kw)
+            LRMMGuardian(m, threshold=0.5, strategies=strategies)
+    with pytest.raises(ValueError, match=r"Restart speed must be a finite number >= 0.0, got nan"):
+        Restart(speed=float("nan"))
+    # RatedDriver and Restart compare with or pick among the head's candidates: on a model without a head
+    # they are refused when the guardian is built, naming the head
+    for strategies in ("RatedDriver, SafestCandidate", "BrakeTurn, Restart(speed=0.2)"):
+        with pytest.raises(ValueError, match=r"reads the model's action-conditioned head \('candidates'\).*has none"):
+            LRMMGuardian(forward_ray_model(), threshold=0.5, strategies=strategies)
+    # the former refusal of trigger='driver' with hysteresis is gone: both are strategies, run in order
+    both = LRMMGuardian(m, threshold=0.5, strategies="RatedDriver, MovingAverage(window=4), SafestCandidate")
+    assert both.strategies == (RatedDriver(), MovingAverage(window=4), SafestCandidate())
     W = [(np.zeros((1, 12)), np.zeros(1)), (np.zeros((4, 1)), np.zeros(4))]
     on_rays = LRMMModel(W, np.zeros(12), np.ones(12), {**m.meta, "obs_dim": 12, "features": list(range(12))})
-    rays_only = LRMMGuardian(on_rays, trigger="driver", inputs="rays")  # the prediction moves fields it would not read
-    with pytest.raises(ValueError, match="trigger 'driver'"):
+    # the prediction moves fields it would not read
+    rays_only = LRMMGuardian(on_rays, threshold=0.5, strategies="RatedDriver, SafestCandidate", inputs="rays")
+    with pytest.raises(ValueError, match="strategy RatedDriver rates the driver's control"):
         rays_only.check_spaces(SPACES["observation_space"], SPACES["action_space"])
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: RatedDriver(margin=True),
+        lambda: RatedDriver(still=False),
+        lambda: Restart(speed=True),
+        lambda: Restart(speed="0.3"),
+    ],
+    ids=["margin-True", "still-False", "speed-True", "speed-str"],
+)
+def test_a_bool_or_a_string_is_no_number_of_a_strategy(make):
+    with pytest.raises(ValueError, match="must be a"):
+        make()
 
 
 def test_restart_needs_a_speed_and_an_acceleration():
@@ -209,52 +256,53 @@ def test_restart_needs_a_speed_and_an_acceleration():
         ("rays", 12),
         ray_angles=[2.0 * math.pi * i / 12 for i in range(12)],
     )
-    g = LRMMGuardian(speed_model(), restart=0.3)
-    with pytest.raises(ValueError, match="restart needs"):
+    g = LRMMGuardian(speed_model(), threshold=0.5, strategies="SafestCandidate, Restart(speed=0.3)")
+    with pytest.raises(ValueError, match="strategy Restart needs an 'accel_ctrl' control and a 'speed'"):
         g.reset(seed=0, **env_spaces(layout=lay))
 
 
 def test_stored_hand_back_defaults_round_trip(tmp_path):
     p = speed_model().save(tmp_path / "m.npz")
-    set_decision(p, 0.4, 5, "a test", trigger="driver", margin=0.05)
+    set_decision(p, 0.4, "RatedDriver(margin=0.05), Commit(steps=5), SafestCandidate", "a test")
     m = LRMMModel.load(p)
     assert m.meta["decision"] == {
         "threshold": 0.4,
-        "commit": 5,
-        "action": "head",
-        "trigger": "driver",
-        "margin": 0.05,
+        "strategies": ["RatedDriver(margin=0.05, still=None, stay=True)", "Commit(steps=5)", "SafestCandidate()"],
         "chosen_by": "a test",
     }
     g = LRMMGuardian(p)
-    assert (g.trigger, g.margin, g.restart) == ("driver", 0.05, 0.0)
-    assert LRMMGuardian(p, trigger="risk").trigger == "risk"  # an argument overrides the file
-    with pytest.raises(ValueError, match="unknown decision field"):
-        set_decision(p, 0.4, 5, "x", hold=3)
-    with pytest.raises(ValueError, match="restart"):
-        set_decision(p, 0.4, 5, "x", restart=-1.0)
+    assert g.strategies == (RatedDriver(margin=0.05), Commit(steps=5), SafestCandidate())
+    assert (g.strategies[0].margin, g.strategies[0].still, g.strategies[0].stay) == (0.05, None, True)
+    # an argument overrides the file (here: edits it)
+    assert LRMMGuardian(p, strategies="-RatedDriver").strategies == (Commit(steps=5), SafestCandidate())
+    with pytest.raises(ValueError, match=r"unexpected keyword argument 'hold'.*its parameters: margin, still, stay"):
+        set_decision(p, 0.4, "RatedDriver(hold=3)", "x")
+    with pytest.raises(ValueError, match="Restart speed must be a finite number >= 0.0, got -1.0"):
+        set_decision(p, 0.4, "Restart(speed=-1.0)", "x")
     from rmm_guardians.lrmm.decision import main as decision_main
 
-    assert decision_main([str(p), "--threshold", "0.3", "--commit", "18", "--restart", "0.3", "--chosen-by", "t"]) == 0
+    spec = "SafestCandidate, Commit(steps=18), Restart(speed=0.3)"
+    assert decision_main([str(p), "--threshold", "0.3", "--strategies", spec, "--chosen-by", "t"]) == 0
     assert LRMMModel.load(p).meta["decision"] == {
         "threshold": 0.3,
-        "commit": 18,
-        "action": "head",
-        "restart": 0.3,
+        "strategies": ["SafestCandidate()", "Commit(steps=18)", "Restart(speed=0.3)"],
         "chosen_by": "t",
     }
-    assert decision_main([str(p), "--threshold", "0.3", "--commit", "1", "--margin", "-2", "--chosen-by", "t"]) == 2
+    bad = [str(p), "--threshold", "0.3", "--strategies", "RatedDriver(margin=-2)", "--chosen-by", "t"]
+    assert decision_main(bad) == 2
 
 
 def test_stored_hand_back_defaults_apply_only_to_the_rule_they_were_chosen_for(tmp_path):
     from rmm_guardians.lrmm.guardian import LRMMPaperGuardian
 
     p = speed_model().save(tmp_path / "m.npz")
-    set_decision(p, 0.4, 5, "a test", trigger="driver", margin=0.05, restart=0.3)
-    assert (LRMMGuardian(p).trigger, LRMMGuardian(p).restart) == ("driver", 0.3)
-    heuristic = LRMMGuardian(p, action="heuristic")  # brake-and-turn: no candidates to rate or to accelerate with
-    assert (heuristic.trigger, heuristic.margin, heuristic.restart) == ("risk", 0.0, 0.0)
+    set_decision(p, 0.4, "RatedDriver(margin=0.05), Commit(steps=5), SafestCandidate, Restart(speed=0.3)", "a test")
+    stored = (RatedDriver(margin=0.05), Commit(steps=5), SafestCandidate(), Restart(speed=0.3))
+    assert LRMMGuardian(p).strategies == stored
+    # brake-and-turn given: the stored composition is replaced whole, no candidates rated or accelerated with
+    assert LRMMGuardian(p, strategies="BrakeTurn").strategies == (BrakeTurn(),)
     paper = LRMMPaperGuardian(p)
-    assert (paper.action, paper.threshold, paper.trigger, paper.restart) == ("heuristic", 0.85, "risk", 0.0)
-    averaged = LRMMGuardian(p, hysteresis=True)  # the moving average is of the state risk
-    assert (averaged.trigger, averaged.restart) == ("risk", 0.3)
+    assert (paper.strategies, paper.threshold) == ((BrakeTurn(),), 0.85)
+    # the moving average is of the state risk: the driver's rating taken out, the rest kept
+    averaged = LRMMGuardian(p, strategies="-RatedDriver, +MovingAverage(window=20)")
+    assert averaged.strategies == (Commit(steps=5), SafestCandidate(), Restart(speed=0.3), MovingAverage(window=20))

@@ -1,6 +1,6 @@
-"""lrmm's slide and still rules (``rmm_guardians.lrmm.nominal``): the variants of the driver's velocity
-command, the take-over test, and the quadrotor guardian on a hand-built model whose risks are
-computed by hand below."""
+"""lrmm's ``Slide`` strategy and ``RatedDriver``'s still and stay (``rmm_guardians.lrmm.strategies``,
+``rmm_guardians.lrmm.nominal``): the variants of the driver's velocity command, the take-over test,
+and the quadrotor guardian on a hand-built model whose risks are computed by hand below."""
 
 import math
 
@@ -8,11 +8,13 @@ import numpy as np
 import pytest
 
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox
-from rmm_envs.envs.dubins4d import CONTROLS
+from rmm_guardians.lrmm import strategies
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel, set_decision
-from rmm_guardians.lrmm.nominal import SLIDE_MOVES, Slide, driver_at_risk
-from tests.test_lrmm_filter import QUAD, QUAD_CONTROLS
+from rmm_guardians.lrmm.nominal import driver_at_risk
+from rmm_guardians.lrmm.strategies import SLIDE_MOVES, Commit, RatedDriver, SafestCandidate, Slide
+from tests.test_lrmm import SPACES as D4_SPACES
+from tests.test_lrmm_filter import QUAD, QUAD_CONTROLS, speed_model
 
 LOW, HIGH = [-2.0, -2.0, -1.0, -1.0], [2.0, 2.0, 1.0, 1.0]  # the quadrotor's command box
 HEAD = [[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [-1.5, 0.0, 0.0, 0.0], [-1.0, 0.0, 1.0, 0.0]]
@@ -27,26 +29,34 @@ def test_the_shipped_moves_climb_at_full_half_and_no_horizontal_speed():
     assert SLIDE_MOVES == (((1.0, 0.0), 1.0, "climb"), ((1.0, 0.0), 0.5, "climb"), ((1.0, 0.0), 0.0, "climb"))
 
 
-def test_variants_by_hand_nearest_first_clipped_without_the_driver_control():
-    s = Slide(QUAD_CONTROLS, LOW, HIGH)
+def bound_slide():
+    """The quadrotor guardian's Slide, bound to its controls and their box (as at reset)."""
+    g = LRMMGuardian(quad_model(), threshold=0.2, strategies="RatedDriver(margin=0.15), SafestCandidate, Slide")
+    g.reset(seed=0, **SPACES)
+    (s,) = [x for x in g.strategies if isinstance(x, Slide)]
+    return s
+
+
+def test_variants_by_hand_nearest_first_clipped_without_the_driver_control(monkeypatch):
+    s = bound_slide()
     # gaps 1.5, sqrt(0.36 + 0.04 + 2.25) and sqrt(1.44 + 0.16 + 2.25); the yaw rate stays the driver's
     assert s.variants(NOMINAL) == [[1.2, -0.4, 1.0, 0.3], [0.6, -0.2, 1.0, 0.3], [0.0, 0.0, 1.0, 0.3]]
     assert s.variants([0.0, 0.0, 1.0, -0.2]) == []  # already climbing in place: no variant differs
-    turn = Slide(
-        QUAD_CONTROLS, LOW, HIGH, moves=(((0.0, 1.0), 1.0, 1.0), ((1.0, 0.0), 0.5, 1.0), ((1.0, 0.0), 2.0, 0.5))
-    )
-    # 90 degrees left (gap sqrt 2), half speed (gap 0.5), twice the speed clipped to 2 with half the climb (gap
-    # sqrt(1 + 0.0625)): nearest first
-    assert turn.variants([1.0, 0.0, 0.5, 0.0]) == [[0.5, 0.0, 0.5, 0.0], [2.0, 0.0, 0.25, 0.0], [0.0, 1.0, 0.5, 0.0]]
+    # other moves (the module's table, read at each call): 90 degrees left (gap sqrt 2), half speed (gap 0.5),
+    # twice the speed clipped to 2 with half the climb (gap sqrt(1 + 0.0625)): nearest first
+    moves = (((0.0, 1.0), 1.0, 1.0), ((1.0, 0.0), 0.5, 1.0), ((1.0, 0.0), 2.0, 0.5))
+    monkeypatch.setattr(strategies, "SLIDE_MOVES", moves)
+    assert s.variants([1.0, 0.0, 0.5, 0.0]) == [[0.5, 0.0, 0.5, 0.0], [2.0, 0.0, 0.25, 0.0], [0.0, 1.0, 0.5, 0.0]]
 
 
 def test_slide_needs_the_three_velocity_controls():
+    g = LRMMGuardian(speed_model(), threshold=0.5, strategies="RatedDriver, SafestCandidate, Slide")  # Dubins4D
     with pytest.raises(
         ValueError,
-        match=r"slide bends a velocity command: it needs the controls .*vup_ctrl.*got "
+        match=r"guardian 'lrmm': strategy Slide bends a velocity command: it needs the controls .*vup_ctrl.*got "
         r"\('turnrate_ctrl', 'accel_ctrl'\)",
     ):
-        Slide(CONTROLS, [-0.25, -0.5], [0.25, 0.5])
+        g.check_spaces(D4_SPACES["observation_space"], D4_SPACES["action_space"])
 
 
 @pytest.mark.parametrize(
@@ -97,10 +107,10 @@ SPACES = {
 OBS = np.zeros(23)
 
 
-def guard(**kw):
-    g = LRMMGuardian(
-        quad_model(), **{"threshold": 0.2, "commit": 0, "trigger": "driver", "margin": 0.15, "slide": True, **kw}
-    )
+def guard(threshold=0.2, commit=0, margin=0.15, still=None, stay=True, slide=True):
+    """The quadrotor's stored rule: RatedDriver, Commit, the head's safest candidate, then Slide."""
+    rule = (RatedDriver(margin=margin, still=still, stay=stay), Commit(steps=commit), SafestCandidate())
+    g = LRMMGuardian(quad_model(), threshold=threshold, strategies=rule + ((Slide(),) if slide else ()))
     g.reset(seed=0, **SPACES)
     return g
 
@@ -119,7 +129,7 @@ def test_guardian_slides_keeps_control_while_the_driver_is_risky_and_hands_back_
     # the driver's command is rated 0.599, the best candidate (back off and climb) 0.0009: take control with the
     # nearest variant rated at most 0.2, climbing at the driver's horizontal velocity and yaw rate (0.069)
     assert step(g, NOMINAL) == [1, 1.2, -0.4, 1.0, 0.3]
-    assert g.last_driver_risk == pytest.approx(rating(1.2, -0.5))
+    assert g.signals()["risk_driver"] == pytest.approx(rating(1.2, -0.5))
     # the driver faster, rated sigmoid(0.7) = 0.67: still in control, climbing (sigmoid(-2.3) = 0.091)
     assert step(g, [1.35, 0.0, -0.5, 0.0]) == [1, 1.35, 0.0, 1.0, 0.0]
     assert step(g, [0.5, 0.0, 0.0, 0.0]) == [0, 0.0, 0.0, 0.0, 0.0]  # rated 0.119: handed back (commit 0)
@@ -159,19 +169,25 @@ def test_without_stay_the_guardian_hands_back_once_the_take_over_test_fails():
 
 def test_bad_slide_still_and_stay_are_named():
     m = quad_model()
-    for kw, match in (
-        ({"slide": 1}, "slide must be True or False"),
-        ({"stay": "no"}, "stay must be True or False"),
-        ({"trigger": "driver", "still": -0.1}, "still must be a finite number >= 0"),
-        ({"trigger": "driver", "still": math.inf}, "still must be"),
-        ({"slide": True}, "need trigger='driver', got 'risk'"),
-        ({"still": 0.1}, "need trigger='driver'"),
-        ({"stay": False}, "need trigger='driver'"),
+    for spec, match in (
+        ("Slide(True)", r"strategy 'Slide\(True\)': .*its parameters: none"),
+        ("RatedDriver(stay='no')", "RatedDriver stay must be True or False, got 'no'"),
+        ("RatedDriver(still=-0.1)", r"RatedDriver still must be a finite number >= 0.0, got -0.1"),
+        ("RatedDriver(still=1e999)", "RatedDriver still must be"),
+        ("Slide, Slide", "each strategy may appear once"),
     ):
         with pytest.raises(ValueError, match=match):
-            LRMMGuardian(m, threshold=0.2, **kw)
-    no_climb = LRMMGuardian(m, threshold=0.2, trigger="driver", slide=True)
-    with pytest.raises(ValueError, match="slide bends a velocity command"):
+            LRMMGuardian(m, threshold=0.2, strategies=spec)
+    # Slide reads the driver's control itself: without RatedDriver (the former trigger='driver') the state
+    # risk decides when, and Slide what
+    alone = LRMMGuardian(m, threshold=0.2, strategies="SafestCandidate, Slide")
+    alone.reset(seed=0, **SPACES)
+    fast = OBS.copy()
+    fast[14], fast[16] = 1.2, -0.5  # measured: the driver's command, rated 0.599 as the state risk
+    assert step_at(alone, fast, NOMINAL) == [1, 1.2, -0.4, 1.0, 0.3]
+    assert "risk_driver" not in alone.signals()
+    no_climb = LRMMGuardian(m, threshold=0.2, strategies="RatedDriver, SafestCandidate, Slide")
+    with pytest.raises(ValueError, match="strategy Slide bends a velocity command"):
         no_climb.reset(
             seed=0,
             observation_space=SPACES["observation_space"],
@@ -179,45 +195,34 @@ def test_bad_slide_still_and_stay_are_named():
         )
 
 
+def step_at(g, obs, u):
+    return command(g.act(obs, {"nominal_control": np.array(u)}))
+
+
 def test_stored_slide_still_and_stay_round_trip(tmp_path):
     p = quad_model().save(tmp_path / "q.npz")
-    set_decision(p, 0.2, 20, "a test", trigger="driver", margin=0.15, slide=True, still=0.05, stay=False)
+    spec = "RatedDriver(margin=0.15, still=0.05, stay=False), Commit(steps=20), SafestCandidate, Slide"
+    set_decision(p, 0.2, spec, "a test")
     assert LRMMModel.load(p).meta["decision"] == {
         "threshold": 0.2,
-        "commit": 20,
-        "action": "head",
-        "trigger": "driver",
-        "margin": 0.15,
-        "slide": True,
-        "still": 0.05,
-        "stay": False,
+        "strategies": [
+            "RatedDriver(margin=0.15, still=0.05, stay=False)",
+            "Commit(steps=20)",
+            "SafestCandidate()",
+            "Slide()",
+        ],
         "chosen_by": "a test",
     }
     g = LRMMGuardian(p)
-    assert (g.trigger, g.margin, g.slide, g.still, g.stay) == ("driver", 0.15, True, 0.05, False)
-    assert LRMMGuardian(p, slide=False, stay=True).slide is False  # arguments override the file
+    rd = g.strategies[0]
+    assert (type(rd), rd.margin, rd.still, rd.stay, g.strategies[-1]) == (RatedDriver, 0.15, 0.05, False, Slide())
+    # arguments override the file
+    kept = LRMMGuardian(p, strategies="-Slide, +RatedDriver(margin=0.15, still=0.05, stay=True)")
+    assert kept.strategies == (RatedDriver(0.15, 0.05, True), Commit(steps=20), SafestCandidate())
     from rmm_guardians.lrmm.decision import main as decision_main
 
-    assert (
-        decision_main(
-            [
-                str(p),
-                "--threshold",
-                "0.2",
-                "--commit",
-                "20",
-                "--trigger",
-                "driver",
-                "--margin",
-                "0.15",
-                "--slide",
-                "--still",
-                "0.05",
-                "--chosen-by",
-                "t",
-            ]
-        )
-        == 0
-    )
-    assert LRMMModel.load(p).meta["decision"]["still"] == 0.05 and "stay" not in LRMMModel.load(p).meta["decision"]
-    assert decision_main([str(p), "--threshold", "0.2", "--commit", "1", "--slide", "--chosen-by", "t"]) == 2  # risk
+    cli = "RatedDriver(margin=0.15, still=0.05), Commit(steps=20), SafestCandidate, Slide"
+    assert decision_main([str(p), "--threshold", "0.2", "--strategies", cli, "--chosen-by", "t"]) == 0
+    stored = LRMMModel.load(p).meta["decision"]["strategies"]
+    assert stored[0] == "RatedDriver(margin=0.15, still=0.05, stay=True)" and stored[-1] == "Slide()"
+    assert decision_main([str(p), "--threshold", "0.2", "--strategies", "Slide(climb=True)", "--chosen-by", "t"]) == 2

@@ -1,4 +1,4 @@
-"""The LRMM guardian's maze action (``action="turn"``) and its refusal texts, pinned on hand-made models.
+"""The LRMM guardian's maze action (strategy ``RayTurn``) and its refusal texts, pinned on hand-made models.
 
 The turn compares the model's risk of the rays rolled by one ray each way (the heading one ray
 further left: ``roll(rays, -1)``, whose forward ray is the old ray 1; right: ``roll(rays, 1)``,
@@ -17,6 +17,7 @@ from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLa
 from rmm_envs.envs.dubins3d_maze_parallel import observation_layout
 from rmm_guardians.lrmm.guardian import REMEDY, LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel
+from rmm_guardians.lrmm.strategies import RayTurn
 from tests.test_lrmm import SPACES, forward_ray_model
 
 TURN = GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2])
@@ -61,7 +62,7 @@ def maze_spaces(layout=None):
 
 
 def turner(fn, **kw):
-    g = LRMMGuardian(RaysModel(fn), threshold=0.3, commit=0, action="turn", inputs="rays", **kw)
+    g = LRMMGuardian(RaysModel(fn), threshold=0.3, strategies=(RayTurn(**kw),), inputs="rays")
     g.reset(seed=0, **maze_spaces())
     return g
 
@@ -130,10 +131,10 @@ def test_a_near_tie_within_isclose_is_a_tie():
 
 def test_turn_rate_is_the_action_spaces_largest_or_the_given_one():
     narrow = GuardianActionSpace(("turnrate_ctrl",), [-0.1], [0.15])
-    g = LRMMGuardian(RaysModel(forward_risk), threshold=0.3, commit=0, action="turn", inputs="rays")
+    g = LRMMGuardian(RaysModel(forward_risk), threshold=0.3, strategies="RayTurn", inputs="rays")
     g.reset(seed=0, **(maze_spaces() | {"action_space": narrow}))
     assert g.act(maze_obs([1.0, 9.0, 0.5, 9.0, 9.0, 3.0, 3.0, 3.0]), {})["turnrate_ctrl"].tolist() == [np.float32(0.15)]
-    g = turner(forward_risk, u1_max=0.05)
+    g = turner(forward_risk, rate=0.05)
     assert g.act(maze_obs([1.0, 3.0, 3.0, 3.0, 9.0, 9.0, 0.5, 9.0]), {})["turnrate_ctrl"].tolist() == [
         np.float32(-0.05)
     ]
@@ -155,7 +156,7 @@ def test_a_non_finite_turned_risk_is_an_error_not_a_turn(bad_ray, where):
 
 def _turn_refusal(inputs, angles):
     return (
-        "guardian 'lrmm': action 'turn' judges a turn by the model's risk of the rays rotated by one ray, so the model "
+        "guardian 'lrmm': strategy RayTurn judges a turn by the model's risk of the rays rotated by one ray, so the model "
         "must read the 'rays' field, rays evenly spaced over the full circle from the heading; "
         f"got inputs={inputs!r}, ray angles {angles}"
     )
@@ -171,7 +172,7 @@ def _turn_refusal(inputs, angles):
 )
 def test_turn_refuses_rays_that_a_roll_does_not_rotate(angles):
     lay = ObservationLayout.of(("rays", 8), ("goal_offset", 2), ("heading", 1), ray_angles=angles)
-    g = LRMMGuardian(RaysModel(forward_risk), threshold=0.3, action="turn", inputs="rays")
+    g = LRMMGuardian(RaysModel(forward_risk), threshold=0.3, strategies="RayTurn", inputs="rays")
     with pytest.raises(ValueError) as e:
         g.reset(seed=0, **maze_spaces(lay))
     assert str(e.value) == _turn_refusal("rays", lay.ray_angles)
@@ -184,11 +185,11 @@ def test_turn_refuses_rays_that_a_roll_does_not_rotate(angles):
 
 
 def test_turn_refuses_a_model_that_reads_more_than_the_rays_and_spaces_without_one_control():
-    g = LRMMGuardian(RaysModel(forward_risk, obs_dim=11), threshold=0.3, action="turn")  # the whole observation
+    g = LRMMGuardian(RaysModel(forward_risk, obs_dim=11), threshold=0.3, strategies="RayTurn")  # the whole observation
     with pytest.raises(ValueError) as e:
         g.reset(seed=0, **maze_spaces())
     assert str(e.value) == _turn_refusal(None, observation_layout().ray_angles)
-    g = LRMMGuardian(RaysModel(forward_risk), threshold=0.3, action="turn", inputs="rays")
+    g = LRMMGuardian(RaysModel(forward_risk), threshold=0.3, strategies="RayTurn", inputs="rays")
     with pytest.raises(ValueError) as e:
         g.reset(seed=0, **(maze_spaces() | {"action_space": SPACES["action_space"]}))
     assert str(e.value) == (
@@ -201,18 +202,18 @@ def test_a_model_without_a_file_is_named_the_model_in_refusals_and_warnings():
     m = forward_ray_model()  # built in memory: no path
     assert not hasattr(m, "path")
     with pytest.raises(ValueError) as e:
-        LRMMGuardian(m, action="head")
-    assert str(e.value) == "action='head' needs a model with a 'candidates' head; the model has none"
+        LRMMGuardian(m, threshold=0.5, strategies="SafestCandidate")
+    assert str(e.value) == (
+        "strategy SafestCandidate reads the model's action-conditioned head ('candidates'), and the model has none"
+    )
     with pytest.warns(UserWarning) as w:
-        LRMMGuardian(m)
-    assert [str(x.message) for x in w] == [
-        "lrmm: the model has no 'candidates' head: using the paper's brake-and-turn heuristic",
-        "lrmm: the model has no 'decision' threshold: using the paper's 0.85",
-    ]
+        g = LRMMGuardian(m)
+    assert [str(x.message) for x in w] == ["lrmm: the model has no 'decision' threshold: using the paper's 0.85"]
+    assert g.strategies == ()  # no head, nothing stored: the core alone, without a warning of its own
 
 
 def test_a_wrong_observation_size_is_refused_showing_the_space_or_the_field():
-    g = LRMMGuardian(forward_ray_model(), action="heuristic", threshold=0.85)
+    g = LRMMGuardian(forward_ray_model(), strategies="BrakeTurn", threshold=0.85)
     with pytest.raises(ValueError) as e:
         g.check_spaces("a space without a shape", SPACES["action_space"])
     assert str(e.value) == (
@@ -228,7 +229,7 @@ def test_a_wrong_observation_size_is_refused_showing_the_space_or_the_field():
         "guardian 'lrmm': the LRMM model (trained on Dubins4DGuarded-v0) expects observations of "
         "shape (17,), the env's observation space is (11,)" + REMEDY
     )
-    t = LRMMGuardian(RaysModel(forward_risk, obs_dim=12), threshold=0.3, action="turn", inputs="rays")
+    t = LRMMGuardian(RaysModel(forward_risk, obs_dim=12), threshold=0.3, strategies="RayTurn", inputs="rays")
     with pytest.raises(ValueError) as e:
         t.reset(seed=0, **maze_spaces())
     assert str(e.value) == (
@@ -242,7 +243,7 @@ def test_the_sides_are_read_from_the_directions_however_the_angles_are_written()
     ray 4, straight behind, still belongs to neither side."""
     angles = [0.0, math.pi / 4, math.pi / 2, 3 * math.pi / 4, -math.pi, -3 * math.pi / 4, -math.pi / 2, -math.pi / 4]
     lay = ObservationLayout.of(("rays", 8), ("goal_offset", 2), ("heading", 1), ray_angles=angles)
-    g = LRMMGuardian(RaysModel(nearest_wall_risk), threshold=0.3, commit=0, action="turn", inputs="rays")
+    g = LRMMGuardian(RaysModel(nearest_wall_risk), threshold=0.3, strategies="RayTurn", inputs="rays")
     g.reset(seed=0, **maze_spaces(lay))
     # left's nearest wall 2, right's 4: right, whatever the wall behind (0.5) is
     a = g.act(maze_obs([1.0, 2.0, 2.0, 2.0, 0.5, 4.0, 4.0, 4.0]), {})

@@ -278,8 +278,10 @@ def test_safe_default_turns_away_from_the_nearer_wall():
 def test_lrmm_reads_the_maze_model_on_the_rays_and_turns_to_the_lower_risk_side():
     env = Dubins3DMazeGuardedEnv()
     g = make_guardian("lrmm", env_id="Dubins3DMazeParallel-v0")
-    assert g.model.env_id == "Dubins3DMaze-v0" and g.inputs == "rays" and g.action == "turn"
-    assert (g.threshold, g.commit) == (0.7, 5)
+    from rmm_guardians.lrmm.strategies import Commit, RayTurn
+
+    assert g.model.env_id == "Dubins3DMaze-v0" and g.inputs == "rays"
+    assert (g.threshold, g.strategies) == (0.7, (RayTurn(rate=None), Commit(steps=5)))
     obs, _ = env.reset(seed=0, options={"maze": corridor(), "state": [125.0, 125.0, 0.0], "goal_cell": 2})
     g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
     assert g.act(obs, {})["active_ctrl"] == 0 and g.last_risk < 0.7  # mid-corridor, heading along it

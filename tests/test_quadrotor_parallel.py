@@ -12,12 +12,13 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.drivers.quadrotor import WaypointPilot
-from rmm_envs.envs.quadrotor_room_parallel import CONTROLS, HoverAndLevel, QuadrotorRoomGuardedEnv, observation_layout
+from rmm_envs.envs.quadrotor_room_parallel import CONTROLS, QuadrotorRoomGuardedEnv, observation_layout
 from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
 from rmm_envs.systems.quadrotor import QUADROTOR, Quadrotor
 from rmm_envs.systems.quadrotor_control import (
     ClosedLoopQuadrotor,
     CommandController,
+    HoverAndLevel,
     body_packed,
     body_step,
     heading_of,
@@ -456,7 +457,9 @@ def floor_model():
 def test_lrmm_applies_hover_and_level_while_the_risk_is_high_then_commits(env):
     from rmm_guardians.lrmm.guardian import LRMMGuardian
 
-    g = LRMMGuardian(model=floor_model(), threshold=0.7, commit=2, action="safe", env_id="QuadrotorRoomParallel-v0")
+    g = LRMMGuardian(
+        model=floor_model(), threshold=0.7, strategies="Commit(steps=2)", env_id="QuadrotorRoomParallel-v0"
+    )
     g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
     obs = np.zeros(23, np.float32)
     obs[9] = 2.0
@@ -475,13 +478,18 @@ def test_lrmm_safe_action_needs_a_safe_default():
     from rmm_envs.autonomy import GuardianActionSpace
     from rmm_guardians.lrmm.guardian import LRMMGuardian
 
-    g = LRMMGuardian(model=floor_model(), threshold=0.7, action="safe")
+    g = LRMMGuardian(model=floor_model(), threshold=0.7, strategies="")  # the core alone
     from rmm_envs.autonomy import ObservationBox
 
     bare = GuardianActionSpace(CONTROLS, CTRL.command_low, CTRL.command_high)  # no safe default
     box = ObservationBox(np.zeros(23, np.float32), np.ones(23, np.float32), observation_layout())
-    with pytest.raises(ValueError, match="action 'safe' applies the env's safe default"):
+    with pytest.raises(
+        ValueError, match="the core applies the env's safe default, and this env's action space states none"
+    ):
         g.check_spaces(box, bare)
+    g.check_spaces(
+        box, GuardianActionSpace(CONTROLS, CTRL.command_low, CTRL.command_high, safe_default=HoverAndLevel())
+    )
 
 
 def test_brakes_is_hover_and_level_and_random_draws_commands_in_the_box(env):
@@ -507,12 +515,20 @@ def test_lrmm_reads_the_shipped_command_model_by_env_id(env):
     g = make_guardian("lrmm", env_id="QuadrotorRoomParallel-v0")
     ship = SHIPPED["QuadrotorRoomParallel-v0"]
     assert g.model.path.name == ship.files["act"] == "quadrotor_cmd_act.npz"
+    from rmm_guardians.lrmm.strategies import Commit, RatedDriver, SafestCandidate, Slide
+
     decision = g.model.meta["decision"]  # stored in the file, with how it was chosen
-    assert (g.action, g.threshold, g.commit) == ("head", decision["threshold"], decision["commit"]) == ("head", 0.2, 20)
+    assert decision["strategies"] == [
+        "RatedDriver(margin=0.15, still=0.05, stay=True)",
+        "Commit(steps=20)",
+        "SafestCandidate()",
+        "Slide()",
+    ]
+    assert (g.threshold, g.threshold_source) == (decision["threshold"], "stored decision") == (0.2, "stored decision")
     np.testing.assert_array_equal(g.model.candidates, [[0, 0, 0, 0], [0, 0, 1, 0], [-1.5, 0, 0, 0], [-1, 0, 1, 0]])
     assert g.model.meta["env_id"] == "QuadrotorRoomGuarded-v0" and g.model.obs_dim == 23
     risk_only = make_guardian(
-        "lrmm", model=str(g.model.path.with_name(ship.files["risk"])), action="safe", threshold=0.5
+        "lrmm", model=str(g.model.path.with_name(ship.files["risk"])), strategies="", threshold=0.5
     )
     assert risk_only.model.candidates is None and risk_only.model.meta["env_id"] == "QuadrotorRoomGuarded-v0"
     lay = env.observation_space.layout
@@ -521,11 +537,16 @@ def test_lrmm_reads_the_shipped_command_model_by_env_id(env):
     used = {f for f, a, b in lay.fields if any(a <= i < b for i in g.model.features)}
     assert used == {"rays", "rays_vertical", "velocity", "angular_velocity"}
     # acts on the pilot's command, rated against the best candidate and against holding still; slides by climbing
-    assert (g.trigger, g.margin, g.restart, g.slide, g.still, g.stay) == ("driver", 0.15, 0.0, True, 0.05, True)
+    assert g.strategies == (
+        RatedDriver(margin=0.15, still=0.05, stay=True),
+        Commit(steps=20),
+        SafestCandidate(),
+        Slide(),
+    )
     obs, info = env.reset(seed=0)
     g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
     a = g.act(obs, info)
-    assert a["active_ctrl"] in (0, 1) and 0.0 < g.last_risk < 1.0 and 0.0 < g.last_driver_risk < 1.0
+    assert a["active_ctrl"] in (0, 1) and 0.0 < g.last_risk < 1.0 and 0.0 < g.signals()["risk_driver"] < 1.0
 
 
 @pytest.mark.heavy
@@ -643,7 +664,7 @@ def test_lrmm_head_picks_the_lowest_risk_command_of_four_controls(env):
     model = LRMMModel(
         [(np.array([[-10.0]]), np.array([10.0])), (np.array([[3.0], [2.0], [-2.0]]), None)], [0.0], [1.0], meta
     )
-    g = LRMMGuardian(model=model, threshold=0.4, commit=0)
+    g = LRMMGuardian(model=model, threshold=0.4, strategies="SafestCandidate")
     g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
     obs = np.zeros(23, np.float32)
     obs[9] = 0.5
@@ -665,17 +686,21 @@ def test_lrmm_built_for_another_env_or_without_a_head_says_how_to_serve_the_quad
         "guardian 'lrmm': the LRMM model (trained on Dubins4DCircles-v0) expects observations "
         "of shape (17,), the env's observation space is (23,)" + REMEDY
     )
+    risk_path = default_model_path("QuadrotorRoomParallel-v0", variant="risk")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the risk-only model stores no decision: the paper's fallback warns
-        risk_only = LRMMGuardian(
-            env_id="QuadrotorRoomParallel-v0", model=default_model_path("QuadrotorRoomParallel-v0", variant="risk")
-        )
+        risk_only = LRMMGuardian(env_id="QuadrotorRoomParallel-v0", model=risk_path)
+        braking = LRMMGuardian(env_id="QuadrotorRoomParallel-v0", model=risk_path, strategies="BrakeTurn")
+    assert risk_only.strategies == ()  # no head, nothing stored: the core alone, which serves the quadrotor
+    risk_only.reset(seed=0, **spaces)
     with pytest.raises(
         ValueError,
-        match=r"needs the Dubins car's two controls, got 4 .*this env states a safe default "
-        r"\(hover and level.*\): action='safe' applies it",
+        match=r"strategy BrakeTurn needs the Dubins car's two controls, got 4 .*this env states a safe default "
+        r"\(hover and level.*\), which the core alone applies",
     ):
-        risk_only.reset(seed=0, **spaces)
+        braking.reset(seed=0, **spaces)
+    with pytest.raises(ValueError, match=r"strategy SafestCandidate reads the model's action-conditioned head"):
+        LRMMGuardian(env_id="QuadrotorRoomParallel-v0", model=risk_path, threshold=0.5, strategies="SafestCandidate")
     for bad, shown in ((True, "True"), ("nan", "'nan'"), ("0.2", "'0.2'")):
         with pytest.raises(ValueError) as e:
             LRMMGuardian(env_id="QuadrotorRoomParallel-v0", threshold=bad)

@@ -309,18 +309,19 @@ def test_lrmm_on_an_own_simulator_says_what_to_give_on_the_command_line():
 
     env = gym.make("OwnLineParallel-v0", clock="fixed:1")
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        g = LRMMGuardian(_model(2), threshold=0.3)
+        warnings.simplefilter("error")  # everything given: no fallback to warn of
+        g = LRMMGuardian(_model(2), threshold=0.3, strategies="BrakeTurn")
     with pytest.raises(ValueError) as e:
         g.check_spaces(env.observation_space, env.action_space)
     assert str(e.value) == (
-        "guardian 'lrmm': the brake-and-turn heuristic (the action of a model without a 'candidates' head) reads "
-        "the observation field 'rays' by name, and this env's observation names no fields (an env of your own, "
-        "e.g. made by rmm_envs.envs.driven.guarded or parallel); to take the env's safe default (the policy brake) "
-        "while the risk is above the threshold, give rmm-bench --agent-opt lrmm.action='\"safe\"' "
-        "(in Python: action='safe')"
+        "guardian 'lrmm': strategy BrakeTurn reads the observation field 'rays' by name, and this env's observation "
+        "names no fields (an env of your own, e.g. made by rmm_envs.envs.driven.guarded or parallel); the core alone "
+        "takes the env's safe default (the policy brake): rmm-bench --agent-opt lrmm.strategies='\"\"' "
+        '(in Python: strategies="")'
     )
-    LRMMGuardian(_model(2), threshold=0.3, action="safe").check_spaces(env.observation_space, env.action_space)
+    LRMMGuardian(_model(2), threshold=0.3, strategies="").check_spaces(env.observation_space, env.action_space)
+    # a model without a head and without a stored decision: the core alone, which serves this env as it is
+    LRMMGuardian(_model(2), threshold=0.3).check_spaces(env.observation_space, env.action_space)
 
 
 def test_lrmm_warnings_point_at_the_line_that_built_the_guardian():
@@ -331,8 +332,5 @@ def test_lrmm_warnings_point_at_the_line_that_built_the_guardian():
         LRMMGuardian(_model(2))
     with pytest.warns(UserWarning) as by_name:
         make_guardian("lrmm", model=_model(2))
-    assert [str(w.message) for w in by_name] == [
-        "lrmm: the model has no 'candidates' head: using the paper's brake-and-turn heuristic",
-        "lrmm: the model has no 'decision' threshold: using the paper's 0.85",
-    ]
+    assert [str(w.message) for w in by_name] == ["lrmm: the model has no 'decision' threshold: using the paper's 0.85"]
     assert {(w.filename, w.lineno > 0) for w in [*direct, *by_name]} == {(__file__, True)}

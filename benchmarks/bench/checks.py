@@ -155,6 +155,20 @@ def check_env_contract(env_id: str, env=None) -> None:
         )
 
 
+def _keywords(agent: str, classes: dict | None) -> list[str]:
+    """The keyword arguments the guardian ``agent`` takes (its constructor's named parameters)."""
+    import inspect
+
+    from rmm_guardians.registry import load_guardian_class
+
+    cls = (classes or {}).get(agent) or load_guardian_class(agent)
+    try:
+        params = inspect.signature(cls).parameters
+    except (TypeError, ValueError):  # no signature to read
+        return []
+    return [n for n, q in params.items() if q.kind not in (q.VAR_POSITIONAL, q.VAR_KEYWORD) and n != "self"]
+
+
 def check_runs(
     runs: dict[str, AgentRun], skip_inapplicable: bool = False, classes: dict | None = None
 ) -> dict[str, dict]:
@@ -202,6 +216,8 @@ def check_runs(
                 f"{agent}.{k}={v if isinstance(v, str) else json.dumps(v)}" for k, v in run.agent_kwargs.items()
             )
             where = f"--agent-opt {opts}" if opts else f"--agent {agent}"
+            if isinstance(e, TypeError) and "unexpected keyword argument" in str(e):
+                e = TypeError(f"{e}; {agent} takes {', '.join(_keywords(agent, classes) or ['no options'])}")
             raise ValueError(
                 f"{where}: the guardian cannot be built for --env {run.env_id}: {type(e).__name__}: {e}"
             ) from None

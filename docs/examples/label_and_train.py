@@ -56,10 +56,10 @@ def main(argv=None):
     assert sum(m["n"] for m in model.meta["metrics"].values()) == len(data)
 
     # 3. use it as a guardian.  This model predicts the risk only (no action-conditioned head,
-    #    no stored decision defaults), so say how to act: take control above 0.3 and brake
-    #    toward the more open side (the paper's manoeuvre)
+    #    no stored decision), so say how to act: take control above 0.3 and brake toward the
+    #    more open side (the paper's manoeuvre, the strategy BrakeTurn)
     env = gym.make("Dubins4DParallel-v0", clock="fixed:1")
-    guardian = LRMMGuardian(work / "model.npz", threshold=0.3, action="heuristic")
+    guardian = LRMMGuardian(work / "model.npz", threshold=0.3, strategies="BrakeTurn")
     obs, info = env.reset(seed=123)
     guardian.reset(seed=123, observation_space=env.observation_space, action_space=env.action_space)
     done = False

@@ -172,7 +172,7 @@ def main(argv=None):
         "rmm-bench",
         rmm_bench,
         ["--env", ENV, "--agent", "lrmm,inactive,random", "--agent-opt", f"lrmm.model={json.dumps(str(model))}"]
-        + ["--agent-opt", 'lrmm.action="safe"', "--agent-opt", "lrmm.threshold=0.3", "--clock", "fixed:1"]
+        + ["--agent-opt", "lrmm.threshold=0.3", "--clock", "fixed:1"]
         + ["--episodes", str(args.episodes), "--seed", "0", "--workers", "1", "--no-progress", "--out", str(bench)],
     )
     with open(bench / "table_I.csv") as f:

@@ -11,7 +11,7 @@ finite: a model with NaN or inf weights raises ``ValueError`` naming the array.
 The shipped models' table (:data:`SHIPPED_BY_SYSTEM`, :data:`SHIPPED`, :func:`default_model_path`)
 lives in :mod:`rmm_guardians.lrmm.shipped`; this module re-exports it.
 
-The head, the artifact's fields and why: docs/design-notes.md#rmm_guardianslrmmmodel.
+The head, the artifact's fields and why: docs/decisions/0007-datasets-and-models.md.
 """
 
 from __future__ import annotations
@@ -275,45 +275,28 @@ def load_model(path=None, env_id: str = "Dubins4DGuarded-v0") -> LRMMModel:
     return LRMMModel.load(path or default_model_path(env_id))
 
 
-def set_decision(path, threshold: float, commit: int, chosen_by: str, action: str = "head", **hand_back) -> LRMMModel:
-    """Store the guardian's decision defaults in the model file ``path`` (weights unchanged);
-    ``hand_back``: ``trigger``, ``margin``, ``restart``, ``slide``, ``still``, ``stay``
-    (:mod:`rmm_guardians.lrmm.nominal`), stored when not None."""
-    if not (isinstance(threshold, (int, float)) and 0.0 <= threshold <= 1.0):
-        raise ValueError(f"threshold must be in [0, 1], got {threshold!r}")
-    if int(commit) != commit or commit < 0:
-        raise ValueError(f"commit must be an integer >= 0, got {commit!r}")
-    if action not in ("head", "heuristic"):
-        raise ValueError(f"action must be 'head' or 'heuristic', got {action!r}")
-    if not chosen_by or not chosen_by.strip():
-        raise ValueError("chosen_by must say how the threshold was chosen")
-    model = LRMMModel.load(path)
-    if model.candidates is None:
-        raise ValueError(f"{path} has no 'candidates' head; its guardian uses the paper's rule")
-    from rmm_guardians.lrmm.nominal import hand_back_options  # checks them as the guardian will
+def set_decision(path, threshold: float, strategies, chosen_by: str) -> LRMMModel:
+    """Store the ``lrmm`` guardian's decision in the model file ``path`` (weights unchanged):
+    ``threshold``, ``strategies`` (a spec string or a sequence of strategies,
+    :func:`rmm_guardians.lrmm.strategies.parse_strategies`; ``""``: none) and how they were
+    chosen; a ``ValueError`` naming a bad value, or a strategy the model cannot serve."""
+    from rmm_guardians.lrmm.settings import check_threshold
+    from rmm_guardians.lrmm.strategies import parse_strategies, strategy_specs
 
-    fields = ("trigger", "margin", "restart", "slide", "still", "stay")
-    unknown = sorted(set(hand_back) - set(fields))
-    if unknown:
-        raise ValueError(f"unknown decision field(s) {unknown}; expected {', '.join(fields)}")
-    hand_back = {k: v for k, v in hand_back.items() if v is not None}
-    checked = hand_back_options(
-        trigger=hand_back.get("trigger"),
-        margin=hand_back.get("margin"),
-        restart=hand_back.get("restart"),
-        stored=None,
-        action=action,
-        hysteresis=False,
-        slide=hand_back.get("slide"),
-        still=hand_back.get("still"),
-        stay=hand_back.get("stay"),
-    )
-    extra = dict(zip(fields, checked, strict=True))
+    checked = check_threshold(threshold)
+    if checked is None:
+        raise ValueError("threshold must be a number in [0, 1], got None")
+    if not isinstance(chosen_by, str) or not chosen_by.strip():
+        raise ValueError("chosen_by must say how the threshold and strategies were chosen")
+    from rmm_guardians.lrmm.settings import stored_strategies
+
+    model = LRMMModel.load(path)
+    chosen = parse_strategies(strategies, stored_strategies(model.meta.get("decision"), str(path)))
+    for s in chosen:
+        s.check_model(model, None)
     model.meta["decision"] = {
-        "threshold": float(threshold),
-        "commit": int(commit),
-        "action": action,
-        **{k: extra[k] for k in hand_back},
+        "threshold": checked,
+        "strategies": strategy_specs(chosen),
         "chosen_by": chosen_by.strip(),
     }
     model.save(path)

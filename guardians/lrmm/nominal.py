@@ -1,18 +1,12 @@
 """Rating the driver's own control with an LRMM model, from the local observation alone.
 
-The ``lrmm`` guardian's ``trigger="driver"`` (the quadrotor) rates the driver's next control,
-``info["nominal_control"]``, by the model's state risk of the observation *predicted* after
-holding it for the head's hold time (a velocity command replaces the measured velocity, an
-acceleration changes the speed, a turn rate turns the heading and the rays; the position does
-not move).  **When** (:func:`driver_at_risk`): in control while that rating is above the
-threshold and the head's best candidate, or holding still, is rated materially lower; it stays
-while the rating is above the threshold, then ``commit`` steps.  **What** (:class:`Slide`): the
-variant of the driver's control nearest to it rated at or below the threshold (climbing at its
-horizontal velocity, half of it or none), else the head's safest candidate.
-
-Offers :func:`make_rater`, :class:`PredictRater`, :func:`driver_control`, :func:`driver_at_risk`,
-:class:`Slide` and :func:`hand_back_options`.  The prediction's stated error, why this rule and
-the alternatives tried with their figures: docs/design-notes.md#rmm_guardianslrmmnominal.
+:class:`PredictRater` rates a control by the model's state risk of the observation *predicted*
+after holding it for the head's hold time (a velocity command replaces the measured velocity,
+an acceleration changes the speed, a turn rate turns the heading and the rays; the position
+does not move).  :func:`driver_at_risk` is :class:`~rmm_guardians.lrmm.strategies.RatedDriver`'s
+test; :func:`driver_control` reads the driver's control from ``info["nominal_control"]``.
+Offers :func:`make_rater`, :class:`PredictRater`, :func:`driver_control` and
+:func:`driver_at_risk`.
 """
 
 from __future__ import annotations
@@ -25,19 +19,7 @@ import numpy as np
 
 from rmm_envs.portable import wrap_angle
 
-__all__ = [
-    "SLIDE_MOVES",
-    "TRIGGERS",
-    "VELOCITY_CONTROLS",
-    "PredictRater",
-    "Slide",
-    "driver_at_risk",
-    "driver_control",
-    "hand_back_options",
-    "make_rater",
-]
-
-TRIGGERS = ("risk", "driver")  # when lrmm takes control: the state risk, or the driver's control rated
+__all__ = ["VELOCITY_CONTROLS", "PredictRater", "driver_at_risk", "driver_control", "make_rater"]
 
 #: control field -> component of the observation's ``"velocity"`` field that measures it
 VELOCITY_CONTROLS = {"vforward_ctrl": 0, "vleft_ctrl": 1, "vup_ctrl": 2}
@@ -109,63 +91,6 @@ class PredictRater:
         return rated
 
 
-#: the slide's variants of the driver's velocity command: (cos, sin) of the turn of its horizontal
-#: velocity, the fraction of that velocity kept, and the vertical velocity: ``"climb"`` (the box's
-#: largest) or the fraction of the driver's kept
-SLIDE_MOVES = (((1.0, 0.0), 1.0, "climb"), ((1.0, 0.0), 0.5, "climb"), ((1.0, 0.0), 0.0, "climb"))
-
-
-class Slide:
-    """The driver's own velocity command bent around what the model rates risky (``slide``).
-
-    The variants of the driver's command ``u`` (forward, left, up velocity and the rest, in the
-    action space's order) are :data:`SLIDE_MOVES`; every other control (the yaw rate) is the
-    driver's.  ``u`` itself is not one of them: a slide is applied only while the guardian is in
-    control.  They are ordered by how far they are from ``u`` (Euclidean over the velocities),
-    the order of :data:`SLIDE_MOVES` on ties; :meth:`choose` rates them as ``u`` is rated and
-    returns the first one rated at or below the threshold, ``None`` when none is.
-
-    Args:
-        controls: the action space's control fields (``vforward_ctrl``, ``vleft_ctrl`` and
-            ``vup_ctrl`` needed).
-        low, high: the action space's control bounds (variants are clipped to them).
-        moves: ``(turn, kept, vertical)`` triples as in :data:`SLIDE_MOVES` (default: those).
-    """
-
-    def __init__(self, controls, low, high, moves=None) -> None:
-        controls = tuple(controls)
-        if any(c not in controls for c in VELOCITY_CONTROLS):
-            raise ValueError(
-                f"slide bends a velocity command: it needs the controls {tuple(VELOCITY_CONTROLS)}, got {controls}"
-            )
-        self.f, self.l, self.up = (controls.index(c) for c in VELOCITY_CONTROLS)
-        self.low, self.high = [float(v) for v in low], [float(v) for v in high]
-        self.moves = SLIDE_MOVES if moves is None else moves
-
-    def variants(self, u) -> list[list[float]]:
-        """The variants of ``u``, nearest first (class docstring)."""
-        u = [float(v) for v in u]
-        out = []
-        for (c, s), k, z in self.moves:
-            v = list(u)
-            v[self.f] = k * (c * u[self.f] - s * u[self.l])
-            v[self.l] = k * (s * u[self.f] + c * u[self.l])
-            v[self.up] = self.high[self.up] if z == "climb" else z * u[self.up]
-            v = [min(max(a, lo), hi) for a, lo, hi in zip(v, self.low, self.high, strict=True)]
-            if v != u and v not in out:
-                out.append(v)
-        gap = [math.sqrt(sum((v[j] - u[j]) ** 2 for j in (self.f, self.l, self.up))) for v in out]
-        return [out[i] for i in sorted(range(len(out)), key=lambda i: gap[i])]
-
-    def choose(self, rater: PredictRater, model, x, u, threshold: float) -> list | None:
-        """The nearest variant of ``u`` rated at or below ``threshold``; ``None`` if none is."""
-        options = self.variants(u)
-        if not options:
-            return None
-        rated = rater.rate_many(options, model, x)
-        return next((v for v, r in zip(options, rated, strict=True) if r <= threshold), None)
-
-
 def make_rater(controls: Sequence[str], layout, hold, low, high) -> PredictRater | None:
     """The rater for this env, or ``None`` when the observation measures none of the controls'
     effects (no ``layout``, or none of the fields :class:`PredictRater` predicts)."""
@@ -184,8 +109,8 @@ def driver_control(info, action_space, warn: bool = True) -> list | None:
         if warn:
             keys = sorted(info) if isinstance(info, dict) else info
             warnings.warn(
-                f"lrmm: trigger 'driver' rates the driver's control, info['nominal_control'], and this env "
-                f"gives none (info: {keys!r}); using the state risk (trigger 'risk') instead",
+                f"lrmm: strategies RatedDriver and Slide read the driver's control, info['nominal_control'], and this env "
+                f"gives none (info: {keys!r}); using the state risk instead",
                 UserWarning,
                 stacklevel=4,
             )
@@ -202,55 +127,8 @@ def driver_control(info, action_space, warn: bool = True) -> list | None:
     return n.tolist()
 
 
-def hand_back_options(
-    trigger, margin, restart, stored: dict | None, action: str, hysteresis: bool, slide=None, still=None, stay=None
-) -> tuple:
-    """``lrmm``'s ``(trigger, margin, restart, slide, still, stay)``: each given one, else the model
-    file's stored decision (used only with ``action="head"`` and, for the trigger, without
-    hysteresis: a file's defaults are for its own rule), else ``"risk"``, 0, 0, False, None, True;
-    ``ValueError`` naming a bad value or a given combination that cannot work (both rate or
-    accelerate with the head's candidates; ``slide``, ``still`` and ``stay=False`` change how the
-    driver's control is judged, so they need ``trigger="driver"``)."""
-    stored = dict(stored or {}) if action == "head" else {}
-    if hysteresis:
-        stored.pop("trigger", None)
-    trigger = trigger if trigger is not None else stored.get("trigger", "risk")
-    if trigger not in TRIGGERS:
-        raise ValueError(f"trigger must be one of {TRIGGERS}, got {trigger!r}")
-    if trigger == "driver" and (action != "head" or hysteresis):
-        raise ValueError(
-            f"trigger='driver' compares the driver's control with the head's candidates: it needs "
-            f"action='head' without hysteresis, got action={action!r}, hysteresis={hysteresis!r}"
-        )
-    values: list[float | None] = []
-    for name, given, default in (("margin", margin, 0.0), ("restart", restart, 0.0), ("still", still, None)):
-        value = given if given is not None else stored.get(name, default)
-        if value is None:
-            values.append(None)
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value < math.inf:
-            raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
-        values.append(float(value))
-    assert values[1] is not None  # restart defaults to 0.0 (set_decision stores no None)
-    if values[1] > 0 and action != "head":
-        raise ValueError(f"restart accelerates with the head's candidates: it needs action='head', got {action!r}")
-    flags = []
-    for name, given, default in (("slide", slide, False), ("stay", stay, True)):
-        value = given if given is not None else stored.get(name, default)
-        if not isinstance(value, (bool, np.bool_)):
-            raise ValueError(f"{name} must be True or False, got {value!r}")
-        flags.append(bool(value))
-    if trigger != "driver" and (flags[0] or values[2] is not None or not flags[1]):
-        raise ValueError(
-            f"slide, still and stay=False judge the driver's control, info['nominal_control']: they need "
-            f"trigger='driver', got {trigger!r}"
-        )
-    margin, restart, still = values
-    return trigger, margin, restart, flags[0], still, flags[1]
-
-
 def driver_at_risk(rated, threshold: float, margin: float, still: float | None = None, holding: bool = False) -> bool:
-    """Whether ``lrmm`` (``trigger="driver"``) is to be in control this step, from ``rated``: the
+    """Whether :class:`~rmm_guardians.lrmm.strategies.RatedDriver` puts ``lrmm`` in control this step, from ``rated``: the
     driver's control, the zero control (holding still) and the head's candidates, each rated by
     :meth:`PredictRater.rate_many`.  Never at or below ``threshold``; above it, while ``holding``
     (in control, with ``stay``), when the best candidate is rated more than ``margin`` lower, or

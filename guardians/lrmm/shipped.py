@@ -21,8 +21,8 @@ __all__ = ["SHIPPED", "SHIPPED_BY_SYSTEM", "Shipped", "ShippedById", "default_mo
 class Shipped:
     """What this package ships for one env id: its model file per variant, the observation field
     the model reads (``None``: the whole observation) and, where the model file stores none, the
-    ``lrmm`` guardian's decision defaults for that env (``threshold``, ``commit``, ``action``,
-    ``chosen_by``, as ``meta["decision"]``)."""
+    ``lrmm`` guardian's decision for that env (``threshold``, ``strategies``, ``chosen_by``, as
+    ``meta["decision"]``)."""
 
     files: dict
     inputs: str | None = None
@@ -39,8 +39,7 @@ _MAZE_PARALLEL = Shipped(
     inputs="rays",
     decision={
         "threshold": 0.7,
-        "commit": 5,
-        "action": "turn",
+        "strategies": ["RayTurn(rate=None)", "Commit(steps=5)"],
         "chosen_by": "fewest collisions, then most goals, then least time in control, over thresholds 0.3/0.5/0.7/0.85 x "
         "commit 5/10/20 steps on 64 development episodes (env seeds 5000-5063 of Dubins3DMazeParallel-v0, "
         "fixed 1 ms clock): 0 collisions and 64 goals with 1.3% of the steps in control",
@@ -53,7 +52,7 @@ _MAZE_PARALLEL = Shipped(
 #: commands for 1 s: hover, climb, back off, back off and climb) on the whole observation (its
 #: ``features`` leave out the orientation and the goal); its decision defaults are stored in the
 #: file.  ``"risk"``: the risk-only command model of Table II (``quadrotor_cmd.npz``, more labels,
-#: no head), for ``action="safe"`` (hover and level) with an explicit threshold.
+#: no head), for the core alone (hover and level, ``strategies=""``) with an explicit threshold.
 _QUAD_PARALLEL = Shipped({"act": "quadrotor_cmd_act.npz", "risk": "quadrotor_cmd.npz"})
 
 #: The guarded envs around simulators the project did not write (rmm_envs.envs.driven_examples):
@@ -66,8 +65,7 @@ _CARTPOLE = Shipped(
     {"act": "cartpole_guarded.npz"},
     decision={
         "threshold": 0.2,
-        "commit": 0,
-        "action": "safe",
+        "strategies": [],
         "chosen_by": "fewest collisions, then most goals, over thresholds 0.1/0.15/0.2/0.3/0.5 x commit 0/3/10/25 steps on "
         "100 development episodes each of env seeds 500000-500099 and 600000-600099 of CartPoleParallel-v0 "
         "(fixed 1 ms clock): 2 and 0 collisions, 60 and 53 goals",
@@ -77,8 +75,7 @@ _PENDULUM = Shipped(
     {"act": "inverted_pendulum_guarded.npz"},
     decision={
         "threshold": 0.05,
-        "commit": 0,
-        "action": "safe",
+        "strategies": [],
         "chosen_by": "fewest collisions while keeping the goals, over thresholds 0.02/0.05/0.1/0.3/0.5 x commit 0/2/5 steps "
         "on 100 development episodes each of env seeds 500000-500099 and 600000-600099 of "
         "InvertedPendulumParallel-v0 (fixed 1 ms clock): 32 and 31 collisions, 62 and 64 goals",

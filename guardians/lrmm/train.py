@@ -10,7 +10,7 @@ action-conditioned head is trained too (``--head``).  A NaN or inf loss stops tr
 message naming the epoch, and no model is written.  The guardian's decision defaults are
 chosen after training (``python -m rmm_guardians.lrmm.decision``).
 
-Each choice and how it differs from the original: docs/design-notes.md#rmm_guardianslrmmtrain.
+Each choice and how it differs from the original: docs/decisions/0007-datasets-and-models.md.
 """
 
 from __future__ import annotations
