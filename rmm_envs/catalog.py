@@ -9,11 +9,12 @@ modules plus one entry here.  Each system has up to three envs: ``<System>-v0`` 
 control), ``<System>Guarded-v0`` (a built-in driver, a guardian may take over; blocking) and
 ``<System>Parallel-v0`` (the same, non-blocking).
 
-What is derived from the table, and the stored ids: docs/design-notes.md#rmm_envscatalog.
+What is derived from the table, and the stored ids: docs/decisions/0023-table-of-systems.md.
 """
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass, field
 
 import gymnasium as gym
@@ -32,6 +33,7 @@ __all__ = [
     "env_ids",
     "register",
     "stored_id",
+    "system",
     "system_of",
 ]
 
@@ -79,6 +81,14 @@ class SystemSpec:
 
     def ids(self, kinds=tuple(KINDS)) -> tuple[str, ...]:
         return tuple(self.name + KINDS[k] for k in kinds if k in self.envs)
+
+    def make_safe_default(self, *args, **kwargs):
+        """A new instance of the system's safe default (:attr:`safe_default`, the one place it is
+        named), with the class's own arguments: what its guarded envs' action space carries."""
+        if self.safe_default is None:
+            raise ValueError(f"system {self.name} states no safe default")
+        module, _, attr = self.safe_default.partition(":")
+        return getattr(importlib.import_module(module), attr)(*args, **kwargs)
 
 
 _DUBINS4D_GUARDIANS = ("lrmm", "lrmm-paper", "cbf", "cbf-paper", "hj", "hj-paper", "random", "inactive", "brakes")
@@ -247,6 +257,14 @@ def system_of(env_id: str) -> tuple[SystemSpec, str]:
             if s.env_id(kind) == env_id:
                 return s, kind
     raise KeyError(f"{env_id!r} is not an env of this package's systems ({', '.join(env_ids())})")
+
+
+def system(name: str) -> SystemSpec:
+    """The entry of :data:`SYSTEMS` named ``name``; KeyError naming the systems otherwise."""
+    for s in SYSTEMS:
+        if s.name == name:
+            return s
+    raise KeyError(f"no system {name!r}; the systems are {', '.join(s.name for s in SYSTEMS)}")
 
 
 def guardian_envs_of(env_id: str) -> tuple[str, ...]:

@@ -124,6 +124,7 @@ import numpy as np
 
 import rmm_envs.doomed  # noqa: F401  (registers this env's doomed test)
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout, SafeDefault
+from rmm_envs.catalog import system
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.drivers.maze import PursuitDriver, cell_distances, cell_of, cell_path
 from rmm_envs.envs import _render
@@ -266,7 +267,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         self.clock = make_clock(clock)
         lay = observation_layout()
         self.action_space = GuardianActionSpace.for_system(
-            self.system, CONTROLS, safe_default=TurnFromNearerWall(lay), kind=KIND
+            self.system, CONTROLS, safe_default=system("Dubins3DMaze").make_safe_default(lay), kind=KIND
         )
         low = np.array([0.0] * N_RAYS + [-np.inf, -np.inf, -np.pi], dtype=np.float32)
         high = np.array([np.inf] * N_RAYS + [np.inf, np.inf, np.pi], dtype=np.float32)

@@ -142,6 +142,7 @@ import numpy as np
 
 import rmm_envs.doomed  # noqa: F401  (registers this env's doomed test)
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
+from rmm_envs.catalog import system
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.drivers.dubins4d import CLFDriver, DriverParams
 from rmm_envs.envs import _render
@@ -151,7 +152,7 @@ from rmm_envs.envs.dubins4d_start import Dubins4DStarts
 from rmm_envs.envs.dubins4d_step import advance, nominal_controls
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.scenes.dubins4d import Dubins4DScene, observation
-from rmm_envs.systems.dubins4d import Dubins4D, FullBraking
+from rmm_envs.systems.dubins4d import Dubins4D
 
 __all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "observation", "observation_layout"]
 
@@ -264,7 +265,9 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
             solver=driver_solver,
         )
         self.clock = make_clock(clock)
-        self.action_space = GuardianActionSpace.for_system(s, CONTROLS, safe_default=FullBraking(), kind=KIND)
+        self.action_space = GuardianActionSpace.for_system(
+            s, CONTROLS, safe_default=system("Dubins4D").make_safe_default(), kind=KIND
+        )
         low = np.array([0.0, -np.inf, -np.inf, -np.pi, s.v_min] + [0.0] * self.n_rays, dtype=np.float32)
         high = np.array([np.inf, np.inf, np.inf, np.pi, s.v_max] + [self.ray_length] * self.n_rays, dtype=np.float32)
         self.observation_space = ObservationBox(low, high, observation_layout(self.n_rays))

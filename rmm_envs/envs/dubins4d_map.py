@@ -147,13 +147,14 @@ from importlib import resources
 import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.catalog import system
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import draw_until, option_vector, rejection_sample
 from rmm_envs.envs.dubins4d import CONTROLS, KIND, Dubins4DCirclesEnv
 from rmm_envs.envs.dubins4d_start import in_goal
 from rmm_envs.envs.guarded import parallel_entry_point
 from rmm_envs.scenes.dubins4d_map import Dubins4DMapScene
-from rmm_envs.systems.dubins4d import FullBraking, wrap_angle
+from rmm_envs.systems.dubins4d import wrap_angle
 from rmm_envs.worlds.pymunk_world import PymunkWorld
 from rmm_envs.worlds.shape_map import MapError, ShapeMap, load_map
 
@@ -209,7 +210,11 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
             self._check_goal(self.map.goal, f"map {self.map.source}: its goal")
         self._obstacle_contact = self.world.first_contacts
         self.action_space = GuardianActionSpace.for_system(
-            self.system, CONTROLS, safe_default=FullBraking(), obstacle_shapes=self.map.kinds, kind=KIND
+            self.system,
+            CONTROLS,
+            safe_default=system("Dubins4DMap").make_safe_default(),
+            obstacle_shapes=self.map.kinds,
+            kind=KIND,
         )
 
     # ------------------------------------------------------------------ starts

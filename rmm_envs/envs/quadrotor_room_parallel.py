@@ -127,6 +127,7 @@ import numpy as np
 
 import rmm_envs.doomed  # noqa: F401  (registers this env's doomed test)
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
+from rmm_envs.catalog import system
 from rmm_envs.clocks import make_clock
 from rmm_envs.drivers.quadrotor import WaypointPilot
 from rmm_envs.envs.base import check_arguments, finite, rejection_sample, state_rows, whole
@@ -138,7 +139,6 @@ from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
 from rmm_envs.systems.quadrotor_control import (
     ClosedLoopQuadrotor,
     CommandController,
-    HoverAndLevel,
     command_wrench,
     heading_of,
     yaw_of,
@@ -146,7 +146,7 @@ from rmm_envs.systems.quadrotor_control import (
 from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
 from rmm_envs.worlds.room_collision import BOUND
 
-__all__ = ["CONTROLS", "HoverAndLevel", "QuadrotorRoomGuardedEnv", "make_parallel_env", "observation_layout"]
+__all__ = ["CONTROLS", "QuadrotorRoomGuardedEnv", "make_parallel_env", "observation_layout"]
 
 from rmm_envs.systems.quadrotor_control import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
 
@@ -250,7 +250,7 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         self.pilot = WaypointPilot(self.system.control_low, self.system.control_high, cruise_speed, climb_speed)
         self.clock = make_clock(clock)
         self.action_space = GuardianActionSpace.for_system(
-            self.system, CONTROLS, safe_default=HoverAndLevel(), kind=KIND
+            self.system, CONTROLS, safe_default=system("QuadrotorRoom").make_safe_default(), kind=KIND
         )
         low, high = np.full(_LAYOUT.size, -np.inf, np.float32), np.full(_LAYOUT.size, np.inf, np.float32)
         low[_RANGES], high[_RANGES] = 0.0, self.ray_range
