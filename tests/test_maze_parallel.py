@@ -277,11 +277,13 @@ def test_safe_default_turns_away_from_the_nearer_wall():
 
 def test_lrmm_reads_the_maze_model_on_the_rays_and_turns_to_the_lower_risk_side():
     env = Dubins3DMazeGuardedEnv()
-    g = make_guardian("lrmm", env_id="Dubins3DMazeParallel-v0")
     from rmm_guardians.lrmm.strategies import Commit, RayTurn
 
-    assert g.model.env_id == "Dubins3DMaze-v0" and g.inputs == "rays"
-    assert (g.threshold, g.strategies) == (0.7, (RayTurn(rate=None), Commit(steps=5)))
+    default = make_guardian("lrmm", env_id="Dubins3DMazeParallel-v0")
+    assert default.model.env_id == "Dubins3DMaze-v0" and default.inputs == "rays"
+    assert (default.threshold, default.strategies) == (0.7, (Commit(steps=5),))  # RayTurn removed by its ablation
+    g = make_guardian("lrmm", env_id="Dubins3DMazeParallel-v0", strategies="+RayTurn")
+    assert g.strategies == (Commit(steps=5), RayTurn(rate=None))
     obs, _ = env.reset(seed=0, options={"maze": corridor(), "state": [125.0, 125.0, 0.0], "goal_cell": 2})
     g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
     assert g.act(obs, {})["active_ctrl"] == 0 and g.last_risk < 0.7  # mid-corridor, heading along it
@@ -294,6 +296,8 @@ def test_lrmm_reads_the_maze_model_on_the_rays_and_turns_to_the_lower_risk_side(
     moved = obs.copy()
     moved[8:] = [1e4, -1e4, 0.0]  # the model reads the rays only
     assert g.act(moved, {}) == action
+    default.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
+    assert default.act(obs, {}) == action  # the safe default (away from the nearer wall) turns the same way
 
 
 def test_rmm_bench_refuses_a_named_guardian_that_does_not_apply(tmp_path, capsys):
