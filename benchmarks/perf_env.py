@@ -19,7 +19,7 @@ from scipy.integrate import odeint
 import rmm_envs  # noqa: F401
 from benchmarks._timing import fmt_us, median_time
 from rmm_envs.drivers.dubins4d import CLFDriver
-from rmm_envs.systems.dubins4d import Dubins4D
+from rmm_envs.dynamics.dubins4d import Dubins4D
 from rmm_envs.worlds.circles import CircleWorld, points_in_circles, ray_cast, ray_cast_numpy
 
 
@@ -53,7 +53,7 @@ def profile_step() -> dict[str, float]:
     env.reset(seed=0)
     st = env.true_state
     goal = env.scene.goal
-    sys_ = env.system
+    sys_ = env.dynamics
     u = env.driver.control(st, goal)
     osqp_driver = CLFDriver(
         env.driver.lim[:2], env.driver.lim[2:4], env.driver.lim[4:], env.driver.params, solver="osqp"

@@ -33,8 +33,8 @@ import time
 import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.dynamics.dubins4d import KIND, Dubins4D
 from rmm_envs.envs.dubins4d import CONTROLS
-from rmm_envs.systems.dubins4d import KIND, Dubins4D
 from rmm_guardians.hj._kernels import set_threads
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
@@ -151,7 +151,7 @@ def main(argv=None) -> None:
     box = {"obstacles": OBSTACLES, "goal": np.array([9.0, 9.0, 0.5]), "state": np.zeros(4)}
     g = HJGuardian(cache=False)
     g.reset(
-        seed=0, privileged=lambda: box, action_space=GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind=KIND)
+        seed=0, privileged=lambda: box, action_space=GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind=KIND)
     )
     rng = np.random.default_rng(0)
     states = np.column_stack(

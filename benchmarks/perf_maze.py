@@ -19,7 +19,7 @@ import numpy as np
 import rmm_envs  # noqa: F401
 from benchmarks._timing import fmt_us, median_time
 from benchmarks.perf_env import steps_per_second as _steps_per_second
-from rmm_envs.systems.dubins4d import SERIES_COEFFICIENTS
+from rmm_envs.dynamics.dubins4d import SERIES_COEFFICIENTS
 from rmm_envs.worlds.maze_kernels import dubins_path, maze_path_hit, maze_rays
 
 
@@ -33,7 +33,7 @@ def parts() -> dict[str, float]:
     env.reset(seed=0)
     m = env.scene.maze
     st = env.true_state
-    path = env.system.propagate(st[None], np.array([[0.1]]), 0.11, 8)
+    path = env.dynamics.propagate(st[None], np.array([[0.1]]), 0.11, 8)
     out = np.empty(8)
     return {
         "rays, compiled": median_time(
@@ -48,7 +48,7 @@ def parts() -> dict[str, float]:
             lambda: dubins_path(st[0], st[1], st[2], 10.0, 0.1, 0.11, np.empty((8, 3)), SERIES_COEFFICIENTS), number=500
         ),
         "path, numpy Dubins3D.propagate": median_time(
-            lambda: env.system.propagate(st[None], np.array([[0.1]]), 0.11, 8), number=100
+            lambda: env.dynamics.propagate(st[None], np.array([[0.1]]), 0.11, 8), number=100
         ),
         "driver": median_time(lambda: env.driver.control(st), number=500),
     }

@@ -1,4 +1,4 @@
-"""Adapters: any policy becomes a guardian.
+"""Wrapped policies: any policy becomes a guardian.
 
 * :class:`CallableGuardian` wraps ``fn(observation) -> action``.
 * :class:`SB3Guardian` wraps an object with Stable-Baselines3's

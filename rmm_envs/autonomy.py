@@ -5,7 +5,7 @@ takes control and with which control vector.  This module offers:
 
 * :class:`GuardianActionSpace`: the action's space (a Gymnasium ``Dict``: ``active_ctrl`` and
   one shape-(1,) box per control), with ``inactive()``, ``active(u)``, ``parse(action)``;
-* :class:`SystemContract` (``space.contract``, :func:`contract`): the system's kind (guardians
+* :class:`SystemContract` (``space.contract``, :func:`contract`): the kind of dynamics it drives (guardians
   dispatch on it, never on control names), control names, bounds, safe default and obstacles;
 * :class:`SafeDefault`: a system's safe control (what ``brakes`` applies);
 * :class:`ObservationBox` / :class:`ObservationLayout` / :func:`layout`: named observation fields;
@@ -42,7 +42,7 @@ __all__ = [
 ]
 
 ACTIVE = "active_ctrl"  # the action field that says whether the guardian takes control
-#: The kind of a system no built-in guardian models (a third-party simulator made a guarded env).
+#: The kind of dynamics no built-in guardian models (a third-party simulator made a guarded env).
 GENERIC = "generic"
 
 
@@ -78,7 +78,7 @@ class SafeDefault:
 class SystemContract:
     """What a guardian may know of the system an env's action space drives (``space.contract``).
 
-    ``kind`` names the system's model (a guardian that models one system serves exactly the
+    ``kind`` names the dynamics (a guardian that models one kind of dynamics serves exactly the
     spaces of its kind; :data:`GENERIC`: no built-in model); ``controls``, ``control_low`` and
     ``control_high`` the control vector's fields and bounds; ``safe_default`` and
     ``obstacle_shapes`` as given to :class:`GuardianActionSpace`."""
@@ -96,14 +96,14 @@ class GuardianActionSpace(spaces.Dict):
 
     Args:
         controls: the action field of each component of the control vector, in the order of
-            the system's control vector (e.g. ``("turnrate_ctrl", "accel_ctrl")``).
+            the dynamics' control vector (e.g. ``("turnrate_ctrl", "accel_ctrl")``).
         low, high: the control bounds, one number per control (``low <= high``, finite).
         seed: as for ``gymnasium.spaces.Dict``.
         safe_default: the system's :class:`SafeDefault` (``None``: the env states none).
         obstacle_shapes: the kinds of obstacle in the env's world (e.g. ``("circle",
             "polygon")``), for guardians whose model of the privileged obstacles assumes a kind
             (``cbf`` and ``hj`` need circles); ``None``: not stated (the circle envs).
-        kind: the system's kind (:class:`SystemContract`), stated by the env from its system
+        kind: the dynamics' kind (:class:`SystemContract`), stated by the env from its dynamics
             module's ``KIND``; default :data:`GENERIC`.
 
     The fields are stored in Gymnasium's default (sorted) key order, so sampling, seeding and
@@ -126,7 +126,7 @@ class GuardianActionSpace(spaces.Dict):
     ) -> None:
         controls = tuple(controls)
         if not isinstance(kind, str) or not kind:
-            raise ValueError(f"kind must be a non-empty system name (e.g. {GENERIC!r}), got {kind!r}")
+            raise ValueError(f"kind must be a non-empty dynamics name (e.g. {GENERIC!r}), got {kind!r}")
         lo = np.asarray(list(low), dtype=float).reshape(-1)
         hi = np.asarray(list(high), dtype=float).reshape(-1)
         if not controls or len(set(controls)) != len(controls) or not all(isinstance(c, str) and c for c in controls):
@@ -155,20 +155,20 @@ class GuardianActionSpace(spaces.Dict):
         self.control_high = np.array([float(boxes[c].high[0]) for c in controls])
 
     @classmethod
-    def for_system(
+    def for_dynamics(
         cls,
-        system: Any,
+        dynamics: Any,
         controls: Sequence[str],
         seed=None,
         safe_default: SafeDefault | None = None,
         obstacle_shapes: Sequence[str] | None = None,
         kind: str = GENERIC,
     ) -> GuardianActionSpace:
-        """The action space of a system whose dynamics object has ``control_low``/``control_high``."""
+        """The action space of dynamics whose object has ``control_low``/``control_high``."""
         return cls(
             controls,
-            np.asarray(system.control_low, float),
-            np.asarray(system.control_high, float),
+            np.asarray(dynamics.control_low, float),
+            np.asarray(dynamics.control_high, float),
             seed=seed,
             safe_default=safe_default,
             obstacle_shapes=obstacle_shapes,
@@ -177,7 +177,7 @@ class GuardianActionSpace(spaces.Dict):
 
     @property
     def contract(self) -> SystemContract:
-        """The system's contract: kind, controls, bounds, safe default, obstacle shapes."""
+        """The system's contract: the dynamics' kind, controls, bounds, safe default, obstacle shapes."""
         return SystemContract(
             self.kind,
             self.controls,
@@ -217,7 +217,7 @@ class GuardianActionSpace(spaces.Dict):
     def from_unit(self, flat) -> dict:
         """The action of a flat vector ``[active, z_1, ..., z_c]`` in the unit box (what RL
         libraries train on; :class:`rmm_envs.wrappers.FlattenGuardianAction`'s action space and
-        :class:`rmm_guardians.adapters.SB3Guardian`'s input, so a policy trained through the one acts
+        :class:`rmm_guardians.wrapped.SB3Guardian`'s input, so a policy trained through the one acts
         the same through the other): ``active > 0.5`` takes control, and ``z_i in [-1, 1]`` maps
         linearly onto ``[low_i, high_i]`` (``-1`` the lower bound, ``+1`` the upper; values
         outside ``[-1, 1]`` are clipped first).  Non-finite numbers raise ``ValueError`` naming

@@ -97,14 +97,14 @@ SYSTEMS: tuple[SystemSpec, ...] = (
     SystemSpec(
         name="Dubins4D",
         blurb="a Dubins4D car driven to a goal among five circles by a reckless CLF-QP driver",
-        dynamics="rmm_envs.systems.dubins4d:Dubins4D",
+        dynamics="rmm_envs.dynamics.dubins4d:Dubins4D",
         scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
         envs={
             "guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv",
             "parallel": "rmm_envs.envs.dubins4d:make_parallel_env",
         },
         driver="rmm_envs.drivers.dubins4d:CLFDriver",
-        safe_default="rmm_envs.systems.dubins4d:FullBraking",
+        safe_default="rmm_envs.dynamics.dubins4d:FullBraking",
         guardians=_DUBINS4D_GUARDIANS,
         vector="rmm_envs.envs.dubins4d_vector:Dubins4DCirclesVectorEnv",
         pages=(
@@ -120,14 +120,14 @@ SYSTEMS: tuple[SystemSpec, ...] = (
     SystemSpec(
         name="Dubins4DMap",
         blurb="the same car and driver on a JSON map of your own (circles, polygons, walls; pymunk)",
-        dynamics="rmm_envs.systems.dubins4d:Dubins4D",
+        dynamics="rmm_envs.dynamics.dubins4d:Dubins4D",
         scenes=("rmm_envs.scenes.dubins4d_map:Dubins4DMapScene",),
         envs={
             "guarded": "rmm_envs.envs.dubins4d_map:Dubins4DMapEnv",
             "parallel": "rmm_envs.envs.dubins4d_map:make_parallel_env",
         },
         driver="rmm_envs.drivers.dubins4d:CLFDriver",
-        safe_default="rmm_envs.systems.dubins4d:FullBraking",
+        safe_default="rmm_envs.dynamics.dubins4d:FullBraking",
         guardians=("lrmm", "lrmm-paper", "random", "inactive", "brakes"),
         extra="map",
         pages=(
@@ -143,7 +143,7 @@ SYSTEMS: tuple[SystemSpec, ...] = (
     SystemSpec(
         name="Dubins3DMaze",
         blurb="a constant-speed Dubins car in procedurally generated mazes, guarded from a corner-cutting pursuit driver",
-        dynamics="rmm_envs.systems.dubins3d:Dubins3D",
+        dynamics="rmm_envs.dynamics.dubins3d:Dubins3D",
         scenes=("rmm_envs.scenes.maze:MazeScene",),
         envs={
             "plain": "rmm_envs.envs.dubins3d_maze:Dubins3DMazeEnv",
@@ -167,7 +167,7 @@ SYSTEMS: tuple[SystemSpec, ...] = (
     SystemSpec(
         name="QuadrotorRoom",
         blurb="a quadrotor in procedurally generated rooms (PyBullet), flown through waypoints by a reckless pilot",
-        dynamics="rmm_envs.systems.quadrotor:Quadrotor",
+        dynamics="rmm_envs.dynamics.quadrotor:Quadrotor",
         scenes=("rmm_envs.scenes.quadrotor:QuadrotorScene", "rmm_envs.scenes.quadrotor:QuadrotorCommandScene"),
         envs={
             "plain": "rmm_envs.envs.quadrotor_room:QuadrotorRoomEnv",
@@ -175,7 +175,7 @@ SYSTEMS: tuple[SystemSpec, ...] = (
             "parallel": "rmm_envs.envs.quadrotor_room_parallel:make_parallel_env",
         },
         driver="rmm_envs.drivers.quadrotor:WaypointPilot",
-        safe_default="rmm_envs.systems.quadrotor_control:HoverAndLevel",
+        safe_default="rmm_envs.dynamics.quadrotor_control:HoverAndLevel",
         guardians=("lrmm", "cbf", "hj", "random", "inactive", "brakes"),
         extra="quadrotor",
         pages=(

@@ -45,7 +45,7 @@ def _first(hit: np.ndarray) -> np.ndarray:
 
 
 def dubins4d_escapes(
-    system, state, obstacles, goal, segments=DUBINS4D_SEGMENTS, dt: float = DUBINS4D_DT, first_hit=None
+    dynamics, state, obstacles, goal, segments=DUBINS4D_SEGMENTS, dt: float = DUBINS4D_DT, first_hit=None
 ) -> bool:
     """Whether some sequence of extreme controls from ``state`` ``(x, y, theta, v)`` avoids every
     circle of ``obstacles`` ``(K, 3)`` (x, y, r) until it reaches ``goal`` (x, y, r) or the
@@ -54,7 +54,7 @@ def dubins4d_escapes(
     Every sequence of piecewise-constant controls over ``segments`` (by default three covering
     the longest stop, 4 s from the top speed), each segment's control one of the three turn
     rates ``{min, 0, max}`` times the two accelerations ``{min, max}`` (216 sequences), is
-    integrated exactly with the system's dynamics and checked for contact with the obstacles
+    integrated exactly with the car's dynamics and checked for contact with the obstacles
     and the goal every ``dt`` (20 ms: 4 cm at the top speed; a tie counts as a collision, as in
     the env).  One sequence that stays clear (it stopped, or it still moves when the search
     ends) or reaches the goal first makes the start avoidable.  The test is conservative in the
@@ -68,7 +68,7 @@ def dubins4d_escapes(
     contact test gives it (:func:`dubins4d_map_test`)."""
     obstacles = np.asarray(obstacles, float).reshape(-1, 3)
     goal = np.asarray(goal, float)
-    lo, hi = system.control_low, system.control_high
+    lo, hi = dynamics.control_low, dynamics.control_high
     options = np.array([[w, a] for w in (lo[0], 0.0, hi[0]) for a in (lo[1], hi[1])])
     branches = np.asarray(state, float).reshape(1, 4)
     for duration in segments:
@@ -76,7 +76,7 @@ def dubins4d_escapes(
         times = np.linspace(0.0, duration, n)
         starts = np.repeat(branches, len(options), axis=0)
         controls = np.tile(options, (len(branches), 1))
-        paths = system.states_at(starts, controls, times, compiled=False)  # (B, T, 4)
+        paths = dynamics.states_at(starts, controls, times, compiled=False)  # (B, T, 4)
         xy = paths[..., :2]
         if first_hit is not None:
             hits = np.asarray(first_hit(paths))
@@ -100,7 +100,7 @@ def dubins4d_test(env) -> StartAssessment:
     """The doomed test of a Dubins4D-among-circles env right after ``reset``."""
     inner = env.unwrapped
     scene = inner.scene
-    doomed = not dubins4d_escapes(inner.system, inner.true_state, scene.obstacles, scene.goal)
+    doomed = not dubins4d_escapes(inner.dynamics, inner.true_state, scene.obstacles, scene.goal)
     return StartAssessment(doomed, DUBINS4D_METHOD)
 
 
@@ -128,7 +128,7 @@ def _maze_hits(maze, paths: np.ndarray, chunk: int) -> np.ndarray:
     return first
 
 
-def maze_escapes(system, maze, state, goal, segments=MAZE_SEGMENTS, dt: float = MAZE_DT) -> bool:
+def maze_escapes(dynamics, maze, state, goal, segments=MAZE_SEGMENTS, dt: float = MAZE_DT) -> bool:
     """Whether the maze car at ``state`` ``(x, y, psi)`` can avoid the walls of ``maze`` for ever
     or reach ``goal`` (x, y, r) first; the start is doomed when it cannot.
 
@@ -143,7 +143,7 @@ def maze_escapes(system, maze, state, goal, segments=MAZE_SEGMENTS, dt: float = 
     every sequence touches a wall first.  A sequence still clear at the end without a clear loop
     counts as an escape, so, like :func:`dubins4d_escapes`, the test errs towards *avoidable*:
     what it can miss is a turn rate between the extremes threading a gap they miss."""
-    speed, u = float(system.speed), float(system.u_max)
+    speed, u = float(dynamics.speed), float(dynamics.u_max)
     chunk = max(1, int(0.5 * maze.reach / (speed * dt)))  # a piece stays well within the reach
     goal = np.asarray(goal, float)
     reach_goal = (goal[2] + speed * dt) ** 2
@@ -153,7 +153,7 @@ def maze_escapes(system, maze, state, goal, segments=MAZE_SEGMENTS, dt: float = 
     def any_loop_clear(poses: np.ndarray) -> bool:
         starts = np.repeat(poses, 2, axis=0)
         turns = np.tile([-u, u], len(poses))
-        loops = system.propagate(starts, turns, loop_time, loop_steps)
+        loops = dynamics.propagate(starts, turns, loop_time, loop_steps)
         return bool((_maze_hits(maze, loops, chunk) == loop_steps).any())
 
     branches = np.asarray(state, float).reshape(1, 3)
@@ -163,7 +163,7 @@ def maze_escapes(system, maze, state, goal, segments=MAZE_SEGMENTS, dt: float = 
         n = max(2, int(round(duration / dt)) + 1)
         starts = np.repeat(branches, 3, axis=0)
         turns = np.tile([-u, 0.0, u], len(branches))
-        paths = system.propagate(starts, turns, duration, n)  # (B, n, 3), the start first
+        paths = dynamics.propagate(starts, turns, duration, n)  # (B, n, 3), the start first
         first_hit = _maze_hits(maze, paths, chunk)
         at_goal = ((paths[..., :2] - goal[:2]) ** 2).sum(-1) <= reach_goal
         first_goal = np.where(at_goal.any(axis=1), at_goal.argmax(axis=1), n)
@@ -181,7 +181,7 @@ def maze_escapes(system, maze, state, goal, segments=MAZE_SEGMENTS, dt: float = 
 def maze_test(env) -> StartAssessment:
     """The doomed test of a maze-car guardian env right after ``reset``."""
     inner = env.unwrapped
-    doomed = not maze_escapes(inner.system, inner.scene.maze, inner.true_state, inner.goal)
+    doomed = not maze_escapes(inner.dynamics, inner.scene.maze, inner.true_state, inner.goal)
     return StartAssessment(doomed, MAZE_METHOD)
 
 
@@ -207,7 +207,7 @@ def dubins4d_map_test(env) -> StartAssessment:
         contact = scene.world.first_contacts(paths)  # j + alpha along segment j; inf: none
         return np.where(np.isfinite(contact), np.ceil(np.nan_to_num(contact, posinf=0.0)), paths.shape[1]).astype(int)
 
-    doomed = not dubins4d_escapes(inner.system, inner.true_state, np.zeros((0, 3)), scene.goal, first_hit=first_hit)
+    doomed = not dubins4d_escapes(inner.dynamics, inner.true_state, np.zeros((0, 3)), scene.goal, first_hit=first_hit)
     return StartAssessment(doomed, DUBINS4D_METHOD)
 
 

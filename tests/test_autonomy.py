@@ -16,9 +16,9 @@ from hypothesis import strategies as st
 import rmm_envs  # noqa: F401
 from rmm_envs import autonomy
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
-from rmm_envs.systems.dubins4d import Dubins4D
+from rmm_envs.dynamics.dubins4d import Dubins4D
 
-D4 = GuardianActionSpace.for_system(Dubins4D(), ("turnrate_ctrl", "accel_ctrl"))
+D4 = GuardianActionSpace.for_dynamics(Dubins4D(), ("turnrate_ctrl", "accel_ctrl"))
 
 
 def test_dubins4d_space_is_the_plain_dict_it_replaced():

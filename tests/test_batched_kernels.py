@@ -7,7 +7,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rmm_envs.systems.dubins4d import Dubins4D, _states_at_compiled
+from rmm_envs.dynamics.dubins4d import Dubins4D, _states_at_compiled
 from rmm_envs.worlds.circles import (
     CircleWorld,
     contact_params,

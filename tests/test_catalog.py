@@ -183,7 +183,7 @@ def test_a_new_table_entry_is_registered_listed_and_helped(monkeypatch):
     toy = catalog.SystemSpec(
         name="ToyCircles",
         blurb="a toy",
-        dynamics="rmm_envs.systems.dubins4d:Dubins4D",
+        dynamics="rmm_envs.dynamics.dubins4d:Dubins4D",
         scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
         envs={"guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv"},
     )

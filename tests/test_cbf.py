@@ -9,13 +9,13 @@ from hypothesis import strategies as st
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.drivers.dubins4d import CLFDriver
+from rmm_envs.dynamics.dubins4d import Dubins4D
 from rmm_envs.envs.dubins4d import CONTROLS
-from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_guardians import make_guardian
 from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from tests.qp_reference import solve_qp_dense
 
-SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")  # the Dubins4D envs' action space
+SPACE = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind="dubins4d")  # the Dubins4D envs' action space
 INFO0 = {"nominal_control": np.zeros(2)}  # a step's info whose driver control is (0, 0)
 
 

@@ -11,14 +11,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.dynamics.dubins4d import Dubins4D
 from rmm_envs.envs.dubins4d import CONTROLS
-from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from rmm_guardians.cbf.barrier import HOCBFParams, barrier_rows
 from rmm_guardians.cbf.recovery import recovery_control, recovery_done
 from tests.test_cbf import INFO0
 
-SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")
+SPACE = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind="dubins4d")
 # the default gains; the Dubins4D control box and speed range
 PRM = HOCBFParams(0.7535, 0.6664, 1.0, 1.0, 1.0, 1.0, -0.25, 0.25, -0.5, 0.5, 0.0, 2.0)
 OBST = np.array([[0.0, 0.0, 3.0]])

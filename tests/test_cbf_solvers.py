@@ -10,9 +10,9 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.dynamics.dubins4d import Dubins4D
 from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
 from rmm_envs.envs.dubins4d import CONTROLS
-from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_guardians.cbf import CBFGuardian
 from rmm_guardians.cbf.backend import installed_solvers, parse_solver
 from rmm_guardians.cbf.maze import MazeCBFGuardian
@@ -22,7 +22,7 @@ PRIMAL_INFEASIBLE = 3  # OSQP's status value
 
 # every solver the test extra pins (qpsolvers[clarabel,daqp]): one that is missing fails its tests, it is not left out
 OTHERS = [f"qpsolvers:{n}" for n in ("osqp", "clarabel", "daqp")]
-SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")
+SPACE = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind="dubins4d")
 OBSTACLES = np.array([[3.0, 0.0, 2.0], [-4.0, 5.0, 3.0], [0.0, -6.0, 2.5]])
 GOAL = np.array([8.0, 8.0, 1.0])
 

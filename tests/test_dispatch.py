@@ -11,10 +11,10 @@ import pytest
 
 import rmm_envs  # noqa: F401  (registers the ids)
 from rmm_envs.autonomy import GENERIC, GuardianActionSpace, SystemContract, contract
-from rmm_envs.systems import dubins3d, dubins4d, quadrotor_control
+from rmm_envs.dynamics import dubins3d, dubins4d, quadrotor_control
 from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from rmm_guardians.cbf.maze import MazeCBFGuardian
-from rmm_guardians.dispatch import SYSTEMS, require_system
+from rmm_guardians.dispatch import DYNAMICS, require_dynamics
 from rmm_guardians.hj.guardian import HJGuardian
 
 
@@ -49,11 +49,11 @@ def test_the_systems_own_their_kinds_and_the_default_is_generic():
         "quadrotor",
         "generic",
     )
-    assert set(SYSTEMS) == {"dubins4d", "dubins3d", "quadrotor"}
+    assert set(DYNAMICS) == {"dubins4d", "dubins3d", "quadrotor"}
     space = GuardianActionSpace(("a",), [-1.0], [2.0])
     assert space.contract == SystemContract("generic", ("a",), (-1.0,), (2.0,), None, None)
     for bad in ("", None, 3):
-        with pytest.raises(ValueError, match=f"kind must be a non-empty system name .*got {bad!r}"):
+        with pytest.raises(ValueError, match=f"kind must be a non-empty dynamics name .*got {bad!r}"):
             GuardianActionSpace(("a",), [-1.0], [1.0], kind=bad)
     with pytest.raises(TypeError, match="GuardianActionSpace"):
         contract(gym.spaces.Discrete(2))
@@ -66,7 +66,7 @@ def test_the_kind_not_the_control_names_picks_the_guardian():
         with pytest.raises(
             ValueError,
             match=f"guardian {g.name!r} applies to Dubins4D envs and the maze car .*and the "
-            r"quadrotor .*this env's system is 'generic'",
+            r"quadrotor .*this env's dynamics are 'generic'",
         ):
             g.check_spaces(None, lookalike)
     # the same names under the maze car's kind: the maze guardian
@@ -83,20 +83,20 @@ def test_a_space_whose_controls_contradict_its_kind_is_refused_naming_both():
     wrong = GuardianActionSpace(("turn", "accel"), [-0.25, -0.5], [0.25, 0.5], kind="dubins4d")
     with pytest.raises(
         ValueError,
-        match=r"guardian 'cbf': this env states system 'dubins4d', whose controls are "
+        match=r"guardian 'cbf': this env states dynamics 'dubins4d', whose controls are "
         r"\('turnrate_ctrl', 'accel_ctrl'\), but its action space's controls are "
         r"\('turn', 'accel'\)",
     ):
         CBFGuardian().check_spaces(None, wrong)
 
 
-def test_require_system_returns_the_space_of_its_kind():
+def test_require_dynamics_returns_the_space_of_its_kind():
     space = GuardianActionSpace(quadrotor_control.CONTROLS, [-1.0] * 4, [1.0] * 4, kind="quadrotor")
-    assert require_system(CBFGuardian(), space, "quadrotor", "models the quadrotor") is space
+    assert require_dynamics(CBFGuardian(), space, "quadrotor", "models the quadrotor") is space
     with pytest.raises(
-        ValueError, match=r"guardian 'cbf' models the quadrotor \(system 'quadrotor'.*system is 'dubins3d'"
+        ValueError, match=r"guardian 'cbf' models the quadrotor \(dynamics 'quadrotor'.*dynamics are 'dubins3d'"
     ):
-        require_system(
+        require_dynamics(
             CBFGuardian(),
             GuardianActionSpace(("turnrate_ctrl",), [-1.0], [1.0], kind="dubins3d"),
             "quadrotor",
@@ -111,7 +111,7 @@ def test_a_third_party_env_is_served_by_the_model_free_guardians_only():
     assert env.action_space.kind == GENERIC
     BrakesGuardian().check_spaces(env.observation_space, env.action_space)
     for g in (CBFGuardian(), HJGuardian()):
-        with pytest.raises(ValueError, match="this env's system is 'generic'"):
+        with pytest.raises(ValueError, match="this env's dynamics are 'generic'"):
             g.check_spaces(env.observation_space, env.action_space)
     obs, info = env.reset(seed=0)
     b = BrakesGuardian()
@@ -128,7 +128,7 @@ def test_the_refusals_say_exactly_what_each_guardian_serves():
     assert str(e.value) == (
         "guardian 'cbf' applies to Dubins4D envs and the maze car (controls ('turnrate_ctrl',)) and the quadrotor "
         "(controls ('vforward_ctrl', 'vleft_ctrl', 'vup_ctrl', 'yawrate_ctrl')): it models the Dubins4D car among "
-        "circular obstacles (system 'dubins4d', controls ('turnrate_ctrl', 'accel_ctrl')); this env's system is "
+        "circular obstacles (dynamics 'dubins4d', controls ('turnrate_ctrl', 'accel_ctrl')); this env's dynamics are "
         "'generic' and its controls are ('turnrate_ctrl',)"
     )
     with pytest.raises(ValueError) as e:
@@ -137,8 +137,8 @@ def test_the_refusals_say_exactly_what_each_guardian_serves():
     with pytest.raises(ValueError) as e:
         MazeCBFGuardian().check_spaces(None, lookalike)
     assert str(e.value) == (
-        "guardian 'cbf' (maze) models the constant-speed maze car among walls (system 'dubins3d', "
-        "controls ('turnrate_ctrl',)); this env's system is 'generic' and its controls are "
+        "guardian 'cbf' (maze) models the constant-speed maze car among walls (dynamics 'dubins3d', "
+        "controls ('turnrate_ctrl',)); this env's dynamics are 'generic' and its controls are "
         "('turnrate_ctrl',)"
     )
     lopsided = GuardianActionSpace(dubins3d.CONTROLS, [-0.1], [0.2], kind="dubins3d")
@@ -228,7 +228,7 @@ def test_the_obstacle_shapes_and_the_quadrotor_s_command_box_are_checked_by_valu
     with pytest.raises(
         ValueError,
         match=r"^guardian 'cbf' \(quadrotor\) models the quadrotor's velocity command in a "
-        r"room \(system 'quadrotor'.*this env's system is 'dubins4d'",
+        r"room \(dynamics 'quadrotor'.*this env's dynamics are 'dubins4d'",
     ):
         quadrotor_only(CBFGuardian(), circles)
 

@@ -17,8 +17,8 @@ import rmm_envs  # noqa: F401  (registers the envs)
 from rmm_bench.cli import main
 from rmm_bench.runner import episode_seed
 from rmm_envs.doomed import DUBINS4D_METHOD, MAZE_METHOD, QUADROTOR_METHOD, dubins4d_escapes, maze_escapes
+from rmm_envs.dynamics import Dubins4D
 from rmm_envs.starts import StartAssessment, assess_start, has_doomed_test, world_key
-from rmm_envs.systems import Dubins4D
 
 SYSTEM = Dubins4D()
 FAR_GOAL = (50.0, 50.0, 0.5)
@@ -183,13 +183,13 @@ def _wall_facing_pose(maze, gap: float):
 
 def test_maze_car_straight_at_a_close_wall_is_doomed_and_turned_away_is_not():
     inner = _maze_env().unwrapped
-    maze, system, far = inner.scene.maze, inner.system, (-1e6, -1e6, 1.0)
+    maze, dynamics, far = inner.scene.maze, inner.dynamics, (-1e6, -1e6, 1.0)
     pose = _wall_facing_pose(maze, gap=3.0)  # the turning radius is 50 px: too close to turn
-    assert not maze_escapes(system, maze, pose, far)
+    assert not maze_escapes(dynamics, maze, pose, far)
     away = pose + np.array([0.0, 0.0, math.pi])
-    assert maze_escapes(system, maze, away, far)
+    assert maze_escapes(dynamics, maze, away, far)
     # the goal disc reached before the wall saves it
-    assert maze_escapes(system, maze, pose, (pose[0], pose[1], 2.0))
+    assert maze_escapes(dynamics, maze, pose, (pose[0], pose[1], 2.0))
 
 
 def test_every_control_from_a_doomed_maze_pose_hits_a_wall():
@@ -198,26 +198,26 @@ def test_every_control_from_a_doomed_maze_pose_hits_a_wall():
     itself ends in a collision."""
     env = _maze_env()
     inner = env.unwrapped
-    maze, system, goal = inner.scene.maze, inner.system, inner.goal
+    maze, dynamics, goal = inner.scene.maze, inner.dynamics, inner.goal
     rng = np.random.default_rng(0)
     doomed = []
     while len(doomed) < 12:
         cell = maze.cells[rng.integers(len(maze.cells))]
         pose = np.array([*(cell + rng.uniform(-60.0, 60.0, 2)), rng.uniform(-math.pi, math.pi)])
-        if not maze.state_failed(pose[None, :2])[0] and not maze_escapes(system, maze, pose, goal):
+        if not maze.state_failed(pose[None, :2])[0] and not maze_escapes(dynamics, maze, pose, goal):
             doomed.append(pose)
     for pose in doomed:
         for _ in range(40):
             state, hit = pose[None].copy(), False
             for _ in range(12):
-                path = system.propagate(state, [rng.uniform(-system.u_max, system.u_max)], 2.0, 21)
+                path = dynamics.propagate(state, [rng.uniform(-dynamics.u_max, dynamics.u_max)], 2.0, 21)
                 if maze.paths_hit(path)[0]:
                     hit = True
                     break
                 state = path[:, -1]
             assert hit, f"a random control sequence escaped from the doomed pose {pose.tolist()}"
     for pose in doomed[:3]:
-        for turn in (-system.u_max, 0.0, system.u_max):
+        for turn in (-dynamics.u_max, 0.0, dynamics.u_max):
             env.reset(seed=3, options={"maze": maze, "state": pose.tolist()})
             assert assess_start(env).doomed is True and assess_start(env).method == MAZE_METHOD
             for _ in range(400):

@@ -2,14 +2,14 @@ import numpy as np
 import pytest
 
 from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.dynamics.dubins4d import Dubins4D
 from rmm_envs.envs.dubins4d import CONTROLS
-from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_guardians.hj.dynamics import DoubleIntegrator1D, Dubins4DHJ, Translation
 from rmm_guardians.hj.grid import Grid
 from rmm_guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
 from rmm_guardians.hj.solver import solve_brt, spatial_derivatives
 
-SPACE = GuardianActionSpace.for_system(Dubins4D(), CONTROLS, kind="dubins4d")  # the Dubins4D envs' action space
+SPACE = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind="dubins4d")  # the Dubins4D envs' action space
 
 
 def zero_crossing(xs, values):
@@ -453,7 +453,7 @@ def test_default_grid_value_against_the_exact_propagator(circle_guardians):
     # propagator: from a gap of 4 m or more some constant control keeps clear for 4 s, so those
     # states must be safe (HJ may also use time-varying controls, so its safe set is larger);
     # from 0.5-1 m nothing escapes (every constant control collides, and braking needs 4 m).
-    from rmm_envs.systems.dubins4d import Dubins4D
+    from rmm_envs.dynamics.dubins4d import Dubins4D
 
     dyn = Dubins4D()
     controls = np.array([[u1, u2] for u1 in np.linspace(-0.25, 0.25, 11) for u2 in np.linspace(-0.5, 0.5, 11)])
@@ -473,7 +473,7 @@ def closed_loop(guard, box, s0, *, latency: int, flip_turn: bool = False, lap: f
     env's exact dynamics.  A reckless driver holds its heading and speed (``u = 0``); the
     guardian's action from the state at a step acts ``latency`` laps later (1: the
     parallel-autonomy loop, 0: at once).  ``flip_turn`` negates the guardian's turn rate."""
-    from rmm_envs.systems.dubins4d import Dubins4D, wrap_angle
+    from rmm_envs.dynamics.dubins4d import Dubins4D, wrap_angle
 
     dyn = Dubins4D()
     guard.reset(seed=0, privileged=lambda: box, action_space=SPACE)
@@ -669,7 +669,7 @@ def test_tvd_rk_tableau_is_consistent_and_of_its_order():
 
 
 def test_hj_dynamics_take_their_bounds_from_the_system():
-    assert Dubins4DHJ() == Dubins4DHJ.from_system(Dubins4D())
+    assert Dubins4DHJ() == Dubins4DHJ.from_dynamics(Dubins4D())
     assert (Dubins4DHJ().u1_max, Dubins4DHJ().u2_max, Dubins4DHJ().v_min, Dubins4DHJ().v_max) == (0.25, 0.5, 0.0, 2.0)
     # the cache key is what it was when the numbers were written in this module
     assert Dubins4DHJ().key() == {
@@ -680,7 +680,7 @@ def test_hj_dynamics_take_their_bounds_from_the_system():
         "v_max": 2.0,
         "d_max": 0.0,
     }
-    fast = Dubins4DHJ.from_system(Dubins4D(u1_min=-0.5, u1_max=0.5, v_max=3.0), d_max=0.1)
+    fast = Dubins4DHJ.from_dynamics(Dubins4D(u1_min=-0.5, u1_max=0.5, v_max=3.0), d_max=0.1)
     assert (fast.u1_max, fast.u2_max, fast.v_max, fast.d_max) == (0.5, 0.5, 3.0, 0.1)
     with pytest.raises(ValueError, match="symmetric"):
         Dubins4DHJ.from_bounds([-0.25, -0.4], [0.25, 0.5])

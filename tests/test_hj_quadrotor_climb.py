@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from rmm_envs.systems.rotations import quat_from_euler
+from rmm_envs.dynamics.rotations import quat_from_euler
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_envs.worlds.rooms import Room
 from rmm_guardians import make_guardian

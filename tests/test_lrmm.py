@@ -6,8 +6,8 @@ import pytest
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
+from rmm_envs.dynamics.dubins4d import Dubins4D
 from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
-from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel, default_model_path, load_model
 from rmm_guardians.lrmm.strategies import BrakeTurn, Commit, MovingAverage, Restart, SafestCandidate
@@ -20,7 +20,7 @@ def env_spaces(n_rays=12, layout=None):
     lay = layout or observation_layout(n_rays)
     return {
         "observation_space": ObservationBox(np.full(lay.size, -np.inf), np.full(lay.size, np.inf), lay),
-        "action_space": GuardianActionSpace.for_system(Dubins4D(), CONTROLS),
+        "action_space": GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS),
     }
 
 

@@ -16,8 +16,8 @@ except ImportError as e:
 from gymnasium.utils.env_checker import check_env
 
 import rmm_envs  # noqa: F401
+from rmm_envs.dynamics.quadrotor import QUADROTOR
 from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
-from rmm_envs.systems.quadrotor import QUADROTOR
 from rmm_envs.worlds.rooms import generate_room
 
 EMPTY = {
@@ -168,8 +168,8 @@ def test_numpy_propagator_reproduces_pybullet():
     """The batched propagator the fast labeller needs, against PyBullet itself on random branches."""
     import pybullet as p
 
+    from rmm_envs.dynamics.quadrotor import Quadrotor
     from rmm_envs.envs.quadrotor_room import _urdf_path, push_body
-    from rmm_envs.systems.quadrotor import Quadrotor
 
     c = p.connect(p.DIRECT)
     try:
@@ -208,7 +208,7 @@ def test_numpy_propagator_reproduces_pybullet():
 
 
 def test_hover_in_the_numpy_propagator():
-    from rmm_envs.systems.quadrotor import Quadrotor
+    from rmm_envs.dynamics.quadrotor import Quadrotor
 
     quad = Quadrotor()
     s = np.array([[1.0, 2.0, 3.0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0]])

@@ -10,9 +10,9 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.dynamics.quadrotor_control import ClosedLoopQuadrotor, CommandController
+from rmm_envs.dynamics.rotations import quat_from_euler
 from rmm_envs.envs.quadrotor_room_parallel import CONTROLS, QuadrotorRoomGuardedEnv
-from rmm_envs.systems.quadrotor_control import ClosedLoopQuadrotor, CommandController
-from rmm_envs.systems.rotations import quat_from_euler
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_envs.worlds.rooms import Room
 from rmm_guardians import make_guardian
@@ -282,7 +282,7 @@ def test_decisions_keep_their_rows_and_the_box(x, y, z, yaw, vh, vz, nominal):
         assert np.all(G @ u[:3] <= h + 1e-4)
 
 
-SPACE = GuardianActionSpace.for_system(
+SPACE = GuardianActionSpace.for_dynamics(
     ClosedLoopQuadrotor(CommandController()), CONTROLS, kind="quadrotor"
 )  # the env's
 

@@ -12,10 +12,8 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.drivers.quadrotor import WaypointPilot
-from rmm_envs.envs.quadrotor_room_parallel import CONTROLS, QuadrotorRoomGuardedEnv, observation_layout
-from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
-from rmm_envs.systems.quadrotor import QUADROTOR, Quadrotor
-from rmm_envs.systems.quadrotor_control import (
+from rmm_envs.dynamics.quadrotor import QUADROTOR, Quadrotor
+from rmm_envs.dynamics.quadrotor_control import (
     ClosedLoopQuadrotor,
     CommandController,
     HoverAndLevel,
@@ -24,7 +22,9 @@ from rmm_envs.systems.quadrotor_control import (
     heading_of,
     yaw_of,
 )
-from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
+from rmm_envs.dynamics.rotations import quat_from_euler, quat_to_rot
+from rmm_envs.envs.quadrotor_room_parallel import CONTROLS, QuadrotorRoomGuardedEnv, observation_layout
+from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
 from rmm_envs.worlds.room_collision import BOUND, RoomCollision
 from rmm_envs.worlds.rooms import Room
 
@@ -84,7 +84,7 @@ def test_wrench_is_invariant_under_a_yaw_of_the_whole_state(yaw, cmd, vel, roll,
     q0 = quat_from_euler(roll, pitch, 0.3)
     s0 = np.array([0, 0, 1, *q0, *vel, 0.1, -0.2, 0.3])
     Rz = quat_to_rot(quat_from_euler(0, 0, yaw))
-    from rmm_envs.systems.rotations import quat_mul
+    from rmm_envs.dynamics.rotations import quat_mul
 
     s1 = s0.copy()
     s1[3:7] = quat_mul(quat_from_euler(0, 0, yaw), q0)

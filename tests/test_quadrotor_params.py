@@ -6,8 +6,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
+from rmm_envs.dynamics.quadrotor import QUADROTOR, Quadrotor, QuadrotorParams
 from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv, _urdf_path
-from rmm_envs.systems.quadrotor import QUADROTOR, Quadrotor, QuadrotorParams
 from rmm_envs.worlds import room_collision
 
 
@@ -44,7 +44,7 @@ def test_the_env_configures_pybullet_from_the_parameter_object():
         # the env's damping arguments replace the defaults in its parameters, and the
         # labeller's propagator uses exactly those parameters
         assert env.params == dataclasses.replace(QUADROTOR, linear_damping=0.1, angular_damping=0.2)
-        assert env.risk_scene().system.params is env.params
+        assert env.risk_scene().dynamics.params is env.params
     finally:
         env.close()
     assert QuadrotorRoomEnv().params == QUADROTOR

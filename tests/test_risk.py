@@ -123,17 +123,17 @@ def test_dubins4d_leaf_heuristic_values():
     np.testing.assert_allclose(sc.leaf_estimate(np.array([[3.0, 0.0, 0.0, 0.0]])), [0.0])  # no assert crash
 
 
-def _recursive(system, state, ctrl_tree, n, m, t, n_steps, reduce, path=None):
+def _recursive(scene, state, ctrl_tree, n, m, t, n_steps, reduce, path=None):
     """Algorithm 1 written literally: one branch at a time, recursion on children."""
-    if system.state_failed(state[None])[0] or (path is not None and system.path_failed(path[None])[0]):
+    if scene.state_failed(state[None])[0] or (path is not None and scene.path_failed(path[None])[0]):
         return 1.0
     if m == 0:
         return 0.0
     vals = []
     for i in range(n):
         u, sub = ctrl_tree[i]
-        p = system.propagate(state[None], u[None], t, n_steps)[0]
-        vals.append(_recursive(system, p[-1], sub, n, m - 1, t, n_steps, reduce, p))
+        p = scene.propagate(state[None], u[None], t, n_steps)[0]
+        vals.append(_recursive(scene, p[-1], sub, n, m - 1, t, n_steps, reduce, p))
     return float(reduce(np.array(vals)))
 
 

@@ -7,7 +7,7 @@ import math
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from rmm_envs.systems import dubins4d
+from rmm_envs.dynamics import dubins4d
 
 ANGLE = st.floats(-math.pi, math.pi, allow_nan=False)
 

@@ -480,7 +480,7 @@ def test_the_dubins4d_views_draw_the_obstacles_of_the_collision_check_and_the_ca
 def _convex_projection(obj: dict, pts: np.ndarray, axis: int) -> np.ndarray:
     """``(N,)`` bool: points ``(N, 2)`` of the plane without ``axis`` (z: top, y: side) lie in the
     shape's projection along ``axis`` (its signed distance, minimised over that axis, is <= 0)."""
-    from rmm_envs.systems.rotations import quat_to_rot
+    from rmm_envs.dynamics.rotations import quat_to_rot
     from rmm_envs.worlds.rooms import bounding_radius
 
     pos, R, size = np.asarray(obj["pos"], float), quat_to_rot(np.asarray(obj["quat"], float)), np.asarray(obj["size"])

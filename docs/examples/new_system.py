@@ -1,4 +1,4 @@
-"""Tutorial: a new system gets risk labels without touching the estimator.
+"""Tutorial: a new scene gets risk labels without touching the estimator.
 
     python docs/examples/new_system.py
 
@@ -37,9 +37,9 @@ class CorridorDoubleIntegrator:
 
 
 def main():
-    system = CorridorDoubleIntegrator()
-    check_scene(system)  # raises TypeError naming anything missing
-    est = RiskEstimator(system, branches=32, depth=2, horizon=1.0, n_steps=8)
+    scene = CorridorDoubleIntegrator()
+    check_scene(scene)  # raises TypeError naming anything missing
+    est = RiskEstimator(scene, branches=32, depth=2, horizon=1.0, n_steps=8)
     states = np.array(
         [
             [0.0, 0.0, 1.0, 0.0],  # centred, moving along the corridor
@@ -52,7 +52,7 @@ def main():
     for s, r, u in zip(states, res.risk, res.min_risk_ctrl, strict=True):  # one row per state
         print(f"state {s}: risk {r:.3f}, safest first control {np.round(u, 2)}")
     assert res.risk[0] < res.risk[1] < res.risk[2]
-    cvar = RiskEstimator(system, branches=32, depth=2, horizon=1.0, metric="cvar", alpha=0.1).estimate(
+    cvar = RiskEstimator(scene, branches=32, depth=2, horizon=1.0, metric="cvar", alpha=0.1).estimate(
         states, np.random.default_rng(0)
     )
     print("CVaR(0.1) risks:", np.round(cvar.risk, 3))

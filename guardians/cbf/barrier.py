@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from rmm_envs.systems.dubins4d import desired_heading_compiled as _desired_heading
+from rmm_envs.dynamics.dubins4d import desired_heading_compiled as _desired_heading
 
 njit: Callable[..., Any] | None  # numba's, or None where numba is missing
 try:

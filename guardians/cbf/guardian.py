@@ -10,9 +10,9 @@ import math
 
 import numpy as np
 
+from rmm_envs.dynamics import dubins3d, quadrotor_control
+from rmm_envs.dynamics.dubins4d import Dubins4D
 from rmm_envs.portable import matvec
-from rmm_envs.systems import dubins3d, quadrotor_control
-from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_guardians._checks import settings_signature
 from rmm_guardians.cbf.backend import dubins4d_qp
 from rmm_guardians.cbf.barrier import (
@@ -27,13 +27,13 @@ from rmm_guardians.cbf.maze import MazeCBFGuardian
 from rmm_guardians.cbf.quadrotor import QuadrotorCBFGuardian
 from rmm_guardians.cbf.recovery import recovery_control, recovery_done
 from rmm_guardians.cbf.settings import CBF_PRESETS, REFERENCES, CBFSettings, box_problem
-from rmm_guardians.dispatch import SystemDispatch, delegate_arguments
+from rmm_guardians.dispatch import DynamicsDispatch, delegate_arguments
 from rmm_guardians.privileged import PrivilegedGuardian
 
 __all__ = ["CBFGuardian", "CBFPaperGuardian", "REFERENCES"]
 
 
-class CBFGuardian(SystemDispatch, PrivilegedGuardian):
+class CBFGuardian(DynamicsDispatch, PrivilegedGuardian):
     """HOCBF safety filter with one-step latency prediction and recovery.
 
     ``reference="nominal"`` (default) minimises ``|u - u_nom|^2``, ``u_nom`` the driver's
@@ -91,7 +91,7 @@ class CBFGuardian(SystemDispatch, PrivilegedGuardian):
         s = self.settings = (settings if settings is not None else CBF_PRESETS[self.preset]).replace(**options)
         self.reference, self.solver = s.reference, s.solver
         shared = {"solver": s.solver, "eps": s.eps, "predict_latency": s.predict_latency, "lap_guess": s.lap_guess}
-        self._system_args = {
+        self._dynamics_args = {
             dubins3d.KIND: delegate_arguments(MazeCBFGuardian, "maze", s.maze, shared),
             quadrotor_control.KIND: delegate_arguments(QuadrotorCBFGuardian, "quadrotor", s.quadrotor, shared),
         }

@@ -21,7 +21,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from rmm_envs.systems.rotations import quat_to_rot
+from rmm_envs.dynamics.rotations import quat_to_rot
 from rmm_guardians.cbf.backend import QpsolversQP
 from rmm_guardians.cbf.quiet import quietly
 

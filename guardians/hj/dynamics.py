@@ -6,8 +6,8 @@ cache's identity), ``hamiltonian(grid, p)`` (``max_u min_d p . f(x, u, d)`` for 
 ``p``, one array per axis: the control avoids the target, the disturbance reaches it; with
 ``control="min"`` for reach-avoid) and ``alphas(grid)`` (per axis, a bound on ``|dH/dp_i|`` for
 the Lax-Friedrichs dissipation and the CFL step).  :class:`HJControlDynamics` adds
-``optimal_control(x, grad)``, the bang-bang maximiser a guardian applies.  A new system is a
-frozen dataclass with these methods.  Offered: :class:`Dubins4DHJ` (the guardians' model) and,
+``optimal_control(x, grad)``, the bang-bang maximiser a guardian applies.  New dynamics are
+frozen dataclasses with these methods.  Offered: :class:`Dubins4DHJ` (the guardians' model) and,
 for accuracy tests, :class:`DoubleIntegrator1D`, :class:`Integrator1D`, :class:`Translation`.
 """
 
@@ -19,7 +19,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from rmm_envs.systems.dubins4d import Dubins4D
+from rmm_envs.dynamics.dubins4d import Dubins4D
 
 __all__ = [
     "DoubleIntegrator1D",
@@ -72,13 +72,13 @@ def check_dynamics(dynamics) -> HJDynamics:
 
 @dataclass(frozen=True)
 class Dubins4DHJ:
-    """The Dubins4D system (:class:`rmm_envs.systems.dubins4d.Dubins4D`) as the solver sees it:
+    """The Dubins4D dynamics (:class:`rmm_envs.dynamics.dubins4d.Dubins4D`) as the solver sees it:
     state ``(x, y, theta, v)``; ``u1`` in ``[-u1_max, u1_max]``, ``u2`` in ``[-u2_max, u2_max]``;
     bounded disturbance ``|d_x|, |d_y| <= d_max`` on the position rates (0 by default, as the
     paper ran); speed held in ``[v_min, v_max]`` as in the environment.
 
     The bounds are the dynamics object's, not written again here: the defaults are
-    ``Dubins4D``'s, :meth:`from_system` reads a ``Dubins4D`` instance and :meth:`from_bounds`
+    ``Dubins4D``'s, :meth:`from_dynamics` reads a ``Dubins4D`` instance and :meth:`from_bounds`
     the control bounds an action space carries.  The Hamiltonian below takes the control box
     symmetric about 0 (as Dubins4D's is); other boxes are refused.  The fields (and so the
     value cache's key) are unchanged from when the numbers were written here."""
@@ -105,9 +105,9 @@ class Dubins4DHJ:
         return cls(u1_max=float(hi[0]), u2_max=float(hi[1]), v_min=float(v_min), v_max=float(v_max), d_max=float(d_max))
 
     @classmethod
-    def from_system(cls, system: Dubins4D, d_max: float = 0.0) -> Dubins4DHJ:
+    def from_dynamics(cls, dynamics: Dubins4D, d_max: float = 0.0) -> Dubins4DHJ:
         """From a :class:`Dubins4D` dynamics object: its control and speed bounds."""
-        return cls.from_bounds(system.control_low, system.control_high, system.v_min, system.v_max, d_max)
+        return cls.from_bounds(dynamics.control_low, dynamics.control_high, dynamics.v_min, dynamics.v_max, d_max)
 
     def key(self) -> dict:
         return {"name": "dubins4d", **self.__dict__}

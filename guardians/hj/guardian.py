@@ -19,9 +19,9 @@ import math
 
 import numpy as np
 
-from rmm_envs.systems import dubins3d, quadrotor_control
+from rmm_envs.dynamics import dubins3d, quadrotor_control
 from rmm_guardians._checks import settings_signature
-from rmm_guardians.dispatch import SystemDispatch, delegate_arguments
+from rmm_guardians.dispatch import DynamicsDispatch, delegate_arguments
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.grid import Grid, central_gradient
@@ -47,7 +47,7 @@ def obstacle_target(grid: Grid, obstacles: np.ndarray) -> np.ndarray:
     return np.broadcast_to(dist, grid.shape).astype(np.float32)
 
 
-class HJGuardian(SystemDispatch, PrivilegedGuardian):
+class HJGuardian(DynamicsDispatch, PrivilegedGuardian):
     """Grid HJ reachability guardian for Dubins4D (``hj``); the maze car and the quadrotor are
     handed to :class:`MazeHJGuardian` and :class:`QuadrotorHJGuardian` by the action space's kind.
 
@@ -104,7 +104,7 @@ class HJGuardian(SystemDispatch, PrivilegedGuardian):
             "delay": s.delay,
             "lap": s.lap,
         }
-        self._system_args = {
+        self._dynamics_args = {
             dubins3d.KIND: delegate_arguments(MazeHJGuardian, "maze", s.maze, shared),
             quadrotor_control.KIND: delegate_arguments(QuadrotorHJGuardian, "quadrotor", s.quadrotor, shared),
         }

@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from rmm_envs.systems.quadrotor_control import CommandController, yaw_of
+from rmm_envs.dynamics.quadrotor_control import CommandController, yaw_of
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_guardians._checks import finite, integer
 from rmm_guardians.dispatch import quadrotor_only

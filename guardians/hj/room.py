@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 
+from rmm_envs.dynamics.rotations import quat_to_rot
 from rmm_envs.portable import arctan2
-from rmm_envs.systems.rotations import quat_to_rot
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_envs.worlds.rooms import bounding_radius
 from rmm_guardians.hj.grid import Grid

@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from rmm_envs.systems.dubins4d import desired_heading  # the CLF's target heading, shared with the cbf guardian
-from rmm_envs.systems.dubins4d import desired_heading_compiled as _desired_heading
+from rmm_envs.dynamics.dubins4d import desired_heading  # the CLF's target heading, shared with the cbf guardian
+from rmm_envs.dynamics.dubins4d import desired_heading_compiled as _desired_heading
 
 if TYPE_CHECKING:
     import osqp

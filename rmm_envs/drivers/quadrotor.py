@@ -2,7 +2,7 @@
 
 :class:`WaypointPilot` flies the quadrotor through a list of waypoints (the last one is the
 goal) by issuing *commands* to the cascaded controller
-(:mod:`rmm_envs.systems.quadrotor_control`): ``(v_forward, v_left, v_up, yaw_rate)`` in the
+(:mod:`rmm_envs.dynamics.quadrotor_control`): ``(v_forward, v_left, v_up, yaw_rate)`` in the
 body's heading frame, proportional to the offset to the current waypoint (limited to
 ``cruise_speed`` and ``climb_speed``), turning to look where it flies, each number clipped to
 the command box.  A waypoint other than the last is passed within ``reach`` of it.  It is
@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from rmm_envs.systems.quadrotor_control import yaw_of
+from rmm_envs.dynamics.quadrotor_control import yaw_of
 
 __all__ = ["WaypointPilot"]
 

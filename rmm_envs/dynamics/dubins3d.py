@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rmm_envs.systems.dubins4d import _segment
+from rmm_envs.dynamics.dubins4d import _segment
 
 __all__ = ["CONTROLS", "KIND", "Dubins3D"]
 

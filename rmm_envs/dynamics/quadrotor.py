@@ -21,7 +21,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from rmm_envs.systems.rotations import quat_mul, quat_to_rot
+from rmm_envs.dynamics.rotations import quat_mul, quat_to_rot
 
 __all__ = ["QUADROTOR", "Quadrotor", "QuadrotorParams"]
 
@@ -129,7 +129,7 @@ class Quadrotor:
     A branch of the risk tree holds one control for ``duration`` split into ``n_steps - 1`` equal
     segments; each segment runs ``ceil(segment / dt)`` physics steps (the original's overshoot to
     whole steps is kept, so a 2 s branch with 8 points lasts 7 x 69 steps).  Quaternion arithmetic
-    comes from :mod:`rmm_envs.systems.rotations`."""
+    comes from :mod:`rmm_envs.dynamics.rotations`."""
 
     params: QuadrotorParams = QUADROTOR
     state_dim: ClassVar[int] = 13

@@ -3,12 +3,12 @@
 A **command** is four numbers in the body's *heading frame* (the world frame turned by the
 body's yaw): ``(v_forward, v_left, v_up, yaw_rate)``, within the box of
 :class:`CommandController`; zero is *hover and level*.  :func:`command_wrench` turns a command
-and a body state (:mod:`rmm_envs.systems.quadrotor`) into the body's thrust and moments
+and a body state (:mod:`rmm_envs.dynamics.quadrotor`) into the body's thrust and moments
 ``(F, Mx, My, Mz)``, every physics step: a velocity loop, the thrust along the body z axis and
 a geometric attitude loop (after Lee, Leok and McClamroch 2010).  :func:`command_wrenches` is
 the same function in a compiled loop, serving the batched :class:`ClosedLoopQuadrotor` (the
 risk labels' dynamics, whose control *is* the command).  Every physical number is read from
-the body's :class:`~rmm_envs.systems.quadrotor.QuadrotorParams`.
+the body's :class:`~rmm_envs.dynamics.quadrotor.QuadrotorParams`.
 
 The loops in full and the gains' reasons: :class:`CommandController`.
 """
@@ -23,8 +23,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from rmm_envs.autonomy import SafeDefault
+from rmm_envs.dynamics.quadrotor import QUADROTOR, Quadrotor, QuadrotorParams
 from rmm_envs.portable import arctan2
-from rmm_envs.systems.quadrotor import QUADROTOR, Quadrotor, QuadrotorParams
 
 njit: Callable[..., Any] | None
 try:
@@ -75,7 +75,7 @@ _N_GAINS = 20
 
 def _rotation(qx, qy, qz, qw):
     """The rotation matrix of the unit quaternion ``(x, y, z, w)``, row by row (9 numbers): the
-    scalar form of :func:`rmm_envs.systems.rotations.quat_to_rot`, for the compiled kernels."""
+    scalar form of :func:`rmm_envs.dynamics.rotations.quat_to_rot`, for the compiled kernels."""
     return (
         1 - 2 * (qy * qy + qz * qz),
         2 * (qx * qy - qz * qw),
@@ -146,7 +146,7 @@ def _wrench_loop(states, cmds, k, out):
 
 def body_step(s, u, b, out):
     """One physics step of one body, the arithmetic of :meth:`Quadrotor.step
-    <rmm_envs.systems.quadrotor.Quadrotor.step>` written out for one state (the tests pin the two
+    <rmm_envs.dynamics.quadrotor.Quadrotor.step>` written out for one state (the tests pin the two
     to each other); ``b`` packs ``(mass, gravity, Ix, Iy, Iz, dt, linear damping, angular
     damping, max angular speed)``.  ``out`` (13) may not be ``s``."""
     m, g, ix, iy, iz, dt, dl, da, wmax = b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7], b[8]
@@ -354,7 +354,7 @@ class ClosedLoopQuadrotor:
 
     ``propagate`` holds each command for the branch and, at every physics step, turns it into
     thrust and moments with :func:`command_wrenches` and advances the batched
-    :class:`~rmm_envs.systems.quadrotor.Quadrotor` (which reproduces PyBullet's integrator) by
+    :class:`~rmm_envs.dynamics.quadrotor.Quadrotor` (which reproduces PyBullet's integrator) by
     one step; segments are whole physics steps as there (``ceil(segment / dt)``).
     """
 
@@ -393,7 +393,7 @@ class ClosedLoopQuadrotor:
 
     def propagate_numpy(self, states, commands, duration: float, n_steps: int) -> np.ndarray:
         """The same paths through the numpy :meth:`Quadrotor.step
-        <rmm_envs.systems.quadrotor.Quadrotor.step>` (the reference the compiled loop is pinned to)."""
+        <rmm_envs.dynamics.quadrotor.Quadrotor.step>` (the reference the compiled loop is pinned to)."""
         body = self.body
         states, cmds = body.check_propagate(states, commands, duration, n_steps, self.control_low, self.control_high)
         per_segment = body.segment_steps(duration, n_steps)

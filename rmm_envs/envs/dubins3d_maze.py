@@ -4,7 +4,7 @@ The paper's Fig. 1 / Table II system (docs/original-code.md, item 25), as a Gymn
 
 ## Description
 
-A constant-speed car (:class:`rmm_envs.systems.Dubins3D`, 10 px/s, minimum turning radius
+A constant-speed car (:class:`rmm_envs.dynamics.Dubins3D`, 10 px/s, minimum turning radius
 50 px) drives through a perfect maze with thick walls (:mod:`rmm_envs.worlds.mazes`: 20 x 20
 cells of 125 px, walls 12.5 px thick, a 2750 x 2750 px image for the rectangular kind).  It
 has no goal: the task is to keep driving without touching a wall.  Units are the paper's
@@ -77,6 +77,7 @@ import numpy as np
 from gymnasium import spaces
 
 from rmm_envs.autonomy import ObservationBox, ObservationLayout
+from rmm_envs.dynamics.dubins3d import Dubins3D
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import (
     LabelledEnvBase,
@@ -88,7 +89,6 @@ from rmm_envs.envs.base import (
     whole,
 )
 from rmm_envs.scenes.maze import MazeScene
-from rmm_envs.systems.dubins3d import Dubins3D
 from rmm_envs.worlds.mazes import MAZE_KINDS, Maze, generate_maze
 
 __all__ = ["Dubins3DMazeEnv", "MazeScene", "observation_layout"]
@@ -150,9 +150,9 @@ class Dubins3DMazeEnv(LabelledEnvBase):
         self.step_dt = float(step_dt)
         self.n_path_points = int(n_path_points)
         self.max_episode_steps = int(max_episode_steps)
-        self.system = Dubins3D(speed, r_min)
+        self.dynamics = Dubins3D(speed, r_min)
         self.render_mode = render_mode
-        u = np.float32(self.system.u_max)
+        u = np.float32(self.dynamics.u_max)
         self.action_space = spaces.Box(-u, u, shape=(1,), dtype=np.float32)
         self.observation_space = ObservationBox(
             np.zeros(N_RAYS, np.float32), np.full(N_RAYS, np.inf, np.float32), observation_layout()
@@ -237,7 +237,7 @@ class Dubins3DMazeEnv(LabelledEnvBase):
                 )
         else:
             maze = self._draw_maze(spec)
-        self.scene = MazeScene(maze, self.system)
+        self.scene = MazeScene(maze, self.dynamics)
         if st is None:
             st = self.sample_states(self.np_random, 1)[0]
         self._state = st
@@ -257,8 +257,8 @@ class Dubins3DMazeEnv(LabelledEnvBase):
         u = float(a.reshape(-1)[0])
         if not math.isfinite(u):
             raise ValueError(f"action must be finite (space {self.action_space}), got {u}")
-        u = min(max(u, -self.system.u_max), self.system.u_max)
-        path = self.system.propagate(self._state[None], np.array([[u]]), self.step_dt, self.n_path_points)
+        u = min(max(u, -self.dynamics.u_max), self.dynamics.u_max)
+        path = self.dynamics.propagate(self._state[None], np.array([[u]]), self.step_dt, self.n_path_points)
         hit = bool(self.scene.path_failed(path)[0])
         self._state = path[0, -1].copy()
         self._state[2] = (self._state[2] + np.pi) % (2 * np.pi) - np.pi

@@ -7,7 +7,7 @@ the guardian's thinking time passes in the world), the maze counterparts of
 
 ## Description
 
-The constant-speed car of ``Dubins3DMaze-v0`` (:class:`rmm_envs.systems.Dubins3D`: 10 px/s,
+The constant-speed car of ``Dubins3DMaze-v0`` (:class:`rmm_envs.dynamics.Dubins3D`: 10 px/s,
 minimum turning radius 50 px, so ``|u| <= 0.2`` rad/s) in a seeded perfect maze (10 x 10 cells
 of 125 px, walls 12.5 px thick; :mod:`rmm_envs.worlds.mazes`) must reach a goal disc in the
 centre of a goal cell.  A built-in reckless driver (:class:`rmm_envs.drivers.maze.PursuitDriver`)
@@ -127,21 +127,21 @@ from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLa
 from rmm_envs.catalog import system
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.drivers.maze import PursuitDriver, cell_distances, cell_of, cell_path
+from rmm_envs.dynamics.dubins3d import Dubins3D
+from rmm_envs.dynamics.dubins4d import SERIES_COEFFICIENTS
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, option_vector, whole
 from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv, maze_from_option
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.portable import wrap_angle
 from rmm_envs.scenes.maze import MazeScene
-from rmm_envs.systems.dubins3d import Dubins3D
-from rmm_envs.systems.dubins4d import SERIES_COEFFICIENTS
 from rmm_envs.worlds.bounds import MAX_MAZE_SIDE
 from rmm_envs.worlds.maze_kernels import dubins_path, maze_path_hit, maze_rays, path_reaches_disc
 from rmm_envs.worlds.mazes import Maze, generate_maze
 
 __all__ = ["CONTROLS", "Dubins3DMazeGuardedEnv", "TurnFromNearerWall", "make_parallel_env", "observation_layout"]
 
-from rmm_envs.systems.dubins3d import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
+from rmm_envs.dynamics.dubins3d import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
 
 N_RAYS = 8
 
@@ -262,12 +262,12 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         self.heading_noise = float(heading_noise)
         self.maze_shape = (int(maze_rows), int(maze_cols))
         self.render_mode = render_mode
-        self.system = Dubins3D(float(speed), float(r_min))
-        self.driver = PursuitDriver(self.system.u_max, float(lookahead), float(driver_gain))
+        self.dynamics = Dubins3D(float(speed), float(r_min))
+        self.driver = PursuitDriver(self.dynamics.u_max, float(lookahead), float(driver_gain))
         self.clock = make_clock(clock)
         lay = observation_layout()
-        self.action_space = GuardianActionSpace.for_system(
-            self.system, CONTROLS, safe_default=system("Dubins3DMaze").make_safe_default(lay), kind=KIND
+        self.action_space = GuardianActionSpace.for_dynamics(
+            self.dynamics, CONTROLS, safe_default=system("Dubins3DMaze").make_safe_default(lay), kind=KIND
         )
         low = np.array([0.0] * N_RAYS + [-np.inf, -np.inf, -np.pi], dtype=np.float32)
         high = np.array([np.inf] * N_RAYS + [np.inf, np.inf, np.pi], dtype=np.float32)
@@ -329,7 +329,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         maze, state, goal, waypoints = self._start(self.check_options(options))
-        self.scene = MazeScene(maze, self.system, N_RAYS)
+        self.scene = MazeScene(maze, self.dynamics, N_RAYS)
         self._walls = np.ascontiguousarray(maze.walls)
         self._geom = (self._walls, float(maze.half), float(maze.width), float(maze.height))
         self.goal = np.array([*maze.cells[goal], self.goal_radius])
@@ -362,14 +362,14 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         self.check_interval(duration)
         if active:
             u = float(np.asarray(control, dtype=float).reshape(-1)[0])
-            u = min(max(u, -self.system.u_max), self.system.u_max)
+            u = min(max(u, -self.dynamics.u_max), self.dynamics.u_max)
         else:
             u = float(self._nominal[0])
         path = dubins_path(
             self._state[0],
             self._state[1],
             self._state[2],
-            self.system.speed,
+            self.dynamics.speed,
             u,
             float(duration),
             np.empty((self.n_path_points, 3)),
@@ -393,7 +393,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         return self._observe(), reward, terminated, truncated, info
 
     def final_speed(self) -> float:
-        return self.system.speed
+        return self.dynamics.speed
 
     def driver_control(self) -> np.ndarray:
         return np.array([self.driver.control(self._state)])
@@ -408,7 +408,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
             "state": self._state.copy(),
             "maze": self.scene.maze,
             "goal": self.goal.copy(),
-            "speed": self.system.speed,
+            "speed": self.dynamics.speed,
             "sim_time": self._sim_time,
         }
 

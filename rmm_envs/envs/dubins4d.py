@@ -6,7 +6,7 @@ guardian's thinking time passes in the world).  This is the paper's parallel-aut
 
 ## Description
 
-A car-like vehicle (:class:`rmm_envs.systems.Dubins4D`) drives toward a circular goal among
+A car-like vehicle (:class:`rmm_envs.dynamics.Dubins4D`) drives toward a circular goal among
 ``n_obstacles`` circular obstacles.  A built-in "reckless driver" (:class:`rmm_envs.drivers.dubins4d.
 CLFDriver`, a CLF-QP) steers it to the goal and ignores the obstacles.  The agent is a
 *guardian*: at every step it decides whether to take control and, if so, which control to apply.
@@ -145,6 +145,7 @@ from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLa
 from rmm_envs.catalog import system
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.drivers.dubins4d import CLFDriver, DriverParams
+from rmm_envs.dynamics.dubins4d import Dubins4D
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, rejection_sample, whole
 from rmm_envs.envs.dubins4d_start import HALF as _HALF
@@ -152,11 +153,10 @@ from rmm_envs.envs.dubins4d_start import Dubins4DStarts
 from rmm_envs.envs.dubins4d_step import advance, nominal_controls
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.scenes.dubins4d import Dubins4DScene, observation
-from rmm_envs.systems.dubins4d import Dubins4D
 
 __all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "observation", "observation_layout"]
 
-from rmm_envs.systems.dubins4d import CONTROLS, KIND  # noqa: E402  (the action fields of u = (u1, u2); owned by the system)
+from rmm_envs.dynamics.dubins4d import CONTROLS, KIND  # noqa: E402  (the action fields of u = (u1, u2); owned by the system)
 
 
 def observation_layout(n_rays: int = 12) -> ObservationLayout:
@@ -250,13 +250,13 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         self.n_path_points = int(n_path_points)
         self._step_times = np.linspace(0.0, self.step_dt, self.n_path_points)
         self.render_mode = render_mode
-        self.system = Dubins4D()
+        self.dynamics = Dubins4D()
         if isinstance(driver_params, dict):
             try:
                 driver_params = DriverParams(**driver_params)
             except TypeError as e:
                 raise ValueError(f"driver_params: {e}; expected keys of DriverParams") from None
-        s = self.system
+        s = self.dynamics
         self.driver = CLFDriver(
             (s.u1_min, s.u1_max),
             (s.u2_min, s.u2_max),
@@ -265,7 +265,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
             solver=driver_solver,
         )
         self.clock = make_clock(clock)
-        self.action_space = GuardianActionSpace.for_system(
+        self.action_space = GuardianActionSpace.for_dynamics(
             s, CONTROLS, safe_default=system("Dubins4D").make_safe_default(), kind=KIND
         )
         low = np.array([0.0, -np.inf, -np.inf, -np.pi, s.v_min] + [0.0] * self.n_rays, dtype=np.float32)
@@ -295,7 +295,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         from rmm_envs.doomed import dubins4d_escapes
 
         for _ in range(AVOIDABLE_ATTEMPTS):
-            if dubins4d_escapes(self.system, state, obstacles, goal):
+            if dubins4d_escapes(self.dynamics, state, obstacles, goal):
                 return obstacles, state, goal
             obstacles, state, goal = self.generate_start(self.np_random, options)
         raise RuntimeError(
@@ -304,7 +304,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         )
 
     def _start_episode(self, obstacles: np.ndarray, state: np.ndarray, goal: np.ndarray) -> None:
-        self.scene = Dubins4DScene(obstacles, goal, self.system, self.n_rays, self.ray_length)
+        self.scene = Dubins4DScene(obstacles, goal, self.dynamics, self.n_rays, self.ray_length)
         self._circles = np.vstack([self.scene.obstacles, self.scene.goal[None, :]])
         self._state = state
         self.begin_statistics()
@@ -332,7 +332,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         else:
             times = np.linspace(0.0, float(duration), self.n_path_points)
         nxt, u, hit_obst, hit_goal = advance(
-            self.system,
+            self.dynamics,
             self._nominal[None, :],
             self._state[None, :],
             self._circles[None],
@@ -392,7 +392,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         (rejection sampling, as the original's datagen since 2022-09-13)."""
         self.require_episode()
         assert self.scene is not None  # require_episode raised otherwise
-        s = self.system
+        s = self.dynamics
         return rejection_sample(
             rng,
             n,

@@ -148,13 +148,13 @@ import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.catalog import system
+from rmm_envs.dynamics.dubins4d import wrap_angle
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import draw_until, option_vector, rejection_sample
 from rmm_envs.envs.dubins4d import CONTROLS, KIND, Dubins4DCirclesEnv
 from rmm_envs.envs.dubins4d_start import in_goal
 from rmm_envs.envs.guarded import parallel_entry_point
 from rmm_envs.scenes.dubins4d_map import Dubins4DMapScene
-from rmm_envs.systems.dubins4d import wrap_angle
 from rmm_envs.worlds.pymunk_world import PymunkWorld
 from rmm_envs.worlds.shape_map import MapError, ShapeMap, load_map
 
@@ -209,8 +209,8 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
         if self.map.goal is not None:
             self._check_goal(self.map.goal, f"map {self.map.source}: its goal")
         self._obstacle_contact = self.world.first_contacts
-        self.action_space = GuardianActionSpace.for_system(
-            self.system,
+        self.action_space = GuardianActionSpace.for_dynamics(
+            self.dynamics,
             CONTROLS,
             safe_default=system("Dubins4DMap").make_safe_default(),
             obstacle_shapes=self.map.kinds,
@@ -228,7 +228,7 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
     def _draw_state(self, rng: np.random.Generator, goal: np.ndarray | None) -> np.ndarray:
         assert self.map.start_box is not None  # load_map sets it (the bounding box when the map gives none)
         (x0, y0), (x1, y1) = self.map.start_box
-        s = self.system
+        s = self.dynamics
         st = draw_until(
             lambda: np.array(
                 [rng.uniform(x0, x1), rng.uniform(y0, y1), rng.uniform(-np.pi, np.pi), rng.uniform(s.v_min, s.v_max)]
@@ -272,9 +272,9 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
             goal = self.map.goal.copy()
         if "state" in options:
             state = option_vector(options["state"], 4, "state", " [x, y, theta, v]")
-            if not (self.system.v_min <= state[3] <= self.system.v_max):
+            if not (self.dynamics.v_min <= state[3] <= self.dynamics.v_max):
                 raise ValueError(
-                    f"option 'state': speed must be in [{self.system.v_min}, {self.system.v_max}], got {state[3]}"
+                    f"option 'state': speed must be in [{self.dynamics.v_min}, {self.dynamics.v_max}], got {state[3]}"
                 )
             state[2] = wrap_angle(state[2])
             if self.world.points_inside(state[None, :2])[0]:
@@ -291,7 +291,7 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
 
     def _start_episode(self, _map, state: np.ndarray, goal: np.ndarray) -> None:
         super()._start_episode(np.zeros((0, 3)), state, goal)  # the episode's bookkeeping and driver reset
-        self.scene = Dubins4DMapScene(self.world, goal, self.system, self.n_rays, self.ray_length)
+        self.scene = Dubins4DMapScene(self.world, goal, self.dynamics, self.n_rays, self.ray_length)
         self._circles = self.scene.goal[None, :]  # the goal only: obstacles are the world's (_obstacle_contact)
 
     # ------------------------------------------------------------------ accessors and hooks
@@ -308,7 +308,7 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
         assert self.scene is not None  # require_episode raised otherwise
         assert self.map.start_box is not None  # load_map sets it (the bounding box when the map gives none)
         (x0, y0), (x1, y1) = self.map.start_box
-        s = self.system
+        s = self.dynamics
         return rejection_sample(
             rng,
             n,

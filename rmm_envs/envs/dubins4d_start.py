@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from rmm_envs.dynamics.dubins4d import Dubins4D, wrap_angle
 from rmm_envs.envs.base import draw_until, option_vector
-from rmm_envs.systems.dubins4d import Dubins4D, wrap_angle
 from rmm_envs.worlds.circles import CircleWorld, as_circles, points_in_circles
 
 __all__ = ["HALF", "Dubins4DStarts"]
@@ -45,11 +45,11 @@ def _parts(given: tuple[str, ...]) -> str:
 
 
 class Dubins4DStarts:
-    """Start generation for an env with ``system`` (a Dubins4D), ``n_obstacles``,
+    """Start generation for an env with ``dynamics`` (a Dubins4D), ``n_obstacles``,
     ``obstacle_rad`` and ``goal_rad`` (``(min, max)`` pairs) and ``check_options``."""
 
     # declared only (no class attributes): the env this mixes into provides them
-    system: Dubins4D
+    dynamics: Dubins4D
     n_obstacles: int
     obstacle_rad: tuple[float, float]
     goal_rad: tuple[float, float]
@@ -99,7 +99,7 @@ class Dubins4DStarts:
                     f"option 'goal' {goal.tolist()} covers the whole arena [-{HALF}, {HALF}]^2 where "
                     "initial states are drawn, so no start outside it exists; give a smaller goal"
                 )
-        s = self.system
+        s = self.dynamics
         st = draw_until(
             lambda: np.array(
                 [
@@ -147,9 +147,9 @@ class Dubins4DStarts:
             given["obstacles"] = as_circles(options["obstacles"], "option 'obstacles'")
         if "state" in options:
             state = option_vector(options["state"], 4, "state")
-            if not (self.system.v_min <= state[3] <= self.system.v_max):
+            if not (self.dynamics.v_min <= state[3] <= self.dynamics.v_max):
                 raise ValueError(
-                    f"option 'state': speed must be in [{self.system.v_min}, {self.system.v_max}], got {state[3]}"
+                    f"option 'state': speed must be in [{self.dynamics.v_min}, {self.dynamics.v_max}], got {state[3]}"
                 )
             state[2] = wrap_angle(state[2])
             given["state"] = state

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from rmm_envs.drivers.dubins4d import CLFDriver
-from rmm_envs.systems.dubins4d import Dubins4D, wrap_angle
+from rmm_envs.dynamics.dubins4d import Dubins4D, wrap_angle
 from rmm_envs.worlds.circles import contact_params_each
 
 __all__ = ["advance", "nominal_controls"]
@@ -29,7 +29,7 @@ def nominal_controls(driver: CLFDriver, states: np.ndarray, circles: np.ndarray)
 
 
 def advance(
-    system: Dubins4D,
+    dynamics: Dubins4D,
     nominal: np.ndarray,
     states: np.ndarray,
     circles: np.ndarray,
@@ -57,7 +57,7 @@ def advance(
     with any obstacle and with the goal (``inf`` where none).
     """
     u = np.where(active[:, None], np.asarray(controls, dtype=float), nominal)
-    paths = system.states_at(states, u, times, compiled=True)
+    paths = dynamics.states_at(states, u, times, compiled=True)
     cp = contact_params_each(paths, circles)
     hit_goal = cp[:, -1]
     if obstacle_contact is not None:

@@ -280,7 +280,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         resetting = self._ended if mode == AutoresetMode.NEXT_STEP else np.zeros(n, dtype=bool)
         any_resetting = bool(resetting.any())
         nxt, u, hit_obst, hit_goal = advance(
-            e.system, self._nominal, self._states, self._circles, active, ctrl, e._step_times
+            e.dynamics, self._nominal, self._states, self._circles, active, ctrl, e._step_times
         )
         dt = e.step_dt
         self._n_steps += 1

@@ -90,6 +90,7 @@ import numpy as np
 from gymnasium import spaces
 
 from rmm_envs.autonomy import ObservationBox, ObservationLayout
+from rmm_envs.dynamics.quadrotor import QUADROTOR
 from rmm_envs.envs.base import (
     LabelledEnvBase,
     check_arguments,
@@ -101,7 +102,6 @@ from rmm_envs.envs.base import (
 )
 from rmm_envs.portable import norm, norms
 from rmm_envs.scenes.quadrotor import QuadrotorScene
-from rmm_envs.systems.quadrotor import QUADROTOR
 from rmm_envs.worlds.rooms import Room, build_room, generate_room
 
 __all__ = ["QuadrotorRoomEnv", "QuadrotorScene", "observation_layout", "push_body", "unit_quaternion_rows"]

@@ -8,10 +8,10 @@ of ``Dubins3DMazeGuarded-v0`` / ``Dubins3DMazeParallel-v0`` with the same contra
 ## Description
 
 The PyBullet quadrotor of ``QuadrotorRoom-v0`` (0.5 kg, a collision cylinder of radius 0.3 m,
-240 Hz physics, the same :class:`~rmm_envs.systems.quadrotor.QuadrotorParams`) in a room from
+240 Hz physics, the same :class:`~rmm_envs.dynamics.quadrotor.QuadrotorParams`) in a room from
 :func:`rmm_envs.worlds.rooms.generate_room`, flown by a *command* ``(v_forward, v_left, v_up,
 yaw_rate)`` in the body's heading frame.  At every physics step the cascaded controller of
-:mod:`rmm_envs.systems.quadrotor_control` turns the command into thrust and body moments (the
+:mod:`rmm_envs.dynamics.quadrotor_control` turns the command into thrust and body moments (the
 velocity loop, then a geometric attitude loop), which PyBullet applies.  A built-in reckless
 pilot (:class:`rmm_envs.drivers.quadrotor.WaypointPilot`) flies straight through
 ``n_waypoints`` random points of the room, the last one the goal, ignoring walls and objects:
@@ -28,7 +28,7 @@ vup_ctrl=Box(-1, 1, (1,)), yawrate_ctrl=Box(-1, 1, (1,)))``, a
 guardian's command is applied, clipped to the box.  NaN/inf, a wrong shape or type, a missing
 or unknown field, or an ``active_ctrl`` other than 0/1 raise ``ValueError`` naming the field.
 The space's safe default (``space.safe_default``, what ``brakes`` applies) is
-:class:`~rmm_envs.systems.quadrotor_control.HoverAndLevel`: the zero command.  The guardian
+:class:`~rmm_envs.dynamics.quadrotor_control.HoverAndLevel`: the zero command.  The guardian
 commands the same controller as the pilot, so the risk labels' random commands, the safe
 default and the pilot live in one space.
 
@@ -130,25 +130,25 @@ from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLa
 from rmm_envs.catalog import system
 from rmm_envs.clocks import make_clock
 from rmm_envs.drivers.quadrotor import WaypointPilot
-from rmm_envs.envs.base import check_arguments, finite, rejection_sample, state_rows, whole
-from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
-from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv, unit_quaternion_rows
-from rmm_envs.envs.quadrotor_room_start import WAYPOINT_CLEARANCE, QuadrotorRoomStarts
-from rmm_envs.portable import matvec, norm
-from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
-from rmm_envs.systems.quadrotor_control import (
+from rmm_envs.dynamics.quadrotor_control import (
     ClosedLoopQuadrotor,
     CommandController,
     command_wrench,
     heading_of,
     yaw_of,
 )
-from rmm_envs.systems.rotations import quat_from_euler, quat_to_rot
+from rmm_envs.dynamics.rotations import quat_from_euler, quat_to_rot
+from rmm_envs.envs.base import check_arguments, finite, rejection_sample, state_rows, whole
+from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
+from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv, unit_quaternion_rows
+from rmm_envs.envs.quadrotor_room_start import WAYPOINT_CLEARANCE, QuadrotorRoomStarts
+from rmm_envs.portable import matvec, norm
+from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
 from rmm_envs.worlds.room_collision import BOUND
 
 __all__ = ["CONTROLS", "QuadrotorRoomGuardedEnv", "make_parallel_env", "observation_layout"]
 
-from rmm_envs.systems.quadrotor_control import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
+from rmm_envs.dynamics.quadrotor_control import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
 
 N_RAYS = 8
 _CONTACT_MARGIN = 0.05  # m added to the travel bound before contact queries are skipped
@@ -246,11 +246,11 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         self.altitude = (float(alt[0]), float(alt[1]))
         self.min_leg, self.goal_radius, self.ray_range = float(min_leg), float(goal_radius), float(ray_range)
         self.controller = CommandController(self.params)
-        self.system = ClosedLoopQuadrotor(self.controller)
-        self.pilot = WaypointPilot(self.system.control_low, self.system.control_high, cruise_speed, climb_speed)
+        self.dynamics = ClosedLoopQuadrotor(self.controller)
+        self.pilot = WaypointPilot(self.dynamics.control_low, self.dynamics.control_high, cruise_speed, climb_speed)
         self.clock = make_clock(clock)
-        self.action_space = GuardianActionSpace.for_system(
-            self.system, CONTROLS, safe_default=system("QuadrotorRoom").make_safe_default(), kind=KIND
+        self.action_space = GuardianActionSpace.for_dynamics(
+            self.dynamics, CONTROLS, safe_default=system("QuadrotorRoom").make_safe_default(), kind=KIND
         )
         low, high = np.full(_LAYOUT.size, -np.inf, np.float32), np.full(_LAYOUT.size, np.inf, np.float32)
         low[_RANGES], high[_RANGES] = 0.0, self.ray_range
@@ -325,8 +325,8 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         s = self.get_state()
         if active:
             cmd = np.minimum(
-                np.maximum(np.asarray(control, dtype=float).reshape(4), self.system.control_low),
-                self.system.control_high,
+                np.maximum(np.asarray(control, dtype=float).reshape(4), self.dynamics.control_low),
+                self.dynamics.control_high,
             )
         else:
             cmd = self._nominal.copy()

@@ -15,9 +15,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from rmm_envs.dynamics.rotations import quat_from_euler
 from rmm_envs.envs.base import draw_until, option_vector
 from rmm_envs.portable import norm
-from rmm_envs.systems.rotations import quat_from_euler
 from rmm_envs.worlds.room_collision import BOUND, RoomCollision
 from rmm_envs.worlds.rooms import Room
 

@@ -3,7 +3,7 @@
 For a root state ``s`` the tree has branching factor ``n`` and depth ``m``: each node samples
 ``n`` controls from the policy, holds each for ``t`` seconds, and records the path at
 ``n_steps`` equally spaced points (point 0 is the parent).  A child whose path fails is worth 1
-and is not expanded; a child at depth ``m`` that did not fail is worth 0 (or the system's
+and is not expanded; a child at depth ``m`` that did not fail is worth 0 (or the scene's
 ``leaf_estimate`` with ``leaf="heuristic"``); every other node is worth the coherent risk
 metric of its children.  A root that already fails is worth 1.  Also returned per root: the
 minimum-risk child's first control, its hold time and the number of terminal nodes;
@@ -93,18 +93,18 @@ class RiskEstimator:
     1)``, of the same constant control).
 
     Args:
-        system: a :class:`rmm_envs.risk.RiskScene` (the dynamics in one obstacle configuration).
+        scene: a :class:`rmm_envs.risk.RiskScene` (the dynamics in one obstacle configuration).
         branches: ``n >= 1``.  depth: ``m >= 0``.  horizon: ``t > 0`` seconds per level.
         n_steps: path points per branch, ``>= 2``.
         metric: ``"expected"`` (default), ``"cvar"`` (with ``alpha`` in (0, 1)) or ``"worst"``.
         policy: ``None`` for uniform controls, or ``policy(states (N, d), rng) -> (N, c)``.
-        leaf: ``"zero"`` (Algorithm 1) or ``"heuristic"`` (the system's ``leaf_estimate``).
+        leaf: ``"zero"`` (Algorithm 1) or ``"heuristic"`` (the scene's ``leaf_estimate``).
         chunk_size: roots per batch (memory ~ chunk * n^m * n_steps * d * 8 bytes).
     """
 
     def __init__(
         self,
-        system,
+        scene,
         branches: int = 32,
         depth: int = 2,
         horizon: float = 2.0,
@@ -115,14 +115,14 @@ class RiskEstimator:
         leaf: str = "zero",
         chunk_size: int | None = None,
     ) -> None:
-        check_scene(system)
+        check_scene(scene)
         validate_tree_params(branches, depth, horizon, n_steps, metric, alpha, leaf)
-        if leaf == "heuristic" and not hasattr(system, "leaf_estimate"):
-            raise TypeError(f"leaf='heuristic' needs {type(system).__name__}.leaf_estimate(states)")
+        if leaf == "heuristic" and not hasattr(scene, "leaf_estimate"):
+            raise TypeError(f"leaf='heuristic' needs {type(scene).__name__}.leaf_estimate(states)")
         if policy is not None and not callable(policy):
             raise TypeError(f"policy must be callable policy(states, rng) -> controls, got {policy!r}")
         self.reduce = get_metric(metric, alpha)
-        self.system = system
+        self.scene = scene
         self.n = int(branches)
         self.m = int(depth)
         self.t = float(horizon)
@@ -149,7 +149,7 @@ class RiskEstimator:
     # ------------------------------------------------------------------
     def draw_controls(self, rng: np.random.Generator, n_roots: int) -> list[np.ndarray]:
         """Uniform controls for every level: level ``l`` has shape ``(n_roots, n^l, c)``."""
-        lo, hi = np.asarray(self.system.control_low, float), np.asarray(self.system.control_high, float)
+        lo, hi = np.asarray(self.scene.control_low, float), np.asarray(self.scene.control_high, float)
         widths = [self.n ** (lvl + 1) for lvl in range(self.m)]  # exact: integers
         return [rng.uniform(lo, hi, size=(n_roots, w, lo.shape[0])) for w in widths]
 
@@ -162,8 +162,8 @@ class RiskEstimator:
         returns; otherwise they are drawn from ``rng`` (required then).
         """
         states = np.asarray(states, dtype=float)
-        if states.ndim != 2 or states.shape[1] != self.system.state_dim:
-            raise ValueError(f"states must have shape (B, {self.system.state_dim}), got {states.shape}")
+        if states.ndim != 2 or states.shape[1] != self.scene.state_dim:
+            raise ValueError(f"states must have shape (B, {self.scene.state_dim}), got {states.shape}")
         if not np.all(np.isfinite(states)):
             raise ValueError("states must be finite")
         B = states.shape[0]
@@ -181,7 +181,7 @@ class RiskEstimator:
         elif self.m > 0 and rng is None:
             raise ValueError("estimate() needs rng (a numpy Generator) for a custom policy")
 
-        c_dim = len(np.asarray(self.system.control_low))
+        c_dim = len(np.asarray(self.scene.control_low))
         out = RiskResult(np.empty(B), np.zeros((B, c_dim)), np.zeros(B), np.zeros(B, dtype=np.int64))
         for lo in range(0, B, self.chunk_size):
             hi = min(B, lo + self.chunk_size)
@@ -200,14 +200,14 @@ class RiskEstimator:
         """
         states = np.asarray(states, dtype=float)
         cands = np.asarray(candidates, dtype=float)
-        c_dim = len(np.asarray(self.system.control_low))
-        if states.ndim != 2 or states.shape[1] != self.system.state_dim:
-            raise ValueError(f"states must have shape (B, {self.system.state_dim}), got {states.shape}")
+        c_dim = len(np.asarray(self.scene.control_low))
+        if states.ndim != 2 or states.shape[1] != self.scene.state_dim:
+            raise ValueError(f"states must have shape (B, {self.scene.state_dim}), got {states.shape}")
         if cands.ndim != 2 or cands.shape[1] != c_dim or cands.shape[0] < 1:
             raise ValueError(f"candidates must have shape (K >= 1, {c_dim}), got {cands.shape}")
         if not np.all(np.isfinite(cands)):
             raise ValueError(f"candidates must be finite, got {cands.tolist()}")
-        lo, hi = np.asarray(self.system.control_low, float), np.asarray(self.system.control_high, float)
+        lo, hi = np.asarray(self.scene.control_low, float), np.asarray(self.scene.control_high, float)
         if np.any(cands < lo) or np.any(cands > hi):
             raise ValueError(f"candidates {cands.tolist()} fall outside the control box [{lo.tolist()}, {hi.tolist()}]")
         if not (isinstance(hold, (int, float)) and math.isfinite(hold) and hold > 0):
@@ -216,10 +216,10 @@ class RiskEstimator:
         rep = np.repeat(states, K, axis=0)
         u = np.tile(cands, (B, 1))
         risk = np.ones(B * K)
-        root_ok = ~np.asarray(self.system.state_failed(rep), dtype=bool)
+        root_ok = ~np.asarray(self.scene.state_failed(rep), dtype=bool)
         if root_ok.any():
-            paths = self.system.propagate(rep[root_ok], u[root_ok], float(hold), self.n_steps)
-            branch_ok = ~np.asarray(self.system.path_failed(paths), dtype=bool)
+            paths = self.scene.propagate(rep[root_ok], u[root_ok], float(hold), self.n_steps)
+            branch_ok = ~np.asarray(self.scene.path_failed(paths), dtype=bool)
             ok = np.zeros(B * K, dtype=bool)
             ok[root_ok] = branch_ok
             ends = paths[branch_ok, -1]
@@ -228,7 +228,7 @@ class RiskEstimator:
         return risk.reshape(B, K)
 
     def _estimate_chunk(self, roots: np.ndarray, rng, controls):
-        sys_ = self.system
+        sys_ = self.scene
         n, m = self.n, self.m
         B = roots.shape[0]
         root_fail = np.asarray(sys_.state_failed(roots), dtype=bool)

@@ -4,9 +4,9 @@
 An env builds its episode's scene at every ``reset`` and uses the very same object for its own
 collision checks and observations, so labels and the env agree by construction:
 
-* :class:`Dubins4DScene`: :class:`rmm_envs.systems.Dubins4D` among circles (with a goal);
-* :class:`MazeScene`: :class:`rmm_envs.systems.Dubins3D` in a maze;
-* :class:`QuadrotorScene`: the numpy :class:`rmm_envs.systems.Quadrotor` in a room;
+* :class:`Dubins4DScene`: :class:`rmm_envs.dynamics.Dubins4D` among circles (with a goal);
+* :class:`MazeScene`: :class:`rmm_envs.dynamics.Dubins3D` in a maze;
+* :class:`QuadrotorScene`: the numpy :class:`rmm_envs.dynamics.Quadrotor` in a room;
 * :class:`QuadrotorCommandScene`: the same body flown through its cascaded controller (the
   control is a velocity command).
 """

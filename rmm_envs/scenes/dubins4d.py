@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rmm_envs.dynamics.dubins4d import Dubins4D, wrap_angle
 from rmm_envs.scenes.base import SceneBase
-from rmm_envs.systems.dubins4d import Dubins4D, wrap_angle
 from rmm_envs.worlds.circles import CircleWorld, paths_hit_circles, points_in_circles, ray_cast
 
 __all__ = ["Dubins4DScene", "observation"]
@@ -35,17 +35,17 @@ class Dubins4DScene(SceneBase):
     """
 
     state_dim = 4
-    system: Dubins4D
+    dynamics: Dubins4D
 
     def __init__(
         self,
         obstacles: np.ndarray,
         goal: np.ndarray,
-        system: Dubins4D | None = None,
+        dynamics: Dubins4D | None = None,
         n_rays: int = 12,
         ray_length: float = 10.0,
     ) -> None:
-        self.system = system or Dubins4D()
+        self.dynamics = dynamics or Dubins4D()
         self.world = CircleWorld(obstacles, goal)
         self.n_rays = int(n_rays)
         self.ray_length = float(ray_length)
@@ -84,8 +84,8 @@ class Dubins4DScene(SceneBase):
         and ``v = 0`` gives 0 (the original asserted on it).
         """
         states = np.asarray(states, dtype=float)
-        v = np.clip(states[:, 3], self.system.v_min, self.system.v_max)
-        a = abs(self.system.u2_min)
+        v = np.clip(states[:, 3], self.dynamics.v_min, self.dynamics.v_max)
+        a = abs(self.dynamics.u2_min)
         d_stop = v * v / (2.0 * a)
         fwd = self.rays(states, 1)[:, 0]
         with np.errstate(divide="ignore", invalid="ignore"):

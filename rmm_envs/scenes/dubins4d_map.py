@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rmm_envs.dynamics.dubins4d import Dubins4D
 from rmm_envs.scenes.dubins4d import Dubins4DScene
-from rmm_envs.systems.dubins4d import Dubins4D
 from rmm_envs.worlds.pymunk_world import PymunkWorld
 from rmm_envs.worlds.shape_map import ShapeMap
 
@@ -30,11 +30,11 @@ class Dubins4DMapScene(Dubins4DScene):
         self,
         world: PymunkWorld,
         goal: np.ndarray,
-        system: Dubins4D | None = None,
+        dynamics: Dubins4D | None = None,
         n_rays: int = 12,
         ray_length: float = 10.0,
     ) -> None:
-        self.system = system or Dubins4D()
+        self.dynamics = dynamics or Dubins4D()
         self.world = world
         self._goal = np.asarray(goal, dtype=float).reshape(3)
         self.n_rays = int(n_rays)

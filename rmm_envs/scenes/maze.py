@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rmm_envs.dynamics.dubins3d import Dubins3D
 from rmm_envs.scenes.base import SceneBase
-from rmm_envs.systems.dubins3d import Dubins3D
 from rmm_envs.worlds.mazes import Maze
 
 __all__ = ["MazeScene"]
@@ -20,11 +20,11 @@ class MazeScene(SceneBase):
     """
 
     state_dim = 3
-    system: Dubins3D
+    dynamics: Dubins3D
 
-    def __init__(self, maze: Maze, system: Dubins3D | None = None, n_rays: int = 8) -> None:
+    def __init__(self, maze: Maze, dynamics: Dubins3D | None = None, n_rays: int = 8) -> None:
         self.maze = maze
-        self.system = system or Dubins3D()
+        self.dynamics = dynamics or Dubins3D()
         self.n_rays = n_rays
         self.obs_dim = n_rays
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from rmm_envs.dynamics.quadrotor import Quadrotor, QuadrotorParams
+from rmm_envs.dynamics.quadrotor_control import ClosedLoopQuadrotor, CommandController
 from rmm_envs.scenes.base import SceneBase
-from rmm_envs.systems.quadrotor import Quadrotor, QuadrotorParams
-from rmm_envs.systems.quadrotor_control import ClosedLoopQuadrotor, CommandController
 from rmm_envs.worlds.room_collision import RoomCollision
 from rmm_envs.worlds.rooms import Room
 
@@ -17,8 +17,8 @@ class QuadrotorScene(SceneBase):
     """The quadrotor in one room: the :class:`rmm_envs.risk.RiskScene` of ``QuadrotorRoom-v0``,
     for fast labelling.
 
-    Propagation is the batched numpy integrator (:class:`rmm_envs.systems.Quadrotor`, which
-    reproduces PyBullet's, built from the env's :class:`~rmm_envs.systems.quadrotor.QuadrotorParams`
+    Propagation is the batched numpy integrator (:class:`rmm_envs.dynamics.Quadrotor`, which
+    reproduces PyBullet's, built from the env's :class:`~rmm_envs.dynamics.quadrotor.QuadrotorParams`
     so damping and every other parameter agree), failure is the analytic room collision at the
     path's states (as the original checked its 8 path states).  Observations come from the env's
     PyBullet rays (``QuadrotorRoomEnv.observe_states``).  PyBullet stays the environment's truth;
@@ -29,7 +29,7 @@ class QuadrotorScene(SceneBase):
 
     def __init__(self, room: Room, params: QuadrotorParams) -> None:
         self.room = room
-        self.system = Quadrotor(params)
+        self.dynamics = Quadrotor(params)
         self.collision = RoomCollision(room)
 
     def state_failed(self, states):
@@ -45,7 +45,7 @@ class QuadrotorCommandScene(QuadrotorScene):
     :class:`rmm_envs.risk.RiskScene` of ``QuadrotorRoomGuarded-v0`` / ``QuadrotorRoomParallel-v0``.
 
     The control is the *command* ``(v_forward, v_left, v_up, yaw_rate)``
-    (:mod:`rmm_envs.systems.quadrotor_control`), so the estimator's uniform controls are random
+    (:mod:`rmm_envs.dynamics.quadrotor_control`), so the estimator's uniform controls are random
     bounded commands, each held for one tree level, to a controller that keeps the body
     flying: the label is the risk of flying on at random, not of tumbling under random thrust
     and moments (:class:`QuadrotorScene`, the paper's labelling of ``QuadrotorRoom-v0``).
@@ -54,4 +54,4 @@ class QuadrotorCommandScene(QuadrotorScene):
 
     def __init__(self, room: Room, controller: CommandController) -> None:
         super().__init__(room, controller.params)
-        self.system = ClosedLoopQuadrotor(controller)
+        self.dynamics = ClosedLoopQuadrotor(controller)

@@ -44,7 +44,7 @@ def _rotate(points: np.ndarray, R: np.ndarray) -> np.ndarray:
 
 def _shape_points(obj: dict) -> np.ndarray:
     """Points ``(P, 3)`` whose convex hull is the shape (its corners, or its rims sampled)."""
-    from rmm_envs.systems.rotations import quat_to_rot
+    from rmm_envs.dynamics.rotations import quat_to_rot
 
     pos = np.asarray(obj["pos"], float)
     R = quat_to_rot(np.asarray(obj["quat"], float))
@@ -147,7 +147,7 @@ class QuadrotorView(View):
         return np.stack([self.top.pixels(st[:, [0, 1]]), self.side.pixels(st[:, [0, 2]])], axis=1)
 
     def draw_body(self, draw: ImageDraw.ImageDraw, state: np.ndarray, active: bool, world: RoomOutlines) -> None:
-        from rmm_envs.systems.rotations import quat_to_rot
+        from rmm_envs.dynamics.rotations import quat_to_rot
 
         s = np.asarray(state, float)
         colour = GUARDIAN if active else DRIVER

@@ -9,7 +9,7 @@ call for one car (its per-operation overhead over a few hundred walls):
   whose bounding box, grown by the wall's half thickness, meets the path's (numpy's tests the
   walls near the path's first point only, which holds for short paths);
 * :func:`dubins_path`: the car's exact path under a held turn rate (the closed forms of
-  :meth:`rmm_envs.systems.Dubins3D.propagate`, compiled);
+  :meth:`rmm_envs.dynamics.Dubins3D.propagate`, compiled);
 * :func:`path_reaches_disc`: whether a path comes within a disc, for the goal.
 
 Tests check them against the numpy versions on random poses and paths.
@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from rmm_envs.systems.dubins4d import segment_position
+from rmm_envs.dynamics.dubins4d import segment_position
 
 njit: Callable[..., Any] | None
 try:
@@ -149,7 +149,7 @@ def maze_path_hit(walls, half, width, height, path):
 def dubins_path(x, y, psi, speed, u, duration, out, coef):
     """Write into ``out`` (``(S, 3)``) the poses at ``S`` equally spaced times over ``duration``
     of a constant-speed car holding turn rate ``u``: the closed forms of
-    :meth:`rmm_envs.systems.Dubins3D.propagate` (``coef``: their series coefficients)."""
+    :meth:`rmm_envs.dynamics.Dubins3D.propagate` (``coef``: their series coefficients)."""
     s = out.shape[0]
     step = duration / (s - 1)
     for k in range(s):

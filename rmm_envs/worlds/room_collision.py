@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rmm_envs.systems.quadrotor import QUADROTOR
-from rmm_envs.systems.rotations import quat_to_rot
+from rmm_envs.dynamics.quadrotor import QUADROTOR
+from rmm_envs.dynamics.rotations import quat_to_rot
 from rmm_envs.worlds.rooms import Room, bounding_radius
 
 __all__ = ["RoomCollision", "body_points"]

@@ -59,7 +59,7 @@ class FlattenGuardianAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     def to_guardian(space: GuardianActionSpace, action) -> dict:
         """The guardian action of ``space`` for a flat vector ``[active, scaled controls...]``:
         :meth:`rmm_envs.autonomy.GuardianActionSpace.from_unit`, the one mapping this wrapper
-        and :class:`rmm_guardians.adapters.SB3Guardian` share."""
+        and :class:`rmm_guardians.wrapped.SB3Guardian` share."""
         return space.from_unit(action)
 
     def action(self, action) -> dict:
