@@ -38,9 +38,17 @@ def _row(out: Path, agent: str) -> dict:
 
 
 def run_point(
-    agent: str, opts: list[str], out: Path, episodes: int, seed: int, clock: str, workers: int | None
+    agent: str,
+    opts: list[str],
+    out: Path,
+    episodes: int,
+    seed: int,
+    clock: str,
+    workers: int | None,
+    env: str | None = None,
 ) -> dict:
-    """Run ``rmm-bench`` for one agent and options; return its Table I row (from table_I.csv)."""
+    """Run ``rmm-bench`` for one agent and options (on ``env``, default the default env); return
+    its Table I row (from table_I.csv)."""
     from rmm_bench.cli import main as bench
 
     argv = [
@@ -60,6 +68,8 @@ def run_point(
         argv += ["--agent-opt", o]
     if workers:
         argv += ["--workers", str(workers)]
+    if env:
+        argv += ["--env", env]
     with contextlib.redirect_stdout(io.StringIO()):  # each run prints its table; the sweep prints its own
         rc = bench(argv)
     if rc:

@@ -15,12 +15,22 @@ few fixed-clock episodes) with the fingerprint of every agent's rows.
 
 from __future__ import annotations
 
+import json
 import re
 import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["COLUMNS", "MANIFESTS", "Manifest", "figures", "load_manifests", "read_manifest", "rmm_bench_args"]
+__all__ = [
+    "COLUMNS",
+    "MANIFESTS",
+    "Manifest",
+    "figures",
+    "load_manifests",
+    "read_manifest",
+    "rmm_bench_args",
+    "table_manifest",
+]
 
 #: the folder of the shipped manifests
 MANIFESTS = Path(__file__).resolve().parent / "manifests"
@@ -314,3 +324,26 @@ def figures(text: str) -> list[str]:
     text = re.sub(r"```.*?```", "", text, flags=re.S)
     text = re.sub(r"`[^`]+`", "", text)
     return [re.sub(r"\s", "", m.group(0)) for m in FIGURE.finditer(text)]
+
+
+def _toml(value) -> str:
+    """``value`` (a string, number, bool or a list or dict of them) as TOML (strings as basic
+    strings: JSON's escapes are TOML's)."""
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{json.dumps(k)} = {_toml(v)}" for k, v in value.items()) + "}"
+    return json.dumps(value, ensure_ascii=False)
+
+
+def table_manifest(fields: dict, check: dict | None = None, quick: list[list[str]] | None = None) -> str:
+    """The text of a ``table`` manifest (as :func:`read_manifest` reads it) from its top-level
+    ``fields`` (``name``, ``title``, ``section``, ``commands``, ``measured``, ``header``, ``rows``,
+    ``note``), an optional ``[check]`` table and optional quick ``commands`` (their fingerprints
+    are stored by ``rmm-bench reproduce NAME --quick --update``)."""
+    lines = ['kind = "table"'] + [f"{k} = {_toml(v)}" for k, v in fields.items()]
+    if check:
+        lines += ["", "[check]"] + [f"{k} = {_toml(v)}" for k, v in check.items()]
+    if quick:
+        lines += ["", "[quick]", "commands = ["] + [f"    {_toml(c)}," for c in quick] + ["]"]
+    return "\n".join(lines) + "\n"

@@ -9,7 +9,8 @@ decision, or the system table's).  ``lrmm`` (the default) uses the stored compos
 ``lrmm-paper`` (:class:`LRMMPaperGuardian`) is the paper's rule: risk above 0.85, then
 :class:`~rmm_guardians.lrmm.strategies.BrakeTurn`.
 
-Offers :class:`LRMMGuardian`, :class:`LRMMPaperGuardian` and :data:`PAPER_THRESHOLD`.
+Offers :class:`LRMMGuardian`, :class:`LRMMPaperGuardian` and :data:`PAPER_THRESHOLD`.  Why:
+docs/decisions/0017-lrmm-rule.md, 0018-lrmm-other-systems.md, 0024-lrmm-core-and-strategies.md.
 """
 
 from __future__ import annotations

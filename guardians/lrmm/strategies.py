@@ -9,7 +9,7 @@ Built in (:data:`STRATEGIES`): :class:`SafestCandidate`, :class:`BrakeTurn`, :cl
 :class:`Commit` (when).  A strategy of one's own subclasses :class:`Strategy`; it is given as an
 object in Python, or as ``module:Class(args)`` in a spec (:func:`parse_strategies`, e.g.
 ``"SafestCandidate, Commit(steps=18)"``; items starting with ``-``/``+`` edit the stored
-composition).  Why each built-in exists and what it adds: docs/decisions/ and the ablation tables.
+composition).  Why each built-in exists and what it adds: docs/decisions/0024-lrmm-core-and-strategies.md.
 """
 
 from __future__ import annotations
