@@ -493,3 +493,18 @@ def test_the_decision_module_runs_as_a_command(tmp_path):
     assert LRMMGuardian(p).strategies == (SafestCandidate(), Commit(steps=2))
     bad = subprocess.run([*cmd, "--strategies", "Nope"], capture_output=True, text=True)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "unknown strategy 'Nope'" in bad.stderr
+
+
+def test_the_guardian_module_names_no_system_and_takes_at_most_six_parameters():
+    import inspect
+    from pathlib import Path
+
+    import rmm_guardians.lrmm.guardian as module
+    from rmm_envs.catalog import SYSTEMS
+    from rmm_guardians.lrmm.guardian import LRMMGuardian
+
+    text = Path(module.__file__).read_text().lower()
+    named = [s.name for s in SYSTEMS if s.name.lower() in text] + [w for w in ("maze", "quadrotor") if w in text]
+    assert not named, f"the lrmm guardian's module names systems {named}: a system's rules belong in strategies"
+    params = [p for p in inspect.signature(LRMMGuardian.__init__).parameters if p != "self"]
+    assert params == ["model", "settings", "env_id", "threshold", "strategies", "inputs"]

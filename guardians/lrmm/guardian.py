@@ -33,11 +33,11 @@ from rmm_guardians.lrmm.settings import (
     stored_decision,
     stored_strategies,
 )
+from rmm_guardians.lrmm.shipped import DEFAULT_ENV
 from rmm_guardians.lrmm.strategies import Step, Strategy
 
 __all__ = ["PAPER_THRESHOLD", "LRMMGuardian", "LRMMPaperGuardian"]
 
-DEFAULT_ENV = "Dubins4DGuarded-v0"  # whose shipped model a guardian built without env_id or model reads
 #: how to get the model of another env: the guardian picks its model when it is built, not at reset
 REMEDY = (
     "; the shipped model is chosen when the guardian is built: make_guardian('lrmm', env_id=<this env's id>) "
@@ -65,10 +65,10 @@ def _overrides(strategy: Strategy, method: str) -> bool:
 class LRMMGuardian(Guardian):
     """Args:
     model: an :class:`LRMMModel`, a model file path, or ``None`` for the shipped model of
-        ``env_id`` (``dubins4d_act.npz`` for ``lrmm``, ``dubins4d.npz`` for ``lrmm-paper``).
+        ``env_id`` (the table's ``"act"`` variant for ``lrmm``, ``"paper"`` for ``lrmm-paper``).
     settings: an :class:`~rmm_guardians.lrmm.settings.LRMMSettings` or a preset name
         (``"lrmm"``, ``"lrmm-paper"``, ``"core"``; default: the guardian's own preset).
-    env_id: the env served (default ``None``: Dubins4D): picks the shipped model and the system
+    env_id: the env served (default ``None``: the table's ``DEFAULT_ENV``): picks the shipped model and the system
         table's entry (:data:`rmm_guardians.lrmm.shipped.SHIPPED`).
     threshold, strategies, inputs: change those fields of ``settings`` (``None``: unchanged), e.g.
         ``strategies="-Commit"`` (the stored composition without its Commit) or ``strategies=""``
@@ -233,7 +233,7 @@ class LRMMGuardian(Guardian):
 class LRMMPaperGuardian(LRMMGuardian):
     """The paper's rule: ``risk > 0.85``, then brake fully and turn to the more open side
     (the ``lrmm-paper`` preset: :class:`~rmm_guardians.lrmm.strategies.BrakeTurn`), on the
-    paper-reproducing model ``dubins4d.npz``.  Same arguments as :class:`LRMMGuardian`."""
+    paper-reproducing model (the table's ``"paper"`` variant).  Same arguments as :class:`LRMMGuardian`."""
 
     name = "lrmm-paper"
     default_model = "paper"

@@ -14,7 +14,10 @@ import gymnasium as gym
 
 from rmm_envs.catalog import GUARDED_KINDS, SYSTEMS, current_id
 
-__all__ = ["SHIPPED", "SHIPPED_BY_SYSTEM", "Shipped", "ShippedById", "default_model_path"]
+__all__ = ["DEFAULT_ENV", "SHIPPED", "SHIPPED_BY_SYSTEM", "Shipped", "ShippedById", "default_model_path"]
+
+#: the env whose shipped model a guardian built without ``env_id`` or a model reads (the paper's case study)
+DEFAULT_ENV = "Dubins4DGuarded-v0"
 
 
 @dataclass(frozen=True)
@@ -134,7 +137,7 @@ def _by_id() -> ShippedById:
 SHIPPED: ShippedById = _by_id()
 
 
-def default_model_path(env_id: str = "Dubins4DGuarded-v0", variant: str = "paper") -> Path:
+def default_model_path(env_id: str = DEFAULT_ENV, variant: str = "paper") -> Path:
     """Path of the model shipped with the package for ``env_id`` (:data:`SHIPPED`).
 
     ``variant="paper"`` (default): the paper's risk-only network (Table II).  ``"act"``: the
