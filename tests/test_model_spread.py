@@ -25,6 +25,7 @@ def test_a_model_gets_the_decision_of_the_env_s_shipped_guardian(tmp_path):
     assert (g.threshold, g.strategies, g.inputs) == (shipped.threshold, shipped.strategies, "rays")
     for (w1, b1), (w2, b2) in zip(g.model.weights, shipped.model.weights, strict=True):  # the weights untouched
         np.testing.assert_array_equal(w1, w2)
+        np.testing.assert_array_equal(b1, b2)
     assert LRMMModel.load(src).meta.get("decision") is None  # the source file is not changed
 
 
