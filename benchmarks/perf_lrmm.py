@@ -16,7 +16,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,30 +26,18 @@ PACKAGES = {"rmm_envs": "rmm_envs", "rmm_guardians": "guardians", "rmm_bench": "
 
 
 def decision_medians(steps: int) -> dict[str, list[float]]:
-    """``env id -> [wall median, CPU median]`` (seconds) of ``steps`` lrmm decisions on it."""
-    import gymnasium as gym
+    """``env id -> [wall median, CPU median]`` (seconds) of ``steps`` lrmm decisions on it, timed
+    by :func:`benchmarks.perf_guardians.decision_times` (imported as a sibling: this runs in the
+    child, the script's folder first on the path)."""
+    from perf_guardians import decision_times  # type: ignore[import-not-found]
 
     import rmm_envs  # noqa: F401
     from rmm_guardians import make_guardian
 
     out = {}
     for env_id in ENVS:
-        env = gym.make(env_id)
-        g = make_guardian("lrmm", env_id=env_id)
-        wall, cpu = [], []
-        episode = 0
-        obs, info = env.reset(seed=episode)
-        g.reset(seed=episode, observation_space=env.observation_space, action_space=env.action_space)
-        for _ in range(steps):
-            c0, t0 = time.thread_time_ns(), time.perf_counter()
-            a = g.act(obs, info)
-            wall.append(time.perf_counter() - t0)
-            cpu.append((time.thread_time_ns() - c0) * 1e-9)
-            obs, _, terminated, truncated, info = env.step(a)
-            if terminated or truncated:
-                episode += 1
-                obs, info = env.reset(seed=episode)
-                g.reset(seed=episode, observation_space=env.observation_space, action_space=env.action_space)
+        cpu: list[float] = []
+        wall = decision_times(make_guardian("lrmm", env_id=env_id), env_id=env_id, steps=steps, cpu=cpu)
         out[env_id] = [statistics.median(wall), statistics.median(cpu)]
     return out
 
