@@ -74,13 +74,11 @@ def _collisions(out: Path) -> dict[int, bool]:
 def _paired(a: dict[int, bool], b: dict[int, bool]) -> list[str]:
     """The collision rate of ``a`` minus ``b`` on their common episodes: the difference with
     Newcombe's paired 95% interval, and the exact McNemar p."""
-    from rmm_bench.paired import mcnemar_exact, newcombe_paired
+    from rmm_bench.paired import concordance, mcnemar_exact, newcombe_paired
 
     common = sorted(set(a) & set(b))
-    both = sum(a[e] and b[e] for e in common)
-    a_only = sum(a[e] and not b[e] for e in common)
-    b_only = sum(b[e] and not a[e] for e in common)
-    d, lo, hi = newcombe_paired(both, a_only, b_only, len(common) - both - a_only - b_only)
+    both, a_only, b_only, neither = concordance([a[e] for e in common], [b[e] for e in common])
+    d, lo, hi = newcombe_paired(both, a_only, b_only, neither)
     return [f"{100 * d:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]", f"{mcnemar_exact(a_only, b_only):.2g}"]
 
 

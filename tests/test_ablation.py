@@ -94,3 +94,10 @@ def test_bad_episode_counts_exit_2(bad, capsys):
         with pytest.raises(SystemExit) as e:
             main(["--episodes"])
         assert e.value.code == 2
+
+
+def test_concordance_counts_the_four_kinds_of_paired_episode():
+    from rmm_bench.paired import concordance
+
+    assert concordance([1, 1, 0, 0, 1], [1, 0, 1, 0, 1]) == (2, 1, 1, 1)
+    assert concordance([], []) == (0, 0, 0, 0)

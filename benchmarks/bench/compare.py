@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from rmm_bench.paired import mcnemar_exact, newcombe_paired, newcombe_unpaired, paired_bootstrap
+from rmm_bench.paired import concordance, mcnemar_exact, newcombe_paired, newcombe_unpaired, paired_bootstrap
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore, results_database
 
 __all__ = [
@@ -444,8 +444,7 @@ def _pair_rows(a, b, label, common, ea, eb, doomed, show) -> list[dict]:
             eps = [e for e in common if doomed[e] is False]
         fa = np.array([_outcome_flags(ea[e][0], outcome) for e in eps], bool)
         fb = np.array([_outcome_flags(eb[e][0], outcome) for e in eps], bool)
-        both, a_only = int((fa & fb).sum()), int((fa & ~fb).sum())
-        b_only, neither = int((~fa & fb).sum()), int((~fa & ~fb).sum())
+        both, a_only, b_only, neither = concordance(fa, fb)
         d, lo, hi = newcombe_paired(both, a_only, b_only, neither)
         n = len(eps)
         rows.append(

@@ -13,10 +13,17 @@ import numpy as np
 
 from rmm_bench.metrics import wilson_interval
 
-__all__ = ["Z95", "mcnemar_exact", "newcombe_paired", "newcombe_unpaired", "paired_bootstrap"]
+__all__ = ["Z95", "concordance", "mcnemar_exact", "newcombe_paired", "newcombe_unpaired", "paired_bootstrap"]
 
 #: z of a two-sided 95% interval
 Z95 = 1.959963984540054
+
+
+def concordance(fa, fb) -> tuple[int, int, int, int]:
+    """``(both, a_only, b_only, neither)``: how many paired episodes have the outcome in both, in
+    ``a`` only, in ``b`` only and in neither (``fa``, ``fb``: the outcome's flags, episode by episode)."""
+    fa, fb = np.asarray(fa, bool), np.asarray(fb, bool)
+    return int((fa & fb).sum()), int((fa & ~fb).sum()), int((~fa & fb).sum()), int((~fa & ~fb).sum())
 
 
 def newcombe_paired(both: int, a_only: int, b_only: int, neither: int, z: float = Z95) -> tuple[float, float, float]:
