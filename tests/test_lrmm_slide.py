@@ -8,11 +8,10 @@ import numpy as np
 import pytest
 
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox
-from rmm_guardians.lrmm import strategies
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel, set_decision
 from rmm_guardians.lrmm.nominal import driver_at_risk
-from rmm_guardians.lrmm.strategies import SLIDE_MOVES, Commit, RatedDriver, SafestCandidate, Slide
+from rmm_guardians.lrmm.strategies import SLIDE_MOVES, Commit, RatedDriver, SafestCandidate, Slide, driver
 from tests.test_lrmm import SPACES as D4_SPACES
 from tests.test_lrmm_filter import QUAD, QUAD_CONTROLS, speed_model
 
@@ -45,7 +44,7 @@ def test_variants_by_hand_nearest_first_clipped_without_the_driver_control(monke
     # other moves (the module's table, read at each call): 90 degrees left (gap sqrt 2), half speed (gap 0.5),
     # twice the speed clipped to 2 with half the climb (gap sqrt(1 + 0.0625)): nearest first
     moves = (((0.0, 1.0), 1.0, 1.0), ((1.0, 0.0), 0.5, 1.0), ((1.0, 0.0), 2.0, 0.5))
-    monkeypatch.setattr(strategies, "SLIDE_MOVES", moves)
+    monkeypatch.setattr(driver, "SLIDE_MOVES", moves)
     assert s.variants([1.0, 0.0, 0.5, 0.0]) == [[0.5, 0.0, 0.5, 0.0], [2.0, 0.0, 0.25, 0.0], [0.0, 1.0, 0.5, 0.0]]
 
 
