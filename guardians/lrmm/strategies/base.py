@@ -12,6 +12,8 @@ from rmm_guardians._checks import finite
 
 __all__ = ["Step", "Strategy"]
 
+_PACKAGE = __name__.rpartition(".")[0]  # rmm_guardians.lrmm.strategies
+
 
 class Step:
     """What one decision has computed, handed from the core to each strategy: ``observation``
@@ -63,10 +65,9 @@ class Strategy:
     def spec(self) -> str:
         """This strategy as a spec :func:`parse_strategies` reads back (stored in model files)."""
         args = ", ".join(f"{k}={v!r}" for k, v in self.params().items())
-        from rmm_guardians.lrmm.strategies.spec import STRATEGIES
-
-        built_in = STRATEGIES.get(self.name) is type(self)
-        return f"{'' if built_in else type(self).__module__ + ':'}{self.name}({args})"
+        mod = type(self).__module__
+        built_in = mod.startswith(_PACKAGE + ".")  # the built-ins, known by name (spec.STRATEGIES)
+        return f"{'' if built_in else mod + ':'}{self.name}({args})"
 
     def clone(self) -> Strategy:
         """A fresh copy (same parameters, no episode state): each guardian holds its own."""
