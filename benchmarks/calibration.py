@@ -1,6 +1,6 @@
 """Is the map right?  The shipped models' risk against fresh risk labels on held-out worlds.
 
-Run: ``python -m benchmarks.calibration [--systems dubins4d,maze,quadrotor] [--seed 2026]
+Run: ``python -m benchmarks.calibration [--systems Dubins4D,Dubins3DMaze,...] [--seed 2026]
 [--workers 2] [--out results/calibration]``.
 
 For each system, ``rmm-datagen`` labels states of worlds drawn from ``--seed`` (the shipped
@@ -31,25 +31,36 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SYSTEMS", "calibrate", "main", "reliability"]
+__all__ = ["CALIBRATED", "calibrate", "main", "reliability"]
 
-#: system -> the env whose labels the model learned, the model ``lrmm`` reads, the labelling
-#: arguments of its training dataset (tree and sampler), and how many worlds x states to label
-SYSTEMS = {
-    "dubins4d": {
+#: system (its catalog name, as in rmm_envs.catalog) -> the env whose labels the model learned,
+#: the model ``lrmm`` reads, the labelling arguments of its training dataset (tree and sampler;
+#: the driven envs' are their adapters' defaults), and how many worlds x states to label
+CALIBRATED = {
+    "Dubins4D": {
         "env": ["--env", "Dubins4DGuarded-v0"],
         "model": "dubins4d_act.npz",
         "size": ["--configs", "64", "--samples-per-config", "64"],
     },
-    "maze": {
+    "Dubins3DMaze": {
         "env": ["--env", "Dubins3DMaze-v0", "--env-kwargs", '{"maze_kind": "mixed"}', "--configs-per-shard", "1"],
         "model": "dubins3d_maze.npz",
         "size": ["--configs", "4", "--samples-per-config", "512"],
     },
-    "quadrotor": {
+    "QuadrotorRoom": {
         "env": ["--env", "QuadrotorRoomGuarded-v0", "--branches", "16", "--depth", "2", "--horizon", "1.0"],
         "model": "quadrotor_cmd_act.npz",
         "size": ["--configs", "16", "--samples-per-config", "32", "--n-steps", "5"],
+    },
+    "CartPole": {
+        "env": ["--env", "CartPoleGuarded-v0"],
+        "model": "cartpole_guarded.npz",
+        "size": ["--configs", "16", "--samples-per-config", "64"],
+    },
+    "InvertedPendulum": {
+        "env": ["--env", "InvertedPendulumGuarded-v0"],
+        "model": "inverted_pendulum_guarded.npz",
+        "size": ["--configs", "16", "--samples-per-config", "64"],
     },
 }
 BINS = np.linspace(0.0, 1.0, 11)
@@ -78,7 +89,7 @@ def calibrate(system: str, seed: int, workers: int, out: Path) -> dict:
     from rmm_guardians.lrmm.model import LRMMModel
     from rmm_guardians.lrmm.shipped import default_model_path
 
-    spec = SYSTEMS[system]
+    spec = CALIBRATED[system]
     data = out / system
     args = [*spec["env"], *spec["size"], "--seed", str(seed), "--workers", str(workers), "--no-progress"]
     if datagen([*args, "--out", str(data)]) != 0:
@@ -130,8 +141,12 @@ def _figure(results: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(results), figsize=(4 * len(results), 4), squeeze=False)
-    for ax, r in zip(axes[0], results, strict=True):
+    cols = min(3, len(results))
+    rows = -(-len(results) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 4 * rows), squeeze=False)
+    for ax in axes.flat[len(results) :]:
+        ax.set_visible(False)
+    for ax, r in zip(axes.flat, results, strict=False):
         ax.plot([0, 1], [0, 1], color="0.6", lw=1, label="calibrated")
         xs = [b["mean_pred"] for b in r["bins"]]
         ys = [b["mean_label"] for b in r["bins"]]
@@ -151,15 +166,17 @@ def _figure(results: list[dict], path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--systems", default=",".join(SYSTEMS), help=f"comma list of {', '.join(SYSTEMS)}")
+    p.add_argument("--systems", default=",".join(CALIBRATED), help=f"comma list of {', '.join(CALIBRATED)}")
     p.add_argument("--seed", type=int, default=2026, help="the held-out worlds' seed (not 0 or 1: training's)")
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--out", type=Path, default=Path("results/calibration"))
     args = p.parse_args(argv)
     names = [s.strip() for s in args.systems.split(",") if s.strip()]
-    unknown = [s for s in names if s not in SYSTEMS]
+    unknown = [s for s in names if s not in CALIBRATED]
     if unknown or not names:
-        p.error(f"--systems {args.systems!r}: unknown {unknown or 'none given'}, expected some of {', '.join(SYSTEMS)}")
+        p.error(
+            f"--systems {args.systems!r}: unknown {unknown or 'none given'}, expected some of {', '.join(CALIBRATED)}"
+        )
     if args.seed in (0, 1):
         p.error(f"--seed {args.seed}: the shipped models were trained on seeds 0 and 1; choose another")
     if args.out.exists() and any(args.out.iterdir()):

@@ -25,16 +25,11 @@ import gymnasium as gym
 from PIL import ImageDraw
 
 import rmm_envs  # noqa: F401  (registers the envs)
+from rmm_envs.catalog import SYSTEMS
 from rmm_envs.views import EpisodeRecorder
 
-SYSTEMS = {
-    "Dubins4D": "Dubins4DParallel-v0",
-    "Dubins4DMap": "Dubins4DMapParallel-v0",
-    "Dubins3DMaze": "Dubins3DMazeParallel-v0",
-    "QuadrotorRoom": "QuadrotorRoomParallel-v0",
-    "CartPole": "CartPoleParallel-v0",
-    "InvertedPendulum": "InvertedPendulumParallel-v0",
-}
+#: system name -> its non-blocking guardian env, for every system of the catalog
+PARALLEL_ENVS = {s.name: s.env_id("parallel") for s in SYSTEMS}
 TARGET = {"QuadrotorRoom": 30.0}  # frames/s; the others 60
 
 
@@ -70,7 +65,7 @@ def _episode_length(env, seed: int, steps: int) -> int:
 
 
 def measure(name: str, steps: int, repeats: int, size: int) -> dict:
-    env = gym.make(SYSTEMS[name], clock="fixed:5")
+    env = gym.make(PARALLEL_ENVS[name], clock="fixed:5")
     try:
         # the longest episode of the first seeds (the drivers are reckless: many end in a few steps)
         seed = max(range(8), key=lambda s: (_episode_length(env, s, steps), -s))
@@ -129,7 +124,7 @@ def measure_video(steps: int, repeats: int, size: int, suffix: str = ".mp4") -> 
 
     from rmm_bench.video import write_video
 
-    env = gym.make(SYSTEMS["Dubins4D"], clock="fixed:1")  # 0.11 s steps: a timeout ends the episode at 910
+    env = gym.make(PARALLEL_ENVS["Dubins4D"], clock="fixed:1")  # 0.11 s steps: a timeout ends the episode at 910
     try:
         # episode 0 of an rmm-bench run with --seed 0: the driver alone lasts until the time limit (910 steps)
         candidates = (1374924679, *range(256))
@@ -160,7 +155,9 @@ def measure_video(steps: int, repeats: int, size: int, suffix: str = ".mp4") -> 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--systems", default=",".join(SYSTEMS), help=f"comma-separated, of {', '.join(SYSTEMS)}")
+    ap.add_argument(
+        "--systems", default=",".join(PARALLEL_ENVS), help=f"comma-separated, of {', '.join(PARALLEL_ENVS)}"
+    )
     ap.add_argument("--steps", type=int, default=600)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--size", type=int, default=512, help="pixels per view (square)")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.calibration import SYSTEMS, calibrate, main, reliability
+from benchmarks.calibration import CALIBRATED, calibrate, main, reliability
 
 
 def test_reliability_by_hand():
@@ -31,12 +31,12 @@ def test_a_calibrated_map_has_no_error():
 def test_the_shipped_dubins4d_model_on_fresh_worlds(tmp_path, monkeypatch):
     """A small real run: fresh labels of new worlds, the shipped model's Brier score well under
     the best constant's."""
-    monkeypatch.setitem(SYSTEMS["dubins4d"], "size", ["--configs", "4", "--samples-per-config", "32"])
-    r = calibrate("dubins4d", 2026, 1, tmp_path)
+    monkeypatch.setitem(CALIBRATED["Dubins4D"], "size", ["--configs", "4", "--samples-per-config", "32"])
+    r = calibrate("Dubins4D", 2026, 1, tmp_path)
     assert r["labels"] == 128 and r["worlds"] == 4
     assert 0 <= r["brier"] < 0.5 * r["brier_constant"] and r["skill"] > 0.5
     assert sum(b["n"] for b in r["bins"]) == 128
-    again = calibrate("dubins4d", 2026, 1, tmp_path / "again")
+    again = calibrate("Dubins4D", 2026, 1, tmp_path / "again")
     assert again["brier"] == r["brier"] and again["dataset_sha256"] == r["dataset_sha256"]  # the same bits
 
 

@@ -140,3 +140,38 @@ def test_guardians_never_import_an_env_a_driver_or_a_scene():
             if any(name == m or name.startswith(m + ".") for m in PAST_THE_CONTRACT):
                 found.append(f"{path.relative_to(ROOT)}:{line} imports {name}")
     assert found == []
+
+
+def _module_level_names(path: Path) -> set[str]:
+    """Names a file binds at module level (assignments, annotated assignments, defs, classes),
+    also under a module-level ``if``, ``try`` or ``with``."""
+    out: set[str] = set()
+    nodes = list(ast.parse(path.read_text(), filename=str(path)).body)
+    while nodes:
+        node = nodes.pop()
+        if isinstance(node, (ast.If, ast.Try, ast.With)):
+            nodes += [*node.body, *getattr(node, "orelse", []), *getattr(node, "finalbody", [])]
+            nodes += [s for h in getattr(node, "handlers", []) for s in h.body]
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            out.add(node.name)
+        targets = (
+            node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) else []
+        )
+        out |= {n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name)}
+    return out
+
+
+def test_one_table_of_systems():
+    """``SYSTEMS`` is the catalog's table (``rmm_envs/catalog.py``) and nothing else in the
+    repository's code: a tool that needs systems reads them from there (glossary, docs/concepts.md)."""
+    files = [
+        p for d in ("rmm_envs", "guardians", "benchmarks", "tests", "docs") for p in sorted((ROOT / d).rglob("*.py"))
+    ]
+    defining = sorted(str(p.relative_to(ROOT)) for p in files if "SYSTEMS" in _module_level_names(p))
+    assert defining == ["rmm_envs/catalog.py"]
+
+
+def test_the_name_scanner_sees_every_binding(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text("A = 1\nB: int = 2\nC, (D, E) = 1, (2, 3)\ndef F(): G = 1\nclass H: I = 1\nif True:\n    J = 1\n")
+    assert _module_level_names(f) == {"A", "B", "C", "D", "E", "F", "H", "J"}

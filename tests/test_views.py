@@ -22,7 +22,7 @@ def _needs(module: str):
 
 
 #: env id, the index of the position coordinate moved by the hand-made trajectory
-SYSTEMS = [
+ENVS = [
     pytest.param("Dubins4DParallel-v0", 0, id="Dubins4D"),
     pytest.param("Dubins4DMapParallel-v0", 0, id="Dubins4DMap", marks=_needs("pymunk")),
     pytest.param("Dubins3DMazeParallel-v0", 0, id="Dubins3DMaze"),
@@ -71,7 +71,7 @@ def _panel_window(view) -> Window:
     return view.top if hasattr(view, "top") else view.window
 
 
-@pytest.mark.parametrize("env_id, _coord", SYSTEMS)
+@pytest.mark.parametrize("env_id, _coord", ENVS)
 def test_frames_have_the_size_and_the_strip_shows_the_recorded_flags(envs, env_id, _coord):
     env = envs(env_id)
     rec = EpisodeRecorder(env)
@@ -107,7 +107,7 @@ def test_frames_have_the_size_and_the_strip_shows_the_recorded_flags(envs, env_i
     assert len(calls) == rec.static_draws == 2
 
 
-@pytest.mark.parametrize("env_id, coord", SYSTEMS)
+@pytest.mark.parametrize("env_id, coord", ENVS)
 def test_the_path_is_coloured_by_who_was_in_control(envs, env_id, coord):
     env = envs(env_id)
     env.reset(seed=2)
