@@ -19,7 +19,7 @@ import numpy as np
 
 from rmm_guardians._checks import Settings
 from rmm_guardians.lrmm.strategies import BrakeTurn, Strategy, parse_strategies
-from rmm_guardians.lrmm.strategies.spec import parse_item, split_spec
+from rmm_guardians.lrmm.strategies.spec import parse_item, spec_items
 
 __all__ = [
     "DECISION_KEYS",
@@ -71,13 +71,11 @@ class LRMMSettings(Settings):
         s = self.strategies
         if s is None:
             return
-        items = split_spec(s) if isinstance(s, str) else list(s) if isinstance(s, (list, tuple)) else None
-        if items is None:
+        if not isinstance(s, (str, list, tuple)):
             raise ValueError(f"strategies must be a spec string, a sequence of Strategy objects or None, got {s!r}")
-        if any(isinstance(i, str) and i[:1] in "+-" for i in items):  # edits of the stored ones: checked here,
-            for i in items:  # applied once the model is known
-                if not (isinstance(i, str) and i[:1] in "+-"):
-                    raise ValueError(f"strategies {s!r}: either every item edits the stored ones (+/-) or none does")
+        items, edits = spec_items(s)
+        if edits:  # edits of the stored ones: checked here, applied once the model is known
+            for i in items:
                 parse_item(i[1:].strip())
             self._set("strategies", tuple(items))
         else:
@@ -87,10 +85,9 @@ class LRMMSettings(Settings):
         """These settings with ``changes``; edits (``"-Commit"``) of settings that name their own
         strategies (a preset's, e.g. ``lrmm-paper``'s ``BrakeTurn``) edit those, not the model's."""
         edit = changes.get("strategies")
-        items = split_spec(edit) if isinstance(edit, str) else edit if isinstance(edit, (list, tuple)) else []
-        if isinstance(self.strategies, tuple) and not any(isinstance(i, str) for i in self.strategies):
-            if items and all(isinstance(i, str) and i[:1] in "+-" for i in items):
-                changes = {**changes, "strategies": parse_strategies(list(items), self.strategies)}
+        own = isinstance(self.strategies, tuple) and not any(isinstance(i, str) for i in self.strategies)
+        if own and isinstance(edit, (str, list, tuple)) and spec_items(edit)[1]:
+            changes = {**changes, "strategies": parse_strategies(edit, self.strategies)}
         return super().replace(**changes)
 
     def resolve(self, stored: tuple[Strategy, ...]) -> tuple[Strategy, ...]:

@@ -12,7 +12,7 @@ from rmm_guardians.lrmm.strategies.driver import RatedDriver, Slide
 from rmm_guardians.lrmm.strategies.rays import BrakeTurn, RayTurn
 from rmm_guardians.lrmm.strategies.timing import Commit, MovingAverage
 
-__all__ = ["STRATEGIES", "parse_item", "parse_strategies", "split_spec", "strategy_specs"]
+__all__ = ["STRATEGIES", "parse_item", "parse_strategies", "spec_items", "split_spec", "strategy_specs"]
 
 #: The built-in strategies by name.
 STRATEGIES: dict[str, type[Strategy]] = {
@@ -73,25 +73,33 @@ def parse_item(item: str) -> Strategy:
         raise ValueError(f"strategy {item!r}: {e}; its parameters: {', '.join(cls.PARAMS) or 'none'}") from None
 
 
+def spec_items(spec) -> tuple[list, bool]:
+    """``spec``'s items (a string split at its top-level commas, a sequence's elements) and whether
+    they edit the stored composition (every item a string starting with ``+`` or ``-``); a
+    ``ValueError`` for another type, an item neither a string nor a :class:`Strategy`, or a mix."""
+    if not isinstance(spec, (str, list, tuple)):
+        raise ValueError(f"strategies must be a spec string or a sequence of strategies, got {spec!r}")
+    items: list = split_spec(spec) if isinstance(spec, str) else list(spec)
+    if any(not isinstance(s, (str, Strategy)) for s in items):
+        raise ValueError(f"strategies must be Strategy objects or spec strings, got {spec!r}")
+    n_edits = sum(isinstance(s, str) and s[:1] in "+-" for s in items)
+    if n_edits and n_edits != len(items):
+        raise ValueError(f"strategies {spec!r}: either every item edits the stored ones (+/-) or none does")
+    return items, n_edits > 0
+
+
 def parse_strategies(spec, stored: tuple[Strategy, ...] = ()) -> tuple[Strategy, ...]:
     """Strategies from ``spec``: a sequence of :class:`Strategy` objects or spec strings, or one
     string of comma-separated items such as ``"SafestCandidate, Commit(steps=18), Restart(0.3)"``
     (``""``: none, the core alone).  When every item starts with ``-`` or ``+``, they edit
     ``stored`` (the model's composition): ``-Commit`` removes the Commit, ``+Commit(5)`` replaces
     it in place (or appends one).  An unknown name or bad argument is a ``ValueError`` naming it."""
-    if not isinstance(spec, (str, list, tuple)):
-        raise ValueError(f"strategies must be a spec string or a sequence of strategies, got {spec!r}")
-    items: list = split_spec(spec) if isinstance(spec, str) else list(spec)
-    if any(not isinstance(s, (str, Strategy)) for s in items):
-        raise ValueError(f"strategies must be Strategy objects or spec strings, got {spec!r}")
-    edits = [s for s in items if isinstance(s, str) and s[:1] in "+-"]
-    if edits and len(edits) != len(items):
-        raise ValueError(f"strategies {spec!r}: either every item edits the stored ones (+/-) or none does")
+    items, edits = spec_items(spec)
     if not edits:
         out = tuple(s if isinstance(s, Strategy) else parse_item(s) for s in items)
     else:
         out = tuple(stored)
-        for item in edits:
+        for item in items:
             if item[0] == "-":  # removal names a class: nothing is built
                 cls = _strategy_class(item[1:].partition("(")[0].strip())
                 if not any(type(s) is cls for s in out):
