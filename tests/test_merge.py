@@ -144,11 +144,12 @@ def test_a_wall_clock_overlap_must_be_identical(tmp_path, capsys):
 
 def test_a_crash_leaves_no_half_merged_database(parts, tmp_path, monkeypatch):
     import rmm_bench.merge as merge_module
+    import rmm_bench.outputs as outputs
 
     def crash(*_):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(merge_module.os, "replace", crash)
+    monkeypatch.setattr(outputs.os, "link", crash)  # Ctrl-C just as the merged file is moved into place
     out = tmp_path / "merged"
     with pytest.raises(KeyboardInterrupt):
         merge_module.merge(out, [parts / "part1", parts / "part2"])

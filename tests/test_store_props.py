@@ -288,19 +288,19 @@ def test_only_a_running_invocation_of_a_dead_process_on_this_host_is_stale(tmp_p
 
 
 def test_a_live_process_is_only_asked_whether_it_exists():
-    """``_pid_alive`` sends signal 0 (existence check): a live process is reported alive and left
+    """``pid_alive`` sends signal 0 (existence check): a live process is reported alive and left
     running; a process of another user is alive too (permission denied is an answer)."""
-    from rmm_bench.store import _pid_alive
+    from rmm_bench.store import pid_alive
 
     with _sleeping_child() as child:
-        assert _pid_alive(child.pid) is True
+        assert pid_alive(child.pid) is True
         with pytest.raises(subprocess.TimeoutExpired):  # not signalled: still sleeping
             child.wait(timeout=0.5)
-    assert _pid_alive(child.pid) is False
+    assert pid_alive(child.pid) is False
     # another user's process: pid 1 seen from an unprivileged process (this one, or a child that
     # drops root's privileges first; after a first call, so that everything it imports is loaded)
     drop = "os.setgid(65534); os.setuid(65534); " if os.getuid() == 0 else ""
-    code = f"import os; from rmm_bench.store import _pid_alive; _pid_alive(os.getpid()); {drop}print(_pid_alive(1))"
+    code = f"import os; from rmm_bench.store import pid_alive; pid_alive(os.getpid()); {drop}print(pid_alive(1))"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=os.getcwd(), check=True)
     assert r.stdout.strip() == "True"
 

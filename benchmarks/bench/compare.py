@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -26,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from rmm_bench.outputs import check_output, write_output
 from rmm_bench.paired import concordance, mcnemar_exact, newcombe_paired, newcombe_unpaired, paired_bootstrap
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore, results_database
 
@@ -612,6 +612,9 @@ def cmd(argv: list[str]) -> int:
         agents = [a.strip() for a in args.agents.split(",") if a.strip()]
         if not agents:
             raise ValueError(f"--agents {args.agents!r}: expected comma-separated agent names")
+    existed = args.out is not None and args.out.exists()
+    if args.out is not None:  # before anything is read: never over a database it reads (or any other)
+        check_output(args.out, "--out", reads=[results_database(d, "compare") for d in args.dirs])
     comparison = compare_runs(
         args.dirs,
         agents,
@@ -625,8 +628,6 @@ def cmd(argv: list[str]) -> int:
     if args.out is None:
         sys.stdout.write(text)
     else:
-        tmp = args.out.with_name(args.out.name + ".tmp")
-        tmp.write_text(text)
-        os.replace(tmp, args.out)
+        write_output(args.out, lambda tmp: tmp.write_text(text), existed=existed)
         print(f"wrote {args.out}", file=sys.stderr)
     return 0

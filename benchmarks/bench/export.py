@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 from typing import Any
 
+from rmm_bench.outputs import check_output, write_output
 from rmm_bench.store import ResultsStore, results_database
 
 __all__ = ["OUTCOME_CODES", "SCHEMA", "SCHEMA_NAME", "build_parser", "cmd", "export_frame", "write_export"]
@@ -130,15 +130,6 @@ def export_frame(path: str | Path, agents: list[str] | None = None) -> Any:
     return out.astype({name: dtype for name, dtype, _, _ in SCHEMA})
 
 
-def _atomic(path: Path, write) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
 def schema_description() -> dict:
     """The schema as JSON-ready data: name, columns (name, type, unit, meaning), outcome codes."""
     return {
@@ -159,12 +150,12 @@ def write_export(frame: Any, path: str | Path, fmt: str) -> list[Path]:
         table = pa.Table.from_pandas(frame, preserve_index=False)
         meta = dict(table.schema.metadata or {})
         meta[b"rmm_schema"] = json.dumps(schema_description()).encode()
-        _atomic(path, lambda tmp: pq.write_table(table.replace_schema_metadata(meta), tmp))
+        write_output(path, lambda tmp: pq.write_table(table.replace_schema_metadata(meta), tmp))
         return [path]
     if fmt == "csv":
         side = path.with_name(path.name + ".schema.json")
-        _atomic(path, lambda tmp: frame.to_csv(tmp, index=False))
-        _atomic(side, lambda tmp: tmp.write_text(json.dumps(schema_description(), indent=1) + "\n"))
+        write_output(path, lambda tmp: frame.to_csv(tmp, index=False))
+        write_output(side, lambda tmp: tmp.write_text(json.dumps(schema_description(), indent=1) + "\n"))
         return [path, side]
     raise ValueError(f"--format {fmt!r}: expected parquet or csv")
 
@@ -189,9 +180,13 @@ def cmd(argv: list[str]) -> int:
     if args.format not in ("parquet", "csv"):
         raise ValueError(f"--format {args.format!r}: expected parquet or csv")
     agents = None if args.agents is None else [a.strip() for a in args.agents.split(",") if a.strip()]
-    frame = export_frame(args.dir, agents)
     folder = args.dir if args.dir.is_dir() else args.dir.parent
     out = args.out or folder / f"results.{args.format}"
+    db = results_database(args.dir, "export")
+    check_output(out, "--out", reads=[db])  # before anything is read: never over the database
+    if args.format == "csv":
+        check_output(out.with_name(out.name + ".schema.json"), "--out (its .schema.json)", reads=[db])
+    frame = export_frame(args.dir, agents)
     for f in write_export(frame, out, args.format):
         print(f"wrote {f}", file=sys.stderr)
     print(f"{len(frame)} episodes of {frame.agent.nunique()} agents in {SCHEMA_NAME}", file=sys.stderr)

@@ -17,9 +17,9 @@ from __future__ import annotations
 import base64
 import datetime
 import html
-import os
 from pathlib import Path
 
+from rmm_bench.outputs import write_output
 from rmm_bench.store import ResultsStore
 
 __all__ = ["GIF_LIMIT", "REPLAYS", "write_page"]
@@ -224,10 +224,4 @@ def write_page(path: Path, folder: Path, store: ResultsStore, sections: list[dic
         + "\n".join(body)
         + "</main></body></html>\n"
     )
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(page, encoding="utf-8")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+    return write_output(path, lambda tmp: tmp.write_text(page, encoding="utf-8"))

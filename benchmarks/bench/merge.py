@@ -23,9 +23,10 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rmm_bench.outputs import OutputExists, publish
 from rmm_bench.report import CONFIGURATION, write_report
 from rmm_bench.runner import REPRODUCIBLE_CLOCKS
-from rmm_bench.store import EPISODE_FIELDS, RETRIED_ERRORS, ResultsStore, results_database
+from rmm_bench.store import EPISODE_FIELDS, RETRIED_ERRORS, ResultsStore, pid_alive, results_database
 
 __all__ = ["MergeConflict", "MergeSummary", "build_parser", "cmd", "merge"]
 
@@ -104,17 +105,23 @@ def merge(out: str | Path, inputs: list[str | Path], write_tables: bool = True) 
     if out.exists() and not out.is_dir():
         raise ValueError(f"merge: OUT {out} is not a directory")
     out.mkdir(parents=True, exist_ok=True)
-    tmp = out / f".results.db.merging-{os.getpid()}"
-    tmp.unlink(missing_ok=True)
+    _remove_abandoned(out)
+    tmp = out / f"{_MERGING}{os.getpid()}"
+    _remove(tmp)
     try:
         summary = _merge_into(tmp, dbs, inputs)
-        con = sqlite3.connect(tmp)  # one self-contained file before it is renamed into place
+        con = sqlite3.connect(tmp)  # one self-contained file before it is moved into place
         con.execute("PRAGMA journal_mode=DELETE")
         con.close()
-        os.replace(tmp, target)
+        try:
+            publish(tmp, target, existed=False)  # never over a results.db another merge put there meanwhile
+        except OutputExists:
+            raise MergeConflict(
+                f"merge: {target} appeared while this merge ran (another merge into {out}?); it is left as it is "
+                "and this merge wrote nothing: merge into a new directory"
+            ) from None
     finally:
-        for suffix in ("", "-wal", "-shm", "-journal"):
-            Path(f"{tmp}{suffix}").unlink(missing_ok=True)
+        _remove(tmp)
     summary.out = target
     if write_tables:
         store = ResultsStore(target, read_only=True)
@@ -123,6 +130,24 @@ def merge(out: str | Path, inputs: list[str | Path], write_tables: bool = True) 
         finally:
             store.close()
     return summary
+
+
+#: The name of a merge's database while it is built, followed by the merging process's id.
+_MERGING = ".results.db.merging-"
+
+
+def _remove(db: Path) -> None:
+    for suffix in ("", "-wal", "-shm", "-journal"):
+        Path(f"{db}{suffix}").unlink(missing_ok=True)
+
+
+def _remove_abandoned(out: Path) -> None:
+    """Remove what a merge into ``out`` killed before it could clean up (``kill -9``, a power
+    cut) left: its half-built database and SQLite's files beside it, when its process is gone."""
+    for leftover in out.glob(f"{_MERGING}*"):
+        pid = leftover.name[len(_MERGING) :].split("-")[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not pid_alive(int(pid)):
+            leftover.unlink(missing_ok=True)
 
 
 def _merge_into(tmp: Path, dbs: list[Path], names: list) -> MergeSummary:

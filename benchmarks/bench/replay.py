@@ -434,7 +434,7 @@ def cmd_replay(req: ReplayRequest) -> int:
     _check_inputs(targets[0].run.as_dict())
     from rmm_bench.video import EpisodeDrawing, check_outputs, episode_path
 
-    check_outputs(req.video, req.frames, req.every)  # before anything is simulated or written
+    check_outputs(req.video, req.frames, req.every, reads=[db])  # before anything is simulated or written
     env = build_env(targets[0])
     _check_guardian(targets[0])
     drawing = EpisodeDrawing(req.size) if (req.video or req.frames) else None

@@ -11,11 +11,14 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
+import sys
 from collections import Counter
 from pathlib import Path
 
 from rmm_bench.config import parse_shard, shard_episodes
 from rmm_bench.metrics import aggregate, avoidable_collisions
+from rmm_bench.outputs import check_output
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore
 from rmm_envs.catalog import current_id
 
@@ -511,8 +514,10 @@ def write_report(
     quiet: bool = False,
     figure: bool = True,
     sections: list[dict] | None = None,
+    write_files: bool = True,
 ) -> str:
     """Tables and figures for one recorded command, or several merged (later ones win per agent);
+    ``write_files=False`` only returns (and prints) them, for a results directory that is read-only;
     ``figure=False`` writes the tables only and removes an ``outcomes.png`` left from an earlier
     run, which would not match them.  ``sections``, when given, receives one dict per
     configuration (``title``, ``args``, ``run_keys``, ``rows``, ``md``, ``notes``: the
@@ -580,18 +585,21 @@ def write_report(
             )
         texts.append(text)
     try:
-        (out / "table_I.md").write_text("\n".join(md))
-        (out / "table_I.csv").write_text(_merge_csv(csv_parts) if mixed else csv_parts[0][1])
-        (out / "table_I.tex").write_text("\n".join(tex))
-        if figure:
-            plot_outcomes(
-                figure_rows,
-                out / "outcomes.png",
-                batch_size,
-                any(str(g[-1]["args"].get("clock", "")).strip().lower().startswith("fixed") for g in groups.values()),
-            )
-        else:
-            (out / "outcomes.png").unlink(missing_ok=True)
+        if write_files:
+            (out / "table_I.md").write_text("\n".join(md))
+            (out / "table_I.csv").write_text(_merge_csv(csv_parts) if mixed else csv_parts[0][1])
+            (out / "table_I.tex").write_text("\n".join(tex))
+            if figure:
+                plot_outcomes(
+                    figure_rows,
+                    out / "outcomes.png",
+                    batch_size,
+                    any(
+                        str(g[-1]["args"].get("clock", "")).strip().lower().startswith("fixed") for g in groups.values()
+                    ),
+                )
+            else:
+                (out / "outcomes.png").unlink(missing_ok=True)
     except OSError as e:  # a full disk names no file: name the directory (the CLI prints one line)
         if e.filename is None:
             raise OSError(e.errno, e.strerror or str(e), str(out)) from None
@@ -609,11 +617,11 @@ def write_report(
 
 def cmd_report(request) -> int:
     """``rmm-bench report``; ``request`` is an :class:`rmm_bench.args.ReportRequest`."""
-    import sys
-
     if not (request.dir / "results.db").is_file():
         print(f"rmm-bench report: error: no results.db in {request.dir}", file=sys.stderr)
         return 2
+    if request.html is not None:  # before anything is written: never over the database it reads
+        check_output(request.html, "--html", reads=[request.dir / "results.db"])
     store = ResultsStore(request.dir / "results.db", read_only=True)  # a report never changes the database
     try:
         if request.invocations:
@@ -633,7 +641,14 @@ def cmd_report(request) -> int:
                     "--no-figure)"
                 ) from None
         sections: list[dict] = []
-        write_report(store, request.dir, invs, request.batch_size, sections=sections)
+        writable = os.access(request.dir, os.W_OK | os.X_OK)
+        write_report(store, request.dir, invs, request.batch_size, sections=sections, write_files=writable)
+        if not writable:
+            print(
+                f"rmm-bench report: {request.dir} is read-only: the table is printed above; table_I.md/.csv/.tex "
+                "and outcomes.png there were not rewritten",
+                file=sys.stderr,
+            )
         if request.html is not None:
             from rmm_bench.html import write_page
 

@@ -105,6 +105,7 @@ __all__ = [
     "ResultsStore",
     "decode_laps",
     "encode_laps",
+    "pid_alive",
     "results_database",
 ]
 
@@ -260,7 +261,7 @@ def _guarded(method):
     return wrapper
 
 
-def _pid_alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -290,8 +291,8 @@ class ResultsStore:
         connection: sqlite3.Connection | None = None
         try:
             if read_only:
-                uri = self.path.resolve().as_uri() + "?mode=ro"
-                self.db = connection = sqlite3.connect(uri, uri=True, timeout=30)
+                self._refuse_foreign()
+                self.db = connection = sqlite3.connect(self._read_only_uri(), uri=True, timeout=30)
             else:
                 self.db = connection = sqlite3.connect(str(self.path), timeout=30)
             self.version = self._user_version()
@@ -304,6 +305,8 @@ class ResultsStore:
                 raise sqlite3.DatabaseError("; ".join(problems)[:300])
             if not read_only:
                 self._migrate()
+            else:
+                self._refuse_without_tables()
         except sqlite3.DatabaseError as e:
             if connection is not None:
                 connection.close()
@@ -312,6 +315,51 @@ class ResultsStore:
             if connection is not None:
                 connection.close()
             raise
+
+    def _read_only_uri(self) -> str:
+        """How a read-only command opens the file, leaving nothing beside it and working in a
+        read-only folder.  A database in rollback-journal mode (every database a command has
+        finished with: :meth:`close` leaves WAL mode) is opened ``mode=ro``, which creates no
+        file.  A database still marked WAL (written by an older version, or a writer's) has to
+        be read through a ``-shm`` file beside it, which SQLite creates and leaves behind, and
+        cannot create in a read-only folder; when no ``-wal`` file is beside it, no writer has it
+        open and every committed page is in the file itself, so it is opened ``immutable=1``
+        (read as a plain file, no locks, nothing created).  With a ``-wal`` file beside it (a run
+        in progress, or one killed), ``mode=ro`` reads the committed pages of both."""
+        uri = self.path.resolve().as_uri()
+        wal_header = False
+        try:
+            with open(self.path, "rb") as f:
+                header = f.read(20)
+            wal_header = len(header) == 20 and header[18:20] == b"\x02\x02"  # file format versions: 2 = WAL
+        except OSError:
+            pass
+        if wal_header and not Path(f"{self.path}-wal").exists():
+            return uri + "?immutable=1"
+        return uri + "?mode=ro"
+
+    def _refuse_foreign(self) -> None:
+        """One line for an empty file, which SQLite would read as an empty database (a file that
+        is not SQLite at all is told apart as damaged when it is opened: :meth:`_error`)."""
+        try:
+            size = self.path.stat().st_size
+        except OSError:
+            return  # sqlite3 names the cause
+        if size == 0:
+            raise ResultsDatabaseError(
+                f"{self.path} is empty (0 bytes): it is not a results database (expected the results.db of an "
+                "rmm-bench run)",
+                BAD_INPUT,
+            )
+
+    def _refuse_without_tables(self) -> None:
+        missing = [t for t in ("runs", "episodes") if not self._table_exists(t)]
+        if missing:
+            raise ResultsDatabaseError(
+                f"{self.path} is an SQLite database but not a results database: it has no {' or '.join(missing)} "
+                "table (expected the results.db of an rmm-bench run)",
+                BAD_INPUT,
+            )
 
     def _user_version(self) -> int:
         return int(self.db.execute("PRAGMA user_version").fetchone()[0])
@@ -389,6 +437,13 @@ class ResultsStore:
                 f"another --out; the database is intact",
                 BAD_INPUT,
             )
+        if self.read_only and Path(f"{path}-wal").exists() and not os.access(path.parent, os.W_OK):
+            return ResultsDatabaseError(
+                f"cannot read {path} ({text}): a {path.name}-wal file beside it holds episodes not yet in the file "
+                "itself (a run still writing, or killed), and SQLite must create its -shm file beside them to read "
+                "both, which this read-only folder refuses; copy the folder somewhere writable and read the copy",
+                BAD_INPUT,
+            )
         if name.startswith("SQLITE_CANTOPEN") or "unable to open" in text:
             what = "is a directory" if path.is_dir() else "cannot be created or opened in its directory (not writable?)"
             return ResultsDatabaseError(f"cannot open {path} ({text}): it {what}; choose another --out", BAD_INPUT)
@@ -432,6 +487,15 @@ class ResultsStore:
         )
 
     def close(self) -> None:
+        """Close the file; a writer also takes it out of WAL mode when it is the last one using it,
+        so the finished database is one self-contained file that read-only commands open without
+        creating ``-wal``/``-shm`` files beside it, in any folder (:meth:`_read_only_uri`)."""
+        if not self.read_only:
+            try:
+                self.db.execute("PRAGMA busy_timeout = 0")  # another command has it open: leave WAL as it is
+                self.db.execute("PRAGMA journal_mode=DELETE")
+            except sqlite3.Error:
+                pass
         self.db.close()
 
     # runs
@@ -625,7 +689,7 @@ class ResultsStore:
         self.db.commit()
 
     def _stale(self, status: str, pid, host) -> bool:
-        return status == "running" and pid is not None and host == socket.gethostname() and not _pid_alive(int(pid))
+        return status == "running" and pid is not None and host == socket.gethostname() and not pid_alive(int(pid))
 
     @_guarded
     def mark_stale_invocations(self) -> int:

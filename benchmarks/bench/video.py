@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from rmm_bench.outputs import check_output, publish
+
 if TYPE_CHECKING:
     from rmm_envs.views import EpisodeRecorder
 
@@ -34,8 +36,9 @@ def _writable_folder(folder: Path, what: str) -> None:
         raise ValueError(f"{what}: {probe} cannot be written; expected a folder this user may write to")
 
 
-def check_outputs(video: Path | None, frames: Path | None, every: int) -> None:
-    """Refuse outputs that cannot be written, naming the value and what was expected (ValueError)."""
+def check_outputs(video: Path | None, frames: Path | None, every: int, reads: Iterable[Path] = ()) -> None:
+    """Refuse outputs that cannot be written, naming the value and what was expected (ValueError);
+    ``reads``: the files the replay reads, which a video must never replace."""
     if every < 1:
         raise ValueError(f"--every must be an integer >= 1, got {every}")
     if video is not None:
@@ -55,6 +58,7 @@ def check_outputs(video: Path | None, frames: Path | None, every: int) -> None:
                 ) from None
         if video.is_dir():
             raise ValueError(f"--video {video}: it is a folder; expected a file name ending in .mp4 or .gif")
+        check_output(video, "--video", reads)
         _writable_folder(video.resolve().parent, f"--video {video}")
     if frames is not None:
         if frames.exists() and not frames.is_dir():
@@ -73,7 +77,12 @@ def episode_path(path: Path, episode: int, several: bool) -> Path:
 def write_video(frames: Iterable[np.ndarray], path: Path, fps: float) -> int:
     """Write ``frames`` (each ``(H, W, 3)`` uint8, all one size) to ``path``; the number written."""
     path = Path(path)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
+    existed = path.exists()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)  # --video into a folder not made yet, as --frames does
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
+    except OSError as e:
+        raise OSError(e.errno, e.strerror or str(e), str(path)) from None
     os.close(fd)
     tmp = Path(tmp_name)
     n = 0
@@ -106,7 +115,9 @@ def write_video(frames: Iterable[np.ndarray], path: Path, fps: float) -> int:
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # a temporary file is private: the video gets the usual mode
-        os.replace(tmp, path)
+        publish(tmp, path, existed)
+    except OSError as e:  # name the video asked for, never the temporary file
+        raise OSError(e.errno, e.strerror or str(e), str(path)) from None
     finally:
         tmp.unlink(missing_ok=True)
     return n
