@@ -150,6 +150,16 @@ class SimulatorScene:
         """The env's own failure test of ``(N, d)`` states (none by default)."""
         return np.zeros(states.shape[0], dtype=bool)
 
+    def advance_checked(self, states: np.ndarray, actions: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`advance`, and ``(N, k)`` whether each env step failed: the simulator said so or
+        the state after it fails (:meth:`state_failed`).  Only the steps up to a branch's first
+        failure matter (the path is cut there)."""
+        after, step_failed = self.advance(states, actions, k)
+        failed = self.state_failed(after.reshape(-1, self.state_dim)).reshape(-1, k)
+        if step_failed is not None:
+            failed |= step_failed
+        return after, failed
+
     # -- controls ------------------------------------------------------------------------------
     def to_actions(self, controls: np.ndarray) -> np.ndarray:
         """Controls of the box -> env actions (:func:`env_actions`)."""
@@ -193,22 +203,34 @@ class SimulatorScene:
         k = self.env_steps(duration)
         traj = np.empty((states.shape[0], k + 1, self.state_dim))
         traj[:, 0] = states
-        if states.shape[0]:
-            after, step_failed = self.advance(states, self.to_actions(controls), k)
-            traj[:, 1:] = after
-            failed = self.state_failed(after.reshape(-1, self.state_dim)).reshape(-1, k)
-            if step_failed is not None:
-                failed |= step_failed
-            first = np.where(failed.any(axis=1), failed.argmax(axis=1) + 1, k + 1)
-            traj[np.arange(k + 1)[None, :] >= first[:, None]] = np.nan
         idx = np.round(np.linspace(0, k, int(n_steps))).astype(int)
-        return traj[:, idx]
+        if not states.shape[0]:
+            return traj[:, idx]
+        after, failed = self.advance_checked(states, self.to_actions(controls), k)
+        traj[:, 1:] = after
+        path = traj[:, idx]  # only the points returned are cut at the first failure (NaN from there on)
+        hit = np.flatnonzero(failed.any(axis=1))
+        if hit.size:
+            first = failed[hit].argmax(axis=1) + 1
+            cut = path[hit]
+            cut[idx[None, :] >= first[:, None]] = np.nan
+            path[hit] = cut
+        return path
 
 
 class SnapshotScene(SimulatorScene):
-    """The step-by-step scene of any :class:`SnapshotSimulator`: every branch restores its start
-    state and steps the simulator one env step at a time (no batching; the fallback and the
-    reference the batched adapters are tested and timed against)."""
+    """The scene of any :class:`SnapshotSimulator`.  Step by step by default: every branch
+    restores its start state and steps the simulator one env step at a time (the fallback, and
+    the reference the batched paths are tested and timed against).
+
+    **Batched.**  A simulator that also has ``step_batch(states (N, d), actions (N, a)) ->
+    (states (N, d), failed (N,) bool)`` (every state advanced ``dt`` under its own action, arrays
+    in, arrays out, without touching the simulator's own state) is stepped that way instead: all
+    of a tree level's live branches at once, a branch leaving the batch at its first failed step,
+    as the step-by-step path stops it.  Written with the same arithmetic as ``step``, it gives the
+    same labels to the last bit (the tutorial's ``CartWall`` does: tests/test_snapshot_batch.py)
+    at array speed (``python -m benchmarks.perf_snapshot_batch``).
+    """
 
     def __init__(self, sim, name: str | None = None, failure=None, default_horizon: float = 1.0) -> None:
         name = name or type(sim).__name__
@@ -229,6 +251,9 @@ class SnapshotScene(SimulatorScene):
         return a.astype(self.action_space.dtype)
 
     def advance(self, states, actions, k):
+        if getattr(self.sim, "step_batch", None) is not None:
+            out, step_failed, _ = self._advance_batched(states, actions, k, check=False)
+            return out, step_failed
         out = np.full((states.shape[0], k, self.state_dim), np.nan)
         step_failed = np.zeros((states.shape[0], k), dtype=bool)
         saved = np.asarray(self.sim.get_state(), dtype=float).copy()
@@ -244,6 +269,50 @@ class SnapshotScene(SimulatorScene):
         finally:
             self.sim.set_state(saved)
         return out, step_failed
+
+    def advance_checked(self, states, actions, k):
+        if getattr(self.sim, "step_batch", None) is None:
+            return super().advance_checked(states, actions, k)
+        out, _, failed = self._advance_batched(states, actions, k, check=True)
+        return out, failed
+
+    def _advance_batched(self, states, actions, k, check: bool):
+        """Step the live branches together; ``check``: also test each new state (only the live
+        ones, once) with :meth:`state_failed`, a branch leaving at its first failure either way."""
+        n = states.shape[0]
+        out = np.full((n, k, self.state_dim), np.nan)
+        step_failed = np.zeros((n, k), dtype=bool)
+        any_failed = np.zeros((n, k), dtype=bool)
+        env_actions = np.asarray(actions)
+        if isinstance(self.action_space, gym.spaces.Discrete):
+            env_actions = env_actions[:, :1].astype(np.int64)
+        else:
+            env_actions = env_actions.astype(self.action_space.dtype)
+        live = np.arange(n)
+        current = np.array(states, dtype=float)
+        for j in range(k):
+            if live.size == 0:
+                break
+            result = self.sim.step_batch(current, env_actions[live])
+            if not (isinstance(result, tuple) and len(result) == 2):
+                raise TypeError(
+                    f"{self.name}: step_batch(states, actions) must return (states (N, d), failed (N,) bool), "
+                    f"got {type(result).__name__}"
+                )
+            nxt, failed = np.asarray(result[0], dtype=float), np.asarray(result[1], dtype=bool)
+            if nxt.shape != (live.size, self.state_dim) or failed.shape != (live.size,):
+                raise ValueError(
+                    f"{self.name}: step_batch on {live.size} states must return shapes ({live.size}, "
+                    f"{self.state_dim}) and ({live.size},), got {nxt.shape} and {failed.shape}"
+                )
+            out[live, j] = nxt
+            step_failed[live, j] = failed
+            if check:
+                failed = failed | self.state_failed(nxt)
+                any_failed[live, j] = failed
+            keep = ~failed
+            live, current = live[keep], nxt[keep]
+        return out, step_failed, any_failed
 
 
 class AdaptedEnv:

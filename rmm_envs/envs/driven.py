@@ -194,6 +194,16 @@ SIMULATOR_HOOKS: dict[str, SimulatorHook] = {
             "which states fail in themselves (labelled 1, never sampled)",
         ),
         SimulatorHook(
+            "step_batch",
+            "step_batch(states (N, d), actions (N, a)) -> (states (N, d), failed (N,) bool)",
+            "by every risk label, once per env step of a tree level, on all of its live branches",
+            "`set_state` and `step`, one branch at a time",
+            LABELS,
+            "step many states at once, arrays in, arrays out, leaving the simulator's own state alone: labels at "
+            "array speed (100x on a simulator with rays); written with step's arithmetic it gives the same labels "
+            "to the last bit",
+        ),
+        SimulatorHook(
             "initial_state",
             "initial_state(rng) -> (d,) float array",
             "at every reset, with a generator drawn from the reset seed",
