@@ -97,6 +97,7 @@ import numpy as np
 from rmm_envs.adapters.base import AdaptedEnv, SnapshotScene
 from rmm_envs.autonomy import GENERIC, GuardianActionSpace, SafeDefault
 from rmm_envs.envs.guarded import GuardedEnv
+from rmm_envs.starts import StartAssessment
 from rmm_envs.wrappers.nonblocking import TIME_ACCEL, NonBlockingStepping
 
 __all__ = [
@@ -259,6 +260,15 @@ SIMULATOR_HOOKS: dict[str, SimulatorHook] = {
             '`{"obs_time_feature": None}`',
             DATAGEN,
             "facts about observe a dataset records (obs_time_feature: how a time feature is drawn, or None)",
+        ),
+        SimulatorHook(
+            "start_doomed",
+            "start_doomed(state) -> bool",
+            "by rmm-bench, once per episode right after reset",
+            "not assessed (the doomed-start columns say so)",
+            GUARDED,
+            "whether no control the simulator allows can avoid a failure from this start (doomed), so Table I "
+            "tells avoidable collisions apart; it must not change the simulator's state",
         ),
         SimulatorHook(
             "render",
@@ -610,8 +620,22 @@ class DrivenGuardedEnv(GuardedEnv):
         if render_mode is not None:
             self.metadata["render_fps"] = max(round(1.0 / self.step_dt), 1)
         self.clock = make_clock(clock)
+        if self.simulator is not None and getattr(self.simulator, "start_doomed", None) is not None:
+            self.doomed_test = self._start_doomed  # rmm_envs.starts finds it on the env
         self._adapter: AdaptedEnv | None = None
         self._sampler: tuple[gym.Env, AdaptedEnv] | None = None
+
+    def _start_doomed(self, env) -> StartAssessment:
+        """The simulator's own doomed-start test of the state it starts from."""
+        sim = self.simulator
+        saved = np.array(sim.get_state(), dtype=float)
+        try:
+            doomed = sim.start_doomed(saved.copy())
+        finally:
+            sim.set_state(saved)
+        if not isinstance(doomed, bool | np.bool_):
+            raise TypeError(f"{self.env_name}: start_doomed(state) must return a bool, got {doomed!r}")
+        return StartAssessment(bool(doomed), f"{type(sim).__name__}.start_doomed")
 
     # ------------------------------------------------------------------ the env
     def _make(self, env_id: str, render_mode: str | None) -> gym.Env:
