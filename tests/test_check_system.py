@@ -73,7 +73,9 @@ def _lines(out: str) -> dict[str, str]:
 
 
 def test_the_tutorials_simulator_passes_and_the_estimate_is_printed(research_dir, capsys):
-    assert main(["check-system", "own_simulator_wall:CartWall-v0", "--configs", "64", "--samples-per-config", "64"]) == 0
+    assert (
+        main(["check-system", "own_simulator_wall:CartWall-v0", "--configs", "64", "--samples-per-config", "64"]) == 0
+    )
     out = capsys.readouterr().out
     status = _lines(out)
     assert status["env"] == status["contract"] == status["determinism"] == status["render"] == status["labels"] == "ok"

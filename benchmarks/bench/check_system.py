@@ -29,8 +29,9 @@ import gymnasium as gym
 import numpy as np
 
 from rmm_bench.checks import check_env_contract, env_arguments
-from rmm_envs.envs.driven import SIMULATOR_HOOKS
 from rmm_envs.env_plugins import resolve_env_id
+from rmm_envs.envs.driven import SIMULATOR_HOOKS
+from rmm_envs.risk.estimator import RiskEstimator
 from rmm_envs.risk.labelling import DatagenConfig, labelled_env
 from rmm_envs.risk.protocol import check_labelled_env
 from rmm_envs.starts import has_doomed_test
@@ -157,8 +158,6 @@ def check_system(env_id: str, opts: dict, configs: int, samples: int, workers: i
     try:
         cfg = DatagenConfig(env_id=env_id, configs=1, samples_per_config=probe, seed=seed, env_kwargs=dict(opts))
         hooks = labelled_env(cfg)
-        from rmm_envs.risk.estimator import RiskEstimator
-
         rng = np.random.default_rng(seed)
         hooks.reset(seed=seed)
         states = hooks.sample_states(rng, probe)
@@ -235,5 +234,7 @@ def cmd(argv: list[str]) -> int:
     for name, status, detail in rows:
         print(f"{status:4} {name:<{width}}  {detail}")
     failed = [r[0] for r in rows if r[1] == FAIL]
-    print(f"{len(rows) - len(failed)} of {len(rows)} checks passed" + (f"; failed: {', '.join(failed)}" if failed else ""))
+    print(
+        f"{len(rows) - len(failed)} of {len(rows)} checks passed" + (f"; failed: {', '.join(failed)}" if failed else "")
+    )
     return 1 if failed else 0
