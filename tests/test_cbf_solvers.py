@@ -106,7 +106,24 @@ def test_dubins4d_decisions_agree_with_direct_osqp(solver, x, y, th, v):
 @example(
     f=0.109375, g=0.9375, psi=0.015625
 )  # clarabel stops at its iteration limit on this feasible QP (found by hypothesis)
+@example(f=0.25, g=0.25, psi=-1e-09)  # clarabel stopped with InsufficientProgress: see the docstring
+@example(f=0.0096, g=0.3512, psi=-math.pi / 2 + 1e-09)  # ... and it changed the decision (0.2 for 0.085)
 def test_maze_decisions_agree_with_direct_osqp(solver, f, g, psi):
+    """The maze guardian's QP and decision through qpsolvers' solvers and through direct OSQP.
+
+    Heading along a wall to within 1e-9 rad (``psi = -1e-9`` at (437.5, 437.5), found by
+    hypothesis) gives that wall's row a turn-rate coefficient of 5e-8 beside rows of 35 to 50.
+    The QP was feasible with room to spare (``u = 0`` satisfies every row by 61 or more, as OSQP
+    and daqp found), yet clarabel returned no solution: its status ``InsufficientProgress``, not
+    the iteration limit, and not infeasibility within any tolerance (every row of this QP holds
+    over the whole box ``|u| <= 0.2``).  Its row equilibration cannot handle the 1e9 spread of
+    scales: any normal row beside the tiny one fails, the tiny one alone or without
+    equilibration solves.  Not a tolerance for this test to allow but a real disagreement: on a
+    grid of 161,922 poses heading along the maze's axes, 891 decisions differed, clarabel's
+    failed QP sending the guardian into its full-turn fallback (0.2 rad/s) where OSQP's feasible
+    answer turned gently (0.085 at the second example above).  The solver choice handles it:
+    ``QpsolversQP`` leaves out the rows the box ``|u| <= u_max`` already satisfies (the same
+    feasible set, so the same solution), and the grid then gives no difference."""
     env = Dubins3DMazeGuardedEnv()
     env.reset(seed=3)
     priv = env.privileged()

@@ -97,6 +97,13 @@ class QpsolversQP:
         if np.any(h[empty] < -self.eps):
             return None
         keep = np.isfinite(h) & ~empty
+        if self.lb is not None and self.ub is not None:
+            # a row that every point of the box satisfies (its largest value over the box is
+            # within h) constrains nothing the bounds do not: left out, the same solution.  Such
+            # rows can be scaled far from the others (the maze car heading along a wall: a
+            # coefficient of 5e-8 beside ones of 50), which clarabel's equilibration cannot
+            # handle: it stopped with InsufficientProgress on feasible QPs (tests/test_cbf_solvers.py)
+            keep &= ~(np.maximum(G * self.lb, G * self.ub).sum(axis=1) <= h)
         try:
             z = quietly(
                 self._solve_qp,
