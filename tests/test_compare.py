@@ -250,6 +250,27 @@ def test_reference_results_pair_with_a_new_run(runs, tmp_path, monkeypatch, caps
     # a run of other episodes finds no reference
     assert main(["compare", str(runs / "seed1"), "--reference"]) == 2
     assert "no shipped reference result" in capsys.readouterr().err
+    # naming reference agents chooses them (before: every shipped one was added)
+    chosen = compare_runs([runs / "a"], ["lrmm", "ref:cbf"], reference=True, resamples=10)
+    assert chosen.agents == ["lrmm", "ref:cbf"] and set(zip(chosen.pairs.a, chosen.pairs.b, strict=True)) == {
+        ("lrmm", "ref:cbf")
+    }
+    assert main(["compare", str(runs / "a"), "--reference", "--agents", "lrmm,ref:cbf", "--resamples", "10"]) == 0
+    assert "ref:inactive" not in capsys.readouterr().out
+    assert main(["compare", str(runs / "a"), "--reference", "--agents", "lrmm,ref:cbff"]) == 2
+    assert "(did you mean 'ref:cbf'?)" in capsys.readouterr().err
+
+
+def test_a_run_no_other_agent_ran_alike_is_named_in_one_line(runs, capsys):
+    dirs = [str(runs / d) for d in ("a", "b", "seed1")]
+    assert main(["compare", *dirs, "--agents", "lrmm,cbf", "--resamples", "10"]) == 0
+    err = capsys.readouterr().err  # before: cbf's seed-1 run left out without a word
+    assert err.count("\n") == 1 and "left out" in err and "cbf (Dubins4DParallel-v0 seed 1" in err
+    assert str(runs / "seed1") in err
+    c = compare_runs([runs / "a", runs / "b", runs / "seed1"], ["lrmm", "cbf"], resamples=10)
+    assert len(c.left_out) == 1 and set(c.pairs.group) == {"Dubins4DParallel-v0 seed 0 clock fixed:1"}
+    # every run paired: nothing said
+    assert compare_runs([runs / "a", runs / "b"], ["lrmm", "cbf"], resamples=10).left_out == []
 
 
 @pytest.mark.parametrize(
@@ -263,6 +284,8 @@ def test_reference_results_pair_with_a_new_run(runs, tmp_path, monkeypatch, caps
         (["compare", "{root}/all", "--resamples", "0"], "--resamples must be >= 1"),
         (["compare", "{root}/all", "--agents", ","], "expected comma-separated"),
         (["compare", "{root}/all", "--agents", "lrmm@zzzz,cbf"], "whose key starts with 'zzzz'"),
+        (["compare", "{root}/all", "--agents", "lrm,cbf"], "no run of 'lrm' is stored (did you mean 'lrmm'?)"),
+        (["compare", "{root}/all", "--agents", "lrmm,ref:cbf"], "are compared with --reference"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(runs, capsys, args, expected):

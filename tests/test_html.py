@@ -4,7 +4,9 @@ tests/test_html_browser.py, slow tier)."""
 
 from __future__ import annotations
 
+import csv
 import json
+import re
 import shutil
 import sqlite3
 from html.parser import HTMLParser
@@ -13,6 +15,8 @@ from pathlib import Path
 import pytest
 
 from rmm_bench.cli import main
+from rmm_bench.compare import compare_runs
+from rmm_bench.names import md_cells
 
 EVIL = "<script>alert(1)</script>"
 
@@ -69,15 +73,15 @@ def run(tmp_path_factory):
     return out
 
 
-def _evil_copy(run: Path, tmp_path: Path) -> Path:
-    """The run with its inactive agent renamed to a script tag, as a third-party name could be."""
+def _evil_copy(run: Path, tmp_path: Path, name: str = EVIL) -> Path:
+    """The run with its inactive agent renamed to a script tag (or ``name``), as a third-party name could be."""
     copy = tmp_path / "evil"
     shutil.copytree(run, copy)
     with sqlite3.connect(copy / "results.db") as db:
-        db.execute("UPDATE runs SET agent = ? WHERE agent = 'inactive'", (EVIL,))
-        db.execute("UPDATE episodes SET agent = ? WHERE agent = 'inactive'", (EVIL,))
+        db.execute("UPDATE runs SET agent = ? WHERE agent = 'inactive'", (name,))
+        db.execute("UPDATE episodes SET agent = ? WHERE agent = 'inactive'", (name,))
         for inv, keys in db.execute("SELECT id, run_keys FROM invocations").fetchall():
-            keys = {(EVIL if a == "inactive" else a): k for a, k in json.loads(keys).items()}
+            keys = {(name if a == "inactive" else a): k for a, k in json.loads(keys).items()}
             db.execute("UPDATE invocations SET run_keys = ? WHERE id = ?", (json.dumps(keys), inv))
     return copy
 
@@ -116,6 +120,32 @@ def test_strings_from_the_database_are_escaped(run, tmp_path):
     page = _parse(copy / "results.html")
     assert EVIL in {r[0] for r in page.rows["table-i"][1:]}  # shown as that text
     assert not any(tag == "script" for tag, _ in page.attrs)
+
+
+#: a name with every character that shifts a table's columns or breaks its row in some format
+PIPES = 'a|b\\|c & 5%_d\nx`y`,"q"'
+
+
+def test_names_that_split_cells_stay_in_one_cell_in_every_table_format(run, tmp_path):
+    copy = _evil_copy(run, tmp_path, PIPES)
+    assert main(["report", str(copy), "--html"]) == 0
+    lines = [ln for ln in (copy / "table_I.md").read_text().splitlines() if ln.startswith("|")]
+    width = len(md_cells(lines[0]))
+    assert all(len(md_cells(ln)) == width for ln in lines)  # before: the | added columns, the \n split the row
+    assert PIPES in {md_cells(ln)[0] for ln in lines}
+    with open(copy / "table_I.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    assert {len(r) for r in rows} == {len(rows[0])} and PIPES in {r[0] for r in rows}
+    tex = [ln for ln in (copy / "table_I.tex").read_text().splitlines() if ln.endswith("\\\\") or "\\hline" in ln]
+    assert {len(re.split(r"(?<!\\)&", ln)) for ln in tex} == {width - 2}  # the tex leaves errors and fallbacks out
+    assert r"a\textbar{}b\textbackslash{}\textbar{}c \& 5\%\_d x`y`" in (copy / "table_I.tex").read_text()
+    page = _parse(copy / "results.html")
+    assert {len(r) for r in page.rows["table-i"]} == {width} and PIPES in {r[0] for r in page.rows["table-i"]}
+    assert PIPES in {r[0] for r in page.rows["pairs"][1:]} | {r[1] for r in page.rows["pairs"][1:]}
+    md = compare_runs([copy], ["lrmm", PIPES], resamples=10).to_markdown()
+    table = [ln for ln in md.splitlines() if ln.startswith("|")]
+    assert [len(md_cells(ln)) for ln in table] == [13] * 6 + [7] * 5  # the outcome rows, the continuous rows
+    assert all(md_cells(ln)[1] == PIPES for ln in table[2:6] + table[8:])
 
 
 def test_rendered_replays_are_embedded(run, tmp_path):

@@ -25,6 +25,9 @@ from typing import Any
 
 import numpy as np
 
+from rmm_bench.compare_errors import ERROR, error_note, error_row, split_errors, unpaired_errors
+from rmm_bench.compare_render import continuous_table, pairs_table
+from rmm_bench.names import did_you_mean
 from rmm_bench.outputs import check_output, write_output
 from rmm_bench.paired import concordance, mcnemar_exact, newcombe_paired, newcombe_unpaired, paired_bootstrap
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore, results_database
@@ -126,7 +129,12 @@ def _select(runs: list[_Run], names: Sequence[str] | None) -> dict[str, list[_Ru
         chosen = [r for r in runs if r.label == agent and r.run_key.startswith(key)]
         if not chosen:
             what = f"no run of {agent!r}" if not key else f"no run of {agent!r} whose key starts with {key!r}"
-            raise ValueError(f"--agents {name}: {what} is stored (expected one of: {', '.join(stored) or 'none'})")
+            ref = agent.startswith(REFERENCE_PREFIX) and not any(s.startswith(REFERENCE_PREFIX) for s in stored)
+            near = did_you_mean(agent, stored) if agent not in stored and not ref else ""
+            raise ValueError(
+                f"--agents {name}: {what} is stored{near} (expected one of: {', '.join(stored) or 'none'})"
+                + ("; the shipped reference results (ref:NAME) are compared with --reference" if ref else "")
+            )
         by_group: dict[tuple[str, str], list[_Run]] = {}
         for r in chosen:
             by_group.setdefault(r.group, []).append(r)
@@ -171,14 +179,20 @@ class Comparison:
       ``avoidable collision`` the avoidable starts among them), ``rate_a``, ``rate_b``,
       ``diff`` (``rate_a - rate_b``), ``lo``, ``hi`` (its 95% interval), ``a_only``, ``b_only``,
       ``both``, ``neither``, ``p_value`` (exact McNemar), ``a_only_episodes``,
-      ``b_only_episodes`` (the first discordant episode numbers).  Rates are fractions.  With
-      ``paired`` False: ``n_a``, ``n_b`` instead of the counts, no p-value.
+      ``b_only_episodes`` (the first discordant episode numbers), ``note``.  Rates are fractions.
+      With ``paired`` False: ``n_a``, ``n_b`` instead of the counts, no p-value.  Where an agent
+      of the pair errored (its guardian raised), the outcome rows count the episodes where
+      neither errored, an ``error`` row counts the errored ones (no interval, no test; the only
+      row of a pair where one agent errored in every episode), and ``note`` says so
+      (:mod:`rmm_bench.compare_errors`).
     * ``continuous``: one row per (group, a, b, column): ``column`` (:data:`CONTINUOUS`),
       ``n``, ``mean_a``, ``mean_b``, ``diff``, ``lo``, ``hi`` (paired bootstrap), ``seed``,
-      ``resamples``.
-    * ``floor``: one row per episode every compared agent failed (no goal): ``group``,
-      ``episode``, ``seed``, ``doomed``, and each agent's outcome.
-    * ``notes``: what the reader must know (not assessed starts, unpaired, ...).
+      ``resamples``; over the episodes where neither errored.
+    * ``floor``: one row per episode every compared agent failed (no goal) and none errored:
+      ``group``, ``episode``, ``seed``, ``doomed``, and each agent's outcome.
+    * ``notes``: what the reader must know (not assessed starts, errors, unpaired, ...).
+    * ``left_out``: the runs compared with nothing, as no other agent ran their episodes (one
+      string each: agent, world, database).
     """
 
     pairs: Any
@@ -189,20 +203,21 @@ class Comparison:
     agents: list[str]
     seed: int = 0
     resamples: int = 2000
+    left_out: list[str] = field(default_factory=list)
 
     def to_markdown(self, show: int = 5) -> str:
         """The comparison as markdown tables (rates in %)."""
         out = []
         for group, pairs in self.pairs.groupby("group", sort=False):
             out.append(f"## {group}\n")
-            out.append(_pairs_table(pairs, self.paired, show))
+            out.append(pairs_table(pairs, self.paired, show))
             cont = self.continuous[self.continuous["group"] == group] if len(self.continuous) else self.continuous
             if len(cont):
                 out.append(
                     f"\nContinuous columns: mean difference A - B with its paired bootstrap 95% interval "
                     f"(seed {self.seed}, {self.resamples} resamples)\n"
                 )
-                out.append(_continuous_table(cont))
+                out.append(continuous_table(cont, {c: unit for c, (_, unit) in CONTINUOUS.items()}))
             floor = self.floor[self.floor["group"] == group] if len(self.floor) else self.floor
             if self.paired:
                 out.append("\n" + _floor_line(floor, self.agents))
@@ -216,65 +231,6 @@ class Comparison:
             if col in df:
                 df[col] = [" ".join(map(str, v)) for v in df[col]]
         return str(df.to_csv(index=False))
-
-
-def _pct(v: float) -> str:
-    return "—" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{100 * v:.1f}"
-
-
-def _p(v: float) -> str:
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return "—"
-    return f"{v:.3g}" if v >= 1e-4 else f"{v:.2e}"
-
-
-def _episodes_cell(eps: list[int], total: int, show: int) -> str:
-    if not eps:
-        return ""
-    more = f" (+{total - len(eps[:show])})" if total > show else ""
-    return ",".join(map(str, eps[:show])) + more
-
-
-def _pairs_table(pairs, paired: bool, show: int) -> str:
-    if paired:
-        head = (
-            "| A | B | outcome | episodes | A [%] | B [%] | A - B [%] (95%) | A only | B only | both | "
-            "McNemar p | A-only episodes | B-only episodes |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|"
-        )
-        lines = [head]
-        for r in pairs.itertuples():
-            lines.append(
-                f"| {r.a} | {r.b} | {r.outcome} | {r.n} | {_pct(r.rate_a)} | {_pct(r.rate_b)} | "
-                f"{_pct(r.diff)} [{_pct(r.lo)}, {_pct(r.hi)}] | {r.a_only} | {r.b_only} | {r.both} | "
-                f"{_p(r.p_value)} | {_episodes_cell(r.a_only_episodes, r.a_only, show)} | "
-                f"{_episodes_cell(r.b_only_episodes, r.b_only, show)} |"
-            )
-        return "\n".join(lines) + "\n"
-    lines = [
-        "| A | B | outcome | A episodes | B episodes | A [%] | B [%] | A - B [%] (95%, unpaired) |\n"
-        "|---|---|---|---|---|---|---|---|"
-    ]
-    for r in pairs.itertuples():
-        lines.append(
-            f"| {r.a} | {r.b} | {r.outcome} | {r.n_a} | {r.n_b} | {_pct(r.rate_a)} | {_pct(r.rate_b)} | "
-            f"{_pct(r.diff)} [{_pct(r.lo)}, {_pct(r.hi)}] |"
-        )
-    return "\n".join(lines) + "\n"
-
-
-def _num(v: float, digits: int = 3) -> str:
-    return "—" if math.isnan(v) else f"{v:.{digits}g}"
-
-
-def _continuous_table(cont) -> str:
-    lines = ["| A | B | column | episodes | A | B | A - B (95%) |", "|---|---|---|---|---|---|---|"]
-    for r in cont.itertuples():
-        unit = CONTINUOUS[r.column][1]
-        lines.append(
-            f"| {r.a} | {r.b} | {r.column} [{unit}] | {r.n} | {_num(r.mean_a)} | {_num(r.mean_b)} | "
-            f"{_num(r.diff)} [{_num(r.lo)}, {_num(r.hi)}] |"
-        )
-    return "\n".join(lines) + "\n"
 
 
 def _floor_line(floor, agents: list[str]) -> str:
@@ -369,7 +325,7 @@ def compare_runs(
     if reference:
         ref_runs = _reference_runs({r.group for r in runs}, reference_dir)
         runs.extend(ref_runs)
-        if agents is not None:
+        if agents is not None and not any(a.startswith(REFERENCE_PREFIX) for a in agents):  # none named: all
             agents = list(agents) + sorted({r.label for r in ref_runs} - set(agents))
     selected = _select(runs, agents)
     names = list(selected)
@@ -380,10 +336,11 @@ def compare_runs(
         )
     by_agent = {name: _episodes(rs) for name, rs in selected.items()}
     if unpaired:
-        pairs = _unpaired_pairs(names, by_agent)
-        notes.append(
+        pairs = _unpaired_pairs(names, by_agent, notes)
+        notes.insert(
+            0,
             "unpaired: every episode of each agent, Newcombe's hybrid score interval for independent rates; "
-            "no McNemar test"
+            "no McNemar test",
         )
         empty = pd.DataFrame()
         return Comparison(pairs, empty, empty, notes, False, names, seed, resamples)
@@ -391,6 +348,7 @@ def compare_runs(
     pair_rows: list[dict] = []
     cont_rows: list[dict] = []
     groups = [g for g in by_agent[names[0]] if all(g in by_agent[n] for n in names)]
+    left_out = _left_out(selected, by_agent)
     for a_i, a in enumerate(names):
         for b in names[a_i + 1 :]:
             common_groups = set(by_agent[a]) & set(by_agent[b])
@@ -408,10 +366,17 @@ def compare_runs(
                 if not common:
                     continue
                 _check_starts(a, b, label, common, ea, eb)
-                doomed = _doomed_of(ea, eb, common)
-                pair_rows.extend(_pair_rows(a, b, label, common, ea, eb, doomed, show))
-                cont_rows.extend(_continuous_rows(a, b, label, common, ea, eb, seed, resamples))
-                if any(doomed.get(e) is None for e in common):
+                errs = split_errors(common, ea, eb)  # the tests run where neither errored
+                note = error_note(a, b, errs, show) if errs.any else ""
+                doomed = _doomed_of(ea, eb, errs.tested)
+                if errs.tested:
+                    pair_rows.extend(_pair_rows(a, b, label, errs.tested, ea, eb, doomed, show, note))
+                    cont_rows.extend(_continuous_rows(a, b, label, errs.tested, ea, eb, seed, resamples))
+                if errs.any:
+                    pair_rows.append(error_row(a, b, label, errs, show, note))
+                    notes.append(f"{label}: {note}")
+                    notes.append(f"{label}: the floor leaves out the episodes where an agent errored")
+                if errs.tested and any(doomed.get(e) is None for e in errs.tested):
                     notes.append(
                         f"{label}: starts not assessed for doomed (the env has no doomed test, or the run "
                         f"predates it): no 'avoidable collision' row"
@@ -421,7 +386,16 @@ def compare_runs(
     floor = _floor(names, by_agent, groups)
     notes = list(dict.fromkeys(notes))
     pairs = pd.DataFrame(pair_rows)
-    return Comparison(pairs, pd.DataFrame(cont_rows), floor, notes, True, names, seed, resamples)
+    return Comparison(pairs, pd.DataFrame(cont_rows), floor, notes, True, names, seed, resamples, left_out)
+
+
+def _left_out(selected: dict[str, list[_Run]], by_agent: dict) -> list[str]:
+    """The runs whose episodes no other agent ran (``cbf`` of seed 1 beside ``lrmm`` of seed 0 alone)."""
+    out = []
+    for name, runs in selected.items():
+        others = {g for n in selected if n != name for g in by_agent[n]}
+        out += [f"{name} ({r.describe()}, in {r.source})" for r in runs if r.group not in others]
+    return list(dict.fromkeys(out))
 
 
 def _doomed_of(ea: dict, eb: dict, common: list[int]) -> dict[int, bool | None]:
@@ -433,7 +407,7 @@ def _doomed_of(ea: dict, eb: dict, common: list[int]) -> dict[int, bool | None]:
     return out
 
 
-def _pair_rows(a, b, label, common, ea, eb, doomed, show) -> list[dict]:
+def _pair_rows(a, b, label, common, ea, eb, doomed, show, note) -> list[dict]:
     rows = []
     assessed = all(doomed.get(e) is not None for e in common)
     for outcome in OUTCOMES:
@@ -466,6 +440,7 @@ def _pair_rows(a, b, label, common, ea, eb, doomed, show) -> list[dict]:
                 "p_value": mcnemar_exact(a_only, b_only),
                 "a_only_episodes": [e for e, x, y in zip(eps, fa, fb, strict=True) if x and not y][:show],
                 "b_only_episodes": [e for e, x, y in zip(eps, fa, fb, strict=True) if y and not x][:show],
+                "note": note,
             }
         )
     return rows
@@ -506,7 +481,7 @@ def _floor(names: list[str], by_agent: dict, groups: list) -> Any:
         common = sorted(set.intersection(*(set(p) for p in per)))
         for e in common:
             outcomes = [p[e][0]["outcome"] for p in per]
-            if "goal" in outcomes:
+            if "goal" in outcomes or ERROR in outcomes:  # an agent that raised did not fail there
                 continue
             flags = [p[e][1].doomed.get(e) for p in per]
             known = [f for f in flags if f is not None]
@@ -523,7 +498,9 @@ def _floor(names: list[str], by_agent: dict, groups: list) -> Any:
     return pd.DataFrame(rows, columns=cols)
 
 
-def _unpaired_pairs(names: list[str], by_agent: dict) -> Any:
+def _unpaired_pairs(names: list[str], by_agent: dict, notes: list[str]) -> Any:
+    """Every pair's rates over all of each agent's episodes without an error (``notes``: what
+    the errors left out)."""
     import pandas as pd
 
     rows = []
@@ -531,7 +508,8 @@ def _unpaired_pairs(names: list[str], by_agent: dict) -> Any:
         for b in names[a_i + 1 :]:
             ra = [row for eps in by_agent[a].values() for row, _ in eps.values()]
             rb = [row for eps in by_agent[b].values() for row, _ in eps.values()]
-            for outcome in OUTCOMES[:3]:
+            ra, rb, error, note = unpaired_errors(a, b, ra, rb)
+            for outcome in OUTCOMES[:3] if ra and rb else ():
                 xa = sum(_outcome_flags(r, outcome) for r in ra)
                 xb = sum(_outcome_flags(r, outcome) for r in rb)
                 d, lo, hi = newcombe_unpaired(xa, len(ra), xb, len(rb))
@@ -548,8 +526,12 @@ def _unpaired_pairs(names: list[str], by_agent: dict) -> Any:
                         "diff": d,
                         "lo": lo,
                         "hi": hi,
+                        "note": note,
                     }
                 )
+            if error is not None:
+                rows.append(error)
+                notes.append(note)
     return pd.DataFrame(rows)
 
 
@@ -624,6 +606,9 @@ def cmd(argv: list[str]) -> int:
         resamples=args.resamples,
         show=args.show,
     )
+    if comparison.left_out:  # said in one line, never dropped silently
+        left = "; ".join(comparison.left_out)
+        print(f"rmm-bench compare: note: left out, as no other agent ran their episodes: {left}", file=sys.stderr)
     text = comparison.to_markdown(args.show) if args.format == "md" else comparison.to_csv()
     if args.out is None:
         sys.stdout.write(text)

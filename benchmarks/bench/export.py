@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from rmm_bench.names import did_you_mean
 from rmm_bench.outputs import check_output, write_output
 from rmm_bench.store import ResultsStore, results_database
 
@@ -95,7 +96,10 @@ def export_frame(path: str | Path, agents: list[str] | None = None) -> Any:
         stored = [r[0] for r in store.db.execute("SELECT DISTINCT agent FROM runs ORDER BY agent")]
         for a in agents or []:
             if a not in stored:
-                raise ValueError(f"--agents {a}: not stored in {store.path} (expected one of: {', '.join(stored)})")
+                raise ValueError(
+                    f"--agents {a}: not stored in {store.path}{did_you_mean(a, stored)} "
+                    f"(expected one of: {', '.join(stored)})"
+                )
         have = {r[1] for r in store.db.execute("PRAGMA table_info(episodes)")}
         cols = ", ".join(c if c in have else f"NULL AS {c}" for c in sorted(_FROM_EPISODES))
         episodes = pd.read_sql_query(f"SELECT {cols}, seed AS episode_seed FROM episodes", store.db)

@@ -19,6 +19,8 @@ import datetime
 import html
 from pathlib import Path
 
+from rmm_bench.compare_render import p_text
+from rmm_bench.names import md_cells
 from rmm_bench.outputs import write_output
 from rmm_bench.store import ResultsStore
 
@@ -59,7 +61,7 @@ def _md_table(md: str) -> str:
     lines = [ln for ln in md.splitlines() if ln.startswith("|")]
     if len(lines) < 2:
         return ""
-    cells = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in lines]
+    cells = [md_cells(ln) for ln in lines]  # a name's escaped | stays in its cell
     head, body = cells[0], cells[2:]
     out = ["<div class='wrap'><table class='table-i'><thead><tr>"]
     out += [f"<th>{_e(h)}</th>" for h in head]
@@ -94,7 +96,9 @@ def _comparison(folder: Path, agents: list[str]) -> str:
     out = [
         "<p class='note'>Every pair of agents over the episodes both ran (same starts): rates in %, the "
         "difference with its 95% paired interval (Newcombe), the discordant episodes (A only, B only) "
-        "and the exact McNemar test on them; the episode numbers replay with <code>rmm-bench replay</code>.</p>",
+        "and the exact McNemar test on them; the episode numbers replay with <code>rmm-bench replay</code>. "
+        "Where a guardian raised, the tests run over the episodes where neither errored and the "
+        "<em>error</em> row counts the errored ones (no test; the notes below say which).</p>",
         "<div class='wrap'><table class='pairs'><thead><tr>",
         "".join(
             f"<th>{h}</th>"
@@ -117,12 +121,12 @@ def _comparison(folder: Path, agents: list[str]) -> str:
         "</tr></thead><tbody>",
     ]
     for r in c.pairs.itertuples():
-        p = f"{r.p_value:.3g}" if r.p_value >= 1e-4 else f"{r.p_value:.2e}"
+        diff = "—" if r.diff != r.diff else f"{_pct(r.diff)} [{_pct(r.lo)}, {_pct(r.hi)}]"  # the error row: no test
         out.append(
             f"<tr><td>{_e(r.a)}</td><td>{_e(r.b)}</td><td class='text'>{_e(r.outcome)}</td><td>{r.n}</td>"
             f"<td>{_pct(r.rate_a)}</td><td>{_pct(r.rate_b)}</td>"
-            f"<td>{_pct(r.diff)} [{_pct(r.lo)}, {_pct(r.hi)}]</td><td>{r.a_only}</td><td>{r.b_only}</td>"
-            f"<td>{r.both}</td><td>{p}</td><td class='text'>{_e(', '.join(map(str, r.a_only_episodes)))}</td>"
+            f"<td>{diff}</td><td>{r.a_only}</td><td>{r.b_only}</td>"
+            f"<td>{r.both}</td><td>{p_text(r.p_value)}</td><td class='text'>{_e(', '.join(map(str, r.a_only_episodes)))}</td>"
             f"<td class='text'>{_e(', '.join(map(str, r.b_only_episodes)))}</td></tr>"
         )
     out.append("</tbody></table></div>")

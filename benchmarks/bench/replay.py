@@ -51,6 +51,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rmm_bench.config import AgentRun, EpisodeTask, changed_inputs, file_sha256, module_name, resolve_input
+from rmm_bench.names import did_you_mean
 from rmm_bench.runner import CLOCK_COLUMNS, REPRODUCIBLE_CLOCKS, TIMING_COLUMNS, is_timing_stat
 from rmm_bench.store import EPISODE_FIELDS, ResultsStore
 
@@ -114,7 +115,7 @@ def _select_run(store: ResultsStore, req: ReplayRequest) -> tuple[str, dict]:
     if not runs:
         agents = sorted({r[0] for r in store.db.execute("SELECT agent FROM runs")})
         raise ValueError(
-            f"--agent {req.agent}: no run of {req.agent!r} is stored in {store.path} "
+            f"--agent {req.agent}: no run of {req.agent!r} is stored in {store.path}{did_you_mean(req.agent, agents)} "
             f"(expected one of its agents: {', '.join(agents) or 'none stored'})"
         )
     if req.invocation is None:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from rmm_bench.config import parse_shard, shard_episodes
 from rmm_bench.metrics import aggregate, avoidable_collisions
+from rmm_bench.names import md_cell, tex_cell
 from rmm_bench.outputs import check_output
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore
 from rmm_envs.catalog import current_id
@@ -180,7 +181,7 @@ def format_tables(rows: list[dict], batch_size: int = 64, measured: bool = False
         cells += rates
         body.append(cells + [str(r["errors"]), str(r["qp_fallbacks"])])
     md = "| " + " | ".join(header) + " |\n|" + "|".join("---" for _ in header) + "|\n"
-    md += "".join("| " + " | ".join(b) + " |\n" for b in body)
+    md += "".join("| " + " | ".join(map(md_cell, b)) + " |\n" for b in body)  # a name may hold a | or a line break
     md += "\n" + spread_note(rows, batch_size) + "\n"
     buf = io.StringIO()
     w = csv.writer(buf)
@@ -230,10 +231,11 @@ def format_tables(rows: list[dict], batch_size: int = 64, measured: bool = False
             + ([*r["avoidable_collision"], r["doomed_starts"]] if assessed else [])
         )
     cols = "llcr" + "r" * (len(header) - 6)
-    tex = f"\\begin{{tabular}}{{{cols}}}\n" + " & ".join(h.replace("%", "\\%") for h in header[:-2]) + " \\\\ \\hline\n"
+    tex = f"\\begin{{tabular}}{{{cols}}}\n" + " & ".join(map(tex_cell, header[:-2])) + " \\\\ \\hline\n"
     tex += (
         "".join(
-            " & ".join(c.replace("±", "$\\pm$").replace(WILSON_MARK, "$^\\dagger$") for c in b[:-2]) + " \\\\\n"
+            " & ".join(tex_cell(c).replace("±", "$\\pm$").replace(WILSON_MARK, "$^\\dagger$") for c in b[:-2])
+            + " \\\\\n"
             for b in body
         )
         + "\\end{tabular}\n"

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from rmm_bench.config import AgentRun, BenchConfig, EpisodeResult, EpisodeTask, accepts_argument, source_digests
 from rmm_bench.metrics import aggregate
+from rmm_bench.names import md_cell
 from rmm_bench.report import plot_latency, write_report
 from rmm_bench.runner import EpisodeRecord, episode_seed, hard_timeout, lost_episode, run_traced_episode
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore
@@ -458,7 +459,7 @@ def cmd_sweep(config: BenchConfig, argv) -> int:
                 table[agent].append(f"{agg['collision'][0]:.1f} ± {agg['collision'][1]:.1f}")
     finally:
         store.close()
-    lines += [f"| {a} | " + " | ".join(table[a]) + " |" for a in agents]
+    lines += [f"| {md_cell(a)} | " + " | ".join(table[a]) + " |" for a in agents]
     md = (
         f"Collision rate [% episodes] against added decision latency (fixed clock, time accel {config.parsed['time_accel']}, "
         f"{config.episodes} episodes, seed {config.seed})\n\n" + "\n".join(lines) + "\n"
