@@ -23,6 +23,8 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
+from rmm_envs.settings import safe_path_start, safe_path_started
+
 __all__ = ["TaskLost", "WorkersLost", "check_reachable", "describe_exit", "run_local", "run_ray"]
 
 
@@ -65,6 +67,7 @@ def describe_exit(exitcode: int | None) -> str:
 def _worker_main(fn: Callable, conn) -> None:
     """Worker loop: receive ``(index, task)``, send ``("ok", index, result)`` or ``("err", index, (exc, tb))``."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides what Ctrl-C stops
+    safe_path_started()  # what its tasks start sees the current directory as usual
     while True:
         try:
             msg = conn.recv()
@@ -109,7 +112,8 @@ class _Worker:
     def __init__(self, ctx, fn: Callable) -> None:
         parent, child = ctx.Pipe(duplex=True)
         self.proc = ctx.Process(target=_worker_main, args=(fn, child), daemon=True)
-        self.proc.start()
+        with safe_path_start():  # the current directory is not first on its path while it starts
+            self.proc.start()
         child.close()
         self.conn = parent
         self.job: tuple[int, Any] | None = None

@@ -404,7 +404,7 @@ def test_datagen_failure_is_imported_by_name_and_recorded(tmp_path, monkeypatch)
         (
             ["--failure", "no_such_module_26:f"],
             r"failure \(--failure\) must be 'module:callable'.*, got 'no_such_module_26:f': it cannot be imported "
-            r"\(No module named",
+            r"\(cannot import module .no_such_module_26.: no module named",
         ),
         (
             ["--failure", "numpy:pi"],

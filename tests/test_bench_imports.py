@@ -1,5 +1,6 @@
 """``rmm-bench --agent module:Class`` and ``--env module:Id`` import from the directory the
-command runs in, as ``python -m`` would, in the parent and in every worker (issue 27)."""
+command runs in, in the parent and in every worker (issue 27), after the installed packages
+(tests/test_user_folders.py)."""
 
 from __future__ import annotations
 
@@ -10,8 +11,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from rmm_bench.config import import_from
 
 GUARD = """
 from rmm_guardians.base import Guardian
@@ -100,14 +99,6 @@ def test_a_module_that_is_not_there_exits_2_naming_it(tmp_path):
     (tmp_path / "empty_env.py").write_text("")
     res = _bench(tmp_path, "--env", "empty_env:E-v0", "--episodes", "1")
     assert res.returncode == 2 and "importing 'empty_env' (from empty_env.py) registered no env 'E-v0'" in res.stderr
-
-
-def test_import_from_puts_each_folder_first_once(monkeypatch):
-    monkeypatch.setattr(sys, "path", ["/b", "/a", "/c"])
-    import_from(["/a", "/d"])
-    assert sys.path == ["/a", "/d", "/b", "/c"]
-    import_from(["/a", "/d"])
-    assert sys.path == ["/a", "/d", "/b", "/c"]
 
 
 WARM = """

@@ -107,7 +107,7 @@ PREFIX = "failure (--failure) must be 'module:callable' naming a function failur
         ("a:b:c", "not of the form module:callable"),
         (":walker2d_unhealthy", "not of the form module:callable"),
         ("rmm_envs.adapters.mujoco_envs:", "not of the form module:callable"),
-        ("no_such_module_26:f", "it cannot be imported (No module named 'no_such_module_26')"),
+        ("no_such_module_26:f", "it cannot be imported (cannot import module 'no_such_module_26': no module named"),
         ("rmm_envs.adapters.mujoco_envs:walker3d", "it cannot be imported (module 'rmm_envs.adapters.mujoco_envs' "),
         (
             "rmm_envs.adapters.mujoco_envs:WALKER2D_STATE_DIM",

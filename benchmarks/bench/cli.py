@@ -32,10 +32,15 @@ guardian's compute time passes in the world) and ``Dubins4DGuarded-v0`` (blockin
 ``QuadrotorRoomGuarded-v0`` and the map envs ``Dubins4DMapParallel-v0`` / ``Dubins4DMapGuarded-v0`` in this
 package.  Another env is refused with one line naming it and what it lacks.
 
-Your own code: ``--agent module:Class`` (a guardian) and ``--env module:Id`` (an env that
-``module`` registers on import) are imported with the current directory first on the path, as
-``python -m`` does, in this process and in every worker: ``rmm-bench --agent
-my_guard:MyGuardian`` finds ``my_guard.py`` where you run it, without ``PYTHONPATH``.
+Your own code: ``--agent module:Class`` (a guardian), ``--env module:Id`` (an env that
+``module`` registers on import) and a ``module:Name`` in an option (a strategy of your own,
+``--agent-opt 'lrmm.strategies="+my_rules:Coast"'``) are found in the current directory, in this
+process and in every worker: ``rmm-bench --agent my_guard:MyGuardian`` finds ``my_guard.py``
+where you run it, without ``PYTHONPATH``, and so do the modules beside it that it imports.  The
+current directory comes after the installed packages and serves only the modules you name and
+theirs: a ``tqdm.py`` or ``pyarrow.py`` there is never imported in place of this project's
+dependencies, and a module you name that shares its name with an installed one (``numpy.py``
+and ``--agent numpy:X``) is refused in one line naming both (rename yours).
 
 Clock modes (``--clock``): ``wall`` (default, the paper's: real time between steps, scaled by
 ``--time-accel``, passes in the world; results depend on the machine and on how many workers
@@ -61,9 +66,9 @@ exits with status 1 with one line per agent naming the count and the first error
 ``env`` with the innermost frames of its traceback (where your code raised), it has no result,
 the command exits 1 with one line naming the env, and a rerun retries it.  A run is keyed on
 its options and on the SHA-256 of every file it reads (a model file, given or shipped, and the
-source file of a ``module:Class`` agent's or a ``module:Id`` env's module: its own ``.py``, a
-package's ``__init__.py``): the same command after such a file changed starts a new run, said
-in one line, instead of appending to the old one.  Files that module imports are not covered:
+source file of the module of a ``module:Class`` agent, a ``module:Id`` env or a ``module:Name``
+in an option: its own ``.py``, a package's ``__init__.py``): the same command after such a file
+changed starts a new run, said in one line, instead of appending to the old one.  Files that module imports are not covered:
 after editing one, run with another ``--out`` (the same seeds in a fresh database) or another
 ``--seed``, or change the module's own file.  An episode over ``--episode-timeout`` (default
 600 s: generous, as a worker's first episode also pays for imports and, for ``hj``, a
@@ -72,13 +77,14 @@ calling ``os._exit``) is a failure of the run, not a result: it is stored with i
 fresh worker takes over, and any rerun retries it.  After ``max(4, 2 x workers)`` episodes in
 a row lost their worker the run stops (a cause that kills every worker, such as too little
 memory, would otherwise restart workers for every remaining episode).  A run that leaves
-episodes without a result exits with status 1 and says how to finish; Ctrl-C exits 130; both
-keep every finished episode.  Storage failures are told apart, one line each: an ``--out``
-that is a file or cannot be written, or a read-only ``results.db``, exit 2 (change the path);
-a full disk, a file-size limit (``ulimit -f``) or a database locked by another command exit 1
-and keep every stored episode (rerun the same command once fixed); only a truly damaged
-``results.db`` (its integrity check fails) is to be moved aside, after exporting what is
-readable, as its message says.  In short: 2 is bad input, 1 a run that could not finish.
+episodes without a result exits with status 1 and says how to finish; Ctrl-C exits 130 (in any
+subcommand: one line, no traceback); both keep every finished episode.  Storage failures are
+told apart, one line each: an ``--out`` that is a file or cannot be written, or a read-only
+``results.db``, exit 2 (change the path); a full disk, a file-size limit (``ulimit -f``) or a
+database locked by another command exit 1 and keep every stored episode (rerun the same command
+once fixed); only a truly damaged ``results.db`` (its integrity check fails) is to be moved
+aside, after exporting what is readable, as its message says.  In short: 2 is bad input, 1 a
+run that could not finish.
 ``rmm-bench report`` prints how many episodes each agent actually has and flags a run that was
 killed (its invocation still says ``running`` but its process is gone).
 """
@@ -89,10 +95,10 @@ import os
 import sys
 
 from rmm_bench import args as _args
-from rmm_bench.config import import_from
 from rmm_bench.run import RunFailed, cmd_run, cmd_sweep
 from rmm_bench.store import ResultsDatabaseError
 from rmm_envs.failures import describe_os_error
+from rmm_envs.user_modules import user_folders
 
 __all__ = ["SUBCOMMANDS", "build_parser", "build_replay_parser", "build_report_parser", "build_sweep_parser", "main"]
 
@@ -124,7 +130,21 @@ def build_sweep_parser():
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    import_from([os.getcwd()])  # module:Class and module:Id import from here, as under python -m
+    try:
+        # module:Class, module:Id and an option's module:Name are found here, after the installed packages
+        with user_folders([os.getcwd()]):
+            return _command(argv)
+    except KeyboardInterrupt:  # a run says what it saved and returns 130 itself; anywhere else, one line
+        what = argv[0] if argv and (argv[0] in SUBCOMMANDS or argv[0] in _OWN) else "run"
+        print(f"rmm-bench: interrupted (Ctrl-C) during {what}; rerun the same command to finish", file=sys.stderr)
+        return 130
+
+
+#: the subcommands this module dispatches itself (besides SUBCOMMANDS')
+_OWN = ("report", "replay", "riskmap", "quadrisk", "sweep", "run")
+
+
+def _command(argv: list[str]) -> int:
     try:
         if argv and argv[0] == "report":
             from rmm_bench.report import cmd_report

@@ -8,10 +8,12 @@
   keeps in ``runs.config`` and what :attr:`~AgentRun.key` (the ``run_key``) hashes, with the
   same keys and values as databases written before these classes existed, so ``report`` and
   ``--resume`` read them unchanged, plus ``inputs`` when the run reads files: the SHA-256 of
-  the bytes of every file the guardian or the env reads (:func:`input_digests`), so a model
+  the bytes of every file the guardian or the env reads (:func:`input_digests`, from
+  :mod:`rmm_bench.inputs`), so a model
   file replaced between two commands makes a new run instead of one row mixing two models,
-  and the source file of the module of a ``module:Class`` agent or a ``module:Id`` env
-  (:func:`source_digests`), so editing one's own guardian or simulator makes a new run too.
+  and the source file of the module of a ``module:Class`` agent, a ``module:Id`` env or a
+  ``module:Name`` in the options (a strategy of one's own; :func:`source_digests`), so editing
+  one's own guardian, simulator or strategy makes a new run too.
 * :class:`EpisodeTask`: what a worker receives: the run, the episode index, its derived seed,
   and the guardian's compute threads (not part of the run: results do not depend on them).
 * :class:`EpisodeResult`: what a worker returns and the store writes: one row of the
@@ -26,17 +28,27 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import importlib.util
 import json
-import os
-import sys
 from dataclasses import dataclass, field
-from pathlib import Path
 
+from rmm_bench.inputs import (  # re-exported: the harness imports them from here
+    PROJECT_PACKAGES,
+    InputChanged,
+    changed_inputs,
+    file_sha256,
+    input_digests,
+    module_name,
+    portable_path,
+    resolve_input,
+    run_input_digests,
+    run_modules,
+    source_digests,
+)
 from rmm_envs.catalog import stored_id
 from rmm_guardians.registry import accepts_argument  # noqa: F401  (re-exported: the runner and the checks use it from here)
 
 __all__ = [
+    "PROJECT_PACKAGES",
     "AgentRun",
     "BenchConfig",
     "EpisodeResult",
@@ -47,171 +59,18 @@ __all__ = [
     "file_sha256",
     "input_digests",
     "module_name",
+    "portable_path",
+    "resolve_input",
     "run_input_digests",
     "run_key",
+    "run_modules",
     "source_digests",
 ]
-
-
-def import_from(paths) -> None:
-    """Put ``paths`` first on ``sys.path`` (in order, each once), as ``python -m`` puts the
-    current directory: ``module:Class`` agents and ``module:Id`` envs import from there."""
-    for path in reversed(tuple(paths)):
-        if path in sys.path:
-            sys.path.remove(path)
-        sys.path.insert(0, path)
 
 
 def run_key(config: dict) -> str:
     """The run's identity in the store: the first 16 hex digits of the SHA-256 of its sorted JSON."""
     return hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()[:16]
-
-
-def file_sha256(path: str | Path) -> str:
-    """SHA-256 (hex) of the bytes of the file ``path``, read in 1 MiB blocks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def _strings(value):
-    if isinstance(value, str):
-        yield value
-    elif isinstance(value, dict):
-        for v in value.values():
-            yield from _strings(v)
-    elif isinstance(value, (list, tuple)):
-        for v in value:
-            yield from _strings(v)
-
-
-def input_digests(guardian, *options: dict) -> dict[str, str]:
-    """Every file a run reads, path -> SHA-256 of its bytes: each string option (of the guardian
-    or the env) naming a regular file, and the files the guardian reports it read
-    (:meth:`rmm_guardians.base.Guardian.input_files`, e.g. a shipped model)."""
-    out: dict[str, str] = {}
-    for opts in options:
-        for text in _strings(opts):
-            try:
-                if len(text) < 4096 and Path(text).is_file():
-                    out[text] = file_sha256(text)
-            except (OSError, ValueError):  # unreadable or not a path: the guardian or env reports it when it reads it
-                continue
-    reported = getattr(guardian, "input_files", None)
-    if callable(reported):
-        out.update({str(k): str(v) for k, v in reported().items()})
-    return dict(sorted((portable_path(k), v) for k, v in out.items()))
-
-
-#: the project's packages: a file inside one is named by its place in the package
-PROJECT_PACKAGES = ("rmm_envs", "rmm_guardians", "rmm_bench")
-
-
-def _package_dir(name: str) -> Path | None:
-    spec = importlib.util.find_spec(name)
-    origin = spec.origin if spec is not None else None
-    return Path(origin).resolve().parent if origin else None
-
-
-def portable_path(path: str) -> str:
-    """A file inside one of the project's installed packages (a shipped model) as
-    ``package/relative/path``, the same on every machine and checkout, so the same run has the
-    same key wherever it runs; any other path as given."""
-    try:
-        full = Path(path).resolve()
-    except (OSError, RuntimeError):
-        return path
-    for name in PROJECT_PACKAGES:
-        root = _package_dir(name)
-        if root is not None and full.is_relative_to(root):
-            return f"{name}/{full.relative_to(root).as_posix()}"
-    return path
-
-
-def resolve_input(key: str) -> Path:
-    """The file an ``inputs`` key names on this machine: the inverse of :func:`portable_path`."""
-    head, _, rest = key.partition("/")
-    if head in PROJECT_PACKAGES and rest and not Path(key).is_absolute():
-        root = _package_dir(head)
-        if root is not None:
-            return root / rest
-    return Path(key)
-
-
-def module_name(spec: str, env: bool = False) -> str | None:
-    """The module of a ``module:Class`` agent (``env=False``) or a ``module:Id`` env id, as the
-    registry and :func:`rmm_envs.env_plugins.resolve_env_id` split them; None for a bare name
-    (a built-in guardian or env, an entry point)."""
-    module, colon, rest = spec.rpartition(":") if env else spec.partition(":")
-    return module if colon and module and rest else None
-
-
-def _module_file(name: str) -> str | None:
-    """The file module ``name`` is (or would be) loaded from: its own ``.py`` file, a package's
-    ``__init__.py``; None for a namespace package, a built-in module or one not found."""
-    mod = sys.modules.get(name)
-    origin = getattr(mod, "__file__", None) if mod is not None else None
-    if origin is None and mod is None:
-        try:
-            spec = importlib.util.find_spec(name)
-        except (ImportError, ValueError):  # a parent package missing or failing: the import reports it
-            spec = None
-        origin = spec.origin if spec is not None and spec.has_location else None
-    return origin if isinstance(origin, str) and os.path.isfile(origin) else None
-
-
-def _path_key(path: str, base: str | None) -> str:
-    """``path`` relative to ``base`` (default: the current directory) when it lies under it, so a
-    project moved or cloned elsewhere keeps its run keys; else absolute."""
-    full = os.path.abspath(path)
-    try:
-        rel = os.path.relpath(full, base or os.getcwd())
-    except ValueError:  # another drive
-        return full
-    return full if rel == os.pardir or rel.startswith(os.pardir + os.sep) else rel
-
-
-def source_digests(agent: str, env_id: str, base: str | None = None) -> dict[str, str]:
-    """The source files of the user's own code a run imports, path -> SHA-256: the module of a
-    ``module:Class`` agent and of a ``module:Id`` env (its own ``.py`` file; a package's
-    ``__init__.py``), so editing it starts a new run.  Files that module imports are not
-    covered.  Built-in guardians and envs (bare names) have none: their run keys are unchanged.
-    The module must be imported already (or importable); one that is not gives no entry (the
-    import reports it).  ``base``: the folder paths are relative to (the directory
-    ``rmm-bench`` ran in; default, the current one)."""
-    out: dict[str, str] = {}
-    for name in (module_name(agent), module_name(env_id, env=True)):
-        path = _module_file(name) if name else None
-        if path is not None:
-            try:
-                out[_path_key(path, base)] = file_sha256(path)
-            except OSError:  # unreadable now: the run's check names it as unreadable
-                continue
-    return out
-
-
-def run_input_digests(guardian, run: AgentRun, base: str | None = None) -> dict[str, str]:
-    """Every file ``run`` reads as this process sees it now (what its ``inputs`` recorded when it
-    was keyed): :func:`input_digests` of the guardian and the options, and
-    :func:`source_digests` of the agent's and the env's modules."""
-    out = input_digests(guardian, run.agent_kwargs, run.env_kwargs) | source_digests(run.agent, run.env_id, base)
-    return dict(sorted(out.items()))
-
-
-class InputChanged(RuntimeError):
-    """A file the run reads no longer has the bytes the run was started with."""
-
-
-def changed_inputs(recorded: dict[str, str], now: dict[str, str]) -> str:
-    """'' if every file of ``recorded`` still has its digest in ``now``, else one clause per changed file."""
-    return "; ".join(
-        f"{path} (sha256 {digest[:12]}... when the run was keyed, "
-        f"{now[path][:12] + '...' if now.get(path) else 'unreadable'} now)"
-        for path, digest in recorded.items()
-        if now.get(path) != digest
-    )
 
 
 def _json_copy(name: str, value: dict) -> dict:
@@ -296,9 +155,9 @@ class EpisodeTask:
     episode: int
     seed: int
     threads: int | None = None
-    #: folders the worker puts first on ``sys.path`` before importing the agent and the env (the
-    #: directory ``rmm-bench`` ran in, so ``module:Class`` and ``module:Id`` import from there in
-    #: every worker, as ``python -m`` would; not part of the run's identity)
+    #: folders the worker searches for the modules the run names, after the installed packages
+    #: (the directory ``rmm-bench`` ran in, so ``module:Class`` and ``module:Id`` import from there
+    #: in every worker: :func:`rmm_envs.user_modules.search_user_folders`; not part of the run's identity)
     import_path: tuple[str, ...] = ()
 
     @property

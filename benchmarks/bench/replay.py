@@ -372,11 +372,11 @@ def build_env(target: ReplayTarget):
     :class:`~rmm_envs.clocks.ReplayClock` (loaded per episode).  ValueError when it cannot be made."""
     import gymnasium as gym
 
-    from rmm_bench.config import import_from
     from rmm_envs.clocks import ReplayClock
     from rmm_envs.env_plugins import EnvUnavailable, resolve_env_id
+    from rmm_envs.user_modules import search_user_folders
 
-    import_from((os.getcwd(),))
+    search_user_folders((os.getcwd(),))  # a module:Id env's module, after the installed packages
     kwargs = dict(target.run.env_kwargs)
     if target.clock_trace is not None:
         kwargs["clock"] = ReplayClock((), "no episode yet")

@@ -57,12 +57,12 @@ from rmm_bench.config import (
     EpisodeTask,
     InputChanged,
     changed_inputs,
-    import_from,
     run_input_digests,
     run_key,
 )
 from rmm_envs.envs.guarded import EPISODE_KEY
 from rmm_envs.starts import start_fingerprint
+from rmm_envs.user_modules import search_user_folders
 
 __all__ = [
     "CACHE_STATS",
@@ -368,7 +368,8 @@ def play_episode(task: EpisodeTask, env=None, observer=None) -> EpisodeRecord:
                 signal.setitimer(signal.ITIMER_REAL, float(timeout))
             except ValueError:  # not the main thread (e.g. some Ray setups): check in the loop only
                 use_alarm = False
-        import_from(task.import_path)
+        if task.import_path:  # the folder rmm-bench ran in: its modules, after the installed packages
+            search_user_folders(task.import_path)
         if env is None:
             env = _env(run.env_id, run.env_kwargs)
         guardian = _guardian(task)

@@ -165,7 +165,7 @@ def generate(
                 new_rows = _run_ray(cfg, out, todo, ray_address, bar)
             else:
                 raise ValueError(f"unknown backend {backend!r}; expected 'local' or 'ray'")
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:
         bar.close()
         left = sum(1 for s in range(cfg.n_shards) if not shard_path(out, s).exists())
         print(
@@ -173,6 +173,7 @@ def generate(
             "rerun the same command to finish",
             file=sys.stderr,
         )
+        e.told = True  # main() adds no second line
         raise
     bar.close()
     elapsed = time.perf_counter() - t0
@@ -206,8 +207,16 @@ def generate(
 
 
 def _shard_job(job):
-    """Worker entry for :func:`rmm_envs.pool.run_local` / ``run_ray``: ``job`` is ``(config dict, out or None, shard)``."""
-    return _shard_task(*job)
+    """Worker entry for :func:`rmm_envs.pool.run_local` / ``run_ray``: ``job`` is ``(config dict,
+    out or None, shard, folders)``, ``folders`` those searched for the modules ``--env module:Id``
+    and ``--failure module:callable`` name (the directory ``rmm-datagen`` ran in), after the
+    installed packages."""
+    from rmm_envs.user_modules import search_user_folders
+
+    *args, folders = job
+    if folders:
+        search_user_folders(folders)
+    return _shard_task(*args)
 
 
 # Stop after this many shards in a row lost their worker with none finishing: a cause that
@@ -257,7 +266,7 @@ def _run_local(cfg: DatagenConfig, out: Path, todo: list[int], workers: int | No
 
     if workers is None:
         workers = os.cpu_count() or 1  # generate() has refused anything but an integer >= 1
-    jobs = [(asdict(cfg), str(out), s) for s in todo]
+    jobs = [(asdict(cfg), str(out), s, (os.getcwd(),)) for s in todo]
     return _collect(cfg, out, todo, run_local(_shard_job, jobs, workers, max_lost_in_a_row=_MAX_LOST_IN_A_ROW), bar)
 
 
@@ -265,7 +274,7 @@ def _run_ray(cfg: DatagenConfig, out: Path, todo: list[int], address: str | None
     """Label the ``todo`` shards as Ray tasks and write them here; a shard Ray loses is reported."""
     from rmm_envs.pool import run_ray
 
-    jobs = [(asdict(cfg), None, s) for s in todo]
+    jobs = [(asdict(cfg), None, s, (os.getcwd(),)) for s in todo]
     return _collect(cfg, out, todo, run_ray(_shard_job, jobs, address, max_lost_in_a_row=_MAX_LOST_IN_A_ROW), bar)
 
 
@@ -343,8 +352,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if os.getcwd() not in sys.path:  # --env module:Id and --failure module:callable import from here first,
-        sys.path.insert(0, os.getcwd())  # as under python -m (local workers inherit the path)
+    from rmm_envs.user_modules import user_folders
+
+    # --env module:Id and --failure module:callable are found here, after the installed packages
+    # (never in their place: a tqdm.py here is not imported), in this process and every worker
+    try:
+        with user_folders([os.getcwd()]):
+            return _main(args)
+    except KeyboardInterrupt as e:  # one line, no traceback (generate() says what it saved)
+        if not getattr(e, "told", False):
+            print("rmm-datagen: interrupted (Ctrl-C); rerun the same command to finish", file=sys.stderr)
+        return 130
+
+
+def _main(args) -> int:
     try:
         env_kwargs = json.loads(args.env_kwargs)
         if not isinstance(env_kwargs, dict):
@@ -393,8 +414,6 @@ def main(argv: list[str] | None = None) -> int:
             ray_address=args.ray_address,
             progress=not args.no_progress,
         )
-    except KeyboardInterrupt:
-        return 130
     except (ValueError, TypeError, RuntimeError, FileNotFoundError) as e:  # TypeError: an env that is not a LabelledEnv
         print(f"rmm-datagen: error: {e}", file=sys.stderr)
         return 2

@@ -159,11 +159,13 @@ def load_failure(spec: str | None):
     (:func:`bad_failure`) naming what cannot be imported."""
     if spec is None:
         return None
-    import importlib
+    from rmm_envs.user_modules import UserModuleError, import_user_module
 
     module, _, attr = spec.partition(":")
-    try:
-        fn = getattr(importlib.import_module(module), attr)
+    try:  # the current directory's module, after the installed packages (never in place of one)
+        fn = getattr(import_user_module(module, "--failure"), attr)
+    except UserModuleError as e:
+        raise bad_failure(spec, f"it cannot be imported ({str(e).removeprefix('--failure: ')})") from None
     except (ImportError, AttributeError, ValueError) as e:
         raise bad_failure(spec, f"it cannot be imported ({e})") from None
     if not callable(fn):

@@ -4,8 +4,8 @@ a command line and a model file's stored decision give them in."""
 from __future__ import annotations
 
 import ast
-import importlib
 
+from rmm_envs.user_modules import import_user_module
 from rmm_guardians.lrmm.strategies.base import Strategy
 from rmm_guardians.lrmm.strategies.candidates import Restart, SafestCandidate
 from rmm_guardians.lrmm.strategies.driver import RatedDriver, Slide
@@ -25,9 +25,12 @@ def _strategy_class(name: str) -> type[Strategy]:
         module, _, attr = name.partition(":")
         if not module or not attr:
             raise ValueError(f"strategy {name!r} must look like 'package.module:Class'")
+        # a module of one's own: found in the folder rmm-bench runs in, after the installed
+        # packages, and refused by a replay the command line did not consent to
+        mod = import_user_module(module, f"unknown strategy {name!r}")
         try:
-            cls = getattr(importlib.import_module(module), attr)
-        except (ImportError, AttributeError) as e:
+            cls = getattr(mod, attr)
+        except AttributeError as e:
             raise ValueError(f"unknown strategy {name!r}: {e}") from None
         if not (isinstance(cls, type) and issubclass(cls, Strategy)):
             raise ValueError(f"strategy {name!r} is not a subclass of rmm_guardians.lrmm.strategies.Strategy")
