@@ -307,7 +307,16 @@ def replay_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--trust-modules",
         action="store_true",
-        help="import a module:Class agent or module:Id env that the database names without naming it here",
+        help="import every module the database names (a module:Class agent, a module:Id env, a module:Name "
+        "in the options, such as a strategy of one's own) without naming it here",
+    )
+    p.add_argument(
+        "--trust-module",
+        action="append",
+        default=[],
+        metavar="MODULE",
+        help="import this module the database names (repeat, or a comma list), e.g. a strategy module of "
+        'lrmm.strategies="+my_rules:Coast"',
     )
     p.add_argument(
         "--env",
@@ -343,6 +352,14 @@ def _episode_list(text: str) -> tuple[int, ...]:
     return tuple(dict.fromkeys(out))
 
 
+def _module_list(values: list[str]) -> tuple[str, ...]:
+    out = tuple(m.strip() for v in values for m in v.split(",") if m.strip())
+    for m in out:
+        if not all(part.isidentifier() for part in m.split(".")):
+            raise ValueError(f"--trust-module {m!r}: expected a module name (dotted Python identifiers, e.g. my_rules)")
+    return out
+
+
 def parse_replay(argv: list[str]):
     """``rmm-bench replay``'s arguments as a :class:`rmm_bench.replay.ReplayRequest`."""
     from rmm_bench.replay import ReplayRequest
@@ -366,6 +383,7 @@ def parse_replay(argv: list[str]):
         limit=args.limit,
         allow_errors=args.allow_errors,
         trust_modules=args.trust_modules,
+        trusted=_module_list(args.trust_module),
         env=args.env,
         invocation=args.invocation,
         progress=not args.no_progress,

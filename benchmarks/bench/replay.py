@@ -23,16 +23,18 @@ decides differently in a replay; the replay then reports the first differing col
 the clock trace ran out (the replay went on longer than the run), and says that such a guardian
 cannot be verified.
 
-Safety.  The database is opened read-only (never migrated nor written).  Built-in guardians and
-envs replay directly; a ``module:Class`` agent or ``module:Id`` env that the database names is
-imported only when the command line names the same module (``--agent module:Class``,
-``--env module:Id``) or with ``--trust-modules``: a database may come from someone else.
+Safety.  The database is opened read-only (never migrated nor written).  Built-in guardians,
+envs and strategies replay directly; a module the database names (a ``module:Class`` agent, a
+``module:Id`` env, a ``module:Name`` in the agent's or the env's options, such as a strategy of
+one's own) is imported only when the command line names the same module (``--agent
+module:Class``, ``--env module:Id``, ``--trust-module module``) or with ``--trust-modules``: a
+database may come from someone else (:mod:`rmm_bench.consent`).
 
 Bad input (one line naming the value and what was expected, exit 2): a missing directory or
 database, an agent or episode not stored, an errored episode without ``--allow-errors``, a
-lost worker's episode, a newer schema, a module no longer importable, a file whose SHA-256
-differs from the run's (a model, or the source file of a ``module:Class`` agent's or a ``module:Id``
-env's module: editing it after the run is refused, naming it, never replayed and blamed on
+lost worker's episode, a newer schema, a module no longer importable or not consented to, a
+file whose SHA-256 differs from the run's (a model, or the source file of a module the run
+names: editing it after the run is refused, naming it, never replayed and blamed on
 non-determinism).
 
 Rendering (``--video``, ``--frames``, ``--every``): :func:`replay_episode` passes an observer
@@ -50,7 +52,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from rmm_bench.config import AgentRun, EpisodeTask, changed_inputs, file_sha256, module_name, resolve_input
+from rmm_bench.config import AgentRun, EpisodeTask, changed_inputs
+from rmm_bench.consent import check_consent, check_inputs, consented_imports
 from rmm_bench.names import did_you_mean
 from rmm_bench.runner import CLOCK_COLUMNS, REPRODUCIBLE_CLOCKS, TIMING_COLUMNS, is_timing_stat
 from rmm_bench.store import EPISODE_FIELDS, ResultsStore
@@ -86,6 +89,7 @@ class ReplayRequest:
     every: int = 1  # --every K: every K-th frame (and the last)
     fps: float | None = None  # --fps (default: the episode's own pace, simulated seconds per video second)
     size: int = 512  # --size: the picture's side in pixels (the strip comes under it)
+    trusted: tuple[str, ...] = ()  # --trust-module: modules the database names that may be imported
 
 
 @dataclass(frozen=True)
@@ -127,46 +131,6 @@ def _select_run(store: ResultsStore, req: ReplayRequest) -> tuple[str, dict]:
             f"--invocation {req.invocation}: it ran {', '.join(inv['run_keys']) or 'no agent'}, not {req.agent!r}"
         )
     return key, store.run_config(key)["config"]
-
-
-def _check_trust(config: dict, req: ReplayRequest) -> None:
-    """Refuse to import a module the database names unless the command line names it too."""
-    if req.trust_modules:
-        return
-    named = {m for m in (_module_of(req.agent), _module_of(req.env or "")) if m}
-    for what, value, flag in (("agent", config["agent"], "--agent"), ("env", config["env_id"], "--env")):
-        module = _module_of(value)
-        if module and module not in named:
-            raise ValueError(
-                f"the stored {what} {value!r} is imported from module {module!r}, which only the database names; "
-                f"a replay imports a module only when the command line names it: pass {flag} {value} "
-                f"(expected) or --trust-modules"
-            )
-
-
-def _module_sources(config: dict) -> set[str]:
-    """The file names the module of the run's ``module:Class`` agent or ``module:Id`` env is read
-    from (``pkg/mod.py``, ``pkg/mod/__init__.py``), as their stored ``inputs`` end."""
-    names = (module_name(config.get("agent", "")), module_name(config.get("env_id", ""), env=True))
-    stems = [n.replace(".", os.sep) for n in names if n]
-    return {s + ".py" for s in stems} | {os.path.join(s, "__init__.py") for s in stems}
-
-
-def _check_inputs(config: dict) -> None:
-    """Every file the run read must still have the SHA-256 stored with the run.  A module's source
-    file that is gone is left to its import, which names the module and why it cannot be imported."""
-    sources = _module_sources(config)
-    for path, digest in (config.get("inputs") or {}).items():
-        if not resolve_input(path).is_file():
-            if any(path == s or path.endswith(os.sep + s) for s in sources):
-                continue
-            raise ValueError(f"{path}: the run read this file (sha256 {digest[:12]}...) and it no longer exists")
-        now = file_sha256(resolve_input(path))
-        if now != digest:
-            raise ValueError(
-                f"{path}: its sha256 is {now[:12]}..., expected {digest[:12]}... (the file the run read); "
-                "replay needs the same file"
-            )
 
 
 def _agent_run(config: dict, run_key: str, store: ResultsStore) -> AgentRun:
@@ -230,7 +194,7 @@ def plan_replay(store: ResultsStore, req: ReplayRequest) -> list[ReplayTarget]:
 
         if current_id(req.env) != current_id(config["env_id"]):
             raise ValueError(f"--env {req.env}: {req.agent}'s run {run_key} ran on {config['env_id']!r}, expected it")
-    _check_trust(config, req)
+    check_consent(config, req)  # before anything is imported
     run = _agent_run(config, run_key, store)
     mode = _clock_mode(run.env_kwargs)
     nonblocking = "time_accel" in run.env_kwargs
@@ -420,7 +384,13 @@ def _pace(drawing) -> float:
 
 
 def cmd_replay(req: ReplayRequest) -> int:
-    """Replay the request's episodes; 0 if every one is verified, 1 if one differs (2 is raised as ValueError)."""
+    """Replay the request's episodes; 0 if every one is verified, 1 if one differs (2 is raised as
+    ValueError); only the modules the command line consents to are imported."""
+    with consented_imports(req):
+        return _replay(req)
+
+
+def _replay(req: ReplayRequest) -> int:
     if not req.dir.is_dir():
         what = "is not a directory" if req.dir.exists() else "does not exist"
         raise ValueError(f"replay {req.dir}: it {what}; expected the --out directory of an rmm-bench run")
@@ -432,7 +402,7 @@ def cmd_replay(req: ReplayRequest) -> int:
         targets = plan_replay(store, req)
     finally:
         store.close()
-    _check_inputs(targets[0].run.as_dict())
+    check_inputs(targets[0].run.as_dict())
     from rmm_bench.video import EpisodeDrawing, check_outputs, episode_path
 
     check_outputs(req.video, req.frames, req.every, reads=[db])  # before anything is simulated or written

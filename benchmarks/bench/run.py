@@ -372,6 +372,11 @@ def _interrupted(out: Path) -> int:
     return 130
 
 
+def _sources(run: AgentRun) -> dict[str, str]:
+    """The source files of the modules ``run`` names (its agent's, its env's, its options')."""
+    return source_digests(run.agent, run.env_id, agent_kwargs=run.agent_kwargs, env_kwargs=run.env_kwargs)
+
+
 def applicable(config: BenchConfig) -> tuple[BenchConfig, dict]:
     """Check every option, env and guardian before anything is written (:func:`check_runs`).
     Agents of a named set (``--agent all``, ``paper``) that do not apply to the env are dropped
@@ -397,8 +402,8 @@ def applicable(config: BenchConfig) -> tuple[BenchConfig, dict]:
         meta = {a: m for a, m in meta.items() if a not in skipped}
     runs = config.agent_runs()
     config = config.with_inputs(
-        {  # the files each guardian and option read, and the source of a module:Class agent's or module:Id env's module
-            a: dict(sorted((m.pop("inputs", {}) | source_digests(a, runs[a].env_id)).items())) for a, m in meta.items()
+        {  # the files each guardian and option read, and the source of each module the run names (agent, env, options)
+            a: dict(sorted((m.pop("inputs", {}) | _sources(runs[a])).items())) for a, m in meta.items()
         }
     )
     return config, meta
