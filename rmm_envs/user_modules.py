@@ -21,7 +21,7 @@ import os
 import sys
 import threading
 from collections.abc import Iterable, Iterator
-from types import ModuleType
+from types import FrameType, ModuleType
 
 __all__ = [
     "OWN_PACKAGES",
@@ -206,7 +206,7 @@ _SKIPPED_FRAMES = {os.path.realpath(importlib.__file__), os.path.realpath(__file
 
 def _imported_by_user_code() -> bool:
     """Whether the import under way comes from a file found in the user's folders."""
-    frame = sys._getframe(2)
+    frame: FrameType | None = sys._getframe(2)
     while frame is not None:
         name = frame.f_code.co_filename
         if not name.startswith("<") and os.path.realpath(name) not in _SKIPPED_FRAMES:

@@ -173,7 +173,7 @@ def generate(
             "rerun the same command to finish",
             file=sys.stderr,
         )
-        e.told = True  # main() adds no second line
+        setattr(e, "told", True)  # noqa: B010 - main() adds no second line
         raise
     bar.close()
     elapsed = time.perf_counter() - t0
