@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from rmm_envs.doomed import DUBINS4D_SEGMENTS, MAZE_SEGMENTS, dubins4d_escapes, maze_escapes
+from rmm_envs.doomed import DUBINS4D_METHOD, DUBINS4D_SEGMENTS, MAZE_SEGMENTS, dubins4d_escapes, maze_escapes
 from rmm_envs.dynamics import Dubins4D
 from rmm_envs.dynamics.dubins3d import Dubins3D
 from rmm_envs.worlds.mazes import Maze
@@ -119,3 +119,31 @@ def test_a_loop_found_only_from_the_end_of_a_piece_makes_the_start_avoidable():
     assert _hits(room, [(u, loop)]) and _hits(room, [(-u, loop)])
     assert not _hits(room, [(0.0, 2.0), (u, loop)]) and not _hits(room, [(0.0, 2.0), (-u, loop)])
     assert maze_escapes(MAZE_CAR, room, POSE, NOWHERE)
+
+
+# ---------------------------------------------------------------- a map of your own (pymunk's contacts)
+
+
+def _map_start(wall_x: float, goal=(-8.0, -8.0, 0.5)):
+    """The doomed test of a map env whose only obstacle is a straight wall (a segment 0.4 m thick)
+    whose near face is ``wall_x`` m ahead of the car at 2 m/s."""
+    import gymnasium as gym
+
+    import rmm_envs  # noqa: F401  (registers the envs)
+    from rmm_envs.starts import assess_start
+
+    wall = {"segment": [[wall_x + 0.2, -20.0], [wall_x + 0.2, 20.0], 0.4]}
+    env = gym.make("Dubins4DMapGuarded-v0", map=[wall, {"start": [[-10.0, -10.0], [10.0, 10.0]]}])
+    env.reset(seed=0, options={"state": [0.0, 0.0, 0.0, 2.0], "goal": list(goal)})
+    return assess_start(env)
+
+
+def test_a_maps_wall_reached_only_after_the_first_segments_is_doomed():
+    """The same search with the map's exact contact test: a flat wall 3.5 m ahead is doomed (the
+    first 2.5 s of braking stop short of it), 4.5 m ahead avoidable, and a goal before the wall
+    saves the start."""
+    doomed = _map_start(3.5)
+    assert doomed.doomed is True and doomed.method == DUBINS4D_METHOD
+    assert _map_start(4.5).doomed is False
+    assert _map_start(3.5, goal=(1.0, 0.0, 0.3)).doomed is False
+    assert _map_start(1.0).doomed is True and _map_start(1.0, goal=(0.5, 0.0, 0.2)).doomed is False

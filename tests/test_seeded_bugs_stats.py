@@ -65,6 +65,34 @@ def test_bootstrap_resamples_whole_pairs():
     assert d == pytest.approx(1.0) and lo == pytest.approx(1.0) and hi == pytest.approx(1.0)
 
 
+def test_bootstrap_defaults_are_seed_0_2000_resamples_95_percent():
+    rng = np.random.default_rng(11)
+    x, y = rng.normal(0.2, 1.0, 60), rng.normal(0.0, 1.0, 60)
+    assert paired_bootstrap(x, y) == paired_bootstrap(x, y, seed=0, resamples=2000, level=0.95)
+    assert paired_bootstrap(x, y) != paired_bootstrap(x, y, seed=1)
+    assert paired_bootstrap(x, y) != paired_bootstrap(x, y, resamples=2001)
+
+
+def test_every_resample_is_drawn_and_any_episode_can_be():
+    """One resample: its mean is the interval (no slot left unfilled); episode 0 alone differs:
+    2 episodes, a resample of both copies of episode 0 (1 in 4) reaches 1."""
+    assert paired_bootstrap(np.full(5, 3.0), np.full(5, 1.0), resamples=1) == (2.0, 2.0, 2.0)
+    assert paired_bootstrap(np.full(5, 3.0), np.full(5, 1.0), resamples=2) == (2.0, 2.0, 2.0)
+    d, lo, hi = paired_bootstrap(np.array([1.0, 0.0]), np.zeros(2), seed=4, resamples=1)
+    assert d == 0.5 and lo == hi and lo in (0.0, 0.5, 1.0)
+    assert paired_bootstrap(np.array([1.0, 0.0]), np.zeros(2), resamples=400) == (0.5, 0.0, 1.0)
+
+
+def test_more_resamples_than_one_batch_of_draws():
+    """3,000 episodes and 2,000 resamples are drawn in batches of 1,333 (4 million indices at a
+    time): every resample filled, the interval the normal approximation's to within 10%."""
+    rng = np.random.default_rng(2)
+    x, y = rng.normal(0.5, 1.0, 3000), rng.normal(0.0, 1.0, 3000)
+    d, lo, hi = paired_bootstrap(x, y, seed=5, resamples=2000)
+    se = np.std(x - y) / math.sqrt(3000)
+    assert d - lo == pytest.approx(Z95 * se, rel=0.1) and hi - d == pytest.approx(Z95 * se, rel=0.1)
+
+
 # ---------------------------------------------------------------- Newcombe by hand at several levels
 
 
@@ -142,6 +170,13 @@ def test_newcombe_unpaired_by_hand_at_each_level(level):
     # clipped: 5/5 against 0/5
     d, lo, hi = newcombe_unpaired(5, 5, 0, 5, z)
     assert d == 1.0 and hi == 1.0 and 0 < lo < 1
+
+
+def test_intervals_never_leave_minus_one_to_one_even_by_a_rounding():
+    """Unclipped, B always and A never over 25 paired episodes gives a lower bound of
+    -1.0000000000000002 (and 0/1 against 27/27 unpaired): the bounds are clipped to [-1, 1]."""
+    assert newcombe_paired(0, 0, 25, 0)[1] == -1.0 and newcombe_paired(0, 25, 0, 0)[2] == 1.0
+    assert newcombe_unpaired(0, 1, 27, 27)[1] == -1.0 and newcombe_unpaired(27, 27, 0, 1)[2] == 1.0
 
 
 # ---------------------------------------------------------------- compare's floor
