@@ -108,6 +108,24 @@ class Threaded(Guardian):
         return {"threads": self.threads or 0, "env_threads": int(os.environ.get("RMM_HJ_THREADS", -1))}
 
 
+class Counting(Guardian):
+    """Acts like ``inactive``; its ``stats()`` counts its decisions of the episode (``decisions``),
+    a counter no built-in guardian reports."""
+
+    name = "counting"
+
+    def reset(self, **kw):
+        super().reset(**kw)
+        self.decisions = 0
+
+    def act(self, obs, info):
+        self.decisions += 1
+        return self.action_space.inactive()
+
+    def stats(self):
+        return {"decisions": self.decisions}
+
+
 def query(out, sql: str) -> list[tuple]:
     """The rows of one SQL query on the results database in ``out`` (closed again at once)."""
     import sqlite3

@@ -105,8 +105,10 @@ def test_the_page_shows_the_error_row_and_its_note(run, tmp_path):
     page_path = tmp_path / "page.html"
     assert main(["report", str(run), "--html", str(page_path)]) == 0
     page = _parse(page_path)
-    rows = {(r[0], r[1], r[2]): r for r in page.rows["pairs"][1:]}
-    boom = rows[(BOOM, "inactive", "error")]
-    assert boom[3:7] == ["16", "100.0", "0.0", "—"] and boom[10] == "—"
-    assert (BOOM, "inactive", "collision") not in rows  # no test of an agent that never had an outcome
-    assert f"{BOOM} vs inactive: no outcome test" in "".join(page.text)
+    # compare orders the agents by name: inactive is A, the guardian that raised B
+    ((_, rows),) = [(a, r) for a, r in page.tables if a.get("data-a") == "inactive" and a.get("data-b") == BOOM]
+    assert [r[0] for r in rows[1:]] == ["error"]  # no test of an agent that never had an outcome
+    assert rows[1][1:6] == ["16", "0.0", "100.0", "—", "—"] and rows[1][7].startswith("16: 0,1,2,3,4")
+    assert f"inactive vs {BOOM}: no outcome test" in "".join(page.text)
+    matrix = [r for a, r in page.tables if a.get("data-outcome") == "collision"][0]
+    assert matrix[1][0] == "inactive" and matrix[1][-1] == "no test"  # its cell in the matrix says so

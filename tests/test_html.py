@@ -22,12 +22,14 @@ EVIL = "<script>alert(1)</script>"
 
 
 class _Page(HTMLParser):
-    """Every tag's attributes, the text of each table row by table class, and all text."""
+    """Every tag's attributes, the text of each table row by table class and table by table
+    (``tables``: its attributes and rows), and all text."""
 
     def __init__(self) -> None:
         super().__init__()
         self.attrs: list[tuple[str, dict]] = []
         self.rows: dict[str, list[list[str]]] = {}
+        self.tables: list[tuple[dict, list[list[str]]]] = []
         self.text: list[str] = []
         self._table: str | None = None
         self._row: list[str] | None = None
@@ -38,6 +40,7 @@ class _Page(HTMLParser):
         self.attrs.append((tag, a))
         if tag == "table":
             self._table = a.get("class", "")
+            self.tables.append((a, []))
         elif tag == "tr":
             self._row = []
         elif tag in ("td", "th"):
@@ -49,6 +52,7 @@ class _Page(HTMLParser):
             self._cell = None
         elif tag == "tr" and self._row is not None and self._table is not None:
             self.rows.setdefault(self._table, []).append(self._row)
+            self.tables[-1][1].append(self._row)
             self._row = None
         elif tag == "table":
             self._table = None
@@ -86,17 +90,42 @@ def _evil_copy(run: Path, tmp_path: Path, name: str = EVIL) -> Path:
     return copy
 
 
+def page_table_i(page: _Page) -> dict[str, dict[str, str]]:
+    """Table I as the page shows it: agent -> header -> cell, the columns equal for every agent
+    (which the page moves to the provenance) put back."""
+    head, *body = page.rows["table-i"]
+    constant = dict(page.rows.get("constant", [])[1:])
+    return {
+        r[0]: dict(zip(head, r, strict=True)) | {h: v for h, v in constant.items() if h in _MD_HEADERS} for r in body
+    }
+
+
+#: Table I's headers, which the page's provenance shares with other facts (version, commit, ...)
+_MD_HEADERS = ("Observation", "Obstacles", "Episodes", "Policy compute time [ms]", "Doomed starts", "Errors")
+
+
+def stored_table_i(folder: Path) -> dict[str, dict[str, str]]:
+    md = [ln for ln in (folder / "table_I.md").read_text().splitlines() if ln.startswith("| ") and "---" not in ln]
+    head, *body = map(md_cells, md)  # a name's escaped | stays in its cell
+    return {r[0]: dict(zip(head, r, strict=True)) for r in body}
+
+
 def test_the_page_holds_every_agents_stored_numbers(run, capsys):
     assert main(["report", str(run), "--html"]) == 0
     page_path = run / "results.html"
     assert f"wrote {page_path}" in capsys.readouterr().out
     page = _parse(page_path)
-    table = {r[0]: r for r in page.rows["table-i"][1:]}
-    md = [ln for ln in (run / "table_I.md").read_text().splitlines() if ln.startswith("| ") and "---" not in ln]
-    stored = {c[0]: c for c in ([x.strip() for x in ln.strip("|").split("|")] for ln in md[1:])}
-    assert set(table) == {"lrmm", "cbf", "inactive"} and table == stored  # every cell as report printed it
-    pairs = page.rows["pairs"][1:]
-    assert {(r[0], r[1]) for r in pairs} == {("lrmm", "cbf"), ("lrmm", "inactive"), ("cbf", "inactive")}
+    table = page_table_i(page)
+    assert set(table) == {"lrmm", "cbf", "inactive"} and table == stored_table_i(run)  # every cell as printed
+    assert "Policy compute time [ms]" not in page.rows["table-i"][0]  # a fixed clock: equal, under Provenance
+    pairs = [(a["data-a"], a["data-b"]) for t, a in page.attrs if t == "table" and a.get("class") == "pair"]
+    assert pairs == [("cbf", "inactive"), ("cbf", "lrmm"), ("inactive", "lrmm")]  # compare's order
+    assert {a["data-outcome"] for t, a in page.attrs if t == "table" and a.get("class") == "matrix"} == {
+        "goal",
+        "collision",
+        "avoidable collision",
+        "timeout",
+    }
     assert {r[0] for r in page.rows["provenance"][1:]} == {"lrmm", "cbf", "inactive"}
 
 
@@ -140,8 +169,10 @@ def test_names_that_split_cells_stay_in_one_cell_in_every_table_format(run, tmp_
     assert {len(re.split(r"(?<!\\)&", ln)) for ln in tex} == {width - 2}  # the tex leaves errors and fallbacks out
     assert r"a\textbar{}b\textbackslash{}\textbar{}c \& 5\%\_d x`y`" in (copy / "table_I.tex").read_text()
     page = _parse(copy / "results.html")
-    assert {len(r) for r in page.rows["table-i"]} == {width} and PIPES in {r[0] for r in page.rows["table-i"]}
-    assert PIPES in {r[0] for r in page.rows["pairs"][1:]} | {r[1] for r in page.rows["pairs"][1:]}
+    assert len({len(r) for r in page.rows["table-i"]}) == 1 and PIPES in {r[0] for r in page.rows["table-i"]}
+    assert page_table_i(page)[PIPES] == stored_table_i(copy)[PIPES]
+    pairs = [(a["data-a"], a["data-b"]) for t, a in page.attrs if t == "table" and a.get("class") == "pair"]
+    assert PIPES in {a for pair in pairs for a in pair}
     md = compare_runs([copy], ["lrmm", PIPES], resamples=10).to_markdown()
     table = [ln for ln in md.splitlines() if ln.startswith("|")]
     assert [len(md_cells(ln)) for ln in table] == [13] * 6 + [7] * 5  # the outcome rows, the continuous rows
@@ -158,7 +189,7 @@ def test_rendered_replays_are_embedded(run, tmp_path):
     page = _parse(copy / "results.html")
     images = [a["src"] for t, a in page.attrs if t == "img"]
     assert any(s.startswith("data:image/gif;base64,") for s in images)
-    assert any(s.startswith("data:image/png;base64,") for s in images)  # the outcome figure
+    assert any(s.startswith("data:image/png;base64,") for s in images)  # the figures
     assert "lrmm-episode-3" in "".join(page.text)
 
 

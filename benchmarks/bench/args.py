@@ -141,7 +141,8 @@ def report_parser() -> argparse.ArgumentParser:
         type=int,
         action="append",
         default=None,
-        help="which recorded run (default: the last); repeat to merge several (one table per configuration)",
+        help="which recorded run (default: every run recorded under the newest run's configuration: env, "
+        "clock, time accel, base step, seed); repeat to merge several (one table per configuration)",
     )
     p.add_argument("--batch-size", type=int, default=64)
     p.add_argument(
@@ -260,7 +261,8 @@ def parse_sweep(argv: list[str]) -> BenchConfig:
 
 @dataclass(frozen=True)
 class ReportRequest:
-    """``rmm-bench report``: which directory, which recorded invocations (None: the last run)."""
+    """``rmm-bench report``: which directory, which recorded invocations (None: every run of the
+    newest run's configuration, :func:`rmm_bench.report.newest_configuration`)."""
 
     dir: Path
     invocations: tuple[int, ...] | None

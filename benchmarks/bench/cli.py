@@ -5,7 +5,7 @@
     rmm-bench --agent paper --episodes 64                  # the paper's agents with the paper's rules
     rmm-bench --agent lrmm,cbf --clock fixed:2             # reproducible: every decision takes 2 ms
     rmm-bench --agent mypkg.guard:MyGuardian               # a third-party guardian
-    rmm-bench report results/                              # rebuild the last run's table from the database
+    rmm-bench report results/                              # rebuild Table I: every agent of the newest configuration
     rmm-bench replay results/ --agent lrmm --episode 17    # re-simulate a stored episode and verify its row
     rmm-bench compare results/ --agents lrmm,cbf           # paired comparison on the episodes both ran
     rmm-bench --agent lrmm --shard 1/2 --out part1         # one machine's share; then: rmm-bench merge all part1 part2

@@ -1,15 +1,21 @@
 """The results page: ``rmm-bench report DIR --html`` writes one self-contained HTML file.
 
-Offers :func:`write_page` and :data:`REPLAYS` (the folder of a results directory whose GIFs the
-page shows) and :data:`GIF_LIMIT`.
+Offers :func:`write_page`, :data:`REPLAYS` (the folder of a results directory whose GIFs the
+page shows), :data:`GIF_LIMIT` and :data:`PAGE_LIMIT`.
 
-The page holds, per configuration, the Table I table with the stored numbers, the outcome
-figure, the paired comparisons of every two agents (:func:`rmm_bench.compare.compare_runs`),
-the provenance of every run and merged part, and the GIFs ``rmm-bench replay`` rendered into
-``DIR/replays/``.  Everything is inside the file (images as ``data:`` URIs, the style sheet
-inline, no script): it opens without network access, reads on a laptop screen (a centred
-column, wide tables scroll sideways) and prints (a print style sheet).  Every string that comes
-from the database is escaped, so an agent named ``<script>...`` shows as text.
+The page leads with the answer.  Per configuration (one table of ``report``): a figure of every
+agent's success, collision, avoidable-collision and timeout rates with their 95% intervals
+(:func:`rmm_bench.report_figures.plot_rates`; side by side on a wide screen, stacked on a
+narrow one), a paragraph generated from the numbers (:func:`rmm_bench.pairwise.summary`), then
+Table I with the stored numbers (the columns equal for every agent moved to the provenance),
+each guardian's own counters (its ``stats()``, summed over the episodes), one matrix of paired
+differences per outcome with each pair's details folded (:mod:`rmm_bench.html_pairs`), and the
+provenance of every run and merged part.  After them, ``outcomes.png`` and the GIFs
+``rmm-bench replay`` rendered into ``DIR/replays/``, as many as keep the page under
+:data:`PAGE_LIMIT` (the others are listed).  Everything is inside the file (images as ``data:``
+URIs, the style sheet inline, no script): it opens without network access, fits a laptop's
+width without sideways scrolling and reads on a phone, and prints (a print style sheet).  Every
+string that comes from the database is escaped, so an agent named ``<script>...`` shows as text.
 """
 
 from __future__ import annotations
@@ -19,31 +25,50 @@ import datetime
 import html
 from pathlib import Path
 
-from rmm_bench.compare_render import p_text
+from rmm_bench.html_pairs import name_html as _name
+from rmm_bench.html_pairs import pairs_html, section_comparison
 from rmm_bench.names import md_cells
 from rmm_bench.outputs import write_output
+from rmm_bench.pairwise import pairwise_matrices, summary
+from rmm_bench.report_figures import plot_rates
+from rmm_bench.report_tables import counter_columns, counter_text
+from rmm_bench.runner import is_timing_stat
 from rmm_bench.store import ResultsStore
 
-__all__ = ["GIF_LIMIT", "REPLAYS", "write_page"]
+__all__ = ["GIF_LIMIT", "PAGE_LIMIT", "REPLAYS", "write_page"]
 
 #: the folder of a results directory whose ``AGENT-episode-N.gif`` files the page shows
 REPLAYS = "replays"
 #: GIFs larger than this many bytes are listed but not embedded (the page stays shareable)
 GIF_LIMIT = 4_000_000
+#: the page's size budget in bytes: GIFs that would take it over are listed, not embedded
+PAGE_LIMIT = 20_000_000
+#: the width below which the figure's panels are stacked (CSS pixels)
+NARROW = 900
 
 _CSS = """
 body { font: 15px/1.45 system-ui, -apple-system, "Segoe UI", sans-serif; color: #1d1d1f; margin: 0; }
 main { max-width: 1100px; margin: 0 auto; padding: 1.5rem 1rem 3rem; }
 h1 { font-size: 1.5rem; } h2 { font-size: 1.2rem; margin-top: 2rem; border-bottom: 1px solid #ddd; }
-h3 { font-size: 1.05rem; }
-.wrap { overflow-x: auto; margin: 0.5rem 0 1rem; }
+h3 { font-size: 1.05rem; margin-top: 1.75rem; } h4 { font-size: 0.95rem; margin: 1.25rem 0 0.25rem; }
+.wrap { max-width: 100%; overflow-x: auto; margin: 0.5rem 0 1rem; }
 table { border-collapse: collapse; font-size: 0.85rem; font-variant-numeric: tabular-nums; }
-th, td { border: 1px solid #ccc; padding: 0.25rem 0.5rem; text-align: right; white-space: nowrap; }
-th { background: #f2f2f4; } td:first-child, th:first-child { text-align: left; }
-td.text { text-align: left; white-space: normal; }
+th, td { border: 1px solid #ccc; padding: 0.25rem 0.45rem; text-align: right; vertical-align: top; }
+th { background: #f2f2f4; font-weight: 600; overflow-wrap: break-word; }
+td:first-child, th:first-child, th[scope=row] { text-align: left; overflow-wrap: break-word; }
+td.text { text-align: left; overflow-wrap: anywhere; } .nw { white-space: nowrap; } .long { overflow-wrap: anywhere; }
+table.matrix td { font-size: 0.8rem; } table.matrix .ci { display: block; color: #555; font-size: 0.72rem; }
+table.matrix td.better { background: #dcf3e3; } table.matrix td.worse { background: #fbe0e0; }
+table.matrix td.none { background: #fafafa; color: #888; }
 .note { color: #555; font-size: 0.85rem; } .warn { color: #9a3412; font-weight: 600; }
+.summary { font-size: 1rem; background: #f6f8fa; border-left: 4px solid #4b7bd1; padding: 0.6rem 0.9rem; }
 img { max-width: 100%; height: auto; } figure { margin: 1rem 0; } figcaption { font-size: 0.85rem; color: #555; }
-.gifs { display: flex; flex-wrap: wrap; gap: 1rem; } .gifs figure { width: 320px; margin: 0; }
+details.pair { border: 1px solid #ddd; border-radius: 4px; padding: 0.3rem 0.6rem; margin: 0.3rem 0; }
+details.pair summary { cursor: pointer; } ul.replay { font-size: 0.8rem; padding-left: 1.2rem; }
+code { overflow-wrap: anywhere; }
+.gifs { display: flex; flex-wrap: wrap; gap: 1rem; } .gifs figure { width: 320px; max-width: 100%; margin: 0; }
+@media (max-width: 800px) { main { padding: 1rem 0.5rem 2rem; } table { font-size: 0.78rem; }
+  th, td { padding: 0.2rem 0.3rem; } }
 @media print {
   body { font-size: 10pt; color: #000; } main { max-width: none; padding: 0; }
   th { background: none; } .wrap { overflow: visible; }
@@ -56,104 +81,106 @@ def _e(value) -> str:
     return html.escape("" if value is None else str(value), quote=True)
 
 
-def _md_table(md: str) -> str:
-    """The markdown table ``report`` prints, as an HTML table (the same cells, escaped)."""
+def _data(data: bytes, kind: str) -> str:
+    return f"data:image/{kind};base64,{base64.b64encode(data).decode()}"
+
+
+def _value(text: str) -> str:
+    """A cell's text escaped, a rate's spread kept with it (``74.7 ± 4.3`` breaks before the ±)."""
+    mean, pm, spread = text.partition(" ± ")
+    return f"<span class='nw'>{_e(mean)}</span> <span class='nw'>± {_e(spread)}</span>" if pm else _e(text)
+
+
+def _table_i(md: str) -> tuple[str, list[tuple[str, str]]]:
+    """The markdown table ``report`` prints as an HTML table (the same cells, escaped) and the
+    columns equal in every row (with two rows or more), which the table leaves out: ``(header, value)``."""
     lines = [ln for ln in md.splitlines() if ln.startswith("|")]
     if len(lines) < 2:
-        return ""
+        return "", []
     cells = [md_cells(ln) for ln in lines]  # a name's escaped | stays in its cell
     head, body = cells[0], cells[2:]
+    constant = [j for j in range(1, len(head)) if len(body) > 1 and len({row[j] for row in body}) == 1]
+    keep = [j for j in range(len(head)) if j not in constant]
     out = ["<div class='wrap'><table class='table-i'><thead><tr>"]
-    out += [f"<th>{_e(h)}</th>" for h in head]
+    out += [f"<th>{_e(head[j])}</th>" for j in keep]
     out.append("</tr></thead><tbody>")
     for row in body:
-        out.append(f"<tr data-agent='{_e(row[0])}'>" + "".join(f"<td>{_e(c)}</td>" for c in row) + "</tr>")
+        shown = [_name(row[0])] + [_value(row[j]) for j in keep[1:]]
+        out.append(f"<tr data-agent='{_e(row[0])}'>" + "".join(f"<td>{c}</td>" for c in shown) + "</tr>")
     out.append("</tbody></table></div>")
     notes = [ln for ln in md.splitlines() if ln and not ln.startswith("|")]
+    if constant:
+        notes.append("Equal for every agent, so under Provenance: " + ", ".join(head[j] for j in constant) + ".")
     out += [f"<p class='note'>{_e(n)}</p>" for n in notes]
-    return "".join(out)
+    return "".join(out), [(head[j], body[0][j]) for j in constant]
 
 
-def _image(path: Path, alt: str) -> str:
-    data = base64.b64encode(path.read_bytes()).decode()
-    kind = "gif" if path.suffix.lower() == ".gif" else "png"
-    return f"<img src='data:image/{kind};base64,{data}' alt='{_e(alt)}'>"
-
-
-def _pct(v) -> str:
-    return "—" if v is None or v != v else f"{100 * v:.1f}"
-
-
-def _comparison(folder: Path, agents: list[str]) -> str:
-    if len(agents) < 2:
-        return "<p class='note'>No paired comparison: the run holds one agent.</p>"
-    from rmm_bench.compare import compare_runs
-
-    try:
-        c = compare_runs([folder], agents, resamples=1000)
-    except ValueError as e:
-        return f"<p class='note'>No paired comparison: {_e(e)}</p>"
-    out = [
-        "<p class='note'>Every pair of agents over the episodes both ran (same starts): rates in %, the "
-        "difference with its 95% paired interval (Newcombe), the discordant episodes (A only, B only) "
-        "and the exact McNemar test on them; the episode numbers replay with <code>rmm-bench replay</code>. "
-        "Where a guardian raised, the tests run over the episodes where neither errored and the "
-        "<em>error</em> row counts the errored ones (no test; the notes below say which).</p>",
-        "<div class='wrap'><table class='pairs'><thead><tr>",
-        "".join(
-            f"<th>{h}</th>"
-            for h in (
-                "A",
-                "B",
-                "outcome",
-                "episodes",
-                "A %",
-                "B %",
-                "A − B % (95%)",
-                "A only",
-                "B only",
-                "both",
-                "McNemar p",
-                "A-only episodes",
-                "B-only episodes",
-            )
-        ),  # fmt: skip
-        "</tr></thead><tbody>",
-    ]
-    for r in c.pairs.itertuples():
-        diff = "—" if r.diff != r.diff else f"{_pct(r.diff)} [{_pct(r.lo)}, {_pct(r.hi)}]"  # the error row: no test
+def _counters(rows: list[dict]) -> str:
+    """Each guardian's own statistics (its ``stats()``), summed over its episodes, one column each."""
+    names = counter_columns(rows)
+    if not names:
+        return "<p class='note'>No guardian reported statistics of its own (<code>stats()</code>).</p>"
+    timing = [n for n in names if is_timing_stat(n)]
+    out = ["<div class='wrap'><table class='counters'><thead><tr><th>Agent</th>"]
+    out += [f"<th>{_name(n)}{' †' if n in timing else ''}</th>" for n in names]
+    out.append("</tr></thead><tbody>")
+    for r in rows:
+        counts = r.get("counters", {})
         out.append(
-            f"<tr><td>{_e(r.a)}</td><td>{_e(r.b)}</td><td class='text'>{_e(r.outcome)}</td><td>{r.n}</td>"
-            f"<td>{_pct(r.rate_a)}</td><td>{_pct(r.rate_b)}</td>"
-            f"<td>{diff}</td><td>{r.a_only}</td><td>{r.b_only}</td>"
-            f"<td>{r.both}</td><td>{p_text(r.p_value)}</td><td class='text'>{_e(', '.join(map(str, r.a_only_episodes)))}</td>"
-            f"<td class='text'>{_e(', '.join(map(str, r.b_only_episodes)))}</td></tr>"
+            f"<tr data-agent='{_e(r['agent'])}'><td>{_name(r['agent'])}</td>"
+            + "".join(f"<td>{_e(counter_text(counts.get(n)) or '—')}</td>" for n in names)
+            + "</tr>"
         )
     out.append("</tbody></table></div>")
-    floor = c.floor
-    if len(floor):
-        doomed = int((floor["doomed"] == True).sum())  # noqa: E712
-        out.append(
-            f"<p>Floor: {len(floor)} episodes that every agent failed (no goal)"
-            + (f", {doomed} of them from doomed starts" if floor["doomed"].notna().all() else "")
-            + f"; first: {_e(', '.join(map(str, floor['episode'].head(10))))}.</p>"
-        )
-    out += [f"<p class='note'>{_e(n)}</p>" for n in c.notes]
-    return "".join(out)
+    note = "Each guardian's own <code>stats()</code>, summed over its episodes; —: it reports no such statistic"
+    if timing:
+        note += "; †: a time or this machine's cache state, not a result (a replay does not compare it)"
+    return "".join(out) + f"<p class='note'>{note}. Table I's CSV holds them as <code>stats.NAME</code> columns.</p>"
 
 
-def _provenance(store: ResultsStore, run_keys: dict[str, str]) -> str:
-    out = [
-        "<div class='wrap'><table class='provenance'><thead><tr><th>agent</th><th>run</th><th>version</th>"
-        "<th>commit</th><th>python</th><th>platform</th><th>command</th></tr></thead><tbody>"
+def _figure(rows: list[dict]) -> str:
+    """The rates figure: four panels side by side, stacked below :data:`NARROW` pixels."""
+    if not rows:
+        return ""
+    wide = plot_rates(rows, layout="row")
+    narrow = plot_rates(rows, layout="column")
+    return (
+        "<figure class='rates'><picture>"
+        f"<source media='(max-width: {NARROW}px)' srcset='{_data(narrow, 'png')}'>"
+        f"<img src='{_data(wide, 'png')}' alt='success, collision, avoidable-collision and timeout rate of every "
+        "agent with its 95% interval'></picture><figcaption>Each agent's rates in % of its episodes with a result "
+        "(avoidable collisions: of its avoidable starts), with 95% Wilson score intervals over those episodes; "
+        "fewest collisions first. Table I's ± is the spread over batches, the paper's.</figcaption></figure>"
+    )
+
+
+def _provenance(store: ResultsStore, run_keys: dict[str, str], constant: list[tuple[str, str]]) -> str:
+    fields = [
+        ("version", "package_version"),
+        ("commit", "git_revision"),
+        ("python", "python"),
+        ("platform", "platform"),
     ]
+    provs = {agent: store.run_config(key)["provenance"] for agent, key in run_keys.items()}
+    same = [(label, k) for label, k in fields if len(provs) > 1 and len({str(p.get(k)) for p in provs.values()}) == 1]
+    varying = [(label, k) for label, k in fields if (label, k) not in same]
+    out = []
+    shared = [(h, v) for h, v in constant] + [(label, next(iter(provs.values())).get(k)) for label, k in same]
+    if shared:
+        out.append("<div class='wrap'><table class='constant'><thead><tr><th>equal for every agent</th><th>value</th>")
+        out.append("</tr></thead><tbody>")
+        out += [f"<tr><td>{_e(h)}</td><td class='text'>{_e(v)}</td></tr>" for h, v in shared]
+        out.append("</tbody></table></div>")
+    out.append("<div class='wrap'><table class='provenance'><thead><tr><th>agent</th><th>run</th>")
+    out += [f"<th>{label}</th>" for label, _ in varying]
+    out.append("<th>command</th></tr></thead><tbody>")
     for agent, key in run_keys.items():
-        prov = store.run_config(key)["provenance"]
+        prov = provs[agent]
         argv = " ".join(map(str, prov.get("argv") or []))
         out.append(
-            f"<tr><td>{_e(agent)}</td><td>{_e(key)}</td><td>{_e(prov.get('package_version'))}</td>"
-            f"<td>{_e(prov.get('git_revision'))}</td><td>{_e(prov.get('python'))}</td>"
-            f"<td class='text'>{_e(prov.get('platform'))}</td><td class='text'>rmm-bench {_e(argv)}</td></tr>"
+            f"<tr><td>{_e(agent)}</td><td>{_e(key)}</td>"
+            + "".join(f"<td class='text'>{_e(prov.get(k))}</td>" for _, k in varying)
+            + f"<td class='text'>rmm-bench {_e(argv)}</td></tr>"
         )
     out.append("</tbody></table></div>")
     if store._table_exists("parts"):
@@ -163,13 +190,14 @@ def _provenance(store: ResultsStore, run_keys: dict[str, str]) -> str:
         ).fetchall()
         if parts:
             out.append(
-                "<h3>Merged parts</h3><div class='wrap'><table class='parts'><thead><tr><th>part</th><th>host</th>"
+                "<h4>Merged parts</h4><div class='wrap'><table class='parts'><thead><tr><th>part</th><th>host</th>"
                 "<th>version</th><th>commit</th><th>shard</th><th>episodes</th><th>ran</th></tr></thead><tbody>"
             )
             for src, host, ver, rev, shard, n, started, finished in parts:
                 out.append(
-                    f"<tr><td class='text'>{_e(src)}</td><td>{_e(host)}</td><td>{_e(ver)}</td><td>{_e(rev)}</td>"
-                    f"<td>{_e(shard or 'all')}</td><td>{n}</td><td>{_e(_when(started))} – {_e(_when(finished))}</td></tr>"
+                    f"<tr><td class='text'>{_e(src)}</td><td>{_e(host)}</td><td>{_e(ver)}</td><td class='text'>"
+                    f"{_e(rev)}</td><td>{_e(shard or 'all')}</td><td>{n}</td><td class='text'>{_e(_when(started))} – "
+                    f"{_e(_when(finished))}</td></tr>"
                 )
             out.append("</tbody></table></div>")
     return "".join(out)
@@ -181,24 +209,52 @@ def _when(t) -> str:
     return datetime.datetime.fromtimestamp(float(t), datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
 
 
-def _replays(folder: Path) -> str:
+def _replays(folder: Path, budget: int) -> str:
+    """The rendered GIFs, embedded while the page stays within ``budget`` more bytes; the rest listed."""
     gifs = sorted((folder / REPLAYS).glob("*.gif")) if (folder / REPLAYS).is_dir() else []
     if not gifs:
         return (
             f"<p class='note'>No rendered replays: <code>rmm-bench replay DIR --agent A --episode N --video "
             f"DIR/{REPLAYS}/A-episode-N.gif</code> puts one here.</p>"
         )
-    out = ["<div class='gifs'>"]
+    out, skipped = ["<div class='gifs'>"], []
     for gif in gifs:
-        if gif.stat().st_size > GIF_LIMIT:
-            out.append(
-                f"<figure><figcaption>{_e(gif.name)}: {gif.stat().st_size / 1e6:.1f} MB, over the page's "
-                f"{GIF_LIMIT / 1e6:.0f} MB limit per GIF, not embedded (render it with --every or --size)</figcaption></figure>"
-            )
+        size = gif.stat().st_size
+        if size > GIF_LIMIT:
+            skipped.append(f"{gif.name} ({size / 1e6:.1f} MB, over the {GIF_LIMIT / 1e6:.0f} MB limit per GIF)")
             continue
-        out.append(f"<figure>{_image(gif, gif.stem)}<figcaption>{_e(gif.stem)}</figcaption></figure>")
+        encoded = 4 * ((size + 2) // 3) + 200
+        if encoded > budget:
+            skipped.append(f"{gif.name} ({size / 1e6:.1f} MB, over the page's {PAGE_LIMIT / 1e6:.3g} MB budget)")
+            continue
+        budget -= encoded
+        out.append(
+            f"<figure><img src='{_data(gif.read_bytes(), 'gif')}' alt='{_e(gif.stem)}'>"
+            f"<figcaption>{_e(gif.stem)}</figcaption></figure>"
+        )
     out.append("</div>")
+    if skipped:
+        out.append(
+            "<p class='note'>Not embedded (render them smaller with --every or --size): "
+            + _e("; ".join(skipped))
+            + ".</p>"
+        )
     return "".join(out)
+
+
+def _section(folder: Path, store: ResultsStore, sec: dict) -> list[str]:
+    c, why = section_comparison(folder, sec["run_keys"])
+    matrices = pairwise_matrices(c.pairs) if c is not None else None
+    table, constant = _table_i(sec["md"])
+    body = [f"<h2>{_e(sec['title'].replace('Table I', 'Results', 1))}</h2>"]
+    if sec["notes"].strip():
+        body.append(f"<p class='warn'>{_e(sec['notes'].strip())}</p>")
+    body.append(_figure(sec["rows"]))
+    body.append(f"<p class='summary'>{_e(summary(sec['rows'], matrices))}</p>")
+    body += ["<h3>Table I</h3>", table, "<h3>Guardian counters</h3>", _counters(sec["rows"])]
+    body += ["<h3>Paired comparisons</h3>", pairs_html(folder, c, why, matrices)]
+    body += ["<h3>Provenance</h3>", _provenance(store, sec["run_keys"], constant)]
+    return body
 
 
 def write_page(path: Path, folder: Path, store: ResultsStore, sections: list[dict]) -> Path:
@@ -208,24 +264,20 @@ def write_page(path: Path, folder: Path, store: ResultsStore, sections: list[dic
     title = "rmm-bench results"
     body = [f"<h1>{_e(title)}</h1>", f"<p class='note'>Results directory: {_e(folder.name or folder)}</p>"]
     for sec in sections:
-        body.append(f"<h2>{_e(sec['title'])}</h2>")
-        if sec["notes"].strip():
-            body.append(f"<p class='warn'>{_e(sec['notes'].strip())}</p>")
-        body.append(_md_table(sec["md"]))
-        body.append("<h3>Paired comparisons</h3>")
-        body.append(_comparison(folder, list(sec["run_keys"])))
-        body.append("<h3>Provenance</h3>")
-        body.append(_provenance(store, sec["run_keys"]))
+        body += _section(folder, store, sec)
     figure = folder / "outcomes.png"
     if figure.is_file():
-        body.append("<h2>Outcomes</h2><figure>" + _image(figure, "outcome rates per agent"))
-        body.append("<figcaption>outcomes.png, as rmm-bench report wrote it</figcaption></figure>")
-    body.append("<h2>Replays</h2>" + _replays(folder))
-    page = (
+        body.append(
+            f"<h2>Outcomes and compute time</h2><figure><img src='{_data(figure.read_bytes(), 'png')}' "
+            "alt='outcome rates per agent, and collisions against compute time'>"
+            "<figcaption>outcomes.png, as rmm-bench report wrote it</figcaption></figure>"
+        )
+    head = (
         "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
         "<meta name='viewport' content='width=device-width, initial-scale=1'>"
         f"<title>{_e(title)}</title><style>{_CSS}</style></head><body><main>"
-        + "\n".join(body)
-        + "</main></body></html>\n"
     )
+    size = len(head.encode()) + sum(len(b.encode()) for b in body) + 100
+    body.append("<h2>Replays</h2>" + _replays(folder, PAGE_LIMIT - size))
+    page = head + "\n".join(body) + "</main></body></html>\n"
     return write_output(path, lambda tmp: tmp.write_text(page, encoding="utf-8"))
