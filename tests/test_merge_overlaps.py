@@ -190,3 +190,32 @@ def test_equal_starts_are_kept_once_from_the_first_part(runs, tmp_path):
     assert _query(tmp_path / "m" / "results.db", sql) == _query(runs / "fixed" / "results.db", sql)
     merge(tmp_path / "m2", [slow, runs / "fixed"], write_tables=False)
     assert _query(tmp_path / "m2" / "results.db", sql) == _query(slow / "results.db", sql)
+
+
+def test_a_fixed_clock_runs_clock_sums_are_results(runs, tmp_path):
+    """Under a fixed clock the summed laps (compute_time, avg_compute_time) are the same on every
+    machine: a part that disagrees is refused; under the wall clock they are timings of it."""
+    for col in ("compute_time", "avg_compute_time"):
+        edited = _copy(
+            runs, "fixed", tmp_path / col, (f"UPDATE episodes SET {col} = 5.0 WHERE agent = 'random' AND episode = 0",)
+        )
+        with pytest.raises(MergeConflict, match=f"episode 0 of random .* differs in {col}: "):
+            merge(tmp_path / f"m-{col}", [runs / "fixed", edited], write_tables=False)
+
+
+def test_a_trace_without_its_episode_is_left_out(runs, tmp_path):
+    """A clock trace whose episode row is gone (a hand-edited or damaged part) is not merged, and
+    does not stop the merge."""
+    (key,) = _query(runs / "wall" / "results.db", "SELECT run_key FROM runs WHERE agent = 'inactive'")[0]
+    edited = _copy(
+        runs, "wall", tmp_path / "edited", ("DELETE FROM episodes WHERE run_key = ? AND episode = 3", (key,))
+    )
+    assert _query(
+        edited / "results.db", "SELECT COUNT(*) FROM clock_traces WHERE run_key = ? AND episode = 3", key
+    ) == [(1,)]
+    s = merge(tmp_path / "m", [edited], write_tables=False)
+    db = tmp_path / "m" / "results.db"
+    assert s.episodes == 7 and _query(
+        db, "SELECT COUNT(*) FROM clock_traces WHERE episode = 3 AND run_key = ?", key
+    ) == [(0,)]
+    assert _query(db, "SELECT COUNT(*) FROM clock_traces") == [(7,)]
