@@ -20,6 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from rmm_envs.risk.metrics import get_metric
 from rmm_envs.risk.protocol import check_scene
@@ -70,6 +71,42 @@ def validate_tree_params(branches, depth, horizon, n_steps, metric="expected", a
     get_metric(metric, alpha)
 
 
+def _propagate_failed(scene, states, controls, duration: float, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(failed (N,) bool, ends (N, d))`` of one tree level: the scene's ``propagate_failed``
+    (a fused compiled loop), else ``path_failed`` of ``propagate`` and the paths' last points."""
+    fused = getattr(scene, "propagate_failed", None)
+    if fused is not None:
+        failed, ends = fused(states, controls, duration, n_steps)
+        return np.asarray(failed, dtype=bool), ends
+    paths = scene.propagate(states, controls, duration, n_steps)
+    return np.asarray(scene.path_failed(paths), dtype=bool), paths[:, -1]
+
+
+def _scale_into(r, lo, width):  # pragma: no cover - compiled
+    """``r = lo + width * r`` over the last axis, in place: numpy's ``random_uniform``
+    (``lower + range * next_double``), the same operations."""
+    c = lo.shape[0]
+    rows = r.reshape(-1, c)
+    for i in range(rows.shape[0]):
+        for j in range(c):
+            rows[i, j] = lo[j] + width[j] * rows[i, j]
+
+
+_scale_into = njit(cache=True)(_scale_into)
+
+
+def uniform_box(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, size: tuple) -> np.ndarray:
+    """``rng.uniform(lo, hi, size)`` for bounds ``lo``, ``hi`` of the last axis, the same draws
+    in the same order and the same bits (``lo + (hi - lo) * u``, ``u`` from ``rng.random``), about
+    three times faster (numpy's broadcast ``uniform`` costs 9 ns a number); a test pins the two."""
+    width = np.subtract(hi, lo)
+    if not isinstance(rng, np.random.Generator) or not np.all(np.isfinite(width)) or np.any(width < 0):
+        return rng.uniform(lo, hi, size=size)  # another generator, or numpy's own refusal of the bounds
+    r = rng.random(size)
+    _scale_into(r, np.ascontiguousarray(lo, dtype=float), np.ascontiguousarray(width, dtype=float))
+    return r
+
+
 @dataclass
 class RiskResult:
     risk: np.ndarray  # (B,)
@@ -100,6 +137,9 @@ class RiskEstimator:
         policy: ``None`` for uniform controls, or ``policy(states (N, d), rng) -> (N, c)``.
         leaf: ``"zero"`` (Algorithm 1) or ``"heuristic"`` (the scene's ``leaf_estimate``).
         chunk_size: roots per batch (memory ~ chunk * n^m * n_steps * d * 8 bytes).
+        fused: ``True`` (default) runs a tree level through the scene's ``propagate_failed`` where
+            it has one (a compiled loop that propagates and tests each branch, the same bits);
+            ``False`` the separate ``propagate`` and ``path_failed``, the reference it is pinned to.
     """
 
     def __init__(
@@ -114,6 +154,7 @@ class RiskEstimator:
         policy: Callable | None = None,
         leaf: str = "zero",
         chunk_size: int | None = None,
+        fused: bool = True,
     ) -> None:
         check_scene(scene)
         validate_tree_params(branches, depth, horizon, n_steps, metric, alpha, leaf)
@@ -131,6 +172,7 @@ class RiskEstimator:
         self.alpha = alpha
         self.policy = policy
         self.leaf = leaf
+        self.fused = bool(fused)
         nodes = self.n**self.m if self.m else 1  # exact: integers
         self.chunk_size = int(chunk_size) if chunk_size else max(1, 32768 // max(nodes, 1))
 
@@ -151,7 +193,9 @@ class RiskEstimator:
         """Uniform controls for every level: level ``l`` has shape ``(n_roots, n^l, c)``."""
         lo, hi = np.asarray(self.scene.control_low, float), np.asarray(self.scene.control_high, float)
         widths = [self.n ** (lvl + 1) for lvl in range(self.m)]  # exact: integers
-        return [rng.uniform(lo, hi, size=(n_roots, w, lo.shape[0])) for w in widths]
+        if not self.fused:
+            return [rng.uniform(lo, hi, size=(n_roots, w, lo.shape[0])) for w in widths]
+        return [uniform_box(rng, lo, hi, (n_roots, w, lo.shape[0])) for w in widths]
 
     def estimate(
         self, states, rng: np.random.Generator | None = None, controls: list[np.ndarray] | None = None
@@ -218,11 +262,16 @@ class RiskEstimator:
         risk = np.ones(B * K)
         root_ok = ~np.asarray(self.scene.state_failed(rep), dtype=bool)
         if root_ok.any():
-            paths = self.scene.propagate(rep[root_ok], u[root_ok], float(hold), self.n_steps)
-            branch_ok = ~np.asarray(self.scene.path_failed(paths), dtype=bool)
+            if self.fused:
+                failed, last = _propagate_failed(self.scene, rep[root_ok], u[root_ok], float(hold), self.n_steps)
+                branch_ok = ~failed
+                ends = np.compress(branch_ok, last, axis=0)
+            else:
+                paths = self.scene.propagate(rep[root_ok], u[root_ok], float(hold), self.n_steps)
+                branch_ok = ~np.asarray(self.scene.path_failed(paths), dtype=bool)
+                ends = paths[branch_ok, -1]
             ok = np.zeros(B * K, dtype=bool)
             ok[root_ok] = branch_ok
-            ends = paths[branch_ok, -1]
             if ends.shape[0]:
                 risk[ok] = self.estimate(ends, rng).risk
         return risk.reshape(B, K)
@@ -249,7 +298,8 @@ class RiskEstimator:
             child_idx = (parent_idx[:, None] * n + np.arange(n)[None, :]).reshape(-1)
             rep = np.repeat(parents, n, axis=0)
             if controls is not None:
-                u = controls[lvl].reshape(-1, controls[lvl].shape[-1])[child_idx]
+                flat = controls[lvl].reshape(-1, controls[lvl].shape[-1])
+                u = np.take(flat, child_idx, axis=0) if self.fused else flat[child_idx]  # take: the same rows, faster
             else:
                 assert self.policy is not None  # estimate() draws the controls up front for a uniform policy
                 u = np.asarray(self.policy(rep, rng), dtype=float)
@@ -262,7 +312,12 @@ class RiskEstimator:
             is_live = np.zeros(n_nodes, dtype=bool)
             is_live[child_idx] = True
             final = None
-            if rep.shape[0]:
+            if rep.shape[0] and self.fused:  # the scene's fused loop where it has one; compress: faster masks
+                f, ends = _propagate_failed(sys_, rep, u, self.t, self.n_steps)
+                fail[child_idx] = f
+                final = np.compress(~f, ends, axis=0)
+                parents, parent_idx = final, np.compress(~f, child_idx)
+            elif rep.shape[0]:
                 paths = sys_.propagate(rep, u, self.t, self.n_steps)
                 f = np.asarray(sys_.path_failed(paths), dtype=bool)
                 fail[child_idx] = f

@@ -40,6 +40,11 @@ class RiskScene(Protocol):
 
     Optional:
         leaf_estimate(states (N, d)) -> (N,) in [0, 1]: a value for non-failed leaves instead of 0.
+        propagate_failed(states (N, d), controls (N, c), duration, n_steps) -> (failed (N,) bool,
+            ends (N, d)): ``path_failed(propagate(...))`` and each path's last state in one call,
+            the same bits (the ``ends`` row of a failed branch may be any state: nothing reads it).
+            The estimator uses it where it is defined (``fused=True``); the package's scenes
+            run it as one compiled loop per tree level (:mod:`rmm_envs.scenes.branch_kernels`).
     """
 
     state_dim: int

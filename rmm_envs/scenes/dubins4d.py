@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from rmm_envs.dynamics.dubins4d import Dubins4D, wrap_angle
-from rmm_envs.scenes.base import SceneBase
+from rmm_envs.scenes.base import SceneBase, branch_inputs
+from rmm_envs.scenes.branch_kernels import dubins4d_circle_branches
 from rmm_envs.worlds.circles import CircleWorld, paths_hit_circles, points_in_circles, ray_cast
 
 __all__ = ["Dubins4DScene", "observation"]
@@ -65,6 +66,24 @@ class Dubins4DScene(SceneBase):
     def path_failed(self, paths: np.ndarray) -> np.ndarray:
         """``(N,)`` bool: a path ``(N, S, 4)`` touches an obstacle at a point or segment."""
         return paths_hit_circles(paths, self.world.obstacles)
+
+    def propagate_failed(self, states, controls, duration: float, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """``path_failed(propagate(...))`` and the paths' last states, one branch at a time in a
+        compiled loop (:func:`~rmm_envs.scenes.branch_kernels.dubins4d_circle_branches`, the same
+        bits); a subclass that changes the dynamics, ``propagate`` or ``path_failed`` gets the
+        composition of its own."""
+        if (
+            type(self.dynamics) is not Dubins4D
+            or type(self).propagate is not SceneBase.propagate
+            or type(self).path_failed is not Dubins4DScene.path_failed
+        ):
+            return super().propagate_failed(states, controls, duration, n_steps)
+        states, controls, times = branch_inputs(states, controls, duration, n_steps, 4, 2)
+        failed, ends = np.empty(states.shape[0], dtype=bool), np.empty((states.shape[0], 4))
+        dyn = self.dynamics
+        circles = np.ascontiguousarray(self.world.obstacles, dtype=float)
+        dubins4d_circle_branches(states, controls, times, dyn._lo, dyn._hi, circles, failed, ends)
+        return failed, ends
 
     def observe(self, states: np.ndarray, sim_time=0.0) -> np.ndarray:
         """``(N, 17)`` float32 observations for states ``(N, 4)`` at ``sim_time`` (scalar or ``(N,)``)."""

@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from rmm_envs.dynamics.quadrotor import Quadrotor, QuadrotorParams
-from rmm_envs.dynamics.quadrotor_control import ClosedLoopQuadrotor, CommandController
+from rmm_envs.dynamics.quadrotor_control import ClosedLoopQuadrotor, CommandController, body_packed
 from rmm_envs.scenes.base import SceneBase
+from rmm_envs.scenes.branch_kernels import quadrotor_command_branches
 from rmm_envs.worlds.room_collision import RoomCollision
+from rmm_envs.worlds.room_kernels import room_states_failed
 from rmm_envs.worlds.rooms import Room
 
 __all__ = ["QuadrotorCommandScene", "QuadrotorScene"]
@@ -39,6 +41,21 @@ class QuadrotorScene(SceneBase):
         paths = np.asarray(paths, float)
         return self.collision.states_failed(paths.reshape(-1, 13)).reshape(paths.shape[:2]).any(axis=1)
 
+    def _compiled_room(self) -> bool:
+        """Whether ``path_failed`` is this class's room test (not a subclass's), so the compiled
+        room test (:mod:`rmm_envs.worlds.room_kernels`, the same bits) may stand in for it."""
+        return type(self.collision) is RoomCollision and type(self).path_failed is QuadrotorScene.path_failed
+
+    def propagate_failed(self, states, controls, duration: float, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """``path_failed(propagate(...))`` and the paths' last states, the path states tested by the
+        compiled room test (:func:`~rmm_envs.worlds.room_kernels.room_states_failed`, the same bits)."""
+        if not self._compiled_room() or type(self).propagate is not SceneBase.propagate:
+            return super().propagate_failed(states, controls, duration, n_steps)
+        paths = self.propagate(states, controls, duration, n_steps)
+        flat = np.ascontiguousarray(paths.reshape(-1, 13))
+        failed = room_states_failed(flat, *self.collision.kernel_args(), np.empty(flat.shape[0], dtype=bool))
+        return failed.reshape(paths.shape[:2]).any(axis=1), paths[:, -1]
+
 
 class QuadrotorCommandScene(QuadrotorScene):
     """The quadrotor flown through its cascaded controller in one room: the
@@ -55,3 +72,30 @@ class QuadrotorCommandScene(QuadrotorScene):
     def __init__(self, room: Room, controller: CommandController) -> None:
         super().__init__(room, controller.params)
         self.dynamics = ClosedLoopQuadrotor(controller)
+
+    def propagate_failed(self, states, controls, duration: float, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """``path_failed(propagate(...))`` and the paths' last states in one compiled loop
+        (:func:`~rmm_envs.scenes.branch_kernels.quadrotor_command_branches`, the same bits), which
+        stops a branch at its first failing point: a failed branch's ``ends`` row is that point."""
+        dyn = self.dynamics
+        if (
+            not self._compiled_room()
+            or type(self).propagate is not SceneBase.propagate
+            or type(dyn) is not ClosedLoopQuadrotor
+        ):
+            return super().propagate_failed(states, controls, duration, n_steps)
+        body = dyn.body
+        states, cmds = body.check_propagate(states, controls, duration, n_steps, dyn.control_low, dyn.control_high)
+        failed, ends = np.empty(states.shape[0], dtype=bool), np.empty((states.shape[0], 13))
+        quadrotor_command_branches(
+            np.ascontiguousarray(states),
+            np.ascontiguousarray(cmds),
+            dyn.controller.packed,
+            body_packed(dyn.controller.params),
+            body.segment_steps(duration, n_steps),
+            int(n_steps),
+            self.collision.kernel_args(),
+            failed,
+            ends,
+        )
+        return failed, ends

@@ -63,6 +63,22 @@ class RoomCollision:
             radii[i] = bounding_radius(o["shape"], s)
         self.obj_size, self.obj_radius = sizes, radii
 
+    def kernel_args(self) -> tuple:
+        """The room as :func:`rmm_envs.worlds.room_kernels.room_state_failed` reads it: ``(points,
+        walls, obj_kind, obj_pos, obj_R, obj_size, obj_radius, geom)``, contiguous arrays, ``geom``
+        the body's ``(half length, radius, tolerance, floor tolerance, reach)``."""
+        c = np.ascontiguousarray
+        return (
+            c(self.points, dtype=float),
+            c(self.walls, dtype=float),
+            c(self.obj_shape, dtype=np.int64),
+            c(self.obj_pos, dtype=float),
+            c(self.obj_R, dtype=float),
+            c(self.obj_size, dtype=float),
+            c(self.obj_radius, dtype=float),
+            np.array([HALF, RADIUS, self.tol, self.floor_tol, BOUND + self.tol]),
+        )
+
     def clearance(self, point) -> float:
         """A lower bound (m) on the gap between the room and the body centred at ``point`` in
         any orientation: the distance from the body's bounding sphere to the floor, to every
