@@ -25,7 +25,7 @@ import sqlite3
 import sys
 from pathlib import Path
 
-from benchmarks.knob_sweep import run_point
+from rmm_bench.knob_sweep import run_point
 
 __all__ = ["main", "variants"]
 

@@ -4,8 +4,8 @@
         --models results/spread/maze_seed0.npz,results/spread/maze_seed1.npz,... --out results/spread
 
 Each model (trained on the same data with ``rmm-train --seed S``) gets the decision the guardian
-reads for ``--env`` with the shipped model (its threshold and strategies, copied into the file
-with :func:`rmm_guardians.lrmm.model.set_decision`, so only the weights differ), then runs the
+reads for ``--env`` with the shipped model (its threshold and strategies, written beside a copy of
+the file with :func:`rmm_guardians.lrmm.decision.set_decision`, so only the weights differ), then runs the
 same episodes (``--seed``, fixed 1 ms clock) as ``lrmm``.  Prints each model's success,
 collision and timeout rates and intervention share, their mean and range over the models, and
 the shipped model's row on the same episodes; writes the table to ``--out``/``spread_<env>.md``.
@@ -20,7 +20,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from benchmarks.knob_sweep import run_point
+from rmm_bench.knob_sweep import run_point
 
 __all__ = ["main"]
 
@@ -28,9 +28,9 @@ COLUMNS = (("success", "Success [%]"), ("collision", "Collision [%]"), ("timeout
 
 
 def _decided_copy(model: Path, env_id: str, out: Path) -> Path:
-    """A copy of ``model`` in ``out`` holding the decision of ``env_id``'s shipped guardian."""
+    """A copy of ``model`` in ``out`` with the decision of ``env_id``'s shipped guardian beside it."""
+    from rmm_guardians.lrmm.decision import set_decision
     from rmm_guardians.lrmm.guardian import LRMMGuardian
-    from rmm_guardians.lrmm.model import set_decision
     from rmm_guardians.lrmm.strategies import strategy_specs
 
     shipped = LRMMGuardian(env_id=env_id)

@@ -424,15 +424,38 @@ def test_a_run_says_which_episodes_it_ran_and_which_it_reused(tmp_path, capsys):
 def test_a_guardians_warning_is_said_once_per_run_with_two_workers(tmp_path):
     """The parent builds every guardian before dispatch and shows its warnings; the workers build
     theirs silently (each worker process would repeat them)."""
-    from rmm_guardians.lrmm.guardian import LRMMGuardian
-    from rmm_guardians.lrmm.model import load_model
-
-    bare = load_model(LRMMGuardian(env_id="Dubins4DParallel-v0").model.path)
-    bare.meta.pop("decision", None)  # a model of one's own without a stored decision threshold
-    path = bare.save(tmp_path / "bare.npz")
-    cmd = [sys.executable, "-m", "rmm_bench.cli", "--agent", "lrmm", "--agent-opt", f"lrmm.model={path}"]
+    (tmp_path / "loud_guard.py").write_text(
+        "import warnings\n"
+        "from rmm_guardians.baselines import InactiveGuardian\n\n\n"
+        "class Loud(InactiveGuardian):\n"
+        "    name = 'loud'\n\n"
+        "    def __init__(self):\n"
+        "        super().__init__()\n"
+        "        warnings.warn('loud: built with a setting worth a warning', UserWarning, stacklevel=2)\n"
+    )
+    cmd = [sys.executable, "-m", "rmm_bench.cli", "--agent", "loud_guard:Loud"]
     cmd += ["--episodes", "4", "--workers", "2", "--out", str(tmp_path / "w"), *FAST]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=os.environ | {"PYTHONWARNINGS": ""})
+    env = os.environ | {"PYTHONWARNINGS": ""}
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stderr.count(f"lrmm: {path} has no 'decision' threshold: using the paper's 0.85") == 1, proc.stderr
+    assert proc.stderr.count("loud: built with a setting worth a warning") == 1, proc.stderr
     assert "ran 4 episodes" in proc.stdout
+
+
+def test_a_model_of_ones_own_without_a_decision_is_refused_in_one_line_naming_tune(tmp_path):
+    """On an env with a shipped model and its decision, a model of one's own gets none of it: refused
+    before any episode, exit 2, one line naming the command that chooses a decision; a threshold runs it."""
+    import shutil
+
+    from rmm_guardians.lrmm.model import default_model_path
+
+    path = tmp_path / "mine.npz"
+    shutil.copy(default_model_path("CartPoleParallel-v0", variant="act"), path)  # the bytes, not the decision
+    out = tmp_path / "r"
+    base = ["--agent", "lrmm", "--agent-opt", f"lrmm.model={path}", "--episodes", "1", "--out", str(out), *FAST]
+    base += ["--env", "CartPoleParallel-v0"]  # after FAST's env: the last one given counts
+    proc = subprocess.run([sys.executable, "-m", "rmm_bench.cli", *base], capture_output=True, text=True)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert f"`rmm-bench tune --env CartPoleParallel-v0 --model {path}`" in proc.stderr
+    assert "--agent-opt lrmm.threshold=" in proc.stderr and not out.exists()
+    assert main([*base, "--agent-opt", "lrmm.threshold=0.2"]) == 0

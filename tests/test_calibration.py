@@ -1,12 +1,14 @@
-"""``benchmarks.calibration``: the reliability table and error by hand, the Brier scores of a
-small real run, and its bad input."""
+"""``rmm-bench calibrate`` (rmm_bench.calibration): the reliability table and error by hand, the Brier
+scores of a small real run, a model of one's own, and bad input in one line."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from benchmarks.calibration import CALIBRATED, calibrate, main, reliability
+from rmm_bench.calibration import CALIBRATED, calibrate, reliability
+from rmm_bench.cli import main as bench
+from rmm_guardians.lrmm.model import default_model_path
 
 
 def test_reliability_by_hand():
@@ -40,23 +42,51 @@ def test_the_shipped_dubins4d_model_on_fresh_worlds(tmp_path, monkeypatch):
     assert again["brier"] == r["brier"] and again["dataset_sha256"] == r["dataset_sha256"]  # the same bits
 
 
+def test_a_model_of_ones_own_on_fresh_worlds_of_its_env(tmp_path, capsys):
+    own = tmp_path / "mine.npz"
+    own.write_bytes(default_model_path("CartPoleParallel-v0", variant="act").read_bytes())
+    argv = ["calibrate", "--env", "CartPoleGuarded-v0", "--model", str(own), "--configs", "2"]
+    assert bench([*argv, "--samples-per-config", "16", "--workers", "1", "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "| system | model | labels (worlds) |" in out and "| mine | `mine.npz` | 32 (2) |" in out
+    assert (tmp_path / "out" / "calibration.json").exists()
+
+
 @pytest.mark.parametrize(
     ("argv", "expected"),
     [
         (["--systems", "boat"], "--systems 'boat': unknown ['boat']"),
         (["--systems", ","], "unknown none given"),
         (["--seed", "1"], "the shipped models were trained on seeds 0 and 1"),
+        (["--model", "x.npz"], "--env and --model go together"),
+        (["--env", "CartPoleGuarded-v0", "--model", "none.npz"], "none.npz does not exist"),
+        (
+            [
+                "--env",
+                "CartPoleGuarded-v0",
+                "--model",
+                str(default_model_path("CartPoleParallel-v0", "act")),
+                "--seed",
+                "1",
+            ],
+            "was trained on worlds of that seed",
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, expected):
-    with pytest.raises(SystemExit) as e:
-        main([*argv, "--out", str(tmp_path / "out")])
-    assert e.value.code == 2 and expected in capsys.readouterr().err
+    assert bench(["calibrate", *argv, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rmm-bench calibrate: error: ") and err.count("\n") == 1 and expected in err, err
 
 
 def test_a_used_output_folder_is_refused(tmp_path, capsys):
     (tmp_path / "old.txt").write_text("a user's file")
-    with pytest.raises(SystemExit) as e:
-        main(["--out", str(tmp_path)])
-    assert e.value.code == 2 and "is not empty" in capsys.readouterr().err
+    assert bench(["calibrate", "--out", str(tmp_path)]) == 2
+    assert "is not empty" in capsys.readouterr().err
     assert (tmp_path / "old.txt").read_text() == "a user's file"
+
+
+def test_the_clone_shim_is_the_installed_command():
+    from benchmarks import calibration
+
+    assert calibration.calibrate is calibrate and calibration.CALIBRATED is CALIBRATED

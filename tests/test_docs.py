@@ -57,6 +57,14 @@ def test_generated_pages_are_current():
         assert (DOCS / rel).read_text() == text, f"docs/{rel} is stale: run python docs/gen.py"
 
 
+def test_generated_blocks_are_current():
+    for rel in gen.BLOCKS:
+        text = (DOCS / rel).read_text()
+        assert gen.with_blocks(rel, text) == text, f"a generated block of docs/{rel} is stale: run python docs/gen.py"
+    block = gen.lrmm_decisions_block()
+    assert "`RatedDriver(margin=0.15, still=0.05, stay=True), Commit(steps=20), SafestCandidate(), Slide()`" in block
+
+
 def _section(page: str, name: str) -> str:
     m = re.search(rf"## `{re.escape(name)}`\n\n```text\n(.*?)\n```", page, re.S)
     assert m, f"{name} is missing from docs/cli.md"

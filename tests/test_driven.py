@@ -284,7 +284,7 @@ def test_the_shipped_lrmm_applies_the_safe_default_when_the_pole_is_about_to_fal
     env = gym.make(env_id, clock="fixed:1")
     env.reset(seed=0)
     g = make_guardian("lrmm", env_id=env_id)
-    # the system table's decision: no strategies, the core alone (the env's safe default while risk > threshold)
+    # the shipped model's decision: no strategies, the core alone (the env's safe default while risk > threshold)
     assert g.strategies == () and g.threshold_source == "stored decision"
     g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space)
     space = env.action_space

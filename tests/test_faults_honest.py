@@ -26,16 +26,27 @@ def stored(out, cols="run_key, agent, episode, outcome, error_kind"):
 
 # ------------------------------------------------------------------ 1. a run is what ran
 def _two_models(tmp_path):
-    """The shipped Dubins4D head model, and the same weights with another stored threshold."""
-    from rmm_guardians.lrmm.model import default_model_path, set_decision
+    """The shipped Dubins4D head model, and the same weights with other metadata (other bytes)."""
+    from rmm_guardians.lrmm.model import LRMMModel, default_model_path
 
     first = tmp_path / "first.npz"
     second = tmp_path / "second.npz"
     shutil.copy(default_model_path("Dubins4DParallel-v0", variant="act"), first)
-    shutil.copy(first, second)
-    set_decision(second, threshold=0.05, strategies="SafestCandidate", chosen_by="a drill: a different model file")
+    model = LRMMModel.load(first)
+    model.meta["note"] = "a drill: a different model file"
+    model.save(second)
     assert first.read_bytes() != second.read_bytes()
     return first, second
+
+
+#: the shipped decision given as arguments: the runs below read the model file only
+DECISION = {"threshold": 0.25, "strategies": "SafestCandidate, Commit(steps=18), Restart(speed=0.3)"}
+DECISION_OPTS = [
+    "--agent-opt",
+    "lrmm.threshold=0.25",
+    "--agent-opt",
+    f"lrmm.strategies={json.dumps(DECISION['strategies'])}",
+]
 
 
 def test_resume_after_the_model_file_changed_starts_a_new_run_naming_the_file(tmp_path, capsys):
@@ -48,6 +59,7 @@ def test_resume_after_the_model_file_changed_starts_a_new_run_naming_the_file(tm
         "lrmm",
         "--agent-opt",
         f"lrmm.model={model}",
+        *DECISION_OPTS,
         "--out",
         str(out),
         "--env",
@@ -109,7 +121,7 @@ def test_a_file_changed_while_the_run_runs_is_not_used(tmp_path):
     first, second = _two_models(tmp_path)
     run = AgentRun(
         "lrmm",
-        {"model": str(second)},
+        {"model": str(second), **DECISION},
         "Dubins4DParallel-v0",
         {"clock": "fixed:1"},
         0,
@@ -558,6 +570,7 @@ def test_a_bad_model_file_is_refused_before_any_episode_naming_the_value(tmp_pat
                 "lrmm",
                 "--agent-opt",
                 f"lrmm.model={path}",
+                *DECISION_OPTS,
                 "--episodes",
                 "1",
                 "--out",

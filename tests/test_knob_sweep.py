@@ -1,10 +1,10 @@
-"""benchmarks/knob_sweep.py: one rmm-bench run per knob value, a table and a figure."""
+"""``rmm-bench knob-sweep`` (rmm_bench.knob_sweep): one rmm-bench run per knob value, a table and a figure."""
 
 from __future__ import annotations
 
 import pytest
 
-from benchmarks import knob_sweep
+from rmm_bench.cli import main
 
 
 @pytest.mark.parametrize(
@@ -16,13 +16,15 @@ from benchmarks import knob_sweep
     ],
 )
 def test_bad_arguments_exit_2_naming_the_flag(argv, message, tmp_path, capsys):
-    assert knob_sweep.main(argv + ["--out", str(tmp_path)]) == 2
-    assert message in capsys.readouterr().err
+    assert main(["knob-sweep", *argv, "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rmm-bench knob-sweep: error: ") and err.count("\n") == 1 and message in err
 
 
 def test_sweep_runs_each_value_and_marks_the_default(tmp_path):
-    rc = knob_sweep.main(
+    rc = main(
         [
+            "knob-sweep",
             "--agent",
             "random",
             "--knob",
@@ -49,3 +51,23 @@ def test_sweep_runs_each_value_and_marks_the_default(tmp_path):
     assert float(rows[1].split("|")[5].split("±")[0]) > 90.0
     assert "(default)" in rows[1] and "(default)" not in rows[0]
     assert (tmp_path / "random_p_active.png").stat().st_size > 1000
+    assert "Command: `rmm-bench knob-sweep --agent random --knob p_active" in "\n".join(md)
+
+
+def test_a_bad_knob_is_the_runs_own_one_line_and_exit_2(tmp_path, capsys):
+    argv = [
+        "knob-sweep",
+        "--agent",
+        "random",
+        "--knob",
+        "nope",
+        "--values",
+        "1",
+        "--episodes",
+        "1",
+        "--out",
+        str(tmp_path),
+    ]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "nope" in err, err

@@ -1,4 +1,8 @@
 import dataclasses
+import itertools
+import json
+import tempfile
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -8,6 +12,7 @@ import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.dynamics.dubins4d import Dubins4D
 from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
+from rmm_guardians.lrmm.decision import decision_path, read_decision
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel, default_model_path, load_model
 from rmm_guardians.lrmm.strategies import BrakeTurn, Commit, MovingAverage, Restart, SafestCandidate
@@ -37,6 +42,26 @@ HELDOUT_BOUNDS = {"risk_mae": 0.045, "cand_mae": 0.05, "regret": 0.015}
 
 def quiet(*a):
     pass
+
+
+_DECIDED = tempfile.TemporaryDirectory(prefix="rmm-test-decided-")  # removed when the tests end
+_COUNT = itertools.count()
+
+
+def decided(model: LRMMModel, decision: dict, path: Path | None = None) -> LRMMModel:
+    """``model`` saved (to ``path``, default a file of this session's) with ``decision``
+    (``threshold``, ``strategies`` as a list of specs, any other key as given) written as the
+    decision file beside it, the guardian's one source of it; loaded back.  The file is written as
+    given, not checked, so bad decisions can be tested."""
+    path = path or Path(_DECIDED.name) / f"m{next(_COUNT)}.npz"
+    model.save(path)
+    d = dict(decision)
+    specs = d.pop("strategies", [])
+    d["strategies"] = ", ".join(specs) if isinstance(specs, list) else specs
+    how = d.pop("chosen_by", "a test")
+    lines = ['format = "rmm-lrmm-decision"', "version = 1", *(f"{k} = {json.dumps(v)}" for k, v in d.items())]
+    decision_path(path).write_text("\n".join([*lines, "[chosen_by]", f"how = {json.dumps(how)}", ""]))
+    return LRMMModel.load(path)
 
 
 @pytest.fixture(scope="module")
@@ -210,8 +235,9 @@ def obs_with(ray0, left, right):
 
 
 def test_lrmm_takes_control_above_threshold_and_turns_to_the_open_side():
-    with pytest.warns(UserWarning, match="no 'decision' threshold: using the paper's 0.85"):
-        g = LRMMGuardian(forward_ray_model(), strategies=(BrakeTurn(),))
+    with pytest.raises(ValueError, match=r"^lrmm: the model \(an LRMMModel without a file\) has no decision: give"):
+        LRMMGuardian(forward_ray_model(), strategies=(BrakeTurn(),))  # a model without a decision needs a threshold
+    g = LRMMGuardian(forward_ray_model(), strategies=(BrakeTurn(),), threshold=0.85)
     g.reset(seed=0, **SPACES)
     a = g.act(obs_with(1.0, left=8.0, right=2.0), {})
     assert g.last_risk > 0.85
@@ -456,18 +482,15 @@ def test_head_model_shape_round_trip_and_numpy_equals_torch(tmp_path, cand_datas
 
 def test_set_decision_round_trip_and_bad_values(tmp_path, head_model, trained):
     from rmm_guardians.lrmm.decision import main as decision_main
-    from rmm_guardians.lrmm.model import set_decision
+    from rmm_guardians.lrmm.decision import set_decision
 
     p = head_model.save(tmp_path / "h.npz")
     spec = "SafestCandidate, Commit(steps=7)"
+    before = p.read_bytes()
     assert decision_main([str(p), "--threshold", "0.4", "--strategies", spec, "--chosen-by", "a test"]) == 0
-    m = LRMMModel.load(p)
-    assert m.meta["decision"] == {
-        "threshold": 0.4,
-        "strategies": ["SafestCandidate()", "Commit(steps=7)"],
-        "chosen_by": "a test",
-    }
-    np.testing.assert_array_equal(m.weights[0][0], head_model.weights[0][0])
+    d = read_decision(tmp_path / "h.decision.toml")
+    assert (d.threshold, d.strategies, d.chosen_by) == (0.4, "SafestCandidate(), Commit(steps=7)", {"how": "a test"})
+    assert d.model_sha256 == LRMMModel.load(p).file_sha256 and p.read_bytes() == before  # the model is not touched
     g = LRMMGuardian(p)
     assert (g.threshold, g.threshold_source, g.strategies) == (0.4, "stored decision", (SafestCandidate(), Commit(7)))
     with pytest.raises(ValueError, match=r"threshold must be in \[0, 1\], got 1.5"):
@@ -478,7 +501,7 @@ def test_set_decision_round_trip_and_bad_values(tmp_path, head_model, trained):
         set_decision(p, 0.5, "Commit(steps=1)", " ")
     with pytest.raises(ValueError, match="unknown strategy 'Steer'.*SafestCandidate"):
         set_decision(p, 0.5, "Steer", "x")
-    assert LRMMModel.load(p).meta["decision"]["threshold"] == 0.4  # every refusal left the file as it was
+    assert read_decision(decision_path(p)) == d  # every refusal left the file as it was
     set_decision(p, 0.6, (BrakeTurn(), Commit(steps=3)), "another test")
     assert LRMMGuardian(p).strategies == (BrakeTurn(), Commit(steps=3))
     assert LRMMGuardian(p, strategies="SafestCandidate").strategies == (SafestCandidate(),)  # the argument wins
@@ -488,7 +511,7 @@ def test_set_decision_round_trip_and_bad_values(tmp_path, head_model, trained):
     ):
         set_decision(old, 0.5, "SafestCandidate, Commit(steps=1)", "x")
     set_decision(old, 0.5, "BrakeTurn", "x")  # a rule that needs no head may be stored on a model without one
-    assert LRMMModel.load(old).meta["decision"]["strategies"] == ["BrakeTurn(turn=None, brake=None)"]
+    assert read_decision(decision_path(old)).strategies == "BrakeTurn(turn=None, brake=None)"
     missing = [str(tmp_path / "missing.npz"), "--threshold", "0.4", "--strategies", "", "--chosen-by", "x"]
     assert decision_main(missing) == 2
 
@@ -512,15 +535,16 @@ def _rewrite(src, dst, edit_meta=None, edit_arrays=None):
 
 
 def test_old_format_model_loads_as_the_core_with_a_warning(tmp_path, trained):
-    """A version-1 file (no head, no decision): lrmm warns of the paper's threshold and runs the core alone."""
+    """A version-1 file (no head, no decision): lrmm refuses it without a threshold, runs the core alone with one."""
     p = _rewrite(trained.save(tmp_path / "m.npz"), tmp_path / "v1.npz", edit_meta=lambda m: m.update(format_version=1))
-    with pytest.warns(UserWarning) as rec:
-        g = LRMMGuardian(p)
-    text = " ".join(str(w.message) for w in rec)
-    assert len(rec) == 1 and "'decision'" in text and "v1.npz" in text and "0.85" in text
-    assert (g.threshold, g.threshold_source, g.strategies) == (0.85, "paper", ())
-    with pytest.warns(UserWarning, match="decision"):
-        assert LRMMGuardian(p, strategies="BrakeTurn").threshold == 0.85
+    with pytest.raises(ValueError) as e:
+        LRMMGuardian(p)
+    assert str(e.value).startswith(f"lrmm: {p} has no decision (no v1.decision.toml beside it): choose one on ")
+    assert f"`rmm-bench tune --env Dubins4DGuarded-v0 --model {p}`" in str(e.value) and "\n" not in str(e.value)
+    g = LRMMGuardian(p, threshold=0.85)
+    assert (g.threshold, g.threshold_source, g.strategies) == (0.85, "argument", ())
+    with pytest.raises(ValueError, match="has no decision"):
+        LRMMGuardian(p, strategies="BrakeTurn")
     with pytest.raises(ValueError, match="SafestCandidate.*'candidates'.*v1.npz has none"):
         LRMMGuardian(p, strategies="SafestCandidate", threshold=0.5)
     import warnings
@@ -574,11 +598,10 @@ def test_non_finite_risk_is_an_error_not_safe():
         "hidden": [1],
         "activation": "relu",
         "output_bias": False,
-        "decision": {"threshold": 0.5},
     }
     m = LRMMModel([(W0, np.zeros(1)), (np.ones((1, 1)), None)], np.zeros(17), np.ones(17), meta)
     for g in (
-        LRMMGuardian(m, strategies="BrakeTurn"),
+        LRMMGuardian(m, strategies="BrakeTurn", threshold=0.5),
         __import__("rmm_guardians.lrmm.guardian", fromlist=["x"]).LRMMPaperGuardian(m),
     ):
         g.reset(seed=0, **SPACES)
@@ -657,15 +680,14 @@ def head_model_by_hand(risks_bias=(0.0, 1.0, -1.0, 2.0), decision=None):
         "candidates": [[-0.25, -0.5], [0.25, -0.5], [0.0, 0.5]],
         "candidate_hold": 1.0,
     }
-    if decision:
-        meta["decision"] = decision
     # hidden = relu(10 - ray0) >= 0 for rays <= 10; risk = sigmoid(h + b0 - 8)
-    return LRMMModel(
+    model = LRMMModel(
         [(W0, np.array([10.0])), (W1, np.array(risks_bias) + np.array([-8.0, 0, 0, 0]))],
         np.zeros(17),
         np.ones(17),
         meta,
     )
+    return decided(model, decision) if decision else model
 
 
 def test_rule_is_strictly_above_the_threshold():
@@ -755,12 +777,11 @@ def test_defaults_are_pinned():
     g = LRMMGuardian()
     assert g.name == "lrmm" and g.model.path == default_model_path("Dubins4DGuarded-v0", variant="act")
     assert g.settings == LRMMSettings()
-    d = g.model.meta["decision"]
-    assert set(d) == {"threshold", "strategies", "chosen_by"}
-    assert d["strategies"] == ["SafestCandidate()", "Commit(steps=18)", "Restart(speed=0.3)"]
-    assert (g.threshold, g.threshold_source) == (d["threshold"], "stored decision")
+    d = read_decision(decision_path(g.model.path))
+    assert d.strategies == "SafestCandidate(), Commit(steps=18), Restart(speed=0.3)"
+    assert (g.threshold, g.threshold_source) == (d.threshold, "stored decision")
     assert (g.threshold, g.strategies) == SHIPPED_DECISION
-    assert "seed" in d["chosen_by"]
+    assert "seed" in d.chosen_by["how"] and set(d.chosen_by) == {"how", "command", "seeds", "date"}
 
 
 def test_registry_names():
@@ -796,7 +817,7 @@ def test_bad_guardian_arguments():
     with pytest.raises(ValueError, match="Commit steps"):
         LRMMGuardian(m, strategies=(Commit(steps=-1),))  # an object is checked when made
     bad = head_model_by_hand(decision={"threshold": 1.5})
-    with pytest.raises(ValueError, match="stored decision threshold"):
+    with pytest.raises(ValueError, match=r"decision.toml: threshold must be in \[0, 1\], got 1.5"):
         LRMMGuardian(bad)
 
 

@@ -1,10 +1,8 @@
-"""The LRMM guardian's arguments, stored decision, space checks and moving average, pinned at their edges
+"""The LRMM guardian's arguments, decision file, space checks and moving average, pinned at their edges
 (where a full mutation run of guardians/lrmm/guardian.py found them loose)."""
 
 import math
-import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,8 +24,12 @@ def test_bounds_of_the_threshold_and_window_are_accepted_and_their_neighbours_re
             LRMMGuardian(forward_ray_model(), threshold=t, strategies="BrakeTurn")
         assert str(e.value) == f"threshold must be in [0, 1], got {t}"
         with pytest.raises(ValueError) as e:
-            LRMMGuardian(head_model_by_hand(decision={"threshold": t}))
-        assert str(e.value) == f"the model: stored decision threshold must be in [0, 1], got {t}"
+            m = head_model_by_hand(decision={"threshold": t})
+            LRMMGuardian(m)
+        assert (
+            str(e.value)
+            == f"{m.path.with_suffix('').with_suffix('.decision.toml')}: threshold must be in [0, 1], got {t}"
+        )
     g = LRMMGuardian(forward_ray_model(), threshold=0.5, strategies="BrakeTurn, MovingAverage(window=1)")
     assert g.strategies == (BrakeTurn(), MovingAverage(window=1)) and g.strategies[1].window == 1
     with pytest.raises(ValueError) as e:
@@ -42,48 +44,49 @@ def test_stored_decision_without_strategies_is_the_core_alone_and_a_bad_stored_s
     assert LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5})).strategies == ()
     assert LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5, "strategies": []})).strategies == ()
     with pytest.raises(ValueError) as e:
-        LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5, "strategies": ["Fly()"]}))
+        m = head_model_by_hand(decision={"threshold": 0.5, "strategies": ["Fly()"]})
+        LRMMGuardian(m)
     assert str(e.value) == (
-        f"the model: stored decision: unknown strategy 'Fly'; the strategies are: {', '.join(STRATEGIES)} "
-        "or 'module:Class'"
+        f"{m.path.parent / m.path.stem}.decision.toml: unknown strategy 'Fly'; the strategies are: "
+        f"{', '.join(STRATEGIES)} or 'module:Class'"
     )
     with pytest.raises(ValueError) as e:  # a field of the former format: named, not ignored
-        LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5, "action": "head"}))
+        m = head_model_by_hand(decision={"threshold": 0.5, "action": "head"})
+        LRMMGuardian(m)
     assert str(e.value) == (
-        "the model: stored decision has unknown key(s) ['action']; a decision holds threshold, strategies, "
-        "chosen_by (rewrite it with python -m rmm_guardians.lrmm.decision)"
+        f"{m.path.parent / m.path.stem}.decision.toml: unknown key(s) ['action']; a decision file holds format, "
+        "version, model_sha256, threshold, strategies, chosen_by"
     )
     with pytest.raises(ValueError) as e:
-        LRMMGuardian(head_model_by_hand(decision={"threshold": 0.5, "strategies": "Commit(steps=1)"}))
-    assert str(e.value) == (
-        "the model: stored decision strategies must be a list of spec strings, got 'Commit(steps=1)'"
-    )
+        m = head_model_by_hand(decision={"threshold": 0.5, "strategies": ["Commit(steps=1)", "-Commit"]})
+        LRMMGuardian(m)
+    assert "either every item edits the stored ones (+/-) or none does" in str(e.value)
     with pytest.raises(ValueError) as e:
         LRMMGuardian(forward_ray_model(), env_id=5)
     assert str(e.value) == "env_id must be a registered env id (str) or None, got 5"
 
 
-def test_the_tables_decision_defaults_are_for_the_shipped_model_only():
-    # the maze entry stores threshold 0.7, commit 5: a model of one's own (without a stored decision)
-    # gets the paper's threshold with a warning and no commitment, not the table's numbers
-    with pytest.warns(UserWarning, match="no 'decision' threshold"):
-        g = LRMMGuardian(RaysModel(forward_risk), env_id="Dubins3DMazeParallel-v0", strategies="RayTurn")
+def test_a_model_of_ones_own_on_an_env_with_a_shipped_model_gets_no_shipped_decision():
+    # the maze's shipped model has threshold 0.7 and Commit(steps=5) beside it: a model of one's own
+    # (without a decision file) is refused in one line naming rmm-bench tune, never given those numbers
+    with pytest.raises(ValueError) as e:
+        LRMMGuardian(RaysModel(forward_risk), env_id="Dubins3DMazeParallel-v0")
+    assert str(e.value).startswith("lrmm: the model (an LRMMModel without a file) has no decision: give a threshold")
+    g = LRMMGuardian(RaysModel(forward_risk), env_id="Dubins3DMazeParallel-v0", threshold=0.85, strategies="RayTurn")
     assert (g.threshold, g.strategies, g.inputs) == (0.85, (RayTurn(),), "rays")  # the table's input field applies
-    with pytest.warns(UserWarning, match="no 'decision' threshold"):
-        g = LRMMGuardian(RaysModel(forward_risk), env_id="Dubins3DMazeParallel-v0")
-    assert (g.threshold, g.strategies) == (0.85, ())  # not the table's RayTurn and Commit: the core alone
-    # an env id without an entry in the table: the whole observation, no table defaults
+    g = LRMMGuardian(RaysModel(forward_risk), env_id="Dubins3DMazeParallel-v0", threshold=0.85)
+    assert (g.threshold, g.strategies) == (0.85, ())  # not the shipped model's Commit: the core alone
+    # an env id without an entry in the table: the whole observation
     g = LRMMGuardian(forward_ray_model(), threshold=0.5, strategies="BrakeTurn", env_id="SomeOtherEnv-v0")
     assert (g.env_id, g.inputs, g.strategies) == ("SomeOtherEnv-v0", None, (BrakeTurn(),))
 
 
-def test_fallback_warnings_point_at_the_callers_line():
-    with pytest.warns(UserWarning) as w:
-        LRMMGuardian(forward_ray_model())
-    assert all(x.category is UserWarning for x in w) and len(w) == 1  # the paper's threshold; no rule falls back
-    assert not any(Path(x.filename).parts[-3:] == ("guardians", "lrmm", "guardian.py") for x in w)
-    if "mutmut" not in sys.modules:  # under mutation testing, mutmut's trampoline adds frames in between
-        assert [x.filename for x in w] == [__file__]
+def test_no_warning_without_a_decision_a_refusal():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match="has no decision"):
+            LRMMGuardian(forward_ray_model())
+        LRMMGuardian(forward_ray_model(), threshold=0.85)  # given: nothing to warn about
 
 
 def test_last_risk_is_nan_until_the_first_decision_and_after_each_reset():
@@ -110,13 +113,13 @@ def test_the_paper_preset_passes_its_other_arguments_on():
 
 
 def test_moving_average_is_strictly_above_the_threshold_and_over_the_last_window_only():
-    m = head_model_by_hand(decision={"threshold": 0.5, "strategies": ["SafestCandidate()"]})
+    m = head_model_by_hand()
     at = obs_with(2.0, 5.0, 5.0)  # risk sigmoid(0) = 0.5: the threshold exactly
-    g = LRMMGuardian(m, strategies="MovingAverage(window=3), SafestCandidate")
+    g = LRMMGuardian(m, threshold=0.5, strategies="MovingAverage(window=3), SafestCandidate")
     g.reset(seed=0, **SPACES)
     assert [g.act(at, {})["active_ctrl"] for _ in range(4)] == [0, 0, 0, 0]  # mean 0.5 is not above 0.5
     high, low = obs_with(0.0, 5.0, 5.0), obs_with(9.0, 5.0, 5.0)  # risks sigmoid(2) = 0.88, sigmoid(-7) = 0.0009
-    g = LRMMGuardian(m, strategies="MovingAverage(window=2), SafestCandidate")
+    g = LRMMGuardian(m, threshold=0.5, strategies="MovingAverage(window=2), SafestCandidate")
     g.reset(seed=0, **SPACES)
     assert [g.act(high, {})["active_ctrl"] for _ in range(4)] == [1] * 4
     # the last two risks (0.88, 0.0009) average 0.44: released at once; the whole history (two 0.5s at
@@ -129,9 +132,9 @@ def test_non_finite_candidate_risks_are_an_error_naming_them():
         def predict_all(self, obs):
             return np.array([0.9, np.nan, 0.1, 0.2])
 
-    src = head_model_by_hand(decision={"threshold": 0.5, "strategies": ["SafestCandidate()"]})
+    src = head_model_by_hand()
     m = NanHead(src.weights, src.scaler_min, src.scaler_scale, src.meta)
-    g = LRMMGuardian(m)
+    g = LRMMGuardian(m, threshold=0.5, strategies="SafestCandidate")
     g.reset(seed=0, **SPACES)
     with pytest.raises(ValueError) as e:
         g.act(obs_with(1.0, 5.0, 5.0), {})

@@ -10,8 +10,9 @@ import pytest
 
 from rmm_envs.autonomy import ObservationLayout
 from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
+from rmm_guardians.lrmm.decision import decision_path, read_decision, set_decision
 from rmm_guardians.lrmm.guardian import LRMMGuardian
-from rmm_guardians.lrmm.model import LRMMModel, set_decision
+from rmm_guardians.lrmm.model import LRMMModel
 from rmm_guardians.lrmm.nominal import PredictRater, make_rater
 from rmm_guardians.lrmm.strategies import BrakeTurn, Commit, MovingAverage, RatedDriver, Restart, SafestCandidate
 from tests.test_lrmm import SPACES, env_spaces, forward_ray_model, obs_with
@@ -69,7 +70,7 @@ def test_no_rater_without_a_layout_or_a_field_it_predicts():
     assert make_rater(CONTROLS, rays_only, 1.0, np.zeros(4), np.ones(4)) is None
 
 
-def speed_model(cand_bias=(0.0, -2.0, -1.0), decision=None):
+def speed_model(cand_bias=(0.0, -2.0, -1.0)):
     """Unit 0 = sigmoid(4 v - 4) of the speed v (a stopped car: 0.018, 1 m/s: 0.5, 1.5 m/s: 0.881);
     the candidates' units are constants sigmoid(cand_bias): brake-left 0.5, brake-right 0.119,
     accelerate 0.269 by default."""
@@ -86,8 +87,6 @@ def speed_model(cand_bias=(0.0, -2.0, -1.0), decision=None):
         "candidates": [[-0.25, -0.5], [0.25, -0.5], [0.0, 0.5]],
         "candidate_hold": 1.0,
     }
-    if decision:
-        meta["decision"] = decision
     return LRMMModel([(W0, np.array([0.0])), (W1, np.array([-4.0, *cand_bias]))], np.zeros(17), np.ones(17), meta)
 
 
@@ -264,12 +263,12 @@ def test_restart_needs_a_speed_and_an_acceleration():
 def test_stored_hand_back_defaults_round_trip(tmp_path):
     p = speed_model().save(tmp_path / "m.npz")
     set_decision(p, 0.4, "RatedDriver(margin=0.05), Commit(steps=5), SafestCandidate", "a test")
-    m = LRMMModel.load(p)
-    assert m.meta["decision"] == {
-        "threshold": 0.4,
-        "strategies": ["RatedDriver(margin=0.05, still=None, stay=True)", "Commit(steps=5)", "SafestCandidate()"],
-        "chosen_by": "a test",
-    }
+    d = read_decision(decision_path(p))
+    assert (d.threshold, d.strategies, d.chosen_by) == (
+        0.4,
+        "RatedDriver(margin=0.05, still=None, stay=True), Commit(steps=5), SafestCandidate()",
+        {"how": "a test"},
+    )
     g = LRMMGuardian(p)
     assert g.strategies == (RatedDriver(margin=0.05), Commit(steps=5), SafestCandidate())
     assert (g.strategies[0].margin, g.strategies[0].still, g.strategies[0].stay) == (0.05, None, True)
@@ -283,11 +282,12 @@ def test_stored_hand_back_defaults_round_trip(tmp_path):
 
     spec = "SafestCandidate, Commit(steps=18), Restart(speed=0.3)"
     assert decision_main([str(p), "--threshold", "0.3", "--strategies", spec, "--chosen-by", "t"]) == 0
-    assert LRMMModel.load(p).meta["decision"] == {
-        "threshold": 0.3,
-        "strategies": ["SafestCandidate()", "Commit(steps=18)", "Restart(speed=0.3)"],
-        "chosen_by": "t",
-    }
+    d = read_decision(decision_path(p))
+    assert (d.threshold, d.strategies, d.chosen_by) == (
+        0.3,
+        "SafestCandidate(), Commit(steps=18), Restart(speed=0.3)",
+        {"how": "t"},
+    )
     bad = [str(p), "--threshold", "0.3", "--strategies", "RatedDriver(margin=-2)", "--chosen-by", "t"]
     assert decision_main(bad) == 2
 

@@ -1,6 +1,7 @@
 """rmm_guardians.lrmm.settings: the lrmm guardian's settings and presets, and one precedence for its
-threshold and strategies (argument > the model file's stored decision > the shipped entry's > the
-paper's 0.85 and no strategies)."""
+threshold and strategies (argument > the decision file beside the model; ``lrmm`` refuses a model
+without one unless given a threshold, ``lrmm-paper`` reads none: the paper's 0.85).  The decision
+file itself: tests/test_lrmm_decision.py."""
 
 from __future__ import annotations
 
@@ -8,20 +9,11 @@ import math
 
 import pytest
 
-from rmm_guardians.lrmm.settings import (
-    DECISION_KEYS,
-    LRMM_PRESETS,
-    PAPER_THRESHOLD,
-    LRMMSettings,
-    check_threshold,
-    decision_threshold,
-    stored_decision,
-    stored_strategies,
-)
-from rmm_guardians.lrmm.shipped import Shipped
+from rmm_guardians.lrmm.decision import Decision, decision_path, read_decision
+from rmm_guardians.lrmm.settings import LRMM_PRESETS, LRMMSettings, check_threshold
 from rmm_guardians.lrmm.strategies import STRATEGIES, BrakeTurn, Commit, Restart, SafestCandidate
 
-SHIP = Shipped({"act": "x.npz"}, decision={"threshold": 0.6, "strategies": ["Commit(steps=3)"], "chosen_by": "a test"})
+HOW = {"how": "a test"}
 
 
 @pytest.mark.parametrize(
@@ -39,51 +31,10 @@ def test_a_bad_threshold_argument_is_refused_by_value(bad, message):
         check_threshold(bad)
     assert str(e.value) == message
     with pytest.raises(ValueError):
-        decision_threshold(bad, {"threshold": 0.3}, "m.npz")
+        Decision(bad, "", HOW)
     with pytest.raises(ValueError) as e:
         LRMMSettings(threshold=bad)
     assert str(e.value) == message
-
-
-def test_the_stored_decision_is_the_model_files_else_the_shipped_entrys_for_its_own_model():
-    own = {"threshold": 0.2, "strategies": ["Commit(steps=1)"]}
-    assert stored_decision({"decision": own}, SHIP, model_given=False) is own  # the file wins over the table
-    assert stored_decision({}, SHIP, model_given=False) is SHIP.decision
-    assert stored_decision({}, SHIP, model_given=True) is None  # a model given by path: no shipped decision
-    assert stored_decision({"decision": own}, None, model_given=True) is own
-    assert stored_decision({}, None, model_given=False) is None
-
-
-def test_the_threshold_precedence():
-    assert decision_threshold(0.4, {"threshold": 0.6}, "m.npz") == (0.4, "argument")
-    assert decision_threshold(0, {"threshold": 0.6}, "m.npz") == (0.0, "argument")  # 0 is a value, not "not given"
-    assert decision_threshold(None, {"threshold": 0.6}, "m.npz") == (0.6, "stored decision")
-    assert decision_threshold(None, {"strategies": []}, "m.npz") == (PAPER_THRESHOLD, "paper") == (0.85, "paper")
-    assert decision_threshold(None, None, "m.npz") == (0.85, "paper")
-    with pytest.raises(ValueError, match=r"^m.npz: stored decision threshold must be in \[0, 1\], got 1.2$"):
-        decision_threshold(None, {"threshold": 1.2}, "m.npz")
-
-
-def test_the_stored_strategies_and_their_refusals():
-    assert stored_strategies(None, "m.npz") == () and stored_strategies({}, "m.npz") == ()
-    assert stored_strategies({"threshold": 0.3}, "m.npz") == ()  # no strategies stored: the core alone
-    assert stored_strategies(
-        {"threshold": 0.3, "strategies": ["SafestCandidate()", "Commit(steps=18)", "Restart(speed=0.3)"]}, "m.npz"
-    ) == (SafestCandidate(), Commit(steps=18), Restart(speed=0.3))
-    assert DECISION_KEYS == ("threshold", "strategies", "chosen_by")
-    with pytest.raises(ValueError) as e:
-        stored_strategies({"threshold": 0.3, "commit": 18, "action": "head"}, "m.npz")
-    assert str(e.value) == (
-        "m.npz: stored decision has unknown key(s) ['action', 'commit']; a decision holds threshold, strategies, "
-        "chosen_by (rewrite it with python -m rmm_guardians.lrmm.decision)"
-    )
-    with pytest.raises(ValueError, match=r"^m.npz: stored decision: unknown strategy 'Steer'; the strategies are: "):
-        stored_strategies({"strategies": ["Steer()"]}, "m.npz")
-    for bad in ("Commit(steps=1)", [3], {"Commit": 1}):
-        with pytest.raises(ValueError, match=r"^m.npz: stored decision strategies must be a list of spec strings"):
-            stored_strategies({"strategies": bad}, "m.npz")
-    with pytest.raises(ValueError, match=r"^m.npz: stored decision: .*Commit steps must be an integer >= 0"):
-        stored_strategies({"strategies": ["Commit(steps=-2)"]}, "m.npz")
 
 
 def test_the_guardian_reports_where_its_threshold_came_from():
@@ -91,24 +42,28 @@ def test_the_guardian_reports_where_its_threshold_came_from():
     from rmm_guardians.lrmm.model import load_model
 
     g = LRMMGuardian()
-    stored = g.model.meta.get("decision") or {}
-    assert (g.threshold, g.threshold_source) == (float(stored["threshold"]), "stored decision")
+    stored = read_decision(decision_path(g.model.path))
+    assert (g.threshold, g.threshold_source) == (stored.threshold, "stored decision")
     assert LRMMGuardian(threshold=0.5).threshold_source == "argument"
     assert (LRMMPaperGuardian().threshold, LRMMPaperGuardian().threshold_source) == (0.85, "argument")
     bare = load_model(g.model.path)
+    del bare.path  # a model object without a file: no decision beside it
     bare.meta.pop("decision", None)
-    with pytest.warns(UserWarning, match="has no 'decision' threshold: using the paper's 0.85"):
-        h = LRMMGuardian(model=bare)
-    assert (h.threshold, h.threshold_source, h.strategies) == (0.85, "paper", ())  # and the core alone
+    with pytest.raises(ValueError, match=r"^lrmm: the model \(an LRMMModel without a file\) has no decision: give a"):
+        LRMMGuardian(model=bare)
+    h = LRMMGuardian(model=bare, threshold=0.5)
+    assert (h.threshold, h.threshold_source, h.strategies) == (0.5, "argument", ())  # and the core alone
+    p = LRMMPaperGuardian(model=bare, settings="core")  # lrmm-paper reads no decision: the paper's threshold
+    assert (p.threshold, p.threshold_source, p.strategies) == (0.85, "paper", ())
 
 
 def test_the_ends_of_the_threshold_range_are_values():
     for t in (0, 0.0, 1, 1.0):
         assert check_threshold(t) == float(t)
-        assert decision_threshold(None, {"threshold": t}, "m.npz") == (float(t), "stored decision")
+        assert Decision(t, "", HOW).threshold == float(t)
     for bad in (1.0000001, -1e-9):
-        with pytest.raises(ValueError, match="stored decision threshold must be in"):
-            decision_threshold(None, {"threshold": bad}, "m.npz")
+        with pytest.raises(ValueError, match="threshold must be in"):
+            Decision(bad, "", HOW)
 
 
 # ----------------------------------------------------------------------------- LRMMSettings and the presets

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox
+from rmm_guardians.lrmm.decision import decision_path, read_decision, set_decision
 from rmm_guardians.lrmm.guardian import LRMMGuardian
-from rmm_guardians.lrmm.model import LRMMModel, set_decision
+from rmm_guardians.lrmm.model import LRMMModel
 from rmm_guardians.lrmm.nominal import driver_at_risk
 from rmm_guardians.lrmm.strategies import SLIDE_MOVES, Commit, RatedDriver, SafestCandidate, Slide, driver
 from tests.test_lrmm import SPACES as D4_SPACES
@@ -73,7 +74,7 @@ def test_take_over_test_by_hand(rated, still, holding, expected):
     assert driver_at_risk(rated, 0.2, 0.15, still, holding) is expected
 
 
-def quad_model(head=(0.3, 0.1, 0.5, 0.2), decision=None):
+def quad_model(head=(0.3, 0.1, 0.5, 0.2)):
     """Unit 0 = sigmoid(relu(2 vf - 2 vup + 10) - 13) of the measured forward and up velocity (obs 14
     and 16); the head's units are the constants ``head`` (hover, climb, back off, back off and climb)."""
     W0 = np.zeros((1, 23))
@@ -90,8 +91,6 @@ def quad_model(head=(0.3, 0.1, 0.5, 0.2), decision=None):
         "candidates": HEAD,
         "candidate_hold": 1.0,
     }
-    if decision:
-        meta["decision"] = decision
     return LRMMModel([(W0, np.array([10.0])), (W1, b1)], np.zeros(23), np.ones(23), meta)
 
 
@@ -202,16 +201,12 @@ def test_stored_slide_still_and_stay_round_trip(tmp_path):
     p = quad_model().save(tmp_path / "q.npz")
     spec = "RatedDriver(margin=0.15, still=0.05, stay=False), Commit(steps=20), SafestCandidate, Slide"
     set_decision(p, 0.2, spec, "a test")
-    assert LRMMModel.load(p).meta["decision"] == {
-        "threshold": 0.2,
-        "strategies": [
-            "RatedDriver(margin=0.15, still=0.05, stay=False)",
-            "Commit(steps=20)",
-            "SafestCandidate()",
-            "Slide()",
-        ],
-        "chosen_by": "a test",
-    }
+    d = read_decision(decision_path(p))
+    assert (d.threshold, d.strategies, d.chosen_by) == (
+        0.2,
+        "RatedDriver(margin=0.15, still=0.05, stay=False), Commit(steps=20), SafestCandidate(), Slide()",
+        {"how": "a test"},
+    )
     g = LRMMGuardian(p)
     rd = g.strategies[0]
     assert (type(rd), rd.margin, rd.still, rd.stay, g.strategies[-1]) == (RatedDriver, 0.15, 0.05, False, Slide())
@@ -222,6 +217,6 @@ def test_stored_slide_still_and_stay_round_trip(tmp_path):
 
     cli = "RatedDriver(margin=0.15, still=0.05), Commit(steps=20), SafestCandidate, Slide"
     assert decision_main([str(p), "--threshold", "0.2", "--strategies", cli, "--chosen-by", "t"]) == 0
-    stored = LRMMModel.load(p).meta["decision"]["strategies"]
-    assert stored[0] == "RatedDriver(margin=0.15, still=0.05, stay=True)" and stored[-1] == "Slide()"
+    stored = read_decision(decision_path(p)).strategies
+    assert stored.startswith("RatedDriver(margin=0.15, still=0.05, stay=True), ") and stored.endswith(", Slide()")
     assert decision_main([str(p), "--threshold", "0.2", "--strategies", "Slide(climb=True)", "--chosen-by", "t"]) == 2

@@ -18,8 +18,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
+from rmm_guardians.lrmm.decision import decision_path, read_decision, set_decision
 from rmm_guardians.lrmm.guardian import LRMMGuardian, LRMMPaperGuardian
-from rmm_guardians.lrmm.model import LRMMModel, set_decision
+from rmm_guardians.lrmm.model import LRMMModel
 from rmm_guardians.lrmm.settings import LRMMSettings
 from rmm_guardians.lrmm.strategies import (
     STRATEGIES,
@@ -35,7 +36,7 @@ from rmm_guardians.lrmm.strategies import (
     parse_strategies,
     strategy_specs,
 )
-from tests.test_lrmm import SPACES, forward_ray_model, head_model_by_hand, obs_with
+from tests.test_lrmm import SPACES, decided, forward_ray_model, head_model_by_hand, obs_with
 
 STORED = (SafestCandidate(), Commit(steps=18), Restart(speed=0.3))  # the shipped Dubins4D act model's
 
@@ -128,7 +129,7 @@ def test_a_strategy_from_a_module_on_the_path_is_stored_and_read_back(tmp_path, 
     assert coast.spec() == "my_lrmm_rules:Coast(accel=-0.3)"
     p = head_model_by_hand().save(tmp_path / "m.npz")
     set_decision(p, 0.5, "my_lrmm_rules:Coast(accel=-0.3), Commit(steps=1)", "a test")
-    assert LRMMModel.load(p).meta["decision"]["strategies"] == ["my_lrmm_rules:Coast(accel=-0.3)", "Commit(steps=1)"]
+    assert read_decision(decision_path(p)).strategies == "my_lrmm_rules:Coast(accel=-0.3), Commit(steps=1)"
     g = LRMMGuardian(p)
     assert [s.spec() for s in g.strategies] == ["my_lrmm_rules:Coast(accel=-0.3)", "Commit(steps=1)"]
     g.reset(seed=0, **SPACES)
@@ -320,7 +321,7 @@ def test_settings_objects_and_their_fields_given_as_arguments():
     assert (g.threshold, g.strategies) == (0.6, (SafestCandidate(),))  # edits of the settings' own strategies
     p = LRMMGuardian(settings="lrmm-paper")
     assert (type(p), p.threshold, p.strategies) == (LRMMGuardian, 0.85, (BrakeTurn(),))
-    assert p.model.meta.get("decision") is not None  # the lrmm model: presets set the rule, not the model
+    assert decision_path(p.model.path).is_file()  # the lrmm model: presets set the rule, not its decision
 
 
 def test_edits_on_a_preset_edit_the_presets_strategies():
@@ -331,18 +332,18 @@ def test_edits_on_a_preset_edit_the_presets_strategies():
 @pytest.mark.parametrize(
     "decision, words",
     [
-        ({"threshold": 0.3, "strategies": ["Teleport()"], "chosen_by": "x"}, ["m.npz", "unknown strategy 'Teleport'"]),
-        ({"threshold": 0.3, "strategies": ["Commit(steps=2)", "Commit()"]}, ["m.npz", "each strategy may appear once"]),
-        (
-            {"threshold": 0.3, "commit": 18, "chosen_by": "x"},
-            ["m.npz", "unknown key(s) ['commit']", "threshold, strat"],
-        ),
-        ({"threshold": 0.3, "trigger": "driver", "slide": True}, ["m.npz", "['slide', 'trigger']"]),
-        ({"threshold": 0.3, "strategies": "SafestCandidate()"}, ["m.npz", "must be a list of spec strings"]),
+        ({"threshold": 0.3, "strategies": ["Teleport()"], "chosen_by": "x"}, ["unknown strategy 'Teleport'"]),
+        ({"threshold": 0.3, "strategies": ["Commit(steps=2)", "Commit()"]}, ["each strategy may appear once"]),
+        ({"threshold": 0.3, "commit": 18, "chosen_by": "x"}, ["unknown key(s) ['commit']", "threshold, strat"]),
+        ({"threshold": 0.3, "trigger": "driver", "slide": True}, ["['slide', 'trigger']"]),
+        ({"threshold": 0.3, "strategies": 3}, ["strategies must be a spec string ('': none), got 3"]),
+        ({"threshold": 0.3, "chosen_by": " "}, ["chosen_by.how must say how"]),
+        ({"strategies": ["Commit(steps=2)"]}, ["no threshold"]),
     ],
 )
 def test_a_bad_stored_decision_is_refused_when_the_guardian_is_built(tmp_path, decision, words):
-    p = head_model_by_hand(decision=decision).save(tmp_path / "m.npz")
+    p = decided(head_model_by_hand(), decision, tmp_path / "m.npz").path
+    words = [f"{tmp_path / 'm.decision.toml'}: ", *words]
     for kw in ({}, {"threshold": 0.5}):
         with pytest.raises(ValueError) as e:
             LRMMGuardian(p, **kw)  # at construction: no reset, no env
@@ -356,7 +357,7 @@ def test_set_decision_edits_edit_the_files_stored_strategies(tmp_path):
         set_decision(p, 0.3, "+Commit(steps=5)", "a test")
     except ValueError:
         return  # refusing edits is as good
-    assert LRMMModel.load(p).meta["decision"]["strategies"] == ["SafestCandidate()", "Commit(steps=5)"]
+    assert read_decision(decision_path(p)).strategies == "SafestCandidate(), Commit(steps=5)"
 
 
 # ----------------------------------------------------------------------------- what a strategy needs
@@ -458,14 +459,15 @@ def test_the_decision_command_stores_and_refuses(tmp_path, capsys):
     argv = [str(p), "--threshold", "0.3", "--strategies", "SafestCandidate, Commit(18), Restart(speed=0.3)"]
     assert decision_main([*argv, "--chosen-by", "a test"]) == 0
     assert capsys.readouterr().out == (
-        f"{p}: decision threshold 0.3, strategies [SafestCandidate(), Commit(steps=18), Restart(speed=0.3)]\n"
+        f"{tmp_path / 'm.decision.toml'}: decision threshold 0.3, strategies "
+        "[SafestCandidate(), Commit(steps=18), Restart(speed=0.3)]\n"
     )
-    stored = LRMMModel.load(p).meta["decision"]
-    assert stored == {
-        "threshold": 0.3,
-        "strategies": ["SafestCandidate()", "Commit(steps=18)", "Restart(speed=0.3)"],
-        "chosen_by": "a test",
-    }
+    stored = read_decision(decision_path(p))
+    assert (stored.threshold, stored.strategies, stored.chosen_by) == (
+        0.3,
+        "SafestCandidate(), Commit(steps=18), Restart(speed=0.3)",
+        {"how": "a test"},
+    )
     assert (LRMMGuardian(p).threshold, LRMMGuardian(p).strategies) == (0.3, STORED)
     for strategies, words in (
         ("Nope", ["unknown strategy 'Nope'", "SafestCandidate, Restart", "'module:Class'"]),
@@ -479,12 +481,11 @@ def test_the_decision_command_stores_and_refuses(tmp_path, capsys):
         assert all(w in err for w in words), err
     assert decision_main([str(p), "--threshold", "1.5", "--strategies", "", "--chosen-by", "x"]) == 2
     assert "threshold must be in [0, 1], got 1.5" in capsys.readouterr().err
-    assert LRMMModel.load(p).meta["decision"] == stored  # every refusal left the file as it was
-    with pytest.raises(SystemExit) as e:
-        decision_main([str(p), "--threshold", "0.3", "--chosen-by", "x"])  # --strategies is required
-    assert e.value.code == 2 and "--strategies" in capsys.readouterr().err
+    assert read_decision(decision_path(p)) == stored  # every refusal left the file as it was
+    assert decision_main([str(p), "--threshold", "0.3", "--chosen-by", "x"]) == 2  # --strategies is required
+    assert "give --threshold, --strategies and --chosen-by" in capsys.readouterr().err
     assert decision_main([str(p), "--threshold", "0.3", "--strategies", "", "--chosen-by", "the core alone"]) == 0
-    assert LRMMModel.load(p).meta["decision"]["strategies"] == [] and LRMMGuardian(p).strategies == ()
+    assert read_decision(decision_path(p)).strategies == "" and LRMMGuardian(p).strategies == ()
 
 
 def test_the_decision_module_runs_as_a_command(tmp_path):

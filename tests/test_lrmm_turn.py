@@ -206,10 +206,13 @@ def test_a_model_without_a_file_is_named_the_model_in_refusals_and_warnings():
     assert str(e.value) == (
         "strategy SafestCandidate reads the model's action-conditioned head ('candidates'), and the model has none"
     )
-    with pytest.warns(UserWarning) as w:
-        g = LRMMGuardian(m)
-    assert [str(x.message) for x in w] == ["lrmm: the model has no 'decision' threshold: using the paper's 0.85"]
-    assert g.strategies == ()  # no head, nothing stored: the core alone, without a warning of its own
+    with pytest.raises(ValueError) as e:
+        LRMMGuardian(m)
+    assert str(e.value) == (
+        "lrmm: the model (an LRMMModel without a file) has no decision: give a threshold "
+        "(--agent-opt lrmm.threshold=0.5; in Python threshold=0.5)"
+    )
+    assert LRMMGuardian(m, threshold=0.5).strategies == ()  # no head, nothing stored: the core alone
 
 
 def test_a_wrong_observation_size_is_refused_showing_the_space_or_the_field():

@@ -8,25 +8,27 @@ import shutil
 import numpy as np
 
 from benchmarks.model_spread import _decided_copy, main
+from rmm_guardians.lrmm.decision import decision_path, read_decision
 from rmm_guardians.lrmm.guardian import LRMMGuardian
-from rmm_guardians.lrmm.model import LRMMModel, default_model_path
+from rmm_guardians.lrmm.model import default_model_path
 
 
 def test_a_model_gets_the_decision_of_the_env_s_shipped_guardian(tmp_path):
-    # the maze model file stores no decision (the system table does): the copy carries it
+    # a model of one's own has no decision: the copy gets the shipped guardian's beside it
     src = tmp_path / "maze_seed1.npz"
     shutil.copy(default_model_path("Dubins3DMazeParallel-v0", variant="act"), src)
-    assert LRMMModel.load(src).meta.get("decision") is None
+    assert not decision_path(src).exists()
     copy = _decided_copy(src, "Dubins3DMazeParallel-v0", tmp_path / "out")
-    d = LRMMModel.load(copy).meta["decision"]
+    d = read_decision(decision_path(copy))
     shipped = LRMMGuardian(env_id="Dubins3DMazeParallel-v0")
-    assert d["threshold"] == shipped.threshold == 0.7 and d["strategies"] == ["Commit(steps=5)"]
+    assert d.threshold == shipped.threshold == 0.7 and d.strategies == "Commit(steps=5)"
+    assert copy.read_bytes() == src.read_bytes()  # the model file itself is a plain copy
     g = LRMMGuardian(model=copy, env_id="Dubins3DMazeParallel-v0")
     assert (g.threshold, g.strategies, g.inputs) == (shipped.threshold, shipped.strategies, "rays")
     for (w1, b1), (w2, b2) in zip(g.model.weights, shipped.model.weights, strict=True):  # the weights untouched
         np.testing.assert_array_equal(w1, w2)
         np.testing.assert_array_equal(b1, b2)
-    assert LRMMModel.load(src).meta.get("decision") is None  # the source file is not changed
+    assert not decision_path(src).exists()  # nothing is written beside the source file
 
 
 def test_bad_input_exits_2_naming_it(tmp_path, capsys):

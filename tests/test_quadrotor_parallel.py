@@ -515,16 +515,14 @@ def test_lrmm_reads_the_shipped_command_model_by_env_id(env):
     g = make_guardian("lrmm", env_id="QuadrotorRoomParallel-v0")
     ship = SHIPPED["QuadrotorRoomParallel-v0"]
     assert g.model.path.name == ship.files["act"] == "quadrotor_cmd_act.npz"
+    from rmm_guardians.lrmm.decision import decision_path, read_decision
     from rmm_guardians.lrmm.strategies import Commit, RatedDriver, SafestCandidate, Slide
 
-    decision = g.model.meta["decision"]  # stored in the file, with how it was chosen
-    assert decision["strategies"] == [
-        "RatedDriver(margin=0.15, still=0.05, stay=True)",
-        "Commit(steps=20)",
-        "SafestCandidate()",
-        "Slide()",
-    ]
-    assert (g.threshold, g.threshold_source) == (decision["threshold"], "stored decision") == (0.2, "stored decision")
+    decision = read_decision(decision_path(g.model.path))  # the file beside the model, with how it was chosen
+    assert decision.strategies == (
+        "RatedDriver(margin=0.15, still=0.05, stay=True), Commit(steps=20), SafestCandidate(), Slide()"
+    )
+    assert (g.threshold, g.threshold_source) == (decision.threshold, "stored decision") == (0.2, "stored decision")
     np.testing.assert_array_equal(g.model.candidates, [[0, 0, 0, 0], [0, 0, 1, 0], [-1.5, 0, 0, 0], [-1, 0, 1, 0]])
     assert g.model.meta["env_id"] == "QuadrotorRoomGuarded-v0" and g.model.obs_dim == 23
     risk_only = make_guardian(
@@ -687,10 +685,14 @@ def test_lrmm_built_for_another_env_or_without_a_head_says_how_to_serve_the_quad
         "of shape (17,), the env's observation space is (23,)" + REMEDY
     )
     risk_path = default_model_path("QuadrotorRoomParallel-v0", variant="risk")
+    with pytest.raises(ValueError, match="quadrotor_cmd.npz has no decision"):  # the risk-only model has none
+        LRMMGuardian(env_id="QuadrotorRoomParallel-v0", model=risk_path)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the risk-only model stores no decision: the paper's fallback warns
-        risk_only = LRMMGuardian(env_id="QuadrotorRoomParallel-v0", model=risk_path)
-        braking = LRMMGuardian(env_id="QuadrotorRoomParallel-v0", model=risk_path, strategies="BrakeTurn")
+        warnings.simplefilter("error")  # a threshold given: nothing falls back
+        risk_only = LRMMGuardian(env_id="QuadrotorRoomParallel-v0", model=risk_path, threshold=0.5)
+        braking = LRMMGuardian(
+            env_id="QuadrotorRoomParallel-v0", model=risk_path, threshold=0.5, strategies="BrakeTurn"
+        )
     assert risk_only.strategies == ()  # no head, nothing stored: the core alone, which serves the quadrotor
     risk_only.reset(seed=0, **spaces)
     with pytest.raises(

@@ -255,6 +255,7 @@ def test_a_module_no_longer_importable_is_named(tmp_path, capsys, monkeypatch):
 def test_a_model_file_with_another_sha256_is_refused(tmp_path, capsys, monkeypatch):
     model = tmp_path / "model.npz"
     shutil.copy(ROOT / "guardians" / "lrmm" / "models" / "dubins4d_act.npz", model)  # the shipped model
+    shutil.copy(ROOT / "guardians" / "lrmm" / "models" / "dubins4d_act.decision.toml", tmp_path / "model.decision.toml")
     _run(tmp_path / "out", "lrmm", "fixed:1", 1, "Dubins4DParallel-v0", "--agent-opt", f"lrmm.model={model}")
     code, out, _ = _replay(capsys, tmp_path / "out", "--agent", "lrmm", "--episode", "0")
     assert code == 0 and out.strip() == "episode 0: verified"

@@ -324,13 +324,16 @@ def test_lrmm_on_an_own_simulator_says_what_to_give_on_the_command_line():
     LRMMGuardian(_model(2), threshold=0.3).check_spaces(env.observation_space, env.action_space)
 
 
-def test_lrmm_warnings_point_at_the_line_that_built_the_guardian():
+def test_lrmm_refuses_a_model_without_a_decision_in_one_line_directly_and_by_name():
     from rmm_guardians import make_guardian
     from rmm_guardians.lrmm.guardian import LRMMGuardian
 
-    with pytest.warns(UserWarning) as direct:
-        LRMMGuardian(_model(2))
-    with pytest.warns(UserWarning) as by_name:
-        make_guardian("lrmm", model=_model(2))
-    assert [str(w.message) for w in by_name] == ["lrmm: the model has no 'decision' threshold: using the paper's 0.85"]
-    assert {(w.filename, w.lineno > 0) for w in [*direct, *by_name]} == {(__file__, True)}
+    for build in (LRMMGuardian, lambda m: make_guardian("lrmm", model=m)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # refused, not warned of
+            with pytest.raises(ValueError) as e:
+                build(_model(2))
+        assert str(e.value) == (
+            "lrmm: the model (an LRMMModel without a file) has no decision: give a threshold "
+            "(--agent-opt lrmm.threshold=0.5; in Python threshold=0.5)"
+        )

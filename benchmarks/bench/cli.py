@@ -109,6 +109,9 @@ SUBCOMMANDS = {
     "merge": "rmm_bench.merge",
     "export": "rmm_bench.export",
     "reproduce": "rmm_bench.reproduce",
+    "tune": "rmm_bench.tune",
+    "calibrate": "rmm_bench.calibration",
+    "knob-sweep": "rmm_bench.knob_sweep",
 }
 
 

@@ -4,10 +4,11 @@ Both read the local observation only (no privileged data) and run one numpy forw
 step.  The core of :class:`LRMMGuardian` is the paper's method: in control while the model's
 risk of the observation is above the threshold, applying the env's safe default; every rule
 beyond that is a named strategy (:mod:`rmm_guardians.lrmm.strategies`) composed in its settings
-(:class:`~rmm_guardians.lrmm.settings.LRMMSettings`: by default the model file's stored
-decision, or the system table's).  ``lrmm`` (the default) uses the stored composition;
+(:class:`~rmm_guardians.lrmm.settings.LRMMSettings`: by default the model's decision, the text
+file beside the model file, :mod:`rmm_guardians.lrmm.decision`).  ``lrmm`` (the default) uses the
+decision's composition and refuses a model without a decision unless given a threshold;
 ``lrmm-paper`` (:class:`LRMMPaperGuardian`) is the paper's rule: risk above 0.85, then
-:class:`~rmm_guardians.lrmm.strategies.BrakeTurn`.
+:class:`~rmm_guardians.lrmm.strategies.BrakeTurn`, and reads no decision.
 
 Offers :class:`LRMMGuardian`, :class:`LRMMPaperGuardian` and :data:`PAPER_THRESHOLD`.  Why:
 docs/decisions/0017-lrmm-rule.md, 0018-lrmm-other-systems.md, 0024-lrmm-core-and-strategies.md.
@@ -16,23 +17,13 @@ docs/decisions/0017-lrmm-rule.md, 0018-lrmm-other-systems.md, 0024-lrmm-core-and
 from __future__ import annotations
 
 import math
-import os
-import sys
-import warnings
 from pathlib import Path
-from types import FrameType
 
 from rmm_guardians.base import Guardian
+from rmm_guardians.lrmm.decision import decision_for, is_shipped, no_decision_message
 from rmm_guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, load_model
 from rmm_guardians.lrmm.nominal import driver_control
-from rmm_guardians.lrmm.settings import (
-    LRMM_PRESETS,
-    PAPER_THRESHOLD,
-    LRMMSettings,
-    decision_threshold,
-    stored_decision,
-    stored_strategies,
-)
+from rmm_guardians.lrmm.settings import LRMM_PRESETS, PAPER_THRESHOLD, LRMMSettings
 from rmm_guardians.lrmm.shipped import DEFAULT_ENV
 from rmm_guardians.lrmm.strategies import Step, Strategy
 
@@ -43,19 +34,6 @@ REMEDY = (
     "; the shipped model is chosen when the guardian is built: make_guardian('lrmm', env_id=<this env's id>) "
     "(as rmm-bench does), or model=<a model trained on this env>"
 )
-#: this package's folder: a warning points past its frames, at the code that built the guardian
-_PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
-
-
-def _caller_level() -> int:
-    """The ``stacklevel`` of the first frame, outward from the one calling ``warnings.warn``,
-    outside this package (the user's line that built the guardian, directly or by
-    ``make_guardian``), for a warning raised by this package's code."""
-    level = 1  # the frame calling warnings.warn
-    frame: FrameType | None = sys._getframe(1)
-    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE_DIR):
-        frame, level = frame.f_back, level + 1
-    return level
 
 
 def _overrides(strategy: Strategy, method: str) -> bool:
@@ -68,11 +46,15 @@ class LRMMGuardian(Guardian):
         ``env_id`` (the table's ``"act"`` variant for ``lrmm``, ``"paper"`` for ``lrmm-paper``).
     settings: an :class:`~rmm_guardians.lrmm.settings.LRMMSettings` or a preset name
         (``"lrmm"``, ``"lrmm-paper"``, ``"core"``; default: the guardian's own preset).
-    env_id: the env served (default ``None``: the table's ``DEFAULT_ENV``): picks the shipped model and the system
-        table's entry (:data:`rmm_guardians.lrmm.shipped.SHIPPED`).
+    env_id: the env served (default ``None``: the table's ``DEFAULT_ENV``): picks the shipped model and the
+        observation field it reads (:data:`rmm_guardians.lrmm.shipped.SHIPPED`).
     threshold, strategies, inputs: change those fields of ``settings`` (``None``: unchanged), e.g.
         ``strategies="-Commit"`` (the stored composition without its Commit) or ``strategies=""``
         (the core alone); ``--agent-opt lrmm.strategies='"-Commit"'`` from the command line.
+
+    What is not given comes from the model's decision (``NAME.decision.toml`` beside ``NAME.npz``);
+    a model without one is refused (``ValueError``, one line naming ``rmm-bench tune``) unless
+    ``threshold`` is given.
     """
 
     name = "lrmm"
@@ -80,6 +62,9 @@ class LRMMGuardian(Guardian):
     privileged = False
     default_model = "act"
     preset = "lrmm"  #: the LRMM_PRESETS entry used when no settings are given
+    reads_decision = True  #: whether the model's decision fills what the settings leave open
+    #: the threshold when neither the settings nor a decision give one (``None``: refuse the model)
+    fallback_threshold: float | None = None
 
     def __init__(
         self,
@@ -110,18 +95,22 @@ class LRMMGuardian(Guardian):
             self.model = load_model(
                 model if model is not None else default_model_path(self.env_id, variant=self.default_model)
             )
-        where = str(getattr(self.model, "path", "the model"))
         # the observation field the model reads: given, else the env's entry in the table, else all of it
         self.inputs = settings.inputs if settings.inputs is not None else (ship.inputs if ship is not None else None)
-        decision = stored_decision(self.model.meta, ship, model is not None)
-        self.threshold, self.threshold_source = decision_threshold(settings.threshold, decision, where)
-        if self.threshold_source == "paper" and type(self) is LRMMGuardian:
-            warnings.warn(
-                f"lrmm: {where} has no 'decision' threshold: using the paper's {PAPER_THRESHOLD}",
-                UserWarning,
-                stacklevel=_caller_level(),
-            )
-        self.strategies = settings.resolve(stored_strategies(decision, where))
+        decision, self._decision_file = None, None  # the decision file read and its digest, unless shipped
+        if self.reads_decision and settings.needs_decision():
+            decision, file, digest = decision_for(self.model, self.env_id)
+            if file is not None and not is_shipped(file):  # a shipped one changes only with the package
+                self._decision_file = (str(file), digest)
+        if settings.threshold is not None:
+            self.threshold, self.threshold_source = settings.threshold, "argument"
+        elif decision is not None:
+            self.threshold, self.threshold_source = decision.threshold, "stored decision"
+        elif self.fallback_threshold is not None:
+            self.threshold, self.threshold_source = self.fallback_threshold, "paper"
+        else:
+            raise ValueError(no_decision_message(self.model, self.env_id))
+        self.strategies = settings.resolve(decision.parsed() if decision is not None else ())
         for s in self.strategies:
             s.check_model(self.model, self.inputs)
         cands = self.model.candidates
@@ -137,9 +126,11 @@ class LRMMGuardian(Guardian):
 
     def input_files(self) -> dict[str, str]:
         """The model file this guardian was built from (given or shipped) and the SHA-256 of the
-        bytes it was loaded from; none for a model given as an object."""
+        bytes it was loaded from (none for a model given as an object), and the decision file it
+        read unless it is one this package ships (which changes only with the package, as its code)."""
         path, digest = getattr(self.model, "path", None), getattr(self.model, "file_sha256", None)
-        return {str(path): digest} if path is not None and digest is not None else {}
+        out = {str(path): digest} if path is not None and digest is not None else {}
+        return out | (dict([self._decision_file]) if self._decision_file else {})
 
     def check_spaces(self, observation_space, action_space) -> None:
         """Refuse (``ValueError`` naming what is missing) an env this guardian cannot serve: the
@@ -233,8 +224,11 @@ class LRMMGuardian(Guardian):
 class LRMMPaperGuardian(LRMMGuardian):
     """The paper's rule: ``risk > 0.85``, then brake fully and turn to the more open side
     (the ``lrmm-paper`` preset: :class:`~rmm_guardians.lrmm.strategies.BrakeTurn`), on the
-    paper-reproducing model (the table's ``"paper"`` variant).  Same arguments as :class:`LRMMGuardian`."""
+    paper-reproducing model (the table's ``"paper"`` variant).  Same arguments as :class:`LRMMGuardian`;
+    it reads no decision: what the settings leave open is the paper's (0.85, no strategies)."""
 
     name = "lrmm-paper"
     default_model = "paper"
     preset = "lrmm-paper"
+    reads_decision = False
+    fallback_threshold = PAPER_THRESHOLD

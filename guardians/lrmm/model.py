@@ -273,31 +273,3 @@ class LRMMModel:
 def load_model(path=None, env_id: str = "Dubins4DGuarded-v0") -> LRMMModel:
     """Load ``path`` or the shipped model for ``env_id``."""
     return LRMMModel.load(path or default_model_path(env_id))
-
-
-def set_decision(path, threshold: float, strategies, chosen_by: str) -> LRMMModel:
-    """Store the ``lrmm`` guardian's decision in the model file ``path`` (weights unchanged):
-    ``threshold``, ``strategies`` (a spec string or a sequence of strategies,
-    :func:`rmm_guardians.lrmm.strategies.parse_strategies`; ``""``: none) and how they were
-    chosen; a ``ValueError`` naming a bad value, or a strategy the model cannot serve."""
-    from rmm_guardians.lrmm.settings import check_threshold
-    from rmm_guardians.lrmm.strategies import parse_strategies, strategy_specs
-
-    checked = check_threshold(threshold)
-    if checked is None:
-        raise ValueError("threshold must be a number in [0, 1], got None")
-    if not isinstance(chosen_by, str) or not chosen_by.strip():
-        raise ValueError("chosen_by must say how the threshold and strategies were chosen")
-    from rmm_guardians.lrmm.settings import stored_strategies
-
-    model = LRMMModel.load(path)
-    chosen = parse_strategies(strategies, stored_strategies(model.meta.get("decision"), str(path)))
-    for s in chosen:
-        s.check_model(model, None)
-    model.meta["decision"] = {
-        "threshold": checked,
-        "strategies": strategy_specs(chosen),
-        "chosen_by": chosen_by.strip(),
-    }
-    model.save(path)
-    return model

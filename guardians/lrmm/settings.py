@@ -2,12 +2,12 @@
 
 :class:`LRMMSettings` holds the threshold, the strategies (:mod:`rmm_guardians.lrmm.strategies`)
 and the observation field the model reads; :data:`LRMM_PRESETS` names ``lrmm`` (everything from
-the model), ``lrmm-paper`` (the paper's rule) and ``core`` (the learned risk and the env's safe
-default, nothing else).  Each of the threshold and the strategies comes from the first of: the
-guardian's argument; the model file's ``meta["decision"]`` (``{"threshold", "strategies",
-"chosen_by"}``, written by ``python -m rmm_guardians.lrmm.decision``); the system table's entry
-(:data:`rmm_guardians.lrmm.shipped.SHIPPED`, only for that entry's own model); else the paper's
-threshold :data:`PAPER_THRESHOLD` (with a warning) and no strategies.
+the model's decision), ``lrmm-paper`` (the paper's rule) and ``core`` (the learned risk and the
+env's safe default, nothing else).  Each of the threshold and the strategies comes from the
+guardian's argument, else from the model's decision: the text file beside the model file
+(:mod:`rmm_guardians.lrmm.decision`, written by ``rmm-bench tune``), its one source.  ``lrmm``
+refuses a model without one unless given a threshold (then no strategies unless given);
+``lrmm-paper`` reads no decision (the paper's threshold :data:`PAPER_THRESHOLD` unless given).
 """
 
 from __future__ import annotations
@@ -22,19 +22,13 @@ from rmm_guardians.lrmm.strategies import BrakeTurn, Strategy, parse_strategies
 from rmm_guardians.lrmm.strategies.spec import parse_item, spec_items
 
 __all__ = [
-    "DECISION_KEYS",
     "LRMM_PRESETS",
     "PAPER_THRESHOLD",
     "LRMMSettings",
     "check_threshold",
-    "decision_threshold",
-    "stored_decision",
-    "stored_strategies",
 ]
 
 PAPER_THRESHOLD = 0.85  # the paper's Table I setting
-#: what a model file's ``meta["decision"]`` may hold
-DECISION_KEYS = ("threshold", "strategies", "chosen_by")
 
 
 def check_threshold(threshold, where: str = "threshold") -> float | None:
@@ -53,10 +47,10 @@ def check_threshold(threshold, where: str = "threshold") -> float | None:
 class LRMMSettings(Settings):
     """The ``lrmm`` guardian's settings, checked at construction.
 
-    ``threshold``: in control while the risk is strictly above it (``None``: the stored one).
+    ``threshold``: in control while the risk is strictly above it (``None``: the decision's).
     ``strategies``: :class:`~rmm_guardians.lrmm.strategies.Strategy` objects or a spec string
     (:func:`~rmm_guardians.lrmm.strategies.parse_strategies`; ``""``: none, the core alone;
-    ``None``: the stored ones; items starting with ``-``/``+`` edit the stored ones).
+    ``None``: the decision's; items starting with ``-``/``+`` edit the decision's).
     ``inputs``: the observation field the model reads (``None``: the system table's, else the
     whole observation)."""
 
@@ -90,6 +84,11 @@ class LRMMSettings(Settings):
             changes = {**changes, "strategies": parse_strategies(edit, self.strategies)}
         return super().replace(**changes)
 
+    def needs_decision(self) -> bool:
+        """Whether these settings leave the threshold or the strategies (or edits of them) to the
+        model's decision."""
+        return self.threshold is None or self.strategies is None or any(isinstance(i, str) for i in self.strategies)
+
     def resolve(self, stored: tuple[Strategy, ...]) -> tuple[Strategy, ...]:
         """The strategies these settings give, ``stored`` being the model's (fresh copies)."""
         if self.strategies is None:
@@ -108,45 +107,3 @@ LRMM_PRESETS = {
     "core": LRMMSettings(strategies=()),
 }
 LRMMSettings.PRESETS = LRMM_PRESETS
-
-
-def stored_decision(meta: dict, ship, model_given: bool) -> dict | None:
-    """The decision stored for the guardian's model: the model file's ``meta["decision"]``, else
-    the system table's ``ship.decision`` when the model is that entry's (``model_given`` False),
-    else ``None``."""
-    return meta.get("decision") or (ship.decision if ship is not None and not model_given else None)
-
-
-def stored_strategies(decision: dict | None, where: str) -> tuple[Strategy, ...]:
-    """The strategies a stored decision names (none without one); a ``ValueError`` naming
-    ``where`` (the model) for a key or strategy this version does not know."""
-    if not decision:
-        return ()
-    unknown = sorted(set(decision) - set(DECISION_KEYS))
-    if unknown:
-        raise ValueError(
-            f"{where}: stored decision has unknown key(s) {unknown}; a decision holds {', '.join(DECISION_KEYS)} "
-            "(rewrite it with python -m rmm_guardians.lrmm.decision)"
-        )
-    specs = decision.get("strategies", [])
-    if not isinstance(specs, list) or not all(isinstance(x, str) for x in specs):
-        raise ValueError(f"{where}: stored decision strategies must be a list of spec strings, got {specs!r}")
-    try:
-        return parse_strategies(specs)
-    except ValueError as e:
-        raise ValueError(f"{where}: stored decision: {e}") from None
-
-
-def decision_threshold(threshold, decision: dict | None, where: str) -> tuple[float, str]:
-    """The threshold by the module's precedence and where it came from (``"argument"``,
-    ``"stored decision"`` or ``"paper"``: the caller warns, naming the model, in that case).
-    ``decision``: :func:`stored_decision`'s; ``where`` names the model in messages."""
-    given = check_threshold(threshold)
-    if given is not None:
-        return given, "argument"
-    if decision is not None and "threshold" in decision:
-        stored = float(decision["threshold"])
-        if not 0.0 <= stored <= 1.0:
-            raise ValueError(f"{where}: stored decision threshold must be in [0, 1], got {stored}")
-        return stored, "stored decision"
-    return PAPER_THRESHOLD, "paper"

@@ -1,6 +1,7 @@
 """The LRMM models this package ships: :data:`SHIPPED_BY_SYSTEM` (per system of
-:data:`rmm_envs.catalog.SYSTEMS`), :data:`SHIPPED` (the same by env id) and
-:func:`default_model_path` (the file of one env id and variant).  :mod:`rmm_guardians.lrmm.model`
+:data:`rmm_envs.catalog.SYSTEMS`), :data:`SHIPPED` (the same by env id),
+:func:`default_model_path` (the file of one env id and variant) and :func:`models_dir` (their
+folder, where each model's decision file sits beside it).  :mod:`rmm_guardians.lrmm.model`
 re-exports them."""
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import gymnasium as gym
 
 from rmm_envs.catalog import GUARDED_KINDS, SYSTEMS, current_id
 
-__all__ = ["DEFAULT_ENV", "SHIPPED", "SHIPPED_BY_SYSTEM", "Shipped", "ShippedById", "default_model_path"]
+__all__ = ["DEFAULT_ENV", "SHIPPED", "SHIPPED_BY_SYSTEM", "Shipped", "ShippedById", "default_model_path", "models_dir"]
 
 #: the env whose shipped model a guardian built without ``env_id`` or a model reads (the paper's case study)
 DEFAULT_ENV = "Dubins4DGuarded-v0"
@@ -22,71 +23,35 @@ DEFAULT_ENV = "Dubins4DGuarded-v0"
 
 @dataclass(frozen=True)
 class Shipped:
-    """What this package ships for one env id: its model file per variant, the observation field
-    the model reads (``None``: the whole observation) and, where the model file stores none, the
-    ``lrmm`` guardian's decision for that env (``threshold``, ``strategies``, ``chosen_by``, as
-    ``meta["decision"]``)."""
+    """What this package ships for one env id: its model file per variant and the observation
+    field the model reads (``None``: the whole observation).  A model's ``lrmm`` decision
+    (threshold, strategies, how they were chosen) is not here: it is the text file beside the
+    model (``NAME.decision.toml``, :mod:`rmm_guardians.lrmm.decision`)."""
 
     files: dict
     inputs: str | None = None
-    decision: dict | None = None
 
 
 _DUBINS4D = Shipped({"paper": "dubins4d.npz", "act": "dubins4d_act.npz"})
 #: The maze car under parallel autonomy reads the maze model (trained on ``Dubins3DMaze-v0``'s 8
-#: rays) on its observation's ``"rays"`` field.  Its decision defaults were chosen on development
-#: seeds (env seeds 5000-5063 of ``Dubins3DMazeParallel-v0``, 1 ms fixed clock), never on the
-#: seeds that reported results use; see :mod:`rmm_guardians.lrmm.guardian`.
-_MAZE_PARALLEL = Shipped(
-    {"act": "dubins3d_maze.npz"},
-    inputs="rays",
-    decision={
-        "threshold": 0.7,
-        "strategies": ["Commit(steps=5)"],
-        "chosen_by": "fewest collisions, then most goals, then least time in control, over thresholds 0.3/0.5/0.7/0.85 x "
-        "commit 5/10/20 steps on 64 development episodes (env seeds 5000-5063 of Dubins3DMazeParallel-v0, "
-        "fixed 1 ms clock): 0 collisions and 64 goals with 1.3% of the steps in control; "
-        "RayTurn (the turn toward the side the model rates safer) removed 2026-12-04: on 256 development "
-        "episodes of seed 5 (python -m benchmarks.ablation --env Dubins3DMazeParallel-v0 --episodes 256 --seed 5) "
-        "it turned as the env's safe default in every episode (the same rows with and without it)",
-    },
-)
+#: rays) on its observation's ``"rays"`` field.
+_MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays")
 
 #: The quadrotor under parallel autonomy: ``lrmm`` reads the command model with the
 #: action-conditioned head (``quadrotor_cmd_act.npz``: ``QuadrotorRoomGuarded-v0``'s labels under
 #: random velocity commands to the stabilising controller, plus the risk of holding each of four
 #: commands for 1 s: hover, climb, back off, back off and climb) on the whole observation (its
-#: ``features`` leave out the orientation and the goal); its decision defaults are stored in the
-#: file.  ``"risk"``: the risk-only command model of Table II (``quadrotor_cmd.npz``, more labels,
-#: no head), for the core alone (hover and level, ``strategies=""``) with an explicit threshold.
+#: ``features`` leave out the orientation and the goal).  ``"risk"``: the risk-only command model
+#: of Table II (``quadrotor_cmd.npz``, more labels, no head, no decision), for the core alone
+#: (hover and level, ``strategies=""``) with an explicit threshold.
 _QUAD_PARALLEL = Shipped({"act": "quadrotor_cmd_act.npz", "risk": "quadrotor_cmd.npz"})
 
 #: The guarded envs around simulators the project did not write (rmm_envs.envs.driven_examples):
 #: risk-only models of each env's own observation (the risk adapter's labels: random pushes held
 #: for the adapter's default horizon, over half adapter-sampled and half driver-visited states),
 #: applying the env's safe default (the balancing LQR) while the risk is above the threshold.
-#: Decision defaults chosen on development episodes only (env seeds 500000-500099 and
-#: 600000-600099, fixed 1 ms clock), never on those of the reported ``rmm-bench --seed 11``.
-_CARTPOLE = Shipped(
-    {"act": "cartpole_guarded.npz"},
-    decision={
-        "threshold": 0.2,
-        "strategies": [],
-        "chosen_by": "fewest collisions, then most goals, over thresholds 0.1/0.15/0.2/0.3/0.5 x commit 0/3/10/25 steps on "
-        "100 development episodes each of env seeds 500000-500099 and 600000-600099 of CartPoleParallel-v0 "
-        "(fixed 1 ms clock): 2 and 0 collisions, 60 and 53 goals",
-    },
-)
-_PENDULUM = Shipped(
-    {"act": "inverted_pendulum_guarded.npz"},
-    decision={
-        "threshold": 0.05,
-        "strategies": [],
-        "chosen_by": "fewest collisions while keeping the goals, over thresholds 0.02/0.05/0.1/0.3/0.5 x commit 0/2/5 steps "
-        "on 100 development episodes each of env seeds 500000-500099 and 600000-600099 of "
-        "InvertedPendulumParallel-v0 (fixed 1 ms clock): 32 and 31 collisions, 62 and 64 goals",
-    },
-)
+_CARTPOLE = Shipped({"act": "cartpole_guarded.npz"})
+_PENDULUM = Shipped({"act": "inverted_pendulum_guarded.npz"})
 
 #: The shipped models, per system of :data:`rmm_envs.catalog.SYSTEMS` (its ``name``) and kind of
 #: env: ``"plain"`` (plain control) and ``"guarded"`` (its blocking and non-blocking guardian envs,
@@ -137,6 +102,11 @@ def _by_id() -> ShippedById:
 SHIPPED: ShippedById = _by_id()
 
 
+def models_dir() -> Path:
+    """The folder of the shipped model files and their decision files."""
+    return Path(str(resources.files("rmm_guardians.lrmm") / "models"))
+
+
 def default_model_path(env_id: str = DEFAULT_ENV, variant: str = "paper") -> Path:
     """Path of the model shipped with the package for ``env_id`` (:data:`SHIPPED`).
 
@@ -165,4 +135,4 @@ def default_model_path(env_id: str = DEFAULT_ENV, variant: str = "paper") -> Pat
         raise ValueError(
             f"no shipped LRMM model for {env_id!r} (variant {variant!r}); its variants: {sorted(ship.files)}"
         )
-    return Path(str(resources.files("rmm_guardians.lrmm") / "models" / ship.files[variant]))
+    return models_dir() / ship.files[variant]

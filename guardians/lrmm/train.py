@@ -8,7 +8,8 @@ training split only; the epoch is chosen on validation MSE (``--select``); the s
 arguments and ``--seed`` give the same model bit for bit; with ``candidate_risk`` labels an
 action-conditioned head is trained too (``--head``).  A NaN or inf loss stops training with a
 message naming the epoch, and no model is written.  The guardian's decision defaults are
-chosen after training (``python -m rmm_guardians.lrmm.decision``).
+chosen after training, on development episodes: ``rmm-bench tune --env ENV --model FILE`` writes
+``FILE.decision.toml`` beside the model (:mod:`rmm_guardians.lrmm.decision`).
 
 Each choice and how it differs from the original: docs/decisions/0007-datasets-and-models.md.
 """
