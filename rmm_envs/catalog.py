@@ -1,46 +1,67 @@
-"""The table of systems: one declaration per system, from which every env id is derived.
+"""The table of systems: one :class:`SystemSpec` per system, from which every env id is derived.
 
-:data:`SYSTEMS` holds one :class:`SystemSpec` per system: its dynamics, risk scenes, env entry
-points, driver, safe default, the built-in guardians that apply, its docs page(s), and the ids
-its results are keyed under.  Registration, ``rmm_envs.ENV_IDS`` and ``GUARDIAN_ENV_IDS``, the
-stored-id mapping (:func:`stored_id`, :func:`current_id`), the shipped LRMM models' lookup, the
-``--env`` help and the docs' environment list are all read from it.  Adding a system is its
-modules plus one entry here.  Each system has up to three envs: ``<System>-v0`` (plain
-control), ``<System>Guarded-v0`` (a built-in driver, a guardian may take over; blocking) and
+:data:`SYSTEMS` holds each system's dynamics, risk scenes, env entry points, driver, safe
+default, view, doomed-start test, the guardians that apply, docs pages and stored ids;
+registration, ``rmm_envs.ENV_IDS``, the stored ids (:func:`stored_id`, :func:`current_id`), the
+``--env`` help and the docs' environment list are read from it.  Ids: ``<System>-v0`` (plain
+control), ``<System>Guarded-v0`` (a built-in driver a guardian may override; blocking) and
 ``<System>Parallel-v0`` (the same, non-blocking).
 
-What is derived from the table, and the stored ids: docs/decisions/0023-table-of-systems.md.
+Every system, this package's own included (:mod:`rmm_envs.builtin`), registers through the
+entry-point group :data:`ENTRY_POINT_GROUP`, ``rmm_envs.systems`` (:func:`add_system` says how);
+the table is filled from it on import.  :func:`system_of` finds an id's system,
+:func:`system_of_env` an env's.  Why, and the order of the table:
+docs/decisions/0023-table-of-systems.md.
 """
 
 from __future__ import annotations
 
 import importlib
+import warnings
 from dataclasses import dataclass, field
+from importlib.metadata import entry_points
 
 import gymnasium as gym
 
 __all__ = [
+    "ENTRY_POINT_GROUP",
     "FORMER_IDS",
     "GUARDED_KINDS",
     "KINDS",
     "SYSTEMS",
     "DocPage",
     "SystemSpec",
+    "add_system",
     "current_id",
     "env_help",
+    "env_ids",
     "guardian_env_ids",
     "guardian_envs_of",
-    "env_ids",
+    "load_ref",
     "register",
     "stored_id",
     "system",
     "system_of",
+    "system_of_env",
 ]
 
 #: The three kinds of env a system may have, and the suffix of each one's id.
 KINDS = {"plain": "-v0", "guarded": "Guarded-v0", "parallel": "Parallel-v0"}
 #: The kinds with a built-in driver and a guardian action (the parallel-autonomy contract).
 GUARDED_KINDS = ("guarded", "parallel")
+#: The entry-point group every system is registered through (:func:`add_system`).
+ENTRY_POINT_GROUP = "rmm_envs.systems"
+#: The distribution of this package: its systems come first in the table.
+_OWN = "rmm-envs"
+
+
+def load_ref(ref: str):
+    """The object a ``"module:attribute"`` reference names (the attribute may be dotted)."""
+    module, _, attr = ref.partition(":")
+    obj = importlib.import_module(module)
+    for part in attr.split("."):
+        obj = getattr(obj, part)
+    return obj
 
 
 @dataclass(frozen=True)
@@ -73,6 +94,14 @@ class SystemSpec:
     #: kind -> the id that kind's results, datasets and fingerprints are keyed under, where it is
     #: not today's id (the id it was first recorded under; keys never change, so stored runs resume)
     stored: dict = field(default_factory=dict)
+    #: ids found in older records -> the kind they are today (read back, never registered)
+    former: dict = field(default_factory=dict)
+    #: ``factory(env, size) -> View`` that draws its guarded envs (rmm_envs.views.view_for);
+    #: ``None``: the env's own ``rgb_array`` frame
+    view: str | None = None
+    #: ``test(env) -> StartAssessment`` of its guarded envs' starts, called right after ``reset``
+    #: and leaving the env as it found it (rmm_envs.starts.assess_start); ``None``: not assessed
+    doomed_test: str | None = None
 
     def env_id(self, kind: str) -> str:
         if kind not in self.envs:
@@ -87,155 +116,104 @@ class SystemSpec:
         named), with the class's own arguments: what its guarded envs' action space carries."""
         if self.safe_default is None:
             raise ValueError(f"system {self.name} states no safe default")
-        module, _, attr = self.safe_default.partition(":")
-        return getattr(importlib.import_module(module), attr)(*args, **kwargs)
+        return load_ref(self.safe_default)(*args, **kwargs)
 
 
-_DUBINS4D_GUARDIANS = ("lrmm", "lrmm-paper", "cbf", "cbf-paper", "hj", "hj-paper", "random", "inactive", "brakes")
-
-SYSTEMS: tuple[SystemSpec, ...] = (
-    SystemSpec(
-        name="Dubins4D",
-        blurb="a Dubins4D car driven to a goal among five circles by a reckless CLF-QP driver",
-        dynamics="rmm_envs.dynamics.dubins4d:Dubins4D",
-        scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
-        envs={
-            "guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv",
-            "parallel": "rmm_envs.envs.dubins4d:make_parallel_env",
-        },
-        driver="rmm_envs.drivers.dubins4d:CLFDriver",
-        safe_default="rmm_envs.dynamics.dubins4d:FullBraking",
-        guardians=_DUBINS4D_GUARDIANS,
-        vector="rmm_envs.envs.dubins4d_vector:Dubins4DCirclesVectorEnv",
-        pages=(
-            DocPage(
-                "environments/dubins4d.md",
-                "Dubins4D among circles",
-                ("guarded", "parallel"),
-                "figures/dubins4d_frame.png",
-            ),
-        ),
-        stored={"guarded": "Dubins4DCircles-v0"},
-    ),
-    SystemSpec(
-        name="Dubins4DMap",
-        blurb="the same car and driver on a JSON map of your own (circles, polygons, walls; pymunk)",
-        dynamics="rmm_envs.dynamics.dubins4d:Dubins4D",
-        scenes=("rmm_envs.scenes.dubins4d_map:Dubins4DMapScene",),
-        envs={
-            "guarded": "rmm_envs.envs.dubins4d_map:Dubins4DMapEnv",
-            "parallel": "rmm_envs.envs.dubins4d_map:make_parallel_env",
-        },
-        driver="rmm_envs.drivers.dubins4d:CLFDriver",
-        safe_default="rmm_envs.dynamics.dubins4d:FullBraking",
-        guardians=("lrmm", "lrmm-paper", "random", "inactive", "brakes"),
-        extra="map",
-        pages=(
-            DocPage(
-                "environments/dubins4d_map.md",
-                "Dubins4D on a map of your own",
-                ("guarded", "parallel"),
-                "figures/dubins4d_map_frame.png",
-            ),
-        ),
-        stored={"guarded": "Dubins4DMap-v0"},
-    ),
-    SystemSpec(
-        name="Dubins3DMaze",
-        blurb="a constant-speed Dubins car in procedurally generated mazes, guarded from a corner-cutting pursuit driver",
-        dynamics="rmm_envs.dynamics.dubins3d:Dubins3D",
-        scenes=("rmm_envs.scenes.maze:MazeScene",),
-        envs={
-            "plain": "rmm_envs.envs.dubins3d_maze:Dubins3DMazeEnv",
-            "guarded": "rmm_envs.envs.dubins3d_maze_parallel:Dubins3DMazeGuardedEnv",
-            "parallel": "rmm_envs.envs.dubins3d_maze_parallel:make_parallel_env",
-        },
-        driver="rmm_envs.drivers.maze:PursuitDriver",
-        safe_default="rmm_envs.envs.dubins3d_maze_parallel:TurnFromNearerWall",
-        guardians=("lrmm", "cbf", "hj", "random", "inactive", "brakes"),
-        pages=(
-            DocPage(
-                "environments/dubins3d_maze.md", "Dubins3D in mazes", ("plain",), "figures/dubins3d_maze_frame.png"
-            ),
-            DocPage(
-                "environments/dubins3d_maze_parallel.md",
-                "The maze car under parallel autonomy",
-                ("guarded", "parallel"),
-            ),
-        ),
-    ),
-    SystemSpec(
-        name="QuadrotorRoom",
-        blurb="a quadrotor in procedurally generated rooms (PyBullet), flown through waypoints by a reckless pilot",
-        dynamics="rmm_envs.dynamics.quadrotor:Quadrotor",
-        scenes=("rmm_envs.scenes.quadrotor:QuadrotorScene", "rmm_envs.scenes.quadrotor:QuadrotorCommandScene"),
-        envs={
-            "plain": "rmm_envs.envs.quadrotor_room:QuadrotorRoomEnv",
-            "guarded": "rmm_envs.envs.quadrotor_room_parallel:QuadrotorRoomGuardedEnv",
-            "parallel": "rmm_envs.envs.quadrotor_room_parallel:make_parallel_env",
-        },
-        driver="rmm_envs.drivers.quadrotor:WaypointPilot",
-        safe_default="rmm_envs.dynamics.quadrotor_control:HoverAndLevel",
-        guardians=("lrmm", "cbf", "hj", "random", "inactive", "brakes"),
-        extra="quadrotor",
-        pages=(
-            DocPage(
-                "environments/quadrotor_room.md", "Quadrotor in rooms", ("plain",), "figures/quadrotor_room_frame.png"
-            ),
-            DocPage(
-                "environments/quadrotor_room_parallel.md",
-                "The quadrotor under parallel autonomy",
-                ("guarded", "parallel"),
-            ),
-        ),
-    ),
-    # simulators the project did not write, made guarded envs by rmm_envs.envs.driven.guarded
-    SystemSpec(
-        name="CartPole",
-        blurb="Gymnasium's CartPole-v1 driven to a target position by a reckless LQR, the balancing LQR as safe default",
-        dynamics="gymnasium.envs.classic_control.cartpole:CartPoleEnv",
-        scenes=("rmm_envs.adapters.classic_control:CartPoleScene",),
-        envs={
-            "guarded": "rmm_envs.envs.driven_examples:cartpole_guarded",
-            "parallel": "rmm_envs.envs.driven_examples:cartpole_parallel",
-        },
-        driver="rmm_envs.envs.driven_examples:TargetTask",
-        safe_default="rmm_envs.envs.driven:GivenSafeDefault",
-        guardians=("lrmm", "random", "inactive", "brakes"),
-        pages=(
-            DocPage(
-                "environments/driven_examples.md",
-                "Simulators the project did not write, guarded",
-                ("guarded", "parallel"),
-            ),
-        ),
-    ),
-    SystemSpec(
-        name="InvertedPendulum",
-        blurb="Gymnasium's MuJoCo InvertedPendulum-v5 under the same target task (see the CartPole page)",
-        dynamics="gymnasium.envs.mujoco.inverted_pendulum_v5:InvertedPendulumEnv",
-        scenes=("rmm_envs.adapters.mujoco_envs:MujocoScene",),
-        envs={
-            "guarded": "rmm_envs.envs.driven_examples:inverted_pendulum_guarded",
-            "parallel": "rmm_envs.envs.driven_examples:inverted_pendulum_parallel",
-        },
-        driver="rmm_envs.envs.driven_examples:TargetTask",
-        safe_default="rmm_envs.envs.driven:GivenSafeDefault",
-        guardians=("lrmm", "random", "inactive", "brakes"),
-        extra="mujoco",
-    ),
-)
-
+#: Every registered system, in registration order (module docstring); read it, add through :func:`add_system`.
+SYSTEMS: tuple[SystemSpec, ...] = ()
 #: Today's id -> the id its results are keyed under, where the two differ (:attr:`SystemSpec.stored`).
-_STORED = {s.env_id(kind): old for s in SYSTEMS for kind, old in s.stored.items()}
+_STORED: dict[str, str] = {}
 #: An id found in a stored record (a results database, a dataset, a model's metadata) that is no
-#: longer registered -> today's id of the same env.  Only records are read through it: these ids
-#: are not registered and no command accepts them.
-FORMER_IDS = {
-    **{old: new for new, old in _STORED.items()},
-    "Dubins4DCirclesGuarded-v0": "Dubins4DGuarded-v0",
-    "Dubins4DCirclesParallel-v0": "Dubins4DParallel-v0",
-}
+#: longer registered -> today's id of the same env (:attr:`SystemSpec.stored` and
+#: :attr:`SystemSpec.former`).  Only records are read through it: these ids are not registered
+#: and no command accepts them.
+FORMER_IDS: dict[str, str] = {}
+
+
+def _derive() -> None:
+    """Refill :data:`_STORED` and :data:`FORMER_IDS` (in place) from :data:`SYSTEMS`."""
+    _STORED.clear()
+    _STORED.update({s.env_id(kind): old for s in SYSTEMS for kind, old in s.stored.items()})
+    FORMER_IDS.clear()
+    FORMER_IDS.update({old: new for new, old in _STORED.items()})
+    FORMER_IDS.update({old: s.env_id(kind) for s in SYSTEMS for old, kind in s.former.items()})
+
+
+def _register(s: SystemSpec) -> None:
+    for kind, entry in s.envs.items():
+        if s.env_id(kind) not in gym.registry:
+            gym.register(
+                id=s.env_id(kind),
+                entry_point=entry,
+                vector_entry_point=s.vector if kind == "guarded" else None,
+                disable_env_checker=False,
+            )
+
+
+def add_system(*specs: SystemSpec) -> None:
+    """Add ``specs`` to :data:`SYSTEMS` and register their env ids with Gymnasium: the one way a
+    system enters the table.  A package registers its systems with an entry point of
+    :data:`ENTRY_POINT_GROUP` whose value is a function returning a :class:`SystemSpec` (or
+    several), or a ``SystemSpec`` itself; importing ``rmm_envs`` passes each to this function,
+    this package's entry point first (the built-ins, in the table's order), then other
+    distributions' by name (one that fails is a warning naming it, its systems left out)::
+
+        [project.entry-points."rmm_envs.systems"]
+        MyRobot = "my_robot.system:spec"
+
+    A script may call it directly.  A spec already in the table is left as it is; a second system
+    of the same name, or an id Gymnasium already has under another entry point, is refused
+    (``ValueError`` naming it)."""
+    global SYSTEMS
+    for spec in specs:
+        if not isinstance(spec, SystemSpec):
+            raise TypeError(f"a system is a rmm_envs.catalog.SystemSpec, got {spec!r}")
+        if spec in SYSTEMS:
+            continue
+        if any(s.name == spec.name for s in SYSTEMS):
+            raise ValueError(f"a system named {spec.name!r} is already registered; a system's name is its ids' stem")
+        for kind, entry in spec.envs.items():
+            if kind not in KINDS:
+                raise ValueError(f"system {spec.name!r}: env kind {kind!r} is not one of {list(KINDS)}")
+            known = gym.registry.get(spec.env_id(kind))
+            if known is not None and known.entry_point != entry:
+                raise ValueError(
+                    f"system {spec.name!r}: the id {spec.env_id(kind)!r} is already registered with entry point "
+                    f"{known.entry_point!r}, not {entry!r}"
+                )
+        SYSTEMS = (*SYSTEMS, spec)
+        _derive()
+        _register(spec)
+
+
+def _load_entry_points() -> None:
+    """Fill the table from :data:`ENTRY_POINT_GROUP`: this package's entry points first, in the
+    order it declares them, then other distributions' by name.  This package's failing is an
+    error; another's is a warning naming it, and its systems are left out."""
+
+    def dist(ep) -> str:
+        return ep.dist.name if ep.dist is not None else ""
+
+    eps = sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda ep: (dist(ep) != _OWN, dist(ep)))
+    if not any(dist(ep) == _OWN for ep in eps):
+        raise ImportError(
+            f"rmm_envs: no '{ENTRY_POINT_GROUP}' entry points of {_OWN!r} are installed (its built-in "
+            "systems register through them); reinstall the package, e.g. pip install -e ."
+        )
+    for ep in eps:
+        try:
+            found = ep.load()
+            found = found() if callable(found) and not isinstance(found, SystemSpec) else found
+            add_system(*((found,) if isinstance(found, SystemSpec) else found))
+        except Exception as e:
+            if dist(ep) == _OWN:
+                raise
+            warnings.warn(
+                f"rmm_envs: the '{ENTRY_POINT_GROUP}' entry point {ep.name} = {ep.value!r} of {dist(ep)!r} failed "
+                f"({type(e).__name__}: {e}); its systems are not registered",
+                RuntimeWarning,
+                stacklevel=2,
+            )
 
 
 def env_ids(kinds=tuple(KINDS)) -> tuple[str, ...]:
@@ -257,6 +235,30 @@ def system_of(env_id: str) -> tuple[SystemSpec, str]:
             if s.env_id(kind) == env_id:
                 return s, kind
     raise KeyError(f"{env_id!r} is not an env of this package's systems ({', '.join(env_ids())})")
+
+
+def system_of_env(env) -> tuple[SystemSpec, str] | None:
+    """The system an env instance (wrapped or not) belongs to, and its kind: by the id it was made
+    under (``env.unwrapped.spec``), else by its class or a base class being one a system's envs
+    name (a subclass, an env built without ``gym.make``), else by its class being a system's
+    dynamics (kind ``"dynamics"``: the simulator of ``CartPole`` is ``CartPole-v1``'s env);
+    ``None`` for an env of no system."""
+    u = env.unwrapped
+    spec = getattr(u, "spec", None)
+    if spec is not None and isinstance(getattr(spec, "id", None), str):
+        try:
+            return system_of(spec.id)
+        except KeyError:
+            pass
+    for cls in type(u).__mro__:
+        ref = f"{cls.__module__}:{cls.__qualname__}"
+        for s in SYSTEMS:
+            kind = next((k for k, entry in s.envs.items() if entry == ref), None)
+            if kind is not None:
+                return s, kind
+            if s.dynamics == ref:
+                return s, "dynamics"
+    return None
 
 
 def system(name: str) -> SystemSpec:
@@ -301,13 +303,9 @@ def stored_id(env_id: str) -> str:
 
 
 def register() -> None:
-    """Register every env of :data:`SYSTEMS` (idempotent)."""
+    """Register every env of :data:`SYSTEMS` with Gymnasium (idempotent; :func:`add_system` does it too)."""
     for s in SYSTEMS:
-        for kind, entry in s.envs.items():
-            if s.env_id(kind) not in gym.registry:
-                gym.register(
-                    id=s.env_id(kind),
-                    entry_point=entry,
-                    vector_entry_point=s.vector if kind == "guarded" else None,
-                    disable_env_checker=False,
-                )
+        _register(s)
+
+
+_load_entry_points()

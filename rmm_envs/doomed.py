@@ -2,8 +2,8 @@
 
 Offers :func:`dubins4d_escapes` and :func:`maze_escapes` (the searches; their docstrings give
 the method and what it can miss), the env tests :func:`dubins4d_test`, :func:`maze_test` and
-:func:`quadrotor_test`, and their settings; importing the module registers the tests in
-:data:`rmm_envs.starts.DOOMED_TESTS` (the env modules import it).  Dubins4D among circles and
+:func:`quadrotor_test`, and their settings; each system's spec names its test
+(``SystemSpec.doomed_test``, read by :func:`rmm_envs.starts.assess_start`).  Dubins4D among circles and
 the maze car are searched (a map's circles, polygons and walls with the map's exact contact
 test); a quadrotor start (level and still) is avoidable by hovering.
 ``docs/concepts.md`` (Doomed starts) gives the measured counts and cost.
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rmm_envs.starts import StartAssessment, register_doomed_test
+from rmm_envs.starts import StartAssessment
 
 __all__ = [
     "DUBINS4D_DT",
@@ -209,9 +209,3 @@ def dubins4d_map_test(env) -> StartAssessment:
 
     doomed = not dubins4d_escapes(inner.dynamics, inner.true_state, np.zeros((0, 3)), scene.goal, first_hit=first_hit)
     return StartAssessment(doomed, DUBINS4D_METHOD)
-
-
-register_doomed_test("Dubins4DCirclesEnv", dubins4d_test)
-register_doomed_test("Dubins4DMapEnv", dubins4d_map_test)
-register_doomed_test("Dubins3DMazeGuardedEnv", maze_test)
-register_doomed_test("QuadrotorRoomGuardedEnv", quadrotor_test)

@@ -1,7 +1,7 @@
 """An episode's start: its fingerprint, and whether it was already doomed.
 
 Offers :func:`start_fingerprint`, :func:`world_key`, :class:`StartAssessment`,
-:func:`assess_start`, :func:`has_doomed_test` and the table :data:`DOOMED_TESTS` (:func:`register_doomed_test`).
+:func:`assess_start` and :func:`has_doomed_test` (the test an env carries, or its system's).
 
 Every agent of an ``rmm-bench`` run meets the same episodes: episode ``i`` resets the env with
 the same seed, so it starts from the same state in the same world whatever the agent or the
@@ -22,12 +22,12 @@ from typing import Any
 
 import numpy as np
 
+from rmm_envs.catalog import GUARDED_KINDS, load_ref, system_of_env
+
 __all__ = [
-    "DOOMED_TESTS",
     "StartAssessment",
     "assess_start",
     "has_doomed_test",
-    "register_doomed_test",
     "start_fingerprint",
     "world_key",
 ]
@@ -108,25 +108,17 @@ class StartAssessment:
     method: str = ""
 
 
-#: env class name (of ``env.unwrapped``, any class in its MRO) -> ``test(env) -> StartAssessment``,
-#: called right after ``reset``; it must leave the env as it found it
-DOOMED_TESTS: dict[str, Callable[[Any], StartAssessment]] = {}
-
-
-def register_doomed_test(class_name: str, test: Callable[[Any], StartAssessment]) -> None:
-    """Assess the starts of envs whose class (or a base class) is named ``class_name`` with ``test``."""
-    DOOMED_TESTS[class_name] = test
-
-
 def _test_of(env) -> Callable[[Any], StartAssessment] | None:
-    own = getattr(env.unwrapped, "doomed_test", None)  # an env that carries its own (a simulator's start_doomed)
+    """The doomed test of ``env``: the one the env carries (``env.unwrapped.doomed_test``, as a
+    simulator's ``start_doomed`` hook gives it), else its system's
+    (:attr:`rmm_envs.catalog.SystemSpec.doomed_test`, for the system's guarded envs)."""
+    own = getattr(env.unwrapped, "doomed_test", None)
     if callable(own):
         return own
-    for cls in type(env.unwrapped).__mro__:
-        test = DOOMED_TESTS.get(cls.__name__)
-        if test is not None:
-            return test
-    return None
+    found = system_of_env(env)
+    if found is None or found[1] not in GUARDED_KINDS or found[0].doomed_test is None:
+        return None
+    return load_ref(found[0].doomed_test)
 
 
 def has_doomed_test(env) -> bool:
@@ -135,6 +127,6 @@ def has_doomed_test(env) -> bool:
 
 
 def assess_start(env) -> StartAssessment:
-    """The doomed test of ``env`` (after ``reset``), by its class; ``StartAssessment(None)`` when none applies."""
+    """The doomed test of ``env`` (after ``reset``, :func:`_test_of`); ``StartAssessment(None)`` when none applies."""
     test = _test_of(env)
     return StartAssessment(None) if test is None else test(env)

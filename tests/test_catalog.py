@@ -3,6 +3,7 @@ ids read back from stored records under today's id (never registered, never warn
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import warnings
@@ -242,3 +243,137 @@ def test_the_guardians_the_table_lists_are_those_the_benchmark_accepts():
         assert tuple(a for a in BUILTIN if "skipped" not in meta[a]) == tuple(a for a in BUILTIN if a in s.guardians), (
             s.name
         )
+
+
+# ------------------------------------------------------------------ one path for every system
+
+
+def test_the_built_in_systems_register_through_the_entry_point_group_a_package_of_yours_uses():
+    from importlib.metadata import entry_points
+
+    from rmm_envs import builtin
+    from rmm_envs.catalog import ENTRY_POINT_GROUP, SYSTEMS
+
+    own = {ep.name: ep.value for ep in entry_points(group=ENTRY_POINT_GROUP) if ep.dist.name == "rmm-envs"}
+    assert own == {"rmm_envs": "rmm_envs.builtin:systems"}
+    assert builtin.systems() == SYSTEMS[: len(builtin.systems())]
+    assert [s.name for s in builtin.systems()] == [
+        "Dubins4D",
+        "Dubins4DMap",
+        "Dubins3DMaze",
+        "QuadrotorRoom",
+        "CartPole",
+        "InvertedPendulum",
+    ]
+
+
+def test_every_view_and_doomed_test_the_table_names_imports():
+    from rmm_envs.catalog import SYSTEMS, load_ref
+
+    named = {s.name: (s.view, s.doomed_test) for s in SYSTEMS}
+    assert {n for n, (_, test) in named.items() if test} == {"Dubins4D", "Dubins4DMap", "Dubins3DMaze", "QuadrotorRoom"}
+    assert all(view for view, _ in named.values())
+    for view, test in named.values():
+        for ref in (view, test):
+            assert ref is None or callable(load_ref(ref)), ref
+
+
+def test_an_env_s_system_is_found_by_its_id_then_by_its_class():
+    from rmm_envs.catalog import system_of_env
+    from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
+    from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
+
+    def found(env):
+        s = system_of_env(env)
+        return None if s is None else (s[0].name, s[1])
+
+    assert found(gym.make("Dubins4DParallel-v0")) == ("Dubins4D", "parallel")
+    assert found(gym.make("Dubins3DMaze-v0")) == ("Dubins3DMaze", "plain")
+    assert found(Dubins3DMazeGuardedEnv()) == ("Dubins3DMaze", "guarded")  # built without gym.make
+    assert found(Dubins3DMazeEnv()) == ("Dubins3DMaze", "plain")
+    assert found(gym.make("CartPole-v1")) == ("CartPole", "dynamics")  # the CartPole system's simulator
+    assert found(gym.make("MountainCar-v0")) is None
+
+
+def test_add_system_refuses_a_second_system_of_a_name_or_an_id_taken_by_another_env():
+    from rmm_envs.catalog import SYSTEMS, SystemSpec, add_system
+
+    twin = SystemSpec(name="Dubins4D", blurb="", dynamics="x:Y", scenes=(), envs={"guarded": "x:Y"})
+    with pytest.raises(ValueError, match="a system named 'Dubins4D' is already registered"):
+        add_system(twin)
+    gym.register("ClashGuarded-v0", entry_point="rmm_envs.envs.dubins4d:Dubins4DCirclesEnv")
+    try:
+        clash = SystemSpec(name="Clash", blurb="", dynamics="x:Y", scenes=(), envs={"guarded": "x:Y"})
+        with pytest.raises(ValueError, match="'ClashGuarded-v0' is already registered with entry point"):
+            add_system(clash)
+    finally:
+        gym.registry.pop("ClashGuarded-v0", None)
+    with pytest.raises(TypeError, match="a system is a rmm_envs.catalog.SystemSpec"):
+        add_system("Dubins4D")
+    add_system(SYSTEMS[0])  # already in the table: nothing changes
+    assert rmm_envs.catalog.SYSTEMS == SYSTEMS
+
+
+TOY_SYSTEM = """
+from rmm_envs.catalog import SystemSpec
+from rmm_envs.starts import StartAssessment
+from rmm_envs.views.planar import Dubins4DView
+
+
+def spec():
+    return SystemSpec(
+        name="ToyRobot",
+        blurb="the circles car under another name",
+        dynamics="rmm_envs.dynamics.dubins4d:Dubins4D",
+        scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
+        envs={"guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv"},
+        stored={"guarded": "ToyRobotOld-v0"},
+        view="toyrobot:view",
+        doomed_test="toyrobot:doomed",
+    )
+
+
+def view(env, size):
+    return Dubins4DView(size // 2)
+
+
+def doomed(env):
+    return StartAssessment(True, "toy")
+"""
+
+TOY_CHECK = """
+import warnings
+warnings.simplefilter("always")
+import gymnasium as gym
+import rmm_envs
+from rmm_envs.catalog import SYSTEMS, current_id
+from rmm_envs.starts import assess_start
+from rmm_envs.views import view_for
+
+env = gym.make("ToyRobotGuarded-v0")
+env.reset(seed=0)
+print([s.name for s in SYSTEMS][-2:], current_id("ToyRobotOld-v0"), assess_start(env), view_for(env, 64).width)
+"""
+
+
+def test_a_package_s_system_registers_through_the_same_group_with_its_view_and_doomed_test(tmp_path):
+    """A distribution on the path with a ``rmm_envs.systems`` entry point: importing rmm_envs
+    registers its system after the built-ins, and its own view and doomed test serve its env
+    (whose class is a built-in system's); a failing entry point is a warning, not an error."""
+    (tmp_path / "toyrobot.py").write_text(TOY_SYSTEM)
+    info = tmp_path / "toyrobot-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: toyrobot\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[rmm_envs.systems]\nToyRobot = toyrobot:spec\nBroken = toyrobot:nothing\n")
+    out = subprocess.run(
+        [sys.executable, "-c", TOY_CHECK],
+        env={**os.environ, "PYTHONPATH": str(tmp_path)},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == (
+        "['InvertedPendulum', 'ToyRobot'] ToyRobotGuarded-v0 StartAssessment(doomed=True, method='toy') 32"
+    )
+    assert "entry point Broken = 'toyrobot:nothing' of 'toyrobot' failed (AttributeError" in out.stderr

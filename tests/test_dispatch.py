@@ -14,8 +14,9 @@ from rmm_envs.autonomy import GENERIC, GuardianActionSpace, SystemContract, cont
 from rmm_envs.dynamics import dubins3d, dubins4d, quadrotor_control
 from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from rmm_guardians.cbf.maze import MazeCBFGuardian
-from rmm_guardians.dispatch import DYNAMICS, require_dynamics
+from rmm_guardians.dispatch import delegate_arguments, require_dynamics
 from rmm_guardians.hj.guardian import HJGuardian
+from rmm_guardians.system_checks import quadrotor_only
 
 
 @pytest.mark.parametrize(
@@ -49,7 +50,6 @@ def test_the_systems_own_their_kinds_and_the_default_is_generic():
         "quadrotor",
         "generic",
     )
-    assert set(DYNAMICS) == {"dubins4d", "dubins3d", "quadrotor"}
     space = GuardianActionSpace(("a",), [-1.0], [2.0])
     assert space.contract == SystemContract("generic", ("a",), (-1.0,), (2.0,), None, None)
     for bad in ("", None, 3):
@@ -92,7 +92,8 @@ def test_a_space_whose_controls_contradict_its_kind_is_refused_naming_both():
 
 def test_require_dynamics_returns_the_space_of_its_kind():
     space = GuardianActionSpace(quadrotor_control.CONTROLS, [-1.0] * 4, [1.0] * 4, kind="quadrotor")
-    assert require_dynamics(CBFGuardian(), space, "quadrotor", "models the quadrotor") is space
+    controls = quadrotor_control.CONTROLS
+    assert require_dynamics(CBFGuardian(), space, "quadrotor", controls, "models the quadrotor") is space
     with pytest.raises(
         ValueError, match=r"guardian 'cbf' models the quadrotor \(dynamics 'quadrotor'.*dynamics are 'dubins3d'"
     ):
@@ -100,6 +101,7 @@ def test_require_dynamics_returns_the_space_of_its_kind():
             CBFGuardian(),
             GuardianActionSpace(("turnrate_ctrl",), [-1.0], [1.0], kind="dubins3d"),
             "quadrotor",
+            controls,
             "models the quadrotor",
         )
 
@@ -183,8 +185,6 @@ def test_reset_hands_the_episode_to_the_delegate_of_the_space_s_kind_and_back():
 
 
 def test_delegate_arguments_merge_check_and_refuse():
-    from rmm_guardians.dispatch import delegate_arguments
-
     assert delegate_arguments(MazeCBFGuardian, "maze", False, {"solver": "osqp"}) is None
     assert delegate_arguments(MazeCBFGuardian, "maze", None, {"solver": "osqp"}) == {"solver": "osqp"}
     assert delegate_arguments(MazeCBFGuardian, "maze", {"margin": 2.0}, {"margin": 1.0, "solver": "osqp"}) == {
@@ -199,8 +199,6 @@ def test_delegate_arguments_merge_check_and_refuse():
 
 
 def test_the_obstacle_shapes_and_the_quadrotor_s_command_box_are_checked_by_value():
-    from rmm_guardians.dispatch import quadrotor_only
-
     car = dubins4d.CONTROLS
     circles = GuardianActionSpace(car, [-0.25, -0.5], [0.25, 0.5], kind="dubins4d", obstacle_shapes=("circle",))
     CBFGuardian().check_spaces(None, circles)
@@ -249,7 +247,6 @@ def test_every_non_circle_shape_of_a_map_is_named_in_the_refusal():
 
 
 def test_a_turn_rate_or_command_axis_of_zero_width_is_refused():
-    from rmm_guardians.dispatch import quadrotor_only
     from rmm_guardians.hj.maze import MazeHJGuardian
 
     # [0, 0] is symmetric about 0 and contains hover, but leaves the guardian no control to use
@@ -301,3 +298,87 @@ def test_a_space_that_is_not_a_guardian_action_space_is_refused_by_name(make):
         g.reset(seed=0, observation_space=env.observation_space, privileged=env.unwrapped.privileged)
     assert g.delegate is None
     env.close()
+
+
+# ------------------------------------------------------------------ the methods' parts (rmm_guardians.parts)
+
+
+def test_the_built_in_parts_are_declared_in_the_entry_point_group_a_package_of_yours_uses():
+    from importlib.metadata import entry_points
+
+    from rmm_guardians.cbf.quadrotor import QuadrotorCBFGuardian
+    from rmm_guardians.cbf.settings import CBFSettings
+    from rmm_guardians.hj.maze import MazeHJGuardian
+    from rmm_guardians.hj.quadrotor import QuadrotorHJGuardian
+    from rmm_guardians.hj.settings import HJSettings
+    from rmm_guardians.parts import ENTRY_POINT_GROUP, parts_of
+
+    own = {ep.name: ep.value for ep in entry_points(group=ENTRY_POINT_GROUP) if ep.dist.name == "rmm-envs"}
+    assert own == {
+        "cbf.dubins3d": "rmm_guardians.cbf.maze:MazeCBFGuardian",
+        "cbf.quadrotor": "rmm_guardians.cbf.quadrotor:QuadrotorCBFGuardian",
+        "hj.dubins3d": "rmm_guardians.hj.maze:MazeHJGuardian",
+        "hj.quadrotor": "rmm_guardians.hj.quadrotor:QuadrotorHJGuardian",
+    }
+    assert parts_of("cbf") == {"dubins3d": MazeCBFGuardian, "quadrotor": QuadrotorCBFGuardian}
+    assert parts_of("hj") == {"dubins3d": MazeHJGuardian, "quadrotor": QuadrotorHJGuardian}
+    assert parts_of("lrmm") == {}
+    fields = {"cbf": set(CBFSettings.__dataclass_fields__), "hj": set(HJSettings.__dataclass_fields__)}
+    for method, dynamics in (
+        ("cbf", dubins3d),
+        ("hj", dubins3d),
+        ("cbf", quadrotor_control),
+        ("hj", quadrotor_control),
+    ):
+        part = parts_of(method)[dynamics.KIND]
+        assert part.controls == dynamics.CONTROLS and part.option in fields[method] and part.serves.startswith("the ")
+
+
+class _ToyPart:
+    """A part of ``cbf`` for a kind "toy" (one control, "push"), as a package of yours would write it."""
+
+    serves, controls, option = "the toy", ("push",), None
+    name = "toy"
+
+    def __init__(self, **shared) -> None:
+        self.shared = shared
+
+    def check_spaces(self, observation_space, action_space) -> None:
+        if action_space.kind != "toy":
+            raise ValueError("not a toy")
+
+
+def test_a_part_registered_in_the_process_is_served_under_the_method_and_named_in_refusals(monkeypatch):
+    from rmm_guardians import parts
+
+    monkeypatch.setattr(parts, "_REGISTERED", {})
+    parts.register_part("cbf", "toy", _ToyPart)
+    g = CBFGuardian()
+    assert g.served() == ("dubins3d", "quadrotor", "toy")
+    toy = GuardianActionSpace(("push",), [-1.0], [1.0], kind="toy")
+    g.check_spaces(None, toy)
+    delegate = g._delegate_for(toy)
+    assert isinstance(delegate, _ToyPart) and delegate.name == "cbf" and set(delegate.shared) >= {"solver", "eps"}
+    with pytest.raises(ValueError, match=r"and the quadrotor \(controls .*\) and the toy \(controls \('push',\)\)"):
+        g.check_spaces(None, GuardianActionSpace(("a",), [-1.0], [1.0]))
+    assert HJGuardian().served() == ("dubins3d", "quadrotor")  # another method's parts are its own
+    with pytest.raises(ValueError, match="part must be a guardian class or 'module:Class'"):
+        parts.register_part("cbf", "toy", "no colon")
+
+
+def test_a_package_s_part_registers_through_the_entry_point_group(tmp_path, monkeypatch):
+    from rmm_guardians.parts import parts_of
+
+    (tmp_path / "toyparts.py").write_text("from tests.test_dispatch import _ToyPart as ToyHJ\n")
+    info = tmp_path / "toyparts-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: toyparts\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(
+        "[rmm_guardians.parts]\nhj.toy = toyparts:ToyHJ\nhj.broken = toyparts:Missing\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.warns(RuntimeWarning, match=r"hj.broken = 'toyparts:Missing' of 'toyparts' failed"):
+        found = parts_of("hj")
+    assert list(found) == ["dubins3d", "quadrotor", "toy"] and found["toy"] is _ToyPart
+    with pytest.warns(RuntimeWarning):
+        assert HJGuardian().served() == ("dubins3d", "quadrotor", "toy")

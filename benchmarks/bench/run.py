@@ -145,7 +145,7 @@ def assess_starts(store: ResultsStore, runs: dict[str, AgentRun], episodes, prog
     """Store the start (fingerprint, doomed flag) of each of ``episodes`` (indices) of every world
     the ``runs`` meet (:func:`rmm_envs.starts.world_key`) that is not stored yet: once per world
     and episode, in this process, before the agents run, whatever the number of agents.  Envs
-    without a doomed test (:data:`rmm_envs.starts.DOOMED_TESTS`) are skipped (their rows keep
+    without a doomed test (:func:`rmm_envs.starts.has_doomed_test`) are skipped (their rows keep
     their own fingerprints); an env this process cannot make is left to the workers, which
     report it.  Returns how many starts it stored."""
     from rmm_bench.runner import _env

@@ -10,7 +10,6 @@ import math
 
 import numpy as np
 
-from rmm_envs.dynamics import dubins3d, quadrotor_control
 from rmm_envs.dynamics.dubins4d import Dubins4D
 from rmm_envs.portable import matvec
 from rmm_guardians._checks import settings_signature
@@ -23,12 +22,11 @@ from rmm_guardians.cbf.barrier import (
     critical_obstacle,
     inflated_radii,
 )
-from rmm_guardians.cbf.maze import MazeCBFGuardian
-from rmm_guardians.cbf.quadrotor import QuadrotorCBFGuardian
 from rmm_guardians.cbf.recovery import recovery_control, recovery_done
 from rmm_guardians.cbf.settings import CBF_PRESETS, REFERENCES, CBFSettings, box_problem
-from rmm_guardians.dispatch import DynamicsDispatch, delegate_arguments
+from rmm_guardians.dispatch import DynamicsDispatch
 from rmm_guardians.privileged import PrivilegedGuardian
+from rmm_guardians.system_checks import dubins4d_only
 
 __all__ = ["CBFGuardian", "CBFPaperGuardian", "REFERENCES"]
 
@@ -74,7 +72,8 @@ class CBFGuardian(DynamicsDispatch, PrivilegedGuardian):
     refused at ``reset``."""
 
     name = "cbf"
-    others = {dubins3d.KIND: MazeCBFGuardian, quadrotor_control.KIND: QuadrotorCBFGuardian}
+    method = "cbf"  #: its parts serve the other kinds (rmm_guardians.parts: the maze car, the quadrotor)
+    own_check = staticmethod(dubins4d_only)
 
     preset = "cbf"  #: the CBFSettings preset the keyword arguments change
 
@@ -91,10 +90,7 @@ class CBFGuardian(DynamicsDispatch, PrivilegedGuardian):
         s = self.settings = (settings if settings is not None else CBF_PRESETS[self.preset]).replace(**options)
         self.reference, self.solver = s.reference, s.solver
         shared = {"solver": s.solver, "eps": s.eps, "predict_latency": s.predict_latency, "lap_guess": s.lap_guess}
-        self._dynamics_args = {
-            dubins3d.KIND: delegate_arguments(MazeCBFGuardian, "maze", s.maze, shared),
-            quadrotor_control.KIND: delegate_arguments(QuadrotorCBFGuardian, "quadrotor", s.quadrotor, shared),
-        }
+        self._init_parts(s, shared)
         self.p1, self.p2, self.k = s.p1, s.p2, s.inflation
         self.gamma_vmin, self.gamma_vmax, self.lambda_theta, self.lambda_v = (
             s.gamma_vmin,

@@ -20,10 +20,11 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
+from rmm_envs.dynamics.dubins3d import CONTROLS
 from rmm_guardians._checks import finite, integer
 from rmm_guardians.cbf.backend import QpsolversQP, parse_solver
-from rmm_guardians.dispatch import maze_car_only
 from rmm_guardians.privileged import PrivilegedGuardian
+from rmm_guardians.system_checks import maze_car_only
 
 __all__ = ["MazeCBFGuardian", "WallQP", "wall_rows"]
 
@@ -163,6 +164,8 @@ class MazeCBFGuardian(PrivilegedGuardian):
     first measured lap; ``eps = 1e-6``, ``solver = "osqp"``, ``active_atol = 1e-3``."""
 
     name = "cbf"
+    #: as a part of its method (rmm_guardians.parts): what it models, its controls, its settings field
+    serves, controls, option = "the maze car", CONTROLS, "maze"
 
     def __init__(
         self,

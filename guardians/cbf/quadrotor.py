@@ -20,13 +20,13 @@ from typing import Any
 
 import numpy as np
 
-from rmm_envs.dynamics.quadrotor_control import CommandController, body_packed, body_step, command_wrench
+from rmm_envs.dynamics.quadrotor_control import CONTROLS, CommandController, body_packed, body_step, command_wrench
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_guardians._checks import finite, integer
 from rmm_guardians.cbf.backend import parse_solver
 from rmm_guardians.cbf.quadrotor_rows import CommandQP, command_rows, room_shapes
-from rmm_guardians.dispatch import quadrotor_only
 from rmm_guardians.privileged import PrivilegedGuardian
+from rmm_guardians.system_checks import quadrotor_only
 
 __all__ = ["QuadrotorCBFGuardian"]
 
@@ -93,6 +93,8 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
     arguments are refused naming the value; a command box without 0 is refused at ``reset``."""
 
     name = "cbf"
+    #: as a part of its method (rmm_guardians.parts): what it models, its controls, its settings field
+    serves, controls, option = "the quadrotor", CONTROLS, "quadrotor"
 
     def __init__(
         self,

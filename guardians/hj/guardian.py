@@ -19,17 +19,15 @@ import math
 
 import numpy as np
 
-from rmm_envs.dynamics import dubins3d, quadrotor_control
 from rmm_guardians._checks import settings_signature
-from rmm_guardians.dispatch import DynamicsDispatch, delegate_arguments
+from rmm_guardians.dispatch import DynamicsDispatch
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.grid import Grid, central_gradient
-from rmm_guardians.hj.maze import MazeHJGuardian
-from rmm_guardians.hj.quadrotor import QuadrotorHJGuardian
 from rmm_guardians.hj.settings import HJ_PRESETS, HJSettings
 from rmm_guardians.hj.solver import THREADS_VARIABLE, default_threads, select_backend, solve_brt  # noqa: F401
 from rmm_guardians.privileged import PrivilegedGuardian
+from rmm_guardians.system_checks import dubins4d_only
 
 __all__ = ["HJGuardian", "HJPaperGuardian", "default_grid", "default_threads", "obstacle_target"]
 
@@ -49,7 +47,8 @@ def obstacle_target(grid: Grid, obstacles: np.ndarray) -> np.ndarray:
 
 class HJGuardian(DynamicsDispatch, PrivilegedGuardian):
     """Grid HJ reachability guardian for Dubins4D (``hj``); the maze car and the quadrotor are
-    handed to :class:`MazeHJGuardian` and :class:`QuadrotorHJGuardian` by the action space's kind.
+    handed to the method's parts (:mod:`rmm_guardians.parts`: :class:`~rmm_guardians.hj.maze.MazeHJGuardian`,
+    :class:`~rmm_guardians.hj.quadrotor.QuadrotorHJGuardian`) by the action space's kind.
 
     **Value**: at reset, the backward reachable tube of all the episode's obstacles over
     ``horizon`` (4 s) on the default grid ``x, y in [-15, 15]`` (64 points each), heading periodic
@@ -86,7 +85,8 @@ class HJGuardian(DynamicsDispatch, PrivilegedGuardian):
     maximum (``nan_states``); an obstacle centre off the grid is refused at reset."""
 
     name = "hj"
-    others = {dubins3d.KIND: MazeHJGuardian, quadrotor_control.KIND: QuadrotorHJGuardian}
+    method = "hj"  #: its parts serve the other kinds (rmm_guardians.parts: the maze car, the quadrotor)
+    own_check = staticmethod(dubins4d_only)
 
     preset = "hj"  #: the HJSettings preset the keyword arguments change
 
@@ -104,10 +104,7 @@ class HJGuardian(DynamicsDispatch, PrivilegedGuardian):
             "delay": s.delay,
             "lap": s.lap,
         }
-        self._dynamics_args = {
-            dubins3d.KIND: delegate_arguments(MazeHJGuardian, "maze", s.maze, shared),
-            quadrotor_control.KIND: delegate_arguments(QuadrotorHJGuardian, "quadrotor", s.quadrotor, shared),
-        }
+        self._init_parts(s, shared)
         self.standstill_lookup, self.horizon, self.mode, self.rule = s.standstill_lookup, s.horizon, s.mode, s.rule
         self.order, self.rk, self.cfl = s.order, s.rk, s.cfl
         self.threads = default_threads() if s.threads is None else s.threads

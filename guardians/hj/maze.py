@@ -19,14 +19,15 @@ import math
 
 import numpy as np
 
+from rmm_envs.dynamics.dubins3d import CONTROLS
 from rmm_guardians._checks import finite, integer
-from rmm_guardians.dispatch import maze_car_only
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.grid import Grid, central_gradient
 from rmm_guardians.hj.maze_lookahead import COEF, manoeuvres, near_walls, path_clearances
 from rmm_guardians.hj.solver import check_scheme, select_backend, solve_brt
 from rmm_guardians.privileged import PrivilegedGuardian
+from rmm_guardians.system_checks import maze_car_only
 
 __all__ = ["MazeHJGuardian", "maze_grid", "wall_target"]
 
@@ -93,6 +94,8 @@ class MazeHJGuardian(PrivilegedGuardian):
     a maze with no walls is refused at reset."""
 
     name = "hj"
+    #: as a part of its method (rmm_guardians.parts): what it models, its controls, its settings field
+    serves, controls, option = "the maze car", CONTROLS, "maze"
 
     def __init__(
         self,

@@ -21,10 +21,9 @@ import math
 
 import numpy as np
 
-from rmm_envs.dynamics.quadrotor_control import CommandController, yaw_of
+from rmm_envs.dynamics.quadrotor_control import CONTROLS, CommandController, yaw_of
 from rmm_envs.worlds.room_collision import BOUND
 from rmm_guardians._checks import finite, integer
-from rmm_guardians.dispatch import quadrotor_only
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.grid import Grid, central_gradient
@@ -32,6 +31,7 @@ from rmm_guardians.hj.quadrotor_climb import Climb
 from rmm_guardians.hj.room import angle, lag_prediction, nominal_command, optimal_command, room_target
 from rmm_guardians.hj.solver import check_scheme, select_backend, solve_brt
 from rmm_guardians.privileged import PrivilegedGuardian
+from rmm_guardians.system_checks import quadrotor_only
 
 __all__ = ["QuadrotorHJGuardian"]
 
@@ -77,6 +77,8 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
     walls or a malformed ``nominal_control`` is refused with ``ValueError``."""
 
     name = "hj"
+    #: as a part of its method (rmm_guardians.parts): what it models, its controls, its settings field
+    serves, controls, option = "the quadrotor", CONTROLS, "quadrotor"
     observation_type = "global"
     privileged = True
 

@@ -122,7 +122,6 @@ import math
 
 import numpy as np
 
-import rmm_envs.doomed  # noqa: F401  (registers this env's doomed test)
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout, SafeDefault
 from rmm_envs.catalog import system
 from rmm_envs.clocks import Clock, make_clock

@@ -140,10 +140,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-import rmm_envs.doomed  # noqa: F401  (registers this env's doomed test)
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.catalog import system
 from rmm_envs.clocks import Clock, make_clock
+from rmm_envs.doomed import dubins4d_escapes
 from rmm_envs.drivers.dubins4d import CLFDriver, DriverParams
 from rmm_envs.dynamics.dubins4d import Dubins4D
 from rmm_envs.envs import _render
@@ -292,8 +292,6 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
     def _avoidable_start(self, obstacles, state, goal, options):
         """With ``starts="avoidable"``: the start redrawn from the episode's generator (so still a
         function of the seed) until the doomed test (:mod:`rmm_envs.doomed`) finds it avoidable."""
-        from rmm_envs.doomed import dubins4d_escapes
-
         for _ in range(AVOIDABLE_ATTEMPTS):
             if dubins4d_escapes(self.dynamics, state, obstacles, goal):
                 return obstacles, state, goal

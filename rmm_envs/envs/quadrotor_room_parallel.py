@@ -125,7 +125,6 @@ import math
 import gymnasium as gym
 import numpy as np
 
-import rmm_envs.doomed  # noqa: F401  (registers this env's doomed test)
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
 from rmm_envs.catalog import system
 from rmm_envs.clocks import make_clock

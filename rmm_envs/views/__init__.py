@@ -10,8 +10,9 @@ Drawn with Pillow's ``ImageDraw``; what does not move is drawn once per episode.
   (driver or guardian) and the guardian's signals (a plain ``dict[str, float]``, e.g.
   ``rmm_guardians``' ``Guardian.signals()``), and composes frames.
 
-Every system of the table has a view; any other env that renders ``rgb_array`` is shown
-through its own frame (:class:`EnvFrameView`); :func:`register_view` adds one of your own.
+Every system of the table has a view, named by its spec (``SystemSpec.view``, a system of
+your own states its own there); any other env that renders ``rgb_array`` is shown through its
+own frame (:class:`EnvFrameView`).
 """
 
 from __future__ import annotations
@@ -21,13 +22,12 @@ from rmm_envs.views.planar import Dubins4DView, MapView, MazeView
 from rmm_envs.views.pole import CARTPOLE, PENDULUM, CartPoleView, EnvFrameView, PoleGeometry
 from rmm_envs.views.quadrotor import QuadrotorView
 from rmm_envs.views.recorder import STRIP_HEIGHT, EpisodeRecorder, signal_groups
-from rmm_envs.views.select import VIEWS, register_view, view_for
+from rmm_envs.views.select import view_for
 
 __all__ = [
     "CARTPOLE",
     "PENDULUM",
     "STRIP_HEIGHT",
-    "VIEWS",
     "CartPoleView",
     "Dubins4DView",
     "EnvFrameView",
@@ -38,7 +38,6 @@ __all__ = [
     "QuadrotorView",
     "View",
     "Window",
-    "register_view",
     "signal_groups",
     "view_for",
 ]

@@ -10,7 +10,7 @@ from PIL import ImageDraw
 
 from rmm_envs.views.base import BODY_OUTLINE, DRIVER, GOAL, GUARDIAN, LIGHT, OBSTACLE, WALL, View, Window
 
-__all__ = ["CarView", "Dubins4DView", "MapView", "MazeView"]
+__all__ = ["CarView", "Dubins4DView", "MapView", "MazeView", "dubins4d_view", "map_view", "maze_view"]
 
 
 @dataclass
@@ -125,3 +125,18 @@ class MazeView(CarView):
             capsules=[((w[0], w[1]), (w[2], w[3]), half) for w in np.asarray(m.walls, float)],
             outlines=[],
         )
+
+
+def dubins4d_view(env, size: int) -> Dubins4DView:
+    """The ``Dubins4D`` system's view (its spec's ``view``)."""
+    return Dubins4DView(size)
+
+
+def map_view(env, size: int) -> MapView:
+    """The ``Dubins4DMap`` system's view (its spec's ``view``)."""
+    return MapView(size)
+
+
+def maze_view(env, size: int) -> MazeView:
+    """The ``Dubins3DMaze`` system's view (its spec's ``view``)."""
+    return MazeView(size)

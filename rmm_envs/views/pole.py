@@ -3,6 +3,7 @@ view of any other guarded env: its own ``render()`` frame."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -11,7 +12,7 @@ from PIL import Image, ImageDraw
 
 from rmm_envs.views.base import BODY_OUTLINE, DRIVER, GOAL, GUARDIAN, LIGHT, OBSTACLE, View, Window
 
-__all__ = ["CartPoleView", "EnvFrameView"]
+__all__ = ["CartPoleView", "EnvFrameView", "cartpole_view", "driver_target", "pendulum_view"]
 
 
 @dataclass(frozen=True)
@@ -38,7 +39,7 @@ class CartPoleView(View):
     """A cart on a track and its pole; the path is the pole's tip.  The track's ends (red) and
     the pole's failing angles (lines from the cart, drawn with the body) are the limits; no goal
     is drawn unless ``target`` (a callable returning the target's ``x``, asked at each episode's
-    start) is given: :func:`rmm_envs.views.select.driver_target` gives the built-in drivers' one."""
+    start) is given: :func:`driver_target` gives the built-in drivers' one."""
 
     def __init__(self, geometry: PoleGeometry = CARTPOLE, size: int = 512, target=None) -> None:
         self.g = geometry
@@ -116,3 +117,23 @@ class EnvFrameView(View):
         ImageDraw.Draw(picture).rectangle(
             (0, 0, self.width - 1, self.height - 1), outline=GUARDIAN if active else DRIVER, width=6
         )
+
+
+def driver_target(env) -> Callable[[], float] | None:
+    """The goal a pole view draws: the guarded env's driver's ``target`` (a number, read at each
+    episode's start, as the built-in ``CartPoleGuarded-v0`` / ``InvertedPendulumGuarded-v0``
+    drivers pick a cart position per episode); ``None`` when the driver has none."""
+    driver = getattr(env.unwrapped, "driver", None)
+    if driver is None or not isinstance(getattr(driver, "target", None), int | float):
+        return None
+    return lambda: float(driver.target)
+
+
+def cartpole_view(env, size: int) -> CartPoleView:
+    """The ``CartPole`` system's view (its spec's ``view``)."""
+    return CartPoleView(CARTPOLE, size, driver_target(env))
+
+
+def pendulum_view(env, size: int) -> CartPoleView:
+    """The ``InvertedPendulum`` system's view (its spec's ``view``)."""
+    return CartPoleView(PENDULUM, size, driver_target(env))

@@ -13,7 +13,7 @@ from PIL import ImageDraw
 
 from rmm_envs.views.base import BODY_OUTLINE, DRIVER, GOAL, GUARDIAN, LIGHT, View, Window, convex_hull
 
-__all__ = ["QuadrotorView"]
+__all__ = ["QuadrotorView", "quadrotor_view"]
 
 WALL_FILL = (90, 90, 90)
 OBJECT_FILL = (222, 160, 110)
@@ -166,3 +166,8 @@ class QuadrotorView(View):
         draw.line(
             [self.side.px(s[0], s[2]), self.side.px(s[0] + L * up[0], s[2] + L * up[2])], fill=BODY_OUTLINE, width=2
         )
+
+
+def quadrotor_view(env, size: int) -> QuadrotorView:
+    """The ``QuadrotorRoom`` system's view (its spec's ``view``)."""
+    return QuadrotorView(size)
