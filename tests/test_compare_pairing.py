@@ -5,6 +5,7 @@ against real runs' rows)."""
 
 from __future__ import annotations
 
+import math
 import shutil
 import sqlite3
 from pathlib import Path
@@ -204,3 +205,46 @@ def test_episodes_that_started_differently_are_not_paired(run, tmp_path):
     _sql(both / "results.db", ("UPDATE episodes SET start = NULL WHERE episode = 5",))
     c = compare_runs([both], ["random", "inactive"], resamples=20)
     assert _row(c, "random", "inactive", "goal").n == 8
+
+
+def test_every_start_doomed_leaves_no_avoidable_episode(run, tmp_path):
+    copy = tmp_path / "doomed"
+    shutil.copytree(run, copy)
+    _sql(copy / "results.db", ("UPDATE starts SET doomed = 1",))
+    c = compare_runs([copy], ["random", "inactive"], resamples=20)
+    r = _row(c, "random", "inactive", "avoidable collision")
+    assert _counts(r) == (0, 0, 0, 0, 0) and math.isnan(r.rate_a) and math.isnan(r.rate_b) and math.isnan(r.diff)
+    assert r.p_value == 1.0 and r.a_only_episodes == [] and r.b_only_episodes == []
+    assert set(c.pairs["note"]) == {""}  # no errors: no note on any row
+
+
+def test_an_empty_floor_keeps_its_columns(run, tmp_path):
+    copy = tmp_path / "goal"
+    shutil.copytree(run, copy)
+    _sql(copy / "results.db", ("UPDATE episodes SET outcome = 'goal' WHERE agent = 'inactive'",))
+    c = compare_runs([copy], ["random", "inactive"], resamples=20)
+    assert len(c.floor) == 0
+    assert list(c.floor.columns) == ["group", "episode", "seed", "doomed", "outcome:random", "outcome:inactive"]
+    assert "Floor: no episode that every one of random, inactive failed." in c.to_markdown()
+
+
+@pytest.fixture(scope="module")
+def seed1(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("pairing") / "seed1"
+    argv = ["--agent", "random,inactive", "--episodes", "4", "--clock", "fixed:1", "--seed", "1", "--workers", "1"]
+    assert main([*argv, "--no-progress", "--no-figure", "--out", str(out)]) == 0
+    return out
+
+
+def test_runs_of_two_seeds_are_paired_within_each(run, seed1):
+    """The same agents over seed 0 (8 episodes) and seed 1 (4): two groups, each counted on its own
+    episodes (episode 0 of seed 0 is not episode 0 of seed 1)."""
+    both = compare_runs([run, seed1], ["random", "inactive"], resamples=20)
+    groups = {g: rows for g, rows in both.pairs.groupby("group")}
+    assert set(groups) == {"Dubins4DParallel-v0 seed 0 clock fixed:1", "Dubins4DParallel-v0 seed 1 clock fixed:1"}
+    alone = {s: compare_runs([d], ["random", "inactive"], resamples=20) for s, d in ((0, run), (1, seed1))}
+    cols = ["outcome", "n", "both", "a_only", "b_only", "neither"]
+    for s in (0, 1):
+        mine = groups[f"Dubins4DParallel-v0 seed {s} clock fixed:1"][cols].reset_index(drop=True)
+        assert mine.equals(alone[s].pairs[cols].reset_index(drop=True))
+    assert set(both.floor.group) <= set(groups) and len(both.floor) == len(alone[0].floor) + len(alone[1].floor)

@@ -216,6 +216,22 @@ def test_the_floor_counts_episodes_where_every_agent_collided():
     assert ", 4 where every one collided; first: 3,5,8,13" in line and "doomed" not in line
 
 
+def test_the_floor_line_lists_its_first_eight_episodes():
+    floor = pd.DataFrame(
+        {
+            "group": "g",
+            "episode": list(range(10, 20)),
+            "seed": list(range(10)),
+            "doomed": [False] * 10,
+            "outcome:a": ["collision"] * 10,
+            "outcome:b": ["timeout"] * 10,
+        }
+    )
+    assert _floor_line(floor, ["a", "b"]).endswith(
+        ", 0 where every one collided, 0 of them from doomed starts; first: 10,11,12,13,14,15,16,17"
+    )
+
+
 def test_an_empty_floor_says_so():
     empty = _floor({"a": [], "b": []}, [])
     assert _floor_line(empty, ["a", "b"]) == "Floor: no episode that every one of a, b failed."
