@@ -109,6 +109,7 @@ SUBCOMMANDS = {
     "merge": "rmm_bench.merge",
     "export": "rmm_bench.export",
     "reproduce": "rmm_bench.reproduce",
+    "check-system": "rmm_bench.check_system",
     "tune": "rmm_bench.tune",
     "calibrate": "rmm_bench.calibration",
     "knob-sweep": "rmm_bench.knob_sweep",

@@ -331,9 +331,10 @@ def replay_episode(target: ReplayTarget, env=None, drawing=None) -> tuple[str, b
     return (f"episode {i}: verified{where}", True)
 
 
-def build_env(target: ReplayTarget):
+def build_env(target: ReplayTarget, render_mode: str | None = None):
     """The env the run's episodes ran on, built with the run's options; a clocked run's clock is a
-    :class:`~rmm_envs.clocks.ReplayClock` (loaded per episode).  ValueError when it cannot be made."""
+    :class:`~rmm_envs.clocks.ReplayClock` (loaded per episode).  ``render_mode``: also passed to
+    the env (to draw it).  ValueError when it cannot be made."""
     import gymnasium as gym
 
     from rmm_envs.clocks import ReplayClock
@@ -344,6 +345,8 @@ def build_env(target: ReplayTarget):
     kwargs = dict(target.run.env_kwargs)
     if target.clock_trace is not None:
         kwargs["clock"] = ReplayClock((), "no episode yet")
+    if render_mode is not None:
+        kwargs["render_mode"] = render_mode
     try:
         return gym.make(resolve_env_id(target.run.env_id), **kwargs)
     except EnvUnavailable as e:
@@ -353,6 +356,30 @@ def build_env(target: ReplayTarget):
             f"--env {target.run.env_id}: the run's env cannot be made with its stored options {target.run.env_kwargs}: "
             f"{type(e).__name__}: {e}"
         ) from None
+
+
+def drawable_env(target: ReplayTarget, env, size: int):
+    """``env`` ready to be drawn: as it is when a view of the package draws it, else rebuilt with
+    ``render_mode="rgb_array"`` (its own frames: a simulator of your own, a Gymnasium env);
+    ``ValueError`` naming the env, never the guardian, when it cannot draw at all."""
+    from rmm_envs.views import view_for
+
+    try:
+        view_for(env, size)
+        return env
+    except ValueError:
+        pass
+    try:
+        drawn = build_env(target, render_mode="rgb_array")
+        view_for(drawn, size)
+    except Exception as e:  # noqa: BLE001 - the env cannot render: it is the cause, not the guardian
+        raise ValueError(
+            f"--video/--frames: {target.run.env_id} cannot draw its episodes: it has no view in this package "
+            f"and does not render with render_mode='rgb_array' ({e}); replay without --video/--frames "
+            "verifies it"
+        ) from None
+    env.close()
+    return drawn
 
 
 def _check_guardian(target: ReplayTarget) -> None:
@@ -407,6 +434,8 @@ def _replay(req: ReplayRequest) -> int:
 
     check_outputs(req.video, req.frames, req.every, reads=[db])  # before anything is simulated or written
     env = build_env(targets[0])
+    if req.video or req.frames:
+        env = drawable_env(targets[0], env, req.size)
     _check_guardian(targets[0])
     drawing = EpisodeDrawing(req.size) if (req.video or req.frames) else None
     several = len(targets) > 1

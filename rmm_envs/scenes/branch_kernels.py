@@ -7,24 +7,23 @@ branch at a time in compiled code, with no path array, and give the same bits: e
 numpy twin's floating-point operations in the same order (the closed forms of
 :class:`rmm_envs.dynamics.Dubins4D` and :class:`rmm_envs.dynamics.Dubins3D`, the path tests of
 :mod:`rmm_envs.worlds.path_kernels`); ``tests/test_fused_labels.py`` pins each to its twin.
-
-* :func:`dubins4d_circle_branches`: :class:`rmm_envs.scenes.Dubins4DScene`;
-* :func:`dubins3d_maze_branches`: :class:`rmm_envs.scenes.MazeScene`;
-* :func:`quadrotor_command_branches`: :class:`rmm_envs.scenes.QuadrotorCommandScene` (the
-  controller and body of ``ClosedLoopQuadrotor.propagate``, the room test of
-  :mod:`rmm_envs.worlds.room_kernels` at each path point as it is reached; a branch stops at its
-  first failing point, since the estimator reads no later state of a failed branch).
-
-Two shortcuts skip work whose result is known without changing a bit: the sine and cosine of a
-branch's start heading are computed once per branch (numpy's ``_displace`` computes them per
-point, the same values), and in a branch whose speed saturates the point after the saturation
-time reuses the saturation point (the same for every later point), while a point before it,
-whose second phase lasts exactly 0 s, is the first phase's point (``x + c * (+0) - s * (+-0)``
-is ``x`` for any ``x != 0``; the full arithmetic runs when a coordinate is 0).
 """
 
 from __future__ import annotations
 
+# * :func:`dubins4d_circle_branches`: :class:`rmm_envs.scenes.Dubins4DScene`;
+# * :func:`dubins3d_maze_branches`: :class:`rmm_envs.scenes.MazeScene`;
+# * :func:`quadrotor_command_branches`: :class:`rmm_envs.scenes.QuadrotorCommandScene` (the
+#   controller and body of ``ClosedLoopQuadrotor.propagate``, the room test of
+#   :mod:`rmm_envs.worlds.room_kernels` at each path point as it is reached; a branch stops at its
+#   first failing point, since the estimator reads no later state of a failed branch).
+#
+# Two shortcuts skip work whose result is known without changing a bit: the sine and cosine of a
+# branch's start heading are computed once per branch (numpy's ``_displace`` computes them per
+# point, the same values), and in a branch whose speed saturates the point after the saturation
+# time reuses the saturation point (the same for every later point), while a point before it,
+# whose second phase lasts exactly 0 s, is the first phase's point (``x + c * (+0) - s * (+-0)``
+# is ``x`` for any ``x != 0``; the full arithmetic runs when a coordinate is 0).
 import math
 from collections.abc import Callable
 from typing import Any

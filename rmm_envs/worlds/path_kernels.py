@@ -12,13 +12,12 @@ contracts nothing without ``fastmath``), down to the pruning that decides which 
 * :func:`maze_path_hit_near`: :meth:`rmm_envs.worlds.mazes.Maze.paths_hit` for one path, against
   the candidate walls of its first point's bucket (numpy's answer, including its limits: only
   those walls), with the same segment pruning.
-
-Tests hold each to its numpy twin on random paths and on the labels' own trees
-(``tests/test_fused_labels.py``).
 """
 
 from __future__ import annotations
 
+# Tests hold each to its numpy twin on random paths and on the labels' own trees
+# (``tests/test_fused_labels.py``).
 import math
 from collections.abc import Callable
 from typing import Any
