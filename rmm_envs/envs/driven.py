@@ -90,7 +90,6 @@ import numpy as np
 from gymnasium.envs.registration import load_env_creator
 
 from rmm_envs.adapters import termination_is_failure
-from rmm_envs.adapters.base import AdaptedEnv
 from rmm_envs.autonomy import GENERIC, GuardianActionSpace
 from rmm_envs.clocks import make_clock
 from rmm_envs.envs.driven_labels import DrivenLabels
@@ -245,13 +244,14 @@ class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
         self.clock = make_clock(clock)
         if self.simulator is not None and getattr(self.simulator, "start_doomed", None) is not None:
             self.doomed_test = self._start_doomed  # rmm_envs.starts finds it on the env
-        self._adapter: AdaptedEnv | None = None
-        self._sampler: tuple[gym.Env, AdaptedEnv] | None = None
+        self._adapter = None
+        self._sampler = None
 
     def _start_doomed(self, env) -> StartAssessment:
         """The simulator's own doomed-start test of the state it starts from."""
         sim = self.simulator
-        saved = np.array(sim.get_state(), dtype=float)
+        assert sim is not None  # set only for a simulator of one's own
+        saved = np.asarray(sim.get_state(), dtype=np.float64).copy()
         try:
             doomed = sim.start_doomed(saved.copy())
         finally:

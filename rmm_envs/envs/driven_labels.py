@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Callable
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -22,6 +24,17 @@ __all__ = ["DrivenLabels"]
 class DrivenLabels:
     """Mixed into :class:`rmm_envs.envs.driven.DrivenGuardedEnv`; reads its ``env``,
     ``simulator``, ``env_name``, ``_driver_obj``, ``_acts``, ``dt`` and ``max_episode_sim_time``."""
+
+    env: Any
+    simulator: Any
+    env_name: str
+    dt: float
+    max_episode_sim_time: float
+    _driver_obj: Any
+    _acts: Any
+    _failed: Callable[..., bool]
+    _adapter: AdaptedEnv | None
+    _sampler: tuple[gym.Env, AdaptedEnv] | None
 
     def _adapter_of(self, env: gym.Env, command: str | None = None) -> AdaptedEnv:
         if isinstance(env, SnapshotEnv):

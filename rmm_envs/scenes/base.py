@@ -57,7 +57,7 @@ class SceneBase:
         each path's last state, what the risk estimator reads of a tree level.  This composes
         the two; a scene with a fused compiled loop overrides it with the same bits."""
         paths = self.propagate(states, controls, duration, n_steps)
-        return np.asarray(self.path_failed(paths), dtype=bool), paths[:, -1]
+        return np.asarray(self.path_failed(paths), dtype=bool), paths[:, -1]  # type: ignore[attr-defined]
 
 
 def branch_inputs(states, controls, duration: float, n_steps: int, state_dim: int, control_dim: int):

@@ -53,7 +53,7 @@ class QuadrotorScene(SceneBase):
             return super().propagate_failed(states, controls, duration, n_steps)
         paths = self.propagate(states, controls, duration, n_steps)
         flat = np.ascontiguousarray(paths.reshape(-1, 13))
-        failed = room_states_failed(flat, *self.collision.kernel_args(), np.empty(flat.shape[0], dtype=bool))
+        failed = room_states_failed(flat, *self.collision.kernel_args(), np.empty(flat.shape[0], dtype=bool))  # type: ignore[call-arg]
         return failed.reshape(paths.shape[:2]).any(axis=1), paths[:, -1]
 
 
