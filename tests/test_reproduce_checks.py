@@ -106,9 +106,12 @@ def test_a_wall_clock_sweep_is_checked_by_a_bonferroni_interval(tmp_path, reruns
     assert reproduce.check_full(m, tmp_path / "a") == []
     beyond = next(g for g in range(x, EPISODES) if not inside(g, z24))
     rates["row-8"]["inactive"]["goal"] = (100 * beyond / EPISODES, EPISODES)
-    (problem,) = reproduce.check_full(m, tmp_path / "b")
-    assert problem.startswith(f"knob-lrmm-threshold: inactive goal {100 * beyond / EPISODES:.1f}% over 256 episodes; ")
-    assert problem.endswith("(95%, Bonferroni over 24 rates)")
+    d, lo, hi = newcombe_unpaired(beyond, EPISODES, x, EPISODES, z24)
+    assert reproduce.check_full(m, tmp_path / "b") == [
+        f"knob-lrmm-threshold: inactive goal {100 * beyond / EPISODES:.1f}% over 256 episodes; the published 45.3% "
+        f"differs by {100 * d:+.1f} points, outside the interval [{100 * lo:.1f}, {100 * hi:.1f}] (95%, Bonferroni "
+        "over 24 rates)"
+    ]
 
 
 def test_each_column_of_a_table_is_checked_against_its_own_run(tmp_path, reruns):
@@ -174,7 +177,12 @@ def test_quick_fingerprints_are_compared_agent_by_agent(tmp_path, monkeypatch):
     out.mkdir()
     shutil.copyfile(REFERENCE / "maze.db", out / "results.db")
     got = dict(m.fingerprints)
-    monkeypatch.setattr(reproduce, "_quick_fingerprints", lambda m_, o: got)
+
+    def quick(m_, o):
+        assert m_ is m and o == out
+        return got
+
+    monkeypatch.setattr(reproduce, "_quick_fingerprints", quick)
     assert reproduce.check_quick(m, out) == []
     got["cbf"] = "0000000000000000"
     del got["random"]
@@ -187,3 +195,106 @@ def test_quick_fingerprints_are_compared_agent_by_agent(tmp_path, monkeypatch):
         "rmm-bench replay DIR --agent random --episode 0",
     ]
     assert all(re.fullmatch(r"[0-9a-f]{16}", v) for v in m.fingerprints.values())
+
+
+def test_a_fixed_clock_rate_within_half_a_point_reproduces(tmp_path, reruns):
+    """The published figures have one decimal: a rerun's rate within 0.05 points of one is it."""
+    calls, rates = reruns
+    m = load_manifests(["knob-lrmm-threshold"])[0]
+    for k in range(8):
+        rates[f"row-{k + 1}"] = _published(m, k)
+    rates["row-3"]["lrmm"]["collision"] = (9.05, EPISODES)
+    assert reproduce.check_full(m, tmp_path / "a") == []
+    rates["row-3"]["lrmm"]["collision"] = (9.06, EPISODES)
+    assert len(reproduce.check_full(m, tmp_path / "b")) == 1
+
+
+def test_one_wall_clock_rate_is_checked_by_the_plain_95_percent_interval(tmp_path, reruns):
+    """One cell (the default): no Bonferroni correction; the message gives the interval."""
+    calls, rates = reruns
+    m = load_manifests(["maze-fixed"])[0]
+    m.expect = [{"agent": "inactive", "column": "collision", "value": 46.1}]
+    x = round(46.1 / 100 * EPISODES)
+
+    def inside(got: int, z: float) -> bool:
+        _, lo, hi = newcombe_unpaired(got, EPISODES, x, EPISODES, z)
+        return lo <= 0 <= hi
+
+    z95, z975 = float(norm.ppf(1 - 0.025)), float(norm.ppf(1 - 0.0125))
+    got = next(g for g in range(x, EPISODES) if not inside(g, z95))
+    assert inside(got, z975)  # a wider interval (two cells) would take it
+    rates["r"] = {"inactive": {"collision": (100 * got / EPISODES, EPISODES)}}
+    (tmp_path / "r").mkdir()
+    d, lo, hi = newcombe_unpaired(got, EPISODES, x, EPISODES, z95)
+    assert reproduce._check_rates(m, tmp_path / "r" / "results.db", exact=False) == [
+        f"maze-fixed: inactive collision {100 * got / EPISODES:.1f}% over 256 episodes; the published 46.1% differs by "
+        f"{100 * d:+.1f} points, outside the interval [{100 * lo:.1f}, {100 * hi:.1f}] (95%, Bonferroni over 1 rates)"
+    ]
+    # far off: 118 of 256 measured (46.1%), 30.0% published (77 of 256): the interval 7.6 to 24.1 points
+    m.expect = [{"agent": "inactive", "column": "collision", "value": 30.0}]
+    rates["r"] = {"inactive": {"collision": (100 * 118 / EPISODES, EPISODES)}}
+    assert reproduce._check_rates(m, tmp_path / "r" / "results.db", exact=False) == [
+        "maze-fixed: inactive collision 46.1% over 256 episodes; the published 30.0% differs by +16.0 points, outside "
+        "the interval [7.6, 24.1] (95%, Bonferroni over 1 rates)"
+    ]
+
+
+def test_a_table_without_a_check_reruns_nothing_and_its_ratios_share_one_run(tmp_path, reruns, monkeypatch):
+    calls, rates = reruns
+    seen = []
+    monkeypatch.setattr(reproduce, "check_ratio", lambda m, r, outputs: seen.append((m, r, outputs)) or [])
+    m = load_manifests(["performance"])[0]
+    assert m.kind == "table" and not m.check and len(m.ratios) == 4
+    assert reproduce.expected_rates(m) == []
+    assert reproduce.check_full(m, tmp_path) == [] and calls == []
+    assert [r for _, r, _ in seen] == m.ratios and all(x is m for x, _, _ in seen)
+    assert len({id(o) for _, _, o in seen}) == 1 and isinstance(seen[0][2], dict)
+    plain = load_manifests(["paired-2048"])[0]
+    assert plain.kind == "table" and not plain.check and plain.commands and not plain.ratios
+    assert reproduce.expected_rates(plain) == [] and reproduce.check_full(plain, tmp_path / "p") == [] and calls == []
+
+
+def test_rows_of_a_table_that_are_not_ours_are_not_expected():
+    """dubins4d-wall's paper rows have the agent '' in [check]: no rate of theirs is expected."""
+    m = load_manifests(["dubins4d-wall"])[0]
+    ours = [a for a in m.check["agents"] if a]
+    got = reproduce.expected_rates(m)
+    assert len(ours) < len(m.check["agents"]) and len(got) == 3 * len(ours)
+    assert [e["agent"] for e in got[::3]] == ours
+
+
+def test_the_rates_of_a_run_count_its_episodes_with_a_result_and_never_write_it(tmp_path):
+    import hashlib
+
+    db = tmp_path / "maze.db"
+    shutil.copyfile(REFERENCE / "maze.db", db)
+    import sqlite3
+
+    con = sqlite3.connect(db)
+    con.execute(
+        "UPDATE episodes SET outcome = 'error', error_kind = 'guardian' WHERE agent = 'inactive' AND episode < 3"
+    )
+    con.commit()
+    con.close()
+    before = hashlib.sha256(db.read_bytes()).hexdigest()
+    rates = reproduce._rates(db)
+    assert hashlib.sha256(db.read_bytes()).hexdigest() == before
+    assert {c: n for c, (_, n) in rates["inactive"].items()} == {"goal": 253, "collision": 253, "timeout": 253}
+    assert {c: n for c, (_, n) in rates["cbf"].items()} == {"goal": 256, "collision": 256, "timeout": 256}
+
+
+def test_a_fingerprint_reads_no_statistics_as_none(tmp_path):
+    """A row stored with no guardian statistics (NULL) and one with an empty set ('{}') are the same
+    episode: the same fingerprint."""
+    import sqlite3
+
+    db = tmp_path / "maze.db"
+    shutil.copyfile(REFERENCE / "maze.db", db)
+    con = sqlite3.connect(db)
+    con.execute("UPDATE episodes SET guardian_stats = '{}' WHERE agent = 'inactive'")
+    con.commit()
+    empty = reproduce.fingerprint(db, 4)
+    con.execute("UPDATE episodes SET guardian_stats = NULL WHERE agent = 'inactive'")
+    con.commit()
+    con.close()
+    assert reproduce.fingerprint(db, 4) == empty
