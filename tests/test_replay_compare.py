@@ -116,3 +116,7 @@ def test_an_error_by_its_first_line():
     assert compare_rows(_row(error=None), _row(error=""), True) == ("error", None, "")
     assert compare_rows(_row(error="x"), _row(error=None), True) == ("error", "x", None)
     assert compare_rows(_row(error=""), _row(error="\nsecond"), True) is None  # its first line is empty too
+
+
+def test_a_start_not_stored_leaves_the_columns_after_it_compared():
+    assert compare_rows(_row(start=None), _row(start="abcd", compute_time=9.0), True) == ("compute_time", 0.12, 9.0)
