@@ -6,7 +6,7 @@ single-line bug that was seeded into a copy and passed every other test.
 - Newcombe's intervals at 90%, 95% and 99% by hand;
 - compare's floor: "where every one collided" counts the episodes every agent collided in (``any``
   counted those where one did);
-- calibration: the constant predictor's Brier score is the labels' variance, so the skill score is
+- calibration (rmm_bench.calibration): the constant predictor's Brier score is the labels' variance, so the skill score is
   ``1 - Brier / variance`` (it was computed from the predictions).
 """
 
@@ -260,7 +260,7 @@ def test_brier_of_the_constant_and_the_skill_score_by_hand(tmp_path, monkeypatch
     """Labels 0, 0.5, 1, 0.5 and predictions 0.1, 0.4, 0.9, 0.6: Brier 0.01; the labels' mean is
     0.5, so the best constant's Brier is (0.25 + 0 + 0.25 + 0) / 4 = 0.125 and the skill
     1 - 0.01 / 0.125 = 0.92 (from the predictions it would be 0.085 and 0.882)."""
-    from benchmarks import calibration
+    from rmm_bench import calibration
     from rmm_envs.risk import datagen, dataset
     from rmm_guardians.lrmm import model
 
