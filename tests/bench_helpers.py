@@ -88,7 +88,7 @@ def dying_shard_job(job):
 
     if job[2] == 1 and multiprocessing.parent_process() is not None:
         os._exit(3)
-    return datagen._shard_task(*job)
+    return datagen._shard_job(job)
 
 
 class Threaded(Guardian):
