@@ -117,14 +117,26 @@ QUADROTOR_METHOD = "at-rest:hover"
 
 def _maze_hits(maze, paths: np.ndarray, chunk: int) -> np.ndarray:
     """``(N,)`` index of the first sample after which a path ``(N, T, 2+)`` has touched a wall
-    (``T`` when it never does), exactly on the segments between samples, checked ``chunk``
-    samples at a time (each piece within the walls' look-up reach of its first point)."""
+    (``T`` when it never does): ``k`` when the segment from sample ``k - 1`` to ``k`` is the
+    first to touch one, exactly on the segments between samples.  Paths are checked ``chunk``
+    samples at a time (each piece within the walls' look-up reach of its first point), and a
+    piece that touches is dated segment by segment, so a goal reached inside the piece before
+    its wall still counts as reached first."""
     n, steps = paths.shape[:2]
     first = np.full(n, steps)
     for start in range(0, steps - 1, chunk):
         piece = paths[:, start : min(start + chunk, steps - 1) + 1]
-        hit = maze.paths_hit(piece) & (first == steps)
-        first[hit] = start + 1
+        hit = np.flatnonzero(maze.paths_hit(piece) & (first == steps))
+        if hit.size == 0:
+            continue
+        # date each contact to its segment: every segment of a hitting piece checked on its own
+        # (walls looked up from the piece's first point, as for the whole piece)
+        segs = piece.shape[1] - 1
+        pairs = np.stack([piece[hit, :-1], piece[hit, 1:]], axis=2).reshape(hit.size * segs, 2, -1)
+        origin = np.repeat(piece[hit, 0, :2], segs, axis=0)
+        seg_hit = maze.paths_hit(pairs, reach_from=origin).reshape(hit.size, segs)
+        # a piece that hits has a segment that hits; argmax finds the first
+        first[hit] = start + 1 + seg_hit.argmax(axis=1)
     return first
 
 

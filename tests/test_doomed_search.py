@@ -104,6 +104,32 @@ def test_a_maze_goal_behind_the_wall_does_not_count():
     assert not maze_escapes(MAZE_CAR, CORRIDOR, POSE, (330.0, 200.0, 5.0))
 
 
+def test_a_maze_goal_reached_inside_the_piece_that_touches_the_wall_saves_the_start():
+    """From x = 290 heading into the corridor's end (x = 310), a goal of radius 1 at x = 295 is
+    reached 5 samples out, about 15 samples before the wall: the start is saved although the goal
+    and the wall fall in one piece of the search (30 samples), which must not date the contact by
+    its piece."""
+    near_end = np.array([290.0, 200.0, 0.0])
+    assert not maze_escapes(MAZE_CAR, CORRIDOR, near_end, NOWHERE)
+    assert maze_escapes(MAZE_CAR, CORRIDOR, near_end, (295.0, 200.0, 1.0))
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 30, 200])
+def test_a_contact_is_dated_by_its_segment_whatever_the_piece_size(chunk):
+    """A straight path 1 px per sample from x = 280 meets the corridor's end wall (x = 310, its
+    half-thickness h) on the segment ending at the first sample within h of it: the same index for
+    every piece size; a path that never touches is dated ``T``."""
+    from rmm_envs.doomed import _maze_hits
+
+    xs = 280.0 + np.arange(60.0)
+    path = np.stack([xs, np.full_like(xs, 200.0)], axis=1)[None]
+    clear = path.copy()
+    clear[..., 0] -= 100.0  # 180 .. 239 along the corridor's middle, far from every wall
+    expected = int(np.flatnonzero(xs >= 310.0 - CORRIDOR.half)[0])
+    got = _maze_hits(CORRIDOR, np.concatenate([path, clear]), chunk)
+    assert got.tolist() == [expected, 60]
+
+
 def test_a_moving_quadrotor_start_is_not_assessed():
     """At rest (every generated start) a quadrotor start is avoidable by hovering; one that moves
     (any of the velocities and rates, state[7:13], above 1e-9) is not assessed, with no method."""
