@@ -123,3 +123,47 @@ def test_a_missing_or_shipped_model_is_refused_in_one_line(tmp_path, capsys):
 def test_tune_is_a_listed_subcommand():
     done = subprocess.run([sys.executable, "-m", "rmm_bench.cli", "tune", "--help"], capture_output=True, text=True)
     assert done.returncode == 0 and "MODEL.decision.toml" in done.stdout
+
+
+def test_rows_over_several_models_by_hand():
+    from rmm_bench.tune import combine
+
+    a = {**_row(0.3, 10.0, 60.0, 20.0), "timeout_mean": 30.0, "success_std": 1.0, "collision_std": 2.0}
+    a.update(timeout_std=3.0, intervention_std=4.0)
+    b = {**a, "collision_mean": 20.0, "success_mean": 50.0, "timeout_mean": 30.0, "intervention_mean": 30.0}
+    c = {**a, "collision_mean": 30.0, "success_mean": 40.0, "timeout_mean": 30.0, "intervention_mean": 40.0}
+    row = combine([a, b, c])
+    assert (row["collision_mean"], row["success_mean"], row["timeout_mean"], row["intervention_mean"]) == (
+        20.0, 50.0, 30.0, 30.0,
+    )  # fmt: skip
+    assert (row["collision_std"], row["timeout_std"]) == (10.0, 0.0)  # across the models' means, n - 1
+    assert row["collision_each"] == [10.0, 20.0, 30.0]
+    one = combine([a])
+    assert one["collision_std"] == 2.0 and one["collision_each"] == [10.0]  # one model keeps its own spread
+
+
+def test_tune_over_several_models_chooses_by_their_mean(own_model, small_dataset):
+    folder = own_model.parent
+    ds, _ = small_dataset
+    other = train(ds, TrainConfig(epochs=3, seed=2), log=lambda *a: None).save(folder / "mine_seed2.npz")
+    argv = ["tune", "--env", "Dubins4DParallel-v0", "--model", str(own_model), "--also-models", str(other)]
+    argv += ["--thresholds", "0.3,0.9", "--episodes", "3", "--workers", "1", "--no-reference", "--dry-run"]
+    argv += ["--out", str(folder / "several")]
+    done = subprocess.run([str(BIN / "rmm-bench"), *argv], capture_output=True, text=True, cwd=folder,
+                          env=dict(os.environ, MPLBACKEND="Agg"))  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert (
+        "| Collision per model [%] |" in done.stdout and "mean over 2 models (mine.npz, mine_seed2.npz)" in done.stdout
+    )
+    assert sorted(p.name for p in (folder / "several").iterdir() if p.is_dir()) == [
+        "s0_t0.3", "s0_t0.3_m1", "s0_t0.9", "s0_t0.9_m1",
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize("twice", ["same", "model"])
+def test_a_model_given_twice_is_refused(own_model, tmp_path, capsys, twice):
+    also = f"{own_model},{own_model}" if twice == "same" else str(own_model)
+    argv = ["tune", "--env", "Dubins4DParallel-v0", "--model", str(own_model), "--also-models", also]
+    assert main([*argv, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "twice or as --model" in err and not (tmp_path / "o").exists()

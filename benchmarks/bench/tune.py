@@ -13,7 +13,9 @@ highest success rate, then the least intervention, then the higher threshold; wi
 It prints the trade-off it chose from (``OUT/tune.md``, and ``OUT/tune.png``, collisions against
 interventions, when matplotlib is installed) and writes the choice beside the model as
 ``MODEL.decision.toml`` (:mod:`rmm_guardians.lrmm.decision`), where the guardian reads it;
-``--dry-run`` writes nothing there.  Each run is kept under ``--out`` (default
+``--dry-run`` writes nothing there.  With ``--also-models`` every candidate also runs with models
+trained the same way under other seeds, and the rule reads the mean over all of them: a decision
+that holds across retraining rather than one model's luck.  Each run is kept under ``--out`` (default
 ``results/tune/MODEL``): the same command again resumes them.
 """
 
@@ -34,7 +36,7 @@ from rmm_guardians.lrmm.settings import check_threshold
 from rmm_guardians.lrmm.strategies import parse_strategies, strategy_specs
 from rmm_guardians.lrmm.strategies.spec import spec_items
 
-__all__ = ["DEFAULT_THRESHOLDS", "RULE", "build_parser", "choose", "cmd"]
+__all__ = ["DEFAULT_THRESHOLDS", "RULE", "build_parser", "choose", "cmd", "combine"]
 
 PROG = "rmm-bench tune"
 DEFAULT_THRESHOLDS = (0.1, 0.2, 0.3, 0.5, 0.7, 0.85)
@@ -85,6 +87,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="lrmm.KEY=VALUE",
         help="a fixed option of every run, e.g. lrmm.inputs='\"rays\"' (repeatable)",
     )
+    p.add_argument(
+        "--also-models",
+        default="",
+        metavar="MODEL,MODEL",
+        help="comma-separated models trained like --model under other seeds: every candidate runs with each, and "
+        "the rule reads the mean over all of them, so the decision holds across retraining, not for one model's luck",
+    )
     p.add_argument("--no-reference", action="store_true", help="do not run the driver alone for comparison")
     p.add_argument("--out", type=Path, default=None, help="where the runs, tune.md and tune.png go")
     p.add_argument("--dry-run", action="store_true", help="show the choice; write no decision beside the model")
@@ -125,16 +134,50 @@ def _candidates(args) -> tuple[LRMMModel, list[float], list[str]]:
             f"{args.model} is a model this package ships, its decision part of the package: copy the model to tune "
             "a decision of your own beside the copy, or add --dry-run"
         )
+    others = _also_models(args)
     thresholds = _thresholds(args.thresholds)
     specs = []
     for spec in args.strategies or [""]:
         if spec_items(spec)[1]:
             raise ValueError(f"--strategies {spec!r}: a candidate names its strategies (+/- edit a stored decision)")
         parsed = ", ".join(strategy_specs(parse_strategies(spec)))
-        LRMMGuardian(model, env_id=args.env, threshold=thresholds[0], strategies=parsed)  # one line if it cannot serve
+        for m in (model, *others):  # one line if one cannot serve
+            LRMMGuardian(m, env_id=args.env, threshold=thresholds[0], strategies=parsed)
         if parsed not in specs:
             specs.append(parsed)
     return model, thresholds, specs
+
+
+def _also_models(args) -> list[LRMMModel]:
+    """The models of ``--also-models``, loaded; a ``ValueError`` naming one given twice."""
+    paths = [Path(t.strip()) for t in args.also_models.split(",") if t.strip()]
+    seen = {args.model.resolve()}
+    for path in paths:
+        if path.resolve() in seen:
+            raise ValueError(f"--also-models names {path} twice or as --model; give each model once")
+        seen.add(path.resolve())
+    args.also_paths = paths
+    return [LRMMModel.load(path) for path in paths]
+
+
+_KEYS = ("success", "collision", "timeout", "intervention")
+
+
+def combine(per_model: list[dict]) -> dict:
+    """One candidate's row over several models: each rate the mean of the models' means, its
+    ``_std`` the sample standard deviation across those means (0 for one model: its own
+    ``_std`` is kept), and ``collision_each`` the models' collision rates in order."""
+    if len(per_model) == 1:
+        return {**per_model[0], "collision_each": [per_model[0]["collision_mean"]]}
+    out = dict(per_model[0])
+    n = len(per_model)
+    for k in _KEYS:
+        means = [r[f"{k}_mean"] for r in per_model]
+        mean = sum(means) / n
+        out[f"{k}_mean"] = mean
+        out[f"{k}_std"] = (sum((m - mean) ** 2 for m in means) / (n - 1)) ** 0.5
+    out["collision_each"] = [r["collision_mean"] for r in per_model]
+    return out
 
 
 def choose(rows: list[dict], max_intervention: float | None = None) -> dict | None:
@@ -151,15 +194,20 @@ def _cell(r: dict, key: str) -> str:
     return f"{r[f'{key}_mean']:.1f} ± {r[f'{key}_std']:.1f}"
 
 
-def _table(rows: list[dict], chosen: dict | None, reference: dict | None) -> list[str]:
+def _table(rows: list[dict], chosen: dict | None, reference: dict | None, models: int = 1) -> list[str]:
+    each = models > 1
     out = [
-        "| threshold | strategies | Success [%] | Collision [%] | Timeout [%] | Intervention [% sim time] | |",
-        "|---|---|---|---|---|---|---|",
+        "| threshold | strategies | Success [%] | Collision [%] | Timeout [%] | Intervention [% sim time] |"
+        + (" Collision per model [%] |" if each else "")
+        + " |",
+        "|---|---|---|---|---|---|" + ("---|" if each else "") + "---|",
     ]
     for r in [*rows, *([reference] if reference else [])]:
         name = "driver alone (inactive)" if r is reference else f"{r['threshold']:g}"
         specs = "" if r is reference else f"`{r['strategies']}`" if r["strategies"] else "(core alone)"
-        cells = " | ".join(_cell(r, k) for k in ("success", "collision", "timeout", "intervention"))
+        cells = " | ".join(_cell(r, k) for k in _KEYS)
+        if each:
+            cells += " | " + ("" if r is reference else " / ".join(f"{c:.1f}" for c in r["collision_each"]))
         out.append(f"| {name} | {specs} | {cells} | {'chosen' if r is chosen else ''} |")
     return out
 
@@ -210,18 +258,22 @@ def cmd(argv: list[str]) -> int:
     except (ValueError, FileNotFoundError) as e:
         return _bad(str(e))
     out = args.out or Path("results") / "tune" / args.model.stem
-    given = ["lrmm.model=" + json.dumps(str(args.model.resolve())), *args.agent_opt]
+    models = [args.model, *args.also_paths]
     rows: list[dict] = []
     for i, spec in enumerate(specs):
         for t in thresholds:
-            folder = out / f"s{i}_t{t:g}"
-            opts = [*given, f"lrmm.threshold={t!r}", f"lrmm.strategies={json.dumps(spec)}"]
-            rc = run_bench(
-                bench_argv("lrmm", opts, folder, args.episodes, args.seed, args.clock, args.workers, args.env)
-            )
-            if rc:  # rmm-bench said why, in one line
-                return rc
-            rows.append({**read_row(folder, "lrmm"), "threshold": t, "strategies": spec})
+            per_model = []
+            for j, path in enumerate(models):
+                folder = out / (f"s{i}_t{t:g}" + (f"_m{j}" if j else ""))
+                opts = ["lrmm.model=" + json.dumps(str(path.resolve())), *args.agent_opt]
+                opts += [f"lrmm.threshold={t!r}", f"lrmm.strategies={json.dumps(spec)}"]
+                rc = run_bench(
+                    bench_argv("lrmm", opts, folder, args.episodes, args.seed, args.clock, args.workers, args.env)
+                )
+                if rc:  # rmm-bench said why, in one line
+                    return rc
+                per_model.append(read_row(folder, "lrmm"))
+            rows.append({**combine(per_model), "threshold": t, "strategies": spec})
     reference = None
     if not args.no_reference:
         argv_ref = bench_argv(
@@ -235,9 +287,15 @@ def cmd(argv: list[str]) -> int:
     lines = [
         f"lrmm decision for {args.model} on {args.env}: {args.episodes} episodes of seed {args.seed}, clock {args.clock}",
         "",
-        *_table(rows, chosen, reference),
+        *_table(rows, chosen, reference, len(models)),
         "",
-        f"Rule: {RULE}{cap}.",
+        f"Rule: {RULE}{cap}."
+        + (
+            f" Each rate is the mean over {len(models)} models ({', '.join(p.name for p in models)}) ± the standard "
+            "deviation across them."
+            if len(models) > 1
+            else ""
+        ),
     ]
     out.mkdir(parents=True, exist_ok=True)
     (out / "tune.md").write_text("\n".join(lines) + "\n")
@@ -266,6 +324,13 @@ def cmd(argv: list[str]) -> int:
         f"strategies {' | '.join(repr(s) for s in specs)}: success {chosen['success_mean']:.1f}%, collision "
         f"{chosen['collision_mean']:.1f}%, timeout {chosen['timeout_mean']:.1f}%, in control "
         f"{chosen['intervention_mean']:.1f}% of the time"
+        + (
+            ""
+            if len(models) == 1
+            else f", each the mean over {len(models)} models ({', '.join(p.name for p in models)}), collisions "
+            + " / ".join(f"{c:.1f}" for c in chosen["collision_each"])
+            + "%"
+        )
         + ("" if reference is None else f" (the driver alone: collision {reference['collision_mean']:.1f}%)")
     )
     decision = Decision(
