@@ -6,7 +6,8 @@ control.  :class:`Guardian` is the base class: ``name``, ``observation_type`` (`
 seed, the env's spaces and, for privileged guardians, the env's ``privileged()`` accessor;
 :meth:`~Guardian.act` ``(observation, info) -> action``, built through the env's
 :class:`rmm_envs.autonomy.GuardianActionSpace`; :meth:`~Guardian.stats`, :meth:`~Guardian.signals`
-(what the last decision saw, for frames: :mod:`rmm_envs.views`),
+(what the last decision saw, for frames: :mod:`rmm_envs.views`), :meth:`~Guardian.alarm` (its
+own alarm, for ``rmm-bench collisions``),
 :meth:`~Guardian.warm_up` (run once, untimed, by ``rmm-bench``) and :meth:`~Guardian.input_files`
 (files whose digests join the run's identity).  :meth:`~Guardian.check_spaces`,
 :meth:`~Guardian.require_action_space` and :meth:`~Guardian.require_layout` refuse an env that
@@ -137,6 +138,18 @@ class Guardian:
         (``{}``).  Built-in: ``lrmm`` ``risk``, ``risk_threshold``; ``cbf`` ``barrier_min``,
         ``qp_fallbacks``; ``hj`` ``value``, ``value_threshold`` (docs/guardians.md)."""
         return {}
+
+    def alarm(self) -> tuple[float, float] | None:
+        """The guardian's own alarm at its last decision, as a pair ``(value, threshold)``: the
+        alarm is up when ``value > threshold`` (``nan``: not up).  A guardian whose signal
+        falls as danger grows (a value function, a barrier) returns both negated.  Read by
+        ``rmm-bench collisions`` after every step to date when the guardian first saw the
+        danger it collided with.  Like :meth:`signals`, read only from what the last
+        :meth:`act` computed: calling it never changes a decision.  Default ``None``: no alarm,
+        so its collisions are classified by who was in control alone.  Built-in: ``lrmm``
+        ``(risk, threshold)``; ``cbf`` ``(-barrier_min, 0)``; ``hj`` ``(-value,
+        -value_threshold)`` (docs/guardians.md)."""
+        return None
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"

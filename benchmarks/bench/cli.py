@@ -113,6 +113,7 @@ SUBCOMMANDS = {
     "tune": "rmm_bench.tune",
     "calibrate": "rmm_bench.calibration",
     "knob-sweep": "rmm_bench.knob_sweep",
+    "collisions": "rmm_bench.collisions",
 }
 
 

@@ -365,6 +365,13 @@ class CBFGuardian(DynamicsDispatch, PrivilegedGuardian):
             b = float(np.min(self.barriers(self._decided)))
         return {"barrier_min": b, "qp_fallbacks": float(self._counts["qp_fallbacks"])}
 
+    def alarm(self) -> tuple[float, float] | None:
+        """``(-barrier_min, 0)``: up when the state the last decision acted from is inside an
+        inflated circle (or the delegate's, on the maze car and the quadrotor)."""
+        if self.delegate is not None:
+            return self.delegate.alarm()
+        return -self.signals()["barrier_min"], 0.0
+
 
 # a function's attributes live in its __dict__ (the type checker knows no __signature__ on a method)
 CBFGuardian.__init__.__dict__["__signature__"] = settings_signature(CBFSettings, CBF_PRESETS["cbf"])

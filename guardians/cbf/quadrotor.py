@@ -335,3 +335,7 @@ class QuadrotorCBFGuardian(PrivilegedGuardian):
         """``barrier_min``: the smallest barrier value of the last decision's rows (nearest shape
         first; ``nan`` before one); ``qp_fallbacks``: the episode's infeasible QPs so far."""
         return {"barrier_min": self._barrier_min, "qp_fallbacks": float(self._counts["qp_fallbacks"])}
+
+    def alarm(self) -> tuple[float, float]:
+        """``(-barrier_min, 0)``: up when the last decision's smallest barrier value is below 0."""
+        return -float(self._barrier_min), 0.0

@@ -285,6 +285,14 @@ class HJGuardian(DynamicsDispatch, PrivilegedGuardian):
             return self.delegate.signals()
         return {"value": float(self._value), "value_threshold": float(self._value_threshold)}
 
+    def alarm(self) -> tuple[float, float] | None:
+        """``(-value, -value_threshold)`` of :meth:`signals`: up when the avoid value at the state
+        the last decision read is below its line (on the maze car under the look-ahead rule, the
+        line below which it looks ahead)."""
+        if self.delegate is not None:
+            return self.delegate.alarm()
+        return -float(self._value), -float(self._value_threshold)
+
 
 # a function's attributes live in its __dict__ (the type checker knows no __signature__ on a method)
 HJGuardian.__init__.__dict__["__signature__"] = settings_signature(HJSettings, HJ_PRESETS["hj"])

@@ -347,6 +347,11 @@ class MazeHJGuardian(PrivilegedGuardian):
             return {"value": math.nan, "value_threshold": float(line) if self.V is not None else math.nan}
         return {"value": float(self.evaluate(self._pose)[0]), "value_threshold": float(line)}
 
+    def alarm(self) -> tuple[float, float]:
+        """``(-value, -value_threshold)`` of :meth:`signals`: up when the value is below its line."""
+        s = self.signals()
+        return -s["value"], -s["value_threshold"]
+
 
 def _turn_rate(info, key: str) -> float:
     """The turn rate ``info[key]`` (the env's documented ``nominal_control``), refused (naming

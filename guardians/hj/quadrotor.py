@@ -482,3 +482,8 @@ class QuadrotorHJGuardian(PrivilegedGuardian):
         if self._probe is None:
             return {"value": math.nan, "value_threshold": line}
         return {"value": float(self.evaluate(*self._probe)[0]), "value_threshold": line}
+
+    def alarm(self) -> tuple[float, float]:
+        """``(-value, -value_threshold)`` of :meth:`signals`: up when the value is below its line."""
+        s = self.signals()
+        return -s["value"], -s["value_threshold"]

@@ -190,6 +190,12 @@ class LRMMGuardian(Guardian):
             out.update(s.signals())
         return out
 
+    def alarm(self) -> tuple[float, float]:
+        """``(risk, threshold)``: the model's risk of the last observation and the threshold it
+        takes control above (``nan`` before a decision); the strategies may veto or force a
+        takeover, the alarm is the core rule's."""
+        return float(self.last_risk), float(self.threshold)
+
     def risk(self, observation):
         return self.model.predict(observation)
 

@@ -1,0 +1,639 @@
+"""``rmm-bench collisions DIR --agent NAME [--versus OTHER]``: why a guardian collides, measured.
+
+Every collision of ``--agent``'s stored run (with ``--versus``: only those the other agent's
+run of the same episodes avoided, paired as ``rmm-bench compare`` pairs them: same world,
+clock, episode and start fingerprint) is replayed through :mod:`rmm_bench.replay` (the
+runner's own episode code, verified against the stored row; an episode that does not verify
+is reported as such and the command exits 1), recording after every step who was in control
+and the guardian's own alarm (:meth:`rmm_guardians.base.Guardian.alarm`: ``(value,
+threshold)``, up when ``value > threshold``).  Each collision falls in one class, the first
+that applies:
+
+* ``doomed``: the start was doomed (the results' ``starts`` table): no guardian could avoid it;
+* ``unseen``: the alarm never went up before the last ``--last-steps`` steps before impact;
+* ``failed manoeuvre``: it went up in time and the guardian was in control at impact;
+* ``released``: it went up in time, the guardian took control after it and had handed control
+  back to the driver at impact;
+* ``alarm ignored``: it went up in time and the guardian never took control after it (a rule
+  beyond the alarm held it back).
+
+A guardian without an alarm (``alarm()`` absent or ``None``: a third-party guardian, a
+baseline) is classified by who was in control alone: its first step in control stands for its
+alarm.  Each episode also gets the simulated time from the first crossing to impact (measured
+from the start of the step whose decision first raised the alarm) and the highest alarm value
+before the last steps; with ``--versus``, the other agent's outcome and its first alarm
+(simulated time) in its replay of the same episode, which is verified too.
+
+The database is opened read-only; bad input (a missing directory, an agent not stored, no
+collision to classify, a ``--versus`` agent that ran none of the episodes) is one line naming
+the value, exit 2.  ``docs/cli.md`` describes the output.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from rmm_bench.outputs import check_output, write_output
+from rmm_bench.store import ResultsStore
+
+__all__ = ["CLASSES", "AlarmLog", "Verdict", "build_parser", "classify", "classify_collisions", "cmd"]
+
+#: The classes, in the order they are tested and shown.
+CLASSES = ("doomed", "unseen", "failed manoeuvre", "released", "alarm ignored")
+#: An episode whose replay did not verify (not classified).
+UNVERIFIED = "not verified"
+#: Outcomes of the ``--versus`` agent that count as avoiding the collision.
+AVOIDED = ("goal", "timeout")
+
+
+class AlarmLog:
+    """The observer a replay passes to :func:`rmm_bench.runner.play_episode`: after every step,
+    who was in control (``info["active"]``, else the env's active-step count), the step's end
+    time (``info["sim_time"]``, else the env's statistics) and the guardian's ``alarm()``."""
+
+    def __init__(self) -> None:
+        self.env = None
+        self.times: list[float] = [0.0]
+        self.active: list[bool] = []
+        self.alarms: list[tuple[float, float] | None] = []
+        self._counted = 0
+
+    def begin(self, env) -> None:
+        self.env, self.times, self.active, self.alarms, self._counted = env, [0.0], [], [], 0
+
+    def step(self, info, guardian) -> None:
+        hook = getattr(guardian, "alarm", None)
+        pair = hook() if callable(hook) else None
+        self.alarms.append(None if pair is None else (float(pair[0]), float(pair[1])))
+        stats = None
+        if "active" in info:
+            active = bool(info["active"])
+        else:
+            stats = self.env.unwrapped.episode_statistics()
+            n = int(stats["n_active_ctrl_env_steps"])
+            active, self._counted = n > self._counted, n
+        if "sim_time" in info:
+            t = float(info["sim_time"])
+        else:
+            stats = stats or self.env.unwrapped.episode_statistics()
+            t = float(stats["cum_sim_time"])
+        self.active.append(active)
+        self.times.append(t)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """One collision, classified (times in simulated seconds; ``nan`` where not defined)."""
+
+    episode: int
+    seed: int
+    cls: str
+    doomed: bool | None
+    steps: int
+    impact_s: float
+    signal: bool  # the guardian reported an alarm (else control stood for it)
+    first_alarm_s: float  # when the decision that first raised the alarm was taken
+    alarm_to_impact_s: float
+    in_control_at_impact: bool
+    peak_before: float  # the highest alarm value before the last steps (nan without a signal)
+    threshold: float  # the alarm's threshold at that peak (else at impact)
+    versus_outcome: str | None = None
+    versus_control_lead_s: float = math.nan  # how long before this impact the other agent took control
+    verified: bool = True  # every replay of the episode (its own, the --versus agent's) verified its row
+    note: str = ""
+
+
+def _up(pair: tuple[float, float] | None) -> bool:
+    return pair is not None and pair[0] > pair[1]  # nan compares False: not up
+
+
+def onset(raised: list[bool], start: int, stop: int) -> int | None:
+    """The first step in ``[start, stop)`` with ``raised``, traced back to where its stretch of
+    consecutive raised steps began (possibly before ``start``); ``None`` when none is raised."""
+    first = next((k for k in range(start, min(stop, len(raised))) if raised[k]), None)
+    while first is not None and first > 0 and raised[first - 1]:
+        first -= 1
+    return first
+
+
+def classify(
+    active: list[bool],
+    alarms: list[tuple[float, float] | None],
+    times: list[float],
+    doomed: bool | None,
+    last_steps: int,
+    window: float | None = None,
+) -> tuple[str, dict]:
+    """The class of a collision from its steps (``active[k]``, ``alarms[k]``: step ``k``'s
+    controller and its decision's alarm; ``times[k]``: when step ``k`` began, ``times[-1]``
+    the impact) and its measures.
+
+    The crossing that counts is the onset of the first alarm stretch (consecutive steps with
+    the alarm up; without any alarm, in control) that is up within the ``window`` seconds
+    before impact (``None``: the whole episode), traced back to where that stretch began: an
+    alarm about an earlier danger that went down again is not this collision's.  It is in time
+    when it comes before the last ``last_steps`` steps."""
+    n = len(active)
+    if n == 0 or len(alarms) != n or len(times) != n + 1:
+        raise ValueError(f"a collision needs at least one step and one time more than steps, got {n}, {len(times)}")
+    signal = any(a is not None for a in alarms)
+    raised = [_up(a) for a in alarms] if signal else [bool(a) for a in active]
+    start = 0 if window is None else next((k for k in range(n) if times[k] >= times[-1] - window), n - 1)
+    first = onset(raised, start, n)
+    cut = n - last_steps  # steps before this index are "in time"
+    in_time = first is not None and first < cut
+    values = [a for a in alarms[start : max(cut, start)] if a is not None and not math.isnan(a[0])]
+    peak = max(values, key=lambda a: a[0]) if values else None
+    at_impact = alarms[-1]
+    measures = {
+        "first": first,
+        "first_alarm_s": times[first] if first is not None else math.nan,
+        "alarm_to_impact_s": times[-1] - times[first] if first is not None else math.nan,
+        "in_control_at_impact": bool(active[-1]),
+        "signal": signal,
+        "peak_before": peak[0] if peak else math.nan,
+        "threshold": peak[1] if peak else (at_impact[1] if at_impact else math.nan),
+    }
+    if doomed:
+        return "doomed", measures
+    if not in_time:
+        return "unseen", measures
+    assert first is not None
+    if active[-1]:
+        return "failed manoeuvre", measures
+    if any(active[first:]):
+        return "released", measures
+    return "alarm ignored", measures
+
+
+def _verdict(row: dict, log: AlarmLog, doomed: bool | None, last_steps: int, window: float | None) -> Verdict:
+    cls, m = classify(log.active, log.alarms, log.times, doomed, last_steps, window)
+    return Verdict(
+        episode=int(row["episode"]),
+        seed=int(row["seed"]),
+        cls=cls,
+        doomed=doomed,
+        steps=len(log.active),
+        impact_s=log.times[-1],
+        signal=m["signal"],
+        first_alarm_s=m["first_alarm_s"],
+        alarm_to_impact_s=m["alarm_to_impact_s"],
+        in_control_at_impact=m["in_control_at_impact"],
+        peak_before=m["peak_before"],
+        threshold=m["threshold"],
+    )
+
+
+# ---------------------------------------------------------------- selection
+
+
+@dataclass
+class _Selection:
+    agent: str
+    run_key: str
+    describe: str
+    episodes: list[int]
+    doomed: dict[int, bool | None]
+    collisions: int  # the agent's collisions in the run (before --versus)
+    versus: str | None = None
+    versus_key: str | None = None
+    versus_outcomes: dict[int, str] | None = None
+
+
+def _replay_api():
+    """Replay's functions: ``(ReplayRequest, _select_run, plan_replay, build_env, check_guardian,
+    replay_episode)``, from replay's modules (``replay_plan``, ``replay_env``, ``replay_verify``)
+    where they are split out, else from :mod:`rmm_bench.replay`."""
+    try:
+        from rmm_bench.replay_env import build_env, check_guardian
+        from rmm_bench.replay_plan import ReplayRequest, _select_run, plan_replay
+        from rmm_bench.replay_verify import replay_episode
+    except ImportError:
+        from rmm_bench.replay import ReplayRequest, _select_run, build_env, plan_replay, replay_episode
+        from rmm_bench.replay import _check_guardian as check_guardian
+    return ReplayRequest, _select_run, plan_replay, build_env, check_guardian, replay_episode
+
+
+def _request(dir: Path, agent: str, episodes, args):
+    ReplayRequest = _replay_api()[0]
+
+    return ReplayRequest(
+        dir=dir,
+        agent=agent,
+        episodes=tuple(episodes),
+        where=None,
+        limit=None,
+        allow_errors=False,
+        trust_modules=args.trust_modules,
+        env=None,
+        invocation=None,
+        progress=False,
+        trusted=tuple(args.trust_module),
+    )
+
+
+def _group(config: dict) -> tuple[str, str]:
+    """The episodes a run ran, as ``rmm-bench compare`` pairs them: its world and its clock."""
+    from rmm_envs.starts import world_key
+
+    world = world_key(config["env_id"], config.get("env_kwargs", {}), int(config.get("seed", 0)))
+    return world, str(config.get("env_kwargs", {}).get("clock", "wall"))
+
+
+def _describe(config: dict) -> str:
+    return f"{config.get('env_id')} seed {config.get('seed')} clock {_group(config)[1]}"
+
+
+def _select(db: Path, args) -> _Selection:
+    """The agent's run (the newest, as ``replay`` picks it) and its collisions to classify; with
+    ``--versus``, those the other agent's newest run of the same episodes avoided."""
+    _select_run = _replay_api()[1]
+    store = ResultsStore(db, read_only=True)
+    try:
+        run_key, config = _select_run(store, _request(db.parent, args.agent, (), args))
+        rows = {int(r["episode"]): r for r in store.episodes(run_key)}
+        world, _ = _group(config)
+        doomed = {e: s["doomed"] for e, s in store.starts(world).items()}
+        collided = sorted(e for e, row in rows.items() if row["outcome"] == "collision")
+        sel = _Selection(args.agent, run_key, _describe(config), collided, doomed, len(collided))
+        if not collided:
+            raise ValueError(
+                f"--agent {args.agent}: none of the {len(rows)} episodes of its run {run_key} ({sel.describe}) "
+                "collided; expected a run with a collision to classify"
+            )
+        if args.versus is None:
+            return sel
+        return _versus(store, db, args, sel, rows, config)
+    finally:
+        store.close()
+
+
+def _versus(store: ResultsStore, db: Path, args, sel: _Selection, rows: dict, config: dict) -> _Selection:
+    from rmm_bench.names import did_you_mean
+
+    agent = store.run_config(sel.run_key)["agent"]
+    stored = sorted({r[0] for r in store.db.execute("SELECT DISTINCT agent FROM runs")})
+    if args.versus in (args.agent, agent):
+        raise ValueError(f"--versus {args.versus}: the same agent as --agent; expected another agent")
+    if args.versus not in stored:
+        raise ValueError(
+            f"--versus {args.versus}: no run of {args.versus!r} is stored in {db}{did_you_mean(args.versus, stored)} "
+            f"(expected one of: {', '.join(s for s in stored if s != agent)})"
+        )
+    runs = store.runs_of(args.versus)
+    same = [r for r in runs if _group(r["config"]) == _group(config)]
+    if not same:
+        other = "; ".join(sorted({_describe(r["config"]) for r in runs}))
+        raise ValueError(
+            f"--versus {args.versus}: no run of it ran {args.agent}'s episodes ({sel.describe}; its runs: {other}); "
+            "expected a run of the same env, options, seed and clock"
+        )
+    if same[0]["run_key"] != runs[0]["run_key"]:
+        raise ValueError(
+            f"--versus {args.versus}: its newest run {runs[0]['run_key']} ran other episodes than {args.agent}'s "
+            f"({_describe(runs[0]['config'])}); expected its newest run to be of {sel.describe}"
+        )
+    key = same[0]["run_key"]
+    theirs = {int(r["episode"]): r for r in store.episodes(key)}
+    paired = [e for e in sel.episodes if e in theirs and theirs[e]["outcome"] != "error"]
+    for e in paired:
+        fa, fb = rows[e].get("start"), theirs[e].get("start")
+        if fa is not None and fb is not None and fa != fb:
+            raise ValueError(
+                f"--versus {args.versus}: episode {e} started differently from {args.agent}'s (start fingerprint "
+                f"{fb}, not {fa}): the runs come from code that shapes starts differently"
+            )
+    if not paired:
+        raise ValueError(
+            f"--versus {args.versus}: its run {key} has a result for none of {args.agent}'s "
+            f"{len(sel.episodes)} collision episodes; expected a run of the same episodes"
+        )
+    avoided = [e for e in paired if theirs[e]["outcome"] in AVOIDED]
+    if not avoided:
+        raise ValueError(
+            f"--versus {args.versus}: it avoided none of {args.agent}'s {len(paired)} paired collisions "
+            f"({sel.describe}); nothing to classify"
+        )
+    sel.episodes, sel.versus, sel.versus_key = avoided, args.versus, key
+    sel.versus_outcomes = {e: theirs[e]["outcome"] for e in avoided}
+    return sel
+
+
+# ---------------------------------------------------------------- replaying
+
+
+def _replay(db: Path, agent: str, episodes: list[int], args, want_key: str) -> tuple[dict, int]:
+    """Replay ``agent``'s ``episodes``: episode -> (row, log or None when not verified, message)."""
+    from tqdm import tqdm
+
+    from rmm_bench.consent import check_inputs, consented_imports
+
+    _, _, plan_replay, build_env, check_guardian, replay_episode = _replay_api()
+
+    req = _request(db.parent, agent, episodes, args)
+    out: dict[int, tuple[dict, AlarmLog | None, str]] = {}
+    with consented_imports(req):
+        store = ResultsStore(db, read_only=True)
+        try:
+            targets = plan_replay(store, req)
+        finally:
+            store.close()
+        if targets[0].run_key != want_key:
+            raise ValueError(
+                f"--versus {agent}: its newest run {targets[0].run_key} ran other episodes than the one paired "
+                f"({want_key}); expected its newest run to be the paired one"
+            )
+        check_inputs(targets[0].run.as_dict())
+        env = build_env(targets[0])
+        check_guardian(targets[0])
+        bar = tqdm(total=len(targets), unit="ep", disable=not args.progress, desc=f"replay {agent}", file=sys.stderr)
+        try:
+            for target in targets:
+                log = AlarmLog()
+                message, ok = replay_episode(target, env, log)
+                out[int(target.row["episode"])] = (target.row, log if ok else None, message)
+                bar.update(1)
+        finally:
+            bar.close()
+            env.close()
+    return out, len(targets)
+
+
+def versus_lead(log: AlarmLog, impact: float, window: float | None) -> float:
+    """How long before ``impact`` (the first agent's) the other agent's control stretch that is
+    on within the window before it began (``nan``: not in control there)."""
+    begin = 0.0 if window is None else impact - window
+    steps = len(log.active)
+    start = next((k for k in range(steps) if log.times[k] >= begin), steps)
+    stop = next((k for k in range(steps) if log.times[k] >= impact), steps)
+    k = onset(log.active, start, stop)
+    return math.nan if k is None else impact - log.times[k]
+
+
+def classify_collisions(dir: str | Path, args) -> tuple[_Selection, list[Verdict], float]:
+    """Classify ``args.agent``'s collisions in ``dir`` (see the module): the selection, one
+    verdict per episode, and the seconds the replays took.  ``ValueError`` for bad input."""
+    from rmm_bench.store import results_database
+
+    if args.last_steps < 0:
+        raise ValueError(f"--last-steps {args.last_steps}: expected a whole number of steps >= 0")
+    if args.window is not None and not (args.window > 0 and math.isfinite(args.window)):
+        raise ValueError(f"--window {args.window}: expected a number of seconds > 0 (or 'all')")
+    db = results_database(dir, "collisions")
+    sel = _select(db, args)
+    t0 = time.perf_counter()
+    mine, _ = _replay(db, args.agent, sel.episodes, args, sel.run_key)
+    theirs: dict = {}
+    if sel.versus is not None:
+        assert sel.versus_key is not None
+        theirs, _ = _replay(db, sel.versus, sel.episodes, args, sel.versus_key)
+    seconds = time.perf_counter() - t0
+    verdicts = []
+    for e in sel.episodes:
+        row, log, message = mine[e]
+        doomed = sel.doomed.get(e)
+        if log is None:
+            v = Verdict(
+                e,
+                int(row["seed"]),
+                UNVERIFIED,
+                doomed,
+                int(row["steps"]),
+                math.nan,
+                False,
+                math.nan,
+                math.nan,
+                False,
+                math.nan,
+                math.nan,
+                verified=False,
+                note=message,
+            )
+        else:
+            v = _verdict(row, log, doomed, args.last_steps, args.window)
+        if sel.versus is not None:
+            _, vlog, vmessage = theirs[e]
+            lead = math.nan
+            if vlog is not None and not math.isnan(v.impact_s):
+                lead = versus_lead(vlog, v.impact_s, args.window)
+            note = v.note if vlog is not None else f"{sel.versus}: {vmessage}"
+            v = Verdict(
+                **{
+                    **asdict(v),
+                    "versus_outcome": (sel.versus_outcomes or {}).get(e),
+                    "versus_control_lead_s": lead,
+                    "verified": v.verified and vlog is not None,
+                    "note": note,
+                }
+            )
+        verdicts.append(v)
+    return sel, verdicts, seconds
+
+
+# ---------------------------------------------------------------- output
+
+
+def _s(x: float, digits: int = 2) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
+
+
+def totals(verdicts: list[Verdict]) -> list[dict]:
+    """Per class (those with an episode, in :data:`CLASSES` order, then ``not verified``): the
+    count, its share and the median time from first crossing to impact."""
+    n = len(verdicts)
+    rows = []
+    for cls in (*CLASSES, UNVERIFIED):
+        of = [v for v in verdicts if v.cls == cls]
+        if not of:
+            continue
+        times = [v.alarm_to_impact_s for v in of if not math.isnan(v.alarm_to_impact_s)]
+        rows.append(
+            {
+                "class": cls,
+                "episodes": len(of),
+                "share": len(of) / n,
+                "median_alarm_to_impact_s": statistics.median(times) if times else math.nan,
+                "with_alarm": len(times),
+            }
+        )
+    return rows
+
+
+def _yes(b: bool | None) -> str:
+    return "?" if b is None else ("yes" if b else "no")
+
+
+def _rule(last_steps: int, window: float | None) -> str:
+    w = "over the whole episode" if window is None else f"up within {window:g} s before impact"
+    return f"the first alarm {w} (traced back to where it began), in time if before the last {last_steps} steps"
+
+
+def to_markdown(sel: _Selection, verdicts: list[Verdict], last_steps: int, window: float | None) -> str:
+    signal = any(v.signal for v in verdicts)
+    what = f"{sel.agent}'s collisions" + (f" that {sel.versus} avoids" if sel.versus else "")
+    alarm = (
+        f"{sel.agent}'s alarm() (value > threshold)"
+        if signal
+        else f"none: {sel.agent} has no alarm(), its first step in control stands for it"
+    )
+    lines = [
+        f"## {what}: {sel.describe}",
+        "",
+        f"{len(verdicts)} episodes (of its {sel.collisions} collisions; run {sel.run_key}"
+        + (f", {sel.versus}'s run {sel.versus_key}" if sel.versus else "")
+        + f"). Alarm: {alarm}; the crossing: {_rule(last_steps, window)}.",
+        "",
+        "| class | episodes | share | median first alarm to impact (s) |",
+        "|---|---:|---:|---:|",
+    ]
+    for t in totals(verdicts):
+        lines.append(
+            f"| {t['class']} | {t['episodes']} | {100 * t['share']:.0f}% | {_s(t['median_alarm_to_impact_s'])}"
+            + (f" ({t['with_alarm']} with an alarm)" if t["with_alarm"] != t["episodes"] else "")
+            + " |"
+        )
+    all_t = [v.alarm_to_impact_s for v in verdicts if not math.isnan(v.alarm_to_impact_s)]
+    lines.append(f"| total | {len(verdicts)} | 100% | {_s(statistics.median(all_t)) if all_t else '-'} |")
+    head = (
+        "| episode | seed | class | doomed | steps | impact (s) | first alarm (s) | alarm to impact (s) "
+        "| in control at impact | peak before | threshold |"
+    )
+    rule = "|---:|---:|---|---|---:|---:|---:|---:|---|---:|---:|"
+    if sel.versus:
+        head += f" {sel.versus} outcome | {sel.versus} in control before impact (s) |"
+        rule += "---|---:|"
+    lines += ["", head, rule]
+    for v in verdicts:
+        line = (
+            f"| {v.episode} | {v.seed} | {v.cls} | {_yes(v.doomed)} | {v.steps} | {_s(v.impact_s)} | "
+            f"{_s(v.first_alarm_s)} | {_s(v.alarm_to_impact_s)} | {_yes(v.in_control_at_impact)} | "
+            f"{_s(v.peak_before, 3)} | {_s(v.threshold, 3)} |"
+        )
+        if sel.versus:
+            line += f" {v.versus_outcome or '-'} | {_s(v.versus_control_lead_s)} |"
+        lines.append(line)
+    notes = [f"episode {v.episode}: {v.note}" for v in verdicts if v.note]
+    if notes:
+        lines += [""] + [f"Note: {n}" for n in notes]
+    return "\n".join(lines) + "\n"
+
+
+def _plain(x):
+    return None if isinstance(x, float) and math.isnan(x) else x
+
+
+def to_csv(verdicts: list[Verdict]) -> str:
+    import csv
+    import io
+
+    buf = io.StringIO()
+    fields = list(asdict(verdicts[0]))
+    w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
+    w.writeheader()
+    for v in verdicts:
+        w.writerow({k: ("" if _plain(x) is None else x) for k, x in asdict(v).items()})
+    return buf.getvalue()
+
+
+def to_json(sel: _Selection, verdicts: list[Verdict], last_steps: int, window: float | None) -> str:
+    doc = {
+        "agent": sel.agent,
+        "run_key": sel.run_key,
+        "world": sel.describe,
+        "versus": sel.versus,
+        "versus_run_key": sel.versus_key,
+        "last_steps": last_steps,
+        "window_s": window,
+        "collisions": sel.collisions,
+        "totals": [{k: _plain(x) for k, x in t.items()} for t in totals(verdicts)],
+        "episodes": [{k: _plain(x) for k, x in asdict(v).items()} for v in verdicts],
+    }
+    return json.dumps(doc, indent=1) + "\n"
+
+
+# ---------------------------------------------------------------- the command
+
+
+def _window(text: str) -> float | None:
+    if text == "all":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds or 'all', got {text!r}") from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``rmm-bench collisions`` command line."""
+    p = argparse.ArgumentParser(
+        prog="rmm-bench collisions",
+        description="Classify an agent's collisions by replaying them (verified against the stored rows): "
+        "doomed start, unseen (its alarm never up before the last steps), failed manoeuvre (in control at "
+        "impact), released (control handed back before impact) or alarm ignored, with the time from the "
+        "first alarm to impact.  The alarm is the guardian's own (Guardian.alarm(), docs/guardians.md); one "
+        "without it is classified by who was in control.  Opens the database read-only.",
+    )
+    p.add_argument("results_dir", metavar="DIR", help="a results directory (a run's --out) or its results.db")
+    p.add_argument("--agent", required=True, help="the stored agent whose collisions to classify (its newest run)")
+    p.add_argument(
+        "--versus",
+        default=None,
+        metavar="AGENT",
+        help="only the collisions this agent's run of the same episodes avoided (goal or timeout); replayed too",
+    )
+    p.add_argument(
+        "--last-steps",
+        type=int,
+        default=3,
+        metavar="N",
+        help="an alarm first up within the last N steps before impact is too late: unseen (default 3)",
+    )
+    p.add_argument(
+        "--window",
+        type=_window,
+        default=3.0,
+        metavar="SECONDS",
+        help="the alarm that counts is the first one up within this many simulated seconds before impact, "
+        "traced back to where it began; 'all': the whole episode (default 3)",
+    )
+    p.add_argument("--format", default="md", choices=("md", "csv", "json"), help="md (default), csv or json")
+    p.add_argument("--table", type=Path, default=None, metavar="FILE", help="write the table there (default: stdout)")
+    p.add_argument("--trust-modules", action="store_true", help="import any module the database names (as replay)")
+    p.add_argument(
+        "--trust-module", action="append", default=[], metavar="MODULE", help="import this module the database names"
+    )
+    p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+    return p
+
+
+def cmd(argv: list[str]) -> int:
+    """Run ``rmm-bench collisions``: 0, or 1 when an episode's replay did not verify; bad input
+    raises ``ValueError`` (exit 2 through the CLI)."""
+    args = build_parser().parse_args(argv)
+    existed = args.table is not None and args.table.exists()
+    if args.table is not None:  # before anything is read: never over the database it reads (or any other)
+        from rmm_bench.store import results_database
+
+        check_output(args.table, "--table", reads=[results_database(args.results_dir, "collisions")])
+    sel, verdicts, seconds = classify_collisions(args.results_dir, args)
+    replays = len(verdicts) * (2 if sel.versus else 1)
+    print(f"rmm-bench collisions: replayed {replays} episodes in {seconds:.1f} s", file=sys.stderr)
+    if args.format == "md":
+        text = to_markdown(sel, verdicts, args.last_steps, args.window)
+    elif args.format == "csv":
+        text = to_csv(verdicts)
+    else:
+        text = to_json(sel, verdicts, args.last_steps, args.window)
+    if args.table is None:
+        sys.stdout.write(text)
+    else:
+        write_output(args.table, lambda tmp: tmp.write_text(text), existed=existed)
+        print(f"wrote {args.table}", file=sys.stderr)
+    return 0 if all(v.verified for v in verdicts) else 1
