@@ -4,14 +4,18 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+# setuptools says "Editable installation ... be careful with folders in your working directory with
+# the same name as your package" on every editable install of this layout: informational, and the
+# folders are mapped on purpose (docs/decisions/0001-import-names.md), so the install says nothing
+PIP_E := PYTHONWARNINGS="ignore:Editable installation" $(BIN)/python -m pip install -q -e
 
-.PHONY: run test test-slow lint typecheck-tree bench install clean mutate
+.PHONY: run test test-slow lint typecheck-tree bench install clean mutate docs
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q torch==2.13.0
-	$(BIN)/python -m pip install -q -e ".[test]"
+	$(PIP_E) ".[test]"
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -26,7 +30,7 @@ test: $(STAMP)
 LINT_STAMP := $(VENV)/.installed-lint
 
 $(LINT_STAMP): $(STAMP)
-	$(BIN)/python -m pip install -q -e ".[test,lint]"
+	$(PIP_E) ".[test,lint]"
 	touch $(LINT_STAMP)
 
 # mypy does not read pyproject's package-dir mapping: build/typecheck/ links the mapped folders
@@ -45,13 +49,25 @@ lint: $(LINT_STAMP) typecheck-tree
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2 -m slow
 
+# The documentation site (docs/decisions/0028-docs-site.md): Sphinx with MyST markdown over docs/, the
+# API reference from the docstrings, warnings (broken cross-references among them) as errors
+DOCS_STAMP := $(VENV)/.installed-docs
+
+$(DOCS_STAMP): $(STAMP)
+	$(PIP_E) ".[test,docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	rm -rf docs/api  # autosummary writes the API pages afresh: none left from a removed module
+	$(BIN)/python -m sphinx -b html -E -W --keep-going -q -j 2 docs build/docs
+
 # Mutation score of the decision-making modules (docs/mutation.md): targets and the tests that judge
 # each are in mutation/targets.toml; `make mutate TARGETS="cbf hj"` runs only those.
 MUTATE_STAMP := $(VENV)/.installed-mutate
 TARGETS ?=
 
 $(MUTATE_STAMP): $(STAMP)
-	$(BIN)/python -m pip install -q -e ".[test,mutate]"
+	$(PIP_E) ".[test,mutate]"
 	touch $(MUTATE_STAMP)
 
 mutate: $(MUTATE_STAMP)

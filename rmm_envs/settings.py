@@ -1,12 +1,12 @@
 """The environment variables the project reads, and the one place each is read.
 
-=================== =====================================================================
-``RMM_HJ_THREADS``  threads of the HJ guardians' compiled solve when none is given
-                    (an integer >= 1; unset: numba's default, the core count)
-``RMM_HJ_CACHE``    folder of the HJ value-function cache (unset: ``~/.cache/rmm-envs/hj``)
+===================== =====================================================================
+``RMM_HJ_THREADS``    threads of the HJ guardians' compiled solve when none is given
+                      (an integer >= 1; unset: numba's default, the core count)
+``RMM_HJ_CACHE``      folder of the HJ value-function cache (unset: ``~/.cache/rmm-envs/hj``)
 ``RMM_REFERENCE_DIR`` folder of reference results for ``rmm-bench compare --reference``
-                    (unset: the ones shipped in ``rmm_bench/reference``)
-=================== =====================================================================
+                      (unset: the ones shipped in ``rmm_bench/reference``)
+===================== =====================================================================
 
 Everything else is an argument.  ``tests/test_layers.py`` fails if another module of the
 package reads ``os.environ`` (``benchmarks/arith.py`` builds its children's environment and is

@@ -104,6 +104,8 @@ def test_every_console_script_help_matches_the_reference(monkeypatch, capsys):
 
 
 def test_links_between_pages_resolve():
+    """Every markdown link to a file names one that exists (the README's too, which is not part
+    of the site; ``make docs`` checks the site's page links and anchors with -W)."""
     pages = list(DOCS.rglob("*.md")) + [ROOT / "README.md"]
     bad = []
     for page in pages:
@@ -114,6 +116,80 @@ def test_links_between_pages_resolve():
             if not path.exists():
                 bad.append(f"{page.relative_to(ROOT)} -> {target}")
     assert not bad, bad
+
+
+#: a fenced block that is not run says why on the line before it
+NOT_RUN = re.compile(r"<!-- not-run: (.+?) -->\s*$")
+SHELL = ("bash", "console")
+
+
+def _shell_blocks():
+    """Every ```bash and ```console block of the README and of docs/tutorials/, as (where, code,
+    why not run or None)."""
+    out = []
+    for page in [ROOT / "README.md", *sorted((DOCS / "tutorials").glob("*.md"))]:
+        text = page.read_text()
+        for i, m in enumerate(re.finditer(r"^```(\w+)\n(.*?)\n```", text, re.S | re.M)):
+            if m.group(1) not in SHELL:
+                continue
+            before = text[: m.start()].rstrip("\n").rsplit("\n", 1)[-1]
+            why = NOT_RUN.search(before)
+            out.append((f"{page.relative_to(ROOT)}#{i}", m.group(1), m.group(2), why.group(1) if why else None))
+    return out
+
+
+SHELL_BLOCKS = _shell_blocks()
+
+
+def _commands(kind: str, code: str) -> str:
+    """The commands of a block: a console block's ``$ `` lines (the rest is output)."""
+    if kind == "bash":
+        return code
+    return "\n".join(line[2:] for line in code.splitlines() if line.startswith("$ "))
+
+
+def test_readme_commands_after_the_set_up_say_where_they_run():
+    """After the two set-up commands (``make run``, ``make test``) nothing is on PATH: a command of
+    the README runs from ``.venv/bin/`` (or is a make target)."""
+    bare = []
+    for where, kind, code, _ in SHELL_BLOCKS:
+        if not where.startswith("README"):
+            continue
+        for line in _commands(kind, code).splitlines():
+            word = line.strip().split(" ")[0] if line.strip() else ""
+            if word and not word.startswith(("#", ".venv/bin/", "make", "source", "cd", "--", "git")):
+                bare.append(f"{where}: {line.strip()}")
+    assert not bare, bare
+
+
+@pytest.mark.parametrize("where, kind, code, why", SHELL_BLOCKS, ids=[b[0] for b in SHELL_BLOCKS])
+def test_shell_blocks_of_the_readme_and_tutorials_run(where, kind, code, why, tmp_path):
+    """A reader runs the block from the repository's root after the two set-up commands: here in a
+    scratch folder holding links to ``.venv`` and ``docs``; a tutorial's bare commands as after
+    ``source .venv/bin/activate``, which the tutorial must say.  A block that takes minutes is
+    marked ``<!-- not-run: REASON -->`` and skipped with that reason."""
+    if why is not None:
+        assert len(why.split()) >= 3, f"{where}: say why the block is not run"
+        pytest.skip(f"not run: {why}")
+    page = ROOT / where.split("#")[0]
+    if not where.startswith("README"):
+        assert "source .venv/bin/activate" in page.read_text(), f"{page.name}: say how to activate .venv"
+    (tmp_path / ".venv").symlink_to(Path(sys.prefix))
+    (tmp_path / "docs").symlink_to(DOCS)
+    bindir = str(Path(sys.executable).parent)
+    path = os.environ.get("PATH", "")
+    if not where.startswith("README"):
+        path = bindir + os.pathsep + path
+    env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(tmp_path), PATH=path, COLUMNS="100")
+    res = subprocess.run(
+        ["bash", "-euo", "pipefail", "-c", _commands(kind, code)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+        env=env,
+    )
+    assert res.returncode == 0, f"{where} failed:\n{res.stdout[-1500:]}\n{res.stderr[-3000:]}"
 
 
 def _python_snippets():
@@ -147,10 +223,10 @@ def test_python_snippets_in_the_docs_run(where, code, tmp_path):
         assert first in ("goal", "collision", "timeout"), f"{where} printed {res.stdout[:200]!r}"
 
 
-def test_readme_dependencies_name_every_dependency_and_extra():
-    """README "Dependencies": one line per runtime dependency and per extra of pyproject.toml."""
+def test_the_dependencies_page_names_every_dependency_and_extra():
+    """docs/getting-started.md "Dependencies": one line per runtime dependency and per extra of pyproject.toml."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    text = (ROOT / "README.md").read_text()
+    text = (DOCS / "getting-started.md").read_text()
     section = text[text.index("## Dependencies") : text.index("\n## ", text.index("## Dependencies") + 3)]
     lines = [ln for ln in section.splitlines() if ln.startswith("- ")]
     for dep in project["dependencies"]:

@@ -34,7 +34,8 @@ def test_the_package_map_is_the_tests_layout_and_lists_every_package_folder():
         for init in folder.rglob("__init__.py"):
             rel = init.parent.relative_to(folder).as_posix()
             folders[name + ("" if rel == "." else "." + rel.replace("/", "."))] = init.parent
-    data = {"rmm_envs.assets", "rmm_envs.assets.maps", "rmm_guardians.lrmm.models"}  # folders of data files
+    # folders of data files
+    data = {"rmm_envs.assets", "rmm_envs.assets.maps", "rmm_guardians.lrmm.models", "rmm_bench.manifests"}
     assert set(setup["packages"]) == set(folders) | data
     assert all(name.startswith("rmm_") for name in setup["packages"])
 

@@ -29,7 +29,8 @@ _REQUIRED = ("state_dim", "control_low", "control_high", "propagate", "path_fail
 class RiskScene(Protocol):
     """A dynamics object placed in one obstacle configuration: what the estimator labels.
 
-    Members (exactly what :class:`rmm_envs.risk.RiskEstimator` reads):
+    Members (exactly what :class:`rmm_envs.risk.RiskEstimator` reads)::
+
         state_dim: int, the length of a state vector.
         control_low, control_high: ``(control_dim,)`` arrays, the control box the estimator samples
             uniformly.
@@ -38,7 +39,8 @@ class RiskScene(Protocol):
         path_failed(paths (N, S, d)) -> (N,) bool: any point or segment of the path fails.
         state_failed(states (N, d)) -> (N,) bool: the state itself fails.
 
-    Optional:
+    Optional::
+
         leaf_estimate(states (N, d)) -> (N,) in [0, 1]: a value for non-failed leaves instead of 0.
         propagate_failed(states (N, d), controls (N, c), duration, n_steps) -> (failed (N,) bool,
             ends (N, d)): ``path_failed(propagate(...))`` and each path's last state in one call,
