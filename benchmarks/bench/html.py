@@ -33,11 +33,14 @@ from rmm_bench.pairwise import pairwise_matrices, summary
 from rmm_bench.report_figures import plot_rates
 from rmm_bench.report_tables import counter_columns, counter_text
 from rmm_bench.runner import is_timing_stat
+from rmm_bench.side_by_side import replay_anchor
 from rmm_bench.store import ResultsStore
 
 __all__ = ["GIF_LIMIT", "PAGE_LIMIT", "REPLAYS", "write_page"]
 
-#: the folder of a results directory whose ``AGENT-episode-N.gif`` files the page shows
+#: the folder of a results directory whose GIFs the page shows: ``AGENT-episode-N.gif``, and
+#: ``A-vs-B-episode-N.gif`` (:func:`rmm_bench.side_by_side.side_by_side_name`), which each pair's
+#: discordant episodes link to
 REPLAYS = "replays"
 #: GIFs larger than this many bytes are listed but not embedded (the page stays shareable)
 GIF_LIMIT = 4_000_000
@@ -215,7 +218,8 @@ def _replays(folder: Path, budget: int) -> str:
     if not gifs:
         return (
             f"<p class='note'>No rendered replays: <code>rmm-bench replay DIR --agent A --episode N --video "
-            f"DIR/{REPLAYS}/A-episode-N.gif</code> puts one here.</p>"
+            f"DIR/{REPLAYS}/A-episode-N.gif</code> puts one here, <code>--agent A,B --video "
+            f"DIR/{REPLAYS}/A-vs-B-episode-N.gif</code> two agents side by side.</p>"
         )
     out, skipped = ["<div class='gifs'>"], []
     for gif in gifs:
@@ -229,7 +233,8 @@ def _replays(folder: Path, budget: int) -> str:
             continue
         budget -= encoded
         out.append(
-            f"<figure><img src='{_data(gif.read_bytes(), 'gif')}' alt='{_e(gif.stem)}'>"
+            f"<figure id='{_e(replay_anchor(gif.name))}'><img src='{_data(gif.read_bytes(), 'gif')}' "
+            f"alt='{_e(gif.stem)}'>"
             f"<figcaption>{_e(gif.stem)}</figcaption></figure>"
         )
     out.append("</div>")

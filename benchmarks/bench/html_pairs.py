@@ -119,21 +119,31 @@ def _matrix(outcome: str, matrix: dict[tuple[str, str], PairCell], names: list[s
 
 
 def _replays(folder: Path, a: str, b: str, rows) -> str:
-    """The commands that replay the first discordant episode of each side of each outcome, both agents."""
+    """The command that replays the first discordant episode of each side of each outcome, both
+    agents side by side into ``DIR/replays/`` (where the page shows it), and a link to that replay
+    when it is there."""
+    from rmm_bench.html import REPLAYS
+    from rmm_bench.side_by_side import replay_anchor, side_by_side_name
+
     episodes = list(dict.fromkeys(e for r in rows for eps in (r.a_only_episodes, r.b_only_episodes) for e in eps[:1]))
     if not episodes:
         return ""
     where = shlex.quote(str(folder))
-    items = "".join(
-        "<li>"
-        + "; ".join(
-            f"<code>rmm-bench replay {_e(where)} --agent {_e(shlex.quote(agent))} --episode {e}</code>"
-            for agent in (a, b)
+    items = []
+    for e in episodes:
+        name = side_by_side_name((a, b), e)
+        video = shlex.quote(str(folder / REPLAYS / name))
+        item = (
+            f"<code>rmm-bench replay {_e(where)} --agent {_e(shlex.quote(f'{a},{b}'))} --episode {e} --size 320 "
+            f"--video {_e(video)}</code>"
         )
-        + "</li>"
-        for e in episodes
+        if (folder / REPLAYS / name).is_file():
+            item += f" (<a href='#{_e(replay_anchor(name))}'>watch episode {e}</a>)"
+        items.append(f"<li>{item}</li>")
+    return (
+        "<p class='note'>Replay a discordant episode (the first of each side), both agents side by side, into "
+        f"the Replays section below:</p><ul class='replay'>{''.join(items)}</ul>"
     )
-    return f"<p class='note'>Replay a discordant episode (the first of each side):</p><ul class='replay'>{items}</ul>"
 
 
 def _continuous(cont) -> str:

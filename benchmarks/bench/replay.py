@@ -38,373 +38,52 @@ names: editing it after the run is refused, naming it, never replayed and blamed
 non-determinism).
 
 Rendering (``--video``, ``--frames``, ``--every``): :func:`replay_episode` passes an observer
-(:class:`rmm_bench.video.EpisodeDrawing`) to the episode loop; the
-env it builds is the one the episode runs on.
+(:class:`rmm_bench.video.EpisodeDrawing`) to the episode loop; the env it builds is the one the
+episode runs on.  Frames draw the rays the guardian sensed (:mod:`rmm_bench.sensed`).
+
+Side by side (``--agent lrmm,cbf``): each agent's episode is planned, re-simulated and verified
+as above (one line each), and one video holds them side by side on a shared simulated-time axis
+(:mod:`rmm_bench.side_by_side`).  The agents must have run the episode from the same start (the
+same env, seed and start fingerprint, as ``compare`` pairs them); ``--where`` selects by the
+first agent's rows.
+
+The parts: :mod:`rmm_bench.replay_plan` (the request, the episodes selected),
+:mod:`rmm_bench.replay_env` (the env and the guardian), :mod:`rmm_bench.replay_verify` (the
+re-simulation and the comparison with the row); this module is the command.
 """
 
 from __future__ import annotations
 
-import json
-import math
-import os
-import sqlite3
 import sys
-from dataclasses import dataclass
+from dataclasses import replace
 from pathlib import Path
 
-from rmm_bench.config import AgentRun, EpisodeTask, changed_inputs
-from rmm_bench.consent import check_consent, check_inputs, consented_imports
-from rmm_bench.names import did_you_mean
-from rmm_bench.runner import CLOCK_COLUMNS, REPRODUCIBLE_CLOCKS, TIMING_COLUMNS, is_timing_stat
-from rmm_bench.store import EPISODE_FIELDS, ResultsStore
+from rmm_bench.consent import check_inputs, consented_imports
+from rmm_bench.replay_env import build_env, check_guardian, drawable_env
+from rmm_bench.replay_plan import ReplayRequest, ReplayTarget, _module_of, plan_replay, replay_agents
+from rmm_bench.replay_plan import _select_run as _select_run  # imported from here by other commands
+from rmm_bench.replay_verify import _same as _same  # its tests import it from here
+from rmm_bench.replay_verify import compare_rows, replay_episode
+from rmm_bench.store import ResultsStore
 
-__all__ = ["ReplayRequest", "ReplayTarget", "cmd_replay", "compare_rows", "plan_replay", "replay_episode"]
+_check_guardian = check_guardian  # its former name, imported from here by other commands
 
-#: The columns compared, in this order (the rest of the row follows in the store's order).
-_FIRST = ("outcome", "error_kind", "steps", "sim_time", "active_steps", "active_sim_time", "final_speed", "cost")
-#: Columns naming the episode, not results of it.
-_IDENTITY = ("run_key", "episode", "agent", "seed")
-_UNVERIFIABLE = (
-    "(a guardian that reads the time itself or is not deterministic cannot be verified: "
-    "docs/getting-started.md, Replaying an episode)"
-)
-
-
-@dataclass(frozen=True)
-class ReplayRequest:
-    """``rmm-bench replay``'s arguments, validated (``args.parse_replay``)."""
-
-    dir: Path
-    agent: str
-    episodes: tuple[int, ...] | None  # --episode (None: --where selects)
-    where: str | None
-    limit: int | None
-    allow_errors: bool
-    trust_modules: bool
-    env: str | None  # --env: names the env's module for a module:Id env (and must match the stored env)
-    invocation: int | None
-    progress: bool
-    video: Path | None = None  # --video FILE (.mp4 or .gif)
-    frames: Path | None = None  # --frames DIR (one PNG per frame)
-    every: int = 1  # --every K: every K-th frame (and the last)
-    fps: float | None = None  # --fps (default: the episode's own pace, simulated seconds per video second)
-    size: int = 512  # --size: the picture's side in pixels (the strip comes under it)
-    trusted: tuple[str, ...] = ()  # --trust-module: modules the database names that may be imported
+__all__ = [
+    "ReplayRequest",
+    "ReplayTarget",
+    "build_env",
+    "check_guardian",
+    "cmd_replay",
+    "compare_rows",
+    "drawable_env",
+    "plan_replay",
+    "replay_agents",
+    "replay_episode",
+]
 
 
-@dataclass(frozen=True)
-class ReplayTarget:
-    """One episode to replay: the stored run, its row, its clock trace (None: not needed)."""
-
-    run: AgentRun
-    run_key: str
-    row: dict
-    clock_trace: tuple[float, ...] | None
-    clock_mode: str  # the run's clock mode (wall, cpu, fixed)
-    nonblocking: bool
-
-
-def _module_of(name: str) -> str | None:
-    module, colon, _ = name.rpartition(":")
-    return module if colon and module else None
-
-
-def _select_run(store: ResultsStore, req: ReplayRequest) -> tuple[str, dict]:
-    """The run of ``--agent`` to replay: that of ``--invocation``, else the newest stored."""
-    runs = store.runs_of(req.agent)
-    if not runs:  # a module:Class agent named by its class alone (its module is then not named: see _check_trust)
-        stored = [r[0] for r in store.db.execute("SELECT DISTINCT agent FROM runs")]
-        same = [a for a in stored if _module_of(a) and a.rpartition(":")[2] == req.agent]
-        runs = store.runs_of(same[0]) if len(same) == 1 else []
-    if not runs:
-        agents = sorted({r[0] for r in store.db.execute("SELECT agent FROM runs")})
-        raise ValueError(
-            f"--agent {req.agent}: no run of {req.agent!r} is stored in {store.path}{did_you_mean(req.agent, agents)} "
-            f"(expected one of its agents: {', '.join(agents) or 'none stored'})"
-        )
-    if req.invocation is None:
-        return runs[0]["run_key"], runs[0]["config"]
-    inv = store.invocation(req.invocation)  # LookupError naming the invocation
-    key = inv["run_keys"].get(req.agent)
-    if key is None:
-        raise ValueError(
-            f"--invocation {req.invocation}: it ran {', '.join(inv['run_keys']) or 'no agent'}, not {req.agent!r}"
-        )
-    return key, store.run_config(key)["config"]
-
-
-def _agent_run(config: dict, run_key: str, store: ResultsStore) -> AgentRun:
-    from rmm_envs.catalog import current_id
-
-    try:
-        run = AgentRun(
-            agent=config["agent"],
-            agent_kwargs=config["agent_kwargs"],
-            env_id=current_id(config["env_id"]),
-            env_kwargs=config["env_kwargs"],
-            seed=int(config["seed"]),
-            episode_timeout=float(config["episode_timeout"]),
-            charge_precompute=bool(config["charge_precompute"]),
-            inputs=config.get("inputs") or {},
-        )
-    except (KeyError, TypeError, ValueError) as e:
-        raise ValueError(f"run {run_key} in {store.path}: its stored configuration cannot be read ({e!r})") from None
-    if run.key != run_key:
-        raise ValueError(
-            f"run {run_key} in {store.path}: its stored configuration hashes to {run.key}, expected {run_key}; "
-            "the database was edited or written by another version"
-        )
-    return run
-
-
-def _episode_numbers(store: ResultsStore, run_key: str, req: ReplayRequest) -> list[int]:
-    if req.where is None:
-        numbers = list(req.episodes or ())
-    else:
-        try:
-            rows = store.db.execute(
-                f"SELECT episode FROM episodes WHERE run_key = ? AND ({req.where}) ORDER BY episode", (run_key,)
-            ).fetchall()
-        except sqlite3.Error as e:
-            columns = [r[1] for r in store.db.execute("PRAGMA table_info(episodes)")]
-            raise ValueError(
-                f"--where {req.where!r}: {e}; expected an SQL condition on the episodes table's columns "
-                f"({', '.join(columns)}), e.g. \"outcome='collision'\""
-            ) from None
-        numbers = [int(r[0]) for r in rows]
-        if req.episodes is not None:
-            numbers = [i for i in numbers if i in set(req.episodes)]
-        if not numbers:
-            raise ValueError(f"--where {req.where!r}: no episode of {req.agent}'s run {run_key} matches")
-    return numbers[: req.limit] if req.limit is not None else numbers
-
-
-def _clock_mode(env_kwargs: dict) -> str:
-    from rmm_envs.clocks import make_clock
-
-    return make_clock(env_kwargs.get("clock", "wall")).mode
-
-
-def plan_replay(store: ResultsStore, req: ReplayRequest) -> list[ReplayTarget]:
-    """Every selected episode, checked (ValueError, one line, for any that cannot be replayed)
-    before anything is imported or run."""
-    run_key, config = _select_run(store, req)
-    if req.env is not None and req.env not in (config["env_id"],):
-        from rmm_envs.catalog import current_id
-
-        if current_id(req.env) != current_id(config["env_id"]):
-            raise ValueError(f"--env {req.env}: {req.agent}'s run {run_key} ran on {config['env_id']!r}, expected it")
-    check_consent(config, req)  # before anything is imported
-    run = _agent_run(config, run_key, store)
-    mode = _clock_mode(run.env_kwargs)
-    nonblocking = "time_accel" in run.env_kwargs
-    stored = {r["episode"]: r for r in store.episodes(run_key)}
-    targets = []
-    for i in _episode_numbers(store, run_key, req):
-        row = stored.get(i)
-        if row is None:
-            span = f"0-{max(stored)}" if stored else "none"
-            raise ValueError(
-                f"--episode {i}: {req.agent}'s run {run_key} in {store.path} has no episode {i} "
-                f"(expected one of the {len(stored)} stored: {span})"
-            )
-        if row["outcome"] == "error":
-            kind = row.get("error_kind") or "guardian"
-            first = (row.get("error") or "").splitlines()[0][:200] if row.get("error") else "no message"
-            if kind == "lost_worker":
-                raise ValueError(
-                    f"--episode {i}: its worker was lost ({first}), so nothing of it was recorded to replay; "
-                    "expected an episode with a result (rerun the run to retry it)"
-                )
-            if not req.allow_errors:
-                raise ValueError(
-                    f"--episode {i}: it ended in an error of kind {kind} ({first}); replayed only with --allow-errors"
-                )
-        trace = None
-        if nonblocking and mode not in REPRODUCIBLE_CLOCKS:
-            laps = store.clock_trace(run_key, i)
-            if laps is None:
-                why = (
-                    f"{store.path} predates clock traces (schema version {store.version})"
-                    if not store.has_traces()
-                    else "no clock trace is stored for it"
-                )
-                raise ValueError(
-                    f"--episode {i}: cannot be replayed: its run used the {mode!r} clock, whose decision times "
-                    f"passed in the simulated world, and {why}; only its fixed-clock runs (--clock fixed:MS) "
-                    "replay without one"
-                )
-            trace = tuple(laps)
-        targets.append(ReplayTarget(run, run_key, row, trace, mode, nonblocking))
-    if not targets:
-        raise ValueError("--episode: no episode selected; expected an episode number, e.g. --episode 3")
-    return targets
-
-
-def _as_stored(result) -> dict:
-    """``result`` as the store would read it back: through an in-memory table of the same columns."""
-    con = sqlite3.connect(":memory:")
-    try:
-        keys = list(EPISODE_FIELDS)
-        con.execute(f"CREATE TABLE episodes ({', '.join(f'{k} {v}' for k, v in EPISODE_FIELDS.items())})")
-        row = result.as_row()
-        con.execute(f"INSERT INTO episodes VALUES ({', '.join('?' * len(keys))})", [row[k] for k in keys])
-        cur = con.execute("SELECT * FROM episodes")
-        return dict(zip([d[0] for d in cur.description], cur.fetchone(), strict=True))
-    finally:
-        con.close()
-
-
-def _same(a, b) -> bool:
-    """Equal as stored: floats bit for bit (``nan`` equal to ``nan``)."""
-    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
-        return True
-    return a == b
-
-
-def compare_rows(stored: dict, replayed: dict, clock_reproduced: bool) -> tuple[str, object, object] | None:
-    """The first result column where ``replayed`` differs from ``stored`` (both as the store
-    reads them): ``(column, stored value, replayed value)``, or None when every one is equal.
-    Only columns the stored row has are compared (an older layout lacks some); timing columns
-    never, the clock columns only when ``clock_reproduced``; ``guardian_stats`` key by key
-    (``guardian_stats.KEY``), its timings aside; an error by its first line."""
-    skip = set(_IDENTITY) | TIMING_COLUMNS | (set() if clock_reproduced else CLOCK_COLUMNS)
-    order = [c for c in _FIRST if c in stored] + [c for c in stored if c not in _FIRST]
-    for col in order:
-        if col in skip:
-            continue
-        a, b = stored[col], replayed.get(col)
-        if col == "start" and a is None:  # a row stored before starts were fingerprinted
-            continue
-        if col == "guardian_stats":
-            sa, sb = json.loads(a or "{}"), json.loads(b or "{}")
-            for k in sorted(set(sa) | set(sb)):
-                if not is_timing_stat(k) and not _same(sa.get(k), sb.get(k)):
-                    return f"guardian_stats.{k}", sa.get(k), sb.get(k)
-            continue
-        if col == "error":
-            a = (a or "").splitlines()[0] if a else a
-            b = (b or "").splitlines()[0] if b else b
-        if not _same(a, b):
-            return col, a, b
-    return None
-
-
-def replay_episode(target: ReplayTarget, env=None, drawing=None) -> tuple[str, bool]:
-    """Re-simulate ``target``'s episode and compare it with its row: ``(message, verified)``.
-
-    ``env``: one built for the run by :func:`build_env` (reused across episodes of one run);
-    ``drawing``: a :class:`rmm_bench.video.EpisodeDrawing` that records the episode's frames."""
-    from rmm_bench.runner import play_episode
-    from rmm_envs.clocks import TraceExhausted
-
-    row = target.row
-    i = row["episode"]
-    label = f"episode {i} of {target.run.agent}'s run {target.run_key}"
-    clock = None
-    if target.clock_trace is not None:
-        clock = env.get_wrapper_attr("clock")
-        clock.load(target.clock_trace, label)
-    task = EpisodeTask(
-        run=target.run, run_key=target.run_key, episode=i, seed=int(row["seed"]), import_path=(os.getcwd(),)
-    )
-    record = play_episode(task, env, observer=drawing)
-    replayed = _as_stored(record.result)
-    error = replayed.get("error") or ""
-    first = error.splitlines()[0] if error else ""
-    if first.startswith(TraceExhausted.__name__):
-        return (f"episode {i}: differs: {first} {_UNVERIFIABLE}", False)
-    reproduced = target.clock_mode in REPRODUCIBLE_CLOCKS or target.clock_trace is not None
-    diff = compare_rows(row, replayed, reproduced)
-    where = ""
-    if replayed["outcome"] == "error":
-        where = "; the replay raised: " + " | ".join(line.strip() for line in error.splitlines()[-3:] if line.strip())
-    if diff is not None:
-        col, a, b = diff
-        return (f"episode {i}: differs in {col}: stored {a!r}, replayed {b!r} {_UNVERIFIABLE}{where}", False)
-    if clock is not None and clock.used != len(clock.laps):
-        return (
-            f"episode {i}: differs in the clock trace: the replay read {clock.used} of its {len(clock.laps)} laps "
-            f"{_UNVERIFIABLE}",
-            False,
-        )
-    return (f"episode {i}: verified{where}", True)
-
-
-def build_env(target: ReplayTarget, render_mode: str | None = None):
-    """The env the run's episodes ran on, built with the run's options; a clocked run's clock is a
-    :class:`~rmm_envs.clocks.ReplayClock` (loaded per episode).  ``render_mode``: also passed to
-    the env (to draw it).  ValueError when it cannot be made."""
-    import gymnasium as gym
-
-    from rmm_envs.clocks import ReplayClock
-    from rmm_envs.env_plugins import EnvUnavailable, resolve_env_id
-    from rmm_envs.user_modules import search_user_folders
-
-    search_user_folders((os.getcwd(),))  # a module:Id env's module, after the installed packages
-    kwargs = dict(target.run.env_kwargs)
-    if target.clock_trace is not None:
-        kwargs["clock"] = ReplayClock((), "no episode yet")
-    if render_mode is not None:
-        kwargs["render_mode"] = render_mode
-    try:
-        return gym.make(resolve_env_id(target.run.env_id), **kwargs)
-    except EnvUnavailable as e:
-        raise ValueError(f"{e}; expected the env the run used to be importable") from None
-    except Exception as e:  # noqa: BLE001 - its constructor failed: the stored options no longer build it
-        raise ValueError(
-            f"--env {target.run.env_id}: the run's env cannot be made with its stored options {target.run.env_kwargs}: "
-            f"{type(e).__name__}: {e}"
-        ) from None
-
-
-def drawable_env(target: ReplayTarget, env, size: int):
-    """``env`` ready to be drawn: as it is when a view of the package draws it, else rebuilt with
-    ``render_mode="rgb_array"`` (its own frames: a simulator of your own, a Gymnasium env);
-    ``ValueError`` naming the env, never the guardian, when it cannot draw at all."""
-    from rmm_envs.views import view_for
-
-    try:
-        view_for(env, size)
-        return env
-    except ValueError:
-        pass
-    try:
-        drawn = build_env(target, render_mode="rgb_array")
-        view_for(drawn, size)
-    except Exception as e:  # noqa: BLE001 - the env cannot render: it is the cause, not the guardian
-        raise ValueError(
-            f"--video/--frames: {target.run.env_id} cannot draw its episodes: it has no view in this package "
-            f"and does not render with render_mode='rgb_array' ({e}); replay without --video/--frames "
-            "verifies it"
-        ) from None
-    env.close()
-    return drawn
-
-
-def _check_guardian(target: ReplayTarget) -> None:
-    """Import and build the run's guardian (as the episode will), refused in one line if it cannot be."""
-    from rmm_bench.config import InputChanged, run_input_digests
-    from rmm_bench.runner import guardian_for
-
-    task = EpisodeTask(run=target.run, run_key=target.run_key, episode=0, seed=0, import_path=(os.getcwd(),))
-    try:
-        guardian = guardian_for(task)
-    except InputChanged as e:
-        raise ValueError(f"{e}".split(": a file changed")[0] + ": expected the file the run read") from None
-    except Exception as e:  # noqa: BLE001 - an import or a constructor that fails now
-        raise ValueError(
-            f"--agent {target.run.agent}: the run's guardian cannot be imported or built now: {type(e).__name__}: {e}"
-        ) from None
-    changed = changed_inputs(target.run.inputs, run_input_digests(guardian, target.run))
-    if changed:
-        raise ValueError(f"{changed}: expected the files the run read")
-
-
-def _pace(drawing) -> float:
-    """Frames per second that play the episode at its simulated pace (1 to 60)."""
-    rec = drawing.recorder
-    times = [] if rec is None else list(rec.times)
+def _pace(times: list[float]) -> float:
+    """Frames per second that play ``times`` (one frame each) at their simulated pace (1 to 60)."""
     if not times or not times[-1] > 0:
         return 10.0
     return float(min(60.0, max(1.0, len(times) / times[-1])))
@@ -413,17 +92,41 @@ def _pace(drawing) -> float:
 def cmd_replay(req: ReplayRequest) -> int:
     """Replay the request's episodes; 0 if every one is verified, 1 if one differs (2 is raised as
     ValueError); only the modules the command line consents to are imported."""
-    with consented_imports(req):
-        return _replay(req)
+    agents = replay_agents(req)
+    if len(agents) == 1:
+        req = replace(req, agent=agents[0])
+        with consented_imports(req):
+            return _replay(req)
+    named = tuple(m for a in agents if (m := _module_of(a)))  # every agent the command line names
+    with consented_imports(replace(req, agent=agents[0], trusted=tuple(req.trusted) + named)):
+        return _replay_side_by_side(req, agents)
 
 
-def _replay(req: ReplayRequest) -> int:
+def _database(req: ReplayRequest) -> Path:
     if not req.dir.is_dir():
         what = "is not a directory" if req.dir.exists() else "does not exist"
         raise ValueError(f"replay {req.dir}: it {what}; expected the --out directory of an rmm-bench run")
     db = req.dir / "results.db"
     if not db.is_file():
         raise ValueError(f"replay {req.dir}: it holds no results.db; expected the --out directory of an rmm-bench run")
+    return db
+
+
+def _prepare(targets: list[ReplayTarget], req: ReplayRequest, drawn: bool):
+    """The env of ``targets``' run, drawable when ``drawn``; its guardian checked."""
+    env = build_env(targets[0])
+    try:
+        if drawn:
+            env = drawable_env(targets[0], env, req.size)
+        check_guardian(targets[0])
+    except BaseException:
+        env.close()
+        raise
+    return env
+
+
+def _replay(req: ReplayRequest) -> int:
+    db = _database(req)
     store = ResultsStore(db, read_only=True)
     try:
         targets = plan_replay(store, req)
@@ -433,11 +136,9 @@ def _replay(req: ReplayRequest) -> int:
     from rmm_bench.video import EpisodeDrawing, check_outputs, episode_path
 
     check_outputs(req.video, req.frames, req.every, reads=[db])  # before anything is simulated or written
-    env = build_env(targets[0])
-    if req.video or req.frames:
-        env = drawable_env(targets[0], env, req.size)
-    _check_guardian(targets[0])
-    drawing = EpisodeDrawing(req.size) if (req.video or req.frames) else None
+    drawn = bool(req.video or req.frames)
+    env = _prepare(targets, req, drawn)
+    drawing = EpisodeDrawing(req.size) if drawn else None
     several = len(targets) > 1
     from tqdm import tqdm
 
@@ -451,7 +152,7 @@ def _replay(req: ReplayRequest) -> int:
             (tqdm.write if show else print)(message)
             if drawing is not None:
                 i = int(target.row["episode"])
-                fps = req.fps or _pace(drawing)
+                fps = req.fps or _pace(drawing.times)
                 video = None if req.video is None else episode_path(req.video, i, several)
                 frames = None if req.frames is None else episode_path(req.frames, i, several)
                 for line in drawing.write(video, frames, req.every, fps):
@@ -462,4 +163,89 @@ def _replay(req: ReplayRequest) -> int:
         env.close()
     if len(targets) > 1:
         print(f"{'verified' if verified else 'not verified'}: {len(targets)} episodes of {req.agent}")
+    return 0 if verified else 1
+
+
+def _check_same_starts(agents: tuple[str, ...], plans: list[list[ReplayTarget]]) -> None:
+    """Refuse agents whose episode did not start from the same state (one line)."""
+    for j, first in enumerate(plans[0]):
+        i = int(first.row["episode"])
+        for agent, targets in zip(agents[1:], plans[1:], strict=True):
+            other = targets[j]
+            same = (
+                other.run.env_id == first.run.env_id
+                and other.row["seed"] == first.row["seed"]
+                and (other.row.get("start") is None or first.row.get("start") is None
+                     or other.row["start"] == first.row["start"])
+            )  # fmt: skip
+            if not same:
+                raise ValueError(
+                    f"--agent {','.join(agents)}: episode {i} of {agent} did not start as {agents[0]}'s did "
+                    f"(env {other.run.env_id} vs {first.run.env_id}, seed {other.row['seed']} vs "
+                    f"{first.row['seed']}, or its start differs); expected runs of the same env and seed, as "
+                    "rmm-bench compare pairs them"
+                )
+
+
+def _write_side_by_side(agents, drawings, req: ReplayRequest, episode: int, several: bool) -> list[str]:
+    from rmm_bench.side_by_side import frame_size, shared_times, side_by_side_frames
+    from rmm_bench.video import episode_path, write_frames, write_video
+
+    shown = [(a, d) for a, d in zip(agents, drawings, strict=True) if d.recorder is not None and d.times]
+    if not shown or all(d.recorder.n_steps == 0 for _, d in shown):
+        return []
+    names, ds = [a for a, _ in shown], [d for _, d in shown]
+    fps = req.fps or _pace(shared_times([d.times for d in ds]))
+    h, w = frame_size(ds)
+    out = []
+    if req.video is not None:
+        video = episode_path(req.video, episode, several)
+        n = write_video(side_by_side_frames(names, ds, req.every), video, fps / req.every)
+        out.append(f"wrote {video} ({n} frames, {w} x {h}: {', '.join(names)} side by side)")
+    if req.frames is not None:
+        folder = episode_path(req.frames, episode, several)
+        n = write_frames(side_by_side_frames(names, ds, req.every), folder)
+        out.append(f"wrote {n} frames to {folder}")
+    return out
+
+
+def _replay_side_by_side(req: ReplayRequest, agents: tuple[str, ...]) -> int:
+    """Replay one episode selection of several agents; with --video/--frames, each episode's
+    agents side by side in one video."""
+    db = _database(req)
+    store = ResultsStore(db, read_only=True)
+    try:
+        first = plan_replay(store, replace(req, agent=agents[0]))
+        episodes = tuple(int(t.row["episode"]) for t in first)
+        plans = [first] + [
+            plan_replay(store, replace(req, agent=a, episodes=episodes, where=None, limit=None)) for a in agents[1:]
+        ]
+    finally:
+        store.close()
+    _check_same_starts(agents, plans)
+    for targets in plans:
+        check_inputs(targets[0].run.as_dict())
+    from rmm_bench.video import EpisodeDrawing, check_outputs
+
+    check_outputs(req.video, req.frames, req.every, reads=[db])  # before anything is simulated or written
+    drawn = bool(req.video or req.frames)
+    envs: list = []
+    try:
+        for targets in plans:
+            envs.append(_prepare(targets, req, drawn))
+        drawings = [EpisodeDrawing(req.size) for _ in agents] if drawn else [None] * len(agents)
+        verified = True
+        for j, i in enumerate(episodes):
+            for agent, targets, env, drawing in zip(agents, plans, envs, drawings, strict=True):
+                message, ok = replay_episode(targets[j], env, drawing)
+                verified &= ok
+                print(f"{agent}: {message}")
+            if drawn:
+                for line in _write_side_by_side(agents, drawings, req, i, len(episodes) > 1):
+                    print(line)
+    finally:
+        for env in envs:
+            env.close()
+    n = len(episodes) * len(agents)
+    print(f"{'verified' if verified else 'not verified'}: {n} episodes of {', '.join(agents)}")
     return 0 if verified else 1

@@ -26,7 +26,7 @@ and records the episode as ``lost_worker``.
 The env is driven only through the parallel-autonomy contract (:mod:`rmm_bench.checks`):
 the result's columns come from the last step's ``info["outcome"]`` and ``info["episode_stats"]``
 (:data:`EPISODE_STATISTICS`; ``final_speed`` and ``cum_cost`` are optional).  The guardian is built with the
-run's options, plus ``threads`` when the task carries it (see :func:`rmm_bench.run.plan_tasks`).
+run's options, plus ``threads`` when the task carries it (see :func:`rmm_bench.run_plan.plan_tasks`).
 
 Clock traces.  For a clocked run (a non-blocking env whose clock is not reproducible: ``wall``
 or ``cpu``), :func:`play_episode` also returns every lap the non-blocking wrapper's clock
@@ -348,8 +348,9 @@ def play_episode(task: EpisodeTask, env=None, observer=None) -> EpisodeRecord:
     ``env``: the env to run it on (``rmm-bench replay`` passes one built with the run's options
     and a :class:`~rmm_envs.clocks.ReplayClock`); default, this worker's env for the run.
     ``observer``: an object with ``begin(env)`` (called after the reset) and ``step(info,
-    guardian)`` (after every step), for a replay that draws the episode; it must not act on the
-    env.  A run passes none: drawing would cost a clocked run's time."""
+    guardian)`` (after every step), and optionally ``observe(obs)`` (the observation, after each
+    of them), for a replay that draws the episode; it must not act on the env.  A run passes
+    none: drawing would cost a clocked run's time."""
     t_start = time.perf_counter()
     run = task.run
     timeout = run.episode_timeout
@@ -378,8 +379,11 @@ def play_episode(task: EpisodeTask, env=None, observer=None) -> EpisodeRecord:
         env_call = None
         started = env
         fields["start"] = start_fingerprint(env, obs)
+        observe = getattr(observer, "observe", None)  # an observer that also reads the observations
         if observer is not None:
             observer.begin(env)
+            if observe is not None:
+                observe(obs)
         t0 = time.perf_counter()
         guardian.reset(
             seed=task.seed,
@@ -402,6 +406,8 @@ def play_episode(task: EpisodeTask, env=None, observer=None) -> EpisodeRecord:
             env_call = None
             if observer is not None:
                 observer.step(info, guardian)
+                if observe is not None:
+                    observe(obs)
             if terminated or truncated:
                 break
             if timeout and time.perf_counter() - t_start > timeout:

@@ -9,9 +9,10 @@ replay never leaves half a video under the name asked for.
 
 from __future__ import annotations
 
+import functools
 import os
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -137,26 +138,91 @@ def write_frames(frames: Iterable[np.ndarray], folder: Path) -> int:
     return n
 
 
+@functools.cache
+def _recorder_class() -> type:
+    """:class:`rmm_envs.views.EpisodeRecorder` whose strip may span a time set from outside
+    (``span``: the longest episode of a side-by-side replay, so that the strips share one axis)."""
+    from rmm_envs.views import EpisodeRecorder
+
+    class SharedSpanRecorder(EpisodeRecorder):
+        span: float | None = None
+
+        def _span(self) -> float:
+            return self.span if self.span else super()._span()
+
+    return SharedSpanRecorder
+
+
 class EpisodeDrawing:
     """The observer a replay passes to :func:`rmm_bench.runner.play_episode`: it records the
     episode with :class:`rmm_envs.views.EpisodeRecorder` (the guardian's ``signals()`` after every
-    step), then :meth:`write` writes what was asked for."""
+    step) and the observations (``observe``: after the reset and after every step), then
+    :meth:`frame` draws a frame with the rays the guardian sensed (:mod:`rmm_bench.sensed`) and
+    :meth:`write` writes what was asked for."""
 
     def __init__(self, size: int = 512) -> None:
         self.size = int(size)
         self.recorder: EpisodeRecorder | None = None
+        self.observations: list[np.ndarray | None] = []
+        self.layout = None
+        self.high: np.ndarray | None = None
 
     def begin(self, env) -> None:
-        from rmm_envs.views import EpisodeRecorder
-
         if self.recorder is None or self.recorder.env is not env:
-            self.recorder = EpisodeRecorder(env, size=self.size)
+            self.recorder = _recorder_class()(env, size=self.size)
         self.recorder.begin()  # a new episode on the same env: the recorder starts afresh
+        space = getattr(env, "observation_space", None)
+        self.layout = getattr(space, "layout", None)
+        high = getattr(space, "high", None)
+        self.high = None if high is None else np.asarray(high, dtype=float)
+        self.observations = []
+
+    def observe(self, obs) -> None:
+        """The observation the guardian is given next (after the reset, then after every step)."""
+        try:
+            self.observations.append(np.array(obs, dtype=float, copy=True))
+        except (TypeError, ValueError):  # a dict or another structure: no rays to draw from it
+            self.observations.append(None)
 
     def step(self, info, guardian) -> None:
         signals = guardian.signals() if hasattr(guardian, "signals") else {}
         assert self.recorder is not None  # begin() ran after the reset
         self.recorder.record(info, signals)
+
+    @property
+    def times(self) -> list[float]:
+        """The simulated time of every frame (frame ``k`` ends step ``k``; frame 0 is the start)."""
+        return [] if self.recorder is None else list(self.recorder.times)
+
+    def frame(self, k: int) -> np.ndarray:
+        """Frame ``k``: the recorder's, with the rays of the observation at ``k`` and the body over them."""
+        from PIL import Image, ImageDraw
+
+        from rmm_bench.sensed import draw_rays, ray_segments
+
+        rec = self.recorder
+        assert rec is not None
+        frame = rec.frame(k)
+        obs = self.observations[k] if k < len(self.observations) else None
+        segments = ray_segments(rec.view, rec.states[k], obs, self.layout, self.high)
+        if not segments:
+            return frame
+        picture = Image.fromarray(frame)
+        draw_rays(picture, segments, rec.view.width)
+        if not rec.view.captures:  # the body over its rays
+            rec.view.draw_body(ImageDraw.Draw(picture), rec.states[k], rec.active[k], rec.world)
+        return np.asarray(picture)
+
+    def frames(self, every: int = 1) -> Iterator[np.ndarray]:
+        """Frames ``0, every, 2 every, ...`` and always the last one."""
+        rec = self.recorder
+        assert rec is not None
+        last = rec.n_steps
+        ks = list(range(0, last + 1, max(int(every), 1)))
+        if ks[-1] != last:
+            ks.append(last)
+        for k in ks:
+            yield self.frame(k)
 
     def write(self, video: Path | None, frames: Path | None, every: int, fps: float) -> list[str]:
         """Write the recorded episode; one line per output for the command to print."""
@@ -165,9 +231,9 @@ class EpisodeDrawing:
             return []
         out = []
         if video is not None:
-            n = write_video(rec.frames(every=every), video, fps / every)
+            n = write_video(self.frames(every=every), video, fps / every)
             out.append(f"wrote {video} ({n} frames, {rec.frame_size[1]} x {rec.frame_size[0]})")
         if frames is not None:
-            n = write_frames(rec.frames(every=every), frames)
+            n = write_frames(self.frames(every=every), frames)
             out.append(f"wrote {n} frames to {frames}")
         return out
