@@ -11,6 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from rmm_envs.disturbances.spec import Disturbance, SystemSupport, kind_code
+from rmm_envs.portable import norm
 
 __all__ = ["BLOCK", "Realisation"]
 
@@ -108,7 +109,7 @@ class Realisation:
             if d.kind in ("obs-noise", "act-noise", "dyn-rate", "impulse"):
                 signal = _Signal(d.shape, n, seq, self.dt, support.horizon, gaussian=d.kind != "dyn-rate")
                 if d.kind == "impulse":  # a push of the given size in a random direction
-                    direction = signal.held / max(np.linalg.norm(signal.held), 1e-12)
+                    direction = signal.held / max(norm(signal.held), 1e-12)
                     signal.held = direction
             elif d.kind == "ray-dropout":
                 signal = _Signal("white", n, seq, self.dt, support.horizon, gaussian=False)
