@@ -46,7 +46,7 @@ _MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays")
 #: (hover and level, ``strategies=""``) with an explicit threshold.
 _QUAD_PARALLEL = Shipped({"act": "quadrotor_cmd_act.npz", "risk": "quadrotor_cmd.npz"})
 
-#: The guarded envs around simulators the project did not write (rmm_envs.envs.driven_examples):
+#: The guarded envs around simulators the project did not write (rmm_envs/systems/cartpole, rmm_envs/systems/pendulum):
 #: risk-only models of each env's own observation (the risk adapter's labels: random pushes held
 #: for the adapter's default horizon, over half adapter-sampled and half driver-visited states),
 #: applying the env's safe default (the balancing LQR) while the risk is above the threshold.

@@ -67,7 +67,7 @@ def dubins4d_frame(scene, state, guardian_active: bool, half: float, size: int =
     """Dubins4D's top-down frame of the window ``[-15, 15]^2`` m: the generation arena
     ``[-half, half]^2`` outlined, obstacles red, the goal green with a ring, the rays grey and the
     vehicle blue (driver) or orange (``guardian_active``)."""
-    from rmm_envs.worlds.circles import ray_cast
+    from rmm_envs.systems.dubins4d.circles import ray_cast
 
     cv = Canvas(size, -15, 15, -15, 15)
     for a, b in (
