@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from rmm_envs.worlds.bounds import MAX_MAGNITUDE, within_bounds
+
 njit: Callable[..., Any] | None
 try:
     from numba import njit
@@ -47,8 +49,6 @@ __all__ = [
 def as_circles(circles, name: str = "circles") -> np.ndarray:
     """Validate and return circles as a float ``(K, 3)`` array with positive radii, every number
     of magnitude at most :data:`rmm_envs.worlds.bounds.MAX_MAGNITUDE`."""
-    from rmm_envs.worlds.bounds import MAX_MAGNITUDE, within_bounds
-
     try:
         arr = np.asarray(circles, dtype=float)
     except OverflowError:  # an integer beyond a float (10**400)

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rmm_envs.worlds.bounds import MAX_MAGNITUDE, MAX_MAZE_SIDE, within_bounds
+
 __all__ = ["MAZE_KINDS", "Maze", "cell_distances", "cell_of", "cell_path", "generate_maze", "render_occupancy"]
 
 MAZE_KINDS = ("rectangular", "honeycomb")
@@ -336,8 +338,6 @@ def generate_maze(
     at 300 dpi), a 2750 x 2750 px image."""
     if kind not in MAZE_KINDS:
         raise ValueError(f"unknown maze kind {kind!r}; expected one of {MAZE_KINDS}")
-    from rmm_envs.worlds.bounds import MAX_MAGNITUDE, MAX_MAZE_SIDE, within_bounds
-
     sides_ok = all(
         isinstance(x, (int, float, np.integer, np.floating))
         and not isinstance(x, bool)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import ImageDraw
 
+from rmm_envs.systems.quadrotor.rotations import quat_to_rot
 from rmm_envs.views.base import BODY_OUTLINE, DRIVER, GOAL, GUARDIAN, LIGHT, View, Window, convex_hull
 
 __all__ = ["QuadrotorView", "quadrotor_view"]
@@ -44,8 +45,6 @@ def _rotate(points: np.ndarray, R: np.ndarray) -> np.ndarray:
 
 def _shape_points(obj: dict) -> np.ndarray:
     """Points ``(P, 3)`` whose convex hull is the shape (its corners, or its rims sampled)."""
-    from rmm_envs.systems.quadrotor.rotations import quat_to_rot
-
     pos = np.asarray(obj["pos"], float)
     R = quat_to_rot(np.asarray(obj["quat"], float))
     size = np.asarray(obj["size"], float)
@@ -147,8 +146,6 @@ class QuadrotorView(View):
         return np.stack([self.top.pixels(st[:, [0, 1]]), self.side.pixels(st[:, [0, 2]])], axis=1)
 
     def draw_body(self, draw: ImageDraw.ImageDraw, state: np.ndarray, active: bool, world: RoomOutlines) -> None:
-        from rmm_envs.systems.quadrotor.rotations import quat_to_rot
-
         s = np.asarray(state, float)
         colour = GUARDIAN if active else DRIVER
         R = quat_to_rot(s[3:7])
