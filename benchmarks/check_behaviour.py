@@ -267,8 +267,8 @@ def env_fingerprint(steps: int = 200, envs=ENVS) -> dict:
 def world_fingerprint(seeds: int) -> dict:
     """The generated worlds: rooms, mazes, and every env's world and start state at reset
     (circle sets, map starts, goals and waypoints), through the privileged accessor."""
-    from rmm_envs.worlds.mazes import generate_maze
-    from rmm_envs.worlds.rooms import generate_room
+    from rmm_envs.systems.maze.mazes import generate_maze
+    from rmm_envs.systems.quadrotor.rooms import generate_room
 
     out = {}
     rooms, mazes = [], []

@@ -18,9 +18,9 @@ from scipy.integrate import odeint
 
 import rmm_envs  # noqa: F401
 from benchmarks._timing import fmt_us, median_time
-from rmm_envs.drivers.dubins4d import CLFDriver
-from rmm_envs.dynamics.dubins4d import Dubins4D
-from rmm_envs.worlds.circles import CircleWorld, points_in_circles, ray_cast, ray_cast_numpy
+from rmm_envs.systems.dubins4d.circles import CircleWorld, points_in_circles, ray_cast, ray_cast_numpy
+from rmm_envs.systems.dubins4d.driver import CLFDriver
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
 
 
 def steps_per_second(

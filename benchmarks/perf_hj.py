@@ -33,8 +33,8 @@ import time
 import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.dynamics.dubins4d import KIND, Dubins4D
-from rmm_envs.envs.dubins4d import CONTROLS
+from rmm_envs.systems.dubins4d.dynamics import KIND, Dubins4D
+from rmm_envs.systems.dubins4d.env import CONTROLS
 from rmm_guardians.hj._kernels import set_threads
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.guardian import HJGuardian, default_grid, obstacle_target

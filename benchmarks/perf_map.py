@@ -22,8 +22,8 @@ import numpy as np
 
 import rmm_envs  # noqa: F401
 from benchmarks._timing import fmt_us, median_time
-from rmm_envs.envs.dubins4d_map import Dubins4DMapEnv
 from rmm_envs.risk import RiskEstimator
+from rmm_envs.systems.dubins4d_map.env import Dubins4DMapEnv
 
 
 def cpu_steps_per_second(env, episodes: int) -> float:

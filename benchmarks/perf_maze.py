@@ -19,8 +19,8 @@ import numpy as np
 import rmm_envs  # noqa: F401
 from benchmarks._timing import fmt_us, median_time
 from benchmarks.perf_env import steps_per_second as _steps_per_second
-from rmm_envs.dynamics.dubins4d import SERIES_COEFFICIENTS
-from rmm_envs.worlds.maze_kernels import dubins_path, maze_path_hit, maze_rays
+from rmm_envs.systems.dubins4d.dynamics import SERIES_COEFFICIENTS
+from rmm_envs.systems.maze.maze_kernels import dubins_path, maze_path_hit, maze_rays
 
 
 def steps_per_second(env_id: str, episodes: int, repeats: int) -> list[float]:

@@ -21,8 +21,8 @@ import numpy as np
 import rmm_envs  # noqa: F401
 from benchmarks._timing import fmt_us, median_time
 from benchmarks.perf_env import steps_per_second as _steps_per_second
-from rmm_envs.dynamics.quadrotor_control import command_wrench
-from rmm_envs.worlds.rooms import generate_room
+from rmm_envs.systems.quadrotor.control import command_wrench
+from rmm_envs.systems.quadrotor.rooms import generate_room
 
 QUAD = "QuadrotorRoomParallel-v0"
 BASELINE = "Dubins3DMazeParallel-v0"

@@ -31,9 +31,9 @@ import numpy as np
 from scipy.integrate import odeint
 
 import rmm_envs  # noqa: F401  (registers the envs)
-from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
 from rmm_envs.risk import RiskEstimator, RiskResult
 from rmm_envs.risk.labelling import DatagenConfig, config_seeds, labelled_env
+from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
 
 
 def _rhs(z, t, u1, u2):

@@ -24,7 +24,7 @@ import numpy as np
 
 import rmm_envs  # noqa: F401
 from rmm_envs.risk.estimator import RiskEstimator
-from rmm_envs.scenes.quadrotor import QuadrotorScene
+from rmm_envs.systems.quadrotor.scene import QuadrotorScene
 from rmm_guardians.lrmm.model import default_model_path, load_model
 
 ENV = "QuadrotorRoomParallel-v0"

@@ -12,7 +12,9 @@ from __future__ import annotations
 import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.dynamics import dubins3d, dubins4d, quadrotor_control
+from rmm_envs.systems.dubins4d import dynamics as dubins4d
+from rmm_envs.systems.maze import dynamics as dubins3d
+from rmm_envs.systems.quadrotor import control as quadrotor_control
 from rmm_guardians.dispatch import require_dynamics
 
 __all__ = ["dubins4d_only", "maze_car_only", "quadrotor_only"]

@@ -6,7 +6,7 @@ table, :data:`rmm_envs.catalog.SYSTEMS` (listed in docs/environments/index.md): 
 override, blocking, fixed step) and ``<System>Parallel-v0`` (the same, non-blocking: the
 guardian's compute time passes), for Dubins4D among circles and on maps of your own, the
 Dubins3D maze car, the PyBullet quadrotor, and two simulators the project did not write
-(Gymnasium's CartPole and MuJoCo InvertedPendulum, :mod:`rmm_envs.envs.driven_examples`).
+(Gymnasium's CartPole and MuJoCo InvertedPendulum, :mod:`rmm_envs.systems.cartpole.guarded`).
 ``gym.make_vec("Dubins4DGuarded-v0", num_envs=N)`` is a native numpy vector env.  Ids renamed to this scheme stay registered and
 warn (:data:`rmm_envs.catalog.RENAMED`).
 """

@@ -270,7 +270,7 @@ def test_reaching_the_goal_under_guardian_control_pays_the_bonus_less_the_cost()
 
 
 def test_an_env_made_without_gym_make_is_named_by_its_class():
-    from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
+    from rmm_envs.systems.maze.env import Dubins3DMazeEnv
 
     with pytest.raises(TypeError) as e:
         GuardianReward(Dubins3DMazeEnv())

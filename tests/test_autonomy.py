@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 import rmm_envs  # noqa: F401
 from rmm_envs import autonomy
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
-from rmm_envs.dynamics.dubins4d import Dubins4D
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
 
 D4 = GuardianActionSpace.for_dynamics(Dubins4D(), ("turnrate_ctrl", "accel_ctrl"))
 

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from rmm_envs.autonomy import GuardianActionSpace, SafeDefault
-from rmm_envs.dynamics.dubins4d import Dubins4D, FullBraking
-from rmm_envs.envs.dubins4d import CONTROLS
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D, FullBraking
+from rmm_envs.systems.dubins4d.env import CONTROLS
 from rmm_guardians.baselines import BrakesGuardian, RandomGuardian
 
 DUBINS = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, safe_default=FullBraking())

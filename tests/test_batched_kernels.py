@@ -7,8 +7,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rmm_envs.dynamics.dubins4d import Dubins4D, _states_at_compiled
-from rmm_envs.worlds.circles import (
+from rmm_envs.systems.dubins4d.circles import (
     CircleWorld,
     contact_params,
     contact_params_each,
@@ -17,6 +16,7 @@ from rmm_envs.worlds.circles import (
     ray_cast_each,
     ray_cast_numpy,
 )
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D, _states_at_compiled
 
 
 def _worlds(rng, n, k=5):

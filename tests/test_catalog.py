@@ -16,8 +16,8 @@ from rmm_envs.catalog import FORMER_IDS, current_id, stored_id
 
 
 def test_the_users_id_is_todays_id_for_the_circles_world_and_keys_stay_stable():
-    assert gym.spec("Dubins4DParallel-v0").entry_point == "rmm_envs.envs.dubins4d:make_parallel_env"
-    assert gym.spec("Dubins4DGuarded-v0").entry_point == "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv"
+    assert gym.spec("Dubins4DParallel-v0").entry_point == "rmm_envs.systems.dubins4d.env:make_parallel_env"
+    assert gym.spec("Dubins4DGuarded-v0").entry_point == "rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv"
     # results stored before the ids settled keep their keys: the same stored id as then
     assert stored_id("Dubins4DParallel-v0") == "Dubins4DParallel-v0"
     assert stored_id("Dubins4DGuarded-v0") == "Dubins4DCircles-v0"
@@ -95,7 +95,9 @@ def test_ids_registration_and_twins_come_from_the_table():
             spec = gym.spec(s.env_id(kind))
             assert spec.entry_point == entry
             assert spec.vector_entry_point == (s.vector if kind == "guarded" else None)
-    assert gym.spec("Dubins4DGuarded-v0").vector_entry_point == "rmm_envs.envs.dubins4d_vector:Dubins4DCirclesVectorEnv"
+    assert (
+        gym.spec("Dubins4DGuarded-v0").vector_entry_point == "rmm_envs.systems.dubins4d.vector:Dubins4DCirclesVectorEnv"
+    )
     with pytest.raises(KeyError, match="Dubins4D has no plain env"):
         SYSTEMS[0].env_id("plain")
 
@@ -184,15 +186,15 @@ def test_a_new_table_entry_is_registered_listed_and_helped(monkeypatch):
     toy = catalog.SystemSpec(
         name="ToyCircles",
         blurb="a toy",
-        dynamics="rmm_envs.dynamics.dubins4d:Dubins4D",
-        scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
-        envs={"guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv"},
+        dynamics="rmm_envs.systems.dubins4d.dynamics:Dubins4D",
+        scenes=("rmm_envs.systems.dubins4d.scene:Dubins4DScene",),
+        envs={"guarded": "rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv"},
     )
     last = catalog.env_ids(("guarded",))[-1]  # the table's last blocking env so far
     monkeypatch.setattr(catalog, "SYSTEMS", (*catalog.SYSTEMS, toy))
     try:
         catalog.register()
-        assert gym.spec("ToyCirclesGuarded-v0").entry_point == "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv"
+        assert gym.spec("ToyCirclesGuarded-v0").entry_point == "rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv"
         assert catalog.env_ids()[-1] == "ToyCirclesGuarded-v0" and "ToyCirclesGuarded-v0" in catalog.guardian_env_ids()
         assert f"{last}, ToyCirclesGuarded-v0 (blocking)" in catalog.env_help()
         assert catalog.system_of("ToyCirclesGuarded-v0") == (toy, "guarded")
@@ -280,8 +282,8 @@ def test_every_view_and_doomed_test_the_table_names_imports():
 
 def test_an_env_s_system_is_found_by_its_id_then_by_its_class():
     from rmm_envs.catalog import system_of_env
-    from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
-    from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
+    from rmm_envs.systems.maze.env import Dubins3DMazeEnv
+    from rmm_envs.systems.maze.guarded import Dubins3DMazeGuardedEnv
 
     def found(env):
         s = system_of_env(env)
@@ -301,7 +303,7 @@ def test_add_system_refuses_a_second_system_of_a_name_or_an_id_taken_by_another_
     twin = SystemSpec(name="Dubins4D", blurb="", dynamics="x:Y", scenes=(), envs={"guarded": "x:Y"})
     with pytest.raises(ValueError, match="a system named 'Dubins4D' is already registered"):
         add_system(twin)
-    gym.register("ClashGuarded-v0", entry_point="rmm_envs.envs.dubins4d:Dubins4DCirclesEnv")
+    gym.register("ClashGuarded-v0", entry_point="rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv")
     try:
         clash = SystemSpec(name="Clash", blurb="", dynamics="x:Y", scenes=(), envs={"guarded": "x:Y"})
         with pytest.raises(ValueError, match="'ClashGuarded-v0' is already registered with entry point"):
@@ -317,16 +319,16 @@ def test_add_system_refuses_a_second_system_of_a_name_or_an_id_taken_by_another_
 TOY_SYSTEM = """
 from rmm_envs.catalog import SystemSpec
 from rmm_envs.starts import StartAssessment
-from rmm_envs.views.planar import Dubins4DView
+from rmm_envs.systems.dubins4d.view import Dubins4DView
 
 
 def spec():
     return SystemSpec(
         name="ToyRobot",
         blurb="the circles car under another name",
-        dynamics="rmm_envs.dynamics.dubins4d:Dubins4D",
-        scenes=("rmm_envs.scenes.dubins4d:Dubins4DScene",),
-        envs={"guarded": "rmm_envs.envs.dubins4d:Dubins4DCirclesEnv"},
+        dynamics="rmm_envs.systems.dubins4d.dynamics:Dubins4D",
+        scenes=("rmm_envs.systems.dubins4d.scene:Dubins4DScene",),
+        envs={"guarded": "rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv"},
         stored={"guarded": "ToyRobotOld-v0"},
         view="toyrobot:view",
         doomed_test="toyrobot:doomed",

@@ -8,9 +8,9 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.drivers.dubins4d import CLFDriver
-from rmm_envs.dynamics.dubins4d import Dubins4D
-from rmm_envs.envs.dubins4d import CONTROLS
+from rmm_envs.systems.dubins4d.driver import CLFDriver
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
+from rmm_envs.systems.dubins4d.env import CONTROLS
 from rmm_guardians import make_guardian
 from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from tests.qp_reference import solve_qp_dense

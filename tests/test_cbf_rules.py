@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.dynamics.dubins4d import Dubins4D
-from rmm_envs.envs.dubins4d import CONTROLS
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
+from rmm_envs.systems.dubins4d.env import CONTROLS
 from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from rmm_guardians.cbf.barrier import HOCBFParams, barrier_rows
 from rmm_guardians.cbf.recovery import recovery_control, recovery_done

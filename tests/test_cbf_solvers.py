@@ -10,9 +10,9 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.dynamics.dubins4d import Dubins4D
-from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
-from rmm_envs.envs.dubins4d import CONTROLS
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
+from rmm_envs.systems.dubins4d.env import CONTROLS
+from rmm_envs.systems.maze.guarded import Dubins3DMazeGuardedEnv
 from rmm_guardians.cbf import CBFGuardian
 from rmm_guardians.cbf.backend import installed_solvers, parse_solver
 from rmm_guardians.cbf.maze import MazeCBFGuardian

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rmm_envs.worlds.circles import (
+from rmm_envs.systems.dubins4d.circles import (
     CircleWorld,
     as_circles,
     contact_params,

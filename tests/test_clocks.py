@@ -10,7 +10,7 @@ import pytest
 
 import rmm_envs  # noqa: F401
 from rmm_envs.clocks import FixedLatencyClock, ManualClock, WallClock, make_clock
-from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
 from rmm_envs.wrappers import NonBlockingStepping
 
 

@@ -249,7 +249,7 @@ def test_datagen_reaches_any_env_through_the_labelled_env_protocol_only(tmp_path
     import gymnasium as gym
 
     if "ThirdPartyMaze-v0" not in gym.registry:
-        gym.register(id="ThirdPartyMaze-v0", entry_point="rmm_envs.envs.dubins3d_maze:Dubins3DMazeEnv")
+        gym.register(id="ThirdPartyMaze-v0", entry_point="rmm_envs.systems.maze.env:Dubins3DMazeEnv")
     tiny = dict(configs=1, samples_per_config=4, branches=2, depth=1, configs_per_shard=1, seed=5)
     ours = generate(DatagenConfig(env_id="Dubins3DMaze-v0", **tiny), tmp_path / "ours", workers=1, progress=False)
     theirs = generate(DatagenConfig(env_id="ThirdPartyMaze-v0", **tiny), tmp_path / "theirs", workers=1, progress=False)

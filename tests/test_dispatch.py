@@ -11,7 +11,9 @@ import pytest
 
 import rmm_envs  # noqa: F401  (registers the ids)
 from rmm_envs.autonomy import GENERIC, GuardianActionSpace, SystemContract, contract
-from rmm_envs.dynamics import dubins3d, dubins4d, quadrotor_control
+from rmm_envs.systems.dubins4d import dynamics as dubins4d
+from rmm_envs.systems.maze import dynamics as dubins3d
+from rmm_envs.systems.quadrotor import control as quadrotor_control
 from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from rmm_guardians.cbf.maze import MazeCBFGuardian
 from rmm_guardians.dispatch import delegate_arguments, require_dynamics
@@ -154,7 +156,7 @@ def test_the_refusals_say_exactly_what_each_guardian_serves():
 
 
 def test_reset_hands_the_episode_to_the_delegate_of_the_space_s_kind_and_back():
-    from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
+    from rmm_envs.systems.maze.guarded import Dubins3DMazeGuardedEnv
 
     maze_env = Dubins3DMazeGuardedEnv()
     obs, info = maze_env.reset(seed=3)

@@ -16,9 +16,11 @@ from hypothesis import strategies as st
 import rmm_envs  # noqa: F401  (registers the envs)
 from rmm_bench.cli import main
 from rmm_bench.runner import episode_seed
-from rmm_envs.doomed import DUBINS4D_METHOD, MAZE_METHOD, QUADROTOR_METHOD, dubins4d_escapes, maze_escapes
-from rmm_envs.dynamics import Dubins4D
 from rmm_envs.starts import StartAssessment, assess_start, has_doomed_test, world_key
+from rmm_envs.systems.dubins4d.doomed import DUBINS4D_METHOD, dubins4d_escapes
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
+from rmm_envs.systems.maze.doomed import MAZE_METHOD, maze_escapes
+from rmm_envs.systems.quadrotor.doomed import QUADROTOR_METHOD
 
 SYSTEM = Dubins4D()
 FAR_GOAL = (50.0, 50.0, 0.5)

@@ -9,11 +9,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rmm_envs.doomed import DUBINS4D_DT, DUBINS4D_SEGMENTS, MAZE_DT, dubins4d_escapes, maze_escapes
-from rmm_envs.dynamics import Dubins4D
-from rmm_envs.dynamics.dubins3d import Dubins3D
 from rmm_envs.starts import StartAssessment
-from rmm_envs.worlds.mazes import Maze
+from rmm_envs.systems.dubins4d.doomed import DUBINS4D_DT, DUBINS4D_SEGMENTS, dubins4d_escapes
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
+from rmm_envs.systems.maze.doomed import MAZE_DT, maze_escapes
+from rmm_envs.systems.maze.dynamics import Dubins3D
+from rmm_envs.systems.maze.mazes import Maze
 
 CAR = Dubins4D()  # turn rate within +-0.25 rad/s, acceleration within +-0.5 m/s^2
 START = (0.0, 0.0, 0.0, 2.0)
@@ -119,7 +120,7 @@ def test_a_contact_is_dated_by_its_segment_whatever_the_piece_size(chunk):
     """A straight path 1 px per sample from x = 280 meets the corridor's end wall (x = 310, its
     half-thickness h) on the segment ending at the first sample within h of it: the same index for
     every piece size; a path that never touches is dated ``T``."""
-    from rmm_envs.doomed import _maze_hits
+    from rmm_envs.systems.maze.doomed import _maze_hits
 
     xs = 280.0 + np.arange(60.0)
     path = np.stack([xs, np.full_like(xs, 200.0)], axis=1)[None]
@@ -137,7 +138,7 @@ def test_a_moving_quadrotor_start_is_not_assessed():
     import gymnasium as gym
 
     import rmm_envs  # noqa: F401  (registers the envs)
-    from rmm_envs.doomed import QUADROTOR_METHOD, quadrotor_test
+    from rmm_envs.systems.quadrotor.doomed import QUADROTOR_METHOD, quadrotor_test
 
     env = gym.make("QuadrotorRoomParallel-v0", clock="fixed:1")
     env.reset(seed=0)

@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.envs.driven import guarded, parallel
-from rmm_envs.envs.driven_examples import CARTPOLE_K, TargetTask
+from rmm_envs.envs.target_driver import TargetDriver
+from rmm_envs.systems.cartpole.guarded import CARTPOLE_K
 
 
 def push_right(obs):
@@ -19,7 +20,7 @@ def push_right(obs):
 
 
 def balance(obs):  # the examples' safe default at the centre
-    return TargetTask(CARTPOLE_K, 0, 2, 0.02, 0.5, 1.0, 1.0, 1.0, 0.2, 1.0, True).balance(obs)
+    return TargetDriver(CARTPOLE_K, 0, 2, 0.02, 0.5, 1.0, 1.0, 1.0, 0.2, 1.0, True).balance(obs)
 
 
 def never(obs):

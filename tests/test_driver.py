@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from rmm_envs.drivers.dubins4d import CLFDriver, desired_heading
+from rmm_envs.systems.dubins4d.driver import CLFDriver, desired_heading
 from tests.qp_reference import solve_qp_dense
 
 
@@ -71,7 +71,7 @@ def test_bad_bounds():
 from hypothesis import assume, example, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
-from rmm_envs.drivers.dubins4d import DriverParams, clf_qp  # noqa: E402
+from rmm_envs.systems.dubins4d.driver import DriverParams, clf_qp  # noqa: E402
 
 _coord = st.floats(-12, 12)
 _gain = st.floats(0.0, 5.0)

@@ -1,6 +1,6 @@
 """What the reckless drivers promise, as properties: the Dubins4D CLF-QP driver
-(``rmm_envs/drivers/dubins4d.py``) keeps every barrier row it claims and reads the heading modulo a turn;
-the maze's pursuit driver (``rmm_envs/drivers/maze.py``) turns the short way to its target.
+(``rmm_envs/systems/dubins4d/driver.py``) keeps every barrier row it claims and reads the heading modulo a turn;
+the maze's pursuit driver (``rmm_envs/systems/maze/driver.py``) turns the short way to its target.
 
 Every Dubins4D result depends on the closed-form driver; its numbers feed the env only, so a
 wrong bound would pass any test that only runs an episode.  These tests read the numbers."""
@@ -15,8 +15,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rmm_envs.drivers.dubins4d import CLFDriver, DriverParams, clf_qp
-from rmm_envs.drivers.maze import PursuitDriver
+from rmm_envs.systems.dubins4d.driver import CLFDriver, DriverParams, clf_qp
+from rmm_envs.systems.maze.driver import PursuitDriver
 
 finite = dict(allow_nan=False, allow_infinity=False)
 coord = st.floats(-20.0, 20.0, **finite)
@@ -295,7 +295,7 @@ def test_pursuit_target_moves_with_the_path(dx, dy, x, y):
 def test_cell_path_reads_passages_as_indices_and_names_an_unreachable_cell():
     from types import SimpleNamespace
 
-    from rmm_envs.drivers.maze import cell_path
+    from rmm_envs.systems.maze.driver import cell_path
 
     maze = SimpleNamespace(
         cells=np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]]), passages=[[0.0, 1.0], [2.0, 1.0]]
@@ -336,7 +336,7 @@ def test_osqp_agrees_with_the_closed_form_to_its_tolerance_on_random_states():
 def test_branch_cut_heuristic_edges():
     """The literal heuristic's inequalities: strict about the heading, inclusive about the goal's
     bearing (atan2 returns pi exactly for a goal straight behind on the -x axis)."""
-    from rmm_envs.drivers.dubins4d import desired_heading
+    from rmm_envs.systems.dubins4d.driver import desired_heading
 
     assert desired_heading(-math.pi, 1.0) == 1.0  # theta = -pi is not in (-pi, 0)
     assert desired_heading(-0.5, math.pi) == -1.5 * math.pi  # the bearing pi is in [pi - 0.5, pi]

@@ -16,11 +16,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from rmm_envs.envs.dubins4d_map import Dubins4DMapEnv, example_map_path
 from rmm_envs.risk import RiskEstimator
-from rmm_envs.worlds.circles import contact_params_each, points_in_circles, ray_cast
-from rmm_envs.worlds.pymunk_world import PymunkWorld
-from rmm_envs.worlds.shape_map import MapError, load_map, triangulate
+from rmm_envs.systems.dubins4d.circles import contact_params_each, points_in_circles, ray_cast
+from rmm_envs.systems.dubins4d_map.env import Dubins4DMapEnv, example_map_path
+from rmm_envs.systems.dubins4d_map.pymunk_world import PymunkWorld
+from rmm_envs.systems.dubins4d_map.shape_map import MapError, load_map, triangulate
 
 
 def circle_map(rng, k):

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from rmm_envs.dynamics.dubins4d import Dubins4D, wrap_angle
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D, wrap_angle
 
 SYS = Dubins4D()
 

@@ -7,7 +7,7 @@ from gymnasium.utils.env_checker import check_env
 
 import rmm_envs  # noqa: F401
 from rmm_envs.clocks import FixedLatencyClock
-from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
 
 INACTIVE = {"active_ctrl": 0, "turnrate_ctrl": np.zeros(1, np.float32), "accel_ctrl": np.zeros(1, np.float32)}
 

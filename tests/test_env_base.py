@@ -8,11 +8,12 @@ import pytest
 
 import rmm_envs  # noqa: F401
 from rmm_envs.envs.base import check_arguments, draw_until, option_vector, rejection_sample
-from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
-from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
-from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
 from rmm_envs.risk import LabelledEnv, RiskScene, check_labelled_env, check_scene
-from rmm_envs.scenes import Dubins4DScene, MazeScene
+from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.scene import Dubins4DScene
+from rmm_envs.systems.maze.env import Dubins3DMazeEnv
+from rmm_envs.systems.maze.scene import MazeScene
+from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv
 
 
 @pytest.mark.parametrize("env_id", ["Dubins4DGuarded-v0", "Dubins4DParallel-v0", "Dubins3DMaze-v0", "QuadrotorRoom-v0"])
@@ -68,9 +69,9 @@ def test_the_checker_names_the_env_and_each_ill_formed_hook():
 
 
 def test_scene_protocol_asks_only_for_what_the_estimator_uses():
-    import rmm_envs.envs.dubins4d as d4
     import rmm_envs.risk as risk
     import rmm_envs.risk.protocol as protocol
+    import rmm_envs.systems.dubins4d.env as d4
 
     for module, old in (
         (risk, "System"),

@@ -17,7 +17,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rmm_envs.drivers.dubins4d import desired_heading
+from rmm_envs.systems.dubins4d.driver import desired_heading
 from rmm_guardians.cbf.barrier import BarrierRows, HOCBFParams, any_row_active, barrier_rows
 from rmm_guardians.cbf.qp import BarrierQP
 from rmm_guardians.hj.grid import Grid
@@ -245,7 +245,7 @@ def test_direct_osqp_calls_give_what_the_wrapper_gives():
     st.one_of(st.just(0.0), st.floats(0, 6)),
 )
 def test_state_after_is_states_at_for_one_state_bit_for_bit(x, y, th, v, w, a, t):
-    from rmm_envs.dynamics.dubins4d import Dubins4D
+    from rmm_envs.systems.dubins4d.dynamics import Dubins4D
 
     d = Dubins4D()
     s, u = np.array([x, y, th, v]), np.array([w, a])

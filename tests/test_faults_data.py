@@ -15,10 +15,10 @@ import pyarrow.parquet as pq
 import pytest
 
 import rmm_envs  # noqa: F401
-from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
 from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 from rmm_envs.risk.datagen import main as datagen_main
 from rmm_envs.risk.estimator import MAX_TREE_NODES, RiskEstimator, tree_nodes
+from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
 
 TINY = dict(configs=4, samples_per_config=6, branches=4, depth=2, configs_per_shard=2, seed=11)
 
@@ -254,8 +254,8 @@ def test_dubins4d_explicit_options_obey_generation_rules_and_errors_blame_only_g
 
 
 def test_maze_state_option_gets_a_maze_clear_of_it():
-    from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
-    from rmm_envs.worlds.mazes import generate_maze
+    from rmm_envs.systems.maze.env import Dubins3DMazeEnv
+    from rmm_envs.systems.maze.mazes import generate_maze
 
     env = Dubins3DMazeEnv()
     state = [375.0, 437.5, 0.0]  # on the side shared by two cells: a wall in some mazes, not in others
@@ -271,7 +271,7 @@ def test_maze_state_option_gets_a_maze_clear_of_it():
 
 
 def test_quadrotor_state_option_gets_a_room_clear_of_it():
-    from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
+    from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv
 
     env = QuadrotorRoomEnv()
     try:
@@ -303,8 +303,8 @@ def test_dubins4d_non_finite_parameters_refused(kwargs, name):
 
 
 def test_maze_and_quadrotor_non_finite_parameters_refused():
-    from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
-    from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
+    from rmm_envs.systems.maze.env import Dubins3DMazeEnv
+    from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv
 
     with pytest.raises(ValueError, match="speed must be a finite number"):
         Dubins3DMazeEnv(speed=math.inf)

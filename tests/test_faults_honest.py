@@ -359,8 +359,8 @@ def _hj_guardian(cache_dir):
     import numpy as np
 
     from rmm_envs.autonomy import GuardianActionSpace
-    from rmm_envs.dynamics.dubins4d import Dubins4D
-    from rmm_envs.envs.dubins4d import CONTROLS
+    from rmm_envs.systems.dubins4d.dynamics import Dubins4D
+    from rmm_envs.systems.dubins4d.env import CONTROLS
     from rmm_guardians.hj.grid import Grid
     from rmm_guardians.hj.guardian import HJGuardian
 
@@ -598,7 +598,7 @@ def _make_map_env(spec):
 
 @pytest.mark.parametrize("radius", [1e150, 1e300, 10**400])
 def test_a_map_number_too_large_for_the_geometry_is_refused(tmp_path, radius):
-    from rmm_envs.worlds.shape_map import MapError
+    from rmm_envs.systems.dubins4d_map.shape_map import MapError
 
     path = tmp_path / "big.json"
     path.write_text(f'[{{"circle": [0, 0, {radius}]}}]')
@@ -609,8 +609,8 @@ def test_a_map_number_too_large_for_the_geometry_is_refused(tmp_path, radius):
 
 
 def test_map_files_bounded_in_bytes_and_depth_before_they_are_parsed(tmp_path):
+    from rmm_envs.systems.dubins4d_map.shape_map import MapError
     from rmm_envs.worlds.bounds import MAX_MAP_BYTES
-    from rmm_envs.worlds.shape_map import MapError
 
     big = tmp_path / "big.json"
     big.write_text('[{"circle": [0, 0, 1]}' + " " * MAX_MAP_BYTES + "]")
@@ -637,8 +637,8 @@ def _star(n, scale=3.0):
 def test_a_polygon_of_thousands_of_vertices_builds_in_seconds_and_larger_ones_are_refused():
     import time
 
+    from rmm_envs.systems.dubins4d_map.shape_map import MapError
     from rmm_envs.worlds.bounds import MAX_POLYGON_VERTICES
-    from rmm_envs.worlds.shape_map import MapError
 
     t0 = time.perf_counter()
     env = _make_map_env(
@@ -659,7 +659,7 @@ def test_the_vectorised_polygon_checks_agree_with_the_scalar_tests():
     and repeated points) judged by the vectorised test equals the scalar one."""
     import numpy as np
 
-    from rmm_envs.worlds.shape_map import _segments_meet, _segments_meet_many
+    from rmm_envs.systems.dubins4d_map.shape_map import _segments_meet, _segments_meet_many
 
     rng = np.random.default_rng(3)
     for _ in range(200):
@@ -720,7 +720,7 @@ def test_maze_sizes_refused_before_anything_is_allocated(rows):
     import numpy as np
 
     import rmm_envs  # noqa: F401
-    from rmm_envs.worlds.mazes import generate_maze
+    from rmm_envs.systems.maze.mazes import generate_maze
 
     t0 = time.perf_counter()
     with pytest.raises(ValueError, match=r"maze_rows must be an integer in \[2, 32\]"):

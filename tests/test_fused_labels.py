@@ -1,7 +1,7 @@
 """The fused risk-labelling loops give their numpy twins' bits (issue 54, item 4).
 
 Each compiled path test of :mod:`rmm_envs.worlds.path_kernels` and
-:mod:`rmm_envs.worlds.room_kernels` equals the batched numpy test it replaces, each scene's
+:mod:`rmm_envs.systems.quadrotor.room_kernels` equals the batched numpy test it replaces, each scene's
 ``propagate_failed`` (:mod:`rmm_envs.scenes.branch_kernels`) equals ``path_failed`` of
 ``propagate`` with the paths' last states, signed zeros included, and the estimator's labels are
 the same bits with ``fused=True`` (the default) and ``fused=False`` (the separate calls).  Inputs
@@ -15,21 +15,24 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rmm_envs.dynamics import dubins4d as d4
-from rmm_envs.dynamics.dubins3d import Dubins3D
-from rmm_envs.dynamics.dubins4d import Dubins4D
-from rmm_envs.dynamics.quadrotor_control import CommandController
-from rmm_envs.dynamics.rotations import quat_to_rot
 from rmm_envs.risk import RiskEstimator
 from rmm_envs.risk.estimator import uniform_box
-from rmm_envs.scenes import Dubins4DScene, MazeScene, QuadrotorCommandScene, QuadrotorScene, SceneBase
+from rmm_envs.scenes import SceneBase
 from rmm_envs.scenes import branch_kernels as bk
-from rmm_envs.worlds.circles import paths_hit_circles
-from rmm_envs.worlds.mazes import generate_maze
+from rmm_envs.systems.dubins4d import dynamics as d4
+from rmm_envs.systems.dubins4d.circles import paths_hit_circles
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
+from rmm_envs.systems.dubins4d.scene import Dubins4DScene
+from rmm_envs.systems.maze.dynamics import Dubins3D
+from rmm_envs.systems.maze.mazes import generate_maze
+from rmm_envs.systems.maze.scene import MazeScene
+from rmm_envs.systems.quadrotor.control import CommandController
+from rmm_envs.systems.quadrotor.room_collision import RoomCollision, _box_sd
+from rmm_envs.systems.quadrotor.room_kernels import room_shape_distance, room_states_failed
+from rmm_envs.systems.quadrotor.rooms import generate_room
+from rmm_envs.systems.quadrotor.rotations import quat_to_rot
+from rmm_envs.systems.quadrotor.scene import QuadrotorCommandScene, QuadrotorScene
 from rmm_envs.worlds.path_kernels import circle_path_hit, maze_path_hit_near, pairwise_sum
-from rmm_envs.worlds.room_collision import RoomCollision, _box_sd
-from rmm_envs.worlds.room_kernels import room_shape_distance, room_states_failed
-from rmm_envs.worlds.rooms import generate_room
 
 
 def _bits(a) -> np.ndarray:

@@ -7,8 +7,8 @@ import pytest
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
-from rmm_envs.dynamics.dubins4d import Dubins4D, FullBraking
-from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D, FullBraking
+from rmm_envs.systems.dubins4d.env import CONTROLS, observation_layout
 from rmm_guardians import CallableGuardian, SB3Guardian, available_guardians, make_guardian
 from rmm_guardians.baselines import BrakesGuardian, InactiveGuardian, RandomGuardian
 from rmm_guardians.wrapped import to_guardian_action

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.dynamics.dubins4d import Dubins4D
-from rmm_envs.envs.dubins4d import CONTROLS
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
+from rmm_envs.systems.dubins4d.env import CONTROLS
 from rmm_guardians.hj.dynamics import DoubleIntegrator1D, Dubins4DHJ, Translation
 from rmm_guardians.hj.grid import Grid
 from rmm_guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
@@ -453,7 +453,7 @@ def test_default_grid_value_against_the_exact_propagator(circle_guardians):
     # propagator: from a gap of 4 m or more some constant control keeps clear for 4 s, so those
     # states must be safe (HJ may also use time-varying controls, so its safe set is larger);
     # from 0.5-1 m nothing escapes (every constant control collides, and braking needs 4 m).
-    from rmm_envs.dynamics.dubins4d import Dubins4D
+    from rmm_envs.systems.dubins4d.dynamics import Dubins4D
 
     dyn = Dubins4D()
     controls = np.array([[u1, u2] for u1 in np.linspace(-0.25, 0.25, 11) for u2 in np.linspace(-0.5, 0.5, 11)])
@@ -473,7 +473,7 @@ def closed_loop(guard, box, s0, *, latency: int, flip_turn: bool = False, lap: f
     env's exact dynamics.  A reckless driver holds its heading and speed (``u = 0``); the
     guardian's action from the state at a step acts ``latency`` laps later (1: the
     parallel-autonomy loop, 0: at once).  ``flip_turn`` negates the guardian's turn rate."""
-    from rmm_envs.dynamics.dubins4d import Dubins4D, wrap_angle
+    from rmm_envs.systems.dubins4d.dynamics import Dubins4D, wrap_angle
 
     dyn = Dubins4D()
     guard.reset(seed=0, privileged=lambda: box, action_space=SPACE)

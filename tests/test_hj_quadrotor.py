@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import rmm_envs  # noqa: F401
-from rmm_envs.envs.quadrotor_room_parallel import QuadrotorRoomGuardedEnv
-from rmm_envs.worlds.room_collision import BOUND
-from rmm_envs.worlds.rooms import Room
+from rmm_envs.systems.quadrotor.guarded import QuadrotorRoomGuardedEnv
+from rmm_envs.systems.quadrotor.room_collision import BOUND
+from rmm_envs.systems.quadrotor.rooms import Room
 from rmm_guardians import make_guardian
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.grid import Grid
@@ -192,7 +192,7 @@ def test_bad_input_named(solved, space):
 
 
 def test_dispatch_by_spaces(space):
-    from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
+    from rmm_envs.systems.maze.guarded import Dubins3DMazeGuardedEnv
 
     HJGuardian().check_spaces(None, space)  # the quadrotor: applies
     with pytest.raises(ValueError, match="hj-paper.*Dubins4D envs only"):

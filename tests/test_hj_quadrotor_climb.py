@@ -10,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from rmm_envs.dynamics.rotations import quat_from_euler
-from rmm_envs.worlds.room_collision import BOUND
-from rmm_envs.worlds.rooms import Room
+from rmm_envs.systems.quadrotor.room_collision import BOUND
+from rmm_envs.systems.quadrotor.rooms import Room
+from rmm_envs.systems.quadrotor.rotations import quat_from_euler
 from rmm_guardians import make_guardian
 from rmm_guardians.hj.quadrotor import QuadrotorHJGuardian
 from rmm_guardians.hj.quadrotor_climb import DESCEND, SETTLE, Climb, ClimbPlan

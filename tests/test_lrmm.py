@@ -10,8 +10,8 @@ import pytest
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
-from rmm_envs.dynamics.dubins4d import Dubins4D
-from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
+from rmm_envs.systems.dubins4d.env import CONTROLS, observation_layout
 from rmm_guardians.lrmm.decision import decision_path, read_decision
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel, default_model_path, load_model

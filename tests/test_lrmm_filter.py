@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rmm_envs.autonomy import ObservationLayout
-from rmm_envs.envs.dubins4d import CONTROLS, observation_layout
+from rmm_envs.systems.dubins4d.env import CONTROLS, observation_layout
 from rmm_guardians.lrmm.decision import decision_path, read_decision, set_decision
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
-from rmm_envs.envs.dubins3d_maze_parallel import observation_layout
+from rmm_envs.systems.maze.guarded import observation_layout
 from rmm_guardians.lrmm.guardian import REMEDY, LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel
 from rmm_guardians.lrmm.strategies import RayTurn

@@ -19,7 +19,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
+from rmm_envs.systems.maze.guarded import Dubins3DMazeGuardedEnv
 from rmm_guardians.cbf.maze import MazeCBFGuardian
 from tests.test_maze_guardians import reset_at
 

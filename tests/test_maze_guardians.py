@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
-from rmm_envs.worlds.mazes import Maze
+from rmm_envs.systems.maze.guarded import Dubins3DMazeGuardedEnv
+from rmm_envs.systems.maze.mazes import Maze
 from rmm_guardians import make_guardian
 from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from rmm_guardians.cbf.maze import MazeCBFGuardian, wall_rows
@@ -99,7 +99,7 @@ def test_wall_rows_hand_computed():
 )
 def test_barrier_rate_matches_the_flow(y, psi, u, x0):
     # the row says dB/dt = (h - p1 B) - G u; compare with B along the exact arc (side and cap regions)
-    from rmm_envs.dynamics.dubins3d import Dubins3D
+    from rmm_envs.systems.maze.dynamics import Dubins3D
 
     dt = 1e-4
     B0, G, h = (np.asarray(a).reshape(-1)[0] for a in wall_rows([x0, y, psi], 10.0, WALL, 1.0, 0.0, 1.0, 0.1))

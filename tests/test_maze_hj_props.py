@@ -24,8 +24,8 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv
-from rmm_envs.worlds.mazes import Maze
+from rmm_envs.systems.maze.guarded import Dubins3DMazeGuardedEnv
+from rmm_envs.systems.maze.mazes import Maze
 from rmm_guardians.hj.maze import MazeHJGuardian, maze_grid, wall_target
 from rmm_guardians.hj.maze_lookahead import COEF, manoeuvres, path_clearances
 from tests.test_maze_guardians import corridor

@@ -10,12 +10,12 @@ from gymnasium.utils.env_checker import check_env
 import rmm_envs  # noqa: F401
 from rmm_bench.cli import main as bench_main
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.drivers.maze import PursuitDriver, cell_distances, cell_path
-from rmm_envs.dynamics.dubins3d import Dubins3D
-from rmm_envs.dynamics.dubins4d import SERIES_COEFFICIENTS
-from rmm_envs.envs.dubins3d_maze_parallel import Dubins3DMazeGuardedEnv, TurnFromNearerWall, observation_layout
-from rmm_envs.worlds.maze_kernels import dubins_path, maze_path_hit, maze_rays
-from rmm_envs.worlds.mazes import Maze, generate_maze
+from rmm_envs.systems.dubins4d.dynamics import SERIES_COEFFICIENTS
+from rmm_envs.systems.maze.driver import PursuitDriver, cell_distances, cell_path
+from rmm_envs.systems.maze.dynamics import Dubins3D
+from rmm_envs.systems.maze.guarded import Dubins3DMazeGuardedEnv, TurnFromNearerWall, observation_layout
+from rmm_envs.systems.maze.maze_kernels import dubins_path, maze_path_hit, maze_rays
+from rmm_envs.systems.maze.mazes import Maze, generate_maze
 from rmm_guardians import make_guardian
 from rmm_guardians.baselines import BrakesGuardian
 
@@ -362,7 +362,7 @@ def test_rmm_bench_set_runs_what_applies_and_lists_the_rest(tmp_path, capsys):
 
 
 def test_safe_default_contract_and_dubins4d_braking():
-    from rmm_envs.dynamics.dubins4d import FullBraking
+    from rmm_envs.systems.dubins4d.dynamics import FullBraking
 
     with pytest.raises(TypeError, match="SafeDefault"):
         GuardianActionSpace(("turnrate_ctrl",), [-1.0], [1.0], safe_default="brake")

@@ -8,9 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from rmm_envs.dynamics.dubins3d import Dubins3D
-from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
-from rmm_envs.worlds.mazes import MAZE_KINDS, Maze, _seg_point_sq, generate_maze, render_occupancy
+from rmm_envs.systems.maze.dynamics import Dubins3D
+from rmm_envs.systems.maze.env import Dubins3DMazeEnv
+from rmm_envs.systems.maze.mazes import MAZE_KINDS, Maze, _seg_point_sq, generate_maze, render_occupancy
 from rmm_envs.wrappers import RiskLabel
 
 

@@ -4,7 +4,7 @@ import pytest
 
 import rmm_envs  # noqa: F401
 from rmm_envs.clocks import CPUClock, FixedLatencyClock, ManualClock, WallClock, make_clock
-from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
 from rmm_envs.wrappers import NonBlockingStepping
 
 OPTS = {"state": [0, 0, 0, 1.0], "goal": [9, 9, 0.5], "obstacles": [[-9, -9, 1.0]]}

@@ -20,7 +20,7 @@ SPEC_OPENINGS = {
     "rmm_envs/adapters/classic_control.py": "each adapter's spec: state, failure, controls, horizon, sampler, observation",
     "rmm_envs/adapters/mujoco_envs.py": "each adapter's spec: state, failure, controls, horizon, sampler, observation",
     "rmm_envs/envs/driven.py": "guarded()'s spec: every argument, the controls, stepping, outcomes, labels",
-    "rmm_envs/envs/dubins4d_vector.py": "the vector env's spec: spaces, autoreset, infos, clock, arguments",
+    "rmm_envs/systems/dubins4d/vector.py": "the vector env's spec: spaces, autoreset, infos, clock, arguments",
 }
 
 
@@ -46,7 +46,7 @@ def test_the_counter_reads_the_docstring_only(tmp_path):
 
 def test_module_openings_are_short():
     spec = spec_modules()
-    assert "rmm_envs.envs.dubins4d" in spec and len(spec) >= 7
+    assert "rmm_envs.systems.dubins4d.env" in spec and len(spec) >= 7
     long = {}
     for pkg in ("guardians", "rmm_envs"):
         for path in sorted((ROOT / pkg).rglob("*.py")):

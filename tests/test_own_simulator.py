@@ -18,7 +18,8 @@ import pytest
 
 import rmm_envs  # noqa: F401
 from rmm_envs.envs.driven import SIMULATOR_HOOKS, guarded, hooks_table, parallel
-from rmm_envs.envs.driven_examples import CARTPOLE_K, TargetTask
+from rmm_envs.envs.target_driver import TargetDriver
+from rmm_envs.systems.cartpole.guarded import CARTPOLE_K
 
 ROOT = Path(__file__).resolve().parent.parent
 TUTORIAL = ROOT / "docs" / "tutorials" / "own-simulator.md"
@@ -183,7 +184,7 @@ def test_step_dt_is_the_step_of_a_simulator_or_env_without_dt():
 
 
 def balance(obs):
-    return TargetTask(CARTPOLE_K, 0, 2, 0.02, 0.5, 1.0, 1.0, 1.0, 0.2, 1.0, True).balance(obs)
+    return TargetDriver(CARTPOLE_K, 0, 2, 0.02, 0.5, 1.0, 1.0, 1.0, 0.2, 1.0, True).balance(obs)
 
 
 def test_parallel_steps_step_dt_per_base_step():

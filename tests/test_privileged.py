@@ -89,7 +89,7 @@ def test_the_state_guard_counts_what_it_refuses():
 @pytest.mark.parametrize("cls", [CBFGuardian, HJGuardian])
 def test_a_nan_state_brakes_fully_and_is_counted(cls, tmp_path):
     from rmm_envs.autonomy import GuardianActionSpace
-    from rmm_envs.dynamics.dubins4d import CONTROLS, Dubins4D
+    from rmm_envs.systems.dubins4d.dynamics import CONTROLS, Dubins4D
 
     space = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind="dubins4d")
     g = cls(cache_dir=tmp_path, grid_n=(9, 9, 8, 5), horizon=0.5) if cls is HJGuardian else cls(reference="clf")

@@ -16,9 +16,9 @@ except ImportError as e:
 from gymnasium.utils.env_checker import check_env
 
 import rmm_envs  # noqa: F401
-from rmm_envs.dynamics.quadrotor import QUADROTOR
-from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
-from rmm_envs.worlds.rooms import generate_room
+from rmm_envs.systems.quadrotor.body import QUADROTOR
+from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv
+from rmm_envs.systems.quadrotor.rooms import generate_room
 
 EMPTY = {
     "n_rectangles": 1,
@@ -168,8 +168,8 @@ def test_numpy_propagator_reproduces_pybullet():
     """The batched propagator the fast labeller needs, against PyBullet itself on random branches."""
     import pybullet as p
 
-    from rmm_envs.dynamics.quadrotor import Quadrotor
-    from rmm_envs.envs.quadrotor_room import _urdf_path, push_body
+    from rmm_envs.systems.quadrotor.body import Quadrotor
+    from rmm_envs.systems.quadrotor.env import _urdf_path, push_body
 
     c = p.connect(p.DIRECT)
     try:
@@ -208,7 +208,7 @@ def test_numpy_propagator_reproduces_pybullet():
 
 
 def test_hover_in_the_numpy_propagator():
-    from rmm_envs.dynamics.quadrotor import Quadrotor
+    from rmm_envs.systems.quadrotor.body import Quadrotor
 
     quad = Quadrotor()
     s = np.array([[1.0, 2.0, 3.0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0]])
@@ -298,7 +298,7 @@ def test_shipped_quadrotor_model():
 def test_the_bounding_sphere_holds_the_object_and_touches_it(shape, size, direction):
     """No point of the bounding sphere lies inside the object (in its own frame, so in any
     orientation), and the sphere touches the object at a corner (box) or on a rim (cylinder)."""
-    from rmm_envs.worlds.rooms import bounding_radius
+    from rmm_envs.systems.quadrotor.rooms import bounding_radius
     from rmm_guardians.hj.room import _object_sd
 
     size = np.array(size[: {"box": 3, "cylinder": 2, "sphere": 1}[shape]])

@@ -10,11 +10,11 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.dynamics.quadrotor_control import ClosedLoopQuadrotor, CommandController
-from rmm_envs.dynamics.rotations import quat_from_euler
-from rmm_envs.envs.quadrotor_room_parallel import CONTROLS, QuadrotorRoomGuardedEnv
-from rmm_envs.worlds.room_collision import BOUND
-from rmm_envs.worlds.rooms import Room
+from rmm_envs.systems.quadrotor.control import ClosedLoopQuadrotor, CommandController
+from rmm_envs.systems.quadrotor.guarded import CONTROLS, QuadrotorRoomGuardedEnv
+from rmm_envs.systems.quadrotor.room_collision import BOUND
+from rmm_envs.systems.quadrotor.rooms import Room
+from rmm_envs.systems.quadrotor.rotations import quat_from_euler
 from rmm_guardians import make_guardian
 from rmm_guardians.cbf.quadrotor import QuadrotorCBFGuardian
 from rmm_guardians.cbf.quadrotor_rows import BOX, CYLINDER, FLOOR, SPHERE, command_rows, room_shapes, shape_distances
@@ -348,7 +348,7 @@ def test_bad_input_is_named(env):
     ):
         with pytest.raises(ValueError, match=msg):
             QuadrotorCBFGuardian(**kwargs)
-    from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
+    from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
 
     d4 = Dubins4DCirclesEnv()
     with pytest.raises(ValueError, match=r"guardian 'cbf' \(quadrotor\) models the quadrotor's velocity command"):

@@ -1,5 +1,5 @@
 """What the quadrotor's cascaded controller and its reckless pilot promise
-(``rmm_envs/dynamics/quadrotor_control.py``, ``rmm_envs/drivers/quadrotor.py``).
+(``rmm_envs/systems/quadrotor/control.py``, ``rmm_envs/systems/quadrotor/driver.py``).
 
 The controller: each feedback term reads its own state component with the documented sign
 (a hand-computed response to every single-component error at hover), and the closed loop
@@ -15,10 +15,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rmm_envs.drivers.quadrotor import WaypointPilot
-from rmm_envs.dynamics.quadrotor import QUADROTOR
-from rmm_envs.dynamics.quadrotor_control import ClosedLoopQuadrotor, CommandController, heading_of
-from rmm_envs.dynamics.rotations import quat_from_euler, quat_to_rot
+from rmm_envs.systems.quadrotor.body import QUADROTOR
+from rmm_envs.systems.quadrotor.control import ClosedLoopQuadrotor, CommandController, heading_of
+from rmm_envs.systems.quadrotor.driver import WaypointPilot
+from rmm_envs.systems.quadrotor.rotations import quat_from_euler, quat_to_rot
 
 CTRL = CommandController()
 M, G = QUADROTOR.mass, QUADROTOR.gravity
@@ -311,7 +311,7 @@ def test_controller_keeps_its_arguments_and_packs_the_gains_in_the_kernels_order
 
 def test_a_command_outside_the_box_is_clipped_to_it_and_hover_and_level_is_zero():
     from rmm_envs.autonomy import GuardianActionSpace
-    from rmm_envs.dynamics.quadrotor_control import HoverAndLevel
+    from rmm_envs.systems.quadrotor.control import HoverAndLevel
 
     np.testing.assert_array_equal(
         CTRL.wrench(hover(), [9.0, -9.0, 9.0, -9.0]), CTRL.wrench(hover(), [2.0, -2.0, 1.0, -1.0])
@@ -336,7 +336,7 @@ def test_closed_loop_system_box_and_samples():
 @settings(max_examples=40, deadline=None)
 @given(q=st.tuples(*[st.floats(-1.0, 1.0, **finite)] * 4))
 def test_scalar_and_array_yaw_agree_and_read_the_body_x_axis(q):
-    from rmm_envs.dynamics.quadrotor_control import yaw_of
+    from rmm_envs.systems.quadrotor.control import yaw_of
 
     n = math.sqrt(sum(x * x for x in q))
     if n < 0.1:

@@ -11,9 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
-from rmm_envs.drivers.quadrotor import WaypointPilot
-from rmm_envs.dynamics.quadrotor import QUADROTOR, Quadrotor
-from rmm_envs.dynamics.quadrotor_control import (
+from rmm_envs.systems.quadrotor.body import QUADROTOR, Quadrotor
+from rmm_envs.systems.quadrotor.control import (
     ClosedLoopQuadrotor,
     CommandController,
     HoverAndLevel,
@@ -22,11 +21,12 @@ from rmm_envs.dynamics.quadrotor_control import (
     heading_of,
     yaw_of,
 )
-from rmm_envs.dynamics.rotations import quat_from_euler, quat_to_rot
-from rmm_envs.envs.quadrotor_room_parallel import CONTROLS, QuadrotorRoomGuardedEnv, observation_layout
-from rmm_envs.scenes.quadrotor import QuadrotorCommandScene
-from rmm_envs.worlds.room_collision import BOUND, RoomCollision
-from rmm_envs.worlds.rooms import Room
+from rmm_envs.systems.quadrotor.driver import WaypointPilot
+from rmm_envs.systems.quadrotor.guarded import CONTROLS, QuadrotorRoomGuardedEnv, observation_layout
+from rmm_envs.systems.quadrotor.room_collision import BOUND, RoomCollision
+from rmm_envs.systems.quadrotor.rooms import Room
+from rmm_envs.systems.quadrotor.rotations import quat_from_euler, quat_to_rot
+from rmm_envs.systems.quadrotor.scene import QuadrotorCommandScene
 
 CTRL = CommandController()
 M, G = QUADROTOR.mass, QUADROTOR.gravity
@@ -84,7 +84,7 @@ def test_wrench_is_invariant_under_a_yaw_of_the_whole_state(yaw, cmd, vel, roll,
     q0 = quat_from_euler(roll, pitch, 0.3)
     s0 = np.array([0, 0, 1, *q0, *vel, 0.1, -0.2, 0.3])
     Rz = quat_to_rot(quat_from_euler(0, 0, yaw))
-    from rmm_envs.dynamics.rotations import quat_mul
+    from rmm_envs.systems.quadrotor.rotations import quat_mul
 
     s1 = s0.copy()
     s1[3:7] = quat_mul(quat_from_euler(0, 0, yaw), q0)
@@ -631,7 +631,7 @@ def test_generated_rooms_are_those_the_shipped_datasets_were_made_from():
     shipped quadrotor datasets' rooms must not change."""
     import hashlib
 
-    from rmm_envs.worlds.rooms import generate_room
+    from rmm_envs.systems.quadrotor.rooms import generate_room
 
     h = hashlib.sha256()
     for seed in range(10):

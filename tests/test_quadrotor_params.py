@@ -6,9 +6,9 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from rmm_envs.dynamics.quadrotor import QUADROTOR, Quadrotor, QuadrotorParams
-from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv, _urdf_path
-from rmm_envs.worlds import room_collision
+from rmm_envs.systems.quadrotor import room_collision
+from rmm_envs.systems.quadrotor.body import QUADROTOR, Quadrotor, QuadrotorParams
+from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv, _urdf_path
 
 
 def test_urdf_agrees_with_the_parameter_object_exactly():

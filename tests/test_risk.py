@@ -5,9 +5,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from rmm_envs.envs.dubins4d import Dubins4DCirclesEnv
 from rmm_envs.risk import RiskEstimator, check_scene, cvar, get_metric, worst_case
-from rmm_envs.scenes import Dubins4DScene
+from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.scene import Dubins4DScene
 from tests.toy_systems import Line1D
 
 

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rmm_envs.dynamics.rotations import quat_from_euler, quat_mul, quat_to_rot
+from rmm_envs.systems.quadrotor.rotations import quat_from_euler, quat_mul, quat_to_rot
 
 S = math.sin(math.pi / 4)  # sin and cos of half a right angle
 

@@ -10,10 +10,11 @@ import math
 
 import numpy as np
 
-from rmm_envs.doomed import DUBINS4D_METHOD, DUBINS4D_SEGMENTS, MAZE_SEGMENTS, dubins4d_escapes, maze_escapes
-from rmm_envs.dynamics import Dubins4D
-from rmm_envs.dynamics.dubins3d import Dubins3D
-from rmm_envs.worlds.mazes import Maze
+from rmm_envs.systems.dubins4d.doomed import DUBINS4D_METHOD, DUBINS4D_SEGMENTS, dubins4d_escapes
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
+from rmm_envs.systems.maze.doomed import MAZE_SEGMENTS, maze_escapes
+from rmm_envs.systems.maze.dynamics import Dubins3D
+from rmm_envs.systems.maze.mazes import Maze
 
 CAR = Dubins4D()  # turn rate within +-0.25 rad/s, acceleration within +-0.5 m/s^2
 FAR = (50.0, 50.0, 0.5)

@@ -7,13 +7,13 @@ import math
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from rmm_envs.dynamics import dubins4d
+from rmm_envs.systems.dubins4d import dynamics as dubins4d
 
 ANGLE = st.floats(-math.pi, math.pi, allow_nan=False)
 
 
 def test_desired_heading_is_compiled_once_and_used_by_the_driver_and_the_cbf_rows():
-    from rmm_envs.drivers import dubins4d as driver
+    from rmm_envs.systems.dubins4d import driver
     from rmm_guardians.cbf import barrier
 
     assert barrier._desired_heading is driver._desired_heading is dubins4d.desired_heading_compiled

@@ -7,7 +7,7 @@ from gymnasium.utils.env_checker import data_equivalence
 from gymnasium.vector import AutoresetMode
 
 import rmm_envs  # noqa: F401
-from rmm_envs.envs.dubins4d_vector import Dubins4DCirclesVectorEnv
+from rmm_envs.systems.dubins4d.vector import Dubins4DCirclesVectorEnv
 
 ID = "Dubins4DGuarded-v0"
 

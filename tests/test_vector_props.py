@@ -1,4 +1,4 @@
-"""The native vector env never changes an array after returning it (``rmm_envs/envs/dubins4d_vector.py``).
+"""The native vector env never changes an array after returning it (``rmm_envs/systems/dubins4d/vector.py``).
 
 RL libraries keep the observation arrays they are given (rollout buffers, ``final_obs`` of the
 previous step, a ``NormalizeObservation`` running statistic): an env that writes into an array
@@ -14,8 +14,8 @@ from gymnasium.vector import AutoresetMode
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rmm_envs.envs.dubins4d_vector import Dubins4DCirclesVectorEnv
 from rmm_envs.envs.guarded import EPISODE_KEY
+from rmm_envs.systems.dubins4d.vector import Dubins4DCirclesVectorEnv
 
 N = 4
 

@@ -480,8 +480,8 @@ def test_the_dubins4d_views_draw_the_obstacles_of_the_collision_check_and_the_ca
 def _convex_projection(obj: dict, pts: np.ndarray, axis: int) -> np.ndarray:
     """``(N,)`` bool: points ``(N, 2)`` of the plane without ``axis`` (z: top, y: side) lie in the
     shape's projection along ``axis`` (its signed distance, minimised over that axis, is <= 0)."""
-    from rmm_envs.dynamics.rotations import quat_to_rot
-    from rmm_envs.worlds.rooms import bounding_radius
+    from rmm_envs.systems.quadrotor.rooms import bounding_radius
+    from rmm_envs.systems.quadrotor.rotations import quat_to_rot
 
     pos, R, size = np.asarray(obj["pos"], float), quat_to_rot(np.asarray(obj["quat"], float)), np.asarray(obj["size"])
     reach = bounding_radius(obj["shape"], size)
@@ -507,8 +507,8 @@ def _convex_projection(obj: dict, pts: np.ndarray, axis: int) -> np.ndarray:
 def test_the_quadrotor_views_draw_the_rooms_boxes_and_objects_and_the_body_where_it_is(envs):
     from PIL import ImageDraw
 
-    from rmm_envs.views.quadrotor import BODY_RADIUS, FLOOR, OBJECT_EDGE, OBJECT_FILL, WALL_FILL
-    from rmm_envs.worlds.rooms import bounding_radius
+    from rmm_envs.systems.quadrotor.rooms import bounding_radius
+    from rmm_envs.systems.quadrotor.view import BODY_RADIUS, FLOOR, OBJECT_EDGE, OBJECT_FILL, WALL_FILL
 
     env = envs("QuadrotorRoomParallel-v0")
     env.reset(seed=4)

@@ -48,8 +48,8 @@ def riskmap(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from rmm_envs.envs.dubins3d_maze import Dubins3DMazeEnv
-    from rmm_envs.worlds.mazes import render_occupancy
+    from rmm_envs.systems.maze.env import Dubins3DMazeEnv
+    from rmm_envs.systems.maze.mazes import render_occupancy
 
     env = gym.make("Dubins3DMaze-v0", maze_kind=args.kind).unwrapped
     if not isinstance(env, Dubins3DMazeEnv):
@@ -107,7 +107,7 @@ def quadrisk(args: argparse.Namespace) -> int:
     import matplotlib.pyplot as plt
     import pybullet as p
 
-    from rmm_envs.envs.quadrotor_room import QuadrotorRoomEnv
+    from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv
     from rmm_guardians.lrmm.model import LRMMModel, default_model_path
 
     env = gym.make("QuadrotorRoom-v0", render_mode="rgb_array").unwrapped

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from rmm_envs.dynamics.dubins4d import desired_heading_compiled as _desired_heading
+from rmm_envs.systems.dubins4d.dynamics import desired_heading_compiled as _desired_heading
 
 njit: Callable[..., Any] | None  # numba's, or None where numba is missing
 try:
@@ -83,7 +83,7 @@ def barrier_rows(state, obstacles: np.ndarray, radii: np.ndarray, goal: np.ndarr
         LgLf b = [2 v ((y - y_i) cos th - (x - x_i) sin th),  2 ((x - x_i) cos th + (y - y_i) sin th)]
         Lf^2 b + LgLf b . u + p1 Lf b + p2 (Lf b + p1 b) >= 0        (linear class-K, p1, p2)
 
-    The heading CLF is the driver's (:func:`rmm_envs.drivers.dubins4d.clf_qp`); the speed CLF
+    The heading CLF is the driver's (:func:`rmm_envs.systems.dubins4d.driver.clf_qp`); the speed CLF
     steers toward ``v_d = min((d/2)^2, d/2)`` with ``V_v = (v - v_d)^2`` (the original wrote
     ``(v - v_d) * 82``, a typo for the square; docs/original-code.md, item 13)."""
     return BarrierRows(obstacles, radii, goal, prm)(state)

@@ -20,7 +20,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from rmm_envs.dynamics.dubins3d import CONTROLS
+from rmm_envs.systems.maze.dynamics import CONTROLS
 from rmm_guardians._checks import finite, integer
 from rmm_guardians.cbf.backend import QpsolversQP, parse_solver
 from rmm_guardians.privileged import PrivilegedGuardian

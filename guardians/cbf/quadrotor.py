@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from rmm_envs.dynamics.quadrotor_control import CONTROLS, CommandController, body_packed, body_step, command_wrench
-from rmm_envs.worlds.room_collision import BOUND
+from rmm_envs.systems.quadrotor.control import CONTROLS, CommandController, body_packed, body_step, command_wrench
+from rmm_envs.systems.quadrotor.room_collision import BOUND
 from rmm_guardians._checks import finite, integer
 from rmm_guardians.cbf.backend import parse_solver
 from rmm_guardians.cbf.quadrotor_rows import CommandQP, command_rows, room_shapes
@@ -40,7 +40,7 @@ except ImportError:  # pragma: no cover - numba is a dependency; the Python loop
 def _flow(s, cmd, k, body, steps, a, b, u):
     """The body state after ``steps`` physics steps of the controller (gains ``k``) and the body
     (``body``) under the held command ``cmd`` from ``s`` (``a``, ``b``, ``u``: work arrays); the
-    per-step arithmetic of :class:`rmm_envs.dynamics.quadrotor_control.ClosedLoopQuadrotor`."""
+    per-step arithmetic of :class:`rmm_envs.systems.quadrotor.control.ClosedLoopQuadrotor`."""
     for j in range(13):
         a[j] = s[j]
     for _ in range(steps):

@@ -1,6 +1,6 @@
 """The barrier maths of the quadrotor ``cbf``: distances to a generated room, the QP's rows, the QP.
 
-Pure functions of a body state and the episode's room (:class:`rmm_envs.worlds.rooms.Room`);
+Pure functions of a body state and the episode's room (:class:`rmm_envs.systems.quadrotor.rooms.Room`);
 the model, the gains and the margins are derived in :mod:`rmm_guardians.cbf.quadrotor`.  Every part
 of the room (floor, walls, boxes, cylinders, spheres) is one convex shape of a flat table
 (:class:`RoomShapes`); :func:`shape_distances` gives each shape's signed distance and unit
@@ -21,7 +21,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from rmm_envs.dynamics.rotations import quat_to_rot
+from rmm_envs.systems.quadrotor.rotations import quat_to_rot
 from rmm_guardians.cbf.backend import QpsolversQP
 from rmm_guardians.cbf.quiet import quietly
 

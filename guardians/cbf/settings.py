@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from rmm_envs.dynamics.dubins4d import Dubins4D
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
 from rmm_guardians._checks import Settings, finite, integer, number_pair
 from rmm_guardians.cbf.backend import parse_solver
 

@@ -19,7 +19,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from rmm_envs.dynamics.dubins4d import Dubins4D
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
 
 __all__ = [
     "DoubleIntegrator1D",
@@ -72,7 +72,7 @@ def check_dynamics(dynamics) -> HJDynamics:
 
 @dataclass(frozen=True)
 class Dubins4DHJ:
-    """The Dubins4D dynamics (:class:`rmm_envs.dynamics.dubins4d.Dubins4D`) as the solver sees it:
+    """The Dubins4D dynamics (:class:`rmm_envs.systems.dubins4d.dynamics.Dubins4D`) as the solver sees it:
     state ``(x, y, theta, v)``; ``u1`` in ``[-u1_max, u1_max]``, ``u2`` in ``[-u2_max, u2_max]``;
     bounded disturbance ``|d_x|, |d_y| <= d_max`` on the position rates (0 by default, as the
     paper ran); speed held in ``[v_min, v_max]`` as in the environment.

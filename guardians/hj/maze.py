@@ -19,7 +19,8 @@ import math
 
 import numpy as np
 
-from rmm_envs.dynamics.dubins3d import CONTROLS
+from rmm_envs.systems.maze.dynamics import CONTROLS
+from rmm_envs.systems.maze.mazes import cell_of, cell_path
 from rmm_guardians._checks import finite, integer
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ
@@ -165,8 +166,6 @@ class MazeHJGuardian(PrivilegedGuardian):
         hi = np.maximum(w[:, :2].max(0), w[:, 2:].max(0))
         if self.region == "maze" or maze.cells.shape[0] < 2:
             return lo, hi
-        from rmm_envs.worlds.mazes import cell_of, cell_path
-
         path = cell_path(maze, cell_of(maze, state), cell_of(maze, goal))
         a, b = np.asarray(maze.passages[0], dtype=int)
         cell = float(np.hypot(*(maze.cells[a] - maze.cells[b])))

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from rmm_envs.dynamics.dubins4d import SERIES_COEFFICIENTS, segment_position
-from rmm_envs.worlds.maze_kernels import _seg_point_sq
+from rmm_envs.systems.dubins4d.dynamics import SERIES_COEFFICIENTS, segment_position
+from rmm_envs.systems.maze.maze_kernels import _seg_point_sq
 
 njit: Callable[..., Any] | None  # numba's, or None where numba is missing
 try:

@@ -21,8 +21,8 @@ import math
 
 import numpy as np
 
-from rmm_envs.dynamics.quadrotor_control import CONTROLS, CommandController, yaw_of
-from rmm_envs.worlds.room_collision import BOUND
+from rmm_envs.systems.quadrotor.control import CONTROLS, CommandController, yaw_of
+from rmm_envs.systems.quadrotor.room_collision import BOUND
 from rmm_guardians._checks import finite, integer
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ

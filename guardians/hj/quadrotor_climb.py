@@ -20,8 +20,8 @@ import math
 
 import numpy as np
 
-from rmm_envs.worlds.room_collision import BOUND
-from rmm_envs.worlds.rooms import bounding_radius
+from rmm_envs.systems.quadrotor.room_collision import BOUND
+from rmm_envs.systems.quadrotor.rooms import bounding_radius
 from rmm_guardians.hj.room import object_top, room_distance
 
 __all__ = ["Climb", "ClimbPlan"]

@@ -8,10 +8,10 @@ import math
 
 import numpy as np
 
-from rmm_envs.dynamics.rotations import quat_to_rot
 from rmm_envs.portable import arctan2
-from rmm_envs.worlds.room_collision import BOUND
-from rmm_envs.worlds.rooms import bounding_radius
+from rmm_envs.systems.quadrotor.room_collision import BOUND
+from rmm_envs.systems.quadrotor.rooms import bounding_radius
+from rmm_envs.systems.quadrotor.rotations import quat_to_rot
 from rmm_guardians.hj.grid import Grid
 
 __all__ = [

@@ -1,5 +1,6 @@
 """The LRMM models this package ships: :data:`SHIPPED_BY_SYSTEM` (per system of
-:data:`rmm_envs.catalog.SYSTEMS`), :data:`SHIPPED` (the same by env id),
+:data:`rmm_envs.catalog.SYSTEMS`, read from the registration file ``models/shipped.toml``, the one
+place a shipped model names the systems it serves), :data:`SHIPPED` (the same by env id),
 :func:`default_model_path` (the file of one env id and variant) and :func:`models_dir` (their
 folder, where each model's decision file sits beside it).  :mod:`rmm_guardians.lrmm.model`
 re-exports them."""
@@ -12,10 +13,20 @@ from importlib import resources
 from pathlib import Path
 
 import gymnasium as gym
+import tomllib
 
 from rmm_envs.catalog import GUARDED_KINDS, SYSTEMS, current_id
 
-__all__ = ["DEFAULT_ENV", "SHIPPED", "SHIPPED_BY_SYSTEM", "Shipped", "ShippedById", "default_model_path", "models_dir"]
+__all__ = [
+    "DEFAULT_ENV",
+    "REGISTRATION",
+    "SHIPPED",
+    "SHIPPED_BY_SYSTEM",
+    "Shipped",
+    "ShippedById",
+    "default_model_path",
+    "models_dir",
+]
 
 #: the env whose shipped model a guardian built without ``env_id`` or a model reads (the paper's case study)
 DEFAULT_ENV = "Dubins4DGuarded-v0"
@@ -32,41 +43,45 @@ class Shipped:
     inputs: str | None = None
 
 
-_DUBINS4D = Shipped({"paper": "dubins4d.npz", "act": "dubins4d_act.npz"})
-#: The maze car under parallel autonomy reads the maze model (trained on ``Dubins3DMaze-v0``'s 8
-#: rays) on its observation's ``"rays"`` field.
-_MAZE_PARALLEL = Shipped({"act": "dubins3d_maze.npz"}, inputs="rays")
+#: The file, beside the models, that registers each shipped model for the systems it serves.
+REGISTRATION = "shipped.toml"
+_FORMAT = "rmm-lrmm-shipped"
 
-#: The quadrotor under parallel autonomy: ``lrmm`` reads the command model with the
-#: action-conditioned head (``quadrotor_cmd_act.npz``: ``QuadrotorRoomGuarded-v0``'s labels under
-#: random velocity commands to the stabilising controller, plus the risk of holding each of four
-#: commands for 1 s: hover, climb, back off, back off and climb) on the whole observation (its
-#: ``features`` leave out the orientation and the goal).  ``"risk"``: the risk-only command model
-#: of Table II (``quadrotor_cmd.npz``, more labels, no head, no decision), for the core alone
-#: (hover and level, ``strategies=""``) with an explicit threshold.
-_QUAD_PARALLEL = Shipped({"act": "quadrotor_cmd_act.npz", "risk": "quadrotor_cmd.npz"})
 
-#: The guarded envs around simulators the project did not write (rmm_envs.envs.driven_examples):
-#: risk-only models of each env's own observation (the risk adapter's labels: random pushes held
-#: for the adapter's default horizon, over half adapter-sampled and half driver-visited states),
-#: applying the env's safe default (the balancing LQR) while the risk is above the threshold.
-_CARTPOLE = Shipped({"act": "cartpole_guarded.npz"})
-_PENDULUM = Shipped({"act": "inverted_pendulum_guarded.npz"})
+def _read_registration(path: Path) -> dict[str, dict[str, Shipped]]:
+    """System name -> kind -> :class:`Shipped`, from the registration file ``path``
+    (``shipped.toml`` beside the models; its comments say what each entry is).  A malformed file
+    is a ``ValueError`` naming the file, the entry and what was expected."""
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    if data.get("format") != _FORMAT or data.get("version") != 1:
+        raise ValueError(
+            f"{path}: expected format = {_FORMAT!r} and version = 1, got format = {data.get('format')!r} "
+            f"and version = {data.get('version')!r}"
+        )
+    out: dict[str, dict[str, Shipped]] = {}
+    for name, kinds in data.get("systems", {}).items():
+        for kind, entry in kinds.items():
+            files, inputs = entry.get("files"), entry.get("inputs")
+            if kind not in ("plain", "guarded") or not isinstance(files, dict) or not files:
+                raise ValueError(
+                    f"{path}: [systems.{name}.{kind}] must be of kind 'plain' or 'guarded' with a non-empty "
+                    f"files table (variant = file), got kind {kind!r} and files {files!r}"
+                )
+            if inputs is not None and not isinstance(inputs, str):
+                raise ValueError(f"{path}: [systems.{name}.{kind}] inputs must be a field name, got {inputs!r}")
+            out.setdefault(name, {})[kind] = Shipped(dict(files), inputs)
+    return out
+
+
+def models_dir() -> Path:
+    """The folder of the shipped model files, their decision files and :data:`REGISTRATION`."""
+    return Path(str(resources.files("rmm_guardians.lrmm") / "models"))
+
 
 #: The shipped models, per system of :data:`rmm_envs.catalog.SYSTEMS` (its ``name``) and kind of
-#: env: ``"plain"`` (plain control) and ``"guarded"`` (its blocking and non-blocking guardian envs,
-#: which share the world and the observation, so one entry serves both).
-SHIPPED_BY_SYSTEM: dict[str, dict[str, Shipped]] = {
-    "Dubins4D": {"guarded": _DUBINS4D},
-    # the same car and observation on a map of your own: the circle-trained models, unchanged
-    # (rays are distances whatever the obstacle's shape; how well that transfers is measured
-    # in the map env's tests and docs, not assumed)
-    "Dubins4DMap": {"guarded": _DUBINS4D},
-    "Dubins3DMaze": {"plain": Shipped({"paper": "dubins3d_maze.npz"}), "guarded": _MAZE_PARALLEL},
-    "QuadrotorRoom": {"plain": Shipped({"paper": "quadrotor.npz"}), "guarded": _QUAD_PARALLEL},
-    "CartPole": {"guarded": _CARTPOLE},
-    "InvertedPendulum": {"guarded": _PENDULUM},
-}
+#: env (``"plain"``; ``"guarded"``: its blocking and non-blocking guardian envs), as
+#: :data:`REGISTRATION` registers them.
+SHIPPED_BY_SYSTEM: dict[str, dict[str, Shipped]] = _read_registration(models_dir() / REGISTRATION)
 
 
 class ShippedById(dict):
@@ -100,11 +115,6 @@ def _by_id() -> ShippedById:
 
 #: The shipped model of each env id (:data:`SHIPPED_BY_SYSTEM`, looked up by id).
 SHIPPED: ShippedById = _by_id()
-
-
-def models_dir() -> Path:
-    """The folder of the shipped model files and their decision files."""
-    return Path(str(resources.files("rmm_guardians.lrmm") / "models"))
 
 
 def default_model_path(env_id: str = DEFAULT_ENV, variant: str = "paper") -> Path:

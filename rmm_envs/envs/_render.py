@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rmm_envs.systems.dubins4d.circles import ray_cast
+
 WHITE = (255, 255, 255)
 RED = (214, 39, 40)
 GREEN = (44, 160, 44)
@@ -67,8 +69,6 @@ def dubins4d_frame(scene, state, guardian_active: bool, half: float, size: int =
     """Dubins4D's top-down frame of the window ``[-15, 15]^2`` m: the generation arena
     ``[-half, half]^2`` outlined, obstacles red, the goal green with a ring, the rays grey and the
     vehicle blue (driver) or orange (``guardian_active``)."""
-    from rmm_envs.worlds.circles import ray_cast
-
     cv = Canvas(size, -15, 15, -15, 15)
     for a, b in (
         ((-half, -half), (half, -half)),

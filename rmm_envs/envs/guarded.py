@@ -23,7 +23,7 @@ import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace, parse
 from rmm_envs.envs.base import LabelledEnvBase
-from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL
+from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL, NonBlockingStepping
 
 __all__ = ["EPISODE_KEY", "GuardedEnv", "parallel_entry_point"]
 
@@ -169,8 +169,6 @@ def parallel_entry_point(env_cls, env_id: str, base_step: float = BASE_STEP):
                 f"blocking env) does not apply; set base_step and time_accel instead, got "
                 f"step_dt={kwargs['step_dt']!r}"
             )
-        from rmm_envs.wrappers.nonblocking import NonBlockingStepping
-
         return NonBlockingStepping(env_cls(**kwargs), time_accel=time_accel, base_step=base_step, clock=clock)
 
     make_parallel_env.__doc__ = (

@@ -19,6 +19,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from rmm_envs.catalog import current_id
+
 __all__ = ["FORMAT", "FORMAT_VERSION", "Dataset", "load_dataset", "rerun_command"]
 
 FORMAT = "rmm-dataset"
@@ -124,8 +126,6 @@ def shard_ok(path: Path, rows: int) -> bool:
 def identity(meta: dict) -> dict:
     """What makes two datasets the same dataset; a former env id counts as today's id, so a dataset
     made under a former id (:data:`rmm_envs.catalog.FORMER_IDS`) is resumed under today's."""
-    from rmm_envs.catalog import current_id
-
     keys = (
         "format",
         "format_version",

@@ -1,7 +1,7 @@
 """The two protocols of risk labelling: :class:`RiskScene` (what the estimator needs of a system
 placed in a world) and :class:`LabelledEnv` (what ``RiskLabel`` and ``rmm-datagen`` need of an env).
 
-A *scene* is a dynamics object (:mod:`rmm_envs.dynamics`) placed in one obstacle configuration,
+A *scene* is a dynamics object (a system's dynamics, ``rmm_envs/systems/<system>/``) placed in one obstacle configuration,
 and that is what the estimator labels: ``state_dim``, the control box ``control_low`` /
 ``control_high``, ``propagate``, ``path_failed``, ``state_failed`` and optionally
 ``leaf_estimate``.  A labelled env offers ``risk_scene()``, ``true_state``, ``sample_states``,

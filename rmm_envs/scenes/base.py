@@ -10,7 +10,7 @@ __all__ = ["Dynamics", "SceneBase", "branch_inputs"]
 
 
 class Dynamics(Protocol):
-    """What a scene reads of its dynamics object (every class of :mod:`rmm_envs.dynamics` has it)."""
+    """What a scene reads of its dynamics object (every class of a system's ``dynamics.py`` has it)."""
 
     @property
     def control_low(self) -> np.ndarray: ...
@@ -26,7 +26,7 @@ class Dynamics(Protocol):
 class SceneBase:
     """A dynamics object placed in a world: the dynamics part of :class:`rmm_envs.risk.RiskScene`.
 
-    Subclasses set ``self.dynamics`` (a dynamics object of :mod:`rmm_envs.dynamics`, with
+    Subclasses set ``self.dynamics`` (a dynamics object of a system's ``dynamics.py``, with
     ``control_low``/``control_high``, ``sample_controls`` and ``propagate``) and ``state_dim``,
     and implement ``state_failed`` and ``path_failed``.
     """

@@ -5,7 +5,7 @@ fails and, if not, its last state.  The scenes' ``propagate`` and ``path_failed`
 path of a level as an ``(N, S, d)`` array and test the arrays; the loops here do both for one
 branch at a time in compiled code, with no path array, and give the same bits: each repeats its
 numpy twin's floating-point operations in the same order (the closed forms of
-:class:`rmm_envs.dynamics.Dubins4D` and :class:`rmm_envs.dynamics.Dubins3D`, the path tests of
+:class:`rmm_envs.systems.dubins4d.dynamics.Dubins4D` and :class:`rmm_envs.systems.maze.dynamics.Dubins3D`, the path tests of
 :mod:`rmm_envs.worlds.path_kernels`); ``tests/test_fused_labels.py`` pins each to its twin.
 """
 
@@ -15,7 +15,7 @@ from __future__ import annotations
 # * :func:`dubins3d_maze_branches`: :class:`rmm_envs.scenes.MazeScene`;
 # * :func:`quadrotor_command_branches`: :class:`rmm_envs.scenes.QuadrotorCommandScene` (the
 #   controller and body of ``ClosedLoopQuadrotor.propagate``, the room test of
-#   :mod:`rmm_envs.worlds.room_kernels` at each path point as it is reached; a branch stops at its
+#   :mod:`rmm_envs.systems.quadrotor.room_kernels` at each path point as it is reached; a branch stops at its
 #   first failing point, since the estimator reads no later state of a failed branch).
 #
 # Two shortcuts skip work whose result is known without changing a bit: the sine and cosine of a
@@ -30,10 +30,10 @@ from typing import Any
 
 import numpy as np
 
-from rmm_envs.dynamics.dubins4d import SERIES_COEFFICIENTS
-from rmm_envs.dynamics.quadrotor_control import body_step, command_wrench
+from rmm_envs.systems.dubins4d.dynamics import SERIES_COEFFICIENTS
+from rmm_envs.systems.quadrotor.control import body_step, command_wrench
+from rmm_envs.systems.quadrotor.room_kernels import room_state_failed
 from rmm_envs.worlds.path_kernels import circle_path_hit, maze_path_hit_near
-from rmm_envs.worlds.room_kernels import room_state_failed
 
 njit: Callable[..., Any] | None
 try:
@@ -43,13 +43,13 @@ except ImportError:  # pragma: no cover - numba is a dependency; plain Python st
 
 __all__ = ["dubins3d_maze_branches", "dubins4d_circle_branches", "quadrotor_command_branches"]
 
-_SERIES_MAX = 0.6  # rmm_envs.dynamics.dubins4d._SERIES_MAX: a test holds the two equal
+_SERIES_MAX = 0.6  # rmm_envs.systems.dubins4d.dynamics._SERIES_MAX: a test holds the two equal
 _C = tuple(tuple(float(c) for c in row) for row in SERIES_COEFFICIENTS)  # constants in the compiled code
 _C1R, _C1I, _C2R, _C2I = _C
 
 
 def _horner7(p, c):
-    """``rmm_envs.dynamics.dubins4d._horner`` of seven coefficients (``acc *= p; acc += c``)."""
+    """``rmm_envs.systems.dubins4d.dynamics._horner`` of seven coefficients (``acc *= p; acc += c``)."""
     acc = c[6]
     acc *= p
     acc += c[5]
@@ -80,7 +80,7 @@ def _series_position(x0, y0, c0, s0, v0, w, a, t):
 
 
 def _position(x0, y0, c0, s0, v0, w, a, t):
-    """``_segment`` of :mod:`rmm_envs.dynamics.dubins4d` for one time ``t``, given the start
+    """``_segment`` of :mod:`rmm_envs.systems.dubins4d.dynamics` for one time ``t``, given the start
     heading's cosine ``c0`` and sine ``s0``: the turn integrals, then ``_displace``."""
     phi = w * t
     if abs(phi) <= _SERIES_MAX:
@@ -101,7 +101,7 @@ def _position(x0, y0, c0, s0, v0, w, a, t):
 
 
 def _dubins4d_path(x0, y0, th0, v, u1, u2, times, lo, hi, px, py):
-    """The positions ``px, py`` of :meth:`Dubins4D.states_at <rmm_envs.dynamics.Dubins4D.states_at>`
+    """The positions ``px, py`` of :meth:`Dubins4D.states_at <rmm_envs.systems.dubins4d.dynamics.Dubins4D.states_at>`
     at ``times`` and the last point's heading and speed; ``lo``/``hi``: (v, u1, u2) bounds."""
     s = times.shape[0]
     t_end = 0.0

@@ -3,7 +3,8 @@ the collision point, and a strip over the episode with the guardian's intervals 
 
 Drawn with Pillow's ``ImageDraw``; what does not move is drawn once per episode.  Two parts:
 
-* a **view** per system (:class:`~rmm_envs.views.base.View`): reads the env's world and state
+* a **view** per system (:class:`~rmm_envs.views.base.View`, in the system's folder:
+  ``rmm_envs/systems/<system>/view.py``): reads the env's world and state
   through public accessors (``privileged()``, ``true_state``) and draws them;
   :func:`view_for` picks the view of an env;
 * the **recorder** (:class:`EpisodeRecorder`): collects per step the state, who controlled
@@ -18,24 +19,19 @@ own frame (:class:`EnvFrameView`).
 from __future__ import annotations
 
 from rmm_envs.views.base import View, Window
-from rmm_envs.views.planar import Dubins4DView, MapView, MazeView
-from rmm_envs.views.pole import CARTPOLE, PENDULUM, CartPoleView, EnvFrameView, PoleGeometry
-from rmm_envs.views.quadrotor import QuadrotorView
+from rmm_envs.views.planar import CarView, PlanarWorld
+from rmm_envs.views.pole import CartPoleView, EnvFrameView, PoleGeometry
 from rmm_envs.views.recorder import STRIP_HEIGHT, EpisodeRecorder, signal_groups
 from rmm_envs.views.select import view_for
 
 __all__ = [
-    "CARTPOLE",
-    "PENDULUM",
     "STRIP_HEIGHT",
+    "CarView",
     "CartPoleView",
-    "Dubins4DView",
     "EnvFrameView",
     "EpisodeRecorder",
-    "MapView",
-    "MazeView",
+    "PlanarWorld",
     "PoleGeometry",
-    "QuadrotorView",
     "View",
     "Window",
     "signal_groups",

@@ -1,5 +1,6 @@
-"""Cart and pole seen from the front (CartPole, MuJoCo's InvertedPendulum), and the fallback
-view of any other guarded env: its own ``render()`` frame."""
+"""A cart and pole seen from the front (:class:`CartPoleView`, drawn with a system's
+:class:`PoleGeometry`: ``rmm_envs/systems/cartpole/view.py``, ``.../pendulum/view.py``), and the
+fallback view of any other guarded env: its own ``render()`` frame."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from PIL import Image, ImageDraw
 
 from rmm_envs.views.base import BODY_OUTLINE, DRIVER, GOAL, GUARDIAN, LIGHT, OBSTACLE, View, Window
 
-__all__ = ["CartPoleView", "EnvFrameView", "cartpole_view", "driver_target", "pendulum_view"]
+__all__ = ["CartPoleView", "EnvFrameView", "PoleGeometry", "driver_target"]
 
 
 @dataclass(frozen=True)
@@ -28,20 +29,13 @@ class PoleGeometry:
     angle_limit: float
 
 
-#: CartPole-v1: true state ``(x, x_dot, theta, theta_dot)``, fails at 2.4 m or 12 degrees
-CARTPOLE = PoleGeometry(0, 2, 1.0, 2.4, 12 * 2 * np.pi / 360)
-#: InvertedPendulum-v5: the MuJoCo snapshot ``(time, x, theta, x_dot, theta_dot)``, the rail's joint range +-1 m
-#: (a stop, not a failure), the pole 0.6 m, fails beyond 0.2 rad
-PENDULUM = PoleGeometry(1, 2, 0.6, 1.0, 0.2)
-
-
 class CartPoleView(View):
     """A cart on a track and its pole; the path is the pole's tip.  The track's ends (red) and
     the pole's failing angles (lines from the cart, drawn with the body) are the limits; no goal
     is drawn unless ``target`` (a callable returning the target's ``x``, asked at each episode's
     start) is given: :func:`driver_target` gives the built-in drivers' one."""
 
-    def __init__(self, geometry: PoleGeometry = CARTPOLE, size: int = 512, target=None) -> None:
+    def __init__(self, geometry: PoleGeometry, size: int = 512, target=None) -> None:
         self.g = geometry
         self.width = self.height = int(size)
         half = 1.2 * geometry.x_limit
@@ -127,13 +121,3 @@ def driver_target(env) -> Callable[[], float] | None:
     if driver is None or not isinstance(getattr(driver, "target", None), int | float):
         return None
     return lambda: float(driver.target)
-
-
-def cartpole_view(env, size: int) -> CartPoleView:
-    """The ``CartPole`` system's view (its spec's ``view``)."""
-    return CartPoleView(CARTPOLE, size, driver_target(env))
-
-
-def pendulum_view(env, size: int) -> CartPoleView:
-    """The ``InvertedPendulum`` system's view (its spec's ``view``)."""
-    return CartPoleView(PENDULUM, size, driver_target(env))

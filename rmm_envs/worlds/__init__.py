@@ -1,11 +1,3 @@
-"""Obstacle families: generation, exact collision tests and ray sensing (one file per family)."""
-
-from rmm_envs.worlds.circles import (
-    CircleWorld,
-    first_contact,
-    points_in_circles,
-    ray_cast,
-    segments_hit_circles,
-)
-
-__all__ = ["CircleWorld", "first_contact", "points_in_circles", "ray_cast", "segments_hit_circles"]
+"""What the worlds of several systems share: input bounds (:mod:`.bounds`) and compiled one-path
+failure tests (:mod:`.path_kernels`).  Each system's own world (circles, mazes, rooms, maps) is in
+its folder, ``rmm_envs/systems/<system>/``."""

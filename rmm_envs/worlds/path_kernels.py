@@ -6,10 +6,10 @@ and testing them as arrays.  To keep the labels the same bits, each test here re
 floating-point operations of its numpy twin in the same order (no fused multiply-adds: numba
 contracts nothing without ``fastmath``), down to the pruning that decides which exact tests run:
 
-* :func:`circle_path_hit`: :func:`rmm_envs.worlds.circles.paths_hit_circles` for one path (the
+* :func:`circle_path_hit`: :func:`rmm_envs.systems.dubins4d.circles.paths_hit_circles` for one path (the
   chord-midpoint pruning with the path length summed as numpy's pairwise ``sum`` does it, then
   the exact segment-circle test);
-* :func:`maze_path_hit_near`: :meth:`rmm_envs.worlds.mazes.Maze.paths_hit` for one path, against
+* :func:`maze_path_hit_near`: :meth:`rmm_envs.systems.maze.mazes.Maze.paths_hit` for one path, against
   the candidate walls of its first point's bucket (numpy's answer, including its limits: only
   those walls), with the same segment pruning.
 """
@@ -22,7 +22,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from rmm_envs.worlds.maze_kernels import _seg_point_sq, _seg_seg_sq
+from rmm_envs.systems.maze.maze_kernels import _seg_point_sq, _seg_seg_sq
 
 njit: Callable[..., Any] | None
 try:
@@ -69,7 +69,7 @@ def pairwise_sum(a, n):
 
 def circle_path_hit(px, py, n, circles, seg_len):
     """Whether the path of points ``(px[i], py[i])``, ``i < n``, touches a circle of ``circles``
-    ``(K, 3)``: :func:`~rmm_envs.worlds.circles.paths_hit_circles` for one path.  ``seg_len``: a
+    ``(K, 3)``: :func:`~rmm_envs.systems.dubins4d.circles.paths_hit_circles` for one path.  ``seg_len``: a
     scratch array of at least ``n - 1`` floats."""
     if circles.shape[0] == 0 or n == 0:
         return False
@@ -105,7 +105,7 @@ def circle_path_hit(px, py, n, circles, seg_len):
 
 def maze_path_hit_near(px, py, n, walls, cand, half, width, height, d2):
     """Whether the path of points ``(px[i], py[i])``, ``i < n``, fails in a maze:
-    :meth:`~rmm_envs.worlds.mazes.Maze.paths_hit` for one path.  ``walls``: the maze's extended
+    :meth:`~rmm_envs.systems.maze.mazes.Maze.paths_hit` for one path.  ``walls``: the maze's extended
     wall array (``Maze._walls_ext``, a far dummy wall last); ``cand``: the indices of the
     candidate walls (``Maze._candidates`` of the path's first point); ``d2``: a scratch array of
     at least ``n * len(cand)`` floats."""

@@ -1,0 +1,448 @@
+"""The maze car under parallel autonomy: a reckless driver, a guardian that may take over.
+
+``Dubins3DMazeGuarded-v0`` (blocking, fixed step) and ``Dubins3DMazeParallel-v0`` (non-blocking:
+the guardian's thinking time passes in the world), the maze counterparts of
+``Dubins4DGuarded-v0`` and ``Dubins4DParallel-v0`` with the same contract
+(:mod:`rmm_envs.autonomy`), so the same guardians and ``rmm-bench --env`` run on both systems.
+
+## Description
+
+The constant-speed car of ``Dubins3DMaze-v0`` (:class:`rmm_envs.systems.maze.dynamics.Dubins3D`: 10 px/s,
+minimum turning radius 50 px, so ``|u| <= 0.2`` rad/s) in a seeded perfect maze (10 x 10 cells
+of 125 px, walls 12.5 px thick; :mod:`rmm_envs.systems.maze.mazes`) must reach a goal disc in the
+centre of a goal cell.  A built-in reckless driver (:class:`rmm_envs.systems.maze.driver.PursuitDriver`)
+follows the maze's cell path to the goal by pure pursuit with a long look-ahead, cutting
+corners and ignoring the walls: alone it collides in 46% of the episodes (256 episodes of
+``rmm-bench`` seed 0, fixed 1 ms clock) and reaches the goal in the rest.  The agent is a
+*guardian*: at every step it decides whether to take over the turn rate.
+
+**Units** are the paper's pixels (``length_unit = "px"``).  For reading them physically the env
+states a nominal scale, ``metres_per_unit = 0.01`` (1 px = 1 cm: a small indoor robot at
+0.1 m/s with a 0.5 m turning radius in 1.25 m cells); nothing in the env depends on it, and
+``rmm-envs demo`` prints speeds in m/s at this scale with px/s in brackets.
+
+## Dynamics
+
+``x' = 10 cos(psi), y' = 10 sin(psi), psi' = u``, integrated exactly for the step's held turn
+rate; each step is checked as a path of ``n_path_points`` (8) points and the segments between
+them.  The speed is constant: the car cannot stop.
+
+## Action space
+
+``Dict(active_ctrl=Discrete(2), turnrate_ctrl=Box(-0.2, 0.2, (1,)))``, a
+:class:`rmm_envs.autonomy.GuardianActionSpace` built from the system's bounds.
+``active_ctrl = 0``: the driver steers this step; ``1``: ``turnrate_ctrl`` is applied, clipped
+to the bounds.  NaN/inf, a wrong shape or type, a missing or unknown field, or an
+``active_ctrl`` other than 0/1 raise ``ValueError`` naming the field.  The space's safe default
+(``space.safe_default``, what the ``brakes`` guardian applies) is :class:`TurnFromNearerWall`:
+the maximum turn away from the nearer wall.
+
+## Observation space
+
+``Box(11,)`` float32, an :class:`rmm_envs.autonomy.ObservationBox` with a named layout:
+
+| index | field         | observation                                              | min  | max |
+|-------|---------------|----------------------------------------------------------|------|-----|
+| 0-7   | ``rays``      | distances along rays at ``psi + k pi / 4``, px            | 0    | inf |
+| 8-9   | ``goal_offset``| goal centre minus position, px (world frame)             | -inf | inf |
+| 10    | ``heading``   | ``psi``, rad, wrapped to ``[-pi, pi)``                     | -pi  | pi  |
+
+The rays are exactly those of ``Dubins3DMaze-v0`` (ray ``k`` at ``k pi / 4`` counter-clockwise
+from the heading, to the first wall surface, 0 from inside a wall), so the risk model trained
+there reads them unchanged; the goal offset and heading are what a guardian needs to weigh
+safety against progress.
+
+## Rewards and episode end
+
+``+1`` on reaching the goal (a path point or segment within ``goal_radius`` of the goal
+centre), ``-1`` on touching a wall (exactly, as ``Dubins3DMaze-v0``), else 0; a step that does
+both is a collision.  ``terminated`` on either; ``truncated`` when simulated time reaches
+``max_episode_sim_time`` (300 s: 2.5 times the longest drive from start to goal).  The state
+after a collision step is the end of that step's path.
+
+## Starting state
+
+A maze from the seed; a start cell uniform over the maze's cells; a goal cell uniform over the
+cells ``goal_cells = (4, 8)`` passages away (inclusive; a perfect maze always has cells at
+every distance up to its eccentricity); the car at the start cell's centre plus a uniform
+offset of up to ``start_jitter`` (15 px) per axis, heading toward the next cell of its path
+plus ``U(-heading_noise, heading_noise)`` (``pi / 4``).  ``reset(seed=..., options={"maze":
+Maze or dict of generate_maze arguments, "state": [x, y, psi], "goal_cell": int})`` sets any of
+them: with ``"state"`` the start cell is the cell whose centre is nearest; a state inside a
+wall or outside the maze's cells, a goal cell out of range or equal to the start cell, no cell
+at the goal distance, an unknown key or a malformed value raise ``ValueError``.
+
+## Risk labelling
+
+The :class:`rmm_envs.risk.LabelledEnv` hooks: ``risk_scene()`` is the episode's
+:class:`rmm_envs.scenes.MazeScene` (rays only, as ``Dubins3DMaze-v0``); ``sample_states`` draws
+poses uniform over the image clear of the walls; ``observe_states(states)`` is this env's full
+observation of those poses (no random feature).
+
+## Info
+
+Every step: ``sim_time``, ``state`` (the true pose, **privileged**), ``active`` and ``control``
+(what was applied during the step), ``cost`` (1.0 on the step that touches a wall, else 0.0)
+and ``nominal_control`` (also on ``reset``): the driver's turn rate at the pose the returned
+observation shows, exactly what it applies if the guardian leaves it the next interval.  On
+the last step also ``outcome`` (``"goal"``, ``"collision"`` or ``"timeout"``) and
+``episode_stats``, the same statistics as Dubins4D's (``n_env_steps``,
+``n_active_ctrl_env_steps``, ``active_ctrl_sim_time``, ``cum_sim_time``, ``cum_compute_time``,
+``avg_compute_time``, ``cum_reward``, ``cum_cost``, ``final_speed`` (the constant speed),
+``outcome``).  :meth:`Dubins3DMazeGuardedEnv.privileged` returns the pose, the maze,
+the goal ``[x, y, r]``, the car's speed (px/s) and the simulated time.
+
+## Arguments
+
+``gym.make("Dubins3DMazeGuarded-v0", step_dt=0.1, n_path_points=8, max_episode_sim_time=300.0,
+goal_cells=(4, 8), goal_radius=30.0, start_jitter=15.0, heading_noise=pi/4, lookahead=190.0,
+driver_gain=1.0, maze_rows=10, maze_cols=10, speed=10.0, r_min=50.0, clock=None,
+render_mode=None)``.  ``step_dt`` 0.1 s as Dubins4D: the blocking env re-decides every 1 px of
+travel.  ``goal_radius`` 30 px: half a corridor, so the driver cannot miss it when it arrives.
+``lookahead`` (px) and ``driver_gain`` (1/s): the driver's (:mod:`rmm_envs.systems.maze.driver`, where
+the collision rate against the look-ahead is measured).  A 10 x 10 maze holds every drive (the
+goal is at most 8 cells away) and resets ~8x faster than the paper's 20 x 20 (the ``Maze``
+spatial index); the rays are local either way.  ``clock`` only measures the agent's compute
+time in the blocking env.
+
+``gym.make("Dubins3DMazeParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same but step_dt)``:
+the same world under :class:`rmm_envs.wrappers.NonBlockingStepping` (each ``step(a)`` advances
+the world by ``elapsed * time_accel + base_step`` seconds under the previous action, then
+stores ``a``; the first interval is the driver's), with ``Dubins4DParallel-v0``'s defaults.
+
+## Rendering
+
+``render_mode="rgb_array"``: a 512 x 512 frame of the maze (walls black), the goal (green), the
+driver's path (grey) and the car (blue: driver, orange: guardian).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout, SafeDefault
+from rmm_envs.catalog import system
+from rmm_envs.clocks import Clock, make_clock
+from rmm_envs.envs import _render
+from rmm_envs.envs.base import check_arguments, finite, option_vector, whole
+from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
+from rmm_envs.portable import wrap_angle
+from rmm_envs.systems.dubins4d.dynamics import SERIES_COEFFICIENTS
+from rmm_envs.systems.maze.driver import PursuitDriver, cell_distances, cell_of, cell_path
+from rmm_envs.systems.maze.dynamics import Dubins3D
+from rmm_envs.systems.maze.env import Dubins3DMazeEnv, maze_from_option
+from rmm_envs.systems.maze.maze_kernels import dubins_path, maze_path_hit, maze_rays, path_reaches_disc
+from rmm_envs.systems.maze.mazes import Maze, generate_maze
+from rmm_envs.systems.maze.scene import MazeScene
+from rmm_envs.worlds.bounds import MAX_MAZE_SIDE
+
+__all__ = ["CONTROLS", "Dubins3DMazeGuardedEnv", "TurnFromNearerWall", "make_parallel_env", "observation_layout"]
+
+from rmm_envs.systems.maze.dynamics import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
+
+N_RAYS = 8
+
+
+def observation_layout() -> ObservationLayout:
+    """The named slices of the observation table above."""
+    return ObservationLayout.of(
+        ("rays", N_RAYS), ("goal_offset", 2), ("heading", 1), ray_angles=[k * math.pi / 4 for k in range(N_RAYS)]
+    )
+
+
+class TurnFromNearerWall(SafeDefault):
+    """The maze car's safe default: the maximum turn rate away from the nearer wall.
+
+    "Nearer wall" compares the shortest ray on the left (rays strictly between 0 and pi from
+    the heading) with the shortest on the right; the car turns toward the side whose shortest
+    ray is longer, left on a tie.  The car cannot stop, so turning is all it can do."""
+
+    description = "maximum turn rate away from the nearer wall"
+
+    def __init__(self, layout: ObservationLayout) -> None:
+        rays = layout["rays"]
+        ang = wrap_angle(layout.ray_angles)
+        self._left = [rays.start + i for i, a in enumerate(ang) if 1e-9 < a < math.pi - 1e-9]
+        self._right = [rays.start + i for i, a in enumerate(ang) if -math.pi + 1e-9 < a < -1e-9]
+
+    def policy(self, space: GuardianActionSpace, rng: np.random.Generator, **options):
+        self.check_options(options)
+        left, right = self._left, self._right
+        turn_left, turn_right = space.control_high.copy(), space.control_low.copy()
+
+        def control(observation) -> np.ndarray:
+            obs = np.asarray(observation, dtype=float)
+            return turn_right if min(obs[left]) < min(obs[right]) else turn_left
+
+        return control
+
+
+class Dubins3DMazeGuardedEnv(GuardedEnv):
+    """Blocking maze parallel-autonomy env; see the module docstring for the full spec."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    reset_options = ("maze", "state", "goal_cell")
+    #: lengths are in pixels; for reading them in metres, a nominal scale of 1 cm per px (the
+    #: "Units" paragraph of the module docstring)
+    length_unit = "px"
+    metres_per_unit = 0.01
+    scene: MazeScene | None
+
+    def __init__(
+        self,
+        step_dt: float = 0.1,
+        n_path_points: int = 8,
+        max_episode_sim_time: float = 300.0,
+        goal_cells=(4, 8),
+        goal_radius: float = 30.0,
+        start_jitter: float = 15.0,
+        heading_noise: float = math.pi / 4,
+        lookahead: float = 190.0,
+        driver_gain: float = 1.0,
+        maze_rows: int = 10,
+        maze_cols: int = 10,
+        speed: float = 10.0,
+        r_min: float = 50.0,
+        clock: Clock | str | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        gc = tuple(goal_cells) if isinstance(goal_cells, (tuple, list)) else ()
+        check_arguments(
+            [
+                (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number > 0"),
+                (whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
+                (
+                    finite(max_episode_sim_time) and max_episode_sim_time > 0,
+                    "max_episode_sim_time",
+                    max_episode_sim_time,
+                    "a finite number of seconds > 0 (episodes need a time limit)",
+                ),
+                (
+                    len(gc) == 2 and all(whole(g) for g in gc) and 1 <= gc[0] <= gc[1],
+                    "goal_cells",
+                    goal_cells,
+                    "a pair (min, max) of integers with 1 <= min <= max",
+                ),
+                (finite(goal_radius) and goal_radius > 0, "goal_radius", goal_radius, "a finite number > 0"),
+                (finite(start_jitter) and start_jitter >= 0, "start_jitter", start_jitter, "a finite number >= 0"),
+                (
+                    finite(heading_noise) and 0 <= heading_noise <= math.pi,
+                    "heading_noise",
+                    heading_noise,
+                    "a number in [0, pi]",
+                ),
+                (finite(lookahead) and lookahead > 0, "lookahead", lookahead, "a finite number > 0"),
+                (finite(driver_gain) and driver_gain > 0, "driver_gain", driver_gain, "a finite number > 0"),
+                (
+                    whole(maze_rows) and 2 <= maze_rows <= MAX_MAZE_SIDE,
+                    "maze_rows",
+                    maze_rows,
+                    f"an integer in [2, {MAX_MAZE_SIDE}]",
+                ),
+                (
+                    whole(maze_cols) and 2 <= maze_cols <= MAX_MAZE_SIDE,
+                    "maze_cols",
+                    maze_cols,
+                    f"an integer in [2, {MAX_MAZE_SIDE}]",
+                ),
+                (finite(speed) and speed > 0, "speed", speed, "a finite number > 0"),
+                (finite(r_min) and r_min > 0, "r_min", r_min, "a finite number > 0"),
+                self.check_render_mode(render_mode),
+            ]
+        )
+        self.step_dt = float(step_dt)
+        self.n_path_points = int(n_path_points)
+        self.max_episode_sim_time = float(max_episode_sim_time)
+        self.goal_cells = (int(gc[0]), int(gc[1]))
+        self.goal_radius = float(goal_radius)
+        self.start_jitter = float(start_jitter)
+        self.heading_noise = float(heading_noise)
+        self.maze_shape = (int(maze_rows), int(maze_cols))
+        self.render_mode = render_mode
+        self.dynamics = Dubins3D(float(speed), float(r_min))
+        self.driver = PursuitDriver(self.dynamics.u_max, float(lookahead), float(driver_gain))
+        self.clock = make_clock(clock)
+        lay = observation_layout()
+        self.action_space = GuardianActionSpace.for_dynamics(
+            self.dynamics, CONTROLS, safe_default=system("Dubins3DMaze").make_safe_default(lay), kind=KIND
+        )
+        low = np.array([0.0] * N_RAYS + [-np.inf, -np.inf, -np.pi], dtype=np.float32)
+        high = np.array([np.inf] * N_RAYS + [np.inf, np.inf, np.pi], dtype=np.float32)
+        self.observation_space = ObservationBox(low, high, lay)
+        self._state = np.zeros(3)
+        self._rays = np.zeros(N_RAYS)
+        self._last_active = False
+
+    # ------------------------------------------------------------------ starts
+    def _maze(self, spec) -> Maze:
+        if spec is None:
+            return generate_maze(self.np_random, "rectangular", *self.maze_shape)
+        if isinstance(spec, Maze) and (spec.cells.shape[0] < 2 or spec.passages.shape[0] < 1):
+            raise ValueError("option 'maze' must have cells joined by passages (a generated Maze); this one has none")
+        return maze_from_option(spec, self.np_random)
+
+    def _start(self, options: dict):
+        rng = self.np_random
+        maze = self._maze(options.get("maze"))
+        n = maze.cells.shape[0]
+        if "state" in options:
+            state = option_vector(options["state"], 3, "state", " [x, y, psi]")
+            start = cell_of(maze, state)
+            a, b = np.asarray(maze.passages[0], dtype=int)
+            spacing = float(np.hypot(*(maze.cells[a] - maze.cells[b])))  # between neighbouring cell centres
+            if maze.state_failed(state[None, :2])[0] or np.hypot(
+                *(state[:2] - maze.cells[start])
+            ) > spacing / math.sqrt(2):
+                raise ValueError(f"option 'state': {state[:2].tolist()} is inside a wall or outside the maze's cells")
+        else:
+            state, start = None, int(rng.integers(n))
+        dist = cell_distances(maze, start)
+        if "goal_cell" in options:
+            goal = options["goal_cell"]
+            if not whole(goal) or not 0 <= goal < n or int(goal) == start:
+                raise ValueError(
+                    f"option 'goal_cell' must be an integer cell index in [0, {n}) other than the start "
+                    f"cell {start}, got {goal!r}"
+                )
+            goal = int(goal)
+        else:
+            band = np.flatnonzero((dist >= self.goal_cells[0]) & (dist <= self.goal_cells[1]))
+            if band.size == 0:
+                raise ValueError(
+                    f"no cell of the maze is {self.goal_cells[0]}-{self.goal_cells[1]} passages from start cell "
+                    f"{start} (goal_cells); give a larger maze or 'goal_cell'"
+                )
+            goal = int(band[rng.integers(band.size)])
+        cells = cell_path(maze, start, goal)
+        waypoints = maze.cells[cells]
+        if state is None:
+            pos = waypoints[0] + rng.uniform(-self.start_jitter, self.start_jitter, 2)
+            d = waypoints[1] - waypoints[0]
+            psi = math.atan2(d[1], d[0]) + rng.uniform(-self.heading_noise, self.heading_noise)
+            state = np.array([pos[0], pos[1], psi])
+        waypoints = np.vstack([state[None, :2], waypoints[1:]])  # from the car, through the path's cells
+        return maze, state, goal, waypoints
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        maze, state, goal, waypoints = self._start(self.check_options(options))
+        self.scene = MazeScene(maze, self.dynamics, N_RAYS)
+        self._walls = np.ascontiguousarray(maze.walls)
+        self._geom = (self._walls, float(maze.half), float(maze.width), float(maze.height))
+        self.goal = np.array([*maze.cells[goal], self.goal_radius])
+        self.goal_cell = goal
+        self.driver.reset(waypoints)
+        self._state = state.copy()
+        self._state[2] = (self._state[2] + math.pi) % (2 * math.pi) - math.pi
+        self.begin_statistics()
+        self._last_active = False
+        self._last_control = np.zeros(1)
+        self.begin_episode()
+        info = {"sim_time": 0.0, "state": self._state.copy(), "nominal_control": self.update_nominal()}
+        self.clock.start()
+        return self._observe(), info
+
+    # ------------------------------------------------------------------ stepping
+    def _observe(self) -> np.ndarray:
+        x, y, psi = self._state
+        maze_rays(*self._geom, x, y, psi, N_RAYS, self._rays)
+        obs = np.empty(N_RAYS + 3, dtype=np.float32)
+        obs[:N_RAYS] = self._rays
+        obs[N_RAYS], obs[N_RAYS + 1], obs[N_RAYS + 2] = self.goal[0] - x, self.goal[1] - y, psi
+        return obs
+
+    def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
+        """Advance the world by ``duration`` seconds under one held turn rate: the driver's
+        (chosen at the start of the interval) when ``active`` is false, else ``control[0]``
+        (already validated).  ``compute_time`` is the agent's time charged to this step
+        (statistics only).  Used by :meth:`step` and the non-blocking wrapper."""
+        self.check_interval(duration)
+        if active:
+            u = float(np.asarray(control, dtype=float).reshape(-1)[0])
+            u = min(max(u, -self.dynamics.u_max), self.dynamics.u_max)
+        else:
+            u = float(self._nominal[0])
+        path = dubins_path(
+            self._state[0],
+            self._state[1],
+            self._state[2],
+            self.dynamics.speed,
+            u,
+            float(duration),
+            np.empty((self.n_path_points, 3)),
+            SERIES_COEFFICIENTS,
+        )
+        hit = maze_path_hit(*self._geom, path)
+        reached = not hit and path_reaches_disc(path, self.goal[0], self.goal[1], self.goal[2])
+        self.count_interval(duration, active, compute_time)
+        self._state = path[-1].copy()
+        self._state[2] = (self._state[2] + math.pi) % (2 * math.pi) - math.pi
+        self._last_active = bool(active)
+        self._last_control = np.array([u])
+        outcome, reward = ("collision", -1.0) if hit else ("goal", 1.0) if reached else (None, 0.0)
+        info = {
+            "sim_time": self._sim_time,
+            "state": self._state.copy(),
+            "active": bool(active),
+            "control": self._last_control.copy(),
+        }
+        terminated, truncated = self.end_interval(outcome, reward, info)
+        return self._observe(), reward, terminated, truncated, info
+
+    def final_speed(self) -> float:
+        return self.dynamics.speed
+
+    def driver_control(self) -> np.ndarray:
+        return np.array([self.driver.control(self._state)])
+
+    # ------------------------------------------------------------------ accessors and labelling hooks
+    def privileged(self) -> dict:
+        """The true pose, the maze, the goal ``[x, y, r]``, the car's (constant) speed and the
+        simulated time. **Privileged**."""
+        self.require_episode()
+        assert self.scene is not None  # require_episode raised otherwise
+        return {
+            "state": self._state.copy(),
+            "maze": self.scene.maze,
+            "goal": self.goal.copy(),
+            "speed": self.dynamics.speed,
+            "sim_time": self._sim_time,
+        }
+
+    true_state = property(lambda self: self._state.copy(), doc="The true pose (a copy). **Privileged**.")
+    sim_time = property(lambda self: self._sim_time, doc="Simulated seconds since reset.")
+
+    #: poses uniform over the image x [-pi, pi), clear of the walls: the maze env's hook, shared
+    sample_states = Dubins3DMazeEnv.sample_states
+
+    def observe_states(self, states, rng=None) -> np.ndarray:
+        """This env's observation of poses ``(N, 3)`` in the current episode; ``rng`` is unused."""
+        self.require_episode()
+        assert self.scene is not None  # require_episode raised otherwise
+        st = np.asarray(states, dtype=float)
+        out = np.empty((st.shape[0], N_RAYS + 3), dtype=np.float32)
+        out[:, :N_RAYS] = self.scene.observe(st)
+        out[:, N_RAYS : N_RAYS + 2] = self.goal[:2] - st[:, :2]
+        out[:, N_RAYS + 2] = (st[:, 2] + np.pi) % (2 * np.pi) - np.pi
+        return out
+
+    def render_frame(self, size: int = 512) -> np.ndarray:
+        """The ``rgb_array`` frame described under "Rendering" above."""
+        if self.scene is None:
+            return _render.Canvas(size, 0, 1, 0, 1).img
+        m = self.scene.maze
+        side = max(m.width, m.height)
+        cv = _render.Canvas(size, 0, side, 0, side)
+        X, Y = np.meshgrid(cv.wx, cv.wy)
+        cv.img[(m.point_clearance(np.column_stack([X.ravel(), Y.ravel()])) <= 2.0).reshape(size, size)] = (0, 0, 0)
+        w = self.driver.waypoints
+        for a, b in zip(w[:-1], w[1:], strict=True):
+            cv.line(a[0], a[1], b[0], b[1], _render.GREY)
+        cv.disc(self.goal[0], self.goal[1], self.goal[2], _render.GREEN)
+        cv.disc(self._state[0], self._state[1], 25.0, _render.ORANGE if self._last_active else _render.BLUE)
+        return cv.img
+
+
+make_parallel_env = parallel_entry_point(Dubins3DMazeGuardedEnv, "Dubins3DMazeParallel-v0")

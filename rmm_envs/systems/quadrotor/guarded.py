@@ -1,0 +1,432 @@
+"""The quadrotor under parallel autonomy: a reckless pilot, a guardian that may take over.
+
+``QuadrotorRoomGuarded-v0`` (blocking, fixed step) and ``QuadrotorRoomParallel-v0``
+(non-blocking: the guardian's thinking time passes in the world), the quadrotor counterparts
+of ``Dubins3DMazeGuarded-v0`` / ``Dubins3DMazeParallel-v0`` with the same contract
+(:mod:`rmm_envs.autonomy`), so the same guardians and ``rmm-bench --env`` run on them.
+
+## Description
+
+The PyBullet quadrotor of ``QuadrotorRoom-v0`` (0.5 kg, a collision cylinder of radius 0.3 m,
+240 Hz physics, the same :class:`~rmm_envs.systems.quadrotor.body.QuadrotorParams`) in a room from
+:func:`rmm_envs.systems.quadrotor.rooms.generate_room`, flown by a *command* ``(v_forward, v_left, v_up,
+yaw_rate)`` in the body's heading frame.  At every physics step the cascaded controller of
+:mod:`rmm_envs.systems.quadrotor.control` turns the command into thrust and body moments (the
+velocity loop, then a geometric attitude loop), which PyBullet applies.  A built-in reckless
+pilot (:class:`rmm_envs.systems.quadrotor.driver.WaypointPilot`) flies straight through
+``n_waypoints`` random points of the room, the last one the goal, ignoring walls and objects:
+alone it collides in 57.7% of the episodes and reaches the goal in 42.2% (2,048 episodes of
+``rmm-bench`` seed 0, fixed 1 ms clock).  The agent is a *guardian*: at every step it decides
+whether to take over the command.
+
+## Action space
+
+``Dict(active_ctrl=Discrete(2), vforward_ctrl=Box(-2, 2, (1,)), vleft_ctrl=Box(-2, 2, (1,)),
+vup_ctrl=Box(-1, 1, (1,)), yawrate_ctrl=Box(-1, 1, (1,)))``, a
+:class:`rmm_envs.autonomy.GuardianActionSpace` built from the controller's command box
+(m/s, m/s, m/s, rad/s).  ``active_ctrl = 0``: the pilot commands this step; ``1``: the
+guardian's command is applied, clipped to the box.  NaN/inf, a wrong shape or type, a missing
+or unknown field, or an ``active_ctrl`` other than 0/1 raise ``ValueError`` naming the field.
+The space's safe default (``space.safe_default``, what ``brakes`` applies) is
+:class:`~rmm_envs.systems.quadrotor.control.HoverAndLevel`: the zero command.  The guardian
+commands the same controller as the pilot, so the risk labels' random commands, the safe
+default and the pilot live in one space.
+
+## Observation space
+
+``Box(23,)`` float32, an :class:`rmm_envs.autonomy.ObservationBox` with a named layout:
+
+| index | field | observation | range |
+|---|---|---|---|
+| 0-7 | ``rays`` | ray ranges in the body's x-y plane at ``k pi / 4`` from the body x axis, m | [0, ray_range] |
+| 8-9 | ``rays_vertical`` | ray ranges along body +z and -z, m | [0, ray_range] |
+| 10-13 | ``orientation`` | quaternion (x, y, z, w), world frame | [-1, 1] |
+| 14-16 | ``velocity`` | linear velocity in the heading frame (forward, left, up), m/s | R |
+| 17-19 | ``angular_velocity`` | angular velocity in the body frame, rad/s | R |
+| 20-22 | ``goal_offset`` | goal minus position in the heading frame, m | R |
+
+Rays start at the body's origin (PyBullet ``rayTestBatch``, not hitting the body itself) and
+read ``ray_range`` (10 m) when nothing is nearer.
+
+## Dynamics and episode end
+
+Each interval holds one command: the pilot's (chosen from the state at the interval's start)
+or the guardian's.  An interval of ``d`` seconds runs the PyBullet steps that bring the
+physics clock to ``floor(t / dt)`` steps at simulated time ``t`` (so fractional steps carry
+over).  ``+1`` when the body comes within ``goal_radius`` of the goal (checked after every
+physics step), ``-1`` on any contact with the room (walls, objects, floor; PyBullet's contact
+points, queried at every physics step of an interval unless the body's clearance at the
+interval's start, :meth:`RoomCollision.clearance <rmm_envs.systems.quadrotor.room_collision.RoomCollision.clearance>`,
+exceeds what it can travel in the interval, ``|v| d + (F_max / m + g) d^2 / 2`` plus 5 cm; the
+clearance is recomputed only when the last one, less the distance moved since, falls short);
+the episode ends on either (``terminated``), else ``truncated`` at
+``max_episode_sim_time`` (60 s).  The state after a collision is the one PyBullet reached.
+
+## Starting state
+
+A room from the seed; the body level and still at a point uniform over the room's footprint at
+a height ``U(altitude)`` (0.5-2 m), its bounding sphere (radius 0.304 m) clear of everything by
+0.2 m, with a uniform yaw; ``n_waypoints`` (3) points drawn the same way with 0.5 m of
+clearance, each at least ``min_leg`` (3 m) horizontally from the one before.  Draws that miss
+the clearance are redrawn, so starts lie at least 0.504 m and waypoints at least 0.804 m above
+the floor (``altitude``'s maximum must exceed 0.804).  A room where they cannot be placed in
+200 draws each is redrawn (up to 100 rooms; then ``RuntimeError`` naming ``min_leg`` and
+``altitude``).  ``reset(seed=..., options={"room": Room or dict of generate_room arguments,
+"state": [13 numbers], "waypoints": [[x, y, z], ...]})`` sets any of them.  A given state must
+lie over the room's footprint and clear of it; given waypoints must lie over the footprint with
+the bounding sphere clear of the floor, walls and objects (generated rooms are redrawn until
+they are; a given room, or a room with a given state, raises; a point no higher than the
+bounding radius raises at once, as no room can hold it).  Those, a non-unit quaternion,
+an unknown key or malformed values raise ``ValueError`` naming the option.
+
+## Risk labelling
+
+The :class:`rmm_envs.risk.LabelledEnv` hooks: ``risk_scene()`` is the episode's
+:class:`rmm_envs.scenes.QuadrotorCommandScene`: the estimator's controls are random commands
+uniform over the command box, each held for one tree level, flown through the same controller
+(compiled, pinned to the numpy propagator that reproduces PyBullet), failing on the analytic
+room collision.  ``sample_states(rng, n)`` draws flight states: a point uniform over the
+footprint at height ``U(0.2, 3)`` m, a uniform yaw, roll and pitch ``U(-0.3, 0.3)`` rad,
+heading-frame velocity ``U(-2, 2)`` m/s horizontally and ``U(-1, 1)`` vertically, angular
+velocity ``U(-1, 1)`` rad/s per axis, rejecting states in contact.  ``observe_states`` is this
+env's observation of them (PyBullet rays; the goal offset from the episode's goal).
+
+## Info
+
+Every step: ``sim_time``, ``state`` (13 numbers, **privileged**), ``active`` and ``control``
+(the command applied), ``cost`` (1.0 on the step that collides, else 0.0) and
+``nominal_control`` (also on ``reset``): the pilot's command at the state the returned
+observation shows, exactly what it applies if the guardian leaves it the next interval.  On
+the last step also ``outcome`` (``"goal"``, ``"collision"`` or ``"timeout"``) and
+``episode_stats`` (the statistics of :class:`rmm_envs.envs.guarded.GuardedEnv`,
+``final_speed`` the body's speed).  :meth:`QuadrotorRoomGuardedEnv.privileged` returns the
+state, the room, the goal, the waypoints and the simulated time.
+
+## Arguments
+
+``gym.make("QuadrotorRoomGuarded-v0", step_dt=0.1, max_episode_sim_time=60.0, n_waypoints=3,
+altitude=(0.5, 2.0), min_leg=3.0, goal_radius=0.5, cruise_speed=1.5, climb_speed=0.5,
+ray_range=10.0, clock=None, render_mode=None)``; ``cruise_speed`` and ``climb_speed`` (m/s)
+are the pilot's.  ``gym.make("QuadrotorRoomParallel-v0", time_accel=10.0, base_step=0.1,
+clock=None, **same but step_dt)``: the same world under :class:`rmm_envs.wrappers.NonBlockingStepping`
+(each ``step(a)`` advances the world by ``elapsed * time_accel + base_step`` seconds under the
+previous action, then stores ``a``; the first interval is the pilot's).
+
+## Rendering
+
+``render_mode="rgb_array"``: a 320 x 240 frame from PyBullet's software renderer, as
+``QuadrotorRoom-v0``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
+from rmm_envs.catalog import system
+from rmm_envs.clocks import make_clock
+from rmm_envs.envs.base import check_arguments, finite, rejection_sample, state_rows, whole
+from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
+from rmm_envs.portable import matvec, norm
+from rmm_envs.systems.quadrotor.control import (
+    ClosedLoopQuadrotor,
+    CommandController,
+    command_wrench,
+    heading_of,
+    yaw_of,
+)
+from rmm_envs.systems.quadrotor.driver import WaypointPilot
+from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv, unit_quaternion_rows
+from rmm_envs.systems.quadrotor.room_collision import BOUND
+from rmm_envs.systems.quadrotor.rotations import quat_from_euler, quat_to_rot
+from rmm_envs.systems.quadrotor.scene import QuadrotorCommandScene
+from rmm_envs.systems.quadrotor.starts import WAYPOINT_CLEARANCE, QuadrotorRoomStarts
+
+__all__ = ["CONTROLS", "QuadrotorRoomGuardedEnv", "make_parallel_env", "observation_layout"]
+
+from rmm_envs.systems.quadrotor.control import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
+
+N_RAYS = 8
+_CONTACT_MARGIN = 0.05  # m added to the travel bound before contact queries are skipped
+
+
+def observation_layout() -> ObservationLayout:
+    """The named slices of the observation table above."""
+    return ObservationLayout.of(
+        ("rays", N_RAYS),
+        ("rays_vertical", 2),
+        ("orientation", 4),
+        ("velocity", 3),
+        ("angular_velocity", 3),
+        ("goal_offset", 3),
+        ray_angles=[k * math.pi / 4 for k in range(N_RAYS)],
+    )
+
+
+_LAYOUT = observation_layout()
+_RANGES = slice(_LAYOUT["rays"].start, _LAYOUT["rays_vertical"].stop)  # every ray, horizontal then vertical
+_QUAT, _VEL, _RATES, _GOAL = (_LAYOUT[f] for f in ("orientation", "velocity", "angular_velocity", "goal_offset"))
+
+
+_DIRS = np.array(
+    [[math.cos(k * math.pi / 4), math.sin(k * math.pi / 4), 0.0] for k in range(N_RAYS)]
+    + [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]
+)
+
+
+def _heading_frame(q, vectors) -> np.ndarray:
+    """World vectors ``(N, 3)`` in the heading frames of quaternions ``(N, 4)``."""
+    psi = heading_of(q)
+    c, s = np.cos(psi), np.sin(psi)
+    v = np.asarray(vectors, float)
+    return np.column_stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]])
+
+
+class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv):
+    """Blocking quadrotor parallel-autonomy env; see the module docstring for the full spec."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    reset_options: tuple[str, ...] = ("room", "state", "waypoints")
+
+    def __init__(
+        self,
+        step_dt: float = 0.1,
+        max_episode_sim_time: float = 60.0,
+        n_waypoints: int = 3,
+        altitude=(0.5, 2.0),
+        min_leg: float = 3.0,
+        goal_radius: float = 0.5,
+        cruise_speed: float = 1.5,
+        climb_speed: float = 0.5,
+        ray_range: float = 10.0,
+        clock=None,
+        render_mode: str | None = None,
+    ) -> None:
+        alt = tuple(altitude) if isinstance(altitude, (tuple, list, np.ndarray)) else ()
+        check_arguments(
+            [
+                (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number of seconds > 0"),
+                (
+                    finite(max_episode_sim_time) and max_episode_sim_time > 0,
+                    "max_episode_sim_time",
+                    max_episode_sim_time,
+                    "a finite number of seconds > 0 (episodes need a time limit)",
+                ),
+                (
+                    whole(n_waypoints) and n_waypoints >= 1,
+                    "n_waypoints",
+                    n_waypoints,
+                    "an integer >= 1 (the last is the goal)",
+                ),
+                (
+                    len(alt) == 2
+                    and all(finite(a) for a in alt)
+                    and 0.35 <= alt[0] <= alt[1]
+                    and alt[1] > WAYPOINT_CLEARANCE + BOUND,
+                    "altitude",
+                    altitude,
+                    f"a pair (min, max) of heights in m with 0.35 <= min <= max and max > {WAYPOINT_CLEARANCE + BOUND:.3f} "
+                    f"(a drawn waypoint keeps its bounding sphere {WAYPOINT_CLEARANCE} m above the floor)",
+                ),
+                (finite(min_leg) and min_leg >= 0, "min_leg", min_leg, "a finite number of metres >= 0"),
+                (finite(goal_radius) and goal_radius > 0, "goal_radius", goal_radius, "a finite number of metres > 0"),
+                (finite(cruise_speed) and cruise_speed > 0, "cruise_speed", cruise_speed, "a finite speed > 0 (m/s)"),
+                (finite(climb_speed) and climb_speed > 0, "climb_speed", climb_speed, "a finite speed > 0 (m/s)"),
+                (finite(ray_range) and ray_range > 0, "ray_range", ray_range, "a finite number of metres > 0"),
+            ]
+        )
+        QuadrotorRoomEnv.__init__(self, render_mode=render_mode)
+        self.step_dt = float(step_dt)
+        self.max_episode_sim_time = float(max_episode_sim_time)
+        self.n_waypoints = int(n_waypoints)
+        self.altitude = (float(alt[0]), float(alt[1]))
+        self.min_leg, self.goal_radius, self.ray_range = float(min_leg), float(goal_radius), float(ray_range)
+        self.controller = CommandController(self.params)
+        self.dynamics = ClosedLoopQuadrotor(self.controller)
+        self.pilot = WaypointPilot(self.dynamics.control_low, self.dynamics.control_high, cruise_speed, climb_speed)
+        self.clock = make_clock(clock)
+        self.action_space = GuardianActionSpace.for_dynamics(
+            self.dynamics, CONTROLS, safe_default=system("QuadrotorRoom").make_safe_default(), kind=KIND
+        )
+        low, high = np.full(_LAYOUT.size, -np.inf, np.float32), np.full(_LAYOUT.size, np.inf, np.float32)
+        low[_RANGES], high[_RANGES] = 0.0, self.ray_range
+        low[_QUAT], high[_QUAT] = -1.0, 1.0
+        self.observation_space = ObservationBox(low, high, _LAYOUT)
+        # F_max / m + g: no body acceleration exceeds it (damping only slows the body)
+        self._a_bound = self.params.control_high[0] / self.params.mass + self.params.gravity
+        self._ray_to = (self.ray_range * _DIRS).tolist()
+        self._wrench = np.empty(4)
+        self.goal = np.zeros(3)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        gym.Env.reset(self, seed=seed)
+        options = self.check_options(options)
+        room, state, waypoints = self.draw_start(options)
+        self._build(room)
+        self.set_state(state)
+        self.scene = QuadrotorCommandScene(room, self.controller)
+        self.pilot.reset(waypoints)
+        self.goal = waypoints[-1].copy()
+        self._physics_steps = 0
+        self._gap, self._gap_at = -math.inf, state[:3].copy()  # no clearance known yet
+        self.begin_statistics()
+        self.begin_episode()
+        info = {"sim_time": 0.0, "state": state.copy(), "nominal_control": self.update_nominal()}
+        self.clock.start()
+        return self._observe(state), info
+
+    # ------------------------------------------------------------------ stepping
+    def rays(self) -> np.ndarray:
+        res = self.p.rayTestBatch(
+            [[0.0, 0.0, 0.0]] * len(_DIRS),
+            self._ray_to,
+            parentObjectUniqueId=self.body,
+            parentLinkIndex=-1,
+            physicsClientId=self.client,
+        )
+        return np.array([self.ray_range * r[2] if r[0] >= 0 else self.ray_range for r in res])
+
+    def _features(self, states, rays) -> np.ndarray:
+        st = np.atleast_2d(states)
+        n = st.shape[0]
+        R = quat_to_rot(st[:, 3:7])
+        out = np.empty((n, _LAYOUT.size), dtype=np.float32)
+        out[:, _RANGES] = rays
+        out[:, _QUAT] = st[:, 3:7]
+        out[:, _VEL] = _heading_frame(st[:, 3:7], st[:, 7:10])
+        out[:, _RATES] = np.einsum("nji,nj->ni", R, st[:, 10:13])
+        out[:, _GOAL] = _heading_frame(st[:, 3:7], self.goal[None, :] - st[:, :3])
+        return out
+
+    def _observe(self, s) -> np.ndarray:
+        """:meth:`_features` of one state, in scalar arithmetic (a step's observation; the tests
+        hold the two equal)."""
+        out = np.empty(_LAYOUT.size, dtype=np.float32)
+        out[_RANGES] = self.rays()
+        out[_QUAT] = s[3:7]
+        psi = yaw_of(s[3], s[4], s[5], s[6])
+        c, sn = math.cos(psi), math.sin(psi)
+        out[_VEL] = (c * s[7] + sn * s[8], -sn * s[7] + c * s[8], s[9])
+        out[_RATES] = matvec(quat_to_rot(s[3:7]).T, s[10:13])
+        dx, dy = self.goal[0] - s[0], self.goal[1] - s[1]
+        out[_GOAL] = (c * dx + sn * dy, -sn * dx + c * dy, self.goal[2] - s[2])
+        return out
+
+    def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
+        """Advance the world by ``duration`` seconds under one held command: the pilot's (chosen
+        at the start of the interval) when ``active`` is false, else ``control`` (already
+        validated).  ``compute_time``: the agent's time charged to this step (statistics)."""
+        self.check_interval(duration)
+        p, c, body, par = self.p, self.client, self.body, self.params
+        s = self.get_state()
+        if active:
+            cmd = np.minimum(
+                np.maximum(np.asarray(control, dtype=float).reshape(4), self.dynamics.control_low),
+                self.dynamics.control_high,
+            )
+        else:
+            cmd = self._nominal.copy()
+        target = math.floor((self._sim_time + duration) / par.dt + 1e-9)
+        n = max(0, target - self._physics_steps)
+        t = n * par.dt
+        speed = math.sqrt(s[7] ** 2 + s[8] ** 2 + s[9] ** 2)
+        reach = speed * t + 0.5 * self._a_bound * t * t + _CONTACT_MARGIN
+        # the clearance is 1-Lipschitz in the position: the last one computed, less the distance
+        # moved since, is a lower bound; compute it afresh only when that bound is not enough
+        query = self._gap - math.dist(s[:3], self._gap_at) <= reach
+        if query:
+            assert self.scene is not None  # set by reset; simulate runs within an episode
+            self._gap, self._gap_at = self.scene.collision.clearance(s[:3]), s[:3].copy()
+            query = self._gap <= reach
+        k, w, gx, gy, gz = self.controller.packed, self._wrench, *self.goal
+        r2 = self.goal_radius**2
+        hit = reached = False
+        frame, force, torque, step = p.LINK_FRAME, p.applyExternalForce, p.applyExternalTorque, p.stepSimulation
+        pose, vel, contacts, origin = (
+            p.getBasePositionAndOrientation,
+            p.getBaseVelocity,
+            p.getContactPoints,
+            (0.0, 0.0, 0.0),
+        )
+        for _ in range(n):
+            command_wrench(s, cmd, k, w)
+            force(body, -1, (0.0, 0.0, w[0]), origin, frame, physicsClientId=c)
+            torque(body, -1, (w[1], w[2], w[3]), frame, physicsClientId=c)
+            step(physicsClientId=c)
+            self._physics_steps += 1
+            hit = query and len(contacts(bodyA=body, physicsClientId=c)) > 0
+            pos, quat = pose(body, physicsClientId=c)
+            s = np.array(pos + quat + sum(vel(body, physicsClientId=c), ()))
+            if hit:
+                break
+            if (pos[0] - gx) ** 2 + (pos[1] - gy) ** 2 + (pos[2] - gz) ** 2 < r2:
+                reached = True
+                break
+        self.count_interval(duration, active, compute_time)
+        outcome, reward = ("collision", -1.0) if hit else ("goal", 1.0) if reached else (None, 0.0)
+        info = {"sim_time": self._sim_time, "state": s.copy(), "active": bool(active), "control": cmd.copy()}
+        terminated, truncated = self.end_interval(outcome, reward, info)
+        return self._observe(s), reward, terminated, truncated, info
+
+    def driver_control(self) -> np.ndarray:
+        return self.pilot.command(self.get_state())
+
+    def final_speed(self) -> float:
+        v = self.get_state()[7:10]
+        return norm(v)
+
+    # ------------------------------------------------------------------ accessors and labelling hooks
+    def privileged(self) -> dict:
+        """The true state, the room, the goal, the waypoints and the simulated time. **Privileged**."""
+        self.require_episode()
+        return {
+            "state": self.get_state(),
+            "room": self.room,
+            "goal": self.goal.copy(),
+            "waypoints": self.pilot.waypoints.copy(),
+            "sim_time": self._sim_time,
+        }
+
+    true_state = property(lambda self: self.get_state(), doc="The true state (a copy). **Privileged**.")
+    sim_time = property(lambda self: self._sim_time, doc="Simulated seconds since reset.")
+
+    def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """Flight states of the current room (see "Risk labelling" above)."""
+        self.require_episode()
+        room = self.room
+        assert room is not None and self.scene is not None  # require_episode raised otherwise
+        cells = np.argwhere(room.footprint)
+
+        def draw(r, k):
+            ij = cells[r.integers(len(cells), size=k)]
+            xy = room.origin + (ij + r.uniform(0, 1, (k, 2))) * room.cell
+            q = quat_from_euler(r.uniform(-0.3, 0.3, k), r.uniform(-0.3, 0.3, k), r.uniform(-np.pi, np.pi, k))
+            psi = heading_of(q)
+            vf, vl = r.uniform(-2, 2, k), r.uniform(-2, 2, k)
+            v = np.column_stack(
+                [np.cos(psi) * vf - np.sin(psi) * vl, np.sin(psi) * vf + np.cos(psi) * vl, r.uniform(-1, 1, k)]
+            )
+            return np.column_stack([xy, r.uniform(0.2, 3.0, k), q, v, r.uniform(-1, 1, (k, 3))])
+
+        return rejection_sample(
+            rng, n, 13, draw, self.scene.collision.states_failed, "quadrotor flight states clear of the room"
+        )
+
+    def observe_states(self, states, rng=None) -> np.ndarray:
+        """This env's observation of states ``(N, 13)`` in the current episode (PyBullet rays; the
+        env's state is restored); ``rng`` is unused."""
+        self.require_episode()
+        st = unit_quaternion_rows(state_rows(states, 13))
+        keep = self.get_state()
+        rays = np.empty((st.shape[0], _RANGES.stop - _RANGES.start))
+        for i, row in enumerate(st):
+            self.set_state(row)
+            rays[i] = self.rays()
+        self.set_state(keep)
+        return self._features(st, rays)
+
+
+make_parallel_env = parallel_entry_point(QuadrotorRoomGuardedEnv, "QuadrotorRoomParallel-v0")
