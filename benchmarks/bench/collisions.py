@@ -39,6 +39,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 from rmm_bench.outputs import check_output, write_output
 from rmm_bench.store import ResultsStore
@@ -59,7 +60,7 @@ class AlarmLog:
     time (``info["sim_time"]``, else the env's statistics) and the guardian's ``alarm()``."""
 
     def __init__(self) -> None:
-        self.env = None
+        self.env: Any = None
         self.times: list[float] = [0.0]
         self.active: list[bool] = []
         self.alarms: list[tuple[float, float] | None] = []
@@ -212,9 +213,9 @@ def _replay_api():
     replay_episode)``, from replay's modules (``replay_plan``, ``replay_env``, ``replay_verify``)
     where they are split out, else from :mod:`rmm_bench.replay`."""
     try:
-        from rmm_bench.replay_env import build_env, check_guardian
-        from rmm_bench.replay_plan import ReplayRequest, _select_run, plan_replay
-        from rmm_bench.replay_verify import replay_episode
+        from rmm_bench.replay_env import build_env, check_guardian  # type: ignore[import-not-found, unused-ignore]
+        from rmm_bench.replay_plan import ReplayRequest, _select_run, plan_replay  # type: ignore[import-not-found, unused-ignore]
+        from rmm_bench.replay_verify import replay_episode  # type: ignore[import-not-found, unused-ignore]
     except ImportError:
         from rmm_bench.replay import ReplayRequest, _select_run, build_env, plan_replay, replay_episode
         from rmm_bench.replay import _check_guardian as check_guardian
