@@ -271,3 +271,18 @@ def test_every_kind_is_documented_in_the_package_docstring():
 
     for kind in KINDS:
         assert f"``{kind}``" in (pkg.__doc__ or "")
+
+
+def test_a_delay_is_counted_in_sim_time_not_in_calls():
+    """An agent that calls twice within a step (the non-blocking env's intervals) meets the same
+    delayed control as one that calls once per step."""
+    once, twice = realise("act-delay=2"), realise("act-delay=2")
+    u = [np.array([0.01 * k, 0.0]) for k in range(8)]
+    a = [once.control(u[k], 0.1 * k) for k in range(8)]
+    b = []
+    for k in range(8):
+        b.append(twice.control(u[k], 0.1 * k))
+        twice.control(u[k], 0.1 * k + 0.05)  # a second call within the step, commanding the same
+    for x, y in zip(a, b, strict=True):
+        assert np.array_equal(x, y)
+    assert np.array_equal(a[5], u[3]) and np.array_equal(a[1], u[0])

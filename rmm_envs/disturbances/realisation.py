@@ -72,17 +72,19 @@ class Realisation:
     disturbance of another kind leaves the others' draws as they were.
     """
 
-    def __init__(self, disturbances: Sequence[Disturbance], support: SystemSupport, seed: int):
+    def __init__(self, disturbances: Sequence[Disturbance], support: SystemSupport, seed: int | Sequence[int]):
         support.check(disturbances)
         self.disturbances = tuple(disturbances)
         self.support = support
         self.dt = float(support.dt)
         self._signals: list[_Signal | None] = []
         self._masks: list[np.ndarray | None] = []
-        root = (int(seed) & 0xFFFF_FFFF_FFFF_FFFF, _DOMAIN)
+        seeds = (seed,) if isinstance(seed, (int, np.integer)) else tuple(seed)
+        root = (*(int(x) & 0xFFFF_FFFF_FFFF_FFFF for x in seeds), _DOMAIN)
         n_act = 0 if support.action_low is None else int(np.size(support.action_low))
         size = int(getattr(support.layout, "size", 0))
-        self._delay: deque | None = None
+        self._delay: deque | None = None  # (t, commanded) pairs, the oldest first
+        self._delay_steps = 0
         self.gain = np.ones(n_act)
         self.parameters = dict(support.parameters)
         for d in self.disturbances:
@@ -117,7 +119,8 @@ class Realisation:
                 rng = np.random.default_rng(seq)
                 self.gain = self.gain * (1.0 + d.level * rng.uniform(-1.0, 1.0, n_act))
             elif d.kind == "act-delay":
-                self._delay = deque(maxlen=int(d.level) + 1)
+                self._delay = deque()
+                self._delay_steps = int(d.level)
             elif d.kind == "mismatch":
                 for name in d.on or sorted(support.parameters):  # each parameter its own stream
                     own = np.random.SeedSequence(list(root), spawn_key=(kind_code(d.kind), zlib.crc32(name.encode())))
@@ -159,14 +162,18 @@ class Realisation:
 
     def control(self, u: np.ndarray, t: float) -> np.ndarray:
         """The control the plant applies at sim time ``t`` when ``u`` is commanded (a new array),
-        within the control's bounds.  Call it once per step: a delay of ``k`` applies the control
-        commanded ``k`` calls before (the first one until then)."""
+        within the control's bounds.  Call it in order of sim time: a delay of ``k`` applies the
+        latest control commanded at or before step ``floor(t / dt) - k`` (the first until then),
+        whatever the number of calls in between."""
         low = np.asarray(self.support.action_low, float)
         high = np.asarray(self.support.action_high, float)
         out = np.array(u, dtype=np.float64, copy=True).reshape(-1)
-        if self._delay is not None:
-            self._delay.append(out.copy())
-            out = self._delay[0].copy()
+        if self._delay is not None:  # the control commanded k steps of sim time before (the first until then)
+            self._delay.append((self.step_of(t), out.copy()))
+            due = self.step_of(t) - self._delay_steps
+            while len(self._delay) > 1 and self._delay[1][0] <= due:
+                self._delay.popleft()
+            out = self._delay[0][1].copy()
         k = self.step_of(t)
         for d, sig in zip(self.disturbances, self._signals, strict=True):
             if d.kind == "act-noise":

@@ -22,6 +22,7 @@ from typing import cast
 import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace, parse
+from rmm_envs.disturbances.hooks import Disturbable
 from rmm_envs.envs.base import LabelledEnvBase
 from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL, NonBlockingStepping
 
@@ -33,7 +34,7 @@ __all__ = ["EPISODE_KEY", "GuardedEnv", "parallel_entry_point"]
 EPISODE_KEY = "episode_stats"
 
 
-class GuardedEnv(LabelledEnvBase):
+class GuardedEnv(Disturbable, LabelledEnvBase):
     """The shared parallel-autonomy step (see the module docstring).
 
     * :meth:`step`: read the agent's compute time off ``self.clock``, parse the action with the
@@ -55,7 +56,12 @@ class GuardedEnv(LabelledEnvBase):
       truncated) and adds ``outcome`` and ``episode_stats`` to the last step's ``info``.
 
     ``simulate`` applies ``self._nominal`` on an interval the driver controls, and calls
-    :meth:`end_interval` after the state has advanced."""
+    :meth:`end_interval` after the state has advanced.
+
+    Disturbances (:class:`rmm_envs.disturbances.hooks.Disturbable`): an env that takes them
+    passes its ``disturbances`` argument to :meth:`set_disturbances`, calls
+    :meth:`start_disturbances` at ``reset`` and routes its observation, applied control and
+    state rates through :meth:`sensed`, :meth:`actuated` and :meth:`drift`."""
 
     step_dt: float
     max_episode_sim_time: float

@@ -105,7 +105,11 @@ Privileged information is also available through :meth:`Dubins4DCirclesEnv.privi
 ``gym.make("Dubins4DGuarded-v0", step_dt=0.1, n_rays=12, ray_length=10.0,
 max_episode_sim_time=100.0, n_obstacles=5, obstacle_min_rad=2.0, obstacle_max_rad=5.0,
 goal_min_rad=0.1, goal_max_rad=1.0, n_path_points=16, driver_params=None, clock=None,
-render_mode=None, driver_solver="closed_form", starts="any")``.  ``starts="avoidable"`` redraws
+render_mode=None, driver_solver="closed_form", starts="any", disturbances=None)``.
+``disturbances``: sensor noise, actuation error, a drift of the position (``x``, ``y``),
+impulses or a plant whose ``turn_gain``, ``accel_gain`` and ``v_max`` differ from the model's,
+e.g. ``"obs-noise.rays=0.1; dyn-rate=0.2"`` (:mod:`rmm_envs.disturbances`; off by default,
+drawn from the episode's seed).  ``starts="avoidable"`` redraws
 a start (from the episode's seed) until some control avoids every obstacle, by the doomed test
 of :mod:`rmm_envs.systems.dubins4d.doomed` (off by default: the paper's sampling keeps doomed starts; see
 docs/concepts.md, Doomed starts).  ``clock`` ("wall", "cpu", "fixed:MS" or a
@@ -140,44 +144,27 @@ from collections.abc import Callable
 
 import numpy as np
 
-from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox
 from rmm_envs.catalog import system
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.envs import _render
-from rmm_envs.envs.base import check_arguments, finite, rejection_sample, whole
+from rmm_envs.envs.base import check_arguments, finite, whole
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
-from rmm_envs.systems.dubins4d.doomed import dubins4d_escapes
+from rmm_envs.systems.dubins4d.dataset_hooks import Dubins4DDatasetHooks
 from rmm_envs.systems.dubins4d.driver import CLFDriver, DriverParams
 from rmm_envs.systems.dubins4d.dynamics import Dubins4D
-from rmm_envs.systems.dubins4d.scene import Dubins4DScene, observation
+from rmm_envs.systems.dubins4d.plant import plant_model
+from rmm_envs.systems.dubins4d.scene import Dubins4DScene, observation, observation_layout
 from rmm_envs.systems.dubins4d.starts import HALF as _HALF
-from rmm_envs.systems.dubins4d.starts import Dubins4DStarts
+from rmm_envs.systems.dubins4d.starts import STARTS, Dubins4DStarts
 from rmm_envs.systems.dubins4d.step import advance, nominal_controls
 
-__all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "observation", "observation_layout"]
+__all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "observation", "observation_layout", "plant_model"]
 
 from rmm_envs.systems.dubins4d.dynamics import CONTROLS, KIND  # noqa: E402  (the action fields of u = (u1, u2); owned by the system)
 
 
-def observation_layout(n_rays: int = 12) -> ObservationLayout:
-    """The named slices of the observation table above; ray ``i`` points ``2 pi i / n_rays`` left of the heading."""
-    return ObservationLayout.of(
-        ("time", 1),
-        ("goal_offset", 2),
-        ("heading", 1),
-        ("speed", 1),
-        ("rays", n_rays),
-        ray_angles=[2.0 * math.pi * i / n_rays for i in range(n_rays)],
-    )
-
-
-#: the values of the ``starts`` argument: the paper's sampling, or only starts some control saves
-STARTS = ("any", "avoidable")
-#: draws ``starts="avoidable"`` makes before it gives up
-AVOIDABLE_ATTEMPTS = 100
-
-
-class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
+class Dubins4DCirclesEnv(Dubins4DStarts, Dubins4DDatasetHooks, GuardedEnv):
     """Blocking Dubins4D parallel-autonomy env; see the module docstring for the full spec."""
 
     # "human" is offered only where its optional dependency (pygame) is installed
@@ -189,6 +176,12 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
     #: ``None``: contacts with the circles of ``_circles``; a subclass on another world sets a
     #: function ``paths -> first obstacle contacts`` (see :func:`~rmm_envs.systems.dubins4d.step.advance`)
     _obstacle_contact: Callable[[np.ndarray], np.ndarray] | None = None
+    #: a rate disturbance moves the car's position (the HJ model's ``|d_x|, |d_y| <= d_max``)
+    disturbance_rates = {"x": 0, "y": 1}
+
+    def disturbance_parameters(self) -> dict[str, float]:
+        """What a ``mismatch`` scales: the turn-rate and acceleration gains and the top speed."""
+        return {"turn_gain": 1.0, "accel_gain": 1.0, "v_max": float(self.dynamics.v_max)}
 
     def __init__(
         self,
@@ -207,6 +200,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         render_mode: str | None = None,
         driver_solver: str = "closed_form",
         starts: str = "any",
+        disturbances=None,
     ) -> None:
         # Every bound is finite: an infinite episode length, ray length or radius would silently
         # disable what it configures (no timeout, rays that never end, a goal covering everything).
@@ -271,6 +265,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         low = np.array([0.0, -np.inf, -np.inf, -np.pi, s.v_min] + [0.0] * self.n_rays, dtype=np.float32)
         high = np.array([np.inf, np.inf, np.inf, np.pi, s.v_max] + [self.ray_length] * self.n_rays, dtype=np.float32)
         self.observation_space = ObservationBox(low, high, observation_layout(self.n_rays))
+        self.set_disturbances(disturbances)
 
         self.scene: Dubins4DScene | None = None
         self._state = np.zeros(4)
@@ -282,24 +277,14 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
         if self.starts == "avoidable":
             obstacles, state, goal = self._avoidable_start(obstacles, state, goal, options)
         self._start_episode(obstacles, state, goal)
+        self.start_disturbances(seed)
+        self._plant, self._gains = plant_model(self.dynamics, self.plant_parameters())
         obs = self._observe()
         info = {"sim_time": 0.0, "state": self._state.copy(), "nominal_control": self.update_nominal()}
         if self.render_mode == "human":
             self.render()
         self.clock.start()
         return obs, info
-
-    def _avoidable_start(self, obstacles, state, goal, options):
-        """With ``starts="avoidable"``: the start redrawn from the episode's generator (so still a
-        function of the seed) until the doomed test (:mod:`rmm_envs.systems.dubins4d.doomed`) finds it avoidable."""
-        for _ in range(AVOIDABLE_ATTEMPTS):
-            if dubins4d_escapes(self.dynamics, state, obstacles, goal):
-                return obstacles, state, goal
-            obstacles, state, goal = self.generate_start(self.np_random, options)
-        raise RuntimeError(
-            f"starts='avoidable': no avoidable start in {AVOIDABLE_ATTEMPTS} draws (reset options "
-            f"{sorted(options or {})}); the given parts leave no start that any control saves"
-        )
 
     def _start_episode(self, obstacles: np.ndarray, state: np.ndarray, goal: np.ndarray) -> None:
         self.scene = Dubins4DScene(obstacles, goal, self.dynamics, self.n_rays, self.ray_length)
@@ -314,7 +299,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
     # ------------------------------------------------------------------ stepping
     def _observe(self) -> np.ndarray:
         assert self.scene is not None  # set by reset, before any observation
-        return self.scene.observe(self._state[None, :], self._sim_time)[0]
+        return self.sensed(self.scene.observe(self._state[None, :], self._sim_time)[0], self._sim_time)
 
     def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
         """Advance the world by ``duration`` seconds under one held control.
@@ -329,18 +314,26 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
             times = self._step_times
         else:
             times = np.linspace(0.0, float(duration), self.n_path_points)
+        controls = np.zeros((1, 2)) if control is None else np.asarray(control, dtype=float).reshape(1, 2)
+        act, plant, drift, applied = np.array([bool(active)]), self.dynamics, None, None
+        if self.realisation is not None:  # the actuators' control, the plant's gains, the drift
+            applied = self.actuated(controls[0] if active else self._nominal, self._sim_time)
+            act, plant, controls = np.array([True]), self._plant, (applied * self._gains)[None, :]
+            rate = self.drift(self._sim_time, 4)
+            drift = None if rate is None else rate[None, :]
         nxt, u, hit_obst, hit_goal = advance(
-            self.dynamics,
+            plant,
             self._nominal[None, :],
             self._state[None, :],
             self._circles[None],
-            np.array([bool(active)]),
-            np.zeros((1, 2)) if control is None else np.asarray(control, dtype=float).reshape(1, 2),
+            act,
+            controls,
             times,
             self._obstacle_contact,
+            drift,
         )
         hit_obst, hit_goal = float(hit_obst[0]), float(hit_goal[0])
-        u = u[0]
+        u = u[0] if applied is None else applied
 
         self.count_interval(duration, active, compute_time)
         self._state = nxt[0]
@@ -383,46 +376,6 @@ class Dubins4DCirclesEnv(Dubins4DStarts, GuardedEnv):
             "goal": self.scene.goal.copy(),
             "sim_time": self._sim_time,
         }
-
-    # ------------------------------------------------------------------ dataset hooks
-    def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        """``n`` states uniform over the arena x [-pi, pi) x [0, 2], outside every obstacle
-        (rejection sampling, as the original's datagen since 2022-09-13)."""
-        self.require_episode()
-        assert self.scene is not None  # require_episode raised otherwise
-        s = self.dynamics
-        return rejection_sample(
-            rng,
-            n,
-            4,
-            lambda r, m: np.column_stack(
-                [
-                    r.uniform(-_HALF, _HALF, m),
-                    r.uniform(-_HALF, _HALF, m),
-                    r.uniform(-np.pi, np.pi, m),
-                    r.uniform(s.v_min, s.v_max, m),
-                ]
-            ),
-            self.scene.state_failed,
-            "states outside the obstacles",
-        )
-
-    def observe_states(self, states: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
-        """Observations of arbitrary states for a dataset.  The simulated-time feature is drawn
-        from ``rng`` (required) uniformly over the episode range ``[0, max_episode_sim_time]``: the
-        original left it 0 in every training sample and met 0-100 s at run time
-        (docs/original-code.md, item 8)."""
-        self.require_episode()
-        if not isinstance(rng, np.random.Generator):
-            raise ValueError(
-                f"observe_states needs rng, a numpy.random.Generator to draw the simulated-time feature, got {rng!r}"
-            )
-        t = rng.uniform(0.0, self.max_episode_sim_time, size=np.asarray(states).shape[0])
-        assert self.scene is not None  # require_episode raised otherwise
-        return self.scene.observe(states, t)
-
-    def dataset_notes(self) -> dict:
-        return {"obs_time_feature": "uniform over [0, max_episode_sim_time]"}
 
     @property
     def true_state(self) -> np.ndarray:

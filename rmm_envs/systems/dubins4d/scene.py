@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from rmm_envs.autonomy import ObservationLayout
 from rmm_envs.scenes.base import SceneBase, branch_inputs
 from rmm_envs.scenes.branch_kernels import dubins4d_circle_branches
 from rmm_envs.systems.dubins4d.circles import CircleWorld, paths_hit_circles, points_in_circles, ray_cast
 from rmm_envs.systems.dubins4d.dynamics import Dubins4D, wrap_angle
 
-__all__ = ["Dubins4DScene", "observation"]
+__all__ = ["Dubins4DScene", "observation", "observation_layout"]
 
 
 def observation(states: np.ndarray, sim_time, goals: np.ndarray, rays: np.ndarray) -> np.ndarray:
@@ -110,3 +113,15 @@ class Dubins4DScene(SceneBase):
         with np.errstate(divide="ignore", invalid="ignore"):
             risk = np.where(fwd <= 0, 1.0, np.minimum(d_stop / fwd, 1.0))
         return np.where(v <= 0, np.where(fwd <= 0, 1.0, 0.0), risk)
+
+
+def observation_layout(n_rays: int = 12) -> ObservationLayout:
+    """The named slices of the observation table above; ray ``i`` points ``2 pi i / n_rays`` left of the heading."""
+    return ObservationLayout.of(
+        ("time", 1),
+        ("goal_offset", 2),
+        ("heading", 1),
+        ("speed", 1),
+        ("rays", n_rays),
+        ray_angles=[2.0 * math.pi * i / n_rays for i in range(n_rays)],
+    )

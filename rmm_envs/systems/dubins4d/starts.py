@@ -20,9 +20,10 @@ import numpy as np
 
 from rmm_envs.envs.base import draw_until, option_vector
 from rmm_envs.systems.dubins4d.circles import CircleWorld, as_circles, points_in_circles
+from rmm_envs.systems.dubins4d.doomed import dubins4d_escapes
 from rmm_envs.systems.dubins4d.dynamics import Dubins4D, wrap_angle
 
-__all__ = ["HALF", "Dubins4DStarts"]
+__all__ = ["AVOIDABLE_ATTEMPTS", "HALF", "STARTS", "Dubins4DStarts"]
 
 HALF = 10.0  # arena half width (generation only)
 
@@ -42,6 +43,12 @@ def in_goal(state: np.ndarray, goal: np.ndarray) -> bool:
 
 def _parts(given: tuple[str, ...]) -> str:
     return " and ".join(f"option {k!r}" for k in given)
+
+
+#: the values of the ``starts`` argument: the paper's sampling, or only starts some control saves
+STARTS = ("any", "avoidable")
+#: draws ``starts="avoidable"`` makes before it gives up
+AVOIDABLE_ATTEMPTS = 100
 
 
 class Dubins4DStarts:
@@ -198,3 +205,15 @@ class Dubins4DStarts:
         if goal is None:
             goal = self._generate_goal(rng, state, obstacles, tuple(k for k in ("state", "obstacles") if k in given))
         return obstacles, state, goal
+
+    def _avoidable_start(self, obstacles, state, goal, options):
+        """With ``starts="avoidable"``: the start redrawn from the episode's generator (so still a
+        function of the seed) until the doomed test (:mod:`rmm_envs.systems.dubins4d.doomed`) finds it avoidable."""
+        for _ in range(AVOIDABLE_ATTEMPTS):
+            if dubins4d_escapes(self.dynamics, state, obstacles, goal):
+                return obstacles, state, goal
+            obstacles, state, goal = self.generate_start(self.np_random, options)
+        raise RuntimeError(
+            f"starts='avoidable': no avoidable start in {AVOIDABLE_ATTEMPTS} draws (reset options "
+            f"{sorted(options or {})}); the given parts leave no start that any control saves"
+        )

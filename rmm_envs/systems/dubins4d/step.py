@@ -37,6 +37,7 @@ def advance(
     controls: np.ndarray,
     times: np.ndarray,
     obstacle_contact=None,
+    drift: np.ndarray | None = None,
 ):
     """Advance ``N`` worlds by one held control each.
 
@@ -51,6 +52,9 @@ def advance(
         obstacle_contact: ``None`` (the circles before the goal are the obstacles), or a
             function ``paths (N, S, 4) -> (N,)`` giving the first obstacle contact parameters
             of another world (then ``circles`` holds the goal only): the map env's hook.
+        drift: ``None``, or ``(N, 4)`` rates added to the state's over the whole step (a
+            disturbance on the position rates: ``x`` and ``y`` move by ``drift * t`` on top of the
+            car's own motion, exactly, as heading and speed do not depend on position).
 
     Returns ``(next_states, applied_controls, hit_obstacle, hit_goal)``: the path's end with the
     heading wrapped to ``[-pi, pi)``, ``(N, 2)``, and the first contact parameters ``(N,)``
@@ -58,6 +62,8 @@ def advance(
     """
     u = np.where(active[:, None], np.asarray(controls, dtype=float), nominal)
     paths = dynamics.states_at(states, u, times, compiled=True)
+    if drift is not None:
+        paths = paths + np.asarray(drift, float)[:, None, :] * np.asarray(times, float)[None, :, None]
     cp = contact_params_each(paths, circles)
     hit_goal = cp[:, -1]
     if obstacle_contact is not None:

@@ -112,7 +112,8 @@ its obstacles only on a map of circles only) and ``map`` (the map's entries, as 
 
 ``gym.make("Dubins4DMapGuarded-v0", map=None, step_dt=0.1, n_rays=12, ray_length=10.0,
 max_episode_sim_time=100.0, goal_min_rad=0.1, goal_max_rad=1.0, n_path_points=16,
-driver_params=None, clock=None, render_mode=None, driver_solver="closed_form")``; ``map`` is a
+driver_params=None, clock=None, render_mode=None, driver_solver="closed_form", disturbances=None)``
+(``disturbances`` as in Dubins4DGuarded-v0); ``map`` is a
 path to a JSON file, the list (or object) already loaded, or ``None`` for the example; the
 other arguments and their defaults are ``Dubins4DGuarded-v0``'s (the paper's).  The map is
 parsed and its pymunk space built once, at construction.
@@ -188,6 +189,7 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
         clock=None,
         render_mode: str | None = None,
         driver_solver: str = "closed_form",
+        disturbances=None,
     ) -> None:
         super().__init__(
             step_dt=step_dt,
@@ -202,6 +204,7 @@ class Dubins4DMapEnv(Dubins4DCirclesEnv):
             clock=clock,
             render_mode=render_mode,
             driver_solver=driver_solver,
+            disturbances=disturbances,
         )
         self.map = load_map(example_map_path() if map is None else map)
         self.world = PymunkWorld(self.map)

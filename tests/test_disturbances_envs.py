@@ -1,0 +1,161 @@
+"""Disturbances applied by an env (issue 52), on Dubins4D: off is the same bits as before, each kind
+changes what it should and nothing else, the same seed gives the same episode, and the draws do not
+depend on what the agent does."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import rmm_envs  # noqa: F401  (registers the envs)
+from rmm_envs.disturbances import DisturbanceError
+
+ENV = "Dubins4DGuarded-v0"
+SEED = 7
+
+
+def _action(turn: float, accel: float, active: int = 1) -> dict:
+    return {"active_ctrl": active, "turnrate_ctrl": np.array([turn]), "accel_ctrl": np.array([accel])}
+
+
+#: a fixed guardian control sequence: the same commands whatever the env shows
+COMMANDS = [_action(0.1 * np.sin(k / 5), 0.3 * np.cos(k / 7)) for k in range(40)]
+
+
+def _run(disturbances=None, actions=COMMANDS, seed: int = SEED, env_id: str = ENV):
+    env = gym.make(env_id, disturbances=disturbances).unwrapped
+    obs, _ = env.reset(seed=seed)
+    observations, states, controls = [obs], [env.true_state], []
+    for a in actions:
+        obs, _, terminated, truncated, info = env.step(a)
+        observations.append(obs)
+        states.append(info["state"])
+        controls.append(info["control"])
+        if terminated or truncated:
+            break
+    return env, np.array(observations), np.array(states), np.array(controls)
+
+
+def test_off_is_the_undisturbed_env_bit_for_bit():
+    _, o0, s0, c0 = _run(None)
+    for off in ("", [], ()):
+        env, o, s, c = _run(off)
+        assert env.realisation is None and env.disturbances == ()
+        assert np.array_equal(o, o0) and np.array_equal(s, s0) and np.array_equal(c, c0)
+
+
+def test_observation_noise_leaves_the_true_trajectory_untouched():
+    _, o0, s0, c0 = _run(None)
+    _, o, s, c = _run("obs-noise.rays=0.5")
+    assert np.array_equal(s, s0) and np.array_equal(c, c0)  # the world and the controls as before
+    assert np.array_equal(o[:, :5], o0[:, :5])  # time, goal offset, heading, speed
+    assert not np.array_equal(o[:, 5:], o0[:, 5:])
+    assert o[:, 5:].min() >= 0.0 and o[:, 5:].max() <= 10.0
+
+
+def test_a_rate_disturbance_moves_the_position_by_its_rate_times_the_time():
+    """A uniform drift ``d`` (held for the episode) adds ``d t`` to x and y, exactly: heading and speed
+    do not depend on the position, so they are the undisturbed ones."""
+    env, _, s0, _ = _run(None)
+    env, _, s, _ = _run("dyn-rate=0.3")
+    d = env.realisation.rate(0.0, 4)
+    assert np.all(np.abs(d[:2]) <= 0.3) and np.all(d[:2] != 0) and np.all(d[2:] == 0)
+    n = min(len(s), len(s0))
+    t = 0.1 * np.arange(n)
+    assert np.array_equal(s[:n, 2:], s0[:n, 2:])
+    np.testing.assert_allclose(s[:n, :2] - s0[:n, :2], t[:, None] * d[None, :2], rtol=0, atol=1e-9)
+
+
+def test_a_gain_mismatch_scales_the_acceleration_the_car_gets():
+    """Full acceleration from a known state: the speed grows by ``accel_gain * 0.5`` m/s^2 up to the
+    plant's own top speed."""
+    actions = [_action(0.0, 0.5)] * 30
+    env = gym.make(ENV, disturbances="mismatch.accel_gain+v_max=0.3").unwrapped
+    env.reset(seed=SEED, options={"state": [0.0, 0.0, 0.0, 0.0], "goal": [9.0, 9.0, 0.5], "obstacles": []})
+    p = env.plant_parameters()
+    assert p["turn_gain"] == 1.0 and p["accel_gain"] != 1.0 and p["v_max"] != 2.0
+    speeds = []
+    for a in actions:
+        *_, info = env.step(a)
+        speeds.append(info["state"][3])
+    t = 0.1 * np.arange(1, 31)
+    np.testing.assert_allclose(speeds, np.minimum(0.5 * p["accel_gain"] * t, p["v_max"]), atol=1e-12)
+    np.testing.assert_array_equal(info["control"], [0.0, 0.5])  # the command; the plant's gain is its own
+
+
+def test_a_delay_applies_the_command_of_k_steps_before():
+    _, _, _, c = _run("act-delay=3")
+    commanded = np.array([[a["turnrate_ctrl"][0], a["accel_ctrl"][0]] for a in COMMANDS[: len(c)]])
+    np.testing.assert_array_equal(c[3:], commanded[:-3])
+    np.testing.assert_array_equal(c[:3], np.repeat(commanded[:1], 3, axis=0))
+
+
+def test_action_noise_and_gain_keep_the_control_within_its_bounds():
+    _, _, _, c = _run("act-noise=2.0;act-gain=0.5")
+    assert np.all(np.abs(c[:, 0]) <= 0.25) and np.all(np.abs(c[:, 1]) <= 0.5)
+    commanded = np.array([[a["turnrate_ctrl"][0], a["accel_ctrl"][0]] for a in COMMANDS[: len(c)]])
+    assert not np.array_equal(c, commanded)
+
+
+@pytest.mark.parametrize(
+    "spec",
+    ["obs-noise=0.2@white", "ray-dropout=0.3", "obs-bias=0.5", "act-noise=0.2", "act-gain=0.3", "act-delay=2",
+     "dyn-rate=0.3@white", "dyn-rate=0.3@periodic", "dyn-rate=0.3@step", "impulse=1.0", "mismatch=0.3"],
+)  # fmt: skip
+def test_every_kind_gives_the_same_bits_twice_and_keeps_the_start(spec):
+    env0, o0, *_ = _run(None, actions=[])
+    a = _run(spec)
+    b = _run(spec)
+    for x, y in zip(a[1:], b[1:], strict=True):
+        assert np.array_equal(x, y)
+    env, *_ = _run(spec, actions=[])
+    assert np.array_equal(env.true_state, env0.true_state)  # the start is drawn as undisturbed
+    assert np.array_equal(env.scene.obstacles, env0.scene.obstacles)
+
+
+def test_the_draws_do_not_depend_on_what_the_agent_does():
+    """Two agents on one episode (one lets the driver drive, the other steers) meet the same
+    disturbance at every sim time."""
+    spec = "dyn-rate=0.3@white;obs-noise=0.1;ray-dropout=0.2"
+    lazy, *_ = _run(spec, actions=[_action(0.0, 0.0, active=0)] * 20)
+    busy, *_ = _run(spec, actions=COMMANDS[:20])
+    obs = np.full(17, 5.0, np.float32)
+    for k in range(0, 300, 7):
+        t = 0.1 * k
+        assert np.array_equal(lazy.realisation.rate(t, 4), busy.realisation.rate(t, 4))
+        assert np.array_equal(lazy.realisation.observation(obs, t), busy.realisation.observation(obs, t))
+
+
+def test_unseeded_episodes_follow_the_seeded_one_without_repeating_it():
+    env = gym.make(ENV, disturbances="dyn-rate=0.3").unwrapped
+    env.reset(seed=SEED)
+    first = env.realisation.rate(0.0, 4)
+    env.reset()
+    second = env.realisation.rate(0.0, 4)
+    env.reset(seed=SEED)
+    assert np.array_equal(env.realisation.rate(0.0, 4), first) and not np.array_equal(first, second)
+
+
+def test_the_parallel_env_and_the_map_env_take_them_too():
+    env = gym.make("Dubins4DParallel-v0", disturbances="obs-noise.rays=0.2", clock="fixed:1")
+    env.reset(seed=SEED)
+    assert env.unwrapped.realisation is not None
+    env = gym.make("Dubins4DMapGuarded-v0", disturbances="dyn-rate=0.1")
+    env.reset(seed=SEED)
+    assert env.unwrapped.realisation is not None
+
+
+@pytest.mark.parametrize(
+    ("spec", "words"),
+    [
+        ("dyn-rate.theta=0.1", ["'theta'", "x, y"]),
+        ("mismatch.mass=0.1", ["'mass'", "turn_gain"]),
+        ("obs-noise.lidar=0.1", ["'lidar'", "goal_offset"]),
+        ("obs-noise=-1", ["negative"]),
+    ],
+)
+def test_bad_input_is_refused_when_the_env_is_made(spec, words):
+    with pytest.raises(DisturbanceError) as e:
+        gym.make(ENV, disturbances=spec)
+    assert "\n" not in str(e.value) and all(w in str(e.value) for w in words)
