@@ -159,3 +159,66 @@ def test_bad_input_is_refused_when_the_env_is_made(spec, words):
     with pytest.raises(DisturbanceError) as e:
         gym.make(ENV, disturbances=spec)
     assert "\n" not in str(e.value) and all(w in str(e.value) for w in words)
+
+
+# ---------------------------------------------------------------- the maze car and the quadrotor
+
+MAZE = "Dubins3DMazeGuarded-v0"
+QUAD = "QuadrotorRoomGuarded-v0"
+
+
+def _driver_steps(env_id: str, n: int) -> list:
+    space = gym.make(env_id).unwrapped.action_space
+    idle = {k: np.zeros(space[k].shape) for k in space.spaces if k != "active_ctrl"}
+    return [{"active_ctrl": 0, **idle}] * n
+
+
+@pytest.mark.parametrize(("env_id", "n"), [(MAZE, 60), (QUAD, 15)])
+def test_maze_and_quadrotor_off_are_the_undisturbed_env_and_sensor_noise_leaves_the_world(env_id, n):
+    actions = _driver_steps(env_id, n)
+    _, o0, s0, c0 = _run(None, actions, env_id=env_id)
+    _, o, s, c = _run("", actions, env_id=env_id)
+    assert np.array_equal(o, o0) and np.array_equal(s, s0) and np.array_equal(c, c0)
+    _, o, s, c = _run("obs-noise=0.3", actions, env_id=env_id)
+    assert np.array_equal(s, s0) and np.array_equal(c, c0) and not np.array_equal(o, o0)
+
+
+def test_the_maze_drift_moves_the_car_by_its_rate_times_the_time():
+    actions = _driver_steps(MAZE, 40)
+    _, _, s0, c0 = _run(None, actions, env_id=MAZE)
+    env, _, s, c = _run("dyn-rate=0.5", actions, env_id=MAZE)
+    d = env.realisation.rate(0.0, 3)
+    n = min(len(s), len(s0), 5)  # the driver answers the drifted pose after the first step
+    np.testing.assert_allclose(s[1] - s0[1], [d[0] * 0.1, d[1] * 0.1, 0.0], atol=1e-9)
+    assert np.all(np.abs(d[:2]) <= 0.5) and d[2] == 0 and n == 5
+
+
+def test_the_maze_mismatch_changes_the_car_s_speed():
+    env = gym.make(MAZE, disturbances="mismatch.speed=0.3").unwrapped
+    env.reset(seed=SEED)
+    speed = env.plant_parameters()["speed"]
+    x0 = env.true_state
+    *_, info = env.step(_driver_steps(MAZE, 1)[0])
+    moved = np.hypot(*(info["state"][:2] - x0[:2]))
+    assert speed != 10.0 and abs(speed / 10.0 - 1) <= 0.3
+    assert abs(moved - speed * 0.1) < 1e-3  # a turning path's chord is barely shorter than its arc
+
+
+def test_the_maze_refuses_ray_dropouts_its_rays_have_no_maximum():
+    with pytest.raises(DisturbanceError, match="no maximum range"):
+        gym.make(MAZE, disturbances="ray-dropout=0.1")
+
+
+def test_quadrotor_wind_lifts_the_body_and_a_mismatch_changes_its_mass_in_pybullet():
+    actions = _driver_steps(QUAD, 10)
+    _, _, s0, _ = _run(None, actions, env_id=QUAD)
+    env, _, s, _ = _run("dyn-rate.vz=2.0", actions, env_id=QUAD)
+    up = env.realisation.rate(0.0, 13)[9]
+    assert up != 0 and np.sign(s[-1][2] - s0[-1][2]) == np.sign(up)
+    env = gym.make(QUAD, disturbances="mismatch.mass=0.3").unwrapped
+    env.reset(seed=SEED)
+    mass = env.p.getDynamicsInfo(env.body, -1, physicsClientId=env.client)[0]
+    assert mass == pytest.approx(env.plant_parameters()["mass"]) and mass != pytest.approx(env.params.mass)
+    a = _run("act-noise=0.2;impulse=0.3", actions, env_id=QUAD)
+    b = _run("act-noise=0.2;impulse=0.3", actions, env_id=QUAD)
+    assert all(np.array_equal(x, y) for x, y in zip(a[1:], b[1:], strict=True))

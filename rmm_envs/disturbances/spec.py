@@ -186,8 +186,10 @@ class SystemSupport:
                         raise DisturbanceError(
                             f"{d}: {self.system}'s observation has no field {c!r}; it has {', '.join(names)}"
                         )
-                if d.kind == "ray-dropout" and self.obs_high is None:
-                    raise DisturbanceError(f"{d}: {self.system} gives no ray range to read on a dropout")
+                if d.kind == "ray-dropout" and (
+                    self.obs_high is None or not np.all(np.isfinite(np.asarray(self.obs_high)[self.layout["rays"]]))  # type: ignore[index]
+                ):
+                    raise DisturbanceError(f"{d}: {self.system}'s rays have no maximum range to read on a dropout")
             elif target == "act":
                 if self.action_low is None or self.action_high is None:
                     raise DisturbanceError(f"{d}: {self.system} has no continuous control to disturb")

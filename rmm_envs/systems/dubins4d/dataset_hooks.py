@@ -3,9 +3,13 @@ the arena and observed as the env observes them, for risk labels."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
 from rmm_envs.envs.base import rejection_sample
+from rmm_envs.systems.dubins4d.dynamics import Dubins4D
 from rmm_envs.systems.dubins4d.starts import HALF as _HALF
 
 __all__ = ["Dubins4DDatasetHooks"]
@@ -16,9 +20,10 @@ class Dubins4DDatasetHooks:
     :class:`rmm_envs.systems.dubins4d.env.Dubins4DCirclesEnv` (it sets ``scene``, ``dynamics`` and
     ``max_episode_sim_time``)."""
 
-    scene: object
-    dynamics: object
+    scene: Any
+    dynamics: Dubins4D
     max_episode_sim_time: float
+    require_episode: Callable[[], None]
 
     def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """``n`` states uniform over the arena x [-pi, pi) x [0, 2], outside every obstacle

@@ -97,7 +97,11 @@ the goal ``[x, y, r]``, the car's speed (px/s) and the simulated time.
 ``gym.make("Dubins3DMazeGuarded-v0", step_dt=0.1, n_path_points=8, max_episode_sim_time=300.0,
 goal_cells=(4, 8), goal_radius=30.0, start_jitter=15.0, heading_noise=pi/4, lookahead=190.0,
 driver_gain=1.0, maze_rows=10, maze_cols=10, speed=10.0, r_min=50.0, clock=None,
-render_mode=None)``.  ``step_dt`` 0.1 s as Dubins4D: the blocking env re-decides every 1 px of
+render_mode=None, disturbances=None)``.  ``disturbances``: sensor noise (the rays, the goal
+offset, the heading), actuation error on the turn rate, a drift of the position (``x``, ``y``, px/s),
+impulses, or a plant whose ``speed`` and ``turn_gain`` differ from the model's
+(:mod:`rmm_envs.disturbances`; off by default; no ray dropouts: the rays have no maximum range).
+``step_dt`` 0.1 s as Dubins4D: the blocking env re-decides every 1 px of
 travel.  ``goal_radius`` 30 px: half a corridor, so the driver cannot miss it when it arrives.
 ``lookahead`` (px) and ``driver_gain`` (1/s): the driver's (:mod:`rmm_envs.systems.maze.driver`, where
 the collision rate against the look-ahead is measured).  A 10 x 10 maze holds every drive (the
@@ -122,64 +126,28 @@ import math
 
 import numpy as np
 
-from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout, SafeDefault
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox
 from rmm_envs.catalog import system
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.envs import _render
-from rmm_envs.envs.base import check_arguments, finite, option_vector, whole
+from rmm_envs.envs.base import check_arguments, finite, whole
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
-from rmm_envs.portable import wrap_angle
 from rmm_envs.systems.dubins4d.dynamics import SERIES_COEFFICIENTS
-from rmm_envs.systems.maze.driver import PursuitDriver, cell_distances, cell_of, cell_path
+from rmm_envs.systems.maze.driver import PursuitDriver
 from rmm_envs.systems.maze.dynamics import Dubins3D
-from rmm_envs.systems.maze.env import Dubins3DMazeEnv, maze_from_option
+from rmm_envs.systems.maze.env import Dubins3DMazeEnv
 from rmm_envs.systems.maze.maze_kernels import dubins_path, maze_path_hit, maze_rays, path_reaches_disc
-from rmm_envs.systems.maze.mazes import Maze, generate_maze
+from rmm_envs.systems.maze.observation import N_RAYS, TurnFromNearerWall, observation_layout
 from rmm_envs.systems.maze.scene import MazeScene
+from rmm_envs.systems.maze.starts import MazeStarts
 from rmm_envs.worlds.bounds import MAX_MAZE_SIDE
 
 __all__ = ["CONTROLS", "Dubins3DMazeGuardedEnv", "TurnFromNearerWall", "make_parallel_env", "observation_layout"]
 
 from rmm_envs.systems.maze.dynamics import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
 
-N_RAYS = 8
 
-
-def observation_layout() -> ObservationLayout:
-    """The named slices of the observation table above."""
-    return ObservationLayout.of(
-        ("rays", N_RAYS), ("goal_offset", 2), ("heading", 1), ray_angles=[k * math.pi / 4 for k in range(N_RAYS)]
-    )
-
-
-class TurnFromNearerWall(SafeDefault):
-    """The maze car's safe default: the maximum turn rate away from the nearer wall.
-
-    "Nearer wall" compares the shortest ray on the left (rays strictly between 0 and pi from
-    the heading) with the shortest on the right; the car turns toward the side whose shortest
-    ray is longer, left on a tie.  The car cannot stop, so turning is all it can do."""
-
-    description = "maximum turn rate away from the nearer wall"
-
-    def __init__(self, layout: ObservationLayout) -> None:
-        rays = layout["rays"]
-        ang = wrap_angle(layout.ray_angles)
-        self._left = [rays.start + i for i, a in enumerate(ang) if 1e-9 < a < math.pi - 1e-9]
-        self._right = [rays.start + i for i, a in enumerate(ang) if -math.pi + 1e-9 < a < -1e-9]
-
-    def policy(self, space: GuardianActionSpace, rng: np.random.Generator, **options):
-        self.check_options(options)
-        left, right = self._left, self._right
-        turn_left, turn_right = space.control_high.copy(), space.control_low.copy()
-
-        def control(observation) -> np.ndarray:
-            obs = np.asarray(observation, dtype=float)
-            return turn_right if min(obs[left]) < min(obs[right]) else turn_left
-
-        return control
-
-
-class Dubins3DMazeGuardedEnv(GuardedEnv):
+class Dubins3DMazeGuardedEnv(MazeStarts, GuardedEnv):
     """Blocking maze parallel-autonomy env; see the module docstring for the full spec."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -189,6 +157,12 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
     length_unit = "px"
     metres_per_unit = 0.01
     scene: MazeScene | None
+    #: a rate disturbance moves the car's position (px/s)
+    disturbance_rates = {"x": 0, "y": 1}
+
+    def disturbance_parameters(self) -> dict[str, float]:
+        """What a ``mismatch`` scales: the car's speed and the gain on its turn rate."""
+        return {"speed": float(self.dynamics.speed), "turn_gain": 1.0}
 
     def __init__(
         self,
@@ -207,6 +181,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         r_min: float = 50.0,
         clock: Clock | str | None = None,
         render_mode: str | None = None,
+        disturbances=None,
     ) -> None:
         gc = tuple(goal_cells) if isinstance(goal_cells, (tuple, list)) else ()
         check_arguments(
@@ -271,59 +246,10 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         low = np.array([0.0] * N_RAYS + [-np.inf, -np.inf, -np.pi], dtype=np.float32)
         high = np.array([np.inf] * N_RAYS + [np.inf, np.inf, np.pi], dtype=np.float32)
         self.observation_space = ObservationBox(low, high, lay)
+        self.set_disturbances(disturbances)
         self._state = np.zeros(3)
         self._rays = np.zeros(N_RAYS)
         self._last_active = False
-
-    # ------------------------------------------------------------------ starts
-    def _maze(self, spec) -> Maze:
-        if spec is None:
-            return generate_maze(self.np_random, "rectangular", *self.maze_shape)
-        if isinstance(spec, Maze) and (spec.cells.shape[0] < 2 or spec.passages.shape[0] < 1):
-            raise ValueError("option 'maze' must have cells joined by passages (a generated Maze); this one has none")
-        return maze_from_option(spec, self.np_random)
-
-    def _start(self, options: dict):
-        rng = self.np_random
-        maze = self._maze(options.get("maze"))
-        n = maze.cells.shape[0]
-        if "state" in options:
-            state = option_vector(options["state"], 3, "state", " [x, y, psi]")
-            start = cell_of(maze, state)
-            a, b = np.asarray(maze.passages[0], dtype=int)
-            spacing = float(np.hypot(*(maze.cells[a] - maze.cells[b])))  # between neighbouring cell centres
-            if maze.state_failed(state[None, :2])[0] or np.hypot(
-                *(state[:2] - maze.cells[start])
-            ) > spacing / math.sqrt(2):
-                raise ValueError(f"option 'state': {state[:2].tolist()} is inside a wall or outside the maze's cells")
-        else:
-            state, start = None, int(rng.integers(n))
-        dist = cell_distances(maze, start)
-        if "goal_cell" in options:
-            goal = options["goal_cell"]
-            if not whole(goal) or not 0 <= goal < n or int(goal) == start:
-                raise ValueError(
-                    f"option 'goal_cell' must be an integer cell index in [0, {n}) other than the start "
-                    f"cell {start}, got {goal!r}"
-                )
-            goal = int(goal)
-        else:
-            band = np.flatnonzero((dist >= self.goal_cells[0]) & (dist <= self.goal_cells[1]))
-            if band.size == 0:
-                raise ValueError(
-                    f"no cell of the maze is {self.goal_cells[0]}-{self.goal_cells[1]} passages from start cell "
-                    f"{start} (goal_cells); give a larger maze or 'goal_cell'"
-                )
-            goal = int(band[rng.integers(band.size)])
-        cells = cell_path(maze, start, goal)
-        waypoints = maze.cells[cells]
-        if state is None:
-            pos = waypoints[0] + rng.uniform(-self.start_jitter, self.start_jitter, 2)
-            d = waypoints[1] - waypoints[0]
-            psi = math.atan2(d[1], d[0]) + rng.uniform(-self.heading_noise, self.heading_noise)
-            state = np.array([pos[0], pos[1], psi])
-        waypoints = np.vstack([state[None, :2], waypoints[1:]])  # from the car, through the path's cells
-        return maze, state, goal, waypoints
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
@@ -340,6 +266,9 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         self._last_active = False
         self._last_control = np.zeros(1)
         self.begin_episode()
+        self.start_disturbances(seed)
+        plant = self.plant_parameters() or self.disturbance_parameters()
+        self._plant_speed, self._turn_gain = plant["speed"], plant["turn_gain"]
         info = {"sim_time": 0.0, "state": self._state.copy(), "nominal_control": self.update_nominal()}
         self.clock.start()
         return self._observe(), info
@@ -351,7 +280,7 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
         obs = np.empty(N_RAYS + 3, dtype=np.float32)
         obs[:N_RAYS] = self._rays
         obs[N_RAYS], obs[N_RAYS + 1], obs[N_RAYS + 2] = self.goal[0] - x, self.goal[1] - y, psi
-        return obs
+        return self.sensed(obs, self._sim_time)
 
     def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
         """Advance the world by ``duration`` seconds under one held turn rate: the driver's
@@ -364,16 +293,22 @@ class Dubins3DMazeGuardedEnv(GuardedEnv):
             u = min(max(u, -self.dynamics.u_max), self.dynamics.u_max)
         else:
             u = float(self._nominal[0])
+        speed, turn, drift = self.dynamics.speed, u, None
+        if self.realisation is not None:  # the actuators' turn rate, the plant's speed and gain, the drift
+            u = float(self.actuated(np.array([u]), self._sim_time)[0])
+            speed, turn, drift = self._plant_speed, u * self._turn_gain, self.drift(self._sim_time, 3)
         path = dubins_path(
             self._state[0],
             self._state[1],
             self._state[2],
-            self.dynamics.speed,
-            u,
+            speed,
+            turn,
             float(duration),
             np.empty((self.n_path_points, 3)),
             SERIES_COEFFICIENTS,
         )
+        if drift is not None:  # x and y move by drift * t on top of the car's own motion, exactly
+            path[:, :2] += drift[None, :2] * np.linspace(0.0, float(duration), self.n_path_points)[:, None]
         hit = maze_path_hit(*self._geom, path)
         reached = not hit and path_reaches_disc(path, self.goal[0], self.goal[1], self.goal[2])
         self.count_interval(duration, active, compute_time)

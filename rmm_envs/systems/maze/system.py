@@ -21,7 +21,7 @@ def spec() -> SystemSpec:
             "parallel": "rmm_envs.systems.maze.guarded:make_parallel_env",
         },
         driver="rmm_envs.systems.maze.driver:PursuitDriver",
-        safe_default="rmm_envs.systems.maze.guarded:TurnFromNearerWall",
+        safe_default="rmm_envs.systems.maze.observation:TurnFromNearerWall",
         guardians=("lrmm", "cbf", "hj", "random", "inactive", "brakes"),
         pages=(
             DocPage(

@@ -106,8 +106,12 @@ state, the room, the goal, the waypoints and the simulated time.
 
 ``gym.make("QuadrotorRoomGuarded-v0", step_dt=0.1, max_episode_sim_time=60.0, n_waypoints=3,
 altitude=(0.5, 2.0), min_leg=3.0, goal_radius=0.5, cruise_speed=1.5, climb_speed=0.5,
-ray_range=10.0, clock=None, render_mode=None)``; ``cruise_speed`` and ``climb_speed`` (m/s)
-are the pilot's.  ``gym.make("QuadrotorRoomParallel-v0", time_accel=10.0, base_step=0.1,
+ray_range=10.0, clock=None, render_mode=None, disturbances=None)``; ``cruise_speed`` and
+``climb_speed`` (m/s) are the pilot's.  ``disturbances``: sensor noise (rays, orientation,
+velocities, goal offset), ray dropouts, actuation error on the command, wind and pushes (an
+acceleration of the body, ``vx``, ``vy``, ``vz`` in m/s^2, applied in PyBullet as a world force
+at the centre of mass), or a body whose ``mass`` and ``linear_damping`` differ from what the
+controller assumes (:mod:`rmm_envs.disturbances`; off by default).  ``gym.make("QuadrotorRoomParallel-v0", time_accel=10.0, base_step=0.1,
 clock=None, **same but step_dt)``: the same world under :class:`rmm_envs.wrappers.NonBlockingStepping`
 (each ``step(a)`` advances the world by ``elapsed * time_accel + base_step`` seconds under the
 previous action, then stores ``a``; the first interval is the pilot's).
@@ -125,23 +129,34 @@ import math
 import gymnasium as gym
 import numpy as np
 
-from rmm_envs.autonomy import GuardianActionSpace, ObservationBox, ObservationLayout
+from rmm_envs.autonomy import GuardianActionSpace, ObservationBox
 from rmm_envs.catalog import system
 from rmm_envs.clocks import make_clock
-from rmm_envs.envs.base import check_arguments, finite, rejection_sample, state_rows, whole
+from rmm_envs.envs.base import check_arguments, finite, whole
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
 from rmm_envs.portable import matvec, norm
 from rmm_envs.systems.quadrotor.control import (
     ClosedLoopQuadrotor,
     CommandController,
     command_wrench,
-    heading_of,
     yaw_of,
 )
 from rmm_envs.systems.quadrotor.driver import WaypointPilot
-from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv, unit_quaternion_rows
+from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv
+from rmm_envs.systems.quadrotor.observation import (
+    _CONTACT_MARGIN,
+    _DIRS,
+    _GOAL,
+    _LAYOUT,
+    _QUAT,
+    _RANGES,
+    _RATES,
+    _VEL,
+    QuadrotorDatasetHooks,
+    observation_layout,
+)
 from rmm_envs.systems.quadrotor.room_collision import BOUND
-from rmm_envs.systems.quadrotor.rotations import quat_from_euler, quat_to_rot
+from rmm_envs.systems.quadrotor.rotations import quat_to_rot
 from rmm_envs.systems.quadrotor.scene import QuadrotorCommandScene
 from rmm_envs.systems.quadrotor.starts import WAYPOINT_CLEARANCE, QuadrotorRoomStarts
 
@@ -149,47 +164,19 @@ __all__ = ["CONTROLS", "QuadrotorRoomGuardedEnv", "make_parallel_env", "observat
 
 from rmm_envs.systems.quadrotor.control import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
 
-N_RAYS = 8
-_CONTACT_MARGIN = 0.05  # m added to the travel bound before contact queries are skipped
 
-
-def observation_layout() -> ObservationLayout:
-    """The named slices of the observation table above."""
-    return ObservationLayout.of(
-        ("rays", N_RAYS),
-        ("rays_vertical", 2),
-        ("orientation", 4),
-        ("velocity", 3),
-        ("angular_velocity", 3),
-        ("goal_offset", 3),
-        ray_angles=[k * math.pi / 4 for k in range(N_RAYS)],
-    )
-
-
-_LAYOUT = observation_layout()
-_RANGES = slice(_LAYOUT["rays"].start, _LAYOUT["rays_vertical"].stop)  # every ray, horizontal then vertical
-_QUAT, _VEL, _RATES, _GOAL = (_LAYOUT[f] for f in ("orientation", "velocity", "angular_velocity", "goal_offset"))
-
-
-_DIRS = np.array(
-    [[math.cos(k * math.pi / 4), math.sin(k * math.pi / 4), 0.0] for k in range(N_RAYS)]
-    + [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]
-)
-
-
-def _heading_frame(q, vectors) -> np.ndarray:
-    """World vectors ``(N, 3)`` in the heading frames of quaternions ``(N, 4)``."""
-    psi = heading_of(q)
-    c, s = np.cos(psi), np.sin(psi)
-    v = np.asarray(vectors, float)
-    return np.column_stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]])
-
-
-class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv):
+class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, QuadrotorDatasetHooks, GuardedEnv, QuadrotorRoomEnv):
     """Blocking quadrotor parallel-autonomy env; see the module docstring for the full spec."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
     reset_options: tuple[str, ...] = ("room", "state", "waypoints")
+    #: a rate disturbance accelerates the body (m/s^2, world frame): wind, pushes
+    disturbance_rates = {"vx": 7, "vy": 8, "vz": 9}
+
+    def disturbance_parameters(self) -> dict[str, float]:
+        """What a ``mismatch`` scales in PyBullet (the controller keeps the nominal values): the
+        body's mass and its linear damping."""
+        return {"mass": float(self.params.mass), "linear_damping": float(self.damping[0])}
 
     def __init__(
         self,
@@ -204,6 +191,7 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         ray_range: float = 10.0,
         clock=None,
         render_mode: str | None = None,
+        disturbances=None,
     ) -> None:
         alt = tuple(altitude) if isinstance(altitude, (tuple, list, np.ndarray)) else ()
         check_arguments(
@@ -255,6 +243,7 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         low[_RANGES], high[_RANGES] = 0.0, self.ray_range
         low[_QUAT], high[_QUAT] = -1.0, 1.0
         self.observation_space = ObservationBox(low, high, _LAYOUT)
+        self.set_disturbances(disturbances)
         # F_max / m + g: no body acceleration exceeds it (damping only slows the body)
         self._a_bound = self.params.control_high[0] / self.params.mass + self.params.gravity
         self._ray_to = (self.ray_range * _DIRS).tolist()
@@ -274,6 +263,13 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         self._gap, self._gap_at = -math.inf, state[:3].copy()  # no clearance known yet
         self.begin_statistics()
         self.begin_episode()
+        self.start_disturbances(seed)
+        self._mass = self.params.mass
+        if (plant := self.plant_parameters()) is not None:
+            self._mass = plant["mass"]
+            self.p.changeDynamics(
+                self.body, -1, mass=plant["mass"], linearDamping=plant["linear_damping"], physicsClientId=self.client
+            )
         info = {"sim_time": 0.0, "state": state.copy(), "nominal_control": self.update_nominal()}
         self.clock.start()
         return self._observe(state), info
@@ -289,18 +285,6 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         )
         return np.array([self.ray_range * r[2] if r[0] >= 0 else self.ray_range for r in res])
 
-    def _features(self, states, rays) -> np.ndarray:
-        st = np.atleast_2d(states)
-        n = st.shape[0]
-        R = quat_to_rot(st[:, 3:7])
-        out = np.empty((n, _LAYOUT.size), dtype=np.float32)
-        out[:, _RANGES] = rays
-        out[:, _QUAT] = st[:, 3:7]
-        out[:, _VEL] = _heading_frame(st[:, 3:7], st[:, 7:10])
-        out[:, _RATES] = np.einsum("nji,nj->ni", R, st[:, 10:13])
-        out[:, _GOAL] = _heading_frame(st[:, 3:7], self.goal[None, :] - st[:, :3])
-        return out
-
     def _observe(self, s) -> np.ndarray:
         """:meth:`_features` of one state, in scalar arithmetic (a step's observation; the tests
         hold the two equal)."""
@@ -313,7 +297,7 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
         out[_RATES] = matvec(quat_to_rot(s[3:7]).T, s[10:13])
         dx, dy = self.goal[0] - s[0], self.goal[1] - s[1]
         out[_GOAL] = (c * dx + sn * dy, -sn * dx + c * dy, self.goal[2] - s[2])
-        return out
+        return self.sensed(out, self._sim_time)
 
     def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
         """Advance the world by ``duration`` seconds under one held command: the pilot's (chosen
@@ -329,11 +313,17 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
             )
         else:
             cmd = self._nominal.copy()
+        push, a_bound = None, self._a_bound
+        if self.realisation is not None:  # the actuators' command; wind and pushes as a world force
+            cmd = self.actuated(cmd, self._sim_time)
+            rate = self.drift(self._sim_time, 13)
+            if rate is not None and rate[7:10].any():
+                push, a_bound = tuple(self._mass * rate[7:10]), a_bound + norm(rate[7:10])
         target = math.floor((self._sim_time + duration) / par.dt + 1e-9)
         n = max(0, target - self._physics_steps)
         t = n * par.dt
         speed = math.sqrt(s[7] ** 2 + s[8] ** 2 + s[9] ** 2)
-        reach = speed * t + 0.5 * self._a_bound * t * t + _CONTACT_MARGIN
+        reach = speed * t + 0.5 * a_bound * t * t + _CONTACT_MARGIN
         # the clearance is 1-Lipschitz in the position: the last one computed, less the distance
         # moved since, is a lower bound; compute it afresh only when that bound is not enough
         query = self._gap - math.dist(s[:3], self._gap_at) <= reach
@@ -355,6 +345,8 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
             command_wrench(s, cmd, k, w)
             force(body, -1, (0.0, 0.0, w[0]), origin, frame, physicsClientId=c)
             torque(body, -1, (w[1], w[2], w[3]), frame, physicsClientId=c)
+            if push is not None:  # at the centre of mass, in the world frame
+                force(body, -1, push, (s[0], s[1], s[2]), p.WORLD_FRAME, physicsClientId=c)
             step(physicsClientId=c)
             self._physics_steps += 1
             hit = query and len(contacts(bodyA=body, physicsClientId=c)) > 0
@@ -392,41 +384,6 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, GuardedEnv, QuadrotorRoomEnv)
 
     true_state = property(lambda self: self.get_state(), doc="The true state (a copy). **Privileged**.")
     sim_time = property(lambda self: self._sim_time, doc="Simulated seconds since reset.")
-
-    def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        """Flight states of the current room (see "Risk labelling" above)."""
-        self.require_episode()
-        room = self.room
-        assert room is not None and self.scene is not None  # require_episode raised otherwise
-        cells = np.argwhere(room.footprint)
-
-        def draw(r, k):
-            ij = cells[r.integers(len(cells), size=k)]
-            xy = room.origin + (ij + r.uniform(0, 1, (k, 2))) * room.cell
-            q = quat_from_euler(r.uniform(-0.3, 0.3, k), r.uniform(-0.3, 0.3, k), r.uniform(-np.pi, np.pi, k))
-            psi = heading_of(q)
-            vf, vl = r.uniform(-2, 2, k), r.uniform(-2, 2, k)
-            v = np.column_stack(
-                [np.cos(psi) * vf - np.sin(psi) * vl, np.sin(psi) * vf + np.cos(psi) * vl, r.uniform(-1, 1, k)]
-            )
-            return np.column_stack([xy, r.uniform(0.2, 3.0, k), q, v, r.uniform(-1, 1, (k, 3))])
-
-        return rejection_sample(
-            rng, n, 13, draw, self.scene.collision.states_failed, "quadrotor flight states clear of the room"
-        )
-
-    def observe_states(self, states, rng=None) -> np.ndarray:
-        """This env's observation of states ``(N, 13)`` in the current episode (PyBullet rays; the
-        env's state is restored); ``rng`` is unused."""
-        self.require_episode()
-        st = unit_quaternion_rows(state_rows(states, 13))
-        keep = self.get_state()
-        rays = np.empty((st.shape[0], _RANGES.stop - _RANGES.start))
-        for i, row in enumerate(st):
-            self.set_state(row)
-            rays[i] = self.rays()
-        self.set_state(keep)
-        return self._features(st, rays)
 
 
 make_parallel_env = parallel_entry_point(QuadrotorRoomGuardedEnv, "QuadrotorRoomParallel-v0")
