@@ -222,3 +222,34 @@ def test_quadrotor_wind_lifts_the_body_and_a_mismatch_changes_its_mass_in_pybull
     a = _run("act-noise=0.2;impulse=0.3", actions, env_id=QUAD)
     b = _run("act-noise=0.2;impulse=0.3", actions, env_id=QUAD)
     assert all(np.array_equal(x, y) for x, y in zip(a[1:], b[1:], strict=True))
+
+
+# ---------------------------------------------------------------- the vector env
+
+
+@pytest.mark.parametrize(
+    "spec", ["obs-noise=0.1;act-delay=2;act-noise=0.1;dyn-rate=0.2@white;impulse=0.5", "mismatch=0.2;ray-dropout=0.1"]
+)
+def test_the_vector_env_is_the_single_envs_under_disturbances_too(spec):
+    """Sub-env ``i`` after ``reset(seed=s)`` is the single env after ``reset(seed=s + i)`` bit for bit,
+    across autoresets (each sub-env's later episodes draw as the single env's unseeded resets do)."""
+    from gymnasium.utils.env_checker import data_equivalence
+
+    n = 4
+    vec = gym.make_vec(ENV, num_envs=n, vectorization_mode="vector_entry_point", clock="fixed:1", disturbances=spec)
+    ref = gym.make_vec(ENV, num_envs=n, vectorization_mode="sync", clock="fixed:1", disturbances=spec)
+    for x, y in zip(vec.reset(seed=5), ref.reset(seed=5), strict=True):
+        assert data_equivalence(x, y, exact=True)
+    rng = np.random.default_rng(0)
+    ended = 0
+    for t in range(400):
+        a = {
+            "active_ctrl": (rng.random(n) < (0.2 if t % 50 < 40 else 0.9)).astype(np.int64),
+            "turnrate_ctrl": rng.uniform(-0.3, 0.3, (n, 1)).astype(np.float32),
+            "accel_ctrl": rng.uniform(-0.5, 0.5, (n, 1)).astype(np.float32),
+        }
+        out, expected = vec.step(a), ref.step(a)
+        for name, x, y in zip(("obs", "reward", "terminated", "truncated", "info"), out, expected, strict=True):
+            assert data_equivalence(x, y, exact=True), f"step {t}: {name} differs"
+        ended += int(np.sum(out[2] | out[3]))
+    assert ended >= 4

@@ -11,7 +11,9 @@ Gymnasium's vector API (``gymnasium.vector.VectorEnv``, gymnasium >= 1.0).
 After ``reset(seed=s)``, sub-env ``i`` is exactly the single env after ``reset(seed=s + i)``,
 step for step and bit for bit, across autoresets (tested against Gymnasium's
 ``SyncVectorEnv`` of single envs: observations, rewards, ``terminated``, ``truncated`` and every
-info entry).  It holds by construction: each sub-env has its own random generator, seeded as the
+info entry), with the same ``disturbances`` too (each sub-env draws its own realisation as the
+single env with its seed does; a mismatch, whose plant differs per sub-env, steps row by row).
+It holds by construction: each sub-env has its own random generator, seeded as the
 single env's, and draws its starts with the single env's own generation code; a step runs the
 single env's batched functions (:func:`rmm_envs.systems.dubins4d.step.advance`: the driver's
 closed-form QP, the exact path, the contact test; and the ray caster), each a compiled loop whose
@@ -91,11 +93,15 @@ from gymnasium.vector.utils import batch_space
 
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.clocks import make_clock
-from rmm_envs.envs.guarded import EPISODE_KEY
+from rmm_envs.disturbances import Realisation
 from rmm_envs.systems.dubins4d.circles import ray_cast_each
 from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.plant import plant_model
 from rmm_envs.systems.dubins4d.scene import observation
 from rmm_envs.systems.dubins4d.step import advance, nominal_controls
+from rmm_envs.systems.dubins4d.vector_disturbances import advance_disturbed
+from rmm_envs.systems.dubins4d.vector_info import _masked, reset_info
+from rmm_envs.systems.dubins4d.vector_info import ended_info as vector_ended_info
 
 __all__ = ["Dubins4DCirclesVectorEnv"]
 
@@ -160,6 +166,12 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         assert obs_shape is not None  # the single env's observation space is a Box
         self._obs = np.zeros((n, obs_shape[0]), dtype=np.float32)
         self._started = False
+        # disturbances: each sub-env draws as the single env with its seed would (its seed, then
+        # how many episodes since), its own plant and gains under a mismatch
+        self._seeds: list[tuple[int, int]] = [(0, 0)] * n
+        self._draws: list[Realisation | None] = [None] * n
+        self._plants = [self._single.dynamics] * n
+        self._gains = np.ones((n, 2))
 
     # ------------------------------------------------------------------ observations
     def _observe(self, idx=slice(None)) -> np.ndarray:
@@ -168,7 +180,13 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         circles = self._circles[idx]
         e = self._single
         rays = ray_cast_each(st[:, :2], st[:, 2], circles[:, :-1], e.n_rays, e.ray_length)
-        return observation(st, self._sim_time[idx], circles[:, -1, :2], rays)
+        obs = observation(st, self._sim_time[idx], circles[:, -1, :2], rays)
+        if e.disturbances:  # what each sub-env's sensors report
+            for row, i in enumerate(np.arange(self.num_envs)[idx]):
+                draw = self._draws[i]
+                assert draw is not None  # drawn at the sub-env's reset
+                obs[row] = draw.observation(obs[row], self._sim_time[i])
+        return obs
 
     # ------------------------------------------------------------------ reset
     def _reset_one(self, i: int, options: dict | None) -> None:
@@ -188,6 +206,14 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         self._cum_reward[i] = 0.0
         self._cum_cost[i] = 0.0
         self._ended[i] = False
+        if e.disturbances:
+            base, count = self._seeds[i]
+            self._draws[i] = draw = Realisation(
+                e.disturbances, e.disturbance_support(), (base,) if count == 0 else (base, count)
+            )
+            self._seeds[i] = (base, count + 1)
+            mismatch = any(d.kind == "mismatch" for d in e.disturbances)
+            self._plants[i], self._gains[i] = plant_model(e.dynamics, dict(draw.parameters) if mismatch else None)
 
     def _check_start(self, obstacles, state, goal) -> None:
         k = self._single.n_obstacles
@@ -196,23 +222,6 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
                 f"option 'obstacles' must hold n_obstacles = {k} circles in the vector env "
                 f"(every world of a batch has as many), got {obstacles.shape[0]}"
             )
-
-    def _reset_info(self, idx: np.ndarray) -> dict:
-        mask = np.zeros(self.num_envs, dtype=bool)
-        mask[idx] = True
-        sim_time = np.zeros(self.num_envs)
-        state = np.zeros((self.num_envs, 4))
-        state[idx] = self._states[idx]
-        nominal = np.zeros((self.num_envs, 2))
-        nominal[idx] = self._nominal[idx]
-        return {
-            "sim_time": sim_time,
-            "_sim_time": mask,
-            "state": state,
-            "_state": mask.copy(),
-            "nominal_control": nominal,
-            "_nominal_control": mask.copy(),
-        }
 
     def reset(self, *, seed: int | list | None = None, options: dict[str, Any] | None = None):
         """Reset every sub-env (or those of ``options["reset_mask"]``); see the module docstring."""
@@ -243,14 +252,15 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
             self._check_start(*self._single.generate_start(np.random.default_rng(0), options))
         for i in idx:
             if seeds[i] is not None or self._rngs[i] is None:
-                self._rngs[i], _ = seeding.np_random(seeds[i])
+                self._rngs[i], used = seeding.np_random(seeds[i])
+                self._seeds[i] = (int(used) & 0xFFFF_FFFF_FFFF_FFFF, 0)
             self._reset_one(int(i), options or None)
         self._started = True
         self._obs = self._obs.copy()  # the array returned earlier stays as it was
         self._obs[idx] = self._observe(idx)
         self._update_nominal(idx)
         self.clock.start()
-        return self._obs, self._reset_info(idx)
+        return self._obs, reset_info(self, idx)
 
     # ------------------------------------------------------------------ actions
     def _parse_actions(self, actions) -> tuple[np.ndarray, np.ndarray]:
@@ -279,9 +289,12 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         # computed is discarded and their bookkeeping restarts in _reset_one.
         resetting = self._ended if mode == AutoresetMode.NEXT_STEP else np.zeros(n, dtype=bool)
         any_resetting = bool(resetting.any())
-        nxt, u, hit_obst, hit_goal = advance(
-            e.dynamics, self._nominal, self._states, self._circles, active, ctrl, e._step_times
-        )
+        if e.disturbances:
+            nxt, u, hit_obst, hit_goal = advance_disturbed(self, active, ctrl)
+        else:
+            nxt, u, hit_obst, hit_goal = advance(
+                e.dynamics, self._nominal, self._states, self._circles, active, ctrl, e._step_times
+            )
         dt = e.step_dt
         self._n_steps += 1
         self._n_active += active
@@ -325,7 +338,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         }
         any_ended = bool(ended.any())
         if any_ended:
-            ended_info = self._ended_info(ended, coll_all, goal_all)
+            ended_info = vector_ended_info(self, ended, coll_all, goal_all)
 
         if resetting.any():  # NEXT_STEP: sub-envs whose episode ended at the last step
             ridx = np.nonzero(resetting)[0]
@@ -380,41 +393,5 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         interval the driver controls applies)."""
         self._nominal[idx] = nominal_controls(self._single.driver, self._states[idx], self._circles[idx])
 
-    def _ended_info(self, ended: np.ndarray, collision: np.ndarray, goal: np.ndarray) -> dict:
-        """``outcome`` and ``episode`` (the single env's ``episode_statistics``) of the sub-envs
-        where ``ended``, as arrays with masks (zero or ``None`` elsewhere, as Gymnasium fills)."""
-        n_steps = self._n_steps
-        with np.errstate(divide="ignore", invalid="ignore"):
-            avg = np.where(n_steps > 0, self._cum_compute / n_steps, 0.0)
-        outcome = np.full(self.num_envs, None, dtype=object)
-        for i in np.nonzero(ended)[0]:
-            outcome[i] = "collision" if collision[i] else "goal" if goal[i] else "timeout"
-        masks = np.repeat(ended[None], 12, axis=0)  # one independent mask row per key
-        episode = {"outcome": outcome.copy(), "_outcome": masks[0]}
-        for j, (key, value) in enumerate(
-            (
-                ("n_env_steps", n_steps),
-                ("n_active_ctrl_env_steps", self._n_active),
-                ("active_ctrl_sim_time", self._active_time),
-                ("cum_sim_time", self._sim_time),
-                ("cum_compute_time", self._cum_compute),
-                ("avg_compute_time", avg),
-                ("cum_reward", self._cum_reward),
-                ("cum_cost", self._cum_cost),
-                ("final_speed", self._states[:, 3]),
-            ),
-            start=1,
-        ):
-            episode[key] = np.where(ended, value, value.dtype.type(0))
-            episode[f"_{key}"] = masks[j]
-        return {"outcome": outcome, "_outcome": masks[10], EPISODE_KEY: episode, f"_{EPISODE_KEY}": masks[11]}
-
     def close_extras(self, **kwargs: Any) -> None:
         self._single.close()
-
-
-def _masked(value: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """A copy of ``value`` (``(N, ...)``) with the rows outside ``mask`` zero (``None`` for objects)."""
-    out = np.zeros_like(value) if value.dtype != object else np.full(value.shape, None, dtype=object)
-    out[mask] = value[mask]
-    return out
