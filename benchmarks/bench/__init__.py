@@ -1,7 +1,7 @@
 """rmm-bench: run guardians over seeded episodes, store results, report Table I.
 
 ``load_results(path)`` reads an ``rmm-bench`` results database into a pandas DataFrame (one
-row per stored episode); see :func:`rmm_bench.frames.load_results`.  ``table_i(df)``
+row per stored episode); see :func:`rmm_bench.dataframes.load_results`.  ``table_i(df)``
 aggregates such a frame into the paper's Table I, one row per agent.
 """
 
@@ -10,7 +10,7 @@ __all__ = ["load_results", "table_i"]
 
 def load_results(path, *, expand_stats: bool = False):
     """One row per stored episode of the results database at ``path`` (pandas DataFrame)."""
-    from rmm_bench.frames import load_results as _load  # pandas only when asked for
+    from rmm_bench.dataframes import load_results as _load  # pandas only when asked for
 
     return _load(path, expand_stats=expand_stats)
 
