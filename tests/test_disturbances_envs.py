@@ -253,3 +253,27 @@ def test_the_vector_env_is_the_single_envs_under_disturbances_too(spec):
             assert data_equivalence(x, y, exact=True), f"step {t}: {name} differs"
         ended += int(np.sum(out[2] | out[3]))
     assert ended >= 4
+
+
+# ---------------------------------------------------------------- what a guardian assumes
+
+
+def test_hj_takes_its_disturbance_bound_from_the_run_when_asked():
+    """``hj.disturbance="env"``: the HJ value is solved for the run's own ``dyn-rate`` bound (read
+    from the env at every reset; 0 without one); a number stays that number."""
+    from rmm_guardians.hj.guardian import env_disturbance_bound
+    from rmm_guardians.registry import make_guardian
+
+    assert env_disturbance_bound(["dyn-rate=0.2", "obs-noise=0.1"]) == 0.2
+    assert env_disturbance_bound(["dyn-rate.y=0.3@white", "dyn-rate.x=0.1"]) == 0.3
+    assert env_disturbance_bound(["impulse=1.0"]) == 0.0 == env_disturbance_bound([])
+    for spec, expected in (("dyn-rate=0.25", 0.25), (None, 0.0)):
+        env = gym.make(ENV, disturbances=spec).unwrapped
+        env.reset(seed=SEED)
+        g = make_guardian("hj", env_id=ENV, grid_n=[21, 21, 8, 5], cache=False, threads=1, disturbance="env")
+        g.reset(seed=0, observation_space=env.observation_space, action_space=env.action_space,
+                privileged=env.privileged)  # fmt: skip
+        assert g.dynamics.d_max == expected
+    assert "disturbances" not in env.privileged()  # an undisturbed env's privileged data is as before
+    with pytest.raises(ValueError, match="disturbance"):
+        make_guardian("hj", env_id=ENV, disturbance="wind")

@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from rmm_envs.disturbances import parse_disturbances
 from rmm_guardians._checks import settings_signature
 from rmm_guardians.dispatch import DynamicsDispatch
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
@@ -69,7 +70,9 @@ class HJGuardian(DynamicsDispatch, PrivilegedGuardian):
     **Arguments** (:class:`~rmm_guardians.hj.settings.HJSettings`): ``grid`` or ``grid_n``,
     ``horizon``, ``order`` (1 upwind, 2 ENO2), ``rk`` (TVD RK order), ``cfl`` (0.8), ``rule``,
     ``margin`` (m; ``None``: half a position cell, 0.238 m on the default grid), ``delay`` (laps;
-    0 in the blocking ``Dubins4DGuarded-v0``), ``lap``, ``disturbance`` (0, as the paper ran),
+    0 in the blocking ``Dubins4DGuarded-v0``), ``lap``, ``disturbance`` (0, as the paper ran;
+    ``"env"``: the bound of the run's own ``dyn-rate`` disturbance on x and y, read at every
+    reset, 0 when it has none),
     ``cache_dir`` (``None``: ``$RMM_HJ_CACHE`` if set, else ``~/.cache/rmm-envs/hj``), ``cache``,
     ``cache_max_files`` (64 files of 17 MB), ``backend`` (``"auto"``: the compiled kernel;
     ``"numpy"``/``"numba"``: both give the same value to float32 rounding and share cache
@@ -114,7 +117,8 @@ class HJGuardian(DynamicsDispatch, PrivilegedGuardian):
         # at a kink of a function that is 1-Lipschitz in position
         self.margin = 0.5 * float(max(self.grid.dx[0], self.grid.dx[1])) if s.margin is None else s.margin
         # the Dubins4D system's bounds; reset replaces the control bounds by the action space's
-        self.dynamics = Dubins4DHJ(d_max=s.disturbance)
+        self._disturbance_from_env = s.disturbance == "env"
+        self.dynamics = Dubins4DHJ(d_max=0.0 if self._disturbance_from_env else float(s.disturbance))
         self.backend = s.backend
         select_backend(self.grid, self.dynamics, self.order, s.backend)  # a bad choice fails here, not at reset
         self.cache = ValueCache(s.cache_dir, s.cache_max_files) if s.cache else None
@@ -190,15 +194,16 @@ class HJGuardian(DynamicsDispatch, PrivilegedGuardian):
         self.check_spaces(self.observation_space, self.action_space)
         space = self.require_action_space(controls=2)
         d = self.dynamics
+        assert self._privileged is not None  # Guardian.reset refuses a privileged guardian without it
+        priv = self._privileged()
+        d_max = env_disturbance_bound(priv.get("disturbances", ())) if self._disturbance_from_env else d.d_max
         try:
-            dyn = Dubins4DHJ.from_bounds(space.control_low, space.control_high, d.v_min, d.v_max, d.d_max)
+            dyn = Dubins4DHJ.from_bounds(space.control_low, space.control_high, d.v_min, d.v_max, d_max)
         except ValueError as e:
             raise ValueError(f"guardian {self.name!r}: {e}") from None
         if dyn != d:
             self.dynamics = dyn
         self._counts = {"outside_grid": 0, "nan_states": 0, "cache_hits": 0, "solves": 0}
-        assert self._privileged is not None  # Guardian.reset refuses a privileged guardian without it
-        priv = self._privileged()
         self.V = self.value_function(priv["obstacles"])
         self.grads = central_gradient(self.V, self.grid)
         self._arrays = [self.V, *self.grads]
@@ -305,3 +310,14 @@ class HJPaperGuardian(HJGuardian):
 
     name = "hj-paper"
     preset = "hj-paper"
+
+
+def env_disturbance_bound(disturbances) -> float:
+    """The bound ``d_max`` of the position-rate disturbance among ``disturbances`` (an env's
+    ``privileged()["disturbances"]``, strings): the largest ``dyn-rate`` level acting on ``x`` or
+    ``y``, 0 when there is none (impulses and the other kinds are not a bounded rate)."""
+    bound = 0.0
+    for d in parse_disturbances(list(disturbances)):
+        if d.kind == "dyn-rate" and (not d.on or {"x", "y"} & set(d.on)):
+            bound = max(bound, d.level)
+    return bound

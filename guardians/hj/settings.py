@@ -39,7 +39,7 @@ class HJSettings(Settings):
     margin: float | None = None
     delay: int = 1
     lap: float | None = None
-    disturbance: float = 0.0
+    disturbance: float | str = 0.0  # or "env": the run's dyn-rate bound, read at reset
     cache_dir: Any = None
     cache: bool = True
     cache_max_files: int = 64
@@ -75,7 +75,8 @@ class HJSettings(Settings):
             self._set("grid_n", tuple(int(k) for k in self.grid_n))
         if self.margin is not None:
             self._set("margin", finite("margin", self.margin))
-        self._set("disturbance", finite("disturbance", self.disturbance, 0.0))
+        if self.disturbance != "env":
+            self._set("disturbance", finite("disturbance", self.disturbance, 0.0))
         if self.backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
         self._set("cache", bool(self.cache))

@@ -370,12 +370,15 @@ class Dubins4DCirclesEnv(Dubins4DStarts, Dubins4DDatasetHooks, GuardedEnv):
         that declare they need it (CBF, HJ) and for analysis, never for local-observation ones."""
         self.require_episode()
         assert self.scene is not None  # require_episode raised otherwise
-        return {
+        out = {
             "state": self._state.copy(),
             "obstacles": self.scene.obstacles.copy(),
             "goal": self.scene.goal.copy(),
             "sim_time": self._sim_time,
         }
+        if self.disturbances:  # what the world does to the car, for a guardian that models it (hj)
+            out["disturbances"] = [str(d) for d in self.disturbances]
+        return out
 
     @property
     def true_state(self) -> np.ndarray:
