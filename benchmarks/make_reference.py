@@ -58,7 +58,7 @@ def _portable_inputs(inputs: dict, shipped: dict[str, str]) -> dict:
 
 def make(src: Path, name: str, dest: Path = REFERENCE) -> Path:
     """Write ``dest/NAME.db`` from the results directory ``src``; returns its path."""
-    from rmm_bench.run import assess_starts
+    from rmm_bench.run_plan import assess_starts
 
     shipped = _shipped_files()
     with tempfile.TemporaryDirectory() as tmp:

@@ -8,7 +8,6 @@ Run ``python docs/gen.py``; ``tests/test_docs.py`` fails when a generated page i
 from __future__ import annotations
 
 import contextlib
-import importlib
 import io
 import sys
 from pathlib import Path
@@ -102,7 +101,6 @@ def _help(parser) -> str:
 
 def cli_parsers():
     from rmm_bench import cli as bench
-    from rmm_bench import figures
     from rmm_envs import cli as envs_cli
     from rmm_envs.risk import datagen
     from rmm_guardians.lrmm import train
@@ -111,15 +109,7 @@ def cli_parsers():
     demo = next(a for a in envs._actions if a.dest == "command").choices["demo"]
     return [
         ("rmm-bench", bench.build_parser()),
-        ("rmm-bench report", bench.build_report_parser()),
-        ("rmm-bench sweep", bench.build_sweep_parser()),
-        ("rmm-bench replay", bench.build_replay_parser()),
-        *(
-            (f"rmm-bench {name}", importlib.import_module(module).build_parser())
-            for name, module in bench.SUBCOMMANDS.items()
-        ),
-        ("rmm-bench riskmap", figures.riskmap_parser()),
-        ("rmm-bench quadrisk", figures.quadrisk_parser()),
+        *((f"rmm-bench {name}", bench.command_parser(name)) for name in bench.SUBCOMMANDS),
         ("rmm-datagen", datagen.build_parser()),
         ("rmm-train", train.build_parser()),
         ("rmm-envs", envs),

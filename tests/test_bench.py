@@ -401,7 +401,7 @@ def test_latency_sweep(tmp_path, capsys):
 
 
 def test_a_run_says_which_episodes_it_ran_and_which_it_reused(tmp_path, capsys):
-    from rmm_bench.run import done_line
+    from rmm_bench.run_command import done_line
 
     assert done_line(12, 0, 0.01) == "reused 12 stored episodes: none left to run"
     assert done_line(1, 0, 0.0) == "reused 1 stored episode: none left to run"

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from rmm_bench.args import parse_run, parse_sweep
 from rmm_bench.cli import main
 from rmm_bench.config import AgentRun, BenchConfig, EpisodeResult, EpisodeTask, accepts_argument, run_key
+from rmm_bench.run_args import parse_run, parse_sweep
 from rmm_bench.store import EPISODE_FIELDS
 
 DATA = Path(__file__).parent / "data"
@@ -233,14 +233,14 @@ def test_accepts_argument_reads_signatures_and_follows_forwarded_kwargs():
     [(2, "local", {}, 1), (1, "ray", {}, 1), (1, "local", {}, None), (4, "local", {"threads": 3}, None)],
 )
 def test_threads_go_to_guardians_that_take_them_when_workers_share_the_machine(workers, backend, opts, expected):
-    from rmm_bench.run import guardian_threads
+    from rmm_bench.run_plan import guardian_threads
 
     assert guardian_threads("tests.bench_helpers:Threaded", opts, workers, backend) == expected
     assert guardian_threads("inactive", {}, workers, backend) is None  # takes no threads
 
 
 def test_a_worker_builds_the_guardian_with_the_tasks_threads_and_sets_no_environment(tmp_path, monkeypatch):
-    from rmm_bench.run import plan_tasks
+    from rmm_bench.run_plan import plan_tasks
     from rmm_bench.runner import run_episode
     from rmm_bench.store import ResultsStore
 
@@ -313,7 +313,7 @@ def test_bench_config_is_what_the_command_line_said():
 def test_each_guardian_class_is_resolved_once_per_command(monkeypatch, tmp_path):
     # --agent resolves each name to its class once; the checks and the task plan use that class
     import rmm_guardians.registry as registry
-    from rmm_bench.run import applicable, plan_tasks
+    from rmm_bench.run_plan import applicable, plan_tasks
     from rmm_bench.store import ResultsStore
     from tests.bench_helpers import Threaded
 
@@ -350,8 +350,8 @@ def test_each_guardian_class_is_resolved_once_per_command(monkeypatch, tmp_path)
 def test_the_non_blocking_defaults_are_the_wrapper_s_everywhere():
     import inspect
 
-    from rmm_bench.args import NON_BLOCKING_DEFAULTS
     from rmm_bench.checks import _env_creator
+    from rmm_bench.run_args import NON_BLOCKING_DEFAULTS
     from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL, NonBlockingStepping
 
     assert (TIME_ACCEL, BASE_STEP) == (10.0, 0.1)  # the paper's 10x and 0.1 s

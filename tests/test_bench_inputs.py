@@ -136,8 +136,8 @@ def test_builtin_guardians_and_envs_read_no_source_file_so_their_keys_stay():
 
 
 def test_a_builtin_run_keeps_its_key_through_the_checks(tmp_path):
-    from rmm_bench.args import parse_run
-    from rmm_bench.run import applicable
+    from rmm_bench.run_args import parse_run
+    from rmm_bench.run_plan import applicable
 
     cfg = parse_run(["--agent", "inactive,brakes", "--out", str(tmp_path), *FAST], "")
     before = {a: r.key for a, r in cfg.agent_runs().items()}

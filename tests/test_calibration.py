@@ -57,7 +57,7 @@ def test_a_model_of_ones_own_on_fresh_worlds_of_its_env(tmp_path, capsys):
     [
         (["--systems", "boat"], "--systems 'boat': unknown ['boat']"),
         (["--systems", ","], "unknown none given"),
-        (["--seed", "1"], "the shipped models were trained on seeds 0 and 1"),
+        (["--world-seed", "1"], "the shipped models were trained on seeds 0 and 1"),
         (["--model", "x.npz"], "--env and --model go together"),
         (["--env", "CartPoleGuarded-v0", "--model", "none.npz"], "none.npz does not exist"),
         (
@@ -66,7 +66,7 @@ def test_a_model_of_ones_own_on_fresh_worlds_of_its_env(tmp_path, capsys):
                 "CartPoleGuarded-v0",
                 "--model",
                 str(default_model_path("CartPoleParallel-v0", "act")),
-                "--seed",
+                "--world-seed",
                 "1",
             ],
             "was trained on worlds of that seed",

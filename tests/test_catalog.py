@@ -149,7 +149,7 @@ def test_the_cli_help_and_the_docs_list_name_the_table_s_ids():
     import sys
     from pathlib import Path
 
-    from rmm_bench.args import run_parser, sweep_parser
+    from rmm_bench.run_args import run_parser, sweep_parser
     from rmm_envs.catalog import FORMER_IDS, SYSTEMS, env_help
     from rmm_envs.cli import build_parser
 
@@ -219,8 +219,8 @@ def test_shipped_models_are_keyed_by_system_and_found_by_every_id():
 
 
 def test_the_guardians_the_table_lists_are_those_the_benchmark_accepts():
-    from rmm_bench.args import parse_run
     from rmm_bench.checks import check_runs
+    from rmm_bench.run_args import parse_run
     from rmm_envs.catalog import SYSTEMS
     from rmm_guardians.registry import BUILTIN
 

@@ -187,11 +187,11 @@ def test_agents_in_two_directories_pair_as_in_one(runs):
 
 
 def test_a_different_seed_is_refused_naming_the_key(runs, capsys):
-    assert main(["compare", str(runs / "a"), str(runs / "seed1"), "--agents", "lrmm,cbf"]) == 2
+    assert main(["compare", str(runs / "a"), str(runs / "seed1"), "--agent", "lrmm,cbf"]) == 2
     err = capsys.readouterr().err
     assert "ran no episode alike" in err and "seed 0" in err and "seed 1" in err and "--unpaired" in err
     # unpaired, it compares
-    assert main(["compare", str(runs / "a"), str(runs / "seed1"), "--agents", "lrmm,cbf", "--unpaired"]) == 0
+    assert main(["compare", str(runs / "a"), str(runs / "seed1"), "--agent", "lrmm,cbf", "--unpaired"]) == 0
     assert "unpaired" in capsys.readouterr().out
 
 
@@ -200,7 +200,7 @@ def test_an_edited_start_is_refused_naming_the_episode(runs, tmp_path, capsys):
     shutil.copytree(runs / "b", copy)
     with sqlite3.connect(copy / "results.db") as db:
         db.execute("UPDATE episodes SET start = 'ffffffffffffffff' WHERE agent = 'cbf' AND episode = 7")
-    assert main(["compare", str(runs / "a"), str(copy), "--agents", "lrmm,cbf"]) == 2
+    assert main(["compare", str(runs / "a"), str(copy), "--agent", "lrmm,cbf"]) == 2
     err = capsys.readouterr().err
     assert "episode 7 started differently" in err and "ffffffffffffffff" in err
 
@@ -211,7 +211,7 @@ def test_rows_without_fingerprints_pair_only_within_one_database(runs, tmp_path,
     with sqlite3.connect(copy / "results.db") as db:
         db.execute("UPDATE episodes SET start = NULL")
     assert compare_runs([copy], ["cbf", "inactive"], resamples=10).pairs.n.iloc[0] == EPISODES
-    assert main(["compare", str(runs / "a"), str(copy), "--agents", "lrmm,cbf"]) == 2
+    assert main(["compare", str(runs / "a"), str(copy), "--agent", "lrmm,cbf"]) == 2
     assert "no start fingerprint" in capsys.readouterr().err
 
 
@@ -227,12 +227,14 @@ def test_starts_not_assessed_give_no_avoidable_row(runs, tmp_path):
 
 def test_csv_and_markdown_outputs(runs, tmp_path, capsys):
     out = tmp_path / "cmp.csv"
-    assert main(["compare", str(runs / "all"), "--agents", "lrmm,cbf", "--format", "csv", "--out", str(out)]) == 0
+    assert main(["compare", str(runs / "all"), "--agent", "lrmm,cbf", "--format", "csv", "--table", str(out)]) == 0
     import pandas as pd
 
     table = pd.read_csv(out)
     assert list(table.outcome) == ["goal", "collision", "timeout", "avoidable collision"] and set(table.a) == {"lrmm"}
-    assert main(["compare", str(runs / "all"), "--agents", "lrmm,cbf", "--resamples", "50", "--seed", "3"]) == 0
+    assert (
+        main(["compare", str(runs / "all"), "--agent", "lrmm,cbf", "--resamples", "50", "--bootstrap-seed", "3"]) == 0
+    )
     text = capsys.readouterr().out
     assert "| lrmm | cbf | collision |" in text and "seed 3, 50 resamples" in text and "Floor:" in text
 
@@ -255,15 +257,15 @@ def test_reference_results_pair_with_a_new_run(runs, tmp_path, monkeypatch, caps
     assert chosen.agents == ["lrmm", "ref:cbf"] and set(zip(chosen.pairs.a, chosen.pairs.b, strict=True)) == {
         ("lrmm", "ref:cbf")
     }
-    assert main(["compare", str(runs / "a"), "--reference", "--agents", "lrmm,ref:cbf", "--resamples", "10"]) == 0
+    assert main(["compare", str(runs / "a"), "--reference", "--agent", "lrmm,ref:cbf", "--resamples", "10"]) == 0
     assert "ref:inactive" not in capsys.readouterr().out
-    assert main(["compare", str(runs / "a"), "--reference", "--agents", "lrmm,ref:cbff"]) == 2
+    assert main(["compare", str(runs / "a"), "--reference", "--agent", "lrmm,ref:cbff"]) == 2
     assert "(did you mean 'ref:cbf'?)" in capsys.readouterr().err
 
 
 def test_a_run_no_other_agent_ran_alike_is_named_in_one_line(runs, capsys):
     dirs = [str(runs / d) for d in ("a", "b", "seed1")]
-    assert main(["compare", *dirs, "--agents", "lrmm,cbf", "--resamples", "10"]) == 0
+    assert main(["compare", *dirs, "--agent", "lrmm,cbf", "--resamples", "10"]) == 0
     err = capsys.readouterr().err  # before: cbf's seed-1 run left out without a word
     assert err.count("\n") == 1 and "left out" in err and "cbf (Dubins4DParallel-v0 seed 1" in err
     assert str(runs / "seed1") in err
@@ -276,16 +278,16 @@ def test_a_run_no_other_agent_ran_alike_is_named_in_one_line(runs, capsys):
 @pytest.mark.parametrize(
     ("args", "expected"),
     [
-        (["compare", "{root}/missing", "--agents", "lrmm,cbf"], "does not exist"),
-        (["compare", "{root}", "--agents", "lrmm,cbf"], "holds no results.db"),
-        (["compare", "{root}/all", "--agents", "lrmm,nope"], "no run of 'nope'"),
-        (["compare", "{root}/all", "--agents", "lrmm"], "at least two agents"),
+        (["compare", "{root}/missing", "--agent", "lrmm,cbf"], "does not exist"),
+        (["compare", "{root}", "--agent", "lrmm,cbf"], "holds no results.db"),
+        (["compare", "{root}/all", "--agent", "lrmm,nope"], "no run of 'nope'"),
+        (["compare", "{root}/all", "--agent", "lrmm"], "at least two agents"),
         (["compare", "{root}/all", "--format", "xml"], "expected md or csv"),
         (["compare", "{root}/all", "--resamples", "0"], "--resamples must be >= 1"),
-        (["compare", "{root}/all", "--agents", ","], "expected comma-separated"),
-        (["compare", "{root}/all", "--agents", "lrmm@zzzz,cbf"], "whose key starts with 'zzzz'"),
-        (["compare", "{root}/all", "--agents", "lrm,cbf"], "no run of 'lrm' is stored (did you mean 'lrmm'?)"),
-        (["compare", "{root}/all", "--agents", "lrmm,ref:cbf"], "are compared with --reference"),
+        (["compare", "{root}/all", "--agent", ","], "expected one agent name or a comma list"),
+        (["compare", "{root}/all", "--agent", "lrmm@zzzz,cbf"], "whose key starts with 'zzzz'"),
+        (["compare", "{root}/all", "--agent", "lrm,cbf"], "no run of 'lrm' is stored (did you mean 'lrmm'?)"),
+        (["compare", "{root}/all", "--agent", "lrmm,ref:cbf"], "are compared with --reference"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(runs, capsys, args, expected):
@@ -299,7 +301,7 @@ def test_a_newer_schema_is_refused(runs, tmp_path, capsys):
     shutil.copytree(runs / "all", copy)
     with sqlite3.connect(copy / "results.db") as db:
         db.execute("PRAGMA user_version = 99")
-    assert main(["compare", str(copy), "--agents", "lrmm,cbf"]) == 2
+    assert main(["compare", str(copy), "--agent", "lrmm,cbf"]) == 2
     assert "schema version 99" in capsys.readouterr().err
 
 

@@ -53,12 +53,12 @@ def test_an_agent_that_errored_in_every_episode_gets_its_row_and_a_note_but_no_t
         f"where neither errored; {BOOM} errored in all {EPISODES} (episodes 0, 1, 2, 3, 4 and 11 more)"
     )
     assert note in c.notes and len(c.floor) == 0
-    assert main(["compare", str(run), "--agents", f"{BOOM},inactive"]) == 0
+    assert main(["compare", str(run), "--agent", f"{BOOM},inactive"]) == 0
     out = capsys.readouterr().out
     rows = [ln for ln in out.splitlines() if ln.startswith(f"| {BOOM} |")]
     assert rows == [f"| {BOOM} | inactive | error | 16 | 100.0 | 0.0 | — | 16 | 0 | 0 | — | 0,1,2,3,4 (+11) |  |"]
     assert f"Note: {note}" in out
-    assert main(["compare", str(run), "--agents", f"{BOOM},inactive", "--format", "csv"]) == 0
+    assert main(["compare", str(run), "--agent", f"{BOOM},inactive", "--format", "csv"]) == 0
     table = pd.read_csv(pd.io.common.StringIO(capsys.readouterr().out))
     assert list(table.outcome) == ["error"] and table.note.item() == note.split(": ", 1)[1]
 

@@ -253,8 +253,8 @@ def test_the_sampler_draws_non_failed_states_half_from_the_driver_and_repeats_wi
 
 
 def test_rmm_bench_runs_every_applicable_guardian_and_names_cbf_and_hj_as_not_applying(tmp_path, capsys):
-    from rmm_bench.args import parse_run
-    from rmm_bench.run import applicable
+    from rmm_bench.run_args import parse_run
+    from rmm_bench.run_plan import applicable
 
     config = parse_run(
         ["--env", "CartPoleParallel-v0", "--agent", "all", "--clock", "fixed:1", "--out", str(tmp_path)], "rmm-bench"

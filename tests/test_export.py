@@ -34,7 +34,7 @@ def _stored(run) -> pd.DataFrame:
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
 def test_an_export_reads_back_with_pandas_alone(run, tmp_path, fmt):
     out = tmp_path / f"x.{fmt}"
-    assert main(["export", str(run), "--format", fmt, "--out", str(out)]) == 0
+    assert main(["export", str(run), "--format", fmt, "--table", str(out)]) == 0
     df = pd.read_parquet(out) if fmt == "parquet" else pd.read_csv(out)
     assert list(df.columns) == [name for name, *_ in SCHEMA]
     assert set(df.schema) == {SCHEMA_NAME}
@@ -52,11 +52,11 @@ def test_an_export_reads_back_with_pandas_alone(run, tmp_path, fmt):
 
 def test_the_schema_travels_with_the_file(run, tmp_path):
     out = tmp_path / "x.parquet"
-    assert main(["export", str(run), "--out", str(out)]) == 0
+    assert main(["export", str(run), "--table", str(out)]) == 0
     meta = json.loads(pq.read_schema(out).metadata[b"rmm_schema"])
     assert meta["schema"] == SCHEMA_NAME and [c["name"] for c in meta["columns"]] == [n for n, *_ in SCHEMA]
     csv = tmp_path / "x.csv"
-    assert main(["export", str(run), "--format", "csv", "--out", str(csv)]) == 0
+    assert main(["export", str(run), "--format", "csv", "--table", str(csv)]) == 0
     side = json.loads((tmp_path / "x.csv.schema.json").read_text())
     assert side == meta
 
@@ -95,7 +95,7 @@ def test_doomed_flags_come_from_the_starts_table(run, tmp_path):
         (["export", "{root}/missing"], "does not exist"),
         (["export", "{root}"], "holds no results.db"),
         (["export", "{run}", "--format", "xlsx"], "expected parquet or csv"),
-        (["export", "{run}", "--agents", "nope"], "--agents nope: not stored"),
+        (["export", "{run}", "--agent", "nope"], "--agent nope: not stored"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(run, tmp_path, capsys, args, expected):

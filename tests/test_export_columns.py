@@ -130,7 +130,7 @@ def test_a_chosen_agent_alone_and_an_unknown_one_named(run):
     assert set(df.agent) == {"random"} and list(df.episode) == [0, 1, 2, 3] and list(df.index) == [0, 1, 2, 3]
     with pytest.raises(ValueError) as e:
         export_frame(run, ["random", "nope"])
-    assert str(e.value) == f"--agents nope: not stored in {run / 'results.db'} (expected one of: inactive, random)"
+    assert str(e.value) == f"--agent nope: not stored in {run / 'results.db'} (expected one of: inactive, random)"
     with pytest.raises(ValueError, match=r"^export .*: it does not exist; expected the --out directory"):
         export_frame(run / "missing")
 

@@ -343,12 +343,12 @@ def test_ray_backend_same_results_and_a_lost_task_is_reported(tmp_path):
     "exc, code, status", [(KeyboardInterrupt(), 130, "interrupted"), (ZeroDivisionError("bug"), None, "failed")]
 )
 def test_an_invocation_never_stays_running(tmp_path, monkeypatch, exc, code, status):
-    import rmm_bench.run as run
+    import rmm_bench.run_execute as run_execute
 
     def broken(*a, **k):
         raise exc
 
-    monkeypatch.setattr(run, "execute", broken)
+    monkeypatch.setattr(run_execute, "execute", broken)
     out = tmp_path / "i"
     argv = ["--agent", "inactive", "--episodes", "1", "--workers", "1", "--out", str(out), *FAST]
     if code is None:

@@ -66,8 +66,8 @@ def run(tmp_path_factory):
 @pytest.mark.parametrize(
     ("argv", "expected"),
     [
-        (["compare", "{run}", "--agents", "inactiv,random"], "no run of 'inactiv' is stored (did you mean 'inactive'?)"),
-        (["export", "{run}", "--agents", "randm", "--out", "{tmp}/x.csv", "--format", "csv"], "(did you mean 'random'?)"),
+        (["compare", "{run}", "--agent", "inactiv,random"], "no run of 'inactiv' is stored (did you mean 'inactive'?)"),
+        (["export", "{run}", "--agent", "randm", "--table", "{tmp}/x.csv", "--format", "csv"], "(did you mean 'random'?)"),
         (["replay", "{run}", "--agent", "inactve", "--episode", "0"], "(did you mean 'inactive'?)"),
     ],
 )  # fmt: skip

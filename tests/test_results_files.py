@@ -58,10 +58,10 @@ def _refused(capsys, argv: list[str], *words: str) -> str:
 @pytest.mark.parametrize(
     "argv",
     [
-        ["export", "{d}", "--format", "csv", "--out", "{d}/results.db"],
-        ["export", "{d}", "--format", "parquet", "--out", "{d}/results.db"],
-        ["export", "{d}/results.db", "--format", "csv", "--out", "{d}/results.db-wal"],
-        ["compare", "{d}", "--agents", "inactive,brakes", "--out", "{d}/results.db"],
+        ["export", "{d}", "--format", "csv", "--table", "{d}/results.db"],
+        ["export", "{d}", "--format", "parquet", "--table", "{d}/results.db"],
+        ["export", "{d}/results.db", "--format", "csv", "--table", "{d}/results.db-wal"],
+        ["compare", "{d}", "--agent", "inactive,brakes", "--table", "{d}/results.db"],
         ["report", "{d}", "--html", "{d}/results.db"],
     ],
     ids=["export-csv", "export-parquet", "export-onto-wal", "compare", "report-html"],
@@ -80,12 +80,12 @@ def test_no_command_writes_over_another_database_nor_through_a_link(runs, tmp_pa
     other = tmp_path / "other.csv"  # a results database under another name
     shutil.copy(runs / "s1" / "results.db", other)
     before = _sha(other)
-    _refused(capsys, ["export", str(d), "--format", "csv", "--out", str(other)], "SQLite database")
-    _refused(capsys, ["compare", str(d), "--agents", "inactive,brakes", "--out", str(other)], "SQLite database")
+    _refused(capsys, ["export", str(d), "--format", "csv", "--table", str(other)], "SQLite database")
+    _refused(capsys, ["compare", str(d), "--agent", "inactive,brakes", "--table", str(other)], "SQLite database")
     assert _sha(other) == before
     link = tmp_path / "table.md"
     link.symlink_to(d / "results.db")  # the database under a name that looks like an output
-    _refused(capsys, ["compare", str(d), "--agents", "inactive,brakes", "--out", str(link)], "reads")
+    _refused(capsys, ["compare", str(d), "--agent", "inactive,brakes", "--table", str(link)], "reads")
     video = tmp_path / "ep.gif"
     shutil.copy(runs / "s1" / "results.db", video)
     _refused(capsys, ["replay", str(d), "--agent", "inactive", "--episode", "0", "--video", str(video)], "SQLite")
@@ -95,17 +95,17 @@ def test_no_command_writes_over_another_database_nor_through_a_link(runs, tmp_pa
 def test_outputs_go_into_new_folders_and_existing_outputs_are_replaced(runs, tmp_path, capsys):
     d = _copy(runs, "a", tmp_path)
     out = tmp_path / "new" / "deeper" / "eps.parquet"  # a folder not made yet, as --frames makes its own
-    assert main(["export", str(d), "--out", str(out)]) == 0
+    assert main(["export", str(d), "--table", str(out)]) == 0
     assert out.is_file()
     csv = tmp_path / "eps.csv"
     csv.write_text("an earlier export\n")
-    assert main(["export", str(d), "--format", "csv", "--out", str(csv)]) == 0  # a previous output is replaced
+    assert main(["export", str(d), "--format", "csv", "--table", str(csv)]) == 0  # a previous output is replaced
     assert csv.read_text().startswith("schema,")
     video = tmp_path / "videos" / "ep0.gif"
     assert main(["replay", str(d), "--agent", "inactive", "--episode", "0", "--video", str(video), "--size", "64"]) == 0
     assert video.is_file() and video.read_bytes()[:3] == b"GIF"
     capsys.readouterr()
-    _refused(capsys, ["export", str(d), "--out", str(tmp_path)], "is a folder", str(tmp_path))
+    _refused(capsys, ["export", str(d), "--table", str(tmp_path)], "is a folder", str(tmp_path))
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
@@ -233,8 +233,8 @@ def test_results_in_a_read_only_folder_are_readable_by_every_read_only_command(r
     with _read_only_copy(src, tmp_path) as d:
         before = sorted(p.name for p in d.iterdir())
         assert main(["replay", str(d), "--agent", "brakes", "--episode", "0,2"]) == 0
-        assert main(["compare", str(d), "--agents", "inactive,brakes"]) == 0
-        assert main(["export", str(d), "--out", str(elsewhere / "e.parquet")]) == 0
+        assert main(["compare", str(d), "--agent", "inactive,brakes"]) == 0
+        assert main(["export", str(d), "--table", str(elsewhere / "e.parquet")]) == 0
         assert main(["report", str(d), "--html", str(elsewhere / "page.html")]) == 0
         assert "is read-only" in capsys.readouterr().err
         assert main(["merge", str(elsewhere / "m"), str(d)]) == 0
@@ -249,8 +249,8 @@ def test_read_only_commands_leave_no_files_beside_the_database(runs, tmp_path, l
         _legacy_wal(d / "results.db")
     sha = _sha(d / "results.db")
     assert main(["replay", str(d), "--agent", "inactive", "--episode", "1"]) == 0
-    assert main(["compare", str(d), "--agents", "inactive,brakes"]) == 0
-    assert main(["export", str(d), "--out", str(tmp_path / "e.parquet")]) == 0
+    assert main(["compare", str(d), "--agent", "inactive,brakes"]) == 0
+    assert main(["export", str(d), "--table", str(tmp_path / "e.parquet")]) == 0
     assert main(["merge", str(tmp_path / "m"), str(d)]) == 0
     assert not [p.name for p in d.iterdir() if p.name.endswith(("-wal", "-shm", "-journal"))]
     assert _sha(d / "results.db") == sha
@@ -280,8 +280,8 @@ def test_an_empty_or_foreign_database_is_named_in_one_line(tmp_path, capsys, wha
         words = ["not a results database", "no runs or episodes table"]
     for argv in (
         ["replay", str(d), "--agent", "inactive", "--episode", "0"],
-        ["compare", str(d), "--agents", "inactive,brakes"],
-        ["export", str(d), "--out", str(tmp_path / "e.csv"), "--format", "csv"],
+        ["compare", str(d), "--agent", "inactive,brakes"],
+        ["export", str(d), "--table", str(tmp_path / "e.csv"), "--format", "csv"],
         ["merge", str(tmp_path / "m"), str(d)],
         ["report", str(d)],
     ):

@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rmm_bench.config import AgentRun, EpisodeResult
-from rmm_bench.run import plan_tasks
+from rmm_bench.run_plan import plan_tasks
 from rmm_bench.runner import episode_seed
 from rmm_bench.store import EPISODE_FIELDS, RETRIED_ERRORS, ResultsStore
 

@@ -74,8 +74,8 @@ def test_no_command_imports_a_file_of_the_current_directory_in_place_of_an_insta
     assert "| my_guard:MyGuardian |" in res.stdout  # found here, with its helper, by both workers
     for args in (
         ("replay", "res", "--agent", "my_guard:MyGuardian", "--episode", "0,1", "--no-progress"),
-        ("compare", "res", "--agents", agents),
-        ("export", "res", "--format", "parquet", "--out", "episodes.parquet"),
+        ("compare", "res", "--agent", agents),
+        ("export", "res", "--format", "parquet", "--table", "episodes.parquet"),
         ("report", "res"),
     ):
         res = _cli(cwd, "rmm-bench", *args)

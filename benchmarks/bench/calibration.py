@@ -1,10 +1,10 @@
 """``rmm-bench calibrate``: is the map right?  A model's risk against fresh risk labels of held-out worlds.
 
-Run: ``rmm-bench calibrate [--systems Dubins4D,Dubins3DMaze,...] [--seed 2026] [--workers 2]
+Run: ``rmm-bench calibrate [--systems Dubins4D,Dubins3DMaze,...] [--world-seed 2026] [--workers 2]
 [--out results/calibration]`` (the shipped models), or ``rmm-bench calibrate --env ENV --model
 FILE`` (a model of one's own, on worlds of ``ENV`` labelled with ``rmm-datagen``'s defaults).
 
-For each system, ``rmm-datagen`` labels states of worlds drawn from ``--seed`` (the shipped
+For each system, ``rmm-datagen`` labels states of worlds drawn from ``--world-seed`` (the shipped
 models were trained on datasets of seeds 0 and 1, so these worlds are not theirs) with the
 sampling tree the model was trained on, and the model the ``lrmm`` guardian reads predicts each
 state's risk from its observation.  Reported per system:
@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from rmm_bench.options import refuse
 from rmm_envs.risk import datagen, dataset
 from rmm_guardians.lrmm import model as lrmm_model
 from rmm_guardians.lrmm.shipped import models_dir
@@ -183,9 +184,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--samples-per-config", type=int, default=64, help="with --model: states per world (default: %(default)s)"
     )
-    p.add_argument("--seed", type=int, default=2026, help="the held-out worlds' seed (not the training data's)")
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--out", type=Path, default=Path("results/calibration"))
+    p.add_argument(
+        "--world-seed",
+        type=int,
+        default=2026,
+        help="seed of the held-out worlds and their states (not the training data's; default: %(default)s)",
+    )
+    refuse(p, "--seed", "use --world-seed (--seed is the master seed of a run)")
+    p.add_argument("--workers", type=int, default=2, help="labelling processes (default: %(default)s)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("results/calibration"),
+        metavar="DIR",
+        help="a new or empty directory for the labels, the tables and the figure (default: %(default)s)",
+    )
     return p
 
 
@@ -201,8 +214,8 @@ def _own(args) -> tuple[list[str], dict | None] | str:
         unknown = [s for s in names if s not in CALIBRATED]
         if unknown or not names:
             return f"--systems {args.systems!r}: unknown {unknown or 'none given'}, expected some of {', '.join(CALIBRATED)}"
-        if args.seed in (0, 1):
-            return f"--seed {args.seed}: the shipped models were trained on seeds 0 and 1; choose another"
+        if args.world_seed in (0, 1):
+            return f"--world-seed {args.world_seed}: the shipped models were trained on seeds 0 and 1; choose another"
         return names, None
     if args.model is None or args.env is None:
         return "--env and --model go together: the env whose worlds are labelled and the model scored on them"
@@ -212,8 +225,8 @@ def _own(args) -> tuple[list[str], dict | None] | str:
         trained = lrmm_model.LRMMModel.load(args.model).meta.get("data", {}).get("seed")
     except (ValueError, FileNotFoundError) as e:
         return str(e)
-    if trained == args.seed:
-        return f"--seed {args.seed}: {args.model} was trained on worlds of that seed; choose another"
+    if trained == args.world_seed:
+        return f"--world-seed {args.world_seed}: {args.model} was trained on worlds of that seed; choose another"
     size = ["--configs", str(args.configs), "--samples-per-config", str(args.samples_per_config)]
     return [args.model.stem], {"env": ["--env", args.env], "model": args.model.resolve(), "size": size}
 
@@ -228,7 +241,7 @@ def cmd(argv: list[str]) -> int:
     if args.out.exists() and (not args.out.is_dir() or any(args.out.iterdir())):
         return _bad(f"--out {args.out} is not empty: the labels go into a fresh folder")
     args.out.mkdir(parents=True, exist_ok=True)
-    results = [calibrate(s, args.seed, args.workers, args.out, spec) for s in names]
+    results = [calibrate(s, args.world_seed, args.workers, args.out, spec) for s in names]
     (args.out / "calibration.json").write_text(json.dumps(results, indent=1))
     md = _markdown(results)
     (args.out / "calibration.md").write_text(md)

@@ -29,6 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 from rmm_bench.checks import check_env_contract, env_arguments
+from rmm_bench.options import env_opt_option, parse_env_opts
 from rmm_envs.env_plugins import resolve_env_id
 from rmm_envs.envs.driven import SIMULATOR_HOOKS
 from rmm_envs.risk.estimator import RiskEstimator
@@ -40,19 +41,6 @@ from rmm_envs.views import view_for
 __all__ = ["build_parser", "check_system", "cmd"]
 
 OK, ABSENT, FAIL = "ok", "--", "FAIL"
-
-
-def _env_opts(items: list[str]) -> dict:
-    opts = {}
-    for item in items or []:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise ValueError(f"--env-opt {item!r}: expected KEY=JSON, e.g. maze_kind='\"mixed\"'")
-        try:
-            opts[key.strip()] = json.loads(value)
-        except json.JSONDecodeError:
-            raise ValueError(f"--env-opt {item!r}: the value {value!r} is not JSON (a string needs quotes)") from None
-    return opts
 
 
 def _make(env_id: str, opts: dict, **extra):
@@ -192,15 +180,13 @@ def _duration(seconds: float) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
+        parents=[env_opt_option()],
         prog="rmm-bench check-system",
         description="Pre-flight check of a system (an env id, or module:Id): the contract, the hooks, "
         "determinism under a seed, rendering, doomed-start assessment, and the labelling rate with the time a "
         "dataset of the requested size will take.",
     )
     p.add_argument("env", metavar="ENV", help="a registered env id, or module:Id for an env that module registers")
-    p.add_argument(
-        "--env-opt", action="append", default=[], metavar="KEY=JSON", help="an env constructor argument; repeatable"
-    )
     p.add_argument("--configs", type=int, default=274, help="rmm-datagen --configs to estimate (default: %(default)s)")
     p.add_argument(
         "--samples-per-config",
@@ -210,7 +196,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--workers", type=int, default=1, help="processes the estimate assumes (default: %(default)s)")
     p.add_argument("--probe-states", type=int, default=8, help="states labelled to measure the rate (default: 8)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the episodes and states checked (default: 0)")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="master seed of the episodes checked, and of the states labelled (default: %(default)s)",
+    )
     return p
 
 
@@ -226,7 +217,7 @@ def cmd(argv: list[str]) -> int:
             raise ValueError(f"{flag} must be an integer >= 1, got {value}")
     if args.seed < 0:
         raise ValueError(f"--seed must be a non-negative integer, got {args.seed}")
-    opts = _env_opts(args.env_opt)
+    opts = parse_env_opts(args.env_opt)
     rows, _ = check_system(
         args.env, opts, args.configs, args.samples_per_config, args.workers, args.probe_states, args.seed
     )

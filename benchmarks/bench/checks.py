@@ -26,7 +26,7 @@ from typing import Any
 from rmm_bench.config import AgentRun, accepts_argument, input_digests
 from rmm_envs.autonomy import ACTIVE
 
-__all__ = ["check_env_contract", "check_runs", "env_arguments", "parse_agent_opts", "resolve_agents"]
+__all__ = ["check_env_contract", "check_runs", "env_arguments", "env_parameters", "parse_agent_opts", "resolve_agents"]
 
 #: Options of this command that an env may take, in the order the run's env_kwargs list them.
 ENV_OPTIONS = ("time_accel", "base_step", "clock")
@@ -90,6 +90,27 @@ def env_arguments(env_id: str) -> set[str]:
     """Which of :data:`ENV_OPTIONS` the registered env ``env_id`` takes (ValueError if it is not registered)."""
     creator = _env_creator(env_id)
     return {name for name in ENV_OPTIONS if accepts_argument(creator, name)}
+
+
+def _env_flag(key: str, value) -> str:
+    """How this command's user gave the env argument ``key``: its own flag, or ``--env-opt``."""
+    if key in ENV_OPTIONS:
+        return f"--{key.replace('_', '-')} {value}"
+    return f"--env-opt {key}={json.dumps(value)}"
+
+
+def env_parameters(env_id: str) -> set[str] | None:
+    """The names of the registered env ``env_id``'s constructor arguments (``--env-opt`` keys), or
+    None when they cannot be known (a creator taking ``**kwargs`` or without a signature)."""
+    import inspect
+
+    try:
+        params = inspect.signature(_env_creator(env_id)).parameters.values()
+    except (TypeError, ValueError):
+        return None
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return None
+    return {p.name for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
 
 
 def env_default(env_id: str, name: str, fallback):
@@ -199,7 +220,7 @@ def check_runs(
             try:
                 env = gym.make(run.env_id, **run.env_kwargs)
             except Exception as e:
-                raise ValueError(describe_env_error(e, run.env_id, run.env_kwargs)) from None
+                raise ValueError(describe_env_error(e, run.env_id, run.env_kwargs, _env_flag)) from None
             try:
                 check_env_contract(run.env_id, env)
                 envs[ekey] = int(getattr(env.unwrapped, "n_obstacles", -1))  # optional: the table's Obstacles column

@@ -1,8 +1,8 @@
 """``rmm-bench compare``: agents compared on the episodes they all ran, pair by pair.
 
-Offers :func:`compare_runs` (the Python entry: a :class:`Comparison` of pandas DataFrames)
-and the command (:func:`build_parser`, :func:`cmd`); the statistics it rests on are in
-:mod:`rmm_bench.paired`.
+Offers :func:`compare_runs` (the Python entry: a :class:`Comparison` of pandas DataFrames);
+the runs it reads come from :mod:`rmm_bench.compare_load`, the command line is
+:mod:`rmm_bench.compare_command` and the statistics it rests on are in :mod:`rmm_bench.paired`.
 
 Every agent of a run meets the same episodes, so two agents are compared episode by episode:
 where one collides and the other does not (the discordant episodes) rather than by two rates
@@ -14,10 +14,7 @@ wrong.  ``docs/comparing.md`` explains the output.
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,17 +23,28 @@ from typing import Any
 import numpy as np
 
 from rmm_bench.compare_errors import ERROR, error_note, error_row, split_errors, unpaired_errors
+from rmm_bench.compare_load import (
+    REFERENCE_PREFIX,
+    Run,
+    check_starts,
+    episodes_by_group,
+    read_runs,
+    reference_runs,
+    select,
+)
+from rmm_bench.compare_load import (
+    left_out as runs_left_out,
+)
 from rmm_bench.compare_render import continuous_table, pairs_table
-from rmm_bench.names import did_you_mean
-from rmm_bench.outputs import check_output, write_output
 from rmm_bench.paired import concordance, mcnemar_exact, newcombe_paired, newcombe_unpaired, paired_bootstrap
-from rmm_bench.store import RETRIED_ERRORS, ResultsStore, results_database
+from rmm_bench.store import results_database
+
+#: ``read_runs`` under the name it had here (the collision taxonomy reads runs through it)
+_read_runs = read_runs
 
 __all__ = [
     "OUTCOMES",
     "Comparison",
-    "build_parser",
-    "cmd",
     "compare_runs",
 ]
 
@@ -49,122 +57,6 @@ CONTINUOUS = {
     "decision_ms": ("mean measured decision time (a timing value: differs between machines)", "ms"),
 }
 #: the prefix of the shipped reference results' agents (``rmm-bench compare --reference``)
-REFERENCE_PREFIX = "ref:"
-
-
-# ---------------------------------------------------------------- loading
-
-
-@dataclass
-class _Run:
-    """One stored run of one agent: the rows this comparison reads."""
-
-    label: str  # the agent's name in the comparison
-    source: Path  # the database
-    run_key: str
-    config: dict
-    world: str  # rmm_envs.starts.world_key
-    clock: str
-    rows: dict[int, dict] = field(default_factory=dict)  # episode -> row
-    doomed: dict[int, bool | None] = field(default_factory=dict)  # episode -> flag
-
-    @property
-    def group(self) -> tuple[str, str]:
-        return self.world, self.clock
-
-    def describe(self) -> str:
-        c = self.config
-        return f"{c.get('env_id')} seed {c.get('seed')} clock {self.clock}"
-
-
-_COLUMNS = "episode, seed, outcome, error_kind, steps, sim_time, active_sim_time, decision_mean, start"
-
-
-def _clock(config: dict) -> str:
-    return str(config.get("env_kwargs", {}).get("clock", "wall"))
-
-
-def _read_runs(db: Path, prefix: str = "") -> list[_Run]:
-    """Every run stored in ``db`` with its rows (episodes without a result left out) and doomed flags."""
-    from rmm_envs.starts import world_key
-
-    store = ResultsStore(db, read_only=True)
-    try:
-        runs = []
-        for key, agent, config in store.db.execute("SELECT run_key, agent, config FROM runs ORDER BY created, rowid"):
-            config = json.loads(config)
-            run = _Run(
-                label=prefix + agent,
-                source=db,
-                run_key=key,
-                config=config,
-                world=world_key(config["env_id"], config.get("env_kwargs", {}), int(config.get("seed", 0))),
-                clock=_clock(config),
-            )
-            names = [r[1] for r in store.db.execute("PRAGMA table_info(episodes)")]
-            cols = ", ".join(c.strip() if c.strip() in names else f"NULL AS {c.strip()}" for c in _COLUMNS.split(","))
-            cur = store.db.execute(f"SELECT {cols} FROM episodes WHERE run_key = ? ORDER BY episode", (key,))
-            fields = [d[0] for d in cur.description]
-            for values in cur.fetchall():
-                row = dict(zip(fields, values, strict=True))
-                if row["outcome"] == "error" and (row["error_kind"] or "guardian") in RETRIED_ERRORS:
-                    continue  # no result: lost, over time, or a failure of the run
-                run.rows[int(row["episode"])] = row
-            run.doomed = {e: s["doomed"] for e, s in store.starts(run.world).items()}
-            runs.append(run)
-        return runs
-    finally:
-        store.close()
-
-
-def _select(runs: list[_Run], names: Sequence[str] | None) -> dict[str, list[_Run]]:
-    """The runs of each named agent (``name`` or ``name@KEY``, KEY a prefix of a run key); with no
-    names, every stored agent.  One agent's runs must not share a world and clock (say which)."""
-    stored = sorted({r.label for r in runs})
-    if names is None:
-        names = stored
-    out: dict[str, list[_Run]] = {}
-    for name in names:
-        agent, _, key = name.partition("@")
-        chosen = [r for r in runs if r.label == agent and r.run_key.startswith(key)]
-        if not chosen:
-            what = f"no run of {agent!r}" if not key else f"no run of {agent!r} whose key starts with {key!r}"
-            ref = agent.startswith(REFERENCE_PREFIX) and not any(s.startswith(REFERENCE_PREFIX) for s in stored)
-            near = did_you_mean(agent, stored) if agent not in stored and not ref else ""
-            raise ValueError(
-                f"--agents {name}: {what} is stored{near} (expected one of: {', '.join(stored) or 'none'})"
-                + ("; the shipped reference results (ref:NAME) are compared with --reference" if ref else "")
-            )
-        by_group: dict[tuple[str, str], list[_Run]] = {}
-        for r in chosen:
-            by_group.setdefault(r.group, []).append(r)
-        for group_runs in by_group.values():
-            keys = sorted({r.run_key for r in group_runs})
-            if len(keys) > 1:
-                raise ValueError(
-                    f"--agents {name}: {len(keys)} runs of {agent!r} ran the same episodes "
-                    f"({group_runs[0].describe()}: runs {', '.join(keys)}, other options or files); "
-                    f"name one as {agent}@KEY"
-                )
-        out[name] = chosen
-    return out
-
-
-def _episodes(runs: list[_Run]) -> dict[tuple[str, str], dict[int, tuple[dict, _Run]]]:
-    """One agent's rows by group and episode; the same run in several databases (shards of one
-    run) is joined, and an episode stored differently in two of them is refused."""
-    out: dict[tuple[str, str], dict[int, tuple[dict, _Run]]] = {}
-    for run in runs:
-        rows = out.setdefault(run.group, {})
-        for e, row in run.rows.items():
-            if e in rows and rows[e][0]["outcome"] != row["outcome"]:
-                raise ValueError(
-                    f"{run.label} episode {e} is stored with outcome {rows[e][0]['outcome']} in "
-                    f"{rows[e][1].source} and {row['outcome']} in {run.source}: merge them first "
-                    f"(rmm-bench merge) or compare one of them"
-                )
-            rows.setdefault(e, (row, run))
-    return out
 
 
 # ---------------------------------------------------------------- the comparison
@@ -271,27 +163,6 @@ def _continuous_values(column: str, ra: dict, rb: dict) -> tuple[float, float]:
     return (math.nan if a is None else 1e3 * float(a)), (math.nan if b is None else 1e3 * float(b))
 
 
-def _check_starts(a: str, b: str, group_label: str, common: list[int], ea: dict, eb: dict) -> None:
-    """Paired episodes must have started alike: equal fingerprints, or (before fingerprints were
-    stored) the same database."""
-    for e in common:
-        (ra, run_a), (rb, run_b) = ea[e], eb[e]
-        fa, fb = ra.get("start"), rb.get("start")
-        if fa is not None and fb is not None:
-            if fa != fb:
-                raise ValueError(
-                    f"{a} and {b} ({group_label}): episode {e} started differently (start fingerprint {fa} in "
-                    f"{run_a.source}, {fb} in {run_b.source}): the runs come from code that shapes starts "
-                    f"differently; compare them with --unpaired"
-                )
-        elif run_a.source != run_b.source:
-            raise ValueError(
-                f"{a} and {b} ({group_label}): episode {e} has no start fingerprint in "
-                f"{run_a.source if fa is None else run_b.source} (stored before results-store schema 3), so its "
-                f"start cannot be checked against the other database's; compare them with --unpaired"
-            )
-
-
 def compare_runs(
     dirs: Sequence[str | Path],
     agents: Sequence[str] | None = None,
@@ -318,23 +189,23 @@ def compare_runs(
         raise ValueError(f"--show must be >= 0, got {show}")
     if not dirs:
         raise ValueError("compare: no results directory given (expected DIR [DIR2 ...])")
-    runs: list[_Run] = []
+    runs: list[Run] = []
     for d in dirs:
-        runs.extend(_read_runs(results_database(d, "compare")))
+        runs.extend(read_runs(results_database(d, "compare")))
     notes: list[str] = []
     if reference:
-        ref_runs = _reference_runs({r.group for r in runs}, reference_dir)
+        ref_runs = reference_runs({r.group for r in runs}, reference_dir)
         runs.extend(ref_runs)
         if agents is not None and not any(a.startswith(REFERENCE_PREFIX) for a in agents):  # none named: all
             agents = list(agents) + sorted({r.label for r in ref_runs} - set(agents))
-    selected = _select(runs, agents)
+    selected = select(runs, agents)
     names = list(selected)
     if len(names) < 2:
         raise ValueError(
-            f"--agents: compare needs at least two agents, got {', '.join(names) or 'none'} "
+            f"--agent: compare needs at least two agents, got {', '.join(names) or 'none'} "
             f"(stored: {', '.join(sorted({r.label for r in runs}))})"
         )
-    by_agent = {name: _episodes(rs) for name, rs in selected.items()}
+    by_agent = {name: episodes_by_group(rs) for name, rs in selected.items()}
     if unpaired:
         pairs = _unpaired_pairs(names, by_agent, notes)
         notes.insert(
@@ -348,7 +219,7 @@ def compare_runs(
     pair_rows: list[dict] = []
     cont_rows: list[dict] = []
     groups = [g for g in by_agent[names[0]] if all(g in by_agent[n] for n in names)]
-    left_out = _left_out(selected, by_agent)
+    left_out = runs_left_out(selected, by_agent)
     for a_i, a in enumerate(names):
         for b in names[a_i + 1 :]:
             common_groups = set(by_agent[a]) & set(by_agent[b])
@@ -365,7 +236,7 @@ def compare_runs(
                 label = next(iter(ea.values()))[1].describe()
                 if not common:
                     continue
-                _check_starts(a, b, label, common, ea, eb)
+                check_starts(a, b, label, common, ea, eb)
                 errs = split_errors(common, ea, eb)  # the tests run where neither errored
                 note = error_note(a, b, errs, show) if errs.any else ""
                 doomed = _doomed_of(ea, eb, errs.tested)
@@ -387,15 +258,6 @@ def compare_runs(
     notes = list(dict.fromkeys(notes))
     pairs = pd.DataFrame(pair_rows)
     return Comparison(pairs, pd.DataFrame(cont_rows), floor, notes, True, names, seed, resamples, left_out)
-
-
-def _left_out(selected: dict[str, list[_Run]], by_agent: dict) -> list[str]:
-    """The runs whose episodes no other agent ran (``cbf`` of seed 1 beside ``lrmm`` of seed 0 alone)."""
-    out = []
-    for name, runs in selected.items():
-        others = {g for n in selected if n != name for g in by_agent[n]}
-        out += [f"{name} ({r.describe()}, in {r.source})" for r in runs if r.group not in others]
-    return list(dict.fromkeys(out))
 
 
 def _doomed_of(ea: dict, eb: dict, common: list[int]) -> dict[int, bool | None]:
@@ -533,86 +395,3 @@ def _unpaired_pairs(names: list[str], by_agent: dict, notes: list[str]) -> Any:
                 rows.append(error)
                 notes.append(note)
     return pd.DataFrame(rows)
-
-
-def _reference_runs(groups: set[tuple[str, str]], folder: str | Path | None) -> list[_Run]:
-    from rmm_bench.reference import reference_dbs
-
-    dbs = reference_dbs(folder)
-    shipped: list[_Run] = []
-    for db in dbs:
-        shipped.extend(_read_runs(db, prefix=REFERENCE_PREFIX))
-    matching = [r for r in shipped if r.group in groups]
-    if not matching:
-        worlds = "; ".join(sorted({r.describe() for r in shipped})) or "none"
-        raise ValueError(
-            f"--reference: no shipped reference result ran the same episodes as the given runs (same env, "
-            f"options, seed and clock); shipped: {worlds}"
-        )
-    return matching
-
-
-# ---------------------------------------------------------------- the command
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The ``rmm-bench compare`` command line."""
-    p = argparse.ArgumentParser(
-        prog="rmm-bench compare",
-        description="Compare agents pair by pair on the episodes they all ran (same world, seed, clock and "
-        "start): rate differences with paired 95%% intervals, the exact McNemar test on the discordant "
-        "episodes and their numbers (for rmm-bench replay), the floor no agent lifts, and paired bootstrap "
-        "intervals of the continuous columns.  Opens the databases read-only.",
-    )
-    p.add_argument("dirs", nargs="+", metavar="DIR", help="results directories (or results.db files)")
-    p.add_argument(
-        "--agents",
-        default=None,
-        help="comma-separated agents, NAME or NAME@KEY (KEY: a prefix of the run key); default: every stored one",
-    )
-    p.add_argument("--unpaired", action="store_true", help="compare every episode of each agent as independent samples")
-    p.add_argument(
-        "--reference",
-        action="store_true",
-        help="also compare with the shipped reference results of the same episodes (agents ref:NAME)",
-    )
-    p.add_argument("--format", default="md", help="md (default) or csv")
-    p.add_argument("--out", type=Path, default=None, metavar="FILE", help="write the table there (default: stdout)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the paired bootstrap (default 0)")
-    p.add_argument("--resamples", type=int, default=2000, help="bootstrap resamples (default 2000)")
-    p.add_argument("--show", type=int, default=5, help="discordant episode numbers shown per side (default 5)")
-    return p
-
-
-def cmd(argv: list[str]) -> int:
-    """Run ``rmm-bench compare``; bad input raises ``ValueError`` (exit 2 through the CLI)."""
-    args = build_parser().parse_args(argv)
-    if args.format not in ("md", "csv"):
-        raise ValueError(f"--format {args.format!r}: expected md or csv")
-    agents = None
-    if args.agents is not None:
-        agents = [a.strip() for a in args.agents.split(",") if a.strip()]
-        if not agents:
-            raise ValueError(f"--agents {args.agents!r}: expected comma-separated agent names")
-    existed = args.out is not None and args.out.exists()
-    if args.out is not None:  # before anything is read: never over a database it reads (or any other)
-        check_output(args.out, "--out", reads=[results_database(d, "compare") for d in args.dirs])
-    comparison = compare_runs(
-        args.dirs,
-        agents,
-        unpaired=args.unpaired,
-        reference=args.reference,
-        seed=args.seed,
-        resamples=args.resamples,
-        show=args.show,
-    )
-    if comparison.left_out:  # said in one line, never dropped silently
-        left = "; ".join(comparison.left_out)
-        print(f"rmm-bench compare: note: left out, as no other agent ran their episodes: {left}", file=sys.stderr)
-    text = comparison.to_markdown(args.show) if args.format == "md" else comparison.to_csv()
-    if args.out is None:
-        sys.stdout.write(text)
-    else:
-        write_output(args.out, lambda tmp: tmp.write_text(text), existed=existed)
-        print(f"wrote {args.out}", file=sys.stderr)
-    return 0

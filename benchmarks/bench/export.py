@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from rmm_bench.names import did_you_mean
+from rmm_bench.options import agent_option, refuse, results_dir
 from rmm_bench.outputs import check_output, write_output
 from rmm_bench.store import ResultsStore, results_database
 
@@ -97,7 +98,7 @@ def export_frame(path: str | Path, agents: list[str] | None = None) -> Any:
         for a in agents or []:
             if a not in stored:
                 raise ValueError(
-                    f"--agents {a}: not stored in {store.path}{did_you_mean(a, stored)} "
+                    f"--agent {a}: not stored in {store.path}{did_you_mean(a, stored)} "
                     f"(expected one of: {', '.join(stored)})"
                 )
         have = {r[1] for r in store.db.execute("PRAGMA table_info(episodes)")}
@@ -170,11 +171,17 @@ def build_parser() -> argparse.ArgumentParser:
         prog="rmm-bench export",
         description=f"Write the stored episodes as one table in the versioned schema {SCHEMA_NAME} "
         "(docs/comparing.md), readable without this package.  Opens the database read-only.",
+        parents=[results_dir(), agent_option("one agent or a comma list (default: every stored one)")],
     )
-    p.add_argument("dir", type=Path, metavar="DIR", help="a results directory (or its results.db)")
     p.add_argument("--format", default="parquet", help="parquet (default) or csv")
-    p.add_argument("--out", type=Path, default=None, metavar="FILE", help="default: DIR/results.parquet or .csv")
-    p.add_argument("--agents", default=None, help="comma-separated agents (default: all)")
+    p.add_argument(
+        "--table",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="the file to write (default: DIR/results.parquet or DIR/results.csv)",
+    )
+    refuse(p, "--out", "write the table with --table FILE (--out is a directory in every command)")
     return p
 
 
@@ -183,14 +190,15 @@ def cmd(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
     if args.format not in ("parquet", "csv"):
         raise ValueError(f"--format {args.format!r}: expected parquet or csv")
-    agents = None if args.agents is None else [a.strip() for a in args.agents.split(",") if a.strip()]
-    folder = args.dir if args.dir.is_dir() else args.dir.parent
-    out = args.out or folder / f"results.{args.format}"
-    db = results_database(args.dir, "export")
-    check_output(out, "--out", reads=[db])  # before anything is read: never over the database
+    agents = None if args.agent is None else [a.strip() for a in args.agent.split(",") if a.strip()]
+    source = Path(args.results_dir)
+    folder = source if source.is_dir() else source.parent
+    out = args.table or folder / f"results.{args.format}"
+    db = results_database(source, "export")
+    check_output(out, "--table", reads=[db])  # before anything is read: never over the database
     if args.format == "csv":
-        check_output(out.with_name(out.name + ".schema.json"), "--out (its .schema.json)", reads=[db])
-    frame = export_frame(args.dir, agents)
+        check_output(out.with_name(out.name + ".schema.json"), "--table (its .schema.json)", reads=[db])
+    frame = export_frame(source, agents)
     for f in write_export(frame, out, args.format):
         print(f"wrote {f}", file=sys.stderr)
     print(f"{len(frame)} episodes of {frame.agent.nunique()} agents in {SCHEMA_NAME}", file=sys.stderr)

@@ -1,17 +1,17 @@
 """``rmm-bench riskmap`` and ``rmm-bench quadrisk``: the paper's figures of a learned risk model at work.
 
-    rmm-bench riskmap --seed 3 --out riskmap.png     # Fig. 1: maze states coloured by inferred risk
+    rmm-bench riskmap --world-seed 3 --png riskmap.png     # Fig. 1: maze states coloured by inferred risk
     rmm-bench riskmap --labels                       # ... by the sampling tree's risk instead
-    rmm-bench quadrisk --seed 1 --out quadrisk.png   # Fig. 3: the quadrotor coloured by inferred risk
+    rmm-bench quadrisk --world-seed 1 --png quadrisk.png # Fig. 3: the quadrotor coloured by inferred risk
 
 ``riskmap`` samples ``--n`` states (default 1,000, the figure's density) in a freshly
-generated maze (``--kind``, ``--seed``) and draws each as an arrow coloured green to red by
+generated maze (``--maze``, ``--world-seed``) and draws each as an arrow coloured green to red by
 the risk the LRMM model infers from its local observation (default: the model shipped for
 ``Dubins3DMaze-v0``; ``--model`` another file), or with ``--labels`` by the sampling-tree
 risk that labels the training data (the estimator's defaults, n=32, m=2, t=2 s).
 ``quadrisk`` renders the quadrotor in three hand-picked situations (level and still; tilted
 and flying at a wall; upside down and falling) in a room 3 m high, its body coloured by the
-risk the shipped ``QuadrotorRoom-v0`` model infers.  Both write a PNG (``--out``, ``--dpi``,
+risk the shipped ``QuadrotorRoom-v0`` model infers.  Both write a PNG (``--png``, ``--dpi``,
 default 110: legible on screen at a small file size).
 
 These commands live in ``benchmarks`` because they load a guardian's model: the packages stack
@@ -30,8 +30,9 @@ import gymnasium as gym
 import numpy as np
 
 import rmm_envs  # noqa: F401  (registers the environments)
+from rmm_bench.options import refuse
 
-__all__ = ["COMMANDS", "main", "quadrisk", "quadrisk_parser", "riskmap", "riskmap_parser"]
+__all__ = ["quadrisk", "quadrisk_cmd", "quadrisk_parser", "riskmap", "riskmap_cmd", "riskmap_parser"]
 
 
 def _png(out) -> Path:
@@ -51,11 +52,11 @@ def riskmap(args: argparse.Namespace) -> int:
     from rmm_envs.systems.maze.env import Dubins3DMazeEnv
     from rmm_envs.systems.maze.mazes import render_occupancy
 
-    env = gym.make("Dubins3DMaze-v0", maze_kind=args.kind).unwrapped
+    env = gym.make("Dubins3DMaze-v0", maze_kind=args.maze).unwrapped
     if not isinstance(env, Dubins3DMazeEnv):
         raise TypeError(f"Dubins3DMaze-v0 made a {type(env).__name__}, not the Dubins3DMazeEnv this figure draws")
-    env.reset(seed=args.seed)
-    rng = np.random.default_rng(args.seed)
+    env.reset(seed=args.world_seed)
+    rng = np.random.default_rng(args.world_seed)
     states = env.sample_states(rng, args.n)
     obs = env.observe_states(states)
     if args.labels:
@@ -88,12 +89,12 @@ def riskmap(args: argparse.Namespace) -> int:
         clim=(0, 1),
     )
     fig.colorbar(q, ax=ax, label=what)
-    ax.set_title(f"{len(states)} sampled states in a {args.kind} maze (seed {args.seed}); arrow base = position")
+    ax.set_title(f"{len(states)} sampled states in a {args.maze} maze (seed {args.world_seed}); arrow base = position")
     ax.set_xlim(0, maze.width)
     ax.set_ylim(0, maze.height)
     ax.set_aspect("equal")
     fig.tight_layout()
-    out = _png(args.out)
+    out = _png(args.png)
     fig.savefig(out, dpi=args.dpi)
     print(f"wrote {out}: mean risk {risk.mean():.3f}, {np.mean(risk > 0.5) * 100:.0f}% of states above 0.5")
     return 0
@@ -113,7 +114,7 @@ def quadrisk(args: argparse.Namespace) -> int:
     env = gym.make("QuadrotorRoom-v0", render_mode="rgb_array").unwrapped
     if not isinstance(env, QuadrotorRoomEnv):
         raise TypeError(f"QuadrotorRoom-v0 made a {type(env).__name__}, not the QuadrotorRoomEnv this figure draws")
-    env.reset(seed=args.seed, options={"room": {"wall_height": 3.0}})
+    env.reset(seed=args.world_seed, options={"room": {"wall_height": 3.0}})
     model = LRMMModel.load(args.model or default_model_path("QuadrotorRoom-v0"), env_id="QuadrotorRoom-v0")
     room = env.room
     if room is None:  # reset builds the room
@@ -144,9 +145,9 @@ def quadrisk(args: argparse.Namespace) -> int:
         ax.imshow(np.asarray(rgba, dtype=np.uint8).reshape(240, 320, 4)[..., :3])
         ax.set_title(f"{name}\ninferred risk {float(r):.3f}", fontsize=9)
         ax.axis("off")
-    fig.suptitle(f"QuadrotorRoom-v0 (room seed {args.seed}): the body coloured green to red by inferred risk")
+    fig.suptitle(f"QuadrotorRoom-v0 (room seed {args.world_seed}): the body coloured green to red by inferred risk")
     fig.tight_layout()
-    out = _png(args.out)
+    out = _png(args.png)
     fig.savefig(out, dpi=args.dpi)
     print(f"wrote {out}: inferred risks {[round(float(r), 3) for r in risk]}")
     return 0
@@ -159,13 +160,15 @@ def riskmap_parser() -> argparse.ArgumentParser:
     )
     rm.add_argument("--model", default=None, help="LRMM model file (default: the shipped maze model)")
     rm.add_argument(
-        "--kind", default="rectangular", choices=["rectangular", "honeycomb"], help="maze kind (default: %(default)s)"
+        "--maze", default="rectangular", choices=["rectangular", "honeycomb"], help="maze layout (default: %(default)s)"
     )
-    rm.add_argument("--seed", type=int, default=0, help="maze and sampling seed (default: %(default)s)")
+    rm.add_argument(
+        "--world-seed", type=int, default=0, help="seed of the maze and of the sampled states (default: %(default)s)"
+    )
     rm.add_argument("--n", type=int, default=1000, help="number of sampled states (default: %(default)s)")
     rm.add_argument("--labels", action="store_true", help="colour by the sampling tree's risk instead of the model")
-    rm.add_argument("--out", default="riskmap.png", help="output PNG (default: %(default)s)")
-    rm.add_argument("--dpi", type=int, default=110, help="resolution of the PNG (default: %(default)s)")
+    _png_options(rm, "riskmap.png")
+    refuse(rm, "--kind", "use --maze rectangular or --maze honeycomb")
     return rm
 
 
@@ -174,25 +177,33 @@ def quadrisk_parser() -> argparse.ArgumentParser:
         prog="rmm-bench quadrisk", description="The paper's Fig. 3: the quadrotor coloured by inferred risk, as a PNG."
     )
     qr.add_argument("--model", default=None, help="LRMM model file (default: the shipped quadrotor model)")
-    qr.add_argument("--seed", type=int, default=0, help="room and sampling seed (default: %(default)s)")
-    qr.add_argument("--out", default="quadrisk.png", help="output PNG (default: %(default)s)")
-    qr.add_argument("--dpi", type=int, default=110, help="resolution of the PNG (default: %(default)s)")
+    qr.add_argument(
+        "--world-seed", type=int, default=0, help="seed of the room and of the sampled states (default: %(default)s)"
+    )
+    _png_options(qr, "quadrisk.png")
     return qr
 
 
-#: subcommand -> (its parser, what it runs)
-COMMANDS = {"riskmap": (riskmap_parser, riskmap), "quadrisk": (quadrisk_parser, quadrisk)}
+def _png_options(p: argparse.ArgumentParser, default: str) -> None:
+    p.add_argument("--png", default=default, metavar="FILE", help="the PNG to write (default: %(default)s)")
+    p.add_argument("--dpi", type=int, default=110, help="resolution of the PNG (default: %(default)s)")
+    refuse(p, "--out", "write the figure with --png FILE (--out is a directory in every command)")
+    refuse(p, "--seed", "use --world-seed (--seed is the master seed of a run)")
 
 
-def main(argv: list[str]) -> int:
-    """``argv``: the subcommand's name, then its arguments."""
-    name = argv[0] if argv else None
-    if name not in COMMANDS:
-        raise ValueError(f"figure command must be one of {sorted(COMMANDS)}, got {name!r}")
-    parser, run = COMMANDS[name]
-    args = parser().parse_args(argv[1:])
+def riskmap_cmd(argv: list[str]) -> int:
+    """``rmm-bench riskmap``."""
+    return _figure(riskmap_parser().parse_args(argv), riskmap)
+
+
+def quadrisk_cmd(argv: list[str]) -> int:
+    """``rmm-bench quadrisk``."""
+    return _figure(quadrisk_parser().parse_args(argv), quadrisk)
+
+
+def _figure(args: argparse.Namespace, draw) -> int:
     if getattr(args, "n", 1) < 1:
         raise ValueError(f"--n must be >= 1, got {args.n}")
     if args.dpi < 1:
         raise ValueError(f"--dpi must be >= 1, got {args.dpi}")
-    return run(args)
+    return draw(args)

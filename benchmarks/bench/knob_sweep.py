@@ -28,6 +28,7 @@ import sys
 from pathlib import Path
 
 from rmm_bench import cli
+from rmm_bench.options import refuse
 
 __all__ = ["bench_argv", "build_parser", "cmd", "main", "read_row", "run_bench", "run_point"]
 
@@ -140,7 +141,8 @@ def build_parser() -> argparse.ArgumentParser:
         "per value under a fixed clock, a table and a figure.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--agent", required=True, help="guardian name (e.g. lrmm, hj, cbf)")
+    p.add_argument("--agent", required=True, help="the one guardian whose knob to sweep (e.g. lrmm, hj, cbf)")
+    refuse(p, "--agents", "use --agent (one guardian)")
     p.add_argument("--knob", required=True, help="the constructor argument to sweep (e.g. threshold)")
     p.add_argument("--values", required=True, help="comma-separated values, each parsed as JSON")
     p.add_argument("--default", default=None, help="the guardian's default value of the knob (marked in the figure)")
@@ -152,12 +154,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="fixed options passed to every run (repeatable)",
     )
     p.add_argument("--env", default=None, help="the env of every run (default: rmm-bench's)")
-    p.add_argument("--episodes", type=int, default=256)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--episodes", type=int, default=256, help="episodes of every run (default: %(default)s)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="master seed; episode i's seed derives from it (default: %(default)s)"
+    )
     p.add_argument("--clock", default="fixed:1", help="decision clock of every run (default fixed:1, reproducible)")
-    p.add_argument("--workers", type=int, default=None)
+    p.add_argument("--workers", type=int, default=None, help="worker processes of each run (default: rmm-bench's)")
     p.add_argument("--no-reference", action="store_true", help="do not run the driver alone as a reference point")
-    p.add_argument("--out", default="results/knobs")
+    p.add_argument(
+        "--out",
+        default="results/knobs",
+        metavar="DIR",
+        help="the directory of the runs, the table and the figure (default: %(default)s)",
+    )
     return p
 
 

@@ -28,6 +28,7 @@ __all__ = [
     "figures",
     "load_manifests",
     "read_manifest",
+    "clone_only",
     "rmm_bench_args",
     "table_manifest",
 ]
@@ -308,6 +309,18 @@ def read_manifest(path: Path) -> Manifest:
             raise _bad(path, f"[[expect]] {i + 1}: value {value!r}, expected a rate in % (0 to 100)")
     m.expect = list(expect)
     return m
+
+
+#: a command line that runs one of the repository's development scripts, which a wheel does not install
+_CLONE_ONLY = re.compile(r"^(?:[A-Za-z_][A-Za-z0-9_]*=\S*\s+)*python3?\s+-m\s+(benchmarks\.\w+)")
+
+
+def clone_only(m: Manifest) -> list[str]:
+    """The development scripts (``benchmarks.NAME``) that ``m``'s commands run, each once, in
+    order: a wheel does not install them, so these commands need a clone of the repository."""
+    lines = [*m.shell, *m.check.get("commands", []), *(r["command"] for r in m.ratios)]
+    found = [match.group(1) for line in lines if line and (match := _CLONE_ONLY.match(line.strip()))]
+    return list(dict.fromkeys(found))
 
 
 def load_manifests(names: list[str] | None = None, folder: Path = MANIFESTS) -> list[Manifest]:

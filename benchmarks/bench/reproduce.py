@@ -1,7 +1,7 @@
 """``rmm-bench reproduce``: rerun the commands behind published tables and check their numbers.
 
-Offers :func:`fingerprint`, :func:`expected_rates`, the checks and the command
-(:func:`build_parser`, :func:`cmd`); the manifests are read by :mod:`rmm_bench.manifest` and
+Offers :func:`fingerprint`, :func:`expected_rates` and the checks; the command line is
+:mod:`rmm_bench.reproduce_command`; the manifests are read by :mod:`rmm_bench.manifest` and
 printed into the docs by :mod:`rmm_bench.reproduce_docs`.
 
 ``--quick --check`` reruns the manifests' quick versions (a few episodes per agent under the
@@ -15,14 +15,12 @@ as not rerun.
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import re
 import shlex
 import sqlite3
 import sys
-import tempfile
 from pathlib import Path
 
 from rmm_bench.manifest import COLUMNS, MANIFESTS, Manifest, load_manifests, rmm_bench_args
@@ -31,8 +29,6 @@ from rmm_bench.store import ResultsStore
 __all__ = [
     "MANIFESTS",
     "Manifest",
-    "build_parser",
-    "cmd",
     "expected_rates",
     "fingerprint",
     "load_manifests",
@@ -327,96 +323,3 @@ def _with_expects(m: Manifest, text: str) -> str:
     )
     text = re.sub(r"\[\[expect\]\]\n(?:[a-z]+ = [^\n]*\n)*\n*", "", text)
     return text.replace("[quick]", entries + "[quick]", 1)
-
-
-# ---------------------------------------------------------------- the command
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The ``rmm-bench reproduce`` command line."""
-    p = argparse.ArgumentParser(
-        prog="rmm-bench reproduce",
-        description="Rerun the commands behind the published tables (manifests in rmm_bench/manifests) and "
-        "check their numbers: --quick reruns small fixed-clock versions (or small datasets) that must match "
-        "stored fingerprints bit for bit; without it the whole commands run, each published rate must lie in "
-        "the 95%% interval of the rate measured and each published speed ratio within its stated factor. "
-        "Manifests of training runs and absolute timings are listed as not rerun.",
-    )
-    p.add_argument("names", nargs="*", metavar="NAME", help="manifests to run (default: all); --list names them")
-    p.add_argument("--quick", action="store_true", help="the small fixed-clock versions (seconds to minutes)")
-    p.add_argument("--check", action="store_true", help="compare with the stored fingerprints or rates")
-    p.add_argument("--update", action="store_true", help="store the quick versions' fingerprints (maintainers)")
-    p.add_argument("--out", type=Path, default=None, help="where the runs go (default: a temporary folder)")
-    p.add_argument("--list", action="store_true", help="list the manifests and what they cover")
-    p.add_argument("--write-docs", type=Path, default=None, metavar="PAGE", help="regenerate PAGE's tables")
-    return p
-
-
-def cmd(argv: list[str]) -> int:
-    """Run ``rmm-bench reproduce``: 0 when everything checked reproduces, 1 when a number differs."""
-    args = build_parser().parse_args(argv)
-    manifests = load_manifests(args.names or None)
-    if args.list:
-        for m in manifests:
-            print(
-                f"{m.name}: {m.title} ({len(expected_rates(m))} checked rates, {len(m.ratios)} checked "
-                f"ratios, {len(m.fingerprints)} quick fingerprints)"
-            )
-        return 0
-    if args.write_docs is not None:
-        from rmm_bench.reproduce_docs import write_docs
-
-        changed = write_docs(args.write_docs)
-        print(f"{args.write_docs}: {'regenerated' if changed else 'current'}")
-        return 0
-    if args.update and not args.quick:
-        raise ValueError("--update stores the quick versions' fingerprints: use it with --quick")
-    problems: list[str] = []
-    unchecked: list[str] = []
-    with tempfile.TemporaryDirectory(prefix="rmm-reproduce-") as tmp:
-        root = args.out or Path(tmp)
-        for m in manifests:
-            if not _checkable(m, args.quick):
-                why = "no quick version" if args.quick else "no rmm-bench runs of rated agents and no ratios"
-                unchecked.append(m.name)
-                print(f"{m.name}: not rerun ({why}; run its commands as printed in the docs to check it)")
-                continue
-            out = root / (m.name + ("-quick" if args.quick else ""))
-            if (out / "results.db").exists() and args.out is not None and args.quick:
-                (out / "results.db").unlink()
-            print(
-                f"{m.name}: running {'the quick version' if args.quick else 'the whole commands'} into {out}",
-                file=sys.stderr,
-            )
-            if args.update:
-                update(m, out)
-                print(f"{m.name}: fingerprints stored in {m.path.name}")
-                continue
-            try:
-                found = check_quick(m, out) if args.quick else check_full(m, out)
-            except RuntimeError as e:  # a command that failed: the other manifests still run
-                found = [f"{m.name}: {e}"]
-            if args.check:
-                problems += found
-                print(f"{m.name}: {'reproduced' if not found else 'DIFFERS'}")
-    for line in problems:
-        print(line)
-    if args.check:
-        rerun = len(manifests) - len(unchecked)
-        print(
-            f"{rerun - len({p.split(':')[0] for p in problems})} of {rerun} manifests reproduced"
-            + (f"; {len(unchecked)} not rerun ({', '.join(unchecked)})" if unchecked else "")
-        )
-    return 1 if problems else 0
-
-
-def _checkable(m: Manifest, quick: bool) -> bool:
-    """Whether ``reproduce`` can rerun ``m`` (its quick version, or its whole commands and rates)."""
-    if quick:
-        return bool(m.quick_commands or m.quick_datagen)
-    rerun = bool(m.commands) or bool(m.check.get("commands")) or bool(m.check.get("columns"))
-    return (rerun and (m.kind != "table" or bool(m.check))) or bool(m.ratios)
-
-
-if __name__ == "__main__":
-    sys.exit(cmd(sys.argv[1:]))

@@ -95,7 +95,9 @@ def build_parser() -> argparse.ArgumentParser:
         "the rule reads the mean over all of them, so the decision holds across retraining, not for one model's luck",
     )
     p.add_argument("--no-reference", action="store_true", help="do not run the driver alone for comparison")
-    p.add_argument("--out", type=Path, default=None, help="where the runs, tune.md and tune.png go")
+    p.add_argument(
+        "--out", type=Path, default=None, metavar="DIR", help="the directory of the runs, tune.md and tune.png"
+    )
     p.add_argument("--dry-run", action="store_true", help="show the choice; write no decision beside the model")
     return p
 
