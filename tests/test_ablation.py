@@ -1,11 +1,11 @@
-"""benchmarks.ablation: the rows of a system's ablation table come from the composition the guardian
+"""rmm-bench ablation (rmm_bench.ablation): the rows of a system's ablation table come from the composition the guardian
 reads; the paired column; the manifest it writes reads back (rmm_bench.manifest.table_manifest)."""
 
 from __future__ import annotations
 
 import pytest
 
-from benchmarks.ablation import _paired, variants
+from rmm_bench.ablation import _paired, variants
 from rmm_bench.manifest import read_manifest, table_manifest
 
 
@@ -65,7 +65,7 @@ def test_a_written_table_manifest_reads_back(tmp_path):
         "name": "t",
         "title": 'a "quoted" title, ± and —',
         "section": "S",
-        "commands": ["python -m benchmarks.ablation --seed 5"],
+        "commands": ["rmm-bench ablation --seed 5"],
         "measured": "2026-12-04",
         "header": ["variant", "Success [%]", "Collision [%]", "Timeout [%]"],
         "rows": [["core", "50.0 ± 1.0", "20.0 ± 1.0", "30.0 ± 1.0"]],
@@ -85,14 +85,14 @@ def test_a_written_table_manifest_reads_back(tmp_path):
 
 @pytest.mark.parametrize("bad", ["--episodes", "0"])
 def test_bad_episode_counts_exit_2(bad, capsys):
-    from benchmarks.ablation import main
+    from rmm_bench.cli import main
 
     if bad == "0":
-        assert main(["--episodes", "0", "--out", "unused"]) == 2
-        assert "--episodes must be >= 1, got 0" in capsys.readouterr().err
+        assert main(["ablation", "--episodes", "0", "--out", "unused"]) == 2
+        assert capsys.readouterr().err == "rmm-bench ablation: error: --episodes must be >= 1, got 0\n"
     else:
         with pytest.raises(SystemExit) as e:
-            main(["--episodes"])
+            main(["ablation", "--episodes"])
         assert e.value.code == 2
 
 

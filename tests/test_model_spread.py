@@ -1,4 +1,4 @@
-"""benchmarks.model_spread: each model gets the shipped guardian's decision (only the weights differ),
+"""rmm-bench model-spread (rmm_bench.model_spread): each model gets the shipped guardian's decision (only the weights differ),
 and bad input exits 2 before anything runs."""
 
 from __future__ import annotations
@@ -7,7 +7,8 @@ import shutil
 
 import numpy as np
 
-from benchmarks.model_spread import _decided_copy, main
+from rmm_bench.cli import main
+from rmm_bench.model_spread import _decided_copy
 from rmm_guardians.lrmm.decision import decision_path, read_decision
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import default_model_path
@@ -32,11 +33,13 @@ def test_a_model_gets_the_decision_of_the_env_s_shipped_guardian(tmp_path):
 
 
 def test_bad_input_exits_2_naming_it(tmp_path, capsys):
-    assert main(["--env", "Dubins3DMazeParallel-v0", "--models", str(tmp_path / "a.npz")]) == 2
+    assert main(["model-spread", "--env", "Dubins3DMazeParallel-v0", "--models", str(tmp_path / "a.npz")]) == 2
     assert "do not exist" in capsys.readouterr().err
     one = tmp_path / "one.npz"
     shutil.copy(default_model_path("Dubins3DMazeParallel-v0", variant="act"), one)
-    assert main(["--env", "Dubins3DMazeParallel-v0", "--models", str(one)]) == 2
+    assert main(["model-spread", "--env", "Dubins3DMazeParallel-v0", "--models", str(one)]) == 2
     assert "two or more" in capsys.readouterr().err
-    assert main(["--env", "Dubins3DMazeParallel-v0", "--models", f"{one},{one}", "--episodes", "0"]) == 2
+    assert (
+        main(["model-spread", "--env", "Dubins3DMazeParallel-v0", "--models", f"{one},{one}", "--episodes", "0"]) == 2
+    )
     assert "--episodes must be >= 1" in capsys.readouterr().err

@@ -51,6 +51,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("rmm_bench.calibration", "a model's risk against fresh labels of new worlds"),
     "knob-sweep": ("rmm_bench.knob_sweep", "collisions against interventions over one knob"),
     "collisions": ("rmm_bench.collisions", "why an agent collides: its collisions replayed and classified"),
+    "ablation": ("rmm_bench.ablation", "what each of lrmm's strategies adds, on one env"),
+    "model-spread": ("rmm_bench.model_spread", "lrmm's rates with models trained under other seeds"),
     "riskmap": ("rmm_bench.figures:riskmap", "the paper's Fig. 1: a maze by inferred risk"),
     "quadrisk": ("rmm_bench.figures:quadrisk", "the paper's Fig. 3: the quadrotor by inferred risk"),
 }

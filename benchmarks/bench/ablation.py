@@ -1,6 +1,6 @@
-"""What each of the ``lrmm`` guardian's strategies adds: one system's ablation table.
+"""``rmm-bench ablation``: what each of the ``lrmm`` guardian's strategies adds, one system's table.
 
-    python -m benchmarks.ablation --env Dubins4DParallel-v0 --episodes 2048 --seed 0 --out results/ablation
+    rmm-bench ablation --env Dubins4DParallel-v0 --episodes 2048 --seed 0 --out results/ablation
 
 Runs, on the same episodes (``--seed``, fixed 1 ms clock): the driver alone (``inactive``); the
 paper's rule (``lrmm-paper``, where the system serves it); the core alone (the learned risk
@@ -27,7 +27,7 @@ from pathlib import Path
 
 from rmm_bench.knob_sweep import run_point
 
-__all__ = ["main", "variants"]
+__all__ = ["build_parser", "cmd", "variants"]
 
 
 def variants(env_id: str) -> list[tuple[str, str, dict]]:
@@ -109,32 +109,49 @@ def _command(env: str, agent: str, opts: dict, episodes: int, seed: int) -> str:
     return " ".join(words + ["--episodes", str(episodes), "--seed", str(seed), "--clock", "fixed:1"])
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The ``rmm-bench ablation`` command line."""
     p = argparse.ArgumentParser(
-        prog="python -m benchmarks.ablation", description=__doc__.split("\n\n")[0], allow_abbrev=False
+        prog="rmm-bench ablation",
+        description="What each of lrmm's strategies adds on one env: the driver alone, the paper's rule, the core, "
+        "the core plus each strategy, the full guardian and the full guardian minus each strategy, on the same "
+        "episodes under a fixed 1 ms clock, each row's collisions paired with the full guardian's.",
+        allow_abbrev=False,
     )
-    p.add_argument("--env", default="Dubins4DParallel-v0")
-    p.add_argument("--episodes", type=int, default=2048)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=None)
-    p.add_argument("--out", default="results/ablation")
+    p.add_argument("--env", default="Dubins4DParallel-v0", help="the env of every run (default: %(default)s)")
+    p.add_argument("--episodes", type=int, default=2048, help="episodes of every run (default: %(default)s)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="master seed; episode i's seed derives from it (default: %(default)s)"
+    )
+    p.add_argument("--workers", type=int, default=None, help="worker processes of each run (default: rmm-bench's)")
+    p.add_argument(
+        "--out",
+        default="results/ablation",
+        metavar="DIR",
+        help="the directory of the runs and the table (default: %(default)s)",
+    )
     p.add_argument("--manifest", metavar="NAME", help="also write the table as manifest NAME (rmm_bench/manifests)")
     p.add_argument("--title", default="", help="with --manifest: the table's title (default: said from the run)")
-    args = p.parse_args(argv)
+    return p
+
+
+def cmd(argv: list[str]) -> int:
+    """``rmm-bench ablation ARGS``: the exit status (2: bad input, one line)."""
+    args = build_parser().parse_args(argv)
     if args.episodes < 1:
-        print(f"ablation: --episodes must be >= 1, got {args.episodes}", file=sys.stderr)
+        print(f"rmm-bench ablation: error: --episodes must be >= 1, got {args.episodes}", file=sys.stderr)
         return 2
     try:
         rows = variants(args.env)
     except (ValueError, KeyError) as e:
-        print(f"ablation: {e}", file=sys.stderr)
+        print(f"rmm-bench ablation: error: {e}", file=sys.stderr)
         return 2
     base = Path(args.out) / f"{args.env}_seed{args.seed}"
     results = []
     for label, agent, opts in rows:
         out = base / _slug(label, agent, opts)
         extra = [f"{agent}.{k}={json.dumps(v)}" for k, v in opts.items()]
-        sys.stderr.write(f"ablation: {label} -> {out}\n")
+        sys.stderr.write(f"rmm-bench ablation: {label} -> {out}\n")
         row = run_point(agent, extra, out, args.episodes, args.seed, "fixed:1", args.workers, args.env)
         results.append((label, agent, opts, out, row))
     full = next(_collisions(out) for _, agent, opts, out, _ in results if agent == "lrmm" and not opts)
@@ -142,11 +159,11 @@ def main(argv: list[str] | None = None) -> int:
         _cells(label, r, ["—", "—"] if agent == "lrmm" and not opts else _paired(_collisions(out), full))
         for label, agent, opts, out, r in results
     ]
-    cmd = "python -m benchmarks.ablation " + " ".join(argv if argv is not None else sys.argv[1:])
+    command = "rmm-bench ablation " + " ".join(shlex.quote(a) for a in argv)
     lines = ["| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)] + [
         "| " + " | ".join(c) + " |" for c in table
     ]
-    text = f"{args.env}, {args.episodes} episodes of seed {args.seed}, fixed 1 ms clock\n\nCommand: `{cmd}`\n\n"
+    text = f"{args.env}, {args.episodes} episodes of seed {args.seed}, fixed 1 ms clock\n\nCommand: `{command}`\n\n"
     text += "\n".join(lines) + "\n"
     base.parent.mkdir(parents=True, exist_ok=True)
     (base.parent / f"{args.env}_seed{args.seed}.md").write_text(text)
@@ -159,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
             "title": args.title
             or f"`lrmm` ablation on `{args.env}`, {args.episodes} episodes of seed {args.seed}, fixed 1 ms clock",
             "section": "What each strategy adds: ablations",
-            "commands": [cmd.replace(f" --manifest {args.manifest}", "").split(" --title")[0]],
+            "commands": [command.replace(f" --manifest {args.manifest}", "").split(" --title")[0]],
             "measured": f"{datetime.date.today().isoformat()}, {os.cpu_count()} cores",
             "header": HEADER,
             "rows": table,
@@ -192,4 +209,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(cmd(sys.argv[1:]))

@@ -1,6 +1,6 @@
-"""How much ``lrmm``'s Table I rates move between models trained with different seeds.
+"""``rmm-bench model-spread``: how much ``lrmm``'s Table I rates move between models trained under other seeds.
 
-    python -m benchmarks.model_spread --env Dubins3DMazeParallel-v0 --episodes 256 \\
+    rmm-bench model-spread --env Dubins3DMazeParallel-v0 --episodes 256 \\
         --models results/spread/maze_seed0.npz,results/spread/maze_seed1.npz,... --out results/spread
 
 Each model (trained on the same data with ``rmm-train --seed S``) gets the decision the guardian
@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import shutil
 import statistics
 import sys
@@ -22,7 +23,7 @@ from pathlib import Path
 
 from rmm_bench.knob_sweep import run_point
 
-__all__ = ["main"]
+__all__ = ["build_parser", "cmd"]
 
 COLUMNS = (("success", "Success [%]"), ("collision", "Collision [%]"), ("timeout", "Timeout [%]"))
 
@@ -42,22 +43,43 @@ def _decided_copy(model: Path, env_id: str, out: Path) -> Path:
     return copy
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.model_spread", description=__doc__.split("\n\n")[0])
-    p.add_argument("--env", required=True)
+def build_parser() -> argparse.ArgumentParser:
+    """The ``rmm-bench model-spread`` command line."""
+    p = argparse.ArgumentParser(
+        prog="rmm-bench model-spread",
+        description="How much lrmm's rates move between models trained on the same data under other seeds: each "
+        "model gets the decision of the env's shipped guardian (only the weights differ) and runs the same episodes "
+        "under a fixed 1 ms clock, beside the shipped model.",
+    )
+    p.add_argument("--env", required=True, help="the env of every run (one rmm-bench runs)")
     p.add_argument("--models", required=True, help="comma-separated model files (one per training seed)")
-    p.add_argument("--episodes", type=int, default=256)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=None)
-    p.add_argument("--out", default="results/spread")
+    p.add_argument("--episodes", type=int, default=256, help="episodes of every run (default: %(default)s)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="master seed; episode i's seed derives from it (default: %(default)s)"
+    )
+    p.add_argument("--workers", type=int, default=None, help="worker processes of each run (default: rmm-bench's)")
+    p.add_argument(
+        "--out",
+        default="results/spread",
+        metavar="DIR",
+        help="the directory of the runs and the table (default: %(default)s)",
+    )
     p.add_argument("--manifest", metavar="NAME", help="also write the table as manifest NAME (rmm_bench/manifests)")
     p.add_argument("--made-by", action="append", default=[], help="with --manifest: a command that made the models")
-    args = p.parse_args(argv)
+    return p
+
+
+def cmd(argv: list[str]) -> int:
+    """``rmm-bench model-spread ARGS``: the exit status (2: bad input, one line)."""
+    args = build_parser().parse_args(argv)
     models = [Path(m.strip()) for m in args.models.split(",") if m.strip()]
     missing = [str(m) for m in models if not m.is_file()]
     if len(models) < 2 or missing or args.episodes < 1:
         why = f"model files {missing} do not exist" if missing else "--models needs two or more files"
-        print(f"model_spread: {why if len(models) < 2 or missing else '--episodes must be >= 1'}", file=sys.stderr)
+        print(
+            f"rmm-bench model-spread: error: {why if len(models) < 2 or missing else '--episodes must be >= 1'}",
+            file=sys.stderr,
+        )
         return 2
     out = Path(args.out) / f"{args.env}_seed{args.seed}"
     rows = []
@@ -65,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             decided = _decided_copy(m, args.env, out / "models")
         except ValueError as e:
-            print(f"model_spread: {m}: {e}", file=sys.stderr)
+            print(f"rmm-bench model-spread: error: {m}: {e}", file=sys.stderr)
             return 2
         opt = f"lrmm.model={json.dumps(str(decided.resolve()))}"
         rows.append(
@@ -75,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
             )
         )
     shipped = run_point("lrmm", [], out / "shipped", args.episodes, args.seed, "fixed:1", args.workers, args.env)
-    cmd = "python -m benchmarks.model_spread " + " ".join(argv if argv is not None else sys.argv[1:])
+    command = "rmm-bench model-spread " + " ".join(shlex.quote(a) for a in argv)
     header = ["model", *(h for _, h in COLUMNS), "Intervention [% sim time]"]
     table = [
         [name, *(f"{r[f'{k}_mean']:.1f}" for k, _ in COLUMNS), f"{r['intervention_mean']:.1f}"]
@@ -89,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + [
         "| " + " | ".join(c) + " |" for c in table
     ]
-    text = f"{args.env}, {args.episodes} episodes of seed {args.seed}, fixed 1 ms clock\n\nCommand: `{cmd}`\n\n"
+    text = f"{args.env}, {args.episodes} episodes of seed {args.seed}, fixed 1 ms clock\n\nCommand: `{command}`\n\n"
     text += "\n".join(lines) + "\n"
     (Path(args.out) / f"spread_{args.env}.md").write_text(text)
     print(text)
@@ -104,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
             "title": f"`lrmm` on `{args.env}` with models trained on the same data under {len(rows)} seeds, "
             f"{args.episodes} episodes of seed {args.seed}, fixed 1 ms clock",
             "section": "Is the map right? Calibration on held-out worlds",
-            "commands": [*args.made_by, cmd.split(" --manifest")[0]],
+            "commands": [*args.made_by, command.split(" --manifest")[0]],
             "measured": f"{datetime.date.today().isoformat()}, {os.cpu_count()} cores",
             "header": header,
             "rows": table,
@@ -116,4 +138,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(cmd(sys.argv[1:]))
