@@ -22,6 +22,9 @@ from collections.abc import Callable
 from importlib.metadata import entry_points
 from typing import Any
 
+import gymnasium as gym
+
+import rmm_envs  # noqa: F401  (the package's own envs register on import)
 from rmm_envs.user_modules import UserModuleError, import_user_module, where
 
 __all__ = ["ENTRY_POINT_GROUP", "EnvUnavailable", "describe_env_error", "load_env_plugins", "resolve_env_id"]
@@ -59,10 +62,6 @@ def resolve_env_id(env_id: str) -> str:
     Entry points are how Gymnasium before 1.0 loaded other packages' envs: a package declaring
     ``[project.entry-points."gymnasium.envs"] my_envs = "my_envs.registration:register"`` works
     with a plain ``--env MyEnv-v0``."""
-    import gymnasium as gym
-
-    import rmm_envs  # noqa: F401  (the package's own envs)
-
     if not isinstance(env_id, str) or not env_id:
         raise EnvUnavailable(f"an env id must be a non-empty string, got {env_id!r}")
     module, _, name = env_id.rpartition(":")

@@ -14,13 +14,16 @@ docs/decisions/0022-worker-pool.md.
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import os
 import signal
+import socket
 import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
+from multiprocessing.connection import wait
 from typing import Any
 
 from rmm_envs.settings import safe_path_start, safe_path_started
@@ -173,9 +176,6 @@ def run_local(
         for t in tasks:
             yield fn(t)
         return
-    import multiprocessing as mp
-    from multiprocessing.connection import wait
-
     ctx = mp.get_context("spawn")
     todo = deque(enumerate(tasks))
     pool: list[_Worker] = []
@@ -248,8 +248,6 @@ def check_reachable(address: str, timeout: float = 10.0) -> None:
     """Raise :class:`ConnectionError` naming ``address`` when nothing accepts a connection there
     within ``timeout`` seconds (``ray.init`` would otherwise retry for minutes).  ``host:port``
     or ``ray://host:port``; ``auto`` and ``local`` are Ray's own and not checked."""
-    import socket
-
     if address in ("auto", "local"):
         return
     target = address.split("://", 1)[-1]
@@ -273,7 +271,7 @@ def run_ray(
     no parent-side time limit on Ray tasks: a limit inside the task (``rmm-bench``'s episode
     timer) is the only one.
     """
-    try:
+    try:  # lazy: Ray is an optional heavy dependency (the ray extra), loaded for the Ray backend only
         import ray
     except ImportError as e:
         raise RuntimeError("the Ray backend needs Ray: the ray extra, pip install -e '.[ray]' in a clone") from e

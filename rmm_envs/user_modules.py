@@ -20,6 +20,7 @@ import importlib.util
 import os
 import sys
 import threading
+import traceback
 from collections.abc import Iterable, Iterator
 from types import FrameType, ModuleType
 
@@ -76,9 +77,6 @@ def _short(path: str) -> str:
 def _found_without_import(module: str) -> str | None:
     """The file of ``module`` as the import path finds it, without executing any package
     ``__init__.py`` on the way (``None`` when it is not found there)."""
-    import importlib.machinery
-    import sys
-
     spec = None
     parts = module.split(".")
     for i, part in enumerate(parts):
@@ -112,8 +110,6 @@ def _found_without_import(module: str) -> str | None:
 def _raised_in(e: BaseException) -> tuple[str, int] | None:
     """``(file, line)`` of the code whose import raised ``e``: the innermost module-level frame
     of its traceback outside importlib (the innermost frame outside importlib if none is)."""
-    import traceback
-
     skip = (os.path.realpath(importlib.__file__), os.path.realpath(__file__))
     frames = [
         f

@@ -86,7 +86,7 @@ def ray_segments(view, state, obs, layout, high=None) -> list[RaySegment]:
             end = window.px(x + d * math.cos(th + a), y + d * math.sin(th + a))
             out.append((window, start, end, bool(h)))
     elif top is not None and side is not None and s.shape[0] >= 7:  # the quadrotor: body-frame rays
-        from rmm_envs.dynamics.rotations import quat_to_rot
+        from rmm_envs.systems.quadrotor.rotations import quat_to_rot
 
         R = np.asarray(quat_to_rot(s[3:7]), dtype=float)
         p = s[:3]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rmm_guardians.cbf.qp import BarrierQP
 from rmm_guardians.cbf.quiet import quietly
 
 __all__ = ["DEFAULT_SOLVER", "QpsolversQP", "installed_solvers", "parse_solver"]
@@ -26,7 +27,7 @@ PREFIX = "qpsolvers:"
 
 def installed_solvers() -> list[str]:
     """The solvers qpsolvers can use here (empty when qpsolvers is not installed)."""
-    try:
+    try:  # lazy: qpsolvers is an optional dependency (the qp extra)
         import qpsolvers
     except ImportError:
         return []
@@ -74,7 +75,7 @@ class QpsolversQP:
     """
 
     def __init__(self, P, name: str, eps: float, lb=None, ub=None, polish: bool = True) -> None:
-        import qpsolvers
+        import qpsolvers  # lazy: an optional dependency (the qp extra), checked by parse_solver
         from qpsolvers.exceptions import QPError
 
         self._solve_qp = qpsolvers.solve_qp
@@ -149,7 +150,5 @@ def dubins4d_qp(solver: str, K: int, prm, p_theta: float, p_v: float, eps: float
     """The Dubins4D guardian's QP for ``solver`` (checked by :func:`parse_solver`)."""
     name = parse_solver(solver)
     if name is None:
-        from rmm_guardians.cbf.qp import BarrierQP
-
         return BarrierQP(K, prm, p_theta, p_v, eps)
     return Dubins4DQpsolversQP(K, p_theta, p_v, name, eps)

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from rmm_envs.risk.dataset import load_dataset
 from rmm_guardians.lrmm.model import ACTIVATIONS, LRMMModel
 
 if TYPE_CHECKING:
@@ -144,7 +145,7 @@ class TrainingDiverged(ValueError):
 
 def train(dataset, cfg: TrainConfig, log=print) -> LRMMModel:
     """Train on a :class:`rmm_envs.risk.datagen.Dataset`; returns the numpy model with metrics."""
-    import torch
+    import torch  # lazy: an optional heavy dependency (the train extra)
 
     if len(dataset) == 0:
         raise ValueError("the dataset is empty")
@@ -343,8 +344,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rmm_envs.risk.datagen import load_dataset
-
     args = build_parser().parse_args(argv)
     try:
         cfg = TrainConfig(

@@ -18,6 +18,7 @@ with a ``TypeError`` naming it and what it lacks; a simulator of your own is ser
 from __future__ import annotations
 
 import gymnasium as gym
+from gymnasium.envs.classic_control import CartPoleEnv, PendulumEnv
 
 from rmm_envs.adapters.base import AdaptedEnv, SimulatorScene, SnapshotScene, SnapshotSimulator, control_box
 from rmm_envs.adapters.classic_control import (
@@ -27,6 +28,7 @@ from rmm_envs.adapters.classic_control import (
     PendulumAdapter,
     PendulumScene,
 )
+from rmm_envs.risk.protocol import check_labelled_env
 
 __all__ = [
     "AdaptedEnv",
@@ -69,19 +71,16 @@ def adapt(env: gym.Env, failure=None) -> AdaptedEnv:
     """The risk adapter of ``env`` (see the module's table); ``failure(states) -> (N,) bool`` adds
     (or, for envs that never fail on their own, provides) the failure test.  ``TypeError`` names
     the env and what is missing when no adapter serves it."""
-    from gymnasium.envs.classic_control import CartPoleEnv, PendulumEnv
-
     base = env.unwrapped
     if isinstance(base, CartPoleEnv):
         return CartPoleAdapter(env, failure)
     if isinstance(base, PendulumEnv):
         return PendulumAdapter(env, failure)
     if _is_mujoco(base):
+        # lazy: the MuJoCo adapters import mujoco (optional extra rmm-envs[mujoco]), loaded for a MuJoCo env only
         from rmm_envs.adapters.mujoco_envs import MujocoAdapter
 
         return MujocoAdapter(env, failure)
-    from rmm_envs.risk.protocol import check_labelled_env
-
     try:
         check_labelled_env(env, needs=("risk_scene", "true_state"))
         lacks = f"{_env_name(env)} is not served by a risk adapter"
@@ -99,18 +98,20 @@ def termination_is_failure(env: gym.Env) -> bool:
     column of the module's table: CartPole's termination, the unhealthy termination of the
     MuJoCo envs with a known failure test); False for any other env, including Pendulum (which
     never terminates) and envs whose termination may mean success."""
-    from gymnasium.envs.classic_control import CartPoleEnv
-
-    from rmm_envs.adapters.mujoco_envs import MujocoScene  # importable without mujoco itself
-
     base = env.unwrapped
-    return isinstance(base, CartPoleEnv) or (_is_mujoco(base) and type(base).__name__ in MujocoScene.KINDS)
+    if not _is_mujoco(base):
+        return isinstance(base, CartPoleEnv)
+    # lazy: the MuJoCo adapters import mujoco (optional extra rmm-envs[mujoco]), loaded for a MuJoCo env only
+    from rmm_envs.adapters.mujoco_envs import MujocoScene
+
+    return type(base).__name__ in MujocoScene.KINDS
 
 
 def snapshot_of(adapter: AdaptedEnv):
     """The :class:`SnapshotSimulator` of an adapted env (steps the env itself, one at a time)."""
     if isinstance(adapter, (CartPoleAdapter, PendulumAdapter)):
         return ClassicControlSnapshot(adapter.env, adapter.scene)
+    # lazy: the MuJoCo adapters import mujoco (optional extra rmm-envs[mujoco])
     from rmm_envs.adapters.mujoco_envs import MujocoAdapter, MujocoSnapshot
 
     if isinstance(adapter, MujocoAdapter):

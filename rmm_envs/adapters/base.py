@@ -21,6 +21,8 @@ from typing import Protocol, runtime_checkable
 import gymnasium as gym
 import numpy as np
 
+from rmm_envs.envs.base import rejection_sample
+
 __all__ = ["AdaptedEnv", "SimulatorScene", "SnapshotScene", "SnapshotSimulator", "control_box", "env_actions"]
 
 
@@ -358,8 +360,6 @@ class AdaptedEnv:
 
     def sample_states(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """``n`` states that do not fail, drawn from ``rng`` only (see the adapter's sampler)."""
-        from rmm_envs.envs.base import rejection_sample
-
         return rejection_sample(
             rng,
             n,

@@ -17,6 +17,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from rmm_envs.views.base import BACKGROUND, BODY_OUTLINE, COLLISION, DRIVER, GUARDIAN, LIGHT, View
+from rmm_envs.views.select import view_for
 
 __all__ = ["STRIP_HEIGHT", "EpisodeRecorder", "signal_groups"]
 
@@ -47,8 +48,6 @@ class EpisodeRecorder:
     """
 
     def __init__(self, env, view: View | None = None, size: int = 512, strip_height: int = STRIP_HEIGHT) -> None:
-        from rmm_envs.views.select import view_for  # select imports the views, never the recorder
-
         self.env = env
         self.view = view if view is not None else view_for(env, size)
         self.strip_height = int(strip_height)

@@ -20,6 +20,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from rmm_envs.adapters import adapt
 from rmm_envs.risk.estimator import RiskEstimator, validate_tree_params
 from rmm_envs.risk.protocol import check_labelled_env
 
@@ -55,8 +56,6 @@ class RiskLabel(gym.Wrapper):
             check_labelled_env(env, needs=("risk_scene", "true_state"))
             self._hooks = self.env.unwrapped
         except TypeError:
-            from rmm_envs.adapters import adapt
-
             self._hooks = adapted = adapt(env, failure)
         else:
             if failure is not None:

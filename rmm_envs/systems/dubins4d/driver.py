@@ -192,6 +192,7 @@ class CLFDriver:
         """
         if self.solver != "osqp":
             return
+        # lazy: OSQP and scipy.sparse are heavy (about 0.3 s to import), used by this solver path only
         import osqp
         import scipy.sparse as sp
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from math import factorial as f
 from typing import Any
 
 import numpy as np
@@ -48,8 +49,6 @@ _COMPILED_MAX_N = 8  # up to this many states per call, the compiled scalar path
 
 
 def _series_coefficients(j_max: int = 7):
-    from math import factorial as f
-
     return (
         [(-1) ** j / f(2 * j + 1) for j in range(j_max)],
         [(-1) ** j / f(2 * j + 2) for j in range(j_max)],

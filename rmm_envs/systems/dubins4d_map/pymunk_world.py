@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 
+import gymnasium as gym
 import numpy as np
 
 from rmm_envs.systems.dubins4d_map.shape_map import ShapeMap, triangulate
@@ -29,11 +30,9 @@ _REACH = 1e-6
 
 def require_pymunk():
     """The ``pymunk`` module, or a ``DependencyNotInstalled`` error saying how to install it."""
-    try:
+    try:  # lazy: pymunk is an optional dependency (the map extra)
         import pymunk
     except ImportError as e:
-        import gymnasium as gym
-
         raise gym.error.DependencyNotInstalled(
             "maps of your own need pymunk: the map extra, pip install -e '.[map]' in a clone"
         ) from e

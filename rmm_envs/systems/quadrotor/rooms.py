@@ -226,7 +226,7 @@ def build_room(client: int, room: Room, visual: bool = True) -> list[int]:
     static bodies instead of hundreds keep Bullet's broadphase cheap.  ``visual=False`` gives
     the bodies no visual shapes (collision is the same; building takes about half the time).
     """
-    import pybullet as p
+    import pybullet as p  # lazy: an optional heavy dependency (the quadrotor extra)
 
     ids = []
     plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client)
