@@ -203,7 +203,7 @@ def test_rerun_command_names_every_parameter_and_quotes_the_folder():
     assert rerun_command(meta, "/data/my set") == (
         "rmm-datagen --env Dubins3DMaze-v0 --configs 5 --samples-per-config 6 --seed 2 --configs-per-shard 3 "
         "--branches 7 --depth 2 --horizon 1.5 --n-steps 4 --metric cvar --alpha 0.1 --leaf heuristic "
-        """--env-kwargs '{"a": 1, "maze_kind": "mixed"}' --out '/data/my set'"""
+        """--env-opt a=1 --env-opt 'maze_kind="mixed"' --out '/data/my set'"""
     )
     # parameters that are not set are left out; no estimator or env arguments at all
     meta = {

@@ -65,19 +65,43 @@ def test_describe_env_error_names_the_option_its_message_names():
 def test_rmm_datagen_says_an_env_that_cannot_be_built_in_one_line_and_exits_2(kind, tmp_path, capsys):
     from rmm_envs.risk.datagen import main
 
-    status = main(["--env", "BrokenCtor-v0", "--env-kwargs", f'{{"kind": "{kind}"}}', "--out", str(tmp_path / "d")])
+    status = main(["--env", "BrokenCtor-v0", "--env-opt", f'kind="{kind}"', "--out", str(tmp_path / "d")])
     assert (status, capsys.readouterr().err) == (2, f"rmm-datagen: error: {_said(kind)}\n")
     assert not (tmp_path / "d").exists()
 
 
-def test_rmm_datagen_names_the_env_kwargs_option_the_constructor_names(tmp_path, capsys):
+def test_rmm_datagen_names_the_env_option_the_constructor_names(tmp_path, capsys):
     from rmm_envs.risk.datagen import main
 
-    status = main(["--env", "BrokenCtor-v0", "--env-kwargs", '{"size": -1}', "--out", str(tmp_path / "d")])
+    status = main(["--env", "BrokenCtor-v0", "--env-opt", "size=-1", "--out", str(tmp_path / "d")])
     assert (status, capsys.readouterr().err) == (
         2,
-        'rmm-datagen: error: --env-kwargs {"size": -1}: size must be >= 0, got -1\n',
+        "rmm-datagen: error: --env-opt size=-1: size must be >= 0, got -1\n",
     )
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (
+            ["--env-kwargs", '{"size": 1}'],
+            "--env-kwargs is no longer accepted; use --env-opt KEY=JSON, once per argument",
+        ),
+        (["--env-opt", "size"], "--env-opt 'size': expected KEY=JSON, e.g. maze_kind='\"mixed\"'"),
+        (["--env-opt", "=1"], "--env-opt '=1': expected KEY=JSON, e.g. maze_kind='\"mixed\"'"),
+        (["--env-opt", "kind=mixed"], "--env-opt 'kind=mixed': the value 'mixed' is not JSON (a string needs quotes)"),
+        (
+            ["--env-opt", "size=1", "--env-opt", "size=2"],
+            "--env-opt 'size=2': size is given twice; give each argument once",
+        ),
+    ],
+)
+def test_rmm_datagen_refuses_bad_env_options_in_one_line(argv, message, tmp_path, capsys):
+    from rmm_envs.risk.datagen import main
+
+    assert main(["--env", "BrokenCtor-v0", *argv, "--out", str(tmp_path / "d")]) == 2
+    assert capsys.readouterr().err == f"rmm-datagen: error: {message}\n"
+    assert not (tmp_path / "d").exists()
 
 
 @pytest.mark.parametrize("kind", ["AttributeError", "TypeError"])

@@ -52,7 +52,7 @@ CALIBRATED: dict[str, dict[str, Any]] = {
         "size": ["--configs", "64", "--samples-per-config", "64"],
     },
     "Dubins3DMaze": {
-        "env": ["--env", "Dubins3DMaze-v0", "--env-kwargs", '{"maze_kind": "mixed"}', "--configs-per-shard", "1"],
+        "env": ["--env", "Dubins3DMaze-v0", "--env-opt", 'maze_kind="mixed"', "--configs-per-shard", "1"],
         "model": "dubins3d_maze.npz",
         "size": ["--configs", "4", "--samples-per-config", "512"],
     },
