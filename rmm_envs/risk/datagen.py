@@ -17,7 +17,6 @@ The files and the columns: :func:`generate`; why: docs/decisions/0007-datasets-a
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import sys
@@ -26,22 +25,22 @@ from dataclasses import asdict
 from pathlib import Path
 
 import pyarrow as pa
+from tqdm import tqdm
 
+from rmm_envs.failures import describe_os_error
+from rmm_envs.pool import TaskLost, WorkersLost, run_local, run_ray
 from rmm_envs.risk.dataset import (
     Dataset,
-    atomic_write_bytes,
-    checksum_path,
-    identity,
     load_dataset,
-    read_manifest_shards,
-    recorded_checksum,
-    sha256_file,
-    shard_ok,
+    prepare_folder,
     shard_path,
+    shards_to_label,
+    write_manifest,
     write_table,
 )
 from rmm_envs.risk.labelling import DatagenConfig, dataset_metadata, label_configs, labelled_env
 from rmm_envs.risk.metrics import METRICS
+from rmm_envs.user_modules import search_user_folders, user_folders
 
 __all__ = ["DatagenConfig", "Dataset", "generate", "label_configs", "load_dataset", "main"]
 
@@ -101,51 +100,10 @@ def generate(
         )
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    meta = dataset_metadata(cfg)
-    meta_path = out / "metadata.json"
-    if meta_path.exists():
-        try:
-            old = json.loads(meta_path.read_text())
-        except (OSError, json.JSONDecodeError) as e:
-            raise ValueError(f"{meta_path} is unreadable ({e}); delete {out} or choose another --out") from None
-        if identity(old) != identity(meta):
-            diff = {k: (old.get(k), meta.get(k)) for k in identity(meta) if old.get(k) != meta.get(k)}
-            raise ValueError(
-                f"{out} holds a dataset made with other parameters (existing vs requested: {diff}); "
-                "choose another --out or delete it"
-            )
-    else:
-        atomic_write_bytes(meta_path, json.dumps(meta, indent=2).encode())
-    for tmp in out.glob(".shard-*.tmp"):
-        tmp.unlink(missing_ok=True)
-
+    prepare_folder(out, dataset_metadata(cfg))
     rows_of = {s: len(cfg.shard_configs(s)) * cfg.samples_per_config for s in range(cfg.n_shards)}
-    in_manifest, manifest_problem = read_manifest_shards(out)
-    if manifest_problem:
-        print(f"rmm-datagen: {manifest_problem}", file=sys.stderr)
-    todo, regenerated, verified = [], [], {}
-    for s in range(cfg.n_shards):
-        p = shard_path(out, s)
-        if p.exists():
-            expected = recorded_checksum(p) or in_manifest.get(p.name)  # a checksum file is newer
-            problem = None
-            if expected is None:
-                problem = "has no recorded checksum (written by an interrupted run or an older version)"
-            elif sha256_file(p) != expected:
-                problem = "does not match the checksum recorded when it was written (damaged or changed since)"
-            elif not shard_ok(p, rows_of[s]):
-                problem = f"does not hold the expected {rows_of[s]} rows"
-            if problem is None:
-                verified[p.name] = expected
-                continue
-            print(f"rmm-datagen: {p} {problem}; regenerating it", file=sys.stderr)
-            regenerated.append(p.name)
-        p.unlink(missing_ok=True)
-        checksum_path(p).unlink(missing_ok=True)
-        todo.append(s)
+    todo, regenerated, verified = shards_to_label(out, rows_of)
     done_configs = cfg.configs - sum(len(cfg.shard_configs(s)) for s in todo)
-
-    from tqdm import tqdm
 
     bar = tqdm(
         total=cfg.configs,
@@ -178,31 +136,14 @@ def generate(
     bar.close()
     elapsed = time.perf_counter() - t0
 
-    hashes = {}
-    for s in range(cfg.n_shards):
-        p = shard_path(out, s)
-        expected = verified.get(p.name) or recorded_checksum(p)
-        if not p.exists() or expected is None:
-            raise RuntimeError(f"shard {p} is missing or has no checksum after generation; rerun the same command")
-        if sha256_file(p) != expected or not shard_ok(p, rows_of[s]):
-            raise RuntimeError(f"shard {p} changed while this run was writing the dataset; rerun the same command")
-        hashes[p.name] = expected
-    manifest = {
-        "n_rows": sum(rows_of.values()),
-        "n_shards": cfg.n_shards,
-        "shards": hashes,
-        "dataset_sha256": hashlib.sha256("".join(hashes[k] for k in sorted(hashes)).encode()).hexdigest(),
-        "last_run": {
-            "new_rows": new_rows,
-            "seconds": elapsed,
-            "backend": backend,
-            "labels_per_second": new_rows / elapsed if elapsed > 0 and new_rows else None,
-            "regenerated": regenerated,
-        },
+    last_run = {
+        "new_rows": new_rows,
+        "seconds": elapsed,
+        "backend": backend,
+        "labels_per_second": new_rows / elapsed if elapsed > 0 and new_rows else None,
+        "regenerated": regenerated,
     }
-    atomic_write_bytes(out / "manifest.json", json.dumps(manifest, indent=2).encode())
-    for s in range(cfg.n_shards):  # the manifest holds the checksums now
-        checksum_path(shard_path(out, s)).unlink(missing_ok=True)
+    manifest = write_manifest(out, rows_of, verified, last_run)
     return manifest
 
 
@@ -211,8 +152,6 @@ def _shard_job(job):
     out or None, shard, folders)``, ``folders`` those searched for the modules ``--env module:Id``
     and ``--failure module:callable`` name (the directory ``rmm-datagen`` ran in), after the
     installed packages."""
-    from rmm_envs.user_modules import search_user_folders
-
     *args, folders = job
     if folders:
         search_user_folders(folders)
@@ -239,8 +178,6 @@ def _lost_shards_error(lost: list, todo: list[int], out: Path, stopped: str | No
 def _collect(cfg: DatagenConfig, out: Path, todo: list[int], results, bar) -> int:
     """Count the rows of finished shards (writing those that came back as bytes, from Ray);
     a shard whose worker was lost is reported after the others finish."""
-    from rmm_envs.pool import TaskLost, WorkersLost
-
     rows = 0
     lost: list = []
     try:
@@ -262,8 +199,6 @@ def _collect(cfg: DatagenConfig, out: Path, todo: list[int], results, bar) -> in
 
 def _run_local(cfg: DatagenConfig, out: Path, todo: list[int], workers: int | None, bar) -> int:
     """Label the ``todo`` shards on local processes; a shard whose worker dies is reported, the rest finish."""
-    from rmm_envs.pool import run_local
-
     if workers is None:
         workers = os.cpu_count() or 1  # generate() has refused anything but an integer >= 1
     jobs = [(asdict(cfg), str(out), s, (os.getcwd(),)) for s in todo]
@@ -272,8 +207,6 @@ def _run_local(cfg: DatagenConfig, out: Path, todo: list[int], workers: int | No
 
 def _run_ray(cfg: DatagenConfig, out: Path, todo: list[int], address: str | None, bar) -> int:
     """Label the ``todo`` shards as Ray tasks and write them here; a shard Ray loses is reported."""
-    from rmm_envs.pool import run_ray
-
     jobs = [(asdict(cfg), None, s, (os.getcwd(),)) for s in todo]
     return _collect(cfg, out, todo, run_ray(_shard_job, jobs, address, max_lost_in_a_row=_MAX_LOST_IN_A_ROW), bar)
 
@@ -356,7 +289,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from rmm_envs.user_modules import user_folders
 
     # --env module:Id and --failure module:callable are found here, after the installed packages
     # (never in their place: a tqdm.py here is not imported), in this process and every worker
@@ -412,8 +344,6 @@ def _main(args) -> int:
             file=sys.stderr,
         )
         return 2
-    from rmm_envs.failures import describe_os_error
-
     cfg = DatagenConfig(
         env_id=args.env,
         configs=args.configs,

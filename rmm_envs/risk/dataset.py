@@ -12,6 +12,7 @@ import hashlib
 import json
 import os
 import shlex
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -144,6 +145,86 @@ def identity(meta: dict) -> dict:
     return out
 
 
+def prepare_folder(out: Path, meta: dict) -> None:
+    """Write ``metadata.json`` into ``out``, or check that the one there describes the same dataset
+    (``ValueError`` naming what differs); remove temporary shards an interrupted run left."""
+    meta_path = out / "metadata.json"
+    if meta_path.exists():
+        try:
+            old = json.loads(meta_path.read_text())
+        except (OSError, json.JSONDecodeError) as e:
+            raise ValueError(f"{meta_path} is unreadable ({e}); delete {out} or choose another --out") from None
+        if identity(old) != identity(meta):
+            diff = {k: (old.get(k), meta.get(k)) for k in identity(meta) if old.get(k) != meta.get(k)}
+            raise ValueError(
+                f"{out} holds a dataset made with other parameters (existing vs requested: {diff}); "
+                "choose another --out or delete it"
+            )
+    else:
+        atomic_write_bytes(meta_path, json.dumps(meta, indent=2).encode())
+    for tmp in out.glob(".shard-*.tmp"):
+        tmp.unlink(missing_ok=True)
+
+
+def shards_to_label(out: Path, rows_of: dict[int, int]) -> tuple[list[int], list[str], dict[str, str]]:
+    """``(todo, regenerated, verified)`` of a dataset folder whose shard ``s`` holds ``rows_of[s]``
+    rows: the shards to (re)compute (a shard that is kept matches the checksum recorded when it was
+    written and its row count; any other is removed, and named on stderr when it existed), the
+    names of those regenerated and ``{name: sha256}`` of those kept."""
+    in_manifest, manifest_problem = read_manifest_shards(out)
+    if manifest_problem:
+        print(f"rmm-datagen: {manifest_problem}", file=sys.stderr)
+    todo: list[int] = []
+    regenerated: list[str] = []
+    verified: dict[str, str] = {}
+    for s in range(len(rows_of)):
+        p = shard_path(out, s)
+        if p.exists():
+            expected = recorded_checksum(p) or in_manifest.get(p.name)  # a checksum file is newer
+            problem = None
+            if expected is None:
+                problem = "has no recorded checksum (written by an interrupted run or an older version)"
+            elif sha256_file(p) != expected:
+                problem = "does not match the checksum recorded when it was written (damaged or changed since)"
+            elif not shard_ok(p, rows_of[s]):
+                problem = f"does not hold the expected {rows_of[s]} rows"
+            if problem is None and expected is not None:
+                verified[p.name] = expected
+                continue
+            print(f"rmm-datagen: {p} {problem}; regenerating it", file=sys.stderr)
+            regenerated.append(p.name)
+        p.unlink(missing_ok=True)
+        checksum_path(p).unlink(missing_ok=True)
+        todo.append(s)
+    return todo, regenerated, verified
+
+
+def write_manifest(out: Path, rows_of: dict[int, int], verified: dict[str, str], last_run: dict) -> dict:
+    """Check every shard against its recorded checksum and row count (``RuntimeError`` naming one
+    missing or changed), write ``manifest.json`` from the recorded checksums (never from what the
+    files hold now), remove the checksum files it replaces, and return it."""
+    hashes = {}
+    for s in range(len(rows_of)):
+        p = shard_path(out, s)
+        expected = verified.get(p.name) or recorded_checksum(p)
+        if not p.exists() or expected is None:
+            raise RuntimeError(f"shard {p} is missing or has no checksum after generation; rerun the same command")
+        if sha256_file(p) != expected or not shard_ok(p, rows_of[s]):
+            raise RuntimeError(f"shard {p} changed while this run was writing the dataset; rerun the same command")
+        hashes[p.name] = expected
+    manifest = {
+        "n_rows": sum(rows_of.values()),
+        "n_shards": len(rows_of),
+        "shards": hashes,
+        "dataset_sha256": hashlib.sha256("".join(hashes[k] for k in sorted(hashes)).encode()).hexdigest(),
+        "last_run": last_run,
+    }
+    atomic_write_bytes(out / "manifest.json", json.dumps(manifest, indent=2).encode())
+    for s in range(len(rows_of)):  # the manifest holds the checksums now
+        checksum_path(shard_path(out, s)).unlink(missing_ok=True)
+    return manifest
+
+
 @dataclass
 class Dataset:
     obs: np.ndarray
@@ -174,7 +255,7 @@ class Dataset:
 
         ``df.attrs`` holds ``meta`` (the dataset's metadata) and ``sha256`` (its hash).
         """
-        import pandas as pd
+        import pandas as pd  # lazy: heavy (about 0.3 s to import), read by this method only
 
         if vectors not in ("columns", "lists"):
             raise ValueError(f"vectors must be 'columns' or 'lists', got {vectors!r}")

@@ -13,15 +13,24 @@ the package's own envs) and ``failure="module:callable"`` names a failure test
 from __future__ import annotations
 
 import json
+import os
+import sysconfig
 import time
+import traceback
 from dataclasses import dataclass, field
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import pyarrow as pa
 
+import rmm_envs  # the package's own envs register on import
+from rmm_envs.adapters import AdaptedEnv, adapt
+from rmm_envs.env_plugins import describe_env_error, load_env_plugins, resolve_env_id
 from rmm_envs.risk.dataset import FORMAT, FORMAT_VERSION
+from rmm_envs.risk.estimator import RiskEstimator, validate_tree_params
 from rmm_envs.risk.protocol import check_labelled_env
+from rmm_envs.user_modules import UserModuleError, import_user_module
 
 __all__ = ["DatagenConfig", "LabellingError", "config_seeds", "dataset_metadata", "label_configs", "labelled_env"]
 
@@ -36,10 +45,6 @@ def _raised_at(e: BaseException) -> str:
     """``path:line in function`` of the innermost frame of ``e``'s traceback outside the standard
     library and the installed packages (the code of the env, its simulator or driver), else of the
     innermost frame; ``""`` without a traceback."""
-    import os
-    import sysconfig
-    import traceback
-
     frames = traceback.extract_tb(e.__traceback__)
     if not frames:
         return ""
@@ -89,9 +94,6 @@ class DatagenConfig:
     failure: str | None = None  # "module:callable", failure(states) -> (N,) bool for an adapted env
 
     def validate(self) -> None:
-        from rmm_envs.env_plugins import resolve_env_id
-        from rmm_envs.risk.estimator import validate_tree_params
-
         # a module:Id or an entry point's env registers here (and in each worker, which builds its env from env_id);
         # an id that cannot is EnvUnavailable, a ValueError naming the id, the cause and the nearest registered id
         resolve_env_id(self.env_id)
@@ -125,8 +127,6 @@ class DatagenConfig:
         """``horizon``, or the env's default when it is ``None`` (see the module docstring)."""
         if self.horizon is not None:
             return self.horizon
-        from rmm_envs.adapters import AdaptedEnv
-
         env = labelled_env(self)
         # an env built on an adapted simulator (rmm_envs.envs.driven) states its adapter's default
         return env.scene.default_horizon if isinstance(env, AdaptedEnv) else getattr(env, "default_horizon", 2.0)
@@ -159,8 +159,6 @@ def load_failure(spec: str | None):
     (:func:`bad_failure`) naming what cannot be imported."""
     if spec is None:
         return None
-    from rmm_envs.user_modules import UserModuleError, import_user_module
-
     module, _, attr = spec.partition(":")
     try:  # the current directory's module, after the installed packages (never in place of one)
         fn = getattr(import_user_module(module, "--failure"), attr)
@@ -180,19 +178,11 @@ def labelled_env(cfg: DatagenConfig):
     neither serves)."""
     key = (cfg.env_id, json.dumps(cfg.env_kwargs, sort_keys=True), cfg.failure)
     if key not in _ENV_CACHE:
-        import gymnasium as gym
-
-        import rmm_envs  # noqa: F401  (registers the package's envs)
-
         if ":" not in cfg.env_id and cfg.env_id not in gym.registry:  # in a worker: the entry points register it
-            from rmm_envs.env_plugins import load_env_plugins
-
             load_env_plugins()
         try:
             env = gym.make(cfg.env_id, **cfg.env_kwargs)
         except Exception as e:  # noqa: BLE001 - any exception of the env's constructor: one line naming it
-            from rmm_envs.env_plugins import describe_env_error
-
             raise ValueError(describe_env_error(e, cfg.env_id, cfg.env_kwargs, _env_kwargs_option)) from None
         hooks: Any
         try:
@@ -203,8 +193,6 @@ def labelled_env(cfg: DatagenConfig):
                     f"failure (--failure) is for envs served by a risk adapter; {cfg.env_id} defines its own failures"
                 )
         except TypeError:
-            from rmm_envs.adapters import adapt
-
             hooks = adapt(env, load_failure(cfg.failure))
         require = getattr(hooks, "require_labelling", None)
         if callable(require):  # an env built on a simulator of one's own names the hook it lacks, and the command
@@ -230,8 +218,6 @@ def config_seeds(seed: int, config_id: int) -> tuple[int, np.random.Generator]:
 
 def label_configs(cfg: DatagenConfig, config_ids) -> pa.Table:
     """Generate, observe and label the samples of the given configurations (Algorithm 2)."""
-    from rmm_envs.risk.estimator import RiskEstimator
-
     env = labelled_env(cfg)
     cols: dict[str, list] = {
         k: [] for k in ("config_id", "sample", "obs", "state", "risk", "min_risk_ctrl", "min_risk_ctrl_dur", "n_leaves")
@@ -275,8 +261,6 @@ def label_configs(cfg: DatagenConfig, config_ids) -> pa.Table:
 def dataset_metadata(cfg: DatagenConfig) -> dict:
     """``metadata.json`` of the dataset ``cfg`` describes (the env is reset once if it has no
     episode yet, to read its scene's sizes)."""
-    import rmm_envs
-
     env = labelled_env(cfg)
     try:
         scene = env.risk_scene()
