@@ -17,7 +17,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from rmm_envs.disturbances.realisation import Realisation
+from rmm_envs.disturbances.realisation import Plan, Realisation
 from rmm_envs.disturbances.spec import Disturbance, SystemSupport, parse_disturbances
 
 __all__ = ["Disturbable"]
@@ -32,6 +32,7 @@ class Disturbable:
     disturbances: tuple[Disturbance, ...] = ()
     _realisation: Realisation | None = None
     _disturbance_seed: tuple[int, int] | None = None
+    _dist_plan: Plan | None = None
 
     def disturbance_parameters(self) -> dict[str, float]:
         """The plant's nominal parameters a ``mismatch`` may scale (none by default)."""
@@ -64,8 +65,7 @@ class Disturbable:
         line naming what is wrong (:class:`~rmm_envs.disturbances.DisturbanceError`) when it
         cannot be applied.  Call it once the spaces are set."""
         found = parse_disturbances(spec)
-        if found:
-            self.disturbance_support().check(found)
+        self._dist_plan = Plan(found, self.disturbance_support()) if found else None
         self.disturbances = found
 
     def start_disturbances(self, seed: int | None) -> None:
@@ -82,9 +82,14 @@ class Disturbable:
             base, count = self._disturbance_seed
             self._disturbance_seed = (base, count + 1)
         base, count = self._disturbance_seed
-        self._realisation = Realisation(
-            self.disturbances, self.disturbance_support(), (base,) if count == 0 else (base, count)
-        )
+        plan = self._dist_plan
+        assert plan is not None  # set with the disturbances
+        self._realisation = Realisation(plan.disturbances, plan.support, (base,) if count == 0 else (base, count), plan)
+
+    @property
+    def disturbance_plan(self) -> Plan | None:
+        """What this env's disturbances do, worked out when it was made (``None``: none)."""
+        return self._dist_plan
 
     @property
     def realisation(self) -> Realisation | None:
@@ -94,20 +99,27 @@ class Disturbable:
     def sensed(self, obs: np.ndarray, t: float) -> np.ndarray:
         """The observation the sensors report at sim time ``t`` (``obs`` itself when undisturbed)."""
         r = self._realisation
-        return obs if r is None else r.observation(obs, t)
+        return obs if r is None or not r.senses else r.observation(obs, t)
+
+    @property
+    def moves_plant(self) -> bool:
+        """Whether this episode's plant is disturbed (its control, its rates or its parameters):
+        ``False`` when only the sensors are, or nothing is."""
+        r = self._realisation
+        return r is not None and (r.actuates or r.pushes or bool(r.plan.mismatch))
 
     def actuated(self, u: np.ndarray, t: float) -> np.ndarray:
         """The control the actuators apply at sim time ``t`` when ``u`` is commanded (``u`` itself
         when undisturbed)."""
         r = self._realisation
-        if r is None or not any(d.target == "act" for d in r.disturbances):
+        if r is None or not r.actuates:
             return u
         return r.control(u, t)
 
     def drift(self, t: float, dim: int) -> np.ndarray | None:
         """The additive state-rate disturbance at sim time ``t`` (``None`` when there is none)."""
         r = self._realisation
-        if r is None or not any(d.target == "rate" for d in r.disturbances):
+        if r is None or not r.pushes:
             return None
         return r.rate(t, dim)
 

@@ -316,7 +316,7 @@ class Dubins4DCirclesEnv(Dubins4DStarts, Dubins4DDatasetHooks, GuardedEnv):
             times = np.linspace(0.0, float(duration), self.n_path_points)
         controls = np.zeros((1, 2)) if control is None else np.asarray(control, dtype=float).reshape(1, 2)
         act, plant, drift, applied = np.array([bool(active)]), self.dynamics, None, None
-        if self.realisation is not None:  # the actuators' control, the plant's gains, the drift
+        if self.moves_plant:  # the actuators' control, the plant's gains, the drift
             applied = self.actuated(controls[0] if active else self._nominal, self._sim_time)
             act, plant, controls = np.array([True]), self._plant, (applied * self._gains)[None, :]
             rate = self.drift(self._sim_time, 4)

@@ -94,6 +94,7 @@ from gymnasium.vector.utils import batch_space
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.clocks import make_clock
 from rmm_envs.disturbances import Realisation
+from rmm_envs.disturbances.realisation import observation_rows
 from rmm_envs.systems.dubins4d.circles import ray_cast_each
 from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
 from rmm_envs.systems.dubins4d.plant import plant_model
@@ -182,10 +183,8 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         rays = ray_cast_each(st[:, :2], st[:, 2], circles[:, :-1], e.n_rays, e.ray_length)
         obs = observation(st, self._sim_time[idx], circles[:, -1, :2], rays)
         if e.disturbances:  # what each sub-env's sensors report
-            for row, i in enumerate(np.arange(self.num_envs)[idx]):
-                draw = self._draws[i]
-                assert draw is not None  # drawn at the sub-env's reset
-                obs[row] = draw.observation(obs[row], self._sim_time[i])
+            rows = np.arange(self.num_envs)[idx]
+            obs = observation_rows([self._draws[i] for i in rows], obs, self._sim_time[rows])
         return obs
 
     # ------------------------------------------------------------------ reset
@@ -208,9 +207,10 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         self._ended[i] = False
         if e.disturbances:
             base, count = self._seeds[i]
-            self._draws[i] = draw = Realisation(
-                e.disturbances, e.disturbance_support(), (base,) if count == 0 else (base, count)
-            )
+            plan = e.disturbance_plan
+            assert plan is not None  # set with the disturbances
+            key = (base,) if count == 0 else (base, count)
+            self._draws[i] = draw = Realisation(plan.disturbances, plan.support, key, plan)
             self._seeds[i] = (base, count + 1)
             mismatch = any(d.kind == "mismatch" for d in e.disturbances)
             self._plants[i], self._gains[i] = plant_model(e.dynamics, dict(draw.parameters) if mismatch else None)

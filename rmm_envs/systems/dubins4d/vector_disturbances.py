@@ -5,33 +5,26 @@ from __future__ import annotations
 
 import numpy as np
 
+from rmm_envs.disturbances.realisation import control_rows, rate_rows
 from rmm_envs.systems.dubins4d.step import advance
 
 __all__ = ["advance_disturbed"]
 
 
 def advance_disturbed(self, active: np.ndarray, ctrl: np.ndarray):
-    """:func:`advance` under each sub-env's disturbances, as the single env applies them:
-    the actuators' controls, the plant's gains and the position drift, per row; one batch
+    """:func:`advance` under each sub-env's disturbances, as the single env applies them: the
+    actuators' controls, the plant's gains and the position drift, all rows at once; one batch
     unless a mismatch gives the rows plants of their own (then row by row, each as the single
     env's own batch of one)."""
     e, n = self._single, self.num_envs
-    applied = np.empty((n, 2))
-    drift = np.zeros((n, 4))
-    for i in range(n):
-        draw = self._draws[i]
-        assert draw is not None  # drawn at the sub-env's reset
-        t = self._sim_time[i]
-        cmd = ctrl[i] if active[i] else self._nominal[i]
-        applied[i] = draw.control(cmd, t) if any(d.target == "act" for d in draw.disturbances) else cmd
-        if any(d.target == "rate" for d in draw.disturbances):
-            drift[i] = draw.rate(t, 4)
-    rates = drift if any(d.target == "rate" for d in e.disturbances) else None
+    draws, times = self._draws, self._sim_time
+    commanded = np.where(active[:, None], ctrl, self._nominal)
+    applied = control_rows(draws, commanded, times)
+    rates = rate_rows(draws, times, 4) if draws[0].pushes else None
     on = np.ones(n, dtype=bool)
     controls = applied * self._gains
     if not any(d.kind == "mismatch" for d in e.disturbances):
-        out = advance(e.dynamics, self._nominal, self._states, self._circles, on, controls, e._step_times,
-                      None, rates)  # fmt: skip
+        out = advance(e.dynamics, self._nominal, self._states, self._circles, on, controls, e._step_times, None, rates)
     else:
         rows = [
             advance(
@@ -43,7 +36,7 @@ def advance_disturbed(self, active: np.ndarray, ctrl: np.ndarray):
                 controls[i : i + 1],
                 e._step_times,
                 None,
-                drift[i : i + 1],
+                None if rates is None else rates[i : i + 1],
             )  # fmt: skip
             for i in range(n)
         ]

@@ -294,7 +294,7 @@ class Dubins3DMazeGuardedEnv(MazeStarts, GuardedEnv):
         else:
             u = float(self._nominal[0])
         speed, turn, drift = self.dynamics.speed, u, None
-        if self.realisation is not None:  # the actuators' turn rate, the plant's speed and gain, the drift
+        if self.moves_plant:  # the actuators' turn rate, the plant's speed and gain, the drift
             u = float(self.actuated(np.array([u]), self._sim_time)[0])
             speed, turn, drift = self._plant_speed, u * self._turn_gain, self.drift(self._sim_time, 3)
         path = dubins_path(

@@ -111,8 +111,9 @@ ray_range=10.0, clock=None, render_mode=None, disturbances=None)``; ``cruise_spe
 velocities, goal offset), ray dropouts, actuation error on the command, wind and pushes (an
 acceleration of the body, ``vx``, ``vy``, ``vz`` in m/s^2, applied in PyBullet as a world force
 at the centre of mass), or a body whose ``mass`` and ``linear_damping`` differ from what the
-controller assumes (:mod:`rmm_envs.disturbances`; off by default).  ``gym.make("QuadrotorRoomParallel-v0", time_accel=10.0, base_step=0.1,
-clock=None, **same but step_dt)``: the same world under :class:`rmm_envs.wrappers.NonBlockingStepping`
+controller assumes (:mod:`rmm_envs.disturbances`; off by default).
+``gym.make("QuadrotorRoomParallel-v0", time_accel=10.0, base_step=0.1, clock=None, **same but step_dt)``:
+the same world under :class:`rmm_envs.wrappers.NonBlockingStepping`
 (each ``step(a)`` advances the world by ``elapsed * time_accel + base_step`` seconds under the
 previous action, then stores ``a``; the first interval is the pilot's).
 
@@ -314,7 +315,7 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, QuadrotorDatasetHooks, Guarde
         else:
             cmd = self._nominal.copy()
         push, a_bound = None, self._a_bound
-        if self.realisation is not None:  # the actuators' command; wind and pushes as a world force
+        if self.moves_plant:  # the actuators' command; wind and pushes as a world force
             cmd = self.actuated(cmd, self._sim_time)
             rate = self.drift(self._sim_time, 13)
             if rate is not None and rate[7:10].any():
