@@ -74,7 +74,7 @@ def test_a_shard_runs_its_share_and_says_so(parts):
 def test_two_shards_merged_equal_one_run(parts, tmp_path, capsys):
     before = {k: _digest(parts / f"part{k}") for k in (1, 2)}
     out = tmp_path / "merged"
-    assert main(["merge", str(out), str(parts / "part1"), str(parts / "part2")]) == 0
+    assert main(["merge", str(parts / "part1"), str(parts / "part2"), "--out", str(out)]) == 0
     assert "merged 2 parts" in capsys.readouterr().out
     assert {k: _digest(parts / f"part{k}") for k in (1, 2)} == before  # the inputs are untouched
     assert _rows(out / "results.db") == _rows(parts / "one" / "results.db")  # bit for bit but the timings
@@ -101,7 +101,7 @@ def test_two_shards_merged_equal_one_run(parts, tmp_path, capsys):
 
 def test_overlapping_parts_are_checked_and_kept_once(parts, tmp_path, capsys):
     out = tmp_path / "merged"
-    assert main(["merge", str(out), str(parts / "one"), str(parts / "part1")]) == 0
+    assert main(["merge", str(parts / "one"), str(parts / "part1"), "--out", str(out)]) == 0
     assert f"{EPISODES} stored in more than one part" in capsys.readouterr().out
     assert _rows(out / "results.db") == _rows(parts / "one" / "results.db")
 
@@ -113,7 +113,7 @@ def test_an_edited_row_makes_merge_refuse_naming_episode_and_column(parts, tmp_p
     with sqlite3.connect(edited / "results.db") as con:
         con.execute(f"UPDATE episodes SET {column} = {value} WHERE agent = 'cbf' AND episode = 4")
     out = tmp_path / "merged"
-    assert main(["merge", str(out), str(parts / "one"), str(edited)]) == 2
+    assert main(["merge", str(parts / "one"), str(edited), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "episode 4 of cbf" in err and f"differs in {column}" in err and err.count("\n") == 1
     assert not (out / "results.db").exists() and not list(out.glob(".results.db*"))
@@ -124,7 +124,7 @@ def test_timing_columns_and_timing_stats_never_conflict(parts, tmp_path):
     shutil.copytree(parts / "part1", edited)
     with sqlite3.connect(edited / "results.db") as con:
         con.execute("UPDATE episodes SET decision_mean = 9.0, wall_time = 9.0 WHERE episode = 0")
-    assert main(["merge", str(tmp_path / "m"), str(parts / "one"), str(edited)]) == 0
+    assert main(["merge", str(parts / "one"), str(edited), "--out", str(tmp_path / "m")]) == 0
 
 
 def test_a_wall_clock_overlap_must_be_identical(tmp_path, capsys):
@@ -133,13 +133,13 @@ def test_a_wall_clock_overlap_must_be_identical(tmp_path, capsys):
     shutil.copytree(tmp_path / "a", tmp_path / "b")
     with sqlite3.connect(tmp_path / "b" / "results.db") as con:
         con.execute("UPDATE episodes SET wall_time = wall_time + 1 WHERE episode = 2")
-    assert main(["merge", str(tmp_path / "m"), str(tmp_path / "a"), str(tmp_path / "b")]) == 2
+    assert main(["merge", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(tmp_path / "m")]) == 2
     err = capsys.readouterr().err
     assert "episode 2 of inactive" in err and "wall_time" in err and "wall-clock" in err
     # without an overlap, wall-clock parts merge
     assert main([*run, "--shard", "1/2", "--out", str(tmp_path / "s1")]) == 0
     assert main([*run, "--shard", "2/2", "--out", str(tmp_path / "s2")]) == 0
-    assert main(["merge", str(tmp_path / "m2"), str(tmp_path / "s1"), str(tmp_path / "s2")]) == 0
+    assert main(["merge", str(tmp_path / "s1"), str(tmp_path / "s2"), "--out", str(tmp_path / "m2")]) == 0
 
 
 def test_a_crash_leaves_no_half_merged_database(parts, tmp_path, monkeypatch):
@@ -161,7 +161,7 @@ def test_another_configuration_under_one_name_is_refused(parts, tmp_path, capsys
     assert main(["--agent", "cbf", "--agent-opt", "cbf.inflation=1.2", "--episodes", "4", "--clock", "fixed:1",
                  "--workers", "1", "--no-progress", "--out", str(other)]) == 0  # fmt: skip
     capsys.readouterr()
-    assert main(["merge", str(tmp_path / "m"), str(parts / "part1"), str(other)]) == 2
+    assert main(["merge", str(parts / "part1"), str(other), "--out", str(tmp_path / "m")]) == 2
     err = capsys.readouterr().err
     assert "agent cbf" in err and "agent_kwargs" in err and not (tmp_path / "m" / "results.db").exists()
 
@@ -169,7 +169,7 @@ def test_another_configuration_under_one_name_is_refused(parts, tmp_path, capsys
 def test_runs_of_another_seed_are_refused(parts, tmp_path, capsys):
     assert main([*RUN[:-5], "--episodes", "4", "--clock", "fixed:1", "--seed", "3", "--workers", "1", "--no-progress",
                  "--out", str(tmp_path / "s3")]) == 0  # fmt: skip
-    assert main(["merge", str(tmp_path / "m"), str(parts / "part1"), str(tmp_path / "s3")]) == 2
+    assert main(["merge", str(parts / "part1"), str(tmp_path / "s3"), "--out", str(tmp_path / "m")]) == 2
     err = capsys.readouterr().err
     assert "another configuration" in err and "seed" in err
 
@@ -177,11 +177,16 @@ def test_runs_of_another_seed_are_refused(parts, tmp_path, capsys):
 @pytest.mark.parametrize(
     ("args", "expected"),
     [
-        (["merge", "{tmp}/m", "{tmp}/missing"], "does not exist"),
-        (["merge", "{tmp}/m", "{tmp}"], "holds no results.db"),
-        (["merge", "{part1}", "{part1}"], "is also an input"),
-        (["merge", "{tmp}/m", "{part1}", "{part1}"], "named twice"),
-        (["merge", "{one}", "{part1}"], "exists already"),
+        (["merge", "{tmp}/missing", "--out", "{tmp}/m"], "does not exist"),
+        (["merge", "{tmp}", "--out", "{tmp}/m"], "holds no results.db"),
+        (["merge", "{part1}", "--out", "{part1}"], "is also an input"),
+        (["merge", "{part1}", "{part1}", "--out", "{tmp}/m"], "named twice"),
+        (["merge", "{part1}", "--out", "{one}"], "exists already"),
+        (
+            ["merge", "{tmp}/m", "{part1}"],
+            "merge: no --out; name the new results directory with --out DIR (rmm-bench merge DIR [DIR ...] "
+            "--out DIR): the first directory is an input",
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(parts, tmp_path, capsys, args, expected):
@@ -196,5 +201,5 @@ def test_a_newer_schema_is_refused(parts, tmp_path, capsys):
     shutil.copytree(parts / "part1", copy)
     with sqlite3.connect(copy / "results.db") as con:
         con.execute("PRAGMA user_version = 77")
-    assert main(["merge", str(tmp_path / "m"), str(copy), str(parts / "part2")]) == 2
+    assert main(["merge", str(copy), str(parts / "part2"), "--out", str(tmp_path / "m")]) == 2
     assert "schema version 77" in capsys.readouterr().err

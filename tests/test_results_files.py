@@ -150,7 +150,9 @@ def test_two_merges_started_together_never_both_succeed(runs, tmp_path):
     for trial in range(7):
         out = tmp_path / f"m{trial}"
         procs = [
-            subprocess.Popen([str(exe), "merge", str(out), str(runs / a), str(runs / b)], stderr=subprocess.PIPE)
+            subprocess.Popen(
+                [str(exe), "merge", str(runs / a), str(runs / b), "--out", str(out)], stderr=subprocess.PIPE
+            )
             for a, b in (("s1", "s2"), ("a", "s1"))
         ]
         codes = [p.wait(120) for p in procs]
@@ -237,7 +239,7 @@ def test_results_in_a_read_only_folder_are_readable_by_every_read_only_command(r
         assert main(["export", str(d), "--table", str(elsewhere / "e.parquet")]) == 0
         assert main(["report", str(d), "--html", str(elsewhere / "page.html")]) == 0
         assert "is read-only" in capsys.readouterr().err
-        assert main(["merge", str(elsewhere / "m"), str(d)]) == 0
+        assert main(["merge", str(d), "--out", str(elsewhere / "m")]) == 0
         assert sorted(p.name for p in d.iterdir()) == before
     assert (elsewhere / "page.html").is_file() and (elsewhere / "m" / "results.db").is_file()
 
@@ -251,7 +253,7 @@ def test_read_only_commands_leave_no_files_beside_the_database(runs, tmp_path, l
     assert main(["replay", str(d), "--agent", "inactive", "--episode", "1"]) == 0
     assert main(["compare", str(d), "--agent", "inactive,brakes"]) == 0
     assert main(["export", str(d), "--table", str(tmp_path / "e.parquet")]) == 0
-    assert main(["merge", str(tmp_path / "m"), str(d)]) == 0
+    assert main(["merge", str(d), "--out", str(tmp_path / "m")]) == 0
     assert not [p.name for p in d.iterdir() if p.name.endswith(("-wal", "-shm", "-journal"))]
     assert _sha(d / "results.db") == sha
 
@@ -282,7 +284,7 @@ def test_an_empty_or_foreign_database_is_named_in_one_line(tmp_path, capsys, wha
         ["replay", str(d), "--agent", "inactive", "--episode", "0"],
         ["compare", str(d), "--agent", "inactive,brakes"],
         ["export", str(d), "--table", str(tmp_path / "e.csv"), "--format", "csv"],
-        ["merge", str(tmp_path / "m"), str(d)],
+        ["merge", str(d), "--out", str(tmp_path / "m")],
         ["report", str(d)],
     ):
         err = _refused(capsys, argv, str(db), *words)

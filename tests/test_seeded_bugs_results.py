@@ -116,14 +116,14 @@ def test_parts_that_disagree_on_a_start_are_refused(run, tmp_path, capsys, colum
     _sql(b / "results.db", (f"UPDATE starts SET {column} = ? WHERE world_key = ? AND episode = 2", (new, world)))
     out = tmp_path / "merged"
     capsys.readouterr()
-    assert main(["merge", str(out), str(a), str(b)]) == 2
+    assert main(["merge", str(a), str(b), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert f"the start of episode 2 (world {world}) differs: fingerprint {fp} doomed {doomed} in one input, " in err
     assert f"{fp2} doomed {doomed2} in " in err and err.rstrip().endswith("; nothing was written")
     assert err.count("\n") == 1
     assert not (out / "results.db").exists()
     # the same two copies unedited merge, the overlap checked and kept once
-    assert main(["merge", str(tmp_path / "fine"), str(a), str(c)]) == 0
+    assert main(["merge", str(a), str(c), "--out", str(tmp_path / "fine")]) == 0
     assert "8 episodes of inactive, random, 8 stored in more than one part" in capsys.readouterr().out
 
 
@@ -243,7 +243,7 @@ def test_markup_in_the_command_platform_and_parts_is_escaped(tmp_path):
         folder = tmp_path / f"part{MARK['part']}{k}{MARK['out']}"
         parts.append(_run(folder, "--agent", "inactive", "--episodes", "4", "--shard", f"{k}/2"))
     merged = tmp_path / "merged"
-    assert main(["merge", str(merged), *map(str, parts)]) == 0
+    assert main(["merge", *map(str, parts), "--out", str(merged)]) == 0
     db = merged / "results.db"
     con = sqlite3.connect(db)
     (prov,) = con.execute("SELECT provenance FROM runs").fetchone()

@@ -7,7 +7,7 @@
     rmm-bench report results/                              # rebuild Table I: every agent of the newest configuration
     rmm-bench replay results/ --agent lrmm --episode 17    # re-simulate a stored episode and verify its row
     rmm-bench compare results/ --agent lrmm,cbf            # paired comparison on the episodes both ran
-    rmm-bench --agent lrmm --shard 1/2 --out part1         # one machine's share; then: rmm-bench merge all part1 part2
+    rmm-bench --agent lrmm --shard 1/2 --out part1         # one machine's share; then: rmm-bench merge part1 part2 --out all
     rmm-bench export results/ --format parquet             # the episodes in a documented, versioned schema
     rmm-bench reproduce --quick --check                    # rerun small versions of the published tables
     rmm-bench sweep --agent lrmm,cbf --latency 0,1,5,20,50 # collision rate against decision latency

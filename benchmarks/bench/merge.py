@@ -1,4 +1,4 @@
-"""``rmm-bench merge OUT DIR1 DIR2 ...``: results of several machines joined into one database.
+"""``rmm-bench merge DIR1 DIR2 ... --out OUT``: results of several machines joined into one database.
 
 Offers :func:`merge` (the Python entry, returning a :class:`MergeSummary`), :class:`MergeConflict`
 and the command (:func:`build_parser`, :func:`cmd`).
@@ -92,18 +92,18 @@ def merge(out: str | Path, inputs: list[str | Path], write_tables: bool = True) 
     the merged run's tables and figure into ``out``, as ``rmm-bench report out`` would."""
     out = Path(out)
     if len(inputs) < 1:
-        raise ValueError("merge: no input given (expected OUT DIR1 DIR2 ...)")
+        raise ValueError("merge: no input given (expected DIR1 DIR2 ... --out OUT)")
     dbs = [results_database(p, "merge") for p in inputs]
     target = out / "results.db"
     for given, db in zip(inputs, dbs, strict=True):
         if db.resolve() == target.resolve():
-            raise ValueError(f"merge: OUT {out} is also an input ({given}); merge into a new directory")
+            raise ValueError(f"merge: --out {out} is also an input ({given}); merge into a new directory")
     if len({db.resolve() for db in dbs}) < len(dbs):
         raise ValueError("merge: an input is named twice")
     if target.exists():
         raise ValueError(f"merge: {target} exists already; merge into a new directory (the inputs stay as they are)")
     if out.exists() and not out.is_dir():
-        raise ValueError(f"merge: OUT {out} is not a directory")
+        raise ValueError(f"merge: --out {out} is not a directory")
     out.mkdir(parents=True, exist_ok=True)
     _remove_abandoned(out)
     tmp = out / f"{_MERGING}{os.getpid()}"
@@ -345,20 +345,27 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="rmm-bench merge",
         description="Join results directories (machines' shares of one run: --shard K/N, or any runs of one "
-        "configuration) into OUT: every episode stored twice is compared column by column (timing columns "
-        "aside) and a difference refused; the inputs are read-only, OUT/results.db is written atomically; "
-        "then OUT holds the tables of the merged run (docs/machines.md).",
+        "configuration) into --out: every episode stored twice is compared column by column (timing columns "
+        "aside) and a difference refused; the inputs are read-only, its results.db is written atomically; "
+        "then it holds the tables of the merged run (docs/machines.md).",
     )
-    p.add_argument("out", type=Path, metavar="OUT", help="a new results directory")
-    p.add_argument("inputs", nargs="+", metavar="DIR", help="results directories (or results.db files) to join")
+    p.add_argument(
+        "results_dirs", nargs="+", metavar="DIR", help="results directories (a run's --out) or their results.db to join"
+    )
+    p.add_argument("--out", type=Path, default=None, metavar="DIR", help="the new results directory they join into")
     return p
 
 
 def cmd(argv: list[str]) -> int:
     """Run ``rmm-bench merge``; bad input and conflicts raise ``ValueError`` (exit 2 through the CLI)."""
     args = build_parser().parse_args(argv)
+    if args.out is None:  # the form before --out took the first directory as the output: never guess
+        raise ValueError(
+            "merge: no --out; name the new results directory with --out DIR (rmm-bench merge DIR [DIR ...] "
+            "--out DIR): the first directory is an input"
+        )
     t0 = time.perf_counter()
-    s = merge(args.out, args.inputs)
+    s = merge(args.out, args.results_dirs)
     print(
         f"merged {s.parts} parts into {s.out}: {s.episodes} episodes of {', '.join(s.agents)}, "
         f"{s.overlaps} stored in more than one part and equal in every compared column "

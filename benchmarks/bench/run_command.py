@@ -5,7 +5,7 @@
     rmm-bench --agent paper --episodes 64                  # the paper's agents with the paper's rules
     rmm-bench --agent lrmm,cbf --clock fixed:2             # reproducible: every decision takes 2 ms
     rmm-bench --agent mypkg.guard:MyGuardian               # a third-party guardian
-    rmm-bench --agent lrmm --shard 1/2 --out part1         # one machine's share; then: rmm-bench merge all part1 part2
+    rmm-bench --agent lrmm --shard 1/2 --out part1         # one machine's share; then: rmm-bench merge part1 part2 --out all
     rmm-bench --agent lrmm --episodes 2048 --retry-errors  # after fixing a guardian: rerun its error episodes
     rmm-bench --agent lrmm --env-opt n_obstacles=3         # an argument of the env's constructor
 
