@@ -22,9 +22,13 @@ from __future__ import annotations
 import argparse
 import json
 
+from rmm_envs.disturbances import parse_disturbances
+
 __all__ = [
     "RenamedOption",
     "agent_option",
+    "disturb_option",
+    "disturbance_opts",
     "env_opt_option",
     "out_dir_option",
     "parse_env_opts",
@@ -95,6 +99,37 @@ def env_opt_option() -> argparse.ArgumentParser:
     )
     refuse(p, "--env-kwargs", "use --env-opt KEY=JSON, once per argument")
     return p
+
+
+def disturb_option() -> argparse.ArgumentParser:
+    """``--disturb KIND[.COMPONENTS]=LEVEL[@SHAPE]`` (repeatable): the env's ``disturbances``."""
+    p = argparse.ArgumentParser(add_help=False)
+    p.add_argument(
+        "--disturb",
+        action="append",
+        default=[],
+        metavar="KIND=LEVEL",
+        help="a disturbance of the env, e.g. obs-noise.rays=0.2, act-delay=2, dyn-rate=0.1@white, mismatch=0.2 "
+        "(docs/disturbances.md); repeatable; shorthand for --env-opt disturbances=[...]",
+    )
+    return p
+
+
+def disturbance_opts(items: list[str] | None, env_opts: dict, accepted: set[str] | None, env_id: str) -> dict:
+    """The env option ``disturbances`` from ``--disturb`` items (or as ``--env-opt`` gave it), in
+    one canonical form (sorted strings, so the run's identity does not depend on the order given);
+    ``{}`` when none.  ValueError, in one line, for a bad item, both spellings at once, or an env
+    that takes no disturbances."""
+    given = env_opts.get("disturbances")
+    if items and given is not None:
+        raise ValueError("give disturbances with --disturb or with --env-opt disturbances=..., not both")
+    spec = list(items) if items else given
+    found = parse_disturbances(spec)
+    if not found:
+        return {}
+    if accepted is not None and "disturbances" not in accepted:
+        raise ValueError(f"--disturb {found[0]}: {env_id} takes no disturbances (docs/disturbances.md lists the envs)")
+    return {"disturbances": sorted(str(d) for d in found)}
 
 
 def parse_env_opts(items: list[str] | None, accepted: set[str] | None = None, env_id: str = "") -> dict:

@@ -1,7 +1,7 @@
 """``rmm-bench run`` and ``rmm-bench sweep``: their parsers, and their validation into a :class:`BenchConfig`.
 
 Every option that needs no env or guardian built is checked here, once, and the result is a
-frozen :class:`~rmm_bench.config.BenchConfig`; :func:`rmm_bench.checks.check_runs`
+frozen :class:`~rmm_bench.config.BenchConfig`; :func:`rmm_bench.run_checks.check_runs`
 then builds the env and each guardian before any episode runs.  A bad value raises
 ValueError naming the flag and the value (``main`` turns it into one line and exit status 2).
 """
@@ -13,7 +13,7 @@ import math
 import os
 
 from rmm_bench.config import BenchConfig
-from rmm_bench.options import agent_option, env_opt_option, parse_env_opts
+from rmm_bench.options import agent_option, disturb_option, disturbance_opts, env_opt_option, parse_env_opts
 from rmm_envs.catalog import env_help
 from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL
 
@@ -45,6 +45,7 @@ def run_options(default_agent: str) -> argparse.ArgumentParser:
                 default=default_agent,
             ),
             env_opt_option(),
+            disturb_option(),
         ],
     )
     p.add_argument("--episodes", type=int, default=2048, help="episodes per agent (default: %(default)s)")
@@ -182,7 +183,7 @@ def _check_counts(args) -> None:
 
 
 def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
-    from rmm_bench.checks import (
+    from rmm_bench.run_checks import (
         ENV_OPTIONS,
         env_arguments,
         env_default,
@@ -202,6 +203,8 @@ def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
         args.base_step = env_default(env_id, "base_step", NON_BLOCKING_DEFAULTS["base_step"])
     options = {"time_accel": args.time_accel, "base_step": args.base_step, "clock": clock}
     env_opts = parse_env_opts(args.env_opt, env_parameters(env_id), env_id)
+    dist = disturbance_opts(getattr(args, "disturb", None), env_opts, env_parameters(env_id), env_id)
+    env_opts = {k: v for k, v in env_opts.items() if k != "disturbances"} | dist
     for name in ENV_OPTIONS:
         if name in env_opts:  # the command's own flag sets it, and the run's identity names it there
             flag = "--clock" if name == "clock" else "--" + name.replace("_", "-")
@@ -232,7 +235,7 @@ def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
         retry_errors=args.retry_errors,
         progress=not args.no_progress,
         figure=not args.no_figure,
-        parsed={k: v for k, v in vars(args).items() if k != "env_opt" or v},  # unset: the args stored before it
+        parsed={k: v for k, v in vars(args).items() if k not in ("env_opt", "disturb") or v},  # unset: as stored before
         latencies=latencies,
         agent_set=args.agent.strip() if guardian_set(args.agent) is not None else None,
         shard=None if getattr(args, "shard", None) is None else parse_shard(args.shard),

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+import gymnasium as gym
 import numpy as np
 
+from rmm_envs.autonomy import ObservationLayout
 from rmm_envs.disturbances.realisation import Plan, Realisation
 from rmm_envs.disturbances.spec import Disturbance, SystemSupport, parse_disturbances
 
@@ -46,6 +48,8 @@ class Disturbable:
         """What this env offers disturbances, from its spaces and declarations."""
         obs_space = getattr(self, "observation_space", None)
         layout = getattr(obs_space, "layout", None)
+        if layout is None and isinstance(obs_space, gym.spaces.Box) and len(obs_space.shape) == 1:
+            layout = ObservationLayout.of(("obs", obs_space.shape[0]))  # a plain vector: one field
         act = getattr(self, "action_space", None)
         low, high = getattr(act, "control_low", None), getattr(act, "control_high", None)
         return SystemSupport(

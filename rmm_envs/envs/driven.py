@@ -43,6 +43,10 @@ Arguments (each refused by name, with what was expected, when it does not fit):
 ``render_mode``
     ``None``, ``"rgb_array"`` (the env's frame) or ``"human"`` (the env's own window where it
     has one, else its ``rgb_array`` frame shown with pygame).
+``disturbances``
+    Sensor noise (an observation space with a layout, ``rmm_envs.autonomy.ObservationBox``) and
+    actuation error on the control (:mod:`rmm_envs.disturbances`; off by default); the driver
+    and the tests read the true observation.
 
 Per episode, each of ``driver``, ``safe_default`` and ``success`` with a method
 ``begin_episode(rng)`` has it called at ``reset`` with a generator drawn from the reset seed
@@ -89,11 +93,18 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.envs.registration import load_env_creator
 
-from rmm_envs.adapters import termination_is_failure
 from rmm_envs.autonomy import GENERIC, GuardianActionSpace
 from rmm_envs.clocks import make_clock
 from rmm_envs.envs.driven_labels import DrivenLabels
-from rmm_envs.envs.given import Actions, GivenSafeDefault, as_policy, callable_name
+from rmm_envs.envs.given import (
+    Actions,
+    GivenSafeDefault,
+    as_policy,
+    callable_name,
+    control_names,
+    given_failure,
+    given_safe_default,
+)
 from rmm_envs.envs.guarded import GuardedEnv
 from rmm_envs.envs.simulator import (
     SIMULATOR_HOOKS,
@@ -141,6 +152,7 @@ class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
         max_episode_sim_time: float | None = None,
         clock=None,
         render_mode: str | None = None,
+        disturbances=None,
     ) -> None:
 
         if render_mode not in (None, "rgb_array", "human"):
@@ -184,46 +196,10 @@ class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
         if not callable(success):
             raise TypeError(f"success must be a callable success(obs) -> bool, got {success!r}")
         self._success = success
-        if self.simulator is not None and failure is not None:
-            raise ValueError(
-                f"failure: the simulator {self.env_name} reports its failures itself (its step returns True), "
-                f"so guarded() takes no failure for it; got {failure!r}"
-            )
-        if failure is None and self.simulator is None and not termination_is_failure(self.env):
-            raise ValueError(
-                f"{self.env_name} has no known failure notion (its termination means failure only for "
-                "CartPole and the MuJoCo envs with an unhealthy state); give failure='terminated' if its "
-                "termination is a failure, or failure=callable(obs) -> bool"
-            )
-        if not (failure is None or failure == "terminated" or callable(failure)):
-            raise TypeError(f"failure must be None, 'terminated' or a callable failure(obs) -> bool, got {failure!r}")
-        self._failure = None if failure in (None, "terminated") else failure
+        self._failure = given_failure(failure, self.env, self.env_name, simulator=self.simulator is not None)
         self._safe_obj = safe_default
-        if callable(safe_default) or callable(getattr(safe_default, "predict", None)):
-            safe = GivenSafeDefault(as_policy(safe_default, "safe_default"), self._acts)
-        else:
-            try:
-                constant = self._acts.check(safe_default, "safe_default")
-            except ValueError:
-                raise TypeError(
-                    f"safe_default must be a callable obs -> action, an SB3-style policy or a constant "
-                    f"action in the env's action space {self.env.action_space}, got {safe_default!r}"
-                ) from None
-            safe = GivenSafeDefault(None, self._acts, constant)
-        k = len(self._acts.low)
-        names = (
-            tuple(f"u{i}" for i in range(k))
-            if controls is None
-            else ()
-            if isinstance(controls, str)
-            else tuple(controls)
-        )
-        if len(names) != k:  # a string would be one name per letter
-            hint = f" (a string; one name is {(controls,)!r})" if isinstance(controls, str) else ""
-            raise ValueError(
-                f"controls must name each control of {self.env_name}'s action space {self.env.action_space} "
-                f"({k} control{'s' if k > 1 else ''}), got {controls!r}{hint}"
-            )
+        safe = given_safe_default(safe_default, self._acts)
+        names = control_names(controls, self._acts)
         self.action_space = GuardianActionSpace(names, self._acts.low, self._acts.high, safe_default=safe, kind=GENERIC)
         self.observation_space = self.env.observation_space
         self.dt = self._env_dt(step_dt)
@@ -246,6 +222,7 @@ class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
             self.doomed_test = self._start_doomed  # rmm_envs.starts finds it on the env
         self._adapter = None
         self._sampler = None
+        self.set_disturbances(disturbances)
 
     def _start_doomed(self, env) -> StartAssessment:
         """The simulator's own doomed-start test of the state it starts from."""
@@ -327,9 +304,10 @@ class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
         self.scene = _RUNNING  # an episode runs (risk_scene gives the adapter's scene)
         self.begin_episode()
         self.begin_statistics()
+        self.start_disturbances(seed)
         info = {"nominal_control": self.update_nominal()}
         self.clock.start()
-        return obs, info
+        return self.sensed(obs, 0.0), info
 
     def driver_control(self) -> np.ndarray:
         return self._acts.control(
@@ -344,7 +322,10 @@ class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
         self._carry += duration
         n = int(math.floor(self._carry / self.dt + 1e-9))
         self._carry = max(0.0, self._carry - n * self.dt)
-        action = self._acts.action(control if active else self._nominal)
+        ctrl = control if active else self._nominal
+        if self.moves_plant:  # the actuators' control (sim time at the interval's start)
+            ctrl = self.actuated(np.asarray(ctrl, float), self._sim_time)
+        action = self._acts.action(ctrl)
         outcome, reward, ended = None, 0.0, False
         for _ in range(n):
             obs, r, terminated, truncated, _ = self.env.step(action)
@@ -360,7 +341,7 @@ class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
         self.count_interval(duration, active, compute_time)
         info: dict = {}
         terminated, truncated = self.end_interval(outcome, reward, info, truncate=ended)
-        return self._obs, reward, terminated, truncated, info
+        return self.sensed(self._obs, self._sim_time), reward, terminated, truncated, info
 
     def final_speed(self):
         return None
