@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.systems.quadrotor.control import ClosedLoopQuadrotor, CommandController
+from rmm_envs.systems.quadrotor.closed_loop import ClosedLoopQuadrotor
+from rmm_envs.systems.quadrotor.control import CommandController
 from rmm_envs.systems.quadrotor.guarded import CONTROLS, QuadrotorRoomGuardedEnv
 from rmm_envs.systems.quadrotor.room_collision import BOUND
 from rmm_envs.systems.quadrotor.rooms import Room

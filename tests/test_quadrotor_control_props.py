@@ -16,7 +16,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rmm_envs.systems.quadrotor.body import QUADROTOR
-from rmm_envs.systems.quadrotor.control import ClosedLoopQuadrotor, CommandController, heading_of
+from rmm_envs.systems.quadrotor.closed_loop import ClosedLoopQuadrotor
+from rmm_envs.systems.quadrotor.control import CommandController, heading_of
 from rmm_envs.systems.quadrotor.driver import WaypointPilot
 from rmm_envs.systems.quadrotor.rotations import quat_from_euler, quat_to_rot
 

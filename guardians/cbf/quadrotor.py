@@ -40,7 +40,7 @@ except ImportError:  # pragma: no cover - numba is a dependency; the Python loop
 def _flow(s, cmd, k, body, steps, a, b, u):
     """The body state after ``steps`` physics steps of the controller (gains ``k``) and the body
     (``body``) under the held command ``cmd`` from ``s`` (``a``, ``b``, ``u``: work arrays); the
-    per-step arithmetic of :class:`rmm_envs.systems.quadrotor.control.ClosedLoopQuadrotor`."""
+    per-step arithmetic of :class:`rmm_envs.systems.quadrotor.closed_loop.ClosedLoopQuadrotor`."""
     for j in range(13):
         a[j] = s[j]
     for _ in range(steps):

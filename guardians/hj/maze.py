@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from rmm_envs.systems.maze.dynamics import CONTROLS
-from rmm_envs.systems.maze.mazes import cell_of, cell_path
+from rmm_envs.systems.maze.routes import cell_of, cell_path
 from rmm_guardians._checks import finite, integer
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ

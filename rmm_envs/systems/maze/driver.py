@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from rmm_envs.systems.maze.mazes import cell_distances, cell_of, cell_path  # the maze's routes, shared with guardians
+from rmm_envs.systems.maze.routes import cell_distances, cell_of, cell_path  # the maze's routes, shared with guardians
 
 __all__ = ["PursuitDriver", "cell_distances", "cell_of", "cell_path"]
 

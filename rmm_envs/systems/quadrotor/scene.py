@@ -7,7 +7,8 @@ import numpy as np
 from rmm_envs.scenes.base import SceneBase
 from rmm_envs.scenes.branch_kernels import quadrotor_command_branches
 from rmm_envs.systems.quadrotor.body import Quadrotor, QuadrotorParams
-from rmm_envs.systems.quadrotor.control import ClosedLoopQuadrotor, CommandController, body_packed
+from rmm_envs.systems.quadrotor.closed_loop import ClosedLoopQuadrotor
+from rmm_envs.systems.quadrotor.control import CommandController, body_packed
 from rmm_envs.systems.quadrotor.room_collision import RoomCollision
 from rmm_envs.systems.quadrotor.room_kernels import room_states_failed
 from rmm_envs.systems.quadrotor.rooms import Room
