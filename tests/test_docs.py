@@ -227,7 +227,9 @@ def test_the_dependencies_page_names_every_dependency_and_extra():
     """docs/getting-started.md "Dependencies": one line per runtime dependency and per extra of pyproject.toml."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     text = (DOCS / "getting-started.md").read_text()
-    section = text[text.index("## Dependencies") : text.index("\n## ", text.index("## Dependencies") + 3)]
+    start = text.index("## Dependencies")
+    end = text.find("\n## ", start + 3)
+    section = text[start : end if end >= 0 else len(text)]
     lines = [ln for ln in section.splitlines() if ln.startswith("- ")]
     for dep in project["dependencies"]:
         name = re.split(r"[<>=!~\[ ;]", dep, maxsplit=1)[0]
