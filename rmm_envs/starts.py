@@ -34,6 +34,10 @@ __all__ = [
 
 #: env keyword arguments that change how an episode is timed, never where it starts
 TIMING_KWARGS = frozenset({"clock", "time_accel"})
+#: env options that never shape a start: timing, and disturbances (drawn from streams of their
+#: own, so a disturbed episode starts where the undisturbed one does; its doomed flag is the
+#: nominal model's)
+UNSHAPING_KWARGS = TIMING_KWARGS | {"disturbances"}
 
 
 def _feed(h, value: Any, depth: int = 0) -> None:
@@ -91,9 +95,9 @@ def start_fingerprint(env, observation) -> str:
 
 def world_key(env_id: str, env_kwargs: dict, seed: int) -> str:
     """The identity of a run's episode starts: its env, the env's options that shape a start
-    (all but :data:`TIMING_KWARGS`) and the run's seed; 16 hex digits.  Runs with the same key
-    share their starts (and their doomed flags), whatever their agents and clocks."""
-    shaped = {k: v for k, v in sorted(env_kwargs.items()) if k not in TIMING_KWARGS}
+    (all but :data:`UNSHAPING_KWARGS`) and the run's seed; 16 hex digits.  Runs with the same key
+    share their starts (and their doomed flags), whatever their agents, clocks and disturbances."""
+    shaped = {k: v for k, v in sorted(env_kwargs.items()) if k not in UNSHAPING_KWARGS}
     text = json.dumps({"env_id": env_id, "env_kwargs": shaped, "seed": int(seed)}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 

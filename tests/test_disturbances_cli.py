@@ -72,3 +72,17 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path, capsys, extr
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and all(w in err for w in words), err
     assert not out.exists()
+
+
+def test_compare_pairs_runs_only_under_the_same_disturbances(tmp_path, capsys):
+    """An undisturbed and a disturbed run of one world start alike (one starts table) but are not
+    the same condition: compare keeps them in groups of their own."""
+    out = tmp_path / "mixed"
+    assert main([*RUN, "--out", str(out)]) == 0
+    assert main([*RUN, "--disturb", "act-noise=0.3", "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert text.count("## Dubins4DParallel-v0 seed 0 clock fixed:1") == 2 and "disturbances act-noise=0.3" in text
+    with sqlite3.connect(out / "results.db") as db:
+        assert db.execute("SELECT COUNT(DISTINCT world_key) FROM starts").fetchone()[0] == 1

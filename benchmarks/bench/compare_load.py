@@ -13,7 +13,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rmm_bench.names import did_you_mean
+from rmm_bench.reference import reference_dbs
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore
+from rmm_envs.starts import world_key
 
 __all__ = [
     "REFERENCE_PREFIX",
@@ -44,12 +46,19 @@ class Run:
     doomed: dict[int, bool | None] = field(default_factory=dict)  # episode -> flag
 
     @property
-    def group(self) -> tuple[str, str]:
-        return self.world, self.clock
+    def disturbances(self) -> str:
+        """The run's disturbances (``; `` between them), ``""`` when undisturbed: runs pair only
+        under the same ones (their starts are the same; what happens after is not)."""
+        return "; ".join(self.config.get("env_kwargs", {}).get("disturbances", []) or [])
+
+    @property
+    def group(self) -> tuple[str, ...]:
+        return self.world, self.clock, self.disturbances
 
     def describe(self) -> str:
         c = self.config
-        return f"{c.get('env_id')} seed {c.get('seed')} clock {self.clock}"
+        dist = f" disturbances {self.disturbances}" if self.disturbances else ""
+        return f"{c.get('env_id')} seed {c.get('seed')} clock {self.clock}{dist}"
 
 
 _COLUMNS = "episode, seed, outcome, error_kind, steps, sim_time, active_sim_time, decision_mean, start"
@@ -61,7 +70,6 @@ def _clock(config: dict) -> str:
 
 def read_runs(db: Path, prefix: str = "") -> list[Run]:
     """Every run stored in ``db`` with its rows (episodes without a result left out) and doomed flags."""
-    from rmm_envs.starts import world_key
 
     store = ResultsStore(db, read_only=True)
     try:
@@ -110,7 +118,7 @@ def select(runs: list[Run], names: Sequence[str] | None) -> dict[str, list[Run]]
                 f"--agent {name}: {what} is stored{near} (expected one of: {', '.join(stored) or 'none'})"
                 + ("; the shipped reference results (ref:NAME) are compared with --reference" if ref else "")
             )
-        by_group: dict[tuple[str, str], list[Run]] = {}
+        by_group: dict[tuple[str, ...], list[Run]] = {}
         for r in chosen:
             by_group.setdefault(r.group, []).append(r)
         for group_runs in by_group.values():
@@ -125,10 +133,10 @@ def select(runs: list[Run], names: Sequence[str] | None) -> dict[str, list[Run]]
     return out
 
 
-def episodes_by_group(runs: list[Run]) -> dict[tuple[str, str], dict[int, tuple[dict, Run]]]:
+def episodes_by_group(runs: list[Run]) -> dict[tuple[str, ...], dict[int, tuple[dict, Run]]]:
     """One agent's rows by group and episode; the same run in several databases (shards of one
     run) is joined, and an episode stored differently in two of them is refused."""
-    out: dict[tuple[str, str], dict[int, tuple[dict, Run]]] = {}
+    out: dict[tuple[str, ...], dict[int, tuple[dict, Run]]] = {}
     for run in runs:
         rows = out.setdefault(run.group, {})
         for e, row in run.rows.items():
@@ -142,8 +150,7 @@ def episodes_by_group(runs: list[Run]) -> dict[tuple[str, str], dict[int, tuple[
     return out
 
 
-def reference_runs(groups: set[tuple[str, str]], folder: str | Path | None) -> list[Run]:
-    from rmm_bench.reference import reference_dbs
+def reference_runs(groups: set[tuple[str, ...]], folder: str | Path | None) -> list[Run]:
 
     dbs = reference_dbs(folder)
     shipped: list[Run] = []

@@ -247,6 +247,29 @@ def _replays(folder: Path, budget: int) -> str:
     return "".join(out)
 
 
+def _robustness(folder: Path) -> list[str]:
+    """The disturbance sweep ``rmm-bench sweep --disturb`` wrote in ``folder`` (its figure and
+    table, escaped), or nothing when there is none."""
+    md_path = folder / "disturbance_sweep.md"
+    if not md_path.is_file():
+        return []
+    text = md_path.read_text(encoding="utf-8")
+    intro = [ln for ln in text.splitlines() if ln.strip() and not ln.startswith("|")]
+    rows = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in text.splitlines() if ln.startswith("|")]
+    out = ["<h2>Robustness: who degrades least</h2>"] + [f"<p class='note'>{_e(ln)}</p>" for ln in intro]
+    png = folder / "disturbance_sweep.png"
+    if png.is_file():
+        out.append(
+            f"<figure><img src='{_data(png.read_bytes(), 'png')}' alt='collision rate against the disturbance level, "
+            "one curve per agent'><figcaption>disturbance_sweep.png</figcaption></figure>"
+        )
+    if len(rows) >= 2:
+        head = "".join(f"<th>{_e(c)}</th>" for c in rows[0])
+        body = "".join("<tr>" + "".join(f"<td>{_e(c)}</td>" for c in r) + "</tr>" for r in rows[2:])
+        out.append(f"<div class='tw'><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>")
+    return out
+
+
 def _section(folder: Path, store: ResultsStore, sec: dict) -> list[str]:
     c, why = section_comparison(folder, sec["run_keys"])
     matrices = pairwise_matrices(c.pairs) if c is not None else None
@@ -277,6 +300,7 @@ def write_page(path: Path, folder: Path, store: ResultsStore, sections: list[dic
             "alt='outcome rates per agent, and collisions against compute time'>"
             "<figcaption>outcomes.png, as rmm-bench report wrote it</figcaption></figure>"
         )
+    body += _robustness(folder)
     head = (
         "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
         "<meta name='viewport' content='width=device-width, initial-scale=1'>"

@@ -345,6 +345,12 @@ def cmd_report(request) -> int:
             try:
                 invs = newest_configuration(store)
             except LookupError:
+                sweep = request.dir / "disturbance_sweep.md"
+                if sweep.is_file():  # a disturbance sweep only: its table, and a page of it
+                    print(sweep.read_text(encoding="utf-8"))
+                    if request.html is not None:
+                        print(f"wrote {write_page(request.html, request.dir, store, [])}")
+                    return 0
                 try:
                     store.invocation(None, kind="sweep")
                 except LookupError:

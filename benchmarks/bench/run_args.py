@@ -156,11 +156,15 @@ def run_parser(description: str | None = None) -> argparse.ArgumentParser:
 def sweep_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="rmm-bench sweep",
-        description="Collision rate against added decision latency (fixed-latency clock).",
+        description="Collision rate against added decision latency (fixed-latency clock), or, with a --disturb "
+        "item of several levels (e.g. --disturb obs-noise.rays=0.1,0.3,1.0), every rate against that disturbance's "
+        "level, paired with the undisturbed episodes (at one latency, 1 ms unless --latency gives another).",
         parents=[run_options("lrmm,cbf")],
     )
     p.add_argument(
-        "--latency", default="0,1,5,20,50", help="comma list of decision latencies in ms (default: %(default)s)"
+        "--latency",
+        default=None,
+        help="comma list of decision latencies in ms (default: 0,1,5,20,50; one value, 1, when a disturbance is swept)",
     )
     p.set_defaults(episodes=256)
     return p
@@ -183,6 +187,7 @@ def _check_counts(args) -> None:
 
 
 def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
+    from rmm_bench.config import parse_shard
     from rmm_bench.run_checks import (
         ENV_OPTIONS,
         env_arguments,
@@ -191,7 +196,6 @@ def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
         parse_agent_opts,
         resolve_agents,
     )
-    from rmm_bench.config import parse_shard
     from rmm_guardians.registry import guardian_set
 
     classes = resolve_agents(args.agent)
@@ -257,17 +261,21 @@ def parse_run(argv: list[str], description: str | None = None) -> BenchConfig:
     return _config(args, args.clock)
 
 
-def parse_sweep(argv: list[str]) -> BenchConfig:
+def parse_sweep(argv: list[str], disturbance_swept: bool = False) -> BenchConfig:
     """A sweep's config carries its latencies and the first one's clock; the command derives
-    one config per latency with :meth:`BenchConfig.with_clock`."""
+    one config per latency with :meth:`BenchConfig.with_clock`.  A disturbance sweep runs at one
+    latency (``--latency``, default 1 ms)."""
     args = sweep_parser().parse_args(argv)
     _check_counts(args)
+    text = args.latency if args.latency is not None else ("1" if disturbance_swept else "0,1,5,20,50")
     try:
-        latencies = tuple(float(x) for x in args.latency.split(",") if x.strip())
+        latencies = tuple(float(x) for x in text.split(",") if x.strip())
     except ValueError:
         latencies = ()
     if not latencies or any(not 0 <= x < float("inf") for x in latencies):
-        raise ValueError(f"--latency must be a comma list of non-negative milliseconds, got {args.latency!r}")
+        raise ValueError(f"--latency must be a comma list of non-negative milliseconds, got {text!r}")
+    if disturbance_swept and len(latencies) > 1:
+        raise ValueError(f"--latency {text}: a disturbance sweep runs at one latency; sweep one thing at a time")
     return _config(args, f"fixed:{latencies[0]:g}", latencies)
 
 
@@ -279,6 +287,11 @@ def run_cmd(argv: list[str]) -> int:
 
 
 def sweep_cmd(argv: list[str]) -> int:
+    """``rmm-bench sweep``: over latencies, or over a disturbance's levels (:mod:`rmm_bench.disturb_sweep`)."""
+    from rmm_bench.disturb_sweep import cmd_disturbance_sweep, split_swept
     from rmm_bench.run_command import cmd_sweep
 
+    rest, swept = split_swept(argv)
+    if swept is not None:
+        return cmd_disturbance_sweep(parse_sweep(rest, disturbance_swept=True), swept, ["sweep", *argv])
     return cmd_sweep(parse_sweep(argv), ["sweep", *argv])
