@@ -22,6 +22,8 @@ from collections.abc import Sequence
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from rmm_envs.machine_independent import matvec
+
 __all__ = ["HIT", "RAY", "RAY_FREE", "RaySegment", "draw_rays", "font", "line_width", "ray_segments", "text_size"]
 
 #: a ray that hit something, its end dot, and a ray that hit nothing within its range
@@ -91,7 +93,7 @@ def ray_segments(view, state, obs, layout, high=None) -> list[RaySegment]:
         R = np.asarray(quat_to_rot(s[3:7]), dtype=float)
         p = s[:3]
         for a, d, h in zip(angles.tolist(), dist.tolist(), hit.tolist(), strict=True):
-            q = p + d * (R @ np.array([math.cos(a), math.sin(a), 0.0]))
+            q = p + d * matvec(R, np.array([math.cos(a), math.sin(a), 0.0]))
             out.append((top, top.px(p[0], p[1]), top.px(q[0], q[1]), bool(h)))
             out.append((side, side.px(p[0], p[2]), side.px(q[0], q[2]), bool(h)))
     return out
