@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
-from rmm_envs.portable import wrap_angle
+from rmm_envs.machine_independent import wrap_angle
 
 __all__ = ["ObservationBox", "ObservationLayout", "layout"]
 

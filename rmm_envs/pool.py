@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from multiprocessing.connection import wait
 from typing import Any
 
-from rmm_envs.settings import safe_path_start, safe_path_started
+from rmm_envs.environment_variables import safe_path_start, safe_path_started
 
 __all__ = ["TaskLost", "WorkersLost", "check_reachable", "describe_exit", "run_local", "run_ray"]
 

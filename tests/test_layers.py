@@ -100,9 +100,9 @@ def _reads_environment(path: Path) -> list[int]:
 
 
 def test_environment_variables_are_read_in_one_configuration_module_only():
-    """``rmm_envs/settings.py`` reads every setting taken from the environment; the one other
+    """``rmm_envs/environment_variables.py`` reads every setting taken from the environment; the one other
     reader, ``benchmarks/arith.py``, copies the environment for its child interpreters."""
-    allowed = {ROOT / "rmm_envs" / "settings.py", ROOT / "benchmarks" / "arith.py"}
+    allowed = {ROOT / "rmm_envs" / "environment_variables.py", ROOT / "benchmarks" / "arith.py"}
     found = {
         str(p.relative_to(ROOT)): lines
         for pkg in ("rmm_envs", "guardians", "benchmarks")
@@ -110,24 +110,24 @@ def test_environment_variables_are_read_in_one_configuration_module_only():
         if p not in allowed and (lines := _reads_environment(p))
     }
     assert found == {}
-    assert _reads_environment(ROOT / "rmm_envs" / "settings.py")  # the check sees a real reader
+    assert _reads_environment(ROOT / "rmm_envs" / "environment_variables.py")  # the check sees a real reader
 
 
-def test_the_settings_module_reads_and_refuses_by_name(monkeypatch, tmp_path):
-    from rmm_envs import settings
+def test_the_environment_variables_module_reads_and_refuses_by_name(monkeypatch, tmp_path):
+    from rmm_envs import environment_variables as variables
 
     monkeypatch.delenv("RMM_HJ_THREADS", raising=False)
-    assert settings.hj_threads() is None
+    assert variables.hj_threads() is None
     monkeypatch.setenv("RMM_HJ_THREADS", "3")
-    assert settings.hj_threads() == 3
+    assert variables.hj_threads() == 3
     for bad in ("0", "two", "-1"):
         monkeypatch.setenv("RMM_HJ_THREADS", bad)
         with pytest.raises(ValueError, match=f"RMM_HJ_THREADS must be an integer >= 1, got '{bad}'"):
-            settings.hj_threads()
+            variables.hj_threads()
     monkeypatch.setenv("RMM_HJ_CACHE", str(tmp_path))
-    assert settings.hj_cache_dir() == tmp_path
+    assert variables.hj_cache_dir() == tmp_path
     monkeypatch.setenv("RMM_HJ_CACHE", "")
-    assert settings.hj_cache_dir() == Path.home() / ".cache" / "rmm-envs" / "hj"
+    assert variables.hj_cache_dir() == Path.home() / ".cache" / "rmm-envs" / "hj"
 
 
 #: what a guardian may not import: the envs, the drivers and the risk scenes (it meets a system

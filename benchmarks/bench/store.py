@@ -48,7 +48,7 @@ Tables:
 
 A file that cannot be used is reported as :class:`ResultsDatabaseError`: one line naming the
 file, what went wrong and what to do, never a raw SQLite traceback, and its ``status``, the
-exit status (:mod:`rmm_envs.failures`).  The causes are told apart, because only one of them
+exit status (:mod:`rmm_envs.os_errors`).  The causes are told apart, because only one of them
 means the stored episodes are gone:
 
 * not writable (the file, its directory or its file system is read-only for this user), or
@@ -93,7 +93,7 @@ from pathlib import Path
 import numpy as np
 
 from rmm_bench.config import EpisodeResult
-from rmm_envs.failures import BAD_INPUT, RUN_FAILED, describe_os_error, file_size_limit
+from rmm_envs.os_errors import BAD_INPUT, RUN_FAILED, describe_os_error, file_size_limit
 
 __all__ = [
     "EPISODE_FIELDS",

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from rmm_envs.portable import matvec
+from rmm_envs.machine_independent import matvec
 from rmm_envs.systems.dubins4d.dynamics import Dubins4D
 from rmm_guardians._checks import settings_signature
 from rmm_guardians.cbf.backend import dubins4d_qp

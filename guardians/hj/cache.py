@@ -7,7 +7,7 @@ verified; anything else is recomputed and replaced, with a ``RuntimeWarning`` na
 (counted in ``counts["cache_rejected"]``).  Written atomically; the oldest files beyond
 ``max_files`` are removed; several processes may share a directory.  The directory is the HJ
 guardian's ``cache_dir`` argument; without one, :func:`default_cache_dir`: ``$RMM_HJ_CACHE`` if
-set (read by :mod:`rmm_envs.settings`), else ``~/.cache/rmm-envs/hj``.
+set (read by :mod:`rmm_envs.environment_variables`), else ``~/.cache/rmm-envs/hj``.
 
 What is verified and what sharing a directory means: :class:`ValueCache`.
 """
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rmm_envs.settings import hj_cache_dir
+from rmm_envs.environment_variables import hj_cache_dir
 
 __all__ = ["CacheEntryRejected", "ValueCache", "default_cache_dir", "load_or_solve"]
 
@@ -72,7 +72,7 @@ def load_or_solve(
 
 
 def default_cache_dir() -> Path:
-    """``$RMM_HJ_CACHE`` if set, else ``~/.cache/rmm-envs/hj`` (read by :mod:`rmm_envs.settings`)."""
+    """``$RMM_HJ_CACHE`` if set, else ``~/.cache/rmm-envs/hj`` (read by :mod:`rmm_envs.environment_variables`)."""
     return hj_cache_dir()
 
 

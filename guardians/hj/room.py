@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from rmm_envs.portable import arctan2
+from rmm_envs.machine_independent import arctan2
 from rmm_envs.systems.quadrotor.room_collision import BOUND
 from rmm_envs.systems.quadrotor.rooms import bounding_radius
 from rmm_envs.systems.quadrotor.rotations import quat_to_rot

@@ -22,7 +22,7 @@ from typing import Protocol, cast
 
 import numpy as np
 
-from rmm_envs.settings import HJ_THREADS, hj_threads
+from rmm_envs.environment_variables import HJ_THREADS, hj_threads
 from rmm_guardians._checks import finite, integer
 from rmm_guardians.hj import _kernels
 from rmm_guardians.hj.dynamics import HJDynamics, check_dynamics
@@ -63,7 +63,7 @@ THREADS_VARIABLE = HJ_THREADS
 
 def default_threads() -> int | None:
     """The HJ guardians' ``threads`` when none is given: ``$RMM_HJ_THREADS`` (an integer >= 1)
-    if set, else ``None`` (numba's default, the core count); read by :mod:`rmm_envs.settings`."""
+    if set, else ``None`` (numba's default, the core count); read by :mod:`rmm_envs.environment_variables`."""
     return hj_threads()
 
 

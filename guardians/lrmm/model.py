@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from rmm_envs.catalog import FORMER_IDS, current_id
-from rmm_envs.portable import matvec
+from rmm_envs.machine_independent import matvec
 from rmm_guardians.lrmm.inference import forward_one as _forward_one
 from rmm_guardians.lrmm.inference import forward_rows as _forward_rows
 from rmm_guardians.lrmm.shipped import SHIPPED, SHIPPED_BY_SYSTEM, Shipped, default_model_path

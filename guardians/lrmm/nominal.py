@@ -17,7 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rmm_envs.portable import wrap_angle
+from rmm_envs.machine_independent import wrap_angle
 
 __all__ = ["VELOCITY_CONTROLS", "PredictRater", "driver_at_risk", "driver_control", "make_rater"]
 

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from rmm_envs.disturbances.spec import Disturbance, SystemSupport, kind_code
-from rmm_envs.portable import norm
+from rmm_envs.machine_independent import norm
 
 __all__ = ["BLOCK", "Plan", "Realisation", "control_rows", "observation_rows", "rate_rows"]
 

@@ -27,7 +27,7 @@ from pathlib import Path
 import pyarrow as pa
 from tqdm import tqdm
 
-from rmm_envs.failures import describe_os_error
+from rmm_envs.os_errors import describe_os_error
 from rmm_envs.pool import TaskLost, WorkersLost, run_local, run_ray
 from rmm_envs.risk.dataset import (
     Dataset,

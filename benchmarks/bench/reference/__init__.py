@@ -1,6 +1,6 @@
 """Reference results shipped with the package: the fixed-clock Table I of every built-in system.
 
-Offers :func:`reference_dbs`; ``RMM_REFERENCE_DIR`` (:mod:`rmm_envs.settings`) points it elsewhere.
+Offers :func:`reference_dbs`; ``RMM_REFERENCE_DIR`` (:mod:`rmm_envs.environment_variables`) points it elsewhere.
 
 Each ``*.db`` file in this folder is an ``rmm-bench`` results database (``results.db`` of a
 fixed-clock run, trimmed of what a comparison does not read), so ``rmm-bench compare DIR
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rmm_envs.settings import REFERENCE_DIR, reference_dir
+from rmm_envs.environment_variables import REFERENCE_DIR, reference_dir
 
 __all__ = ["reference_dbs"]
 

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from rmm_envs.portable import wrap_angle
+from rmm_envs.machine_independent import wrap_angle
 from rmm_guardians.lrmm.strategies.base import Step, Strategy, _needs_rays, _number
 
 __all__ = ["BrakeTurn", "RayTurn"]

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from rmm_envs.autonomy import SafeDefault
-from rmm_envs.portable import wrap_angle
+from rmm_envs.machine_independent import wrap_angle
 
 njit: Callable[..., Any] | None
 try:

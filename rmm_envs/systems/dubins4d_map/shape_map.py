@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from rmm_envs.portable import dot
+from rmm_envs.machine_independent import dot
 from rmm_envs.worlds.bounds import MAX_MAGNITUDE, MAX_MAP_BYTES, MAX_POLYGON_VERTICES, within_bounds
 
 __all__ = ["OBSTACLE_KINDS", "MapError", "ShapeMap", "load_map", "triangulate"]

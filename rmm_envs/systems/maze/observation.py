@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace, ObservationLayout, SafeDefault
-from rmm_envs.portable import wrap_angle
+from rmm_envs.machine_independent import wrap_angle
 
 __all__ = ["N_RAYS", "TurnFromNearerWall", "observation_layout"]
 

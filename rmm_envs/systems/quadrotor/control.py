@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from rmm_envs.autonomy import SafeDefault
-from rmm_envs.portable import arctan2
+from rmm_envs.machine_independent import arctan2
 from rmm_envs.systems.quadrotor.body import QUADROTOR, QuadrotorParams
 
 njit: Callable[..., Any] | None

@@ -99,7 +99,7 @@ from rmm_envs.envs.base import (
     rejection_sample,
     state_rows,
 )
-from rmm_envs.portable import norm, norms
+from rmm_envs.machine_independent import norm, norms
 from rmm_envs.systems.quadrotor.body import QUADROTOR
 from rmm_envs.systems.quadrotor.rooms import Room, build_room, generate_room
 from rmm_envs.systems.quadrotor.scene import QuadrotorScene

@@ -135,7 +135,7 @@ from rmm_envs.catalog import system
 from rmm_envs.clocks import make_clock
 from rmm_envs.envs.base import check_arguments, finite, whole
 from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
-from rmm_envs.portable import matvec, norm
+from rmm_envs.machine_independent import matvec, norm
 from rmm_envs.systems.quadrotor.closed_loop import ClosedLoopQuadrotor
 from rmm_envs.systems.quadrotor.control import (
     CommandController,

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rmm_envs.portable import dot, norm
+from rmm_envs.machine_independent import dot, norm
 from rmm_envs.systems.quadrotor.rotations import quat_from_euler, quat_to_rot
 
 __all__ = ["Room", "bounding_radius", "build_room", "generate_room"]

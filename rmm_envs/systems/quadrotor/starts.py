@@ -16,7 +16,7 @@ from collections.abc import Callable
 import numpy as np
 
 from rmm_envs.envs.base import draw_until, option_vector
-from rmm_envs.portable import norm
+from rmm_envs.machine_independent import norm
 from rmm_envs.systems.quadrotor.room_collision import BOUND, RoomCollision
 from rmm_envs.systems.quadrotor.rooms import Room
 from rmm_envs.systems.quadrotor.rotations import quat_from_euler
