@@ -25,7 +25,7 @@ from rmm_guardians.lrmm.model import SHIPPED, LRMMModel, default_model_path, loa
 from rmm_guardians.lrmm.nominal import driver_control
 from rmm_guardians.lrmm.settings import LRMM_PRESETS, PAPER_THRESHOLD, LRMMSettings
 from rmm_guardians.lrmm.shipped import DEFAULT_ENV
-from rmm_guardians.lrmm.strategies import Step, Strategy
+from rmm_guardians.lrmm.strategies import DecisionContext, Strategy
 
 __all__ = ["PAPER_THRESHOLD", "LRMMGuardian", "LRMMPaperGuardian"]
 
@@ -121,7 +121,7 @@ class LRMMGuardian(Guardian):
         self._reads_driver = any(s.reads_driver for s in self.strategies)
         self._chooses = any(s.chooses for s in self.strategies)
         self._warned = False
-        self._step = Step(self.threshold)
+        self._step = DecisionContext(self.threshold)
         self.last_risk = float("nan")
 
     def input_files(self) -> dict[str, str]:

@@ -12,7 +12,7 @@ object in Python, or as ``module:Class(args)`` in a spec (:func:`parse_strategie
 composition).  Why each built-in exists and what it adds: docs/decisions/0024-lrmm-core-and-strategies.md.
 """
 
-from rmm_guardians.lrmm.strategies.base import Step, Strategy
+from rmm_guardians.lrmm.strategies.base import DecisionContext, Strategy
 from rmm_guardians.lrmm.strategies.candidates import Restart, SafestCandidate
 from rmm_guardians.lrmm.strategies.driver import SLIDE_MOVES, RatedDriver, Slide
 from rmm_guardians.lrmm.strategies.rays import BrakeTurn, RayTurn
@@ -30,7 +30,7 @@ __all__ = [
     "Restart",
     "SafestCandidate",
     "Slide",
-    "Step",
+    "DecisionContext",
     "Strategy",
     "parse_strategies",
     "strategy_specs",

@@ -1,4 +1,4 @@
-"""What every strategy is: :class:`Step` (what one decision computed, handed to each strategy)
+"""What every strategy is: :class:`DecisionContext` (what one decision computed, handed to each strategy)
 and :class:`Strategy` (the base class), with the checks the built-ins share."""
 
 from __future__ import annotations
@@ -10,12 +10,12 @@ import numpy as np
 
 from rmm_guardians._checks import finite
 
-__all__ = ["Step", "Strategy"]
+__all__ = ["DecisionContext", "Strategy"]
 
 _PACKAGE = __name__.rpartition(".")[0]  # rmm_guardians.lrmm.strategies
 
 
-class Step:
+class DecisionContext:
     """What one decision has computed, handed from the core to each strategy: ``observation``
     (the whole observation), ``x`` (the model's input), ``out`` (the model's outputs: the risk,
     then one per head candidate), ``risk``, ``info``, ``nominal`` (the driver's control, when a
@@ -91,10 +91,10 @@ class Strategy:
     def reset(self, guardian) -> None:
         """Bind to ``guardian`` for an episode (default: nothing to bind)."""
 
-    def take(self, step: Step, take: bool) -> bool:
+    def take(self, step: DecisionContext, take: bool) -> bool:
         return take
 
-    def act(self, step: Step, control):
+    def act(self, step: DecisionContext, control):
         return control
 
     def signals(self) -> dict[str, float]:
@@ -116,7 +116,7 @@ def _needs_head(strategy: Strategy, model) -> None:
         )
 
 
-def _candidate_risks(step: Step) -> list[float]:
+def _candidate_risks(step: DecisionContext) -> list[float]:
     cand = step.out[1:].tolist()
     if not all(map(math.isfinite, cand)):
         raise ValueError(f"the LRMM model returned non-finite candidate risks {cand}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rmm_guardians.lrmm.strategies.base import Step, Strategy, _candidate_risks, _needs_head, _number
+from rmm_guardians.lrmm.strategies.base import DecisionContext, Strategy, _candidate_risks, _needs_head, _number
 
 __all__ = ["Restart", "SafestCandidate"]
 
@@ -43,7 +43,7 @@ class SafestCandidate(Strategy):
     def reset(self, guardian) -> None:
         self._cands = guardian.candidates
 
-    def act(self, step: Step, control):
+    def act(self, step: DecisionContext, control):
         cand = _candidate_risks(step)
         return self._cands[cand.index(min(cand))]
 
@@ -75,7 +75,7 @@ class Restart(Strategy):
         self._speed = guardian.observation_space.layout.index("speed")
         self._accel = guardian.action_space.controls.index("accel_ctrl")
 
-    def act(self, step: Step, control):
+    def act(self, step: DecisionContext, control):
         if not step.observation[self._speed] < self.speed:
             return control
         cand = _candidate_risks(step)

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from rmm_guardians.lrmm.nominal import VELOCITY_CONTROLS, driver_at_risk, make_rater
-from rmm_guardians.lrmm.strategies.base import Step, Strategy, _needs_head, _number
+from rmm_guardians.lrmm.strategies.base import DecisionContext, Strategy, _needs_head, _number
 
 __all__ = ["SLIDE_MOVES", "RatedDriver", "Slide"]
 
@@ -69,7 +69,7 @@ class RatedDriver(Strategy):
         self._zero = [0.0] * guardian.action_space.control_dim
         self.last = math.nan
 
-    def take(self, step: Step, take: bool) -> bool:
+    def take(self, step: DecisionContext, take: bool) -> bool:
         nominal = step.nominal
         if nominal is None:
             return take
@@ -128,7 +128,7 @@ class Slide(Strategy):
         gap = [math.sqrt(sum((v[j] - u[j]) ** 2 for j in (self.f, self.l, self.up))) for v in out]
         return [out[i] for i in sorted(range(len(out)), key=lambda i: gap[i])]
 
-    def act(self, step: Step, control):
+    def act(self, step: DecisionContext, control):
         if not step.nominal:
             return control
         options = self.variants(step.nominal)

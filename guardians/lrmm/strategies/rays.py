@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from rmm_envs.machine_independent import wrap_angle
-from rmm_guardians.lrmm.strategies.base import Step, Strategy, _needs_rays, _number
+from rmm_guardians.lrmm.strategies.base import DecisionContext, Strategy, _needs_rays, _number
 
 __all__ = ["BrakeTurn", "RayTurn"]
 
@@ -47,7 +47,7 @@ class BrakeTurn(Strategy):
         self._u1 = float(actions.control_high[0]) if self.turn is None else self.turn
         self._u2 = float(actions.control_low[1]) if self.brake is None else self.brake
 
-    def act(self, step: Step, control):
+    def act(self, step: DecisionContext, control):
         left, right = step.observation[self._left], step.observation[self._right]
         turn = 0.0 if np.isclose(left, right) else (self._u1 if left > right else -self._u1)
         return (turn, self._u2)
@@ -89,7 +89,7 @@ class RayTurn(Strategy):
         self._u1 = float(guardian.action_space.control_high[0]) if self.rate is None else self.rate
         self._model = guardian.model
 
-    def act(self, step: Step, control):
+    def act(self, step: DecisionContext, control):
         rays, observation = step.x, step.observation
         r_left, r_right = self._model.predict_all(np.stack([np.roll(rays, -1), np.roll(rays, 1)]))[:, 0]
         if not (math.isfinite(r_left) and math.isfinite(r_right)):

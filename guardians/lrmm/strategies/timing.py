@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections import deque
 
 from rmm_guardians._checks import integer
-from rmm_guardians.lrmm.strategies.base import Step, Strategy
+from rmm_guardians.lrmm.strategies.base import DecisionContext, Strategy
 
 __all__ = ["Commit", "MovingAverage"]
 
@@ -24,7 +24,7 @@ class MovingAverage(Strategy):
     def reset(self, guardian) -> None:
         self._history = deque([guardian.threshold] * self.window, maxlen=self.window)
 
-    def take(self, step: Step, take: bool) -> bool:
+    def take(self, step: DecisionContext, take: bool) -> bool:
         self._history.append(step.risk)
         return take or sum(self._history) / len(self._history) > step.threshold
 
@@ -44,7 +44,7 @@ class Commit(Strategy):
     def reset(self, guardian) -> None:
         self._left = 0
 
-    def take(self, step: Step, take: bool) -> bool:
+    def take(self, step: DecisionContext, take: bool) -> bool:
         if take:
             self._left = self.steps
         elif self._left > 0:
