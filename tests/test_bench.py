@@ -210,7 +210,7 @@ def test_every_agent_end_to_end_and_report(tmp_path, capsys):
 
 
 def test_named_agent_sets():
-    from rmm_bench.checks import resolve_agents as _agents
+    from rmm_bench.run_checks import resolve_agents as _agents
     from rmm_guardians.registry import load_guardian_class
 
     assert list(_agents("all")) == ["lrmm", "cbf", "hj", "random", "inactive", "brakes"]

@@ -312,6 +312,8 @@ def test_bench_config_is_what_the_command_line_said():
 
 def test_each_guardian_class_is_resolved_once_per_command(monkeypatch, tmp_path):
     # --agent resolves each name to its class once; the checks and the task plan use that class
+    import rmm_bench.run_checks
+    import rmm_bench.run_plan
     import rmm_guardians.registry as registry
     from rmm_bench.run_plan import applicable, plan_tasks
     from rmm_bench.store import ResultsStore
@@ -319,7 +321,13 @@ def test_each_guardian_class_is_resolved_once_per_command(monkeypatch, tmp_path)
 
     calls = []
     resolve = registry.load_guardian_class
-    monkeypatch.setattr(registry, "load_guardian_class", lambda name: calls.append(name) or resolve(name))
+
+    def counted(name):
+        calls.append(name)
+        return resolve(name)
+
+    for module in (registry, rmm_bench.run_checks, rmm_bench.run_plan):  # where each caller looks it up
+        monkeypatch.setattr(module, "load_guardian_class", counted)
     cfg = parse_run(
         [
             "--agent",
@@ -350,8 +358,8 @@ def test_each_guardian_class_is_resolved_once_per_command(monkeypatch, tmp_path)
 def test_the_non_blocking_defaults_are_the_wrapper_s_everywhere():
     import inspect
 
-    from rmm_bench.checks import _env_creator
     from rmm_bench.run_args import NON_BLOCKING_DEFAULTS
+    from rmm_bench.run_checks import _env_creator
     from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL, NonBlockingStepping
 
     assert (TIME_ACCEL, BASE_STEP) == (10.0, 0.1)  # the paper's 10x and 0.1 s

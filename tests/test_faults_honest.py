@@ -95,7 +95,7 @@ def test_resume_after_the_model_file_changed_starts_a_new_run_naming_the_file(tm
 
 
 def test_shipped_model_is_part_of_the_run_key(tmp_path):
-    from rmm_bench.checks import check_runs
+    from rmm_bench.run_checks import check_runs
     from rmm_bench.config import AgentRun, file_sha256
     from rmm_guardians.lrmm.model import default_model_path
 
@@ -734,7 +734,7 @@ def test_a_file_size_limit_error_names_the_file_the_limit_and_the_fix(monkeypatc
     """The line both commands print for EFBIG (the drills below run them under a real limit)."""
     import errno
 
-    from rmm_envs import failures
+    from rmm_envs import os_errors as failures
 
     e = OSError(errno.EFBIG, "File too large", "d/shard_0001.npz")
     monkeypatch.setattr(failures, "file_size_limit", lambda: 4096)
@@ -796,7 +796,7 @@ def test_a_closed_output_pipe_is_not_called_an_unreachable_ray_cluster():
     (a ConnectionError, as the Ray check's are); the line says what happened."""
     import errno
 
-    from rmm_envs.failures import describe_os_error
+    from rmm_envs.os_errors import describe_os_error
 
     line, status = describe_os_error(BrokenPipeError(errno.EPIPE, "Broken pipe"))
     assert (line, status) == (

@@ -13,7 +13,7 @@
   meant to move results, record it again:
   ``python -m benchmarks.check_behaviour record tests/data/fingerprint_quick.json --size quick``.
 * A static check that the code whose results a seed determines sends nothing to BLAS and calls
-  none of numpy's CPU-dispatched transcendental functions (see :mod:`rmm_envs.portable`).
+  none of numpy's CPU-dispatched transcendental functions (see :mod:`rmm_envs.machine_independent`).
 * The portable helpers themselves, against plain Python arithmetic.
 """
 
@@ -33,7 +33,7 @@ from hypothesis import strategies as st
 
 from benchmarks.arith import applied, arith_settings, describe, run_under
 from benchmarks.check_behaviour import SECTIONS, compare
-from rmm_envs import portable
+from rmm_envs import machine_independent as portable
 
 ROOT = Path(__file__).resolve().parent.parent
 RECORD = ROOT / "tests" / "data" / "fingerprint_quick.json"
@@ -164,7 +164,7 @@ _DISPATCHED = {
 # np.argpartition / np.partition, and argsort unless stable: the tie order is the SIMD sort code's
 _EXACT_POWERS = {0, 1, 2, -1, 0.5}  # numpy's fast paths: a product, a square, a reciprocal or sqrt
 # where a machine-dependent result is harmless: drawing figures
-_EXEMPT_FILES = {"rmm_envs/envs/_render.py", "benchmarks/bench/figures.py"}
+_EXEMPT_FILES = {"rmm_envs/envs/_render.py", "benchmarks/bench/paper_figures.py"}
 #: a line may say why a flagged form is exact there, e.g. an integer power: ``# exact: integers``
 _PRAGMA = "# exact:"
 
@@ -289,7 +289,7 @@ def test_seeded_code_sends_nothing_to_blas_or_numpys_simd_transcendentals():
         hit for p in files if p.relative_to(ROOT).as_posix() not in _EXEMPT_FILES for hit in machine_dependent_calls(p)
     ]
     assert not found, (
-        "machine-dependent arithmetic in seeded code (use rmm_envs.portable: dot, norm, norms, matvec, "
+        "machine-dependent arithmetic in seeded code (use rmm_envs.machine_independent: dot, norm, norms, matvec, "
         f"arctan2, wrap_angle, a numba kernel, or say why it is exact with '{_PRAGMA} ...'):\n" + "\n".join(found)
     )
 

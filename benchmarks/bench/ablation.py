@@ -26,6 +26,10 @@ import sys
 from pathlib import Path
 
 from rmm_bench.knob_sweep import run_point
+from rmm_bench.manifest import MANIFESTS, table_manifest
+from rmm_bench.paired import concordance, mcnemar_exact, newcombe_paired
+from rmm_envs.catalog import system_of
+from rmm_guardians.lrmm.guardian import LRMMGuardian
 
 __all__ = ["build_parser", "cmd", "variants"]
 
@@ -34,8 +38,6 @@ def variants(env_id: str) -> list[tuple[str, str, dict]]:
     """``(label, agent, options)`` of each row for ``env_id`` (options: the agent's keyword
     arguments), in the table's order; a variant the same as an earlier one (with two strategies,
     full minus one is the core plus the other) is one row with both labels."""
-    from rmm_envs.catalog import system_of
-    from rmm_guardians.lrmm.guardian import LRMMGuardian
 
     stored = LRMMGuardian(env_id=env_id).strategies
     names = [s.name for s in stored]
@@ -74,7 +76,6 @@ def _collisions(out: Path) -> dict[int, bool]:
 def _paired(a: dict[int, bool], b: dict[int, bool]) -> list[str]:
     """The collision rate of ``a`` minus ``b`` on their common episodes: the difference with
     Newcombe's paired 95% interval, and the exact McNemar p."""
-    from rmm_bench.paired import concordance, mcnemar_exact, newcombe_paired
 
     common = sorted(set(a) & set(b))
     both, a_only, b_only, neither = concordance([a[e] for e in common], [b[e] for e in common])
@@ -169,8 +170,6 @@ def cmd(argv: list[str]) -> int:
     (base.parent / f"{args.env}_seed{args.seed}.md").write_text(text)
     print(text)
     if args.manifest:
-        from rmm_bench.manifest import MANIFESTS, table_manifest
-
         fields = {
             "name": args.manifest,
             "title": args.title

@@ -29,7 +29,7 @@ import sys
 
 from rmm_bench.run_execute import RunFailed
 from rmm_bench.store import ResultsDatabaseError
-from rmm_envs.failures import describe_os_error
+from rmm_envs.os_errors import describe_os_error
 from rmm_envs.user_modules import user_folders
 
 __all__ = ["DEFAULT_COMMAND", "SUBCOMMANDS", "build_parser", "command_parser", "main"]
@@ -40,8 +40,8 @@ __all__ = ["DEFAULT_COMMAND", "SUBCOMMANDS", "build_parser", "command_parser", "
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "run": ("rmm_bench.run_args:run", "run guardians over seeded episodes (the default)"),
     "sweep": ("rmm_bench.run_args:sweep", "collision rate against added decision latency"),
-    "report": ("rmm_bench.args:report", "rebuild Table I and the figures of a results DIR"),
-    "replay": ("rmm_bench.args:replay", "re-simulate stored episodes and verify their rows"),
+    "report": ("rmm_bench.results_args:report", "rebuild Table I and the figures of a results DIR"),
+    "replay": ("rmm_bench.results_args:replay", "re-simulate stored episodes and verify their rows"),
     "compare": ("rmm_bench.compare_command", "agents compared on the episodes they all ran"),
     "merge": ("rmm_bench.merge", "join the results of several machines into one"),
     "export": ("rmm_bench.export", "the stored episodes as one versioned table"),
@@ -53,8 +53,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "collisions": ("rmm_bench.collisions", "why an agent collides: its collisions replayed and classified"),
     "ablation": ("rmm_bench.ablation", "what each of lrmm's strategies adds, on one env"),
     "model-spread": ("rmm_bench.model_spread", "lrmm's rates with models trained under other seeds"),
-    "riskmap": ("rmm_bench.figures:riskmap", "the paper's Fig. 1: a maze by inferred risk"),
-    "quadrisk": ("rmm_bench.figures:quadrisk", "the paper's Fig. 3: the quadrotor by inferred risk"),
+    "riskmap": ("rmm_bench.paper_figures:riskmap", "the paper's Fig. 1: a maze by inferred risk"),
+    "quadrisk": ("rmm_bench.paper_figures:quadrisk", "the paper's Fig. 3: the quadrotor by inferred risk"),
 }
 
 #: what ``rmm-bench`` runs when its first argument is a flag, or when it has none

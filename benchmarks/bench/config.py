@@ -1,6 +1,6 @@
 """Typed configuration of ``rmm-bench``: what the command line asked for, what a worker runs, what it returns.
 
-* :class:`BenchConfig`: one ``rmm-bench`` command, parsed and validated once (``args.py``);
+* :class:`BenchConfig`: one ``rmm-bench`` command, parsed and validated once (``run_args.py``);
   never changed afterwards (a latency sweep derives one config per latency with
   :meth:`BenchConfig.with_clock`).
 * :class:`AgentRun`: one agent under one configuration: exactly what determines an
@@ -212,7 +212,7 @@ class EpisodeResult:
 
 @dataclass(frozen=True)
 class BenchConfig:
-    """One ``rmm-bench`` run or sweep, validated (see ``args.py``).
+    """One ``rmm-bench`` run or sweep, validated (see ``run_args.py``).
 
     ``parsed`` is the command line's arguments as argparse named them (stored with the
     invocation, where ``report`` reads the env, clock, time acceleration and seed it prints)."""

@@ -25,6 +25,7 @@ from rmm_bench.names import did_you_mean
 from rmm_bench.options import agent_option, refuse, results_dir
 from rmm_bench.outputs import check_output, write_output
 from rmm_bench.store import ResultsStore, results_database
+from rmm_envs.starts import world_key
 
 __all__ = ["OUTCOME_CODES", "SCHEMA", "SCHEMA_NAME", "build_parser", "cmd", "export_frame", "write_export"]
 
@@ -89,8 +90,6 @@ def export_frame(path: str | Path, agents: list[str] | None = None) -> Any:
     read-only) as a pandas DataFrame of :data:`SCHEMA`'s columns and types, ordered by agent,
     run and episode; ``agents``: only these (each must be stored)."""
     import pandas as pd
-
-    from rmm_envs.starts import world_key
 
     store = ResultsStore(results_database(path, "export"), read_only=True)
     try:

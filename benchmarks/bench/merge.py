@@ -24,9 +24,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rmm_bench.outputs import OutputExists, publish
+from rmm_bench.replay import compare_rows
 from rmm_bench.report import CONFIGURATION, write_report
 from rmm_bench.runner import REPRODUCIBLE_CLOCKS
 from rmm_bench.store import EPISODE_FIELDS, RETRIED_ERRORS, ResultsStore, pid_alive, results_database
+from rmm_envs.starts import world_key
 
 __all__ = ["MergeConflict", "MergeSummary", "build_parser", "cmd", "merge"]
 
@@ -59,8 +61,6 @@ def _difference(kept: dict, new: dict, reproducible: bool) -> tuple[str, object,
     """The first column where two stored rows of one episode differ: timing columns aside for a
     reproducible run (:func:`rmm_bench.replay.compare_rows`), every column for a wall-clock one."""
     if reproducible:
-        from rmm_bench.replay import compare_rows
-
         return compare_rows(kept, new, clock_reproduced=True)
     for col in kept:
         if col in ("run_key", "episode"):
@@ -289,7 +289,6 @@ def _part(src: ResultsStore, name: str, inv: dict | None) -> tuple:
 def _check_agents(runs: dict[str, dict]) -> None:
     """One agent name, one configuration per world: two runs of an agent on the same episodes
     (env, options, seed, clock) with other guardian options or files are refused."""
-    from rmm_envs.starts import world_key
 
     seen: dict[tuple, tuple[str, dict]] = {}
     for key, run in runs.items():

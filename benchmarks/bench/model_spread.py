@@ -22,6 +22,10 @@ import sys
 from pathlib import Path
 
 from rmm_bench.knob_sweep import run_point
+from rmm_bench.manifest import MANIFESTS, table_manifest
+from rmm_guardians.lrmm.decision import set_decision
+from rmm_guardians.lrmm.guardian import LRMMGuardian
+from rmm_guardians.lrmm.strategies import strategy_specs
 
 __all__ = ["build_parser", "cmd"]
 
@@ -30,9 +34,6 @@ COLUMNS = (("success", "Success [%]"), ("collision", "Collision [%]"), ("timeout
 
 def _decided_copy(model: Path, env_id: str, out: Path) -> Path:
     """A copy of ``model`` in ``out`` with the decision of ``env_id``'s shipped guardian beside it."""
-    from rmm_guardians.lrmm.decision import set_decision
-    from rmm_guardians.lrmm.guardian import LRMMGuardian
-    from rmm_guardians.lrmm.strategies import strategy_specs
 
     shipped = LRMMGuardian(env_id=env_id)
     copy = out / f"{model.stem}_decided.npz"
@@ -118,8 +119,6 @@ def cmd(argv: list[str]) -> int:
     if args.manifest:
         import datetime
         import os
-
-        from rmm_bench.manifest import MANIFESTS, table_manifest
 
         fields = {
             "name": args.manifest,

@@ -25,7 +25,7 @@ __all__ = ["ReplayRequest", "ReplayTarget", "plan_replay", "replay_agents"]
 
 @dataclass(frozen=True)
 class ReplayRequest:
-    """``rmm-bench replay``'s arguments, validated (``args.parse_replay``)."""
+    """``rmm-bench replay``'s arguments, validated (``results_args.parse_replay``)."""
 
     dir: Path
     agent: str

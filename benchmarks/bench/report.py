@@ -331,7 +331,7 @@ def write_report(
 
 
 def cmd_report(request) -> int:
-    """``rmm-bench report``; ``request`` is an :class:`rmm_bench.args.ReportRequest`."""
+    """``rmm-bench report``; ``request`` is an :class:`rmm_bench.results_args.ReportRequest`."""
     if not (request.dir / "results.db").is_file():
         print(f"rmm-bench report: error: no results.db in {request.dir}", file=sys.stderr)
         return 2

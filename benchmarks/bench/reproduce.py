@@ -23,8 +23,14 @@ import sqlite3
 import sys
 from pathlib import Path
 
+from rmm_bench.cli import main
 from rmm_bench.manifest import COLUMNS, MANIFESTS, Manifest, load_manifests, rmm_bench_args
+from rmm_bench.metrics import aggregate
+from rmm_bench.paired import newcombe_unpaired
+from rmm_bench.reference import reference_dbs
+from rmm_bench.runner import TIMING_COLUMNS, is_timing_stat
 from rmm_bench.store import ResultsStore
+from rmm_envs.risk.datagen import main as datagen
 
 __all__ = [
     "MANIFESTS",
@@ -41,7 +47,6 @@ def _canonical_rows(db: Path, episodes: int | None = None) -> dict[str, list]:
     """Per agent, its rows in episode order (the first ``episodes`` when given) with the timing
     columns and timing statistics left out (what is the same on every machine under a fixed
     clock)."""
-    from rmm_bench.runner import TIMING_COLUMNS, is_timing_stat
 
     con = sqlite3.connect(f"{db.resolve().as_uri()}?mode=ro", uri=True)
     try:
@@ -87,7 +92,6 @@ def _first_difference(db: Path, agent: str) -> str:
 
 
 def _run(commands: list[list[str]], out: Path) -> None:
-    from rmm_bench.cli import main
 
     for command in commands:
         code = main([*command, "--out", str(out), "--no-progress", "--no-figure"])
@@ -125,8 +129,6 @@ def _quick_fingerprints(m: Manifest, out: Path) -> dict[str, str]:
 
 def _datagen_fingerprint(args: list[str], out: Path) -> str:
     import shutil
-
-    from rmm_envs.risk.datagen import main as datagen
 
     if out.exists():
         shutil.rmtree(out)
@@ -235,7 +237,6 @@ def expected_rates(m: Manifest, rows: set[int] | None = None, columns: set[str] 
 
 def _rates(db: Path) -> dict[str, dict[str, tuple[float, int]]]:
     """Agent -> column -> (rate in %, episodes with a result) of the last run of each agent."""
-    from rmm_bench.metrics import aggregate
 
     store = ResultsStore(db, read_only=True)
     try:
@@ -264,8 +265,6 @@ def _check_rates(
     (Newcombe's, for two proportions over the same number of episodes), Bonferroni-corrected
     over the manifest's ``cells`` rates so that a faithful rerun of a large table passes."""
     from scipy.stats import norm
-
-    from rmm_bench.paired import newcombe_unpaired
 
     rates = _rates(db)
     z = float(norm.ppf(1 - 0.025 / max(1, cells)))
@@ -312,7 +311,6 @@ def update(m: Manifest, out: Path) -> None:
 
 def _with_expects(m: Manifest, text: str) -> str:
     """``text`` (a reference manifest) with its ``[[expect]]`` entries the shipped results' rates."""
-    from rmm_bench.reference import reference_dbs
 
     dbs = {db.stem: db for db in reference_dbs()}
     rates = _rates(dbs[m.reference])

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from rmm_bench.manifest import Manifest, clone_only, load_manifests
 from rmm_bench.reproduce import check_full, check_quick, expected_rates, update
+from rmm_bench.reproduce_docs import write_docs
 
 __all__ = ["build_parser", "cmd"]
 
@@ -60,8 +61,6 @@ def cmd(argv: list[str]) -> int:
             )
         return 0
     if args.write_docs is not None:
-        from rmm_bench.reproduce_docs import write_docs
-
         changed = write_docs(args.write_docs)
         print(f"{args.write_docs}: {'regenerated' if changed else 'current'}")
         return 0

@@ -24,7 +24,7 @@ or adding ``--resume``, finishes an interrupted run without repeating stored epi
 Environments (``--env``): any registered env offering the parallel-autonomy contract (an
 action ``active_ctrl`` choosing between the built-in driver and the guardian's control, a
 ``clock`` argument timing the guardian, and the episode statistics in the last step's info;
-described in ``rmm_bench.checks``): ``Dubins4DParallel-v0`` (default, non-blocking: the
+described in ``rmm_bench.run_checks``): ``Dubins4DParallel-v0`` (default, non-blocking: the
 guardian's compute time passes in the world) and ``Dubins4DGuarded-v0`` (blocking), the maze car's
 ``Dubins3DMazeParallel-v0`` / ``Dubins3DMazeGuarded-v0``, the quadrotor's ``QuadrotorRoomParallel-v0`` /
 ``QuadrotorRoomGuarded-v0`` and the map envs ``Dubins4DMapParallel-v0`` / ``Dubins4DMapGuarded-v0`` in this
@@ -96,6 +96,7 @@ import sys
 import time
 from pathlib import Path
 
+import rmm_envs
 from rmm_bench import run_execute
 from rmm_bench.config import BenchConfig
 from rmm_bench.metrics import aggregate
@@ -108,7 +109,6 @@ __all__ = ["cmd_run", "cmd_sweep", "done_line", "env_error_lines", "guardian_err
 
 
 def _provenance(argv) -> dict:
-    import rmm_envs
 
     rev = None
     try:

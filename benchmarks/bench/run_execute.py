@@ -14,6 +14,7 @@ from rmm_bench.config import AgentRun, BenchConfig, EpisodeResult
 from rmm_bench.run_plan import assess_starts, plan_tasks
 from rmm_bench.runner import EpisodeRecord, hard_timeout, lost_episode, run_traced_episode
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore
+from rmm_envs.pool import TaskLost, WorkersLost, run_local, run_ray
 
 __all__ = ["RunFailed", "execute", "unfinished_message"]
 
@@ -59,7 +60,6 @@ def execute(
     call's episodes ended without a result (time limit, lost worker).  ``tally``, when given,
     receives ``reused`` (the requested episodes answered from the store) and ``ran`` (those this
     call runs).  Raises :class:`RunFailed` if too many episodes in a row lost their worker."""
-    from rmm_envs.pool import TaskLost, WorkersLost, run_local, run_ray
 
     runs = config.agent_runs()
     _announce_new_runs(store, runs)

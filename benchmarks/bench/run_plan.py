@@ -1,6 +1,6 @@
 """What a run or sweep owes before anything runs: the agents that apply, the episodes not stored, the starts.
 
-:func:`applicable` checks every option, env and guardian (:func:`rmm_bench.checks.check_runs`)
+:func:`applicable` checks every option, env and guardian (:func:`rmm_bench.run_checks.check_runs`)
 and drops the agents of a named set that do not apply; :func:`plan_tasks` lists the episodes of
 each :class:`~rmm_bench.config.AgentRun` not stored yet as :class:`~rmm_bench.config.EpisodeTask`
 values; :func:`assess_starts` stores each world's starts (doomed or not) once, before the agents run.
@@ -19,8 +19,12 @@ import sys
 import time
 
 from rmm_bench.config import AgentRun, BenchConfig, EpisodeTask, accepts_argument, source_digests
-from rmm_bench.runner import episode_seed
+from rmm_bench.run_checks import check_runs
+from rmm_bench.runner import _env, episode_seed
 from rmm_bench.store import ResultsStore
+from rmm_envs.catalog import stored_id
+from rmm_envs.starts import assess_start, has_doomed_test, start_fingerprint, world_key
+from rmm_guardians.registry import load_guardian_class
 
 __all__ = ["applicable", "assess_starts", "guardian_threads", "plan_tasks"]
 
@@ -28,7 +32,6 @@ __all__ = ["applicable", "assess_starts", "guardian_threads", "plan_tasks"]
 def guardian_threads(agent, agent_kwargs: dict, workers: int, backend: str) -> int | None:
     """The ``threads`` a worker builds ``agent`` (its class, or its name) with (None: not passed);
     see the module docstring."""
-    from rmm_guardians.registry import load_guardian_class
 
     if not (workers > 1 or backend == "ray") or "threads" in agent_kwargs:
         return None
@@ -75,9 +78,6 @@ def assess_starts(store: ResultsStore, runs: dict[str, AgentRun], episodes, prog
     without a doomed test (:func:`rmm_envs.starts.has_doomed_test`) are skipped (their rows keep
     their own fingerprints); an env this process cannot make is left to the workers, which
     report it.  Returns how many starts it stored."""
-    from rmm_bench.runner import _env
-    from rmm_envs.catalog import stored_id
-    from rmm_envs.starts import assess_start, has_doomed_test, start_fingerprint, world_key
 
     worlds: dict[str, AgentRun] = {}
     for run in runs.values():
@@ -122,7 +122,6 @@ def applicable(config: BenchConfig) -> tuple[BenchConfig, dict]:
     Agents of a named set (``--agent all``, ``paper``) that do not apply to the env are dropped
     from the run and listed, with the reason, on stderr; an agent named explicitly that does
     not apply is an error, as is a set of which none applies."""
-    from rmm_bench.checks import check_runs
 
     meta = check_runs(config.agent_runs(), skip_inapplicable=config.agent_set is not None, classes=config.agent_classes)
     skipped = {a: m["skipped"] for a, m in meta.items() if "skipped" in m}

@@ -23,7 +23,7 @@ time limit is a ``SIGALRM`` timer in the worker, so it interrupts Python code; a
 compiled code is ended by the parent, which kills the worker after :func:`hard_timeout` seconds
 and records the episode as ``lost_worker``.
 
-The env is driven only through the parallel-autonomy contract (:mod:`rmm_bench.checks`):
+The env is driven only through the parallel-autonomy contract (:mod:`rmm_bench.run_checks`):
 the result's columns come from the last step's ``info["outcome"]`` and ``info["episode_stats"]``
 (:data:`EPISODE_STATISTICS`; ``final_speed`` and ``cum_cost`` are optional).  The guardian is built with the
 run's options, plus ``threads`` when the task carries it (see :func:`rmm_bench.run_plan.plan_tasks`).
@@ -213,7 +213,7 @@ def _guardian(task: EpisodeTask):
     keyed with (:class:`InputChanged` otherwise: the episode would mix two models in one run).
 
     Built without its warnings (e.g. ``lrmm``'s fallback to the paper's threshold): the parent
-    built the same guardian before dispatching any episode (:func:`rmm_bench.checks.check_runs`)
+    built the same guardian before dispatching any episode (:func:`rmm_bench.run_checks.check_runs`)
     and showed them there, once per run; every worker process would repeat them."""
     key = _guardian_key(task)
     if key not in _CACHE:

@@ -31,6 +31,11 @@ import numpy as np
 
 import rmm_envs  # noqa: F401  (registers the environments)
 from rmm_bench.options import refuse
+from rmm_envs.risk import RiskEstimator
+from rmm_envs.systems.maze.env import Dubins3DMazeEnv
+from rmm_envs.systems.maze.mazes import render_occupancy
+from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv
+from rmm_guardians.lrmm.model import LRMMModel, default_model_path
 
 __all__ = ["quadrisk", "quadrisk_cmd", "quadrisk_parser", "riskmap", "riskmap_cmd", "riskmap_parser"]
 
@@ -49,9 +54,6 @@ def riskmap(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from rmm_envs.systems.maze.env import Dubins3DMazeEnv
-    from rmm_envs.systems.maze.mazes import render_occupancy
-
     env = gym.make("Dubins3DMaze-v0", maze_kind=args.maze).unwrapped
     if not isinstance(env, Dubins3DMazeEnv):
         raise TypeError(f"Dubins3DMaze-v0 made a {type(env).__name__}, not the Dubins3DMazeEnv this figure draws")
@@ -60,13 +62,9 @@ def riskmap(args: argparse.Namespace) -> int:
     states = env.sample_states(rng, args.n)
     obs = env.observe_states(states)
     if args.labels:
-        from rmm_envs.risk import RiskEstimator
-
         risk = RiskEstimator(env.risk_scene()).estimate(states, rng).risk
         what = "sampling-tree risk (n=32, m=2, t=2 s)"
     else:
-        from rmm_guardians.lrmm.model import LRMMModel, default_model_path
-
         model = LRMMModel.load(args.model or default_model_path("Dubins3DMaze-v0"), env_id="Dubins3DMaze-v0")
         risk = np.asarray(model.predict(obs))  # a batch: an array (a float only for one observation)
         what = "inferred risk (LRMM)"
@@ -107,9 +105,6 @@ def quadrisk(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import pybullet as p
-
-    from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv
-    from rmm_guardians.lrmm.model import LRMMModel, default_model_path
 
     env = gym.make("QuadrotorRoom-v0", render_mode="rgb_array").unwrapped
     if not isinstance(env, QuadrotorRoomEnv):

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rmm_bench.options import agent_option, results_dir
+from rmm_bench.replay import ReplayRequest, cmd_replay
+from rmm_bench.report import cmd_report
 
 __all__ = [
     "ReportRequest",
@@ -161,7 +163,6 @@ def _module_list(values: list[str]) -> tuple[str, ...]:
 
 def parse_replay(argv: list[str]):
     """``rmm-bench replay``'s arguments as a :class:`rmm_bench.replay.ReplayRequest`."""
-    from rmm_bench.replay import ReplayRequest
 
     args = replay_parser().parse_args(argv)
     if args.episode is None and args.where is None:
@@ -198,12 +199,10 @@ def parse_replay(argv: list[str]):
 
 
 def report_cmd(argv: list[str]) -> int:
-    from rmm_bench.report import cmd_report
 
     return cmd_report(parse_report(argv))
 
 
 def replay_cmd(argv: list[str]) -> int:
-    from rmm_bench.replay import cmd_replay
 
     return cmd_replay(parse_replay(argv))

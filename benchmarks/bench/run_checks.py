@@ -23,8 +23,13 @@ from __future__ import annotations
 import json
 from typing import Any
 
+import rmm_envs  # noqa: F401
 from rmm_bench.config import AgentRun, accepts_argument, input_digests
-from rmm_envs.autonomy import ACTIVE
+from rmm_envs.autonomy import ACTIVE, GuardianActionSpace
+from rmm_envs.catalog import guardian_envs_of
+from rmm_envs.env_plugins import describe_env_error, resolve_env_id
+from rmm_guardians import available_guardians, make_guardian
+from rmm_guardians.registry import guardian_set, load_guardian_class
 
 __all__ = ["check_env_contract", "check_runs", "env_arguments", "env_parameters", "parse_agent_opts", "resolve_agents"]
 
@@ -35,8 +40,6 @@ ENV_OPTIONS = ("time_accel", "base_step", "clock")
 def resolve_agents(spec: str) -> dict[str, Any]:
     """``--agent``: a name, a comma list, ``all``, ``paper`` or ``module:Class``; each one's class
     (or factory), resolved here once for the whole run (name -> class, in order)."""
-    from rmm_guardians import available_guardians
-    from rmm_guardians.registry import guardian_set, load_guardian_class
 
     available = available_guardians()
     names = guardian_set(spec)
@@ -73,8 +76,6 @@ def parse_agent_opts(items: list[str], agents: list[str]) -> dict[str, dict]:
 def _env_creator(env_id: str):
     import gymnasium as gym
     from gymnasium.envs.registration import load_env_creator
-
-    from rmm_envs.env_plugins import resolve_env_id
 
     env_id = resolve_env_id(env_id)  # module:Id imported, entry points loaded; ValueError naming the id otherwise
     entry = gym.spec(env_id).entry_point
@@ -126,7 +127,6 @@ def env_default(env_id: str, name: str, fallback):
 
 
 def _action_space_lacks(space) -> str | None:
-    from rmm_envs.autonomy import GuardianActionSpace
 
     if not isinstance(space, GuardianActionSpace):
         return (
@@ -161,8 +161,6 @@ def check_env_contract(env_id: str, env=None) -> None:
         if problem:
             lacks.append(problem)
     if lacks:
-        from rmm_envs.catalog import guardian_envs_of
-
         twins = [f"{i} ({'non-blocking' if 'Parallel' in i else 'blocking'})" for i in guardian_envs_of(env_id)]
         lacks.append(
             f"its system's guardian envs are {' and '.join(twins)}"
@@ -179,8 +177,6 @@ def check_env_contract(env_id: str, env=None) -> None:
 def _keywords(agent: str, classes: dict | None) -> list[str]:
     """The keyword arguments the guardian ``agent`` takes (its constructor's named parameters)."""
     import inspect
-
-    from rmm_guardians.registry import load_guardian_class
 
     cls = (classes or {}).get(agent) or load_guardian_class(agent)
     try:
@@ -204,10 +200,6 @@ def check_runs(
     entry is ``{"skipped": reason}`` instead.  ``classes``: each agent's class as the command
     resolved it (:func:`resolve_agents`); an agent not in it is resolved by name."""
     import gymnasium as gym
-
-    import rmm_envs  # noqa: F401
-    from rmm_envs.env_plugins import describe_env_error
-    from rmm_guardians import make_guardian
 
     meta: dict[str, dict] = {}
     envs: dict[str, int] = {}
