@@ -277,3 +277,30 @@ def test_hj_takes_its_disturbance_bound_from_the_run_when_asked():
     assert "disturbances" not in env.privileged()  # an undisturbed env's privileged data is as before
     with pytest.raises(ValueError, match="disturbance"):
         make_guardian("hj", env_id=ENV, disturbance="wind")
+
+
+# ---------------------------------------------------------------- datasets under sensor noise
+
+
+def test_a_dataset_under_sensor_noise_keeps_states_and_labels_and_perturbs_the_rays(tmp_path, small_dataset):
+    """``rmm-datagen --disturb obs-noise.rays=...``: the same states and labels as the undisturbed
+    dataset (the noise draws from streams of its own), the rays perturbed within their range, the
+    rest of the observation untouched; the same bits twice; dynamics kinds refused in one line."""
+    from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
+
+    plain, _ = small_dataset
+    cfg = dict(configs=8, samples_per_config=24, branches=6, depth=2, configs_per_shard=4, seed=11)
+    noisy = []
+    for name in ("a", "b"):
+        out = tmp_path / name
+        spec = DatagenConfig(**cfg, env_kwargs={"disturbances": ["obs-noise.rays=0.5"]})
+        generate(spec, out, workers=1, progress=False)
+        noisy.append(load_dataset(out))
+    a, b = noisy
+    assert np.array_equal(a.state, plain.state) and np.array_equal(a.risk, plain.risk)
+    assert np.array_equal(a.obs[:, :5], plain.obs[:, :5]) and not np.array_equal(a.obs[:, 5:], plain.obs[:, 5:])
+    assert a.obs[:, 5:].min() >= 0 and a.obs[:, 5:].max() <= 10 and np.array_equal(a.obs, b.obs)
+    inside = (plain.obs[:, 5:] > 2) & (plain.obs[:, 5:] < 8)  # away from the clipping at 0 and 10
+    assert abs(np.std((a.obs[:, 5:] - plain.obs[:, 5:])[inside]) - 0.5) < 0.05
+    with pytest.raises(ValueError, match="sensor disturbances"):
+        DatagenConfig(**cfg, env_kwargs={"disturbances": ["dyn-rate=0.1"]}).validate()

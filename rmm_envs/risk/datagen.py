@@ -27,6 +27,7 @@ from pathlib import Path
 import pyarrow as pa
 from tqdm import tqdm
 
+from rmm_envs.disturbances import parse_disturbances
 from rmm_envs.os_errors import describe_os_error
 from rmm_envs.pool import TaskLost, WorkersLost, run_local, run_ray
 from rmm_envs.risk.dataset import (
@@ -266,6 +267,8 @@ def build_parser() -> argparse.ArgumentParser:
         "maze_kind='\"mixed\"'; repeatable",
     )
     p.add_argument("--env-kwargs", default=None, help=argparse.SUPPRESS)  # refused in _main: --env-opt replaced it
+    help_disturb = "sensor noise on the observations (labels: the true risk), e.g. obs-noise.rays=0.2; repeatable"
+    p.add_argument("--disturb", action="append", default=[], metavar="KIND=LEVEL", help=help_disturb)
     p.add_argument(
         "--candidates",
         default=None,
@@ -329,6 +332,10 @@ def _main(args) -> int:
         return 2
     try:
         env_kwargs = env_options(args.env_opt)
+        if args.disturb and "disturbances" in env_kwargs:
+            raise ValueError("give disturbances with --disturb or with --env-opt disturbances=..., not both")
+        if args.disturb:
+            env_kwargs["disturbances"] = sorted(str(d) for d in parse_disturbances(args.disturb))
     except ValueError as e:
         print(f"rmm-datagen: error: {e}", file=sys.stderr)
         return 2

@@ -26,6 +26,8 @@ import pyarrow as pa
 
 import rmm_envs  # the package's own envs register on import
 from rmm_envs.adapters import AdaptedEnv, adapt
+from rmm_envs.disturbances import parse_disturbances
+from rmm_envs.disturbances.realisation import Realisation, observation_rows
 from rmm_envs.env_plugins import describe_env_error, load_env_plugins, resolve_env_id
 from rmm_envs.risk.dataset import FORMAT, FORMAT_VERSION
 from rmm_envs.risk.estimator import RiskEstimator, validate_tree_params
@@ -108,6 +110,13 @@ class DatagenConfig:
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise ValueError(f"seed (--seed) must be an integer >= 0, got {self.seed!r}")
         validate_tree_params(**self.estimator_params())
+        for d in parse_disturbances((self.env_kwargs or {}).get("disturbances")):
+            if d.target != "obs":
+                raise ValueError(
+                    f"disturbance {d}: a dataset takes sensor disturbances (obs-noise, obs-bias, ray-dropout) on its "
+                    "observations; its labels are the risk under the nominal model (the estimator does not simulate "
+                    f"{d.kind})"
+                )
         if self.candidates is not None:
             c = np.asarray(self.candidates, dtype=float)
             if c.ndim != 2 or c.shape[0] < 1 or not np.all(np.isfinite(c)):
@@ -216,6 +225,22 @@ def config_seeds(seed: int, config_id: int) -> tuple[int, np.random.Generator]:
     return env_seed, rng
 
 
+def sensed_samples(env, env_seed: int, obs: np.ndarray) -> np.ndarray:
+    """``obs`` as the env's sensors would report them under its disturbances (``obs`` itself
+    without): one draw per configuration, from its env seed on the disturbances' own streams
+    (so the states, the labels and every other draw are those of the undisturbed dataset), sample
+    ``i`` at step ``i`` of that draw."""
+    plan = getattr(env.unwrapped, "disturbance_plan", None)
+    if plan is None or not plan.obs_ops:
+        return obs
+    draw = Realisation(plan.disturbances, plan.support, (env_seed, _DATASET_STREAM), plan)
+    return observation_rows([draw] * len(obs), obs, [i * draw.dt for i in range(len(obs))])
+
+
+#: the dataset's sensor draws, apart from an episode's with the same seed
+_DATASET_STREAM = 0x6461_7461  # "data"
+
+
 def label_configs(cfg: DatagenConfig, config_ids) -> pa.Table:
     """Generate, observe and label the samples of the given configurations (Algorithm 2)."""
     env = labelled_env(cfg)
@@ -227,7 +252,7 @@ def label_configs(cfg: DatagenConfig, config_ids) -> pa.Table:
         try:
             env.reset(seed=env_seed)
             states = env.sample_states(rng, cfg.samples_per_config)
-            obs = env.observe_states(states, rng)
+            obs = sensed_samples(env, env_seed, env.observe_states(states, rng))
             est = RiskEstimator(env.risk_scene(), **cfg.estimator_params())
             res = est.estimate(states, rng)
             candidate_risk = (
