@@ -28,8 +28,8 @@ import time
 import gymnasium as gym
 import numpy as np
 
-from rmm_bench.run_checks import check_env_contract, env_arguments
 from rmm_bench.options import env_opt_option, parse_env_opts
+from rmm_bench.run_checks import check_env_contract, env_arguments
 from rmm_envs.env_plugins import resolve_env_id
 from rmm_envs.envs.driven import SIMULATOR_HOOKS
 from rmm_envs.risk.estimator import RiskEstimator
