@@ -33,7 +33,7 @@ from scipy.integrate import odeint
 import rmm_envs  # noqa: F401  (registers the envs)
 from rmm_envs.risk import RiskEstimator, RiskResult
 from rmm_envs.risk.labelling import DatagenConfig, config_seeds, labelled_env
-from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.env import Dubins4DGuardedEnv
 
 
 def _rhs(z, t, u1, u2):
@@ -135,7 +135,7 @@ def main(argv=None) -> None:
     ap.add_argument("--quad-labels", type=int, default=128, help="quadrotor command-policy labels per run, 0 to skip")
     args = ap.parse_args(argv)
 
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     env.reset(seed=0)
     sc = env.risk_scene()
     rng = np.random.default_rng(0)

@@ -25,7 +25,7 @@ class Steady(Guardian):
 ENV = """
 import gymnasium as gym
 
-gym.register(id="MyCircles-v0", entry_point="rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv")
+gym.register(id="MyCircles-v0", entry_point="rmm_envs.systems.dubins4d.env:Dubins4DGuardedEnv")
 """
 
 

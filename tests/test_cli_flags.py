@@ -144,7 +144,7 @@ def test_a_run_without_env_opts_keeps_its_key(tmp_path):
 @pytest.mark.parametrize(
     "opt, message",
     [
-        ("bogus=1", "--env-opt bogus=1: Dubins4DCirclesEnv.__init__() got an unexpected keyword argument 'bogus'"),
+        ("bogus=1", "--env-opt bogus=1: Dubins4DGuardedEnv.__init__() got an unexpected keyword argument 'bogus'"),
         ("n_obstacles=three", "--env-opt 'n_obstacles=three': the value 'three' is not JSON (a string needs quotes)"),
         ('clock="wall"', "--env-opt clock=...: set it with --clock, the command's own flag for it"),
         ("time_accel=2", "--env-opt time_accel=...: set it with --time-accel, the command's own flag for it"),

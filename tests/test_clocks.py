@@ -10,7 +10,7 @@ import pytest
 
 import rmm_envs  # noqa: F401
 from rmm_envs.clocks import FixedLatencyClock, ManualClock, WallClock, make_clock
-from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.env import Dubins4DGuardedEnv
 from rmm_envs.wrappers import NonBlockingStepping
 
 
@@ -67,14 +67,14 @@ def test_fixed_latency_bounds():
             FixedLatencyClock(bad)
 
 
-class NoGuardianSpace(Dubins4DCirclesEnv):
+class NoGuardianSpace(Dubins4DGuardedEnv):
     def __init__(self):
         super().__init__()
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,))
 
 
 def test_wrapper_accepts_the_papers_range_and_names_what_it_refuses():
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     for accel in (1.0, 1.5):  # >= 1 as in the paper
         w = NonBlockingStepping(env, time_accel=accel, clock="fixed:0")
         w.reset(options={"state": [0, 0, 0, 1.0], "goal": [9, 9, 0.5], "obstacles": [[-9, -9, 1.0]]})

@@ -7,7 +7,7 @@ from gymnasium.utils.env_checker import check_env
 
 import rmm_envs  # noqa: F401
 from rmm_envs.clocks import FixedLatencyClock
-from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.env import Dubins4DGuardedEnv
 
 INACTIVE = {"active_ctrl": 0, "turnrate_ctrl": np.zeros(1, np.float32), "accel_ctrl": np.zeros(1, np.float32)}
 
@@ -59,7 +59,7 @@ def test_make_with_module_prefix_and_vector():
 
 
 def test_observation_layout():
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     obs, info = env.reset(
         seed=0, options={"state": [1.0, 2.0, 0.0, 1.5], "goal": [4.0, 6.0, 0.5], "obstacles": [[6.0, 2.0, 1.0]]}
     )
@@ -73,26 +73,26 @@ def test_observation_layout():
 
 
 def test_same_seed_same_episode():
-    a = run_episode(Dubins4DCirclesEnv(), 7)
-    b = run_episode(Dubins4DCirclesEnv(), 7)
+    a = run_episode(Dubins4DGuardedEnv(), 7)
+    b = run_episode(Dubins4DGuardedEnv(), 7)
     np.testing.assert_array_equal(a[0], b[0])
     assert a[2]["outcome"] == b[2]["outcome"]
-    c = run_episode(Dubins4DCirclesEnv(), 8)
+    c = run_episode(Dubins4DGuardedEnv(), 8)
     assert c[0].shape != a[0].shape or not np.array_equal(c[0], a[0])
 
 
 def test_replaying_a_scenario_from_options():
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     env.reset(seed=11)
     p = env.privileged()
     opts = {"state": p["state"].tolist(), "goal": p["goal"].tolist(), "obstacles": p["obstacles"].tolist()}
-    a = run_episode(Dubins4DCirclesEnv(), 11)
-    b = run_episode(Dubins4DCirclesEnv(), 999, options=opts)
+    a = run_episode(Dubins4DGuardedEnv(), 11)
+    b = run_episode(Dubins4DGuardedEnv(), 999, options=opts)
     np.testing.assert_allclose(a[0][:, 1:], b[0][:, 1:])
 
 
 def test_partial_options_keep_the_rest_seeded():
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     obs1, i1 = env.reset(seed=3, options={"obstacles": [[50.0, 50.0, 1.0]]})
     obs2, i2 = env.reset(seed=3, options={"obstacles": [[50.0, 50.0, 1.0]]})
     np.testing.assert_array_equal(obs1, obs2)
@@ -100,7 +100,7 @@ def test_partial_options_keep_the_rest_seeded():
 
 
 def test_goal_reached_gives_plus_one():
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     env.reset(options={"state": [0, 0, 0, 2.0], "goal": [0.4, 0, 0.3], "obstacles": [[0, 8, 1]]})
     obs, r, te, tr, info = env.step(act(0, 0))
     assert (r, te, tr, info["outcome"]) == (1.0, True, False, "goal")
@@ -108,7 +108,7 @@ def test_goal_reached_gives_plus_one():
 
 
 def test_obstacle_first_then_goal_is_a_collision():
-    env = Dubins4DCirclesEnv(step_dt=1.0)
+    env = Dubins4DGuardedEnv(step_dt=1.0)
     # obstacle at 0.4..0.6 m ahead, goal further along the same step's path
     env.reset(options={"state": [0, 0, 0, 2.0], "goal": [1.5, 0, 0.2], "obstacles": [[0.5, 0, 0.1]]})
     obs, r, te, tr, info = env.step(act(0, 0))
@@ -116,21 +116,21 @@ def test_obstacle_first_then_goal_is_a_collision():
 
 
 def test_goal_first_then_obstacle_is_a_goal():
-    env = Dubins4DCirclesEnv(step_dt=1.0)
+    env = Dubins4DGuardedEnv(step_dt=1.0)
     env.reset(options={"state": [0, 0, 0, 2.0], "goal": [0.5, 0, 0.1], "obstacles": [[1.5, 0, 0.2]]})
     obs, r, te, tr, info = env.step(act(0, 0))
     assert (r, info["outcome"]) == (1.0, "goal")
 
 
 def test_tie_is_a_collision():
-    env = Dubins4DCirclesEnv(step_dt=1.0)
+    env = Dubins4DGuardedEnv(step_dt=1.0)
     env.reset(options={"state": [0, 0, 0, 2.0], "goal": [1.0, 0, 0.2], "obstacles": [[1.0, 0.0, 0.2]]})
     obs, r, te, tr, info = env.step(act(0, 0))
     assert (r, info["outcome"]) == (-1.0, "collision")
 
 
 def test_timeout_truncates():
-    env = Dubins4DCirclesEnv(max_episode_sim_time=1.0)
+    env = Dubins4DGuardedEnv(max_episode_sim_time=1.0)
     env.reset(options={"state": [0, 0, 0, 0.0], "goal": [9, 9, 0.5], "obstacles": [[-9, -9, 1]]})
     for _ in range(10):
         obs, r, te, tr, info = env.step(act(0, -0.5))
@@ -144,7 +144,7 @@ def test_timeout_truncates():
 
 
 def test_info_reports_who_drove():
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     env.reset(seed=0)
     _, _, _, _, info = env.step(INACTIVE)
     assert info["active"] is False and info["control"].shape == (2,)
@@ -155,7 +155,7 @@ def test_info_reports_who_drove():
 
 
 def test_out_of_bounds_controls_are_clipped():
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     env.reset(seed=0)
     _, _, _, _, info = env.step(act(3.0, -9.0))
     np.testing.assert_allclose(info["control"], [0.25, -0.5])
@@ -177,7 +177,7 @@ def test_out_of_bounds_controls_are_clipped():
     ],
 )
 def test_bad_actions(action, match):
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     env.reset(seed=0)
     with pytest.raises(ValueError, match=match):
         env.step(action)
@@ -198,7 +198,7 @@ def test_bad_actions(action, match):
 )
 def test_bad_reset_options(options, match):
     with pytest.raises(ValueError, match=match):
-        Dubins4DCirclesEnv().reset(seed=0, options=options)
+        Dubins4DGuardedEnv().reset(seed=0, options=options)
 
 
 @pytest.mark.parametrize(
@@ -213,11 +213,11 @@ def test_bad_reset_options(options, match):
 )
 def test_bad_constructor_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):
-        Dubins4DCirclesEnv(**kwargs)
+        Dubins4DGuardedEnv(**kwargs)
 
 
 def test_generated_scenarios_are_valid():
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     for seed in range(200):
         env.reset(seed=seed)
         p = env.privileged()
@@ -238,7 +238,7 @@ def test_rgb_render():
 
 
 def test_fixed_clock_counts_compute_time():
-    env = Dubins4DCirclesEnv(clock=FixedLatencyClock(0.002))
+    env = Dubins4DGuardedEnv(clock=FixedLatencyClock(0.002))
     _, _, info = run_episode(env, 0)
     ep = info["episode_stats"]
     assert ep["cum_compute_time"] == pytest.approx(0.002 * ep["n_env_steps"])

@@ -9,7 +9,7 @@ import pytest
 import rmm_envs  # noqa: F401
 from rmm_envs.envs.base import check_arguments, draw_until, option_vector, rejection_sample
 from rmm_envs.risk import LabelledEnv, RiskScene, check_labelled_env, check_scene
-from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.env import Dubins4DGuardedEnv
 from rmm_envs.systems.dubins4d.scene import Dubins4DScene
 from rmm_envs.systems.maze.env import Dubins3DMazeEnv
 from rmm_envs.systems.maze.scene import MazeScene
@@ -139,7 +139,7 @@ def test_draw_until_and_argument_checks():
             option_vector(bad, 2, "goal", " [x, y]")
 
 
-@pytest.mark.parametrize("make", [Dubins4DCirclesEnv, Dubins3DMazeEnv, QuadrotorRoomEnv])
+@pytest.mark.parametrize("make", [Dubins4DGuardedEnv, Dubins3DMazeEnv, QuadrotorRoomEnv])
 def test_running_state_guards_options_and_render_warning(make):
     env = make()
     with pytest.raises(RuntimeError, match=r"call reset\(\) before step\(\)"):
@@ -157,7 +157,7 @@ def test_running_state_guards_options_and_render_warning(make):
 
 
 def test_dubins4d_observe_states_needs_its_generator():
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     env.reset(seed=0)
     with pytest.raises(ValueError, match="observe_states needs rng, a numpy.random.Generator"):
         env.observe_states(env.sample_states(np.random.default_rng(0), 2))

@@ -25,7 +25,7 @@ CALLS = []
 def register():
     CALLS.append(1)
     if "PlugCircles-v0" not in gym.registry:
-        gym.register(id="PlugCircles-v0", entry_point="rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv")
+        gym.register(id="PlugCircles-v0", entry_point="rmm_envs.systems.dubins4d.env:Dubins4DGuardedEnv")
 """
 
 BROKEN_PLUGIN = """
@@ -40,7 +40,7 @@ import gymnasium as gym
 
 if multiprocessing.parent_process() is not None:  # a spawned worker
     raise ImportError("the licence server of MyEnv is not reachable from worker processes")
-gym.register(id="MyEnv-v0", entry_point="rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv")
+gym.register(id="MyEnv-v0", entry_point="rmm_envs.systems.dubins4d.env:Dubins4DGuardedEnv")
 """
 
 
@@ -108,7 +108,7 @@ def test_a_mistyped_id_is_answered_with_the_nearest_registered_one():
 
 def test_module_ids_are_resolved_to_the_id_the_module_registers(tmp_path, monkeypatch):
     (tmp_path / "regmod26.py").write_text(
-        'import gymnasium as gym\ngym.register(id="Reg26-v0", entry_point="rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv")\n'
+        'import gymnasium as gym\ngym.register(id="Reg26-v0", entry_point="rmm_envs.systems.dubins4d.env:Dubins4DGuardedEnv")\n'
     )
     monkeypatch.syspath_prepend(str(tmp_path))
     try:

@@ -18,7 +18,7 @@ import rmm_envs  # noqa: F401
 from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 from rmm_envs.risk.datagen import main as datagen_main
 from rmm_envs.risk.estimator import MAX_TREE_NODES, RiskEstimator, tree_nodes
-from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.env import Dubins4DGuardedEnv
 
 TINY = dict(configs=4, samples_per_config=6, branches=4, depth=2, configs_per_shard=2, seed=11)
 
@@ -149,7 +149,7 @@ def test_tree_size_refused_before_allocation_naming_the_flags(tmp_path, capsys):
     assert tree_nodes(32, 2) == 1056 and tree_nodes(1, 7) == 7 and tree_nodes(2, 100) == math.inf
     with pytest.raises(ValueError, match="more than 2\\^64"):
         tiny(branches=2, depth=10**9).validate()
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     env.reset(seed=0)
     with pytest.raises(ValueError, match="--depth"):
         RiskEstimator(env.risk_scene(), branches=2, depth=21)  # 2^22 - 2 nodes
@@ -204,7 +204,7 @@ def _rules_hold(scene, state):
     ],
 )
 def test_dubins4d_partial_options_are_generated_around_for_every_seed(options):
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     for seed in range(60):
         _, info = env.reset(seed=seed, options=options)
         for key, value in options.items():
@@ -216,7 +216,7 @@ def test_dubins4d_partial_options_are_generated_around_for_every_seed(options):
 def test_dubins4d_given_state_keeps_generation_where_it_fits_and_redraws_where_it_does_not():
     """A seed whose generated obstacles leave the given state free gets exactly them; a seed whose
     obstacles cover it gets the next draw that leaves it free (the draws continue from the seed)."""
-    env, plain = Dubins4DCirclesEnv(), Dubins4DCirclesEnv()
+    env, plain = Dubins4DGuardedEnv(), Dubins4DGuardedEnv()
     state = np.array([1.0, -1.0, 0.0, 1.0])
     kept = redrawn = 0
     for seed in range(40):
@@ -234,7 +234,7 @@ def test_dubins4d_given_state_keeps_generation_where_it_fits_and_redraws_where_i
 
 
 def test_dubins4d_explicit_options_obey_generation_rules_and_errors_blame_only_given_values():
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     with pytest.raises(ValueError, match=r"option 'goal' .* entirely inside obstacle 0 .* of option 'obstacles'"):
         env.reset(seed=0, options={"goal": [0.0, 0.0, 0.5], "obstacles": [[0.0, 0.0, 3.0]]})
     # the boundary case: a goal that touches the obstacle's rim from inside is not *entirely* inside
@@ -247,7 +247,7 @@ def test_dubins4d_explicit_options_obey_generation_rules_and_errors_blame_only_g
         assert "option 'state'" not in msg and "initial position" not in msg
     env.reset(seed=0, options={"goal": [5.0, 5.0, 21.0]})  # (-10, -10) lies 21.21 from the centre: it stays free
     with pytest.raises(ValueError) as e:  # obstacles covering the given start in every draw
-        Dubins4DCirclesEnv(obstacle_min_rad=30.0, obstacle_max_rad=40.0).reset(
+        Dubins4DGuardedEnv(obstacle_min_rad=30.0, obstacle_max_rad=40.0).reset(
             seed=0, options={"state": STATE_AT_ORIGIN}
         )
     assert "option 'state'" in str(e.value) and "'obstacles' explicitly" in str(e.value)
@@ -297,7 +297,7 @@ def test_quadrotor_state_option_gets_a_room_clear_of_it():
 )
 def test_dubins4d_non_finite_parameters_refused(kwargs, name):
     with pytest.raises(ValueError, match=f"{name} must be"):
-        Dubins4DCirclesEnv(**kwargs)
+        Dubins4DGuardedEnv(**kwargs)
     with pytest.raises(ValueError, match=f"{name} must be"):
         gym.make("Dubins4DParallel-v0", **kwargs)
 
@@ -332,10 +332,10 @@ def _episode_bits(env, seed):
 
 def test_episode_floats_do_not_depend_on_the_episodes_run_before():
     seeds = [3, 8, 14, 21]
-    env = Dubins4DCirclesEnv(max_episode_sim_time=30.0, clock="fixed:1")
+    env = Dubins4DGuardedEnv(max_episode_sim_time=30.0, clock="fixed:1")
     forward = {s: _episode_bits(env, s) for s in seeds}
     backward = {s: _episode_bits(env, s) for s in reversed(seeds)}
-    fresh = {s: _episode_bits(Dubins4DCirclesEnv(max_episode_sim_time=30.0, clock="fixed:1"), s) for s in seeds}
+    fresh = {s: _episode_bits(Dubins4DGuardedEnv(max_episode_sim_time=30.0, clock="fixed:1"), s) for s in seeds}
     for s in seeds:
         assert forward[s] == backward[s] == fresh[s], f"episode seed {s} changed with the order"
 
@@ -345,7 +345,7 @@ def test_check_env_finds_the_parallel_env_deterministic():
 
     from rmm_envs.wrappers.nonblocking import NonBlockingStepping
 
-    env = NonBlockingStepping(Dubins4DCirclesEnv(), clock="fixed:2")
+    env = NonBlockingStepping(Dubins4DGuardedEnv(), clock="fixed:2")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         check_env(env, skip_render_check=True)
@@ -407,7 +407,7 @@ def test_bench_rows_bit_identical_with_1_and_2_workers(tmp_path):
 )
 def test_driver_parameters_that_disable_a_constraint_refused(params, name):
     with pytest.raises(ValueError, match=name):
-        Dubins4DCirclesEnv(driver_params=params)
+        Dubins4DGuardedEnv(driver_params=params)
 
 
 def test_datagen_negative_seed_names_the_flag(tmp_path, capsys):

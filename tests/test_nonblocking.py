@@ -4,7 +4,7 @@ import pytest
 
 import rmm_envs  # noqa: F401
 from rmm_envs.clocks import CPUClock, FixedLatencyClock, ManualClock, WallClock, make_clock
-from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.env import Dubins4DGuardedEnv
 from rmm_envs.wrappers import NonBlockingStepping
 
 OPTS = {"state": [0, 0, 0, 1.0], "goal": [9, 9, 0.5], "obstacles": [[-9, -9, 1.0]]}
@@ -20,7 +20,7 @@ def act(u1, u2, active=1):
 
 def test_lap_is_elapsed_times_accel_plus_base():
     clock = ManualClock()
-    env = NonBlockingStepping(Dubins4DCirclesEnv(), time_accel=10.0, base_step=0.1, clock=clock)
+    env = NonBlockingStepping(Dubins4DGuardedEnv(), time_accel=10.0, base_step=0.1, clock=clock)
     env.reset(options=OPTS)
     clock.advance(0.05)
     _, _, _, _, info = env.step(act(0, -0.5))
@@ -32,7 +32,7 @@ def test_lap_is_elapsed_times_accel_plus_base():
 
 def test_action_applies_one_step_late():
     clock = ManualClock()
-    env = NonBlockingStepping(Dubins4DCirclesEnv(), clock=clock)
+    env = NonBlockingStepping(Dubins4DGuardedEnv(), clock=clock)
     env.reset(options=OPTS)
     _, _, _, _, info = env.step(act(0.2, -0.5))
     assert info["active"] is False  # the first lap belongs to the driver
@@ -45,7 +45,7 @@ def test_action_applies_one_step_late():
 
 def test_thinking_time_is_charged_to_the_world_and_the_stats():
     clock = ManualClock()
-    env = NonBlockingStepping(Dubins4DCirclesEnv(max_episode_sim_time=5.0), clock=clock)
+    env = NonBlockingStepping(Dubins4DGuardedEnv(max_episode_sim_time=5.0), clock=clock)
     env.reset(options=OPTS)
     done = False
     n = 0
@@ -80,7 +80,7 @@ def test_fixed_clock_episodes_are_reproducible():
 
 def test_bad_action_does_not_advance_the_world():
     clock = ManualClock()
-    env = NonBlockingStepping(Dubins4DCirclesEnv(), clock=clock)
+    env = NonBlockingStepping(Dubins4DGuardedEnv(), clock=clock)
     env.reset(options=OPTS)
     with pytest.raises(ValueError, match="accel_ctrl"):
         env.step(act(0, np.nan))
@@ -90,7 +90,7 @@ def test_bad_action_does_not_advance_the_world():
 @pytest.mark.parametrize("kwargs, match", [({"time_accel": 0.5}, "time_accel"), ({"base_step": 0}, "base_step")])
 def test_bad_wrapper_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):
-        NonBlockingStepping(Dubins4DCirclesEnv(), **kwargs)
+        NonBlockingStepping(Dubins4DGuardedEnv(), **kwargs)
 
 
 def test_wrapper_needs_a_simulate_method():
@@ -129,7 +129,7 @@ class RecordingClock(ManualClock):
         return lap
 
 
-class SlowPhysicsEnv(Dubins4DCirclesEnv):
+class SlowPhysicsEnv(Dubins4DGuardedEnv):
     """The env's own work takes (clock) time: 0.3 s before the physics and 0.7 s after it."""
 
     def simulate(self, duration, active, control, compute_time=0.0):

@@ -349,9 +349,9 @@ def test_bad_input_is_named(env):
     ):
         with pytest.raises(ValueError, match=msg):
             QuadrotorCBFGuardian(**kwargs)
-    from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
+    from rmm_envs.systems.dubins4d.env import Dubins4DGuardedEnv
 
-    d4 = Dubins4DCirclesEnv()
+    d4 = Dubins4DGuardedEnv()
     with pytest.raises(ValueError, match=r"guardian 'cbf' \(quadrotor\) models the quadrotor's velocity command"):
         g.check_spaces(d4.observation_space, d4.action_space)
 

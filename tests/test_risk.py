@@ -6,7 +6,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from rmm_envs.risk import RiskEstimator, check_scene, cvar, get_metric, worst_case
-from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.env import Dubins4DGuardedEnv
 from rmm_envs.systems.dubins4d.scene import Dubins4DScene
 from tests.toy_systems import Line1D
 
@@ -150,7 +150,7 @@ def _tree_from_levels(levels, root, n, m):
 
 @pytest.mark.parametrize("metric, alpha", [("expected", None), ("cvar", 0.3), ("worst", None)])
 def test_batched_agrees_with_recursive_reference(metric, alpha):
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     env.reset(seed=4)
     sc = env.risk_scene()
     rng = np.random.default_rng(1)
@@ -165,7 +165,7 @@ def test_batched_agrees_with_recursive_reference(metric, alpha):
 
 
 def test_deterministic_and_independent_of_chunking():
-    env = Dubins4DCirclesEnv()
+    env = Dubins4DGuardedEnv()
     env.reset(seed=2)
     states = env.sample_states(np.random.default_rng(0), 40)
     a = RiskEstimator(env.risk_scene(), chunk_size=7).estimate(states, np.random.default_rng(9))

@@ -17,7 +17,7 @@ __all__ = ["Dubins4DDatasetHooks"]
 
 class Dubins4DDatasetHooks:
     """``sample_states``, ``observe_states`` and ``dataset_notes`` of
-    :class:`rmm_envs.systems.dubins4d.env.Dubins4DCirclesEnv` (it sets ``scene``, ``dynamics`` and
+    :class:`rmm_envs.systems.dubins4d.env.Dubins4DGuardedEnv` (it sets ``scene``, ``dynamics`` and
     ``max_episode_sim_time``)."""
 
     scene: Any

@@ -98,7 +98,7 @@ or ``"timeout"``) and ``episode_stats`` (the statistics of the paper's Table I: 
 ``avg_compute_time``, ``cum_reward``, ``cum_cost``, ``final_speed``, ``outcome``; not
 ``episode``, which Gymnasium's ``RecordEpisodeStatistics`` and SB3's ``Monitor`` write).
 
-Privileged information is also available through :meth:`Dubins4DCirclesEnv.privileged`.
+Privileged information is also available through :meth:`Dubins4DGuardedEnv.privileged`.
 
 ## Arguments
 
@@ -159,12 +159,12 @@ from rmm_envs.systems.dubins4d.starts import HALF as _HALF
 from rmm_envs.systems.dubins4d.starts import STARTS, Dubins4DStarts
 from rmm_envs.systems.dubins4d.step import advance, nominal_controls
 
-__all__ = ["Dubins4DCirclesEnv", "Dubins4DScene", "observation", "observation_layout", "plant_model"]
+__all__ = ["Dubins4DGuardedEnv", "Dubins4DScene", "observation", "observation_layout", "plant_model"]
 
 from rmm_envs.systems.dubins4d.dynamics import CONTROLS, KIND  # noqa: E402  (the action fields of u = (u1, u2); owned by the system)
 
 
-class Dubins4DCirclesEnv(Dubins4DStarts, Dubins4DDatasetHooks, GuardedEnv):
+class Dubins4DGuardedEnv(Dubins4DStarts, Dubins4DDatasetHooks, GuardedEnv):
     """Blocking Dubins4D parallel-autonomy env; see the module docstring for the full spec."""
 
     # "human" is offered only where its optional dependency (pygame) is installed
@@ -396,4 +396,4 @@ class Dubins4DCirclesEnv(Dubins4DStarts, Dubins4DDatasetHooks, GuardedEnv):
         return _render.dubins4d_frame(self.scene, self._state, self._last_active, _HALF, size)
 
 
-make_parallel_env = parallel_entry_point(Dubins4DCirclesEnv, "Dubins4DParallel-v0")
+make_parallel_env = parallel_entry_point(Dubins4DGuardedEnv, "Dubins4DParallel-v0")

@@ -4,7 +4,7 @@ The driver's control at each world's state (:func:`nominal_controls`) is compute
 the state is observed, and handed to :func:`advance`: the same numbers are the env's
 ``info["nominal_control"]`` and what the driver applies when the guardian stays inactive.
 
-Shared by :class:`rmm_envs.systems.dubins4d.env.Dubins4DCirclesEnv` (``N = 1``) and
+Shared by :class:`rmm_envs.systems.dubins4d.env.Dubins4DGuardedEnv` (``N = 1``) and
 :class:`rmm_envs.systems.dubins4d.vector.Dubins4DCirclesVectorEnv` (``N`` sub-environments), so
 both run the very same floating-point operations: every stage is a compiled loop over the
 worlds (the driver's closed-form QP, the exact zero-order-hold path, the contact parameters),

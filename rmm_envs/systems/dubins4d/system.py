@@ -16,7 +16,7 @@ def spec() -> SystemSpec:
         dynamics="rmm_envs.systems.dubins4d.dynamics:Dubins4D",
         scenes=("rmm_envs.systems.dubins4d.scene:Dubins4DScene",),
         envs={
-            "guarded": "rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv",
+            "guarded": "rmm_envs.systems.dubins4d.env:Dubins4DGuardedEnv",
             "parallel": "rmm_envs.systems.dubins4d.env:make_parallel_env",
         },
         driver="rmm_envs.systems.dubins4d.driver:CLFDriver",

@@ -2,7 +2,7 @@
 
 ``gym.make_vec("Dubins4DGuarded-v0", num_envs=N, vectorization_mode="vector_entry_point")``
 returns a :class:`Dubins4DCirclesVectorEnv`.  It is ``N`` independent copies of
-:class:`rmm_envs.systems.dubins4d.env.Dubins4DCirclesEnv` (whose module docstring is the world's spec:
+:class:`rmm_envs.systems.dubins4d.env.Dubins4DGuardedEnv` (whose module docstring is the world's spec:
 dynamics, driver, rays, rewards, episode end, starting states, info) stepped together, with
 Gymnasium's vector API (``gymnasium.vector.VectorEnv``, gymnasium >= 1.0).
 
@@ -96,7 +96,7 @@ from rmm_envs.clocks import make_clock
 from rmm_envs.disturbances import Realisation
 from rmm_envs.disturbances.realisation import observation_rows
 from rmm_envs.systems.dubins4d.circles import ray_cast_each
-from rmm_envs.systems.dubins4d.env import Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.env import Dubins4DGuardedEnv
 from rmm_envs.systems.dubins4d.plant import plant_model
 from rmm_envs.systems.dubins4d.scene import observation
 from rmm_envs.systems.dubins4d.step import advance, nominal_controls
@@ -143,7 +143,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         self.render_mode = None
         # One single env holds the configuration (validated there), the spaces, the driver and
         # the generation code; it is never stepped.
-        self._single = Dubins4DCirclesEnv(**kwargs)
+        self._single = Dubins4DGuardedEnv(**kwargs)
         self.clock = make_clock(clock)
         self.single_observation_space = self._single.observation_space
         self.single_action_space = self._single.action_space

@@ -11,7 +11,7 @@ statistics) among obstacles you draw, with the optional extra ``rmm-envs[map]`` 
 the car drives from a start in the map's start box toward a goal disc; a built-in reckless
 driver (:class:`rmm_envs.systems.dubins4d.driver.CLFDriver`) steers it to the goal's centre and ignores the
 obstacles; the agent is a *guardian* that decides at each step whether to take control.
-Everything but the world is :class:`rmm_envs.systems.dubins4d.env.Dubins4DCirclesEnv`'s (this env is
+Everything but the world is :class:`rmm_envs.systems.dubins4d.env.Dubins4DGuardedEnv`'s (this env is
 its subclass): read that spec for the parts only summarised here.  Without ``map`` the example
 shipped in ``rmm_envs/assets/maps/example.json`` is used (two circles, an L-shaped and a
 triangular polygon, two walls, in ``[-10, 10]^2``).
@@ -153,7 +153,7 @@ from rmm_envs.envs import _render
 from rmm_envs.envs.base import draw_until, option_vector, rejection_sample
 from rmm_envs.envs.guarded import parallel_entry_point
 from rmm_envs.systems.dubins4d.dynamics import wrap_angle
-from rmm_envs.systems.dubins4d.env import CONTROLS, KIND, Dubins4DCirclesEnv
+from rmm_envs.systems.dubins4d.env import CONTROLS, KIND, Dubins4DGuardedEnv
 from rmm_envs.systems.dubins4d.starts import in_goal
 from rmm_envs.systems.dubins4d_map.pymunk_world import PymunkWorld
 from rmm_envs.systems.dubins4d_map.scene import Dubins4DMapScene
@@ -167,7 +167,7 @@ def example_map_path() -> str:
     return str(resources.files("rmm_envs") / "assets" / "maps" / "example.json")
 
 
-class Dubins4DMapEnv(Dubins4DCirclesEnv):
+class Dubins4DMapEnv(Dubins4DGuardedEnv):
     """Blocking Dubins4D parallel-autonomy env on a map; see the module docstring for the spec."""
 
     reset_options = ("state", "goal")
