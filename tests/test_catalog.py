@@ -219,8 +219,8 @@ def test_shipped_models_are_keyed_by_system_and_found_by_every_id():
 
 
 def test_the_guardians_the_table_lists_are_those_the_benchmark_accepts():
-    from rmm_bench.run_checks import check_runs
     from rmm_bench.run_args import parse_run
+    from rmm_bench.run_checks import check_runs
     from rmm_envs.catalog import SYSTEMS
     from rmm_guardians.registry import BUILTIN
 

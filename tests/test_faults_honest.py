@@ -95,8 +95,8 @@ def test_resume_after_the_model_file_changed_starts_a_new_run_naming_the_file(tm
 
 
 def test_shipped_model_is_part_of_the_run_key(tmp_path):
-    from rmm_bench.run_checks import check_runs
     from rmm_bench.config import AgentRun, file_sha256
+    from rmm_bench.run_checks import check_runs
     from rmm_guardians.lrmm.model import default_model_path
 
     run = AgentRun("lrmm", {}, "Dubins4DParallel-v0", {"clock": "fixed:1"}, 0, 60.0, False)
