@@ -20,7 +20,7 @@ import numpy as np
 import rmm_envs  # noqa: F401
 from rmm_envs.risk import RiskEstimator
 from rmm_envs.systems.quadrotor.body import QUADROTOR
-from rmm_envs.systems.quadrotor.env import push_body
+from rmm_envs.systems.quadrotor.pybullet_body import push_body
 
 
 def compare(env, states, controls):

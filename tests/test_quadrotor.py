@@ -169,7 +169,8 @@ def test_numpy_propagator_reproduces_pybullet():
     import pybullet as p
 
     from rmm_envs.systems.quadrotor.body import Quadrotor
-    from rmm_envs.systems.quadrotor.env import _urdf_path, push_body
+    from rmm_envs.systems.quadrotor.pybullet_body import push_body
+    from rmm_envs.systems.quadrotor.pybullet_body import urdf_path as _urdf_path
 
     c = p.connect(p.DIRECT)
     try:

@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.systems.quadrotor.body import QUADROTOR, Quadrotor
+from rmm_envs.systems.quadrotor.closed_loop import ClosedLoopQuadrotor
 from rmm_envs.systems.quadrotor.control import (
-    ClosedLoopQuadrotor,
     CommandController,
     HoverAndLevel,
     body_packed,

@@ -8,7 +8,8 @@ import pytest
 
 from rmm_envs.systems.quadrotor import room_collision
 from rmm_envs.systems.quadrotor.body import QUADROTOR, Quadrotor, QuadrotorParams
-from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv, _urdf_path
+from rmm_envs.systems.quadrotor.env import QuadrotorRoomEnv
+from rmm_envs.systems.quadrotor.pybullet_body import urdf_path as _urdf_path
 
 
 def test_urdf_agrees_with_the_parameter_object_exactly():

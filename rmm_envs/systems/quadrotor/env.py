@@ -101,10 +101,12 @@ from rmm_envs.envs.base import (
 )
 from rmm_envs.machine_independent import norm, norms
 from rmm_envs.systems.quadrotor.body import QUADROTOR
+from rmm_envs.systems.quadrotor.pybullet_body import push_body, urdf_path
 from rmm_envs.systems.quadrotor.rooms import Room, build_room, generate_room
+from rmm_envs.systems.quadrotor.rotations import unit_quaternion_rows
 from rmm_envs.systems.quadrotor.scene import QuadrotorScene
 
-__all__ = ["QuadrotorRoomEnv", "QuadrotorScene", "observation_layout", "push_body", "unit_quaternion_rows"]
+__all__ = ["QuadrotorRoomEnv", "QuadrotorScene", "observation_layout"]
 
 RAY_RANGE = 100.0
 _RAY_DIRS = np.array([[1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float)
@@ -120,43 +122,6 @@ def observation_layout() -> ObservationLayout:
         ("angular_velocity", 3),
         ray_angles=[0.0, math.pi / 2, math.pi, 3 * math.pi / 2],
     )
-
-
-def _urdf_path() -> str:
-    from importlib import resources
-
-    return str(resources.files("rmm_envs") / "assets" / "quadrotor.urdf")
-
-
-def push_body(p, client: int, body: int, control, n_steps: int, stop_on_contact: bool = False) -> tuple[int, bool]:
-    """Hold ``control = (F, Mx, My, Mz)`` for ``n_steps`` PyBullet steps of ``body``: before each
-    step, the thrust ``F`` along the body z axis and the moments in the body frame
-    (``applyExternalForce`` / ``applyExternalTorque`` in ``LINK_FRAME``; PyBullet clears them after
-    every step).  Returns ``(steps taken, whether the body touched anything after a step)``;
-    with ``stop_on_contact`` it stops after the first step that ends in contact."""
-    force = [0.0, 0.0, float(control[0])]
-    torque = [float(control[1]), float(control[2]), float(control[3])]
-    touched = False
-    for k in range(n_steps):
-        p.applyExternalForce(body, -1, force, [0, 0, 0], p.LINK_FRAME, physicsClientId=client)
-        p.applyExternalTorque(body, -1, torque, p.LINK_FRAME, physicsClientId=client)
-        p.stepSimulation(physicsClientId=client)
-        if p.getContactPoints(bodyA=body, physicsClientId=client):
-            touched = True
-            if stop_on_contact:
-                return k + 1, True
-    return n_steps, touched
-
-
-def unit_quaternion_rows(states: np.ndarray) -> np.ndarray:
-    """``states`` ``(N, 13)``, refused (``ValueError`` naming the first bad row) unless every
-    quaternion (columns 3-6) is a unit quaternion to 1e-6."""
-    bad = np.flatnonzero(np.abs(norms(states[:, 3:7]) - 1.0) > 1e-6)
-    if bad.size:
-        raise ValueError(
-            f"states: row {bad[0]} has the quaternion {states[bad[0], 3:7].tolist()}, not a unit quaternion"
-        )
-    return states
 
 
 class QuadrotorRoomEnv(LabelledEnvBase):
@@ -233,7 +198,7 @@ class QuadrotorRoomEnv(LabelledEnvBase):
         p.setGravity(0, 0, -self.params.gravity, physicsClientId=c)
         p.setTimeStep(self.params.dt, physicsClientId=c)
         build_room(c, room, visual=self.render_mode is not None)  # visual shapes only for rendering
-        self.body = p.loadURDF(_urdf_path(), [0, 0, 1], physicsClientId=c, flags=p.URDF_USE_INERTIA_FROM_FILE)
+        self.body = p.loadURDF(urdf_path(), [0, 0, 1], physicsClientId=c, flags=p.URDF_USE_INERTIA_FROM_FILE)
         p.changeDynamics(
             self.body, -1, linearDamping=self.damping[0], angularDamping=self.damping[1], physicsClientId=c
         )

@@ -12,8 +12,7 @@ import numpy as np
 from rmm_envs.autonomy import ObservationLayout
 from rmm_envs.envs.base import rejection_sample, state_rows
 from rmm_envs.systems.quadrotor.control import heading_of
-from rmm_envs.systems.quadrotor.env import unit_quaternion_rows
-from rmm_envs.systems.quadrotor.rotations import quat_from_euler, quat_to_rot
+from rmm_envs.systems.quadrotor.rotations import quat_from_euler, quat_to_rot, unit_quaternion_rows
 
 __all__ = ["N_RAYS", "QuadrotorDatasetHooks", "observation_layout"]
 

@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["quat_mul", "quat_from_euler", "quat_to_rot"]
+from rmm_envs.machine_independent import norms
+
+__all__ = ["quat_mul", "quat_from_euler", "quat_to_rot", "unit_quaternion_rows"]
 
 
 def _quats(q, name: str) -> np.ndarray:
@@ -74,3 +76,14 @@ def quat_from_euler(roll, pitch, yaw) -> np.ndarray:
         ],
         axis=-1,
     )
+
+
+def unit_quaternion_rows(states: np.ndarray) -> np.ndarray:
+    """``states`` ``(N, 13)``, refused (``ValueError`` naming the first bad row) unless every
+    quaternion (columns 3-6) is a unit quaternion to 1e-6."""
+    bad = np.flatnonzero(np.abs(norms(states[:, 3:7]) - 1.0) > 1e-6)
+    if bad.size:
+        raise ValueError(
+            f"states: row {bad[0]} has the quaternion {states[bad[0], 3:7].tolist()}, not a unit quaternion"
+        )
+    return states
