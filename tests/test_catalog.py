@@ -17,7 +17,7 @@ from rmm_envs.catalog import FORMER_IDS, current_id, stored_id
 
 def test_the_users_id_is_todays_id_for_the_circles_world_and_keys_stay_stable():
     assert gym.spec("Dubins4DParallel-v0").entry_point == "rmm_envs.systems.dubins4d.env:make_parallel_env"
-    assert gym.spec("Dubins4DGuarded-v0").entry_point == "rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv"
+    assert gym.spec("Dubins4DGuarded-v0").entry_point == "rmm_envs.systems.dubins4d.env:Dubins4DGuardedEnv"
     # results stored before the ids settled keep their keys: the same stored id as then
     assert stored_id("Dubins4DParallel-v0") == "Dubins4DParallel-v0"
     assert stored_id("Dubins4DGuarded-v0") == "Dubins4DCircles-v0"
@@ -188,13 +188,13 @@ def test_a_new_table_entry_is_registered_listed_and_helped(monkeypatch):
         blurb="a toy",
         dynamics="rmm_envs.systems.dubins4d.dynamics:Dubins4D",
         scenes=("rmm_envs.systems.dubins4d.scene:Dubins4DScene",),
-        envs={"guarded": "rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv"},
+        envs={"guarded": "rmm_envs.systems.dubins4d.env:Dubins4DGuardedEnv"},
     )
     last = catalog.env_ids(("guarded",))[-1]  # the table's last blocking env so far
     monkeypatch.setattr(catalog, "SYSTEMS", (*catalog.SYSTEMS, toy))
     try:
         catalog.register()
-        assert gym.spec("ToyCirclesGuarded-v0").entry_point == "rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv"
+        assert gym.spec("ToyCirclesGuarded-v0").entry_point == "rmm_envs.systems.dubins4d.env:Dubins4DGuardedEnv"
         assert catalog.env_ids()[-1] == "ToyCirclesGuarded-v0" and "ToyCirclesGuarded-v0" in catalog.guardian_env_ids()
         assert f"{last}, ToyCirclesGuarded-v0 (blocking)" in catalog.env_help()
         assert catalog.system_of("ToyCirclesGuarded-v0") == (toy, "guarded")
@@ -303,7 +303,7 @@ def test_add_system_refuses_a_second_system_of_a_name_or_an_id_taken_by_another_
     twin = SystemSpec(name="Dubins4D", blurb="", dynamics="x:Y", scenes=(), envs={"guarded": "x:Y"})
     with pytest.raises(ValueError, match="a system named 'Dubins4D' is already registered"):
         add_system(twin)
-    gym.register("ClashGuarded-v0", entry_point="rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv")
+    gym.register("ClashGuarded-v0", entry_point="rmm_envs.systems.dubins4d.env:Dubins4DGuardedEnv")
     try:
         clash = SystemSpec(name="Clash", blurb="", dynamics="x:Y", scenes=(), envs={"guarded": "x:Y"})
         with pytest.raises(ValueError, match="'ClashGuarded-v0' is already registered with entry point"):
@@ -328,7 +328,7 @@ def spec():
         blurb="the circles car under another name",
         dynamics="rmm_envs.systems.dubins4d.dynamics:Dubins4D",
         scenes=("rmm_envs.systems.dubins4d.scene:Dubins4DScene",),
-        envs={"guarded": "rmm_envs.systems.dubins4d.env:Dubins4DCirclesEnv"},
+        envs={"guarded": "rmm_envs.systems.dubins4d.env:Dubins4DGuardedEnv"},
         stored={"guarded": "ToyRobotOld-v0"},
         view="toyrobot:view",
         doomed_test="toyrobot:doomed",
