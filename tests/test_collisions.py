@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from rmm_bench.cli import main
-from rmm_bench.collisions import CLASSES, AlarmLog, classify, onset, versus_lead
+from rmm_bench.collision_classes import CLASSES, AlarmLog, classify, onset, versus_lead
 
 REFERENCE = Path(__file__).resolve().parents[1] / "benchmarks" / "bench" / "reference"
 THRESHOLD = 0.5

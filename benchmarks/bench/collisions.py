@@ -32,180 +32,28 @@ the value, exit 2.  ``docs/cli.md`` describes the output.
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import statistics
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
-from typing import Any
 
+from rmm_bench.collision_classes import (
+    AVOIDED,
+    CLASSES,
+    UNVERIFIED,
+    AlarmLog,
+    Selection,
+    Verdict,
+    _verdict,
+    classify,
+    versus_lead,
+)
+from rmm_bench.collision_tables import to_csv, to_json, to_markdown
 from rmm_bench.outputs import check_output, write_output
 from rmm_bench.store import ResultsStore
 
 __all__ = ["CLASSES", "AlarmLog", "Verdict", "build_parser", "classify", "classify_collisions", "cmd"]
-
-#: The classes, in the order they are tested and shown.
-CLASSES = ("doomed", "unseen", "failed manoeuvre", "released", "alarm ignored")
-#: An episode whose replay did not verify (not classified).
-UNVERIFIED = "not verified"
-#: Outcomes of the ``--versus`` agent that count as avoiding the collision.
-AVOIDED = ("goal", "timeout")
-
-
-class AlarmLog:
-    """The observer a replay passes to :func:`rmm_bench.runner.play_episode`: after every step,
-    who was in control (``info["active"]``, else the env's active-step count), the step's end
-    time (``info["sim_time"]``, else the env's statistics) and the guardian's ``alarm()``."""
-
-    def __init__(self) -> None:
-        self.env: Any = None
-        self.times: list[float] = [0.0]
-        self.active: list[bool] = []
-        self.alarms: list[tuple[float, float] | None] = []
-        self._counted = 0
-
-    def begin(self, env) -> None:
-        self.env, self.times, self.active, self.alarms, self._counted = env, [0.0], [], [], 0
-
-    def step(self, info, guardian) -> None:
-        hook = getattr(guardian, "alarm", None)
-        pair = hook() if callable(hook) else None
-        self.alarms.append(None if pair is None else (float(pair[0]), float(pair[1])))
-        stats = None
-        if "active" in info:
-            active = bool(info["active"])
-        else:
-            stats = self.env.unwrapped.episode_statistics()
-            n = int(stats["n_active_ctrl_env_steps"])
-            active, self._counted = n > self._counted, n
-        if "sim_time" in info:
-            t = float(info["sim_time"])
-        else:
-            stats = stats or self.env.unwrapped.episode_statistics()
-            t = float(stats["cum_sim_time"])
-        self.active.append(active)
-        self.times.append(t)
-
-
-@dataclass(frozen=True)
-class Verdict:
-    """One collision, classified (times in simulated seconds; ``nan`` where not defined)."""
-
-    episode: int
-    seed: int
-    cls: str
-    doomed: bool | None
-    steps: int
-    impact_s: float
-    signal: bool  # the guardian reported an alarm (else control stood for it)
-    first_alarm_s: float  # when the decision that first raised the alarm was taken
-    alarm_to_impact_s: float
-    in_control_at_impact: bool
-    peak_before: float  # the highest alarm value before the last steps (nan without a signal)
-    threshold: float  # the alarm's threshold at that peak (else at impact)
-    versus_outcome: str | None = None
-    versus_control_lead_s: float = math.nan  # how long before this impact the other agent took control
-    verified: bool = True  # every replay of the episode (its own, the --versus agent's) verified its row
-    note: str = ""
-
-
-def _up(pair: tuple[float, float] | None) -> bool:
-    return pair is not None and pair[0] > pair[1]  # nan compares False: not up
-
-
-def onset(raised: list[bool], start: int, stop: int) -> int | None:
-    """The first step in ``[start, stop)`` with ``raised``, traced back to where its stretch of
-    consecutive raised steps began (possibly before ``start``); ``None`` when none is raised."""
-    first = next((k for k in range(start, min(stop, len(raised))) if raised[k]), None)
-    while first is not None and first > 0 and raised[first - 1]:
-        first -= 1
-    return first
-
-
-def classify(
-    active: list[bool],
-    alarms: list[tuple[float, float] | None],
-    times: list[float],
-    doomed: bool | None,
-    last_steps: int,
-    window: float | None = None,
-) -> tuple[str, dict]:
-    """The class of a collision from its steps (``active[k]``, ``alarms[k]``: step ``k``'s
-    controller and its decision's alarm; ``times[k]``: when step ``k`` began, ``times[-1]``
-    the impact) and its measures.
-
-    The crossing that counts is the onset of the first alarm stretch (consecutive steps with
-    the alarm up; without any alarm, in control) that is up within the ``window`` seconds
-    before impact (``None``: the whole episode), traced back to where that stretch began: an
-    alarm about an earlier danger that went down again is not this collision's.  It is in time
-    when it comes before the last ``last_steps`` steps."""
-    n = len(active)
-    if n == 0 or len(alarms) != n or len(times) != n + 1:
-        raise ValueError(f"a collision needs at least one step and one time more than steps, got {n}, {len(times)}")
-    signal = any(a is not None for a in alarms)
-    raised = [_up(a) for a in alarms] if signal else [bool(a) for a in active]
-    start = 0 if window is None else next((k for k in range(n) if times[k] >= times[-1] - window), n - 1)
-    first = onset(raised, start, n)
-    cut = n - last_steps  # steps before this index are "in time"
-    in_time = first is not None and first < cut
-    values = [a for a in alarms[start : max(cut, start)] if a is not None and not math.isnan(a[0])]
-    peak = max(values, key=lambda a: a[0]) if values else None
-    at_impact = alarms[-1]
-    measures = {
-        "first": first,
-        "first_alarm_s": times[first] if first is not None else math.nan,
-        "alarm_to_impact_s": times[-1] - times[first] if first is not None else math.nan,
-        "in_control_at_impact": bool(active[-1]),
-        "signal": signal,
-        "peak_before": peak[0] if peak else math.nan,
-        "threshold": peak[1] if peak else (at_impact[1] if at_impact else math.nan),
-    }
-    if doomed:
-        return "doomed", measures
-    if not in_time:
-        return "unseen", measures
-    assert first is not None
-    if active[-1]:
-        return "failed manoeuvre", measures
-    if any(active[first:]):
-        return "released", measures
-    return "alarm ignored", measures
-
-
-def _verdict(row: dict, log: AlarmLog, doomed: bool | None, last_steps: int, window: float | None) -> Verdict:
-    cls, m = classify(log.active, log.alarms, log.times, doomed, last_steps, window)
-    return Verdict(
-        episode=int(row["episode"]),
-        seed=int(row["seed"]),
-        cls=cls,
-        doomed=doomed,
-        steps=len(log.active),
-        impact_s=log.times[-1],
-        signal=m["signal"],
-        first_alarm_s=m["first_alarm_s"],
-        alarm_to_impact_s=m["alarm_to_impact_s"],
-        in_control_at_impact=m["in_control_at_impact"],
-        peak_before=m["peak_before"],
-        threshold=m["threshold"],
-    )
-
-
-# ---------------------------------------------------------------- selection
-
-
-@dataclass
-class _Selection:
-    agent: str
-    run_key: str
-    describe: str
-    episodes: list[int]
-    doomed: dict[int, bool | None]
-    collisions: int  # the agent's collisions in the run (before --versus)
-    versus: str | None = None
-    versus_key: str | None = None
-    versus_outcomes: dict[int, str] | None = None
 
 
 def _replay_api():
@@ -240,19 +88,21 @@ def _request(dir: Path, agent: str, episodes, args):
     )
 
 
-def _group(config: dict) -> tuple[str, str]:
-    """The episodes a run ran, as ``rmm-bench compare`` pairs them: its world and its clock."""
+def _group(config: dict) -> tuple[str, str, str]:
+    """The episodes a run ran, as ``rmm-bench compare`` pairs them: its world, its clock and its
+    disturbances."""
     from rmm_envs.starts import world_key
 
-    world = world_key(config["env_id"], config.get("env_kwargs", {}), int(config.get("seed", 0)))
-    return world, str(config.get("env_kwargs", {}).get("clock", "wall"))
+    kwargs = config.get("env_kwargs", {})
+    world = world_key(config["env_id"], kwargs, int(config.get("seed", 0)))
+    return world, str(kwargs.get("clock", "wall")), "; ".join(kwargs.get("disturbances", []) or [])
 
 
 def _describe(config: dict) -> str:
     return f"{config.get('env_id')} seed {config.get('seed')} clock {_group(config)[1]}"
 
 
-def _select(db: Path, args) -> _Selection:
+def _select(db: Path, args) -> Selection:
     """The agent's run (the newest, as ``replay`` picks it) and its collisions to classify; with
     ``--versus``, those the other agent's newest run of the same episodes avoided."""
     _select_run = _replay_api()[1]
@@ -263,7 +113,7 @@ def _select(db: Path, args) -> _Selection:
         world, _ = _group(config)
         doomed = {e: s["doomed"] for e, s in store.starts(world).items()}
         collided = sorted(e for e, row in rows.items() if row["outcome"] == "collision")
-        sel = _Selection(args.agent, run_key, _describe(config), collided, doomed, len(collided))
+        sel = Selection(args.agent, run_key, _describe(config), collided, doomed, len(collided))
         if not collided:
             raise ValueError(
                 f"--agent {args.agent}: none of the {len(rows)} episodes of its run {run_key} ({sel.describe}) "
@@ -276,7 +126,7 @@ def _select(db: Path, args) -> _Selection:
         store.close()
 
 
-def _versus(store: ResultsStore, db: Path, args, sel: _Selection, rows: dict, config: dict) -> _Selection:
+def _versus(store: ResultsStore, db: Path, args, sel: Selection, rows: dict, config: dict) -> Selection:
     from rmm_bench.names import did_you_mean
 
     agent = store.run_config(sel.run_key)["agent"]
@@ -367,18 +217,7 @@ def _replay(db: Path, agent: str, episodes: list[int], args, want_key: str) -> t
     return out, len(targets)
 
 
-def versus_lead(log: AlarmLog, impact: float, window: float | None) -> float:
-    """How long before ``impact`` (the first agent's) the other agent's control stretch that is
-    on within the window before it began (``nan``: not in control there)."""
-    begin = 0.0 if window is None else impact - window
-    steps = len(log.active)
-    start = next((k for k in range(steps) if log.times[k] >= begin), steps)
-    stop = next((k for k in range(steps) if log.times[k] >= impact), steps)
-    k = onset(log.active, start, stop)
-    return math.nan if k is None else impact - log.times[k]
-
-
-def classify_collisions(dir: str | Path, args) -> tuple[_Selection, list[Verdict], float]:
+def classify_collisions(dir: str | Path, args) -> tuple[Selection, list[Verdict], float]:
     """Classify ``args.agent``'s collisions in ``dir`` (see the module): the selection, one
     verdict per episode, and the seconds the replays took.  ``ValueError`` for bad input."""
     from rmm_bench.store import results_database
@@ -439,127 +278,6 @@ def classify_collisions(dir: str | Path, args) -> tuple[_Selection, list[Verdict
 
 
 # ---------------------------------------------------------------- output
-
-
-def _s(x: float, digits: int = 2) -> str:
-    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
-
-
-def totals(verdicts: list[Verdict]) -> list[dict]:
-    """Per class (those with an episode, in :data:`CLASSES` order, then ``not verified``): the
-    count, its share and the median time from first crossing to impact."""
-    n = len(verdicts)
-    rows = []
-    for cls in (*CLASSES, UNVERIFIED):
-        of = [v for v in verdicts if v.cls == cls]
-        if not of:
-            continue
-        times = [v.alarm_to_impact_s for v in of if not math.isnan(v.alarm_to_impact_s)]
-        rows.append(
-            {
-                "class": cls,
-                "episodes": len(of),
-                "share": len(of) / n,
-                "median_alarm_to_impact_s": statistics.median(times) if times else math.nan,
-                "with_alarm": len(times),
-            }
-        )
-    return rows
-
-
-def _yes(b: bool | None) -> str:
-    return "?" if b is None else ("yes" if b else "no")
-
-
-def _rule(last_steps: int, window: float | None) -> str:
-    w = "over the whole episode" if window is None else f"up within {window:g} s before impact"
-    return f"the first alarm {w} (traced back to where it began), in time if before the last {last_steps} steps"
-
-
-def to_markdown(sel: _Selection, verdicts: list[Verdict], last_steps: int, window: float | None) -> str:
-    signal = any(v.signal for v in verdicts)
-    what = f"{sel.agent}'s collisions" + (f" that {sel.versus} avoids" if sel.versus else "")
-    alarm = (
-        f"{sel.agent}'s alarm() (value > threshold)"
-        if signal
-        else f"none: {sel.agent} has no alarm(), its first step in control stands for it"
-    )
-    lines = [
-        f"## {what}: {sel.describe}",
-        "",
-        f"{len(verdicts)} episodes (of its {sel.collisions} collisions; run {sel.run_key}"
-        + (f", {sel.versus}'s run {sel.versus_key}" if sel.versus else "")
-        + f"). Alarm: {alarm}; the crossing: {_rule(last_steps, window)}.",
-        "",
-        "| class | episodes | share | median first alarm to impact (s) |",
-        "|---|---:|---:|---:|",
-    ]
-    for t in totals(verdicts):
-        lines.append(
-            f"| {t['class']} | {t['episodes']} | {100 * t['share']:.0f}% | {_s(t['median_alarm_to_impact_s'])}"
-            + (f" ({t['with_alarm']} with an alarm)" if t["with_alarm"] != t["episodes"] else "")
-            + " |"
-        )
-    all_t = [v.alarm_to_impact_s for v in verdicts if not math.isnan(v.alarm_to_impact_s)]
-    lines.append(f"| total | {len(verdicts)} | 100% | {_s(statistics.median(all_t)) if all_t else '-'} |")
-    head = (
-        "| episode | seed | class | doomed | steps | impact (s) | first alarm (s) | alarm to impact (s) "
-        "| in control at impact | peak before | threshold |"
-    )
-    rule = "|---:|---:|---|---|---:|---:|---:|---:|---|---:|---:|"
-    if sel.versus:
-        head += f" {sel.versus} outcome | {sel.versus} in control before impact (s) |"
-        rule += "---|---:|"
-    lines += ["", head, rule]
-    for v in verdicts:
-        line = (
-            f"| {v.episode} | {v.seed} | {v.cls} | {_yes(v.doomed)} | {v.steps} | {_s(v.impact_s)} | "
-            f"{_s(v.first_alarm_s)} | {_s(v.alarm_to_impact_s)} | {_yes(v.in_control_at_impact)} | "
-            f"{_s(v.peak_before, 3)} | {_s(v.threshold, 3)} |"
-        )
-        if sel.versus:
-            line += f" {v.versus_outcome or '-'} | {_s(v.versus_control_lead_s)} |"
-        lines.append(line)
-    notes = [f"episode {v.episode}: {v.note}" for v in verdicts if v.note]
-    if notes:
-        lines += [""] + [f"Note: {n}" for n in notes]
-    return "\n".join(lines) + "\n"
-
-
-def _plain(x):
-    return None if isinstance(x, float) and math.isnan(x) else x
-
-
-def to_csv(verdicts: list[Verdict]) -> str:
-    import csv
-    import io
-
-    buf = io.StringIO()
-    fields = list(asdict(verdicts[0]))
-    w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
-    w.writeheader()
-    for v in verdicts:
-        w.writerow({k: ("" if _plain(x) is None else x) for k, x in asdict(v).items()})
-    return buf.getvalue()
-
-
-def to_json(sel: _Selection, verdicts: list[Verdict], last_steps: int, window: float | None) -> str:
-    doc = {
-        "agent": sel.agent,
-        "run_key": sel.run_key,
-        "world": sel.describe,
-        "versus": sel.versus,
-        "versus_run_key": sel.versus_key,
-        "last_steps": last_steps,
-        "window_s": window,
-        "collisions": sel.collisions,
-        "totals": [{k: _plain(x) for k, x in t.items()} for t in totals(verdicts)],
-        "episodes": [{k: _plain(x) for k, x in asdict(v).items()} for v in verdicts],
-    }
-    return json.dumps(doc, indent=1) + "\n"
-
-
-# ---------------------------------------------------------------- the command
 
 
 def _window(text: str) -> float | None:
