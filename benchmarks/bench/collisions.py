@@ -110,7 +110,7 @@ def _select(db: Path, args) -> Selection:
     try:
         run_key, config = _select_run(store, _request(db.parent, args.agent, (), args))
         rows = {int(r["episode"]): r for r in store.episodes(run_key)}
-        world, _ = _group(config)
+        world = _group(config)[0]
         doomed = {e: s["doomed"] for e, s in store.starts(world).items()}
         collided = sorted(e for e, row in rows.items() if row["outcome"] == "collision")
         sel = Selection(args.agent, run_key, _describe(config), collided, doomed, len(collided))
