@@ -45,7 +45,7 @@ def test_the_counter_leaves_out_generated_pages_and_blocks():
 # strict: passes the day the prose is within its budget, and then this mark must go
 @pytest.mark.xfail(
     strict=True,
-    reason="issue 53 item 5 unfinished: 3,899 lines on 2026-12-05 against 2,900; the cuts of docs/ pages remain",
+    reason="issue 53 item 5 unfinished: 4,000 lines on 2026-12-05 against 2,900; the cuts of docs/ pages remain",
 )
 def test_hand_written_prose_is_within_its_budget():
     lines = prose_lines()
