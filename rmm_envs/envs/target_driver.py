@@ -69,10 +69,11 @@ class TargetDriver:
         return self._held * self.dt >= self.hold - 1e-9
 
 
-def target_task_env(env_id: str, driver: TargetDriver, max_episode_sim_time: float, clock=None, **kwargs):
+def target_task_env(env_id: str, driver: TargetDriver, max_episode_sim_time: float, /, clock=None, **kwargs):
     """The blocking guarded env of the Gymnasium env ``env_id`` under the target task: ``driver``
     drives, its :meth:`~TargetDriver.balance` is the safe default and
-    :meth:`~TargetDriver.reached` the success test (keywords as :func:`rmm_envs.envs.driven.guarded`)."""
+    :meth:`~TargetDriver.reached` the success test (keywords as :func:`rmm_envs.envs.driven.guarded`;
+    a ``max_episode_sim_time`` among them, as ``gym.make`` passes it, overrides the system's)."""
     defaults = {"controls": ("force_ctrl",), "max_episode_sim_time": max_episode_sim_time}
     return guarded(
         env_id, driver=driver, safe_default=driver.balance, success=driver.reached, clock=clock, **(defaults | kwargs)
