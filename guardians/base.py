@@ -6,9 +6,8 @@ control.  :class:`Guardian` is the base class: ``name``, ``observation_type`` (`
 seed, the env's spaces and, for privileged guardians, the env's ``privileged()`` accessor;
 :meth:`~Guardian.act` ``(observation, info) -> action``, built through the env's
 :class:`rmm_envs.autonomy.GuardianActionSpace`; :meth:`~Guardian.stats`, :meth:`~Guardian.signals`
-(what the last decision saw, for frames: :mod:`rmm_envs.views`), :meth:`~Guardian.alarm` (its
-own alarm, for ``rmm-bench collisions``),
-:meth:`~Guardian.warm_up` (run once, untimed, by ``rmm-bench``) and :meth:`~Guardian.input_files`
+(what the last decision saw, for frames), :meth:`~Guardian.alarm` (its own alarm, for
+``rmm-bench collisions``), :meth:`~Guardian.warm_up` (run once, untimed) and :meth:`~Guardian.input_files`
 (files whose digests join the run's identity).  :meth:`~Guardian.check_spaces`,
 :meth:`~Guardian.require_action_space` and :meth:`~Guardian.require_layout` refuse an env that
 lacks what the guardian needs (``ValueError`` naming the guardian and the piece) before any

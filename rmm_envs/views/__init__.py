@@ -3,9 +3,8 @@ the collision point, and a strip over the episode with the guardian's intervals 
 
 Drawn with Pillow's ``ImageDraw``; what does not move is drawn once per episode.  Two parts:
 
-* a **view** per system (:class:`~rmm_envs.views.base.View`, in the system's folder:
-  ``rmm_envs/systems/<system>/view.py``): reads the env's world and state
-  through public accessors (``privileged()``, ``true_state``) and draws them;
+* a **view** per system (:class:`~rmm_envs.views.base.View`, in ``systems/<system>/view.py``):
+  reads the env's world and state through public accessors (``privileged()``, ``true_state``);
   :func:`view_for` picks the view of an env;
 * the **recorder** (:class:`EpisodeRecorder`): collects per step the state, who controlled
   (driver or guardian) and the guardian's signals (a plain ``dict[str, float]``, e.g.
