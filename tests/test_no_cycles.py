@@ -1,5 +1,6 @@
-"""No file circle: the modules of ``rmm_guardians`` and ``rmm_envs`` import one another without a
-cycle (a shared piece lives below both of its users), read statically at any depth."""
+"""No file circle: the modules of ``rmm_bench``, ``rmm_guardians`` and ``rmm_envs`` import one
+another without a cycle (a shared piece lives below both of its users), read statically at any
+depth, ``if TYPE_CHECKING`` included."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from pathlib import Path
 
 from tests.layout import PACKAGE_DIRS
 
-PACKAGES = {name: PACKAGE_DIRS[name] for name in ("rmm_guardians", "rmm_envs")}
+PACKAGES = {name: PACKAGE_DIRS[name] for name in ("rmm_bench", "rmm_guardians", "rmm_envs")}
 
 
 def _module_name(path: Path, package: str, folder: Path) -> str:

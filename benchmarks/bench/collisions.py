@@ -50,29 +50,19 @@ from rmm_bench.collision_classes import (
     versus_lead,
 )
 from rmm_bench.collision_tables import to_csv, to_json, to_markdown
+from rmm_bench.consent import check_inputs, consented_imports
+from rmm_bench.names import did_you_mean
 from rmm_bench.outputs import check_output, write_output
-from rmm_bench.store import ResultsStore
+from rmm_bench.replay_env import build_env, check_guardian
+from rmm_bench.replay_plan import ReplayRequest, _select_run, plan_replay
+from rmm_bench.replay_verify import replay_episode
+from rmm_bench.store import ResultsStore, results_database
+from rmm_envs.starts import world_key
 
 __all__ = ["CLASSES", "AlarmLog", "Verdict", "build_parser", "classify", "classify_collisions", "cmd"]
 
 
-def _replay_api():
-    """Replay's functions: ``(ReplayRequest, _select_run, plan_replay, build_env, check_guardian,
-    replay_episode)``, from replay's modules (``replay_plan``, ``replay_env``, ``replay_verify``)
-    where they are split out, else from :mod:`rmm_bench.replay`."""
-    try:
-        from rmm_bench.replay_env import build_env, check_guardian  # type: ignore[import-not-found, unused-ignore]
-        from rmm_bench.replay_plan import ReplayRequest, _select_run, plan_replay  # type: ignore[import-not-found, unused-ignore]
-        from rmm_bench.replay_verify import replay_episode  # type: ignore[import-not-found, unused-ignore]
-    except ImportError:
-        from rmm_bench.replay import ReplayRequest, _select_run, build_env, plan_replay, replay_episode
-        from rmm_bench.replay import _check_guardian as check_guardian
-    return ReplayRequest, _select_run, plan_replay, build_env, check_guardian, replay_episode
-
-
 def _request(dir: Path, agent: str, episodes, args):
-    ReplayRequest = _replay_api()[0]
-
     return ReplayRequest(
         dir=dir,
         agent=agent,
@@ -91,8 +81,6 @@ def _request(dir: Path, agent: str, episodes, args):
 def _group(config: dict) -> tuple[str, str, str]:
     """The episodes a run ran, as ``rmm-bench compare`` pairs them: its world, its clock and its
     disturbances."""
-    from rmm_envs.starts import world_key
-
     kwargs = config.get("env_kwargs", {})
     world = world_key(config["env_id"], kwargs, int(config.get("seed", 0)))
     return world, str(kwargs.get("clock", "wall")), "; ".join(kwargs.get("disturbances", []) or [])
@@ -105,7 +93,6 @@ def _describe(config: dict) -> str:
 def _select(db: Path, args) -> Selection:
     """The agent's run (the newest, as ``replay`` picks it) and its collisions to classify; with
     ``--versus``, those the other agent's newest run of the same episodes avoided."""
-    _select_run = _replay_api()[1]
     store = ResultsStore(db, read_only=True)
     try:
         run_key, config = _select_run(store, _request(db.parent, args.agent, (), args))
@@ -127,8 +114,6 @@ def _select(db: Path, args) -> Selection:
 
 
 def _versus(store: ResultsStore, db: Path, args, sel: Selection, rows: dict, config: dict) -> Selection:
-    from rmm_bench.names import did_you_mean
-
     agent = store.run_config(sel.run_key)["agent"]
     stored = sorted({r[0] for r in store.db.execute("SELECT DISTINCT agent FROM runs")})
     if args.versus in (args.agent, agent):
@@ -184,10 +169,6 @@ def _replay(db: Path, agent: str, episodes: list[int], args, want_key: str) -> t
     """Replay ``agent``'s ``episodes``: episode -> (row, log or None when not verified, message)."""
     from tqdm import tqdm
 
-    from rmm_bench.consent import check_inputs, consented_imports
-
-    _, _, plan_replay, build_env, check_guardian, replay_episode = _replay_api()
-
     req = _request(db.parent, agent, episodes, args)
     out: dict[int, tuple[dict, AlarmLog | None, str]] = {}
     with consented_imports(req):
@@ -220,8 +201,6 @@ def _replay(db: Path, agent: str, episodes: list[int], args, want_key: str) -> t
 def classify_collisions(dir: str | Path, args) -> tuple[Selection, list[Verdict], float]:
     """Classify ``args.agent``'s collisions in ``dir`` (see the module): the selection, one
     verdict per episode, and the seconds the replays took.  ``ValueError`` for bad input."""
-    from rmm_bench.store import results_database
-
     if args.last_steps < 0:
         raise ValueError(f"--last-steps {args.last_steps}: expected a whole number of steps >= 0")
     if args.window is not None and not (args.window > 0 and math.isfinite(args.window)):
@@ -338,8 +317,6 @@ def cmd(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
     existed = args.table is not None and args.table.exists()
     if args.table is not None:  # before anything is read: never over the database it reads (or any other)
-        from rmm_bench.store import results_database
-
         check_output(args.table, "--table", reads=[results_database(args.results_dir, "collisions")])
     sel, verdicts, seconds = classify_collisions(args.results_dir, args)
     replays = len(verdicts) * (2 if sel.versus else 1)

@@ -40,7 +40,6 @@ from rmm_bench.inputs import (  # re-exported: the harness imports them from her
     module_name,
     portable_path,
     resolve_input,
-    run_input_digests,
     run_modules,
     source_digests,
 )
@@ -141,6 +140,16 @@ class AgentRun:
     @property
     def key(self) -> str:
         return run_key(self.as_dict())
+
+
+def run_input_digests(guardian, run: AgentRun, base: str | None = None) -> dict[str, str]:
+    """Every file ``run`` reads as this process sees it now (what its ``inputs`` recorded when it
+    was keyed): :func:`~rmm_bench.inputs.input_digests` of the guardian and the options, and
+    :func:`~rmm_bench.inputs.source_digests` of the agent's and the env's modules."""
+    out = input_digests(guardian, run.agent_kwargs, run.env_kwargs) | source_digests(
+        run.agent, run.env_id, base, run.agent_kwargs, run.env_kwargs
+    )
+    return dict(sorted(out.items()))
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from rmm_bench.store import ResultsStore
+
 __all__ = ["load_results"]
 
 
@@ -21,8 +23,6 @@ def load_results(path, *, expand_stats: bool = False):
     :class:`~rmm_bench.store.ResultsDatabaseError` naming it.
     """
     import pandas as pd
-
-    from rmm_bench.store import ResultsStore
 
     p = Path(path)
     db = p / "results.db" if p.is_dir() else p

@@ -1,7 +1,7 @@
 """The results page: ``rmm-bench report DIR --html`` writes one self-contained HTML file.
 
 Offers :func:`write_page`, :data:`REPLAYS` (the folder of a results directory whose GIFs the
-page shows), :data:`GIF_LIMIT` and :data:`PAGE_LIMIT`.
+page shows; :mod:`rmm_bench.side_by_side` names it), :data:`GIF_LIMIT` and :data:`PAGE_LIMIT`.
 
 The page leads with the answer.  Per configuration (one table of ``report``): a figure of every
 agent's success, collision, avoidable-collision and timeout rates with their 95% intervals
@@ -33,15 +33,11 @@ from rmm_bench.pairwise import pairwise_matrices, summary
 from rmm_bench.report_figures import plot_rates
 from rmm_bench.report_tables import counter_columns, counter_text
 from rmm_bench.runner import is_timing_stat
-from rmm_bench.side_by_side import replay_anchor
+from rmm_bench.side_by_side import REPLAYS, replay_anchor
 from rmm_bench.store import ResultsStore
 
 __all__ = ["GIF_LIMIT", "PAGE_LIMIT", "REPLAYS", "write_page"]
 
-#: the folder of a results directory whose GIFs the page shows: ``AGENT-episode-N.gif``, and
-#: ``A-vs-B-episode-N.gif`` (:func:`rmm_bench.side_by_side.side_by_side_name`), which each pair's
-#: discordant episodes link to
-REPLAYS = "replays"
 #: GIFs larger than this many bytes are listed but not embedded (the page stays shareable)
 GIF_LIMIT = 4_000_000
 #: the page's size budget in bytes: GIFs that would take it over are listed, not embedded

@@ -20,6 +20,7 @@ from rmm_bench.compare import CONTINUOUS, Comparison, compare_runs
 from rmm_bench.compare_errors import ERROR
 from rmm_bench.compare_render import episodes_cell, p_text, pct
 from rmm_bench.pairwise import ALPHA, CORRECTION, OUTCOMES, PairCell, pairwise_matrices
+from rmm_bench.side_by_side import REPLAYS, replay_anchor, side_by_side_name
 
 __all__ = ["SHOW", "name_html", "pairs_html", "section_comparison"]
 
@@ -122,9 +123,6 @@ def _replays(folder: Path, a: str, b: str, rows) -> str:
     """The command that replays the first discordant episode of each side of each outcome, both
     agents side by side into ``DIR/replays/`` (where the page shows it), and a link to that replay
     when it is there."""
-    from rmm_bench.html import REPLAYS
-    from rmm_bench.side_by_side import replay_anchor, side_by_side_name
-
     episodes = list(dict.fromkeys(e for r in rows for eps in (r.a_only_episodes, r.b_only_episodes) for e in eps[:1]))
     if not episodes:
         return ""

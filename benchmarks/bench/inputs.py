@@ -10,6 +10,8 @@
 * :func:`changed_inputs` / :class:`InputChanged`: a file that no longer has the bytes the run
   was keyed with.
 
+:func:`rmm_bench.config.run_input_digests` takes both of a run (it reads the run's configuration).
+
 Re-exported by :mod:`rmm_bench.config`, where the rest of the harness imports them from.
 """
 
@@ -20,12 +22,8 @@ import importlib.util
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from rmm_envs.user_modules import find_module_spec, named_modules
-
-if TYPE_CHECKING:
-    from rmm_bench.config import AgentRun
 
 __all__ = [
     "PROJECT_PACKAGES",
@@ -36,7 +34,6 @@ __all__ = [
     "module_name",
     "portable_path",
     "resolve_input",
-    "run_input_digests",
     "run_modules",
     "source_digests",
 ]
@@ -181,16 +178,6 @@ def source_digests(
             except OSError:  # unreadable now: the run's check names it as unreadable
                 continue
     return out
-
-
-def run_input_digests(guardian, run: AgentRun, base: str | None = None) -> dict[str, str]:
-    """Every file ``run`` reads as this process sees it now (what its ``inputs`` recorded when it
-    was keyed): :func:`input_digests` of the guardian and the options, and
-    :func:`source_digests` of the agent's and the env's modules."""
-    out = input_digests(guardian, run.agent_kwargs, run.env_kwargs) | source_digests(
-        run.agent, run.env_id, base, run.agent_kwargs, run.env_kwargs
-    )
-    return dict(sorted(out.items()))
 
 
 class InputChanged(RuntimeError):

@@ -61,12 +61,11 @@ from pathlib import Path
 from rmm_bench.consent import check_inputs, consented_imports
 from rmm_bench.replay_env import build_env, check_guardian, drawable_env
 from rmm_bench.replay_plan import ReplayRequest, ReplayTarget, _module_of, plan_replay, replay_agents
-from rmm_bench.replay_plan import _select_run as _select_run  # imported from here by other commands
 from rmm_bench.replay_verify import _same as _same  # its tests import it from here
 from rmm_bench.replay_verify import compare_rows, replay_episode
+from rmm_bench.side_by_side import frame_size, shared_times, side_by_side_frames
 from rmm_bench.store import ResultsStore
-
-_check_guardian = check_guardian  # its former name, imported from here by other commands
+from rmm_bench.video import EpisodeDrawing, check_outputs, episode_path, write_frames, write_video
 
 __all__ = [
     "ReplayRequest",
@@ -133,8 +132,6 @@ def _replay(req: ReplayRequest) -> int:
     finally:
         store.close()
     check_inputs(targets[0].run.as_dict())
-    from rmm_bench.video import EpisodeDrawing, check_outputs, episode_path
-
     check_outputs(req.video, req.frames, req.every, reads=[db])  # before anything is simulated or written
     drawn = bool(req.video or req.frames)
     env = _prepare(targets, req, drawn)
@@ -188,9 +185,6 @@ def _check_same_starts(agents: tuple[str, ...], plans: list[list[ReplayTarget]])
 
 
 def _write_side_by_side(agents, drawings, req: ReplayRequest, episode: int, several: bool) -> list[str]:
-    from rmm_bench.side_by_side import frame_size, shared_times, side_by_side_frames
-    from rmm_bench.video import episode_path, write_frames, write_video
-
     shown = [(a, d) for a, d in zip(agents, drawings, strict=True) if d.recorder is not None and d.times]
     if not shown or all(d.recorder.n_steps == 0 for _, d in shown):
         return []
@@ -225,8 +219,6 @@ def _replay_side_by_side(req: ReplayRequest, agents: tuple[str, ...]) -> int:
     _check_same_starts(agents, plans)
     for targets in plans:
         check_inputs(targets[0].run.as_dict())
-    from rmm_bench.video import EpisodeDrawing, check_outputs
-
     check_outputs(req.video, req.frames, req.every, reads=[db])  # before anything is simulated or written
     drawn = bool(req.video or req.frames)
     envs: list = []

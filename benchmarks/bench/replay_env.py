@@ -8,8 +8,15 @@ from __future__ import annotations
 
 import os
 
-from rmm_bench.config import EpisodeTask, changed_inputs
+import gymnasium as gym
+
+from rmm_bench.config import EpisodeTask, InputChanged, changed_inputs, run_input_digests
 from rmm_bench.replay_plan import ReplayTarget
+from rmm_bench.runner import guardian_for
+from rmm_envs.clocks import ReplayClock
+from rmm_envs.env_plugins import EnvUnavailable, resolve_env_id
+from rmm_envs.user_modules import search_user_folders
+from rmm_envs.views import view_for
 
 __all__ = ["build_env", "check_guardian", "drawable_env"]
 
@@ -18,12 +25,6 @@ def build_env(target: ReplayTarget, render_mode: str | None = None):
     """The env the run's episodes ran on, built with the run's options; a clocked run's clock is a
     :class:`~rmm_envs.clocks.ReplayClock` (loaded per episode).  ``render_mode``: also passed to
     the env (to draw it).  ValueError when it cannot be made."""
-    import gymnasium as gym
-
-    from rmm_envs.clocks import ReplayClock
-    from rmm_envs.env_plugins import EnvUnavailable, resolve_env_id
-    from rmm_envs.user_modules import search_user_folders
-
     search_user_folders((os.getcwd(),))  # a module:Id env's module, after the installed packages
     kwargs = dict(target.run.env_kwargs)
     if target.clock_trace is not None:
@@ -45,8 +46,6 @@ def drawable_env(target: ReplayTarget, env, size: int):
     """``env`` ready to be drawn: as it is when a view of the package draws it, else rebuilt with
     ``render_mode="rgb_array"`` (its own frames: a simulator of your own, a Gymnasium env);
     ``ValueError`` naming the env, never the guardian, when it cannot draw at all."""
-    from rmm_envs.views import view_for
-
     try:
         view_for(env, size)
         return env
@@ -67,9 +66,6 @@ def drawable_env(target: ReplayTarget, env, size: int):
 
 def check_guardian(target: ReplayTarget) -> None:
     """Import and build the run's guardian (as the episode will), refused in one line if it cannot be."""
-    from rmm_bench.config import InputChanged, run_input_digests
-    from rmm_bench.runner import guardian_for
-
     task = EpisodeTask(run=target.run, run_key=target.run_key, episode=0, seed=0, import_path=(os.getcwd(),))
     try:
         guardian = guardian_for(task)

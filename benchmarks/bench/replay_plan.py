@@ -19,6 +19,8 @@ from rmm_bench.consent import check_consent
 from rmm_bench.names import did_you_mean
 from rmm_bench.runner import REPRODUCIBLE_CLOCKS
 from rmm_bench.store import ResultsStore
+from rmm_envs.catalog import current_id
+from rmm_envs.clocks import make_clock
 
 __all__ = ["ReplayRequest", "ReplayTarget", "plan_replay", "replay_agents"]
 
@@ -87,8 +89,6 @@ def _select_run(store: ResultsStore, req: ReplayRequest) -> tuple[str, dict]:
 
 
 def _agent_run(config: dict, run_key: str, store: ResultsStore) -> AgentRun:
-    from rmm_envs.catalog import current_id
-
     try:
         run = AgentRun(
             agent=config["agent"],
@@ -133,8 +133,6 @@ def _episode_numbers(store: ResultsStore, run_key: str, req: ReplayRequest) -> l
 
 
 def _clock_mode(env_kwargs: dict) -> str:
-    from rmm_envs.clocks import make_clock
-
     return make_clock(env_kwargs.get("clock", "wall")).mode
 
 
@@ -143,8 +141,6 @@ def plan_replay(store: ResultsStore, req: ReplayRequest) -> list[ReplayTarget]:
     before anything is imported or run."""
     run_key, config = _select_run(store, req)
     if req.env is not None and req.env not in (config["env_id"],):
-        from rmm_envs.catalog import current_id
-
         if current_id(req.env) != current_id(config["env_id"]):
             raise ValueError(f"--env {req.env}: {req.agent}'s run {run_key} ran on {config['env_id']!r}, expected it")
     check_consent(config, req)  # before anything is imported

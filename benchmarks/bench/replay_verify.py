@@ -17,8 +17,9 @@ import sqlite3
 
 from rmm_bench.config import EpisodeTask
 from rmm_bench.replay_plan import ReplayTarget
-from rmm_bench.runner import CLOCK_COLUMNS, REPRODUCIBLE_CLOCKS, TIMING_COLUMNS, is_timing_stat
+from rmm_bench.runner import CLOCK_COLUMNS, REPRODUCIBLE_CLOCKS, TIMING_COLUMNS, is_timing_stat, play_episode
 from rmm_bench.store import EPISODE_FIELDS
+from rmm_envs.clocks import TraceExhausted
 
 __all__ = ["compare_rows", "replay_episode"]
 
@@ -86,9 +87,6 @@ def replay_episode(target: ReplayTarget, env=None, drawing=None) -> tuple[str, b
 
     ``env``: one built for the run by :func:`build_env` (reused across episodes of one run);
     ``drawing``: a :class:`rmm_bench.video.EpisodeDrawing` that records the episode's frames."""
-    from rmm_bench.runner import play_episode
-    from rmm_envs.clocks import TraceExhausted
-
     row = target.row
     i = row["episode"]
     label = f"episode {i} of {target.run.agent}'s run {target.run_key}"

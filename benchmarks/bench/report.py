@@ -28,7 +28,10 @@ from rmm_bench.report_figures import plot_latency, plot_outcomes
 from rmm_bench.report_paper import NOT_REPORTED, PAPER_ENVS, PAPER_LABEL, PAPER_TABLE_I, format_paper_table
 from rmm_bench.report_tables import AVOIDABLE_HEADER, COLUMNS, WILSON_MARK, format_tables, merge_csv, spread_note
 from rmm_bench.store import RETRIED_ERRORS, ResultsStore
+from rmm_envs import ENV_IDS
 from rmm_envs.catalog import current_id
+from rmm_envs.starts import world_key
+from rmm_guardians.registry import BUILTIN, load_guardian_class
 
 __all__ = [
     "AVOIDABLE_HEADER",
@@ -57,9 +60,6 @@ def _legacy_meta(agent: str, config: dict) -> dict:
     """Observation type and obstacle count for runs stored before they were recorded: only
     built-in guardian names and this package's envs are looked up (our own modules); a name
     from the database is never imported."""
-    from rmm_envs import ENV_IDS
-    from rmm_guardians.registry import BUILTIN, load_guardian_class
-
     meta = {"observation": "?", "n_obstacles": "?"}
     if agent in BUILTIN:
         try:
@@ -127,8 +127,6 @@ def guardian_counters(episodes: list[dict]) -> dict[str, float]:
 
 def _doomed_flags(store: ResultsStore, config: dict) -> dict[int, bool | None]:
     """Episode -> doomed flag of the starts of a run's world (empty before starts were stored)."""
-    from rmm_envs.starts import world_key
-
     key = world_key(config["env_id"], config.get("env_kwargs", {}), int(config.get("seed", 0)))
     return {e: s["doomed"] for e, s in store.starts(key).items()}
 

@@ -14,6 +14,8 @@ import re
 from pathlib import Path
 
 from rmm_bench.manifest import Manifest, load_manifests
+from rmm_bench.reference import reference_dbs
+from rmm_bench.report import format_tables, table_rows
 from rmm_bench.store import ResultsStore
 
 __all__ = ["generated_tables", "render_docs", "write_docs"]
@@ -26,8 +28,6 @@ def generated_tables(manifests: list[Manifest] | None = None) -> dict[str, str]:
     """Name -> the markdown each manifest's block in ``docs/reproduction.md`` holds: its title,
     commands and table (a reference manifest's as ``rmm-bench report`` prints its shipped
     results; a table manifest's as stored, with its note and when it was measured)."""
-    from rmm_bench.reference import reference_dbs
-
     dbs = {db.stem: db for db in reference_dbs()}
     out = {}
     for m in manifests or load_manifests():
@@ -65,8 +65,6 @@ def _table_block(m: Manifest) -> str:
 
 
 def _reference_block(m: Manifest, dbs: dict[str, Path]) -> str:
-    from rmm_bench.report import format_tables, table_rows
-
     if m.reference not in dbs:
         raise ValueError(f"manifest {m.path.name}: reference {m.reference!r} is not shipped ({', '.join(dbs)})")
     store = ResultsStore(dbs[m.reference], read_only=True)

@@ -12,10 +12,23 @@ import argparse
 import math
 import os
 
-from rmm_bench.config import BenchConfig
+from rmm_bench import run_command
+from rmm_bench.config import BenchConfig, parse_shard
+from rmm_bench.disturb_sweep import cmd_disturbance_sweep, split_swept
 from rmm_bench.options import agent_option, disturb_option, disturbance_opts, env_opt_option, parse_env_opts
+from rmm_bench.run_checks import (
+    ENV_OPTIONS,
+    env_arguments,
+    env_default,
+    env_parameters,
+    parse_agent_opts,
+    resolve_agents,
+)
+from rmm_bench.run_command import cmd_run, cmd_sweep
 from rmm_envs.catalog import env_help
+from rmm_envs.clocks import make_clock
 from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL
+from rmm_guardians.registry import guardian_set
 
 __all__ = [
     "DEFAULT_ENV",
@@ -131,8 +144,6 @@ def run_parser(description: str | None = None) -> argparse.ArgumentParser:
     """``rmm-bench run`` (also ``rmm-bench`` with no subcommand); ``description``: the help's text
     (default: :mod:`rmm_bench.run_command`'s)."""
     if description is None:
-        from rmm_bench import run_command
-
         description = run_command.__doc__
     p = argparse.ArgumentParser(
         prog="rmm-bench run",
@@ -187,17 +198,6 @@ def _check_counts(args) -> None:
 
 
 def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
-    from rmm_bench.config import parse_shard
-    from rmm_bench.run_checks import (
-        ENV_OPTIONS,
-        env_arguments,
-        env_default,
-        env_parameters,
-        parse_agent_opts,
-        resolve_agents,
-    )
-    from rmm_guardians.registry import guardian_set
-
     classes = resolve_agents(args.agent)
     agents = list(classes)
     agent_kwargs = parse_agent_opts(args.agent_opt or [], agents)
@@ -249,14 +249,10 @@ def _config(args, clock: str, latencies: tuple[float, ...] = ()) -> BenchConfig:
 def parse_run(argv: list[str], description: str | None = None) -> BenchConfig:
     args = run_parser(description).parse_args(argv)
     _check_counts(args)
-    from rmm_envs.clocks import make_clock
-
     try:
         make_clock(args.clock)
     except ValueError as e:
         raise ValueError(f"--clock {args.clock}: {e}") from None
-    from rmm_bench.config import parse_shard
-
     args.shard = None if args.shard is None else "/".join(map(str, parse_shard(args.shard)))
     return _config(args, args.clock)
 
@@ -281,16 +277,11 @@ def parse_sweep(argv: list[str], disturbance_swept: bool = False) -> BenchConfig
 
 def run_cmd(argv: list[str]) -> int:
     """``rmm-bench run`` (and ``rmm-bench`` with no subcommand); ``argv`` is recorded with the run."""
-    from rmm_bench.run_command import cmd_run
-
     return cmd_run(parse_run(argv), argv)
 
 
 def sweep_cmd(argv: list[str]) -> int:
     """``rmm-bench sweep``: over latencies, or over a disturbance's levels (:mod:`rmm_bench.disturb_sweep`)."""
-    from rmm_bench.disturb_sweep import cmd_disturbance_sweep, split_swept
-    from rmm_bench.run_command import cmd_sweep
-
     rest, swept = split_swept(argv)
     if swept is not None:
         return cmd_disturbance_sweep(parse_sweep(rest, disturbance_swept=True), swept, ["sweep", *argv])

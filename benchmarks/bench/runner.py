@@ -48,6 +48,7 @@ import time
 import warnings
 from dataclasses import dataclass
 
+import gymnasium as gym
 import numpy as np
 
 from rmm_bench.config import (
@@ -72,8 +73,10 @@ from rmm_bench.episode_columns import (
     _traceback_text,
     is_timing_stat,
 )
+from rmm_envs.env_plugins import EnvUnavailable, resolve_env_id
 from rmm_envs.starts import start_fingerprint
 from rmm_envs.user_modules import search_user_folders
+from rmm_guardians import make_guardian
 
 __all__ = [
     "TRACEBACK_CHARS",
@@ -143,10 +146,6 @@ def _env(env_id: str, env_kwargs: dict):
     :class:`EnvUnavailable`: a failure of the run, not of the guardian (the parent made it)."""
     key = ("env", env_id, json.dumps(env_kwargs, sort_keys=True))
     if key not in _CACHE:
-        import gymnasium as gym
-
-        from rmm_envs.env_plugins import EnvUnavailable, resolve_env_id
-
         try:
             _CACHE[key] = gym.make(resolve_env_id(env_id), **env_kwargs)
         except EnvUnavailable as e:
@@ -180,8 +179,6 @@ def _guardian(task: EpisodeTask):
     and showed them there, once per run; every worker process would repeat them."""
     key = _guardian_key(task)
     if key not in _CACHE:
-        from rmm_guardians import make_guardian
-
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             guardian = make_guardian(task.agent, env_id=task.run.env_id, **task.guardian_kwargs())
@@ -323,8 +320,6 @@ def play_episode(task: EpisodeTask, env=None, observer=None) -> EpisodeRecord:
                 raise EpisodeTimeout("episode time limit exceeded")
         fields.update(_statistics(run.env_id, info))
     except (Exception, SystemExit) as e:  # recorded, the run goes on
-        from rmm_envs.env_plugins import EnvUnavailable
-
         env_raised = (  # the env's own code (its reset, step, driver) raised; a bad action it refuses is the guardian's
             env_call is not None
             and not isinstance(e, EpisodeTimeout)

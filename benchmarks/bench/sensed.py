@@ -23,6 +23,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from rmm_envs.machine_independent import matvec
+from rmm_envs.systems.quadrotor.rotations import quat_to_rot
 
 __all__ = ["HIT", "RAY", "RAY_FREE", "RaySegment", "draw_rays", "font", "line_width", "ray_segments", "text_size"]
 
@@ -88,8 +89,6 @@ def ray_segments(view, state, obs, layout, high=None) -> list[RaySegment]:
             end = window.px(x + d * math.cos(th + a), y + d * math.sin(th + a))
             out.append((window, start, end, bool(h)))
     elif top is not None and side is not None and s.shape[0] >= 7:  # the quadrotor: body-frame rays
-        from rmm_envs.systems.quadrotor.rotations import quat_to_rot
-
         R = np.asarray(quat_to_rot(s[3:7]), dtype=float)
         p = s[:3]
         for a, d, h in zip(angles.tolist(), dist.tolist(), hit.tolist(), strict=True):

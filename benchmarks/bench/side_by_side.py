@@ -19,9 +19,24 @@ import re
 from collections.abc import Iterator, Sequence
 
 import numpy as np
+from PIL import Image, ImageDraw
 
-__all__ = ["ENDED", "GAP", "frame_size", "replay_anchor", "shared_times", "side_by_side_frames", "side_by_side_name"]
+from rmm_bench.sensed import font, text_size
 
+__all__ = [
+    "ENDED",
+    "GAP",
+    "REPLAYS",
+    "frame_size",
+    "replay_anchor",
+    "shared_times",
+    "side_by_side_frames",
+    "side_by_side_name",
+]
+
+#: the folder of a results directory that holds its replays (``AGENT-episode-N.gif``, and
+#: :func:`side_by_side_name`'s ``A-vs-B-episode-N.gif``), which the results page shows and links to
+REPLAYS = "replays"
 #: pixels between two panels
 GAP = 8
 _GAP_COLOUR = (60, 60, 60)
@@ -90,10 +105,6 @@ def _ended_text(drawing) -> str:
 
 
 def _compose(panels: list[_Panel], t: float, header: int, size: int):
-    from PIL import Image, ImageDraw
-
-    from rmm_bench.sensed import font
-
     width = sum(p.drawing.recorder.frame_size[1] for p in panels) + GAP * (len(panels) - 1)
     height = header + max(p.drawing.recorder.frame_size[0] for p in panels)
     out = Image.new("RGB", (_even(width), _even(height)), _GAP_COLOUR)
@@ -135,8 +146,6 @@ def _compose(panels: list[_Panel], t: float, header: int, size: int):
 def side_by_side_frames(agents: Sequence[str], drawings: Sequence, every: int = 1) -> Iterator[np.ndarray]:
     """The side-by-side frames of ``drawings`` (one per agent, each holding one recorded episode),
     one per shared simulated time (:func:`shared_times`)."""
-    from rmm_bench.sensed import text_size
-
     span = max(d.times[-1] for d in drawings)
     for d in drawings:  # one time axis for every strip
         d.recorder.span = span if span > 0 else None
@@ -149,8 +158,6 @@ def side_by_side_frames(agents: Sequence[str], drawings: Sequence, every: int = 
 
 def frame_size(drawings: Sequence) -> tuple[int, int]:
     """``(height, width)`` of the side-by-side frames of ``drawings``."""
-    from rmm_bench.sensed import text_size
-
     size = text_size(min(d.recorder.frame_size[1] for d in drawings))
     width = sum(d.recorder.frame_size[1] for d in drawings) + GAP * (len(drawings) - 1)
     height = _even(round(size * 1.7)) + max(d.recorder.frame_size[0] for d in drawings)

@@ -9,6 +9,7 @@ import os
 import sqlite3
 from pathlib import Path
 
+import rmm_envs
 from rmm_bench.store_schema import (  # noqa: F401
     _INVOCATION_COLUMNS,
     _LATER_EPISODE_FIELDS,
@@ -116,8 +117,6 @@ class StoreConnection:
 
     def _refuse_newer(self, version: int) -> None:
         if version > SCHEMA_VERSION:
-            import rmm_envs
-
             raise ResultsDatabaseError(
                 f"{self.path} has results-store schema version {version}, newer than this rmm-bench "
                 f"({rmm_envs.__version__}) knows (versions up to {SCHEMA_VERSION}); open it with the newer "

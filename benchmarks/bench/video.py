@@ -9,19 +9,17 @@ replay never leaves half a video under the name asked for.
 
 from __future__ import annotations
 
-import functools
 import os
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
+from PIL import Image, ImageDraw
 
 from rmm_bench.outputs import check_output, publish
-
-if TYPE_CHECKING:
-    from rmm_envs.views import EpisodeRecorder
+from rmm_bench.sensed import draw_rays, ray_segments
+from rmm_envs.views import EpisodeRecorder
 
 __all__ = ["VIDEO_SUFFIXES", "EpisodeDrawing", "check_outputs", "episode_path", "write_frames", "write_video"]
 
@@ -104,8 +102,6 @@ def write_video(frames: Iterable[np.ndarray], path: Path, fps: float) -> int:
             if writer is not None:
                 writer.close()
         else:
-            from PIL import Image
-
             images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
             n = len(images)
             if images:
@@ -126,8 +122,6 @@ def write_video(frames: Iterable[np.ndarray], path: Path, fps: float) -> int:
 
 def write_frames(frames: Iterable[np.ndarray], folder: Path) -> int:
     """One PNG per frame in ``folder`` (``frame_00000.png``, ...); the number written."""
-    from PIL import Image
-
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     n = 0
@@ -138,19 +132,14 @@ def write_frames(frames: Iterable[np.ndarray], folder: Path) -> int:
     return n
 
 
-@functools.cache
-def _recorder_class() -> type:
+class SharedSpanRecorder(EpisodeRecorder):
     """:class:`rmm_envs.views.EpisodeRecorder` whose strip may span a time set from outside
     (``span``: the longest episode of a side-by-side replay, so that the strips share one axis)."""
-    from rmm_envs.views import EpisodeRecorder
 
-    class SharedSpanRecorder(EpisodeRecorder):
-        span: float | None = None
+    span: float | None = None
 
-        def _span(self) -> float:
-            return self.span if self.span else super()._span()
-
-    return SharedSpanRecorder
+    def _span(self) -> float:
+        return self.span if self.span else super()._span()
 
 
 class EpisodeDrawing:
@@ -169,7 +158,7 @@ class EpisodeDrawing:
 
     def begin(self, env) -> None:
         if self.recorder is None or self.recorder.env is not env:
-            self.recorder = _recorder_class()(env, size=self.size)
+            self.recorder = SharedSpanRecorder(env, size=self.size)
         self.recorder.begin()  # a new episode on the same env: the recorder starts afresh
         space = getattr(env, "observation_space", None)
         self.layout = getattr(space, "layout", None)
@@ -196,10 +185,6 @@ class EpisodeDrawing:
 
     def frame(self, k: int) -> np.ndarray:
         """Frame ``k``: the recorder's, with the rays of the observation at ``k`` and the body over them."""
-        from PIL import Image, ImageDraw
-
-        from rmm_bench.sensed import draw_rays, ray_segments
-
         rec = self.recorder
         assert rec is not None
         frame = rec.frame(k)
