@@ -16,7 +16,7 @@ from rmm_envs.catalog import FORMER_IDS, current_id, stored_id
 
 
 def test_the_users_id_is_todays_id_for_the_circles_world_and_keys_stay_stable():
-    assert gym.spec("Dubins4DParallel-v0").entry_point == "rmm_envs.systems.dubins4d.env:make_parallel_env"
+    assert gym.spec("Dubins4DParallel-v0").entry_point == "rmm_envs.systems.dubins4d.env:parallel_env"
     assert gym.spec("Dubins4DGuarded-v0").entry_point == "rmm_envs.systems.dubins4d.env:Dubins4DGuardedEnv"
     # results stored before the ids settled keep their keys: the same stored id as then
     assert stored_id("Dubins4DParallel-v0") == "Dubins4DParallel-v0"

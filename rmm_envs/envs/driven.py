@@ -377,8 +377,10 @@ def parallel(
     **kwargs,
 ):
     """The non-blocking twin of :func:`guarded`: the same env under
-    :class:`rmm_envs.wrappers.NonBlockingStepping`.  ``base_step`` defaults to ``step_dt`` when
-    that is given, else to the env's own step; both given and different is a ``ValueError``."""
+    :class:`rmm_envs.wrappers.NonBlockingStepping` (what a system's ``parallel_env`` entry point
+    returns; a built-in system's is made by :func:`rmm_envs.envs.guarded.parallel_twin`).
+    ``base_step`` defaults to ``step_dt`` when that is given, else to the env's own step; both
+    given and different is a ``ValueError``."""
     step_dt = kwargs.get("step_dt")
     if base_step is not None and step_dt is not None and float(base_step) != float(step_dt):
         raise ValueError(

@@ -26,7 +26,7 @@ from rmm_envs.disturbances.hooks import Disturbable
 from rmm_envs.envs.base import LabelledEnvBase
 from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL, NonBlockingStepping
 
-__all__ = ["EPISODE_KEY", "GuardedEnv", "parallel_entry_point"]
+__all__ = ["EPISODE_KEY", "GuardedEnv", "parallel_twin"]
 
 #: The ``info`` key of the env's own episode statistics (Table I's), on the last step of an
 #: episode.  Not ``"episode"``: Gymnasium's ``RecordEpisodeStatistics`` and SB3's ``Monitor``
@@ -158,27 +158,28 @@ class GuardedEnv(Disturbable, LabelledEnvBase):
         }
 
 
-def parallel_entry_point(env_cls, env_id: str, base_step: float = BASE_STEP):
-    """The Gymnasium entry point of ``env_id``: the blocking ``env_cls`` (a class or any callable
-    returning the env) under :class:`rmm_envs.wrappers.NonBlockingStepping` (``time_accel``,
-    ``base_step``, default ``base_step``; ``clock``; every other keyword goes to ``env_cls``).
-    ``step_dt``, the blocking env's fixed step, is refused by name: under non-blocking stepping
-    each interval is ``elapsed * time_accel + base_step``, so a given ``step_dt`` would be
-    silently ignored."""
+def parallel_twin(blocking, env_id: str, base_step: float = BASE_STEP):
+    """``env_id``'s entry point (a system's ``parallel_env``): the non-blocking twin of the env
+    ``blocking`` makes (a blocking env's class, or a system's ``guarded_env``), as
+    :func:`rmm_envs.envs.driven.parallel` is the twin of :func:`~rmm_envs.envs.driven.guarded`.
+    The env is ``blocking(**kwargs)`` under :class:`rmm_envs.wrappers.NonBlockingStepping`
+    (``time_accel``, ``base_step``, default ``base_step``; ``clock``).  ``step_dt``, the blocking
+    env's fixed step, is refused by name: under non-blocking stepping each interval is
+    ``elapsed * time_accel + base_step``, so a given ``step_dt`` would be silently ignored."""
 
     default_base_step = base_step
 
-    def make_parallel_env(time_accel: float = TIME_ACCEL, base_step: float = default_base_step, clock=None, **kwargs):
+    def parallel_env(time_accel: float = TIME_ACCEL, base_step: float = default_base_step, clock=None, **kwargs):
         if "step_dt" in kwargs:
             raise ValueError(
                 f"{env_id} steps by elapsed * time_accel + base_step, so step_dt (the fixed step of the "
                 f"blocking env) does not apply; set base_step and time_accel instead, got "
                 f"step_dt={kwargs['step_dt']!r}"
             )
-        return NonBlockingStepping(env_cls(**kwargs), time_accel=time_accel, base_step=base_step, clock=clock)
+        return NonBlockingStepping(blocking(**kwargs), time_accel=time_accel, base_step=base_step, clock=clock)
 
-    make_parallel_env.__doc__ = (
-        f"Entry point of ``{env_id}``: :obj:`{env_cls.__name__}` under non-blocking "
-        "stepping (see :func:`rmm_envs.envs.guarded.parallel_entry_point`)."
+    parallel_env.__doc__ = (
+        f"Entry point of ``{env_id}``: :obj:`{blocking.__name__}` under non-blocking "
+        "stepping (see :func:`rmm_envs.envs.guarded.parallel_twin`)."
     )
-    return make_parallel_env
+    return parallel_env

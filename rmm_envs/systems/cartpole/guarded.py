@@ -49,7 +49,7 @@ each a folder (``rmm_envs/systems/cartpole``, ``rmm_envs/systems/pendulum``); th
 
 from __future__ import annotations
 
-from rmm_envs.envs.guarded import parallel_entry_point
+from rmm_envs.envs.guarded import parallel_twin
 from rmm_envs.envs.target_driver import TargetDriver, target_task_env
 
 __all__ = ["CARTPOLE_K", "driver", "guarded_env", "parallel_env"]
@@ -71,4 +71,4 @@ def guarded_env(clock=None, **kwargs):
 
 
 #: Entry point of ``CartPoleParallel-v0``: ``CartPoleGuarded-v0`` stepped non-blocking, one env step (0.02 s) per base step.
-parallel_env = parallel_entry_point(guarded_env, "CartPoleParallel-v0", 0.02)
+parallel_env = parallel_twin(guarded_env, "CartPoleParallel-v0", 0.02)

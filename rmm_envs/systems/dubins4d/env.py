@@ -149,7 +149,7 @@ from rmm_envs.catalog import system
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, whole
-from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
+from rmm_envs.envs.guarded import GuardedEnv, parallel_twin
 from rmm_envs.systems.dubins4d.dataset_hooks import Dubins4DDatasetHooks
 from rmm_envs.systems.dubins4d.driver import CLFDriver, DriverParams
 from rmm_envs.systems.dubins4d.dynamics import Dubins4D
@@ -396,4 +396,4 @@ class Dubins4DGuardedEnv(Dubins4DStarts, Dubins4DDatasetHooks, GuardedEnv):
         return _render.dubins4d_frame(self.scene, self._state, self._last_active, _HALF, size)
 
 
-make_parallel_env = parallel_entry_point(Dubins4DGuardedEnv, "Dubins4DParallel-v0")
+parallel_env = parallel_twin(Dubins4DGuardedEnv, "Dubins4DParallel-v0")

@@ -17,7 +17,7 @@ def spec() -> SystemSpec:
         scenes=("rmm_envs.systems.dubins4d.scene:Dubins4DScene",),
         envs={
             "guarded": "rmm_envs.systems.dubins4d.env:Dubins4DGuardedEnv",
-            "parallel": "rmm_envs.systems.dubins4d.env:make_parallel_env",
+            "parallel": "rmm_envs.systems.dubins4d.env:parallel_env",
         },
         driver="rmm_envs.systems.dubins4d.driver:CLFDriver",
         safe_default="rmm_envs.systems.dubins4d.dynamics:FullBraking",

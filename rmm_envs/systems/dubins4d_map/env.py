@@ -123,7 +123,7 @@ the same world under :class:`rmm_envs.wrappers.NonBlockingStepping` (each ``step
 advances ``elapsed * time_accel + base_step`` simulated seconds under the previous action), so
 ``rmm-bench --env Dubins4DMapParallel-v0`` runs guardians on the example map.  For your own
 map with ``rmm-bench``, register an id in a module that ``--agent module:Class`` imports:
-``gym.register("MyMap-v0", entry_point="rmm_envs.systems.dubins4d_map.env:make_parallel_env",
+``gym.register("MyMap-v0", entry_point="rmm_envs.systems.dubins4d_map.env:parallel_env",
 kwargs={"map": "my_map.json"})``.
 
 ## Speed
@@ -151,7 +151,7 @@ from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.catalog import system
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import draw_until, option_vector, rejection_sample
-from rmm_envs.envs.guarded import parallel_entry_point
+from rmm_envs.envs.guarded import parallel_twin
 from rmm_envs.systems.dubins4d.dynamics import wrap_angle
 from rmm_envs.systems.dubins4d.env import CONTROLS, KIND, Dubins4DGuardedEnv
 from rmm_envs.systems.dubins4d.starts import in_goal
@@ -159,7 +159,7 @@ from rmm_envs.systems.dubins4d_map.pymunk_world import PymunkWorld
 from rmm_envs.systems.dubins4d_map.scene import Dubins4DMapScene
 from rmm_envs.systems.dubins4d_map.shape_map import MapError, ShapeMap, load_map
 
-__all__ = ["Dubins4DMapEnv", "example_map_path", "make_parallel_env"]
+__all__ = ["Dubins4DMapEnv", "example_map_path", "parallel_env"]
 
 
 def example_map_path() -> str:
@@ -335,4 +335,4 @@ class Dubins4DMapEnv(Dubins4DGuardedEnv):
         return _render.map_frame(self.scene, self._state, self._last_active, self.map.start_box, size)
 
 
-make_parallel_env = parallel_entry_point(Dubins4DMapEnv, "Dubins4DMapParallel-v0")
+parallel_env = parallel_twin(Dubins4DMapEnv, "Dubins4DMapParallel-v0")

@@ -17,7 +17,7 @@ def spec() -> SystemSpec:
         scenes=("rmm_envs.systems.dubins4d_map.scene:Dubins4DMapScene",),
         envs={
             "guarded": "rmm_envs.systems.dubins4d_map.env:Dubins4DMapEnv",
-            "parallel": "rmm_envs.systems.dubins4d_map.env:make_parallel_env",
+            "parallel": "rmm_envs.systems.dubins4d_map.env:parallel_env",
         },
         driver="rmm_envs.systems.dubins4d.driver:CLFDriver",
         safe_default="rmm_envs.systems.dubins4d.dynamics:FullBraking",

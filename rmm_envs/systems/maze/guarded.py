@@ -131,7 +131,7 @@ from rmm_envs.catalog import system
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, whole
-from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
+from rmm_envs.envs.guarded import GuardedEnv, parallel_twin
 from rmm_envs.systems.dubins4d.dynamics import SERIES_COEFFICIENTS
 from rmm_envs.systems.maze.driver import PursuitDriver
 from rmm_envs.systems.maze.dynamics import Dubins3D
@@ -142,7 +142,7 @@ from rmm_envs.systems.maze.scene import MazeScene
 from rmm_envs.systems.maze.starts import MazeStarts
 from rmm_envs.worlds.bounds import MAX_MAZE_SIDE
 
-__all__ = ["CONTROLS", "Dubins3DMazeGuardedEnv", "TurnFromNearerWall", "make_parallel_env", "observation_layout"]
+__all__ = ["CONTROLS", "Dubins3DMazeGuardedEnv", "TurnFromNearerWall", "parallel_env", "observation_layout"]
 
 from rmm_envs.systems.maze.dynamics import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
 
@@ -380,4 +380,4 @@ class Dubins3DMazeGuardedEnv(MazeStarts, GuardedEnv):
         return cv.img
 
 
-make_parallel_env = parallel_entry_point(Dubins3DMazeGuardedEnv, "Dubins3DMazeParallel-v0")
+parallel_env = parallel_twin(Dubins3DMazeGuardedEnv, "Dubins3DMazeParallel-v0")

@@ -18,7 +18,7 @@ def spec() -> SystemSpec:
         envs={
             "plain": "rmm_envs.systems.maze.env:Dubins3DMazeEnv",
             "guarded": "rmm_envs.systems.maze.guarded:Dubins3DMazeGuardedEnv",
-            "parallel": "rmm_envs.systems.maze.guarded:make_parallel_env",
+            "parallel": "rmm_envs.systems.maze.guarded:parallel_env",
         },
         driver="rmm_envs.systems.maze.driver:PursuitDriver",
         safe_default="rmm_envs.systems.maze.observation:TurnFromNearerWall",

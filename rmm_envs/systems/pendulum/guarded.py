@@ -5,7 +5,7 @@ describes both), as ``InvertedPendulumGuarded-v0`` and its non-blocking twin
 
 from __future__ import annotations
 
-from rmm_envs.envs.guarded import parallel_entry_point
+from rmm_envs.envs.guarded import parallel_twin
 from rmm_envs.envs.target_driver import TargetDriver, target_task_env
 
 __all__ = ["PENDULUM_K", "driver", "guarded_env", "parallel_env"]
@@ -28,4 +28,4 @@ def guarded_env(clock=None, **kwargs):
 
 #: Entry point of ``InvertedPendulumParallel-v0``: ``InvertedPendulumGuarded-v0`` stepped non-blocking,
 #: one env step (0.04 s) per base step.
-parallel_env = parallel_entry_point(guarded_env, "InvertedPendulumParallel-v0", 0.04)
+parallel_env = parallel_twin(guarded_env, "InvertedPendulumParallel-v0", 0.04)

@@ -134,7 +134,7 @@ from rmm_envs.autonomy import GuardianActionSpace, ObservationBox
 from rmm_envs.catalog import system
 from rmm_envs.clocks import make_clock
 from rmm_envs.envs.base import check_arguments, finite, whole
-from rmm_envs.envs.guarded import GuardedEnv, parallel_entry_point
+from rmm_envs.envs.guarded import GuardedEnv, parallel_twin
 from rmm_envs.machine_independent import matvec, norm
 from rmm_envs.systems.quadrotor.closed_loop import ClosedLoopQuadrotor
 from rmm_envs.systems.quadrotor.control import (
@@ -161,7 +161,7 @@ from rmm_envs.systems.quadrotor.rotations import quat_to_rot
 from rmm_envs.systems.quadrotor.scene import QuadrotorCommandScene
 from rmm_envs.systems.quadrotor.starts import WAYPOINT_CLEARANCE, QuadrotorRoomStarts
 
-__all__ = ["CONTROLS", "QuadrotorRoomGuardedEnv", "make_parallel_env", "observation_layout"]
+__all__ = ["CONTROLS", "QuadrotorRoomGuardedEnv", "parallel_env", "observation_layout"]
 
 from rmm_envs.systems.quadrotor.control import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
 
@@ -387,4 +387,4 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, QuadrotorDatasetHooks, Guarde
     sim_time = property(lambda self: self._sim_time, doc="Simulated seconds since reset.")
 
 
-make_parallel_env = parallel_entry_point(QuadrotorRoomGuardedEnv, "QuadrotorRoomParallel-v0")
+parallel_env = parallel_twin(QuadrotorRoomGuardedEnv, "QuadrotorRoomParallel-v0")

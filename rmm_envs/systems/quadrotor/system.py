@@ -21,7 +21,7 @@ def spec() -> SystemSpec:
         envs={
             "plain": "rmm_envs.systems.quadrotor.env:QuadrotorRoomEnv",
             "guarded": "rmm_envs.systems.quadrotor.guarded:QuadrotorRoomGuardedEnv",
-            "parallel": "rmm_envs.systems.quadrotor.guarded:make_parallel_env",
+            "parallel": "rmm_envs.systems.quadrotor.guarded:parallel_env",
         },
         driver="rmm_envs.systems.quadrotor.driver:WaypointPilot",
         safe_default="rmm_envs.systems.quadrotor.control:HoverAndLevel",
