@@ -105,7 +105,7 @@ from rmm_envs.envs.given import (
     given_failure,
     given_safe_default,
 )
-from rmm_envs.envs.guarded import GuardedEnv
+from rmm_envs.envs.guarded import GuardedEnv, Motion
 from rmm_envs.envs.simulator import (
     SIMULATOR_HOOKS,
     SimulatorHook,
@@ -294,20 +294,21 @@ class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
             if callable(begin):
                 begin(rng)
 
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        self.check_options(options)
+    def begin(self, options: dict) -> None:
         obs, _ = self.env.reset(seed=int(self.np_random.integers(2**31)))
         self._begin(np.random.default_rng(int(self.np_random.integers(2**63))))
         self._obs = obs
         self._carry = 0.0
-        self.scene = _RUNNING  # an episode runs (risk_scene gives the adapter's scene)
-        self.begin_episode()
-        self.begin_statistics()
-        self.start_disturbances(seed)
-        info = {"nominal_control": self.update_nominal()}
-        self.clock.start()
-        return self.sensed(obs, 0.0), info
+        self.scene = _RUNNING  # type: ignore[assignment]  # an episode runs (risk_scene gives the adapter's scene)
+        return None  # the env shows its observation, not a state
+
+    def observe(self):
+        return self.sensed(self._obs, self._sim_time)
+
+    def render_step(self) -> None:
+        """In ``render_mode="human"`` the frames this env shows (the base env's own window shows itself)."""
+        if self.render_mode == "human" and self._own_window:
+            self.render()
 
     def driver_control(self) -> np.ndarray:
         return self._acts.control(
@@ -317,14 +318,15 @@ class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
     def _failed(self, obs, terminated: bool) -> bool:
         return bool(self._failure(obs)) if self._failure is not None else bool(terminated)
 
-    def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
-        self.check_interval(duration)
+    def advance(self, duration: float, active: bool, control) -> Motion:
+        """The base env's steps of ``dt`` that fit in the interval (the remainder carried to the
+        next), under one held action, stopped at the first failure or success."""
         self._carry += duration
         n = int(math.floor(self._carry / self.dt + 1e-9))
         self._carry = max(0.0, self._carry - n * self.dt)
-        ctrl = control if active else self._nominal
+        ctrl = np.asarray(control if active else self._nominal, dtype=float)
         if self.moves_plant:  # the actuators' control (sim time at the interval's start)
-            ctrl = self.actuated(np.asarray(ctrl, float), self._sim_time)
+            ctrl = self.actuated(ctrl, self._sim_time)
         action = self._acts.action(ctrl)
         outcome, reward, ended = None, 0.0, False
         for _ in range(n):
@@ -338,10 +340,7 @@ class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
             ended = terminated or truncated
             if outcome is not None or ended:
                 break
-        self.count_interval(duration, active, compute_time)
-        info: dict = {}
-        terminated, truncated = self.end_interval(outcome, reward, info, truncate=ended)
-        return self.sensed(self._obs, self._sim_time), reward, terminated, truncated, info
+        return Motion(outcome, ctrl, reward=reward, ended=ended)
 
     def final_speed(self):
         return None

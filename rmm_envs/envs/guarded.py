@@ -7,31 +7,54 @@ the driver's intended control ``info["nominal_control"]`` (applied exactly where
 controls), the per-step safety cost ``info["cost"]`` and the paper's Table I statistics
 (``info["episode_stats"]``) with the episode's end.
 
-A subclass sets ``step_dt``, ``max_episode_sim_time``, ``clock`` and ``action_space``, calls
-:meth:`~GuardedEnv.begin_statistics` and :meth:`~GuardedEnv.update_nominal` at ``reset`` and,
-in ``simulate``, :meth:`~GuardedEnv.check_interval`, :meth:`~GuardedEnv.count_interval` and
-:meth:`~GuardedEnv.end_interval`; it reports :meth:`~GuardedEnv.final_speed` and
-:meth:`~GuardedEnv.driver_control`.  Each piece in detail: :class:`GuardedEnv`.
+``reset`` and ``simulate`` are written once, here, for every guarded env (the built-ins' and a
+user's simulator's, :class:`rmm_envs.envs.driven.DrivenGuardedEnv`); a system supplies its parts
+(:meth:`~GuardedEnv.begin`, :meth:`~GuardedEnv.begin_plant`, :meth:`~GuardedEnv.advance`
+returning a :class:`Motion`, :meth:`~GuardedEnv.observe`, :meth:`~GuardedEnv.driver_control`,
+:meth:`~GuardedEnv.final_speed`) and sets ``step_dt``, ``max_episode_sim_time``, ``clock`` and
+``action_space``.  Each piece: :class:`GuardedEnv`.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import cast
 
+import gymnasium as gym
 import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace, parse
+from rmm_envs.clocks import Clock
 from rmm_envs.disturbances.hooks import Disturbable
 from rmm_envs.envs.base import LabelledEnvBase
 from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL, NonBlockingStepping
 
-__all__ = ["EPISODE_KEY", "GuardedEnv", "parallel_twin"]
+__all__ = ["EPISODE_KEY", "REWARDS", "GuardedEnv", "Motion", "parallel_twin"]
 
 #: The ``info`` key of the env's own episode statistics (Table I's), on the last step of an
 #: episode.  Not ``"episode"``: Gymnasium's ``RecordEpisodeStatistics`` and SB3's ``Monitor``
 #: write that key themselves (the first refuses to run when it is taken).
 EPISODE_KEY = "episode_stats"
+
+#: The reward of an interval by its outcome, where the system gives none of its own
+REWARDS: dict[str | None, float] = {None: 0.0, "collision": -1.0, "goal": 1.0}
+
+
+@dataclass(frozen=True)
+class Motion:
+    """What one interval did (:meth:`GuardedEnv.advance`): its ``outcome`` (``"collision"``,
+    ``"goal"`` or ``None``), the ``control`` the plant received (after the actuators), the true
+    ``state`` at its end (with it, ``info`` shows ``sim_time``, ``state``, ``active`` and
+    ``control``; ``None`` where the env shows no state: a user's simulator), its ``reward``
+    (``None``: :data:`REWARDS` of the outcome) and ``ended`` (the simulator ended the episode
+    without an outcome)."""
+
+    outcome: str | None
+    control: np.ndarray
+    state: np.ndarray | None = None
+    reward: float | None = None
+    ended: bool = False
 
 
 class GuardedEnv(Disturbable, LabelledEnvBase):
@@ -65,6 +88,7 @@ class GuardedEnv(Disturbable, LabelledEnvBase):
 
     step_dt: float
     max_episode_sim_time: float
+    clock: Clock
 
     def step(self, action):
         compute = self.clock.elapsed()
@@ -73,8 +97,73 @@ class GuardedEnv(Disturbable, LabelledEnvBase):
         self.clock.start()
         return out
 
-    def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):  # pragma: no cover
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Seed the episode; the system's :meth:`begin` (world, start, driver); zero the
+        statistics; draw the disturbances' episode and apply the plant's parameters
+        (:meth:`begin_plant`); the driver's first control; then observe and start the agent's
+        clock."""
+        gym.Env.reset(self, seed=seed)
+        start = self.begin(self.check_options(options))
+        self.begin_statistics()
+        self.begin_episode()
+        self._last_active = False
+        self._last_control = np.zeros(len(cast(GuardianActionSpace, self.action_space).control_low))
+        self.start_disturbances(seed)
+        self.begin_plant(self.plant_parameters())
+        info: dict = {} if start is None else {"sim_time": 0.0, "state": np.array(start, dtype=float)}
+        info["nominal_control"] = self.update_nominal()
+        obs = self.observe()
+        self.render_step()
+        self.clock.start()
+        return obs, info
+
+    def begin(self, options: dict) -> np.ndarray | None:  # pragma: no cover - each system implements it
+        """The system's part of ``reset``: draw (or take from ``options``, already checked) the
+        episode's world and start, set ``self.scene``, reset the driver; return the true start
+        state (``info["state"]``; ``None`` where the env shows none).  ``self.np_random`` is
+        seeded."""
         raise NotImplementedError
+
+    def begin_plant(self, parameters: dict[str, float] | None) -> None:
+        """Apply the plant's parameters for this episode (a model mismatch drawn by the
+        disturbances; ``None``: the nominal plant).  Default: nothing to apply."""
+
+    def advance(self, duration: float, active: bool, control) -> Motion:  # pragma: no cover - each system
+        """The system's physics over one interval of ``duration`` seconds: the driver's control
+        ``self._nominal`` if not ``active``, else ``control`` (validated by the action space),
+        through the actuators' disturbances; the plant moved to the interval's end or its first
+        contact or arrival."""
+        raise NotImplementedError
+
+    def observe(self):  # pragma: no cover - each system implements it
+        """The observation of the current state, through the sensors' disturbances."""
+        raise NotImplementedError
+
+    def render_step(self) -> None:
+        """Show the frame after ``reset`` and each step in ``render_mode="human"``."""
+        if self.render_mode == "human":
+            self.render()
+
+    def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
+        """Advance by ``duration`` seconds under one held control (``active``: the guardian's
+        ``control``; else the driver's, chosen at the interval's start); ``compute_time`` is the
+        agent's time charged to it (statistics only).  Used by :meth:`step` and the non-blocking
+        wrapper; returns the usual 5-tuple."""
+        self.check_interval(duration)
+        moved = self.advance(duration, bool(active), control)
+        self.count_interval(duration, active, compute_time)
+        self._last_active = bool(active)
+        self._last_control = moved.control
+        reward = REWARDS[moved.outcome] if moved.reward is None else moved.reward
+        info: dict = {}
+        if moved.state is not None:  # an env that shows its state shows the interval too
+            info.update(
+                sim_time=self._sim_time, state=moved.state.copy(), active=bool(active), control=moved.control.copy()
+            )
+        terminated, truncated = self.end_interval(moved.outcome, reward, info, truncate=moved.ended)
+        obs = self.observe()
+        self.render_step()
+        return obs, reward, terminated, truncated, info
 
     def begin_statistics(self) -> None:
         """Zero the simulated time and the episode's counters (call at ``reset``)."""

@@ -149,7 +149,7 @@ from rmm_envs.catalog import system
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, whole
-from rmm_envs.envs.guarded import GuardedEnv, parallel_twin
+from rmm_envs.envs.guarded import GuardedEnv, Motion, parallel_twin
 from rmm_envs.systems.dubins4d.dataset_hooks import Dubins4DDatasetHooks
 from rmm_envs.systems.dubins4d.driver import CLFDriver, DriverParams
 from rmm_envs.systems.dubins4d.dynamics import Dubins4D
@@ -157,7 +157,8 @@ from rmm_envs.systems.dubins4d.plant import plant_model
 from rmm_envs.systems.dubins4d.scene import Dubins4DScene, observation, observation_layout
 from rmm_envs.systems.dubins4d.starts import HALF as _HALF
 from rmm_envs.systems.dubins4d.starts import STARTS, Dubins4DStarts
-from rmm_envs.systems.dubins4d.step import advance, nominal_controls
+from rmm_envs.systems.dubins4d.step import advance as advance_batch
+from rmm_envs.systems.dubins4d.step import nominal_controls
 
 __all__ = ["Dubins4DGuardedEnv", "Dubins4DScene", "observation", "observation_layout", "plant_model"]
 
@@ -271,57 +272,42 @@ class Dubins4DGuardedEnv(Dubins4DStarts, Dubins4DDatasetHooks, GuardedEnv):
         self._state = np.zeros(4)
         self._last_active = False
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
+    def begin(self, options: dict) -> np.ndarray:
         obstacles, state, goal = self.generate_start(self.np_random, options)
         if self.starts == "avoidable":
             obstacles, state, goal = self._avoidable_start(obstacles, state, goal, options)
         self._start_episode(obstacles, state, goal)
-        self.start_disturbances(seed)
-        self._plant, self._gains = plant_model(self.dynamics, self.plant_parameters())
-        obs = self._observe()
-        info = {"sim_time": 0.0, "state": self._state.copy(), "nominal_control": self.update_nominal()}
-        if self.render_mode == "human":
-            self.render()
-        self.clock.start()
-        return obs, info
+        return self._state
+
+    def begin_plant(self, parameters: dict[str, float] | None) -> None:
+        self._plant, self._gains = plant_model(self.dynamics, parameters)
 
     def _start_episode(self, obstacles: np.ndarray, state: np.ndarray, goal: np.ndarray) -> None:
         self.scene = Dubins4DScene(obstacles, goal, self.dynamics, self.n_rays, self.ray_length)
         self._circles = np.vstack([self.scene.obstacles, self.scene.goal[None, :]])
         self._state = state
-        self.begin_statistics()
-        self.begin_episode()
-        self._last_active = False
-        self._last_control = np.zeros(2)
         self.driver.reset()  # no warm start from an earlier episode: results depend on the seed only
 
     # ------------------------------------------------------------------ stepping
-    def _observe(self) -> np.ndarray:
+    def observe(self) -> np.ndarray:
         assert self.scene is not None  # set by reset, before any observation
         return self.sensed(self.scene.observe(self._state[None, :], self._sim_time)[0], self._sim_time)
 
-    def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
-        """Advance the world by ``duration`` seconds under one held control.
-
-        ``active=False`` lets the driver choose the control at the start of the interval;
-        otherwise ``control = (u1, u2)`` (already validated) is applied.  ``compute_time`` is the
-        agent's thinking time attributed to this step (statistics only).  Used by :meth:`step`
-        and by the non-blocking wrapper; returns the usual 5-tuple.
-        """
-        self.check_interval(duration)
+    def advance(self, duration: float, active: bool, control) -> Motion:
+        """The closed-form path under one held control (``(u1, u2)``), cut at its first contact
+        with an obstacle or the goal (see the module docstring)."""
         if duration == self.step_dt:
             times = self._step_times
         else:
             times = np.linspace(0.0, float(duration), self.n_path_points)
         controls = np.zeros((1, 2)) if control is None else np.asarray(control, dtype=float).reshape(1, 2)
-        act, plant, drift, applied = np.array([bool(active)]), self.dynamics, None, None
+        act, plant, drift, applied = np.array([active]), self.dynamics, None, None
         if self.moves_plant:  # the actuators' control, the plant's gains, the drift
             applied = self.actuated(controls[0] if active else self._nominal, self._sim_time)
             act, plant, controls = np.array([True]), self._plant, (applied * self._gains)[None, :]
             rate = self.drift(self._sim_time, 4)
             drift = None if rate is None else rate[None, :]
-        nxt, u, hit_obst, hit_goal = advance(
+        nxt, u, hit_obst, hit_goal = advance_batch(
             plant,
             self._nominal[None, :],
             self._state[None, :],
@@ -333,30 +319,13 @@ class Dubins4DGuardedEnv(Dubins4DStarts, Dubins4DDatasetHooks, GuardedEnv):
             drift,
         )
         hit_obst, hit_goal = float(hit_obst[0]), float(hit_goal[0])
-        u = u[0] if applied is None else applied
-
-        self.count_interval(duration, active, compute_time)
         self._state = nxt[0]
-        self._last_active = bool(active)
-        self._last_control = u
-
         outcome = None
-        reward = 0.0
         if math.isfinite(hit_obst) and hit_obst <= hit_goal:
-            outcome, reward = "collision", -1.0
+            outcome = "collision"
         elif math.isfinite(hit_goal):
-            outcome, reward = "goal", 1.0
-        info = {
-            "sim_time": self._sim_time,
-            "state": self._state.copy(),
-            "active": bool(active),
-            "control": u.copy(),
-        }
-        terminated, truncated = self.end_interval(outcome, reward, info)
-        obs = self._observe()
-        if self.render_mode == "human":
-            self.render()
-        return obs, reward, terminated, truncated, info
+            outcome = "goal"
+        return Motion(outcome, u[0] if applied is None else applied, self._state)
 
     def final_speed(self) -> float:
         return float(self._state[3])

@@ -131,7 +131,7 @@ from rmm_envs.catalog import system
 from rmm_envs.clocks import Clock, make_clock
 from rmm_envs.envs import _render
 from rmm_envs.envs.base import check_arguments, finite, whole
-from rmm_envs.envs.guarded import GuardedEnv, parallel_twin
+from rmm_envs.envs.guarded import GuardedEnv, Motion, parallel_twin
 from rmm_envs.systems.dubins4d.dynamics import SERIES_COEFFICIENTS
 from rmm_envs.systems.maze.driver import PursuitDriver
 from rmm_envs.systems.maze.dynamics import Dubins3D
@@ -251,9 +251,8 @@ class Dubins3DMazeGuardedEnv(MazeStarts, GuardedEnv):
         self._rays = np.zeros(N_RAYS)
         self._last_active = False
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        maze, state, goal, waypoints = self._start(self.check_options(options))
+    def begin(self, options: dict) -> np.ndarray:
+        maze, state, goal, waypoints = self._start(options)
         self.scene = MazeScene(maze, self.dynamics, N_RAYS)
         self._walls = np.ascontiguousarray(maze.walls)
         self._geom = (self._walls, float(maze.half), float(maze.width), float(maze.height))
@@ -262,19 +261,14 @@ class Dubins3DMazeGuardedEnv(MazeStarts, GuardedEnv):
         self.driver.reset(waypoints)
         self._state = state.copy()
         self._state[2] = (self._state[2] + math.pi) % (2 * math.pi) - math.pi
-        self.begin_statistics()
-        self._last_active = False
-        self._last_control = np.zeros(1)
-        self.begin_episode()
-        self.start_disturbances(seed)
-        plant = self.plant_parameters() or self.disturbance_parameters()
+        return self._state
+
+    def begin_plant(self, parameters: dict[str, float] | None) -> None:
+        plant = parameters or self.disturbance_parameters()
         self._plant_speed, self._turn_gain = plant["speed"], plant["turn_gain"]
-        info = {"sim_time": 0.0, "state": self._state.copy(), "nominal_control": self.update_nominal()}
-        self.clock.start()
-        return self._observe(), info
 
     # ------------------------------------------------------------------ stepping
-    def _observe(self) -> np.ndarray:
+    def observe(self) -> np.ndarray:
         x, y, psi = self._state
         maze_rays(*self._geom, x, y, psi, N_RAYS, self._rays)
         obs = np.empty(N_RAYS + 3, dtype=np.float32)
@@ -282,12 +276,9 @@ class Dubins3DMazeGuardedEnv(MazeStarts, GuardedEnv):
         obs[N_RAYS], obs[N_RAYS + 1], obs[N_RAYS + 2] = self.goal[0] - x, self.goal[1] - y, psi
         return self.sensed(obs, self._sim_time)
 
-    def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
-        """Advance the world by ``duration`` seconds under one held turn rate: the driver's
-        (chosen at the start of the interval) when ``active`` is false, else ``control[0]``
-        (already validated).  ``compute_time`` is the agent's time charged to this step
-        (statistics only).  Used by :meth:`step` and the non-blocking wrapper."""
-        self.check_interval(duration)
+    def advance(self, duration: float, active: bool, control) -> Motion:
+        """The car's closed-form path under one held turn rate (``control[0]``, clipped to
+        ``u_max``), cut at its first wall contact or arrival."""
         if active:
             u = float(np.asarray(control, dtype=float).reshape(-1)[0])
             u = min(max(u, -self.dynamics.u_max), self.dynamics.u_max)
@@ -311,20 +302,9 @@ class Dubins3DMazeGuardedEnv(MazeStarts, GuardedEnv):
             path[:, :2] += drift[None, :2] * np.linspace(0.0, float(duration), self.n_path_points)[:, None]
         hit = maze_path_hit(*self._geom, path)
         reached = not hit and path_reaches_disc(path, self.goal[0], self.goal[1], self.goal[2])
-        self.count_interval(duration, active, compute_time)
         self._state = path[-1].copy()
         self._state[2] = (self._state[2] + math.pi) % (2 * math.pi) - math.pi
-        self._last_active = bool(active)
-        self._last_control = np.array([u])
-        outcome, reward = ("collision", -1.0) if hit else ("goal", 1.0) if reached else (None, 0.0)
-        info = {
-            "sim_time": self._sim_time,
-            "state": self._state.copy(),
-            "active": bool(active),
-            "control": self._last_control.copy(),
-        }
-        terminated, truncated = self.end_interval(outcome, reward, info)
-        return self._observe(), reward, terminated, truncated, info
+        return Motion("collision" if hit else "goal" if reached else None, np.array([u]), self._state)
 
     def final_speed(self) -> float:
         return self.dynamics.speed

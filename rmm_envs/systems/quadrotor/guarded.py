@@ -127,14 +127,13 @@ from __future__ import annotations
 
 import math
 
-import gymnasium as gym
 import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace, ObservationBox
 from rmm_envs.catalog import system
 from rmm_envs.clocks import make_clock
 from rmm_envs.envs.base import check_arguments, finite, whole
-from rmm_envs.envs.guarded import GuardedEnv, parallel_twin
+from rmm_envs.envs.guarded import GuardedEnv, Motion, parallel_twin
 from rmm_envs.machine_independent import matvec, norm
 from rmm_envs.systems.quadrotor.closed_loop import ClosedLoopQuadrotor
 from rmm_envs.systems.quadrotor.control import (
@@ -251,9 +250,7 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, QuadrotorDatasetHooks, Guarde
         self._wrench = np.empty(4)
         self.goal = np.zeros(3)
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        gym.Env.reset(self, seed=seed)
-        options = self.check_options(options)
+    def begin(self, options: dict) -> np.ndarray:
         room, state, waypoints = self.draw_start(options)
         self._build(room)
         self.set_state(state)
@@ -262,18 +259,20 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, QuadrotorDatasetHooks, Guarde
         self.goal = waypoints[-1].copy()
         self._physics_steps = 0
         self._gap, self._gap_at = -math.inf, state[:3].copy()  # no clearance known yet
-        self.begin_statistics()
-        self.begin_episode()
-        self.start_disturbances(seed)
+        self._observed = state  # the start as drawn (PyBullet's copy of it may differ in the last bit)
+        return state
+
+    def begin_plant(self, parameters: dict[str, float] | None) -> None:
         self._mass = self.params.mass
-        if (plant := self.plant_parameters()) is not None:
-            self._mass = plant["mass"]
+        if parameters is not None:
+            self._mass = parameters["mass"]
             self.p.changeDynamics(
-                self.body, -1, mass=plant["mass"], linearDamping=plant["linear_damping"], physicsClientId=self.client
+                self.body,
+                -1,
+                mass=parameters["mass"],
+                linearDamping=parameters["linear_damping"],
+                physicsClientId=self.client,
             )
-        info = {"sim_time": 0.0, "state": state.copy(), "nominal_control": self.update_nominal()}
-        self.clock.start()
-        return self._observe(state), info
 
     # ------------------------------------------------------------------ stepping
     def rays(self) -> np.ndarray:
@@ -300,11 +299,13 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, QuadrotorDatasetHooks, Guarde
         out[_GOAL] = (c * dx + sn * dy, -sn * dx + c * dy, self.goal[2] - s[2])
         return self.sensed(out, self._sim_time)
 
-    def simulate(self, duration: float, active: bool, control, compute_time: float = 0.0):
-        """Advance the world by ``duration`` seconds under one held command: the pilot's (chosen
-        at the start of the interval) when ``active`` is false, else ``control`` (already
-        validated).  ``compute_time``: the agent's time charged to this step (statistics)."""
-        self.check_interval(duration)
+    def observe(self) -> np.ndarray:
+        return self._observe(self._observed)
+
+    def advance(self, duration: float, active: bool, control) -> Motion:
+        """PyBullet's steps of ``params.dt`` up to the interval's end under one held command
+        (the pilot's, or ``control`` clipped to the command box), stopped at the first contact
+        or arrival."""
         p, c, body, par = self.p, self.client, self.body, self.params
         s = self.get_state()
         if active:
@@ -358,11 +359,8 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, QuadrotorDatasetHooks, Guarde
             if (pos[0] - gx) ** 2 + (pos[1] - gy) ** 2 + (pos[2] - gz) ** 2 < r2:
                 reached = True
                 break
-        self.count_interval(duration, active, compute_time)
-        outcome, reward = ("collision", -1.0) if hit else ("goal", 1.0) if reached else (None, 0.0)
-        info = {"sim_time": self._sim_time, "state": s.copy(), "active": bool(active), "control": cmd.copy()}
-        terminated, truncated = self.end_interval(outcome, reward, info)
-        return self._observe(s), reward, terminated, truncated, info
+        self._observed = s
+        return Motion("collision" if hit else "goal" if reached else None, cmd, s)
 
     def driver_control(self) -> np.ndarray:
         return self.pilot.command(self.get_state())
