@@ -21,8 +21,8 @@ def env_pages() -> dict:
 
     return {
         page.path: (
-            system.envs[page.kinds[0]].partition(":")[0],
-            f"{page.title}: " + ", ".join(f"`{i}`" for i in system.ids(page.kinds)),
+            system.envs[page.variants[0]].partition(":")[0],
+            f"{page.title}: " + ", ".join(f"`{i}`" for i in system.ids(page.variants)),
             page.figure,
         )
         for system in SYSTEMS

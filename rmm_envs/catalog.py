@@ -26,8 +26,8 @@ import gymnasium as gym
 __all__ = [
     "ENTRY_POINT_GROUP",
     "FORMER_IDS",
-    "GUARDED_KINDS",
-    "KINDS",
+    "GUARDED_VARIANTS",
+    "ENV_VARIANTS",
     "SYSTEMS",
     "DocPage",
     "SystemSpec",
@@ -45,10 +45,10 @@ __all__ = [
     "system_of_env",
 ]
 
-#: The three kinds of env a system may have, and the suffix of each one's id.
-KINDS = {"plain": "-v0", "guarded": "Guarded-v0", "parallel": "Parallel-v0"}
-#: The kinds with a built-in driver and a guardian action (the parallel-autonomy contract).
-GUARDED_KINDS = ("guarded", "parallel")
+#: The three env variants a system may have, and the suffix of each one's id.
+ENV_VARIANTS = {"plain": "-v0", "guarded": "Guarded-v0", "parallel": "Parallel-v0"}
+#: The env variants with a built-in driver and a guardian action (the parallel-autonomy contract).
+GUARDED_VARIANTS = ("guarded", "parallel")
 #: The entry-point group every system is registered through (:func:`add_system`).
 ENTRY_POINT_GROUP = "rmm_envs.systems"
 #: The distribution of this package: its systems come first in the table.
@@ -67,11 +67,11 @@ def load_ref(ref: str):
 @dataclass(frozen=True)
 class DocPage:
     """A generated docs page: ``path`` under docs/, the module whose docstring it renders (the
-    entry point of its first kind), its title (followed by the ids of ``kinds``), a figure."""
+    entry point of its first variant), its title (followed by the ids of ``variants``), a figure."""
 
     path: str
     title: str
-    kinds: tuple[str, ...]
+    variants: tuple[str, ...]
     figure: str | None = None
 
 
@@ -80,21 +80,21 @@ class SystemSpec:
     """One system.  References are ``"module:attribute"`` strings (imported only when used, so
     listing a system needs none of its optional dependencies)."""
 
-    name: str  #: ids are ``name + KINDS[kind]``
+    name: str  #: ids are ``name + ENV_VARIANTS[variant]``
     blurb: str  #: one line for the docs' environment list
     dynamics: str
     scenes: tuple[str, ...]  #: the RiskScene of each env (plain control first)
-    envs: dict  #: kind -> entry point, for the kinds the system has
+    envs: dict  #: variant -> entry point, for the variants the system has
     driver: str | None = None  #: the built-in driver of its guarded envs
     safe_default: str | None = None  #: the SafeDefault its guardian action space carries
     guardians: tuple[str, ...] = ()  #: the built-in guardians that apply to its guarded envs
     vector: str | None = None  #: vector entry point of its blocking guardian env
     extra: str | None = None  #: the package extra its envs need
     pages: tuple[DocPage, ...] = ()
-    #: kind -> the id that kind's results, datasets and fingerprints are keyed under, where it is
+    #: variant -> the id that variant's results, datasets and fingerprints are keyed under, where it is
     #: not today's id (the id it was first recorded under; keys never change, so stored runs resume)
     stored: dict = field(default_factory=dict)
-    #: ids found in older records -> the kind they are today (read back, never registered)
+    #: ids found in older records -> the variant they are today (read back, never registered)
     former: dict = field(default_factory=dict)
     #: ``factory(env, size) -> View`` that draws its guarded envs (rmm_envs.views.view_for);
     #: ``None``: the env's own ``rgb_array`` frame
@@ -103,13 +103,13 @@ class SystemSpec:
     #: and leaving the env as it found it (rmm_envs.starts.assess_start); ``None``: not assessed
     doomed_test: str | None = None
 
-    def env_id(self, kind: str) -> str:
-        if kind not in self.envs:
-            raise KeyError(f"{self.name} has no {kind} env (it has {sorted(self.envs)})")
-        return self.name + KINDS[kind]
+    def env_id(self, variant: str) -> str:
+        if variant not in self.envs:
+            raise KeyError(f"{self.name} has no {variant} env (it has {sorted(self.envs)})")
+        return self.name + ENV_VARIANTS[variant]
 
-    def ids(self, kinds=tuple(KINDS)) -> tuple[str, ...]:
-        return tuple(self.name + KINDS[k] for k in kinds if k in self.envs)
+    def ids(self, variants=tuple(ENV_VARIANTS)) -> tuple[str, ...]:
+        return tuple(self.name + ENV_VARIANTS[k] for k in variants if k in self.envs)
 
     def make_safe_default(self, *args, **kwargs):
         """A new instance of the system's safe default (:attr:`safe_default`, the one place it is
@@ -133,19 +133,19 @@ FORMER_IDS: dict[str, str] = {}
 def _derive() -> None:
     """Refill :data:`_STORED` and :data:`FORMER_IDS` (in place) from :data:`SYSTEMS`."""
     _STORED.clear()
-    _STORED.update({s.env_id(kind): old for s in SYSTEMS for kind, old in s.stored.items()})
+    _STORED.update({s.env_id(variant): old for s in SYSTEMS for variant, old in s.stored.items()})
     FORMER_IDS.clear()
     FORMER_IDS.update({old: new for new, old in _STORED.items()})
-    FORMER_IDS.update({old: s.env_id(kind) for s in SYSTEMS for old, kind in s.former.items()})
+    FORMER_IDS.update({old: s.env_id(variant) for s in SYSTEMS for old, variant in s.former.items()})
 
 
 def _register(s: SystemSpec) -> None:
-    for kind, entry in s.envs.items():
-        if s.env_id(kind) not in gym.registry:
+    for variant, entry in s.envs.items():
+        if s.env_id(variant) not in gym.registry:
             gym.register(
-                id=s.env_id(kind),
+                id=s.env_id(variant),
                 entry_point=entry,
-                vector_entry_point=s.vector if kind == "guarded" else None,
+                vector_entry_point=s.vector if variant == "guarded" else None,
                 disable_env_checker=False,
             )
 
@@ -172,13 +172,13 @@ def add_system(*specs: SystemSpec) -> None:
             continue
         if any(s.name == spec.name for s in SYSTEMS):
             raise ValueError(f"a system named {spec.name!r} is already registered; a system's name is its ids' stem")
-        for kind, entry in spec.envs.items():
-            if kind not in KINDS:
-                raise ValueError(f"system {spec.name!r}: env kind {kind!r} is not one of {list(KINDS)}")
-            known = gym.registry.get(spec.env_id(kind))
+        for variant, entry in spec.envs.items():
+            if variant not in ENV_VARIANTS:
+                raise ValueError(f"system {spec.name!r}: env variant {variant!r} is not one of {list(ENV_VARIANTS)}")
+            known = gym.registry.get(spec.env_id(variant))
             if known is not None and known.entry_point != entry:
                 raise ValueError(
-                    f"system {spec.name!r}: the id {spec.env_id(kind)!r} is already registered with entry point "
+                    f"system {spec.name!r}: the id {spec.env_id(variant)!r} is already registered with entry point "
                     f"{known.entry_point!r}, not {entry!r}"
                 )
         SYSTEMS = (*SYSTEMS, spec)
@@ -216,32 +216,32 @@ def _load_entry_points() -> None:
             )
 
 
-def env_ids(kinds=tuple(KINDS)) -> tuple[str, ...]:
-    """Every registered id of ``kinds``, system by system, plain control first."""
-    return tuple(i for s in SYSTEMS for i in s.ids(kinds))
+def env_ids(variants=tuple(ENV_VARIANTS)) -> tuple[str, ...]:
+    """Every registered id of ``variants``, system by system, plain control first."""
+    return tuple(i for s in SYSTEMS for i in s.ids(variants))
 
 
 def guardian_env_ids() -> tuple[str, ...]:
     """The ids of every env with a built-in driver and a guardian action."""
-    return env_ids(GUARDED_KINDS)
+    return env_ids(GUARDED_VARIANTS)
 
 
 def system_of(env_id: str) -> tuple[SystemSpec, str]:
-    """The system of ``env_id`` (today's id, or a former one read from a record) and its kind;
+    """The system of ``env_id`` (today's id, or a former one read from a record) and its variant;
     KeyError for other ids."""
     env_id = current_id(env_id)
     for s in SYSTEMS:
-        for kind in s.envs:
-            if s.env_id(kind) == env_id:
-                return s, kind
+        for variant in s.envs:
+            if s.env_id(variant) == env_id:
+                return s, variant
     raise KeyError(f"{env_id!r} is not an env of this package's systems ({', '.join(env_ids())})")
 
 
 def system_of_env(env) -> tuple[SystemSpec, str] | None:
-    """The system an env instance (wrapped or not) belongs to, and its kind: by the id it was made
+    """The system an env instance (wrapped or not) belongs to, and its variant: by the id it was made
     under (``env.unwrapped.spec``), else by its class or a base class being one a system's envs
     name (a subclass, an env built without ``gym.make``), else by its class being a system's
-    dynamics (kind ``"dynamics"``: the simulator of ``CartPole`` is ``CartPole-v1``'s env);
+    dynamics (variant ``"dynamics"``: the simulator of ``CartPole`` is ``CartPole-v1``'s env);
     ``None`` for an env of no system."""
     u = env.unwrapped
     spec = getattr(u, "spec", None)
@@ -253,9 +253,9 @@ def system_of_env(env) -> tuple[SystemSpec, str] | None:
     for cls in type(u).__mro__:
         ref = f"{cls.__module__}:{cls.__qualname__}"
         for s in SYSTEMS:
-            kind = next((k for k, entry in s.envs.items() if entry == ref), None)
-            if kind is not None:
-                return s, kind
+            variant = next((k for k, entry in s.envs.items() if entry == ref), None)
+            if variant is not None:
+                return s, variant
             if s.dynamics == ref:
                 return s, "dynamics"
     return None

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from rmm_envs.catalog import GUARDED_KINDS, load_ref, system_of_env
+from rmm_envs.catalog import GUARDED_VARIANTS, load_ref, system_of_env
 
 __all__ = [
     "StartAssessment",
@@ -120,7 +120,7 @@ def _test_of(env) -> Callable[[Any], StartAssessment] | None:
     if callable(own):
         return own
     found = system_of_env(env)
-    if found is None or found[1] not in GUARDED_KINDS or found[0].doomed_test is None:
+    if found is None or found[1] not in GUARDED_VARIANTS or found[0].doomed_test is None:
         return None
     return load_ref(found[0].doomed_test)
 

@@ -85,16 +85,18 @@ def test_a_dataset_made_under_a_former_id_is_the_same_dataset_under_todays():
 
 # ------------------------------------------------------------------ one table per system
 def test_ids_registration_and_twins_come_from_the_table():
-    from rmm_envs.catalog import GUARDED_KINDS, KINDS, SYSTEMS
+    from rmm_envs.catalog import ENV_VARIANTS, GUARDED_VARIANTS, SYSTEMS
 
-    assert rmm_envs.ENV_IDS == tuple(s.name + KINDS[k] for s in SYSTEMS for k in KINDS if k in s.envs)
-    assert rmm_envs.GUARDIAN_ENV_IDS == tuple(s.name + KINDS[k] for s in SYSTEMS for k in GUARDED_KINDS if k in s.envs)
+    assert rmm_envs.ENV_IDS == tuple(s.name + ENV_VARIANTS[k] for s in SYSTEMS for k in ENV_VARIANTS if k in s.envs)
+    assert rmm_envs.GUARDIAN_ENV_IDS == tuple(
+        s.name + ENV_VARIANTS[k] for s in SYSTEMS for k in GUARDED_VARIANTS if k in s.envs
+    )
     assert len(set(rmm_envs.ENV_IDS)) == len(rmm_envs.ENV_IDS) == 14
     for s in SYSTEMS:
-        for kind, entry in s.envs.items():
-            spec = gym.spec(s.env_id(kind))
+        for variant, entry in s.envs.items():
+            spec = gym.spec(s.env_id(variant))
             assert spec.entry_point == entry
-            assert spec.vector_entry_point == (s.vector if kind == "guarded" else None)
+            assert spec.vector_entry_point == (s.vector if variant == "guarded" else None)
     assert (
         gym.spec("Dubins4DGuarded-v0").vector_entry_point == "rmm_envs.systems.dubins4d.vector:Dubins4DCirclesVectorEnv"
     )
@@ -203,15 +205,15 @@ def test_a_new_table_entry_is_registered_listed_and_helped(monkeypatch):
 
 
 def test_shipped_models_are_keyed_by_system_and_found_by_every_id():
-    from rmm_envs.catalog import GUARDED_KINDS, SYSTEMS
+    from rmm_envs.catalog import GUARDED_VARIANTS, SYSTEMS
     from rmm_guardians.lrmm.model import SHIPPED, SHIPPED_BY_SYSTEM
 
     names = {s.name: s for s in SYSTEMS}
     assert set(SHIPPED_BY_SYSTEM) <= set(names)
-    for name, kinds in SHIPPED_BY_SYSTEM.items():
-        for kind, ship in kinds.items():
-            assert kind in ("plain", "guarded")
-            for env_id in names[name].ids(("plain",) if kind == "plain" else GUARDED_KINDS):
+    for name, variants in SHIPPED_BY_SYSTEM.items():
+        for variant, ship in variants.items():
+            assert variant in ("plain", "guarded")
+            for env_id in names[name].ids(("plain",) if variant == "plain" else GUARDED_VARIANTS):
                 assert SHIPPED[env_id] is ship
     assert list(SHIPPED) == [i for i in rmm_envs.ENV_IDS if i in SHIPPED]  # current ids only (a system may ship none)
     assert SHIPPED["Dubins4DParallel-v0"] is SHIPPED["Dubins4DParallel-v0"] and "Dubins4DMap-v0" in SHIPPED

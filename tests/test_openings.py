@@ -33,7 +33,7 @@ def spec_modules() -> set[str]:
     """The env modules whose docstring is a docs page (the env's spec)."""
     from rmm_envs.catalog import SYSTEMS
 
-    return {s.envs[page.kinds[0]].split(":")[0] for s in SYSTEMS for page in s.pages}
+    return {s.envs[page.variants[0]].split(":")[0] for s in SYSTEMS for page in s.pages}
 
 
 def test_the_counter_reads_the_docstring_only(tmp_path):

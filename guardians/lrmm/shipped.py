@@ -15,7 +15,7 @@ from pathlib import Path
 import gymnasium as gym
 import tomllib
 
-from rmm_envs.catalog import GUARDED_KINDS, SYSTEMS, current_id
+from rmm_envs.catalog import GUARDED_VARIANTS, SYSTEMS, current_id
 
 __all__ = [
     "DEFAULT_ENV",
@@ -49,7 +49,7 @@ _FORMAT = "rmm-lrmm-shipped"
 
 
 def _read_registration(path: Path) -> dict[str, dict[str, Shipped]]:
-    """System name -> kind -> :class:`Shipped`, from the registration file ``path``
+    """System name -> env variant -> :class:`Shipped`, from the registration file ``path``
     (``shipped.toml`` beside the models; its comments say what each entry is).  A malformed file
     is a ``ValueError`` naming the file, the entry and what was expected."""
     data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -59,17 +59,17 @@ def _read_registration(path: Path) -> dict[str, dict[str, Shipped]]:
             f"and version = {data.get('version')!r}"
         )
     out: dict[str, dict[str, Shipped]] = {}
-    for name, kinds in data.get("systems", {}).items():
-        for kind, entry in kinds.items():
+    for name, env_variants in data.get("systems", {}).items():
+        for env_variant, entry in env_variants.items():
             files, inputs = entry.get("files"), entry.get("inputs")
-            if kind not in ("plain", "guarded") or not isinstance(files, dict) or not files:
+            if env_variant not in ("plain", "guarded") or not isinstance(files, dict) or not files:
                 raise ValueError(
-                    f"{path}: [systems.{name}.{kind}] must be of kind 'plain' or 'guarded' with a non-empty "
-                    f"files table (variant = file), got kind {kind!r} and files {files!r}"
+                    f"{path}: [systems.{name}.{env_variant}] must be of env variant 'plain' or 'guarded' with a "
+                    f"non-empty files table (variant = file), got env variant {env_variant!r} and files {files!r}"
                 )
             if inputs is not None and not isinstance(inputs, str):
-                raise ValueError(f"{path}: [systems.{name}.{kind}] inputs must be a field name, got {inputs!r}")
-            out.setdefault(name, {})[kind] = Shipped(dict(files), inputs)
+                raise ValueError(f"{path}: [systems.{name}.{env_variant}] inputs must be a field name, got {inputs!r}")
+            out.setdefault(name, {})[env_variant] = Shipped(dict(files), inputs)
     return out
 
 
@@ -78,8 +78,8 @@ def models_dir() -> Path:
     return Path(str(resources.files("rmm_guardians.lrmm") / "models"))
 
 
-#: The shipped models, per system of :data:`rmm_envs.catalog.SYSTEMS` (its ``name``) and kind of
-#: env (``"plain"``; ``"guarded"``: its blocking and non-blocking guardian envs), as
+#: The shipped models, per system of :data:`rmm_envs.catalog.SYSTEMS` (its ``name``) and env
+#: variant (``"plain"``; ``"guarded"``: its blocking and non-blocking guardian envs), as
 #: :data:`REGISTRATION` registers them.
 SHIPPED_BY_SYSTEM: dict[str, dict[str, Shipped]] = _read_registration(models_dir() / REGISTRATION)
 
@@ -107,8 +107,8 @@ class ShippedById(dict):
 def _by_id() -> ShippedById:
     out = ShippedById()
     for system in SYSTEMS:
-        for kind, ship in SHIPPED_BY_SYSTEM.get(system.name, {}).items():
-            for env_id in system.ids(("plain",) if kind == "plain" else GUARDED_KINDS):
+        for env_variant, ship in SHIPPED_BY_SYSTEM.get(system.name, {}).items():
+            for env_id in system.ids(("plain",) if env_variant == "plain" else GUARDED_VARIANTS):
                 out[env_id] = ship
     return out
 
