@@ -22,6 +22,7 @@ from gymnasium import spaces
 
 import rmm_envs  # noqa: F401  (registers the environments)
 from rmm_envs.autonomy import GuardianActionSpace
+from rmm_envs.defaults import DEFAULT_ENV
 
 
 def driver_only_action(space: spaces.Space, env_id: str) -> dict:
@@ -89,7 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo = sub.add_parser("demo", help="run a few episodes with the driver alone and print the outcomes")
     demo.add_argument(
         "--env",
-        default="Dubins4DParallel-v0",
+        default=DEFAULT_ENV,
         choices=list(rmm_envs.GUARDIAN_ENV_IDS),
         help="an env with a built-in driver (default: %(default)s)",
     )

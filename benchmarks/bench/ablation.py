@@ -29,6 +29,7 @@ from rmm_bench.knob_sweep import run_point
 from rmm_bench.manifest import MANIFESTS, table_manifest
 from rmm_bench.paired import concordance, mcnemar_exact, newcombe_paired
 from rmm_envs.catalog import system_of
+from rmm_envs.defaults import DEFAULT_ENV
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 
 __all__ = ["build_parser", "cmd", "variants"]
@@ -119,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
         "episodes under a fixed 1 ms clock, each row's collisions paired with the full guardian's.",
         allow_abbrev=False,
     )
-    p.add_argument("--env", default="Dubins4DParallel-v0", help="the env of every run (default: %(default)s)")
+    p.add_argument("--env", default=DEFAULT_ENV, help="the env of every run (default: %(default)s)")
     p.add_argument("--episodes", type=int, default=2048, help="episodes of every run (default: %(default)s)")
     p.add_argument(
         "--seed", type=int, default=0, help="master seed; episode i's seed derives from it (default: %(default)s)"

@@ -8,6 +8,7 @@ rows under ours for a run on one of :data:`PAPER_ENVS` (:mod:`rmm_bench.report`)
 from __future__ import annotations
 
 from rmm_bench.report_tables import COLUMNS
+from rmm_envs.defaults import DEFAULT_ENV, DEFAULT_LABELLED_ENV
 
 __all__ = [
     "NOT_REPORTED",
@@ -19,9 +20,9 @@ __all__ = [
     "paper_agent",
 ]
 
-#: The envs the paper's Table I describes (it evaluated guardians on Dubins4D only); the report
-#: prints the paper's rows next to a run on one of them.
-PAPER_ENVS = ("Dubins4DParallel-v0", "Dubins4DGuarded-v0")
+#: The envs the paper's Table I describes (it evaluated guardians on its case study only, this
+#: package's default system); the report prints the paper's rows next to a run on one of them.
+PAPER_ENVS = (DEFAULT_ENV, DEFAULT_LABELLED_ENV)
 #: How the report labels the paper's rows, after the agent's name: the paper's own implementations
 #: and model, which a run here does not reproduce exactly (our ``lrmm`` is not the paper's LRMM).
 PAPER_LABEL = "paper, ICRA 2023"

@@ -27,6 +27,7 @@ from rmm_bench.run_checks import (
 from rmm_bench.run_command import cmd_run, cmd_sweep
 from rmm_envs.catalog import env_help
 from rmm_envs.clocks import make_clock
+from rmm_envs.defaults import DEFAULT_ENV
 from rmm_envs.wrappers.nonblocking import BASE_STEP, TIME_ACCEL
 from rmm_guardians.registry import guardian_set
 
@@ -42,7 +43,6 @@ __all__ = [
     "sweep_parser",
 ]
 
-DEFAULT_ENV = "Dubins4DParallel-v0"
 #: the non-blocking stepping options and their defaults (what a blocking env must be left with)
 NON_BLOCKING_DEFAULTS = {"time_accel": TIME_ACCEL, "base_step": BASE_STEP}
 

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from rmm_envs.catalog import FORMER_IDS, current_id
+from rmm_envs.defaults import DEFAULT_LABELLED_ENV
 from rmm_envs.machine_independent import matvec
 from rmm_guardians.lrmm.inference import forward_one as _forward_one
 from rmm_guardians.lrmm.inference import forward_rows as _forward_rows
@@ -270,6 +271,6 @@ class LRMMModel:
         return model
 
 
-def load_model(path=None, env_id: str = "Dubins4DGuarded-v0") -> LRMMModel:
+def load_model(path=None, env_id: str = DEFAULT_LABELLED_ENV) -> LRMMModel:
     """Load ``path`` or the shipped model for ``env_id``."""
     return LRMMModel.load(path or default_model_path(env_id))

@@ -27,6 +27,7 @@ from pathlib import Path
 import pyarrow as pa
 from tqdm import tqdm
 
+from rmm_envs.defaults import DEFAULT_LABELLED_ENV
 from rmm_envs.disturbances import parse_disturbances
 from rmm_envs.os_errors import describe_os_error
 from rmm_envs.pool import TaskLost, WorkersLost, run_local, run_ray
@@ -221,7 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--env",
-        default="Dubins4DGuarded-v0",
+        default=DEFAULT_LABELLED_ENV,
         help="environment id, or module:Id to import the module that registers it first "
         "(from the current directory first) (default: %(default)s)",
     )

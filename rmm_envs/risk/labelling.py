@@ -26,6 +26,7 @@ import pyarrow as pa
 
 import rmm_envs  # the package's own envs register on import
 from rmm_envs.adapters import AdaptedEnv, adapt
+from rmm_envs.defaults import DEFAULT_LABELLED_ENV
 from rmm_envs.disturbances import parse_disturbances
 from rmm_envs.disturbances.realisation import Realisation, observation_rows
 from rmm_envs.env_plugins import describe_env_error, load_env_plugins, resolve_env_id
@@ -78,7 +79,7 @@ def env_failure(e: BaseException, env_id: str, during: str) -> LabellingError:
 
 @dataclass
 class DatagenConfig:
-    env_id: str = "Dubins4DGuarded-v0"
+    env_id: str = DEFAULT_LABELLED_ENV
     configs: int = 274
     samples_per_config: int = 128
     seed: int = 0
