@@ -19,14 +19,14 @@ from __future__ import annotations
 
 from rmm_envs.views.base import View, Window
 from rmm_envs.views.planar import CarView, PlanarWorld
-from rmm_envs.views.pole import CartPoleView, EnvFrameView, PoleGeometry
+from rmm_envs.views.pole import CartAndPoleView, EnvFrameView, PoleGeometry
 from rmm_envs.views.recorder import STRIP_HEIGHT, EpisodeRecorder, signal_groups
 from rmm_envs.views.select import view_for
 
 __all__ = [
     "STRIP_HEIGHT",
     "CarView",
-    "CartPoleView",
+    "CartAndPoleView",
     "EnvFrameView",
     "EpisodeRecorder",
     "PlanarWorld",

@@ -1,4 +1,4 @@
-"""A cart and pole seen from the front (:class:`CartPoleView`, drawn with a system's
+"""A cart and pole seen from the front (:class:`CartAndPoleView`, drawn with a system's
 :class:`PoleGeometry`: ``rmm_envs/systems/cartpole/view.py``, ``.../pendulum/view.py``), and the
 fallback view of any other guarded env: its own ``render()`` frame."""
 
@@ -13,7 +13,7 @@ from PIL import Image, ImageDraw
 
 from rmm_envs.views.base import BODY_OUTLINE, DRIVER, GOAL, GUARDIAN, LIGHT, OBSTACLE, View, Window
 
-__all__ = ["CartPoleView", "EnvFrameView", "PoleGeometry", "driver_target"]
+__all__ = ["CartAndPoleView", "EnvFrameView", "PoleGeometry", "driver_target"]
 
 
 @dataclass(frozen=True)
@@ -29,7 +29,7 @@ class PoleGeometry:
     angle_limit: float
 
 
-class CartPoleView(View):
+class CartAndPoleView(View):
     """A cart on a track and its pole; the path is the pole's tip.  The track's ends (red) and
     the pole's failing angles (lines from the cart, drawn with the body) are the limits; no goal
     is drawn unless ``target`` (a callable returning the target's ``x``, asked at each episode's

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rmm_envs.views.pole import CartPoleView, PoleGeometry, driver_target
+from rmm_envs.views.pole import CartAndPoleView, PoleGeometry, driver_target
 
 __all__ = ["CARTPOLE", "cartpole_view"]
 
@@ -12,6 +12,6 @@ __all__ = ["CARTPOLE", "cartpole_view"]
 CARTPOLE = PoleGeometry(0, 2, 1.0, 2.4, 12 * 2 * np.pi / 360)
 
 
-def cartpole_view(env, size: int) -> CartPoleView:
+def cartpole_view(env, size: int) -> CartAndPoleView:
     """The ``CartPole`` system's view (its spec's ``view``)."""
-    return CartPoleView(CARTPOLE, size, driver_target(env))
+    return CartAndPoleView(CARTPOLE, size, driver_target(env))

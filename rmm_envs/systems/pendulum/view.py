@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from rmm_envs.views.pole import CartPoleView, PoleGeometry, driver_target
+from rmm_envs.views.pole import CartAndPoleView, PoleGeometry, driver_target
 
 __all__ = ["PENDULUM", "pendulum_view"]
 
@@ -11,6 +11,6 @@ __all__ = ["PENDULUM", "pendulum_view"]
 PENDULUM = PoleGeometry(1, 2, 0.6, 1.0, 0.2)
 
 
-def pendulum_view(env, size: int) -> CartPoleView:
+def pendulum_view(env, size: int) -> CartAndPoleView:
     """The ``InvertedPendulum`` system's view (its spec's ``view``)."""
-    return CartPoleView(PENDULUM, size, driver_target(env))
+    return CartAndPoleView(PENDULUM, size, driver_target(env))
