@@ -1,16 +1,16 @@
-"""Which guardian serves which dynamics: dispatch on the kind an env's action space states.
+"""Which guardian serves which dynamics: dispatch on the dynamics an env's action space states.
 
 An env's :class:`rmm_envs.autonomy.GuardianActionSpace` carries its system's contract
-(``space.contract``: the dynamics' kind, control names, bounds, safe default).  This module offers:
+(``space.contract``: the dynamics' name, control names, bounds, safe default).  This module offers:
 
-* :func:`require_dynamics`: a guardian that models one kind of dynamics refuses a space of another
-  (``ValueError`` naming the guardian, the kind it models and the env's); each system's further
-  requirements are in :mod:`rmm_guardians.system_checks`;
-* :class:`DynamicsDispatch`: one guardian name (``cbf``, ``hj``) for several kinds of dynamics:
-  the space's kind picks the method's part that models it (:mod:`rmm_guardians.parts`), built
-  once with its arguments.
+* :func:`require_dynamics`: a guardian that models one dynamics refuses a space of another
+  (``ValueError`` naming the guardian, the dynamics it models and the env's); each system's
+  further requirements are in :mod:`rmm_guardians.system_checks`;
+* :class:`DynamicsDispatch`: one guardian name (``cbf``, ``hj``) for several dynamics: the
+  space's dynamics name picks the method's part that models it (:mod:`rmm_guardians.parts`),
+  built once with its arguments.
 
-Third-party envs state kind ``"generic"``; only guardians that model no dynamics serve them.
+Third-party envs state the dynamics ``"generic"``; only guardians that model no dynamics serve them.
 """
 
 from __future__ import annotations
@@ -23,20 +23,20 @@ from rmm_guardians.parts import parts_of
 __all__ = ["DynamicsDispatch", "delegate_arguments", "require_dynamics"]
 
 
-def require_dynamics(guardian, action_space, kind: str, controls, model: str) -> GuardianActionSpace:
-    """``action_space`` checked to be a guardian action space of dynamics ``kind`` whose controls
+def require_dynamics(guardian, action_space, dynamics_name: str, controls, model: str) -> GuardianActionSpace:
+    """``action_space`` checked to be a guardian action space of the dynamics ``dynamics_name`` whose controls
     are ``controls`` (those dynamics' own, read from their module by the caller); ``model`` (what
     the guardian models, in words) opens the message of the ``ValueError`` otherwise."""
     space = guardian.require_action_space(space=action_space)
     controls = tuple(controls)
-    if space.kind != kind:
+    if space.dynamics_name != dynamics_name:
         raise ValueError(
-            f"guardian {guardian.name!r} {model} (dynamics {kind!r}, controls {controls}); this env's dynamics "
-            f"are {space.kind!r} and its controls are {space.controls}"
+            f"guardian {guardian.name!r} {model} (dynamics {dynamics_name!r}, controls {controls}); this env's "
+            f"dynamics are {space.dynamics_name!r} and its controls are {space.controls}"
         )
     if tuple(space.controls) != controls:
         raise ValueError(
-            f"guardian {guardian.name!r}: this env states dynamics {kind!r}, whose controls are {controls}, "
+            f"guardian {guardian.name!r}: this env states dynamics {dynamics_name!r}, whose controls are {controls}, "
             f"but its action space's controls are {space.controls}"
         )
     return space
@@ -45,16 +45,16 @@ def require_dynamics(guardian, action_space, kind: str, controls, model: str) ->
 class DynamicsDispatch:
     """One guardian name for several systems: a mixin before :class:`rmm_guardians.base.Guardian`.
 
-    The class models one kind of dynamics itself, checked by :attr:`own_check`
-    (``own_check(guardian, action_space, also=parts)``, ``parts`` the classes of the other kinds
-    it serves, for the refusal to list).  The other kinds are its :attr:`method`'s parts
+    The class models one dynamics itself, checked by :attr:`own_check`
+    (``own_check(guardian, action_space, also=parts)``, ``parts`` the classes of the other dynamics
+    it serves, for the refusal to list).  The other dynamics are its :attr:`method`'s parts
     (:func:`rmm_guardians.parts.parts_of`), read by :meth:`_init_parts` in the constructor with
     each one's arguments (``None``: this guardian refuses that system's envs).  On a space of such
-    a kind, :meth:`check_spaces` and the episode go to one delegate, built on the first such env
+    dynamics, :meth:`check_spaces` and the episode go to one delegate, built on the first such env
     with those arguments and the guardian's name; :attr:`delegate` is the one serving the current
     episode (``None``: the class's own)."""
 
-    method: str = ""  #: the method whose parts serve the other kinds (rmm_guardians.parts)
+    method: str = ""  #: the method whose parts serve the other dynamics (rmm_guardians.parts)
     own_check: Callable
     _parts: dict = {}
     _dynamics_args: dict = {}
@@ -66,25 +66,25 @@ class DynamicsDispatch:
         have no such field)."""
         self._parts = parts_of(self.method)
         self._dynamics_args = {}
-        for kind, part in self._parts.items():
+        for name, part in self._parts.items():
             option = getattr(part, "option", None)
             given = getattr(settings, option, None) if option else None
-            self._dynamics_args[kind] = delegate_arguments(part, option or kind, given, shared)
+            self._dynamics_args[name] = delegate_arguments(part, option or name, given, shared)
 
     def _delegate_for(self, action_space):
-        """The delegate for ``action_space``'s kind, or ``None`` when the class serves it itself
-        (or refuses it)."""
-        kind = getattr(action_space, "kind", None)
-        if kind not in self._parts or self._dynamics_args.get(kind) is None:
+        """The delegate for ``action_space``'s dynamics, or ``None`` when the class serves them itself
+        (or refuses them)."""
+        name = getattr(action_space, "dynamics_name", None)
+        if name not in self._parts or self._dynamics_args.get(name) is None:
             return None
         built = self.__dict__.setdefault("_delegates", {})
-        if kind not in built:
-            built[kind] = self._parts[kind](**self._dynamics_args[kind])
-            built[kind].name = self.name
-        return built[kind]
+        if name not in built:
+            built[name] = self._parts[name](**self._dynamics_args[name])
+            built[name].name = self.name
+        return built[name]
 
     def served(self) -> tuple[str, ...]:
-        """The other kinds this guardian serves, in the order of its method's parts."""
+        """The names of the other dynamics this guardian serves, in the order of its method's parts."""
         return tuple(k for k in self._parts if self._dynamics_args.get(k) is not None)
 
     def check_spaces(self, observation_space, action_space) -> None:

@@ -2,7 +2,7 @@
 
 The requirements ``cbf`` and ``hj`` share for one system: :func:`dubins4d_only` (their own
 classes, the Dubins4D car among circles), :func:`maze_car_only` and :func:`quadrotor_only`
-(their maze car and quadrotor parts, :mod:`rmm_guardians.parts`).  Each checks the kind and
+(their maze car and quadrotor parts, :mod:`rmm_guardians.parts`).  Each checks the dynamics and
 controls with :func:`rmm_guardians.dispatch.require_dynamics`, the controls read from the
 system's dynamics, then what the part's model needs (``ValueError`` naming the guardian and why).
 """
@@ -24,13 +24,13 @@ def dubins4d_only(guardian, action_space, also: tuple = ()) -> None:
     """Refuse an env that is not a Dubins4D one among circles (``ValueError`` naming the guardian
     and why): ``cbf`` and ``hj`` model the Dubins4D car among circles, so an action space that
     states other obstacle shapes (a map with polygons or walls) is refused too.  ``also``: the
-    parts of the other kinds the guardian serves (their ``serves`` and ``controls``), said in the
+    parts of the other dynamics the guardian serves (their ``serves`` and ``controls``), said in the
     message."""
     served = "Dubins4D envs" + "".join(f" and {p.serves} (controls {tuple(p.controls)})" for p in also)
     require_dynamics(
         guardian,
         action_space,
-        dubins4d.KIND,
+        dubins4d.DYNAMICS_NAME,
         dubins4d.CONTROLS,
         f"applies to {served}{'' if also else ' only'}: it models the Dubins4D car among circular obstacles",
     )
@@ -50,7 +50,7 @@ def maze_car_only(guardian, action_space) -> GuardianActionSpace:
     space = require_dynamics(
         guardian,
         action_space,
-        dubins3d.KIND,
+        dubins3d.DYNAMICS_NAME,
         dubins3d.CONTROLS,
         "(maze) models the constant-speed maze car among walls",
     )
@@ -70,7 +70,7 @@ def quadrotor_only(guardian, action_space) -> GuardianActionSpace:
     space = require_dynamics(
         guardian,
         action_space,
-        quadrotor_control.KIND,
+        quadrotor_control.DYNAMICS_NAME,
         quadrotor_control.CONTROLS,
         "(quadrotor) models the quadrotor's velocity command in a room",
     )

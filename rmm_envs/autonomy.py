@@ -5,8 +5,8 @@ takes control and with which control vector.  This module offers:
 
 * :class:`GuardianActionSpace`: the action's space (a Gymnasium ``Dict``: ``active_ctrl`` and
   one shape-(1,) box per control), with ``inactive()``, ``active(u)``, ``parse(action)``;
-* :class:`SystemContract` (``space.contract``, :func:`contract`): the kind of dynamics it drives (guardians
-  dispatch on it, never on control names), control names, bounds, safe default and obstacles;
+* :class:`SystemContract` (``space.contract``, :func:`contract`): the name of the dynamics it drives
+  (guardians dispatch on it, never on control names), control names, bounds, safe default and obstacles;
 * :class:`SafeDefault`: a system's safe control (what ``brakes`` applies);
 * :class:`ObservationBox` / :class:`ObservationLayout` / :func:`layout`: named observation fields;
 * :func:`inactive`, :func:`active`, :func:`parse`: the same given the space.
@@ -42,7 +42,7 @@ __all__ = [
 ]
 
 ACTIVE = "active_ctrl"  # the action field that says whether the guardian takes control
-#: The kind of dynamics no built-in guardian models (a third-party simulator made a guarded env).
+#: The dynamics name of an env no built-in guardian models (a third-party simulator made a guarded env).
 GENERIC = "generic"
 
 
@@ -78,12 +78,12 @@ class SafeDefault:
 class SystemContract:
     """What a guardian may know of the system an env's action space drives (``space.contract``).
 
-    ``kind`` names the dynamics (a guardian that models one kind of dynamics serves exactly the
-    spaces of its kind; :data:`GENERIC`: no built-in model); ``controls``, ``control_low`` and
+    ``dynamics_name`` names the dynamics (a guardian that models one dynamics serves exactly the
+    spaces that name it; :data:`GENERIC`: no built-in model); ``controls``, ``control_low`` and
     ``control_high`` the control vector's fields and bounds; ``safe_default`` and
     ``obstacle_shapes`` as given to :class:`GuardianActionSpace`."""
 
-    kind: str
+    dynamics_name: str
     controls: tuple[str, ...]
     control_low: tuple[float, ...]
     control_high: tuple[float, ...]
@@ -100,11 +100,11 @@ class GuardianActionSpace(spaces.Dict):
         low, high: the control bounds, one number per control (``low <= high``, finite).
         seed: as for ``gymnasium.spaces.Dict``.
         safe_default: the system's :class:`SafeDefault` (``None``: the env states none).
-        obstacle_shapes: the kinds of obstacle in the env's world (e.g. ``("circle",
-            "polygon")``), for guardians whose model of the privileged obstacles assumes a kind
+        obstacle_shapes: the shapes of the obstacles in the env's world (e.g. ``("circle",
+            "polygon")``), for guardians whose model of the privileged obstacles assumes a shape
             (``cbf`` and ``hj`` need circles); ``None``: not stated (the circle envs).
-        kind: the dynamics' kind (:class:`SystemContract`), stated by the env from its dynamics
-            module's ``KIND``; default :data:`GENERIC`.
+        dynamics_name: the dynamics' name (:class:`SystemContract`), stated by the env from its
+            dynamics module's ``DYNAMICS_NAME``; default :data:`GENERIC`.
 
     The fields are stored in Gymnasium's default (sorted) key order, so sampling, seeding and
     flattening behave exactly as for the plain ``Dict`` with the same fields; the control
@@ -122,11 +122,13 @@ class GuardianActionSpace(spaces.Dict):
         seed=None,
         safe_default: SafeDefault | None = None,
         obstacle_shapes: Sequence[str] | None = None,
-        kind: str = GENERIC,
+        dynamics_name: str = GENERIC,
     ) -> None:
         controls = tuple(controls)
-        if not isinstance(kind, str) or not kind:
-            raise ValueError(f"kind must be a non-empty dynamics name (e.g. {GENERIC!r}), got {kind!r}")
+        if not isinstance(dynamics_name, str) or not dynamics_name:
+            raise ValueError(
+                f"dynamics_name must be a non-empty dynamics name (e.g. {GENERIC!r}), got {dynamics_name!r}"
+            )
         lo = np.asarray(list(low), dtype=float).reshape(-1)
         hi = np.asarray(list(high), dtype=float).reshape(-1)
         if not controls or len(set(controls)) != len(controls) or not all(isinstance(c, str) and c for c in controls):
@@ -147,7 +149,7 @@ class GuardianActionSpace(spaces.Dict):
         if safe_default is not None and not isinstance(safe_default, SafeDefault):
             raise TypeError(f"safe_default must be a rmm_envs.autonomy.SafeDefault, got {safe_default!r}")
         self.controls = controls
-        self.kind = kind
+        self.dynamics_name = dynamics_name
         self.safe_default = safe_default
         self.obstacle_shapes = None if obstacle_shapes is None else tuple(obstacle_shapes)
         # the bounds actions are clipped to: those of the boxes
@@ -162,7 +164,7 @@ class GuardianActionSpace(spaces.Dict):
         seed=None,
         safe_default: SafeDefault | None = None,
         obstacle_shapes: Sequence[str] | None = None,
-        kind: str = GENERIC,
+        dynamics_name: str = GENERIC,
     ) -> GuardianActionSpace:
         """The action space of dynamics whose object has ``control_low``/``control_high``."""
         return cls(
@@ -172,14 +174,14 @@ class GuardianActionSpace(spaces.Dict):
             seed=seed,
             safe_default=safe_default,
             obstacle_shapes=obstacle_shapes,
-            kind=kind,
+            dynamics_name=dynamics_name,
         )
 
     @property
     def contract(self) -> SystemContract:
-        """The system's contract: the dynamics' kind, controls, bounds, safe default, obstacle shapes."""
+        """The system's contract: the dynamics' name, controls, bounds, safe default, obstacle shapes."""
         return SystemContract(
-            self.kind,
+            self.dynamics_name,
             self.controls,
             tuple(self.control_low.tolist()),
             tuple(self.control_high.tolist()),

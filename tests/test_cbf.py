@@ -15,7 +15,9 @@ from rmm_guardians import make_guardian
 from rmm_guardians.cbf import CBFGuardian, CBFPaperGuardian
 from tests.qp_reference import solve_qp_dense
 
-SPACE = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind="dubins4d")  # the Dubins4D envs' action space
+SPACE = GuardianActionSpace.for_dynamics(
+    Dubins4D(), CONTROLS, dynamics_name="dubins4d"
+)  # the Dubins4D envs' action space
 INFO0 = {"nominal_control": np.zeros(2)}  # a step's info whose driver control is (0, 0)
 
 
@@ -360,7 +362,7 @@ def test_control_box_comes_from_the_action_space_unless_given():
     g = CBFPaperGuardian()
     g.reset(seed=0, privileged=lambda: box, action_space=SPACE)
     assert (g.u1_min, g.u1_max, g.u2_min, g.u2_max, g.v_min, g.v_max) == (-0.25, 0.25, -0.5, 0.5, 0.0, 2.0)
-    narrow = GuardianActionSpace(CONTROLS, [-0.125, -0.25], [0.125, 0.375], kind="dubins4d")
+    narrow = GuardianActionSpace(CONTROLS, [-0.125, -0.25], [0.125, 0.375], dynamics_name="dubins4d")
     g.reset(seed=0, privileged=lambda: box, action_space=narrow)
     assert (g.u1_min, g.u1_max, g.u2_min, g.u2_max) == (-0.125, 0.125, -0.25, 0.375)
     G, h = g.rows(box["state"])
@@ -374,7 +376,7 @@ def test_control_box_comes_from_the_action_space_unless_given():
         CBFGuardian().reset(
             seed=0,
             privileged=lambda: box,
-            action_space=GuardianActionSpace(CONTROLS, [0.1, -1], [0.2, 1], kind="dubins4d"),
+            action_space=GuardianActionSpace(CONTROLS, [0.1, -1], [0.2, 1], dynamics_name="dubins4d"),
         )
     with pytest.raises(ValueError, match="guardian 'cbf'.*action space"):
         CBFGuardian().reset(seed=0, privileged=lambda: box)

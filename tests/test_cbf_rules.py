@@ -18,7 +18,7 @@ from rmm_guardians.cbf.barrier import HOCBFParams, barrier_rows
 from rmm_guardians.cbf.recovery import recovery_control, recovery_done
 from tests.test_cbf import INFO0
 
-SPACE = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind="dubins4d")
+SPACE = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, dynamics_name="dubins4d")
 # the default gains; the Dubins4D control box and speed range
 PRM = HOCBFParams(0.7535, 0.6664, 1.0, 1.0, 1.0, 1.0, -0.25, 0.25, -0.5, 0.5, 0.0, 2.0)
 OBST = np.array([[0.0, 0.0, 3.0]])

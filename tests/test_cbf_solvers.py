@@ -22,7 +22,7 @@ PRIMAL_INFEASIBLE = 3  # OSQP's status value
 
 # every solver the test extra pins (qpsolvers[clarabel,daqp]): one that is missing fails its tests, it is not left out
 OTHERS = [f"qpsolvers:{n}" for n in ("osqp", "clarabel", "daqp")]
-SPACE = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind="dubins4d")
+SPACE = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, dynamics_name="dubins4d")
 OBSTACLES = np.array([[3.0, 0.0, 2.0], [-4.0, 5.0, 3.0], [0.0, -6.0, 2.5]])
 GOAL = np.array([8.0, 8.0, 1.0])
 

@@ -1,5 +1,5 @@
-"""Guardians dispatch on the system kind an env's action space states (rmm_envs.autonomy's
-SystemContract), never on control names; third-party envs state the kind "generic"."""
+"""Guardians dispatch on the dynamics an env's action space states (rmm_envs.autonomy's
+SystemContract), never on control names; third-party envs state the dynamics "generic"."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from rmm_guardians.system_checks import quadrotor_only
 
 
 @pytest.mark.parametrize(
-    "env_id, kind, controls",
+    "env_id, dynamics_name, controls",
     [
         ("Dubins4DParallel-v0", "dubins4d", ("turnrate_ctrl", "accel_ctrl")),
         ("Dubins4DGuarded-v0", "dubins4d", ("turnrate_ctrl", "accel_ctrl")),
@@ -31,22 +31,22 @@ from rmm_guardians.system_checks import quadrotor_only
         ("CartPoleParallel-v0", "generic", ("force_ctrl",)),
     ],
 )
-def test_each_env_states_its_system_in_its_action_space(env_id, kind, controls):
+def test_each_env_states_its_system_in_its_action_space(env_id, dynamics_name, controls):
     if env_id.startswith("Quadrotor"):
         pytest.importorskip("pybullet")
     env = gym.make(env_id)
     c = contract(env.action_space)
-    assert c == env.action_space.contract and c.kind == kind and c.controls == controls
+    assert c == env.action_space.contract and c.dynamics_name == dynamics_name and c.controls == controls
     assert c.control_low == tuple(env.action_space.control_low.tolist())
     assert c.control_high == tuple(env.action_space.control_high.tolist())
     assert c.safe_default is env.action_space.safe_default and c.safe_default is not None
     with pytest.raises(dataclasses.FrozenInstanceError):
-        c.kind = "other"
+        c.dynamics_name = "other"
     env.close()
 
 
-def test_the_systems_own_their_kinds_and_the_default_is_generic():
-    assert (dubins4d.KIND, dubins3d.KIND, quadrotor_control.KIND, GENERIC) == (
+def test_the_systems_own_their_dynamics_names_and_the_default_is_generic():
+    assert (dubins4d.DYNAMICS_NAME, dubins3d.DYNAMICS_NAME, quadrotor_control.DYNAMICS_NAME, GENERIC) == (
         "dubins4d",
         "dubins3d",
         "quadrotor",
@@ -55,14 +55,14 @@ def test_the_systems_own_their_kinds_and_the_default_is_generic():
     space = GuardianActionSpace(("a",), [-1.0], [2.0])
     assert space.contract == SystemContract("generic", ("a",), (-1.0,), (2.0,), None, None)
     for bad in ("", None, 3):
-        with pytest.raises(ValueError, match=f"kind must be a non-empty dynamics name .*got {bad!r}"):
-            GuardianActionSpace(("a",), [-1.0], [1.0], kind=bad)
+        with pytest.raises(ValueError, match=f"dynamics_name must be a non-empty dynamics name .*got {bad!r}"):
+            GuardianActionSpace(("a",), [-1.0], [1.0], dynamics_name=bad)
     with pytest.raises(TypeError, match="GuardianActionSpace"):
         contract(gym.spaces.Discrete(2))
 
 
-def test_the_kind_not_the_control_names_picks_the_guardian():
-    # the maze car's control names under the generic kind: no guardian that models a system serves it
+def test_the_dynamics_not_the_control_names_pick_the_guardian():
+    # the maze car's control names under the generic dynamics: no guardian that models a system serves it
     lookalike = GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2])
     for g in (CBFGuardian(), HJGuardian()):
         with pytest.raises(
@@ -71,8 +71,8 @@ def test_the_kind_not_the_control_names_picks_the_guardian():
             r"quadrotor .*this env's dynamics are 'generic'",
         ):
             g.check_spaces(None, lookalike)
-    # the same names under the maze car's kind: the maze guardian
-    maze = GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2], kind="dubins3d")
+    # the same names under the maze car's dynamics: the maze guardian
+    maze = GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2], dynamics_name="dubins3d")
     g = CBFGuardian()
     g.check_spaces(None, maze)
     assert isinstance(g._delegate_for(maze), MazeCBFGuardian) and g._delegate_for(maze) is g._delegate_for(maze)
@@ -81,8 +81,8 @@ def test_the_kind_not_the_control_names_picks_the_guardian():
         CBFPaperGuardian().check_spaces(None, maze)
 
 
-def test_a_space_whose_controls_contradict_its_kind_is_refused_naming_both():
-    wrong = GuardianActionSpace(("turn", "accel"), [-0.25, -0.5], [0.25, 0.5], kind="dubins4d")
+def test_a_space_whose_controls_contradict_its_dynamics_is_refused_naming_both():
+    wrong = GuardianActionSpace(("turn", "accel"), [-0.25, -0.5], [0.25, 0.5], dynamics_name="dubins4d")
     with pytest.raises(
         ValueError,
         match=r"guardian 'cbf': this env states dynamics 'dubins4d', whose controls are "
@@ -92,8 +92,8 @@ def test_a_space_whose_controls_contradict_its_kind_is_refused_naming_both():
         CBFGuardian().check_spaces(None, wrong)
 
 
-def test_require_dynamics_returns_the_space_of_its_kind():
-    space = GuardianActionSpace(quadrotor_control.CONTROLS, [-1.0] * 4, [1.0] * 4, kind="quadrotor")
+def test_require_dynamics_returns_the_space_of_its_dynamics():
+    space = GuardianActionSpace(quadrotor_control.CONTROLS, [-1.0] * 4, [1.0] * 4, dynamics_name="quadrotor")
     controls = quadrotor_control.CONTROLS
     assert require_dynamics(CBFGuardian(), space, "quadrotor", controls, "models the quadrotor") is space
     with pytest.raises(
@@ -101,7 +101,7 @@ def test_require_dynamics_returns_the_space_of_its_kind():
     ):
         require_dynamics(
             CBFGuardian(),
-            GuardianActionSpace(("turnrate_ctrl",), [-1.0], [1.0], kind="dubins3d"),
+            GuardianActionSpace(("turnrate_ctrl",), [-1.0], [1.0], dynamics_name="dubins3d"),
             "quadrotor",
             controls,
             "models the quadrotor",
@@ -112,7 +112,7 @@ def test_a_third_party_env_is_served_by_the_model_free_guardians_only():
     from rmm_guardians.baselines import BrakesGuardian
 
     env = gym.make("CartPoleParallel-v0")
-    assert env.action_space.kind == GENERIC
+    assert env.action_space.dynamics_name == GENERIC
     BrakesGuardian().check_spaces(env.observation_space, env.action_space)
     for g in (CBFGuardian(), HJGuardian()):
         with pytest.raises(ValueError, match="this env's dynamics are 'generic'"):
@@ -145,17 +145,19 @@ def test_the_refusals_say_exactly_what_each_guardian_serves():
         "controls ('turnrate_ctrl',)); this env's dynamics are 'generic' and its controls are "
         "('turnrate_ctrl',)"
     )
-    lopsided = GuardianActionSpace(dubins3d.CONTROLS, [-0.1], [0.2], kind="dubins3d")
+    lopsided = GuardianActionSpace(dubins3d.CONTROLS, [-0.1], [0.2], dynamics_name="dubins3d")
     with pytest.raises(ValueError) as e:
         MazeCBFGuardian().check_spaces(None, lopsided)
     assert str(e.value) == (
         "guardian 'cbf' (maze) needs a turn-rate bound symmetric about 0 and wider than a point "
         "([-b, b] with b > 0), got [-0.1, 0.2]"
     )
-    MazeCBFGuardian().check_spaces(None, GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2], kind="dubins3d"))
+    MazeCBFGuardian().check_spaces(
+        None, GuardianActionSpace(dubins3d.CONTROLS, [-0.2], [0.2], dynamics_name="dubins3d")
+    )
 
 
-def test_reset_hands_the_episode_to_the_delegate_of_the_space_s_kind_and_back():
+def test_reset_hands_the_episode_to_the_delegate_of_the_space_s_dynamics_and_back():
     from rmm_envs.systems.maze.guarded import Dubins3DMazeGuardedEnv
 
     maze_env = Dubins3DMazeGuardedEnv()
@@ -202,9 +204,13 @@ def test_delegate_arguments_merge_check_and_refuse():
 
 def test_the_obstacle_shapes_and_the_quadrotor_s_command_box_are_checked_by_value():
     car = dubins4d.CONTROLS
-    circles = GuardianActionSpace(car, [-0.25, -0.5], [0.25, 0.5], kind="dubins4d", obstacle_shapes=("circle",))
+    circles = GuardianActionSpace(
+        car, [-0.25, -0.5], [0.25, 0.5], dynamics_name="dubins4d", obstacle_shapes=("circle",)
+    )
     CBFGuardian().check_spaces(None, circles)
-    mixed = GuardianActionSpace(car, [-0.25, -0.5], [0.25, 0.5], kind="dubins4d", obstacle_shapes=("circle", "polygon"))
+    mixed = GuardianActionSpace(
+        car, [-0.25, -0.5], [0.25, 0.5], dynamics_name="dubins4d", obstacle_shapes=("circle", "polygon")
+    )
     with pytest.raises(ValueError) as e:
         CBFGuardian().check_spaces(None, mixed)
     assert str(e.value) == (
@@ -213,11 +219,11 @@ def test_the_obstacle_shapes_and_the_quadrotor_s_command_box_are_checked_by_valu
         "guardian that needs no obstacle geometry (lrmm, brakes)"
     )
     quad = quadrotor_control.CONTROLS
-    box = GuardianActionSpace(quad, [-1.0] * 4, [1.0] * 4, kind="quadrotor")
+    box = GuardianActionSpace(quad, [-1.0] * 4, [1.0] * 4, dynamics_name="quadrotor")
     assert quadrotor_only(CBFGuardian(), box) is box
-    edge = GuardianActionSpace(quad, [0.0, -1.0, -1.0, -1.0], [1.0, 0.0, 1.0, 1.0], kind="quadrotor")
+    edge = GuardianActionSpace(quad, [0.0, -1.0, -1.0, -1.0], [1.0, 0.0, 1.0, 1.0], dynamics_name="quadrotor")
     assert quadrotor_only(CBFGuardian(), edge) is edge  # zero on the box's edge still contains hover
-    no_hover = GuardianActionSpace(quad, [0.5, -1.0, -1.0, -1.0], [1.0, 1.0, 1.0, 1.0], kind="quadrotor")
+    no_hover = GuardianActionSpace(quad, [0.5, -1.0, -1.0, -1.0], [1.0, 1.0, 1.0, 1.0], dynamics_name="quadrotor")
     with pytest.raises(ValueError) as e:
         quadrotor_only(CBFGuardian(), no_hover)
     assert str(e.value) == (
@@ -236,7 +242,7 @@ def test_the_obstacle_shapes_and_the_quadrotor_s_command_box_are_checked_by_valu
 def test_every_non_circle_shape_of_a_map_is_named_in_the_refusal():
     car = dubins4d.CONTROLS
     space = GuardianActionSpace(
-        car, [-0.25, -0.5], [0.25, 0.5], kind="dubins4d", obstacle_shapes=("circle", "polygon", "segment")
+        car, [-0.25, -0.5], [0.25, 0.5], dynamics_name="dubins4d", obstacle_shapes=("circle", "polygon", "segment")
     )
     for g in (CBFGuardian(), HJGuardian()):
         with pytest.raises(ValueError) as e:
@@ -253,7 +259,7 @@ def test_a_turn_rate_or_command_axis_of_zero_width_is_refused():
 
     # [0, 0] is symmetric about 0 and contains hover, but leaves the guardian no control to use
     for lo, hi in ((0.0, 0.0), (-0.0, 0.0)):
-        still = GuardianActionSpace(dubins3d.CONTROLS, [lo], [hi], kind="dubins3d")
+        still = GuardianActionSpace(dubins3d.CONTROLS, [lo], [hi], dynamics_name="dubins3d")
         for g in (MazeCBFGuardian(), MazeHJGuardian(), CBFGuardian(), HJGuardian()):
             with pytest.raises(ValueError) as e:
                 g.check_spaces(None, still)
@@ -261,13 +267,13 @@ def test_a_turn_rate_or_command_axis_of_zero_width_is_refused():
                 f"guardian {g.name!r} (maze) needs a turn-rate bound symmetric about 0 and wider "
                 f"than a point ([-b, b] with b > 0), got [{lo}, {hi}]"
             )
-    tiny = GuardianActionSpace(dubins3d.CONTROLS, [-1e-9], [1e-9], kind="dubins3d")
+    tiny = GuardianActionSpace(dubins3d.CONTROLS, [-1e-9], [1e-9], dynamics_name="dubins3d")
     MazeCBFGuardian().check_spaces(None, tiny)
     quad = quadrotor_control.CONTROLS
     for axis in range(4):
         lo, hi = [-1.0] * 4, [1.0] * 4
         lo[axis] = hi[axis] = 0.0
-        flat = GuardianActionSpace(quad, lo, hi, kind="quadrotor")
+        flat = GuardianActionSpace(quad, lo, hi, dynamics_name="quadrotor")
         with pytest.raises(ValueError) as e:
             quadrotor_only(CBFGuardian(), flat)
         assert str(e.value) == (
@@ -332,12 +338,12 @@ def test_the_built_in_parts_are_declared_in_the_entry_point_group_a_package_of_y
         ("cbf", quadrotor_control),
         ("hj", quadrotor_control),
     ):
-        part = parts_of(method)[dynamics.KIND]
+        part = parts_of(method)[dynamics.DYNAMICS_NAME]
         assert part.controls == dynamics.CONTROLS and part.option in fields[method] and part.serves.startswith("the ")
 
 
 class _ToyPart:
-    """A part of ``cbf`` for a kind "toy" (one control, "push"), as a package of yours would write it."""
+    """A part of ``cbf`` for the dynamics "toy" (one control, "push"), as a package of yours would write it."""
 
     serves, controls, option = "the toy", ("push",), None
     name = "toy"
@@ -346,7 +352,7 @@ class _ToyPart:
         self.shared = shared
 
     def check_spaces(self, observation_space, action_space) -> None:
-        if action_space.kind != "toy":
+        if action_space.dynamics_name != "toy":
             raise ValueError("not a toy")
 
 
@@ -357,7 +363,7 @@ def test_a_part_registered_in_the_process_is_served_under_the_method_and_named_i
     parts.register_part("cbf", "toy", _ToyPart)
     g = CBFGuardian()
     assert g.served() == ("dubins3d", "quadrotor", "toy")
-    toy = GuardianActionSpace(("push",), [-1.0], [1.0], kind="toy")
+    toy = GuardianActionSpace(("push",), [-1.0], [1.0], dynamics_name="toy")
     g.check_spaces(None, toy)
     delegate = g._delegate_for(toy)
     assert isinstance(delegate, _ToyPart) and delegate.name == "cbf" and set(delegate.shared) >= {"solver", "eps"}

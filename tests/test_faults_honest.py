@@ -366,7 +366,7 @@ def _hj_guardian(cache_dir):
 
     grid = Grid([-8.0, -8.0, -np.pi, 0.0], [8.0, 8.0, np.pi, 2.0], [33, 33, 16, 9], periodic=[2])
     g = HJGuardian(grid=grid, horizon=2.0, cache_dir=cache_dir)
-    space = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind="dubins4d")
+    space = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, dynamics_name="dubins4d")
     box = {
         "obstacles": np.array([[0.0, 0.0, 2.0]]),
         "goal": np.array([7.0, 7.0, 0.5]),

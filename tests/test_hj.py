@@ -9,7 +9,9 @@ from rmm_guardians.hj.grid import Grid
 from rmm_guardians.hj.guardian import HJGuardian, default_grid, obstacle_target
 from rmm_guardians.hj.solver import solve_brt, spatial_derivatives
 
-SPACE = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind="dubins4d")  # the Dubins4D envs' action space
+SPACE = GuardianActionSpace.for_dynamics(
+    Dubins4D(), CONTROLS, dynamics_name="dubins4d"
+)  # the Dubins4D envs' action space
 
 
 def zero_crossing(xs, values):
@@ -695,7 +697,7 @@ def test_guardian_reads_the_control_bounds_from_the_action_space(tmp_path):
         "state": np.array([-3.0, 0.0, 0.0, 2.0]),
     }
     g = HJGuardian(grid=small_grid(), horizon=2.0, cache_dir=tmp_path)
-    narrow = GuardianActionSpace(CONTROLS, [-0.125, -0.25], [0.125, 0.25], kind="dubins4d")
+    narrow = GuardianActionSpace(CONTROLS, [-0.125, -0.25], [0.125, 0.25], dynamics_name="dubins4d")
     g.reset(seed=0, privileged=lambda: box, action_space=narrow)
     assert (g.dynamics.u1_max, g.dynamics.u2_max) == (0.125, 0.25)
     a = g.act(None, {})
@@ -706,7 +708,7 @@ def test_guardian_reads_the_control_bounds_from_the_action_space(tmp_path):
         g.reset(
             seed=0,
             privileged=lambda: box,
-            action_space=GuardianActionSpace(CONTROLS, [-0.25, -0.4], [0.25, 0.5], kind="dubins4d"),
+            action_space=GuardianActionSpace(CONTROLS, [-0.25, -0.4], [0.25, 0.5], dynamics_name="dubins4d"),
         )
     with pytest.raises(ValueError, match="guardian 'hj'.*action space"):
         g.reset(seed=0, privileged=lambda: box)

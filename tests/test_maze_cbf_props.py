@@ -236,7 +236,7 @@ def test_without_a_safe_default_a_nan_pose_turns_left_at_full_rate():
     from rmm_guardians.cbf.maze import MazeCBFGuardian as G
     from tests.test_maze_guardians import corridor
 
-    space = GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2], kind="dubins3d")
+    space = GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2], dynamics_name="dubins3d")
     g = G()
     g.reset(
         seed=0,
@@ -268,7 +268,7 @@ def test_a_non_positive_speed_in_the_privileged_data_is_refused_by_name(speed):
     with pytest.raises(ValueError) as e:
         g.reset(
             seed=0,
-            action_space=GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2], kind="dubins3d"),
+            action_space=GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2], dynamics_name="dubins3d"),
             privileged=_maze_privileged(speed=speed),
         )
     assert str(e.value) == f"privileged speed must be a finite number > 0.0, got {speed!r}"
@@ -280,7 +280,7 @@ def test_the_next_decision_is_for_the_pose_after_the_turn_it_emitted():
     ``sim_time`` in the privileged data is read as no time passing."""
     from rmm_envs.autonomy import GuardianActionSpace
 
-    space = GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2], kind="dubins3d")
+    space = GuardianActionSpace(("turnrate_ctrl",), [-0.2], [0.2], dynamics_name="dubins3d")
     g, ref = MazeCBFGuardian(), MazeCBFGuardian()
     for x in (g, ref):
         x.reset(seed=0, action_space=space, privileged=_maze_privileged())

@@ -190,7 +190,7 @@ def test_cbf_maze_bad_arguments_and_dispatch():
     three = GuardianActionSpace(("a", "b", "c"), [-1.0] * 3, [1.0] * 3)
     with pytest.raises(ValueError, match="applies to Dubins4D envs and the maze car"):
         CBFGuardian().check_spaces(None, three)
-    lopsided = GuardianActionSpace(("turnrate_ctrl",), [-0.1], [0.2], kind="dubins3d")
+    lopsided = GuardianActionSpace(("turnrate_ctrl",), [-0.1], [0.2], dynamics_name="dubins3d")
     with pytest.raises(ValueError, match="symmetric about 0"):
         CBFGuardian().check_spaces(None, lopsided)
 

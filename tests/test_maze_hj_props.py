@@ -167,7 +167,7 @@ def test_reset_reads_the_car_and_the_value(space, cache_dir):
     for backend in ("numba", "numpy"):  # checked against the grid and the dynamics at reset (the value is cached)
         assert make(space, cache_dir, backend=backend)[0].stats()["cache_hits"] == 1
     # the value's turn rate is the action space's bound (a coarse, short solve)
-    wide = GuardianActionSpace(("turnrate_ctrl",), [-0.3], [0.3], kind="dubins3d")
+    wide = GuardianActionSpace(("turnrate_ctrl",), [-0.3], [0.3], dynamics_name="dubins3d")
     g3 = MazeHJGuardian(spacing=25.0, n_heading=8, horizon=2.0, region="maze", cache=False, threads=1)
     g3.reset(seed=0, action_space=wide, privileged=lambda: priv)
     assert g3.u_max == 0.3 and g3.dynamics.u1_max == 0.3 and g3.dynamics.u2_max == 0.0
@@ -374,6 +374,6 @@ def test_a_lopsided_or_foreign_action_space_is_refused(cache_dir):
     with pytest.raises(ValueError, match="symmetric about 0"):
         g.reset(
             seed=0,
-            action_space=GuardianActionSpace(("turnrate_ctrl",), [-0.1], [0.2], kind="dubins3d"),
+            action_space=GuardianActionSpace(("turnrate_ctrl",), [-0.1], [0.2], dynamics_name="dubins3d"),
             privileged=lambda: priv,
         )

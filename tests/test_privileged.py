@@ -91,7 +91,7 @@ def test_a_nan_state_brakes_fully_and_is_counted(cls, tmp_path):
     from rmm_envs.autonomy import GuardianActionSpace
     from rmm_envs.systems.dubins4d.dynamics import CONTROLS, Dubins4D
 
-    space = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind="dubins4d")
+    space = GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, dynamics_name="dubins4d")
     g = cls(cache_dir=tmp_path, grid_n=(9, 9, 8, 5), horizon=0.5) if cls is HJGuardian else cls(reference="clf")
     box = {
         "obstacles": np.array([[5.0, 0.0, 1.0]]),

@@ -284,7 +284,7 @@ def test_decisions_keep_their_rows_and_the_box(x, y, z, yaw, vh, vz, nominal):
 
 
 SPACE = GuardianActionSpace.for_dynamics(
-    ClosedLoopQuadrotor(CommandController()), CONTROLS, kind="quadrotor"
+    ClosedLoopQuadrotor(CommandController()), CONTROLS, dynamics_name="quadrotor"
 )  # the env's
 
 

@@ -5,7 +5,7 @@ decision, after Xiao & Belta's HOCBFs as in the paper.  ``cbf`` is a safety filt
 driver's ``info["nominal_control"]`` as close as the barriers allow, decides for the state one
 lap ahead, recovers instead of braking forever and keeps its margin off the goal.
 ``cbf-paper`` is the paper's CBF-CLF QP at the observed state, braking when infeasible.  The
-name ``cbf`` also serves the maze car and the quadrotor (dispatched on the action space's kind).
+name ``cbf`` also serves the maze car and the quadrotor (dispatched on the action space's dynamics).
 
 Offers :class:`CBFGuardian` and :class:`CBFPaperGuardian`; their settings and presets are in
 :mod:`rmm_guardians.cbf.settings`, the rows in :mod:`~rmm_guardians.cbf.barrier`, the QP in

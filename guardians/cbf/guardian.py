@@ -72,7 +72,7 @@ class CBFGuardian(DynamicsDispatch, PrivilegedGuardian):
     refused at ``reset``."""
 
     name = "cbf"
-    method = "cbf"  #: its parts serve the other kinds (rmm_guardians.parts: the maze car, the quadrotor)
+    method = "cbf"  #: its parts serve the other dynamics (rmm_guardians.parts: the maze car, the quadrotor)
     own_check = staticmethod(dubins4d_only)
 
     preset = "cbf"  #: the CBFSettings preset the keyword arguments change

@@ -1,7 +1,7 @@
 """The ``cbf`` guardian on the maze car (``Dubins3DMazeParallel-v0``): walls as control barriers.
 
 :class:`rmm_guardians.cbf.guardian.CBFGuardian` hands an env whose action space is of the maze car's
-kind (``"dubins3d"``) to :class:`MazeCBFGuardian`, also usable (and named,
+dynamics (``"dubins3d"``) to :class:`MazeCBFGuardian`, also usable (and named,
 ``rmm_guardians.cbf.maze:MazeCBFGuardian``) on its own.  It reads **privileged** data (the maze, the
 true pose, the car's speed, the sim time) and keeps the driver's turn rate as close as barriers
 on the nearest walls allow, for the pose one lap ahead; the barriers include the turn the

@@ -1,7 +1,7 @@
 """The ``cbf`` guardian on the quadrotor (``QuadrotorRoomParallel-v0``, ``QuadrotorRoomGuarded-v0``).
 
 :class:`rmm_guardians.cbf.guardian.CBFGuardian` hands an env whose action space is of the
-quadrotor's kind (``"quadrotor"``) to :class:`QuadrotorCBFGuardian`, also usable (and named,
+quadrotor's dynamics (``"quadrotor"``) to :class:`QuadrotorCBFGuardian`, also usable (and named,
 ``rmm_guardians.cbf.quadrotor:QuadrotorCBFGuardian``) on its own.  It reads **privileged** data
 (the room, the true body state, the sim time) and filters the pilot's velocity command,
 ``info["nominal_control"]``, with HOCBF rows on the room's floor, walls and objects (a

@@ -6,7 +6,7 @@ the episode's obstacles for the Dubins4D dynamics over ``horizon`` seconds; each
 control, with the value's bang-bang optimal control, when ``V`` is at or below what the car
 can lose before its decision acts: ``margin + v T + u2_max T^2 / 2`` for ``hj``
 (``T = (1 + delay) * lap``), ``0`` for ``hj-paper``.  The name ``hj`` also serves the maze car
-and the quadrotor (dispatched on the action space's kind).
+and the quadrotor (dispatched on the action space's dynamics).
 
 Offers :class:`HJGuardian`, :class:`HJPaperGuardian`, :func:`default_grid` and
 :func:`obstacle_target`; the settings and presets are in :mod:`rmm_guardians.hj.settings`.  The
@@ -49,7 +49,7 @@ def obstacle_target(grid: Grid, obstacles: np.ndarray) -> np.ndarray:
 class HJGuardian(DynamicsDispatch, PrivilegedGuardian):
     """Grid HJ reachability guardian for Dubins4D (``hj``); the maze car and the quadrotor are
     handed to the method's parts (:mod:`rmm_guardians.parts`: :class:`~rmm_guardians.hj.maze.MazeHJGuardian`,
-    :class:`~rmm_guardians.hj.quadrotor.QuadrotorHJGuardian`) by the action space's kind.
+    :class:`~rmm_guardians.hj.quadrotor.QuadrotorHJGuardian`) by the action space's dynamics.
 
     **Value**: at reset, the backward reachable tube of all the episode's obstacles over
     ``horizon`` (4 s) on the default grid ``x, y in [-15, 15]`` (64 points each), heading periodic
@@ -88,7 +88,7 @@ class HJGuardian(DynamicsDispatch, PrivilegedGuardian):
     maximum (``nan_states``); an obstacle centre off the grid is refused at reset."""
 
     name = "hj"
-    method = "hj"  #: its parts serve the other kinds (rmm_guardians.parts: the maze car, the quadrotor)
+    method = "hj"  #: its parts serve the other dynamics (rmm_guardians.parts: the maze car, the quadrotor)
     own_check = staticmethod(dubins4d_only)
 
     preset = "hj"  #: the HJSettings preset the keyword arguments change

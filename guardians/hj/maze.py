@@ -1,7 +1,7 @@
 """The ``hj`` guardian on the maze car (``Dubins3DMazeParallel-v0``): a 3-D avoid value over the walls.
 
 :class:`rmm_guardians.hj.guardian.HJGuardian` hands an env whose action space is of the maze car's
-kind (``"dubins3d"``) to :class:`MazeHJGuardian`, also usable (and named,
+dynamics (``"dubins3d"``) to :class:`MazeHJGuardian`, also usable (and named,
 ``rmm_guardians.hj.maze:MazeHJGuardian``) on its own.  It reads **privileged** data (the maze, the
 goal, the true pose, the car's speed) and, at reset, solves the walls' backward reachable tube
 for the constant-speed car with the Dubins4D solver (a speed axis of three equal nodes); each

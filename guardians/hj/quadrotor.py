@@ -2,7 +2,7 @@
 horizontal flight in each leg's altitude band, and a climb over what blocks the way.
 
 :class:`rmm_guardians.hj.guardian.HJGuardian` hands an env whose action space states the quadrotor's
-system kind to :class:`QuadrotorHJGuardian` (``quadrotor``, a dict, sets its arguments).  It is
+dynamics to :class:`QuadrotorHJGuardian` (``quadrotor``, a dict, sets its arguments).  It is
 **privileged**: it reads the room, the waypoints, the true state and the simulated time.  Model:
 the velocity loop as a point mass with bounded acceleration (in polar velocity form the Dubins4D
 car), solved by the project's compiled solver over the whole room in each leg's altitude band;

@@ -200,7 +200,9 @@ class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
         self._safe_obj = safe_default
         safe = given_safe_default(safe_default, self._acts)
         names = control_names(controls, self._acts)
-        self.action_space = GuardianActionSpace(names, self._acts.low, self._acts.high, safe_default=safe, kind=GENERIC)
+        self.action_space = GuardianActionSpace(
+            names, self._acts.low, self._acts.high, safe_default=safe, dynamics_name=GENERIC
+        )
         self.observation_space = self.env.observation_space
         self.dt = self._env_dt(step_dt)
         self.step_dt = self.dt if step_dt is None else float(step_dt)

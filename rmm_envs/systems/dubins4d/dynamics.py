@@ -35,7 +35,7 @@ except ImportError:  # pragma: no cover - numba is a dependency; numpy alone sti
 
 __all__ = [
     "CONTROLS",
-    "KIND",
+    "DYNAMICS_NAME",
     "SERIES_COEFFICIENTS",
     "Dubins4D",
     "FullBraking",
@@ -381,8 +381,8 @@ class Dubins4D:
 
 #: the guardian action's control fields of ``u = (u1, u2)``, in order (the Dubins4D envs' action space)
 CONTROLS = ("turnrate_ctrl", "accel_ctrl")
-#: the system's kind in its guardian action space's contract (rmm_envs.autonomy.SystemContract)
-KIND = "dubins4d"
+#: the name of these dynamics in its guardian action space's contract (rmm_envs.autonomy.SystemContract)
+DYNAMICS_NAME = "dubins4d"
 
 
 def desired_heading(theta: float, theta_goal: float) -> float:

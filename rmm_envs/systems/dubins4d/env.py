@@ -162,7 +162,7 @@ from rmm_envs.systems.dubins4d.step import nominal_controls
 
 __all__ = ["Dubins4DGuardedEnv", "Dubins4DScene", "observation", "observation_layout", "plant_model"]
 
-from rmm_envs.systems.dubins4d.dynamics import CONTROLS, KIND  # noqa: E402  (the action fields of u = (u1, u2); owned by the system)
+from rmm_envs.systems.dubins4d.dynamics import CONTROLS, DYNAMICS_NAME  # noqa: E402  (the action fields of u = (u1, u2); owned by the system)
 
 
 class Dubins4DGuardedEnv(Dubins4DStarts, Dubins4DDatasetHooks, GuardedEnv):
@@ -261,7 +261,7 @@ class Dubins4DGuardedEnv(Dubins4DStarts, Dubins4DDatasetHooks, GuardedEnv):
         )
         self.clock = make_clock(clock)
         self.action_space = GuardianActionSpace.for_dynamics(
-            s, CONTROLS, safe_default=system("Dubins4D").make_safe_default(), kind=KIND
+            s, CONTROLS, safe_default=system("Dubins4D").make_safe_default(), dynamics_name=DYNAMICS_NAME
         )
         low = np.array([0.0, -np.inf, -np.inf, -np.pi, s.v_min] + [0.0] * self.n_rays, dtype=np.float32)
         high = np.array([np.inf, np.inf, np.inf, np.pi, s.v_max] + [self.ray_length] * self.n_rays, dtype=np.float32)

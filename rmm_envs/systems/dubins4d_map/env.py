@@ -153,7 +153,7 @@ from rmm_envs.envs import _render
 from rmm_envs.envs.base import draw_until, option_vector, rejection_sample
 from rmm_envs.envs.guarded import parallel_twin
 from rmm_envs.systems.dubins4d.dynamics import wrap_angle
-from rmm_envs.systems.dubins4d.env import CONTROLS, KIND, Dubins4DGuardedEnv
+from rmm_envs.systems.dubins4d.env import CONTROLS, DYNAMICS_NAME, Dubins4DGuardedEnv
 from rmm_envs.systems.dubins4d.starts import in_goal
 from rmm_envs.systems.dubins4d_map.pymunk_world import PymunkWorld
 from rmm_envs.systems.dubins4d_map.scene import Dubins4DMapScene
@@ -217,7 +217,7 @@ class Dubins4DMapEnv(Dubins4DGuardedEnv):
             CONTROLS,
             safe_default=system("Dubins4DMap").make_safe_default(),
             obstacle_shapes=self.map.kinds,
-            kind=KIND,
+            dynamics_name=DYNAMICS_NAME,
         )
 
     # ------------------------------------------------------------------ starts

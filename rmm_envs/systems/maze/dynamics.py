@@ -17,12 +17,12 @@ import numpy as np
 
 from rmm_envs.systems.dubins4d.dynamics import _segment
 
-__all__ = ["CONTROLS", "KIND", "Dubins3D"]
+__all__ = ["CONTROLS", "DYNAMICS_NAME", "Dubins3D"]
 
 #: the guardian action's control field (the maze car's turn rate; its guarded envs' action space)
 CONTROLS = ("turnrate_ctrl",)
-#: the system's kind in its guardian action space's contract (rmm_envs.autonomy.SystemContract)
-KIND = "dubins3d"
+#: the name of these dynamics in its guardian action space's contract (rmm_envs.autonomy.SystemContract)
+DYNAMICS_NAME = "dubins3d"
 
 
 @dataclass(frozen=True)

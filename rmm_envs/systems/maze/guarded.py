@@ -144,7 +144,7 @@ from rmm_envs.worlds.bounds import MAX_MAZE_SIDE
 
 __all__ = ["CONTROLS", "Dubins3DMazeGuardedEnv", "TurnFromNearerWall", "parallel_env", "observation_layout"]
 
-from rmm_envs.systems.maze.dynamics import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
+from rmm_envs.systems.maze.dynamics import CONTROLS, DYNAMICS_NAME  # noqa: E402  (owned by the system; re-exported)
 
 
 class Dubins3DMazeGuardedEnv(MazeStarts, GuardedEnv):
@@ -241,7 +241,10 @@ class Dubins3DMazeGuardedEnv(MazeStarts, GuardedEnv):
         self.clock = make_clock(clock)
         lay = observation_layout()
         self.action_space = GuardianActionSpace.for_dynamics(
-            self.dynamics, CONTROLS, safe_default=system("Dubins3DMaze").make_safe_default(lay), kind=KIND
+            self.dynamics,
+            CONTROLS,
+            safe_default=system("Dubins3DMaze").make_safe_default(lay),
+            dynamics_name=DYNAMICS_NAME,
         )
         low = np.array([0.0] * N_RAYS + [-np.inf, -np.inf, -np.pi], dtype=np.float32)
         high = np.array([np.inf] * N_RAYS + [np.inf, np.inf, np.pi], dtype=np.float32)

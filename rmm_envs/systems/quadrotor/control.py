@@ -35,7 +35,7 @@ except ImportError:  # pragma: no cover - numba is a dependency
 
 __all__ = [
     "CONTROLS",
-    "KIND",
+    "DYNAMICS_NAME",
     "yaw_of",
     "CommandController",
     "HoverAndLevel",
@@ -48,8 +48,8 @@ __all__ = [
 
 #: the guardian action's control fields: the commanded velocity in the heading frame and the yaw rate
 CONTROLS = ("vforward_ctrl", "vleft_ctrl", "vup_ctrl", "yawrate_ctrl")
-#: the system's kind in its guardian action space's contract (rmm_envs.autonomy.SystemContract)
-KIND = "quadrotor"
+#: the name of these dynamics in its guardian action space's contract (rmm_envs.autonomy.SystemContract)
+DYNAMICS_NAME = "quadrotor"
 
 # the layout of the packed gain vector the compiled kernel reads
 _MASS, _G, _IX, _IY, _IZ, _KV, _KVZ, _AH, _AZ, _KR, _KW, _KWZ, _FLO, _FHI, _MLO, _MHI = (

@@ -162,7 +162,7 @@ from rmm_envs.systems.quadrotor.starts import WAYPOINT_CLEARANCE, QuadrotorRoomS
 
 __all__ = ["CONTROLS", "QuadrotorRoomGuardedEnv", "parallel_env", "observation_layout"]
 
-from rmm_envs.systems.quadrotor.control import CONTROLS, KIND  # noqa: E402  (owned by the system; re-exported)
+from rmm_envs.systems.quadrotor.control import CONTROLS, DYNAMICS_NAME  # noqa: E402  (owned by the system; re-exported)
 
 
 class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, QuadrotorDatasetHooks, GuardedEnv, QuadrotorRoomEnv):
@@ -237,7 +237,10 @@ class QuadrotorRoomGuardedEnv(QuadrotorRoomStarts, QuadrotorDatasetHooks, Guarde
         self.pilot = WaypointPilot(self.dynamics.control_low, self.dynamics.control_high, cruise_speed, climb_speed)
         self.clock = make_clock(clock)
         self.action_space = GuardianActionSpace.for_dynamics(
-            self.dynamics, CONTROLS, safe_default=system("QuadrotorRoom").make_safe_default(), kind=KIND
+            self.dynamics,
+            CONTROLS,
+            safe_default=system("QuadrotorRoom").make_safe_default(),
+            dynamics_name=DYNAMICS_NAME,
         )
         low, high = np.full(_LAYOUT.size, -np.inf, np.float32), np.full(_LAYOUT.size, np.inf, np.float32)
         low[_RANGES], high[_RANGES] = 0.0, self.ray_range
