@@ -214,7 +214,7 @@ def test_bad_map_files_and_containers(tmp_path):
 
 def test_map_forms_round_trip(tmp_path):
     m = load_map(example_map_path())
-    assert m.kinds == ("circle", "polygon", "segment") and len(m.entries) == 6
+    assert m.obstacle_shapes == ("circle", "polygon", "segment") and len(m.entries) == 6
     assert m.start_box.tolist() == [[-10, -10], [10, 10]] and m.goal is None
     again = load_map(m.to_json())
     assert again.to_json() == m.to_json()

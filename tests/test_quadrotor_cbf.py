@@ -87,10 +87,10 @@ def test_row_of_a_cylinder_lying_on_its_side():
     r = room(objects=[obj("cylinder", [0.0, 0.0, 0.5], [0.5, 2.0], quat_from_euler(0.0, math.pi / 2, 0.0))])
     shapes = room_shapes(r)
     d, n = np.empty(2), np.empty((2, 3))
-    shape_distances(np.array([0.3, 0.0, 2.0]), shapes.kind, shapes.centre, shapes.rot, shapes.size, d, n)
+    shape_distances(np.array([0.3, 0.0, 2.0]), shapes.code, shapes.centre, shapes.rot, shapes.size, d, n)
     assert d[1] == pytest.approx(1.0, abs=1e-12)
     np.testing.assert_allclose(n[1], [0.0, 0.0, 1.0], atol=1e-12)
-    shape_distances(np.array([3.0, 0.0, 0.5]), shapes.kind, shapes.centre, shapes.rot, shapes.size, d, n)
+    shape_distances(np.array([3.0, 0.0, 0.5]), shapes.code, shapes.centre, shapes.rot, shapes.size, d, n)
     assert d[1] == pytest.approx(2.0, abs=1e-12)
     np.testing.assert_allclose(n[1], [1.0, 0.0, 0.0], atol=1e-12)
     b, G, h = one_row(r, level(x=3.0, z=0.5, v=(-1.0, 0.0, 0.0)), 1)
@@ -105,17 +105,17 @@ def test_row_of_a_box_turned_by_45_degrees():
     nearest face."""
     r = room(objects=[obj("box", [0.0, 0.0, 0.5], [0.5, 0.5, 0.5], quat_from_euler(0.0, 0.0, math.pi / 4))])
     shapes = room_shapes(r)
-    assert shapes.kind.tolist() == [FLOOR, BOX]
+    assert shapes.code.tolist() == [FLOOR, BOX]
     d, n = np.empty(2), np.empty((2, 3))
-    shape_distances(np.array([2.0, 0.0, 0.5]), shapes.kind, shapes.centre, shapes.rot, shapes.size, d, n)
+    shape_distances(np.array([2.0, 0.0, 0.5]), shapes.code, shapes.centre, shapes.rot, shapes.size, d, n)
     assert d[1] == pytest.approx(2.0 - math.sqrt(0.5), abs=1e-12)
     np.testing.assert_allclose(n[1], [1.0, 0.0, 0.0], atol=1e-12)
-    shape_distances(np.array([0.0, 0.0, 0.9]), shapes.kind, shapes.centre, shapes.rot, shapes.size, d, n)
+    shape_distances(np.array([0.0, 0.0, 0.9]), shapes.code, shapes.centre, shapes.rot, shapes.size, d, n)
     assert d[1] == pytest.approx(-0.1, abs=1e-12)  # 0.1 below the top face
     np.testing.assert_allclose(n[1], [0.0, 0.0, 1.0], atol=1e-12)
 
 
-def test_room_shapes_order_and_kinds():
+def test_room_shapes_order_and_codes():
     r = room(
         walls=[[2.0, 0.0, 1.0, 0.25, 3.0, 1.0]],
         objects=[
@@ -124,7 +124,7 @@ def test_room_shapes_order_and_kinds():
             obj("box", [-3, 0, 0.2], [0.2] * 3),
         ],
     )
-    assert room_shapes(r).kind.tolist() == [FLOOR, BOX, SPHERE, CYLINDER, BOX]
+    assert room_shapes(r).code.tolist() == [FLOOR, BOX, SPHERE, CYLINDER, BOX]
     with pytest.raises(ValueError, match="room object 0 has shape 'cone'"):
         room_shapes(room(objects=[obj("cone", [0, 0, 0], [1.0])]))
 
@@ -141,11 +141,11 @@ def test_the_gradient_is_the_distance_s_derivative(p, shape, angles):
     shapes = room_shapes(room(objects=[obj(shape, [0.0, 0.0, 0.0], size, quat_from_euler(*angles))]))
     d, n = np.empty(2), np.empty((2, 3))
     p = np.array(p)
-    shape_distances(p, shapes.kind, shapes.centre, shapes.rot, shapes.size, d, n)
+    shape_distances(p, shapes.code, shapes.centre, shapes.rot, shapes.size, d, n)
     assert abs(np.linalg.norm(n[1]) - 1.0) < 1e-9
     e = 1e-6
     dp, dn = np.empty(2), np.empty((2, 3))
-    shape_distances(p + e * n[1], shapes.kind, shapes.centre, shapes.rot, shapes.size, dp, dn)
+    shape_distances(p + e * n[1], shapes.code, shapes.centre, shapes.rot, shapes.size, dp, dn)
     assert dp[1] - d[1] == pytest.approx(e, rel=1e-3, abs=1e-9) or not np.allclose(dn[1], n[1], atol=1e-6)
 
 

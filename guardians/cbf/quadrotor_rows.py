@@ -46,24 +46,24 @@ __all__ = [
 #: OSQP's status values for "solved" and "solved inaccurate".
 _SOLVED = (1, 2)
 
-#: Shape kinds in :attr:`RoomShapes.kind`.
+#: The shape codes of :attr:`RoomShapes.code`.
 FLOOR, BOX, CYLINDER, SPHERE = 0, 1, 2, 3
-_KINDS = {"box": BOX, "cylinder": CYLINDER, "sphere": SPHERE}
+_CODES = {"box": BOX, "cylinder": CYLINDER, "sphere": SPHERE}
 
 
 @dataclass(frozen=True)
 class RoomShapes:
-    """A room as ``N`` convex shapes: ``kind`` ``(N,)`` (:data:`FLOOR`, :data:`BOX`,
+    """A room as ``N`` convex shapes: ``code`` ``(N,)`` (:data:`FLOOR`, :data:`BOX`,
     :data:`CYLINDER`, :data:`SPHERE`), ``centre`` ``(N, 3)``, ``rot`` ``(N, 3, 3)`` (local to
     world), ``size`` ``(N, 3)`` (box: half extents; cylinder: radius, length; sphere: radius)."""
 
-    kind: np.ndarray
+    code: np.ndarray
     centre: np.ndarray
     rot: np.ndarray
     size: np.ndarray
 
     def __len__(self) -> int:
-        return int(self.kind.shape[0])
+        return int(self.code.shape[0])
 
 
 def room_shapes(room) -> RoomShapes:
@@ -71,23 +71,23 @@ def room_shapes(room) -> RoomShapes:
     An object of another shape is refused (``ValueError`` naming it)."""
     walls = np.asarray(room.walls, float).reshape(-1, 6)
     n = 1 + walls.shape[0] + len(room.objects)
-    kind = np.empty(n, dtype=np.int64)
+    code = np.empty(n, dtype=np.int64)
     centre, rot, size = np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3))
-    kind[0], rot[0] = FLOOR, np.eye(3)
-    kind[1 : 1 + walls.shape[0]] = BOX
+    code[0], rot[0] = FLOOR, np.eye(3)
+    code[1 : 1 + walls.shape[0]] = BOX
     centre[1 : 1 + walls.shape[0]], size[1 : 1 + walls.shape[0]] = walls[:, :3], walls[:, 3:]
     rot[1 : 1 + walls.shape[0]] = np.eye(3)
     for i, o in enumerate(room.objects, start=1 + walls.shape[0]):
-        if o.get("shape") not in _KINDS:
+        if o.get("shape") not in _CODES:
             raise ValueError(
                 f"room object {i - 1 - walls.shape[0]} has shape {o.get('shape')!r}; the quadrotor cbf "
-                f"models {sorted(_KINDS)}"
+                f"models {sorted(_CODES)}"
             )
         s = np.asarray(o["size"], float).reshape(-1)
-        kind[i] = _KINDS[o["shape"]]
+        code[i] = _CODES[o["shape"]]
         centre[i], size[i, : s.size] = o["pos"], s
         rot[i] = quat_to_rot(np.asarray(o["quat"], float))
-    return RoomShapes(kind, np.ascontiguousarray(centre), np.ascontiguousarray(rot), np.ascontiguousarray(size))
+    return RoomShapes(code, np.ascontiguousarray(centre), np.ascontiguousarray(rot), np.ascontiguousarray(size))
 
 
 def _box(qx, qy, qz, a, b, c):
@@ -120,11 +120,11 @@ def _cylinder(qx, qy, qz, r, half):
     return ez, 0.0, 0.0, sz
 
 
-def shape_distances(p, kind, centre, rot, size, d, n):
+def shape_distances(p, code, centre, rot, size, d, n):
     """Fill ``d`` ``(N,)`` and ``n`` ``(N, 3)`` with each shape's signed distance and unit
     gradient at the point ``p`` (module docstring)."""
-    for i in range(kind.shape[0]):
-        k = kind[i]
+    for i in range(code.shape[0]):
+        k = code[i]
         if k == FLOOR:
             d[i], n[i, 0], n[i, 1], n[i, 2] = p[2], 0.0, 0.0, 1.0
             continue
@@ -151,12 +151,12 @@ def shape_distances(p, kind, centre, rot, size, d, n):
     return d, n
 
 
-def _command_rows(s, kind, centre, rot, size, rho, tau_h, tau_z, p1, p2, d, n, order, G, h, b):
+def _command_rows(s, code, centre, rot, size, rho, tau_h, tau_z, p1, p2, d, n, order, G, h, b):
     """Fill the rows of the ``K = order.shape[0]`` shapes nearest the body state ``s`` (13):
     their indices ``order`` (nearest first; on a tie the lower index), ``G`` ``(K, 3)``, ``h``
     and their barrier values ``b`` (``d``, ``n``: work arrays of every shape's distance and
     gradient)."""
-    shape_distances(s, kind, centre, rot, size, d, n)
+    shape_distances(s, code, centre, rot, size, d, n)
     N, K = d.shape[0], order.shape[0]
     taken = np.zeros(N, dtype=np.bool_)
     for j in range(K):  # selection by a strict minimum: the same order on every CPU
@@ -224,7 +224,7 @@ def command_rows(state, shapes: RoomShapes, n_rows: int, rho: float, tau_h: floa
     G, h, b = np.empty((K, 3)), np.empty(K), np.empty(K)
     _command_rows(
         s,
-        shapes.kind,
+        shapes.code,
         shapes.centre,
         shapes.rot,
         shapes.size,

@@ -196,19 +196,19 @@ def quadrotor_command_branches(states, cmds, k, b, per_segment, n_points, room, 
     physics steps apart; ``k``, ``b``: the packed controller and body) fails in the room
     (``failed``), and the last state (``ends``; for a failed branch, the first failing point's).
     ``room``: ``RoomCollision.kernel_args()``."""
-    points, walls, kinds, pos, rots, sizes, radii, geom = room
+    points, walls, shapes, pos, rots, sizes, radii, geom = room
     u, cur, nxt, rot = np.empty(4), np.empty(13), np.empty(13), np.empty(9)
     for i in range(states.shape[0]):
         for j in range(13):
             cur[j] = states[i, j]
-        fail = room_state_failed(cur, rot, points, walls, kinds, pos, rots, sizes, radii, geom)
+        fail = room_state_failed(cur, rot, points, walls, shapes, pos, rots, sizes, radii, geom)
         p = 1
         while not fail and p < n_points:
             for _ in range(per_segment):
                 command_wrench(cur, cmds[i], k, u)
                 body_step(cur, u, b, nxt)
                 cur, nxt = nxt, cur
-            fail = room_state_failed(cur, rot, points, walls, kinds, pos, rots, sizes, radii, geom)
+            fail = room_state_failed(cur, rot, points, walls, shapes, pos, rots, sizes, radii, geom)
             p += 1
         failed[i] = fail
         for j in range(13):

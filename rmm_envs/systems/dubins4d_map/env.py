@@ -52,7 +52,7 @@ Nothing bounds the plane: leaving the start box is allowed.
 
 ``Dict(active_ctrl=Discrete(2), turnrate_ctrl=Box(-0.25, 0.25, (1,)), accel_ctrl=Box(-0.5, 0.5,
 (1,)))``, as for ``Dubins4DGuarded-v0`` (out-of-bound controls clipped, malformed actions
-refused).  Its ``obstacle_shapes`` lists the map's obstacle kinds: the privileged guardians
+refused).  Its ``obstacle_shapes`` lists the map's obstacle shapes: the privileged guardians
 ``cbf`` and ``hj`` model circles only, so their ``check_spaces`` refuse a map with polygons or
 segments (naming them) and run on a map of circles only.
 
@@ -216,7 +216,7 @@ class Dubins4DMapEnv(Dubins4DGuardedEnv):
             self.dynamics,
             CONTROLS,
             safe_default=system("Dubins4DMap").make_safe_default(),
-            obstacle_shapes=self.map.kinds,
+            obstacle_shapes=self.map.obstacle_shapes,
             dynamics_name=DYNAMICS_NAME,
         )
 

@@ -57,11 +57,11 @@ class PymunkWorld:
         self.space = pymunk.Space()
         body = self.space.static_body
         shapes = []
-        for kind, _, k in shape_map.entries:
-            if kind == "circle":
+        for shape, _, k in shape_map.entries:
+            if shape == "circle":
                 x, y, r = shape_map.circles[k]
                 shapes.append(pymunk.Circle(body, float(r), (float(x), float(y))))
-            elif kind == "segment":
+            elif shape == "segment":
                 a, b, t = shape_map.segments[k]
                 shapes.append(pymunk.Segment(body, tuple(map(float, a)), tuple(map(float, b)), t / 2.0))
             else:

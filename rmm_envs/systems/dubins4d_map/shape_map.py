@@ -24,10 +24,10 @@ import numpy as np
 from rmm_envs.machine_independent import dot
 from rmm_envs.worlds.bounds import MAX_MAGNITUDE, MAX_MAP_BYTES, MAX_POLYGON_VERTICES, within_bounds
 
-__all__ = ["OBSTACLE_KINDS", "MapError", "ShapeMap", "load_map", "triangulate"]
+__all__ = ["OBSTACLE_SHAPES", "MapError", "ShapeMap", "load_map", "triangulate"]
 
-OBSTACLE_KINDS = ("circle", "polygon", "segment")
-_KINDS = OBSTACLE_KINDS + ("goal", "start")
+OBSTACLE_SHAPES = ("circle", "polygon", "segment")
+_ENTRY_KEYS = OBSTACLE_SHAPES + ("goal", "start")
 
 
 class MapError(ValueError):
@@ -209,7 +209,7 @@ class ShapeMap:
     """A checked map: its obstacles (in the order given) and the optional goal and start box.
 
     ``circles`` ``(K_c, 3)``, ``polygons`` (counter-clockwise ``(V, 2)`` arrays), ``segments``
-    ``(a, b, thickness)``; ``entries`` pairs each obstacle, in map order, with its kind and its
+    ``(a, b, thickness)``; ``entries`` pairs each obstacle, in map order, with its shape and its
     index in the source list; ``goal`` ``(3,)`` or ``None``; ``start_box``
     ``[[x_min, y_min], [x_max, y_max]]`` (the bounding box of the map when not given).
     """
@@ -219,18 +219,18 @@ class ShapeMap:
     segments: list = field(default_factory=list)
     goal: np.ndarray | None = None
     start_box: np.ndarray | None = None
-    entries: list = field(default_factory=list)  # (kind, index in the source list, index within the kind)
+    entries: list = field(default_factory=list)  # (shape, index in the source list, index among that shape's)
     source: str = "<map>"
 
     @property
-    def kinds(self) -> tuple[str, ...]:
-        """The obstacle kinds present, in :data:`OBSTACLE_KINDS` order."""
+    def obstacle_shapes(self) -> tuple[str, ...]:
+        """The obstacle shapes present, in :data:`OBSTACLE_SHAPES` order."""
         have = {k for k, _, _ in self.entries}
-        return tuple(k for k in OBSTACLE_KINDS if k in have)
+        return tuple(k for k in OBSTACLE_SHAPES if k in have)
 
     @property
     def circles_only(self) -> bool:
-        return self.kinds == ("circle",)
+        return self.obstacle_shapes == ("circle",)
 
     def bounding_box(self) -> np.ndarray:
         """``[[x_min, y_min], [x_max, y_max]]`` of every obstacle and the goal."""
@@ -246,10 +246,10 @@ class ShapeMap:
     def to_json(self) -> list:
         """The map as a list of entries (obstacles in order, then goal and start), loadable again."""
         out: list = []
-        for kind, _, k in self.entries:
-            if kind == "circle":
+        for shape, _, k in self.entries:
+            if shape == "circle":
                 out.append({"circle": self.circles[k].tolist()})
-            elif kind == "polygon":
+            elif shape == "polygon":
                 out.append({"polygon": self.polygons[k].tolist()})
             else:
                 a, b, t = self.segments[k]
@@ -322,21 +322,21 @@ def load_map(map_spec) -> ShapeMap:
     for index, (name, entry) in enumerate(_entries(data, source)):
         where = f"map {source}, {name} {_show(entry)}"
         if not isinstance(entry, dict) or len(entry) != 1:
-            raise MapError(f"{where}: an entry must be an object with exactly one key, one of {list(_KINDS)}")
-        ((kind, value),) = entry.items()
-        if kind not in _KINDS:
-            raise MapError(f"{where}: unknown shape {kind!r}; expected one of {list(_KINDS)}")
+            raise MapError(f"{where}: an entry must be an object with exactly one key, one of {list(_ENTRY_KEYS)}")
+        ((shape, value),) = entry.items()
+        if shape not in _ENTRY_KEYS:
+            raise MapError(f"{where}: unknown shape {shape!r}; expected one of {list(_ENTRY_KEYS)}")
         try:
-            if kind == "circle":
-                entries.append((kind, index, len(circles)))
+            if shape == "circle":
+                entries.append((shape, index, len(circles)))
                 circles.append(_circle(value))
-            elif kind == "polygon":
-                entries.append((kind, index, len(polygons)))
+            elif shape == "polygon":
+                entries.append((shape, index, len(polygons)))
                 polygons.append(_polygon(value))
-            elif kind == "segment":
-                entries.append((kind, index, len(segments)))
+            elif shape == "segment":
+                entries.append((shape, index, len(segments)))
                 segments.append(_segment(value))
-            elif kind == "goal":
+            elif shape == "goal":
                 if goal is not None:
                     raise ValueError("a second goal; a map has at most one")
                 goal = _circle(value, "[x, y, r] with r > 0 (the goal disc)")
@@ -347,7 +347,7 @@ def load_map(map_spec) -> ShapeMap:
         except ValueError as e:
             raise MapError(f"{where}: {e}") from None
     if not entries:
-        raise MapError(f"map {source} has no obstacle: it needs at least one of {list(OBSTACLE_KINDS)}")
+        raise MapError(f"map {source} has no obstacle: it needs at least one of {list(OBSTACLE_SHAPES)}")
     m = ShapeMap(np.array(circles, dtype=float).reshape(-1, 3), polygons, segments, goal, None, entries, source)
     m.start_box = start if start is not None else m.bounding_box()
     return m

@@ -65,7 +65,7 @@ class RoomCollision:
 
     def kernel_args(self) -> tuple:
         """The room as :func:`rmm_envs.systems.quadrotor.room_kernels.room_state_failed` reads it: ``(points,
-        walls, obj_kind, obj_pos, obj_R, obj_size, obj_radius, geom)``, contiguous arrays, ``geom``
+        walls, obj_shape, obj_pos, obj_R, obj_size, obj_radius, geom)``, contiguous arrays, ``geom``
         the body's ``(half length, radius, tolerance, floor tolerance, reach)``."""
         c = np.ascontiguousarray
         return (
@@ -101,38 +101,38 @@ class RoomCollision:
         low = centre[:, 2] - (HALF * nz + RADIUS * np.sqrt(np.maximum(0.0, 1 - nz * nz)))
         out = low <= self.floor_tol
         reach = BOUND + self.tol
-        cand_states, cand_kind, cand_idx = [], [], []
+        cand_states, cand_shape, cand_idx = [], [], []
         if self.walls.size:
             sd = _box_sd(centre[:, None, :] - self.walls[None, :, :3], self.walls[None, :, 3:])  # (N, W)
             i, j = np.nonzero(sd <= reach)
             cand_states.append(i)
-            cand_kind.append(np.full(i.size, -1))
+            cand_shape.append(np.full(i.size, -1))
             cand_idx.append(j)
         if self.obj_pos.size:
             d = np.linalg.norm(centre[:, None, :] - self.obj_pos[None], axis=-1) - self.obj_radius[None]
             i, j = np.nonzero(d <= reach)
             cand_states.append(i)
-            cand_kind.append(self.obj_shape[j])
+            cand_shape.append(self.obj_shape[j])
             cand_idx.append(j)
         if not cand_states:
             return out
         i = np.concatenate(cand_states)
-        kind = np.concatenate(cand_kind)
+        shape = np.concatenate(cand_shape)
         j = np.concatenate(cand_idx)
         keep = ~out[i]
-        i, kind, j = i[keep], kind[keep], j[keep]
+        i, shape, j = i[keep], shape[keep], j[keep]
         if i.size == 0:
             return out
         world = centre[i, None, :] + np.einsum("kab,pb->kpa", R[i], self.points)  # (K, P, 3)
         sd = np.full(world.shape[:2], np.inf)
-        w = kind == -1
+        w = shape == -1
         if w.any():
             sd[w] = _box_sd(world[w] - self.walls[j[w], None, :3], self.walls[j[w], None, 3:])
         o = ~w
         if o.any():
             local = np.einsum("kba,kpb->kpa", self.obj_R[j[o]], world[o] - self.obj_pos[j[o], None, :])  # R^T (x - c)
             size = self.obj_size[j[o]]
-            k = kind[o]
+            k = shape[o]
             res = np.empty(local.shape[:2])
             b = k == 0
             res[b] = _box_sd(local[b], size[b][:, None, :])

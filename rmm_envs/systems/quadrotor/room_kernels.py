@@ -29,7 +29,7 @@ except ImportError:  # pragma: no cover - numba is a dependency; plain Python st
 
 __all__ = ["room_shape_distance", "room_state_failed", "room_states_failed"]
 
-_WALL, _BOX, _CYLINDER, _SPHERE = -1, 0, 1, 2  # RoomCollision's kinds (walls are -1)
+_WALL, _BOX, _CYLINDER, _SPHERE = -1, 0, 1, 2  # RoomCollision's shape codes (walls are -1)
 
 
 def _box_sd(px, py, pz, hx, hy, hz):
@@ -39,15 +39,15 @@ def _box_sd(px, py, pz, hx, hy, hz):
     return math.sqrt(mx * mx + my * my + mz * mz) + min(max(max(qx, qy), qz), 0.0)
 
 
-def room_shape_distance(cx, cy, cz, rot, points, p, kind, idx, walls, obj_pos, obj_R, obj_size):
+def room_shape_distance(cx, cy, cz, rot, points, p, shape, idx, walls, obj_pos, obj_R, obj_size):
     """The signed distance from body point ``p`` (``points[p]`` placed by the rotation ``rot``,
-    9 numbers row by row, at ``(cx, cy, cz)``) to wall or object ``idx`` of kind ``kind``: the
+    9 numbers row by row, at ``(cx, cy, cz)``) to wall or object ``idx`` of shape ``shape``: the
     entry of numpy's ``sd`` array for that pair."""
     bx, by, bz = points[p, 0], points[p, 1], points[p, 2]
     wx = cx + ((rot[0] * bx + rot[2] * bz) + rot[1] * by)  # np.einsum("kab,pb->kpa"): two lanes, see above
     wy = cy + ((rot[3] * bx + rot[5] * bz) + rot[4] * by)
     wz = cz + ((rot[6] * bx + rot[8] * bz) + rot[7] * by)
-    if kind == _WALL:
+    if shape == _WALL:
         return _box_sd(
             wx - walls[idx, 0], wy - walls[idx, 1], wz - walls[idx, 2], walls[idx, 3], walls[idx, 4], walls[idx, 5]
         )
@@ -57,9 +57,9 @@ def room_shape_distance(cx, cy, cz, rot, points, p, kind, idx, walls, obj_pos, o
     ly = o[0, 1] * dx + o[1, 1] * dy + o[2, 1] * dz
     lz = o[0, 2] * dx + o[1, 2] * dy + o[2, 2] * dz
     size = obj_size[idx]
-    if kind == _BOX:
+    if shape == _BOX:
         return _box_sd(lx, ly, lz, size[0], size[1], size[2])
-    if kind == _CYLINDER:
+    if shape == _CYLINDER:
         dr = math.sqrt(lx * lx + ly * ly) - size[0]
         dh = abs(lz) - size[1] / 2
         mr, mh = max(dr, 0.0), max(dh, 0.0)
@@ -67,7 +67,7 @@ def room_shape_distance(cx, cy, cz, rot, points, p, kind, idx, walls, obj_pos, o
     return math.sqrt(lx * lx + ly * ly + lz * lz) - size[0]
 
 
-def room_state_failed(s, rot, points, walls, obj_kind, obj_pos, obj_R, obj_size, obj_radius, geom):
+def room_state_failed(s, rot, points, walls, obj_shape, obj_pos, obj_R, obj_size, obj_radius, geom):
     """Whether body state ``s`` (13; position and quaternion used) fails in the room: one row of
     ``RoomCollision.states_failed``.  ``rot``: a scratch array of 9 floats; ``geom``: the body's
     ``(half length, radius, tolerance, floor tolerance, reach)``."""
@@ -92,18 +92,18 @@ def room_state_failed(s, rot, points, walls, obj_kind, obj_pos, obj_R, obj_size,
         if math.sqrt(dx * dx + dy * dy + dz * dz) - obj_radius[k] <= reach:
             for p in range(points.shape[0]):
                 if (
-                    room_shape_distance(cx, cy, cz, rot, points, p, obj_kind[k], k, walls, obj_pos, obj_R, obj_size)
+                    room_shape_distance(cx, cy, cz, rot, points, p, obj_shape[k], k, walls, obj_pos, obj_R, obj_size)
                     <= tol
                 ):
                     return True
     return False
 
 
-def room_states_failed(states, points, walls, obj_kind, obj_pos, obj_R, obj_size, obj_radius, geom, out):
+def room_states_failed(states, points, walls, obj_shape, obj_pos, obj_R, obj_size, obj_radius, geom, out):
     """:func:`room_state_failed` for each row of ``states`` ``(N, 13)`` into ``out`` ``(N,)``."""
     rot = np.empty(9)
     for i in range(states.shape[0]):
-        out[i] = room_state_failed(states[i], rot, points, walls, obj_kind, obj_pos, obj_R, obj_size, obj_radius, geom)
+        out[i] = room_state_failed(states[i], rot, points, walls, obj_shape, obj_pos, obj_R, obj_size, obj_radius, geom)
     return out
 
 

@@ -231,18 +231,18 @@ def build_room(client: int, room: Room, visual: bool = True) -> list[int]:
     ids = []
     plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client)
     ids.append(p.createMultiBody(0, plane, -1, [0, 0, 0], physicsClientId=client))
-    kinds = {"box": p.GEOM_BOX, "cylinder": p.GEOM_CYLINDER, "sphere": p.GEOM_SPHERE}
+    geom_types = {"box": p.GEOM_BOX, "cylinder": p.GEOM_CYLINDER, "sphere": p.GEOM_SPHERE}
     shapes = [("box", w[3:], w[:3], (0.0, 0.0, 0.0, 1.0), (0.6, 0.6, 0.6, 1)) for w in room.walls]
     shapes += [(o["shape"], o["size"], o["pos"], o["quat"], (0.8, 0.5, 0.2, 1)) for o in room.objects]
     for lo in range(0, len(shapes), _MAX_CHILDREN):
         group = shapes[lo : lo + _MAX_CHILDREN]
         types, he, radii, lengths, pos, orn = [], [], [], [], [], []
-        for kind, size, position, quat, _ in group:
+        for shape, size, position, quat, _ in group:
             size = np.asarray(size, float)
-            types.append(kinds[kind])
-            he.append([float(x) for x in size] if kind == "box" else [0.0, 0.0, 0.0])
-            radii.append(float(size[0]) if kind != "box" else 0.0)
-            lengths.append(float(size[1]) if kind == "cylinder" else 0.0)
+            types.append(geom_types[shape])
+            he.append([float(x) for x in size] if shape == "box" else [0.0, 0.0, 0.0])
+            radii.append(float(size[0]) if shape != "box" else 0.0)
+            lengths.append(float(size[1]) if shape == "cylinder" else 0.0)
             pos.append([float(x) for x in position])
             orn.append([float(x) for x in quat])
         col = p.createCollisionShapeArray(
