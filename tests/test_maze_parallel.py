@@ -199,7 +199,7 @@ def test_same_seed_same_episode():
     [
         ({"goal": 1}, "unknown reset options"),
         ({"maze": "big"}, "option 'maze' must be"),
-        ({"maze": {"kind": "round"}}, "unknown maze kind"),
+        ({"maze": {"generator": "round"}}, "unknown maze generator"),
         ({"maze": "corridor", "state": [125.0, 65.0, 0.0]}, "inside a wall"),
         ({"maze": "corridor", "state": [20.0, 20.0, 0.0]}, "outside the maze's cells"),
         ({"maze": "corridor", "state": [125.0, 125.0]}, "option 'state' must be 3 finite numbers"),

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 import rmm_envs  # noqa: F401
 from rmm_envs.systems.maze.dynamics import Dubins3D
 from rmm_envs.systems.maze.env import Dubins3DMazeEnv
-from rmm_envs.systems.maze.mazes import MAZE_KINDS, Maze, _seg_point_sq, generate_maze, render_occupancy
+from rmm_envs.systems.maze.mazes import MAZE_GENERATORS, Maze, _seg_point_sq, generate_maze, render_occupancy
 from rmm_envs.wrappers import RiskLabel
 
 
@@ -92,14 +92,14 @@ def test_pruned_queries_equal_brute_force(walls, seed):
     assert np.mean(exact != sampled) < 0.05
 
 
-@pytest.mark.parametrize("kind", MAZE_KINDS)
-def test_generated_mazes_are_seeded_and_connected(kind):
-    a = generate_maze(np.random.default_rng(5), kind)
-    b = generate_maze(np.random.default_rng(5), kind)
+@pytest.mark.parametrize("generator", MAZE_GENERATORS)
+def test_generated_mazes_are_seeded_and_connected(generator):
+    a = generate_maze(np.random.default_rng(5), generator)
+    b = generate_maze(np.random.default_rng(5), generator)
     np.testing.assert_array_equal(a.walls, b.walls)
-    assert not np.array_equal(a.walls, generate_maze(np.random.default_rng(6), kind).walls)
+    assert not np.array_equal(a.walls, generate_maze(np.random.default_rng(6), generator).walls)
     for seed in range(5):
-        m = generate_maze(np.random.default_rng(seed), kind)
+        m = generate_maze(np.random.default_rng(seed), generator)
         n = len(m.cells)
         assert len(m.passages) == n - 1  # a spanning tree
         adj = {i: [] for i in range(n)}
@@ -138,7 +138,7 @@ def test_env_checker_and_bad_input():
         env.reset(seed=0, options={"maze": m, "state": [10.0, 10.0]})
     with pytest.raises(ValueError, match="maze_kind"):
         Dubins3DMazeEnv(maze_kind="circular")
-    with pytest.raises(ValueError, match="unknown maze kind"):
+    with pytest.raises(ValueError, match="unknown maze generator"):
         generate_maze(np.random.default_rng(0), "circular")
     env.reset(seed=0, options={"maze": m, "state": [50.0, 100.0, 0.0]})
     with pytest.raises(ValueError, match="finite"):

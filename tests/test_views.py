@@ -409,10 +409,10 @@ def _car_body_check(env, view, world, what: str) -> None:
     _assert_body_at(np.asarray(pic), w.px(state[0], state[1]), r_px, _BODY, what)
 
 
-@pytest.mark.parametrize("kind", ["rectangular", "honeycomb"])
-def test_the_maze_view_draws_the_walls_of_the_collision_check_and_the_car_where_it_is(kind):
+@pytest.mark.parametrize("generator", ["rectangular", "honeycomb"])
+def test_the_maze_view_draws_the_walls_of_the_collision_check_and_the_car_where_it_is(generator):
     env = gym.make("Dubins3DMazeGuarded-v0", clock="fixed:5", render_mode="rgb_array")
-    options = None if kind == "rectangular" else {"maze": {"kind": "honeycomb", "rows": 10, "cols": 10}}
+    options = None if generator == "rectangular" else {"maze": {"generator": "honeycomb", "rows": 10, "cols": 10}}
     env.reset(seed=3, options=options)
     for _ in range(150):  # the driver alone (the drive where a wall seemed to be drawn too long)
         _, _, term, trunc, _ = env.step(env.action_space.inactive())
@@ -424,8 +424,8 @@ def test_the_maze_view_draws_the_walls_of_the_collision_check_and_the_car_where_
     w = view.window
     assert (w.x0, w.x1, w.y0, w.y1) == (0.0, side, 0.0, side)  # the env's own frame's window
     walls = _is(img, WALL)
-    _assert_drawn_where_inside(lambda p: maze.point_clearance(p) <= 0, w, walls, tol=1, what=f"maze {kind}", k=1)
-    _car_body_check(env, view, world, f"maze {kind}")
+    _assert_drawn_where_inside(lambda p: maze.point_clearance(p) <= 0, w, walls, tol=1, what=f"maze {generator}", k=1)
+    _car_body_check(env, view, world, f"maze {generator}")
     # the env's own frame: the car's disc (blue, drawn last) is centred at the same pixel
     frame = env.render()
     ys, xs = np.nonzero(_is(frame, (31, 119, 180)))

@@ -6,7 +6,7 @@ The paper's Fig. 1 / Table II system (docs/original-code.md, item 25), as a Gymn
 
 A constant-speed car (:class:`rmm_envs.systems.maze.dynamics.Dubins3D`, 10 px/s, minimum turning radius
 50 px) drives through a perfect maze with thick walls (:mod:`rmm_envs.systems.maze.mazes`: 20 x 20
-cells of 125 px, walls 12.5 px thick, a 2750 x 2750 px image for the rectangular kind).  It
+cells of 125 px, walls 12.5 px thick, a 2750 x 2750 px image for the rectangular generator).  It
 has no goal: the task is to keep driving without touching a wall.  Units are the paper's
 pixels throughout.
 
@@ -36,10 +36,10 @@ after ``max_episode_steps`` (default 1000) steps.
 
 ## Starting state
 
-A maze from the seed (kind ``"rectangular"`` by default, ``"honeycomb"`` with
+A maze from the seed (generator ``"rectangular"`` by default, ``"honeycomb"`` with
 ``maze_kind="honeycomb"``, or either at random per episode with ``"mixed"``), then a uniform
 state in the image, rejected until it is clear of the walls.
-``reset(seed, options={"state": [x, y, psi], "maze": Maze or {"kind": ...}})``
+``reset(seed, options={"state": [x, y, psi], "maze": Maze or {"generator": ...}})``
 sets either explicitly.  With a given state and a generated maze (from the seed, or from the
 given ``generate_maze`` arguments) the maze is redrawn until the state is clear of its walls,
 as generation keeps states clear; a state inside a wall of a given ``Maze`` or outside its
@@ -88,7 +88,7 @@ from rmm_envs.envs.base import (
     whole,
 )
 from rmm_envs.systems.maze.dynamics import Dubins3D
-from rmm_envs.systems.maze.mazes import MAZE_KINDS, Maze, generate_maze
+from rmm_envs.systems.maze.mazes import MAZE_GENERATORS, Maze, generate_maze
 from rmm_envs.systems.maze.scene import MazeScene
 
 __all__ = ["Dubins3DMazeEnv", "MazeScene", "observation_layout"]
@@ -132,7 +132,12 @@ class Dubins3DMazeEnv(LabelledEnvBase):
     ):
         check_arguments(
             [
-                (maze_kind in MAZE_KINDS + ("mixed",), "maze_kind", maze_kind, f"one of {MAZE_KINDS + ('mixed',)}"),
+                (
+                    maze_kind in MAZE_GENERATORS + ("mixed",),
+                    "maze_kind",
+                    maze_kind,
+                    f"one of {MAZE_GENERATORS + ('mixed',)}",
+                ),
                 (finite(step_dt) and step_dt > 0, "step_dt", step_dt, "a finite number > 0"),
                 (whole(n_path_points) and n_path_points >= 2, "n_path_points", n_path_points, "an integer >= 2"),
                 (
@@ -201,12 +206,12 @@ class Dubins3DMazeEnv(LabelledEnvBase):
 
     def _draw_maze(self, spec) -> Maze:
         if spec is None:
-            kind = (
+            generator = (
                 self.maze_kind
                 if self.maze_kind != "mixed"
-                else MAZE_KINDS[int(self.np_random.integers(len(MAZE_KINDS)))]
+                else MAZE_GENERATORS[int(self.np_random.integers(len(MAZE_GENERATORS)))]
             )
-            return generate_maze(self.np_random, kind)
+            return generate_maze(self.np_random, generator)
         return self._maze_from_option(spec)
 
     def reset(self, *, seed=None, options=None):

@@ -20,9 +20,9 @@ import numpy as np
 
 from rmm_envs.worlds.bounds import MAX_MAGNITUDE, MAX_MAZE_SIDE, within_bounds
 
-__all__ = ["MAZE_KINDS", "Maze", "generate_maze", "render_occupancy"]
+__all__ = ["MAZE_GENERATORS", "Maze", "generate_maze", "render_occupancy"]
 
-MAZE_KINDS = ("rectangular", "honeycomb")
+MAZE_GENERATORS = ("rectangular", "honeycomb")
 
 
 def _kruskal(n_cells: int, edges: list[tuple[int, int]], rng: np.random.Generator) -> set[int]:
@@ -93,7 +93,7 @@ class Maze:
     width: float = 2750.0
     height: float = 2750.0
     thickness: float = 12.5
-    kind: str = "custom"
+    generator: str = "custom"
     cells: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     passages: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=int))
     bucket: float = 50.0
@@ -322,21 +322,21 @@ def _hex_maze(
 
 def generate_maze(
     rng: np.random.Generator,
-    kind: str = "rectangular",
+    generator: str = "rectangular",
     rows: int = 20,
     cols: int = 20,
     cell: float = 125.0,
     thickness: float = 12.5,
 ) -> Maze:
-    """A seeded perfect maze of ``kind`` with a one-cell margin around it (pixel units).
+    """A seeded perfect maze made by ``generator`` with a one-cell margin around it (pixel units).
 
-    Both kinds are perfect mazes (every cell reachable from every other by exactly one path), a
+    Both generators make perfect mazes (every cell reachable from every other by exactly one path), a
     random spanning tree built with Kruskal's algorithm: ``"rectangular"`` a rows x cols grid of
     square cells, ``"honeycomb"`` pointy-top hexagons in offset rows.  The defaults are the
     paper's: 20 x 20 cells of 125 px, walls 12.5 px thick (mazegen's 3-unit round-capped stroke
     at 300 dpi), a 2750 x 2750 px image."""
-    if kind not in MAZE_KINDS:
-        raise ValueError(f"unknown maze kind {kind!r}; expected one of {MAZE_KINDS}")
+    if generator not in MAZE_GENERATORS:
+        raise ValueError(f"unknown maze generator {generator!r}; expected one of {MAZE_GENERATORS}")
     sides_ok = all(
         isinstance(x, (int, float, np.integer, np.floating))
         and not isinstance(x, bool)
@@ -355,7 +355,7 @@ def generate_maze(
         )
     rows, cols = int(rows), int(cols)
     margin = cell
-    if kind == "rectangular":
+    if generator == "rectangular":
         walls, cells, passages = _rect_maze(rng, rows, cols, cell, margin)
         width, height = 2 * margin + cols * cell, 2 * margin + rows * cell
     else:
@@ -363,7 +363,13 @@ def generate_maze(
         width = 2 * margin + (cols + 0.5) * cell
         height = 2 * margin + (1.5 * (rows - 1) + 2) * cell / np.sqrt(3.0)
     return Maze(
-        walls, width=float(width), height=float(height), thickness=thickness, kind=kind, cells=cells, passages=passages
+        walls,
+        width=float(width),
+        height=float(height),
+        thickness=thickness,
+        generator=generator,
+        cells=cells,
+        passages=passages,
     )
 
 
