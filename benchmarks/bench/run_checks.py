@@ -166,7 +166,7 @@ def check_env_contract(env_id: str, env=None) -> None:
             f"its system's guardian envs are {' and '.join(twins)}"
             if twins
             else "rmm_envs.envs.driven.parallel(env, driver, safe_default, success) makes a guardian env of it "
-            "(docs/tutorials/own-simulator.md, step 5)"
+            '(docs/tutorials/own-simulator.md, "The env\'s arguments")'
         )
         raise ValueError(
             f"--env {env_id}: rmm-bench runs guardians only on envs offering the parallel-autonomy contract, "
