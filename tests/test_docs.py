@@ -20,6 +20,7 @@ _TRAINS = pytest.mark.slow  # label, train and benchmark end to end: 7-10 s of C
     "script, args",
     [
         ("third_party_guardian.py", []),
+        ("braking_filter.py", []),
         ("new_system.py", []),
         pytest.param(
             "label_and_train.py",
