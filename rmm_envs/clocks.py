@@ -31,7 +31,7 @@ __all__ = [
 
 
 class Clock:
-    """Base stopwatch. Subclasses define :meth:`now`; ``mode`` names the kind for records."""
+    """Base stopwatch. Subclasses define :meth:`now`; ``mode`` names the clock's mode for records."""
 
     mode = "abstract"
 
@@ -174,8 +174,8 @@ def make_clock(spec: str | Clock | None) -> Clock:
         return WallClock()
     if s == "cpu":
         return CPUClock()
-    kind, colon, ms = s.partition(":")
-    if kind == "fixed" and colon:
+    mode, colon, ms = s.partition(":")
+    if mode == "fixed" and colon:
         try:
             latency_ms = float(ms)
         except ValueError:

@@ -77,14 +77,14 @@ def _cell(cell: PairCell | None) -> str:
     if not cell.tested:
         return "<td class='none' data-tested='no'>no test</td>"
     better = cell.better()
-    kind = "" if better is None else " better" if better == cell.a else " worse"
+    css = "" if better is None else " better" if better == cell.a else " worse"
     mark = "*" if cell.significant else ""
     title = (
         f"{cell.a} − {cell.b}, {cell.outcome}: {_signed(cell.diff)} points [{_signed(cell.lo)}, {_signed(cell.hi)}], "
         f"McNemar p {p_text(cell.p_value)}, {CORRECTION} p {p_text(cell.p_holm)}"
     )
     return (
-        f"<td class='cell{kind}' title='{_e(title)}' data-diff='{100 * cell.diff:.1f}' data-p='{cell.p_value:.6g}' "
+        f"<td class='cell{css}' title='{_e(title)}' data-diff='{100 * cell.diff:.1f}' data-p='{cell.p_value:.6g}' "
         f"data-p-holm='{cell.p_holm:.6g}' data-significant='{'yes' if cell.significant else 'no'}'>"
         f"<span class='d'>{_signed(cell.diff)}{mark}</span> "
         f"<span class='ci'>[{_signed(cell.lo)}, {_signed(cell.hi)}]</span></td>"

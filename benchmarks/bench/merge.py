@@ -76,7 +76,7 @@ def _no_result(row: dict) -> bool:
 
 def _last_run_invocation(store: ResultsStore) -> dict | None:
     try:
-        return store.invocation(None, kind="run")
+        return store.invocation(None, command="run")
     except LookupError:
         return None
 
@@ -126,7 +126,7 @@ def merge(out: str | Path, inputs: list[str | Path], write_tables: bool = True) 
     if write_tables:
         store = ResultsStore(target, read_only=True)
         try:
-            write_report(store, out, store.invocation(None, kind="run"), quiet=True)
+            write_report(store, out, store.invocation(None, command="run"), quiet=True)
         finally:
             store.close()
     return summary

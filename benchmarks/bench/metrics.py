@@ -122,8 +122,8 @@ def _aggregate_frame(df, batch_size: int) -> dict:
     n = len(df)
     ok = df[df["outcome"] != "error"].sort_values("episode", kind="stable")
     out: dict[str, Any] = {"episodes": n, "errors": n - len(ok), "error_rate": (n - len(ok)) / n if n else float("nan")}
-    kind = df["error_kind"] if "error_kind" in df.columns else None  # NULL: a guardian error (rows stored before kinds)
-    no_result = (df["outcome"] == "error") & (kind.isin(RETRIED_ERRORS) if kind is not None else False)
+    error_kind = df["error_kind"] if "error_kind" in df.columns else None  # NULL: a guardian error (stored before it)
+    no_result = (df["outcome"] == "error") & (error_kind.isin(RETRIED_ERRORS) if error_kind is not None else False)
     resulted = df[~no_result].sort_values("episode", kind="stable")  # guardian errors included: failures
     stepped = ok[ok["steps"] != 0]
     out["compute_ms"] = _mean_std(stepped["compute_time"] / stepped["steps"] * 1e3)

@@ -158,16 +158,16 @@ def plan_replay(store: ResultsStore, req: ReplayRequest) -> list[ReplayTarget]:
                 f"(expected one of the {len(stored)} stored: {span})"
             )
         if row["outcome"] == "error":
-            kind = row.get("error_kind") or "guardian"
+            error_kind = row.get("error_kind") or "guardian"
             first = (row.get("error") or "").splitlines()[0][:200] if row.get("error") else "no message"
-            if kind == "lost_worker":
+            if error_kind == "lost_worker":
                 raise ValueError(
                     f"--episode {i}: its worker was lost ({first}), so nothing of it was recorded to replay; "
                     "expected an episode with a result (rerun the run to retry it)"
                 )
             if not req.allow_errors:
                 raise ValueError(
-                    f"--episode {i}: it ended in an error of kind {kind} ({first}); replayed only with --allow-errors"
+                    f"--episode {i}: it ended in an error of kind {error_kind} ({first}); replayed only with --allow-errors"
                 )
         trace = None
         if nonblocking and mode not in REPRODUCIBLE_CLOCKS:

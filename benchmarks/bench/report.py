@@ -131,7 +131,7 @@ def _doomed_flags(store: ResultsStore, config: dict) -> dict[int, bool | None]:
     return {e: s["doomed"] for e, s in store.starts(key).items()}
 
 
-#: why an episode of a kind in RETRIED_ERRORS has no result, as the INCOMPLETE line says it
+#: why an episode whose error_kind is in RETRIED_ERRORS has no result, as the INCOMPLETE line says it
 _MISSING = {
     "timeout": "stored over the time limit",
     "lost_worker": "lost with their worker",
@@ -140,11 +140,11 @@ _MISSING = {
 
 
 def _missing_reason(e: dict) -> str:
-    kind = e.get("error_kind")
-    if kind == "env":
+    error_kind = e.get("error_kind")
+    if error_kind == "env":
         unmade = (e.get("error") or "").startswith("EnvUnavailable")
         return "unable to make the env in their worker" if unmade else "ended by an error the env raised"
-    return _MISSING.get(kind or "", f"ended in an error of kind {kind}")
+    return _MISSING.get(error_kind or "", f"ended in an error of kind {error_kind}")
 
 
 def _completeness(rows: list[dict], invs: list[dict]) -> str:
@@ -197,7 +197,7 @@ def newest_configuration(store: ResultsStore) -> list[dict]:
     that later ones win per agent (an agent keeps its place in the table); an agent whose run is
     no longer stored and that no later invocation reran is left out.  ``LookupError`` when no
     run is recorded."""
-    newest = _today(store.invocation(None, kind="run"))
+    newest = _today(store.invocation(None, command="run"))
     ids = [i for (i,) in store.db.execute("SELECT id FROM invocations WHERE kind = 'run' ORDER BY id")]
     stored = {k for (k,) in store.db.execute("SELECT run_key FROM runs")}
     invs = [inv for inv in map(_today, map(store.invocation, ids)) if _configuration(inv) == _configuration(newest)]
@@ -350,7 +350,7 @@ def cmd_report(request) -> int:
                         print(f"wrote {write_page(request.html, request.dir, store, [])}")
                     return 0
                 try:
-                    store.invocation(None, kind="sweep")
+                    store.invocation(None, command="sweep")
                 except LookupError:
                     raise LookupError(f"no benchmark run recorded in {store.path}") from None
                 raise LookupError(

@@ -189,7 +189,7 @@ def env_error_lines(store: ResultsStore, run_keys: dict[str, str], episodes: int
 
 def _invoke(
     store: ResultsStore,
-    kind: str,
+    command: str,
     config: BenchConfig,
     argv,
     meta: dict,
@@ -199,7 +199,7 @@ def _invoke(
     """Record an invocation, run it, and end it as finished, interrupted or failed (``tally``:
     :func:`execute`'s)."""
     keys = {a: r.key for a, r in config.agent_runs().items()}
-    inv = store.add_invocation(kind, record_args, keys, config.episodes)
+    inv = store.add_invocation(command, record_args, keys, config.episodes)
     try:
         unfinished = run_execute.execute(store, config, _provenance(argv), meta, inv, tally)
     except KeyboardInterrupt:

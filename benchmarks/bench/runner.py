@@ -325,7 +325,7 @@ def play_episode(task: EpisodeTask, env=None, observer=None) -> EpisodeRecord:
             and not isinstance(e, EpisodeTimeout)
             and not (env_call == "step" and _refused_action(env, action))
         )
-        kind = (
+        error_kind = (
             "timeout"
             if isinstance(e, EpisodeTimeout)
             else "input_changed"
@@ -335,7 +335,7 @@ def play_episode(task: EpisodeTask, env=None, observer=None) -> EpisodeRecord:
             else "guardian"
         )
         where = f"raised by the env {run.env_id} in its {env_call}(), not by the guardian" if env_raised else ""
-        fields.update(outcome="error", error_kind=kind, error=_error_text(e, where))
+        fields.update(outcome="error", error_kind=error_kind, error=_error_text(e, where))
         _CACHE.pop(_guardian_key(task), None)
     finally:
         if use_alarm:

@@ -89,7 +89,7 @@ from collections.abc import Sequence
 from rmm_bench.config import EpisodeResult
 from rmm_bench.store_open import StoreConnection
 from rmm_bench.store_schema import (
-    _INVOCATION_KINDS,
+    _COMMAND_NAMES,
     EPISODE_FIELDS,
     MIGRATIONS,
     RETRIED_ERRORS,
@@ -273,7 +273,8 @@ class ResultsStore(StoreConnection):
 
     # invocations
     @_guarded
-    def add_invocation(self, kind: str, args: dict, run_keys: dict, episodes: int) -> int:
+    def add_invocation(self, command: str, args: dict, run_keys: dict, episodes: int) -> int:
+        """Record a ``command`` (``"run"``, ``"sweep"``: the table's ``kind`` column) as running; its id."""
         self._writable()
         now = time.time()
         cur = self.db.execute(
@@ -281,7 +282,7 @@ class ResultsStore(StoreConnection):
             "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (
                 now,
-                kind,
+                command,
                 json.dumps(args, sort_keys=True),
                 json.dumps(run_keys),
                 episodes,
@@ -325,23 +326,24 @@ class ResultsStore(StoreConnection):
         return len(stale)
 
     @_guarded
-    def invocation(self, inv_id: int | None = None, kind: str | None = None) -> dict:
-        """One invocation; ``state`` is its status, or ``stale`` for a ``running`` one whose process is gone."""
+    def invocation(self, inv_id: int | None = None, command: str | None = None) -> dict:
+        """One invocation (``inv_id``, else the newest of ``command``, stored as ``kind``); ``state`` is its
+        status, or ``stale`` for a ``running`` one whose process is gone."""
         q = "SELECT id, created, kind, args, run_keys, episodes, status, pid, host, updated, message FROM invocations"
         params: tuple = ()
         if inv_id is not None:
             q += " WHERE id = ?"
             params = (inv_id,)
-        elif kind is not None:
+        elif command is not None:
             q += " WHERE kind = ?"
-            params = (kind,)
+            params = (command,)
         q += " ORDER BY id DESC LIMIT 1"
         row = self.db.execute(q, params).fetchone()
         if row is None:
             what = (
                 f"invocation {inv_id}"
                 if inv_id is not None
-                else _INVOCATION_KINDS.get(kind, f"{kind or 'benchmark'} invocation")
+                else _COMMAND_NAMES.get(command, f"{command or 'benchmark'} invocation")
             )
             raise LookupError(f"no {what} recorded in {self.path}")
         inv = {

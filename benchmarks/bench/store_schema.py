@@ -48,11 +48,12 @@ _LATER_EPISODE_FIELDS = {"start": 3}
 # the episodes table as version 1 creates it (a later migration adding a column adds it itself)
 _V1_EPISODE_FIELDS = {k: v for k, v in EPISODE_FIELDS.items() if k not in _LATER_EPISODE_FIELDS}
 
-# error kinds that are failures of the run rather than results: every rerun retries them
+# the error_kind values that are failures of the run rather than results: every rerun retries them
 RETRIED_ERRORS = ("timeout", "lost_worker", "input_changed", "env")
 
-# what an invocation of each kind is called in messages (any other kind, or none: "... invocation")
-_INVOCATION_KINDS: dict[str | None, str] = {"run": "benchmark run", "sweep": "latency sweep"}
+# what an invocation of each command (stored in the invocations table's kind) is called in messages
+# (any other, or none: "... invocation")
+_COMMAND_NAMES: dict[str | None, str] = {"run": "benchmark run", "sweep": "latency sweep"}
 
 _INVOCATION_COLUMNS = {"pid": "INTEGER", "host": "TEXT", "updated": "REAL", "message": "TEXT"}
 
@@ -100,9 +101,9 @@ def _legacy_layout(db: sqlite3.Connection) -> None:
     if "cost" not in have:  # databases written before the safety cost was stored
         db.execute("ALTER TABLE episodes ADD COLUMN cost REAL")
     have = {r[1] for r in db.execute("PRAGMA table_info(invocations)")}
-    for name, kind in _INVOCATION_COLUMNS.items():
+    for name, sql_type in _INVOCATION_COLUMNS.items():
         if name not in have:
-            db.execute(f"ALTER TABLE invocations ADD COLUMN {name} {kind}")
+            db.execute(f"ALTER TABLE invocations ADD COLUMN {name} {sql_type}")
     db.execute("UPDATE invocations SET status = 'finished' WHERE status = 'done'")
 
 

@@ -104,7 +104,7 @@ def termination_is_failure(env: gym.Env) -> bool:
     # lazy: the MuJoCo adapters import mujoco (optional extra rmm-envs[mujoco]), loaded for a MuJoCo env only
     from rmm_envs.adapters.mujoco_envs import MujocoScene
 
-    return type(base).__name__ in MujocoScene.KINDS
+    return type(base).__name__ in MujocoScene.KNOWN
 
 
 def snapshot_of(adapter: AdaptedEnv):

@@ -134,7 +134,7 @@ SHIPPED_FAILURES = {"Walker2dEnv": "rmm_envs.adapters.mujoco_envs:walker2d_unhea
 class MujocoScene(SimulatorScene):
     """A MuJoCo env's dynamics over a batch of full states (see the module docstring)."""
 
-    KINDS = {  # unwrapped class name -> (failure kind, default steps per level)
+    KNOWN = {  # unwrapped class name -> (its failure test, default steps per level)
         "InvertedPendulumEnv": ("inverted_pendulum", 1),
         "InvertedDoublePendulumEnv": ("inverted_double_pendulum", 2),
         "HopperEnv": ("hopper", 5),
@@ -144,9 +144,9 @@ class MujocoScene(SimulatorScene):
         u = env.unwrapped
         name = env.spec.id if getattr(env.spec, "id", None) else type(u).__name__
         _require_mujoco(name)
-        known: tuple[str | None, int] = self.KINDS.get(type(u).__name__, (None, 2))
-        self.kind, steps = known
-        if self.kind is None and failure is None:
+        known: tuple[str | None, int] = self.KNOWN.get(type(u).__name__, (None, 2))
+        self.failure_test, steps = known
+        if self.failure_test is None and failure is None:
             d = int(mujoco.mj_stateSize(u.model, int(mujoco.mjtState.mjSTATE_FULLPHYSICS)))
             shipped = SHIPPED_FAILURES.get(type(u).__name__)
             example = f"; for {name} the package ships one: --failure {shipped}" if shipped else ""
@@ -180,9 +180,9 @@ class MujocoScene(SimulatorScene):
         return states[:, self.qvel0 : self.qvel0 + self.nv]
 
     def env_failed(self, states):
-        if self.kind == "inverted_pendulum":
+        if self.failure_test == "inverted_pendulum":
             return np.abs(self.qpos(states)[:, 1]) > 0.2
-        if self.kind == "hopper":
+        if self.failure_test == "hopper":
             u = self.env
             qpos = self.qpos(states)
             rest = np.concatenate([qpos, self.qvel(states)], axis=1)[:, 2:]
@@ -197,7 +197,7 @@ class MujocoScene(SimulatorScene):
                 & (qpos[:, 2] < hi_a)
             )
             return ~healthy
-        if self.kind == "inverted_double_pendulum":
+        if self.failure_test == "inverted_double_pendulum":
             out = np.empty(states.shape[0], dtype=bool)
             d = self._data
             for i, s in enumerate(states):
