@@ -36,42 +36,16 @@ import numpy as np
 from rmm_bench.options import refuse
 from rmm_envs.risk import datagen, dataset
 from rmm_guardians.lrmm import model as lrmm_model
-from rmm_guardians.lrmm.shipped import models_dir
+from rmm_guardians.lrmm.shipped import calibrated, models_dir
 
 __all__ = ["CALIBRATED", "build_parser", "calibrate", "cmd", "main", "reliability"]
 
 PROG = "rmm-bench calibrate"
 
-#: system (its catalog name, as in rmm_envs.catalog) -> the env whose labels the model learned,
-#: the model ``lrmm`` reads, the labelling arguments of its training dataset (tree and sampler;
-#: the driven envs' are their adapters' defaults), and how many worlds x states to label
-CALIBRATED: dict[str, dict[str, Any]] = {
-    "Dubins4D": {
-        "env": ["--env", "Dubins4DGuarded-v0"],
-        "model": "dubins4d_act.npz",
-        "size": ["--configs", "64", "--samples-per-config", "64"],
-    },
-    "Dubins3DMaze": {
-        "env": ["--env", "Dubins3DMaze-v0", "--env-opt", 'maze_kind="mixed"', "--configs-per-shard", "1"],
-        "model": "dubins3d_maze.npz",
-        "size": ["--configs", "4", "--samples-per-config", "512"],
-    },
-    "QuadrotorRoom": {
-        "env": ["--env", "QuadrotorRoomGuarded-v0", "--branches", "16", "--depth", "2", "--horizon", "1.0"],
-        "model": "quadrotor_cmd_act.npz",
-        "size": ["--configs", "16", "--samples-per-config", "32", "--n-steps", "5"],
-    },
-    "CartPole": {
-        "env": ["--env", "CartPoleGuarded-v0"],
-        "model": "cartpole_guarded.npz",
-        "size": ["--configs", "16", "--samples-per-config", "64"],
-    },
-    "InvertedPendulum": {
-        "env": ["--env", "InvertedPendulumGuarded-v0"],
-        "model": "inverted_pendulum_guarded.npz",
-        "size": ["--configs", "16", "--samples-per-config", "64"],
-    },
-}
+#: system (its name in the table of systems) -> the env whose labels its shipped model learned
+#: (with the labelling arguments of its training dataset), the model file and how many worlds x
+#: states to label: each shipped model's ``calibration`` entry in ``shipped.toml``
+CALIBRATED: dict[str, dict[str, Any]] = calibrated()
 BINS = np.linspace(0.0, 1.0, 11)
 
 

@@ -16,6 +16,7 @@ import gymnasium as gym
 import tomllib
 
 from rmm_envs.catalog import GUARDED_VARIANTS, SYSTEMS, current_id
+from rmm_envs.defaults import DEFAULT_LABELLED_ENV
 
 __all__ = [
     "DEFAULT_ENV",
@@ -23,13 +24,14 @@ __all__ = [
     "SHIPPED",
     "SHIPPED_BY_SYSTEM",
     "Shipped",
+    "calibrated",
     "ShippedById",
     "default_model_path",
     "models_dir",
 ]
 
 #: the env whose shipped model a guardian built without ``env_id`` or a model reads (the paper's case study)
-DEFAULT_ENV = "Dubins4DGuarded-v0"
+DEFAULT_ENV = DEFAULT_LABELLED_ENV
 
 
 @dataclass(frozen=True)
@@ -37,10 +39,14 @@ class Shipped:
     """What this package ships for one env id: its model file per variant and the observation
     field the model reads (``None``: the whole observation).  A model's ``lrmm`` decision
     (threshold, strategies, how they were chosen) is not here: it is the text file beside the
-    model (``NAME.decision.toml``, :mod:`rmm_guardians.lrmm.decision`)."""
+    model (``NAME.decision.toml``, :mod:`rmm_guardians.lrmm.decision`).  ``calibration``: how
+    ``rmm-bench calibrate`` checks it (``model``, the variant it scores; ``labelling``, the
+    training dataset's arguments besides the env; ``size``, the worlds and states it labels), or
+    ``None``."""
 
     files: dict
     inputs: str | None = None
+    calibration: dict | None = None
 
 
 #: The file, beside the models, that registers each shipped model for the systems it serves.
@@ -69,8 +75,25 @@ def _read_registration(path: Path) -> dict[str, dict[str, Shipped]]:
                 )
             if inputs is not None and not isinstance(inputs, str):
                 raise ValueError(f"{path}: [systems.{name}.{env_variant}] inputs must be a field name, got {inputs!r}")
-            out.setdefault(name, {})[env_variant] = Shipped(dict(files), inputs)
+            calibration = entry.get("calibration")
+            if calibration is not None:
+                _check_calibration(path, f"[systems.{name}.{env_variant}]", calibration, files)
+            out.setdefault(name, {})[env_variant] = Shipped(dict(files), inputs, calibration)
     return out
+
+
+def _check_calibration(path: Path, where: str, calibration, files: dict) -> None:
+    """``ValueError`` unless ``calibration`` names one of ``files``' variants and holds lists of
+    strings (``labelling`` optional, ``size`` required)."""
+    ok = isinstance(calibration, dict) and calibration.get("model") in files
+    for key in ("labelling", "size"):
+        value = calibration.get(key, [] if key == "labelling" else None) if ok else None
+        ok = ok and isinstance(value, list) and all(isinstance(a, str) for a in value)
+    if not ok or set(calibration) - {"model", "labelling", "size"}:
+        raise ValueError(
+            f"{path}: {where} calibration must be {{ model = one of {sorted(files)}, labelling = [strings], "
+            f"size = [strings] }}, got {calibration!r}"
+        )
 
 
 def models_dir() -> Path:
@@ -115,6 +138,23 @@ def _by_id() -> ShippedById:
 
 #: The shipped model of each env id (:data:`SHIPPED_BY_SYSTEM`, looked up by id).
 SHIPPED: ShippedById = _by_id()
+
+
+def calibrated() -> dict[str, dict]:
+    """System name -> how ``rmm-bench calibrate`` checks its shipped model, in the table's order:
+    ``{"env": ["--env", ID, *labelling], "model": file, "size": [...]}``, from the entries of
+    :data:`REGISTRATION` with a ``calibration`` (ID: the entry's env, plain or blocking guarded)."""
+    out = {}
+    for system in SYSTEMS:
+        for env_variant, ship in SHIPPED_BY_SYSTEM.get(system.name, {}).items():
+            if ship.calibration is not None:
+                (env_id,) = system.ids((env_variant,))
+                out[system.name] = {
+                    "env": ["--env", env_id, *ship.calibration.get("labelling", [])],
+                    "model": ship.files[ship.calibration["model"]],
+                    "size": list(ship.calibration["size"]),
+                }
+    return out
 
 
 def default_model_path(env_id: str = DEFAULT_ENV, variant: str = "paper") -> Path:
