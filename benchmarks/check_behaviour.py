@@ -275,7 +275,7 @@ def world_fingerprint(seeds: int) -> dict:
     for seed in range(seeds):
         _flatten(generate_room(np.random.default_rng(seed)), rooms)
         for kind in ("rectangular", "honeycomb"):
-            _flatten(generate_maze(np.random.default_rng(seed), kind=kind, rows=6, cols=6), mazes)
+            _flatten(generate_maze(np.random.default_rng(seed), kind, rows=6, cols=6), mazes)
     out["generate_room"], out["generate_maze"] = _digest(*rooms), _digest(*mazes)
     for env_id in ENVS:
         env = _make(env_id)

@@ -33,7 +33,7 @@ import time
 import numpy as np
 
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.systems.dubins4d.dynamics import KIND, Dubins4D
+from rmm_envs.systems.dubins4d.dynamics import DYNAMICS_NAME, Dubins4D
 from rmm_envs.systems.dubins4d.env import CONTROLS
 from rmm_guardians.hj._kernels import set_threads
 from rmm_guardians.hj.dynamics import Dubins4DHJ
@@ -151,7 +151,9 @@ def main(argv=None) -> None:
     box = {"obstacles": OBSTACLES, "goal": np.array([9.0, 9.0, 0.5]), "state": np.zeros(4)}
     g = HJGuardian(cache=False)
     g.reset(
-        seed=0, privileged=lambda: box, action_space=GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, kind=KIND)
+        seed=0,
+        privileged=lambda: box,
+        action_space=GuardianActionSpace.for_dynamics(Dubins4D(), CONTROLS, dynamics_name=DYNAMICS_NAME),
     )
     rng = np.random.default_rng(0)
     states = np.column_stack(

@@ -93,7 +93,9 @@ class Maze:
     width: float = 2750.0
     height: float = 2750.0
     thickness: float = 12.5
-    generator: str = "custom"
+    #: the generator that made it ("custom": none); a stored name: its attribute name enters the start
+    #: fingerprints stored with results (rmm_envs.starts.start_fingerprint), so it keeps this spelling
+    kind: str = "custom"
     cells: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     passages: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=int))
     bucket: float = 50.0
@@ -367,7 +369,7 @@ def generate_maze(
         width=float(width),
         height=float(height),
         thickness=thickness,
-        generator=generator,
+        kind=generator,
         cells=cells,
         passages=passages,
     )
