@@ -21,6 +21,7 @@ from typing import Protocol, runtime_checkable
 import gymnasium as gym
 import numpy as np
 
+from rmm_envs.adapters.step_batch import batch_actions, batched_failed_ends, batched_paths
 from rmm_envs.envs.base import rejection_sample
 
 __all__ = ["AdaptedEnv", "SimulatorScene", "SnapshotScene", "SnapshotSimulator", "control_box", "env_actions"]
@@ -180,22 +181,28 @@ class SimulatorScene:
     # -- RiskScene -----------------------------------------------------------------------------
     def state_failed(self, states) -> np.ndarray:
         states = np.asarray(states, dtype=float)
-        bad = ~np.all(np.isfinite(states), axis=1)
+        finite = np.isfinite(states)
+        if finite.all():  # the usual case, without a reduction along rows (slow in numpy)
+            return self._tests_failed(states)
+        bad = ~np.all(finite, axis=1)
         out = bad.copy()
         ok = ~bad
         if ok.any():
-            good = states[ok]
-            f = np.asarray(self.env_failed(good), dtype=bool)
-            if self.failure is not None:
-                user = np.asarray(self.failure(good))
-                if user.shape != (good.shape[0],):
-                    raise ValueError(
-                        f"{self.name}: failure(states) must return shape ({good.shape[0]},) for "
-                        f"{good.shape[0]} states, got {user.shape} from failure = {_callable_name(self.failure)}"
-                    )
-                f = f | user.astype(bool)
-            out[ok] = f
+            out[ok] = self._tests_failed(states[ok])
         return out
+
+    def _tests_failed(self, good: np.ndarray) -> np.ndarray:
+        """The env's failure test and the user's ``failure`` of finite states ``good``."""
+        f = np.asarray(self.env_failed(good), dtype=bool)
+        if self.failure is not None:
+            user = np.asarray(self.failure(good))
+            if user.shape != (good.shape[0],):
+                raise ValueError(
+                    f"{self.name}: failure(states) must return shape ({good.shape[0]},) for "
+                    f"{good.shape[0]} states, got {user.shape} from failure = {_callable_name(self.failure)}"
+                )
+            f = f | user.astype(bool)
+        return f
 
     def path_failed(self, paths) -> np.ndarray:
         return self.state_failed(np.asarray(paths)[:, -1])
@@ -245,7 +252,13 @@ class SnapshotScene(SimulatorScene):
         super().__init__(name, np.asarray(sim.get_state()).shape[0], sim.dt, sim.action_space, failure, default_horizon)
 
     def env_failed(self, states):
-        return np.asarray(self.sim.state_failed(states), dtype=bool)
+        failed = np.asarray(self.sim.state_failed(states), dtype=bool)
+        if failed.shape != (states.shape[0],):
+            raise ValueError(
+                f"{self.name}: state_failed on {states.shape[0]} states must return shape ({states.shape[0]},), "
+                f"got {failed.shape}"
+            )
+        return failed
 
     def _env_action(self, a):
         if isinstance(self.action_space, gym.spaces.Discrete):
@@ -254,7 +267,7 @@ class SnapshotScene(SimulatorScene):
 
     def advance(self, states, actions, k):
         if getattr(self.sim, "step_batch", None) is not None:
-            out, step_failed, _ = self._advance_batched(states, actions, k, check=False)
+            out, step_failed, _ = batched_paths(self, states, actions, k, check=False)
             return out, step_failed
         out = np.full((states.shape[0], k, self.state_dim), np.nan)
         step_failed = np.zeros((states.shape[0], k), dtype=bool)
@@ -275,46 +288,22 @@ class SnapshotScene(SimulatorScene):
     def advance_checked(self, states, actions, k):
         if getattr(self.sim, "step_batch", None) is None:
             return super().advance_checked(states, actions, k)
-        out, _, failed = self._advance_batched(states, actions, k, check=True)
+        out, _, failed = batched_paths(self, states, actions, k, check=True)
         return out, failed
 
-    def _advance_batched(self, states, actions, k, check: bool):
-        """Step the live branches together; ``check``: also test each new state (only the live
-        ones, once) with :meth:`state_failed`, a branch leaving at its first failure either way."""
-        n = states.shape[0]
-        out = np.full((n, k, self.state_dim), np.nan)
-        step_failed = np.zeros((n, k), dtype=bool)
-        any_failed = np.zeros((n, k), dtype=bool)
-        env_actions = np.asarray(actions)
+    def propagate_failed(self, states, controls, duration: float, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(failed (N,) bool, ends (N, d))`` of one tree level, the same bits as ``path_failed``
+        of :meth:`propagate` and the paths' last points: through ``step_batch`` without a path
+        array (:func:`rmm_envs.adapters.step_batch.batched_failed_ends`), else exactly that."""
+        if getattr(self.sim, "step_batch", None) is None:
+            paths = self.propagate(states, controls, duration, n_steps)
+            return np.asarray(self.path_failed(paths), dtype=bool), paths[:, -1]
+        k = self.env_steps(duration)
         if isinstance(self.action_space, gym.spaces.Discrete):
-            env_actions = env_actions[:, :1].astype(np.int64)
-        else:
-            env_actions = env_actions.astype(self.action_space.dtype)
-        live = np.arange(n)
-        current = np.array(states, dtype=float)
-        for j in range(k):
-            if live.size == 0:
-                break
-            result = self.sim.step_batch(current, env_actions[live])
-            if not (isinstance(result, tuple) and len(result) == 2):
-                raise TypeError(
-                    f"{self.name}: step_batch(states, actions) must return (states (N, d), failed (N,) bool), "
-                    f"got {type(result).__name__}"
-                )
-            nxt, failed = np.asarray(result[0], dtype=float), np.asarray(result[1], dtype=bool)
-            if nxt.shape != (live.size, self.state_dim) or failed.shape != (live.size,):
-                raise ValueError(
-                    f"{self.name}: step_batch on {live.size} states must return shapes ({live.size}, "
-                    f"{self.state_dim}) and ({live.size},), got {nxt.shape} and {failed.shape}"
-                )
-            out[live, j] = nxt
-            step_failed[live, j] = failed
-            if check:
-                failed = failed | self.state_failed(nxt)
-                any_failed[live, j] = failed
-            keep = ~failed
-            live, current = live[keep], nxt[keep]
-        return out, step_failed, any_failed
+            return batched_failed_ends(self, states, batch_actions(self.action_space, self.to_actions(controls)), k)
+        # to_actions without its round trip through float64 (the Box's dtype and back: the same values)
+        acts = np.clip(np.asarray(controls, dtype=float), self.control_low, self.control_high)
+        return batched_failed_ends(self, states, acts.astype(self.action_space.dtype), k)
 
 
 class AdaptedEnv:
