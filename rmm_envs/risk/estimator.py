@@ -82,6 +82,11 @@ def _propagate_failed(scene, states, controls, duration: float, n_steps: int) ->
     return np.asarray(scene.path_failed(paths), dtype=bool), paths[:, -1]
 
 
+def _children(parent_idx: np.ndarray, n: int) -> np.ndarray:
+    """The indices of the ``n`` children of each of the nodes ``parent_idx``, parent by parent."""
+    return (parent_idx[:, None] * n + np.arange(n)[None, :]).reshape(-1)
+
+
 def _scale_into(r, lo, width):  # pragma: no cover - compiled
     """``r = lo + width * r`` over the last axis, in place: numpy's ``random_uniform``
     (``lower + range * next_double``), the same operations."""
@@ -288,18 +293,24 @@ class RiskEstimator:
                 risk = np.where(root_fail, 1.0, sys_.leaf_estimate(roots))
             return risk, np.zeros((B, c_dim)), np.zeros(B), np.zeros(B, dtype=np.int64)
 
-        # Expand level by level; only the children of live (non-failed) nodes are propagated.
-        # live[l] flags which nodes of level l (B * n^(l+1) of them, root-major) were expanded.
-        parents, parent_idx = roots[~root_fail], np.nonzero(~root_fail)[0]
-        fails, live, finals = [], [], []
+        # Expand level by level; only the children of live (non-failed) nodes are propagated, n
+        # of them per live parent (parent_idx: the parents' indices in their level, root-major).
+        # A level's bookkeeping works on those blocks of n; the last level keeps only its failures.
+        parents, parent_idx = np.compress(~root_fail, roots, axis=0), np.flatnonzero(~root_fail)
+        fails: list[np.ndarray] = []
+        final, final_idx = None, parent_idx[:0]
         first_ctrls: np.ndarray | None = None
+        leaves = np.zeros(B, dtype=np.int64)  # terminal nodes (failed, or at depth m) among the expanded ones
         for lvl in range(m):
             n_nodes = B * n ** (lvl + 1)  # exact: integers
-            child_idx = (parent_idx[:, None] * n + np.arange(n)[None, :]).reshape(-1)
+            last = lvl == m - 1
             rep = np.repeat(parents, n, axis=0)
             if controls is not None:
-                flat = controls[lvl].reshape(-1, controls[lvl].shape[-1])
-                u = np.take(flat, child_idx, axis=0) if self.fused else flat[child_idx]  # take: the same rows, faster
+                c = controls[lvl].shape[-1]
+                if self.fused:  # take the parents' blocks: the same rows as the children's, faster
+                    u = np.take(controls[lvl].reshape(-1, n, c), parent_idx, axis=0).reshape(-1, c)
+                else:
+                    u = controls[lvl].reshape(-1, c)[_children(parent_idx, n)]
             else:
                 assert self.policy is not None  # estimate() draws the controls up front for a uniform policy
                 u = np.asarray(self.policy(rep, rng), dtype=float)
@@ -307,34 +318,33 @@ class RiskEstimator:
                     raise ValueError(f"policy returned shape {u.shape}, expected {(rep.shape[0], c_dim)}")
             if lvl == 0:
                 first_ctrls = np.zeros((n_nodes, c_dim))
-                first_ctrls[child_idx] = u
+                first_ctrls.reshape(-1, n, c_dim)[parent_idx] = u.reshape(-1, n, c_dim)
+            if last:  # every expanded node of the last level is terminal
+                leaves += n * np.bincount(parent_idx // n**lvl, minlength=B)  # exact: integers
             fail = np.zeros(n_nodes, dtype=bool)
-            is_live = np.zeros(n_nodes, dtype=bool)
-            is_live[child_idx] = True
-            final = None
-            if rep.shape[0] and self.fused:  # the scene's fused loop where it has one; compress: faster masks
-                f, ends = _propagate_failed(sys_, rep, u, self.t, self.n_steps)
-                fail[child_idx] = f
-                final = np.compress(~f, ends, axis=0)
-                parents, parent_idx = final, np.compress(~f, child_idx)
-            elif rep.shape[0]:
-                paths = sys_.propagate(rep, u, self.t, self.n_steps)
-                f = np.asarray(sys_.path_failed(paths), dtype=bool)
-                fail[child_idx] = f
-                final = paths[~f, -1]
-                parents, parent_idx = final, child_idx[~f]
+            if rep.shape[0]:
+                if self.fused:  # the scene's fused loop where it has one; compress: faster masks
+                    f, ends = _propagate_failed(sys_, rep, u, self.t, self.n_steps)
+                else:
+                    paths = sys_.propagate(rep, u, self.t, self.n_steps)
+                    f = np.asarray(sys_.path_failed(paths), dtype=bool)
+                    ends = paths[:, -1]
+                fail.reshape(-1, n)[parent_idx] = f.reshape(-1, n)
+                if not last or self.leaf == "heuristic":  # the live children: the next level's parents
+                    parents = np.compress(~f, ends, axis=0)
+                    parent_idx = np.compress(~f, _children(parent_idx, n))
+                    if last:
+                        final, final_idx = parents, parent_idx
             else:
-                parents, parent_idx = rep, child_idx
+                parent_idx = parent_idx[:0]
+            if not last:
+                leaves += fail.reshape(B, -1).sum(axis=1)
             fails.append(fail)
-            live.append(is_live)
-            finals.append((final, parent_idx))
 
         # values, bottom-up (nodes that were never expanded are masked by their failed ancestor)
         value = fails[-1].astype(float)
-        if self.leaf == "heuristic":
-            final, idx = finals[-1]
-            if idx.size:
-                value[idx] = sys_.leaf_estimate(final)
+        if self.leaf == "heuristic" and final_idx.size:
+            value[final_idx] = sys_.leaf_estimate(final)
         for lvl in range(m - 2, -1, -1):
             value = np.where(fails[lvl], 1.0, self.reduce(value.reshape(-1, n)))
         child_values = value.reshape(B, n)
@@ -346,9 +356,4 @@ class RiskEstimator:
         min_ctrl = np.where(root_fail[:, None], 0.0, min_ctrl)
         dur = np.where(root_fail, 0.0, self.t)
 
-        # terminal nodes (failed, or at depth m) among the expanded ones
-        leaves = np.zeros(B, dtype=np.int64)
-        for lvl in range(m):
-            terminal = live[lvl] & (fails[lvl] | (lvl == m - 1))
-            leaves += terminal.reshape(B, -1).sum(axis=1)
         return risk, min_ctrl, dur, leaves
