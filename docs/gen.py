@@ -1,7 +1,7 @@
 """Regenerate the generated parts of docs/: environment pages (from the module docstrings),
 the CLI reference (from the argument parsers), generated blocks inside hand-written pages (the
-shipped lrmm decisions, from their files; a simulator's hooks; the export schema's columns) and
-the rendered environment frame.
+shipped lrmm decisions, from their files; a simulator's hooks; the export schema's columns; the
+decision records' index) and the rendered environment frame.
 
 Run ``python docs/gen.py``; ``tests/test_docs.py`` fails when a generated page is stale.
 """
@@ -175,8 +175,18 @@ def export_schema_block() -> str:
     return "\n".join(out) + "\n"
 
 
+def decision_index_block() -> str:
+    """One row per decision record, its title as the record states it."""
+    rows = ["| record | decision |", "|---|---|"]
+    for path in sorted((DOCS / "decisions").glob("[0-9][0-9][0-9][0-9]-*.md")):
+        number, _, title = path.read_text().splitlines()[0].removeprefix("# ").partition(": ")
+        rows.append(f"| [{number}]({path.name}) | {title} |")
+    return "\n".join(rows) + "\n"
+
+
 #: generated blocks inside hand-written pages: page -> block name -> its text
 BLOCKS = {
+    "decisions/README.md": {"decision-index": decision_index_block},
     "concepts.md": {"lrmm-decisions": lrmm_decisions_block},
     "tutorials/own-simulator.md": {"simulator-hooks": simulator_hooks_block},
     "comparing.md": {"export-schema": export_schema_block},
