@@ -80,7 +80,8 @@ class HJGuardian(DynamicsDispatch, PrivilegedGuardian):
     ``mode="reach_avoid"`` (also the goal's reach-avoid value over ``ra_horizon``, 10 s: while
     ``-ra_margin <= V_ra <= 0`` it steers to keep it; a second, 2.5x longer solve), ``maze`` and
     ``quadrotor`` (the other systems' arguments; ``False`` refuses them; ``cache_dir``, ``cache``,
-    ``cache_max_files``, ``backend``, ``threads``, ``delay`` and ``lap`` are shared).
+    ``cache_max_files``, ``backend``, ``threads``, ``delay``, ``lap`` and, when set, ``disturbance``
+    are shared: the maze car's part models it, the quadrotor's refuses it).
 
     It needs privileged data and an action space with the two Dubins4D controls, symmetric about 0
     (the dynamics' bounds are read from it and enter the cache key).  A state outside the grid's
@@ -107,6 +108,8 @@ class HJGuardian(DynamicsDispatch, PrivilegedGuardian):
             "delay": s.delay,
             "lap": s.lap,
         }
+        if s.disturbance != 0.0:  # shared when set: the maze car's part models it, the quadrotor's refuses it
+            shared["disturbance"] = s.disturbance
         self._init_parts(s, shared)
         self.standstill_lookup, self.horizon, self.mode, self.rule = s.standstill_lookup, s.horizon, s.mode, s.rule
         self.order, self.rk, self.cfl = s.order, s.rk, s.cfl

@@ -25,7 +25,9 @@ from rmm_guardians._checks import finite, integer
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.grid import Grid, central_gradient
+from rmm_guardians.hj.guardian import env_disturbance_bound
 from rmm_guardians.hj.maze_lookahead import COEF, manoeuvres, near_walls, path_clearances
+from rmm_guardians.hj.settings import disturbance_setting
 from rmm_guardians.hj.solver import check_scheme, select_backend, solve_brt
 from rmm_guardians.privileged import PrivilegedGuardian
 from rmm_guardians.system_checks import maze_car_only
@@ -68,7 +70,9 @@ class MazeHJGuardian(PrivilegedGuardian):
     surfaces (capped at 60 px), so ``V`` is in pixels.  It is solved as the Dubins4D car at one
     speed (``Dubins4DHJ(u1_max=u_max, u2_max=0, v_min=v_max=s)``, a speed axis of three nodes),
     cached on disk like the Dubins4D value; the solve time is ``stats()["solve_seconds"]`` and the
-    episode's precompute time.
+    episode's precompute time.  ``disturbance`` (0; ``hj.disturbance``, as on Dubins4D): a bound
+    ``d_max`` (px/s) on the position rates ``|d_x|, |d_y|``, against the car; ``"env"``: the run's own
+    ``dyn-rate`` bound, read at every reset (0 without one).  The look-ahead's paths stay nominal.
 
     **Rule** (``rule="lookahead"``, :mod:`rmm_guardians.hj.maze_lookahead`): two-turn manoeuvres
     (``u1`` for ``t1`` in ``lookahead / 6`` steps up to ``lookahead``, then ``u2``) are scored by
@@ -120,6 +124,7 @@ class MazeHJGuardian(PrivilegedGuardian):
         lookahead: float = 6.0,
         band: float = 20.0,
         value_error: float = 6.0,
+        disturbance: float | str = 0.0,
     ) -> None:
         super().__init__()
         if rule not in MAZE_RULES:
@@ -131,6 +136,7 @@ class MazeHJGuardian(PrivilegedGuardian):
         self.spacing = finite("spacing", spacing, 0.0, lo_open=True)
         self.n_heading = integer("n_heading", n_heading, 3)
         self.horizon = finite("horizon", horizon, 0.0, lo_open=True)
+        self.disturbance = disturbance_setting(disturbance)
         if region not in REGIONS:
             raise ValueError(f"region must be one of {REGIONS}, got {region!r}")
         self.region = region
@@ -226,7 +232,9 @@ class MazeHJGuardian(PrivilegedGuardian):
             )
         self.speed = finite("privileged speed", priv["speed"], 0.0, lo_open=True)
         self.u_max = float(space.control_high[0])
-        self.dynamics = Dubins4DHJ(u1_max=self.u_max, u2_max=0.0, v_min=self.speed, v_max=self.speed)
+        env = self.disturbance == "env"
+        d_max = env_disturbance_bound(priv.get("disturbances", ())) if env else float(self.disturbance)
+        self.dynamics = Dubins4DHJ(u1_max=self.u_max, u2_max=0.0, v_min=self.speed, v_max=self.speed, d_max=d_max)
         self._counts = self._zero()
         self.solve_seconds = 0.0
         lo, hi = self.region_box(maze, state, np.asarray(priv["goal"], float))

@@ -28,6 +28,7 @@ from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.quadrotor_climb import Climb
 from rmm_guardians.hj.quadrotor_values import LegValues
 from rmm_guardians.hj.room import angle, lag_prediction, nominal_command, optimal_command
+from rmm_guardians.hj.settings import disturbance_setting
 from rmm_guardians.hj.solver import check_scheme
 from rmm_guardians.privileged import PrivilegedGuardian
 from rmm_guardians.system_checks import quadrotor_only
@@ -73,7 +74,9 @@ class QuadrotorHJGuardian(LegValues, PrivilegedGuardian):
     ``climb_after`` in control: a climb (:mod:`rmm_guardians.hj.quadrotor_climb`, ``climb_margin``,
     ``climb_ceiling``, ``climb_speed``).  ``stats()`` counts takeovers, kept commands, turns,
     optimal commands, climbs and climbing steps.  NaN states hover (``nan_states``); a room with no
-    walls or a malformed ``nominal_control`` is refused with ``ValueError``."""
+    walls or a malformed ``nominal_control`` is refused with ``ValueError``.  No disturbance is
+    modelled (wind is a force on the velocities, through the velocity loop, beside mass and damping
+    mismatch; not ``hj.disturbance``'s position-rate bound): one other than 0 is refused on its env."""
 
     name = "hj"
     #: as a part of its method (rmm_guardians.parts): what it models, its controls, its settings field
@@ -114,8 +117,10 @@ class QuadrotorHJGuardian(LegValues, PrivilegedGuardian):
         cache_max_files: int = 64,
         backend: str = "auto",
         threads: int | None = None,
+        disturbance: float | str = 0.0,
     ) -> None:
         super().__init__()
+        self.disturbance = disturbance_setting(disturbance)  # refused on the quadrotor unless 0: see above
         self.spacing = finite("spacing", spacing, 0.0, lo_open=True)
         self.n_heading = integer("n_heading", n_heading, 3)
         self.n_speed = integer("n_speed", n_speed, 3)
@@ -169,6 +174,11 @@ class QuadrotorHJGuardian(LegValues, PrivilegedGuardian):
 
     def check_spaces(self, observation_space, action_space) -> None:
         quadrotor_only(self, action_space)
+        if self.disturbance != 0.0:
+            raise ValueError(
+                f"guardian {self.name!r} (quadrotor) models no disturbance, got disturbance={self.disturbance!r}: "
+                "the quadrotor's wind is a force on its velocities, not a bound on its position rates"
+            )
 
     def reset(self, **kwargs) -> None:
         super().reset(**kwargs)

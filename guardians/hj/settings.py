@@ -15,10 +15,20 @@ from typing import Any
 from rmm_guardians._checks import Settings, finite, integer
 from rmm_guardians.hj.solver import BACKENDS, check_scheme
 
-__all__ = ["HJSettings", "HJ_PRESETS", "MODES", "RULES"]
+__all__ = ["HJSettings", "HJ_PRESETS", "MODES", "RULES", "disturbance_setting"]
 
 RULES = ("distance", "gradient", "value")
 MODES = ("avoid", "reach_avoid")
+
+
+def disturbance_setting(value) -> float | str:
+    """An HJ guardian's ``disturbance``: ``"env"`` (the run's own ``dyn-rate`` bound, read at
+    reset) or a bound ``>= 0`` on the position rates; anything else refused, naming it."""
+    if isinstance(value, str):
+        if value == "env":
+            return value
+        raise ValueError(f'disturbance must be a finite number >= 0.0 or "env", got {value!r}')
+    return finite("disturbance", value, 0.0)
 
 
 @dataclass(frozen=True)
@@ -75,8 +85,7 @@ class HJSettings(Settings):
             self._set("grid_n", tuple(int(k) for k in self.grid_n))
         if self.margin is not None:
             self._set("margin", finite("margin", self.margin))
-        if self.disturbance != "env":
-            self._set("disturbance", finite("disturbance", self.disturbance, 0.0))
+        self._set("disturbance", disturbance_setting(self.disturbance))
         if self.backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
         self._set("cache", bool(self.cache))

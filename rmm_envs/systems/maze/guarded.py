@@ -90,7 +90,7 @@ the last step also ``outcome`` (``"goal"``, ``"collision"`` or ``"timeout"``) an
 ``n_active_ctrl_env_steps``, ``active_ctrl_sim_time``, ``cum_sim_time``, ``cum_compute_time``,
 ``avg_compute_time``, ``cum_reward``, ``cum_cost``, ``final_speed`` (the constant speed),
 ``outcome``).  :meth:`Dubins3DMazeGuardedEnv.privileged` returns the pose, the maze,
-the goal ``[x, y, r]``, the car's speed (px/s) and the simulated time.
+the goal ``[x, y, r]``, the car's speed (px/s), the simulated time and any ``disturbances``.
 
 ## Arguments
 
@@ -317,17 +317,20 @@ class Dubins3DMazeGuardedEnv(MazeStarts, GuardedEnv):
 
     # ------------------------------------------------------------------ accessors and labelling hooks
     def privileged(self) -> dict:
-        """The true pose, the maze, the goal ``[x, y, r]``, the car's (constant) speed and the
-        simulated time. **Privileged**."""
+        """The true pose, the maze, the goal ``[x, y, r]``, the car's (constant) speed, the
+        simulated time and, when set, the disturbances (strings). **Privileged**."""
         self.require_episode()
         assert self.scene is not None  # require_episode raised otherwise
-        return {
+        out = {
             "state": self._state.copy(),
             "maze": self.scene.maze,
             "goal": self.goal.copy(),
             "speed": self.dynamics.speed,
             "sim_time": self._sim_time,
         }
+        if self.disturbances:  # what the world does to the car, for a guardian that models it (hj)
+            out["disturbances"] = [str(d) for d in self.disturbances]
+        return out
 
     true_state = property(lambda self: self._state.copy(), doc="The true pose (a copy). **Privileged**.")
     sim_time = property(lambda self: self._sim_time, doc="Simulated seconds since reset.")
