@@ -29,6 +29,7 @@ __all__ = [
     "load_manifests",
     "read_manifest",
     "clone_only",
+    "in_clone",
     "rmm_bench_args",
     "table_manifest",
 ]
@@ -313,6 +314,13 @@ def read_manifest(path: Path) -> Manifest:
 
 #: a command line that runs one of the repository's development scripts, which a wheel does not install
 _CLONE_ONLY = re.compile(r"^(?:[A-Za-z_][A-Za-z0-9_]*=\S*\s+)*python3?\s+-m\s+(benchmarks\.\w+)")
+
+
+def in_clone(root: Path | None = None) -> bool:
+    """Whether this install runs from a clone of the repository (its ``benchmarks/`` scripts
+    beside this package, as an editable install has them), not from a wheel."""
+    root = root or Path(__file__).resolve().parents[2]
+    return (root / "benchmarks" / "bench").is_dir() and (root / "benchmarks" / "__init__.py").is_file()
 
 
 def clone_only(m: Manifest) -> list[str]:

@@ -12,7 +12,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from rmm_bench.manifest import Manifest, clone_only, load_manifests
+from rmm_bench.manifest import Manifest, clone_only, in_clone, load_manifests
 from rmm_bench.reproduce import check_full, check_quick, expected_rates, update
 from rmm_bench.reproduce_docs import write_docs
 
@@ -47,19 +47,34 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def list_manifests(manifests: list[Manifest], clone: bool) -> int:
+    """``--list``: each manifest, what it covers and, from a clone, the development scripts it
+    runs; from a wheel, only the manifests whose commands run here, and one line naming the rest."""
+    left_out = []
+    for m in manifests:
+        scripts = clone_only(m)
+        if scripts and not clone:
+            left_out.append(m.name)
+            continue
+        print(
+            f"{m.name}: {m.title} ({len(expected_rates(m))} checked rates, {len(m.ratios)} checked "
+            f"ratios, {len(m.fingerprints)} quick fingerprints)"
+            + (f"; clone only: {', '.join(scripts)} (the repository's benchmarks/ scripts)" if scripts else "")
+        )
+    if left_out:
+        print(
+            f"not listed: {', '.join(left_out)}: their commands run the repository's benchmarks/ scripts, "
+            "which this install does not have (check them from a clone)"
+        )
+    return 0
+
+
 def cmd(argv: list[str]) -> int:
     """Run ``rmm-bench reproduce``: 0 when everything checked reproduces, 1 when a number differs."""
     args = build_parser().parse_args(argv)
     manifests = load_manifests(args.names or None)
     if args.list:
-        for m in manifests:
-            clone = clone_only(m)
-            print(
-                f"{m.name}: {m.title} ({len(expected_rates(m))} checked rates, {len(m.ratios)} checked "
-                f"ratios, {len(m.fingerprints)} quick fingerprints)"
-                + (f"; clone only: {', '.join(clone)} (the repository's benchmarks/ scripts)" if clone else "")
-            )
-        return 0
+        return list_manifests(manifests, in_clone())
     if args.write_docs is not None:
         changed = write_docs(args.write_docs)
         print(f"{args.write_docs}: {'regenerated' if changed else 'current'}")
