@@ -48,8 +48,9 @@ def test_an_mp4_a_gif_and_pngs_hold_every_kth_frame_of_the_episode(run, tmp_path
     steps = {i: int(r["steps"]) for i, r in _rows(run, "lrmm").items()}
     assert main(["replay", str(run), "--agent", "lrmm", "--episode", "0", "--video", str(tmp_path / "a.mp4")]) == 0
     out = capsys.readouterr().out
-    assert "episode 0: verified" in out and f"wrote {tmp_path / 'a.mp4'} ({steps[0] + 1} frames, 512 x 624)" in out
-    assert _mp4_frames(tmp_path / "a.mp4") == (steps[0] + 1, (512, 624))  # the start and one frame per step
+    size = (512, 512 + 170)  # the view, then the strip, 170 pixels at 512 (it grows with the text)
+    assert "episode 0: verified" in out and f"wrote {tmp_path / 'a.mp4'} ({steps[0] + 1} frames, 512 x 682)" in out
+    assert _mp4_frames(tmp_path / "a.mp4") == (steps[0] + 1, size)  # the start and one frame per step
     every = 4
     assert (
         main(["replay", str(run), "--agent", "cbf", "--episode", "0,1", "--video", str(tmp_path / "c.gif")]
@@ -60,9 +61,9 @@ def test_an_mp4_a_gif_and_pngs_hold_every_kth_frame_of_the_episode(run, tmp_path
     for i in (0, 1):
         expected = len(range(0, cbf_steps[i] + 1, every)) + (cbf_steps[i] % every != 0)  # and always the last
         gif = Image.open(tmp_path / f"c-ep{i}.gif")
-        assert (gif.n_frames, gif.size) == (expected, (512, 624))
+        assert (gif.n_frames, gif.size) == (expected, size)
         pngs = sorted((tmp_path / "png" / f"ep{i}").glob("frame_*.png"))
-        assert len(pngs) == expected and Image.open(pngs[-1]).size == (512, 624)
+        assert len(pngs) == expected and Image.open(pngs[-1]).size == size
     assert not list(tmp_path.glob(".*"))  # no temporary file left
 
 

@@ -12,7 +12,6 @@ import pytest
 import rmm_envs  # noqa: F401  (registers the envs)
 from rmm_envs.views import EpisodeRecorder, Window, signal_groups, view_for
 from rmm_envs.views.base import BODY_OUTLINE, COLLISION, DRIVER, GOAL, GUARDIAN, OBSTACLE, WALL
-from rmm_envs.views.recorder import _LANE
 
 _HAS = {m: importlib.util.find_spec(m) is not None for m in ("pybullet", "mujoco", "pymunk")}
 
@@ -93,7 +92,7 @@ def test_frames_have_the_size_and_the_strip_shows_the_recorded_flags(envs, env_i
     assert rec.active_steps == stats["n_active_ctrl_env_steps"]
     # the strip's intervention lane is orange exactly over the recorded intervals
     last = rec.frame()
-    lane_y = rec.view.height + (_LANE[0] + _LANE[1]) // 2
+    lane_y = rec.view.height + sum(rec.lane_rows) // 2
     for k in range(1, rec.n_steps + 1):
         a, b = rec.times[k - 1], rec.times[k]
         xa, xb = rec._time_x(a), rec._time_x(b)

@@ -20,10 +20,11 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from PIL import Image, ImageDraw, ImageFont
+from PIL import Image, ImageDraw
 
 from rmm_envs.machine_independent import matvec
 from rmm_envs.systems.quadrotor.rotations import quat_to_rot
+from rmm_envs.views.text import font
 
 __all__ = ["HIT", "RAY", "RAY_FREE", "RaySegment", "draw_rays", "font", "line_width", "ray_segments", "text_size"]
 
@@ -42,16 +43,10 @@ def line_width(width: int) -> int:
 
 
 def text_size(width: int) -> int:
-    """A text height legible on a panel ``width`` pixels wide (15 px at 320, 23 px at 512)."""
+    """The size of a side-by-side replay's headers on panels ``width`` pixels wide (15 px at 320,
+    23 px at 512), a little larger than the frames' own text (:func:`rmm_envs.views.text.text_size`);
+    :func:`font` is the frames' font."""
     return max(12, round(width / 22))
-
-
-def font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
-    """Pillow's own font at ``size`` pixels (its fixed bitmap font where FreeType is missing)."""
-    try:
-        return ImageFont.load_default(size=size)
-    except (TypeError, ImportError, OSError):  # an old Pillow, or no FreeType: the one bitmap size
-        return ImageFont.load_default()
 
 
 def _rays_of(layout, obs, high) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:

@@ -115,26 +115,27 @@ def _compose(panels: list[_Panel], t: float, header: int, size: int):
         frame, ended = p.at(t)
         h, w = frame.shape[:2]
         picture = Image.fromarray(frame)
-        view_h = p.drawing.recorder.view.height
+        status = p.drawing.recorder.status_rows
         d = ImageDraw.Draw(picture)
-        if ended:  # held: dimmed, marked over the view's lower part
+        if ended:  # held: dimmed, marked over the recorder's status line
             picture = Image.blend(picture, Image.new("RGB", picture.size, (255, 255, 255)), 0.35)
             d = ImageDraw.Draw(picture)
             label = _ended_text(p.drawing)
             box = d.textbbox((0, 0), label, font=text)
             pad = max(4, size // 3)
             bh = box[3] - box[1] + 2 * pad
-            top = view_h - bh - 1  # over the recorder's own line of text
+            top = (status[0] + status[1] - bh) // 2
             d.rectangle((0, top, w, top + bh), fill=(255, 255, 255), outline=ENDED, width=2)
             d.text(((w - (box[2] - box[0])) / 2 - box[0], top + pad - box[1]), label, fill=ENDED, font=text)
         band = Image.new("RGB", (w, header), _HEADER)
         bd = ImageDraw.Draw(band)
-        name = p.agent
-        while len(name) > 2 and bd.textlength(name, font=text) > 0.6 * w:  # a long module:Class
-            name = name[:-2] + "…"
         pad = (header - size) // 2
-        bd.text((pad, pad), name, fill=_TEXT, font=text)
         stamp = f"t = {t:.2f} s"
+        room = w - 3 * pad - bd.textlength(stamp, font=small)  # the name never runs into the time
+        name = p.agent
+        while len(name) > 2 and bd.textlength(name, font=text) > room:  # a long module:Class
+            name = name[:-2] + "…"
+        bd.text((pad, pad), name, fill=_TEXT, font=text)
         lift = (size - int(getattr(small, "size", size))) // 2
         bd.text((w - pad - bd.textlength(stamp, font=small), pad + lift), stamp, fill=_TEXT, font=small)
         out.paste(band, (x, 0))

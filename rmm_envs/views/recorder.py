@@ -3,9 +3,11 @@
 ``rec = EpisodeRecorder(env)``; after ``env.reset``: ``rec.begin()`` (reads the world, draws the
 static layer once); after every ``env.step``: ``rec.record(info, guardian.signals())``; then
 ``rec.frames(every=K)`` yields ``(H, W, 3)`` uint8 frames.  A frame is the view's picture (the
-path so far, blue the driver, orange the guardian; the body; the collision point) over a strip
-spanning the episode: the guardian's intervals, one lane per group of signals, a cursor at the
-frame's time.  Frames may be asked in any order; in order each costs only the new path.
+path so far, blue the driver, orange the guardian; the body; the collision point) over a strip:
+the frame's status line (its time and step, who controlled, the outcome), then, spanning the
+episode, the guardian's intervals, one lane per group of signals, a cursor at the frame's time.
+Text and strip grow with the panel (:mod:`rmm_envs.views.text`), so that a frame stays legible
+at 320 pixels.  Frames may be asked in any order; in order each costs only the new path.
 """
 
 from __future__ import annotations
@@ -18,16 +20,21 @@ from PIL import Image, ImageDraw
 
 from rmm_envs.views.base import BACKGROUND, BODY_OUTLINE, COLLISION, DRIVER, GUARDIAN, LIGHT, View
 from rmm_envs.views.select import view_for
+from rmm_envs.views.text import MIN_TEXT, cut, draw_runs, fitted, font, text_size, text_width
 
 __all__ = ["STRIP_HEIGHT", "EpisodeRecorder", "signal_groups"]
 
-#: the strip's height in pixels (intervention lane, then the signals' lanes)
-STRIP_HEIGHT = 112
+#: the strip's height in pixels (the frame's status line, the intervention lane and its caption,
+#: then the signals' lanes) at the smallest text size (:data:`rmm_envs.views.text.MIN_TEXT`:
+#: panels up to 392 pixels); it grows with the text
+STRIP_HEIGHT = 132
 PATH_WIDTH = 3
-_LANE = (15, 29)  # the intervention lane's top and bottom rows (its caption above it)
-_MARGIN = 6  # the strip's left and right margin
+_MARGIN = 6  # the strip's left and right margin at the smallest text size
 _LINE_COLOURS = ((60, 60, 60), (214, 39, 40), (148, 103, 189), (23, 190, 207))
 _THRESHOLD = (120, 120, 120)
+#: the colours of who controls and of an outcome, as text (darker than the path's, to read on white)
+_WHO = {False: (22, 90, 140), True: (190, 80, 0)}
+_OUTCOME = {"collision": COLLISION, "goal": (30, 120, 30)}
 
 
 def signal_groups(keys) -> dict[str, list[str]]:
@@ -44,13 +51,17 @@ class EpisodeRecorder:
     :func:`rmm_envs.envs.driven.guarded` / ``parallel``) and composes its frames.
 
     ``view``: the system's :class:`~rmm_envs.views.base.View` (default :func:`rmm_envs.views.view_for`);
-    ``size``: the view's panel size in pixels; ``strip_height``: the strip's (0: no strip).
+    ``size``: the view's panel size in pixels; ``strip_height``: the strip's (0: no strip; default:
+    :data:`STRIP_HEIGHT`, grown in proportion with the text).
+
+    Text is drawn at :func:`rmm_envs.views.text.text_size` of the panel's side (the view's
+    ``panel`` if it has one, else its width): capitals at least 10 pixels high, legible at 320.
     """
 
-    def __init__(self, env, view: View | None = None, size: int = 512, strip_height: int = STRIP_HEIGHT) -> None:
+    def __init__(self, env, view: View | None = None, size: int = 512, strip_height: int | None = None) -> None:
         self.env = env
         self.view = view if view is not None else view_for(env, size)
-        self.strip_height = int(strip_height)
+        self._strip_height = None if strip_height is None else int(strip_height)
         self.static_draws = 0  #: how many times the static layer was drawn (once per episode)
         self._begun = False
 
@@ -73,6 +84,7 @@ class EpisodeRecorder:
         self._trail_k = -1
         self._strip_key: tuple | None = None
         self._strip: Image.Image | None = None
+        self._label_rows: list[tuple[int, int]] = []  # the strip's rows of signal labels (the cursor skips them)
         self._counted = 0
         self._begun = True
         self.add(v.state(self.env), False, 0.0, None, capture=v.capture(self.env))
@@ -145,6 +157,41 @@ class EpisodeRecorder:
 
     # ------------------------------------------------------------------ frames
     @property
+    def text_px(self) -> int:
+        """The font size of the frame's text, in pixels."""
+        return text_size(getattr(self.view, "panel", self.view.width))
+
+    @property
+    def strip_height(self) -> int:
+        """The strip's height in pixels."""
+        if self._strip_height is not None:
+            return self._strip_height
+        return round(STRIP_HEIGHT * self.text_px / MIN_TEXT)
+
+    def _u(self, n: float) -> int:
+        """``n`` pixels at the smallest text size, at this frame's."""
+        return max(int(n), round(n * self.text_px / MIN_TEXT))
+
+    @property
+    def _row_h(self) -> int:
+        """The height of a row of text."""
+        return round(1.45 * self.text_px)
+
+    @property
+    def status_rows(self) -> tuple[int, int]:
+        """The frame's rows of its status line (the time, the step, who controlled, the outcome),
+        top and bottom: the strip's first row, or the view's last one when there is no strip."""
+        if self.strip_height > 0:
+            return self.view.height, self.view.height + self._row_h
+        return self.view.height - self._row_h - self._u(2), self.view.height - self._u(2)
+
+    @property
+    def lane_rows(self) -> tuple[int, int]:
+        """The strip's rows of the intervention lane, top and bottom (the status line and the
+        lane's caption above it)."""
+        return 2 * self._row_h, 2 * self._row_h + round(0.8 * self.text_px)
+
+    @property
     def frame_size(self) -> tuple[int, int]:
         """``(height, width)`` of every frame."""
         return self.view.height + self.strip_height, self.view.width
@@ -181,14 +228,36 @@ class EpisodeRecorder:
                 draw.line([(x - 9, y - 9), (x + 9, y + 9)], fill=COLLISION, width=4)
                 draw.line([(x - 9, y + 9), (x + 9, y - 9)], fill=COLLISION, width=4)
                 draw.ellipse((x - 14, y - 14, x + 14, y + 14), outline=COLLISION, width=2)
-        who = "guardian" if self.active[k] else "driver"
-        end = f"  {self.outcome}" if k == last and self.outcome else ""
-        draw.text((6, v.height - 16), f"t {self.times[k]:.2f} s  step {k}/{last}  {who}{end}", fill=BODY_OUTLINE)
         if self.strip_height > 0:
             out.paste(self._strip_image(), (0, v.height))
-            x = self._time_x(self.times[k])
-            draw.line([(x, v.height), (x, v.height + self.strip_height)], fill=BODY_OUTLINE, width=1)
+            x, top = self._time_x(self.times[k]), self.lane_rows[0]  # the cursor, clear of every text
+            for a, b in [*self._label_rows, (self.strip_height, self.strip_height)]:  # rows a-b skipped
+                if a > top:
+                    draw.line([(x, v.height + top), (x, v.height + a - 1)], fill=BODY_OUTLINE, width=self._u(1))
+                top = max(top, b + 1)
+        self._draw_status(out, k)
         return np.asarray(out)
+
+    def _draw_status(self, out: Image.Image, k: int) -> None:
+        """The frame's status line (:attr:`status_rows`): the time, the step, who controlled, the
+        outcome on the last frame; fitted to the view's width, on a pale backing over the view
+        when there is no strip."""
+        last, active = self.n_steps, self.active[k]
+        runs = [
+            (f"t {self.times[k]:.2f} s  step {k}/{last}  ", BODY_OUTLINE),
+            ("guardian" if active else "driver", _WHO[active]),
+        ]
+        if k == last and self.outcome:
+            runs.append((f"  {self.outcome}", _OUTCOME.get(self.outcome, BODY_OUTLINE)))
+        m = self._u(_MARGIN)
+        room, text = self.view.width - 2 * m, "".join(t for t, _ in runs)
+        f = font(self.text_px)
+        if text_width(text, f) > room:  # a small view: a smaller font, then the step left out
+            f = fitted(text, self.text_px, room)
+            if text_width(text, f) > room:
+                runs[0] = (f"t {self.times[k]:.2f} s  ", BODY_OUTLINE)
+        over_view = self.strip_height <= 0
+        draw_runs(out, (m + self._u(3), self.status_rows[0] + self._u(1)), runs, f, backing=0.75 if over_view else 0)
 
     def _pixels(self) -> np.ndarray:
         n = len(self.states)
@@ -225,7 +294,25 @@ class EpisodeRecorder:
         return t if t > 0 else 1.0
 
     def _time_x(self, t: float) -> float:
-        return _MARGIN + (self.view.width - 2 * _MARGIN) * min(max(t / self._span(), 0.0), 1.0)
+        m = self._u(_MARGIN)
+        return m + (self.view.width - 2 * m) * min(max(t / self._span(), 0.0), 1.0)
+
+    def _row(self, img: Image.Image, y: int, left: list[tuple[str, tuple]], right: str = "") -> None:
+        """One line of text across the strip at ``y``: ``left``'s runs (text, colour) from the left
+        margin, ``right`` against the right one, a gap between them; the font shrinks until both
+        fit, and ``right`` is left out if they never do."""
+        m, s = self._u(_MARGIN), self.text_px
+        room = img.width - 2 * m - self._u(3)
+        gap = "    " if right else ""
+        both = "".join(t for t, _ in left) + gap + right
+        f = fitted(both, s, room)
+        if text_width(both, f) > room:
+            right, f = "", fitted("".join(t for t, _ in left), s, room)
+        if text_width("".join(t for t, _ in left), f) > room:
+            left = [(cut("".join(t for t, _ in left), f, room), left[0][1])]
+        draw_runs(img, (m + self._u(3), y), left, f)
+        if right:
+            draw_runs(img, (img.width - m - text_width(right, f), y), [(right, BODY_OUTLINE)], f)
 
     def _strip_image(self) -> Image.Image:
         """The strip over the steps recorded so far (drawn again only when steps were added)."""
@@ -235,49 +322,56 @@ class EpisodeRecorder:
         W, H = self.view.width, self.strip_height
         img = Image.new("RGB", (W, H), BACKGROUND)
         d = ImageDraw.Draw(img)
-        d.rectangle((_MARGIN, _LANE[0], W - _MARGIN, _LANE[1]), fill=(236, 236, 236))
+        m, lane = self._u(_MARGIN), self.lane_rows
+        d.rectangle((m, lane[0], W - m, lane[1]), fill=(236, 236, 236))
         for a, b in self.intervals():
             xa, xb = self._time_x(a), self._time_x(b)
-            d.rectangle((xa, _LANE[0], max(xb, xa + 1), _LANE[1]), fill=GUARDIAN)
-        d.text((_MARGIN + 3, 1), f"guardian in control: {self.active_steps}/{self.n_steps} steps", fill=BODY_OUTLINE)
-        d.text((W - _MARGIN - 70, 1), f"{self._span():.1f} s", fill=BODY_OUTLINE)
+            d.rectangle((xa, lane[0], max(xb, xa + 1), lane[1]), fill=GUARDIAN)
+        caption = [(f"guardian in control: {self.active_steps}/{self.n_steps} steps", BODY_OUTLINE)]
+        self._row(img, self._row_h + self._u(1), caption, f"{self._span():.1f} s")
+        self._label_rows = []
         groups = signal_groups(k for s in self.signals for k in s)
         # signals of the decision of step k (k >= 1) are drawn at the decision's time, the step's start
         if groups:
-            top, lanes = _LANE[1] + 3, list(groups.items())[:3]
+            top, lanes = lane[1] + self._u(3), list(groups.items())[:3]
             lane_h = (H - top) // len(lanes)
             for i, (name, keys) in enumerate(lanes):
-                self._draw_lane(d, name, keys, top + i * lane_h, lane_h)
+                self._draw_lane(img, name, keys, top + i * lane_h, lane_h)
         self._strip, self._strip_key = img, key
         return img
 
-    def _draw_lane(self, d: ImageDraw.ImageDraw, name: str, keys: list[str], y0: int, h: int) -> None:
+    def _draw_lane(self, img: Image.Image, name: str, keys: list[str], y0: int, h: int) -> None:
         W = self.view.width
+        d = ImageDraw.Draw(img)
+        m = self._u(_MARGIN)
         series = {
             key: np.array([s.get(key, math.nan) for s in self.signals[1:]], dtype=float)
             for key in keys  # step k's signals (k >= 1)
         }
         t = np.array(self.times[:-1], dtype=float)
         finite = np.concatenate([v[np.isfinite(v)] for v in series.values()])
-        d.line([(_MARGIN, y0), (W - _MARGIN, y0)], fill=LIGHT)
+        d.line([(m, y0), (W - m, y0)], fill=LIGHT)
+        label_h = round(1.4 * self.text_px)  # the labels' row, above the plot when the lane has room
+        yb, yt = y0 + h - self._u(3), (y0 + label_h if h - label_h >= self.text_px else y0 + self._u(2))
+        self._label_rows.append((y0 + 1, max(yt, y0 + label_h // 2) - 1))
         if finite.size == 0:
-            d.text((_MARGIN + 3, y0 + 2), f"{', '.join(keys)}: no value", fill=BODY_OUTLINE)
+            self._row(img, y0 + self._u(2), [(f"{', '.join(keys)}: no value", BODY_OUTLINE)])
             return
         lo, hi = float(finite.min()), float(finite.max())
         if hi - lo < 1e-12:
             lo, hi = lo - 0.5, hi + 0.5
         pad = 0.08 * (hi - lo)
         lo, hi = lo - pad, hi + pad
-        yb, yt = y0 + h - 3, y0 + 14
 
         def y_of(v: np.ndarray) -> np.ndarray:
             return yb - (v - lo) / (hi - lo) * (yb - yt)
 
         if lo < 0 < hi:
             y = float(y_of(np.array([0.0]))[0])
-            d.line([(_MARGIN, y), (W - _MARGIN, y)], fill=LIGHT)
-        xs = _MARGIN + (W - 2 * _MARGIN) * np.clip(t / self._span(), 0.0, 1.0)
-        labels = []
+            d.line([(m, y), (W - m, y)], fill=LIGHT)
+        xs = m + (W - 2 * m) * np.clip(t / self._span(), 0.0, 1.0)
+        lw = self._u(2)
+        labels: list[tuple[str, tuple]] = []
         for j, (key, v) in enumerate(series.items()):
             colour = _THRESHOLD if "threshold" in key else _LINE_COLOURS[j % len(_LINE_COLOURS)]
             ys = y_of(v)
@@ -291,13 +385,10 @@ class EpisodeRecorder:
                 if start is not None:
                     pts = list(zip(xs[start:i].tolist(), ys[start:i].tolist(), strict=True))
                     if len(pts) > 1:
-                        d.line(pts, fill=colour, width=2 if "threshold" not in key else 1)
+                        d.line(pts, fill=colour, width=lw if "threshold" not in key else max(1, lw // 2))
                     else:
-                        d.ellipse((pts[0][0] - 1, pts[0][1] - 1, pts[0][0] + 1, pts[0][1] + 1), fill=colour)
+                        r = max(1, lw // 2)
+                        d.ellipse((pts[0][0] - r, pts[0][1] - r, pts[0][0] + r, pts[0][1] + r), fill=colour)
                     start = None
-            labels.append((key, colour))
-        x = _MARGIN + 3
-        for key, colour in labels:
-            d.text((x, y0 + 2), key, fill=colour)
-            x += 8 * len(key) + 12
-        d.text((W - _MARGIN - 140, y0 + 2), f"[{lo + pad:.3g}, {hi - pad:.3g}]", fill=BODY_OUTLINE)
+            labels += [(key, colour), ("   ", colour)]
+        self._row(img, y0 + self._u(2), labels[:-1], f"[{lo + pad:.3g}, {hi - pad:.3g}]")

@@ -13,6 +13,7 @@ from PIL import ImageDraw
 
 from rmm_envs.systems.quadrotor.rotations import quat_to_rot
 from rmm_envs.views.base import BODY_OUTLINE, DRIVER, GOAL, GUARDIAN, LIGHT, View, Window, convex_hull
+from rmm_envs.views.text import font, text_size
 
 __all__ = ["QuadrotorView", "quadrotor_view"]
 
@@ -138,8 +139,9 @@ class QuadrotorView(View):
         g, r = world.goal, world.goal_radius
         self.top.disc(draw, g[0], g[1], r, fill=GOAL)
         self.side.disc(draw, g[0], g[2], r, fill=GOAL)
-        draw.text((6, 4), "top (x, y)", fill=BODY_OUTLINE)
-        draw.text((self.panel + 6, 4), "side (x, z)", fill=BODY_OUTLINE)
+        f, m = font(text_size(self.panel)), round(self.panel / 64) + 2
+        draw.text((m, m), "top (x, y)", fill=BODY_OUTLINE, font=f)
+        draw.text((self.panel + m, m), "side (x, z)", fill=BODY_OUTLINE, font=f)
 
     def path_pixels(self, states: np.ndarray) -> np.ndarray:
         st = np.asarray(states, dtype=float).reshape(-1, 13)
