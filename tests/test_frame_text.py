@@ -1,14 +1,18 @@
 """The frames' own text stays legible when a video is small: read back from the frames, its height
 grows with the panel and is at least 10 pixels for capitals at 320, the status line is drawn under
 the scene (or only in its corner when there is no strip), the texts of a row never run into one
-another, and the side-by-side headers keep an agent's name clear of the time."""
+another, and the side-by-side headers keep an agent's name clear of the time; the docs' GIFs are
+what their command draws today."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
-from PIL import ImageDraw
+from PIL import Image, ImageDraw
 
+from rmm_bench.cli import main
 from rmm_bench.side_by_side import ENDED, GAP, side_by_side_frames
 from rmm_bench.video import EpisodeDrawing, SharedSpanRecorder
 from rmm_envs.views import EpisodeRecorder, View
@@ -169,3 +173,28 @@ def test_a_side_by_side_header_keeps_a_long_name_clear_of_the_time_and_the_label
     top, bottom = drawings[1].recorder.status_rows
     assert rows.size and top - 6 <= rows[0] < rows[-1] <= bottom + 6
     assert not mark[: top - 6].any()
+
+
+@pytest.mark.heavy
+def test_the_docs_gifs_are_verified_replays_drawn_by_the_recorder_as_it_is(tmp_path, capsys):
+    """``docs/figures/watch_AGENT_ep2.gif`` (the README's picture among them) is what the command
+    beside it in docs/watching.md and the README makes now, frame for frame: a replay verified
+    against its stored row, drawn by today's recorder (rays, text).  A change to the drawing fails
+    here until the figures are made again with that command."""
+    figures = Path(__file__).resolve().parents[1] / "docs" / "figures"
+    out = tmp_path / "results-watch"  # the docs' run has 8 episodes; episode 2 is the same in 3
+    run = ["--agent", "inactive,lrmm,cbf", "--episodes", "3", "--clock", "fixed:1", "--out", str(out)]
+    assert main([*run, "--workers", "1", "--no-progress", "--no-figure"]) == 0
+    for agent in ("inactive", "lrmm", "cbf"):
+        gif = tmp_path / f"{agent}-ep2.gif"
+        argv = ["replay", str(out), "--agent", agent, "--episode", "2", "--video", str(gif), "--size", "320"]
+        assert main([*argv, "--every", "4", "--no-progress"]) == 0
+        assert "episode 2: verified" in capsys.readouterr().out
+        with Image.open(gif) as made, Image.open(figures / f"watch_{agent}_ep2.gif") as shipped:
+            assert (made.n_frames, made.size) == (shipped.n_frames, shipped.size), agent
+            for i in range(made.n_frames):
+                made.seek(i)
+                shipped.seek(i)
+                a, b = np.asarray(made.convert("RGB"), int), np.asarray(shipped.convert("RGB"), int)
+                # the same picture (a FreeType of another version may shade a letter's edge otherwise)
+                assert (np.abs(a - b).max(axis=-1) > 40).mean() < 0.002, (agent, i)
