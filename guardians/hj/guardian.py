@@ -19,13 +19,12 @@ import math
 
 import numpy as np
 
-from rmm_envs.disturbances import parse_disturbances
 from rmm_guardians._checks import settings_signature
 from rmm_guardians.dispatch import DynamicsDispatch
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.grid import Grid, central_gradient
-from rmm_guardians.hj.settings import HJ_PRESETS, HJSettings
+from rmm_guardians.hj.settings import HJ_PRESETS, HJSettings, env_disturbance_bound
 from rmm_guardians.hj.solver import THREADS_VARIABLE, default_threads, select_backend, solve_brt  # noqa: F401
 from rmm_guardians.privileged import PrivilegedGuardian
 from rmm_guardians.system_checks import dubins4d_only
@@ -313,14 +312,3 @@ class HJPaperGuardian(HJGuardian):
 
     name = "hj-paper"
     preset = "hj-paper"
-
-
-def env_disturbance_bound(disturbances) -> float:
-    """The bound ``d_max`` of the position-rate disturbance among ``disturbances`` (an env's
-    ``privileged()["disturbances"]``, strings): the largest ``dyn-rate`` level acting on ``x`` or
-    ``y``, 0 when there is none (impulses and the other kinds are not a bounded rate)."""
-    bound = 0.0
-    for d in parse_disturbances(list(disturbances)):
-        if d.kind == "dyn-rate" and (not d.on or {"x", "y"} & set(d.on)):
-            bound = max(bound, d.level)
-    return bound

@@ -25,9 +25,8 @@ from rmm_guardians._checks import finite, integer
 from rmm_guardians.hj.cache import ValueCache, load_or_solve
 from rmm_guardians.hj.dynamics import Dubins4DHJ
 from rmm_guardians.hj.grid import Grid, central_gradient
-from rmm_guardians.hj.guardian import env_disturbance_bound
 from rmm_guardians.hj.maze_lookahead import COEF, manoeuvres, near_walls, path_clearances
-from rmm_guardians.hj.settings import disturbance_setting
+from rmm_guardians.hj.settings import disturbance_setting, env_disturbance_bound
 from rmm_guardians.hj.solver import check_scheme, select_backend, solve_brt
 from rmm_guardians.privileged import PrivilegedGuardian
 from rmm_guardians.system_checks import maze_car_only

@@ -12,10 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from rmm_envs.disturbances import parse_disturbances
 from rmm_guardians._checks import Settings, finite, integer
 from rmm_guardians.hj.solver import BACKENDS, check_scheme
 
-__all__ = ["HJSettings", "HJ_PRESETS", "MODES", "RULES", "disturbance_setting"]
+__all__ = ["HJSettings", "HJ_PRESETS", "MODES", "RULES", "disturbance_setting", "env_disturbance_bound"]
 
 RULES = ("distance", "gradient", "value")
 MODES = ("avoid", "reach_avoid")
@@ -101,3 +102,14 @@ HJ_PRESETS = {
     ),
 }
 HJSettings.PRESETS = HJ_PRESETS
+
+
+def env_disturbance_bound(disturbances) -> float:
+    """The bound ``d_max`` of the position-rate disturbance among ``disturbances`` (an env's
+    ``privileged()["disturbances"]``, strings): the largest ``dyn-rate`` level acting on ``x`` or
+    ``y``, 0 when there is none (impulses and the other kinds are not a bounded rate)."""
+    bound = 0.0
+    for d in parse_disturbances(list(disturbances)):
+        if d.kind == "dyn-rate" and (not d.on or {"x", "y"} & set(d.on)):
+            bound = max(bound, d.level)
+    return bound
