@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import csv
 import os
-import re
 import subprocess
 import sys
 from pathlib import Path
@@ -453,29 +452,3 @@ def test_the_script_goes_from_a_simulator_to_a_table_where_lrmm_fails_less_often
     assert list(rows) == ["lrmm", "inactive", "random"] and all(r["episodes"] == "16" for r in rows.values())
     assert float(rows["lrmm"]["collision_mean"]) < float(rows["inactive"]["collision_mean"])
     assert "$ rmm-bench --env own_simulator_wall:CartWall-v0 --agent lrmm,inactive,random" in out
-
-
-RATES = ("Success rate", "Collision rate", "Timeout rate", "Intervention rate")
-
-
-def _rates(table: str) -> dict:
-    lines = [ln for ln in table.splitlines() if ln.startswith("|")]
-    head = [c.strip() for c in lines[0].strip("|").split("|")]
-    cols = [i for i, h in enumerate(head) if h.startswith(RATES)]
-    return {
-        cells[0]: [cells[i] for i in cols]
-        for cells in ([c.strip() for c in ln.strip("|").split("|")] for ln in lines[2:])
-    }
-
-
-@pytest.mark.slow
-def test_the_tutorials_table_is_what_the_script_makes_at_its_documented_size(tmp_path):
-    text = TUTORIAL.read_text()
-    m = re.search(
-        r"```bash\n(python docs/examples/own_simulator_wall\.py[^\n]*)\n```\n\n.*?(\| Agent \|.*?)\n\n", text, re.S
-    )
-    assert m, "the tutorial records the script's command and its Table I"
-    args = m.group(1).split()[2:]
-    out, _ = _run_script(tmp_path, *args)
-    made = out[out.index("| Agent |") :]
-    assert _rates(made) == _rates(m.group(2))

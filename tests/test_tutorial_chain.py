@@ -181,7 +181,8 @@ def test_the_tutorials_chain_runs_from_a_research_folder(tmp_path):
 def _quoted_rates() -> dict[str, tuple[str, str]]:
     """The Table I rows the page quotes for the chain: agent -> (success, collision)."""
     text = _page()
-    section = text[text.index("## Your own simulator, end to end") : text.index("## The same simulator in one file")]
+    start = text.index("## Your own simulator, end to end")
+    section = text[start : text.index("\n## ", start)]
     out = {}
     for line in re.findall(r"^\| (?:inactive|lrmm) \| .*$", section, re.M):
         cells = [c.strip() for c in line.strip("|").split("|")]
