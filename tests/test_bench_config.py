@@ -167,7 +167,7 @@ def test_envs_without_the_parallel_autonomy_contract_are_refused_by_name(tmp_pat
     )  # CartPole-v1 is the dynamics the table's CartPole system guards
     assert main(["--agent", "inactive", "--env", "Acrobot-v1", "--out", str(tmp_path / "a"), *FAST]) == 2
     assert capsys.readouterr().err.endswith(
-        "; rmm_envs.envs.driven.parallel(env, driver, safe_default, success) makes "
+        "; rmm_envs.envs.any_env.parallel(env, driver, safe_default, success) makes "
         'a guardian env of it (docs/tutorials/own-simulator.md, "The env\'s arguments")\n'
     )
     assert not (tmp_path / "m").exists() and not (tmp_path / "c").exists()

@@ -24,13 +24,13 @@ from rmm_guardians.base import Guardian
 FAST = ["--clock", "fixed:1", "--no-progress", "--no-figure", "--workers", "1"]
 _ids = itertools.count()
 
-#: a simulator of one's own made a guarded env (rmm_envs.envs.driven), registered on import; RADIUS
+#: a simulator of one's own made a guarded env (rmm_envs.envs.any_env), registered on import; RADIUS
 #: stands for what one edits (an obstacle's radius), RAISE_AT for a driver that raises at that call
 SIMULATOR = """
 import gymnasium as gym
 import numpy as np
 
-from rmm_envs.envs.driven import guarded
+from rmm_envs.envs.any_env import guarded
 
 RADIUS = {radius}
 RAISE_AT = {raise_at}

@@ -19,7 +19,7 @@ VARIANTS = '''
 import gymnasium as gym
 import numpy as np
 from own_simulator_wall import WALL, CartWall, Driver, brake
-from rmm_envs.envs.driven import guarded
+from rmm_envs.envs.any_env import guarded
 
 
 class Shaky(CartWall):

@@ -19,7 +19,7 @@ LIMIT = 15
 SPEC_OPENINGS = {
     "rmm_envs/adapters/classic_control.py": "each adapter's spec: state, failure, controls, horizon, sampler, observation",
     "rmm_envs/adapters/mujoco_envs.py": "each adapter's spec: state, failure, controls, horizon, sampler, observation",
-    "rmm_envs/envs/driven.py": "guarded()'s spec: every argument, the controls, stepping, outcomes, labels",
+    "rmm_envs/envs/any_env.py": "guarded()'s spec: every argument, the controls, stepping, outcomes, labels",
     "rmm_envs/systems/dubins4d/vector.py": "the vector env's spec: spaces, autoreset, infos, clock, arguments",
 }
 

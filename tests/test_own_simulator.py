@@ -1,4 +1,4 @@
-"""A simulator of one's own, end to end (:mod:`rmm_envs.envs.driven`, ``docs/tutorials/own-simulator.md``):
+"""A simulator of one's own, end to end (:mod:`rmm_envs.envs.any_env`, ``docs/tutorials/own-simulator.md``):
 a simulator written only against the snapshot protocol made a guarded env, its hooks and every
 refusal, labels and a dataset of it, ``step_dt`` without a ``dt``, rendering, and the tutorial's
 script ``docs/examples/own_simulator_wall.py``."""
@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 
 import rmm_envs  # noqa: F401
-from rmm_envs.envs.driven import SIMULATOR_HOOKS, guarded, hooks_table, parallel
+from rmm_envs.envs.any_env import SIMULATOR_HOOKS, guarded, hooks_table, parallel
 from rmm_envs.envs.target_driver import TargetDriver
 from rmm_envs.systems.cartpole.guarded import CARTPOLE_K
 
 ROOT = Path(__file__).resolve().parent.parent
 TUTORIAL = ROOT / "docs" / "tutorials" / "own-simulator.md"
 SCRIPT = ROOT / "docs" / "examples" / "own_simulator_wall.py"
-HOOK_DOCS = "(every hook: rmm_envs.envs.driven.SIMULATOR_HOOKS, docs/tutorials/own-simulator.md)"
+HOOK_DOCS = "(every hook: rmm_envs.envs.any_env.SIMULATOR_HOOKS, docs/tutorials/own-simulator.md)"
 GUARDED = "guarded()/parallel() (every env they make: rmm-bench, rmm-datagen)"
 
 

@@ -17,7 +17,7 @@ if str(EXAMPLES) not in sys.path:  # own_simulator_wall: the tutorial's module, 
 NO_RENDER = """
 import gymnasium as gym
 from own_simulator_wall import CartWall, Driver, brake
-from rmm_envs.envs.driven import guarded
+from rmm_envs.envs.any_env import guarded
 
 
 class Blind(CartWall):

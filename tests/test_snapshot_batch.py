@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rmm_envs.adapters import SnapshotScene
-from rmm_envs.envs.driven import SIMULATOR_HOOKS, hooks_table
+from rmm_envs.envs.any_env import SIMULATOR_HOOKS, hooks_table
 from rmm_envs.risk import RiskEstimator
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "docs" / "examples"))

@@ -18,7 +18,7 @@ from gymnasium.utils.env_checker import check_env
 
 import rmm_envs  # noqa: F401
 from rmm_envs.env_plugins import describe_env_error
-from rmm_envs.envs.driven import guarded, parallel
+from rmm_envs.envs.any_env import guarded, parallel
 
 HERE = os.path.relpath(__file__) if not os.path.relpath(__file__).startswith("..") else __file__
 ERRORS = {e.__name__: e for e in (AttributeError, KeyError, IndexError, ZeroDivisionError, ValueError, RuntimeError)}
@@ -339,7 +339,7 @@ def test_lrmm_on_an_own_simulator_says_what_to_give_on_the_command_line():
         g.check_spaces(env.observation_space, env.action_space)
     assert str(e.value) == (
         "guardian 'lrmm': strategy BrakeTurn reads the observation field 'rays' by name, and this env's observation "
-        "names no fields (an env of your own, e.g. made by rmm_envs.envs.driven.guarded or parallel); the core alone "
+        "names no fields (an env of your own, e.g. made by rmm_envs.envs.any_env.guarded or parallel); the core alone "
         "takes the env's safe default (the policy brake): rmm-bench --agent-opt lrmm.strategies='\"\"' "
         '(in Python: strategies="")'
     )

@@ -194,7 +194,7 @@ class _Lamp:
 
 
 def _lamp_env(**kw):
-    from rmm_envs.envs.driven import guarded
+    from rmm_envs.envs.any_env import guarded
 
     return guarded(
         _Lamp(),

@@ -5,7 +5,7 @@ One line per check, each ``ok``, ``--`` (optional and absent: what that leaves o
 
 * ``env``: the env is made with its options (``--env-opt``);
 * ``contract``: it offers the parallel-autonomy contract ``rmm-bench`` runs guardians on;
-* ``hooks``: for a simulator of your own, every hook of ``rmm_envs.envs.driven.SIMULATOR_HOOKS``
+* ``hooks``: for a simulator of your own, every hook of ``rmm_envs.envs.any_env.SIMULATOR_HOOKS``
   present or its default (for the package's envs, the labelling protocol);
 * ``determinism``: two episodes from one seed under the driver alone, on a fixed clock, give the
   same observations, rewards and outcome, bit for bit;
@@ -31,7 +31,7 @@ import numpy as np
 from rmm_bench.options import env_opt_option, parse_env_opts
 from rmm_bench.run_checks import check_env_contract, env_arguments
 from rmm_envs.env_plugins import resolve_env_id
-from rmm_envs.envs.driven import SIMULATOR_HOOKS
+from rmm_envs.envs.any_env import SIMULATOR_HOOKS
 from rmm_envs.risk.estimator import RiskEstimator
 from rmm_envs.risk.labelling import DatagenConfig, labelled_env
 from rmm_envs.risk.protocol import check_labelled_env

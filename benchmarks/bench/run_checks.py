@@ -165,7 +165,7 @@ def check_env_contract(env_id: str, env=None) -> None:
         lacks.append(
             f"its system's guardian envs are {' and '.join(twins)}"
             if twins
-            else "rmm_envs.envs.driven.parallel(env, driver, safe_default, success) makes a guardian env of it "
+            else "rmm_envs.envs.any_env.parallel(env, driver, safe_default, success) makes a guardian env of it "
             '(docs/tutorials/own-simulator.md, "The env\'s arguments")'
         )
         raise ValueError(

@@ -20,7 +20,7 @@ import numpy as np
 
 from rmm_bench.cli import main as rmm_bench
 from rmm_envs.adapters import SnapshotScene
-from rmm_envs.envs.driven import parallel
+from rmm_envs.envs.any_env import parallel
 from rmm_envs.risk import RiskEstimator
 from rmm_envs.risk.datagen import DatagenConfig, generate, load_dataset
 from rmm_envs.wrappers import RiskLabel
@@ -147,7 +147,7 @@ def main(argv=None):
     )
 
     # 5. parallel autonomy: CartPole-v1 with a reckless driver, the balancing LQR at the centre as
-    #    the safe default and "at the mark" as success (rmm_envs.envs.driven.parallel); its
+    #    the safe default and "at the mark" as success (rmm_envs.envs.any_env.parallel); its
     #    failure is CartPole's termination.  Registered here; in a module of your own, rmm-bench
     #    --env mymodule:RushCartPole-v0 imports it in every worker.
     if "RushCartPole-v0" not in gym.registry:

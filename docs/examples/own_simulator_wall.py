@@ -5,7 +5,7 @@
 
 This file is two things.  Imported (``--env own_simulator_wall:CartWall-v0``), it is the module
 a user writes: ``CartWall``, a simulator in plain numpy that knows nothing of rmm_envs (the
-snapshot protocol and a few optional hooks: rmm_envs.envs.driven.SIMULATOR_HOOKS), a reckless
+snapshot protocol and a few optional hooks: rmm_envs.envs.any_env.SIMULATOR_HOOKS), a reckless
 driver, a braking safe default, and the env ``CartWall-v0`` registered with ``guarded``.  Run,
 it takes that env the whole way, running each command in this process with exactly the
 arguments it prints: (1) risk labels of two states, by hand and by the estimator; (2)
@@ -103,7 +103,7 @@ def brake(obs):
 
 def make_cart_wall(clock=None, render_mode=None):
     """``CartWall-v0``: the blocking guarded env (rmm-bench passes the clock)."""
-    from rmm_envs.envs.driven import guarded
+    from rmm_envs.envs.any_env import guarded
 
     driver = Driver()
     return guarded(

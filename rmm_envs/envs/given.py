@@ -1,5 +1,5 @@
 """The driver, the safe default, the failure test and the control names of
-:func:`rmm_envs.envs.driven.guarded`, as given by a user (a driver or safe default: a callable
+:func:`rmm_envs.envs.any_env.guarded`, as given by a user (a driver or safe default: a callable
 ``obs -> action``, an SB3-style policy or a constant action), checked against the env's action space
 and turned into the guardian action's controls."""
 

@@ -8,7 +8,7 @@ controls), the per-step safety cost ``info["cost"]`` and the paper's Table I sta
 (``info["episode_stats"]``) with the episode's end.
 
 ``reset`` and ``simulate`` are written once, here, for every guarded env (the built-ins' and a
-user's simulator's, :class:`rmm_envs.envs.driven.DrivenGuardedEnv`); a system supplies its parts
+user's simulator's, :class:`rmm_envs.envs.any_env.GuardedAnyEnv`); a system supplies its parts
 (:meth:`~GuardedEnv.begin`, :meth:`~GuardedEnv.begin_plant`, :meth:`~GuardedEnv.advance`
 returning a :class:`Motion`, :meth:`~GuardedEnv.observe`, :meth:`~GuardedEnv.driver_control`,
 :meth:`~GuardedEnv.final_speed`) and sets ``step_dt``, ``max_episode_sim_time``, ``clock`` and
@@ -250,7 +250,7 @@ class GuardedEnv(Disturbable, LabelledEnvBase):
 def parallel_twin(blocking, env_id: str, base_step: float = BASE_STEP):
     """``env_id``'s entry point (a system's ``parallel_env``): the non-blocking twin of the env
     ``blocking`` makes (a blocking env's class, or a system's ``guarded_env``), as
-    :func:`rmm_envs.envs.driven.parallel` is the twin of :func:`~rmm_envs.envs.driven.guarded`.
+    :func:`rmm_envs.envs.any_env.parallel` is the twin of :func:`~rmm_envs.envs.any_env.guarded`.
     The env is ``blocking(**kwargs)`` under :class:`rmm_envs.wrappers.NonBlockingStepping`
     (``time_accel``, ``base_step``, default ``base_step``; ``clock``).  ``step_dt``, the blocking
     env's fixed step, is refused by name: under non-blocking stepping each interval is

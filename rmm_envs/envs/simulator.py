@@ -2,7 +2,7 @@
 printed as the tutorial's table by :func:`hooks_table`), :class:`SnapshotEnv` (a simulator as a
 Gymnasium env) and :class:`SnapshotAdapter` (its labelling hooks).
 
-An object handed to :func:`rmm_envs.envs.driven.guarded` that is not a Gymnasium env is such a
+An object handed to :func:`rmm_envs.envs.any_env.guarded` that is not a Gymnasium env is such a
 simulator: the snapshot protocol (:class:`rmm_envs.adapters.SnapshotSimulator`) and the optional
 hooks of the table.  A hook missing for what is asked is a ``TypeError`` that names the
 simulator, the hook and the command that needs it, with the sentence of the table that says what
@@ -53,7 +53,7 @@ class SimulatorHook:
         """The one-line message for a simulator that lacks this hook."""
         return (
             f"{sim_name} lacks the hook {self.signature}, which {command or self.needed_by} needs: {self.purpose} "
-            f"(every hook: rmm_envs.envs.driven.SIMULATOR_HOOKS, docs/tutorials/own-simulator.md)"
+            f"(every hook: rmm_envs.envs.any_env.SIMULATOR_HOOKS, docs/tutorials/own-simulator.md)"
         )
 
 
@@ -237,7 +237,7 @@ def _float_state(state, what: str, name: str) -> np.ndarray:
 class SnapshotEnv(gym.Env):
     """A simulator of your own as a Gymnasium env (see *Simulators of your own* in the module
     docstring and :data:`SIMULATOR_HOOKS`): reward 0, ``terminated`` when its ``step`` fails,
-    never truncated (:class:`DrivenGuardedEnv` ends episodes by time)."""
+    never truncated (:class:`GuardedAnyEnv` ends episodes by time)."""
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array", "human"]}
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rmm_envs.envs.driven import guarded
+from rmm_envs.envs.any_env import guarded
 
 __all__ = ["TargetDriver", "target_task_env"]
 
@@ -72,7 +72,7 @@ class TargetDriver:
 def target_task_env(env_id: str, driver: TargetDriver, max_episode_sim_time: float, /, clock=None, **kwargs):
     """The blocking guarded env of the Gymnasium env ``env_id`` under the target task: ``driver``
     drives, its :meth:`~TargetDriver.balance` is the safe default and
-    :meth:`~TargetDriver.reached` the success test (keywords as :func:`rmm_envs.envs.driven.guarded`;
+    :meth:`~TargetDriver.reached` the success test (keywords as :func:`rmm_envs.envs.any_env.guarded`;
     a ``max_episode_sim_time`` among them, as ``gym.make`` passes it, overrides the system's)."""
     defaults = {"controls": ("force_ctrl",), "max_episode_sim_time": max_episode_sim_time}
     return guarded(

@@ -138,7 +138,7 @@ class DatagenConfig:
         if self.horizon is not None:
             return self.horizon
         env = labelled_env(self)
-        # an env built on an adapted simulator (rmm_envs.envs.driven) states its adapter's default
+        # an env built on an adapted simulator (rmm_envs.envs.any_env) states its adapter's default
         return env.scene.default_horizon if isinstance(env, AdaptedEnv) else getattr(env, "default_horizon", 2.0)
 
     def estimator_params(self) -> dict:

@@ -48,7 +48,7 @@ def signal_groups(keys) -> dict[str, list[str]]:
 
 class EpisodeRecorder:
     """Records one episode of ``env`` (blocking or non-blocking, built-in or built with
-    :func:`rmm_envs.envs.driven.guarded` / ``parallel``) and composes its frames.
+    :func:`rmm_envs.envs.any_env.guarded` / ``parallel``) and composes its frames.
 
     ``view``: the system's :class:`~rmm_envs.views.base.View` (default :func:`rmm_envs.views.view_for`);
     ``size``: the view's panel size in pixels; ``strip_height``: the strip's (0: no strip; default:

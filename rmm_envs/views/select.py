@@ -20,14 +20,14 @@ def _system_view(env):
 
 def view_for(env, size: int = 512) -> View:
     """The view of ``env`` (a gym env, wrapped or not): the one its system states
-    (:func:`rmm_envs.catalog.system_of_env`); a guarded env of :mod:`rmm_envs.envs.driven` whose
+    (:func:`rmm_envs.catalog.system_of_env`); a guarded env of :mod:`rmm_envs.envs.any_env` whose
     system states none, by its simulator's system (``CartPole-v1`` guarded under an id of your
     own); otherwise the env's own ``rgb_array`` frame (:class:`EnvFrameView`, a ``ValueError``
     when it does not render)."""
     u = env.unwrapped
     factory = _system_view(env)
     if factory is None:
-        inner = getattr(u, "env", None)  # DrivenGuardedEnv.env: the simulator (a Gymnasium env)
+        inner = getattr(u, "env", None)  # GuardedAnyEnv.env: the simulator (a Gymnasium env)
         if inner is not None and getattr(u, "simulator", None) is None:
             factory = _system_view(inner)
     if factory is not None:

@@ -129,7 +129,7 @@ def _needs_rays(strategy: Strategy, guardian, observation_space, actions) -> Any
         raise ValueError(
             f"guardian {guardian.name!r}: strategy {strategy.name} reads the observation field 'rays' by name, "
             f"and this env's observation names no fields (an env of your own, e.g. made by "
-            f"rmm_envs.envs.driven.guarded or parallel); the core alone takes the env's safe default "
+            f"rmm_envs.envs.any_env.guarded or parallel); the core alone takes the env's safe default "
             f"({actions.safe_default.description}): rmm-bench --agent-opt {guardian.name}.strategies='\"\"' "
             f'(in Python: strategies="")'
         )

@@ -1,5 +1,5 @@
 """The ``CartPole`` system, and the target task it shares with ``InvertedPendulum``: two guarded
-envs built with :func:`rmm_envs.envs.driven.guarded` around simulators the project did not write:
+envs built with :func:`rmm_envs.envs.any_env.guarded` around simulators the project did not write:
 ``CartPoleGuarded-v0`` (Gymnasium's ``CartPole-v1``) and
 ``InvertedPendulumGuarded-v0`` (Gymnasium's MuJoCo ``InvertedPendulum-v5``, extra ``mujoco``),
 with their non-blocking twins ``CartPoleParallel-v0`` and ``InvertedPendulumParallel-v0``.
@@ -66,7 +66,7 @@ def driver() -> TargetDriver:
 
 
 def guarded_env(clock=None, **kwargs):
-    """Entry point of ``CartPoleGuarded-v0`` (keywords as :func:`rmm_envs.envs.driven.guarded`)."""
+    """Entry point of ``CartPoleGuarded-v0`` (keywords as :func:`rmm_envs.envs.any_env.guarded`)."""
     return target_task_env("CartPole-v1", driver(), 10.0, clock=clock, **kwargs)
 
 

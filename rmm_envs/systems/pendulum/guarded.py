@@ -22,7 +22,7 @@ def driver() -> TargetDriver:
 
 
 def guarded_env(clock=None, **kwargs):
-    """Entry point of ``InvertedPendulumGuarded-v0`` (keywords as :func:`rmm_envs.envs.driven.guarded`)."""
+    """Entry point of ``InvertedPendulumGuarded-v0`` (keywords as :func:`rmm_envs.envs.any_env.guarded`)."""
     return target_task_env("InvertedPendulum-v5", driver(), 10.0, clock=clock, **kwargs)
 
 

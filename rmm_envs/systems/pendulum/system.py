@@ -20,7 +20,7 @@ def spec() -> SystemSpec:
             "parallel": "rmm_envs.systems.pendulum.guarded:parallel_env",
         },
         driver="rmm_envs.envs.target_driver:TargetDriver",
-        safe_default="rmm_envs.envs.driven:GivenSafeDefault",
+        safe_default="rmm_envs.envs.any_env:GivenSafeDefault",
         guardians=("lrmm", "random", "inactive", "brakes"),
         extra="mujoco",
         view="rmm_envs.systems.pendulum.view:pendulum_view",

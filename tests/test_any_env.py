@@ -1,4 +1,4 @@
-"""The guarded-env builder (:mod:`rmm_envs.envs.driven`) and its two registered examples."""
+"""The guarded-env builder (:mod:`rmm_envs.envs.any_env`) and its two registered examples."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 import rmm_envs  # noqa: F401
 from rmm_envs.autonomy import GuardianActionSpace
-from rmm_envs.envs.driven import guarded, parallel
+from rmm_envs.envs.any_env import guarded, parallel
 from rmm_envs.envs.target_driver import TargetDriver
 from rmm_envs.systems.cartpole.guarded import CARTPOLE_K
 

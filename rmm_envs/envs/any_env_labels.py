@@ -1,4 +1,4 @@
-"""The labelling hooks of :class:`rmm_envs.envs.driven.DrivenGuardedEnv` (the
+"""The labelling hooks of :class:`rmm_envs.envs.any_env.GuardedAnyEnv` (the
 :class:`rmm_envs.risk.LabelledEnv` protocol): the risk adapter's scene, state and observation,
 and a state sampler that draws half of each batch from the adapter's own sampler and half from the
 states the driver alone visits."""
@@ -18,11 +18,11 @@ from rmm_envs.adapters.base import AdaptedEnv
 from rmm_envs.envs.given import as_policy, callable_name
 from rmm_envs.envs.simulator import SnapshotAdapter, SnapshotEnv, require_hooks
 
-__all__ = ["DrivenLabels"]
+__all__ = ["AnyEnvLabels"]
 
 
-class DrivenLabels:
-    """Mixed into :class:`rmm_envs.envs.driven.DrivenGuardedEnv`; reads its ``env``,
+class AnyEnvLabels:
+    """Mixed into :class:`rmm_envs.envs.any_env.GuardedAnyEnv`; reads its ``env``,
     ``simulator``, ``env_name``, ``_driver_obj``, ``_acts``, ``dt`` and ``max_episode_sim_time``."""
 
     env: Any

@@ -1,4 +1,4 @@
-"""Parallel autonomy around any Gymnasium env: :func:`guarded` and :class:`DrivenGuardedEnv`.
+"""Parallel autonomy around any Gymnasium env: :func:`guarded` and :class:`GuardedAnyEnv`.
 
 Give an env (a Gymnasium env, or a simulator of your own written against the snapshot protocol,
 see *Simulators of your own* below), a **driver** that controls it by default, a **safe default**
@@ -6,7 +6,7 @@ and a **success** test, and get an env with the contract of :mod:`rmm_envs.auton
 ``rmm-bench`` speak), built on the same skeleton as the package's own guarded envs
 (:class:`rmm_envs.envs.guarded.GuardedEnv`)::
 
-    from rmm_envs.envs.driven import guarded
+    from rmm_envs.envs.any_env import guarded
     env = guarded("CartPole-v1", driver=my_policy, safe_default=balance, success=at_target)
 
 Arguments (each refused by name, with what was expected, when it does not fit):
@@ -95,7 +95,7 @@ from gymnasium.envs.registration import load_env_creator
 
 from rmm_envs.autonomy import GENERIC, GuardianActionSpace
 from rmm_envs.clocks import make_clock
-from rmm_envs.envs.driven_labels import DrivenLabels
+from rmm_envs.envs.any_env_labels import AnyEnvLabels
 from rmm_envs.envs.given import (
     Actions,
     GivenSafeDefault,
@@ -119,7 +119,7 @@ from rmm_envs.wrappers.nonblocking import TIME_ACCEL, NonBlockingStepping
 
 __all__ = [
     "SIMULATOR_HOOKS",
-    "DrivenGuardedEnv",
+    "GuardedAnyEnv",
     "GivenSafeDefault",
     "SimulatorHook",
     "SnapshotEnv",
@@ -130,11 +130,11 @@ __all__ = [
 ]
 
 #: ``self.scene`` while an episode runs (``None`` before the first ``reset``, as for every env of
-#: the package); :meth:`DrivenGuardedEnv.risk_scene` gives the risk adapter's scene instead
+#: the package); :meth:`GuardedAnyEnv.risk_scene` gives the risk adapter's scene instead
 _RUNNING = "running"
 
 
-class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
+class GuardedAnyEnv(AnyEnvLabels, GuardedEnv):
     """An env with a driver, a safe default and a success test; see the module docstring."""
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array", "human"]}
@@ -360,10 +360,10 @@ class DrivenGuardedEnv(DrivenLabels, GuardedEnv):
         super().close()
 
 
-def guarded(env, driver, safe_default, success, failure=None, **kwargs) -> DrivenGuardedEnv:
+def guarded(env, driver, safe_default, success, failure=None, **kwargs) -> GuardedAnyEnv:
     """The blocking guarded env of ``env``, a Gymnasium env, its id or a simulator of your own
     (see the module docstring for every argument)."""
-    return DrivenGuardedEnv(env, driver, safe_default, success, failure=failure, **kwargs)
+    return GuardedAnyEnv(env, driver, safe_default, success, failure=failure, **kwargs)
 
 
 def parallel(
@@ -388,7 +388,7 @@ def parallel(
             f"parallel(): base_step={base_step!r} and step_dt={step_dt!r} both set the seconds of a base step; "
             "give one of them"
         )
-    inner = DrivenGuardedEnv(env, driver, safe_default, success, failure=failure, **kwargs)
+    inner = GuardedAnyEnv(env, driver, safe_default, success, failure=failure, **kwargs)
     return NonBlockingStepping(
         inner, time_accel=time_accel, base_step=inner.step_dt if base_step is None else base_step, clock=clock
     )
