@@ -223,7 +223,18 @@ class Realisation:
         within the control's bounds.  Call it in order of sim time: a delay of ``k`` applies the
         latest control commanded at or before step ``floor(t / dt) - k`` (the first until then),
         whatever the number of calls in between."""
-        return control_rows([self], np.asarray(u, float).reshape(1, -1), [t])[0]
+        out = np.array(u, dtype=np.float64).reshape(-1)  # control_rows' arithmetic on one row
+        if not self.actuates:
+            return out
+        k = self.step_of(t)
+        if self._delay is not None:
+            out = self._delayed(out, k)
+        for scale, sig in self._act_noise:
+            out = out + scale * sig.at(k)
+        if self._gained:
+            out = out * self.gain
+        assert self._low is not None and self._high is not None  # support.check refused act kinds otherwise
+        return np.minimum(np.maximum(out, self._low), self._high)
 
     def _delayed(self, u: np.ndarray, k: int) -> np.ndarray:
         assert self._delay is not None
@@ -235,7 +246,12 @@ class Realisation:
 
     def rate(self, t: float, dim: int) -> np.ndarray:
         """The additive state-rate disturbance at sim time ``t`` (``(dim,)``; zero where none)."""
-        return rate_rows([self], [t], dim)[0]
+        out = np.zeros(dim)  # rate_rows' arithmetic on one row
+        if self.pushes:
+            k = self.step_of(t)
+            for idx, scale, sig in self._rate_ops:
+                out[idx] += scale * sig.at(k)
+        return out
 
     @property
     def active(self) -> bool:
