@@ -13,13 +13,59 @@ whose result for one world does not depend on the others in the batch.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from rmm_envs.systems.dubins4d.circles import contact_params_each
 from rmm_envs.systems.dubins4d.driver import CLFDriver
-from rmm_envs.systems.dubins4d.dynamics import Dubins4D, wrap_angle
+from rmm_envs.systems.dubins4d.dynamics import (
+    SERIES_COEFFICIENTS,
+    Dubins4D,
+    _clamped_start,
+    _state_at_1,
+    njit,
+    wrap_angle,
+)
 
-__all__ = ["advance", "nominal_controls"]
+__all__ = ["advance", "nominal_controls", "states_at_rows"]
+
+
+def _states_at_rows_loop(states, controls, times, lo, hi, coef, out):
+    """The compiled ``states_at`` loop with bounds of its own per row (``lo``/``hi``: ``(N, 3)``,
+    each row a plant's (v, u1, u2) bounds): row ``n`` is the same operations as that plant's
+    ``states_at`` of the one state."""
+    t_end = 0.0
+    for k in range(times.shape[0]):
+        t_end = max(t_end, times[k])
+    for n in range(states.shape[0]):
+        v0, w, a, sat, t_sat = _clamped_start(states[n, 3], controls[n, 0], controls[n, 1], t_end, lo[n], hi[n])
+        for k in range(times.shape[0]):
+            out[n, k, 0], out[n, k, 1], out[n, k, 2], out[n, k, 3] = _state_at_1(
+                states[n, 0], states[n, 1], states[n, 2], v0, w, a, times[k], sat, t_sat, lo[n], hi[n], coef
+            )
+    return out
+
+
+_states_at_rows = _states_at_rows_loop if njit is None else njit(cache=True)(_states_at_rows_loop)
+
+
+def states_at_rows(plants, states: np.ndarray, controls: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """``(N, T, 4)``: row ``n`` is ``plants[n].states_at(states[n:n + 1], controls[n:n + 1],
+    times, compiled=True)[0]``, every row in one compiled loop (plants that differ in their
+    bounds, as a model mismatch draws them)."""
+    lo = np.ascontiguousarray([p._lo for p in plants], dtype=float)
+    hi = np.ascontiguousarray([p._hi for p in plants], dtype=float)
+    out = np.empty((states.shape[0], len(times), 4))
+    return _states_at_rows(
+        np.ascontiguousarray(states, dtype=float),
+        np.ascontiguousarray(controls, dtype=float),
+        np.asarray(times, dtype=float),
+        lo,
+        hi,
+        SERIES_COEFFICIENTS,
+        out,
+    )
 
 
 def nominal_controls(driver: CLFDriver, states: np.ndarray, circles: np.ndarray) -> np.ndarray:
@@ -29,7 +75,7 @@ def nominal_controls(driver: CLFDriver, states: np.ndarray, circles: np.ndarray)
 
 
 def advance(
-    dynamics: Dubins4D,
+    dynamics: Dubins4D | Sequence[Dubins4D],
     nominal: np.ndarray,
     states: np.ndarray,
     circles: np.ndarray,
@@ -42,6 +88,7 @@ def advance(
     """Advance ``N`` worlds by one held control each.
 
     Args:
+        dynamics: the plant, or one plant per world (a model mismatch's, :func:`states_at_rows`).
         nominal: ``(N, 2)`` the driver's controls at ``states`` (:func:`nominal_controls`).
         states: ``(N, 4)`` states.
         circles: ``(N, K + 1, 3)``: each world's obstacles, then its goal (last).
@@ -61,7 +108,10 @@ def advance(
     with any obstacle and with the goal (``inf`` where none).
     """
     u = np.where(active[:, None], np.asarray(controls, dtype=float), nominal)
-    paths = dynamics.states_at(states, u, times, compiled=True)
+    if isinstance(dynamics, Dubins4D):
+        paths = dynamics.states_at(states, u, times, compiled=True)
+    else:
+        paths = states_at_rows(dynamics, states, u, times)
     if drift is not None:
         paths = paths + np.asarray(drift, float)[:, None, :] * np.asarray(times, float)[None, :, None]
     cp = contact_params_each(paths, circles)

@@ -13,9 +13,9 @@ __all__ = ["advance_disturbed"]
 
 def advance_disturbed(self, active: np.ndarray, ctrl: np.ndarray):
     """:func:`advance` under each sub-env's disturbances, as the single env applies them: the
-    actuators' controls, the plant's gains and the position drift, all rows at once; one batch
-    unless a mismatch gives the rows plants of their own (then row by row, each as the single
-    env's own batch of one)."""
+    actuators' controls, the plant's gains and the position drift, all rows at once, in one batch
+    also when a mismatch gives the rows plants of their own (each row's path under its plant's
+    bounds, the operations of the single env's own batch of one)."""
     e, n = self._single, self.num_envs
     draws, times = self._draws, self._sim_time
     commanded = np.where(active[:, None], ctrl, self._nominal)
@@ -23,22 +23,7 @@ def advance_disturbed(self, active: np.ndarray, ctrl: np.ndarray):
     rates = rate_rows(draws, times, 4) if draws[0].pushes else None
     on = np.ones(n, dtype=bool)
     controls = applied * self._gains
-    if not any(d.kind == "mismatch" for d in e.disturbances):
-        out = advance(e.dynamics, self._nominal, self._states, self._circles, on, controls, e._step_times, None, rates)
-    else:
-        rows = [
-            advance(
-                self._plants[i],
-                self._nominal[i : i + 1],
-                self._states[i : i + 1],
-                self._circles[i : i + 1],
-                on[i : i + 1],
-                controls[i : i + 1],
-                e._step_times,
-                None,
-                None if rates is None else rates[i : i + 1],
-            )  # fmt: skip
-            for i in range(n)
-        ]
-        out = tuple(np.concatenate([r[j] for r in rows]) for j in range(4))
+    mismatch = any(d.kind == "mismatch" for d in e.disturbances)
+    plants = self._plants if mismatch else e.dynamics  # a mismatch: each row's plant its own bounds
+    out = advance(plants, self._nominal, self._states, self._circles, on, controls, e._step_times, None, rates)
     return out[0], applied, out[2], out[3]
