@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import rmm_envs  # noqa: F401  (registers the envs)
-from rmm_envs.disturbances import DisturbanceError
+from rmm_envs.disturbances import BLOCK, DisturbanceError
 
 ENV = "Dubins4DGuarded-v0"
 SEED = 7
@@ -228,7 +228,12 @@ def test_quadrotor_wind_lifts_the_body_and_a_mismatch_changes_its_mass_in_pybull
 
 
 @pytest.mark.parametrize(
-    "spec", ["obs-noise=0.1;act-delay=2;act-noise=0.1;dyn-rate=0.2@white;impulse=0.5", "mismatch=0.2;ray-dropout=0.1"]
+    "spec",
+    [
+        "obs-noise=0.1;act-delay=2;act-noise=0.1;dyn-rate=0.2@white;impulse=0.5",
+        "mismatch=0.2;ray-dropout=0.1",
+        "obs-noise=0.1@white",  # the sensors alone: the plant steps as undisturbed
+    ],
 )
 def test_the_vector_env_is_the_single_envs_under_disturbances_too(spec):
     """Sub-env ``i`` after ``reset(seed=s)`` is the single env after ``reset(seed=s + i)`` bit for bit,
@@ -241,7 +246,7 @@ def test_the_vector_env_is_the_single_envs_under_disturbances_too(spec):
     for x, y in zip(vec.reset(seed=5), ref.reset(seed=5), strict=True):
         assert data_equivalence(x, y, exact=True)
     rng = np.random.default_rng(0)
-    ended = 0
+    ended, longest = 0, 0.0
     for t in range(400):
         a = {
             "active_ctrl": (rng.random(n) < (0.2 if t % 50 < 40 else 0.9)).astype(np.int64),
@@ -252,7 +257,9 @@ def test_the_vector_env_is_the_single_envs_under_disturbances_too(spec):
         for name, x, y in zip(("obs", "reward", "terminated", "truncated", "info"), out, expected, strict=True):
             assert data_equivalence(x, y, exact=True), f"step {t}: {name} differs"
         ended += int(np.sum(out[2] | out[3]))
+        longest = max(longest, float(np.max(out[4]["sim_time"])))
     assert ended >= 4
+    assert longest > BLOCK * vec.unwrapped._single.step_dt  # a white stream's second block read too
 
 
 # ---------------------------------------------------------------- what a guardian assumes

@@ -14,7 +14,7 @@ import numpy as np
 from rmm_envs.disturbances.spec import Disturbance, SystemSupport, kind_code
 from rmm_envs.machine_independent import norm
 
-__all__ = ["BLOCK", "Plan", "Realisation", "control_rows", "observation_rows", "rate_rows"]
+__all__ = ["BLOCK", "Plan", "Realisation"]
 
 #: steps drawn at once by a white-noise stream; values depend on the step, not on this size's use
 BLOCK = 256
@@ -41,18 +41,21 @@ class _Signal:
     def _draw(self, rng: np.random.Generator, *shape: int) -> np.ndarray:
         return rng.standard_normal(shape) if self.gaussian else rng.uniform(-1.0, 1.0, shape)
 
-    def _white(self, k: int) -> np.ndarray:
-        b, i = divmod(k, BLOCK)
+    def block(self, b: int) -> np.ndarray:
+        """A white stream's values at steps ``b * BLOCK ... (b + 1) * BLOCK - 1`` (``(BLOCK, n)``)."""
         block = self._blocks.get(b)
-        if block is not None:
-            return block[i]
         if block is None:
             seq = np.random.SeedSequence(self.seq.entropy, spawn_key=(*self.seq.spawn_key, 1, b))
             block = self._draw(np.random.default_rng(seq), BLOCK, self.n)
             if len(self._blocks) > 4:  # episodes move forward: keep the few latest blocks
                 self._blocks.pop(min(self._blocks))
             self._blocks[b] = block
-        return block[i]
+        return block
+
+    def _white(self, k: int) -> np.ndarray:
+        b, i = divmod(k, BLOCK)
+        block = self._blocks.get(b)
+        return (block if block is not None else self.block(b))[i]
 
     def at(self, k: int) -> np.ndarray:
         """The unit-level value at step ``k`` (``(n,)``)."""
@@ -132,6 +135,12 @@ class Plan:
             rays[support.layout["rays"]] = True  # type: ignore[index]
             self.obs_lo[rays & touched] = 0.0
 
+    @property
+    def moves_plant(self) -> bool:
+        """Whether these disturbances act on the plant (its control, its rates or its parameters),
+        not only on the sensors."""
+        return bool(self.act_noise or self.gains or self.delay_steps is not None or self.rate_ops or self.mismatch)
+
 
 class Realisation:
     """One episode's draw of ``disturbances`` on a system (:class:`SystemSupport`), from ``seed``.
@@ -199,7 +208,7 @@ class Realisation:
 
     def observation(self, obs: np.ndarray, t: float) -> np.ndarray:
         """``obs`` as the sensors report it at sim time ``t`` (a new array): the numbers of
-        :func:`observation_rows` for one row, without stacking rows."""
+        :func:`rmm_envs.disturbances.rows.observation_rows` for one row, without stacking rows."""
         out = np.asarray(obs).astype(np.float64)
         if not self.senses:
             return out.astype(np.asarray(obs).dtype, copy=False)
@@ -256,65 +265,6 @@ class Realisation:
     @property
     def active(self) -> bool:
         return bool(self.disturbances)
-
-
-def observation_rows(draws: Sequence[Realisation], obs: np.ndarray, times: Sequence[float]) -> np.ndarray:
-    """Observations ``(N, D)`` as the sensors of ``N`` episodes report them at sim times ``times``:
-    row ``i`` is ``draws[i].observation(obs[i], times[i])``, the same numbers whether one row or
-    many are done at once (the vector env's sub-envs are the single env's).  The draws share one
-    list of disturbances."""
-    out = np.array(obs, dtype=np.float64)
-    first = draws[0]
-    if not first.senses:
-        return out.astype(np.asarray(obs).dtype, copy=False)
-    ks = [d.step_of(t) for d, t in zip(draws, times, strict=True)]
-    for j, (op, idx, level, _, hi) in enumerate(first._obs_ops):
-        if op == _BIAS:
-            out[:, idx] += level
-            continue
-        vals = np.stack([d._obs_ops[j][3].at(k) for d, k in zip(draws, ks, strict=True)])  # type: ignore[union-attr]
-        if op == _NOISE:
-            out[:, idx] += level * vals
-        else:  # a dropped ray reads its maximum: uniform in [0, 1) below the probability
-            sub = out[:, idx]
-            dropped = (vals + 1.0) * 0.5 < level
-            assert hi is not None  # a dropout's maximum ranges, set with it
-            sub[dropped] = np.broadcast_to(hi, sub.shape)[dropped]
-            out[:, idx] = sub
-    np.minimum(out, first._hi, out=out)
-    np.maximum(out, first._lo, out=out)
-    return out.astype(np.asarray(obs).dtype, copy=False)
-
-
-def control_rows(draws: Sequence[Realisation], u: np.ndarray, times: Sequence[float]) -> np.ndarray:
-    """Controls ``(N, C)`` the plants of ``N`` episodes apply when ``u`` is commanded at ``times``:
-    row ``i`` is ``draws[i].control(u[i], times[i])`` (see :meth:`Realisation.control`)."""
-    out = np.array(u, dtype=np.float64)
-    first = draws[0]
-    if not first.actuates:
-        return out
-    ks = [d.step_of(t) for d, t in zip(draws, times, strict=True)]
-    if first._delay is not None:
-        out = np.stack([d._delayed(out[i], k) for i, (d, k) in enumerate(zip(draws, ks, strict=True))])
-    for j, (scale, _) in enumerate(first._act_noise):
-        out = out + scale * np.stack([d._act_noise[j][1].at(k) for d, k in zip(draws, ks, strict=True)])
-    if any(d._gained for d in draws):
-        out = out * np.stack([d.gain for d in draws])
-    assert first._low is not None and first._high is not None  # support.check refused act kinds otherwise
-    return np.minimum(np.maximum(out, first._low), first._high)
-
-
-def rate_rows(draws: Sequence[Realisation], times: Sequence[float], dim: int) -> np.ndarray:
-    """The additive state-rate disturbances ``(N, dim)`` of ``N`` episodes at ``times``: row ``i``
-    is ``draws[i].rate(times[i], dim)``."""
-    out = np.zeros((len(draws), dim))
-    first = draws[0]
-    if not first.pushes:
-        return out
-    ks = [d.step_of(t) for d, t in zip(draws, times, strict=True)]
-    for j, (idx, scale, _) in enumerate(first._rate_ops):
-        out[:, idx] += scale * np.stack([d._rate_ops[j][2].at(k) for d, k in zip(draws, ks, strict=True)])
-    return out
 
 
 def _as_slice(idx: np.ndarray) -> slice | np.ndarray:

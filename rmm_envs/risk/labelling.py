@@ -28,7 +28,8 @@ import rmm_envs  # the package's own envs register on import
 from rmm_envs.adapters import AdaptedEnv, adapt
 from rmm_envs.defaults import DEFAULT_LABELLED_ENV
 from rmm_envs.disturbances import parse_disturbances
-from rmm_envs.disturbances.realisation import Realisation, observation_rows
+from rmm_envs.disturbances.realisation import Realisation
+from rmm_envs.disturbances.rows import observation_rows
 from rmm_envs.env_plugins import describe_env_error, load_env_plugins, resolve_env_id
 from rmm_envs.risk.dataset import FORMAT, FORMAT_VERSION
 from rmm_envs.risk.estimator import RiskEstimator, validate_tree_params

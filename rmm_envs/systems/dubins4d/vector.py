@@ -94,7 +94,7 @@ from gymnasium.vector.utils import batch_space
 from rmm_envs.autonomy import GuardianActionSpace
 from rmm_envs.clocks import make_clock
 from rmm_envs.disturbances import Realisation
-from rmm_envs.disturbances.realisation import observation_rows
+from rmm_envs.disturbances.rows import RowStreams, observation_rows
 from rmm_envs.systems.dubins4d.circles import ray_cast_each
 from rmm_envs.systems.dubins4d.env import Dubins4DGuardedEnv
 from rmm_envs.systems.dubins4d.plant import plant_model
@@ -173,6 +173,9 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         self._draws: list[Realisation | None] = [None] * n
         self._plants = [self._single.dynamics] * n
         self._gains = np.ones((n, 2))
+        self._streams = RowStreams(n)  # each sub-env's current block of its white-noise streams
+        plan = self._single.disturbance_plan
+        self._moves_plant = plan is not None and plan.moves_plant  # or only the sensors are disturbed
 
     # ------------------------------------------------------------------ observations
     def _observe(self, idx=slice(None)) -> np.ndarray:
@@ -184,7 +187,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         obs = observation(st, self._sim_time[idx], circles[:, -1, :2], rays)
         if e.disturbances:  # what each sub-env's sensors report
             rows = np.arange(self.num_envs)[idx]
-            obs = observation_rows([self._draws[i] for i in rows], obs, self._sim_time[rows])
+            obs = observation_rows([self._draws[i] for i in rows], obs, self._sim_time[rows], self._streams, rows)
         return obs
 
     # ------------------------------------------------------------------ reset
@@ -211,6 +214,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
             assert plan is not None  # set with the disturbances
             key = (base,) if count == 0 else (base, count)
             self._draws[i] = draw = Realisation(plan.disturbances, plan.support, key, plan)
+            self._streams.forget(i)
             self._seeds[i] = (base, count + 1)
             mismatch = any(d.kind == "mismatch" for d in e.disturbances)
             self._plants[i], self._gains[i] = plant_model(e.dynamics, dict(draw.parameters) if mismatch else None)
@@ -289,7 +293,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         # computed is discarded and their bookkeeping restarts in _reset_one.
         resetting = self._ended if mode == AutoresetMode.NEXT_STEP else np.zeros(n, dtype=bool)
         any_resetting = bool(resetting.any())
-        if e.disturbances:
+        if self._moves_plant:  # sensors alone disturbed: the plant steps as undisturbed
             nxt, u, hit_obst, hit_goal = advance_disturbed(self, active, ctrl)
         else:
             nxt, u, hit_obst, hit_goal = advance(

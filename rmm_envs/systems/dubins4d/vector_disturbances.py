@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rmm_envs.disturbances.realisation import control_rows, rate_rows
+from rmm_envs.disturbances.rows import control_rows, rate_rows
 from rmm_envs.systems.dubins4d.step import advance
 
 __all__ = ["advance_disturbed"]
@@ -19,8 +19,8 @@ def advance_disturbed(self, active: np.ndarray, ctrl: np.ndarray):
     e, n = self._single, self.num_envs
     draws, times = self._draws, self._sim_time
     commanded = np.where(active[:, None], ctrl, self._nominal)
-    applied = control_rows(draws, commanded, times)
-    rates = rate_rows(draws, times, 4) if draws[0].pushes else None
+    applied = control_rows(draws, commanded, times, self._streams)
+    rates = rate_rows(draws, times, 4, self._streams) if draws[0].pushes else None
     on = np.ones(n, dtype=bool)
     controls = applied * self._gains
     mismatch = any(d.kind == "mismatch" for d in e.disturbances)
