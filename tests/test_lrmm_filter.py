@@ -306,3 +306,79 @@ def test_stored_hand_back_defaults_apply_only_to_the_rule_they_were_chosen_for(t
     # the moving average is of the state risk: the driver's rating taken out, the rest kept
     averaged = LRMMGuardian(p, strategies="-RatedDriver, +MovingAverage(window=20)")
     assert averaged.strategies == (Commit(steps=5), SafestCandidate(), Restart(speed=0.3), MovingAverage(window=20))
+
+
+def _restart_on(cands, controls=("turnrate_ctrl", "accel_ctrl"), **kw):
+    from types import SimpleNamespace
+
+    r = Restart(**kw)
+    g = SimpleNamespace(
+        candidates=np.asarray(cands, float),
+        observation_space=SimpleNamespace(layout=D4),
+        action_space=SimpleNamespace(controls=controls),
+    )
+    r.reset(g)
+    return r
+
+
+def _decide(speed, cand_risks, threshold=0.4):
+    from rmm_guardians.lrmm.strategies import DecisionContext
+
+    step = DecisionContext(threshold)
+    step.observation = d4_obs(speed=speed)
+    step.out = np.array([0.9, *cand_risks])
+    return step
+
+
+def test_restart_turn_turns_a_stopped_car_in_place_and_keeps_its_side():
+    # candidates: brake straight, brake turning left, brake turning right, accelerate straight
+    cands = [[0.0, -0.5], [-0.25, -0.5], [0.25, -0.5], [0.0, 0.5]]
+    kept = [0.0, -0.5]  # the control before Restart (SafestCandidate's: brake straight, rated 0.05)
+    r = _restart_on(cands, speed=0.3, turn=True)
+    # accelerating rated 0.9 > 0.4: turn where it stands, on the lower-rated side (right, 0.2)
+    assert r.act(_decide(0.1, [0.05, 0.3, 0.2, 0.9]), kept).tolist() == [0.25, -0.5]
+    # the left now rated lower: the side first chosen is kept (no dithering left and right)
+    assert r.act(_decide(0.0, [0.05, 0.1, 0.2, 0.9]), kept).tolist() == [0.25, -0.5]
+    # a way forward rated safe (0.3 <= 0.4): accelerate, and the side is forgotten
+    assert r.act(_decide(0.0, [0.05, 0.1, 0.2, 0.3]), kept).tolist() == [0.0, 0.5]
+    assert r.act(_decide(0.0, [0.05, 0.1, 0.2, 0.9]), kept).tolist() == [-0.25, -0.5]
+    # a car at or above the speed: the control before it, turning or not
+    assert r.act(_decide(0.3, [0.05, 0.1, 0.2, 0.9]), kept) is kept
+    # without turn, the stopped car keeps the control before it (it would stay stopped)
+    assert _restart_on(cands, speed=0.3).act(_decide(0.0, [0.05, 0.3, 0.2, 0.9]), kept) is kept
+
+
+def test_restart_turn_keeps_stored_specs_and_names_what_it_needs():
+    from rmm_guardians.lrmm.strategies import parse_strategies
+
+    # the spec stored in decisions and run keys before turn existed is unchanged
+    assert Restart(speed=0.3).spec() == "Restart(speed=0.3)" == Restart(speed=0.3, turn=False).spec()
+    (back,) = parse_strategies(Restart(speed=0.7, turn=True).spec())
+    assert back == Restart(speed=0.7, turn=True) != Restart(speed=0.7)
+    assert back.clone().turn is True
+    with pytest.raises(ValueError, match=r"Restart turn must be True or False, got 'yes'"):
+        Restart(turn="yes")
+    from types import SimpleNamespace
+
+    g = SimpleNamespace(name="lrmm")
+    actions = SimpleNamespace(controls=("accel_ctrl",))
+    with pytest.raises(ValueError, match=r"Restart\(turn=True\) turns the car: it needs a 'turnrate_ctrl' control"):
+        Restart(turn=True).check(g, SimpleNamespace(layout=D4), actions)
+    Restart().check(g, SimpleNamespace(layout=D4), actions)  # without turn, no turn-rate control needed
+
+
+@pytest.mark.parametrize("system", ["dubins4d", "dubins4d-hold-0.7", "quadrotor"])
+def test_predicting_many_controls_at_once_is_predicting_each_bit_for_bit(system):
+    """``rate_many`` predicts every control in one batch; each row must be ``predict``'s, so stored
+    runs rated one control at a time replay unchanged."""
+    if system == "quadrotor":
+        r, dim, box = make_rater(QUAD_CONTROLS, QUAD, 1.0, np.full(23, -np.inf), np.full(23, np.inf)), 23, [(-1, 1)] * 4
+    else:
+        hold = 0.7 if "0.7" in system else 1.0
+        r, dim, box = PredictRater(D4, CONTROLS, hold, D4_LOW, D4_HIGH), 17, [(-0.25, 0.25), (-0.5, 0.5)]
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        x = rng.uniform(-3.0, 10.0, dim).astype(np.float32)
+        controls = [[rng.uniform(a, b) for a, b in box] for _ in range(8)]
+        many = r.predict_many(x, controls)
+        assert many.tobytes() == np.stack([r.predict(x, u) for u in controls]).tobytes()

@@ -50,6 +50,7 @@ class PredictRater:
         even = n > 0 and all(
             abs(float(wrap_angle(a - 2.0 * math.pi * k / n))) < 1e-9 for k, a in enumerate(layout.ray_angles)
         )
+        self._ray_index = np.arange(n, dtype=float)
         if "turnrate_ctrl" in controls and "heading" in layout and even:
             self.turn = (controls.index("turnrate_ctrl"), layout.index("heading"), layout["rays"].start, n)
 
@@ -71,18 +72,41 @@ class PredictRater:
             y[h] = float(wrap_angle(y[h] + delta))
             # the ray at angle a after the turn reads what the ray at a + delta read before it
             shift = delta * n / (2.0 * math.pi)
-            old = [float(v) for v in x[r0 : r0 + n]]
-            for k in range(n):
-                f = k + shift
-                lo_k = math.floor(f)
-                w = f - lo_k
-                y[r0 + k] = (1.0 - w) * old[lo_k % n] + w * old[(lo_k + 1) % n]
+            old = np.array(x[r0 : r0 + n], dtype=float)
+            f = self._ray_index[:n] + shift
+            lo_k = np.floor(f)
+            w = f - lo_k
+            k0 = lo_k.astype(np.int64) % n
+            y[r0 : r0 + n] = (1.0 - w) * old[k0] + w * old[(k0 + 1) % n]
+        return y
+
+    def predict_many(self, x, controls) -> np.ndarray:
+        """:meth:`predict` of ``x`` after each of ``controls`` (``(K, c)``), all at once: row ``k``
+        is ``predict(x, controls[k])``, the same numbers."""
+        u = np.asarray(controls, dtype=float).reshape(len(controls), -1)
+        y = np.tile(np.asarray(x, dtype=float), (u.shape[0], 1))
+        for j, i in self.velocity:
+            y[:, i] = u[:, j]
+        if self.accel is not None:
+            j, i, lo, hi = self.accel
+            y[:, i] = np.minimum(np.maximum(y[:, i] + u[:, j] * self.hold, lo), hi)
+        if self.turn is not None:
+            j, h, r0, n = self.turn
+            delta = u[:, j] * self.hold
+            y[:, h] = wrap_angle(y[:, h] + delta)
+            shift = delta * n / (2.0 * math.pi)
+            old = np.array(x[r0 : r0 + n], dtype=float)
+            f = self._ray_index[None, :n] + shift[:, None]
+            lo_k = np.floor(f)
+            w = f - lo_k
+            k0 = lo_k.astype(np.int64) % n
+            y[:, r0 : r0 + n] = (1.0 - w) * old[k0] + w * old[(k0 + 1) % n]
         return y
 
     def rate_many(self, controls, model, x) -> list[float]:
         """The model's state risk of ``x`` predicted after each of ``controls``; ``ValueError``
         naming the controls when a risk is not finite (NaN would compare as "safe")."""
-        rows = np.stack([self.predict(x, u) for u in controls])
+        rows = self.predict_many(x, controls)
         rated = [float(v) for v in model.predict_all(rows)[:, 0]]
         if not all(map(math.isfinite, rated)):
             raise ValueError(

@@ -52,6 +52,9 @@ class Strategy:
     ``chooses``: its :meth:`act` always returns a control (the env then needs no safe default)."""
 
     PARAMS: ClassVar[tuple[str, ...]] = ()
+    #: parameters left out of :meth:`spec` while at these values (added after specs were stored,
+    #: so a stored spec, and the run keys made from it, stay as they were)
+    SPEC_DEFAULTS: ClassVar[dict[str, Any]] = {}
     reads_driver: ClassVar[bool] = False
     chooses: ClassVar[bool] = False
 
@@ -64,7 +67,8 @@ class Strategy:
 
     def spec(self) -> str:
         """This strategy as a spec :func:`parse_strategies` reads back (stored in model files)."""
-        args = ", ".join(f"{k}={v!r}" for k, v in self.params().items())
+        params = {k: v for k, v in self.params().items() if k not in self.SPEC_DEFAULTS or v != self.SPEC_DEFAULTS[k]}
+        args = ", ".join(f"{k}={v!r}" for k, v in params.items())
         mod = type(self).__module__
         built_in = mod.startswith(_PACKAGE + ".")  # the built-ins, known by name (spec.STRATEGIES)
         return f"{'' if built_in else mod + ':'}{self.name}({args})"
