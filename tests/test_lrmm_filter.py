@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from rmm_envs.autonomy import ObservationLayout
+from rmm_envs.machine_independent import wrap_angle
 from rmm_envs.systems.dubins4d.env import CONTROLS, observation_layout
 from rmm_guardians.lrmm.decision import decision_path, read_decision, set_decision
 from rmm_guardians.lrmm.guardian import LRMMGuardian
@@ -367,10 +368,34 @@ def test_restart_turn_keeps_stored_specs_and_names_what_it_needs():
     Restart().check(g, SimpleNamespace(layout=D4), actions)  # without turn, no turn-rate control needed
 
 
+def _predicted_one_by_one(r, x, u):
+    """The prediction written out for one control in plain Python, as it was before it was batched:
+    the reference ``predict_many`` must equal bit for bit (stored runs rated one control at a time
+    replay unchanged)."""
+    y = [float(v) for v in np.asarray(x, dtype=float)]
+    for j, i in r.velocity:
+        y[i] = float(u[j])
+    if r.accel is not None:
+        j, i, lo, hi = r.accel
+        y[i] = min(max(y[i] + u[j] * r.hold, lo), hi)
+    if r.turn is not None:
+        j, h, r0, n = r.turn
+        delta = u[j] * r.hold
+        y[h] = float(wrap_angle(y[h] + delta))
+        shift = delta * n / (2.0 * math.pi)
+        old = [float(v) for v in x[r0 : r0 + n]]
+        for k in range(n):
+            f = k + shift
+            lo_k = math.floor(f)
+            w = f - lo_k
+            y[r0 + k] = (1.0 - w) * old[lo_k % n] + w * old[(lo_k + 1) % n]
+    return np.array(y)
+
+
 @pytest.mark.parametrize("system", ["dubins4d", "dubins4d-hold-0.7", "quadrotor"])
 def test_predicting_many_controls_at_once_is_predicting_each_bit_for_bit(system):
-    """``rate_many`` predicts every control in one batch; each row must be ``predict``'s, so stored
-    runs rated one control at a time replay unchanged."""
+    """``rate_many`` predicts every control in one batch; each row must be the one-control
+    prediction's numbers."""
     if system == "quadrotor":
         r, dim, box = make_rater(QUAD_CONTROLS, QUAD, 1.0, np.full(23, -np.inf), np.full(23, np.inf)), 23, [(-1, 1)] * 4
     else:
@@ -381,4 +406,5 @@ def test_predicting_many_controls_at_once_is_predicting_each_bit_for_bit(system)
         x = rng.uniform(-3.0, 10.0, dim).astype(np.float32)
         controls = [[rng.uniform(a, b) for a, b in box] for _ in range(8)]
         many = r.predict_many(x, controls)
-        assert many.tobytes() == np.stack([r.predict(x, u) for u in controls]).tobytes()
+        assert many.tobytes() == np.stack([_predicted_one_by_one(r, x, u) for u in controls]).tobytes()
+        assert r.predict(x, controls[0]).tobytes() == many[0].tobytes()

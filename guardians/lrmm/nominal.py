@@ -60,29 +60,14 @@ class PredictRater:
 
     def predict(self, x, u) -> np.ndarray:
         """The observation ``x`` as predicted after holding control ``u`` for ``hold`` seconds."""
-        y = np.array(x, dtype=float)
-        for j, i in self.velocity:  # the velocity loop tracks the command within a fraction of a second
-            y[i] = u[j]
-        if self.accel is not None:
-            j, i, lo, hi = self.accel
-            y[i] = min(max(y[i] + u[j] * self.hold, lo), hi)
-        if self.turn is not None:
-            j, h, r0, n = self.turn
-            delta = u[j] * self.hold
-            y[h] = float(wrap_angle(y[h] + delta))
-            # the ray at angle a after the turn reads what the ray at a + delta read before it
-            shift = delta * n / (2.0 * math.pi)
-            old = np.array(x[r0 : r0 + n], dtype=float)
-            f = self._ray_index[:n] + shift
-            lo_k = np.floor(f)
-            w = f - lo_k
-            k0 = lo_k.astype(np.int64) % n
-            y[r0 : r0 + n] = (1.0 - w) * old[k0] + w * old[(k0 + 1) % n]
-        return y
+        return self.predict_many(x, [u])[0]
 
     def predict_many(self, x, controls) -> np.ndarray:
-        """:meth:`predict` of ``x`` after each of ``controls`` (``(K, c)``), all at once: row ``k``
-        is ``predict(x, controls[k])``, the same numbers."""
+        """The observation ``x`` as predicted after holding each of ``controls`` (``(K, c)``) for
+        ``hold`` seconds, one row each: a velocity command replaces the measured velocity (the loop
+        tracks it within a fraction of a second), an acceleration changes the speed within its
+        bounds, a turn rate turns the heading, and the ray at angle ``a`` after the turn reads what
+        the ray at ``a + delta`` read before it (linear between neighbours)."""
         u = np.asarray(controls, dtype=float).reshape(len(controls), -1)
         y = np.tile(np.asarray(x, dtype=float), (u.shape[0], 1))
         for j, i in self.velocity:

@@ -54,8 +54,7 @@ class _Signal:
 
     def _white(self, k: int) -> np.ndarray:
         b, i = divmod(k, BLOCK)
-        block = self._blocks.get(b)
-        return (block if block is not None else self.block(b))[i]
+        return self.block(b)[i]
 
     def at(self, k: int) -> np.ndarray:
         """The unit-level value at step ``k`` (``(n,)``)."""

@@ -174,8 +174,7 @@ class Dubins4DCirclesVectorEnv(VectorEnv):
         self._plants = [self._single.dynamics] * n
         self._gains = np.ones((n, 2))
         self._streams = RowStreams(n)  # each sub-env's current block of its white-noise streams
-        plan = self._single.disturbance_plan
-        self._moves_plant = plan is not None and plan.moves_plant  # or only the sensors are disturbed
+        self._moves_plant = getattr(self._single.disturbance_plan, "moves_plant", False)  # else sensors alone
 
     # ------------------------------------------------------------------ observations
     def _observe(self, idx=slice(None)) -> np.ndarray:
