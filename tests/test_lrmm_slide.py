@@ -12,7 +12,7 @@ from rmm_guardians.lrmm.decision import decision_path, read_decision, set_decisi
 from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel
 from rmm_guardians.lrmm.nominal import driver_at_risk
-from rmm_guardians.lrmm.strategies import SLIDE_MOVES, Commit, RatedDriver, SafestCandidate, Slide, driver
+from rmm_guardians.lrmm.strategies import SLIDE_MOVES, SLIDE_TURNS, Commit, RatedDriver, SafestCandidate, Slide, driver
 from tests.test_lrmm import SPACES as D4_SPACES
 from tests.test_lrmm_filter import QUAD, QUAD_CONTROLS, speed_model
 
@@ -47,6 +47,41 @@ def test_variants_by_hand_nearest_first_clipped_without_the_driver_control(monke
     moves = (((0.0, 1.0), 1.0, 1.0), ((1.0, 0.0), 0.5, 1.0), ((1.0, 0.0), 2.0, 0.5))
     monkeypatch.setattr(driver, "SLIDE_MOVES", moves)
     assert s.variants([1.0, 0.0, 0.5, 0.0]) == [[0.5, 0.0, 0.5, 0.0], [2.0, 0.0, 0.25, 0.0], [0.0, 1.0, 0.5, 0.0]]
+
+
+def test_turn_adds_the_command_turned_aside_and_backing_off_after_the_climbs():
+    assert SLIDE_TURNS == (((0.0, 1.0), 1.0, "climb"), ((0.0, -1.0), 1.0, "climb"), ((-1.0, 0.0), 0.5, "climb"))
+    s = bound_slide()
+    s.turn = True
+    # after the three climbs (gaps 1.5, 1.63, 1.96): a quarter left (0.4, 1.2) and right (-0.4, -1.2), both
+    # at gap sqrt(0.64 + 2.56 + 2.25) = 2.33 (left first), then backing off at half speed, gap sqrt(5.85) = 2.42
+    assert s.variants(NOMINAL) == [
+        [1.2, -0.4, 1.0, 0.3],
+        [0.6, -0.2, 1.0, 0.3],
+        [0.0, 0.0, 1.0, 0.3],
+        [0.4, 1.2, 1.0, 0.3],
+        [-0.4, -1.2, 1.0, 0.3],
+        [-0.6, 0.2, 1.0, 0.3],
+    ]
+    assert s.variants([0.0, 0.0, 0.2, 0.0]) == [[0.0, 0.0, 1.0, 0.0]]  # hovering: every turn is the same climb
+
+
+def test_turn_bends_the_command_aside_when_no_climb_is_rated_safe():
+    # threshold 0.005: no climb is (climbing in place 0.0067); a quarter left is rated sigmoid(-4.2) = 0.015, a
+    # quarter right sigmoid(-5.8) = 0.0030: the nearest safe variant, before the head's candidate
+    assert rating(0.4, 1.0) == pytest.approx(0.0148, abs=1e-4) and rating(-0.4, 1.0) == pytest.approx(0.0030, abs=1e-4)
+    rule = (RatedDriver(margin=0.15), Commit(steps=0), SafestCandidate(), Slide(turn=True))
+    g = LRMMGuardian(quad_model(), threshold=0.005, strategies=rule)
+    g.reset(seed=0, **SPACES)
+    assert step(g, NOMINAL) == [1, -0.4, -1.2, 1.0, 0.3]
+    assert step(guard(threshold=0.005), NOMINAL) == [1, 0.0, 0.0, 1.0, 0.0]  # without turn: the head's
+
+
+def test_slide_turn_spec_round_trips_and_its_default_stays_out_of_stored_specs():
+    assert (Slide().spec(), Slide(turn=True).spec()) == ("Slide()", "Slide(turn=True)")
+    assert Slide(turn=True).params() == {"turn": True} and Slide(turn=True) != Slide()
+    with pytest.raises(ValueError, match="Slide turn must be True or False, got 'yes'"):
+        LRMMGuardian(quad_model(), threshold=0.2, strategies="Slide(turn='yes')")
 
 
 def test_slide_needs_the_three_velocity_controls():
@@ -168,7 +203,7 @@ def test_without_stay_the_guardian_hands_back_once_the_take_over_test_fails():
 def test_bad_slide_still_and_stay_are_named():
     m = quad_model()
     for spec, match in (
-        ("Slide(True)", r"strategy 'Slide\(True\)': .*its parameters: none"),
+        ("Slide(x=1)", r"strategy 'Slide\(x=1\)': .*unexpected keyword argument 'x'; its parameters: turn"),
         ("RatedDriver(stay='no')", "RatedDriver stay must be True or False, got 'no'"),
         ("RatedDriver(still=-0.1)", r"RatedDriver still must be a finite number >= 0.0, got -0.1"),
         ("RatedDriver(still=1e999)", "RatedDriver still must be"),
