@@ -16,6 +16,7 @@ import warnings
 from collections.abc import Sequence
 
 import numpy as np
+from numba import njit
 
 from rmm_envs.machine_independent import wrap_angle
 
@@ -50,9 +51,16 @@ class PredictRater:
         even = n > 0 and all(
             abs(float(wrap_angle(a - 2.0 * math.pi * k / n))) < 1e-9 for k, a in enumerate(layout.ray_angles)
         )
-        self._ray_index = np.arange(n, dtype=float)
         if "turnrate_ctrl" in controls and "heading" in layout and even:
             self.turn = (controls.index("turnrate_ctrl"), layout.index("heading"), layout["rays"].start, n)
+        # the same as integers and bounds for the compiled prediction (-1: not predicted)
+        accel, turn = self.accel or (-1, -1, 0.0, 0.0), self.turn or (-1, -1, 0, 0)
+        self._kernel_args = (
+            np.array([j for j, _ in self.velocity], dtype=np.int64),
+            np.array([i for _, i in self.velocity], dtype=np.int64),
+            np.array([accel[0], accel[1], turn[0], turn[1], turn[2], turn[3]], dtype=np.int64),
+            np.array([accel[2], accel[3]], dtype=float),
+        )
 
     @property
     def applies(self) -> bool:
@@ -67,26 +75,10 @@ class PredictRater:
         ``hold`` seconds, one row each: a velocity command replaces the measured velocity (the loop
         tracks it within a fraction of a second), an acceleration changes the speed within its
         bounds, a turn rate turns the heading, and the ray at angle ``a`` after the turn reads what
-        the ray at ``a + delta`` read before it (linear between neighbours)."""
-        u = np.asarray(controls, dtype=float).reshape(len(controls), -1)
-        y = np.tile(np.asarray(x, dtype=float), (u.shape[0], 1))
-        for j, i in self.velocity:
-            y[:, i] = u[:, j]
-        if self.accel is not None:
-            j, i, lo, hi = self.accel
-            y[:, i] = np.minimum(np.maximum(y[:, i] + u[:, j] * self.hold, lo), hi)
-        if self.turn is not None:
-            j, h, r0, n = self.turn
-            delta = u[:, j] * self.hold
-            y[:, h] = wrap_angle(y[:, h] + delta)
-            shift = delta * n / (2.0 * math.pi)
-            old = np.array(x[r0 : r0 + n], dtype=float)
-            f = self._ray_index[None, :n] + shift[:, None]
-            lo_k = np.floor(f)
-            w = f - lo_k
-            k0 = lo_k.astype(np.int64) % n
-            y[:, r0 : r0 + n] = (1.0 - w) * old[k0] + w * old[(k0 + 1) % n]
-        return y
+        the ray at ``a + delta`` read before it (linear between neighbours).  One compiled call
+        (:func:`_predict_rows`): a rated decision predicts eight observations each step."""
+        u = np.ascontiguousarray(np.asarray(controls, dtype=float).reshape(len(controls), -1))
+        return _predict_rows(np.ascontiguousarray(x, dtype=float), u, self._kernel_args, self.hold)
 
     def rate_many(self, controls, model, x) -> list[float]:
         """The model's state risk of ``x`` predicted after each of ``controls``; ``ValueError``
@@ -98,6 +90,38 @@ class PredictRater:
                 f"the LRMM model rated the controls {[list(u) for u in controls]} with non-finite risks {rated}"
             )
         return rated
+
+
+def _predict_rows(x, u, args, hold):  # pragma: no cover - compiled
+    """:meth:`PredictRater.predict_many`'s rows, element by element with numpy's operations in
+    its order (the same bits: tests/test_lrmm_filter.py checks them against plain Python)."""
+    vel_j, vel_i, idx, bounds = args
+    aj, ai, tj, th, r0, n = idx[0], idx[1], idx[2], idx[3], idx[4], idx[5]
+    two_pi = 2.0 * math.pi
+    y = np.empty((u.shape[0], x.shape[0]))
+    for k in range(u.shape[0]):
+        for d in range(x.shape[0]):
+            y[k, d] = x[d]
+        for t in range(vel_j.shape[0]):
+            y[k, vel_i[t]] = u[k, vel_j[t]]
+        if aj >= 0:
+            v = y[k, ai] + u[k, aj] * hold
+            v = bounds[0] if v < bounds[0] else v  # np.maximum, then np.minimum (NaN stays NaN)
+            y[k, ai] = bounds[1] if v > bounds[1] else v
+        if tj >= 0:
+            delta = u[k, tj] * hold
+            y[k, th] = (y[k, th] + delta + math.pi) % two_pi - math.pi  # wrap_angle(heading + delta)
+            shift = delta * n / two_pi
+            for r in range(n):
+                f = r + shift
+                lo = math.floor(f)
+                w = f - lo
+                k0 = int(lo) % n
+                y[k, r0 + r] = (1.0 - w) * x[r0 + k0] + w * x[r0 + (k0 + 1) % n]
+    return y
+
+
+_predict_rows = njit(cache=True)(_predict_rows)
 
 
 def make_rater(controls: Sequence[str], layout, hold, low, high) -> PredictRater | None:
