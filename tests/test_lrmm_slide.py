@@ -97,6 +97,24 @@ def test_level_adds_the_command_holding_its_altitude_nearest_first():
     assert step(g, NOMINAL) == [1, 0.6, -0.2, 0.0, 0.3]
 
 
+def test_escape_moves_down_the_rated_risk_when_no_variant_is_safe():
+    # threshold 0.001: no variant is rated at or below it; the lowest is backing off at half speed, climbing,
+    # sigmoid(-1.2 - 2 + 10 - 13) = 0.0020, below the head's climb in place that SafestCandidate chose (0.0067)
+    assert rating(-0.6, 1.0) == pytest.approx(0.00203, abs=1e-5) and rating(0.0, 1.0) == pytest.approx(0.0067, abs=1e-4)
+    rule = (RatedDriver(margin=0.15), Commit(steps=0), SafestCandidate())
+    for escape, expected in ((True, [1, -0.6, 0.2, 1.0, 0.3]), (False, [1, 0.0, 0.0, 1.0, 0.0])):
+        g = LRMMGuardian(quad_model(), threshold=0.001, strategies=rule + (Slide(turn=True, escape=escape),))
+        g.reset(seed=0, **SPACES)
+        assert step(g, NOMINAL) == expected
+    # without turn the climbs are all rated at least the climb in place: the control before is kept
+    g = LRMMGuardian(quad_model(), threshold=0.001, strategies=rule + (Slide(escape=True),))
+    g.reset(seed=0, **SPACES)
+    assert step(g, NOMINAL) == [1, 0.0, 0.0, 1.0, 0.0]
+    s = bound_slide()
+    s.turn = s.level = True  # the turns are tried level too: 3 climbs, 3 turns, 2 level, 3 level turns
+    assert len(s.variants(NOMINAL)) == 11
+
+
 def test_turn_bends_the_command_aside_when_no_climb_is_rated_safe():
     # threshold 0.005: no climb is (climbing in place 0.0067); a quarter left is rated sigmoid(-4.2) = 0.015, a
     # quarter right sigmoid(-5.8) = 0.0030: the nearest safe variant, before the head's candidate
@@ -110,7 +128,7 @@ def test_turn_bends_the_command_aside_when_no_climb_is_rated_safe():
 
 def test_slide_turn_spec_round_trips_and_its_default_stays_out_of_stored_specs():
     assert (Slide().spec(), Slide(turn=True).spec()) == ("Slide()", "Slide(turn=True)")
-    assert Slide(turn=True).params() == {"turn": True, "level": False} and Slide(turn=True) != Slide()
+    assert Slide(turn=True).params() == {"turn": True, "level": False, "escape": False} and Slide(turn=True) != Slide()
     assert (
         Slide(level=True).spec() == "Slide(level=True)" and Slide(True, True).spec() == "Slide(turn=True, level=True)"
     )
@@ -239,7 +257,10 @@ def test_without_stay_the_guardian_hands_back_once_the_take_over_test_fails():
 def test_bad_slide_still_and_stay_are_named():
     m = quad_model()
     for spec, match in (
-        ("Slide(x=1)", r"strategy 'Slide\(x=1\)': .*unexpected keyword argument 'x'; its parameters: turn, level"),
+        (
+            "Slide(x=1)",
+            r"strategy 'Slide\(x=1\)': .*unexpected keyword argument 'x'; its parameters: turn, level, escape",
+        ),
         ("RatedDriver(stay='no')", "RatedDriver stay must be True or False, got 'no'"),
         ("RatedDriver(still=-0.1)", r"RatedDriver still must be a finite number >= 0.0, got -0.1"),
         ("RatedDriver(still=1e999)", "RatedDriver still must be"),

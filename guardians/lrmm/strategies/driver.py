@@ -97,22 +97,25 @@ class Slide(Strategy):
     """In control, apply the variant of the driver's velocity command nearest to it that the model
     rates at or below the threshold (climbing at its horizontal velocity, half of it or none,
     :data:`SLIDE_MOVES`; with ``turn``, also turned aside or backing off, :data:`SLIDE_TURNS`;
-    with ``level``, also holding the altitude, :data:`SLIDE_LEVEL`; other controls kept), else
-    keep the control before it.
+    with ``level``, also holding the altitude, :data:`SLIDE_LEVEL` (and the turns level too);
+    other controls kept), else keep the control before it, or, with ``escape``, apply the
+    variant rated lowest when it is rated lower than that control.
 
     Why: the quadrotor's driver mostly flies toward its goal; bending its command keeps that
-    progress where replacing it with a fixed manoeuvre would throw it away.  Climbing does not
-    clear what reaches the ceiling: ``turn`` lets the command bend around it or back away."""
+    progress where replacing it with a fixed manoeuvre would throw it away.  Where every move is
+    rated above the threshold (a pocket among objects under the ceiling), hovering kept the
+    quadrotor in control at rest to the timeout: ``escape`` moves it down the rated risk until
+    the driver's own command is rated safe again."""
 
-    PARAMS = ("turn", "level")
-    SPEC_DEFAULTS = {"turn": False, "level": False}
+    PARAMS = ("turn", "level", "escape")
+    SPEC_DEFAULTS = {"turn": False, "level": False, "escape": False}
     reads_driver = True
 
-    def __init__(self, turn: bool = False, level: bool = False) -> None:
-        for name, value in (("turn", turn), ("level", level)):
+    def __init__(self, turn: bool = False, level: bool = False, escape: bool = False) -> None:
+        for name, value in (("turn", turn), ("level", level), ("escape", escape)):
             if not isinstance(value, (bool, np.bool_)):
                 raise ValueError(f"Slide {name} must be True or False, got {value!r}")
-        self.turn, self.level = bool(turn), bool(level)
+        self.turn, self.level, self.escape = bool(turn), bool(level), bool(escape)
 
     def check(self, guardian, observation_space, actions) -> None:
         if any(c not in actions.controls for c in VELOCITY_CONTROLS):
@@ -134,7 +137,9 @@ class Slide(Strategy):
         :data:`SLIDE_MOVES` order), ``u`` itself and repeats left out."""
         u = [float(v) for v in u]
         out = []
-        moves = SLIDE_MOVES + (SLIDE_TURNS if self.turn else ()) + (SLIDE_LEVEL if self.level else ())
+        turns = SLIDE_TURNS if self.turn else ()
+        level = SLIDE_LEVEL + tuple((cs, k, 0.0) for cs, k, _ in turns) if self.level else ()
+        moves = SLIDE_MOVES + turns + level
         for (c, s), k, z in moves:
             v = list(u)
             v[self.f] = k * (c * u[self.f] - s * u[self.l])
@@ -152,5 +157,10 @@ class Slide(Strategy):
         options = self.variants(step.nominal)
         if not options:
             return control
-        rated = self._rater.rate_many(options, self._model, step.x)
-        return next((v for v, r in zip(options, rated, strict=True) if r <= step.threshold), control)
+        before = [0.0] * len(options[0]) if control is None else [float(v) for v in control]
+        rated = self._rater.rate_many(options + [before] if self.escape else options, self._model, step.x)
+        safe = next((v for v, r in zip(options, rated, strict=False) if r <= step.threshold), None)
+        if safe is not None or not self.escape:
+            return control if safe is None else safe
+        best = min(range(len(options)), key=lambda i: rated[i])  # the first of equals: the nearest
+        return options[best] if rated[best] < rated[-1] else control
