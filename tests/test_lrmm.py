@@ -757,7 +757,7 @@ def test_defaults_are_pinned():
         20,
     )
     assert (RatedDriver().margin, RatedDriver().still, RatedDriver().stay, RayTurn().rate) == (0.0, None, True, None)
-    assert Slide().params() == {"turn": False, "level": False, "escape": False} and SafestCandidate().params() == {}
+    assert Slide().params() == {"turn": False, "escape": False} and SafestCandidate().params() == {}
     fields = {f.name: f.default for f in dataclasses.fields(LRMMSettings)}
     assert fields == {"threshold": None, "strategies": None, "inputs": None}
     paper = LRMMPaperGuardian()

@@ -13,7 +13,6 @@ from rmm_guardians.lrmm.guardian import LRMMGuardian
 from rmm_guardians.lrmm.model import LRMMModel
 from rmm_guardians.lrmm.nominal import driver_at_risk
 from rmm_guardians.lrmm.strategies import (
-    SLIDE_LEVEL,
     SLIDE_MOVES,
     SLIDE_TURNS,
     Commit,
@@ -75,28 +74,6 @@ def test_turn_adds_the_command_turned_aside_and_backing_off_after_the_climbs():
     assert s.variants([0.0, 0.0, 0.2, 0.0]) == [[0.0, 0.0, 1.0, 0.0]]  # hovering: every turn is the same climb
 
 
-def test_level_adds_the_command_holding_its_altitude_nearest_first():
-    assert SLIDE_LEVEL == (((1.0, 0.0), 1.0, 0.0), ((1.0, 0.0), 0.5, 0.0))
-    s = bound_slide()
-    s.level = True
-    # holding the altitude is nearer than climbing for a descending command: gap 0.5 (the descent dropped),
-    # then sqrt(0.36 + 0.04 + 0.25) = 0.81 (half speed), then the climbs (1.5, 1.63, 1.96)
-    assert s.variants(NOMINAL) == [
-        [1.2, -0.4, 0.0, 0.3],
-        [0.6, -0.2, 0.0, 0.3],
-        [1.2, -0.4, 1.0, 0.3],
-        [0.6, -0.2, 1.0, 0.3],
-        [0.0, 0.0, 1.0, 0.3],
-    ]
-    # in control at threshold 0.2: holding the altitude at the driver's speed is rated sigmoid(2.4 + 10 - 13) = 0.35,
-    # at half of it sigmoid(-1.8) = 0.14: the half-speed level flight, before any climb
-    rule = (RatedDriver(margin=0.15), Commit(steps=0), SafestCandidate(), Slide(level=True))
-    g = LRMMGuardian(quad_model(), threshold=0.2, strategies=rule)
-    g.reset(seed=0, **SPACES)
-    assert rating(0.6, 0.0) == pytest.approx(0.142, abs=1e-3) and rating(1.2, 0.0) == pytest.approx(0.354, abs=1e-3)
-    assert step(g, NOMINAL) == [1, 0.6, -0.2, 0.0, 0.3]
-
-
 def test_escape_moves_down_the_rated_risk_when_no_variant_is_safe():
     # threshold 0.001: no variant is rated at or below it; the lowest is backing off at half speed, climbing,
     # sigmoid(-1.2 - 2 + 10 - 13) = 0.0020, below the head's climb in place that SafestCandidate chose (0.0067)
@@ -110,9 +87,6 @@ def test_escape_moves_down_the_rated_risk_when_no_variant_is_safe():
     g = LRMMGuardian(quad_model(), threshold=0.001, strategies=rule + (Slide(escape=True),))
     g.reset(seed=0, **SPACES)
     assert step(g, NOMINAL) == [1, 0.0, 0.0, 1.0, 0.0]
-    s = bound_slide()
-    s.turn = s.level = True  # the turns are tried level too: 3 climbs, 3 turns, 2 level, 3 level turns
-    assert len(s.variants(NOMINAL)) == 11
 
 
 def test_turn_bends_the_command_aside_when_no_climb_is_rated_safe():
@@ -128,14 +102,15 @@ def test_turn_bends_the_command_aside_when_no_climb_is_rated_safe():
 
 def test_slide_turn_spec_round_trips_and_its_default_stays_out_of_stored_specs():
     assert (Slide().spec(), Slide(turn=True).spec()) == ("Slide()", "Slide(turn=True)")
-    assert Slide(turn=True).params() == {"turn": True, "level": False, "escape": False} and Slide(turn=True) != Slide()
+    assert Slide(turn=True).params() == {"turn": True, "escape": False} and Slide(turn=True) != Slide()
     assert (
-        Slide(level=True).spec() == "Slide(level=True)" and Slide(True, True).spec() == "Slide(turn=True, level=True)"
+        Slide(escape=True).spec() == "Slide(escape=True)"
+        and Slide(True, True).spec() == "Slide(turn=True, escape=True)"
     )
     with pytest.raises(ValueError, match="Slide turn must be True or False, got 'yes'"):
         LRMMGuardian(quad_model(), threshold=0.2, strategies="Slide(turn='yes')")
-    with pytest.raises(ValueError, match="Slide level must be True or False, got 1"):
-        LRMMGuardian(quad_model(), threshold=0.2, strategies="Slide(level=1)")
+    with pytest.raises(ValueError, match="Slide escape must be True or False, got 1"):
+        LRMMGuardian(quad_model(), threshold=0.2, strategies="Slide(escape=1)")
 
 
 def test_slide_needs_the_three_velocity_controls():
@@ -259,7 +234,7 @@ def test_bad_slide_still_and_stay_are_named():
     for spec, match in (
         (
             "Slide(x=1)",
-            r"strategy 'Slide\(x=1\)': .*unexpected keyword argument 'x'; its parameters: turn, level, escape",
+            r"strategy 'Slide\(x=1\)': .*unexpected keyword argument 'x'; its parameters: turn, escape",
         ),
         ("RatedDriver(stay='no')", "RatedDriver stay must be True or False, got 'no'"),
         ("RatedDriver(still=-0.1)", r"RatedDriver still must be a finite number >= 0.0, got -0.1"),

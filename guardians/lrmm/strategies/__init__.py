@@ -14,13 +14,12 @@ composition).  Why each built-in exists and what it adds: docs/decisions/0024-lr
 
 from rmm_guardians.lrmm.strategies.base import DecisionContext, Strategy
 from rmm_guardians.lrmm.strategies.candidates import Restart, SafestCandidate
-from rmm_guardians.lrmm.strategies.driver import SLIDE_LEVEL, SLIDE_MOVES, SLIDE_TURNS, RatedDriver, Slide
+from rmm_guardians.lrmm.strategies.driver import SLIDE_MOVES, SLIDE_TURNS, RatedDriver, Slide
 from rmm_guardians.lrmm.strategies.rays import BrakeTurn, RayTurn
 from rmm_guardians.lrmm.strategies.spec import STRATEGIES, parse_strategies, strategy_specs
 from rmm_guardians.lrmm.strategies.timing import Commit, MovingAverage
 
 __all__ = [
-    "SLIDE_LEVEL",
     "SLIDE_MOVES",
     "SLIDE_TURNS",
     "STRATEGIES",

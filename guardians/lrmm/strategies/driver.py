@@ -10,7 +10,7 @@ import numpy as np
 from rmm_guardians.lrmm.nominal import VELOCITY_CONTROLS, driver_at_risk, make_rater
 from rmm_guardians.lrmm.strategies.base import DecisionContext, Strategy, _needs_head, _number
 
-__all__ = ["SLIDE_LEVEL", "SLIDE_MOVES", "SLIDE_TURNS", "RatedDriver", "Slide"]
+__all__ = ["SLIDE_MOVES", "SLIDE_TURNS", "RatedDriver", "Slide"]
 
 
 def _rater(strategy: Strategy, guardian, observation_space, actions):
@@ -88,18 +88,14 @@ SLIDE_MOVES = (((1.0, 0.0), 1.0, "climb"), ((1.0, 0.0), 0.5, "climb"), ((1.0, 0.
 #: the moves ``Slide(turn=True)`` adds: the horizontal velocity turned a quarter to the left and to
 #: the right at its full speed, and reversed at half of it, each climbing
 SLIDE_TURNS = (((0.0, 1.0), 1.0, "climb"), ((0.0, -1.0), 1.0, "climb"), ((-1.0, 0.0), 0.5, "climb"))
-#: the moves ``Slide(level=True)`` adds: the driver's horizontal velocity, full and half, holding
-#: the altitude (no climb where climbing is what is rated unsafe, as under the ceiling)
-SLIDE_LEVEL = (((1.0, 0.0), 1.0, 0.0), ((1.0, 0.0), 0.5, 0.0))
 
 
 class Slide(Strategy):
     """In control, apply the variant of the driver's velocity command nearest to it that the model
     rates at or below the threshold (climbing at its horizontal velocity, half of it or none,
     :data:`SLIDE_MOVES`; with ``turn``, also turned aside or backing off, :data:`SLIDE_TURNS`;
-    with ``level``, also holding the altitude, :data:`SLIDE_LEVEL` (and the turns level too);
-    other controls kept), else keep the control before it, or, with ``escape``, apply the
-    variant rated lowest when it is rated lower than that control.
+    other controls kept), else keep the control before it, or, with ``escape``, apply the variant
+    rated lowest when it is rated lower than that control.
 
     Why: the quadrotor's driver mostly flies toward its goal; bending its command keeps that
     progress where replacing it with a fixed manoeuvre would throw it away.  Where every move is
@@ -107,15 +103,15 @@ class Slide(Strategy):
     quadrotor in control at rest to the timeout: ``escape`` moves it down the rated risk until
     the driver's own command is rated safe again."""
 
-    PARAMS = ("turn", "level", "escape")
-    SPEC_DEFAULTS = {"turn": False, "level": False, "escape": False}
+    PARAMS = ("turn", "escape")
+    SPEC_DEFAULTS = {"turn": False, "escape": False}
     reads_driver = True
 
-    def __init__(self, turn: bool = False, level: bool = False, escape: bool = False) -> None:
-        for name, value in (("turn", turn), ("level", level), ("escape", escape)):
+    def __init__(self, turn: bool = False, escape: bool = False) -> None:
+        for name, value in (("turn", turn), ("escape", escape)):
             if not isinstance(value, (bool, np.bool_)):
                 raise ValueError(f"Slide {name} must be True or False, got {value!r}")
-        self.turn, self.level, self.escape = bool(turn), bool(level), bool(escape)
+        self.turn, self.escape = bool(turn), bool(escape)
 
     def check(self, guardian, observation_space, actions) -> None:
         if any(c not in actions.controls for c in VELOCITY_CONTROLS):
@@ -137,10 +133,7 @@ class Slide(Strategy):
         :data:`SLIDE_MOVES` order), ``u`` itself and repeats left out."""
         u = [float(v) for v in u]
         out = []
-        turns = SLIDE_TURNS if self.turn else ()
-        level = SLIDE_LEVEL + tuple((cs, k, 0.0) for cs, k, _ in turns) if self.level else ()
-        moves = SLIDE_MOVES + turns + level
-        for (c, s), k, z in moves:
+        for (c, s), k, z in SLIDE_MOVES + (SLIDE_TURNS if self.turn else ()):
             v = list(u)
             v[self.f] = k * (c * u[self.f] - s * u[self.l])
             v[self.l] = k * (s * u[self.f] + c * u[self.l])
