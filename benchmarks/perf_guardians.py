@@ -29,6 +29,12 @@ OTHER_SYSTEMS = [
     ("Dubins3DMazeGuarded-v0", "lrmm", 1000),
     ("Dubins3DMazeGuarded-v0", "cbf", 1000),
 ]
+#: ``lrmm`` rating the driver's own command on Dubins4D (the decision of the reproduction report's
+#: ``lrmm-rated-dubins4d`` table, not the shipped one), timed with the Dubins4D guardians
+RATED = {
+    "threshold": 0.4,
+    "strategies": "SafestCandidate(), RatedDriver(), Commit(steps=18), Restart(speed=0.7, turn=True)",
+}
 
 
 def decision_times(guardian, env_id="Dubins4DGuarded-v0", steps=3000, seed=0, cpu: list | None = None) -> list[float]:
@@ -108,6 +114,9 @@ def main() -> None:
         cpu: list[float] = []
         t = decision_times(g, cpu=cpu)
         print(_row(name, t, cpu))
+    cpu = []
+    t = decision_times(make_guardian("lrmm", **RATED), cpu=cpu)
+    print(_row("lrmm rated", t, cpu) + "  (threshold 0.4, " + RATED["strategies"] + ")")
     print("Guardians on other systems (the same measure)")
     for env_id, name, steps in OTHER_SYSTEMS:
         cpu = []
