@@ -99,7 +99,7 @@ class Slide(Strategy):
 
     Why: the quadrotor's driver mostly flies toward its goal; bending its command keeps that
     progress where replacing it with a fixed manoeuvre would throw it away.  Where every move is
-    rated above the threshold (a pocket among objects under the ceiling), hovering kept the
+    rated above the threshold (a pocket among objects), hovering kept the
     quadrotor in control at rest to the timeout: ``escape`` moves it down the rated risk until
     the driver's own command is rated safe again."""
 
@@ -129,8 +129,8 @@ class Slide(Strategy):
         self._low, self._high = [float(v) for v in actions.control_low], [float(v) for v in actions.control_high]
 
     def variants(self, u) -> list[list[float]]:
-        """The variants of ``u``, nearest first (Euclidean over the velocities; ties in
-        :data:`SLIDE_MOVES` order), ``u`` itself and repeats left out."""
+        """The variants of ``u``, nearest first (Euclidean over the velocities; ties in the
+        order of :data:`SLIDE_MOVES`, then :data:`SLIDE_TURNS`), ``u`` itself and repeats left out."""
         u = [float(v) for v in u]
         out = []
         for (c, s), k, z in SLIDE_MOVES + (SLIDE_TURNS if self.turn else ()):
@@ -150,10 +150,13 @@ class Slide(Strategy):
         options = self.variants(step.nominal)
         if not options:
             return control
+        if not self.escape:
+            rated = self._rater.rate_many(options, self._model, step.x)
+            return next((v for v, r in zip(options, rated, strict=True) if r <= step.threshold), control)
         before = [0.0] * len(options[0]) if control is None else [float(v) for v in control]
-        rated = self._rater.rate_many(options + [before] if self.escape else options, self._model, step.x)
-        safe = next((v for v, r in zip(options, rated, strict=False) if r <= step.threshold), None)
-        if safe is not None or not self.escape:
-            return control if safe is None else safe
+        *rated, rated_before = self._rater.rate_many(options + [before], self._model, step.x)
+        safe = next((v for v, r in zip(options, rated, strict=True) if r <= step.threshold), None)
+        if safe is not None:
+            return safe
         best = min(range(len(options)), key=lambda i: rated[i])  # the first of equals: the nearest
-        return options[best] if rated[best] < rated[-1] else control
+        return options[best] if rated[best] < rated_before else control
